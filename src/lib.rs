@@ -1,0 +1,6 @@
+//! causalcity: traffic datasets for causal discovery and counterfactual
+//! reasoning. Data flows one way: a [`spec::DatasetSpec`] is expanded into
+//! [`orchestrate::plan::ScenarioPlan`]s, a [`world`] simulates each into
+//! trajectories, [`render`] turns them into frames and [`output`] writes files.
+
+pub mod map;

@@ -1,0 +1,307 @@
+//! Curves parameterised by arc length: the geometry every lane, connector and
+//! lane change is made of. Units are metres and radians; headings are measured
+//! counter-clockwise from the +x (east) axis.
+
+use glam::DVec2;
+use std::f64::consts::PI;
+
+/// A planar curve that maps arc length `s` (metres from its start) to a point
+/// and a heading. Lateral offsets are positive to the left of travel.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Curve {
+    Line(Line),
+    Arc(Arc),
+    LaneChange(LaneChange),
+}
+
+impl Curve {
+    /// Length of the curve in metres.
+    pub fn length(&self) -> f64 {
+        match self {
+            Curve::Line(c) => c.length,
+            Curve::Arc(c) => c.radius * c.sweep.abs(),
+            Curve::LaneChange(c) => c.length,
+        }
+    }
+
+    /// The point at arc length `longitudinal`, moved `lateral` metres to the
+    /// left of the direction of travel. `longitudinal` is clamped to the curve.
+    pub fn position(&self, longitudinal: f64, lateral: f64) -> DVec2 {
+        let s = longitudinal.clamp(0.0, self.length());
+        let centre = match self {
+            Curve::Line(c) => c.start + c.direction * s,
+            Curve::Arc(c) => c.point_at_angle(c.angle_at(s)),
+            Curve::LaneChange(c) => c.point_at(c.longitudinal_at_arc_length(s)),
+        };
+        if lateral == 0.0 {
+            return centre;
+        }
+        let h = self.heading_at(s);
+        centre + DVec2::new(-h.sin(), h.cos()) * lateral
+    }
+
+    /// The centre-line point at arc length `s`.
+    pub fn lane_center_at(&self, s: f64) -> DVec2 {
+        self.position(s, 0.0)
+    }
+
+    /// Heading (radians, counter-clockwise from east) at arc length `s`.
+    pub fn heading_at(&self, s: f64) -> f64 {
+        let s = s.clamp(0.0, self.length());
+        match self {
+            Curve::Line(c) => c.direction.y.atan2(c.direction.x),
+            Curve::Arc(c) => {
+                let a = c.angle_at(s);
+                wrap_angle(a + c.sweep.signum() * PI / 2.0)
+            }
+            Curve::LaneChange(c) => c.heading_at_longitudinal(c.longitudinal_at_arc_length(s)),
+        }
+    }
+
+    /// Inverse of [`Curve::position`]: `(longitudinal, lateral)` of `point`
+    /// relative to this curve (nearest point, clamped to the curve's extent).
+    pub fn local_coordinates(&self, point: DVec2) -> (f64, f64) {
+        match self {
+            Curve::Line(c) => {
+                let d = point - c.start;
+                let s = d.dot(c.direction);
+                (s, c.direction.perp_dot(d))
+            }
+            Curve::Arc(c) => {
+                let d = point - c.centre;
+                let angle = d.y.atan2(d.x);
+                let delta = wrap_angle(angle - c.start_angle);
+                let s = delta * c.sweep.signum() * c.radius;
+                // Left of travel is towards the centre for a left (ccw) turn.
+                let lateral = (c.radius - d.length()) * c.sweep.signum();
+                (s, lateral)
+            }
+            Curve::LaneChange(c) => {
+                // Nearest sample, then refine on the tangent: lane changes are
+                // short and gently curved, so this is accurate to millimetres.
+                let n = 64;
+                let len = c.length;
+                let mut best = (0.0, f64::INFINITY);
+                for i in 0..=n {
+                    let s = len * i as f64 / n as f64;
+                    let dist = self.lane_center_at(s).distance_squared(point);
+                    if dist < best.1 {
+                        best = (s, dist);
+                    }
+                }
+                let mut s0 = best.0;
+                for _ in 0..4 {
+                    let h = self.heading_at(s0);
+                    let t = DVec2::new(h.cos(), h.sin());
+                    s0 += (point - self.lane_center_at(s0)).dot(t);
+                }
+                let h = self.heading_at(s0);
+                let t = DVec2::new(h.cos(), h.sin());
+                let d = point - self.lane_center_at(s0);
+                (s0 + d.dot(t), t.perp_dot(d))
+            }
+        }
+    }
+
+    /// First point of the curve.
+    pub fn start(&self) -> DVec2 {
+        self.lane_center_at(0.0)
+    }
+
+    /// Last point of the curve.
+    pub fn end(&self) -> DVec2 {
+        self.lane_center_at(self.length())
+    }
+}
+
+/// A straight segment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Line {
+    pub start: DVec2,
+    /// Unit vector of travel.
+    pub direction: DVec2,
+    pub length: f64,
+}
+
+impl Line {
+    pub fn between(start: DVec2, end: DVec2) -> Curve {
+        let d = end - start;
+        Curve::Line(Line {
+            start,
+            direction: d.normalize(),
+            length: d.length(),
+        })
+    }
+}
+
+/// A circular arc; positive `sweep` turns left (counter-clockwise).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Arc {
+    pub centre: DVec2,
+    pub radius: f64,
+    /// Angle of the start point as seen from the centre.
+    pub start_angle: f64,
+    /// Signed angle swept, radians.
+    pub sweep: f64,
+}
+
+impl Arc {
+    /// The arc leaving `start` with `heading`, turning by `sweep` radians
+    /// (positive = left) on a circle of `radius`.
+    pub fn from_start(start: DVec2, heading: f64, radius: f64, sweep: f64) -> Curve {
+        let left = DVec2::new(-heading.sin(), heading.cos());
+        let centre = start + left * radius * sweep.signum();
+        let d = start - centre;
+        Curve::Arc(Arc {
+            centre,
+            radius,
+            start_angle: d.y.atan2(d.x),
+            sweep,
+        })
+    }
+
+    fn angle_at(&self, s: f64) -> f64 {
+        self.start_angle + self.sweep.signum() * s / self.radius
+    }
+
+    fn point_at_angle(&self, angle: f64) -> DVec2 {
+        self.centre + DVec2::new(angle.cos(), angle.sin()) * self.radius
+    }
+}
+
+/// A smooth lane change: the path moves from one straight lane to a parallel
+/// one, its lateral offset following a quintic smoothstep (zero curvature at
+/// both ends). Arc length is mapped through a precomputed table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaneChange {
+    pub start: DVec2,
+    /// Unit vector of travel of both lanes.
+    pub direction: DVec2,
+    /// Distance along `direction` over which the change happens.
+    pub run: f64,
+    /// Signed lateral shift, positive to the left.
+    pub shift: f64,
+    /// Total arc length.
+    pub length: f64,
+    /// Arc length at `run * i / (n - 1)`, for inverting arc length.
+    arc_table: Vec<f64>,
+}
+
+const LANE_CHANGE_TABLE: usize = 65;
+
+impl LaneChange {
+    pub fn new(start: DVec2, direction: DVec2, run: f64, shift: f64) -> Curve {
+        let mut lc = LaneChange {
+            start,
+            direction,
+            run,
+            shift,
+            length: 0.0,
+            arc_table: Vec::with_capacity(LANE_CHANGE_TABLE),
+        };
+        // Integrate |p'(u)| with Simpson's rule on each table interval.
+        let mut acc = 0.0;
+        lc.arc_table.push(0.0);
+        let step = run / (LANE_CHANGE_TABLE - 1) as f64;
+        for i in 0..LANE_CHANGE_TABLE - 1 {
+            let a = i as f64 * step;
+            let speed = |u: f64| {
+                let t = u / run;
+                (1.0 + (shift * smootherstep_derivative(t) / run).powi(2)).sqrt()
+            };
+            acc += step / 6.0 * (speed(a) + 4.0 * speed(a + step / 2.0) + speed(a + step));
+            lc.arc_table.push(acc);
+        }
+        lc.length = acc;
+        Curve::LaneChange(lc)
+    }
+
+    fn longitudinal_at_arc_length(&self, s: f64) -> f64 {
+        let table = &self.arc_table;
+        let i = table.partition_point(|&a| a < s).clamp(1, table.len() - 1);
+        let (a0, a1) = (table[i - 1], table[i]);
+        let step = self.run / (table.len() - 1) as f64;
+        let frac = if a1 > a0 { (s - a0) / (a1 - a0) } else { 0.0 };
+        ((i - 1) as f64 + frac) * step
+    }
+
+    fn point_at(&self, u: f64) -> DVec2 {
+        let left = self.direction.perp();
+        self.start + self.direction * u + left * self.shift * smootherstep(u / self.run)
+    }
+
+    fn heading_at_longitudinal(&self, u: f64) -> f64 {
+        let left = self.direction.perp();
+        let d = self.direction + left * self.shift * smootherstep_derivative(u / self.run) / self.run;
+        d.y.atan2(d.x)
+    }
+}
+
+fn smootherstep(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+fn smootherstep_derivative(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    30.0 * t * t * (t - 1.0) * (t - 1.0)
+}
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_angle(a: f64) -> f64 {
+    let mut a = a % (2.0 * PI);
+    if a <= -PI {
+        a += 2.0 * PI;
+    } else if a > PI {
+        a -= 2.0 * PI;
+    }
+    a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn arc_quarter_turn_ends_where_expected() {
+        let arc = Arc::from_start(DVec2::new(0.0, 0.0), 0.0, 2.0, PI / 2.0);
+        let end = arc.end();
+        assert!((end - DVec2::new(2.0, 2.0)).length() < 1e-9, "{end:?}");
+        assert!((arc.heading_at(arc.length()) - PI / 2.0).abs() < 1e-9);
+        let right = Arc::from_start(DVec2::new(0.0, 0.0), 0.0, 2.0, -PI / 2.0);
+        assert!((right.end() - DVec2::new(2.0, -2.0)).length() < 1e-9);
+        assert!((right.heading_at(right.length()) + PI / 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn lane_change_is_parameterised_by_arc_length() {
+        let c = LaneChange::new(DVec2::ZERO, DVec2::X, 8.0, 3.0);
+        assert!((c.end() - DVec2::new(8.0, 3.0)).length() < 1e-9);
+        // Equal steps of s give equal chord lengths (up to curvature).
+        let n = 40;
+        let step = c.length() / n as f64;
+        for i in 0..n {
+            let a = c.lane_center_at(i as f64 * step);
+            let b = c.lane_center_at((i + 1) as f64 * step);
+            assert!((a.distance(b) - step).abs() < 1e-3, "step {i}: {}", a.distance(b));
+        }
+        assert!(c.heading_at(0.0).abs() < 1e-9 && c.heading_at(c.length()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn local_coordinates_invert_position() {
+        let curves = [
+            Line::between(DVec2::new(1.0, 1.0), DVec2::new(1.0, 9.0)),
+            Arc::from_start(DVec2::new(0.0, 0.0), 0.3, 7.5, PI / 2.0),
+            Arc::from_start(DVec2::new(0.0, 0.0), 0.3, 1.5, -PI / 2.0),
+            LaneChange::new(DVec2::ZERO, DVec2::Y, 8.0, -3.0),
+        ];
+        for c in &curves {
+            for &(s, lat) in &[(0.5, 0.0), (1.0, 0.4), (2.0, -0.3)] {
+                let p = c.position(s, lat);
+                let (s2, lat2) = c.local_coordinates(p);
+                assert!((s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3, "{c:?} {s} {lat} -> {s2} {lat2}");
+            }
+        }
+    }
+}

@@ -1,0 +1,331 @@
+//! The city map shared by every world: four roads (A and B running east-west,
+//! C and D north-south) crossing at four four-way intersections around a
+//! central block. Each road is cut into segments 0, 1, 2 by the intersections
+//! and has four lanes: `w`, `x` travel towards +x (A, B) or +y (C, D), `y`,
+//! `z` the other way; `w` and `z` are the outer (kerb-side) lanes, `x` and `y`
+//! the inner ones (right-hand traffic). Outer lanes may go straight or turn
+//! right, inner lanes straight or left. Roads continue off camera and loop
+//! back with a U-turn, so every route can be extended forever.
+//!
+//! Units: metres and radians, x east, y north, origin at the centre of the
+//! central block.
+
+pub mod curve;
+pub mod route;
+
+use curve::{Arc, Curve, Line};
+use glam::DVec2;
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+pub use route::{Action, Route, RouteError, RouteLeg, LegKind};
+
+/// Index of a lane in [`CityMap::lanes`].
+pub type LaneId = usize;
+/// Index of a connector in [`CityMap::connectors`].
+pub type ConnectorId = usize;
+
+/// Dimensions of the generated city.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapLayout {
+    pub lane_width: f64,
+    /// East-west roads: name and y of the centre line, ascending y.
+    pub east_west_roads: [(char, f64); 2],
+    /// North-south roads: name and x of the centre line, ascending x.
+    pub north_south_roads: [(char, f64); 2],
+    /// East-west roads run from -extent_x to +extent_x before looping back.
+    pub extent_x: f64,
+    /// North-south roads run from -extent_y to +extent_y before looping back.
+    pub extent_y: f64,
+    /// Distance along the lane over which a merge moves to the next lane.
+    pub lane_change_length: f64,
+}
+
+impl Default for MapLayout {
+    fn default() -> Self {
+        MapLayout {
+            lane_width: 3.0,
+            east_west_roads: [('B', -14.0), ('A', 14.0)],
+            north_south_roads: [('C', -24.0), ('D', 24.0)],
+            extent_x: 52.0,
+            extent_y: 37.0,
+            lane_change_length: 8.0,
+        }
+    }
+}
+
+impl MapLayout {
+    /// Half the width of a road (two lanes each way).
+    pub fn road_half_width(&self) -> f64 {
+        2.0 * self.lane_width
+    }
+}
+
+/// Which lane of its direction a lane is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LanePosition {
+    /// Kerb side: straight or right at intersections.
+    Outer,
+    /// Centre side: straight or left at intersections.
+    Inner,
+}
+
+/// A movement through an intersection (or the U-turn at a road's far end).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Turn {
+    Left,
+    Right,
+    Straight,
+    /// The off-camera loop at the end of a road.
+    UTurn,
+}
+
+/// What a lane runs into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LaneEnd {
+    /// The stop line of an intersection approach.
+    Intersection {
+        intersection: usize,
+        /// Side of the intersection the lane arrives from: 'N', 'E', 'S', 'W'.
+        approach: char,
+    },
+    /// The U-turn loop at the end of the road.
+    Loop(ConnectorId),
+}
+
+/// One lane of one road segment, the unit cars spawn on (`A0w` .. `D2z`).
+#[derive(Debug, Clone)]
+pub struct Lane {
+    pub name: String,
+    pub road: char,
+    pub segment: u8,
+    pub letter: char,
+    pub position: LanePosition,
+    pub curve: Curve,
+    pub end: LaneEnd,
+}
+
+/// A path linking the end of one lane to the start of another.
+#[derive(Debug, Clone)]
+pub struct Connector {
+    pub from: LaneId,
+    pub to: LaneId,
+    pub turn: Turn,
+    pub intersection: Option<usize>,
+    pub curve: Curve,
+}
+
+/// A four-way junction of one east-west and one north-south road.
+#[derive(Debug, Clone)]
+pub struct Intersection {
+    /// East-west road then north-south road, e.g. `AC`.
+    pub name: String,
+    pub centre: DVec2,
+    /// Half the side of the square box the connectors cross.
+    pub half_size: f64,
+}
+
+/// The whole road network: lanes, connectors and intersections.
+#[derive(Debug, Clone)]
+pub struct CityMap {
+    pub layout: MapLayout,
+    pub lanes: Vec<Lane>,
+    pub connectors: Vec<Connector>,
+    pub intersections: Vec<Intersection>,
+    lane_by_name: HashMap<String, LaneId>,
+    /// (lane, turn) -> connector leaving that lane.
+    exits: HashMap<(LaneId, Turn), ConnectorId>,
+}
+
+impl Default for CityMap {
+    fn default() -> Self {
+        CityMap::new(MapLayout::default())
+    }
+}
+
+const LANE_LETTERS: [char; 4] = ['w', 'x', 'y', 'z'];
+
+impl CityMap {
+    /// Builds the network for `layout`.
+    pub fn new(layout: MapLayout) -> CityMap {
+        let hw = layout.road_half_width();
+        let lw = layout.lane_width;
+        let mut intersections = Vec::new();
+        for &(ew, y) in &layout.east_west_roads {
+            for &(ns, x) in &layout.north_south_roads {
+                intersections.push(Intersection {
+                    name: format!("{ew}{ns}"),
+                    centre: DVec2::new(x, y),
+                    half_size: hw,
+                });
+            }
+        }
+        let intersection_at = |ew: usize, ns: usize| ew * 2 + ns;
+
+        let mut lanes = Vec::new();
+        // (road name, origin, axis direction, crossing coordinates, extent, is east-west, road index)
+        let mut roads = Vec::new();
+        for (i, &(name, y)) in layout.east_west_roads.iter().enumerate() {
+            let crossings = [layout.north_south_roads[0].1, layout.north_south_roads[1].1];
+            roads.push((name, DVec2::new(0.0, y), DVec2::X, crossings, layout.extent_x, true, i));
+        }
+        for (j, &(name, x)) in layout.north_south_roads.iter().enumerate() {
+            let crossings = [layout.east_west_roads[0].1, layout.east_west_roads[1].1];
+            roads.push((name, DVec2::new(x, 0.0), DVec2::Y, crossings, layout.extent_y, false, j));
+        }
+        let mut pending_loops = Vec::new();
+        for &(name, origin, axis, crossings, extent, east_west, road_index) in &roads {
+            let right = DVec2::new(axis.y, -axis.x);
+            let bounds = [
+                (-extent, crossings[0] - hw),
+                (crossings[0] + hw, crossings[1] - hw),
+                (crossings[1] + hw, extent),
+            ];
+            for (segment, &(a0, a1)) in bounds.iter().enumerate() {
+                for letter in LANE_LETTERS {
+                    let (offset, forward, position) = match letter {
+                        'w' => (1.5 * lw, true, LanePosition::Outer),
+                        'x' => (0.5 * lw, true, LanePosition::Inner),
+                        'y' => (-0.5 * lw, false, LanePosition::Inner),
+                        _ => (-1.5 * lw, false, LanePosition::Outer),
+                    };
+                    let p0 = origin + axis * a0 + right * offset;
+                    let p1 = origin + axis * a1 + right * offset;
+                    let (start, end) = if forward { (p0, p1) } else { (p1, p0) };
+                    // Index of the crossing this lane runs into, if any.
+                    let crossing = match (forward, segment) {
+                        (true, 0) => Some(0),
+                        (true, 1) => Some(1),
+                        (false, 1) => Some(0),
+                        (false, 2) => Some(1),
+                        _ => None,
+                    };
+                    let end_kind = match crossing {
+                        Some(k) => {
+                            let intersection = if east_west {
+                                intersection_at(road_index, k)
+                            } else {
+                                intersection_at(k, road_index)
+                            };
+                            let approach = match (east_west, forward) {
+                                (true, true) => 'W',
+                                (true, false) => 'E',
+                                (false, true) => 'S',
+                                (false, false) => 'N',
+                            };
+                            LaneEnd::Intersection { intersection, approach }
+                        }
+                        None => {
+                            pending_loops.push(lanes.len());
+                            LaneEnd::Loop(usize::MAX)
+                        }
+                    };
+                    lanes.push(Lane {
+                        name: format!("{name}{segment}{letter}"),
+                        road: name,
+                        segment: segment as u8,
+                        letter,
+                        position,
+                        curve: Line::between(start, end),
+                        end: end_kind,
+                    });
+                }
+            }
+        }
+
+        let lane_starting_at = |lanes: &[Lane], p: DVec2, heading: f64| -> LaneId {
+            lanes
+                .iter()
+                .position(|l| {
+                    l.curve.start().distance(p) < 1e-6
+                        && curve::wrap_angle(l.curve.heading_at(0.0) - heading).abs() < 1e-6
+                })
+                .unwrap_or_else(|| panic!("map layout is not closed: no lane starts at {p:?}"))
+        };
+
+        let mut connectors = Vec::new();
+        for from in 0..lanes.len() {
+            let lane = &lanes[from];
+            let end = lane.curve.end();
+            let heading = lane.curve.heading_at(lane.curve.length());
+            let mut add = |curve: Curve, turn: Turn, intersection: Option<usize>| {
+                let to = lane_starting_at(&lanes, curve.end(), curve.heading_at(curve.length()));
+                connectors.push(Connector { from, to, turn, intersection, curve });
+            };
+            match lane.end {
+                LaneEnd::Intersection { intersection, .. } => {
+                    let travel = DVec2::new(heading.cos(), heading.sin());
+                    add(Line::between(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
+                    match lane.position {
+                        LanePosition::Outer => add(
+                            Arc::from_start(end, heading, hw - 1.5 * lw, -PI / 2.0),
+                            Turn::Right,
+                            Some(intersection),
+                        ),
+                        LanePosition::Inner => add(
+                            Arc::from_start(end, heading, hw + 0.5 * lw, PI / 2.0),
+                            Turn::Left,
+                            Some(intersection),
+                        ),
+                    }
+                }
+                LaneEnd::Loop(_) => {
+                    let radius = match lane.position {
+                        LanePosition::Outer => 1.5 * lw,
+                        LanePosition::Inner => 0.5 * lw,
+                    };
+                    add(Arc::from_start(end, heading, radius, PI), Turn::UTurn, None);
+                }
+            }
+        }
+        for (id, c) in connectors.iter().enumerate() {
+            if c.turn == Turn::UTurn {
+                lanes[c.from].end = LaneEnd::Loop(id);
+            }
+        }
+        debug_assert!(pending_loops.iter().all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
+
+        let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
+        let exits = connectors.iter().enumerate().map(|(i, c)| ((c.from, c.turn), i)).collect();
+        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits }
+    }
+
+    /// The lane named like the original's spawn points, e.g. `C0w`.
+    pub fn lane_by_name(&self, name: &str) -> Option<LaneId> {
+        self.lane_by_name.get(name).copied()
+    }
+
+    /// All 48 spawn points (every lane of every road segment), in name order.
+    pub fn spawn_points(&self) -> Vec<LaneId> {
+        let mut ids: Vec<LaneId> = (0..self.lanes.len()).collect();
+        ids.sort_by(|a, b| self.lanes[*a].name.cmp(&self.lanes[*b].name));
+        ids
+    }
+
+    /// The connector that performs `turn` at the end of `lane`, if allowed.
+    pub fn exit(&self, lane: LaneId, turn: Turn) -> Option<ConnectorId> {
+        self.exits.get(&(lane, turn)).copied()
+    }
+
+    /// The parallel lane of the same direction on the left (`to_left`) or right.
+    pub fn adjacent_lane(&self, lane: LaneId, to_left: bool) -> Option<LaneId> {
+        let l = &self.lanes[lane];
+        let target = match (l.letter, to_left) {
+            ('w', true) => 'x',
+            ('x', false) => 'w',
+            ('z', true) => 'y',
+            ('y', false) => 'z',
+            _ => return None,
+        };
+        self.lane_by_name(&format!("{}{}{}", l.road, l.segment, target))
+    }
+
+    /// Turns allowed at the end of `lane` (none for lanes that end in a loop).
+    pub fn allowed_turns(&self, lane: LaneId) -> Vec<Turn> {
+        [Turn::Left, Turn::Straight, Turn::Right]
+            .into_iter()
+            .filter(|&t| self.exit(lane, t).is_some())
+            .collect()
+    }
+}
