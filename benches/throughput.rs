@@ -1,1 +1,204 @@
-fn main(){}
+//! `make bench`: throughput, memory and size figures for the toy world.
+//! Prints figures; asserts nothing (targets live in the issue notes).
+
+use causalcity::map::CityMap;
+use causalcity::orchestrate::plan::Expansion;
+use causalcity::orchestrate::progress::ProgressMode;
+use causalcity::orchestrate::run::{generate, GenOptions};
+use causalcity::output::png::{encode_png, PixelFormat, PngSettings};
+use causalcity::render::{CarSprite, Renderer};
+use causalcity::spec::DatasetSpec;
+use causalcity::world::toy::ToyWorld;
+use causalcity::world::World;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Arc;
+use std::time::Instant;
+
+fn spec_json(name: &str, cars: u32, train: u32) -> String {
+    format!(
+        r#"{{"name": "{name}", "world": "toy", "seed": 1, "frames": 150,
+            "groups": [{{"cars": {cars}, "edge_proportion": 0.5}}],
+            "splits": {{"train": {train}, "val": 0, "test": 0}}}}"#
+    )
+}
+
+fn write_spec(dir: &Path, name: &str, cars: u32, train: u32) -> PathBuf {
+    let path = dir.join(format!("{name}.json"));
+    std::fs::write(&path, spec_json(name, cars, train)).unwrap();
+    path
+}
+
+fn dir_bytes(dir: &Path, sub: &str) -> (u64, u64) {
+    let mut total = 0;
+    let mut count = 0;
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let e = e.unwrap();
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.parent().unwrap().file_name().unwrap() == sub {
+                total += e.metadata().unwrap().len();
+                count += 1;
+            }
+        }
+    }
+    (total, count)
+}
+
+fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
+    let _ = std::fs::remove_dir_all(out);
+    let options = GenOptions {
+        spec_path: spec.to_path_buf(),
+        out: Some(out.to_path_buf()),
+        limit: None,
+        threads: Some(threads),
+        images,
+        progress: ProgressMode::Quiet,
+    };
+    generate(&options).unwrap().elapsed.as_secs_f64()
+}
+
+fn png_settings_comparison() {
+    println!("== PNG settings on a real 1024x640 toy frame (12 cars) ==");
+    let spec = DatasetSpec::from_json(&spec_json("png", 12, 1)).unwrap();
+    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
+    let plan = expansion.plan(&expansion.keys(None)[0]).unwrap();
+    let traj = ToyWorld.simulate(&expansion.map, &plan);
+    let renderer = Renderer::new(&expansion.map, expansion.camera);
+    let mut canvas = renderer.canvas();
+    let sprites: Vec<CarSprite> = plan
+        .cars
+        .iter()
+        .zip(&traj.states[75])
+        .map(|(c, s)| CarSprite {
+            position: s.position,
+            yaw: s.yaw,
+            length: c.length,
+            width: c.width,
+            colour: c.colour,
+            mask_id: c.mask_id,
+        })
+        .collect();
+    let reps = 40;
+    let t = Instant::now();
+    for _ in 0..reps {
+        renderer.render(&mut canvas, &sprites);
+    }
+    println!(
+        "render (RGB + mask, no encode): {:.2} ms",
+        t.elapsed().as_secs_f64() * 1e3 / reps as f64
+    );
+    use png::{DeflateCompression as D, Filter as F};
+    let options = [
+        ("none", D::NoCompression, F::NoFilter),
+        ("fdeflate fast, Up", D::FdeflateUltraFast, F::Up),
+        ("fdeflate fast, Sub", D::FdeflateUltraFast, F::Sub),
+        ("fdeflate fast, Paeth", D::FdeflateUltraFast, F::Paeth),
+        ("fdeflate fast, adaptive", D::FdeflateUltraFast, F::Adaptive),
+        ("zlib 1, Up", D::Level(1), F::Up),
+        ("zlib 1, adaptive", D::Level(1), F::Adaptive),
+        ("zlib 6, adaptive", D::Level(6), F::Adaptive),
+        ("zlib 9, adaptive", D::Level(9), F::Adaptive),
+    ];
+    let default = PngSettings::default();
+    println!(
+        "{:<26} {:>10} {:>10} {:>10} {:>10}",
+        "settings", "rgb KB", "rgb ms", "mask KB", "mask ms"
+    );
+    for (name, compression, filter) in options {
+        let settings = PngSettings {
+            compression,
+            filter,
+        };
+        let mut sizes = [0usize; 2];
+        let mut times = [0f64; 2];
+        for (i, (format, data)) in [
+            (PixelFormat::Rgb8, &canvas.rgb),
+            (PixelFormat::Gray8, &canvas.mask),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let t = Instant::now();
+            let mut out = Vec::new();
+            for _ in 0..reps {
+                out.clear();
+                encode_png(&mut out, 1024, 640, format, data, settings).unwrap();
+            }
+            times[i] = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+            sizes[i] = out.len();
+        }
+        let chosen = if format!("{:?}{:?}", default.compression, default.filter)
+            == format!("{compression:?}{filter:?}")
+        {
+            "  <- chosen"
+        } else {
+            ""
+        };
+        println!(
+            "{name:<26} {:>10.1} {:>10.2} {:>10.1} {:>10.2}{chosen}",
+            sizes[0] as f64 / 1e3,
+            times[0],
+            sizes[1] as f64 / 1e3,
+            times[1]
+        );
+    }
+}
+
+fn main() {
+    // `cargo bench` passes --bench; ignore arguments.
+    let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&root).unwrap();
+    png_settings_comparison();
+
+    println!("\n== Toy world with images, 1024x640, 12 cars x 150 frames ==");
+    let images_spec = write_spec(&root, "images", 12, 8);
+    let pairs = 8.0 * 150.0;
+    let one = gen(&images_spec, &root.join("img1"), 1, true);
+    let two = gen(&images_spec, &root.join("img2"), 2, true);
+    let (rgb_bytes, rgb_files) = dir_bytes(&root.join("img1"), "rgb");
+    let (mask_bytes, mask_files) = dir_bytes(&root.join("img1"), "mask");
+    println!("1 thread : {:.0} frame pairs/s per core", pairs / one);
+    println!(
+        "2 threads: {:.0} frame pairs/s in all, speed-up {:.2}x",
+        pairs / two,
+        one / two
+    );
+    println!(
+        "bytes per frame pair: {:.1} KB (RGB {:.1} KB, mask {:.1} KB)",
+        (rgb_bytes + mask_bytes) as f64 / rgb_files as f64 / 1e3,
+        rgb_bytes as f64 / rgb_files as f64 / 1e3,
+        mask_bytes as f64 / mask_files as f64 / 1e3
+    );
+
+    println!("\n== Toy world, poses only, 12 cars x 150 frames (CSV included) ==");
+    let poses_spec = write_spec(&root, "poses", 12, 2000);
+    let one = gen(&poses_spec, &root.join("poses1"), 1, false);
+    let two = gen(&poses_spec, &root.join("poses2"), 2, false);
+    println!("1 thread : {:.0} scenarios/s per core", 2000.0 / one);
+    println!(
+        "2 threads: {:.0} scenarios/s in all, speed-up {:.2}x",
+        2000.0 / two,
+        one / two
+    );
+
+    println!("\n== Peak memory of the binary (VmHWM), 2 threads, with images ==");
+    for n in [4u32, 40] {
+        let spec = write_spec(&root, &format!("mem{n}"), 12, n);
+        let out = root.join(format!("mem{n}"));
+        let output = Command::new(env!("CARGO_BIN_EXE_causalcity"))
+            .args(["gen", "--quiet", "-j", "2", "--spec"])
+            .arg(&spec)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let line = String::from_utf8_lossy(&output.stdout);
+        let peak = line.split("peak memory ").nth(1).unwrap_or("n/a").trim();
+        println!("{n:>3} scenarios: peak memory {peak}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -3,4 +3,11 @@
 //! [`orchestrate::plan::ScenarioPlan`]s, a [`world`] simulates each into
 //! trajectories, [`render`] turns them into frames and [`output`] writes files.
 
+pub mod cli;
+pub mod geometry;
 pub mod map;
+pub mod orchestrate;
+pub mod output;
+pub mod render;
+pub mod spec;
+pub mod world;

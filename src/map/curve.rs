@@ -232,7 +232,8 @@ impl LaneChange {
 
     fn heading_at_longitudinal(&self, u: f64) -> f64 {
         let left = self.direction.perp();
-        let d = self.direction + left * self.shift * smootherstep_derivative(u / self.run) / self.run;
+        let d =
+            self.direction + left * self.shift * smootherstep_derivative(u / self.run) / self.run;
         d.y.atan2(d.x)
     }
 }
@@ -283,7 +284,11 @@ mod tests {
         for i in 0..n {
             let a = c.lane_center_at(i as f64 * step);
             let b = c.lane_center_at((i + 1) as f64 * step);
-            assert!((a.distance(b) - step).abs() < 1e-3, "step {i}: {}", a.distance(b));
+            assert!(
+                (a.distance(b) - step).abs() < 1e-3,
+                "step {i}: {}",
+                a.distance(b)
+            );
         }
         assert!(c.heading_at(0.0).abs() < 1e-9 && c.heading_at(c.length()).abs() < 1e-9);
     }
@@ -300,7 +305,10 @@ mod tests {
             for &(s, lat) in &[(0.5, 0.0), (1.0, 0.4), (2.0, -0.3)] {
                 let p = c.position(s, lat);
                 let (s2, lat2) = c.local_coordinates(p);
-                assert!((s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3, "{c:?} {s} {lat} -> {s2} {lat2}");
+                assert!(
+                    (s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3,
+                    "{c:?} {s} {lat} -> {s2} {lat2}"
+                );
             }
         }
     }

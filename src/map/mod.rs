@@ -18,7 +18,7 @@ use glam::DVec2;
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
-pub use route::{Action, Route, RouteError, RouteLeg, LegKind};
+pub use route::{Action, LegKind, Route, RouteError, RouteLeg};
 
 /// Index of a lane in [`CityMap::lanes`].
 pub type LaneId = usize;
@@ -168,11 +168,27 @@ impl CityMap {
         let mut roads = Vec::new();
         for (i, &(name, y)) in layout.east_west_roads.iter().enumerate() {
             let crossings = [layout.north_south_roads[0].1, layout.north_south_roads[1].1];
-            roads.push((name, DVec2::new(0.0, y), DVec2::X, crossings, layout.extent_x, true, i));
+            roads.push((
+                name,
+                DVec2::new(0.0, y),
+                DVec2::X,
+                crossings,
+                layout.extent_x,
+                true,
+                i,
+            ));
         }
         for (j, &(name, x)) in layout.north_south_roads.iter().enumerate() {
             let crossings = [layout.east_west_roads[0].1, layout.east_west_roads[1].1];
-            roads.push((name, DVec2::new(x, 0.0), DVec2::Y, crossings, layout.extent_y, false, j));
+            roads.push((
+                name,
+                DVec2::new(x, 0.0),
+                DVec2::Y,
+                crossings,
+                layout.extent_y,
+                false,
+                j,
+            ));
         }
         let mut pending_loops = Vec::new();
         for &(name, origin, axis, crossings, extent, east_west, road_index) in &roads {
@@ -214,7 +230,10 @@ impl CityMap {
                                 (false, true) => 'S',
                                 (false, false) => 'N',
                             };
-                            LaneEnd::Intersection { intersection, approach }
+                            LaneEnd::Intersection {
+                                intersection,
+                                approach,
+                            }
                         }
                         None => {
                             pending_loops.push(lanes.len());
@@ -251,12 +270,22 @@ impl CityMap {
             let heading = lane.curve.heading_at(lane.curve.length());
             let mut add = |curve: Curve, turn: Turn, intersection: Option<usize>| {
                 let to = lane_starting_at(&lanes, curve.end(), curve.heading_at(curve.length()));
-                connectors.push(Connector { from, to, turn, intersection, curve });
+                connectors.push(Connector {
+                    from,
+                    to,
+                    turn,
+                    intersection,
+                    curve,
+                });
             };
             match lane.end {
                 LaneEnd::Intersection { intersection, .. } => {
                     let travel = DVec2::new(heading.cos(), heading.sin());
-                    add(Line::between(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
+                    add(
+                        Line::between(end, end + travel * 2.0 * hw),
+                        Turn::Straight,
+                        Some(intersection),
+                    );
                     match lane.position {
                         LanePosition::Outer => add(
                             Arc::from_start(end, heading, hw - 1.5 * lw, -PI / 2.0),
@@ -284,11 +313,28 @@ impl CityMap {
                 lanes[c.from].end = LaneEnd::Loop(id);
             }
         }
-        debug_assert!(pending_loops.iter().all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
+        debug_assert!(pending_loops
+            .iter()
+            .all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
 
-        let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
-        let exits = connectors.iter().enumerate().map(|(i, c)| ((c.from, c.turn), i)).collect();
-        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits }
+        let lane_by_name = lanes
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (l.name.clone(), i))
+            .collect();
+        let exits = connectors
+            .iter()
+            .enumerate()
+            .map(|(i, c)| ((c.from, c.turn), i))
+            .collect();
+        CityMap {
+            layout,
+            lanes,
+            connectors,
+            intersections,
+            lane_by_name,
+            exits,
+        }
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.

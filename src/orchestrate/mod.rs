@@ -1,0 +1,5 @@
+//! Orchestration: spec expansion, the parallel run and its progress report.
+
+pub mod plan;
+pub mod progress;
+pub mod run;

@@ -1,0 +1,492 @@
+//! Spec expansion: turns a [`DatasetSpec`] into one [`ScenarioPlan`] per
+//! scenario. Each scenario draws from its own ChaCha8 stream keyed by
+//! SHA-256("causalcity/scenario/v1", seed, group, split, index), so its content
+//! never depends on thread count, order, sharding or the other groups.
+
+use crate::geometry::OrientedBox;
+use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
+use crate::render::camera::Camera;
+use crate::spec::{DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
+use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::sync::Arc;
+
+/// A car's part in the causal graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    Leader,
+    Follower,
+    Independent,
+}
+
+/// Where one scenario sits in the dataset.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct ScenarioKey {
+    pub group: String,
+    pub group_index: usize,
+    pub split: Split,
+    pub index: u32,
+}
+
+impl ScenarioKey {
+    /// Folder name of the scenario, e.g. `00042`.
+    pub fn folder_name(&self) -> String {
+        format!("{:05}", self.index)
+    }
+}
+
+/// Everything about one car that is fixed before simulation.
+#[derive(Debug, Clone)]
+pub struct CarPlan {
+    /// 0-based, randomly permuted per scenario so the index hides the role.
+    pub id: u32,
+    pub name: String,
+    pub colour: [u8; 3],
+    /// Value of this car's pixels in the instance masks (id + 1).
+    pub mask_id: u8,
+    pub spawn: LaneId,
+    pub spawn_name: String,
+    /// Metres along the spawn lane where the car starts.
+    pub spawn_distance: f64,
+    pub actions: Vec<Action>,
+    /// Metres along the current lane for merges, 0 for other actions.
+    pub merge_distances: Vec<f64>,
+    pub role: Role,
+    pub length: f64,
+    pub width: f64,
+    /// Shared by a leader and its follower.
+    pub route: Arc<Route>,
+}
+
+/// One scenario, ready to simulate.
+#[derive(Debug, Clone)]
+pub struct ScenarioPlan {
+    pub key: ScenarioKey,
+    pub world: WorldKind,
+    pub seed: u64,
+    /// Hex of the 32-byte key of the scenario's random stream.
+    pub stream_key: String,
+    pub frames: u32,
+    pub frame_interval: f64,
+    /// Cars in id order.
+    pub cars: Vec<CarPlan>,
+    /// (leader id, follower id) pairs.
+    pub edges: Vec<(u32, u32)>,
+    /// Toy world: metres every car covers per frame.
+    pub toy_step_m: f64,
+}
+
+/// A span of a spawn lane where a car's centre is on camera.
+#[derive(Debug, Clone, Copy)]
+struct SpawnSpan {
+    lane: LaneId,
+    lo: f64,
+    hi: f64,
+}
+
+/// The spec checked against the map and camera, able to plan any scenario.
+#[derive(Debug)]
+pub struct Expansion {
+    pub spec: DatasetSpec,
+    pub map: Arc<CityMap>,
+    pub camera: Camera,
+    spans: Vec<SpawnSpan>,
+    leader_gap_m: f64,
+    toy_step_m: f64,
+}
+
+/// Clearance kept between cars at spawn, metres.
+const SPAWN_CLEARANCE: f64 = 0.1;
+const PLACEMENT_ATTEMPTS: usize = 2000;
+
+impl Expansion {
+    /// Checks that every group can be planned on this map and camera.
+    pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
+        let camera = Camera::birds_eye(spec.image.width, spec.image.height);
+        let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px);
+        if leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
+            return Err(SpecError::new(
+                "leader_gap_px",
+                format!(
+                    "{} px ({leader_gap_m:.2} m) would make a follower overlap its leader: a car is {} m ({:.1} px) long, so use at least {:.1}",
+                    spec.leader_gap_px,
+                    spec.car_length_m,
+                    camera.metres_to_pixels(spec.car_length_m),
+                    camera.metres_to_pixels(spec.car_length_m + SPAWN_CLEARANCE)
+                ),
+            ));
+        }
+        let spans = spawn_spans(&map, &camera, spec.car_length_m);
+        let slot = spec.car_length_m + SPAWN_CLEARANCE;
+        let capacity: u32 = spans
+            .iter()
+            .map(|s| ((s.hi - s.lo) / slot) as u32 + 1)
+            .sum();
+        let toy_step_m = camera.pixels_to_metres(spec.toy_speed_px_per_frame);
+        let expansion = Expansion {
+            spec,
+            map,
+            camera,
+            spans,
+            leader_gap_m,
+            toy_step_m,
+        };
+        for (i, g) in expansion.spec.groups.iter().enumerate() {
+            // Random placement needs room to spare: allow half the packed capacity.
+            if g.cars > capacity / 2 {
+                return Err(SpecError::new(
+                    format!("groups[{i}].cars"),
+                    format!(
+                        "{} cars do not fit on the visible spawn lanes of a {}x{} view without overlapping: use at most {}",
+                        g.cars,
+                        expansion.spec.image.width,
+                        expansion.spec.image.height,
+                        capacity / 2
+                    ),
+                ));
+            }
+            if g.edges() > 0 && !expansion.spans.iter().any(|s| s.hi - s.lo >= leader_gap_m) {
+                return Err(SpecError::new(
+                    "leader_gap_px",
+                    format!(
+                        "{} px is longer than any visible spawn lane: no pair can start on camera",
+                        expansion.spec.leader_gap_px
+                    ),
+                ));
+            }
+            // A dry run proves the group can be planned before anything is written.
+            let key = ScenarioKey {
+                group: g.name(),
+                group_index: i,
+                split: Split::Train,
+                index: 0,
+            };
+            expansion
+                .plan(&key)
+                .map_err(|e| SpecError::new(format!("groups[{i}]"), e))?;
+        }
+        Ok(expansion)
+    }
+
+    /// Every scenario of the dataset in a fixed order (group, split, index),
+    /// with at most `limit` scenarios per split.
+    pub fn keys(&self, limit: Option<u32>) -> Vec<ScenarioKey> {
+        let mut keys = Vec::new();
+        for (group_index, g) in self.spec.groups.iter().enumerate() {
+            for split in Split::ALL {
+                let n = self.spec.splits.count(split).min(limit.unwrap_or(u32::MAX));
+                for index in 0..n {
+                    keys.push(ScenarioKey {
+                        group: g.name(),
+                        group_index,
+                        split,
+                        index,
+                    });
+                }
+            }
+        }
+        keys
+    }
+
+    /// Metres every toy car covers per frame.
+    pub fn toy_step_m(&self) -> f64 {
+        self.toy_step_m
+    }
+
+    /// Plans one scenario. Errors only when cars cannot be placed.
+    pub fn plan(&self, key: &ScenarioKey) -> Result<ScenarioPlan, String> {
+        let spec = &self.spec;
+        let group: &GroupSpec = &spec.groups[key.group_index];
+        let stream = stream_key(spec.seed, &key.group, key.split, key.index);
+        let mut rng = ChaCha8Rng::from_seed(stream);
+        let travel = self.max_travel();
+
+        // Units to place: pairs first (they need the most room), then singles.
+        let pairs = group.edges() as usize;
+        let singles = group.cars as usize - 2 * pairs;
+        let mut placed: Vec<OrientedBox> = Vec::new();
+        // (role, spawn, distance, actions, merges, route)
+        let mut cars: Vec<(Role, LaneId, f64, Vec<Action>, Vec<f64>, Arc<Route>)> = Vec::new();
+        let mut pair_indices = Vec::new();
+        for unit in 0..pairs + singles {
+            let is_pair = unit < pairs;
+            let gap = if is_pair { self.leader_gap_m } else { 0.0 };
+            let mut done = false;
+            for _ in 0..PLACEMENT_ATTEMPTS {
+                let span = self.spans[rng.random_range(0..self.spans.len())];
+                if span.hi - span.lo < gap {
+                    continue;
+                }
+                let back = round_mm(rng.random_range(span.lo..=span.hi - gap));
+                let front = round_mm(back + gap);
+                let (actions, merges) =
+                    random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car);
+                let route = Route::plan(
+                    &self.map,
+                    span.lane,
+                    front,
+                    &actions,
+                    &merges,
+                    front + travel,
+                )
+                .map_err(|e| {
+                    format!(
+                        "internal planning error on {}: {e}",
+                        self.map.lanes[span.lane].name
+                    )
+                })?;
+                let starts: Vec<f64> = if is_pair {
+                    vec![front, back]
+                } else {
+                    vec![front]
+                };
+                let boxes: Vec<OrientedBox> = starts
+                    .iter()
+                    .map(|&s| {
+                        let (centre, heading) = route.pose_at(s, 0.0);
+                        OrientedBox {
+                            centre,
+                            heading,
+                            length: spec.car_length_m,
+                            width: spec.car_width_m,
+                        }
+                    })
+                    .collect();
+                let clear = boxes.iter().all(|b| {
+                    let grown = b.inflated(SPAWN_CLEARANCE / 2.0);
+                    placed
+                        .iter()
+                        .all(|p| !grown.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
+                });
+                if !clear {
+                    continue;
+                }
+                placed.extend(boxes);
+                let route = Arc::new(route);
+                if is_pair {
+                    pair_indices.push((cars.len(), cars.len() + 1));
+                    cars.push((
+                        Role::Leader,
+                        span.lane,
+                        front,
+                        actions.clone(),
+                        merges.clone(),
+                        route.clone(),
+                    ));
+                    cars.push((Role::Follower, span.lane, back, actions, merges, route));
+                } else {
+                    cars.push((Role::Independent, span.lane, front, actions, merges, route));
+                }
+                done = true;
+                break;
+            }
+            if !done {
+                return Err(format!(
+                    "could not place {} cars without overlap after {PLACEMENT_ATTEMPTS} tries: use fewer cars",
+                    group.cars
+                ));
+            }
+        }
+
+        // Random ids so the index order never gives the roles away.
+        let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
+        ids.shuffle(&mut rng);
+        let mut planned: Vec<CarPlan> = cars
+            .into_iter()
+            .enumerate()
+            .map(
+                |(i, (role, spawn, spawn_distance, actions, merge_distances, route))| {
+                    let id = ids[i];
+                    CarPlan {
+                        id,
+                        name: format!("Car_{}", id + 1),
+                        colour: car_colour(id),
+                        mask_id: (id + 1) as u8,
+                        spawn,
+                        spawn_name: self.map.lanes[spawn].name.clone(),
+                        spawn_distance,
+                        actions,
+                        merge_distances,
+                        role,
+                        length: spec.car_length_m,
+                        width: spec.car_width_m,
+                        route,
+                    }
+                },
+            )
+            .collect();
+        let mut edges: Vec<(u32, u32)> = pair_indices
+            .iter()
+            .map(|&(l, f)| (ids[l], ids[f]))
+            .collect();
+        edges.sort_unstable();
+        planned.sort_by_key(|c| c.id);
+        Ok(ScenarioPlan {
+            key: key.clone(),
+            world: spec.world,
+            seed: spec.seed,
+            stream_key: stream.iter().map(|b| format!("{b:02x}")).collect(),
+            frames: spec.frames,
+            frame_interval: spec.frame_interval,
+            cars: planned,
+            edges,
+            toy_step_m: self.toy_step_m,
+        })
+    }
+
+    /// The farthest any car can travel in a scenario, metres, plus a margin.
+    fn max_travel(&self) -> f64 {
+        let toy = self.toy_step_m * self.spec.frames as f64;
+        // City cars never exceed 20 m/s.
+        let city = 20.0 * self.spec.frame_interval * self.spec.frames as f64;
+        toy.max(city) + 10.0
+    }
+}
+
+/// The 32-byte key of a scenario's random stream.
+pub fn stream_key(seed: u64, group: &str, split: Split, index: u32) -> [u8; 32] {
+    let mut h = Sha256::new();
+    h.update(b"causalcity/scenario/v1\0");
+    h.update(seed.to_le_bytes());
+    h.update(group.as_bytes());
+    h.update([0u8]);
+    h.update(split.name().as_bytes());
+    h.update([0u8]);
+    h.update(index.to_le_bytes());
+    h.finalize().into()
+}
+
+fn round_mm(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// A valid random drive queue from `lane`, where the first car on the route
+/// starts `entry` metres along it. Merges are drawn only where they fit.
+fn random_actions(
+    rng: &mut ChaCha8Rng,
+    map: &CityMap,
+    spawn: LaneId,
+    entry: f64,
+    count: u32,
+) -> (Vec<Action>, Vec<f64>) {
+    let mut lane = spawn;
+    let mut earliest = entry;
+    let run = map.layout.lane_change_length;
+    let mut actions = Vec::new();
+    let mut merges = Vec::new();
+    for _ in 0..count {
+        let len = map.lanes[lane].curve.length();
+        // Merge distances on a 0.1 m grid that fits before the lane ends.
+        let lo = (earliest * 10.0).ceil() / 10.0;
+        let hi = ((len - run) * 10.0).floor() / 10.0;
+        let merge_side = map
+            .adjacent_lane(lane, true)
+            .map(|l| (Action::MergeL, l))
+            .or_else(|| map.adjacent_lane(lane, false).map(|l| (Action::MergeR, l)));
+        if let (Some((action, target)), true) = (merge_side, lo <= hi) {
+            if rng.random_bool(0.25) {
+                let at = ((rng.random_range(lo..=hi) * 10.0).round() / 10.0).clamp(lo, hi);
+                actions.push(action);
+                merges.push(at);
+                lane = target;
+                earliest = at + run;
+                continue;
+            }
+        }
+        // A turn applies at the next intersection, after any off-camera loop.
+        let mut approach = lane;
+        if let LaneEnd::Loop(c) = map.lanes[lane].end {
+            approach = map.connectors[c].to;
+        }
+        let turns = map.allowed_turns(approach);
+        let turn = turns[rng.random_range(0..turns.len())];
+        let action = match turn {
+            crate::map::Turn::Left => Action::Left,
+            crate::map::Turn::Right => Action::Right,
+            _ => Action::Straight,
+        };
+        actions.push(action);
+        merges.push(0.0);
+        let connector = map
+            .exit(approach, turn)
+            .expect("allowed turn has a connector");
+        lane = map.connectors[connector].to;
+        earliest = 0.0;
+    }
+    (actions, merges)
+}
+
+/// Spans of each spawn lane where a car lies wholly on camera.
+fn spawn_spans(map: &CityMap, camera: &Camera, car_length: f64) -> Vec<SpawnSpan> {
+    let (lo, hi) = camera.ground_view();
+    let margin = car_length;
+    let step = 0.05;
+    let mut spans = Vec::new();
+    for lane in map.spawn_points() {
+        let curve = &map.lanes[lane].curve;
+        let len = curve.length();
+        let mut first = None;
+        let mut last = None;
+        let mut s = car_length / 2.0;
+        while s <= len - car_length / 2.0 {
+            let p = curve.lane_center_at(s);
+            if p.x >= lo.x + margin
+                && p.x <= hi.x - margin
+                && p.y >= lo.y + margin
+                && p.y <= hi.y - margin
+            {
+                first.get_or_insert(s);
+                last = Some(s);
+            }
+            s += step;
+        }
+        if let (Some(a), Some(b)) = (first, last) {
+            spans.push(SpawnSpan { lane, lo: a, hi: b });
+        }
+    }
+    spans
+}
+
+/// A distinct, saturated colour per car id, away from road and roof colours.
+pub fn car_colour(id: u32) -> [u8; 3] {
+    const PALETTE: [[u8; 3]; 12] = [
+        [230, 25, 75],
+        [60, 180, 75],
+        [255, 225, 25],
+        [0, 130, 200],
+        [245, 130, 48],
+        [145, 30, 180],
+        [70, 240, 240],
+        [240, 50, 230],
+        [210, 245, 60],
+        [250, 190, 212],
+        [0, 128, 128],
+        [170, 110, 40],
+    ];
+    if (id as usize) < PALETTE.len() {
+        return PALETTE[id as usize];
+    }
+    // Golden-angle hues for the rest.
+    let hue = (id as f64 * 137.508) % 360.0;
+    let (s, v) = (0.75, 0.95);
+    let c = v * s;
+    let x = c * (1.0 - ((hue / 60.0) % 2.0 - 1.0).abs());
+    let (r, g, b) = match (hue / 60.0) as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = v - c;
+    [
+        ((r + m) * 255.0) as u8,
+        ((g + m) * 255.0) as u8,
+        ((b + m) * 255.0) as u8,
+    ]
+}

@@ -1,0 +1,234 @@
+//! The static scene, drawn once per camera: ground, blocks and buildings, the
+//! central park, roads, lane markings, stop lines and crosswalks. Flat colours
+//! only, so frames compress well.
+
+use super::camera::Camera;
+use crate::map::CityMap;
+use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
+
+const GROUND: [u8; 3] = [200, 198, 190];
+const ASPHALT: [u8; 3] = [66, 68, 72];
+const PARK: [u8; 3] = [122, 168, 98];
+const PARK_PATH: [u8; 3] = [214, 204, 170];
+const CENTRE_LINE: [u8; 3] = [232, 190, 40];
+const WHITE: [u8; 3] = [240, 240, 240];
+const ROOFS: [[u8; 3]; 4] = [
+    [150, 110, 96],
+    [128, 134, 150],
+    [176, 160, 132],
+    [104, 112, 118],
+];
+
+/// Sidewalk between the kerb and the buildings, metres.
+const SIDEWALK: f64 = 2.0;
+
+/// The transform from world metres to tiny-skia pixel space (whose pixel `i`
+/// spans `[i, i + 1)`, so its centre is at `i + 0.5`).
+pub fn world_to_canvas(camera: &Camera) -> Transform {
+    let ppm = camera.pixels_per_metre as f32;
+    let tx = camera.width as f32 / 2.0 - camera.centre_x as f32 * ppm;
+    let ty = camera.height as f32 / 2.0 + camera.centre_y as f32 * ppm;
+    Transform::from_row(ppm, 0.0, 0.0, -ppm, tx, ty)
+}
+
+fn paint(rgb: [u8; 3]) -> Paint<'static> {
+    let mut p = Paint::default();
+    p.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+    p.anti_alias = true;
+    p
+}
+
+/// An axis-aligned rectangle in world metres.
+fn rect(pixmap: &mut Pixmap, t: Transform, x0: f64, y0: f64, x1: f64, y1: f64, rgb: [u8; 3]) {
+    let (l, r) = (x0.min(x1) as f32, x0.max(x1) as f32);
+    let (b, top) = (y0.min(y1) as f32, y0.max(y1) as f32);
+    if let Some(rc) = Rect::from_ltrb(l, b, r, top) {
+        pixmap.fill_rect(rc, &paint(rgb), t, None);
+    }
+}
+
+/// Draws the background for `map` as seen by `camera`.
+pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
+    let mut pixmap = Pixmap::new(camera.width, camera.height).expect("image size was validated");
+    pixmap.fill(Color::from_rgba8(GROUND[0], GROUND[1], GROUND[2], 255));
+    let t = world_to_canvas(camera);
+    let layout = &map.layout;
+    let hw = layout.road_half_width();
+    let (view_lo, view_hi) = camera.ground_view();
+    let far = 1000.0;
+
+    // Blocks between the roads: buildings, and a park in the middle.
+    let xs = [
+        -far,
+        layout.north_south_roads[0].1,
+        layout.north_south_roads[1].1,
+        far,
+    ];
+    let ys = [
+        -far,
+        layout.east_west_roads[0].1,
+        layout.east_west_roads[1].1,
+        far,
+    ];
+    for i in 0..3 {
+        for j in 0..3 {
+            let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + SIDEWALK }).max(view_lo.x - 5.0);
+            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + SIDEWALK }).min(view_hi.x + 5.0);
+            let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + SIDEWALK }).max(view_lo.y - 5.0);
+            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + SIDEWALK }).min(view_hi.y + 5.0);
+            if x1 <= x0 || y1 <= y0 {
+                continue;
+            }
+            if i == 1 && j == 1 {
+                rect(&mut pixmap, t, x0, y0, x1, y1, PARK);
+                let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+                rect(&mut pixmap, t, x0, cy - 0.8, x1, cy + 0.8, PARK_PATH);
+                rect(&mut pixmap, t, cx - 0.8, y0, cx + 0.8, y1, PARK_PATH);
+            } else {
+                // Two buildings per block, split along the longer side.
+                let gap = 1.5;
+                let roof = |k: usize| ROOFS[(i * 3 + j + k) % ROOFS.len()];
+                if x1 - x0 >= y1 - y0 {
+                    let mid = (x0 + x1) / 2.0;
+                    rect(&mut pixmap, t, x0, y0, mid - gap / 2.0, y1, roof(0));
+                    rect(&mut pixmap, t, mid + gap / 2.0, y0, x1, y1, roof(1));
+                } else {
+                    let mid = (y0 + y1) / 2.0;
+                    rect(&mut pixmap, t, x0, y0, x1, mid - gap / 2.0, roof(0));
+                    rect(&mut pixmap, t, x0, mid + gap / 2.0, x1, y1, roof(1));
+                }
+            }
+        }
+    }
+
+    // Asphalt, including the turning circles at the far ends.
+    for &(_, y) in &layout.east_west_roads {
+        rect(
+            &mut pixmap,
+            t,
+            -layout.extent_x,
+            y - hw,
+            layout.extent_x,
+            y + hw,
+            ASPHALT,
+        );
+        for x in [-layout.extent_x, layout.extent_x] {
+            circle(&mut pixmap, t, x, y, hw, ASPHALT);
+        }
+    }
+    for &(_, x) in &layout.north_south_roads {
+        rect(
+            &mut pixmap,
+            t,
+            x - hw,
+            -layout.extent_y,
+            x + hw,
+            layout.extent_y,
+            ASPHALT,
+        );
+        for y in [-layout.extent_y, layout.extent_y] {
+            circle(&mut pixmap, t, x, y, hw, ASPHALT);
+        }
+    }
+
+    // Markings along every lane of every segment, drawn in the lane's frame.
+    for lane in &map.lanes {
+        if lane.letter != 'w' && lane.letter != 'z' {
+            continue;
+        }
+        let curve = &lane.curve;
+        let len = curve.length();
+        let lw = layout.lane_width;
+        // Divider between this lane and its inner neighbour: dashed white.
+        let mut s = 1.0;
+        while s + 3.0 <= len - 1.0 {
+            quad_along(
+                &mut pixmap,
+                t,
+                curve,
+                s,
+                s + 3.0,
+                0.5 * lw - 0.07,
+                0.5 * lw + 0.07,
+                WHITE,
+            );
+            s += 6.0;
+        }
+        // Half of the double yellow centre line, on this direction's side.
+        quad_along(
+            &mut pixmap,
+            t,
+            curve,
+            0.0,
+            len,
+            1.5 * lw - 0.25,
+            1.5 * lw - 0.1,
+            CENTRE_LINE,
+        );
+        if let crate::map::LaneEnd::Intersection { .. } = lane.end {
+            // Crosswalk across the whole road just before the box, stop line behind it.
+            let mut k = -hw + 0.25;
+            while k + 0.5 <= hw {
+                let lateral = k + 1.5 * lw;
+                quad_along(
+                    &mut pixmap,
+                    t,
+                    curve,
+                    len - 2.8,
+                    len - 0.3,
+                    lateral,
+                    lateral + 0.5,
+                    WHITE,
+                );
+                k += 1.0;
+            }
+            quad_along(
+                &mut pixmap,
+                t,
+                curve,
+                len - 3.6,
+                len - 3.2,
+                -0.5 * lw,
+                1.5 * lw - 0.3,
+                WHITE,
+            );
+        }
+    }
+    pixmap
+}
+
+fn circle(pixmap: &mut Pixmap, t: Transform, x: f64, y: f64, r: f64, rgb: [u8; 3]) {
+    if let Some(path) = PathBuilder::from_circle(x as f32, y as f32, r as f32) {
+        pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
+    }
+}
+
+/// A band along `curve` from `s0` to `s1`, between two lateral offsets
+/// (positive = left of travel). Used for straight lane pieces.
+#[allow(clippy::too_many_arguments)]
+fn quad_along(
+    pixmap: &mut Pixmap,
+    t: Transform,
+    curve: &crate::map::curve::Curve,
+    s0: f64,
+    s1: f64,
+    lat0: f64,
+    lat1: f64,
+    rgb: [u8; 3],
+) {
+    let pts = [
+        curve.position(s0, lat0),
+        curve.position(s1, lat0),
+        curve.position(s1, lat1),
+        curve.position(s0, lat1),
+    ];
+    let mut pb = PathBuilder::new();
+    pb.move_to(pts[0].x as f32, pts[0].y as f32);
+    for p in &pts[1..] {
+        pb.line_to(p.x as f32, p.y as f32);
+    }
+    pb.close();
+    if let Some(path) = pb.finish() {
+        pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
+    }
+}

@@ -1,0 +1,124 @@
+//! Rendering: the static background once per camera, then per frame the cars
+//! into an RGB image and an 8-bit instance mask (0 = background, a car's
+//! `mask_id` on exactly its pixels, no anti-aliasing).
+
+pub mod background;
+pub mod camera;
+
+use camera::Camera;
+use glam::DVec2;
+use std::sync::Arc;
+use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
+
+/// What the renderer needs to draw one car in one frame.
+#[derive(Debug, Clone, Copy)]
+pub struct CarSprite {
+    /// Centre on the ground, metres.
+    pub position: DVec2,
+    /// Heading, radians counter-clockwise from east.
+    pub yaw: f64,
+    pub length: f64,
+    pub width: f64,
+    pub colour: [u8; 3],
+    pub mask_id: u8,
+}
+
+/// Draws frames for one camera over a pre-rendered background.
+#[derive(Clone)]
+pub struct Renderer {
+    pub camera: Camera,
+    background: Arc<Pixmap>,
+}
+
+/// Reusable per-thread buffers: the finished frame is in `rgb` (row-major,
+/// 3 bytes a pixel) and `mask` (1 byte a pixel).
+pub struct FrameCanvas {
+    rgba: Pixmap,
+    mask_rgba: Pixmap,
+    pub rgb: Vec<u8>,
+    pub mask: Vec<u8>,
+}
+
+impl Renderer {
+    /// Renders the background of `map` for `camera`, once.
+    pub fn new(map: &crate::map::CityMap, camera: Camera) -> Renderer {
+        let background = Arc::new(background::draw_background(map, &camera));
+        Renderer { camera, background }
+    }
+
+    /// Buffers sized for this renderer's camera.
+    pub fn canvas(&self) -> FrameCanvas {
+        let (w, h) = (self.camera.width, self.camera.height);
+        FrameCanvas {
+            rgba: Pixmap::new(w, h).expect("image size was validated"),
+            mask_rgba: Pixmap::new(w, h).expect("image size was validated"),
+            rgb: vec![0; (w * h * 3) as usize],
+            mask: vec![0; (w * h) as usize],
+        }
+    }
+
+    /// The static background as RGB bytes.
+    pub fn background_rgb(&self) -> Vec<u8> {
+        rgba_to_rgb(self.background.data())
+    }
+
+    /// Draws `cars` (later ones on top) into `canvas.rgb` and `canvas.mask`.
+    pub fn render(&self, canvas: &mut FrameCanvas, cars: &[CarSprite]) {
+        canvas
+            .rgba
+            .data_mut()
+            .copy_from_slice(self.background.data());
+        canvas.mask_rgba.data_mut().fill(0);
+        let world = background::world_to_canvas(&self.camera);
+        for car in cars {
+            let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
+            // Car frame: x forward, y left, origin at the car's centre.
+            let t = world.pre_concat(Transform::from_row(
+                c,
+                s,
+                -s,
+                c,
+                car.position.x as f32,
+                car.position.y as f32,
+            ));
+            let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
+            let body = Rect::from_ltrb(-hl, -hw, hl, hw).expect("car size was validated");
+            let mut paint = Paint::default();
+            paint.anti_alias = true;
+            paint.set_color_rgba8(car.colour[0], car.colour[1], car.colour[2], 255);
+            canvas.rgba.fill_rect(body, &paint, t, None);
+            // Windscreen towards the front shows the heading.
+            paint.set_color_rgba8(36, 40, 52, 255);
+            if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
+                canvas.rgba.fill_rect(glass, &paint, t, None);
+            }
+            let mut mask_paint = Paint::default();
+            mask_paint.anti_alias = false;
+            mask_paint.set_color_rgba8(car.mask_id, 0, 0, 255);
+            let path = PathBuilder::from_rect(body);
+            canvas
+                .mask_rgba
+                .fill_path(&path, &mask_paint, FillRule::Winding, t, None);
+        }
+        for (dst, src) in canvas
+            .rgb
+            .chunks_exact_mut(3)
+            .zip(canvas.rgba.data().chunks_exact(4))
+        {
+            dst.copy_from_slice(&src[..3]);
+        }
+        for (dst, src) in canvas
+            .mask
+            .iter_mut()
+            .zip(canvas.mask_rgba.data().chunks_exact(4))
+        {
+            *dst = src[0];
+        }
+    }
+}
+
+fn rgba_to_rgb(rgba: &[u8]) -> Vec<u8> {
+    rgba.chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}
