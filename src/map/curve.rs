@@ -205,10 +205,7 @@ impl LaneChange {
         let step = run / (LANE_CHANGE_TABLE - 1) as f64;
         for i in 0..LANE_CHANGE_TABLE - 1 {
             let a = i as f64 * step;
-            let speed = |u: f64| {
-                let t = u / run;
-                (1.0 + (shift * smootherstep_derivative(t) / run).powi(2)).sqrt()
-            };
+            let speed = |u: f64| lc.speed(u);
             acc += step / 6.0 * (speed(a) + 4.0 * speed(a + step / 2.0) + speed(a + step));
             lc.arc_table.push(acc);
         }
@@ -221,8 +218,24 @@ impl LaneChange {
         let i = table.partition_point(|&a| a < s).clamp(1, table.len() - 1);
         let (a0, a1) = (table[i - 1], table[i]);
         let step = self.run / (table.len() - 1) as f64;
-        let frac = if a1 > a0 { (s - a0) / (a1 - a0) } else { 0.0 };
-        ((i - 1) as f64 + frac) * step
+        let (u0, u1) = ((i - 1) as f64 * step, i as f64 * step);
+        let h = a1 - a0;
+        if h <= 0.0 {
+            return u0;
+        }
+        // Cubic Hermite on u(s), with du/ds = 1 / |p'(u)| known at both nodes.
+        let t = ((s - a0) / h).clamp(0.0, 1.0);
+        let (m0, m1) = (1.0 / self.speed(u0), 1.0 / self.speed(u1));
+        let (t2, t3) = (t * t, t * t * t);
+        (2.0 * t3 - 3.0 * t2 + 1.0) * u0
+            + (t3 - 2.0 * t2 + t) * h * m0
+            + (-2.0 * t3 + 3.0 * t2) * u1
+            + (t3 - t2) * h * m1
+    }
+
+    /// |dp/du|: metres of path per metre along the lane.
+    fn speed(&self, u: f64) -> f64 {
+        (1.0 + (self.shift * smootherstep_derivative(u / self.run) / self.run).powi(2)).sqrt()
     }
 
     fn point_at(&self, u: f64) -> DVec2 {

@@ -222,7 +222,7 @@ impl Expansion {
                     continue;
                 }
                 let back = round_mm(rng.random_range(span.lo..=span.hi - gap));
-                let front = round_mm(back + gap);
+                let front = back + gap;
                 let (actions, merges) =
                     random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car);
                 let route = Route::plan(

@@ -1,0 +1,222 @@
+//! Helpers shared by the integration tests: they run the real binary and read
+//! what it wrote (JSON, CSV, PNG) from disk.
+#![allow(dead_code)]
+
+use serde::Deserialize;
+use serde_json::Value;
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::Mutex;
+
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_causalcity")
+}
+
+/// A fresh folder under cargo's per-test-target temporary directory.
+pub fn fresh_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn run(args: &[&str]) -> Output {
+    Command::new(bin())
+        .args(args)
+        .output()
+        .expect("run causalcity")
+}
+
+/// Runs `causalcity gen` and asserts it succeeded.
+pub fn gen_ok(spec: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "gen",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let output = run(&args);
+    assert!(
+        output.status.success(),
+        "gen failed: {}\n{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+/// A toy spec with the given groups `(cars, proportion)` and splits.
+pub fn toy_spec(name: &str, groups: &[(u32, f64)], splits: (u32, u32, u32), frames: u32) -> String {
+    let groups: Vec<String> = groups
+        .iter()
+        .map(|(c, p)| format!(r#"{{"cars": {c}, "edge_proportion": {p}}}"#))
+        .collect();
+    format!(
+        r#"{{"name": "{name}", "world": "toy", "seed": 11, "frames": {frames},
+            "groups": [{}], "splits": {{"train": {}, "val": {}, "test": {}}}}}"#,
+        groups.join(", "),
+        splits.0,
+        splits.1,
+        splits.2
+    )
+}
+
+pub fn write_spec(dir: &Path, text: &str) -> PathBuf {
+    let path = dir.join("spec.json");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// One row of poses.csv.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Pose {
+    pub frame: u32,
+    pub t: f64,
+    pub car: u32,
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub roll: f64,
+    pub pitch: f64,
+    pub yaw: f64,
+    pub px: f64,
+    pub py: f64,
+    pub speed: f64,
+    pub in_view: u8,
+}
+
+pub fn read_poses(path: &Path) -> Vec<Pose> {
+    let mut reader = csv::Reader::from_path(path).unwrap();
+    reader.deserialize().map(|r| r.unwrap()).collect()
+}
+
+/// Poses indexed `[car][frame]`.
+pub fn poses_by_car(poses: &[Pose]) -> BTreeMap<u32, Vec<Pose>> {
+    let mut by_car: BTreeMap<u32, Vec<Pose>> = BTreeMap::new();
+    for p in poses {
+        by_car.entry(p.car).or_default().push(p.clone());
+    }
+    by_car
+}
+
+pub fn read_json(path: &Path) -> Value {
+    serde_json::from_slice(
+        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+    .unwrap()
+}
+
+/// Every scenario folder of a dataset: `root/<group>/<split>/<NNNNN>`.
+pub fn scenario_dirs(root: &Path) -> Vec<PathBuf> {
+    let mut dirs = Vec::new();
+    for group in sorted_entries(root) {
+        if !group.is_dir() {
+            continue;
+        }
+        for split in sorted_entries(&group) {
+            for scenario in sorted_entries(&split) {
+                dirs.push(scenario);
+            }
+        }
+    }
+    dirs
+}
+
+pub fn sorted_entries(dir: &Path) -> Vec<PathBuf> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    entries.sort();
+    entries
+}
+
+/// SHA-256 of every file under `root`, by relative path.
+pub fn hash_tree(root: &Path) -> BTreeMap<String, String> {
+    let mut hashes = BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for path in sorted_entries(&dir) {
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let digest = Sha256::digest(std::fs::read(&path).unwrap());
+                let rel = path
+                    .strip_prefix(root)
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned();
+                let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+                hashes.insert(rel, hex);
+            }
+        }
+    }
+    hashes
+}
+
+static SHARED: Mutex<Option<PathBuf>> = Mutex::new(None);
+
+/// A small toy dataset with images (two groups, 2/1/1 scenarios, 150 frames),
+/// generated once per test binary.
+pub fn shared_image_dataset() -> PathBuf {
+    let mut guard = SHARED.lock().unwrap();
+    if let Some(p) = guard.as_ref() {
+        return p.clone();
+    }
+    let dir = fresh_dir(&format!("shared-{}", std::process::id()));
+    let spec = write_spec(
+        &dir,
+        &toy_spec("shared", &[(4, 0.5), (12, 0.5)], (2, 1, 1), 150),
+    );
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet"]);
+    *guard = Some(out.clone());
+    out
+}
+
+/// Cars of a scenario.json, with the fields tests use.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Car {
+    pub id: u32,
+    pub mask_id: u8,
+    pub colour: String,
+    pub spawn: String,
+    pub spawn_distance: f64,
+    pub actions: Vec<String>,
+    pub merge_distances: Vec<f64>,
+    pub role: String,
+    pub length_m: f64,
+    pub width_m: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct Scenario {
+    pub frames: u32,
+    pub frame_interval: f64,
+    pub camera: Camera,
+    pub cars: Vec<Car>,
+    pub edges: Vec<[u32; 2]>,
+    pub toy: Option<Toy>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct Camera {
+    pub width: u32,
+    pub height: u32,
+    pub pixels_per_metre: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct Toy {
+    pub speed_px_per_frame: f64,
+    pub leader_gap_px: f64,
+    pub leader_gap_m: f64,
+}
+
+pub fn read_scenario(dir: &Path) -> Scenario {
+    serde_json::from_value(read_json(&dir.join("scenario.json"))).unwrap()
+}

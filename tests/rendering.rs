@@ -1,0 +1,210 @@
+//! Rendering, checked on the decoded PNGs: sizes, the ids in the masks,
+//! pixel-exact car footprints and mask centroids against the logged pixels.
+
+mod common;
+use common::*;
+use std::collections::BTreeSet;
+
+/// Pixel-space footprint of a car: centre, unit axes and half extents.
+struct Footprint {
+    centre: (f64, f64),
+    forward: (f64, f64),
+    half: (f64, f64),
+}
+
+impl Footprint {
+    fn new(p: &Pose, car: &Car, ppm: f64) -> Footprint {
+        // Image y points down, so the heading flips sign.
+        Footprint {
+            centre: (p.px, p.py),
+            forward: (p.yaw.cos(), -p.yaw.sin()),
+            half: (car.length_m * ppm / 2.0, car.width_m * ppm / 2.0),
+        }
+    }
+
+    /// Signed distance-ish margin of a point inside the box (positive inside).
+    fn inside_margin(&self, x: f64, y: f64) -> f64 {
+        let (dx, dy) = (x - self.centre.0, y - self.centre.1);
+        let along = dx * self.forward.0 + dy * self.forward.1;
+        let across = -dx * self.forward.1 + dy * self.forward.0;
+        (self.half.0 - along.abs()).min(self.half.1 - across.abs())
+    }
+
+    fn radius(&self) -> f64 {
+        (self.half.0.powi(2) + self.half.1.powi(2)).sqrt()
+    }
+
+    fn within_image(&self, w: f64, h: f64) -> bool {
+        let r = self.radius() + 1.0;
+        self.centre.0 - r >= 0.0
+            && self.centre.1 - r >= 0.0
+            && self.centre.0 + r <= w - 1.0
+            && self.centre.1 + r <= h - 1.0
+    }
+
+    fn outside_image(&self, w: f64, h: f64) -> bool {
+        let r = self.radius() + 1.0;
+        self.centre.0 + r < 0.0
+            || self.centre.1 + r < 0.0
+            || self.centre.0 - r > w
+            || self.centre.1 - r > h
+    }
+
+    fn may_touch(&self, other: &Footprint) -> bool {
+        let d = ((self.centre.0 - other.centre.0).powi(2)
+            + (self.centre.1 - other.centre.1).powi(2))
+        .sqrt();
+        d < self.radius() + other.radius() + 2.0
+    }
+}
+
+fn hex(colour: &str) -> [u8; 3] {
+    let v = u32::from_str_radix(&colour[1..], 16).unwrap();
+    [(v >> 16) as u8, (v >> 8) as u8, v as u8]
+}
+
+#[test]
+fn frames_and_masks_decode_and_match_the_pose_log() {
+    let out = shared_image_dataset();
+    let mut centroids_checked = 0;
+    for d in scenario_dirs(&out) {
+        let s = read_scenario(&d);
+        let (w, h) = (s.camera.width, s.camera.height);
+        assert_eq!((w, h), (1024, 640));
+        let ppm = s.camera.pixels_per_metre;
+        let poses = read_poses(&d.join("poses.csv"));
+        let mask_ids: BTreeSet<u8> = s.cars.iter().map(|c| c.mask_id).collect();
+        assert_eq!(sorted_entries(&d.join("rgb")).len(), s.frames as usize);
+        assert_eq!(sorted_entries(&d.join("mask")).len(), s.frames as usize);
+        for frame in (0..s.frames).step_by(10) {
+            let rgb = image::open(d.join(format!("rgb/{frame:04}.png"))).unwrap();
+            assert!(
+                matches!(rgb, image::DynamicImage::ImageRgb8(_)),
+                "RGB frames are 8-bit RGB"
+            );
+            let rgb = rgb.into_rgb8();
+            let mask = image::open(d.join(format!("mask/{frame:04}.png"))).unwrap();
+            assert!(
+                matches!(mask, image::DynamicImage::ImageLuma8(_)),
+                "masks are 8-bit grey"
+            );
+            let mask = mask.into_luma8();
+            assert_eq!(rgb.dimensions(), (w, h));
+            assert_eq!(mask.dimensions(), (w, h));
+
+            let present: BTreeSet<u8> = mask.pixels().map(|p| p.0[0]).filter(|&v| v != 0).collect();
+            assert!(
+                present.is_subset(&mask_ids),
+                "unknown ids {present:?} in {}",
+                d.display()
+            );
+            let frame_poses: Vec<&Pose> = poses.iter().filter(|p| p.frame == frame).collect();
+            let prints: Vec<Footprint> = frame_poses
+                .iter()
+                .map(|p| Footprint::new(p, &s.cars[p.car as usize], ppm))
+                .collect();
+            for (i, p) in frame_poses.iter().enumerate() {
+                let car = &s.cars[p.car as usize];
+                let fp = &prints[i];
+                if fp.outside_image(w as f64, h as f64) {
+                    assert!(
+                        !present.contains(&car.mask_id),
+                        "car {} is off camera but in the mask",
+                        car.id
+                    );
+                    continue;
+                }
+                let alone = prints
+                    .iter()
+                    .enumerate()
+                    .all(|(j, o)| j == i || !fp.may_touch(o));
+                if !alone || !fp.within_image(w as f64, h as f64) {
+                    continue;
+                }
+                assert!(
+                    present.contains(&car.mask_id),
+                    "car {} is on camera but not in the mask",
+                    car.id
+                );
+                // Pixel-exact footprint: pixel centres clearly inside carry the id,
+                // pixels clearly outside do not (no anti-aliasing). "Clearly" is
+                // 0.05 px: the rasterizer snaps edges to 1/64 px.
+                let r = fp.radius().ceil() as i64 + 2;
+                let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
+                for y in (p.py.round() as i64 - r)..=(p.py.round() as i64 + r) {
+                    for x in (p.px.round() as i64 - r)..=(p.px.round() as i64 + r) {
+                        let v = mask.get_pixel(x as u32, y as u32).0[0];
+                        let margin = fp.inside_margin(x as f64, y as f64);
+                        if margin > 0.05 {
+                            assert_eq!(v, car.mask_id, "pixel ({x},{y}) inside car {} (margin {margin}, pose {p:?}) is {v}", car.id);
+                        } else if margin < -0.05 {
+                            assert_ne!(
+                                v, car.mask_id,
+                                "pixel ({x},{y}) outside car {} carries its id",
+                                car.id
+                            );
+                        }
+                        if v == car.mask_id {
+                            n += 1.0;
+                            sx += x as f64;
+                            sy += y as f64;
+                        }
+                    }
+                }
+                let (cx, cy) = (sx / n, sy / n);
+                assert!(
+                    ((cx - p.px).powi(2) + (cy - p.py).powi(2)).sqrt() <= 1.5,
+                    "mask centroid ({cx:.2}, {cy:.2}) vs logged ({}, {})",
+                    p.px,
+                    p.py
+                );
+                let expected_area = car.length_m * car.width_m * ppm * ppm;
+                assert!(
+                    (n - expected_area).abs() < expected_area * 0.15,
+                    "area {n} vs {expected_area}"
+                );
+                // The body colour shows at the car's centre in the RGB frame.
+                let centre = rgb.get_pixel(p.px.round() as u32, p.py.round() as u32).0;
+                assert_eq!(
+                    centre,
+                    hex(&car.colour),
+                    "car {} colour at its centre",
+                    car.id
+                );
+                centroids_checked += 1;
+            }
+        }
+    }
+    assert!(
+        centroids_checked > 50,
+        "only {centroids_checked} cars checked"
+    );
+}
+
+#[test]
+fn the_background_is_the_same_in_every_frame_where_no_car_is() {
+    let out = shared_image_dataset();
+    let d = &scenario_dirs(&out)[0];
+    let a = image::open(d.join("rgb/0000.png")).unwrap().into_rgb8();
+    let b = image::open(d.join("rgb/0149.png")).unwrap().into_rgb8();
+    let ma = image::open(d.join("mask/0000.png")).unwrap().into_luma8();
+    let mb = image::open(d.join("mask/0149.png")).unwrap().into_luma8();
+    let mut compared = 0;
+    for (x, y, pa) in a.enumerate_pixels() {
+        // Away from cars in either frame (2 px margin for anti-aliased edges).
+        let near_car = (-2i64..=2).any(|dy| {
+            (-2i64..=2).any(|dx| {
+                let (xx, yy) = (
+                    (x as i64 + dx).clamp(0, 1023) as u32,
+                    (y as i64 + dy).clamp(0, 639) as u32,
+                );
+                ma.get_pixel(xx, yy).0[0] != 0 || mb.get_pixel(xx, yy).0[0] != 0
+            })
+        });
+        if !near_car {
+            assert_eq!(pa, b.get_pixel(x, y), "background differs at ({x},{y})");
+            compared += 1;
+        }
+    }
+    assert!(compared > 600_000);
+}

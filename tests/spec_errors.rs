@@ -1,0 +1,240 @@
+//! Bad input: every class of spec error exits 2, names the field and writes nothing.
+
+mod common;
+use common::*;
+
+fn base() -> serde_json::Value {
+    serde_json::from_str(&toy_spec("bad", &[(8, 0.5)], (2, 1, 1), 10)).unwrap()
+}
+
+/// Runs gen on `text`, expects exit 2 with `needle` in stderr and no output folder.
+fn rejected(case: &str, text: &str, needles: &[&str]) {
+    let dir = fresh_dir(&format!("spec-errors-{case}"));
+    let spec = write_spec(&dir, text);
+    let out = dir.join("out");
+    let output = run(&[
+        "gen",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(
+        output.status.code(),
+        Some(2),
+        "{case}: expected exit 2, stderr: {stderr}"
+    );
+    for needle in needles {
+        assert!(
+            stderr.contains(needle),
+            "{case}: stderr should mention {needle:?}: {stderr}"
+        );
+    }
+    assert!(!stderr.contains("panicked"), "{case}: {stderr}");
+    assert!(!out.exists(), "{case}: output was written for a bad spec");
+}
+
+fn with(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut v = base();
+    edit(&mut v);
+    v.to_string()
+}
+
+#[test]
+fn malformed_json() {
+    rejected(
+        "malformed",
+        r#"{"name": "x", "world": "toy",,}"#,
+        &["invalid spec", "line 1"],
+    );
+    rejected("empty", "", &["invalid spec"]);
+}
+
+#[test]
+fn unknown_field_is_named_with_the_allowed_ones() {
+    rejected(
+        "unknown",
+        &with(|v| v["colour_mode"] = 1.into()),
+        &["colour_mode", "expected one of", "frames"],
+    );
+    rejected(
+        "unknown-nested",
+        &with(|v| v["groups"][0]["edges"] = 2.into()),
+        &["groups[0]", "edges", "edge_proportion"],
+    );
+}
+
+#[test]
+fn wrong_type_names_the_field() {
+    rejected(
+        "type-frames",
+        &with(|v| v["frames"] = "many".into()),
+        &["frames", "invalid type"],
+    );
+    rejected(
+        "type-world",
+        &with(|v| v["world"] = "mars".into()),
+        &["world", "toy", "city"],
+    );
+    rejected(
+        "type-proportion",
+        &with(|v| v["groups"][0]["edge_proportion"] = "half".into()),
+        &["groups[0].edge_proportion"],
+    );
+}
+
+#[test]
+fn zero_counts_are_rejected_with_the_allowed_range() {
+    rejected(
+        "zero-cars",
+        &with(|v| v["groups"][0]["cars"] = 0.into()),
+        &["groups[0].cars", "0 is not allowed", "1 to 255"],
+    );
+    rejected(
+        "zero-frames",
+        &with(|v| v["frames"] = 0.into()),
+        &["`frames`", "0 is not allowed"],
+    );
+    rejected(
+        "zero-splits",
+        &with(|v| v["splits"] = serde_json::json!({"train": 0, "val": 0, "test": 0})),
+        &["splits", "at least one"],
+    );
+    rejected(
+        "no-groups",
+        &with(|v| v["groups"] = serde_json::json!([])),
+        &["groups", "empty"],
+    );
+}
+
+#[test]
+fn negative_counts_are_rejected() {
+    rejected(
+        "negative-train",
+        &with(|v| v["splits"]["train"] = (-5).into()),
+        &["splits.train", "-5"],
+    );
+    rejected(
+        "negative-seed",
+        &with(|v| v["seed"] = (-1).into()),
+        &["seed", "-1"],
+    );
+    rejected(
+        "negative-speed",
+        &with(|v| v["toy_speed_px_per_frame"] = (-2.0).into()),
+        &["toy_speed_px_per_frame", "above 0"],
+    );
+}
+
+#[test]
+fn proportion_outside_zero_one() {
+    rejected(
+        "proportion-high",
+        &with(|v| v["groups"][0]["edge_proportion"] = 1.5.into()),
+        &["groups[0].edge_proportion", "1.5", "from 0 to 1"],
+    );
+    rejected(
+        "proportion-low",
+        &with(|v| v["groups"][0]["edge_proportion"] = (-0.1).into()),
+        &["groups[0].edge_proportion", "-0.1"],
+    );
+}
+
+#[test]
+fn impossible_groups() {
+    // 3 cars at 100 % would need 2 pairs = 4 cars.
+    rejected(
+        "too-many-edges",
+        &with(|v| v["groups"][0] = serde_json::json!({"cars": 3, "edge_proportion": 1.0})),
+        &["groups[0].edge_proportion", "need 4 cars"],
+    );
+    // A letterbox camera leaves too little visible road for 200 cars.
+    rejected(
+        "too-many-cars",
+        &with(|v| {
+            v["groups"][0] = serde_json::json!({"cars": 200, "edge_proportion": 0.5});
+            v["image"] = serde_json::json!({"width": 1024, "height": 64});
+        }),
+        &["groups[0].cars", "do not fit", "at most"],
+    );
+    rejected(
+        "duplicate-group",
+        &with(
+            |v| v["groups"] = serde_json::json!([{"cars": 4, "edge_proportion": 0.5}, {"cars": 4, "edge_proportion": 0.5}]),
+        ),
+        &["groups[1]", "cars04_edges50"],
+    );
+    rejected(
+        "gap-shorter-than-car",
+        &with(|v| v["leader_gap_px"] = 10.into()),
+        &["leader_gap_px", "overlap"],
+    );
+}
+
+#[test]
+fn image_size_out_of_range() {
+    rejected(
+        "image-small",
+        &with(|v| v["image"] = serde_json::json!({"width": 10, "height": 640})),
+        &["image.width", "10", "32 to 8192"],
+    );
+    rejected(
+        "image-big",
+        &with(|v| v["image"] = serde_json::json!({"width": 1024, "height": 100000})),
+        &["image.height", "100000"],
+    );
+}
+
+#[test]
+fn hostile_names_cannot_escape_the_output_folder() {
+    rejected(
+        "name-dotdot",
+        &with(|v| v["name"] = "../escape".into()),
+        &["`name`", "not allowed"],
+    );
+    rejected(
+        "name-slash",
+        &with(|v| v["name"] = "/etc".into()),
+        &["`name`"],
+    );
+}
+
+#[test]
+fn missing_spec_file_is_named() {
+    let output = run(&["gen", "--spec", "/nonexistent/spec.json"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("/nonexistent/spec.json"));
+}
+
+#[test]
+fn bad_flags_exit_2() {
+    let output = run(&["gen", "--spec", "configs/ci-toy.json", "--limit", "0"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--limit"));
+}
+
+#[test]
+fn unwritable_output_folder_gets_a_clear_message() {
+    let dir = fresh_dir("spec-errors-unwritable");
+    let spec = write_spec(&dir, &base().to_string());
+    // A path below a regular file can never be created, even by root.
+    let blocker = dir.join("a-file");
+    std::fs::write(&blocker, b"not a folder").unwrap();
+    let out = blocker.join("out");
+    let output = run(&[
+        "gen",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("cannot write") && stderr.contains(out.to_str().unwrap()),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--out"), "should say what to do: {stderr}");
+    assert!(!stderr.contains("panicked"));
+}
