@@ -87,10 +87,7 @@ fn png_settings_comparison() {
     for _ in 0..reps {
         renderer.render(&mut canvas, &sprites);
     }
-    println!(
-        "render (RGB + mask, no encode): {:.2} ms",
-        t.elapsed().as_secs_f64() * 1e3 / reps as f64
-    );
+    println!("render (RGB + mask, no encode): {:.2} ms", t.elapsed().as_secs_f64() * 1e3 / reps as f64);
     use png::{DeflateCompression as D, Filter as F};
     let options = [
         ("none", D::NoCompression, F::NoFilter),
@@ -104,23 +101,13 @@ fn png_settings_comparison() {
         ("zlib 9, adaptive", D::Level(9), F::Adaptive),
     ];
     let default = PngSettings::default();
-    println!(
-        "{:<26} {:>10} {:>10} {:>10} {:>10}",
-        "settings", "rgb KB", "rgb ms", "mask KB", "mask ms"
-    );
+    println!("{:<26} {:>10} {:>10} {:>10} {:>10}", "settings", "rgb KB", "rgb ms", "mask KB", "mask ms");
     for (name, compression, filter) in options {
-        let settings = PngSettings {
-            compression,
-            filter,
-        };
+        let settings = PngSettings { compression, filter };
         let mut sizes = [0usize; 2];
         let mut times = [0f64; 2];
-        for (i, (format, data)) in [
-            (PixelFormat::Rgb8, &canvas.rgb),
-            (PixelFormat::Gray8, &canvas.mask),
-        ]
-        .into_iter()
-        .enumerate()
+        for (i, (format, data)) in
+            [(PixelFormat::Rgb8, &canvas.rgb), (PixelFormat::Gray8, &canvas.mask)].into_iter().enumerate()
         {
             let t = Instant::now();
             let mut out = Vec::new();
@@ -131,8 +118,7 @@ fn png_settings_comparison() {
             times[i] = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
             sizes[i] = out.len();
         }
-        let chosen = if format!("{:?}{:?}", default.compression, default.filter)
-            == format!("{compression:?}{filter:?}")
+        let chosen = if format!("{:?}{:?}", default.compression, default.filter) == format!("{compression:?}{filter:?}")
         {
             "  <- chosen"
         } else {
@@ -162,11 +148,7 @@ fn main() {
     let (rgb_bytes, rgb_files) = dir_bytes(&root.join("img1"), "rgb");
     let (mask_bytes, mask_files) = dir_bytes(&root.join("img1"), "mask");
     println!("1 thread : {:.0} frame pairs/s per core", pairs / one);
-    println!(
-        "2 threads: {:.0} frame pairs/s in all, speed-up {:.2}x",
-        pairs / two,
-        one / two
-    );
+    println!("2 threads: {:.0} frame pairs/s in all, speed-up {:.2}x", pairs / two, one / two);
     println!(
         "bytes per frame pair: {:.1} KB (RGB {:.1} KB, mask {:.1} KB)",
         (rgb_bytes + mask_bytes) as f64 / rgb_files as f64 / 1e3,
@@ -179,11 +161,7 @@ fn main() {
     let one = gen(&poses_spec, &root.join("poses1"), 1, false);
     let two = gen(&poses_spec, &root.join("poses2"), 2, false);
     println!("1 thread : {:.0} scenarios/s per core", 2000.0 / one);
-    println!(
-        "2 threads: {:.0} scenarios/s in all, speed-up {:.2}x",
-        2000.0 / two,
-        one / two
-    );
+    println!("2 threads: {:.0} scenarios/s in all, speed-up {:.2}x", 2000.0 / two, one / two);
 
     println!("\n== Peak memory of the binary (VmHWM), 2 threads, with images ==");
     for n in [4u32, 40] {

@@ -18,21 +18,12 @@ impl OrientedBox {
         let forward = DVec2::new(self.heading.cos(), self.heading.sin()) * (self.length / 2.0);
         let left = DVec2::new(-self.heading.sin(), self.heading.cos()) * (self.width / 2.0);
         let c = self.centre;
-        [
-            c + forward + left,
-            c - forward + left,
-            c - forward - left,
-            c + forward - left,
-        ]
+        [c + forward + left, c - forward + left, c - forward - left, c + forward - left]
     }
 
     /// This box grown by `margin` on every side.
     pub fn inflated(&self, margin: f64) -> OrientedBox {
-        OrientedBox {
-            length: self.length + 2.0 * margin,
-            width: self.width + 2.0 * margin,
-            ..*self
-        }
+        OrientedBox { length: self.length + 2.0 * margin, width: self.width + 2.0 * margin, ..*self }
     }
 
     /// True when the two boxes share any area (separating axis test).
@@ -46,11 +37,10 @@ impl OrientedBox {
         ];
         axes.iter().all(|axis| {
             let project = |pts: &[DVec2; 4]| {
-                pts.iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                        let d = p.dot(*axis);
-                        (lo.min(d), hi.max(d))
-                    })
+                pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let d = p.dot(*axis);
+                    (lo.min(d), hi.max(d))
+                })
             };
             let (a0, a1) = project(&a);
             let (b0, b1) = project(&b);
@@ -65,34 +55,15 @@ mod tests {
 
     #[test]
     fn boxes_overlap_only_when_they_touch() {
-        let a = OrientedBox {
-            centre: DVec2::ZERO,
-            heading: 0.0,
-            length: 4.0,
-            width: 2.0,
-        };
-        let near = OrientedBox {
-            centre: DVec2::new(3.9, 0.0),
-            ..a
-        };
-        let far = OrientedBox {
-            centre: DVec2::new(4.1, 0.0),
-            ..a
-        };
+        let a = OrientedBox { centre: DVec2::ZERO, heading: 0.0, length: 4.0, width: 2.0 };
+        let near = OrientedBox { centre: DVec2::new(3.9, 0.0), ..a };
+        let far = OrientedBox { centre: DVec2::new(4.1, 0.0), ..a };
         assert!(a.overlaps(&near));
         assert!(!a.overlaps(&far));
         // Rotated 45 degrees: the corner reaches further than the side.
-        let rotated = OrientedBox {
-            centre: DVec2::new(0.0, 2.2),
-            heading: std::f64::consts::FRAC_PI_4,
-            ..a
-        };
+        let rotated = OrientedBox { centre: DVec2::new(0.0, 2.2), heading: std::f64::consts::FRAC_PI_4, ..a };
         assert!(a.overlaps(&rotated));
-        let beside = OrientedBox {
-            centre: DVec2::new(0.0, 3.5),
-            heading: std::f64::consts::FRAC_PI_4,
-            ..a
-        };
+        let beside = OrientedBox { centre: DVec2::new(0.0, 3.5), heading: std::f64::consts::FRAC_PI_4, ..a };
         assert!(!a.overlaps(&beside));
     }
 }

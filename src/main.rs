@@ -15,11 +15,7 @@ fn main() {
                 limit: args.limit,
                 threads: args.threads.map(|t| t as usize),
                 images: !args.no_images,
-                progress: if args.quiet {
-                    ProgressMode::Quiet
-                } else {
-                    ProgressMode::Auto
-                },
+                progress: if args.quiet { ProgressMode::Quiet } else { ProgressMode::Auto },
             };
             match generate(&options) {
                 Ok(summary) => {

@@ -34,10 +34,7 @@ pub struct ImageSize {
 
 impl Default for ImageSize {
     fn default() -> Self {
-        ImageSize {
-            width: 1024,
-            height: 640,
-        }
+        ImageSize { width: 1024, height: 640 }
     }
 }
 
@@ -64,11 +61,7 @@ impl GroupSpec {
 
     /// Folder name, e.g. `cars08_edges50` (edges = the proportion in percent).
     pub fn name(&self) -> String {
-        format!(
-            "cars{:02}_edges{:02}",
-            self.cars,
-            (self.edge_proportion * 100.0).round() as u32
-        )
+        format!("cars{:02}_edges{:02}", self.cars, (self.edge_proportion * 100.0).round() as u32)
     }
 }
 
@@ -178,10 +171,7 @@ pub struct SpecError {
 
 impl SpecError {
     pub fn new(field: impl Into<String>, message: impl Into<String>) -> SpecError {
-        SpecError {
-            field: field.into(),
-            message: message.into(),
-        }
+        SpecError { field: field.into(), message: message.into() }
     }
 }
 
@@ -220,9 +210,8 @@ impl DatasetSpec {
 
     /// Reads, parses and checks a spec file.
     pub fn from_file(path: &Path) -> Result<DatasetSpec, SpecError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            SpecError::new("", format!("cannot read spec file {}: {e}", path.display()))
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SpecError::new("", format!("cannot read spec file {}: {e}", path.display())))?;
         DatasetSpec::from_json(&text)
     }
 
@@ -231,10 +220,7 @@ impl DatasetSpec {
         let name_ok = !self.name.is_empty()
             && self.name.len() <= 64
             && !self.name.starts_with('.')
-            && self
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+            && self.name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
         if !name_ok {
             return Err(SpecError::new(
                 "name",
@@ -245,30 +231,14 @@ impl DatasetSpec {
             ));
         }
         range("frames", self.frames, 1, MAX_FRAMES)?;
-        if !(self.frame_interval.is_finite()
-            && self.frame_interval > 0.0
-            && self.frame_interval <= 10.0)
-        {
+        if !(self.frame_interval.is_finite() && self.frame_interval > 0.0 && self.frame_interval <= 10.0) {
             return Err(SpecError::new(
                 "frame_interval",
-                format!(
-                    "{} is not allowed: seconds between frames, above 0 and at most 10",
-                    self.frame_interval
-                ),
+                format!("{} is not allowed: seconds between frames, above 0 and at most 10", self.frame_interval),
             ));
         }
-        range(
-            "image.width",
-            self.image.width,
-            MIN_IMAGE_SIDE,
-            MAX_IMAGE_SIDE,
-        )?;
-        range(
-            "image.height",
-            self.image.height,
-            MIN_IMAGE_SIDE,
-            MAX_IMAGE_SIDE,
-        )?;
+        range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        range("image.height", self.image.height, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
         if self.groups.is_empty() {
             return Err(SpecError::new(
                 "groups",
@@ -282,7 +252,10 @@ impl DatasetSpec {
             if !(g.edge_proportion.is_finite() && (0.0..=1.0).contains(&g.edge_proportion)) {
                 return Err(SpecError::new(
                     field,
-                    format!("{} is not allowed: the share of cars in leader-follower pairs, from 0 to 1", g.edge_proportion),
+                    format!(
+                        "{} is not allowed: the share of cars in leader-follower pairs, from 0 to 1",
+                        g.edge_proportion
+                    ),
                 ));
             }
             if 2 * g.edges() > g.cars {
@@ -300,34 +273,18 @@ impl DatasetSpec {
             if !names.insert(g.name()) {
                 return Err(SpecError::new(
                     format!("groups[{i}]"),
-                    format!(
-                        "duplicates group {}: every (cars, edge_proportion) pair may appear once",
-                        g.name()
-                    ),
+                    format!("duplicates group {}: every (cars, edge_proportion) pair may appear once", g.name()),
                 ));
             }
         }
         for split in Split::ALL {
-            range(
-                &format!("splits.{}", split.name()),
-                self.splits.count(split),
-                0,
-                MAX_SCENARIOS_PER_SPLIT,
-            )?;
+            range(&format!("splits.{}", split.name()), self.splits.count(split), 0, MAX_SCENARIOS_PER_SPLIT)?;
         }
         if Split::ALL.iter().all(|s| self.splits.count(*s) == 0) {
-            return Err(SpecError::new(
-                "splits",
-                "all splits are 0: ask for at least one scenario",
-            ));
+            return Err(SpecError::new("splits", "all splits are 0: ask for at least one scenario"));
         }
         range("actions_per_car", self.actions_per_car, 0, MAX_ACTIONS)?;
-        positive(
-            "toy_speed_px_per_frame",
-            self.toy_speed_px_per_frame,
-            100.0,
-            "pixels per frame",
-        )?;
+        positive("toy_speed_px_per_frame", self.toy_speed_px_per_frame, 100.0, "pixels per frame")?;
         positive("car_length_m", self.car_length_m, 20.0, "metres")?;
         positive("car_width_m", self.car_width_m, 3.0, "metres")?;
         positive("leader_gap_px", self.leader_gap_px, 2000.0, "pixels")?;
@@ -336,30 +293,22 @@ impl DatasetSpec {
 
     /// Scenarios in the whole dataset, or with at most `limit` per split.
     pub fn scenario_count(&self, limit: Option<u32>) -> u64 {
-        let per_group: u64 = Split::ALL
-            .iter()
-            .map(|s| self.splits.count(*s).min(limit.unwrap_or(u32::MAX)) as u64)
-            .sum();
+        let per_group: u64 =
+            Split::ALL.iter().map(|s| self.splits.count(*s).min(limit.unwrap_or(u32::MAX)) as u64).sum();
         per_group * self.groups.len() as u64
     }
 }
 
 fn range(field: &str, value: u32, lo: u32, hi: u32) -> Result<(), SpecError> {
     if value < lo || value > hi {
-        return Err(SpecError::new(
-            field,
-            format!("{value} is not allowed: use {lo} to {hi}"),
-        ));
+        return Err(SpecError::new(field, format!("{value} is not allowed: use {lo} to {hi}")));
     }
     Ok(())
 }
 
 fn positive(field: &str, value: f64, hi: f64, unit: &str) -> Result<(), SpecError> {
     if !(value.is_finite() && value > 0.0 && value <= hi) {
-        return Err(SpecError::new(
-            field,
-            format!("{value} is not allowed: {unit}, above 0 and at most {hi}"),
-        ));
+        return Err(SpecError::new(field, format!("{value} is not allowed: {unit}, above 0 and at most {hi}")));
     }
     Ok(())
 }
@@ -370,13 +319,7 @@ mod tests {
 
     #[test]
     fn edges_follow_the_documented_rule() {
-        let g = |cars, p| {
-            GroupSpec {
-                cars,
-                edge_proportion: p,
-            }
-            .edges()
-        };
+        let g = |cars, p| GroupSpec { cars, edge_proportion: p }.edges();
         assert_eq!(g(8, 0.5), 2);
         assert_eq!(g(12, 0.5), 3);
         assert_eq!(g(4, 0.5), 1);
@@ -384,13 +327,6 @@ mod tests {
         assert_eq!(g(8, 0.8), 3);
         assert_eq!(g(4, 0.1), 1);
         assert_eq!(g(4, 0.0), 0);
-        assert_eq!(
-            GroupSpec {
-                cars: 8,
-                edge_proportion: 0.5
-            }
-            .name(),
-            "cars08_edges50"
-        );
+        assert_eq!(GroupSpec { cars: 8, edge_proportion: 0.5 }.name(), "cars08_edges50");
     }
 }

@@ -44,10 +44,7 @@ fn counts_edges_and_roles_follow_the_spec() {
                 let gap_m = s.toy.as_ref().unwrap().leader_gap_m;
                 for [l, f] in &s.edges {
                     let (leader, follower) = (&s.cars[*l as usize], &s.cars[*f as usize]);
-                    assert_eq!(
-                        (leader.role.as_str(), follower.role.as_str()),
-                        ("leader", "follower")
-                    );
+                    assert_eq!((leader.role.as_str(), follower.role.as_str()), ("leader", "follower"));
                     assert_eq!(leader.spawn, follower.spawn);
                     assert_eq!(leader.actions, follower.actions);
                     assert_eq!(leader.merge_distances, follower.merge_distances);
@@ -65,10 +62,7 @@ fn counts_edges_and_roles_follow_the_spec() {
 #[test]
 fn limit_caps_every_split() {
     let dir = fresh_dir("expansion-limit");
-    let spec = write_spec(
-        &dir,
-        &toy_spec("limit", &[(4, 0.5), (8, 0.5)], (4000, 500, 500), 10),
-    );
+    let spec = write_spec(&dir, &toy_spec("limit", &[(4, 0.5), (8, 0.5)], (4000, 500, 500), 10));
     let out = dir.join("out");
     gen_ok(&spec, &out, &["--no-images", "--quiet", "--limit", "2"]);
     assert_eq!(scenario_dirs(&out).len(), 2 * 3 * 2);
@@ -80,37 +74,22 @@ fn limit_caps_every_split() {
 #[test]
 fn no_two_cars_start_overlapping() {
     let dir = fresh_dir("expansion-overlap");
-    let spec = write_spec(
-        &dir,
-        &toy_spec("overlap", &[(12, 0.5), (12, 1.0), (30, 0.5)], (20, 0, 0), 2),
-    );
+    let spec = write_spec(&dir, &toy_spec("overlap", &[(12, 0.5), (12, 1.0), (30, 0.5)], (20, 0, 0), 2));
     let out = dir.join("out");
     gen_ok(&spec, &out, &["--no-images", "--quiet"]);
     for d in scenario_dirs(&out) {
         let s = read_scenario(&d);
-        let first: Vec<Pose> = read_poses(&d.join("poses.csv"))
-            .into_iter()
-            .filter(|p| p.frame == 0)
-            .collect();
+        let first: Vec<Pose> = read_poses(&d.join("poses.csv")).into_iter().filter(|p| p.frame == 0).collect();
         let boxes: Vec<OrientedBox> = first
             .iter()
             .map(|p| {
                 let car = &s.cars[p.car as usize];
-                OrientedBox {
-                    centre: DVec2::new(p.x, p.y),
-                    heading: p.yaw,
-                    length: car.length_m,
-                    width: car.width_m,
-                }
+                OrientedBox { centre: DVec2::new(p.x, p.y), heading: p.yaw, length: car.length_m, width: car.width_m }
             })
             .collect();
         for i in 0..boxes.len() {
             for j in i + 1..boxes.len() {
-                assert!(
-                    !boxes[i].overlaps(&boxes[j]),
-                    "{}: cars {i} and {j} overlap at frame 0",
-                    d.display()
-                );
+                assert!(!boxes[i].overlaps(&boxes[j]), "{}: cars {i} and {j} overlap at frame 0", d.display());
             }
             assert_eq!(first[i].in_view, 1, "cars start on camera");
         }
@@ -139,15 +118,8 @@ fn ids_are_permuted_so_the_index_hides_the_role() {
             }
         }
     }
-    assert!(
-        role_patterns.len() >= 10,
-        "role order by id should vary, saw {} patterns",
-        role_patterns.len()
-    );
-    assert!(
-        leader_first > 0 && follower_first > 0,
-        "leader/follower id order should vary"
-    );
+    assert!(role_patterns.len() >= 10, "role order by id should vary, saw {} patterns", role_patterns.len());
+    assert!(leader_first > 0 && follower_first > 0, "leader/follower id order should vary");
 }
 
 #[test]
@@ -168,8 +140,7 @@ fn same_spec_same_bytes_for_any_thread_count() {
     // A different seed changes the content.
     let other = write_spec(
         &dir,
-        &toy_spec("det", &[(4, 0.5), (8, 0.8)], (3, 1, 1), 12)
-            .replace("\"seed\": 11", "\"seed\": 12"),
+        &toy_spec("det", &[(4, 0.5), (8, 0.8)], (3, 1, 1), 12).replace("\"seed\": 11", "\"seed\": 12"),
     );
     let out = dir.join("other-seed");
     gen_ok(&other, &out, &["--quiet", "--no-images"]);

@@ -34,18 +34,10 @@ fn every_lane_has_a_way_on() {
         match lane.end {
             LaneEnd::Loop(c) => assert_eq!(map.connectors[c].from, id),
             LaneEnd::Intersection { .. } => {
-                assert!(
-                    map.exit(id, Turn::Straight).is_some(),
-                    "{} has no straight exit",
-                    lane.name
-                )
+                assert!(map.exit(id, Turn::Straight).is_some(), "{} has no straight exit", lane.name)
             }
         }
-        assert!(
-            map.connectors.iter().any(|c| c.to == id),
-            "nothing leads into {}",
-            lane.name
-        );
+        assert!(map.connectors.iter().any(|c| c.to == id), "nothing leads into {}", lane.name);
     }
 }
 
@@ -57,10 +49,7 @@ fn all_48_spawn_points_exist_with_the_original_names() {
         for segment in 0..3 {
             for lane in ['w', 'x', 'y', 'z'] {
                 let name = format!("{road}{segment}{lane}");
-                assert!(
-                    map.lane_by_name(&name).is_some(),
-                    "missing spawn point {name}"
-                );
+                assert!(map.lane_by_name(&name).is_some(), "missing spawn point {name}");
                 names.push(name);
             }
         }
@@ -70,15 +59,10 @@ fn all_48_spawn_points_exist_with_the_original_names() {
     for road in ['A', 'B', 'C', 'D'] {
         for segment in 0..3 {
             for (a, b) in [('w', 'x'), ('z', 'y')] {
-                let la =
-                    &map.lanes[map.lane_by_name(&format!("{road}{segment}{a}")).unwrap()].curve;
-                let lb =
-                    &map.lanes[map.lane_by_name(&format!("{road}{segment}{b}")).unwrap()].curve;
+                let la = &map.lanes[map.lane_by_name(&format!("{road}{segment}{a}")).unwrap()].curve;
+                let lb = &map.lanes[map.lane_by_name(&format!("{road}{segment}{b}")).unwrap()].curve;
                 let (_, lateral) = la.local_coordinates(lb.lane_center_at(1.0));
-                assert!(
-                    (lateral - map.layout.lane_width).abs() < 1e-9,
-                    "{road}{segment}{b} is not left of {a}"
-                );
+                assert!((lateral - map.layout.lane_width).abs() < 1e-9, "{road}{segment}{b} is not left of {a}");
             }
         }
     }
@@ -104,9 +88,7 @@ fn every_action_from_every_spawn_lane_is_valid_or_rejected_with_a_reason() {
                     assert!(expected_ok, "{name}: {action} should be rejected");
                     assert!(route.length >= 100.0);
                     if action.is_merge() {
-                        assert!(route
-                            .kinds()
-                            .any(|k| matches!(k, LegKind::LaneChange { .. })));
+                        assert!(route.kinds().any(|k| matches!(k, LegKind::LaneChange { .. })));
                     }
                 }
                 Err(e) => {
@@ -114,19 +96,12 @@ fn every_action_from_every_spawn_lane_is_valid_or_rejected_with_a_reason() {
                     assert_eq!(e.action_index, 0);
                     // The lane named is where the turn is tried: the spawn lane, or the
                     // lane of the same road segment after the off-camera loop.
-                    assert!(
-                        e.reason.contains(&name[..2]),
-                        "reason should name the lane: {e}"
-                    );
+                    assert!(e.reason.contains(&name[..2]), "reason should name the lane: {e}");
                 }
             }
         }
         // A merge past the lane end is rejected and says how far it may go.
-        let merge = if outer {
-            Action::MergeL
-        } else {
-            Action::MergeR
-        };
+        let merge = if outer { Action::MergeL } else { Action::MergeR };
         let err = Route::plan(&map, lane, 0.0, &[merge], &[500.0], 10.0).unwrap_err();
         assert!(err.reason.contains("past the lane end"), "{err}");
     }
@@ -137,34 +112,13 @@ fn routes_are_continuous_and_never_run_out() {
     let map = CityMap::default();
     let queues: [&[Action]; 4] = [
         &[],
-        &[
-            Action::Straight,
-            Action::Straight,
-            Action::Straight,
-            Action::Straight,
-            Action::Straight,
-        ],
-        &[
-            Action::MergeL,
-            Action::Left,
-            Action::MergeR,
-            Action::Right,
-            Action::Straight,
-        ],
-        &[
-            Action::Right,
-            Action::Right,
-            Action::Right,
-            Action::Right,
-            Action::Right,
-        ],
+        &[Action::Straight, Action::Straight, Action::Straight, Action::Straight, Action::Straight],
+        &[Action::MergeL, Action::Left, Action::MergeR, Action::Right, Action::Straight],
+        &[Action::Right, Action::Right, Action::Right, Action::Right, Action::Right],
     ];
     for lane in map.spawn_points() {
         for queue in queues {
-            let merges: Vec<f64> = queue
-                .iter()
-                .map(|a| if a.is_merge() { 2.0 } else { 0.0 })
-                .collect();
+            let merges: Vec<f64> = queue.iter().map(|a| if a.is_merge() { 2.0 } else { 0.0 }).collect();
             let Ok(route) = Route::plan(&map, lane, 0.0, queue, &merges, 3000.0) else {
                 continue;
             };

@@ -44,16 +44,11 @@ impl Footprint {
 
     fn outside_image(&self, w: f64, h: f64) -> bool {
         let r = self.radius() + 1.0;
-        self.centre.0 + r < 0.0
-            || self.centre.1 + r < 0.0
-            || self.centre.0 - r > w
-            || self.centre.1 - r > h
+        self.centre.0 + r < 0.0 || self.centre.1 + r < 0.0 || self.centre.0 - r > w || self.centre.1 - r > h
     }
 
     fn may_touch(&self, other: &Footprint) -> bool {
-        let d = ((self.centre.0 - other.centre.0).powi(2)
-            + (self.centre.1 - other.centre.1).powi(2))
-        .sqrt();
+        let d = ((self.centre.0 - other.centre.0).powi(2) + (self.centre.1 - other.centre.1).powi(2)).sqrt();
         d < self.radius() + other.radius() + 2.0
     }
 }
@@ -78,54 +73,31 @@ fn frames_and_masks_decode_and_match_the_pose_log() {
         assert_eq!(sorted_entries(&d.join("mask")).len(), s.frames as usize);
         for frame in (0..s.frames).step_by(10) {
             let rgb = image::open(d.join(format!("rgb/{frame:04}.png"))).unwrap();
-            assert!(
-                matches!(rgb, image::DynamicImage::ImageRgb8(_)),
-                "RGB frames are 8-bit RGB"
-            );
+            assert!(matches!(rgb, image::DynamicImage::ImageRgb8(_)), "RGB frames are 8-bit RGB");
             let rgb = rgb.into_rgb8();
             let mask = image::open(d.join(format!("mask/{frame:04}.png"))).unwrap();
-            assert!(
-                matches!(mask, image::DynamicImage::ImageLuma8(_)),
-                "masks are 8-bit grey"
-            );
+            assert!(matches!(mask, image::DynamicImage::ImageLuma8(_)), "masks are 8-bit grey");
             let mask = mask.into_luma8();
             assert_eq!(rgb.dimensions(), (w, h));
             assert_eq!(mask.dimensions(), (w, h));
 
             let present: BTreeSet<u8> = mask.pixels().map(|p| p.0[0]).filter(|&v| v != 0).collect();
-            assert!(
-                present.is_subset(&mask_ids),
-                "unknown ids {present:?} in {}",
-                d.display()
-            );
+            assert!(present.is_subset(&mask_ids), "unknown ids {present:?} in {}", d.display());
             let frame_poses: Vec<&Pose> = poses.iter().filter(|p| p.frame == frame).collect();
-            let prints: Vec<Footprint> = frame_poses
-                .iter()
-                .map(|p| Footprint::new(p, &s.cars[p.car as usize], ppm))
-                .collect();
+            let prints: Vec<Footprint> =
+                frame_poses.iter().map(|p| Footprint::new(p, &s.cars[p.car as usize], ppm)).collect();
             for (i, p) in frame_poses.iter().enumerate() {
                 let car = &s.cars[p.car as usize];
                 let fp = &prints[i];
                 if fp.outside_image(w as f64, h as f64) {
-                    assert!(
-                        !present.contains(&car.mask_id),
-                        "car {} is off camera but in the mask",
-                        car.id
-                    );
+                    assert!(!present.contains(&car.mask_id), "car {} is off camera but in the mask", car.id);
                     continue;
                 }
-                let alone = prints
-                    .iter()
-                    .enumerate()
-                    .all(|(j, o)| j == i || !fp.may_touch(o));
+                let alone = prints.iter().enumerate().all(|(j, o)| j == i || !fp.may_touch(o));
                 if !alone || !fp.within_image(w as f64, h as f64) {
                     continue;
                 }
-                assert!(
-                    present.contains(&car.mask_id),
-                    "car {} is on camera but not in the mask",
-                    car.id
-                );
+                assert!(present.contains(&car.mask_id), "car {} is on camera but not in the mask", car.id);
                 // Pixel-exact footprint: pixel centres clearly inside carry the id,
                 // pixels clearly outside do not (no anti-aliasing). "Clearly" is
                 // 0.05 px: the rasterizer snaps edges to 1/64 px.
@@ -136,13 +108,13 @@ fn frames_and_masks_decode_and_match_the_pose_log() {
                         let v = mask.get_pixel(x as u32, y as u32).0[0];
                         let margin = fp.inside_margin(x as f64, y as f64);
                         if margin > 0.05 {
-                            assert_eq!(v, car.mask_id, "pixel ({x},{y}) inside car {} (margin {margin}, pose {p:?}) is {v}", car.id);
-                        } else if margin < -0.05 {
-                            assert_ne!(
+                            assert_eq!(
                                 v, car.mask_id,
-                                "pixel ({x},{y}) outside car {} carries its id",
+                                "pixel ({x},{y}) inside car {} (margin {margin}, pose {p:?}) is {v}",
                                 car.id
                             );
+                        } else if margin < -0.05 {
+                            assert_ne!(v, car.mask_id, "pixel ({x},{y}) outside car {} carries its id", car.id);
                         }
                         if v == car.mask_id {
                             n += 1.0;
@@ -159,26 +131,15 @@ fn frames_and_masks_decode_and_match_the_pose_log() {
                     p.py
                 );
                 let expected_area = car.length_m * car.width_m * ppm * ppm;
-                assert!(
-                    (n - expected_area).abs() < expected_area * 0.15,
-                    "area {n} vs {expected_area}"
-                );
+                assert!((n - expected_area).abs() < expected_area * 0.15, "area {n} vs {expected_area}");
                 // The body colour shows at the car's centre in the RGB frame.
                 let centre = rgb.get_pixel(p.px.round() as u32, p.py.round() as u32).0;
-                assert_eq!(
-                    centre,
-                    hex(&car.colour),
-                    "car {} colour at its centre",
-                    car.id
-                );
+                assert_eq!(centre, hex(&car.colour), "car {} colour at its centre", car.id);
                 centroids_checked += 1;
             }
         }
     }
-    assert!(
-        centroids_checked > 50,
-        "only {centroids_checked} cars checked"
-    );
+    assert!(centroids_checked > 50, "only {centroids_checked} cars checked");
 }
 
 #[test]
@@ -194,10 +155,7 @@ fn the_background_is_the_same_in_every_frame_where_no_car_is() {
         // Away from cars in either frame (2 px margin for anti-aliased edges).
         let near_car = (-2i64..=2).any(|dy| {
             (-2i64..=2).any(|dx| {
-                let (xx, yy) = (
-                    (x as i64 + dx).clamp(0, 1023) as u32,
-                    (y as i64 + dy).clamp(0, 639) as u32,
-                );
+                let (xx, yy) = ((x as i64 + dx).clamp(0, 1023) as u32, (y as i64 + dy).clamp(0, 639) as u32);
                 ma.get_pixel(xx, yy).0[0] != 0 || mb.get_pixel(xx, yy).0[0] != 0
             })
         });

@@ -12,24 +12,11 @@ fn rejected(case: &str, text: &str, needles: &[&str]) {
     let dir = fresh_dir(&format!("spec-errors-{case}"));
     let spec = write_spec(&dir, text);
     let out = dir.join("out");
-    let output = run(&[
-        "gen",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let output = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(
-        output.status.code(),
-        Some(2),
-        "{case}: expected exit 2, stderr: {stderr}"
-    );
+    assert_eq!(output.status.code(), Some(2), "{case}: expected exit 2, stderr: {stderr}");
     for needle in needles {
-        assert!(
-            stderr.contains(needle),
-            "{case}: stderr should mention {needle:?}: {stderr}"
-        );
+        assert!(stderr.contains(needle), "{case}: stderr should mention {needle:?}: {stderr}");
     }
     assert!(!stderr.contains("panicked"), "{case}: {stderr}");
     assert!(!out.exists(), "{case}: output was written for a bad spec");
@@ -43,21 +30,13 @@ fn with(edit: impl FnOnce(&mut serde_json::Value)) -> String {
 
 #[test]
 fn malformed_json() {
-    rejected(
-        "malformed",
-        r#"{"name": "x", "world": "toy",,}"#,
-        &["invalid spec", "line 1"],
-    );
+    rejected("malformed", r#"{"name": "x", "world": "toy",,}"#, &["invalid spec", "line 1"]);
     rejected("empty", "", &["invalid spec"]);
 }
 
 #[test]
 fn unknown_field_is_named_with_the_allowed_ones() {
-    rejected(
-        "unknown",
-        &with(|v| v["colour_mode"] = 1.into()),
-        &["colour_mode", "expected one of", "frames"],
-    );
+    rejected("unknown", &with(|v| v["colour_mode"] = 1.into()), &["colour_mode", "expected one of", "frames"]);
     rejected(
         "unknown-nested",
         &with(|v| v["groups"][0]["edges"] = 2.into()),
@@ -67,16 +46,8 @@ fn unknown_field_is_named_with_the_allowed_ones() {
 
 #[test]
 fn wrong_type_names_the_field() {
-    rejected(
-        "type-frames",
-        &with(|v| v["frames"] = "many".into()),
-        &["frames", "invalid type"],
-    );
-    rejected(
-        "type-world",
-        &with(|v| v["world"] = "mars".into()),
-        &["world", "toy", "city"],
-    );
+    rejected("type-frames", &with(|v| v["frames"] = "many".into()), &["frames", "invalid type"]);
+    rejected("type-world", &with(|v| v["world"] = "mars".into()), &["world", "toy", "city"]);
     rejected(
         "type-proportion",
         &with(|v| v["groups"][0]["edge_proportion"] = "half".into()),
@@ -91,35 +62,19 @@ fn zero_counts_are_rejected_with_the_allowed_range() {
         &with(|v| v["groups"][0]["cars"] = 0.into()),
         &["groups[0].cars", "0 is not allowed", "1 to 255"],
     );
-    rejected(
-        "zero-frames",
-        &with(|v| v["frames"] = 0.into()),
-        &["`frames`", "0 is not allowed"],
-    );
+    rejected("zero-frames", &with(|v| v["frames"] = 0.into()), &["`frames`", "0 is not allowed"]);
     rejected(
         "zero-splits",
         &with(|v| v["splits"] = serde_json::json!({"train": 0, "val": 0, "test": 0})),
         &["splits", "at least one"],
     );
-    rejected(
-        "no-groups",
-        &with(|v| v["groups"] = serde_json::json!([])),
-        &["groups", "empty"],
-    );
+    rejected("no-groups", &with(|v| v["groups"] = serde_json::json!([])), &["groups", "empty"]);
 }
 
 #[test]
 fn negative_counts_are_rejected() {
-    rejected(
-        "negative-train",
-        &with(|v| v["splits"]["train"] = (-5).into()),
-        &["splits.train", "-5"],
-    );
-    rejected(
-        "negative-seed",
-        &with(|v| v["seed"] = (-1).into()),
-        &["seed", "-1"],
-    );
+    rejected("negative-train", &with(|v| v["splits"]["train"] = (-5).into()), &["splits.train", "-5"]);
+    rejected("negative-seed", &with(|v| v["seed"] = (-1).into()), &["seed", "-1"]);
     rejected(
         "negative-speed",
         &with(|v| v["toy_speed_px_per_frame"] = (-2.0).into()),
@@ -160,16 +115,12 @@ fn impossible_groups() {
     );
     rejected(
         "duplicate-group",
-        &with(
-            |v| v["groups"] = serde_json::json!([{"cars": 4, "edge_proportion": 0.5}, {"cars": 4, "edge_proportion": 0.5}]),
-        ),
+        &with(|v| {
+            v["groups"] = serde_json::json!([{"cars": 4, "edge_proportion": 0.5}, {"cars": 4, "edge_proportion": 0.5}])
+        }),
         &["groups[1]", "cars04_edges50"],
     );
-    rejected(
-        "gap-shorter-than-car",
-        &with(|v| v["leader_gap_px"] = 10.into()),
-        &["leader_gap_px", "overlap"],
-    );
+    rejected("gap-shorter-than-car", &with(|v| v["leader_gap_px"] = 10.into()), &["leader_gap_px", "overlap"]);
 }
 
 #[test]
@@ -188,16 +139,8 @@ fn image_size_out_of_range() {
 
 #[test]
 fn hostile_names_cannot_escape_the_output_folder() {
-    rejected(
-        "name-dotdot",
-        &with(|v| v["name"] = "../escape".into()),
-        &["`name`", "not allowed"],
-    );
-    rejected(
-        "name-slash",
-        &with(|v| v["name"] = "/etc".into()),
-        &["`name`"],
-    );
+    rejected("name-dotdot", &with(|v| v["name"] = "../escape".into()), &["`name`", "not allowed"]);
+    rejected("name-slash", &with(|v| v["name"] = "/etc".into()), &["`name`"]);
 }
 
 #[test]
@@ -222,19 +165,10 @@ fn unwritable_output_folder_gets_a_clear_message() {
     let blocker = dir.join("a-file");
     std::fs::write(&blocker, b"not a folder").unwrap();
     let out = blocker.join("out");
-    let output = run(&[
-        "gen",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let output = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("cannot write") && stderr.contains(out.to_str().unwrap()),
-        "{stderr}"
-    );
+    assert!(stderr.contains("cannot write") && stderr.contains(out.to_str().unwrap()), "{stderr}");
     assert!(stderr.contains("--out"), "should say what to do: {stderr}");
     assert!(!stderr.contains("panicked"));
 }

@@ -18,17 +18,9 @@ fn every_car_moves_exactly_the_toy_speed_every_frame() {
             for w in track.windows(2) {
                 let step = ((w[1].px - w[0].px).powi(2) + (w[1].py - w[0].py).powi(2)).sqrt();
                 // Chords on the tightest (1.5 m) turns are 0.001 px shorter than the arc.
-                assert!(
-                    (step - 2.0).abs() < 0.01,
-                    "{} car {car} frame {}: moved {step} px",
-                    d.display(),
-                    w[1].frame
-                );
+                assert!((step - 2.0).abs() < 0.01, "{} car {car} frame {}: moved {step} px", d.display(), w[1].frame);
                 let logged = w[1].speed * s.frame_interval * ppm;
-                assert!(
-                    (logged - 2.0).abs() < 1e-3,
-                    "speed column says {logged} px/frame"
-                );
+                assert!((logged - 2.0).abs() < 1e-3, "speed column says {logged} px/frame");
                 assert!((w[1].t - w[1].frame as f64 * s.frame_interval).abs() < 1e-9);
             }
         }
@@ -49,9 +41,7 @@ fn followers_trail_their_leaders_by_exactly_the_gap() {
         for [l, f] in &s.edges {
             let (leader, follower) = (&by_car[l], &by_car[f]);
             // At the start both are on the straight spawn lane, 30 px apart.
-            let d0 = ((leader[0].px - follower[0].px).powi(2)
-                + (leader[0].py - follower[0].py).powi(2))
-            .sqrt();
+            let d0 = ((leader[0].px - follower[0].px).powi(2) + (leader[0].py - follower[0].py).powi(2)).sqrt();
             assert!((d0 - 30.0).abs() < 0.005, "start gap {d0} px");
             for t in lag..leader.len() {
                 let (a, b) = (&follower[t], &leader[t - lag]);
@@ -64,15 +54,10 @@ fn followers_trail_their_leaders_by_exactly_the_gap() {
                 // Distance along the path = the leader's travel over the lag.
                 let along: f64 = (t - lag..t)
                     .map(|k| {
-                        ((leader[k + 1].px - leader[k].px).powi(2)
-                            + (leader[k + 1].py - leader[k].py).powi(2))
-                        .sqrt()
+                        ((leader[k + 1].px - leader[k].px).powi(2) + (leader[k + 1].py - leader[k].py).powi(2)).sqrt()
                     })
                     .sum();
-                assert!(
-                    (along - 30.0).abs() < 0.05,
-                    "path gap {along} px at frame {t}"
-                );
+                assert!((along - 30.0).abs() < 0.05, "path gap {along} px at frame {t}");
             }
             pairs_checked += 1;
         }

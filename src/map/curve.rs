@@ -15,6 +15,27 @@ pub enum Curve {
 }
 
 impl Curve {
+    /// The straight segment from `start` to `end`.
+    pub fn line(start: DVec2, end: DVec2) -> Curve {
+        let d = end - start;
+        Curve::Line(Line { start, direction: d.normalize(), length: d.length() })
+    }
+
+    /// The arc leaving `start` with `heading`, turning by `sweep` radians
+    /// (positive = left) on a circle of `radius`.
+    pub fn arc(start: DVec2, heading: f64, radius: f64, sweep: f64) -> Curve {
+        let left = DVec2::new(-heading.sin(), heading.cos());
+        let centre = start + left * radius * sweep.signum();
+        let d = start - centre;
+        Curve::Arc(Arc { centre, radius, start_angle: d.y.atan2(d.x), sweep })
+    }
+
+    /// A smooth change of `shift` metres sideways (positive = left) over
+    /// `run` metres of travel along `direction`, starting at `start`.
+    pub fn lane_change(start: DVec2, direction: DVec2, run: f64, shift: f64) -> Curve {
+        Curve::LaneChange(LaneChange::build(start, direction, run, shift))
+    }
+
     /// Length of the curve in metres.
     pub fn length(&self) -> f64 {
         match self {
@@ -123,17 +144,6 @@ pub struct Line {
     pub length: f64,
 }
 
-impl Line {
-    pub fn between(start: DVec2, end: DVec2) -> Curve {
-        let d = end - start;
-        Curve::Line(Line {
-            start,
-            direction: d.normalize(),
-            length: d.length(),
-        })
-    }
-}
-
 /// A circular arc; positive `sweep` turns left (counter-clockwise).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arc {
@@ -146,20 +156,6 @@ pub struct Arc {
 }
 
 impl Arc {
-    /// The arc leaving `start` with `heading`, turning by `sweep` radians
-    /// (positive = left) on a circle of `radius`.
-    pub fn from_start(start: DVec2, heading: f64, radius: f64, sweep: f64) -> Curve {
-        let left = DVec2::new(-heading.sin(), heading.cos());
-        let centre = start + left * radius * sweep.signum();
-        let d = start - centre;
-        Curve::Arc(Arc {
-            centre,
-            radius,
-            start_angle: d.y.atan2(d.x),
-            sweep,
-        })
-    }
-
     fn angle_at(&self, s: f64) -> f64 {
         self.start_angle + self.sweep.signum() * s / self.radius
     }
@@ -190,15 +186,9 @@ pub struct LaneChange {
 const LANE_CHANGE_TABLE: usize = 65;
 
 impl LaneChange {
-    pub fn new(start: DVec2, direction: DVec2, run: f64, shift: f64) -> Curve {
-        let mut lc = LaneChange {
-            start,
-            direction,
-            run,
-            shift,
-            length: 0.0,
-            arc_table: Vec::with_capacity(LANE_CHANGE_TABLE),
-        };
+    fn build(start: DVec2, direction: DVec2, run: f64, shift: f64) -> LaneChange {
+        let mut lc =
+            LaneChange { start, direction, run, shift, length: 0.0, arc_table: Vec::with_capacity(LANE_CHANGE_TABLE) };
         // Integrate |p'(u)| with Simpson's rule on each table interval.
         let mut acc = 0.0;
         lc.arc_table.push(0.0);
@@ -210,7 +200,7 @@ impl LaneChange {
             lc.arc_table.push(acc);
         }
         lc.length = acc;
-        Curve::LaneChange(lc)
+        lc
     }
 
     fn longitudinal_at_arc_length(&self, s: f64) -> f64 {
@@ -245,8 +235,7 @@ impl LaneChange {
 
     fn heading_at_longitudinal(&self, u: f64) -> f64 {
         let left = self.direction.perp();
-        let d =
-            self.direction + left * self.shift * smootherstep_derivative(u / self.run) / self.run;
+        let d = self.direction + left * self.shift * smootherstep_derivative(u / self.run) / self.run;
         d.y.atan2(d.x)
     }
 }
@@ -278,18 +267,18 @@ mod tests {
 
     #[test]
     fn arc_quarter_turn_ends_where_expected() {
-        let arc = Arc::from_start(DVec2::new(0.0, 0.0), 0.0, 2.0, PI / 2.0);
+        let arc = Curve::arc(DVec2::new(0.0, 0.0), 0.0, 2.0, PI / 2.0);
         let end = arc.end();
         assert!((end - DVec2::new(2.0, 2.0)).length() < 1e-9, "{end:?}");
         assert!((arc.heading_at(arc.length()) - PI / 2.0).abs() < 1e-9);
-        let right = Arc::from_start(DVec2::new(0.0, 0.0), 0.0, 2.0, -PI / 2.0);
+        let right = Curve::arc(DVec2::new(0.0, 0.0), 0.0, 2.0, -PI / 2.0);
         assert!((right.end() - DVec2::new(2.0, -2.0)).length() < 1e-9);
         assert!((right.heading_at(right.length()) + PI / 2.0).abs() < 1e-9);
     }
 
     #[test]
     fn lane_change_is_parameterised_by_arc_length() {
-        let c = LaneChange::new(DVec2::ZERO, DVec2::X, 8.0, 3.0);
+        let c = Curve::lane_change(DVec2::ZERO, DVec2::X, 8.0, 3.0);
         assert!((c.end() - DVec2::new(8.0, 3.0)).length() < 1e-9);
         // Equal steps of s give equal chord lengths (up to curvature).
         let n = 40;
@@ -297,11 +286,7 @@ mod tests {
         for i in 0..n {
             let a = c.lane_center_at(i as f64 * step);
             let b = c.lane_center_at((i + 1) as f64 * step);
-            assert!(
-                (a.distance(b) - step).abs() < 1e-3,
-                "step {i}: {}",
-                a.distance(b)
-            );
+            assert!((a.distance(b) - step).abs() < 1e-3, "step {i}: {}", a.distance(b));
         }
         assert!(c.heading_at(0.0).abs() < 1e-9 && c.heading_at(c.length()).abs() < 1e-9);
     }
@@ -309,19 +294,16 @@ mod tests {
     #[test]
     fn local_coordinates_invert_position() {
         let curves = [
-            Line::between(DVec2::new(1.0, 1.0), DVec2::new(1.0, 9.0)),
-            Arc::from_start(DVec2::new(0.0, 0.0), 0.3, 7.5, PI / 2.0),
-            Arc::from_start(DVec2::new(0.0, 0.0), 0.3, 1.5, -PI / 2.0),
-            LaneChange::new(DVec2::ZERO, DVec2::Y, 8.0, -3.0),
+            Curve::line(DVec2::new(1.0, 1.0), DVec2::new(1.0, 9.0)),
+            Curve::arc(DVec2::new(0.0, 0.0), 0.3, 7.5, PI / 2.0),
+            Curve::arc(DVec2::new(0.0, 0.0), 0.3, 1.5, -PI / 2.0),
+            Curve::lane_change(DVec2::ZERO, DVec2::Y, 8.0, -3.0),
         ];
         for c in &curves {
             for &(s, lat) in &[(0.5, 0.0), (1.0, 0.4), (2.0, -0.3)] {
                 let p = c.position(s, lat);
                 let (s2, lat2) = c.local_coordinates(p);
-                assert!(
-                    (s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3,
-                    "{c:?} {s} {lat} -> {s2} {lat2}"
-                );
+                assert!((s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3, "{c:?} {s} {lat} -> {s2} {lat2}");
             }
         }
     }

@@ -13,7 +13,7 @@
 pub mod curve;
 pub mod route;
 
-use curve::{Arc, Curve, Line};
+use curve::Curve;
 use glam::DVec2;
 use std::collections::HashMap;
 use std::f64::consts::PI;
@@ -154,11 +154,7 @@ impl CityMap {
         let mut intersections = Vec::new();
         for &(ew, y) in &layout.east_west_roads {
             for &(ns, x) in &layout.north_south_roads {
-                intersections.push(Intersection {
-                    name: format!("{ew}{ns}"),
-                    centre: DVec2::new(x, y),
-                    half_size: hw,
-                });
+                intersections.push(Intersection { name: format!("{ew}{ns}"), centre: DVec2::new(x, y), half_size: hw });
             }
         }
         let intersection_at = |ew: usize, ns: usize| ew * 2 + ns;
@@ -168,36 +164,17 @@ impl CityMap {
         let mut roads = Vec::new();
         for (i, &(name, y)) in layout.east_west_roads.iter().enumerate() {
             let crossings = [layout.north_south_roads[0].1, layout.north_south_roads[1].1];
-            roads.push((
-                name,
-                DVec2::new(0.0, y),
-                DVec2::X,
-                crossings,
-                layout.extent_x,
-                true,
-                i,
-            ));
+            roads.push((name, DVec2::new(0.0, y), DVec2::X, crossings, layout.extent_x, true, i));
         }
         for (j, &(name, x)) in layout.north_south_roads.iter().enumerate() {
             let crossings = [layout.east_west_roads[0].1, layout.east_west_roads[1].1];
-            roads.push((
-                name,
-                DVec2::new(x, 0.0),
-                DVec2::Y,
-                crossings,
-                layout.extent_y,
-                false,
-                j,
-            ));
+            roads.push((name, DVec2::new(x, 0.0), DVec2::Y, crossings, layout.extent_y, false, j));
         }
         let mut pending_loops = Vec::new();
         for &(name, origin, axis, crossings, extent, east_west, road_index) in &roads {
             let right = DVec2::new(axis.y, -axis.x);
-            let bounds = [
-                (-extent, crossings[0] - hw),
-                (crossings[0] + hw, crossings[1] - hw),
-                (crossings[1] + hw, extent),
-            ];
+            let bounds =
+                [(-extent, crossings[0] - hw), (crossings[0] + hw, crossings[1] - hw), (crossings[1] + hw, extent)];
             for (segment, &(a0, a1)) in bounds.iter().enumerate() {
                 for letter in LANE_LETTERS {
                     let (offset, forward, position) = match letter {
@@ -219,21 +196,15 @@ impl CityMap {
                     };
                     let end_kind = match crossing {
                         Some(k) => {
-                            let intersection = if east_west {
-                                intersection_at(road_index, k)
-                            } else {
-                                intersection_at(k, road_index)
-                            };
+                            let intersection =
+                                if east_west { intersection_at(road_index, k) } else { intersection_at(k, road_index) };
                             let approach = match (east_west, forward) {
                                 (true, true) => 'W',
                                 (true, false) => 'E',
                                 (false, true) => 'S',
                                 (false, false) => 'N',
                             };
-                            LaneEnd::Intersection {
-                                intersection,
-                                approach,
-                            }
+                            LaneEnd::Intersection { intersection, approach }
                         }
                         None => {
                             pending_loops.push(lanes.len());
@@ -246,7 +217,7 @@ impl CityMap {
                         segment: segment as u8,
                         letter,
                         position,
-                        curve: Line::between(start, end),
+                        curve: Curve::line(start, end),
                         end: end_kind,
                     });
                 }
@@ -270,33 +241,19 @@ impl CityMap {
             let heading = lane.curve.heading_at(lane.curve.length());
             let mut add = |curve: Curve, turn: Turn, intersection: Option<usize>| {
                 let to = lane_starting_at(&lanes, curve.end(), curve.heading_at(curve.length()));
-                connectors.push(Connector {
-                    from,
-                    to,
-                    turn,
-                    intersection,
-                    curve,
-                });
+                connectors.push(Connector { from, to, turn, intersection, curve });
             };
             match lane.end {
                 LaneEnd::Intersection { intersection, .. } => {
                     let travel = DVec2::new(heading.cos(), heading.sin());
-                    add(
-                        Line::between(end, end + travel * 2.0 * hw),
-                        Turn::Straight,
-                        Some(intersection),
-                    );
+                    add(Curve::line(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
                     match lane.position {
-                        LanePosition::Outer => add(
-                            Arc::from_start(end, heading, hw - 1.5 * lw, -PI / 2.0),
-                            Turn::Right,
-                            Some(intersection),
-                        ),
-                        LanePosition::Inner => add(
-                            Arc::from_start(end, heading, hw + 0.5 * lw, PI / 2.0),
-                            Turn::Left,
-                            Some(intersection),
-                        ),
+                        LanePosition::Outer => {
+                            add(Curve::arc(end, heading, hw - 1.5 * lw, -PI / 2.0), Turn::Right, Some(intersection))
+                        }
+                        LanePosition::Inner => {
+                            add(Curve::arc(end, heading, hw + 0.5 * lw, PI / 2.0), Turn::Left, Some(intersection))
+                        }
                     }
                 }
                 LaneEnd::Loop(_) => {
@@ -304,7 +261,7 @@ impl CityMap {
                         LanePosition::Outer => 1.5 * lw,
                         LanePosition::Inner => 0.5 * lw,
                     };
-                    add(Arc::from_start(end, heading, radius, PI), Turn::UTurn, None);
+                    add(Curve::arc(end, heading, radius, PI), Turn::UTurn, None);
                 }
             }
         }
@@ -313,28 +270,11 @@ impl CityMap {
                 lanes[c.from].end = LaneEnd::Loop(id);
             }
         }
-        debug_assert!(pending_loops
-            .iter()
-            .all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
+        debug_assert!(pending_loops.iter().all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
 
-        let lane_by_name = lanes
-            .iter()
-            .enumerate()
-            .map(|(i, l)| (l.name.clone(), i))
-            .collect();
-        let exits = connectors
-            .iter()
-            .enumerate()
-            .map(|(i, c)| ((c.from, c.turn), i))
-            .collect();
-        CityMap {
-            layout,
-            lanes,
-            connectors,
-            intersections,
-            lane_by_name,
-            exits,
-        }
+        let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
+        let exits = connectors.iter().enumerate().map(|(i, c)| ((c.from, c.turn), i)).collect();
+        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits }
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.
@@ -369,9 +309,6 @@ impl CityMap {
 
     /// Turns allowed at the end of `lane` (none for lanes that end in a loop).
     pub fn allowed_turns(&self, lane: LaneId) -> Vec<Turn> {
-        [Turn::Left, Turn::Straight, Turn::Right]
-            .into_iter()
-            .filter(|&t| self.exit(lane, t).is_some())
-            .collect()
+        [Turn::Left, Turn::Straight, Turn::Right].into_iter().filter(|&t| self.exit(lane, t).is_some()).collect()
     }
 }

@@ -5,7 +5,7 @@
 //! up the route goes straight on (and round the off-camera loops) for as long
 //! as it is asked to, so no car ever runs out of road.
 
-use super::curve::{Curve, LaneChange};
+use super::curve::Curve;
 use super::{CityMap, ConnectorId, LaneEnd, LaneId, LanePosition, Turn};
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -27,13 +27,7 @@ pub enum Action {
 }
 
 impl Action {
-    pub const ALL: [Action; 5] = [
-        Action::Left,
-        Action::Right,
-        Action::Straight,
-        Action::MergeL,
-        Action::MergeR,
-    ];
+    pub const ALL: [Action; 5] = [Action::Left, Action::Right, Action::Straight, Action::MergeL, Action::MergeR];
 
     /// The name used in scenario files.
     pub fn name(self) -> &'static str {
@@ -77,11 +71,7 @@ pub struct RouteError {
 
 impl fmt::Display for RouteError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "action {} ({}): {}",
-            self.action_index, self.action, self.reason
-        )
+        write!(f, "action {} ({}): {}", self.action_index, self.action, self.reason)
     }
 }
 
@@ -128,10 +118,7 @@ impl Route {
         merge_distances: &[f64],
         min_length: f64,
     ) -> Result<Route, RouteError> {
-        let mut route = Route {
-            legs: Vec::new(),
-            length: 0.0,
-        };
+        let mut route = Route { legs: Vec::new(), length: 0.0 };
         let mut lane = spawn;
         let mut lane_entry = 0.0;
         let mut earliest = entry;
@@ -144,11 +131,7 @@ impl Route {
             let curve = &map.lanes[lane].curve;
             let lane_len = curve.length();
             let head = actions.get(next).copied();
-            let error = |reason: String| RouteError {
-                action_index: next,
-                action: head.unwrap(),
-                reason,
-            };
+            let error = |reason: String| RouteError { action_index: next, action: head.unwrap(), reason };
             match head {
                 Some(action) if action.is_merge() => {
                     let to_left = action == Action::MergeL;
@@ -175,42 +158,24 @@ impl Route {
                             lane_len - change_run
                         )));
                     }
-                    route.push(
-                        LegKind::Lane(lane),
-                        curve.clone(),
-                        lane_entry,
-                        at - lane_entry,
-                    );
+                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, at - lane_entry);
                     let heading = curve.heading_at(at);
                     let shift = if to_left { 1.0 } else { -1.0 } * map.layout.lane_width;
-                    let change = LaneChange::new(
+                    let change = Curve::lane_change(
                         curve.lane_center_at(at),
                         DVec2::new(heading.cos(), heading.sin()),
                         change_run,
                         shift,
                     );
                     let len = change.length();
-                    route.push(
-                        LegKind::LaneChange {
-                            from: lane,
-                            to: target,
-                        },
-                        change,
-                        0.0,
-                        len,
-                    );
+                    route.push(LegKind::LaneChange { from: lane, to: target }, change, 0.0, len);
                     lane = target;
                     lane_entry = at + change_run;
                     earliest = lane_entry;
                     next += 1;
                 }
                 _ => {
-                    route.push(
-                        LegKind::Lane(lane),
-                        curve.clone(),
-                        lane_entry,
-                        lane_len - lane_entry,
-                    );
+                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, lane_len - lane_entry);
                     let (connector, consumed) = match map.lanes[lane].end {
                         LaneEnd::Loop(c) => (c, false),
                         LaneEnd::Intersection { .. } => {
@@ -220,12 +185,8 @@ impl Route {
                                 None => {
                                     let name = &map.lanes[lane].name;
                                     let allowed = match map.lanes[lane].position {
-                                        LanePosition::Outer => {
-                                            "the outer lanes (w, z) go straight or turn right"
-                                        }
-                                        LanePosition::Inner => {
-                                            "the inner lanes (x, y) go straight or turn left"
-                                        }
+                                        LanePosition::Outer => "the outer lanes (w, z) go straight or turn right",
+                                        LanePosition::Inner => "the inner lanes (x, y) go straight or turn left",
                                     };
                                     return Err(error(format!(
                                         "cannot turn {} from lane {name}: {allowed}; merge first",
@@ -236,12 +197,7 @@ impl Route {
                         }
                     };
                     let c = &map.connectors[connector];
-                    route.push(
-                        LegKind::Connector(connector),
-                        c.curve.clone(),
-                        0.0,
-                        c.curve.length(),
-                    );
+                    route.push(LegKind::Connector(connector), c.curve.clone(), 0.0, c.curve.length());
                     lane = c.to;
                     lane_entry = 0.0;
                     earliest = 0.0;
@@ -257,13 +213,7 @@ impl Route {
         if length <= 0.0 {
             return;
         }
-        self.legs.push(RouteLeg {
-            kind,
-            curve,
-            curve_start,
-            length,
-            route_start: self.length,
-        });
+        self.legs.push(RouteLeg { kind, curve, curve_start, length, route_start: self.length });
         self.length += length;
     }
 
@@ -278,10 +228,7 @@ impl Route {
     pub fn pose_at(&self, s: f64, lateral: f64) -> (DVec2, f64) {
         let leg = self.leg_at(s);
         let on_curve = leg.curve_start + (s - leg.route_start).clamp(0.0, leg.length);
-        (
-            leg.curve.position(on_curve, lateral),
-            leg.curve.heading_at(on_curve),
-        )
+        (leg.curve.position(on_curve, lateral), leg.curve.heading_at(on_curve))
     }
 
     /// The lanes, lane changes and connectors of the route in order.

@@ -80,6 +80,17 @@ pub struct ScenarioPlan {
     pub toy_step_m: f64,
 }
 
+/// A car placed on the map before ids are assigned.
+#[derive(Clone)]
+struct PlacedCar {
+    role: Role,
+    spawn: LaneId,
+    distance: f64,
+    actions: Vec<Action>,
+    merges: Vec<f64>,
+    route: Arc<Route>,
+}
+
 /// A span of a spawn lane where a car's centre is on camera.
 #[derive(Debug, Clone, Copy)]
 struct SpawnSpan {
@@ -122,19 +133,9 @@ impl Expansion {
         }
         let spans = spawn_spans(&map, &camera, spec.car_length_m);
         let slot = spec.car_length_m + SPAWN_CLEARANCE;
-        let capacity: u32 = spans
-            .iter()
-            .map(|s| ((s.hi - s.lo) / slot) as u32 + 1)
-            .sum();
+        let capacity: u32 = spans.iter().map(|s| ((s.hi - s.lo) / slot) as u32 + 1).sum();
         let toy_step_m = camera.pixels_to_metres(spec.toy_speed_px_per_frame);
-        let expansion = Expansion {
-            spec,
-            map,
-            camera,
-            spans,
-            leader_gap_m,
-            toy_step_m,
-        };
+        let expansion = Expansion { spec, map, camera, spans, leader_gap_m, toy_step_m };
         for (i, g) in expansion.spec.groups.iter().enumerate() {
             // Random placement needs room to spare: allow half the packed capacity.
             if g.cars > capacity / 2 {
@@ -159,15 +160,8 @@ impl Expansion {
                 ));
             }
             // A dry run proves the group can be planned before anything is written.
-            let key = ScenarioKey {
-                group: g.name(),
-                group_index: i,
-                split: Split::Train,
-                index: 0,
-            };
-            expansion
-                .plan(&key)
-                .map_err(|e| SpecError::new(format!("groups[{i}]"), e))?;
+            let key = ScenarioKey { group: g.name(), group_index: i, split: Split::Train, index: 0 };
+            expansion.plan(&key).map_err(|e| SpecError::new(format!("groups[{i}]"), e))?;
         }
         Ok(expansion)
     }
@@ -180,12 +174,7 @@ impl Expansion {
             for split in Split::ALL {
                 let n = self.spec.splits.count(split).min(limit.unwrap_or(u32::MAX));
                 for index in 0..n {
-                    keys.push(ScenarioKey {
-                        group: g.name(),
-                        group_index,
-                        split,
-                        index,
-                    });
+                    keys.push(ScenarioKey { group: g.name(), group_index, split, index });
                 }
             }
         }
@@ -209,8 +198,7 @@ impl Expansion {
         let pairs = group.edges() as usize;
         let singles = group.cars as usize - 2 * pairs;
         let mut placed: Vec<OrientedBox> = Vec::new();
-        // (role, spawn, distance, actions, merges, route)
-        let mut cars: Vec<(Role, LaneId, f64, Vec<Action>, Vec<f64>, Arc<Route>)> = Vec::new();
+        let mut cars: Vec<PlacedCar> = Vec::new();
         let mut pair_indices = Vec::new();
         for unit in 0..pairs + singles {
             let is_pair = unit < pairs;
@@ -223,44 +211,20 @@ impl Expansion {
                 }
                 let back = round_mm(rng.random_range(span.lo..=span.hi - gap));
                 let front = back + gap;
-                let (actions, merges) =
-                    random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car);
-                let route = Route::plan(
-                    &self.map,
-                    span.lane,
-                    front,
-                    &actions,
-                    &merges,
-                    front + travel,
-                )
-                .map_err(|e| {
-                    format!(
-                        "internal planning error on {}: {e}",
-                        self.map.lanes[span.lane].name
-                    )
-                })?;
-                let starts: Vec<f64> = if is_pair {
-                    vec![front, back]
-                } else {
-                    vec![front]
-                };
+                let (actions, merges) = random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car);
+                let route = Route::plan(&self.map, span.lane, front, &actions, &merges, front + travel)
+                    .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[span.lane].name))?;
+                let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
                 let boxes: Vec<OrientedBox> = starts
                     .iter()
                     .map(|&s| {
                         let (centre, heading) = route.pose_at(s, 0.0);
-                        OrientedBox {
-                            centre,
-                            heading,
-                            length: spec.car_length_m,
-                            width: spec.car_width_m,
-                        }
+                        OrientedBox { centre, heading, length: spec.car_length_m, width: spec.car_width_m }
                     })
                     .collect();
                 let clear = boxes.iter().all(|b| {
                     let grown = b.inflated(SPAWN_CLEARANCE / 2.0);
-                    placed
-                        .iter()
-                        .all(|p| !grown.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
+                    placed.iter().all(|p| !grown.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
                 });
                 if !clear {
                     continue;
@@ -269,17 +233,19 @@ impl Expansion {
                 let route = Arc::new(route);
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    cars.push((
-                        Role::Leader,
-                        span.lane,
-                        front,
-                        actions.clone(),
-                        merges.clone(),
-                        route.clone(),
-                    ));
-                    cars.push((Role::Follower, span.lane, back, actions, merges, route));
+                    let leader =
+                        PlacedCar { role: Role::Leader, spawn: span.lane, distance: front, actions, merges, route };
+                    let follower = PlacedCar { role: Role::Follower, distance: back, ..leader.clone() };
+                    cars.extend([leader, follower]);
                 } else {
-                    cars.push((Role::Independent, span.lane, front, actions, merges, route));
+                    cars.push(PlacedCar {
+                        role: Role::Independent,
+                        spawn: span.lane,
+                        distance: front,
+                        actions,
+                        merges,
+                        route,
+                    });
                 }
                 done = true;
                 break;
@@ -298,31 +264,28 @@ impl Expansion {
         let mut planned: Vec<CarPlan> = cars
             .into_iter()
             .enumerate()
-            .map(
-                |(i, (role, spawn, spawn_distance, actions, merge_distances, route))| {
-                    let id = ids[i];
-                    CarPlan {
-                        id,
-                        name: format!("Car_{}", id + 1),
-                        colour: car_colour(id),
-                        mask_id: (id + 1) as u8,
-                        spawn,
-                        spawn_name: self.map.lanes[spawn].name.clone(),
-                        spawn_distance,
-                        actions,
-                        merge_distances,
-                        role,
-                        length: spec.car_length_m,
-                        width: spec.car_width_m,
-                        route,
-                    }
-                },
-            )
+            .map(|(i, placed)| {
+                let PlacedCar { role, spawn, distance: spawn_distance, actions, merges: merge_distances, route } =
+                    placed;
+                let id = ids[i];
+                CarPlan {
+                    id,
+                    name: format!("Car_{}", id + 1),
+                    colour: car_colour(id),
+                    mask_id: (id + 1) as u8,
+                    spawn,
+                    spawn_name: self.map.lanes[spawn].name.clone(),
+                    spawn_distance,
+                    actions,
+                    merge_distances,
+                    role,
+                    length: spec.car_length_m,
+                    width: spec.car_width_m,
+                    route,
+                }
+            })
             .collect();
-        let mut edges: Vec<(u32, u32)> = pair_indices
-            .iter()
-            .map(|&(l, f)| (ids[l], ids[f]))
-            .collect();
+        let mut edges: Vec<(u32, u32)> = pair_indices.iter().map(|&(l, f)| (ids[l], ids[f])).collect();
         edges.sort_unstable();
         planned.sort_by_key(|c| c.id);
         Ok(ScenarioPlan {
@@ -411,9 +374,7 @@ fn random_actions(
         };
         actions.push(action);
         merges.push(0.0);
-        let connector = map
-            .exit(approach, turn)
-            .expect("allowed turn has a connector");
+        let connector = map.exit(approach, turn).expect("allowed turn has a connector");
         lane = map.connectors[connector].to;
         earliest = 0.0;
     }
@@ -434,11 +395,7 @@ fn spawn_spans(map: &CityMap, camera: &Camera, car_length: f64) -> Vec<SpawnSpan
         let mut s = car_length / 2.0;
         while s <= len - car_length / 2.0 {
             let p = curve.lane_center_at(s);
-            if p.x >= lo.x + margin
-                && p.x <= hi.x - margin
-                && p.y >= lo.y + margin
-                && p.y <= hi.y - margin
-            {
+            if p.x >= lo.x + margin && p.x <= hi.x - margin && p.y >= lo.y + margin && p.y <= hi.y - margin {
                 first.get_or_insert(s);
                 last = Some(s);
             }
@@ -484,9 +441,5 @@ pub fn car_colour(id: u32) -> [u8; 3] {
         _ => (c, 0.0, x),
     };
     let m = v - c;
-    [
-        ((r + m) * 255.0) as u8,
-        ((g + m) * 255.0) as u8,
-        ((b + m) * 255.0) as u8,
-    ]
+    [((r + m) * 255.0) as u8, ((g + m) * 255.0) as u8, ((b + m) * 255.0) as u8]
 }

@@ -43,13 +43,7 @@ impl Progress {
             }
             ProgressMode::Auto => (None, Some(Mutex::new((start, 0)))),
         };
-        Progress {
-            bar,
-            plain,
-            done: AtomicU64::new(0),
-            total,
-            start,
-        }
+        Progress { bar, plain, done: AtomicU64::new(0), total, start }
     }
 
     /// One more scenario finished.
@@ -61,9 +55,7 @@ impl Progress {
         if let Some(plain) = &self.plain {
             let mut last = plain.lock().expect("progress lock");
             let step = (self.total / 10).max(1);
-            let due = done / step > last.1 / step
-                || last.0.elapsed() > Duration::from_secs(15)
-                || done == self.total;
+            let due = done / step > last.1 / step || last.0.elapsed() > Duration::from_secs(15) || done == self.total;
             if due {
                 let secs = self.start.elapsed().as_secs_f64();
                 let rate = done as f64 / secs.max(1e-9);

@@ -81,16 +81,10 @@ struct Job {
 
 /// Reads, checks and expands a spec file; nothing is written.
 pub fn load_spec(path: &Path) -> Result<Expansion, GenError> {
-    let spec_err = |error| GenError::Spec {
-        path: path.to_path_buf(),
-        error,
-    };
+    let spec_err = |error| GenError::Spec { path: path.to_path_buf(), error };
     let spec = DatasetSpec::from_file(path).map_err(spec_err)?;
     if spec.world == WorldKind::City {
-        return Err(spec_err(SpecError::new(
-            "world",
-            "\"city\" is not available yet in this version: use \"toy\"",
-        )));
+        return Err(spec_err(SpecError::new("world", "\"city\" is not available yet in this version: use \"toy\"")));
     }
     Expansion::new(spec, Arc::new(CityMap::default())).map_err(spec_err)
 }
@@ -99,37 +93,22 @@ pub fn load_spec(path: &Path) -> Result<Expansion, GenError> {
 pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     let start = Instant::now();
     let expansion = load_spec(&options.spec_path)?;
-    let out = options
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
+    let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     std::fs::create_dir_all(&out).map_err(io_err(&out))?;
 
-    let threads = options.threads.filter(|&t| t > 0).unwrap_or_else(|| {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    });
+    let threads = options
+        .threads
+        .filter(|&t| t > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
-        .map_err(|e| GenError::Threads {
-            threads,
-            reason: e.to_string(),
-        })?;
+        .map_err(|e| GenError::Threads { threads, reason: e.to_string() })?;
 
     let map = expansion.map.clone();
-    let renderer = options
-        .images
-        .then(|| Renderer::new(&map, expansion.camera));
-    let job = Job {
-        map,
-        world: Box::new(ToyWorld),
-        renderer,
-        out: out.clone(),
-        png: PngSettings::default(),
-        expansion,
-    };
+    let renderer = options.images.then(|| Renderer::new(&map, expansion.camera));
+    let job =
+        Job { map, world: Box::new(ToyWorld), renderer, out: out.clone(), png: PngSettings::default(), expansion };
     let keys = job.expansion.keys(options.limit);
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
@@ -148,18 +127,13 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     result?;
 
     let spec = &job.expansion.spec;
-    let manifest =
-        Manifest::new(spec, &job.expansion.camera, options.limit, options.images).to_json();
+    let manifest = Manifest::new(spec, &job.expansion.camera, options.limit, options.images).to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
     let scenarios = keys.len() as u64;
     Ok(Summary {
         out,
         scenarios,
-        frame_pairs: if options.images {
-            scenarios * spec.frames as u64
-        } else {
-            0
-        },
+        frame_pairs: if options.images { scenarios * spec.frames as u64 } else { 0 },
         bytes: bytes.load(Ordering::Relaxed) + manifest.len() as u64,
         elapsed: start.elapsed(),
         threads,
@@ -168,11 +142,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 }
 
 /// Plans, simulates and writes one scenario; returns the bytes written.
-fn write_scenario(
-    job: &Job,
-    key: &ScenarioKey,
-    canvas: Option<&mut FrameCanvas>,
-) -> Result<u64, GenError> {
+fn write_scenario(job: &Job, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<u64, GenError> {
     let plan = job.expansion.plan(key).map_err(|reason| GenError::Plan {
         scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
         reason,
@@ -181,10 +151,7 @@ fn write_scenario(
     let camera = &job.expansion.camera;
     let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
     let dir = ScenarioDir::begin(target, plan.frames, canvas.is_some())?;
-    let mut bytes = dir.write_file(
-        "scenario.json",
-        &scenario_json(&plan, camera, job.expansion.spec.leader_gap_px),
-    )?;
+    let mut bytes = dir.write_file("scenario.json", &scenario_json(&plan, camera, job.expansion.spec.leader_gap_px))?;
     let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
     bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, &trajectories, camera))?;
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {

@@ -38,12 +38,7 @@ pub struct Manifest<'a> {
 }
 
 impl<'a> Manifest<'a> {
-    pub fn new(
-        spec: &'a DatasetSpec,
-        camera: &'a Camera,
-        limit: Option<u32>,
-        images: bool,
-    ) -> Manifest<'a> {
+    pub fn new(spec: &'a DatasetSpec, camera: &'a Camera, limit: Option<u32>, images: bool) -> Manifest<'a> {
         let groups = spec
             .groups
             .iter()
@@ -54,12 +49,7 @@ impl<'a> Manifest<'a> {
                 edges: g.edges(),
                 splits: Split::ALL
                     .iter()
-                    .map(|s| {
-                        (
-                            s.name(),
-                            spec.splits.count(*s).min(limit.unwrap_or(u32::MAX)),
-                        )
-                    })
+                    .map(|s| (s.name(), spec.splits.count(*s).min(limit.unwrap_or(u32::MAX))))
                     .collect(),
             })
             .collect();

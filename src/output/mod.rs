@@ -25,10 +25,7 @@ pub struct WriteError {
 }
 
 pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError + '_ {
-    move |source| WriteError {
-        path: path.to_path_buf(),
-        source,
-    }
+    move |source| WriteError { path: path.to_path_buf(), source }
 }
 
 /// Digits in frame file names: at least 4 (`0000.png`), more for long scenarios.
@@ -54,11 +51,7 @@ pub struct ScenarioDir {
 impl ScenarioDir {
     /// Starts writing the scenario that will live at `target`.
     pub fn begin(target: PathBuf, frames: u32, images: bool) -> Result<ScenarioDir, WriteError> {
-        let name = target
-            .file_name()
-            .expect("scenario folder has a name")
-            .to_string_lossy()
-            .into_owned();
+        let name = target.file_name().expect("scenario folder has a name").to_string_lossy().into_owned();
         let temp = target.with_file_name(format!(".partial-{name}"));
         if temp.exists() {
             fs::remove_dir_all(&temp).map_err(io_err(&temp))?;
@@ -70,12 +63,7 @@ impl ScenarioDir {
                 fs::create_dir(&p).map_err(io_err(&p))?;
             }
         }
-        Ok(ScenarioDir {
-            temp,
-            target,
-            frame_digits: frame_digits(frames),
-            committed: false,
-        })
+        Ok(ScenarioDir { temp, target, frame_digits: frame_digits(frames), committed: false })
     }
 
     /// Writes a whole file into the scenario folder.
@@ -94,10 +82,7 @@ impl ScenarioDir {
         let path = self.temp.join(name);
         let file = fs::File::create(&path).map_err(io_err(&path))?;
         let mut w = BufWriter::with_capacity(1 << 16, file);
-        fill(&mut w).map_err(|e| WriteError {
-            path: path.clone(),
-            source: e.into(),
-        })?;
+        fill(&mut w).map_err(|e| WriteError { path: path.clone(), source: e.into() })?;
         w.flush().map_err(io_err(&path))?;
         let len = w.get_ref().metadata().map_err(io_err(&path))?.len();
         Ok(len)

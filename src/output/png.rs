@@ -20,10 +20,7 @@ pub struct PngSettings {
 
 impl Default for PngSettings {
     fn default() -> Self {
-        PngSettings {
-            compression: png::DeflateCompression::FdeflateUltraFast,
-            filter: png::Filter::Adaptive,
-        }
+        PngSettings { compression: png::DeflateCompression::FdeflateUltraFast, filter: png::Filter::Adaptive }
     }
 }
 

@@ -7,9 +7,8 @@ use serde::Serialize;
 use std::io::Write;
 
 /// The column names, in order.
-pub const POSE_COLUMNS: [&str; 13] = [
-    "frame", "t", "car", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed", "in_view",
-];
+pub const POSE_COLUMNS: [&str; 13] =
+    ["frame", "t", "car", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed", "in_view"];
 
 #[derive(Serialize)]
 struct PoseRow {
@@ -40,12 +39,7 @@ fn round(x: f64, decimals: i32) -> f64 {
 }
 
 /// Writes the pose log of `trajectories` for cars with the given ids.
-pub fn write_poses<W: Write>(
-    out: W,
-    car_ids: &[u32],
-    trajectories: &Trajectories,
-    camera: &Camera,
-) -> csv::Result<()> {
+pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> csv::Result<()> {
     let mut writer = csv::WriterBuilder::new().has_headers(true).from_writer(out);
     for (frame, states) in trajectories.states.iter().enumerate() {
         let t = round(frame as f64 * trajectories.frame_interval, 6);

@@ -12,12 +12,7 @@ const PARK: [u8; 3] = [122, 168, 98];
 const PARK_PATH: [u8; 3] = [214, 204, 170];
 const CENTRE_LINE: [u8; 3] = [232, 190, 40];
 const WHITE: [u8; 3] = [240, 240, 240];
-const ROOFS: [[u8; 3]; 4] = [
-    [150, 110, 96],
-    [128, 134, 150],
-    [176, 160, 132],
-    [104, 112, 118],
-];
+const ROOFS: [[u8; 3]; 4] = [[150, 110, 96], [128, 134, 150], [176, 160, 132], [104, 112, 118]];
 
 /// Sidewalk between the kerb and the buildings, metres.
 const SIDEWALK: f64 = 2.0;
@@ -32,9 +27,8 @@ pub fn world_to_canvas(camera: &Camera) -> Transform {
 }
 
 fn paint(rgb: [u8; 3]) -> Paint<'static> {
-    let mut p = Paint::default();
+    let mut p = Paint { anti_alias: true, ..Paint::default() };
     p.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-    p.anti_alias = true;
     p
 }
 
@@ -58,18 +52,8 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
     let far = 1000.0;
 
     // Blocks between the roads: buildings, and a park in the middle.
-    let xs = [
-        -far,
-        layout.north_south_roads[0].1,
-        layout.north_south_roads[1].1,
-        far,
-    ];
-    let ys = [
-        -far,
-        layout.east_west_roads[0].1,
-        layout.east_west_roads[1].1,
-        far,
-    ];
+    let xs = [-far, layout.north_south_roads[0].1, layout.north_south_roads[1].1, far];
+    let ys = [-far, layout.east_west_roads[0].1, layout.east_west_roads[1].1, far];
     for i in 0..3 {
         for j in 0..3 {
             let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + SIDEWALK }).max(view_lo.x - 5.0);
@@ -103,29 +87,13 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
 
     // Asphalt, including the turning circles at the far ends.
     for &(_, y) in &layout.east_west_roads {
-        rect(
-            &mut pixmap,
-            t,
-            -layout.extent_x,
-            y - hw,
-            layout.extent_x,
-            y + hw,
-            ASPHALT,
-        );
+        rect(&mut pixmap, t, -layout.extent_x, y - hw, layout.extent_x, y + hw, ASPHALT);
         for x in [-layout.extent_x, layout.extent_x] {
             circle(&mut pixmap, t, x, y, hw, ASPHALT);
         }
     }
     for &(_, x) in &layout.north_south_roads {
-        rect(
-            &mut pixmap,
-            t,
-            x - hw,
-            -layout.extent_y,
-            x + hw,
-            layout.extent_y,
-            ASPHALT,
-        );
+        rect(&mut pixmap, t, x - hw, -layout.extent_y, x + hw, layout.extent_y, ASPHALT);
         for y in [-layout.extent_y, layout.extent_y] {
             circle(&mut pixmap, t, x, y, hw, ASPHALT);
         }
@@ -142,56 +110,20 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
         // Divider between this lane and its inner neighbour: dashed white.
         let mut s = 1.0;
         while s + 3.0 <= len - 1.0 {
-            quad_along(
-                &mut pixmap,
-                t,
-                curve,
-                s,
-                s + 3.0,
-                0.5 * lw - 0.07,
-                0.5 * lw + 0.07,
-                WHITE,
-            );
+            quad_along(&mut pixmap, t, curve, s, s + 3.0, 0.5 * lw - 0.07, 0.5 * lw + 0.07, WHITE);
             s += 6.0;
         }
         // Half of the double yellow centre line, on this direction's side.
-        quad_along(
-            &mut pixmap,
-            t,
-            curve,
-            0.0,
-            len,
-            1.5 * lw - 0.25,
-            1.5 * lw - 0.1,
-            CENTRE_LINE,
-        );
+        quad_along(&mut pixmap, t, curve, 0.0, len, 1.5 * lw - 0.25, 1.5 * lw - 0.1, CENTRE_LINE);
         if let crate::map::LaneEnd::Intersection { .. } = lane.end {
             // Crosswalk across the whole road just before the box, stop line behind it.
             let mut k = -hw + 0.25;
             while k + 0.5 <= hw {
                 let lateral = k + 1.5 * lw;
-                quad_along(
-                    &mut pixmap,
-                    t,
-                    curve,
-                    len - 2.8,
-                    len - 0.3,
-                    lateral,
-                    lateral + 0.5,
-                    WHITE,
-                );
+                quad_along(&mut pixmap, t, curve, len - 2.8, len - 0.3, lateral, lateral + 0.5, WHITE);
                 k += 1.0;
             }
-            quad_along(
-                &mut pixmap,
-                t,
-                curve,
-                len - 3.6,
-                len - 3.2,
-                -0.5 * lw,
-                1.5 * lw - 0.3,
-                WHITE,
-            );
+            quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, 1.5 * lw - 0.3, WHITE);
         }
     }
     pixmap
@@ -216,12 +148,7 @@ fn quad_along(
     lat1: f64,
     rgb: [u8; 3],
 ) {
-    let pts = [
-        curve.position(s0, lat0),
-        curve.position(s1, lat0),
-        curve.position(s1, lat1),
-        curve.position(s0, lat1),
-    ];
+    let pts = [curve.position(s0, lat0), curve.position(s1, lat0), curve.position(s1, lat1), curve.position(s0, lat1)];
     let mut pb = PathBuilder::new();
     pb.move_to(pts[0].x as f32, pts[0].y as f32);
     for p in &pts[1..] {

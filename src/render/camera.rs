@@ -46,16 +46,12 @@ impl Camera {
 
     /// A pixel position lies on the image (its nearest pixel exists).
     pub fn contains_pixel(&self, px: DVec2) -> bool {
-        px.x >= -0.5
-            && px.y >= -0.5
-            && px.x < self.width as f64 - 0.5
-            && px.y < self.height as f64 - 0.5
+        px.x >= -0.5 && px.y >= -0.5 && px.x < self.width as f64 - 0.5 && px.y < self.height as f64 - 0.5
     }
 
     /// The ground rectangle seen by the camera: (min corner, max corner), metres.
     pub fn ground_view(&self) -> (DVec2, DVec2) {
-        let half =
-            DVec2::new(self.width as f64, self.height as f64) / (2.0 * self.pixels_per_metre);
+        let half = DVec2::new(self.width as f64, self.height as f64) / (2.0 * self.pixels_per_metre);
         let c = DVec2::new(self.centre_x, self.centre_y);
         (c - half, c + half)
     }

@@ -64,27 +64,16 @@ impl Renderer {
 
     /// Draws `cars` (later ones on top) into `canvas.rgb` and `canvas.mask`.
     pub fn render(&self, canvas: &mut FrameCanvas, cars: &[CarSprite]) {
-        canvas
-            .rgba
-            .data_mut()
-            .copy_from_slice(self.background.data());
+        canvas.rgba.data_mut().copy_from_slice(self.background.data());
         canvas.mask_rgba.data_mut().fill(0);
         let world = background::world_to_canvas(&self.camera);
         for car in cars {
             let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
             // Car frame: x forward, y left, origin at the car's centre.
-            let t = world.pre_concat(Transform::from_row(
-                c,
-                s,
-                -s,
-                c,
-                car.position.x as f32,
-                car.position.y as f32,
-            ));
+            let t = world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32));
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
             let body = Rect::from_ltrb(-hl, -hw, hl, hw).expect("car size was validated");
-            let mut paint = Paint::default();
-            paint.anti_alias = true;
+            let mut paint = Paint { anti_alias: true, ..Paint::default() };
             paint.set_color_rgba8(car.colour[0], car.colour[1], car.colour[2], 255);
             canvas.rgba.fill_rect(body, &paint, t, None);
             // Windscreen towards the front shows the heading.
@@ -92,33 +81,20 @@ impl Renderer {
             if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
                 canvas.rgba.fill_rect(glass, &paint, t, None);
             }
-            let mut mask_paint = Paint::default();
-            mask_paint.anti_alias = false;
+            let mut mask_paint = Paint { anti_alias: false, ..Paint::default() };
             mask_paint.set_color_rgba8(car.mask_id, 0, 0, 255);
             let path = PathBuilder::from_rect(body);
-            canvas
-                .mask_rgba
-                .fill_path(&path, &mask_paint, FillRule::Winding, t, None);
+            canvas.mask_rgba.fill_path(&path, &mask_paint, FillRule::Winding, t, None);
         }
-        for (dst, src) in canvas
-            .rgb
-            .chunks_exact_mut(3)
-            .zip(canvas.rgba.data().chunks_exact(4))
-        {
+        for (dst, src) in canvas.rgb.chunks_exact_mut(3).zip(canvas.rgba.data().chunks_exact(4)) {
             dst.copy_from_slice(&src[..3]);
         }
-        for (dst, src) in canvas
-            .mask
-            .iter_mut()
-            .zip(canvas.mask_rgba.data().chunks_exact(4))
-        {
+        for (dst, src) in canvas.mask.iter_mut().zip(canvas.mask_rgba.data().chunks_exact(4)) {
             *dst = src[0];
         }
     }
 }
 
 fn rgba_to_rgb(rgba: &[u8]) -> Vec<u8> {
-    rgba.chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect()
+    rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect()
 }

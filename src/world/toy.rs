@@ -21,21 +21,11 @@ impl World for ToyWorld {
                     .map(|car| {
                         let s = car.spawn_distance + step * frame as f64;
                         let (position, yaw) = car.route.pose_at(s, 0.0);
-                        CarState {
-                            position,
-                            z: 0.0,
-                            roll: 0.0,
-                            pitch: 0.0,
-                            yaw,
-                            speed,
-                        }
+                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
                     })
                     .collect()
             })
             .collect();
-        Trajectories {
-            frame_interval: plan.frame_interval,
-            states,
-        }
+        Trajectories { frame_interval: plan.frame_interval, states }
     }
 }

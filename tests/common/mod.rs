@@ -23,21 +23,12 @@ pub fn fresh_dir(name: &str) -> PathBuf {
 }
 
 pub fn run(args: &[&str]) -> Output {
-    Command::new(bin())
-        .args(args)
-        .output()
-        .expect("run causalcity")
+    Command::new(bin()).args(args).output().expect("run causalcity")
 }
 
 /// Runs `causalcity gen` and asserts it succeeded.
 pub fn gen_ok(spec: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "gen",
-        "--spec",
-        spec.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
+    let mut args = vec!["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
     let output = run(&args);
     assert!(
@@ -51,10 +42,8 @@ pub fn gen_ok(spec: &Path, out: &Path, extra: &[&str]) -> Output {
 
 /// A toy spec with the given groups `(cars, proportion)` and splits.
 pub fn toy_spec(name: &str, groups: &[(u32, f64)], splits: (u32, u32, u32), frames: u32) -> String {
-    let groups: Vec<String> = groups
-        .iter()
-        .map(|(c, p)| format!(r#"{{"cars": {c}, "edge_proportion": {p}}}"#))
-        .collect();
+    let groups: Vec<String> =
+        groups.iter().map(|(c, p)| format!(r#"{{"cars": {c}, "edge_proportion": {p}}}"#)).collect();
     format!(
         r#"{{"name": "{name}", "world": "toy", "seed": 11, "frames": {frames},
             "groups": [{}], "splits": {{"train": {}, "val": {}, "test": {}}}}}"#,
@@ -104,10 +93,7 @@ pub fn poses_by_car(poses: &[Pose]) -> BTreeMap<u32, Vec<Pose>> {
 }
 
 pub fn read_json(path: &Path) -> Value {
-    serde_json::from_slice(
-        &std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
-    )
-    .unwrap()
+    serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 /// Every scenario folder of a dataset: `root/<group>/<split>/<NNNNN>`.
@@ -127,10 +113,7 @@ pub fn scenario_dirs(root: &Path) -> Vec<PathBuf> {
 }
 
 pub fn sorted_entries(dir: &Path) -> Vec<PathBuf> {
-    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
     entries.sort();
     entries
 }
@@ -145,11 +128,7 @@ pub fn hash_tree(root: &Path) -> BTreeMap<String, String> {
                 stack.push(path);
             } else {
                 let digest = Sha256::digest(std::fs::read(&path).unwrap());
-                let rel = path
-                    .strip_prefix(root)
-                    .unwrap()
-                    .to_string_lossy()
-                    .into_owned();
+                let rel = path.strip_prefix(root).unwrap().to_string_lossy().into_owned();
                 let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
                 hashes.insert(rel, hex);
             }
@@ -168,10 +147,7 @@ pub fn shared_image_dataset() -> PathBuf {
         return p.clone();
     }
     let dir = fresh_dir(&format!("shared-{}", std::process::id()));
-    let spec = write_spec(
-        &dir,
-        &toy_spec("shared", &[(4, 0.5), (12, 0.5)], (2, 1, 1), 150),
-    );
+    let spec = write_spec(&dir, &toy_spec("shared", &[(4, 0.5), (12, 0.5)], (2, 1, 1), 150));
     let out = dir.join("out");
     gen_ok(&spec, &out, &["--quiet"]);
     *guard = Some(out.clone());

@@ -1,0 +1,34 @@
+# causalcity: the two set-up commands are `make dataset` and `make test`.
+CARGO ?= cargo
+BIN := target/release/causalcity
+
+.PHONY: all build dataset test bench lint fmt clean
+
+all: build
+
+build:
+	$(CARGO) build --release --locked
+
+## Generate the small built-in toy dataset into data/ci-toy.
+dataset: build
+	$(BIN) gen --spec configs/ci-toy.json --out data/ci-toy
+	@echo "dataset written to data/ci-toy (see README: Output layout)"
+
+## Run every test: unit, integration (real files, real decoding) and doc tests.
+test:
+	$(CARGO) test --locked
+
+## Throughput, memory and size figures (prints, asserts nothing).
+bench:
+	$(CARGO) bench --locked --bench throughput
+
+lint:
+	$(CARGO) fmt --all -- --check
+	$(CARGO) clippy --locked --all-targets -- -D warnings
+
+fmt:
+	$(CARGO) fmt --all
+
+clean:
+	$(CARGO) clean
+	rm -rf data

@@ -1,0 +1,138 @@
+//! The built binary on a tiny spec: the whole output layout, checked against
+//! the documents in data-schema/.
+
+mod common;
+use common::*;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// Resolves `$ref`s between the files of data-schema/.
+struct SchemaFolder(PathBuf);
+
+impl jsonschema::Retrieve for SchemaFolder {
+    fn retrieve(&self, uri: &jsonschema::Uri<String>) -> Result<Value, Box<dyn std::error::Error + Send + Sync>> {
+        let name = uri.as_str().rsplit('/').next().unwrap_or_default();
+        let text = std::fs::read_to_string(self.0.join(name))?;
+        Ok(serde_json::from_str(&text)?)
+    }
+}
+
+fn schema_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data-schema")
+}
+
+fn validator(name: &str) -> jsonschema::Validator {
+    let schema = read_json(&schema_dir().join(name));
+    jsonschema::options().with_retriever(SchemaFolder(schema_dir())).build(&schema).unwrap()
+}
+
+fn assert_valid(v: &jsonschema::Validator, instance: &Value, what: &Path) {
+    let errors: Vec<String> = v.iter_errors(instance).map(|e| format!("{} at {}", e, e.instance_path())).collect();
+    assert!(errors.is_empty(), "{} does not match its schema:\n{}", what.display(), errors.join("\n"));
+}
+
+#[test]
+fn the_layout_matches_data_schema() {
+    let dir = fresh_dir("e2e-layout");
+    let spec = write_spec(&dir, &toy_spec("e2e", &[(4, 0.5), (8, 0.2)], (2, 1, 1), 24));
+    let out = dir.join("out");
+    let output = gen_ok(&spec, &out, &[]);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("wrote 8 scenarios (192 frame pairs"), "summary: {stdout}");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("progress: 8/8 scenarios"), "plain progress lines when not a terminal: {stderr}");
+
+    // Top level: the manifest and one folder per group, nothing else.
+    let top: Vec<String> =
+        sorted_entries(&out).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+    assert_eq!(top, ["cars04_edges50", "cars08_edges20", "manifest.json"]);
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_valid(&validator("manifest.schema.json"), &manifest, &out.join("manifest.json"));
+    assert_valid(&validator("spec.schema.json"), &manifest["spec"], Path::new("manifest.spec"));
+    assert_valid(&validator("spec.schema.json"), &read_json(&spec), &spec);
+    let digits = manifest["frame_file_digits"].as_u64().unwrap() as usize;
+
+    let scenario_schema = validator("scenario.schema.json");
+    let table = read_json(&schema_dir().join("poses.schema.json"));
+    let columns: Vec<&str> = table["fields"].as_array().unwrap().iter().map(|f| f["name"].as_str().unwrap()).collect();
+    let dirs = scenario_dirs(&out);
+    assert_eq!(dirs.len(), 8);
+    for d in &dirs {
+        let names: Vec<String> =
+            sorted_entries(d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+        assert_eq!(names, ["mask", "poses.csv", "rgb", "scenario.json"], "{}", d.display());
+        let scenario = read_json(&d.join("scenario.json"));
+        assert_valid(&scenario_schema, &scenario, &d.join("scenario.json"));
+        let frames = scenario["frames"].as_u64().unwrap() as usize;
+        let cars = scenario["cars"].as_array().unwrap().len();
+
+        let mut reader = csv::Reader::from_path(d.join("poses.csv")).unwrap();
+        let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(header, columns, "poses.csv columns");
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+        assert_eq!(rows.len(), frames * cars);
+        for (i, row) in rows.iter().enumerate() {
+            let (frame, car): (usize, usize) = (row[0].parse().unwrap(), row[2].parse().unwrap());
+            assert_eq!((frame, car), (i / cars, i % cars), "rows sorted by frame then car");
+            for (value, field) in row.iter().zip(table["fields"].as_array().unwrap()) {
+                match field["type"].as_str().unwrap() {
+                    "integer" => assert!(value.parse::<i64>().is_ok(), "{value} is not an integer"),
+                    _ => assert!(value.parse::<f64>().map(f64::is_finite).unwrap_or(false), "{value} is not a number"),
+                }
+            }
+            assert!(&row[12] == "0" || &row[12] == "1");
+        }
+        for kind in ["rgb", "mask"] {
+            let files: Vec<String> = sorted_entries(&d.join(kind))
+                .iter()
+                .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+                .collect();
+            let expected: Vec<String> = (0..frames).map(|f| format!("{f:0digits$}.png")).collect();
+            assert_eq!(files, expected, "{}/{kind}", d.display());
+        }
+    }
+    // No temporary folders are left behind.
+    for group in ["cars04_edges50", "cars08_edges20"] {
+        for split in ["train", "val", "test"] {
+            for e in sorted_entries(&out.join(group).join(split)) {
+                assert!(!e.file_name().unwrap().to_string_lossy().starts_with('.'), "leftover {}", e.display());
+            }
+        }
+    }
+}
+
+#[test]
+fn no_images_writes_poses_and_ground_truth_only() {
+    let dir = fresh_dir("e2e-no-images");
+    let spec = write_spec(&dir, &toy_spec("noimg", &[(4, 0.5)], (1, 1, 1), 10));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images", "--quiet"]);
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["images"], false);
+    for d in scenario_dirs(&out) {
+        let names: Vec<String> =
+            sorted_entries(&d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+        assert_eq!(names, ["poses.csv", "scenario.json"]);
+    }
+}
+
+#[test]
+fn shipped_configs_are_valid_specs() {
+    let v = validator("spec.schema.json");
+    for entry in sorted_entries(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs")) {
+        if entry.extension().is_some_and(|e| e == "json") {
+            assert_valid(&v, &read_json(&entry), &entry);
+        }
+    }
+    // The shipped toy spec carries the paper's design.
+    let toy = read_json(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/toy.json"));
+    assert_eq!(toy["splits"], serde_json::json!({"train": 4000, "val": 500, "test": 500}));
+    assert_eq!(toy["frames"], 150);
+    let groups: Vec<(u64, f64)> = toy["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| (g["cars"].as_u64().unwrap(), g["edge_proportion"].as_f64().unwrap()))
+        .collect();
+    assert_eq!(groups, [(4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)]);
+}
