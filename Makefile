@@ -1,6 +1,7 @@
 # causalcity: the two set-up commands are `make dataset` and `make test`.
 CARGO ?= cargo
-BIN := target/release/causalcity
+# Through cargo so that CARGO_TARGET_DIR and friends are respected.
+RUN := $(CARGO) run --release --locked --quiet --
 
 .PHONY: all build dataset test bench lint fmt clean
 
@@ -11,7 +12,7 @@ build:
 
 ## Generate the small built-in toy dataset into data/ci-toy.
 dataset: build
-	$(BIN) gen --spec configs/ci-toy.json --out data/ci-toy
+	$(RUN) gen --spec configs/ci-toy.json --out data/ci-toy
 	@echo "dataset written to data/ci-toy (see README: Output layout)"
 
 ## Run every test: unit, integration (real files, real decoding) and doc tests.
