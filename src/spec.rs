@@ -1,6 +1,8 @@
 //! The dataset spec: what a user asks for, read from JSON. Every field is
 //! checked here with a message that names it, the value and what is allowed.
 
+use crate::world::driver::DriverParams;
+use crate::world::lights::{ScheduleStep, Signal};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
@@ -11,7 +13,7 @@ use std::path::Path;
 pub enum WorldKind {
     /// No agency: constant speed along the route, no lights, no collisions.
     Toy,
-    /// Agency, lights and confounders (not implemented yet).
+    /// Agency: car-following, lights, merges, collisions, confounders.
     City,
 }
 
@@ -116,9 +118,9 @@ pub struct DatasetSpec {
     /// Frames per scenario.
     #[serde(default = "default_frames")]
     pub frames: u32,
-    /// Seconds between frames.
-    #[serde(default = "default_frame_interval")]
-    pub frame_interval: f64,
+    /// Seconds between frames: 0.1 for the toy world, 0.2 for the city when absent.
+    #[serde(default)]
+    pub frame_interval: Option<f64>,
     #[serde(default)]
     pub image: ImageSize,
     pub groups: Vec<GroupSpec>,
@@ -137,13 +139,236 @@ pub struct DatasetSpec {
     pub car_length_m: f64,
     #[serde(default = "default_car_width")]
     pub car_width_m: f64,
+    /// City world only: agency, lights and confounders.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub city: Option<CitySpec>,
+}
+
+/// A value fixed by the spec or drawn per scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Distribution {
+    Fixed(f64),
+    /// `{"uniform": [low, high]}`
+    Uniform {
+        uniform: [f64; 2],
+    },
+    /// `{"choice": [a, b, ...]}`, each equally likely.
+    Choice {
+        choice: Vec<f64>,
+    },
+}
+
+impl Distribution {
+    fn check(&self, field: &str, lo: f64, hi: f64) -> Result<(), SpecError> {
+        let values: Vec<f64> = match self {
+            Distribution::Fixed(v) => vec![*v],
+            Distribution::Uniform { uniform } => {
+                if uniform[0] > uniform[1] {
+                    return Err(SpecError::new(field, format!("uniform range {uniform:?} has low above high")));
+                }
+                uniform.to_vec()
+            }
+            Distribution::Choice { choice } => {
+                if choice.is_empty() {
+                    return Err(SpecError::new(field, "choice list is empty"));
+                }
+                choice.clone()
+            }
+        };
+        for v in values {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(SpecError::new(field, format!("{v} is not allowed: use {lo} to {hi}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Draws a value.
+    pub fn sample<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        use rand::RngExt;
+        match self {
+            Distribution::Fixed(v) => *v,
+            Distribution::Uniform { uniform } => {
+                if uniform[0] == uniform[1] {
+                    uniform[0]
+                } else {
+                    rng.random_range(uniform[0]..uniform[1])
+                }
+            }
+            Distribution::Choice { choice } => choice[rng.random_range(0..choice.len())],
+        }
+    }
+}
+
+/// Confounders per scenario: each a fixed value or a distribution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConfounderSpec {
+    /// Rain intensity 0..1.
+    pub rain: Distribution,
+    /// Fog density 0..1.
+    pub fog: Distribution,
+    /// Snowfall 0..1.
+    pub snow: Distribution,
+    /// Water on the road 0..1.
+    pub wetness: Distribution,
+    /// Time of day, hours 0..24.
+    pub hour: Distribution,
+}
+
+impl Default for ConfounderSpec {
+    fn default() -> Self {
+        ConfounderSpec {
+            rain: Distribution::Fixed(0.0),
+            fog: Distribution::Fixed(0.0),
+            snow: Distribution::Fixed(0.0),
+            wetness: Distribution::Fixed(0.0),
+            hour: Distribution::Fixed(12.0),
+        }
+    }
+}
+
+/// Replaces the schedule of one light.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightOverride {
+    /// Intersection name, e.g. `AC`.
+    pub intersection: String,
+    /// Side the controlled traffic arrives from: `N`, `E`, `S`, `W`.
+    pub approach: char,
+    pub signal: Signal,
+    /// Seconds added to the scenario clock.
+    #[serde(default)]
+    pub offset: f64,
+    /// Repeating (colour, seconds) steps.
+    pub schedule: Vec<ScheduleStep>,
+}
+
+/// Traffic light control: the original cycle scaled, offsets per
+/// intersection (high level) and single-light schedules (low level).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LightsSpec {
+    /// Multiplies every duration of the original 60 s cycle.
+    pub cycle_scale: f64,
+    /// Seconds added to the clock of each intersection, in the order AC, AD, BC, BD.
+    pub offsets: Vec<f64>,
+    pub overrides: Vec<LightOverride>,
+}
+
+impl Default for LightsSpec {
+    fn default() -> Self {
+        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new() }
+    }
+}
+
+/// City-world settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CitySpec {
+    /// Mean desired speed, m/s.
+    pub desired_speed: f64,
+    /// Each leg's desired speed is `desired_speed x (1 +- spread)`, uniform.
+    pub desired_speed_spread: f64,
+    /// Chance that a car is forced through red lights.
+    pub red_light_runner_probability: f64,
+    /// Base driver parameters, before confounders.
+    pub driver: DriverParams,
+    pub lights: LightsSpec,
+    pub confounders: ConfounderSpec,
+}
+
+impl Default for CitySpec {
+    fn default() -> Self {
+        CitySpec {
+            desired_speed: 1.6,
+            desired_speed_spread: 0.25,
+            red_light_runner_probability: 0.02,
+            driver: DriverParams::default(),
+            lights: LightsSpec::default(),
+            confounders: ConfounderSpec::default(),
+        }
+    }
+}
+
+impl CitySpec {
+    fn validate(&self) -> Result<(), SpecError> {
+        positive("city.desired_speed", self.desired_speed, 20.0, "m/s")?;
+        unit_interval("city.desired_speed_spread", self.desired_speed_spread, 0.9)?;
+        unit_interval("city.red_light_runner_probability", self.red_light_runner_probability, 1.0)?;
+        let d = &self.driver;
+        positive("city.driver.time_headway", d.time_headway, 10.0, "seconds")?;
+        positive("city.driver.min_gap", d.min_gap, 20.0, "metres")?;
+        positive("city.driver.max_acceleration", d.max_acceleration, 10.0, "m/s^2")?;
+        positive("city.driver.comfortable_deceleration", d.comfortable_deceleration, 10.0, "m/s^2")?;
+        positive("city.driver.max_deceleration", d.max_deceleration, 15.0, "m/s^2")?;
+        if d.max_deceleration < d.comfortable_deceleration {
+            return Err(SpecError::new(
+                "city.driver.max_deceleration",
+                format!(
+                    "{} is below comfortable_deceleration {}: the hard limit must be the larger",
+                    d.max_deceleration, d.comfortable_deceleration
+                ),
+            ));
+        }
+        positive("city.driver.reaction_time", d.reaction_time, 3.0, "seconds")?;
+        unit_interval("city.driver.perception_noise", d.perception_noise, 1.0)?;
+        unit_interval("city.driver.lateral_wander", d.lateral_wander, 0.5)?;
+        positive("city.driver.curve_acceleration", d.curve_acceleration, 10.0, "m/s^2")?;
+        positive("city.lights.cycle_scale", self.lights.cycle_scale, 10.0, "factor")?;
+        if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !o.is_finite()) {
+            return Err(SpecError::new(
+                "city.lights.offsets",
+                format!(
+                    "{:?} is not allowed: give 4 finite offsets in seconds, for AC, AD, BC, BD",
+                    self.lights.offsets
+                ),
+            ));
+        }
+        for (i, o) in self.lights.overrides.iter().enumerate() {
+            let field = format!("city.lights.overrides[{i}]");
+            if !["AC", "AD", "BC", "BD"].contains(&o.intersection.as_str()) {
+                return Err(SpecError::new(
+                    format!("{field}.intersection"),
+                    format!("{:?} is not an intersection: use AC, AD, BC or BD", o.intersection),
+                ));
+            }
+            if !['N', 'E', 'S', 'W'].contains(&o.approach) {
+                return Err(SpecError::new(
+                    format!("{field}.approach"),
+                    format!("{:?} is not allowed: use N, E, S or W", o.approach),
+                ));
+            }
+            if o.schedule.is_empty() || o.schedule.iter().any(|st| !(st.duration.is_finite() && st.duration > 0.0)) {
+                return Err(SpecError::new(
+                    format!("{field}.schedule"),
+                    "give at least one {\"colour\": \"green\"|\"yellow\"|\"red\", \"duration\": seconds above 0}",
+                ));
+            }
+            if !o.offset.is_finite() {
+                return Err(SpecError::new(format!("{field}.offset"), "must be a finite number of seconds"));
+            }
+        }
+        let c = &self.confounders;
+        c.rain.check("city.confounders.rain", 0.0, 1.0)?;
+        c.fog.check("city.confounders.fog", 0.0, 1.0)?;
+        c.snow.check("city.confounders.snow", 0.0, 1.0)?;
+        c.wetness.check("city.confounders.wetness", 0.0, 1.0)?;
+        c.hour.check("city.confounders.hour", 0.0, 24.0)?;
+        Ok(())
+    }
+}
+
+fn unit_interval(field: &str, value: f64, hi: f64) -> Result<(), SpecError> {
+    if !(value.is_finite() && (0.0..=hi).contains(&value)) {
+        return Err(SpecError::new(field, format!("{value} is not allowed: use 0 to {hi}")));
+    }
+    Ok(())
 }
 
 fn default_frames() -> u32 {
     150
-}
-fn default_frame_interval() -> f64 {
-    0.1
 }
 fn default_actions() -> u32 {
     5
@@ -205,7 +430,7 @@ impl DatasetSpec {
             SpecError::new(field, e.into_inner().to_string())
         })?;
         spec.validate()?;
-        Ok(spec)
+        Ok(spec.resolved())
     }
 
     /// Reads, parses and checks a spec file.
@@ -231,10 +456,11 @@ impl DatasetSpec {
             ));
         }
         range("frames", self.frames, 1, MAX_FRAMES)?;
-        if !(self.frame_interval.is_finite() && self.frame_interval > 0.0 && self.frame_interval <= 10.0) {
+        let interval = self.frame_interval();
+        if !(interval.is_finite() && interval > 0.0 && interval <= 10.0) {
             return Err(SpecError::new(
                 "frame_interval",
-                format!("{} is not allowed: seconds between frames, above 0 and at most 10", self.frame_interval),
+                format!("{interval} is not allowed: seconds between frames, above 0 and at most 10"),
             ));
         }
         range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
@@ -288,7 +514,37 @@ impl DatasetSpec {
         positive("car_length_m", self.car_length_m, 20.0, "metres")?;
         positive("car_width_m", self.car_width_m, 3.0, "metres")?;
         positive("leader_gap_px", self.leader_gap_px, 2000.0, "pixels")?;
+        match (&self.city, self.world) {
+            (Some(city), WorldKind::City) => city.validate()?,
+            (Some(_), WorldKind::Toy) => {
+                return Err(SpecError::new("city", "applies to \"world\": \"city\" only: remove it or change world"))
+            }
+            (None, _) => {}
+        }
         Ok(())
+    }
+
+    /// Seconds between frames, with the world's default filled in.
+    pub fn frame_interval(&self) -> f64 {
+        self.frame_interval.unwrap_or(match self.world {
+            WorldKind::Toy => 0.1,
+            WorldKind::City => 0.2,
+        })
+    }
+
+    /// The city settings (defaults when the spec has none).
+    pub fn city_settings(&self) -> CitySpec {
+        self.city.clone().unwrap_or_default()
+    }
+
+    /// The spec with every default written out, as recorded in manifests.
+    pub fn resolved(&self) -> DatasetSpec {
+        let mut spec = self.clone();
+        spec.frame_interval = Some(self.frame_interval());
+        if self.world == WorldKind::City {
+            spec.city = Some(self.city_settings());
+        }
+        spec
     }
 
     /// Scenarios in the whole dataset, or with at most `limit` per split.

@@ -39,6 +39,9 @@ pub struct MapLayout {
     pub extent_y: f64,
     /// Distance along the lane over which a merge moves to the next lane.
     pub lane_change_length: f64,
+    /// Stop lines stand this far before the intersection box (the crosswalk
+    /// lies between), metres.
+    pub stop_line_setback: f64,
 }
 
 impl Default for MapLayout {
@@ -50,6 +53,7 @@ impl Default for MapLayout {
             extent_x: 52.0,
             extent_y: 37.0,
             lane_change_length: 8.0,
+            stop_line_setback: 3.6,
         }
     }
 }
@@ -136,6 +140,9 @@ pub struct CityMap {
     lane_by_name: HashMap<String, LaneId>,
     /// (lane, turn) -> connector leaving that lane.
     exits: HashMap<(LaneId, Turn), ConnectorId>,
+    /// For each connector, the connectors of the same intersection whose
+    /// paths cross or meet it (cars on them could collide).
+    conflicts: Vec<Vec<ConnectorId>>,
 }
 
 impl Default for CityMap {
@@ -274,7 +281,8 @@ impl CityMap {
 
         let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
         let exits = connectors.iter().enumerate().map(|(i, c)| ((c.from, c.turn), i)).collect();
-        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits }
+        let conflicts = find_conflicts(&connectors);
+        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts }
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.
@@ -294,6 +302,26 @@ impl CityMap {
         self.exits.get(&(lane, turn)).copied()
     }
 
+    /// Every connector leaving the end of `lane`.
+    pub fn exits_from(&self, lane: LaneId) -> impl Iterator<Item = ConnectorId> + '_ {
+        [Turn::Left, Turn::Straight, Turn::Right, Turn::UTurn].into_iter().filter_map(move |t| self.exit(lane, t))
+    }
+
+    /// Connectors whose paths cross or merge with `connector`'s.
+    pub fn conflicts(&self, connector: ConnectorId) -> &[ConnectorId] {
+        &self.conflicts[connector]
+    }
+
+    /// Lanes and connectors share one index space ("tracks"): lanes first.
+    pub fn track_count(&self) -> usize {
+        self.lanes.len() + self.connectors.len()
+    }
+
+    /// Track index of a connector.
+    pub fn connector_track(&self, connector: ConnectorId) -> usize {
+        self.lanes.len() + connector
+    }
+
     /// The parallel lane of the same direction on the left (`to_left`) or right.
     pub fn adjacent_lane(&self, lane: LaneId, to_left: bool) -> Option<LaneId> {
         let l = &self.lanes[lane];
@@ -311,4 +339,30 @@ impl CityMap {
     pub fn allowed_turns(&self, lane: LaneId) -> Vec<Turn> {
         [Turn::Left, Turn::Straight, Turn::Right].into_iter().filter(|&t| self.exit(lane, t).is_some()).collect()
     }
+}
+
+/// Pairs of connectors in one intersection that come from different lanes and
+/// either end in the same lane or pass within 2 m of each other.
+fn find_conflicts(connectors: &[Connector]) -> Vec<Vec<ConnectorId>> {
+    let samples: Vec<Vec<DVec2>> = connectors
+        .iter()
+        .map(|c| {
+            let n = (c.curve.length() / 0.25).ceil() as usize;
+            (0..=n).map(|i| c.curve.lane_center_at(c.curve.length() * i as f64 / n as f64)).collect()
+        })
+        .collect();
+    let mut conflicts = vec![Vec::new(); connectors.len()];
+    for (i, a) in connectors.iter().enumerate() {
+        for (j, b) in connectors.iter().enumerate() {
+            if i == j || a.intersection.is_none() || a.intersection != b.intersection || a.from == b.from {
+                continue;
+            }
+            let close =
+                a.to == b.to || samples[i].iter().any(|p| samples[j].iter().any(|q| p.distance_squared(*q) < 4.0));
+            if close {
+                conflicts[i].push(j);
+            }
+        }
+    }
+    conflicts
 }

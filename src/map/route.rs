@@ -78,11 +78,16 @@ impl fmt::Display for RouteError {
 impl std::error::Error for RouteError {}
 
 /// What a stretch of a route runs along.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LegKind {
     Lane(LaneId),
     Connector(ConnectorId),
-    LaneChange { from: LaneId, to: LaneId },
+    /// A merge that starts `at` metres along `from` and ends on `to`.
+    LaneChange {
+        from: LaneId,
+        to: LaneId,
+        at: f64,
+    },
 }
 
 /// One stretch of a route: part of a curve.
@@ -95,6 +100,9 @@ pub struct RouteLeg {
     pub length: f64,
     /// Arc length along the route where this leg begins.
     pub route_start: f64,
+    /// Index in the drive queue of the action this leg carries out (merges
+    /// and turns at intersections); `None` for lanes, loops and default moves.
+    pub action: Option<usize>,
 }
 
 /// A car's path from the start of its spawn lane, parameterised by arc length.
@@ -158,7 +166,7 @@ impl Route {
                             lane_len - change_run
                         )));
                     }
-                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, at - lane_entry);
+                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, at - lane_entry, None);
                     let heading = curve.heading_at(at);
                     let shift = if to_left { 1.0 } else { -1.0 } * map.layout.lane_width;
                     let change = Curve::lane_change(
@@ -168,14 +176,14 @@ impl Route {
                         shift,
                     );
                     let len = change.length();
-                    route.push(LegKind::LaneChange { from: lane, to: target }, change, 0.0, len);
+                    route.push(LegKind::LaneChange { from: lane, to: target, at }, change, 0.0, len, Some(next));
                     lane = target;
                     lane_entry = at + change_run;
                     earliest = lane_entry;
                     next += 1;
                 }
                 _ => {
-                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, lane_len - lane_entry);
+                    route.push(LegKind::Lane(lane), curve.clone(), lane_entry, lane_len - lane_entry, None);
                     let (connector, consumed) = match map.lanes[lane].end {
                         LaneEnd::Loop(c) => (c, false),
                         LaneEnd::Intersection { .. } => {
@@ -197,7 +205,8 @@ impl Route {
                         }
                     };
                     let c = &map.connectors[connector];
-                    route.push(LegKind::Connector(connector), c.curve.clone(), 0.0, c.curve.length());
+                    let action = consumed.then_some(next);
+                    route.push(LegKind::Connector(connector), c.curve.clone(), 0.0, c.curve.length(), action);
                     lane = c.to;
                     lane_entry = 0.0;
                     earliest = 0.0;
@@ -209,18 +218,22 @@ impl Route {
         }
     }
 
-    fn push(&mut self, kind: LegKind, curve: Curve, curve_start: f64, length: f64) {
+    fn push(&mut self, kind: LegKind, curve: Curve, curve_start: f64, length: f64, action: Option<usize>) {
         if length <= 0.0 {
             return;
         }
-        self.legs.push(RouteLeg { kind, curve, curve_start, length, route_start: self.length });
+        self.legs.push(RouteLeg { kind, curve, curve_start, length, route_start: self.length, action });
         self.length += length;
     }
 
     /// The leg containing route arc length `s` (clamped to the route).
     pub fn leg_at(&self, s: f64) -> &RouteLeg {
-        let i = self.legs.partition_point(|l| l.route_start + l.length <= s);
-        &self.legs[i.min(self.legs.len() - 1)]
+        &self.legs[self.leg_index_at(s)]
+    }
+
+    /// Index of the leg containing route arc length `s` (clamped to the route).
+    pub fn leg_index_at(&self, s: f64) -> usize {
+        self.legs.partition_point(|l| l.route_start + l.length <= s).min(self.legs.len() - 1)
     }
 
     /// Position and heading at route arc length `s`, `lateral` metres left of

@@ -7,6 +7,9 @@ use crate::geometry::OrientedBox;
 use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
 use crate::render::camera::Camera;
 use crate::spec::{DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
+use crate::world::confounders::{Confounders, Effects};
+use crate::world::driver::DriverParams;
+use crate::world::lights::LightPlan;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -60,6 +63,33 @@ pub struct CarPlan {
     pub width: f64,
     /// Shared by a leader and its follower.
     pub route: Arc<Route>,
+    /// City world only: how this car drives.
+    pub agency: Option<CarAgency>,
+}
+
+/// A city car's driving plan: shared by a leader and its follower except for
+/// the red-light flag.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarAgency {
+    /// Desired speed (m/s, after confounders) before the first action, after
+    /// each action in turn, and after the last.
+    pub desired_speeds: Vec<f64>,
+    /// After confounders.
+    pub driver: DriverParams,
+    /// Forced through red and yellow lights.
+    pub runs_red_lights: bool,
+}
+
+/// City-world parts of a scenario.
+#[derive(Debug, Clone)]
+pub struct CityPlan {
+    pub confounders: Confounders,
+    pub effects: Effects,
+    pub lights: LightPlan,
+    /// Base driver parameters before confounders.
+    pub base_driver: DriverParams,
+    /// Key of the simulation's own random stream (driver noise, collision stops).
+    pub sim_stream: [u8; 32],
 }
 
 /// One scenario, ready to simulate.
@@ -78,6 +108,7 @@ pub struct ScenarioPlan {
     pub edges: Vec<(u32, u32)>,
     /// Toy world: metres every car covers per frame.
     pub toy_step_m: f64,
+    pub city: Option<CityPlan>,
 }
 
 /// A car placed on the map before ids are assigned.
@@ -89,6 +120,7 @@ struct PlacedCar {
     actions: Vec<Action>,
     merges: Vec<f64>,
     route: Arc<Route>,
+    desired_speeds: Vec<f64>,
 }
 
 /// A span of a spawn lane where a car's centre is on camera.
@@ -193,6 +225,7 @@ impl Expansion {
         let stream = stream_key(spec.seed, &key.group, key.split, key.index);
         let mut rng = ChaCha8Rng::from_seed(stream);
         let travel = self.max_travel();
+        let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
 
         // Units to place: pairs first (they need the most room), then singles.
         let pairs = group.edges() as usize;
@@ -231,10 +264,27 @@ impl Expansion {
                 }
                 placed.extend(boxes);
                 let route = Arc::new(route);
+                let desired_speeds = match &city {
+                    Some(c) => (0..=actions.len())
+                        .map(|_| {
+                            let spread = c.desired_speed_spread;
+                            let factor = if spread > 0.0 { rng.random_range(1.0 - spread..=1.0 + spread) } else { 1.0 };
+                            c.desired_speed * factor
+                        })
+                        .collect(),
+                    None => Vec::new(),
+                };
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    let leader =
-                        PlacedCar { role: Role::Leader, spawn: span.lane, distance: front, actions, merges, route };
+                    let leader = PlacedCar {
+                        role: Role::Leader,
+                        spawn: span.lane,
+                        distance: front,
+                        actions,
+                        merges,
+                        route,
+                        desired_speeds,
+                    };
                     let follower = PlacedCar { role: Role::Follower, distance: back, ..leader.clone() };
                     cars.extend([leader, follower]);
                 } else {
@@ -245,6 +295,7 @@ impl Expansion {
                         actions,
                         merges,
                         route,
+                        desired_speeds,
                     });
                 }
                 done = true;
@@ -261,12 +312,52 @@ impl Expansion {
         // Random ids so the index order never gives the roles away.
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
+
+        // City: confounders, lights and each car's driving, drawn after placement.
+        let city_plan = city.as_ref().map(|c| {
+            let cs = &c.confounders;
+            let confounders = Confounders {
+                rain: cs.rain.sample(&mut rng),
+                fog: cs.fog.sample(&mut rng),
+                snow: cs.snow.sample(&mut rng),
+                wetness: cs.wetness.sample(&mut rng),
+                hour: cs.hour.sample(&mut rng),
+            };
+            let mut sim_stream = stream;
+            sim_stream[31] ^= 0x5a;
+            CityPlan {
+                confounders,
+                effects: confounders.effects(),
+                lights: self.light_plan(c),
+                base_driver: c.driver,
+                sim_stream: Sha256::digest(sim_stream).into(),
+            }
+        });
+        let agencies: Vec<Option<CarAgency>> = cars
+            .iter()
+            .map(|placed| {
+                let (c, plan) = (city.as_ref()?, city_plan.as_ref()?);
+                let p_run = (c.red_light_runner_probability + plan.effects.red_light_run_probability_added).min(1.0);
+                let runs_red_lights = rng.random_bool(p_run);
+                Some(CarAgency {
+                    desired_speeds: placed
+                        .desired_speeds
+                        .iter()
+                        .map(|v| v * plan.effects.desired_speed_factor)
+                        .collect(),
+                    driver: plan.effects.apply(&c.driver),
+                    runs_red_lights,
+                })
+            })
+            .collect();
         let mut planned: Vec<CarPlan> = cars
             .into_iter()
             .enumerate()
-            .map(|(i, placed)| {
-                let PlacedCar { role, spawn, distance: spawn_distance, actions, merges: merge_distances, route } =
-                    placed;
+            .zip(agencies)
+            .map(|((i, placed), agency)| {
+                let PlacedCar {
+                    role, spawn, distance: spawn_distance, actions, merges: merge_distances, route, ..
+                } = placed;
                 let id = ids[i];
                 CarPlan {
                     id,
@@ -282,6 +373,7 @@ impl Expansion {
                     length: spec.car_length_m,
                     width: spec.car_width_m,
                     route,
+                    agency,
                 }
             })
             .collect();
@@ -294,19 +386,40 @@ impl Expansion {
             seed: spec.seed,
             stream_key: stream.iter().map(|b| format!("{b:02x}")).collect(),
             frames: spec.frames,
-            frame_interval: spec.frame_interval,
+            frame_interval: spec.frame_interval(),
             cars: planned,
             edges,
             toy_step_m: self.toy_step_m,
+            city: city_plan,
         })
     }
 
+    /// The lights of every scenario of this spec.
+    fn light_plan(&self, city: &crate::spec::CitySpec) -> LightPlan {
+        let lights = &city.lights;
+        let mut plan = LightPlan::cycle(self.map.intersections.len(), lights.cycle_scale, &lights.offsets);
+        for o in &lights.overrides {
+            let Some(intersection) = self.map.intersections.iter().position(|i| i.name == o.intersection) else {
+                continue; // names were checked with the spec
+            };
+            let index = plan.index(intersection, o.approach, o.signal);
+            plan.lights[index].offset = o.offset;
+            plan.lights[index].schedule = o.schedule.clone();
+        }
+        plan
+    }
+
     /// The farthest any car can travel in a scenario, metres, plus a margin.
-    fn max_travel(&self) -> f64 {
-        let toy = self.toy_step_m * self.spec.frames as f64;
-        // City cars never exceed 20 m/s.
-        let city = 20.0 * self.spec.frame_interval * self.spec.frames as f64;
-        toy.max(city) + 10.0
+    pub fn max_travel(&self) -> f64 {
+        let duration = self.spec.frame_interval() * self.spec.frames as f64;
+        let distance = match self.spec.world {
+            WorldKind::Toy => self.toy_step_m * self.spec.frames as f64,
+            WorldKind::City => {
+                let c = self.spec.city_settings();
+                c.desired_speed * (1.0 + c.desired_speed_spread) * duration
+            }
+        };
+        distance + 10.0
     }
 }
 
@@ -344,7 +457,8 @@ fn random_actions(
     for _ in 0..count {
         let len = map.lanes[lane].curve.length();
         // Merge distances on a 0.1 m grid that fits before the lane ends.
-        let lo = (earliest * 10.0).ceil() / 10.0;
+        // At least 1 m after the car, so a car can check the gap before it starts.
+        let lo = ((earliest + 1.0) * 10.0).ceil() / 10.0;
         let hi = ((len - run) * 10.0).floor() / 10.0;
         let merge_side = map
             .adjacent_lane(lane, true)
@@ -389,11 +503,15 @@ fn spawn_spans(map: &CityMap, camera: &Camera, car_length: f64) -> Vec<SpawnSpan
     let mut spans = Vec::new();
     for lane in map.spawn_points() {
         let curve = &map.lanes[lane].curve;
-        let len = curve.length();
+        // Cars start behind the stop line, never on the crosswalk.
+        let end = match map.lanes[lane].end {
+            LaneEnd::Intersection { .. } => curve.length() - map.layout.stop_line_setback - 0.5,
+            LaneEnd::Loop(_) => curve.length(),
+        };
         let mut first = None;
         let mut last = None;
         let mut s = car_length / 2.0;
-        while s <= len - car_length / 2.0 {
+        while s <= end - car_length / 2.0 {
             let p = curve.lane_center_at(s);
             if p.x >= lo.x + margin && p.x <= hi.x - margin && p.y >= lo.y + margin && p.y <= hi.y - margin {
                 first.get_or_insert(s);

@@ -4,6 +4,7 @@
 use super::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use super::progress::{Progress, ProgressMode};
 use crate::map::CityMap;
+use crate::output::logs::{write_events, write_lights};
 use crate::output::manifest::Manifest;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::output::poses::write_poses;
@@ -11,6 +12,7 @@ use crate::output::scenario::scenario_json;
 use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError};
 use crate::render::{CarSprite, FrameCanvas, Renderer};
 use crate::spec::{DatasetSpec, SpecError, WorldKind};
+use crate::world::city::CityWorld;
 use crate::world::toy::ToyWorld;
 use crate::world::{Trajectories, World};
 use rayon::prelude::*;
@@ -77,15 +79,13 @@ struct Job {
     renderer: Option<Renderer>,
     out: PathBuf,
     png: PngSettings,
+    intersection_names: Vec<String>,
 }
 
 /// Reads, checks and expands a spec file; nothing is written.
 pub fn load_spec(path: &Path) -> Result<Expansion, GenError> {
     let spec_err = |error| GenError::Spec { path: path.to_path_buf(), error };
     let spec = DatasetSpec::from_file(path).map_err(spec_err)?;
-    if spec.world == WorldKind::City {
-        return Err(spec_err(SpecError::new("world", "\"city\" is not available yet in this version: use \"toy\"")));
-    }
     Expansion::new(spec, Arc::new(CityMap::default())).map_err(spec_err)
 }
 
@@ -107,8 +107,13 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 
     let map = expansion.map.clone();
     let renderer = options.images.then(|| Renderer::new(&map, expansion.camera));
+    let world: Box<dyn World> = match expansion.spec.world {
+        WorldKind::Toy => Box::new(ToyWorld),
+        WorldKind::City => Box::new(CityWorld::default()),
+    };
+    let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
     let job =
-        Job { map, world: Box::new(ToyWorld), renderer, out: out.clone(), png: PngSettings::default(), expansion };
+        Job { map, world, renderer, out: out.clone(), png: PngSettings::default(), expansion, intersection_names };
     let keys = job.expansion.keys(options.limit);
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
@@ -151,9 +156,16 @@ fn write_scenario(job: &Job, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>
     let camera = &job.expansion.camera;
     let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
     let dir = ScenarioDir::begin(target, plan.frames, canvas.is_some())?;
-    let mut bytes = dir.write_file("scenario.json", &scenario_json(&plan, camera, job.expansion.spec.leader_gap_px))?;
+    let record =
+        scenario_json(&plan, camera, job.expansion.spec.leader_gap_px, &job.intersection_names, job.world.model_name());
+    let mut bytes = dir.write_file("scenario.json", &record)?;
     let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
     bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, &trajectories, camera))?;
+    if let Some(city) = &plan.city {
+        bytes +=
+            dir.write_with("lights.csv", |w| write_lights(w, &city.lights, &job.intersection_names, &trajectories))?;
+        bytes += dir.write_with("events.csv", |w| write_events(w, &trajectories))?;
+    }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
         bytes += write_frames(job, renderer, canvas, &dir, &plan, &trajectories)?;
     }

@@ -4,6 +4,9 @@
 use crate::map::Action;
 use crate::orchestrate::plan::{Role, ScenarioPlan};
 use crate::render::camera::Camera;
+use crate::world::confounders::{Confounders, Effects};
+use crate::world::driver::DriverParams;
+use crate::world::lights::Light;
 use serde::Serialize;
 
 /// Format tag written into every scenario.json.
@@ -22,6 +25,30 @@ struct CarRecord<'a> {
     role: Role,
     length_m: f64,
     width_m: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    desired_speeds: Option<&'a [f64]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    driver: Option<&'a DriverParams>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    runs_red_lights: Option<bool>,
+}
+
+#[derive(Serialize)]
+struct LightRecord<'a> {
+    intersection: &'a str,
+    approach: char,
+    signal: &'a str,
+    offset: f64,
+    schedule: &'a [crate::world::lights::ScheduleStep],
+}
+
+#[derive(Serialize)]
+struct CityRecord<'a> {
+    model: &'a str,
+    confounders: &'a Confounders,
+    effects: &'a Effects,
+    base_driver: &'a DriverParams,
+    lights: Vec<LightRecord<'a>>,
 }
 
 #[derive(Serialize)]
@@ -47,12 +74,38 @@ struct ScenarioRecord<'a> {
     camera: &'a Camera,
     #[serde(skip_serializing_if = "Option::is_none")]
     toy: Option<ToyRecord>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    city: Option<CityRecord<'a>>,
     cars: Vec<CarRecord<'a>>,
     edges: Vec<[u32; 2]>,
 }
 
-/// Serialises the scenario record as pretty JSON.
-pub fn scenario_json(plan: &ScenarioPlan, camera: &Camera, leader_gap_px: f64) -> Vec<u8> {
+/// Serialises the scenario record as pretty JSON. `intersection_names` and
+/// `model` describe the city world's lights and car-following model.
+pub fn scenario_json(
+    plan: &ScenarioPlan,
+    camera: &Camera,
+    leader_gap_px: f64,
+    intersection_names: &[String],
+    model: &str,
+) -> Vec<u8> {
+    let light_record =
+        |l: &'_ Light| -> (usize, char, &'static str, f64) { (l.intersection, l.approach, l.signal.name(), l.offset) };
+    let city = plan.city.as_ref().map(|c| CityRecord {
+        model,
+        confounders: &c.confounders,
+        effects: &c.effects,
+        base_driver: &c.base_driver,
+        lights: c
+            .lights
+            .lights
+            .iter()
+            .map(|l| {
+                let (i, approach, signal, offset) = light_record(l);
+                LightRecord { intersection: &intersection_names[i], approach, signal, offset, schedule: &l.schedule }
+            })
+            .collect(),
+    });
     let toy = (plan.world == crate::spec::WorldKind::Toy).then(|| ToyRecord {
         speed_px_per_frame: camera.metres_to_pixels(plan.toy_step_m),
         speed_m_per_s: plan.toy_step_m / plan.frame_interval,
@@ -72,6 +125,7 @@ pub fn scenario_json(plan: &ScenarioPlan, camera: &Camera, leader_gap_px: f64) -
         frame_interval: plan.frame_interval,
         camera,
         toy,
+        city,
         cars: plan
             .cars
             .iter()
@@ -87,6 +141,9 @@ pub fn scenario_json(plan: &ScenarioPlan, camera: &Camera, leader_gap_px: f64) -
                 role: c.role,
                 length_m: c.length,
                 width_m: c.width,
+                desired_speeds: c.agency.as_ref().map(|a| a.desired_speeds.as_slice()),
+                driver: c.agency.as_ref().map(|a| &a.driver),
+                runs_red_lights: c.agency.as_ref().map(|a| a.runs_red_lights),
             })
             .collect(),
         edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),

@@ -1,6 +1,10 @@
 //! Worlds turn a scenario plan into trajectories: the pose of every car at
 //! every frame, in metres and radians. A world never sees pixels or files.
 
+pub mod city;
+pub mod confounders;
+pub mod driver;
+pub mod lights;
 pub mod toy;
 
 use crate::map::CityMap;
@@ -22,11 +26,50 @@ pub struct CarState {
     pub speed: f64,
 }
 
+/// Something that happened during a scenario, for `events.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Event {
+    /// Seconds since the start.
+    pub t: f64,
+    pub kind: EventKind,
+    /// Car id.
+    pub car: u32,
+    /// The other car involved (collisions).
+    pub other: Option<u32>,
+    pub detail: String,
+}
+
+/// Kinds of [`Event`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EventKind {
+    Collision,
+    RedLightRun,
+    MergeDone,
+    TurnDone,
+    ActionsFinished,
+}
+
+impl EventKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            EventKind::Collision => "collision",
+            EventKind::RedLightRun => "red_light_run",
+            EventKind::MergeDone => "merge_done",
+            EventKind::TurnDone => "turn_done",
+            EventKind::ActionsFinished => "actions_finished",
+        }
+    }
+}
+
 /// The simulated scenario: `states[frame][car]`, cars in plan (id) order.
 #[derive(Debug, Clone)]
 pub struct Trajectories {
     pub frame_interval: f64,
     pub states: Vec<Vec<CarState>>,
+    /// `lights[frame][light]`, in the order of the scenario's light plan; empty without lights.
+    pub lights: Vec<Vec<lights::LightState>>,
+    /// In time order.
+    pub events: Vec<Event>,
 }
 
 impl Trajectories {
@@ -38,4 +81,6 @@ impl Trajectories {
 /// The dynamics of one world.
 pub trait World: Sync {
     fn simulate(&self, map: &CityMap, plan: &ScenarioPlan) -> Trajectories;
+    /// Name of the behaviour model, for scenario.json.
+    fn model_name(&self) -> &'static str;
 }

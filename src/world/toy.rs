@@ -11,6 +11,10 @@ use crate::orchestrate::plan::ScenarioPlan;
 pub struct ToyWorld;
 
 impl World for ToyWorld {
+    fn model_name(&self) -> &'static str {
+        "constant-speed"
+    }
+
     fn simulate(&self, _map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
         let step = plan.toy_step_m;
         let speed = step / plan.frame_interval;
@@ -26,6 +30,6 @@ impl World for ToyWorld {
                     .collect()
             })
             .collect();
-        Trajectories { frame_interval: plan.frame_interval, states }
+        Trajectories { frame_interval: plan.frame_interval, states, lights: Vec::new(), events: Vec::new() }
     }
 }

@@ -1,0 +1,82 @@
+//! `lights.csv` and `events.csv` (city world). Columns are documented in
+//! `data-schema/lights.schema.json` and `data-schema/events.schema.json`.
+
+use crate::world::lights::LightPlan;
+use crate::world::Trajectories;
+use serde::Serialize;
+use std::io::Write;
+
+pub const LIGHT_COLUMNS: [&str; 7] = ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"];
+pub const EVENT_COLUMNS: [&str; 6] = ["frame", "t", "kind", "car", "other_car", "detail"];
+
+fn round(x: f64, decimals: i32) -> f64 {
+    let f = 10f64.powi(decimals);
+    (x * f).round() / f
+}
+
+#[derive(Serialize)]
+struct LightRow<'a> {
+    frame: usize,
+    t: f64,
+    intersection: &'a str,
+    approach: char,
+    signal: &'a str,
+    colour: &'a str,
+    since_change: f64,
+}
+
+/// One row per frame and light, lights in plan order.
+pub fn write_lights<W: Write>(
+    out: W,
+    plan: &LightPlan,
+    intersection_names: &[String],
+    trajectories: &Trajectories,
+) -> csv::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
+    for (frame, states) in trajectories.lights.iter().enumerate() {
+        let t = round(frame as f64 * trajectories.frame_interval, 6);
+        for (light, state) in plan.lights.iter().zip(states) {
+            w.serialize(LightRow {
+                frame,
+                t,
+                intersection: &intersection_names[light.intersection],
+                approach: light.approach,
+                signal: light.signal.name(),
+                colour: state.colour.name(),
+                since_change: round(state.since_change, 3),
+            })?;
+        }
+    }
+    w.flush()?;
+    Ok(())
+}
+
+#[derive(Serialize)]
+struct EventRow<'a> {
+    frame: u64,
+    t: f64,
+    kind: &'a str,
+    car: u32,
+    other_car: Option<u32>,
+    detail: &'a str,
+}
+
+/// One row per event; `frame` is the first frame that shows its outcome.
+pub fn write_events<W: Write>(out: W, trajectories: &Trajectories) -> csv::Result<()> {
+    // The header is written by hand so that a scenario without events still has one.
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
+    w.write_record(EVENT_COLUMNS)?;
+    for e in &trajectories.events {
+        let frame = (e.t / trajectories.frame_interval - 1e-6).ceil().max(0.0) as u64;
+        w.serialize(EventRow {
+            frame,
+            t: round(e.t, 4),
+            kind: e.kind.name(),
+            car: e.car,
+            other_car: e.other,
+            detail: &e.detail,
+        })?;
+    }
+    w.flush()?;
+    Ok(())
+}

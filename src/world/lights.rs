@@ -1,0 +1,206 @@
+//! Traffic lights as data: every approach of every intersection has a
+//! Straight signal (also used by right turns) and a Left signal, each running
+//! a repeating schedule of (colour, seconds) shifted by an offset. The default
+//! plan is the original's cycle; specs scale it, shift intersections, or
+//! replace the schedule of any single light.
+
+use serde::{Deserialize, Serialize};
+
+/// Which movements a signal controls.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Signal {
+    /// Straight on and right turns.
+    Straight,
+    /// Protected left turns.
+    Left,
+}
+
+impl Signal {
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::Straight => "straight",
+            Signal::Left => "left",
+        }
+    }
+}
+
+/// A signal's colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Colour {
+    Green,
+    Yellow,
+    Red,
+}
+
+impl Colour {
+    pub fn name(self) -> &'static str {
+        match self {
+            Colour::Green => "green",
+            Colour::Yellow => "yellow",
+            Colour::Red => "red",
+        }
+    }
+}
+
+/// One step of a repeating schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleStep {
+    pub colour: Colour,
+    /// Seconds.
+    pub duration: f64,
+}
+
+/// One light: where it stands and what it shows when.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Light {
+    /// Intersection index in the map.
+    pub intersection: usize,
+    /// Side the controlled traffic arrives from: 'N', 'E', 'S' or 'W'.
+    pub approach: char,
+    pub signal: Signal,
+    /// Seconds added to the scenario clock before looking up the schedule.
+    pub offset: f64,
+    /// Repeats for ever.
+    pub schedule: Vec<ScheduleStep>,
+}
+
+/// A light's state at one moment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightState {
+    pub colour: Colour,
+    /// Seconds since the colour last changed. Lights run before the scenario
+    /// starts, so this can exceed the scenario time.
+    pub since_change: f64,
+}
+
+impl Light {
+    /// Colour at scenario time `t` (seconds).
+    pub fn state_at(&self, t: f64) -> LightState {
+        let period: f64 = self.schedule.iter().map(|s| s.duration).sum();
+        let mut local = (t + self.offset).rem_euclid(period);
+        // Merge runs of one colour (a wrap from the last step to the first).
+        for (i, step) in self.schedule.iter().enumerate() {
+            if local < step.duration {
+                let mut since = local;
+                // Earlier steps of the same colour count too.
+                let mut j = i;
+                loop {
+                    j = (j + self.schedule.len() - 1) % self.schedule.len();
+                    if j == i || self.schedule[j].colour != step.colour {
+                        break;
+                    }
+                    since += self.schedule[j].duration;
+                }
+                return LightState { colour: step.colour, since_change: since };
+            }
+            local -= step.duration;
+        }
+        let last = self.schedule.last().expect("schedules are not empty");
+        LightState { colour: last.colour, since_change: 0.0 }
+    }
+}
+
+/// The stages of the original's cycle, in seconds: (axis, signal, green, yellow).
+/// Axis `EW` covers approaches E and W, `NS` covers N and S.
+pub const DEFAULT_CYCLE: [(&str, Signal, f64, f64); 4] = [
+    ("EW", Signal::Straight, 15.0, 4.0),
+    ("NS", Signal::Left, 7.0, 4.0),
+    ("NS", Signal::Straight, 15.0, 4.0),
+    ("EW", Signal::Left, 7.0, 4.0),
+];
+
+/// Every light of the map for one scenario.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LightPlan {
+    pub lights: Vec<Light>,
+}
+
+/// Approaches in the order lights are listed.
+pub const APPROACHES: [char; 4] = ['N', 'E', 'S', 'W'];
+
+impl LightPlan {
+    /// The original cycle with every duration multiplied by `scale`, each
+    /// intersection shifted by its `offsets` entry (seconds).
+    pub fn cycle(intersections: usize, scale: f64, offsets: &[f64]) -> LightPlan {
+        let mut lights = Vec::new();
+        for intersection in 0..intersections {
+            for approach in APPROACHES {
+                let axis = if approach == 'E' || approach == 'W' { "EW" } else { "NS" };
+                for signal in [Signal::Straight, Signal::Left] {
+                    // Walk the cycle: green and yellow in this light's stage, red elsewhere.
+                    let mut schedule: Vec<ScheduleStep> = Vec::new();
+                    for &(stage_axis, stage_signal, green, yellow) in &DEFAULT_CYCLE {
+                        let mine = stage_axis == axis && stage_signal == signal;
+                        let steps = if mine {
+                            vec![(Colour::Green, green), (Colour::Yellow, yellow)]
+                        } else {
+                            vec![(Colour::Red, green + yellow)]
+                        };
+                        for (colour, d) in steps {
+                            match schedule.last_mut() {
+                                Some(last) if last.colour == colour => last.duration += d * scale,
+                                _ => schedule.push(ScheduleStep { colour, duration: d * scale }),
+                            }
+                        }
+                    }
+                    let offset = offsets.get(intersection).copied().unwrap_or(0.0);
+                    lights.push(Light { intersection, approach, signal, offset, schedule });
+                }
+            }
+        }
+        LightPlan { lights }
+    }
+
+    /// Index of the light for (intersection, approach, signal).
+    pub fn index(&self, intersection: usize, approach: char, signal: Signal) -> usize {
+        let a = APPROACHES.iter().position(|&c| c == approach).expect("approach is N, E, S or W");
+        intersection * 8 + a * 2 + if signal == Signal::Left { 1 } else { 0 }
+    }
+
+    /// States of every light at time `t`.
+    pub fn states_at(&self, t: f64) -> Vec<LightState> {
+        self.lights.iter().map(|l| l.state_at(t)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_cycle_runs_the_original_phases() {
+        let plan = LightPlan::cycle(4, 1.0, &[0.0; 4]);
+        assert_eq!(plan.lights.len(), 32);
+        let ew = &plan.lights[plan.index(0, 'W', Signal::Straight)];
+        assert_eq!(ew.state_at(0.0).colour, Colour::Green);
+        assert_eq!(ew.state_at(15.5).colour, Colour::Yellow);
+        assert_eq!(ew.state_at(19.5).colour, Colour::Red);
+        assert!((ew.state_at(30.0).since_change - 11.0).abs() < 1e-9);
+        assert_eq!(ew.state_at(60.1).colour, Colour::Green);
+        let ns_left = &plan.lights[plan.index(2, 'N', Signal::Left)];
+        assert_eq!(ns_left.state_at(20.0).colour, Colour::Green);
+        assert_eq!(ns_left.state_at(27.0).colour, Colour::Yellow);
+        let ew_left = &plan.lights[plan.index(1, 'E', Signal::Left)];
+        assert_eq!(ew_left.state_at(50.0).colour, Colour::Green);
+        // Never two conflicting greens: EW straight and NS straight.
+        for k in 0..600 {
+            let t = k as f64 * 0.1;
+            let a = plan.lights[plan.index(0, 'E', Signal::Straight)].state_at(t).colour;
+            let b = plan.lights[plan.index(0, 'N', Signal::Straight)].state_at(t).colour;
+            assert!(!(a != Colour::Red && b != Colour::Red), "t={t}");
+        }
+    }
+
+    #[test]
+    fn scale_and_offset_shift_the_schedule() {
+        let plan = LightPlan::cycle(4, 0.5, &[0.0, 5.0, 0.0, 0.0]);
+        let a = &plan.lights[plan.index(0, 'W', Signal::Straight)];
+        assert_eq!(a.state_at(7.0).colour, Colour::Green);
+        assert_eq!(a.state_at(8.0).colour, Colour::Yellow);
+        let b = &plan.lights[plan.index(1, 'W', Signal::Straight)];
+        assert_eq!(b.state_at(3.0).colour, Colour::Yellow);
+    }
+}
