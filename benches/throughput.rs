@@ -84,8 +84,9 @@ fn png_settings_comparison() {
         .collect();
     let reps = 40;
     let t = Instant::now();
+    let scene = renderer.scene(causalcity::render::weather::SceneLook::clear());
     for _ in 0..reps {
-        renderer.render(&mut canvas, &sprites);
+        renderer.render(&mut canvas, &scene, &sprites, 75);
     }
     println!("render (RGB + mask, no encode): {:.2} ms", t.elapsed().as_secs_f64() * 1e3 / reps as f64);
     use png::{DeflateCompression as D, Filter as F};

@@ -10,6 +10,7 @@ use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::output::poses::write_poses;
 use crate::output::scenario::scenario_json;
 use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError};
+use crate::render::weather::SceneLook;
 use crate::render::{CarSprite, FrameCanvas, Renderer};
 use crate::spec::{DatasetSpec, SpecError, WorldKind};
 use crate::world::city::CityWorld;
@@ -182,6 +183,15 @@ fn write_frames(
     trajectories: &Trajectories,
 ) -> Result<u64, GenError> {
     let (w, h) = (renderer.camera.width, renderer.camera.height);
+    let look = match &plan.city {
+        Some(city) => {
+            let c = &city.confounders;
+            let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
+            SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
+        }
+        None => SceneLook::clear(),
+    };
+    let scene = renderer.scene(look);
     let mut bytes = 0;
     let mut sprites = Vec::with_capacity(plan.cars.len());
     for (frame, states) in trajectories.states.iter().enumerate() {
@@ -194,8 +204,8 @@ fn write_frames(
             colour: car.colour,
             mask_id: car.mask_id,
         }));
-        renderer.render(canvas, &sprites);
         let frame = frame as u32;
+        renderer.render(canvas, &scene, &sprites, frame);
         bytes += dir.write_with(&dir.frame_name("rgb", frame), |out| {
             encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, job.png).map_err(png_to_io)
         })?;

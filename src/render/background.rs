@@ -41,9 +41,11 @@ fn rect(pixmap: &mut Pixmap, t: Transform, x0: f64, y0: f64, x1: f64, y1: f64, r
     }
 }
 
-/// Draws the background for `map` as seen by `camera`.
-pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
+/// Draws the background for `map` as seen by `camera`, and returns with it
+/// the asphalt coverage of every pixel (255 on the road), which weather uses.
+pub fn draw_background(map: &CityMap, camera: &Camera) -> (Pixmap, Vec<u8>) {
     let mut pixmap = Pixmap::new(camera.width, camera.height).expect("image size was validated");
+    let mut road = Pixmap::new(camera.width, camera.height).expect("image size was validated");
     pixmap.fill(Color::from_rgba8(GROUND[0], GROUND[1], GROUND[2], 255));
     let t = world_to_canvas(camera);
     let layout = &map.layout;
@@ -86,16 +88,18 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
     }
 
     // Asphalt, including the turning circles at the far ends.
-    for &(_, y) in &layout.east_west_roads {
-        rect(&mut pixmap, t, -layout.extent_x, y - hw, layout.extent_x, y + hw, ASPHALT);
-        for x in [-layout.extent_x, layout.extent_x] {
-            circle(&mut pixmap, t, x, y, hw, ASPHALT);
+    for target in [&mut pixmap, &mut road] {
+        for &(_, y) in &layout.east_west_roads {
+            rect(target, t, -layout.extent_x, y - hw, layout.extent_x, y + hw, ASPHALT);
+            for x in [-layout.extent_x, layout.extent_x] {
+                circle(target, t, x, y, hw, ASPHALT);
+            }
         }
-    }
-    for &(_, x) in &layout.north_south_roads {
-        rect(&mut pixmap, t, x - hw, -layout.extent_y, x + hw, layout.extent_y, ASPHALT);
-        for y in [-layout.extent_y, layout.extent_y] {
-            circle(&mut pixmap, t, x, y, hw, ASPHALT);
+        for &(_, x) in &layout.north_south_roads {
+            rect(target, t, x - hw, -layout.extent_y, x + hw, layout.extent_y, ASPHALT);
+            for y in [-layout.extent_y, layout.extent_y] {
+                circle(target, t, x, y, hw, ASPHALT);
+            }
         }
     }
 
@@ -126,7 +130,8 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Pixmap {
             quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, 1.5 * lw - 0.3, WHITE);
         }
     }
-    pixmap
+    let coverage = road.data().chunks_exact(4).map(|p| p[3]).collect();
+    (pixmap, coverage)
 }
 
 fn circle(pixmap: &mut Pixmap, t: Transform, x: f64, y: f64, r: f64, rgb: [u8; 3]) {

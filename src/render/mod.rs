@@ -4,11 +4,13 @@
 
 pub mod background;
 pub mod camera;
+pub mod weather;
 
 use camera::Camera;
 use glam::DVec2;
 use std::sync::Arc;
 use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
+use weather::SceneLook;
 
 /// What the renderer needs to draw one car in one frame.
 #[derive(Debug, Clone, Copy)]
@@ -28,6 +30,14 @@ pub struct CarSprite {
 pub struct Renderer {
     pub camera: Camera,
     background: Arc<Pixmap>,
+    /// Asphalt coverage per pixel, for wet roads.
+    road: Arc<Vec<u8>>,
+}
+
+/// One scenario's look: its background under its light, water and fog.
+pub struct Scene {
+    background: Arc<Pixmap>,
+    pub look: SceneLook,
 }
 
 /// Reusable per-thread buffers: the finished frame is in `rgb` (row-major,
@@ -42,8 +52,18 @@ pub struct FrameCanvas {
 impl Renderer {
     /// Renders the background of `map` for `camera`, once.
     pub fn new(map: &crate::map::CityMap, camera: Camera) -> Renderer {
-        let background = Arc::new(background::draw_background(map, &camera));
-        Renderer { camera, background }
+        let (background, road) = background::draw_background(map, &camera);
+        Renderer { camera, background: Arc::new(background), road: Arc::new(road) }
+    }
+
+    /// Prepares the background of a scenario that looks like `look`.
+    pub fn scene(&self, look: SceneLook) -> Scene {
+        let background = if look.is_clear() {
+            self.background.clone()
+        } else {
+            Arc::new(look.apply_to_background(&self.background, &self.road))
+        };
+        Scene { background, look }
     }
 
     /// Buffers sized for this renderer's camera.
@@ -57,14 +77,11 @@ impl Renderer {
         }
     }
 
-    /// The static background as RGB bytes.
-    pub fn background_rgb(&self) -> Vec<u8> {
-        rgba_to_rgb(self.background.data())
-    }
-
-    /// Draws `cars` (later ones on top) into `canvas.rgb` and `canvas.mask`.
-    pub fn render(&self, canvas: &mut FrameCanvas, cars: &[CarSprite]) {
-        canvas.rgba.data_mut().copy_from_slice(self.background.data());
+    /// Draws frame `frame` of `scene` with `cars` (later ones on top) into
+    /// `canvas.rgb` and `canvas.mask`.
+    pub fn render(&self, canvas: &mut FrameCanvas, scene: &Scene, cars: &[CarSprite], frame: u32) {
+        let look = &scene.look;
+        canvas.rgba.data_mut().copy_from_slice(scene.background.data());
         canvas.mask_rgba.data_mut().fill(0);
         let world = background::world_to_canvas(&self.camera);
         for car in cars {
@@ -74,10 +91,12 @@ impl Renderer {
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
             let body = Rect::from_ltrb(-hl, -hw, hl, hw).expect("car size was validated");
             let mut paint = Paint { anti_alias: true, ..Paint::default() };
-            paint.set_color_rgba8(car.colour[0], car.colour[1], car.colour[2], 255);
+            let body_colour = look.shade(car.colour);
+            paint.set_color_rgba8(body_colour[0], body_colour[1], body_colour[2], 255);
             canvas.rgba.fill_rect(body, &paint, t, None);
             // Windscreen towards the front shows the heading.
-            paint.set_color_rgba8(36, 40, 52, 255);
+            let glass_colour = look.shade([36, 40, 52]);
+            paint.set_color_rgba8(glass_colour[0], glass_colour[1], glass_colour[2], 255);
             if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
                 canvas.rgba.fill_rect(glass, &paint, t, None);
             }
@@ -85,7 +104,9 @@ impl Renderer {
             mask_paint.set_color_rgba8(car.mask_id, 0, 0, 255);
             let path = PathBuilder::from_rect(body);
             canvas.mask_rgba.fill_path(&path, &mask_paint, FillRule::Winding, t, None);
+            look.draw_headlights(&mut canvas.rgba, t, hl * 2.0, hw * 2.0);
         }
+        look.draw_precipitation(&mut canvas.rgba, frame);
         for (dst, src) in canvas.rgb.chunks_exact_mut(3).zip(canvas.rgba.data().chunks_exact(4)) {
             dst.copy_from_slice(&src[..3]);
         }
@@ -93,8 +114,4 @@ impl Renderer {
             *dst = src[0];
         }
     }
-}
-
-fn rgba_to_rgb(rgba: &[u8]) -> Vec<u8> {
-    rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect()
 }

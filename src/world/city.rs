@@ -456,7 +456,11 @@ impl<'a> Sim<'a> {
             return;
         }
         let front_before = car.front();
-        let v_new = (car.v + car.accel * dt).max(0.0);
+        let mut v_new = (car.v + car.accel * dt).max(0.0);
+        if car.accel > 0.0 {
+            // Speeding up towards the desired speed never overshoots it.
+            v_new = v_new.min(car.desired().max(car.v));
+        }
         car.s += (car.v + v_new) / 2.0 * dt;
         car.v = v_new;
         if car.v == 0.0 && car.accel < 0.0 {

@@ -196,3 +196,81 @@ pub struct Toy {
 pub fn read_scenario(dir: &Path) -> Scenario {
     serde_json::from_value(read_json(&dir.join("scenario.json"))).unwrap()
 }
+
+/// One row of lights.csv.
+#[derive(Debug, Clone, Deserialize)]
+pub struct LightRow {
+    pub frame: u32,
+    pub t: f64,
+    pub intersection: String,
+    pub approach: String,
+    pub signal: String,
+    pub colour: String,
+    pub since_change: f64,
+}
+
+/// One row of events.csv.
+#[derive(Debug, Clone, Deserialize)]
+pub struct EventRow {
+    pub frame: u32,
+    pub t: f64,
+    pub kind: String,
+    pub car: u32,
+    pub other_car: Option<u32>,
+    pub detail: String,
+}
+
+pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    reader.deserialize().map(|r| r.unwrap()).collect()
+}
+
+/// City fields of scenario.json cars.
+#[derive(Debug, Clone, Deserialize)]
+pub struct CityCar {
+    pub id: u32,
+    pub spawn: String,
+    pub spawn_distance: f64,
+    pub actions: Vec<String>,
+    pub merge_distances: Vec<f64>,
+    pub role: String,
+    pub length_m: f64,
+    pub width_m: f64,
+    pub desired_speeds: Vec<f64>,
+    pub driver: Driver,
+    pub runs_red_lights: bool,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct Driver {
+    pub max_acceleration: f64,
+    pub max_deceleration: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct CityScenario {
+    pub frames: u32,
+    pub frame_interval: f64,
+    pub camera: Camera,
+    pub cars: Vec<CityCar>,
+    pub edges: Vec<[u32; 2]>,
+    pub city: serde_json::Value,
+}
+
+pub fn read_city_scenario(dir: &Path) -> CityScenario {
+    serde_json::from_value(read_json(&dir.join("scenario.json"))).unwrap()
+}
+
+/// Writes a city spec whose `city` section is `city` (JSON text).
+pub fn city_spec(name: &str, groups: &[(u32, f64)], splits: (u32, u32, u32), frames: u32, city: &str) -> String {
+    let groups: Vec<String> =
+        groups.iter().map(|(c, p)| format!(r#"{{"cars": {c}, "edge_proportion": {p}}}"#)).collect();
+    format!(
+        r#"{{"name": "{name}", "world": "city", "seed": 21, "frames": {frames},
+            "groups": [{}], "splits": {{"train": {}, "val": {}, "test": {}}}, "city": {city}}}"#,
+        groups.join(", "),
+        splits.0,
+        splits.1,
+        splits.2
+    )
+}

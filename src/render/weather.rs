@@ -1,0 +1,158 @@
+//! How confounders look: light level and tint by time of day, darker wet
+//! asphalt, a fog veil, rain streaks and snowflakes, headlights at night.
+//! Only the RGB frames are affected; masks never are.
+//!
+//! Light and fog are uniform over the image, so instead of post-processing
+//! every frame they are applied once to the scenario's background and to each
+//! car's colour (the same result for opaque shapes). Rain and snow are drawn
+//! per frame from a seeded stream, so frames are reproducible.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
+
+/// The visual state of a scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneLook {
+    /// 1 in daylight, 0 at night.
+    pub daylight: f64,
+    pub wetness: f64,
+    pub fog: f64,
+    pub rain: f64,
+    pub snow: f64,
+    /// Seeds the precipitation of every frame.
+    pub seed: u64,
+}
+
+impl SceneLook {
+    /// A dry, clear day (the toy world).
+    pub fn clear() -> SceneLook {
+        SceneLook { daylight: 1.0, wetness: 0.0, fog: 0.0, rain: 0.0, snow: 0.0, seed: 0 }
+    }
+
+    pub fn is_clear(&self) -> bool {
+        self.daylight >= 1.0 && self.wetness == 0.0 && self.fog == 0.0 && self.rain == 0.0 && self.snow == 0.0
+    }
+
+    /// A colour under this scene's light and fog.
+    pub fn shade(&self, rgb: [u8; 3]) -> [u8; 3] {
+        let dark = 1.0 - self.daylight;
+        let level = 0.28 + 0.72 * self.daylight;
+        // Night is blue, dusk and dawn warm.
+        let dusk = (std::f64::consts::PI * self.daylight).sin();
+        let tint =
+            [(1.0 - 0.25 * dark) * (1.0 + 0.10 * dusk), (1.0 - 0.12 * dark) * (1.0 - 0.02 * dusk), 1.0 - 0.12 * dusk];
+        let alpha = 0.65 * self.fog;
+        let fog = [206.0, 208.0, 212.0];
+        let mut out = [0u8; 3];
+        for k in 0..3 {
+            let lit = rgb[k] as f64 * level * tint[k];
+            let veiled = (1.0 - alpha) * lit + alpha * fog[k] * level;
+            out[k] = veiled.round().clamp(0.0, 255.0) as u8;
+        }
+        out
+    }
+
+    /// The scenario's background from the clear-day one and its road coverage
+    /// (255 on asphalt).
+    pub fn apply_to_background(&self, base: &Pixmap, road: &[u8]) -> Pixmap {
+        let mut out = base.clone();
+        let wet = 0.38 * self.wetness;
+        for (px, &cover) in out.data_mut().chunks_exact_mut(4).zip(road) {
+            let mut rgb = [px[0], px[1], px[2]];
+            if cover > 0 && wet > 0.0 {
+                let k = 1.0 - wet * cover as f64 / 255.0;
+                // Water darkens asphalt and gives it a faint blue sheen.
+                rgb = [
+                    (rgb[0] as f64 * k) as u8,
+                    (rgb[1] as f64 * k) as u8,
+                    (rgb[2] as f64 * (k + 0.08 * wet)).min(255.0) as u8,
+                ];
+            }
+            let shaded = self.shade(rgb);
+            px[..3].copy_from_slice(&shaded);
+        }
+        out
+    }
+
+    /// Headlight beams (at dusk and night) for a car in its own frame
+    /// (x forward, y left, metres), drawn over the road.
+    pub fn draw_headlights(&self, pixmap: &mut Pixmap, car_to_canvas: Transform, length: f32, width: f32) {
+        let strength = (1.0 - self.daylight) as f32;
+        if strength <= 0.05 {
+            return;
+        }
+        let mut paint = Paint { anti_alias: true, ..Paint::default() };
+        paint.set_color_rgba8(255, 236, 170, (110.0 * strength) as u8);
+        let front = length / 2.0;
+        let mut pb = PathBuilder::new();
+        for side in [-1.0f32, 1.0] {
+            let y = side * width * 0.3;
+            pb.move_to(front, y - 0.1);
+            pb.line_to(front + 3.5, y - 0.9);
+            pb.line_to(front + 3.5, y + 0.9);
+            pb.line_to(front, y + 0.1);
+            pb.close();
+        }
+        if let Some(path) = pb.finish() {
+            pixmap.fill_path(&path, &paint, FillRule::Winding, car_to_canvas, None);
+        }
+    }
+
+    /// Rain streaks and snowflakes of frame `frame`, in pixel space.
+    pub fn draw_precipitation(&self, pixmap: &mut Pixmap, frame: u32) {
+        if self.rain <= 0.0 && self.snow <= 0.0 {
+            return;
+        }
+        let (w, h) = (pixmap.width() as f32, pixmap.height() as f32);
+        let scale = w / 1024.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ (frame as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let streaks = (260.0 * self.rain * (w * h / (1024.0 * 640.0)) as f64) as usize;
+        if streaks > 0 {
+            let mut pb = PathBuilder::new();
+            for _ in 0..streaks {
+                let x = rng.random_range(0.0..w);
+                let y = rng.random_range(0.0..h);
+                let len = rng.random_range(8.0..16.0) * scale;
+                pb.move_to(x, y);
+                pb.line_to(x - 0.35 * len, y + len);
+            }
+            if let Some(path) = pb.finish() {
+                let mut paint = Paint { anti_alias: true, ..Paint::default() };
+                paint.set_color_rgba8(200, 210, 225, 120);
+                let stroke = Stroke { width: 1.0 * scale, line_cap: LineCap::Butt, ..Stroke::default() };
+                pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
+            }
+        }
+        let flakes = (420.0 * self.snow * (w * h / (1024.0 * 640.0)) as f64) as usize;
+        if flakes > 0 {
+            let mut pb = PathBuilder::new();
+            for _ in 0..flakes {
+                let x = rng.random_range(0.0..w);
+                let y = rng.random_range(0.0..h);
+                pb.push_circle(x, y, rng.random_range(1.0..2.2) * scale);
+            }
+            if let Some(path) = pb.finish() {
+                let mut paint = Paint { anti_alias: true, ..Paint::default() };
+                paint.set_color_rgba8(250, 250, 252, 220);
+                pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn night_is_darker_and_fog_greyer() {
+        let clear = SceneLook::clear();
+        assert_eq!(clear.shade([100, 150, 200]), [100, 150, 200]);
+        let night = SceneLook { daylight: 0.0, ..clear };
+        let n = night.shade([100, 150, 200]);
+        assert!(n.iter().zip([100, 150, 200]).all(|(a, b)| (*a as i32) < b));
+        let fog = SceneLook { fog: 1.0, ..clear }.shade([0, 0, 0]);
+        assert!(fog[0] > 100);
+    }
+}
