@@ -10,10 +10,11 @@ all: build
 build:
 	$(CARGO) build --release --locked
 
-## Generate the small built-in toy dataset into data/ci-toy.
+## Generate the small built-in toy and city datasets into data/ci-toy and data/ci-city.
 dataset: build
 	$(RUN) gen --spec configs/ci-toy.json --out data/ci-toy
-	@echo "dataset written to data/ci-toy (see README: Output layout)"
+	$(RUN) gen --spec configs/ci-city.json --out data/ci-city
+	@echo "datasets written to data/ci-toy and data/ci-city (see README: Output layout)"
 
 ## Run every test: unit, integration (real files, real decoding) and doc tests.
 test:

@@ -16,16 +16,31 @@ use std::sync::Arc;
 use std::time::Instant;
 
 fn spec_json(name: &str, cars: u32, train: u32) -> String {
+    world_spec_json(name, "toy", cars, train)
+}
+
+/// A spec of one 12-car group; city specs use the default city design's confounders.
+fn world_spec_json(name: &str, world: &str, cars: u32, train: u32) -> String {
+    let city = if world == "city" {
+        r#", "city": {"confounders": {"rain": {"choice": [0, 0, 0, 0.4, 0.8]}, "fog": {"choice": [0, 0, 0, 0.5]},
+            "snow": {"choice": [0, 0, 0, 0, 0.6]}, "wetness": {"choice": [0, 0, 0.3, 0.6, 1.0]}, "hour": {"uniform": [5, 23]}}}"#
+    } else {
+        ""
+    };
     format!(
-        r#"{{"name": "{name}", "world": "toy", "seed": 1, "frames": 150,
+        r#"{{"name": "{name}", "world": "{world}", "seed": 1, "frames": 150,
             "groups": [{{"cars": {cars}, "edge_proportion": 0.5}}],
-            "splits": {{"train": {train}, "val": 0, "test": 0}}}}"#
+            "splits": {{"train": {train}, "val": 0, "test": 0}}{city}}}"#
     )
 }
 
 fn write_spec(dir: &Path, name: &str, cars: u32, train: u32) -> PathBuf {
+    write_world_spec(dir, name, "toy", cars, train)
+}
+
+fn write_world_spec(dir: &Path, name: &str, world: &str, cars: u32, train: u32) -> PathBuf {
     let path = dir.join(format!("{name}.json"));
-    std::fs::write(&path, spec_json(name, cars, train)).unwrap();
+    std::fs::write(&path, world_spec_json(name, world, cars, train)).unwrap();
     path
 }
 
@@ -83,6 +98,34 @@ fn png_settings_comparison() {
         })
         .collect();
     let reps = 40;
+    use causalcity::render::weather::SceneLook;
+    let looks = [
+        ("clear day", SceneLook::clear()),
+        ("night", SceneLook { daylight: 0.0, ..SceneLook::clear() }),
+        ("rain 0.8", SceneLook { rain: 0.8, wetness: 0.6, seed: 3, ..SceneLook::clear() }),
+        ("snow 0.6", SceneLook { snow: 0.6, seed: 3, ..SceneLook::clear() }),
+        ("fog 0.5", SceneLook { fog: 0.5, ..SceneLook::clear() }),
+    ];
+    for (name, look) in looks {
+        let scene = renderer.scene(look);
+        let t = Instant::now();
+        let mut size = 0;
+        for k in 0..reps {
+            renderer.render(&mut canvas, &scene, &sprites, k);
+        }
+        let render_ms = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        let t = Instant::now();
+        for _ in 0..reps {
+            let mut out = Vec::new();
+            encode_png(&mut out, 1024, 640, PixelFormat::Rgb8, &canvas.rgb, PngSettings::default()).unwrap();
+            size = out.len();
+        }
+        let encode_ms = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        println!(
+            "look {name:<10}: render {render_ms:.2} ms, RGB encode {encode_ms:.2} ms, {:.1} KB",
+            size as f64 / 1e3
+        );
+    }
     let t = Instant::now();
     let scene = renderer.scene(causalcity::render::weather::SceneLook::clear());
     for _ in 0..reps {
@@ -157,12 +200,27 @@ fn main() {
         mask_bytes as f64 / mask_files as f64 / 1e3
     );
 
-    println!("\n== Toy world, poses only, 12 cars x 150 frames (CSV included) ==");
-    let poses_spec = write_spec(&root, "poses", 12, 2000);
-    let one = gen(&poses_spec, &root.join("poses1"), 1, false);
-    let two = gen(&poses_spec, &root.join("poses2"), 2, false);
-    println!("1 thread : {:.0} scenarios/s per core", 2000.0 / one);
-    println!("2 threads: {:.0} scenarios/s in all, speed-up {:.2}x", 2000.0 / two, one / two);
+    let toy_pairs_per_s = pairs / one;
+
+    println!("\n== City world with images (default confounders), 1024x640, 12 cars x 150 frames ==");
+    let city_images = write_world_spec(&root, "cityimg", "city", 12, 8);
+    let one = gen(&city_images, &root.join("cityimg1"), 1, true);
+    let (rgb_bytes, rgb_files) = dir_bytes(&root.join("cityimg1"), "rgb");
+    println!(
+        "1 thread : {:.0} frame pairs/s per core ({:.0} % of the toy world), RGB {:.1} KB per frame",
+        pairs / one,
+        100.0 * (pairs / one) / toy_pairs_per_s,
+        rgb_bytes as f64 / rgb_files as f64 / 1e3
+    );
+
+    for world in ["toy", "city"] {
+        println!("\n== {world} world, poses only, 12 cars x 150 frames (CSV included) ==");
+        let poses_spec = write_world_spec(&root, &format!("poses-{world}"), world, 12, 2000);
+        let one = gen(&poses_spec, &root.join(format!("{world}-poses1")), 1, false);
+        let two = gen(&poses_spec, &root.join(format!("{world}-poses2")), 2, false);
+        println!("1 thread : {:.0} scenarios/s per core", 2000.0 / one);
+        println!("2 threads: {:.0} scenarios/s in all, speed-up {:.2}x", 2000.0 / two, one / two);
+    }
 
     println!("\n== Peak memory of the binary (VmHWM), 2 threads, with images ==");
     for n in [4u32, 40] {

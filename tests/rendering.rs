@@ -166,3 +166,63 @@ fn the_background_is_the_same_in_every_frame_where_no_car_is() {
     }
     assert!(compared > 600_000);
 }
+
+fn mean_luma(img: &image::RgbImage) -> f64 {
+    img.pixels().map(|p| 0.299 * p.0[0] as f64 + 0.587 * p.0[1] as f64 + 0.114 * p.0[2] as f64).sum::<f64>()
+        / (img.width() * img.height()) as f64
+}
+
+fn luma_spread(img: &image::RgbImage) -> f64 {
+    let m = mean_luma(img);
+    (img.pixels()
+        .map(|p| (0.299 * p.0[0] as f64 + 0.587 * p.0[1] as f64 + 0.114 * p.0[2] as f64 - m).powi(2))
+        .sum::<f64>()
+        / (img.width() * img.height()) as f64)
+        .sqrt()
+}
+
+#[test]
+fn weather_changes_the_frames_but_never_the_masks() {
+    let dir = fresh_dir("rendering-weather");
+    let looks = [
+        ("day", r#"{"hour": 12}"#),
+        ("night", r#"{"hour": 23}"#),
+        ("fog", r#"{"hour": 12, "fog": 1.0}"#),
+        ("rain", r#"{"hour": 12, "rain": 1.0}"#),
+        ("snow", r#"{"hour": 12, "snow": 1.0}"#),
+    ];
+    let mut frames = std::collections::BTreeMap::new();
+    for (name, confounders) in looks {
+        let city = format!(r#"{{"confounders": {confounders}, "red_light_runner_probability": 0}}"#);
+        let spec = dir.join(format!("{name}.json"));
+        std::fs::write(&spec, city_spec(name, &[(8, 0.5)], (1, 0, 0), 12, &city)).unwrap();
+        let out = dir.join(name);
+        gen_ok(&spec, &out, &["--quiet"]);
+        let d = &scenario_dirs(&out)[0];
+        let s = read_city_scenario(d);
+        let ids: BTreeSet<u8> = s.cars.iter().map(|c| (c.id + 1) as u8).collect();
+        for f in [0, 11] {
+            let mask = image::open(d.join(format!("mask/{f:04}.png"))).unwrap().into_luma8();
+            let values: BTreeSet<u8> = mask.pixels().map(|p| p.0[0]).filter(|&v| v != 0).collect();
+            assert!(values.is_subset(&ids), "{name}: weather leaked into the mask: {values:?}");
+        }
+        let first = image::open(d.join("rgb/0000.png")).unwrap().into_rgb8();
+        let last = image::open(d.join("rgb/0011.png")).unwrap().into_rgb8();
+        // Frame 0 has every car at rest at its spawn, the same in every look.
+        let mask0 = std::fs::read(d.join("mask/0000.png")).unwrap();
+        frames.insert(name, (first, last, mask0));
+    }
+    let (day, night, fog) = (&frames["day"].0, &frames["night"].0, &frames["fog"].0);
+    assert!(mean_luma(night) < 0.6 * mean_luma(day), "night should be much darker");
+    assert!(luma_spread(fog) < 0.7 * luma_spread(day), "fog should wash out contrast");
+    for name in ["night", "fog", "rain", "snow"] {
+        assert_eq!(frames[name].2, frames["day"].2, "{name}: frame-0 mask differs from the clear day's");
+    }
+    // Precipitation moves: away from cars, rain and snow frames change over time.
+    for name in ["rain", "snow"] {
+        let (a, b, _) = &frames[name];
+        let changed = a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count();
+        let still = frames["day"].0.pixels().zip(frames["day"].1.pixels()).filter(|(p, q)| p != q).count();
+        assert!(changed > still + 2000, "{name}: only {changed} pixels changed (clear day: {still})");
+    }
+}

@@ -84,10 +84,17 @@ impl Renderer {
         canvas.rgba.data_mut().copy_from_slice(scene.background.data());
         canvas.mask_rgba.data_mut().fill(0);
         let world = background::world_to_canvas(&self.camera);
-        for car in cars {
+        // Car frame: x forward, y left, origin at the car's centre.
+        let car_frame = |car: &CarSprite| {
             let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
-            // Car frame: x forward, y left, origin at the car's centre.
-            let t = world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32));
+            world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32))
+        };
+        // Beams lie on the road, under every car.
+        for car in cars {
+            look.draw_headlights(&mut canvas.rgba, car_frame(car), car.length as f32, car.width as f32);
+        }
+        for car in cars {
+            let t = car_frame(car);
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
             let body = Rect::from_ltrb(-hl, -hw, hl, hw).expect("car size was validated");
             let mut paint = Paint { anti_alias: true, ..Paint::default() };
@@ -104,7 +111,6 @@ impl Renderer {
             mask_paint.set_color_rgba8(car.mask_id, 0, 0, 255);
             let path = PathBuilder::from_rect(body);
             canvas.mask_rgba.fill_path(&path, &mask_paint, FillRule::Winding, t, None);
-            look.draw_headlights(&mut canvas.rgba, t, hl * 2.0, hw * 2.0);
         }
         look.draw_precipitation(&mut canvas.rgba, frame);
         for (dst, src) in canvas.rgb.chunks_exact_mut(3).zip(canvas.rgba.data().chunks_exact(4)) {
