@@ -282,7 +282,7 @@ pub struct CitySpec {
 impl Default for CitySpec {
     fn default() -> Self {
         CitySpec {
-            desired_speed: 1.6,
+            desired_speed: 1.8,
             desired_speed_spread: 0.25,
             red_light_runner_probability: 0.02,
             driver: DriverParams::default(),

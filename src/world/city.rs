@@ -307,9 +307,11 @@ impl<'a> Sim<'a> {
             let LaneEnd::Intersection { approach, .. } = self.map.lanes[connector.from].end else { continue };
             let signal = if connector.turn == Turn::Left { Signal::Left } else { Signal::Straight };
             let light = &self.city.lights.lights[self.city.lights.index(intersection, approach, signal)];
-            // Once committed to a yellow the light no longer matters, but cars
-            // still crossing the box always do.
-            let must_stop = car.committed != Some(c)
+            // Once committed (moving, too close to stop comfortably) the light
+            // no longer matters, but cars still crossing the box always do. A
+            // car that has come to rest before its line is committed no more.
+            let committed = car.committed == Some(c) && car.v > 0.1;
+            let must_stop = !committed
                 && match light.state_at(t).colour {
                     Colour::Red => true,
                     Colour::Yellow => braking <= dist,
@@ -320,7 +322,7 @@ impl<'a> Sim<'a> {
                 stop = Some(dist.max(0.0));
                 break;
             }
-            if dist < braking + 0.5 {
+            if car.v > 0.1 && dist < braking {
                 commit = Some(c);
             }
         }
