@@ -72,6 +72,10 @@ fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
         threads: Some(threads),
         images,
         progress: ProgressMode::Quiet,
+        shard: None,
+        force: false,
+        fsync: false,
+        handle_signals: false,
     };
     generate(&options).unwrap().elapsed.as_secs_f64()
 }

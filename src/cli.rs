@@ -1,5 +1,6 @@
 //! Every command-line flag, defined once with its documentation.
 
+use crate::orchestrate::run::Shard;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -15,8 +16,13 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Generate a dataset from a spec file (see configs/).
+    /// Generate a dataset from a spec file (see configs/). Rerunning the same
+    /// command resumes an interrupted run.
     Gen(GenArgs),
+    /// Combine the outputs of `gen --shard K/N` runs into one dataset.
+    Merge(MergeArgs),
+    /// Check a dataset against data-schema/ and its checksums.
+    Validate(ValidateArgs),
 }
 
 #[derive(Debug, Args)]
@@ -37,11 +43,56 @@ pub struct GenArgs {
     #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
     pub threads: Option<u32>,
 
-    /// Write scenario.json and poses.csv only, no PNG frames or masks.
+    /// Write scenario.json and the CSV logs only, no PNG frames or masks.
     #[arg(long)]
     pub no_images: bool,
+
+    /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
+    /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
+
+    /// Replace a dataset made from another spec or version in --out. Removes
+    /// only what causalcity wrote (its manifests and group folders).
+    #[arg(long)]
+    pub force: bool,
+
+    /// fsync every file before a scenario is moved into place, so finished
+    /// scenarios survive a power cut (slower; a killed process never needs it).
+    #[arg(long)]
+    pub fsync: bool,
+
+    /// Print the final summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 
     /// No progress output (the final summary is still printed).
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The dataset folder to complete; shards may already be in it.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Shard output folders to move into --out (none when every shard wrote into --out).
+    #[arg(value_name = "SHARD_DIR")]
+    pub shards: Vec<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct ValidateArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DIR")]
+    pub dir: PathBuf,
+
+    /// Worker threads [default: every core].
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
+    pub threads: Option<u32>,
+
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 }

@@ -10,4 +10,5 @@ pub mod orchestrate;
 pub mod output;
 pub mod render;
 pub mod spec;
+pub mod validate;
 pub mod world;

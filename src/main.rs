@@ -1,8 +1,10 @@
 //! The `causalcity` binary: parses flags and hands over to the library.
 
 use causalcity::cli::{Cli, Command};
+use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::progress::ProgressMode;
 use causalcity::orchestrate::run::{generate, GenOptions, Summary};
+use causalcity::validate::validate;
 use clap::Parser;
 
 fn main() {
@@ -16,10 +18,18 @@ fn main() {
                 threads: args.threads.map(|t| t as usize),
                 images: !args.no_images,
                 progress: if args.quiet { ProgressMode::Quiet } else { ProgressMode::Auto },
+                shard: args.shard,
+                force: args.force,
+                fsync: args.fsync,
+                handle_signals: true,
             };
             match generate(&options) {
                 Ok(summary) => {
-                    println!("{}", summary_line(&summary));
+                    if args.json {
+                        println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                    } else {
+                        println!("{}", summary_line(&summary));
+                    }
                     0
                 }
                 Err(e) => {
@@ -28,6 +38,34 @@ fn main() {
                 }
             }
         }
+        Command::Merge(args) => match merge(&args.out, &args.shards) {
+            Ok(report) => {
+                println!("{report}");
+                0
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                e.exit_code()
+            }
+        },
+        Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
+            Ok(report) => {
+                if args.json {
+                    println!("{}", serde_json::to_string_pretty(&report).expect("report serialises"));
+                } else {
+                    print!("{report}");
+                }
+                if report.problems.is_empty() {
+                    0
+                } else {
+                    1
+                }
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                2
+            }
+        },
     };
     std::process::exit(code);
 }
@@ -35,15 +73,20 @@ fn main() {
 fn summary_line(s: &Summary) -> String {
     let secs = s.elapsed.as_secs_f64();
     let mut line = format!(
-        "wrote {} scenarios ({} frame pairs, {:.1} MB) to {} in {:.1} s: {:.1} scenarios/s on {} threads",
-        s.scenarios,
+        "wrote {} scenarios ({} frame pairs, {:.1} MB), skipped {} already complete, {} failed, to {} in {:.1} s: {:.1} scenarios/s on {} threads",
+        s.written,
         s.frame_pairs,
         s.bytes as f64 / 1e6,
+        s.skipped,
+        s.failed,
         s.out.display(),
         secs,
-        s.scenarios as f64 / secs.max(1e-9),
+        s.written as f64 / secs.max(1e-9),
         s.threads
     );
+    if let Some(shard) = &s.shard {
+        line.push_str(&format!(", shard {shard}"));
+    }
     if let Some(peak) = s.peak_memory {
         line.push_str(&format!(", peak memory {:.0} MB", peak as f64 / 1e6));
     }

@@ -4,6 +4,7 @@
 mod common;
 use common::*;
 use serde_json::Value;
+use sha2::Digest;
 use std::path::{Path, PathBuf};
 
 /// Resolves `$ref`s between the files of data-schema/.
@@ -60,7 +61,17 @@ fn the_layout_matches_data_schema() {
     for d in &dirs {
         let names: Vec<String> =
             sorted_entries(d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["mask", "poses.csv", "rgb", "scenario.json"], "{}", d.display());
+        assert_eq!(names, ["checksums.sha256", "mask", "poses.csv", "rgb", "scenario.json"], "{}", d.display());
+        // sha256sum -c format, covering every other file.
+        let listing = std::fs::read_to_string(d.join("checksums.sha256")).unwrap();
+        let frames_here = sorted_entries(&d.join("rgb")).len();
+        assert_eq!(listing.lines().count(), 2 + 2 * frames_here);
+        for line in listing.lines() {
+            let (hash, name) = line.split_once("  ").unwrap();
+            let digest = sha2::Sha256::digest(std::fs::read(d.join(name)).unwrap());
+            let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(hash, hex, "{name}");
+        }
         let scenario = read_json(&d.join("scenario.json"));
         assert_valid(&scenario_schema, &scenario, &d.join("scenario.json"));
         let frames = scenario["frames"].as_u64().unwrap() as usize;
@@ -112,7 +123,7 @@ fn no_images_writes_poses_and_ground_truth_only() {
     for d in scenario_dirs(&out) {
         let names: Vec<String> =
             sorted_entries(&d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["poses.csv", "scenario.json"]);
+        assert_eq!(names, ["checksums.sha256", "poses.csv", "scenario.json"]);
     }
 }
 
@@ -135,4 +146,44 @@ fn shipped_configs_are_valid_specs() {
         .map(|g| (g["cars"].as_u64().unwrap(), g["edge_proportion"].as_f64().unwrap()))
         .collect();
     assert_eq!(groups, [(4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)]);
+}
+
+#[test]
+fn the_city_layout_matches_data_schema_and_validates() {
+    let dir = fresh_dir("e2e-city");
+    let city = r#"{"confounders": {"rain": {"choice": [0, 1]}, "hour": {"uniform": [0, 24]}}}"#;
+    let spec = write_spec(&dir, &city_spec("e2e-city", &[(8, 0.5)], (2, 1, 1), 20, city));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet"]);
+    assert_valid(&validator("manifest.schema.json"), &read_json(&out.join("manifest.json")), &out);
+    let scenario_schema = validator("scenario.schema.json");
+    let columns = |name: &str| -> Vec<String> {
+        read_json(&schema_dir().join(name))["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f["name"].as_str().unwrap().to_string())
+            .collect()
+    };
+    for d in scenario_dirs(&out) {
+        let scenario = read_json(&d.join("scenario.json"));
+        assert_valid(&scenario_schema, &scenario, &d.join("scenario.json"));
+        assert!(scenario["city"]["effects"]["desired_speed_factor"].is_number());
+        for (file, schema, rows_per_frame) in
+            [("lights.csv", "lights.schema.json", Some(32)), ("events.csv", "events.schema.json", None)]
+        {
+            let mut reader = csv::Reader::from_path(d.join(file)).unwrap();
+            let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+            assert_eq!(header, columns(schema), "{file} columns");
+            let rows = reader.records().count();
+            if let Some(n) = rows_per_frame {
+                assert_eq!(rows, 20 * n);
+            }
+        }
+    }
+    let output = run(&["validate", out.to_str().unwrap(), "--json"]);
+    let report: Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(output.status.code(), Some(0), "{report}");
+    assert_eq!(report["scenarios_checked"], 4);
+    assert_eq!(report["problems"].as_array().unwrap().len(), 0);
 }

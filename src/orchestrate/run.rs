@@ -5,11 +5,11 @@ use super::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use super::progress::{Progress, ProgressMode};
 use crate::map::CityMap;
 use crate::output::logs::{write_events, write_lights};
-use crate::output::manifest::Manifest;
+use crate::output::manifest::{Manifest, ManifestRecord, ShardEntry};
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::output::poses::write_poses;
 use crate::output::scenario::scenario_json;
-use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError};
+use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError, PARTIAL_PREFIX};
 use crate::render::weather::SceneLook;
 use crate::render::{CarSprite, FrameCanvas, Renderer};
 use crate::spec::{DatasetSpec, SpecError, WorldKind};
@@ -18,7 +18,7 @@ use crate::world::toy::ToyWorld;
 use crate::world::{Trajectories, World};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -34,19 +34,68 @@ pub struct GenOptions {
     pub threads: Option<usize>,
     pub images: bool,
     pub progress: ProgressMode,
+    /// Generate only this part of the dataset.
+    pub shard: Option<Shard>,
+    /// Replace a dataset made from another spec (removes only what causalcity wrote).
+    pub force: bool,
+    /// fsync every file and folder before a scenario is renamed into place.
+    pub fsync: bool,
+    /// Stop cleanly on SIGINT / SIGTERM (the binary sets this).
+    pub handle_signals: bool,
+}
+
+/// Shard `index` of `count` (0-based): scenario i of the dataset's fixed order
+/// belongs to shard i mod count, so every shard gets its share of every group
+/// and split.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Shard, String> {
+        let usage = || format!("{text:?} is not a shard: use K/N with 0 <= K < N, e.g. 0/10");
+        let (k, n) = text.split_once('/').ok_or_else(usage)?;
+        let (index, count): (u32, u32) =
+            (k.trim().parse().map_err(|_| usage())?, n.trim().parse().map_err(|_| usage())?);
+        if count == 0 || index >= count {
+            return Err(usage());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
 }
 
 /// What a finished run did.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize)]
 pub struct Summary {
     pub out: PathBuf,
+    /// Scenarios this run was asked for (its shard's share when sharded).
     pub scenarios: u64,
+    pub written: u64,
+    /// Already complete from an earlier run.
+    pub skipped: u64,
+    pub failed: u64,
     pub frame_pairs: u64,
     pub bytes: u64,
+    #[serde(serialize_with = "seconds")]
     pub elapsed: Duration,
     pub threads: usize,
     /// Peak resident memory of the process, bytes (Linux only).
     pub peak_memory: Option<u64>,
+    pub shard: Option<String>,
+}
+
+fn seconds<S: serde::Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(d.as_secs_f64())
 }
 
 /// Why a run failed; [`GenError::exit_code`] maps it to the process status.
@@ -54,33 +103,63 @@ pub struct Summary {
 pub enum GenError {
     #[error("invalid spec {path}: {error}")]
     Spec { path: PathBuf, error: SpecError },
-    #[error("{0}\nhint: check that the output folder is writable and the disk has room, or choose another with --out")]
-    Write(#[from] WriteError),
+    #[error("{error}\n{done} finished scenarios are kept. Free some space or fix the folder's permissions (or choose another --out), then rerun the same command to resume.")]
+    Write { error: WriteError, done: u64 },
     #[error("cannot plan scenario {scenario}: {reason}")]
     Plan { scenario: String, reason: String },
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads { threads: usize, reason: String },
+    #[error("{out} holds a dataset made differently:\n  {}\nUse another --out, or --force to replace it (removes only what causalcity wrote there).", differences.join("\n  "))]
+    Mixed { out: PathBuf, differences: Vec<String> },
+    #[error("{0}")]
+    Manifest(String),
+    #[error("interrupted: {done} of {total} scenarios are complete in {out}. Rerun the same command to resume.")]
+    Interrupted { done: u64, total: u64, out: PathBuf },
+}
+
+impl From<WriteError> for GenError {
+    fn from(error: WriteError) -> GenError {
+        GenError::Write { error, done: 0 }
+    }
 }
 
 impl GenError {
-    /// 2 for bad input, 1 for failures while running.
+    /// 2 for bad input, 130 when interrupted, 1 for failures while running.
     pub fn exit_code(&self) -> i32 {
         match self {
-            GenError::Spec { .. } => 2,
+            GenError::Spec { .. } | GenError::Mixed { .. } => 2,
+            GenError::Interrupted { .. } => 130,
             _ => 1,
         }
     }
 }
 
+/// Set by SIGINT / SIGTERM; workers stop at the next frame.
+static STOP: AtomicBool = AtomicBool::new(false);
+static HANDLER: std::sync::Once = std::sync::Once::new();
+
+fn install_signal_handler() {
+    HANDLER.call_once(|| {
+        let _ = ctrlc::set_handler(|| {
+            if STOP.swap(true, Ordering::SeqCst) {
+                // A second Ctrl-C: leave at once (partial folders are hidden and discarded on rerun).
+                std::process::exit(130);
+            }
+            eprintln!("\nstopping: finishing no more scenarios (press Ctrl-C again to quit at once)");
+        });
+    });
+}
+
 /// Everything shared by the workers of one run.
-struct Job {
-    expansion: Expansion,
+struct Job<'e> {
+    expansion: &'e Expansion,
     map: Arc<CityMap>,
     world: Box<dyn World>,
     renderer: Option<Renderer>,
     out: PathBuf,
     png: PngSettings,
     intersection_names: Vec<String>,
+    fsync: bool,
 }
 
 /// Reads, checks and expands a spec file; nothing is written.
@@ -90,12 +169,104 @@ pub fn load_spec(path: &Path) -> Result<Expansion, GenError> {
     Expansion::new(spec, Arc::new(CityMap::default())).map_err(spec_err)
 }
 
-/// Runs `causalcity gen`.
+/// Where a run's manifest lives: `manifest.json`, or `shards/K-of-N.json`.
+pub fn manifest_path(out: &Path, shard: Option<Shard>) -> PathBuf {
+    match shard {
+        None => out.join("manifest.json"),
+        Some(s) => out.join("shards").join(format!("{}-of-{}.json", s.index, s.count)),
+    }
+}
+
+/// Every manifest in `out`: the dataset's and the shards'.
+fn existing_manifests(out: &Path) -> Result<Vec<(PathBuf, ManifestRecord)>, GenError> {
+    let mut paths = vec![out.join("manifest.json")];
+    if let Ok(entries) = std::fs::read_dir(out.join("shards")) {
+        let mut shard_paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        shard_paths.sort();
+        paths.extend(shard_paths.into_iter().filter(|p| p.extension().is_some_and(|e| e == "json")));
+    }
+    let mut found = Vec::new();
+    for path in paths {
+        if let Some(record) = ManifestRecord::read(&path).map_err(GenError::Manifest)? {
+            found.push((path, record));
+        }
+    }
+    Ok(found)
+}
+
+/// Removes what causalcity wrote into `out` according to `record`: the
+/// manifests and the group folders it lists, nothing else.
+fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(), GenError> {
+    let group_name = |n: &str| {
+        n.starts_with("cars") && n.contains("_edges") && n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    };
+    for (path, record) in records {
+        for g in &record.groups {
+            let dir = out.join(&g.name);
+            if group_name(&g.name) && dir.exists() {
+                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
+            }
+        }
+        std::fs::remove_file(path).map_err(io_err(path))?;
+    }
+    let shards = out.join("shards");
+    if shards.exists() && std::fs::read_dir(&shards).map(|mut d| d.next().is_none()).unwrap_or(false) {
+        std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
+    }
+    Ok(())
+}
+
+/// Removes hidden leftovers of interrupted scenarios in the spec's folders.
+fn sweep_partials(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
+    for g in &spec.groups {
+        for split in crate::spec::Split::ALL {
+            let dir = out.join(g.name()).join(split.name());
+            let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+            for e in entries.flatten() {
+                if e.file_name().to_string_lossy().starts_with(PARTIAL_PREFIX) {
+                    std::fs::remove_dir_all(e.path()).map_err(io_err(&e.path()))?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The scenarios of `shard` (all when `None`), in the dataset's fixed order.
+pub fn shard_keys(keys: Vec<ScenarioKey>, shard: Option<Shard>) -> Vec<ScenarioKey> {
+    match shard {
+        None => keys,
+        Some(s) => {
+            keys.into_iter().enumerate().filter(|(i, _)| *i as u32 % s.count == s.index).map(|(_, k)| k).collect()
+        }
+    }
+}
+
+/// Runs `causalcity gen`: resumes an interrupted run of the same spec, refuses
+/// to mix specs unless forced.
 pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     let start = Instant::now();
     let expansion = load_spec(&options.spec_path)?;
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     std::fs::create_dir_all(&out).map_err(io_err(&out))?;
+
+    // One dataset per folder: same spec, tool version and image setting.
+    let existing = existing_manifests(&out)?;
+    let differences: Vec<String> = existing
+        .iter()
+        .flat_map(|(_, record)| record.differences(&expansion.spec, options.images))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    if !differences.is_empty() {
+        if !options.force {
+            return Err(GenError::Mixed { out, differences });
+        }
+        remove_dataset(&out, &existing)?;
+    }
+    if options.shard.is_none() {
+        sweep_partials(&out, &expansion.spec)?;
+    }
 
     let threads = options
         .threads
@@ -105,6 +276,23 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         .num_threads(threads)
         .build()
         .map_err(|e| GenError::Threads { threads, reason: e.to_string() })?;
+    if options.handle_signals {
+        install_signal_handler();
+    }
+    STOP.store(false, Ordering::SeqCst);
+
+    let keys = shard_keys(expansion.keys(options.limit), options.shard);
+    let shard_entry =
+        options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: keys.len() as u64 });
+    let manifest_file = manifest_path(&out, options.shard);
+    if let Some(parent) = manifest_file.parent() {
+        std::fs::create_dir_all(parent).map_err(io_err(parent))?;
+    }
+    let manifest = |complete| {
+        Manifest::new(&expansion.spec, &expansion.camera, options.limit, options.images, complete, shard_entry)
+            .to_json()
+    };
+    write_atomically(&manifest_file, &manifest(false))?;
 
     let map = expansion.map.clone();
     let renderer = options.images.then(|| Renderer::new(&map, expansion.camera));
@@ -113,42 +301,68 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         WorldKind::City => Box::new(CityWorld::default()),
     };
     let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
-    let job =
-        Job { map, world, renderer, out: out.clone(), png: PngSettings::default(), expansion, intersection_names };
-    let keys = job.expansion.keys(options.limit);
+    let job = Job {
+        map,
+        world,
+        renderer,
+        out: out.clone(),
+        png: PngSettings::default(),
+        expansion: &expansion,
+        intersection_names,
+        fsync: options.fsync,
+    };
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
+    let written = AtomicU64::new(0);
+    let skipped = AtomicU64::new(0);
     let result = pool.install(|| {
         keys.par_iter().try_for_each_init(
             || job.renderer.as_ref().map(Renderer::canvas),
             |canvas, key| {
-                let written = write_scenario(&job, key, canvas.as_mut())?;
-                bytes.fetch_add(written, Ordering::Relaxed);
+                if STOP.load(Ordering::Relaxed) {
+                    return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+                }
+                if scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name()).exists() {
+                    skipped.fetch_add(1, Ordering::Relaxed);
+                } else {
+                    bytes.fetch_add(write_scenario(&job, key, canvas.as_mut())?, Ordering::Relaxed);
+                    written.fetch_add(1, Ordering::Relaxed);
+                }
                 progress.inc();
-                Ok::<(), GenError>(())
+                Ok(())
             },
         )
     });
     progress.finish();
-    result?;
-
-    let spec = &job.expansion.spec;
-    let manifest = Manifest::new(spec, &job.expansion.camera, options.limit, options.images).to_json();
-    write_atomically(&out.join("manifest.json"), &manifest)?;
-    let scenarios = keys.len() as u64;
+    let done = written.load(Ordering::Relaxed) + skipped.load(Ordering::Relaxed);
+    match result {
+        Err(GenError::Interrupted { .. }) => {
+            return Err(GenError::Interrupted { done, total: keys.len() as u64, out });
+        }
+        Err(GenError::Write { error, .. }) => return Err(GenError::Write { error, done }),
+        Err(e) => return Err(e),
+        Ok(()) => {}
+    }
+    let final_manifest = manifest(true);
+    write_atomically(&manifest_file, &final_manifest)?;
+    let written = written.load(Ordering::Relaxed);
     Ok(Summary {
         out,
-        scenarios,
-        frame_pairs: if options.images { scenarios * spec.frames as u64 } else { 0 },
-        bytes: bytes.load(Ordering::Relaxed) + manifest.len() as u64,
+        scenarios: keys.len() as u64,
+        written,
+        skipped: skipped.load(Ordering::Relaxed),
+        failed: 0,
+        frame_pairs: if options.images { written * expansion.spec.frames as u64 } else { 0 },
+        bytes: bytes.load(Ordering::Relaxed) + final_manifest.len() as u64,
         elapsed: start.elapsed(),
         threads,
         peak_memory: peak_memory_bytes(),
+        shard: options.shard.map(|s| s.to_string()),
     })
 }
 
 /// Plans, simulates and writes one scenario; returns the bytes written.
-fn write_scenario(job: &Job, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<u64, GenError> {
+fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<u64, GenError> {
     let plan = job.expansion.plan(key).map_err(|reason| GenError::Plan {
         scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
         reason,
@@ -156,7 +370,7 @@ fn write_scenario(job: &Job, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>
     let trajectories = job.world.simulate(&job.map, &plan);
     let camera = &job.expansion.camera;
     let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
-    let dir = ScenarioDir::begin(target, plan.frames, canvas.is_some())?;
+    let mut dir = ScenarioDir::begin(target, plan.frames, canvas.is_some(), job.fsync)?;
     let record =
         scenario_json(&plan, camera, job.expansion.spec.leader_gap_px, &job.intersection_names, job.world.model_name());
     let mut bytes = dir.write_file("scenario.json", &record)?;
@@ -168,17 +382,17 @@ fn write_scenario(job: &Job, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>
         bytes += dir.write_with("events.csv", |w| write_events(w, &trajectories))?;
     }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
-        bytes += write_frames(job, renderer, canvas, &dir, &plan, &trajectories)?;
+        bytes += write_frames(job, renderer, canvas, &mut dir, &plan, &trajectories)?;
     }
-    dir.commit()?;
+    bytes += dir.commit()?;
     Ok(bytes)
 }
 
 fn write_frames(
-    job: &Job,
+    job: &Job<'_>,
     renderer: &Renderer,
     canvas: &mut FrameCanvas,
-    dir: &ScenarioDir,
+    dir: &mut ScenarioDir,
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
 ) -> Result<u64, GenError> {
@@ -195,6 +409,9 @@ fn write_frames(
     let mut bytes = 0;
     let mut sprites = Vec::with_capacity(plan.cars.len());
     for (frame, states) in trajectories.states.iter().enumerate() {
+        if STOP.load(Ordering::Relaxed) {
+            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+        }
         sprites.clear();
         sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
             position: s.position,
@@ -206,10 +423,11 @@ fn write_frames(
         }));
         let frame = frame as u32;
         renderer.render(canvas, &scene, &sprites, frame);
-        bytes += dir.write_with(&dir.frame_name("rgb", frame), |out| {
+        let (rgb_name, mask_name) = (dir.frame_name("rgb", frame), dir.frame_name("mask", frame));
+        bytes += dir.write_with(&rgb_name, |out| {
             encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, job.png).map_err(png_to_io)
         })?;
-        bytes += dir.write_with(&dir.frame_name("mask", frame), |out| {
+        bytes += dir.write_with(&mask_name, |out| {
             encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, job.png).map_err(png_to_io)
         })?;
     }

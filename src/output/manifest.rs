@@ -4,8 +4,10 @@
 
 use crate::render::camera::Camera;
 use crate::spec::{DatasetSpec, Split};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
+use std::path::Path;
 
 /// Format tag written into every manifest.
 pub const MANIFEST_FORMAT: &str = "causalcity-dataset/1";
@@ -26,6 +28,8 @@ pub struct Manifest<'a> {
     pub format: &'static str,
     pub tool: &'static str,
     pub version: &'static str,
+    /// SHA-256 of the spec as run (with defaults filled in), compact JSON.
+    pub spec_sha256: String,
     pub spec: &'a DatasetSpec,
     /// Scenarios per split were capped at this (`--limit`).
     pub limit: Option<u32>,
@@ -35,10 +39,115 @@ pub struct Manifest<'a> {
     pub frame_file_digits: usize,
     pub scenarios: u64,
     pub groups: Vec<GroupEntry>,
+    /// False while a run is writing; true once every scenario is in place.
+    pub complete: bool,
+    /// Only in the per-shard manifests under `shards/`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard: Option<ShardEntry>,
+}
+
+/// Which part of the dataset a shard run writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ShardEntry {
+    /// 0-based.
+    pub index: u32,
+    pub count: u32,
+    /// Scenarios in this shard.
+    pub scenarios: u64,
+}
+
+/// SHA-256 (hex) of a spec's compact JSON.
+pub fn spec_sha256(spec: &DatasetSpec) -> String {
+    super::hex(&Sha256::digest(serde_json::to_vec(spec).expect("spec serialises")))
+}
+
+/// What a run into an existing folder must agree on.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct ManifestRecord {
+    pub version: String,
+    pub spec_sha256: String,
+    pub spec: serde_json::Value,
+    pub images: bool,
+    pub limit: Option<u32>,
+    pub groups: Vec<GroupRecord>,
+    pub complete: bool,
+    #[serde(default)]
+    pub shard: Option<ShardEntry>,
+}
+
+/// A group as read back from a manifest.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct GroupRecord {
+    pub name: String,
+}
+
+impl ManifestRecord {
+    /// Reads a manifest; `Ok(None)` when there is none.
+    pub fn read(path: &Path) -> Result<Option<ManifestRecord>, String> {
+        match std::fs::read(path) {
+            Ok(bytes) => serde_json::from_slice(&bytes)
+                .map(Some)
+                .map_err(|e| format!("{} is not a causalcity manifest: {e}", path.display())),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(format!("cannot read {}: {e}", path.display())),
+        }
+    }
+
+    /// What differs between this manifest and a run of `spec` (with `images`),
+    /// one line per difference; empty when they agree.
+    pub fn differences(&self, spec: &DatasetSpec, images: bool) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.version != env!("CARGO_PKG_VERSION") {
+            out.push(format!("tool version: {} wrote it, this is {}", self.version, env!("CARGO_PKG_VERSION")));
+        }
+        if self.images != images {
+            out.push(format!("images: {} there, {} now (--no-images)", self.images, images));
+        }
+        if self.spec_sha256 != spec_sha256(spec) {
+            let new = serde_json::to_value(spec).expect("spec serialises");
+            diff_values("spec", &self.spec, &new, &mut out);
+            if out.is_empty() {
+                out.push("spec: contents differ".into());
+            }
+        }
+        out
+    }
+}
+
+fn diff_values(path: &str, old: &serde_json::Value, new: &serde_json::Value, out: &mut Vec<String>) {
+    use serde_json::Value;
+    match (old, new) {
+        (Value::Object(a), Value::Object(b)) => {
+            let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+            for k in keys {
+                let null = Value::Null;
+                diff_values(&format!("{path}.{k}"), a.get(k).unwrap_or(&null), b.get(k).unwrap_or(&null), out);
+            }
+        }
+        _ if old != new => {
+            let short = |v: &serde_json::Value| {
+                let text = v.to_string();
+                if text.chars().count() > 60 {
+                    format!("{}...", text.chars().take(57).collect::<String>())
+                } else {
+                    text
+                }
+            };
+            out.push(format!("{path}: {} there, {} now", short(old), short(new)))
+        }
+        _ => {}
+    }
 }
 
 impl<'a> Manifest<'a> {
-    pub fn new(spec: &'a DatasetSpec, camera: &'a Camera, limit: Option<u32>, images: bool) -> Manifest<'a> {
+    pub fn new(
+        spec: &'a DatasetSpec,
+        camera: &'a Camera,
+        limit: Option<u32>,
+        images: bool,
+        complete: bool,
+        shard: Option<ShardEntry>,
+    ) -> Manifest<'a> {
         let groups = spec
             .groups
             .iter()
@@ -57,6 +166,7 @@ impl<'a> Manifest<'a> {
             format: MANIFEST_FORMAT,
             tool: "causalcity",
             version: env!("CARGO_PKG_VERSION"),
+            spec_sha256: spec_sha256(spec),
             spec,
             limit,
             images,
@@ -65,6 +175,8 @@ impl<'a> Manifest<'a> {
             frame_file_digits: super::frame_digits(spec.frames),
             scenarios: spec.scenario_count(limit),
             groups,
+            complete,
+            shard,
         }
     }
 

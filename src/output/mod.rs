@@ -12,6 +12,7 @@ pub mod png;
 pub mod poses;
 pub mod scenario;
 
+use sha2::{Digest, Sha256};
 use std::fs;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -39,21 +40,50 @@ pub fn scenario_dir(root: &Path, group: &str, split: &str, folder: &str) -> Path
     root.join(group).join(split).join(folder)
 }
 
+/// Name of the checksum file in every scenario folder (`sha256sum -c` format).
+pub const CHECKSUMS: &str = "checksums.sha256";
+
+/// Prefix of the hidden folder a scenario is written into before it is complete.
+pub const PARTIAL_PREFIX: &str = ".partial-";
+
 /// A scenario folder being written. Files go into a hidden temporary folder
-/// beside the final one, which is renamed into place by [`ScenarioDir::commit`],
-/// so a scenario folder that exists is complete.
+/// beside the final one, each hashed (SHA-256) as it is written; `commit`
+/// adds `checksums.sha256`, flushes and renames the folder into place, so a
+/// scenario folder that exists is complete.
 pub struct ScenarioDir {
     temp: PathBuf,
     target: PathBuf,
     frame_digits: usize,
     committed: bool,
+    fsync: bool,
+    hashes: Vec<(String, [u8; 32])>,
+}
+
+/// Passes bytes through to a writer and hashes them on the way.
+struct HashingWriter<W: Write> {
+    inner: W,
+    hasher: Sha256,
+}
+
+impl<W: Write> Write for HashingWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.hasher.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 impl ScenarioDir {
-    /// Starts writing the scenario that will live at `target`.
-    pub fn begin(target: PathBuf, frames: u32, images: bool) -> Result<ScenarioDir, WriteError> {
+    /// Starts writing the scenario that will live at `target`; leftovers of
+    /// an interrupted attempt are discarded. With `fsync`, every file and the
+    /// folder reach the disk before the rename (survives power loss, slower).
+    pub fn begin(target: PathBuf, frames: u32, images: bool, fsync: bool) -> Result<ScenarioDir, WriteError> {
         let name = target.file_name().expect("scenario folder has a name").to_string_lossy().into_owned();
-        let temp = target.with_file_name(format!(".partial-{name}"));
+        let temp = target.with_file_name(format!("{PARTIAL_PREFIX}{name}"));
         if temp.exists() {
             fs::remove_dir_all(&temp).map_err(io_err(&temp))?;
         }
@@ -64,28 +94,39 @@ impl ScenarioDir {
                 fs::create_dir(&p).map_err(io_err(&p))?;
             }
         }
-        Ok(ScenarioDir { temp, target, frame_digits: frame_digits(frames), committed: false })
+        Ok(ScenarioDir {
+            temp,
+            target,
+            frame_digits: frame_digits(frames),
+            committed: false,
+            fsync,
+            hashes: Vec::new(),
+        })
     }
 
     /// Writes a whole file into the scenario folder.
-    pub fn write_file(&self, name: &str, bytes: &[u8]) -> Result<u64, WriteError> {
-        let path = self.temp.join(name);
-        fs::write(&path, bytes).map_err(io_err(&path))?;
-        Ok(bytes.len() as u64)
+    pub fn write_file(&mut self, name: &str, bytes: &[u8]) -> Result<u64, WriteError> {
+        self.write_with(name, |w| w.write_all(bytes))
     }
 
     /// Streams a file through `fill`; returns its size.
     pub fn write_with<E: Into<std::io::Error>>(
-        &self,
+        &mut self,
         name: &str,
-        fill: impl FnOnce(&mut BufWriter<fs::File>) -> Result<(), E>,
+        fill: impl FnOnce(&mut dyn Write) -> Result<(), E>,
     ) -> Result<u64, WriteError> {
         let path = self.temp.join(name);
         let file = fs::File::create(&path).map_err(io_err(&path))?;
-        let mut w = BufWriter::with_capacity(1 << 16, file);
+        let mut w = HashingWriter { inner: BufWriter::with_capacity(1 << 16, file), hasher: Sha256::new() };
         fill(&mut w).map_err(|e| WriteError { path: path.clone(), source: e.into() })?;
         w.flush().map_err(io_err(&path))?;
-        let len = w.get_ref().metadata().map_err(io_err(&path))?.len();
+        let HashingWriter { inner, hasher } = w;
+        let file = inner.into_inner().map_err(|e| WriteError { path: path.clone(), source: e.into_error() })?;
+        if self.fsync {
+            file.sync_all().map_err(io_err(&path))?;
+        }
+        let len = file.metadata().map_err(io_err(&path))?.len();
+        self.hashes.push((name.to_string(), hasher.finalize().into()));
         Ok(len)
     }
 
@@ -94,14 +135,26 @@ impl ScenarioDir {
         format!("{kind}/{frame:0width$}.png", width = self.frame_digits)
     }
 
-    /// Moves the finished scenario into place, replacing an older copy.
-    pub fn commit(mut self) -> Result<(), WriteError> {
+    /// Writes the checksums and moves the finished scenario into place,
+    /// replacing an older copy. Returns the checksum file's size.
+    pub fn commit(mut self) -> Result<u64, WriteError> {
+        let mut hashes = std::mem::take(&mut self.hashes);
+        hashes.sort();
+        let listing: String = hashes.iter().map(|(name, h)| format!("{}  {name}\n", hex(h))).collect();
+        let len = self.write_file(CHECKSUMS, listing.as_bytes())?;
+        if self.fsync {
+            for dir in [self.temp.clone(), self.temp.join("rgb"), self.temp.join("mask")] {
+                if dir.exists() {
+                    fs::File::open(&dir).and_then(|d| d.sync_all()).map_err(io_err(&dir))?;
+                }
+            }
+        }
         if self.target.exists() {
             fs::remove_dir_all(&self.target).map_err(io_err(&self.target))?;
         }
         fs::rename(&self.temp, &self.target).map_err(io_err(&self.target))?;
         self.committed = true;
-        Ok(())
+        Ok(len)
     }
 }
 
@@ -113,9 +166,16 @@ impl Drop for ScenarioDir {
     }
 }
 
+/// Lower-case hex of bytes.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// Writes `bytes` to `path` through a temporary file and a rename.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
-    let temp = path.with_extension("json.partial");
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let temp = path.with_file_name(name);
     fs::write(&temp, bytes).map_err(io_err(&temp))?;
     fs::rename(&temp, path).map_err(io_err(path))
 }

@@ -1,0 +1,178 @@
+//! `causalcity merge`: turns the outputs of `gen --shard K/N` runs into one
+//! dataset with one manifest, byte for byte what an unsharded run writes.
+//! Shards may have written into one shared folder or into folders of their
+//! own; either way the shard manifests say what each contains.
+
+use super::plan::Expansion;
+use super::run::GenError;
+use crate::map::CityMap;
+use crate::output::manifest::{Manifest, ManifestRecord};
+use crate::output::{io_err, scenario_dir, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use crate::spec::DatasetSpec;
+use std::collections::BTreeSet;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Shard manifests found in `dir/shards/`.
+fn shard_manifests(dir: &Path) -> Result<Vec<(PathBuf, ManifestRecord)>, GenError> {
+    let mut found = Vec::new();
+    let Ok(entries) = fs::read_dir(dir.join("shards")) else { return Ok(found) };
+    let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    paths.sort();
+    for path in paths.into_iter().filter(|p| p.extension().is_some_and(|e| e == "json")) {
+        if let Some(record) = ManifestRecord::read(&path).map_err(GenError::Manifest)? {
+            if record.shard.is_some() {
+                found.push((path, record));
+            }
+        }
+    }
+    Ok(found)
+}
+
+/// Copies a scenario folder (files, rgb/, mask/) when it cannot be renamed.
+fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
+    fs::create_dir_all(to)?;
+    for entry in fs::read_dir(from)? {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        if entry.file_type()?.is_dir() {
+            copy_tree(&entry.path(), &target)?;
+        } else {
+            fs::copy(entry.path(), target)?;
+        }
+    }
+    Ok(())
+}
+
+/// Merges shard outputs in `sources` (and any already in `out`) into `out`.
+pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
+    fs::create_dir_all(out).map_err(io_err(out))?;
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    let others: Vec<&PathBuf> = sources.iter().filter(|s| !same(s, out)).collect();
+    let mut manifests = shard_manifests(out)?;
+    for source in &others {
+        if !source.is_dir() {
+            return Err(GenError::Manifest(format!("{} is not a folder", source.display())));
+        }
+        manifests.extend(shard_manifests(source)?);
+    }
+    let Some((_, first)) = manifests.first().cloned() else {
+        return Err(GenError::Manifest(format!(
+            "no shard manifests (shards/K-of-N.json) in {}{}: run `causalcity gen --shard K/N` first",
+            out.display(),
+            if others.is_empty() { "" } else { " or the shard folders given" }
+        )));
+    };
+
+    // Every shard must come from the same spec, version and settings.
+    let count = first.shard.expect("shard manifests carry their shard").count;
+    for (path, record) in &manifests {
+        let shard = record.shard.expect("shard manifests carry their shard");
+        if record.spec_sha256 != first.spec_sha256
+            || record.version != first.version
+            || record.images != first.images
+            || record.limit != first.limit
+            || shard.count != count
+        {
+            return Err(GenError::Manifest(format!(
+                "{} belongs to another dataset (spec, version, --no-images, --limit or shard count differ) than {}",
+                path.display(),
+                manifests[0].0.display()
+            )));
+        }
+    }
+    let present: BTreeSet<u32> = manifests.iter().map(|(_, r)| r.shard.expect("shard").index).collect();
+    let missing: Vec<String> = (0..count).filter(|i| !present.contains(i)).map(|i| i.to_string()).collect();
+    if !missing.is_empty() {
+        return Err(GenError::Manifest(format!(
+            "shards {} of {count} are missing: run `causalcity gen --shard K/{count}` for them",
+            missing.join(", ")
+        )));
+    }
+    let incomplete: Vec<String> =
+        manifests.iter().filter(|(_, r)| !r.complete).map(|(_, r)| r.shard.expect("shard").index.to_string()).collect();
+    if !incomplete.is_empty() {
+        return Err(GenError::Manifest(format!(
+            "shards {} did not finish: rerun their gen commands to resume them",
+            incomplete.join(", ")
+        )));
+    }
+    if let Some(existing) = ManifestRecord::read(&out.join("manifest.json")).map_err(GenError::Manifest)? {
+        if existing.spec_sha256 != first.spec_sha256 || existing.version != first.version {
+            return Err(GenError::Manifest(format!(
+                "{} already holds another dataset: merge into an empty folder",
+                out.display()
+            )));
+        }
+    }
+
+    let spec: DatasetSpec = serde_json::from_value(first.spec.clone())
+        .map_err(|e| GenError::Manifest(format!("shard manifest spec is unreadable: {e}")))?;
+    let expansion = Expansion::new(spec.clone(), Arc::new(CityMap::default()))
+        .map_err(|error| GenError::Spec { path: manifests[0].0.clone(), error })?;
+    let keys = expansion.keys(first.limit);
+
+    // Move every scenario into place.
+    let (mut moved, mut already) = (0u64, 0u64);
+    for source in &others {
+        for key in &keys {
+            let from = scenario_dir(source, &key.group, key.split.name(), &key.folder_name());
+            if !from.is_dir() {
+                continue;
+            }
+            let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
+            if to.exists() {
+                let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(to.join(CHECKSUMS)).ok());
+                if a.is_none() || a != b {
+                    return Err(GenError::Manifest(format!(
+                        "{} and {} hold the same scenario with different contents",
+                        from.display(),
+                        to.display()
+                    )));
+                }
+                fs::remove_dir_all(&from).map_err(io_err(&from))?;
+                already += 1;
+                continue;
+            }
+            let parent = to.parent().expect("scenario folders have parents");
+            fs::create_dir_all(parent).map_err(io_err(parent))?;
+            if fs::rename(&from, &to).is_err() {
+                // Another filesystem: copy, then remove the source.
+                let partial = parent.join(format!("{PARTIAL_PREFIX}{}", key.folder_name()));
+                copy_tree(&from, &partial).map_err(io_err(&partial))?;
+                fs::rename(&partial, &to).map_err(io_err(&to))?;
+                fs::remove_dir_all(&from).map_err(io_err(&from))?;
+            }
+            moved += 1;
+        }
+    }
+    let absent: Vec<String> = keys
+        .iter()
+        .filter(|k| !scenario_dir(out, &k.group, k.split.name(), &k.folder_name()).is_dir())
+        .map(|k| format!("{}/{}/{}", k.group, k.split.name(), k.folder_name()))
+        .collect();
+    if !absent.is_empty() {
+        return Err(GenError::Manifest(format!(
+            "{} scenarios are in no shard (first: {}): were all shard folders given?",
+            absent.len(),
+            absent[..absent.len().min(3)].join(", ")
+        )));
+    }
+    let manifest = Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.images, true, None).to_json();
+    write_atomically(&out.join("manifest.json"), &manifest)?;
+    for (path, _) in &manifests {
+        fs::remove_file(path).map_err(io_err(path))?;
+        if let Some(dir) = path.parent() {
+            let _ = fs::remove_dir(dir); // only when empty
+        }
+    }
+    Ok(format!(
+        "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
+        out.display(),
+        keys.len()
+    ))
+}

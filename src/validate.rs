@@ -1,0 +1,392 @@
+//! `causalcity validate`: checks a dataset folder against what `data-schema/`
+//! documents and against its own checksums, in parallel, reading every file
+//! once: files present, frame counts and sizes, CSV columns and row counts,
+//! ids consistent across scenario.json, the CSV logs and the masks, and the
+//! SHA-256 of every file. Reports every problem with its path.
+
+use crate::map::CityMap;
+use crate::orchestrate::plan::{Expansion, ScenarioKey};
+use crate::output::logs::{EVENT_COLUMNS, LIGHT_COLUMNS};
+use crate::output::manifest::ManifestRecord;
+use crate::output::poses::POSE_COLUMNS;
+use crate::output::{frame_digits, hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
+use crate::spec::{DatasetSpec, WorldKind};
+use rayon::prelude::*;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// One thing wrong, and where.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Problem {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+/// The outcome of a validation.
+#[derive(Debug, Clone, Serialize)]
+pub struct ValidationReport {
+    pub dir: PathBuf,
+    pub scenarios_expected: usize,
+    pub scenarios_checked: usize,
+    pub files_checked: u64,
+    pub bytes_read: u64,
+    pub seconds: f64,
+    pub problems: Vec<Problem>,
+}
+
+impl fmt::Display for ValidationReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for p in &self.problems {
+            writeln!(f, "{}: {}", p.path.display(), p.message)?;
+        }
+        writeln!(
+            f,
+            "{}: {} of {} scenarios checked, {} files, {:.1} MB in {:.1} s: {}",
+            self.dir.display(),
+            self.scenarios_checked,
+            self.scenarios_expected,
+            self.files_checked,
+            self.bytes_read as f64 / 1e6,
+            self.seconds,
+            if self.problems.is_empty() { "valid".to_string() } else { format!("{} problems", self.problems.len()) }
+        )
+    }
+}
+
+/// What every scenario of the dataset must look like.
+struct Expected<'a> {
+    spec: &'a DatasetSpec,
+    images: bool,
+    digits: usize,
+}
+
+/// Checks the dataset in `dir`. Errors only when `dir` is not a dataset.
+pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, String> {
+    let start = Instant::now();
+    let manifest_path = dir.join("manifest.json");
+    let record = ManifestRecord::read(&manifest_path)?.ok_or_else(|| {
+        format!("no manifest.json in {}: not a causalcity dataset, or its gen run has not started", dir.display())
+    })?;
+    let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
+        .map_err(|e| format!("{}: the spec in it is unreadable: {e}", manifest_path.display()))?;
+    let expansion = Expansion::new(spec, Arc::new(CityMap::default()))
+        .map_err(|e| format!("{}: the spec in it is invalid: {e}", manifest_path.display()))?;
+    let keys = expansion.keys(record.limit);
+    let expected =
+        Expected { spec: &expansion.spec, images: record.images, digits: frame_digits(expansion.spec.frames) };
+
+    let mut problems = Vec::new();
+    if !record.complete {
+        problems.push(Problem {
+            path: manifest_path.clone(),
+            message: "the run that wrote this dataset did not finish: rerun its gen command to complete it".into(),
+        });
+    }
+    problems.extend(unexpected_entries(dir, &keys));
+
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
+    let results: Vec<(Vec<Problem>, u64, u64)> =
+        pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect());
+    let (mut files, mut bytes) = (0, 0);
+    for (p, f, b) in results {
+        problems.extend(p);
+        files += f;
+        bytes += b;
+    }
+    Ok(ValidationReport {
+        dir: dir.to_path_buf(),
+        scenarios_expected: keys.len(),
+        scenarios_checked: keys.len(),
+        files_checked: files,
+        bytes_read: bytes,
+        seconds: start.elapsed().as_secs_f64(),
+        problems,
+    })
+}
+
+/// Leftovers of interrupted runs and folders the manifest does not know.
+fn unexpected_entries(dir: &Path, keys: &[ScenarioKey]) -> Vec<Problem> {
+    let known: BTreeSet<PathBuf> =
+        keys.iter().map(|k| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name())).collect();
+    let splits: BTreeSet<PathBuf> = known.iter().filter_map(|p| p.parent().map(Path::to_path_buf)).collect();
+    let mut problems = Vec::new();
+    for split in splits {
+        let Ok(entries) = std::fs::read_dir(&split) else { continue };
+        for e in entries.flatten() {
+            let path = e.path();
+            if known.contains(&path) {
+                continue;
+            }
+            let message = if e.file_name().to_string_lossy().starts_with(PARTIAL_PREFIX) {
+                "leftover of an interrupted scenario: rerun gen to finish it"
+            } else {
+                "not part of this dataset (the manifest does not list it)"
+            };
+            problems.push(Problem { path, message: message.into() });
+        }
+    }
+    problems
+}
+
+/// Checks one scenario; returns its problems, files and bytes read.
+fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (Vec<Problem>, u64, u64) {
+    let dir = scenario_dir(root, &key.group, key.split.name(), &key.folder_name());
+    let mut problems = Vec::new();
+    let mut problem = |path: &Path, message: String| problems.push(Problem { path: path.to_path_buf(), message });
+    if !dir.is_dir() {
+        problem(&dir, "missing scenario folder: rerun gen to write it".into());
+        return (problems, 0, 0);
+    }
+    let spec = expected.spec;
+    let frames = spec.frames as usize;
+    let city = spec.world == WorldKind::City;
+
+    // The files there should be.
+    let mut names: Vec<String> = vec!["scenario.json".into(), "poses.csv".into()];
+    if city {
+        names.extend(["lights.csv".into(), "events.csv".into()]);
+    }
+    if expected.images {
+        for kind in ["rgb", "mask"] {
+            names.extend((0..frames).map(|f| format!("{kind}/{f:0width$}.png", width = expected.digits)));
+        }
+    }
+    let wanted: BTreeSet<&str> = names.iter().map(String::as_str).collect();
+    for extra in list_files(&dir).iter().filter(|n| !wanted.contains(n.as_str()) && n.as_str() != CHECKSUMS) {
+        problem(&dir.join(extra), "unexpected file".into());
+    }
+
+    // The checksum listing.
+    let listing: BTreeMap<String, String> = match std::fs::read_to_string(dir.join(CHECKSUMS)) {
+        Ok(text) => {
+            text.lines().filter_map(|l| l.split_once("  ").map(|(h, n)| (n.to_string(), h.to_string()))).collect()
+        }
+        Err(e) => {
+            problem(&dir.join(CHECKSUMS), format!("cannot read: {e}"));
+            BTreeMap::new()
+        }
+    };
+
+    let (mut files, mut bytes) = (0u64, 0u64);
+    let mut read = |name: &str, problems: &mut Vec<Problem>| -> Option<Vec<u8>> {
+        let path = dir.join(name);
+        let data = match std::fs::read(&path) {
+            Ok(d) => d,
+            Err(e) => {
+                problems.push(Problem { path, message: format!("missing or unreadable: {e}") });
+                return None;
+            }
+        };
+        files += 1;
+        bytes += data.len() as u64;
+        match listing.get(name) {
+            Some(h) if *h == hex(&Sha256::digest(&data)) => {}
+            Some(_) => problems.push(Problem {
+                path: path.clone(),
+                message: "checksum mismatch: the file changed after it was written".into(),
+            }),
+            None => problems.push(Problem { path: path.clone(), message: format!("not listed in {CHECKSUMS}") }),
+        }
+        Some(data)
+    };
+
+    // scenario.json: identity, frames and cars.
+    let mut mask_ids: BTreeSet<u8> = BTreeSet::new();
+    let mut cars = 0usize;
+    if let Some(data) = read("scenario.json", &mut problems) {
+        let path = dir.join("scenario.json");
+        match serde_json::from_slice::<serde_json::Value>(&data) {
+            Ok(v) => {
+                let checks = [
+                    (v["format"] == crate::output::scenario::SCENARIO_FORMAT, "format"),
+                    (v["group"] == key.group.as_str(), "group"),
+                    (v["split"] == key.split.name(), "split"),
+                    (v["index"] == key.index, "index"),
+                    (v["frames"] == spec.frames, "frames"),
+                    (v["world"] == spec.world.name(), "world"),
+                ];
+                for (ok, field) in checks {
+                    if !ok {
+                        problems
+                            .push(Problem { path: path.clone(), message: format!("`{field}` is {} here", v[field]) });
+                    }
+                }
+                let list = v["cars"].as_array().cloned().unwrap_or_default();
+                cars = list.len();
+                for (i, car) in list.iter().enumerate() {
+                    if car["id"] != i || car["mask_id"] != i + 1 {
+                        problems.push(Problem {
+                            path: path.clone(),
+                            message: format!("car {i} has id {} and mask_id {}", car["id"], car["mask_id"]),
+                        });
+                    }
+                    mask_ids.insert((i + 1) as u8);
+                }
+                let group = spec.groups.iter().find(|g| g.name() == key.group);
+                if let Some(g) = group {
+                    if cars != g.cars as usize {
+                        problems.push(Problem {
+                            path: path.clone(),
+                            message: format!("{cars} cars, the spec asks for {}", g.cars),
+                        });
+                    }
+                }
+            }
+            Err(e) => problems.push(Problem { path, message: format!("not valid JSON: {e}") }),
+        }
+    }
+
+    // CSV logs: columns, row counts, ids.
+    if let Some(data) = read("poses.csv", &mut problems) {
+        check_csv(&dir.join("poses.csv"), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
+            let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(2)?.parse::<usize>().ok()?);
+            let ok = cars > 0 && frame == i / cars && car == i % cars;
+            ok.then_some(()).ok_or(()).ok()
+        });
+    }
+    if city {
+        if let Some(data) = read("lights.csv", &mut problems) {
+            check_csv(&dir.join("lights.csv"), &data, &LIGHT_COLUMNS, frames * 32, &mut problems, |row, i| {
+                (row.get(0)?.parse::<usize>().ok()? == i / 32).then_some(())
+            });
+        }
+        if let Some(data) = read("events.csv", &mut problems) {
+            let path = dir.join("events.csv");
+            let mut reader = csv::Reader::from_reader(&data[..]);
+            let header_ok = reader.headers().map(|h| h.iter().eq(EVENT_COLUMNS.iter().copied())).unwrap_or(false);
+            if !header_ok {
+                problems.push(Problem {
+                    path: path.clone(),
+                    message: format!("columns should be {}", EVENT_COLUMNS.join(",")),
+                });
+            }
+            for (i, row) in reader.records().enumerate() {
+                let ok = row.as_ref().ok().and_then(|r| r.get(3)?.parse::<usize>().ok()).is_some_and(|c| c < cars);
+                if !ok {
+                    problems.push(Problem {
+                        path: path.clone(),
+                        message: format!("row {} names no car of this scenario", i + 2),
+                    });
+                    break;
+                }
+            }
+        }
+    }
+
+    // Frames: RGB by header (their bytes are covered by the checksums), masks
+    // decoded so that every id is checked.
+    if expected.images {
+        let (w, h) = (spec.image.width, spec.image.height);
+        for f in 0..frames {
+            let rgb = format!("rgb/{f:0width$}.png", width = expected.digits);
+            if let Some(data) = read(&rgb, &mut problems) {
+                match png_header(&data) {
+                    Some((pw, ph, 8, 2)) if (pw, ph) == (w, h) => {}
+                    Some((pw, ph, depth, colour)) => problems.push(Problem {
+                        path: dir.join(&rgb),
+                        message: format!("{pw}x{ph}, depth {depth}, colour type {colour}; expected {w}x{h} 8-bit RGB"),
+                    }),
+                    None => problems.push(Problem { path: dir.join(&rgb), message: "not a PNG".into() }),
+                }
+            }
+            let mask = format!("mask/{f:0width$}.png", width = expected.digits);
+            if let Some(data) = read(&mask, &mut problems) {
+                if let Err(message) = check_mask(&data, w, h, &mask_ids) {
+                    problems.push(Problem { path: dir.join(&mask), message });
+                }
+            }
+        }
+    }
+    (problems, files, bytes)
+}
+
+fn check_csv(
+    path: &Path,
+    data: &[u8],
+    columns: &[&str],
+    rows: usize,
+    problems: &mut Vec<Problem>,
+    row_ok: impl Fn(&csv::StringRecord, usize) -> Option<()>,
+) {
+    let mut reader = csv::Reader::from_reader(data);
+    let header_ok = reader.headers().map(|h| h.iter().eq(columns.iter().copied())).unwrap_or(false);
+    if !header_ok {
+        problems
+            .push(Problem { path: path.to_path_buf(), message: format!("columns should be {}", columns.join(",")) });
+        return;
+    }
+    let mut n = 0;
+    for (i, row) in reader.records().enumerate() {
+        let good = row.as_ref().ok().and_then(|r| (r.len() == columns.len()).then_some(r)).and_then(|r| row_ok(r, i));
+        if good.is_none() {
+            problems.push(Problem {
+                path: path.to_path_buf(),
+                message: format!("row {} is malformed or out of order", i + 2),
+            });
+            return;
+        }
+        n += 1;
+    }
+    if n != rows {
+        problems.push(Problem { path: path.to_path_buf(), message: format!("{n} rows, expected {rows}") });
+    }
+}
+
+/// (width, height, bit depth, colour type) from a PNG's IHDR.
+fn png_header(data: &[u8]) -> Option<(u32, u32, u8, u8)> {
+    if data.len() < 29 || &data[..8] != b"\x89PNG\r\n\x1a\n" || &data[12..16] != b"IHDR" {
+        return None;
+    }
+    let w = u32::from_be_bytes(data[16..20].try_into().ok()?);
+    let h = u32::from_be_bytes(data[20..24].try_into().ok()?);
+    Some((w, h, data[24], data[25]))
+}
+
+fn check_mask(data: &[u8], w: u32, h: u32, ids: &BTreeSet<u8>) -> Result<(), String> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(data));
+    let mut reader = decoder.read_info().map_err(|e| format!("cannot decode: {e}"))?;
+    let info = reader.info();
+    if (info.width, info.height) != (w, h)
+        || info.color_type != png::ColorType::Grayscale
+        || info.bit_depth != png::BitDepth::Eight
+    {
+        return Err(format!(
+            "{}x{} {:?} {:?}; expected {w}x{h} 8-bit grey",
+            info.width, info.height, info.color_type, info.bit_depth
+        ));
+    }
+    let mut buf = vec![0; reader.output_buffer_size().ok_or("image too large")?];
+    reader.next_frame(&mut buf).map_err(|e| format!("cannot decode: {e}"))?;
+    let mut seen = [false; 256];
+    for &v in &buf {
+        seen[v as usize] = true;
+    }
+    let stray: Vec<u8> = (1..=255u8).filter(|&v| seen[v as usize] && !ids.contains(&v)).collect();
+    if !stray.is_empty() {
+        return Err(format!("ids {stray:?} belong to no car of scenario.json"));
+    }
+    Ok(())
+}
+
+/// Relative paths of every file under `dir`.
+fn list_files(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else { continue };
+        for e in entries.flatten() {
+            let path = e.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if let Ok(rel) = path.strip_prefix(dir) {
+                out.push(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
+    out
+}

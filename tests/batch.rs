@@ -1,0 +1,316 @@
+//! Batch runs that survive: kills and resumes, interrupts, sharding and
+//! merging, the mixing guard, full and read-only disks, and `validate`.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn small_spec(dir: &Path) -> PathBuf {
+    write_spec(dir, &toy_spec("batch", &[(4, 0.5), (8, 0.5)], (4, 2, 2), 40))
+}
+
+fn gen_cmd(spec: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut cmd = Command::new(bin());
+    cmd.args(["gen", "--quiet", "--spec"]).arg(spec).arg("--out").arg(out).args(extra);
+    cmd
+}
+
+fn validate_dir(dir: &Path) -> (i32, String) {
+    let out = run(&["validate", dir.to_str().unwrap()]);
+    (out.status.code().unwrap(), String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+#[test]
+fn killed_runs_resume_to_identical_bytes() {
+    let dir = fresh_dir("batch-kill");
+    // About 1.5 s of work on two cores, so that kills land mid-run.
+    let spec = write_spec(&dir, &toy_spec("kill", &[(4, 0.5), (8, 0.5)], (4, 2, 2), 120));
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet"]);
+    let expected = hash_tree(&reference);
+    assert!(expected.len() > 16 * 240);
+
+    // Kill at spread-out moments; one folder is killed three times before it completes.
+    let delays_ms: [&[u64]; 5] = [&[40], &[150, 90], &[300], &[520, 260, 130], &[800]];
+    let mut interrupted = 0;
+    for (trial, delays) in delays_ms.iter().enumerate() {
+        let out = dir.join(format!("killed-{trial}"));
+        for &delay in *delays {
+            let mut child = gen_cmd(&spec, &out, &[]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+            std::thread::sleep(Duration::from_millis(delay));
+            let _ = child.kill(); // SIGKILL
+            child.wait().unwrap();
+        }
+        // Whatever state the kill left, no partial scenario looks complete.
+        let (code, report) = validate_dir(&out);
+        assert!(
+            code != 0 || hash_tree(&out) == expected,
+            "a killed run validated as complete without being so: {report}"
+        );
+        interrupted += (code != 0) as usize;
+        gen_ok(&spec, &out, &["--quiet"]);
+        assert_eq!(hash_tree(&out), expected, "trial {trial}: resumed output differs from an uninterrupted run");
+    }
+    assert!(interrupted >= 4, "only {interrupted} of 5 kills landed mid-run");
+}
+
+#[test]
+fn ctrl_c_stops_quickly_and_says_how_to_resume() {
+    let dir = fresh_dir("batch-sigint");
+    let spec = write_spec(&dir, &toy_spec("sigint", &[(12, 0.5)], (60, 0, 0), 150));
+    let out = dir.join("out");
+    let child = gen_cmd(&spec, &out, &["-j", "2"]).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    let sent = Instant::now();
+    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let output = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(took < Duration::from_secs(2), "took {took:?} to stop");
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("Rerun the same command to resume"), "{stderr}");
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 1, "an interrupted dataset must not validate: {report}");
+    assert!(report.contains("did not finish"), "{report}");
+    gen_ok(&spec, &out, &["--quiet"]);
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 0, "{report}");
+}
+
+#[test]
+fn three_shards_merged_equal_one_run() {
+    let dir = fresh_dir("batch-shards");
+    let spec = small_spec(&dir);
+    let whole = dir.join("whole");
+    gen_ok(&spec, &whole, &["--quiet", "-j", "2"]);
+    let expected = hash_tree(&whole);
+
+    // Shards in folders of their own, merged into a new one.
+    let mut shard_dirs = Vec::new();
+    for k in 0..3 {
+        let out = dir.join(format!("shard{k}"));
+        let output = gen_ok(&spec, &out, &["--shard", &format!("{k}/3"), "--json", "-j", "1"]);
+        let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+        assert_eq!(summary["shard"], format!("{k}/3"));
+        assert!(summary["written"].as_u64().unwrap() >= 5, "shards are balanced: {summary}");
+        shard_dirs.push(out.to_str().unwrap().to_string());
+    }
+    let merged = dir.join("merged");
+    let mut args = vec!["merge", "--out", merged.to_str().unwrap()];
+    args.extend(shard_dirs.iter().map(String::as_str));
+    let output = run(&args);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(hash_tree(&merged), expected, "merged shards differ from one run");
+
+    // Shards written into one shared folder, merged in place.
+    let shared = dir.join("shared");
+    for k in [2, 0, 1] {
+        gen_ok(&spec, &shared, &["--quiet", "--shard", &format!("{k}/3")]);
+    }
+    let premature = run(&["validate", shared.to_str().unwrap()]);
+    assert_ne!(premature.status.code(), Some(0), "shards without a merge are not a dataset yet");
+    let output = run(&["merge", "--out", shared.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(hash_tree(&shared), expected);
+
+    // A missing shard is named.
+    let partial = dir.join("partial");
+    gen_ok(&spec, &partial, &["--quiet", "--shard", "0/3"]);
+    let output = run(&["merge", "--out", partial.to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("shards 1, 2 of 3 are missing"));
+}
+
+#[test]
+fn another_spec_is_refused_unless_forced() {
+    let dir = fresh_dir("batch-mixing");
+    let spec = small_spec(&dir);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+    std::fs::write(out.join("NOTES.txt"), "mine").unwrap();
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let before = hash_tree(&out);
+    let output = gen_cmd(&other, &out, &["--no-images"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("spec.seed: 11 there, 12 now") && stderr.contains("--force"), "{stderr}");
+    assert_eq!(hash_tree(&out), before, "a refused run must not touch the folder");
+    // Images on or off is part of what a dataset is.
+    let output = gen_cmd(&spec, &out, &[]).output().unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("images"));
+
+    let output = gen_cmd(&other, &out, &["--no-images", "--force"]).output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(
+        std::fs::read_to_string(out.join("NOTES.txt")).unwrap(),
+        "mine",
+        "--force removed a file causalcity did not write"
+    );
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["spec"]["seed"], 12);
+    let reference = dir.join("reference");
+    gen_ok(&other, &reference, &["--quiet", "--no-images"]);
+    let mut forced = hash_tree(&out);
+    forced.remove("NOTES.txt");
+    assert_eq!(forced, hash_tree(&reference));
+}
+
+/// A small tmpfs mounted for a test, unmounted when dropped.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &Path, size: &str) -> Option<Tmpfs> {
+        std::fs::create_dir_all(dir).unwrap();
+        let ok = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        ok.then(|| Tmpfs(dir.to_path_buf()))
+    }
+
+    fn remount(&self, options: &str) {
+        let status = Command::new("mount").args(["-o", &format!("remount,{options}")]).arg(&self.0).status().unwrap();
+        assert!(status.success());
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+    }
+}
+
+#[test]
+fn a_full_or_read_only_disk_stops_cleanly_and_a_rerun_completes() {
+    let dir = fresh_dir("batch-disk");
+    let spec = small_spec(&dir);
+    let mount = dir.join("disk");
+    let Some(disk) = Tmpfs::mount(&mount, "3m") else {
+        // No permission to mount here: use a per-file size limit instead (a real EFBIG from the OS).
+        let out = dir.join("limited");
+        let script = format!(
+            "trap '' XFSZ; ulimit -f 16; exec {} gen --quiet --spec {} --out {}",
+            bin(),
+            spec.display(),
+            out.display()
+        );
+        let output = Command::new("sh").args(["-c", &script]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains("cannot write") && stderr.contains("too large"), "{stderr}");
+        gen_ok(&spec, &out, &["--quiet"]);
+        assert_eq!(validate_dir(&out).0, 0);
+        eprintln!("tmpfs not available: tested the write-failure path with ulimit -f");
+        return;
+    };
+    let out = mount.join("out");
+    let output = gen_cmd(&spec, &out, &["-j", "1"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("No space left on device") && stderr.contains(out.to_str().unwrap()), "{stderr}");
+    assert!(stderr.contains("rerun the same command to resume"), "{stderr}");
+    assert!(!stderr.contains("panicked"));
+    // Finished scenarios are intact: every folder present passes its checksums.
+    let (_, report) = validate_dir(&out);
+    assert!(!report.contains("checksum mismatch") && !report.contains("unexpected file"), "{report}");
+    let finished = scenario_dirs(&out).len();
+    assert!(finished > 0, "some scenarios fit on the disk");
+
+    // Read-only: a clear message too.
+    disk.remount("ro");
+    let output = gen_cmd(&spec, &out, &[]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_ne!(output.status.code(), Some(0));
+    assert!(stderr.contains("Read-only file system"), "{stderr}");
+    assert_eq!(scenario_dirs(&out).len(), finished, "finished scenarios survive");
+
+    // Room again: the same command completes the dataset.
+    disk.remount("rw,size=200m");
+    gen_ok(&spec, &out, &["--quiet"]);
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 0, "{report}");
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet"]);
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+}
+
+#[test]
+fn validate_catches_each_kind_of_damage() {
+    let dir = fresh_dir("batch-validate");
+    let spec = write_spec(&dir, &toy_spec("damage", &[(4, 0.5)], (2, 0, 0), 12));
+    let clean = dir.join("clean");
+    gen_ok(&spec, &clean, &["--quiet"]);
+    assert_eq!(validate_dir(&clean).0, 0);
+    let scenario = "cars04_edges50/train/00001";
+
+    type Damage = fn(&Path);
+    let damages: [(&str, Damage, &str); 6] = [
+        ("deleted-frame", |d| std::fs::remove_file(d.join("rgb/0007.png")).unwrap(), "rgb/0007.png: missing"),
+        (
+            "truncated-png",
+            |d| {
+                let p = d.join("rgb/0003.png");
+                let bytes = std::fs::read(&p).unwrap();
+                std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+            },
+            "rgb/0003.png: checksum mismatch",
+        ),
+        (
+            "missing-csv-row",
+            |d| {
+                let p = d.join("poses.csv");
+                let text = std::fs::read_to_string(&p).unwrap();
+                let mut lines: Vec<&str> = text.lines().collect();
+                lines.remove(10);
+                std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+            },
+            "poses.csv: row 11 is malformed or out of order",
+        ),
+        (
+            "flipped-byte",
+            |d| {
+                let p = d.join("mask/0005.png");
+                let mut bytes = std::fs::read(&p).unwrap();
+                let k = bytes.len() - 20;
+                bytes[k] ^= 0x01;
+                std::fs::write(&p, bytes).unwrap();
+            },
+            "mask/0005.png: checksum mismatch",
+        ),
+        (
+            "extra-car-id",
+            |d| {
+                let p = d.join("mask/0002.png");
+                let mut mask = image::open(&p).unwrap().into_luma8();
+                mask.put_pixel(3, 3, image::Luma([9]));
+                mask.save(&p).unwrap();
+            },
+            "mask/0002.png: ids [9] belong to no car",
+        ),
+        (
+            "leftover",
+            |d| std::fs::create_dir_all(d.parent().unwrap().join(".partial-00007")).unwrap(),
+            ".partial-00007: leftover",
+        ),
+    ];
+    for (name, damage, needle) in damages {
+        let copy = dir.join(name);
+        let status = Command::new("cp").arg("-r").arg(&clean).arg(&copy).status().unwrap();
+        assert!(status.success());
+        damage(&copy.join(scenario));
+        let (code, report) = validate_dir(&copy);
+        assert_eq!(code, 1, "{name}: validate should fail: {report}");
+        assert!(report.contains(needle), "{name}: report should contain {needle:?}:\n{report}");
+        assert!(report.contains(&copy.join(scenario).display().to_string()) || name == "leftover", "{report}");
+    }
+    let not_a_dataset = run(&["validate", dir.to_str().unwrap()]);
+    assert_eq!(not_a_dataset.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&not_a_dataset.stderr).contains("no manifest.json"));
+}
