@@ -314,3 +314,34 @@ fn validate_catches_each_kind_of_damage() {
     assert_eq!(not_a_dataset.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&not_a_dataset.stderr).contains("no manifest.json"));
 }
+
+#[test]
+fn the_slurm_array_example_builds_the_same_dataset() {
+    let dir = fresh_dir("batch-slurm");
+    let spec = small_spec(&dir);
+    let whole = dir.join("whole");
+    gen_ok(&spec, &whole, &["--quiet"]);
+    // `causalcity` on PATH, as on a cluster.
+    let bin_dir = dir.join("bin");
+    std::fs::create_dir_all(&bin_dir).unwrap();
+    std::os::unix::fs::symlink(bin(), bin_dir.join("causalcity")).unwrap();
+    let path = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/slurm/gen.sbatch");
+    let shared = dir.join("shared");
+    for task in 0..3 {
+        let output = Command::new("bash")
+            .arg(&script)
+            .arg(&spec)
+            .arg(&shared)
+            .env("PATH", &path)
+            .env("SLURM_ARRAY_TASK_ID", task.to_string())
+            .env("SLURM_ARRAY_TASK_COUNT", "3")
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "task {task}: {}", String::from_utf8_lossy(&output.stderr));
+    }
+    let output = run(&["merge", "--out", shared.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(hash_tree(&shared), hash_tree(&whole));
+}

@@ -157,7 +157,6 @@ struct Job<'e> {
     world: Box<dyn World>,
     renderer: Option<Renderer>,
     out: PathBuf,
-    png: PngSettings,
     intersection_names: Vec<String>,
     fsync: bool,
 }
@@ -301,16 +300,8 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         WorldKind::City => Box::new(CityWorld::default()),
     };
     let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
-    let job = Job {
-        map,
-        world,
-        renderer,
-        out: out.clone(),
-        png: PngSettings::default(),
-        expansion: &expansion,
-        intersection_names,
-        fsync: options.fsync,
-    };
+    let job =
+        Job { map, world, renderer, out: out.clone(), expansion: &expansion, intersection_names, fsync: options.fsync };
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
@@ -382,14 +373,13 @@ fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCan
         bytes += dir.write_with("events.csv", |w| write_events(w, &trajectories))?;
     }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
-        bytes += write_frames(job, renderer, canvas, &mut dir, &plan, &trajectories)?;
+        bytes += write_frames(renderer, canvas, &mut dir, &plan, &trajectories)?;
     }
     bytes += dir.commit()?;
     Ok(bytes)
 }
 
 fn write_frames(
-    job: &Job<'_>,
     renderer: &Renderer,
     canvas: &mut FrameCanvas,
     dir: &mut ScenarioDir,
@@ -425,10 +415,10 @@ fn write_frames(
         renderer.render(canvas, &scene, &sprites, frame);
         let (rgb_name, mask_name) = (dir.frame_name("rgb", frame), dir.frame_name("mask", frame));
         bytes += dir.write_with(&rgb_name, |out| {
-            encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, job.png).map_err(png_to_io)
+            encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
         })?;
         bytes += dir.write_with(&mask_name, |out| {
-            encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, job.png).map_err(png_to_io)
+            encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
         })?;
     }
     Ok(bytes)

@@ -1,6 +1,7 @@
 //! `lights.csv` and `events.csv` (city world). Columns are documented in
 //! `data-schema/lights.schema.json` and `data-schema/events.schema.json`.
 
+use super::poses::Fields;
 use crate::world::lights::LightPlan;
 use crate::world::Trajectories;
 use serde::Serialize;
@@ -14,17 +15,6 @@ fn round(x: f64, decimals: i32) -> f64 {
     (x * f).round() / f
 }
 
-#[derive(Serialize)]
-struct LightRow<'a> {
-    frame: usize,
-    t: f64,
-    intersection: &'a str,
-    approach: char,
-    signal: &'a str,
-    colour: &'a str,
-    since_change: f64,
-}
-
 /// One row per frame and light, lights in plan order.
 pub fn write_lights<W: Write>(
     out: W,
@@ -32,19 +22,21 @@ pub fn write_lights<W: Write>(
     intersection_names: &[String],
     trajectories: &Trajectories,
 ) -> csv::Result<()> {
-    let mut w = csv::Writer::from_writer(out);
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
+    w.write_record(LIGHT_COLUMNS)?;
+    let mut fields = Fields::default();
+    let mut approach = [0u8; 4];
     for (frame, states) in trajectories.lights.iter().enumerate() {
-        let t = round(frame as f64 * trajectories.frame_interval, 6);
+        let t = frame as f64 * trajectories.frame_interval;
         for (light, state) in plan.lights.iter().zip(states) {
-            w.serialize(LightRow {
-                frame,
-                t,
-                intersection: &intersection_names[light.intersection],
-                approach: light.approach,
-                signal: light.signal.name(),
-                colour: state.colour.name(),
-                since_change: round(state.since_change, 3),
-            })?;
+            fields.int(&mut w, frame as u64)?;
+            fields.fixed(&mut w, t, 6)?;
+            w.write_field(&intersection_names[light.intersection])?;
+            w.write_field(light.approach.encode_utf8(&mut approach))?;
+            w.write_field(light.signal.name())?;
+            w.write_field(state.colour.name())?;
+            fields.fixed(&mut w, state.since_change, 3)?;
+            w.write_record(None::<&[u8]>)?;
         }
     }
     w.flush()?;

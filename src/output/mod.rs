@@ -8,6 +8,7 @@
 
 pub mod logs;
 pub mod manifest;
+pub mod number;
 pub mod png;
 pub mod poses;
 pub mod scenario;

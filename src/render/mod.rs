@@ -90,9 +90,7 @@ impl Renderer {
             world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32))
         };
         // Beams lie on the road, under every car.
-        for car in cars {
-            look.draw_headlights(&mut canvas.rgba, car_frame(car), car.length as f32, car.width as f32);
-        }
+        look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
         for car in cars {
             let t = car_frame(car);
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);

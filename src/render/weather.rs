@@ -75,27 +75,37 @@ impl SceneLook {
         out
     }
 
-    /// Headlight beams (at dusk and night) for a car in its own frame
-    /// (x forward, y left, metres), drawn over the road.
-    pub fn draw_headlights(&self, pixmap: &mut Pixmap, car_to_canvas: Transform, length: f32, width: f32) {
+    /// Headlight beams (at dusk and night) of every car, each given as its
+    /// car-frame transform (x forward, y left, metres) and length and width,
+    /// drawn over the road in one pass.
+    pub fn draw_headlights(&self, pixmap: &mut Pixmap, cars: impl Iterator<Item = (Transform, f32, f32)>) {
         let strength = (1.0 - self.daylight) as f32;
         if strength <= 0.05 {
             return;
         }
-        let mut paint = Paint { anti_alias: true, ..Paint::default() };
-        paint.set_color_rgba8(255, 236, 170, (110.0 * strength) as u8);
-        let front = length / 2.0;
         let mut pb = PathBuilder::new();
-        for side in [-1.0f32, 1.0] {
-            let y = side * width * 0.3;
-            pb.move_to(front, y - 0.1);
-            pb.line_to(front + 3.5, y - 0.9);
-            pb.line_to(front + 3.5, y + 0.9);
-            pb.line_to(front, y + 0.1);
-            pb.close();
+        for (to_canvas, length, width) in cars {
+            let front = length / 2.0;
+            for side in [-1.0f32, 1.0] {
+                let y = side * width * 0.3;
+                let mut points = [
+                    tiny_skia::Point::from_xy(front, y - 0.1),
+                    tiny_skia::Point::from_xy(front + 3.5, y - 0.9),
+                    tiny_skia::Point::from_xy(front + 3.5, y + 0.9),
+                    tiny_skia::Point::from_xy(front, y + 0.1),
+                ];
+                to_canvas.map_points(&mut points);
+                pb.move_to(points[0].x, points[0].y);
+                for p in &points[1..] {
+                    pb.line_to(p.x, p.y);
+                }
+                pb.close();
+            }
         }
         if let Some(path) = pb.finish() {
-            pixmap.fill_path(&path, &paint, FillRule::Winding, car_to_canvas, None);
+            let mut paint = Paint { anti_alias: true, ..Paint::default() };
+            paint.set_color_rgba8(255, 236, 170, (110.0 * strength) as u8);
+            pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
         }
     }
 

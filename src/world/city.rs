@@ -98,8 +98,12 @@ struct SimCar<'p> {
     /// Intersection connector the car has decided to drive through.
     committed: Option<usize>,
     wander: f64,
+    /// Where the wander is heading, drawn at each decision.
+    wander_target: f64,
     /// Standard-normal state of the perception error.
     noise: f64,
+    /// Half the footprint's diagonal: beyond twice this, two cars cannot touch.
+    reach: f64,
 }
 
 impl SimCar<'_> {
@@ -173,7 +177,9 @@ impl<'a> Sim<'a> {
                     actions_done: 0,
                     committed: None,
                     wander: 0.0,
+                    wander_target: 0.0,
                     noise: normal(&mut rng),
+                    reach: c.length.hypot(c.width) / 2.0,
                 }
             })
             .collect();
@@ -441,18 +447,22 @@ impl<'a> Sim<'a> {
         }
         let rho = (-p.reaction_time / 2.0).exp();
         let draw = normal(&mut self.rng);
+        let wander_draw = normal(&mut self.rng);
         let car = &mut self.cars[i];
         car.accel = ((target - v) / dt).clamp(-p.max_deceleration, p.max_acceleration);
         car.noise = rho * car.noise + (1.0 - rho * rho).sqrt() * draw;
+        // Sideways wander: an Ornstein-Uhlenbeck target per decision, approached smoothly.
+        let wander_rho = (-p.reaction_time / WANDER_TIME).exp();
+        car.wander_target = (wander_rho * car.wander_target
+            + p.lateral_wander * (1.0 - wander_rho * wander_rho).sqrt() * wander_draw)
+            .clamp(-MAX_WANDER, MAX_WANDER);
     }
 
     fn advance(&mut self, i: usize, t: f64, dt: f64) {
         let now = t + dt;
-        let draw = normal(&mut self.rng);
         let car = &mut self.cars[i];
-        let rho = (-dt / WANDER_TIME).exp();
-        car.wander = (rho * car.wander + car.agency.driver.lateral_wander * (1.0 - rho * rho).sqrt() * draw)
-            .clamp(-MAX_WANDER, MAX_WANDER);
+        let glide = (dt / car.agency.driver.reaction_time).min(1.0);
+        car.wander += (car.wander_target - car.wander) * glide;
         if now <= car.hold_until {
             car.v = 0.0;
             return;
@@ -551,7 +561,7 @@ impl<'a> Sim<'a> {
         let boxes: Vec<OrientedBox> = self.cars.iter().map(SimCar::footprint).collect();
         for i in 0..boxes.len() {
             for j in i + 1..boxes.len() {
-                let reach = (boxes[i].length.hypot(boxes[i].width) + boxes[j].length.hypot(boxes[j].width)) / 2.0;
+                let reach = self.cars[i].reach + self.cars[j].reach;
                 let near = boxes[i].centre.distance(boxes[j].centre) < reach + CONTACT_RELEASE;
                 if self.contacts.contains(&(i, j)) {
                     // A contact ends only once the cars are clearly apart, so
