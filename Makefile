@@ -3,7 +3,7 @@ CARGO ?= cargo
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet --
 
-.PHONY: all build dataset test bench lint fmt clean
+.PHONY: all build dataset test bench fuzz lint fmt clean
 
 all: build
 
@@ -23,6 +23,13 @@ test:
 ## Throughput, memory and size figures (prints, asserts nothing).
 bench:
 	$(CARGO) bench --locked --bench throughput
+
+## Fuzz the spec parser (not part of CI). Needs cargo-fuzz; runs on stable
+## through RUSTC_BOOTSTRAP. FUZZ_SECONDS sets how long (default 600).
+FUZZ_SECONDS ?= 600
+fuzz:
+	command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz --locked
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run spec corpus/spec -- -max_total_time=$(FUZZ_SECONDS) -max_len=4096
 
 lint:
 	$(CARGO) fmt --all -- --check
