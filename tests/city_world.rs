@@ -34,7 +34,7 @@ fn front(p: &Pose, length: f64) -> DVec2 {
     DVec2::new(p.x, p.y) + DVec2::new(p.yaw.cos(), p.yaw.sin()) * length / 2.0
 }
 
-fn footprint(p: &Pose, car: &CityCar, shrink: f64) -> OrientedBox {
+fn footprint(p: &Pose, car: &Car, shrink: f64) -> OrientedBox {
     OrientedBox {
         centre: DVec2::new(p.x, p.y),
         heading: p.yaw,
@@ -57,7 +57,7 @@ fn lane_at(map: &CityMap, p: DVec2, yaw: f64, tolerance: f64) -> Option<usize> {
 
 /// The route a car's spawn and actions describe (merges may happen later in
 /// the simulation, which changes neither its lanes nor its turns).
-fn planned_route(map: &CityMap, car: &CityCar) -> Route {
+fn planned_route(map: &CityMap, car: &Car) -> Route {
     let actions: Vec<Action> = car.actions.iter().map(|a| serde_json::from_value(a.as_str().into()).unwrap()).collect();
     let spawn = map.lane_by_name(&car.spawn).unwrap();
     Route::plan(map, spawn, car.spawn_distance, &actions, &car.merge_distances, 500.0).unwrap()
@@ -70,7 +70,7 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
     let setback = map.layout.stop_line_setback;
     let (mut crossings, mut forced_runs) = (0, 0);
     for d in scenario_dirs(&out) {
-        let s = read_city_scenario(&d);
+        let s = read_scenario(&d);
         let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
         let lights: BTreeMap<(u32, String, String, String), String> = read_csv::<LightRow>(&d.join("lights.csv"))
             .into_iter()
@@ -145,7 +145,7 @@ fn cars_overlap_only_after_a_logged_collision() {
     let out = dataset();
     let mut collisions = 0;
     for d in scenario_dirs(&out) {
-        let s = read_city_scenario(&d);
+        let s = read_scenario(&d);
         let poses = read_poses(&d.join("poses.csv"));
         let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
         let mut logged: BTreeMap<(u32, u32), u32> = BTreeMap::new();
@@ -187,7 +187,7 @@ fn speeds_accelerations_and_positions_stay_physical() {
     let out = dataset();
     let map = CityMap::default();
     for d in scenario_dirs(&out) {
-        let s = read_city_scenario(&d);
+        let s = read_scenario(&d);
         let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
         let crashed: BTreeSet<(u32, u32)> = events
             .iter()
@@ -223,15 +223,15 @@ fn speeds_accelerations_and_positions_stay_physical() {
                 let accel = (p.speed - prev.speed) / dt;
                 let collided = crashed.contains(&(car_id, p.frame));
                 assert!(
-                    accel <= car.driver.max_acceleration + 1e-3,
+                    accel <= car.driver.as_ref().unwrap().max_acceleration + 1e-3,
                     "{}: car {car_id} accelerates {accel}",
                     d.display()
                 );
                 assert!(
-                    collided || accel >= -car.driver.max_deceleration - 1e-3,
+                    collided || accel >= -car.driver.as_ref().unwrap().max_deceleration - 1e-3,
                     "{}: car {car_id} brakes {accel} beyond its limit {} at frame {}",
                     d.display(),
-                    car.driver.max_deceleration,
+                    car.driver.as_ref().unwrap().max_deceleration,
                     p.frame
                 );
                 let moved = DVec2::new(p.x - prev.x, p.y - prev.y);
@@ -253,7 +253,7 @@ fn lane_sequences_follow_the_action_lists() {
     let map = CityMap::default();
     let mut merges_seen = 0;
     for d in scenario_dirs(&out).into_iter().take(25) {
-        let s = read_city_scenario(&d);
+        let s = read_scenario(&d);
         for (car_id, track) in poses_by_car(&read_poses(&d.join("poses.csv"))) {
             let car = &s.cars[car_id as usize];
             let route = planned_route(&map, car);
@@ -361,7 +361,7 @@ fn the_default_city_design_shows_agency_and_confounding() {
     let mut cvs = Vec::new();
     let (mut dry, mut dry_crashes) = (0, 0);
     for d in scenario_dirs(&out) {
-        let s = read_city_scenario(&d);
+        let s = read_scenario(&d);
         let to_px = s.frame_interval * s.camera.pixels_per_metre;
         let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
         for track in by_car.values() {
@@ -389,7 +389,7 @@ fn the_default_city_design_shows_agency_and_confounding() {
             }
         }
         assert!(changes.values().all(|(_, c)| *c >= 2), "{}: a light changed fewer than twice", d.display());
-        if s.city["confounders"]["wetness"].as_f64().unwrap() == 0.0 {
+        if s.city.as_ref().unwrap()["confounders"]["wetness"].as_f64().unwrap() == 0.0 {
             dry += 1;
             dry_crashes += read_csv::<EventRow>(&d.join("events.csv")).iter().any(|e| e.kind == "collision") as usize;
         }

@@ -199,7 +199,7 @@ fn weather_changes_the_frames_but_never_the_masks() {
         let out = dir.join(name);
         gen_ok(&spec, &out, &["--quiet"]);
         let d = &scenario_dirs(&out)[0];
-        let s = read_city_scenario(d);
+        let s = read_scenario(d);
         let ids: BTreeSet<u8> = s.cars.iter().map(|c| (c.id + 1) as u8).collect();
         for f in [0, 11] {
             let mask = image::open(d.join(format!("mask/{f:04}.png"))).unwrap().into_luma8();

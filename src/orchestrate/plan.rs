@@ -274,29 +274,14 @@ impl Expansion {
                         .collect(),
                     None => Vec::new(),
                 };
+                let role = if is_pair { Role::Leader } else { Role::Independent };
+                let car = PlacedCar { role, spawn: span.lane, distance: front, actions, merges, route, desired_speeds };
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    let leader = PlacedCar {
-                        role: Role::Leader,
-                        spawn: span.lane,
-                        distance: front,
-                        actions,
-                        merges,
-                        route,
-                        desired_speeds,
-                    };
-                    let follower = PlacedCar { role: Role::Follower, distance: back, ..leader.clone() };
-                    cars.extend([leader, follower]);
+                    let follower = PlacedCar { role: Role::Follower, distance: back, ..car.clone() };
+                    cars.extend([car, follower]);
                 } else {
-                    cars.push(PlacedCar {
-                        role: Role::Independent,
-                        spawn: span.lane,
-                        distance: front,
-                        actions,
-                        merges,
-                        route,
-                        desired_speeds,
-                    });
+                    cars.push(car);
                 }
                 done = true;
                 break;

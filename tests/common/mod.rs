@@ -167,6 +167,12 @@ pub struct Car {
     pub role: String,
     pub length_m: f64,
     pub width_m: f64,
+    /// City only.
+    #[serde(default)]
+    pub desired_speeds: Vec<f64>,
+    pub driver: Option<Driver>,
+    #[serde(default)]
+    pub runs_red_lights: bool,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -177,6 +183,8 @@ pub struct Scenario {
     pub cars: Vec<Car>,
     pub edges: Vec<[u32; 2]>,
     pub toy: Option<Toy>,
+    /// City only: confounders, effects, lights.
+    pub city: Option<serde_json::Value>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -225,40 +233,11 @@ pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
     reader.deserialize().map(|r| r.unwrap()).collect()
 }
 
-/// City fields of scenario.json cars.
-#[derive(Debug, Clone, Deserialize)]
-pub struct CityCar {
-    pub id: u32,
-    pub spawn: String,
-    pub spawn_distance: f64,
-    pub actions: Vec<String>,
-    pub merge_distances: Vec<f64>,
-    pub role: String,
-    pub length_m: f64,
-    pub width_m: f64,
-    pub desired_speeds: Vec<f64>,
-    pub driver: Driver,
-    pub runs_red_lights: bool,
-}
-
+/// The driver limits a city car's scenario.json records.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Driver {
     pub max_acceleration: f64,
     pub max_deceleration: f64,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-pub struct CityScenario {
-    pub frames: u32,
-    pub frame_interval: f64,
-    pub camera: Camera,
-    pub cars: Vec<CityCar>,
-    pub edges: Vec<[u32; 2]>,
-    pub city: serde_json::Value,
-}
-
-pub fn read_city_scenario(dir: &Path) -> CityScenario {
-    serde_json::from_value(read_json(&dir.join("scenario.json"))).unwrap()
 }
 
 /// Writes a city spec whose `city` section is `city` (JSON text).
