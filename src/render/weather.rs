@@ -11,6 +11,12 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
+/// Water on asphalt (`cover` 255 = wholly road): darker, with a faint blue sheen.
+fn wet_rgb(rgb: [u8; 3], wet: f64, cover: u8) -> [u8; 3] {
+    let k = 1.0 - wet * cover as f64 / 255.0;
+    [(rgb[0] as f64 * k) as u8, (rgb[1] as f64 * k) as u8, (rgb[2] as f64 * (k + 0.08 * wet)).min(255.0) as u8]
+}
+
 /// The visual state of a scenario.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SceneLook {
@@ -58,19 +64,27 @@ impl SceneLook {
     pub fn apply_to_background(&self, base: &Pixmap, road: &[u8]) -> Pixmap {
         let mut out = base.clone();
         let wet = 0.38 * self.wetness;
-        for (px, &cover) in out.data_mut().chunks_exact_mut(4).zip(road) {
-            let mut rgb = [px[0], px[1], px[2]];
-            if cover > 0 && wet > 0.0 {
-                let k = 1.0 - wet * cover as f64 / 255.0;
-                // Water darkens asphalt and gives it a faint blue sheen.
-                rgb = [
-                    (rgb[0] as f64 * k) as u8,
-                    (rgb[1] as f64 * k) as u8,
-                    (rgb[2] as f64 * (k + 0.08 * wet)).min(255.0) as u8,
-                ];
+        // shade() acts on each channel alone: tabulate it once, and likewise
+        // for fully covered wet asphalt; only road edges need arithmetic.
+        let mut table = [[0u8; 256]; 3];
+        let mut wet_table = [[0u8; 256]; 3];
+        for v in 0..256 {
+            let shaded = self.shade([v as u8; 3]);
+            let wet_shaded = self.shade(wet_rgb([v as u8; 3], wet, 255));
+            for k in 0..3 {
+                table[k][v] = shaded[k];
+                wet_table[k][v] = wet_shaded[k];
             }
-            let shaded = self.shade(rgb);
-            px[..3].copy_from_slice(&shaded);
+        }
+        for (px, &cover) in out.data_mut().chunks_exact_mut(4).zip(road) {
+            let (rgb, lut) = match cover {
+                _ if cover == 0 || wet == 0.0 => ([px[0], px[1], px[2]], &table),
+                255 => ([px[0], px[1], px[2]], &wet_table),
+                _ => (wet_rgb([px[0], px[1], px[2]], wet, cover), &table),
+            };
+            for k in 0..3 {
+                px[k] = lut[k][rgb[k] as usize];
+            }
         }
         out
     }
@@ -103,7 +117,8 @@ impl SceneLook {
             }
         }
         if let Some(path) = pb.finish() {
-            let mut paint = Paint { anti_alias: true, ..Paint::default() };
+            // Soft translucent light: hard edges look alike and cost far less.
+            let mut paint = Paint { anti_alias: false, ..Paint::default() };
             paint.set_color_rgba8(255, 236, 170, (110.0 * strength) as u8);
             pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
         }
