@@ -23,6 +23,39 @@ pub enum Command {
     Merge(MergeArgs),
     /// Check a dataset against data-schema/ and its checksums.
     Validate(ValidateArgs),
+    /// Turn a dataset into the inputs of other projects' loaders.
+    #[command(subcommand)]
+    Export(ExportCommand),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExportCommand {
+    /// NRI: loc/vel/edges .npy files per group and split (train, valid, test).
+    Nri(ExportNriArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ExportNriArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// Output folder; one subfolder per group.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// causalcity: [scenarios, frames, cars, 2] with identity edges (the original
+    /// CausalCity NRI fork); nri: [scenarios, frames, 2, cars], no self loops.
+    #[arg(long, value_enum, default_value = "causalcity")]
+    pub layout: crate::export::nri::NriLayout,
+
+    /// Appended to every file name, e.g. `_city` gives loc_train_city.npy.
+    #[arg(long, default_value = "")]
+    pub suffix: String,
+
+    /// Keep only leader -> follower edges (edges[s, follower, leader] = 1).
+    #[arg(long)]
+    pub directed: bool,
 }
 
 #[derive(Debug, Args)]

@@ -4,6 +4,7 @@
 //! trajectories, [`render`] turns them into frames and [`output`] writes files.
 
 pub mod cli;
+pub mod export;
 pub mod geometry;
 pub mod map;
 pub mod orchestrate;

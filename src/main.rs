@@ -1,6 +1,7 @@
 //! The `causalcity` binary: parses flags and hands over to the library.
 
-use causalcity::cli::{Cli, Command};
+use causalcity::cli::{Cli, Command, ExportCommand};
+use causalcity::export::nri::{export_nri, NriOptions};
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::progress::ProgressMode;
 use causalcity::orchestrate::run::{generate, GenOptions, Summary};
@@ -48,6 +49,21 @@ fn main() {
                 e.exit_code()
             }
         },
+        Command::Export(ExportCommand::Nri(args)) => {
+            let options = NriOptions { layout: args.layout, suffix: args.suffix, directed: args.directed };
+            match export_nri(&args.dataset, &args.out, &options) {
+                Ok(report) => {
+                    for line in report {
+                        println!("{line}");
+                    }
+                    0
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    1
+                }
+            }
+        }
         Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
             Ok(report) => {
                 if args.json {

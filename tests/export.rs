@@ -1,0 +1,95 @@
+//! `export nri`: shapes, dtypes and values of the .npy files against the CSVs
+//! and scenario.json, for both layouts and directed / undirected edges.
+
+mod common;
+use common::*;
+use std::path::Path;
+
+fn load<T: npyz::Deserialize>(path: &Path) -> (Vec<u64>, Vec<T>, String) {
+    let npy = npyz::NpyFile::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).unwrap();
+    let shape = npy.shape().to_vec();
+    let dtype = npy.dtype().descr();
+    (shape, npy.into_vec::<T>().unwrap(), dtype)
+}
+
+#[test]
+fn nri_exports_match_the_pose_logs_in_both_layouts() {
+    let dir = fresh_dir("export-nri");
+    let spec = write_spec(&dir, &toy_spec("nri", &[(4, 0.5), (8, 0.8)], (3, 2, 1), 20));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    for (layout, directed, suffix) in [("causalcity", false, ""), ("nri", false, "_nri"), ("causalcity", true, "_dir")]
+    {
+        let out = dir.join(format!("out{suffix}"));
+        let mut args =
+            vec!["export", "nri", data.to_str().unwrap(), "--out", out.to_str().unwrap(), "--layout", layout];
+        if directed {
+            args.push("--directed");
+        }
+        if !suffix.is_empty() {
+            args.extend(["--suffix", suffix]);
+        }
+        let output = run(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        for (group, cars) in [("cars04_edges50", 4usize), ("cars08_edges80", 8)] {
+            for (split, nri_split, count) in [("train", "train", 3usize), ("val", "valid", 2), ("test", "test", 1)] {
+                let file = |kind: &str| out.join(group).join(format!("{kind}_{nri_split}{suffix}.npy"));
+                let (loc_shape, loc, loc_dtype) = load::<f32>(&file("loc"));
+                let (vel_shape, vel, _) = load::<f32>(&file("vel"));
+                let (edge_shape, edges, edge_dtype) = load::<i64>(&file("edges"));
+                assert_eq!(loc_dtype, "'<f4'");
+                assert_eq!(edge_dtype, "'<i8'");
+                let expected = if layout == "nri" {
+                    vec![count as u64, 20, 2, cars as u64]
+                } else {
+                    vec![count as u64, 20, cars as u64, 2]
+                };
+                assert_eq!(loc_shape, expected);
+                assert_eq!(vel_shape, expected);
+                assert_eq!(edge_shape, vec![count as u64, cars as u64, cars as u64]);
+                let at = |s: usize, f: usize, c: usize, axis: usize| {
+                    if layout == "nri" {
+                        ((s * 20 + f) * 2 + axis) * cars + c
+                    } else {
+                        ((s * 20 + f) * cars + c) * 2 + axis
+                    }
+                };
+                for s in 0..count {
+                    let scenario_dir = data.join(group).join(split).join(format!("{s:05}"));
+                    for p in read_poses(&scenario_dir.join("poses.csv")) {
+                        let (f, c) = (p.frame as usize, p.car as usize);
+                        assert_eq!(loc[at(s, f, c, 0)], p.px as f32);
+                        assert_eq!(loc[at(s, f, c, 1)], p.py as f32);
+                        if f > 0 {
+                            let back = at(s, f - 1, c, 0);
+                            assert_eq!(vel[at(s, f, c, 0)], loc[at(s, f, c, 0)] - loc[back]);
+                        }
+                    }
+                    let scenario = read_scenario(&scenario_dir);
+                    let mut expected_edges = vec![0i64; cars * cars];
+                    if layout == "causalcity" {
+                        for i in 0..cars {
+                            expected_edges[i * cars + i] = 1;
+                        }
+                    }
+                    for [leader, follower] in &scenario.edges {
+                        let (l, f) = (*leader as usize, *follower as usize);
+                        expected_edges[f * cars + l] = 1;
+                        if !directed {
+                            expected_edges[l * cars + f] = 1;
+                        }
+                    }
+                    assert_eq!(
+                        &edges[s * cars * cars..(s + 1) * cars * cars],
+                        &expected_edges[..],
+                        "{group} {split} {s}"
+                    );
+                }
+            }
+        }
+    }
+    // An unfinished or foreign folder is refused with a clear message.
+    let output = run(&["export", "nri", dir.to_str().unwrap(), "--out", dir.join("x").to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("no manifest.json"));
+}
