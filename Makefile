@@ -3,7 +3,10 @@ CARGO ?= cargo
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet --
 
-.PHONY: all build dataset test bench fuzz lint fmt clean
+.PHONY: all build dataset test test-rust test-python bench fuzz lint fmt clean
+PYTHON ?= python3
+VENV := target/python-venv
+PYDATA := target/python-data
 
 all: build
 
@@ -16,9 +19,23 @@ dataset: build
 	$(RUN) gen --spec configs/ci-city.json --out data/ci-city
 	@echo "datasets written to data/ci-toy and data/ci-city (see README: Output layout)"
 
-## Run every test: unit, integration (real files, real decoding) and doc tests.
-test:
+## Run every test: Rust (unit, integration on real files) and the Python client tests.
+test: test-rust test-python
+
+test-rust:
 	$(CARGO) test --locked
+
+## Python clients (numpy, pandas, Pillow from PyPI, in a venv under target/)
+## load a small generated dataset and its exports.
+test-python: build
+	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+	rm -rf $(PYDATA)
+	$(RUN) gen --quiet --spec tests/python/toy.json --out $(PYDATA)/toy
+	$(RUN) gen --quiet --spec tests/python/city.json --out $(PYDATA)/city
+	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-causalcity
+	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-reference --layout nri --directed
+	CAUSALCITY_DATA=$(PYDATA) $(VENV)/bin/python -m pytest -q -p no:cacheprovider tests/python
 
 ## Throughput, memory and size figures (prints, asserts nothing).
 bench:

@@ -1,0 +1,121 @@
+"""Real clients load causalcity output unchanged: pandas reads the CSV logs
+with the documented dtypes, Pillow and numpy read the frames and masks, and
+numpy loads the NRI exports with the documented shapes and values that match
+the CSVs. The data comes from `make test-python`, which generates it with the
+built binary into $CAUSALCITY_DATA."""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+ROOT = Path(os.environ.get("CAUSALCITY_DATA", "target/python-data"))
+TOY = ROOT / "toy"
+CITY = ROOT / "city"
+SPLITS = {"train": "train", "val": "valid", "test": "test"}
+
+
+def scenarios(dataset):
+    return sorted(p for p in dataset.glob("*/*/*") if (p / "scenario.json").exists())
+
+
+@pytest.fixture(scope="module")
+def toy_scenarios():
+    found = scenarios(TOY)
+    assert len(found) == 8, f"expected 8 toy scenarios under {TOY}"
+    return found
+
+
+def test_manifest_is_complete_json():
+    for dataset in (TOY, CITY):
+        manifest = json.loads((dataset / "manifest.json").read_text())
+        assert manifest["complete"] is True
+        assert manifest["format"] == "causalcity-dataset/1"
+
+
+def test_poses_load_with_the_documented_dtypes(toy_scenarios):
+    for d in toy_scenarios:
+        scenario = json.loads((d / "scenario.json").read_text())
+        poses = pd.read_csv(d / "poses.csv")
+        assert list(poses.columns) == ["frame", "t", "car", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed", "in_view"]
+        for column in ("frame", "car", "in_view"):
+            assert poses[column].dtype == np.int64, column
+        for column in ("t", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed"):
+            assert poses[column].dtype == np.float64, column
+        assert len(poses) == scenario["frames"] * len(scenario["cars"])
+        assert poses.set_index(["frame", "car"]).index.is_monotonic_increasing
+        assert set(poses.car) == {c["id"] for c in scenario["cars"]}
+
+
+def test_city_logs_load_with_the_documented_dtypes():
+    for d in scenarios(CITY):
+        lights = pd.read_csv(d / "lights.csv")
+        assert list(lights.columns) == ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"]
+        assert lights.frame.dtype == np.int64 and lights.since_change.dtype == np.float64
+        assert set(lights.colour) <= {"green", "yellow", "red"}
+        assert len(lights) == 30 * 32
+        events = pd.read_csv(d / "events.csv")
+        assert list(events.columns) == ["frame", "t", "kind", "car", "other_car", "detail"]
+        assert set(events.kind) <= {"collision", "red_light_run", "merge_done", "turn_done", "actions_finished"}
+
+
+def test_frames_and_masks_decode_and_agree_with_the_poses(toy_scenarios):
+    checked = 0
+    for d in toy_scenarios:
+        scenario = json.loads((d / "scenario.json").read_text())
+        ids = {c["mask_id"] for c in scenario["cars"]}
+        poses = pd.read_csv(d / "poses.csv")
+        for frame in (0, 29):
+            rgb = np.asarray(Image.open(d / "rgb" / f"{frame:04d}.png"))
+            mask = np.asarray(Image.open(d / "mask" / f"{frame:04d}.png"))
+            assert rgb.shape == (640, 1024, 3) and rgb.dtype == np.uint8
+            assert mask.shape == (640, 1024) and mask.dtype == np.uint8
+            assert set(np.unique(mask)) - {0} <= ids
+            here = poses[poses.frame == frame]
+            for car in scenario["cars"]:
+                row = here[here.car == car["id"]].iloc[0]
+                ys, xs = np.nonzero(mask == car["mask_id"])
+                alone = ((here.px - row.px) ** 2 + (here.py - row.py) ** 2 > 40**2).sum() == len(here) - 1
+                inside = 20 < row.px < 1003 and 20 < row.py < 619
+                if alone and inside:
+                    assert abs(xs.mean() - row.px) <= 1.5 and abs(ys.mean() - row.py) <= 1.5
+                    checked += 1
+    assert checked >= 10
+
+
+def nri_dir(name):
+    return ROOT / name
+
+
+@pytest.mark.parametrize("export, layout, directed", [("nri-causalcity", "causalcity", False), ("nri-reference", "nri", True)])
+def test_nri_exports_match_the_csvs(export, layout, directed):
+    for group, cars in (("cars04_edges50", 4), ("cars08_edges80", 8)):
+        for split, nri_split in SPLITS.items():
+            folder = nri_dir(export) / group
+            loc = np.load(folder / f"loc_{nri_split}.npy")
+            vel = np.load(folder / f"vel_{nri_split}.npy")
+            edges = np.load(folder / f"edges_{nri_split}.npy")
+            dirs = sorted((TOY / group / split).iterdir())
+            if layout == "causalcity":
+                assert loc.shape == (len(dirs), 30, cars, 2)
+            else:
+                assert loc.shape == (len(dirs), 30, 2, cars)
+                loc, vel = loc.transpose(0, 1, 3, 2), vel.transpose(0, 1, 3, 2)
+            assert loc.dtype == np.float32 and vel.shape == loc.shape and edges.shape == (len(dirs), cars, cars)
+            np.testing.assert_array_equal(vel[:, 1:], loc[:, 1:] - loc[:, :-1])
+            for s, d in enumerate(dirs):
+                poses = pd.read_csv(d / "poses.csv").sort_values(["frame", "car"])
+                px = poses.px.to_numpy(np.float32).reshape(30, cars)
+                py = poses.py.to_numpy(np.float32).reshape(30, cars)
+                np.testing.assert_array_equal(loc[s, :, :, 0], px)
+                np.testing.assert_array_equal(loc[s, :, :, 1], py)
+                expected = np.eye(cars, dtype=np.int64) if layout == "causalcity" else np.zeros((cars, cars), np.int64)
+                for leader, follower in json.loads((d / "scenario.json").read_text())["edges"]:
+                    expected[follower, leader] = 1
+                    if not directed:
+                        expected[leader, follower] = 1
+                np.testing.assert_array_equal(edges[s], expected)
