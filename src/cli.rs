@@ -23,9 +23,22 @@ pub enum Command {
     Merge(MergeArgs),
     /// Check a dataset against data-schema/ and its checksums.
     Validate(ValidateArgs),
+    /// Per group and split: speeds, stops, collisions, red-light runs, leader-follower gaps.
+    Stats(StatsArgs),
     /// Turn a dataset into the inputs of other projects' loaders.
     #[command(subcommand)]
     Export(ExportCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct StatsArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// Print the table as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Subcommand)]

@@ -3,6 +3,7 @@
 //! [`orchestrate::plan::ScenarioPlan`]s, a [`world`] simulates each into
 //! trajectories, [`render`] turns them into frames and [`output`] writes files.
 
+pub mod analysis;
 pub mod cli;
 pub mod export;
 pub mod geometry;

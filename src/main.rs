@@ -64,6 +64,20 @@ fn main() {
                 }
             }
         }
+        Command::Stats(args) => match causalcity::analysis::stats::dataset_stats(&args.dataset) {
+            Ok(stats) => {
+                if args.json {
+                    println!("{}", serde_json::to_string_pretty(&stats).expect("stats serialise"));
+                } else {
+                    print!("{stats}");
+                }
+                0
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                1
+            }
+        },
         Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
             Ok(report) => {
                 if args.json {

@@ -1,0 +1,3 @@
+//! Analysis of a written dataset (reads files only): summary statistics.
+
+pub mod stats;

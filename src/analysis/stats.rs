@@ -1,0 +1,267 @@
+//! `causalcity stats DATASET`: per group and split, what a researcher checks
+//! before training: scenarios, cars, mean and 95th-percentile speed (pixels
+//! per frame), share of cars that stop (under 0.1 px/frame for 5 frames or
+//! more) and that stop on an intersection approach (light stops), scenarios
+//! with collisions, red-light runs, leader-follower distance (mean, and the
+//! median over pairs of its coefficient of variation), and the share of
+//! car-frames on camera.
+
+use crate::map::CityMap;
+use crate::orchestrate::plan::Expansion;
+use crate::output::manifest::ManifestRecord;
+use crate::output::scenario_dir;
+use crate::spec::{DatasetSpec, Split};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::fmt;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Speed below which a car counts as standing, pixels per frame.
+pub const STOP_SPEED_PX: f64 = 0.1;
+/// Frames a car must stand to count as stopped.
+pub const STOP_FRAMES: usize = 5;
+/// How far before an intersection box a stop counts as a light stop, metres.
+const APPROACH_M: f64 = 12.0;
+const HISTOGRAM_BIN_PX: f64 = 0.01;
+const HISTOGRAM_BINS: usize = 3001;
+
+/// Statistics of one group and split.
+#[derive(Debug, Clone, Serialize)]
+pub struct SplitStats {
+    pub group: String,
+    pub split: String,
+    pub scenarios: usize,
+    pub cars: usize,
+    pub mean_speed_px: f64,
+    pub p95_speed_px: f64,
+    pub stopped_share: f64,
+    pub light_stop_share: f64,
+    pub collision_scenarios: usize,
+    pub collisions: usize,
+    pub red_light_runs: usize,
+    pub gap_mean_m: Option<f64>,
+    pub gap_cv_median: Option<f64>,
+    pub in_view_share: f64,
+}
+
+/// The whole table.
+#[derive(Debug, Clone, Serialize)]
+pub struct DatasetStats {
+    pub world: String,
+    pub rows: Vec<SplitStats>,
+}
+
+impl fmt::Display for DatasetStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6}",
+            "group",
+            "split",
+            "scen",
+            "cars",
+            "speed",
+            "p95",
+            "stopped",
+            "lights",
+            "colli",
+            "reds",
+            "gap m",
+            "gapCV",
+            "inview"
+        )?;
+        let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
+        for r in &self.rows {
+            writeln!(
+                f,
+                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}%",
+                r.group,
+                r.split,
+                r.scenarios,
+                r.cars,
+                r.mean_speed_px,
+                r.p95_speed_px,
+                100.0 * r.stopped_share,
+                100.0 * r.light_stop_share,
+                r.collision_scenarios,
+                r.red_light_runs,
+                opt(r.gap_mean_m, 2),
+                opt(r.gap_cv_median, 2),
+                100.0 * r.in_view_share
+            )?;
+        }
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m of an intersection; colli: scenarios with a collision")
+    }
+}
+
+/// One scenario's contribution.
+#[derive(Default)]
+struct Tally {
+    cars: usize,
+    car_frames: usize,
+    speed_sum: f64,
+    histogram: Vec<u64>,
+    stopped: usize,
+    light_stops: usize,
+    collisions: usize,
+    red_light_runs: usize,
+    gap_means: Vec<f64>,
+    gap_cvs: Vec<f64>,
+    in_view: usize,
+}
+
+/// Computes the statistics of the dataset in `dir`.
+pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, String> {
+    let manifest = dir.join("manifest.json");
+    let record = ManifestRecord::read(&manifest)?
+        .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
+    let spec: DatasetSpec =
+        serde_json::from_value(record.spec.clone()).map_err(|e| format!("{}: {e}", manifest.display()))?;
+    let map = Arc::new(CityMap::default());
+    let expansion = Expansion::new(spec, map.clone()).map_err(|e| e.to_string())?;
+    let keys = expansion.keys(record.limit);
+    let mut rows = Vec::new();
+    for group in &expansion.spec.groups {
+        for split in Split::ALL {
+            let dirs: Vec<_> = keys
+                .iter()
+                .filter(|k| k.group == group.name() && k.split == split)
+                .map(|k| scenario_dir(dir, &k.group, split.name(), &k.folder_name()))
+                .collect();
+            if dirs.is_empty() {
+                continue;
+            }
+            let tallies: Vec<Tally> = dirs.par_iter().map(|d| tally(d, &map)).collect::<Result<_, _>>()?;
+            rows.push(combine(group.name(), split.name(), tallies));
+        }
+    }
+    Ok(DatasetStats { world: expansion.spec.world.name().into(), rows })
+}
+
+fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
+    let scenarios = tallies.len();
+    let mut all = Tally { histogram: vec![0; HISTOGRAM_BINS], ..Tally::default() };
+    let mut collision_scenarios = 0;
+    for t in tallies {
+        all.cars += t.cars;
+        all.car_frames += t.car_frames;
+        all.speed_sum += t.speed_sum;
+        for (a, b) in all.histogram.iter_mut().zip(&t.histogram) {
+            *a += b;
+        }
+        all.stopped += t.stopped;
+        all.light_stops += t.light_stops;
+        all.collisions += t.collisions;
+        collision_scenarios += (t.collisions > 0) as usize;
+        all.red_light_runs += t.red_light_runs;
+        all.gap_means.extend(t.gap_means);
+        all.gap_cvs.extend(t.gap_cvs);
+        all.in_view += t.in_view;
+    }
+    let target = (0.95 * all.car_frames as f64).ceil() as u64;
+    let mut seen = 0;
+    let mut p95 = 0.0;
+    for (i, n) in all.histogram.iter().enumerate() {
+        seen += n;
+        if seen >= target {
+            p95 = i as f64 * HISTOGRAM_BIN_PX;
+            break;
+        }
+    }
+    all.gap_cvs.sort_by(f64::total_cmp);
+    let frames = all.car_frames.max(1) as f64;
+    SplitStats {
+        group,
+        split: split.into(),
+        scenarios,
+        cars: all.cars,
+        mean_speed_px: all.speed_sum / frames,
+        p95_speed_px: p95,
+        stopped_share: all.stopped as f64 / all.cars.max(1) as f64,
+        light_stop_share: all.light_stops as f64 / all.cars.max(1) as f64,
+        collision_scenarios,
+        collisions: all.collisions,
+        red_light_runs: all.red_light_runs,
+        gap_mean_m: (!all.gap_means.is_empty()).then(|| all.gap_means.iter().sum::<f64>() / all.gap_means.len() as f64),
+        gap_cv_median: all.gap_cvs.get(all.gap_cvs.len() / 2).copied(),
+        in_view_share: all.in_view as f64 / frames,
+    }
+}
+
+fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
+    let path = dir.join("scenario.json");
+    let scenario: serde_json::Value = std::fs::read(&path)
+        .map_err(|e| e.to_string())
+        .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let cars = scenario["cars"].as_array().map_or(0, Vec::len);
+    let to_px = scenario["frame_interval"].as_f64().unwrap_or(0.0)
+        * scenario["camera"]["pixels_per_metre"].as_f64().unwrap_or(0.0);
+    let poses_path = dir.join("poses.csv");
+    let mut reader = csv::Reader::from_path(&poses_path).map_err(|e| format!("{}: {e}", poses_path.display()))?;
+    // Per car: (x, y, speed px/frame) per frame.
+    let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
+    let mut t = Tally { cars, histogram: vec![0; HISTOGRAM_BINS], ..Tally::default() };
+    for row in reader.records() {
+        let row = row.map_err(|e| format!("{}: {e}", poses_path.display()))?;
+        let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
+        let (Some(car), Some(x), Some(y), Some(speed), Some(view)) = (num(2), num(3), num(4), num(11), num(12)) else {
+            return Err(format!("{}: malformed row", poses_path.display()));
+        };
+        let car = car as usize;
+        if car >= cars {
+            return Err(format!("{}: car {car} is not in scenario.json", poses_path.display()));
+        }
+        let px = speed * to_px;
+        tracks[car].push((x, y, px));
+        t.car_frames += 1;
+        t.speed_sum += px;
+        t.histogram[((px / HISTOGRAM_BIN_PX).round() as usize).min(HISTOGRAM_BINS - 1)] += 1;
+        t.in_view += (view > 0.5) as usize;
+    }
+    let hw = map.layout.road_half_width();
+    let on_approach = |x: f64, y: f64| {
+        map.intersections.iter().any(|i| {
+            let (dx, dy) = ((x - i.centre.x).abs(), (y - i.centre.y).abs());
+            (dx < hw && dy >= hw && dy < hw + APPROACH_M) || (dy < hw && dx >= hw && dx < hw + APPROACH_M)
+        })
+    };
+    for track in &tracks {
+        let (mut run, mut stopped, mut light) = (0, false, false);
+        for &(x, y, px) in track {
+            run = if px < STOP_SPEED_PX { run + 1 } else { 0 };
+            if run == STOP_FRAMES {
+                stopped = true;
+                light |= on_approach(x, y);
+            }
+        }
+        t.stopped += stopped as usize;
+        t.light_stops += light as usize;
+    }
+    for edge in scenario["edges"].as_array().into_iter().flatten() {
+        let (Some(l), Some(f)) = (edge[0].as_u64(), edge[1].as_u64()) else { continue };
+        let (a, b) = (&tracks[l as usize], &tracks[f as usize]);
+        let gaps: Vec<f64> = a.iter().zip(b).map(|(p, q)| ((p.0 - q.0).powi(2) + (p.1 - q.1).powi(2)).sqrt()).collect();
+        if gaps.is_empty() {
+            continue;
+        }
+        let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
+        let sd = (gaps.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / gaps.len() as f64).sqrt();
+        t.gap_means.push(mean);
+        t.gap_cvs.push(if mean > 0.0 { sd / mean } else { 0.0 });
+    }
+    let events = dir.join("events.csv");
+    if events.exists() {
+        let mut reader = csv::Reader::from_path(&events).map_err(|e| format!("{}: {e}", events.display()))?;
+        for row in reader.records() {
+            let row = row.map_err(|e| format!("{}: {e}", events.display()))?;
+            match row.get(2) {
+                Some("collision") => t.collisions += 1,
+                Some("red_light_run") => t.red_light_runs += 1,
+                _ => {}
+            }
+        }
+    }
+    Ok(t)
+}

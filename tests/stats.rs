@@ -1,0 +1,74 @@
+//! `causalcity stats`: its table agrees with figures computed here straight
+//! from the CSV logs, and tells the toy world from the city.
+
+mod common;
+use common::*;
+use serde_json::Value;
+
+fn stats(dir: &std::path::Path) -> Value {
+    let output = run(&["stats", dir.to_str().unwrap(), "--json"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+#[test]
+fn stats_match_the_logs_and_separate_the_worlds() {
+    let dir = fresh_dir("stats");
+    let toy = dir.join("toy");
+    gen_ok(&write_spec(&dir, &toy_spec("stats-toy", &[(8, 0.5)], (3, 1, 1), 60)), &toy, &["--quiet", "--no-images"]);
+    let city = dir.join("city");
+    let city_spec_path = dir.join("city.json");
+    std::fs::write(
+        &city_spec_path,
+        city_spec("stats-city", &[(12, 0.5)], (6, 1, 1), 150, r#"{"red_light_runner_probability": 0.3}"#),
+    )
+    .unwrap();
+    gen_ok(&city_spec_path, &city, &["--quiet", "--no-images"]);
+
+    let toy_stats = stats(&toy);
+    assert_eq!(toy_stats["world"], "toy");
+    for row in toy_stats["rows"].as_array().unwrap() {
+        assert!((row["mean_speed_px"].as_f64().unwrap() - 2.0).abs() < 1e-3, "{row}");
+        assert!((row["p95_speed_px"].as_f64().unwrap() - 2.0).abs() < 0.011);
+        assert_eq!(row["stopped_share"], 0.0);
+        assert_eq!(row["collisions"], 0);
+        assert!(row["gap_cv_median"].as_f64().unwrap() < 0.01, "toy gaps are constant");
+    }
+
+    let city_stats = stats(&city);
+    let train = &city_stats["rows"][0];
+    assert_eq!((train["group"].as_str(), train["split"].as_str()), (Some("cars12_edges50"), Some("train")));
+    // Recompute the train row from the files.
+    let (mut speed, mut n, mut cars, mut stopped, mut reds, mut in_view) =
+        (0.0, 0usize, 0usize, 0usize, 0usize, 0usize);
+    for d in scenario_dirs(&city).into_iter().filter(|d| d.to_string_lossy().contains("/train/")) {
+        let s = read_scenario(&d);
+        let to_px = s.frame_interval * s.camera.pixels_per_metre;
+        for track in poses_by_car(&read_poses(&d.join("poses.csv"))).values() {
+            cars += 1;
+            let (mut run, mut stop) = (0, false);
+            for p in track {
+                speed += p.speed * to_px;
+                n += 1;
+                in_view += p.in_view as usize;
+                run = if p.speed * to_px < 0.1 { run + 1 } else { 0 };
+                stop |= run >= 5;
+            }
+            stopped += stop as usize;
+        }
+        reds += read_csv::<EventRow>(&d.join("events.csv")).iter().filter(|e| e.kind == "red_light_run").count();
+    }
+    assert_eq!(train["scenarios"], 6);
+    assert_eq!(train["cars"], cars);
+    assert!((train["mean_speed_px"].as_f64().unwrap() - speed / n as f64).abs() < 1e-9);
+    assert!((train["stopped_share"].as_f64().unwrap() - stopped as f64 / cars as f64).abs() < 1e-12);
+    assert!((train["in_view_share"].as_f64().unwrap() - in_view as f64 / n as f64).abs() < 1e-12);
+    assert_eq!(train["red_light_runs"], reds);
+    assert!(train["stopped_share"].as_f64().unwrap() > 0.2, "city cars stop");
+    assert!(train["gap_cv_median"].as_f64().unwrap() > 0.05, "city gaps vary");
+    assert!(train["p95_speed_px"].as_f64().unwrap() > train["mean_speed_px"].as_f64().unwrap());
+
+    // The plain table names every column.
+    let table = String::from_utf8(run(&["stats", city.to_str().unwrap()]).stdout).unwrap();
+    assert!(table.contains("gapCV") && table.contains("cars12_edges50"));
+}
