@@ -25,6 +25,8 @@ pub enum Command {
     Validate(ValidateArgs),
     /// Per group and split: speeds, stops, collisions, red-light runs, leader-follower gaps.
     Stats(StatsArgs),
+    /// Dwell-time heat map of all cars over the camera view (PNG with a colour bar).
+    Heatmap(HeatmapArgs),
     /// Turn a dataset into the inputs of other projects' loaders.
     #[command(subcommand)]
     Export(ExportCommand),
@@ -37,6 +39,29 @@ pub struct StatsArgs {
     pub dataset: PathBuf,
 
     /// Print the table as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct HeatmapArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// The PNG to write.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+
+    /// Only this group, e.g. cars08_edges50.
+    #[arg(long)]
+    pub group: Option<String>,
+
+    /// Only this split.
+    #[arg(long, value_parser = ["train", "val", "test"])]
+    pub split: Option<String>,
+
+    /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
 }

@@ -78,6 +78,38 @@ fn main() {
                 1
             }
         },
+        Command::Heatmap(args) => {
+            use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
+            use causalcity::spec::Split;
+            let split = args.split.as_deref().map(|s| match s {
+                "train" => Split::Train,
+                "val" => Split::Val,
+                _ => Split::Test,
+            });
+            match heatmap(&args.dataset, &args.out, &HeatmapFilter { group: args.group, split }) {
+                Ok(summary) => {
+                    if args.json {
+                        println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                    } else {
+                        println!(
+                            "wrote {} ({}x{}): {} scenarios, {} car-frames, {} cells visited, dwell CV {:.2}",
+                            args.out.display(),
+                            summary.width,
+                            summary.height,
+                            summary.scenarios,
+                            summary.car_frames,
+                            summary.cells_visited,
+                            summary.visited_cell_cv
+                        );
+                    }
+                    0
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    1
+                }
+            }
+        }
         Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
             Ok(report) => {
                 if args.json {

@@ -72,3 +72,33 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     let table = String::from_utf8(run(&["stats", city.to_str().unwrap()]).stdout).unwrap();
     assert!(table.contains("gapCV") && table.contains("cars12_edges50"));
 }
+
+#[test]
+fn the_toy_heat_map_is_more_uniform_than_the_city_one() {
+    let dir = fresh_dir("heatmap");
+    let mut cvs = Vec::new();
+    for world in ["toy", "city"] {
+        let spec = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/ci-{world}.json")),
+        )
+        .unwrap()
+        .replace(r#""train": 2, "val": 1, "test": 1"#, r#""train": 20, "val": 1, "test": 1"#);
+        let spec_path = dir.join(format!("{world}.json"));
+        std::fs::write(&spec_path, spec).unwrap();
+        let data = dir.join(world);
+        gen_ok(&spec_path, &data, &["--quiet", "--no-images"]);
+        let png = dir.join(format!("{world}.png"));
+        let output =
+            run(&["heatmap", data.to_str().unwrap(), "--out", png.to_str().unwrap(), "--split", "train", "--json"]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let summary: Value = serde_json::from_slice(&output.stdout).unwrap();
+        assert_eq!(summary["scenarios"], 5 * 20, "--split train keeps the train scenarios of every group");
+        let image = image::open(&png).unwrap().into_rgb8();
+        assert_eq!(image.dimensions(), (1024 + 40, 640), "the view plus a colour bar");
+        cvs.push(summary["visited_cell_cv"].as_f64().unwrap());
+    }
+    assert!(cvs[0] < 0.6 * cvs[1], "toy dwell CV {} should be well below the city's {}", cvs[0], cvs[1]);
+    let bad = run(&["heatmap", dir.join("toy").to_str().unwrap(), "--out", "/tmp/x.png", "--group", "cars99_edges50"]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("use one of cars04_edges50"));
+}

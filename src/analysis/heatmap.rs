@@ -1,0 +1,138 @@
+//! `causalcity heatmap DATASET --out heat.png`: where cars spend their time.
+//! Every car-frame adds one to the cell (4 x 4 pixels) under the car's centre;
+//! the image shows log(1 + count) over the camera view in a perceptual colour
+//! ramp, with a colour bar. Uniform for the toy world, hot in front of the
+//! lights for the city, as in the paper's figure.
+
+use crate::map::CityMap;
+use crate::orchestrate::plan::Expansion;
+use crate::output::manifest::ManifestRecord;
+use crate::output::png::{encode_png, PixelFormat, PngSettings};
+use crate::output::scenario_dir;
+use crate::spec::{DatasetSpec, Split};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Side of a heat-map cell, pixels.
+pub const CELL_PX: u32 = 4;
+const BAR_WIDTH: u32 = 40;
+
+/// What the heat map summarises.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeatmapSummary {
+    pub scenarios: usize,
+    pub car_frames: u64,
+    pub cells_visited: usize,
+    pub max_count: u64,
+    /// Coefficient of variation of the counts over visited cells: low when
+    /// dwell time is uniform, high with queues.
+    pub visited_cell_cv: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Filters on which scenarios count.
+#[derive(Debug, Clone, Default)]
+pub struct HeatmapFilter {
+    pub group: Option<String>,
+    pub split: Option<Split>,
+}
+
+/// Writes the heat map of `dataset` to `out` (PNG).
+pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
+    let manifest = dataset.join("manifest.json");
+    let record = ManifestRecord::read(&manifest)?
+        .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dataset.display()))?;
+    let spec: DatasetSpec =
+        serde_json::from_value(record.spec.clone()).map_err(|e| format!("{}: {e}", manifest.display()))?;
+    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).map_err(|e| e.to_string())?;
+    if let Some(g) = &filter.group {
+        if !expansion.spec.groups.iter().any(|x| &x.name() == g) {
+            let names: Vec<String> = expansion.spec.groups.iter().map(|x| x.name()).collect();
+            return Err(format!("--group {g} is not in this dataset: use one of {}", names.join(", ")));
+        }
+    }
+    let dirs: Vec<_> = expansion
+        .keys(record.limit)
+        .into_iter()
+        .filter(|k| filter.group.as_ref().is_none_or(|g| &k.group == g) && filter.split.is_none_or(|s| k.split == s))
+        .map(|k| scenario_dir(dataset, &k.group, k.split.name(), &k.folder_name()))
+        .collect();
+    let (w, h) = (expansion.camera.width, expansion.camera.height);
+    let (cw, ch) = (w.div_ceil(CELL_PX) as usize, h.div_ceil(CELL_PX) as usize);
+    let counts = dirs.par_iter().map(|d| count_cells(&d.join("poses.csv"), cw, ch)).try_reduce(
+        || vec![0u64; cw * ch],
+        |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            Ok(a)
+        },
+    )?;
+    let visited: Vec<f64> = counts.iter().filter(|&&c| c > 0).map(|&c| c as f64).collect();
+    let mean = visited.iter().sum::<f64>() / visited.len().max(1) as f64;
+    let sd = (visited.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / visited.len().max(1) as f64).sqrt();
+    let max = counts.iter().copied().max().unwrap_or(0);
+
+    // Image: the heat over the view, a colour bar on the right.
+    let (iw, ih) = (w + BAR_WIDTH, h);
+    let mut rgb = vec![0u8; (iw * ih * 3) as usize];
+    let scale = ((1 + max) as f64).ln().max(1e-9);
+    for y in 0..h {
+        for x in 0..w {
+            let c = counts[(y / CELL_PX) as usize * cw + (x / CELL_PX) as usize];
+            let colour = if c == 0 { [24, 24, 28] } else { ramp(((1 + c) as f64).ln() / scale) };
+            let i = ((y * iw + x) * 3) as usize;
+            rgb[i..i + 3].copy_from_slice(&colour);
+        }
+        let level = 1.0 - y as f64 / (h - 1).max(1) as f64;
+        for x in w + 8..iw - 8 {
+            let i = ((y * iw + x) * 3) as usize;
+            rgb[i..i + 3].copy_from_slice(&ramp(level));
+        }
+    }
+    let file = std::fs::File::create(out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    encode_png(std::io::BufWriter::new(file), iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())
+        .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    Ok(HeatmapSummary {
+        scenarios: dirs.len(),
+        car_frames: counts.iter().sum(),
+        cells_visited: visited.len(),
+        max_count: max,
+        visited_cell_cv: if mean > 0.0 { sd / mean } else { 0.0 },
+        width: iw,
+        height: ih,
+    })
+}
+
+fn count_cells(poses: &Path, cw: usize, ch: usize) -> Result<Vec<u64>, String> {
+    let mut counts = vec![0u64; cw * ch];
+    let mut reader = csv::Reader::from_path(poses).map_err(|e| format!("{}: {e}", poses.display()))?;
+    for row in reader.records() {
+        let row = row.map_err(|e| format!("{}: {e}", poses.display()))?;
+        let (Some(px), Some(py)) =
+            (row.get(9).and_then(|v| v.parse::<f64>().ok()), row.get(10).and_then(|v| v.parse::<f64>().ok()))
+        else {
+            return Err(format!("{}: malformed row", poses.display()));
+        };
+        let (cx, cy) = ((px + 0.5) / CELL_PX as f64, (py + 0.5) / CELL_PX as f64);
+        if cx >= 0.0 && cy >= 0.0 && (cx as usize) < cw && (cy as usize) < ch {
+            counts[cy as usize * cw + cx as usize] += 1;
+        }
+    }
+    Ok(counts)
+}
+
+/// A perceptual ramp (after viridis) from 0 to 1.
+fn ramp(t: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 5] =
+        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let t = t.clamp(0.0, 1.0) * (STOPS.len() - 1) as f64;
+    let i = (t.floor() as usize).min(STOPS.len() - 2);
+    let f = t - i as f64;
+    let mut out = [0u8; 3];
+    for k in 0..3 {
+        out[k] = (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f).round() as u8;
+    }
+    out
+}
