@@ -5,6 +5,7 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod dataset;
 pub mod export;
 pub mod geometry;
 pub mod map;

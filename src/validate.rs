@@ -4,10 +4,9 @@
 //! ids consistent across scenario.json, the CSV logs and the masks, and the
 //! SHA-256 of every file. Reports every problem with its path.
 
-use crate::map::CityMap;
-use crate::orchestrate::plan::{Expansion, ScenarioKey};
+use crate::dataset::Dataset;
+use crate::orchestrate::plan::ScenarioKey;
 use crate::output::logs::{EVENT_COLUMNS, LIGHT_COLUMNS};
-use crate::output::manifest::ManifestRecord;
 use crate::output::poses::POSE_COLUMNS;
 use crate::output::{frame_digits, hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::spec::{DatasetSpec, WorldKind};
@@ -17,7 +16,6 @@ use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::Instant;
 
 /// One thing wrong, and where.
@@ -69,16 +67,10 @@ struct Expected<'a> {
 pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, String> {
     let start = Instant::now();
     let manifest_path = dir.join("manifest.json");
-    let record = ManifestRecord::read(&manifest_path)?.ok_or_else(|| {
-        format!("no manifest.json in {}: not a causalcity dataset, or its gen run has not started", dir.display())
-    })?;
-    let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
-        .map_err(|e| format!("{}: the spec in it is unreadable: {e}", manifest_path.display()))?;
-    let expansion = Expansion::new(spec, Arc::new(CityMap::default()))
-        .map_err(|e| format!("{}: the spec in it is invalid: {e}", manifest_path.display()))?;
-    let keys = expansion.keys(record.limit);
+    let dataset = Dataset::open(dir)?;
+    let (record, keys) = (&dataset.record, &dataset.keys);
     let expected =
-        Expected { spec: &expansion.spec, images: record.images, digits: frame_digits(expansion.spec.frames) };
+        Expected { spec: dataset.spec(), images: record.images, digits: frame_digits(dataset.spec().frames) };
 
     let mut problems = Vec::new();
     if !record.complete {
@@ -87,7 +79,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
             message: "the run that wrote this dataset did not finish: rerun its gen command to complete it".into(),
         });
     }
-    problems.extend(unexpected_entries(dir, &keys));
+    problems.extend(unexpected_entries(dir, keys));
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
     let results: Vec<(Vec<Problem>, u64, u64)> =

@@ -4,16 +4,12 @@
 //! ramp, with a colour bar. Uniform for the toy world, hot in front of the
 //! lights for the city, as in the paper's figure.
 
-use crate::map::CityMap;
-use crate::orchestrate::plan::Expansion;
-use crate::output::manifest::ManifestRecord;
+use crate::dataset::Dataset;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
-use crate::output::scenario_dir;
-use crate::spec::{DatasetSpec, Split};
+use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
-use std::sync::Arc;
 
 /// Side of a heat-map cell, pixels.
 pub const CELL_PX: u32 = 4;
@@ -42,25 +38,22 @@ pub struct HeatmapFilter {
 
 /// Writes the heat map of `dataset` to `out` (PNG).
 pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
-    let manifest = dataset.join("manifest.json");
-    let record = ManifestRecord::read(&manifest)?
-        .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dataset.display()))?;
-    let spec: DatasetSpec =
-        serde_json::from_value(record.spec.clone()).map_err(|e| format!("{}: {e}", manifest.display()))?;
-    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).map_err(|e| e.to_string())?;
+    let opened = Dataset::open_complete(dataset)?;
+    let spec = opened.spec();
     if let Some(g) = &filter.group {
-        if !expansion.spec.groups.iter().any(|x| &x.name() == g) {
-            let names: Vec<String> = expansion.spec.groups.iter().map(|x| x.name()).collect();
+        if !spec.groups.iter().any(|x| &x.name() == g) {
+            let names: Vec<String> = spec.groups.iter().map(|x| x.name()).collect();
             return Err(format!("--group {g} is not in this dataset: use one of {}", names.join(", ")));
         }
     }
-    let dirs: Vec<_> = expansion
-        .keys(record.limit)
-        .into_iter()
-        .filter(|k| filter.group.as_ref().is_none_or(|g| &k.group == g) && filter.split.is_none_or(|s| k.split == s))
-        .map(|k| scenario_dir(dataset, &k.group, k.split.name(), &k.folder_name()))
-        .collect();
-    let (w, h) = (expansion.camera.width, expansion.camera.height);
+    let mut dirs = Vec::new();
+    for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
+        for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
+            dirs.extend(opened.scenario_dirs(&group, split));
+        }
+    }
+    let camera = opened.expansion.camera;
+    let (w, h) = (camera.width, camera.height);
     let (cw, ch) = (w.div_ceil(CELL_PX) as usize, h.div_ceil(CELL_PX) as usize);
     let counts = dirs.par_iter().map(|d| count_cells(&d.join("poses.csv"), cw, ch)).try_reduce(
         || vec![0u64; cw * ch],

@@ -6,16 +6,13 @@
 //! median over pairs of its coefficient of variation), and the share of
 //! car-frames on camera.
 
+use crate::dataset::Dataset;
 use crate::map::CityMap;
-use crate::orchestrate::plan::Expansion;
-use crate::output::manifest::ManifestRecord;
-use crate::output::scenario_dir;
-use crate::spec::{DatasetSpec, Split};
+use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
 use std::path::Path;
-use std::sync::Arc;
 
 /// Speed below which a car counts as standing, pixels per frame.
 pub const STOP_SPEED_PX: f64 = 0.1;
@@ -113,22 +110,12 @@ struct Tally {
 
 /// Computes the statistics of the dataset in `dir`.
 pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, String> {
-    let manifest = dir.join("manifest.json");
-    let record = ManifestRecord::read(&manifest)?
-        .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
-    let spec: DatasetSpec =
-        serde_json::from_value(record.spec.clone()).map_err(|e| format!("{}: {e}", manifest.display()))?;
-    let map = Arc::new(CityMap::default());
-    let expansion = Expansion::new(spec, map.clone()).map_err(|e| e.to_string())?;
-    let keys = expansion.keys(record.limit);
+    let dataset = Dataset::open_complete(dir)?;
+    let map = dataset.expansion.map.clone();
     let mut rows = Vec::new();
-    for group in &expansion.spec.groups {
+    for group in &dataset.spec().groups {
         for split in Split::ALL {
-            let dirs: Vec<_> = keys
-                .iter()
-                .filter(|k| k.group == group.name() && k.split == split)
-                .map(|k| scenario_dir(dir, &k.group, split.name(), &k.folder_name()))
-                .collect();
+            let dirs = dataset.scenario_dirs(&group.name(), split);
             if dirs.is_empty() {
                 continue;
             }
@@ -136,7 +123,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, String> {
             rows.push(combine(group.name(), split.name(), tallies));
         }
     }
-    Ok(DatasetStats { world: expansion.spec.world.name().into(), rows })
+    Ok(DatasetStats { world: dataset.spec().world.name().into(), rows })
 }
 
 fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {

@@ -15,14 +15,11 @@
 //! `vel[0] = loc[1] - loc[0]`. Car order is the scenario's (randomly
 //! permuted) ids. One split is held in memory at a time.
 
-use crate::map::CityMap;
-use crate::orchestrate::plan::Expansion;
-use crate::output::manifest::ManifestRecord;
-use crate::output::{io_err, scenario_dir};
-use crate::spec::{DatasetSpec, Split};
+use crate::dataset::Dataset;
+use crate::output::io_err;
+use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 /// Array layout of the export.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -110,28 +107,15 @@ fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[
 
 /// Exports `dataset` into `out`; returns a one-line report per file group.
 pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {
-    let manifest = dataset.join("manifest.json");
-    let record = ManifestRecord::read(&manifest)?
-        .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dataset.display()))?;
-    if !record.complete {
-        return Err(format!("{} is not complete: finish it with its gen command first", dataset.display()));
-    }
-    let spec: DatasetSpec =
-        serde_json::from_value(record.spec.clone()).map_err(|e| format!("{}: {e}", manifest.display()))?;
-    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).map_err(|e| e.to_string())?;
-    let keys = expansion.keys(record.limit);
-    let frames = expansion.spec.frames as usize;
+    let opened = Dataset::open_complete(dataset)?;
+    let frames = opened.spec().frames as usize;
     let mut report = Vec::new();
-    for group in &expansion.spec.groups {
+    for group in &opened.spec().groups {
         let cars = group.cars as usize;
         let group_dir: PathBuf = out.join(group.name());
         std::fs::create_dir_all(&group_dir).map_err(|e| io_err(&group_dir)(e).to_string())?;
         for split in Split::ALL {
-            let dirs: Vec<PathBuf> = keys
-                .iter()
-                .filter(|k| k.group == group.name() && k.split == split)
-                .map(|k| scenario_dir(dataset, &k.group, split.name(), &k.folder_name()))
-                .collect();
+            let dirs = opened.scenario_dirs(&group.name(), split);
             if dirs.is_empty() {
                 continue;
             }
