@@ -24,10 +24,7 @@ impl Dataset {
         let manifest = dir.join("manifest.json");
         let record = ManifestRecord::read(&manifest)?
             .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
-        let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
-            .map_err(|e| format!("{}: the spec in it is unreadable: {e}", manifest.display()))?;
-        let expansion = Expansion::new(spec, Arc::new(CityMap::default()))
-            .map_err(|e| format!("{}: the spec in it is invalid: {e}", manifest.display()))?;
+        let expansion = expansion_of(&record, &manifest)?;
         let keys = expansion.keys(record.limit);
         Ok(Dataset { dir: dir.to_path_buf(), record, expansion, keys })
     }
@@ -53,4 +50,12 @@ impl Dataset {
             .map(|k| scenario_dir(&self.dir, &k.group, split.name(), &k.folder_name()))
             .collect()
     }
+}
+
+/// The expansion of the spec a manifest (at `path`) records.
+pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, String> {
+    let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
+        .map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
+    Expansion::new(spec, Arc::new(CityMap::default()))
+        .map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }

@@ -3,16 +3,12 @@
 //! Shards may have written into one shared folder or into folders of their
 //! own; either way the shard manifests say what each contains.
 
-use super::plan::Expansion;
 use super::run::GenError;
-use crate::map::CityMap;
 use crate::output::manifest::{Manifest, ManifestRecord};
 use crate::output::{io_err, scenario_dir, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
-use crate::spec::DatasetSpec;
 use std::collections::BTreeSet;
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 /// Shard manifests found in `dir/shards/`.
 fn shard_manifests(dir: &Path) -> Result<Vec<(PathBuf, ManifestRecord)>, GenError> {
@@ -110,10 +106,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         }
     }
 
-    let spec: DatasetSpec = serde_json::from_value(first.spec.clone())
-        .map_err(|e| GenError::Manifest(format!("shard manifest spec is unreadable: {e}")))?;
-    let expansion = Expansion::new(spec.clone(), Arc::new(CityMap::default()))
-        .map_err(|error| GenError::Spec { path: manifests[0].0.clone(), error })?;
+    let expansion = crate::dataset::expansion_of(&first, &manifests[0].0).map_err(GenError::Manifest)?;
     let keys = expansion.keys(first.limit);
 
     // Move every scenario into place.

@@ -153,7 +153,6 @@ fn install_signal_handler() {
 /// Everything shared by the workers of one run.
 struct Job<'e> {
     expansion: &'e Expansion,
-    map: Arc<CityMap>,
     world: Box<dyn World>,
     renderer: Option<Renderer>,
     out: PathBuf,
@@ -301,7 +300,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     };
     let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
     let job =
-        Job { map, world, renderer, out: out.clone(), expansion: &expansion, intersection_names, fsync: options.fsync };
+        Job { world, renderer, out: out.clone(), expansion: &expansion, intersection_names, fsync: options.fsync };
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
@@ -358,7 +357,7 @@ fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCan
         scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
         reason,
     })?;
-    let trajectories = job.world.simulate(&job.map, &plan);
+    let trajectories = job.world.simulate(&job.expansion.map, &plan);
     let camera = &job.expansion.camera;
     let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
     let mut dir = ScenarioDir::begin(target, plan.frames, canvas.is_some(), job.fsync)?;

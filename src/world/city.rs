@@ -303,16 +303,12 @@ impl<'a> Sim<'a> {
                 break;
             }
             let LegKind::Connector(c) = leg.kind else { continue };
-            let connector = &self.map.connectors[c];
-            let Some(intersection) = connector.intersection else { continue };
             let dist = leg.route_start - setback - front;
             // Past the stop line, or forced through: nothing stops the car here.
             if dist < -0.05 || car.agency.runs_red_lights {
                 continue;
             }
-            let LaneEnd::Intersection { approach, .. } = self.map.lanes[connector.from].end else { continue };
-            let signal = if connector.turn == Turn::Left { Signal::Left } else { Signal::Straight };
-            let light = &self.city.lights.lights[self.city.lights.index(intersection, approach, signal)];
+            let Some(light) = Self::light_for(self.map, self.city, c) else { continue };
             // Once committed (moving, too close to stop comfortably) the light
             // no longer matters, but cars still crossing the box always do. A
             // car that has come to rest before its line is committed no more.
@@ -336,6 +332,17 @@ impl<'a> Sim<'a> {
             self.cars[i].committed = commit;
         }
         stop
+    }
+
+    /// The light that governs entering `connector`: its approach's Left
+    /// signal for left turns, its Straight signal otherwise.
+    fn light_for(map: &'a CityMap, city: &'a CityPlan, connector: usize) -> Option<&'a super::lights::Light> {
+        let c = &map.connectors[connector];
+        let intersection = c.intersection?;
+        let LaneEnd::Intersection { approach, .. } = map.lanes[c.from].end else { return None };
+        let signal = if c.turn == Turn::Left { Signal::Left } else { Signal::Straight };
+        let lights = &city.lights;
+        Some(&lights.lights[lights.index(intersection, approach, signal)])
     }
 
     fn conflict_occupied(&self, connector: usize) -> bool {
@@ -493,9 +500,7 @@ impl<'a> Sim<'a> {
             let Some(intersection) = connector.intersection else { continue };
             let line = leg.route_start - setback;
             if front_before < line && front_after >= line {
-                let LaneEnd::Intersection { approach, .. } = self.map.lanes[connector.from].end else { continue };
-                let signal = if connector.turn == Turn::Left { Signal::Left } else { Signal::Straight };
-                let light = &self.city.lights.lights[self.city.lights.index(intersection, approach, signal)];
+                let Some(light) = Self::light_for(self.map, self.city, c) else { continue };
                 if light.state_at(now).colour == Colour::Red {
                     let forced = if car.agency.runs_red_lights { "forced" } else { "not forced" };
                     events.push(Event {
@@ -504,9 +509,10 @@ impl<'a> Sim<'a> {
                         car: id,
                         other: None,
                         detail: format!(
-                            "{} {approach} {} ({forced})",
+                            "{} {} {} ({forced})",
                             self.map.intersections[intersection].name,
-                            signal.name()
+                            light.approach,
+                            light.signal.name()
                         ),
                     });
                 }
