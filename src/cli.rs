@@ -30,6 +30,70 @@ pub enum Command {
     /// Turn a dataset into the inputs of other projects' loaders.
     #[command(subcommand)]
     Export(ExportCommand),
+    /// A scenario's frames as a small animated GIF (or a PNG contact sheet),
+    /// optionally with masks, trails and leader -> follower arrows.
+    Preview(PreviewArgs),
+    /// Non-learned causal-discovery baseline: lagged path-following scores,
+    /// threshold picked on train, precision / recall / F1 on test per group.
+    Baseline(BaselineArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct PreviewArgs {
+    /// Scenario folder (the one holding scenario.json, rgb/ and mask/).
+    #[arg(value_name = "SCENARIO")]
+    pub scenario: PathBuf,
+
+    /// Output file: .gif for an animation, .png for a contact sheet.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+
+    /// Scale factor of the frames (0 < scale <= 1).
+    #[arg(long, default_value_t = 0.4)]
+    pub scale: f64,
+
+    /// Use every Nth frame.
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..))]
+    pub every: u32,
+
+    /// GIF frames per second [default: the scenario's real time at --every].
+    #[arg(long)]
+    pub fps: Option<f64>,
+
+    /// Tint every car's mask pixels with its instance colour.
+    #[arg(long)]
+    pub masks: bool,
+
+    /// Draw each car's path so far.
+    #[arg(long)]
+    pub trails: bool,
+
+    /// Draw an arrow from each leader to its follower.
+    #[arg(long)]
+    pub arrows: bool,
+
+    /// Contact sheet: frames shown (spread over the scenario).
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub sheet_frames: u32,
+
+    /// Contact sheet: frames per row.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub columns: u32,
+}
+
+#[derive(Debug, Args)]
+pub struct BaselineArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// Longest lag tried, in seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 8.0)]
+    pub max_lag: f64,
+
+    /// Print the table as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -70,6 +134,25 @@ pub struct HeatmapArgs {
 pub enum ExportCommand {
     /// NRI: loc/vel/edges .npy files per group and split (train, valid, test).
     Nri(ExportNriArgs),
+    /// V-CDN: one HDF5 file per scenario (attrs, states, actions, rels).
+    Vcdn(ExportDirArgs),
+    /// NS-DR: annotations.json per scenario, masks as COCO RLE.
+    Nsdr(ExportDirArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ExportDirArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// Output folder; files go under <group>/<split>/.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// No progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -117,6 +200,11 @@ pub struct GenArgs {
     /// Write scenario.json and the CSV logs only, no PNG frames or masks.
     #[arg(long)]
     pub no_images: bool,
+
+    /// Also write NS-DR annotations.json per scenario: every car's mask per
+    /// frame as COCO RLE (pycocotools.mask.decode reads it).
+    #[arg(long, conflicts_with = "no_images")]
+    pub annotations: bool,
 
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
     /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.

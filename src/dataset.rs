@@ -59,3 +59,112 @@ pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, S
     Expansion::new(spec, Arc::new(CityMap::default()))
         .map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
+
+/// One car as a scenario.json names it.
+#[derive(Debug, Clone, serde::Deserialize)]
+pub struct ScenarioCar {
+    pub id: u32,
+    pub name: String,
+    pub mask_id: u8,
+    /// "#rrggbb"
+    #[serde(default)]
+    pub colour: String,
+}
+
+/// What readers need from a scenario.json.
+#[derive(Debug, Clone, serde::Deserialize)]
+pub struct ScenarioSummary {
+    pub name: String,
+    pub frames: u32,
+    pub frame_interval: f64,
+    pub cars: Vec<ScenarioCar>,
+    /// (leader, follower) car ids.
+    pub edges: Vec<[u32; 2]>,
+}
+
+impl ScenarioSummary {
+    /// Reads `dir/scenario.json`; errors name the file.
+    pub fn read(dir: &Path) -> Result<ScenarioSummary, String> {
+        let path = dir.join("scenario.json");
+        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let summary: ScenarioSummary = serde_json::from_slice(&bytes)
+            .map_err(|e| format!("{}: not a causalcity scenario: {e}", path.display()))?;
+        let cars = summary.cars.len() as u32;
+        if summary.cars.iter().enumerate().any(|(i, c)| c.id != i as u32)
+            || summary.edges.iter().any(|e| e[0] >= cars || e[1] >= cars)
+        {
+            return Err(format!("{}: car ids must be 0..{cars} in order, and edges must name them", path.display()));
+        }
+        Ok(summary)
+    }
+}
+
+/// One row of poses.csv (the columns readers use).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Pose {
+    /// Metres on the ground plane.
+    pub x: f64,
+    pub y: f64,
+    /// Pixel position in the bird's-eye frame.
+    pub px: f64,
+    pub py: f64,
+    /// Metres per second.
+    pub speed: f64,
+    pub in_view: bool,
+}
+
+/// A scenario's pose log as a [frame][car] table.
+#[derive(Debug, Clone)]
+pub struct PoseLog {
+    pub frames: usize,
+    pub cars: usize,
+    poses: Vec<Pose>,
+}
+
+impl PoseLog {
+    /// Reads `dir/poses.csv`, which must hold exactly `frames` x `cars` rows.
+    pub fn read(dir: &Path, frames: usize, cars: usize) -> Result<PoseLog, String> {
+        let path = dir.join("poses.csv");
+        let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let mut poses = vec![Pose::default(); frames * cars];
+        let mut filled = vec![false; frames * cars];
+        for (n, row) in reader.records().enumerate() {
+            let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+            let bad = || format!("{}: row {} is not a pose of this scenario", path.display(), n + 2);
+            let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
+            let (Some(frame), Some(car)) =
+                (row.get(0).and_then(|v| v.parse::<usize>().ok()), row.get(2).and_then(|v| v.parse::<usize>().ok()))
+            else {
+                return Err(bad());
+            };
+            let (Some(x), Some(y), Some(px), Some(py), Some(speed), Some(view)) =
+                (num(3), num(4), num(9), num(10), num(11), num(12))
+            else {
+                return Err(bad());
+            };
+            if frame >= frames || car >= cars || filled[frame * cars + car] {
+                return Err(bad());
+            }
+            filled[frame * cars + car] = true;
+            poses[frame * cars + car] = Pose { x, y, px, py, speed, in_view: view > 0.5 };
+        }
+        if let Some(missing) = filled.iter().position(|f| !f) {
+            return Err(format!(
+                "{}: no pose for frame {} car {} (expected {frames} frames x {cars} cars)",
+                path.display(),
+                missing / cars,
+                missing % cars
+            ));
+        }
+        Ok(PoseLog { frames, cars, poses })
+    }
+
+    pub fn at(&self, frame: usize, car: usize) -> &Pose {
+        &self.poses[frame * self.cars + car]
+    }
+
+    /// The poses of one frame, in car-id order.
+    pub fn frame(&self, frame: usize) -> &[Pose] {
+        &self.poses[frame * self.cars..(frame + 1) * self.cars]
+    }
+}

@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod map;
 pub mod orchestrate;
 pub mod output;
+pub mod preview;
 pub mod render;
 pub mod spec;
 pub mod validate;

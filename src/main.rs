@@ -10,97 +10,107 @@ use clap::Parser;
 
 fn main() {
     let cli = Cli::parse();
-    let code = match cli.command {
-        Command::Gen(args) => {
-            let options = GenOptions {
-                spec_path: args.spec,
-                out: args.out,
-                limit: args.limit,
-                threads: args.threads.map(|t| t as usize),
-                images: !args.no_images,
-                progress: if args.quiet { ProgressMode::Quiet } else { ProgressMode::Auto },
-                shard: args.shard,
-                force: args.force,
-                fsync: args.fsync,
-                handle_signals: true,
-            };
-            match generate(&options) {
-                Ok(summary) => {
-                    if args.json {
-                        println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
-                    } else {
-                        println!("{}", summary_line(&summary));
+    let code =
+        match cli.command {
+            Command::Gen(args) => {
+                let options = GenOptions {
+                    spec_path: args.spec,
+                    out: args.out,
+                    limit: args.limit,
+                    threads: args.threads.map(|t| t as usize),
+                    images: !args.no_images,
+                    annotations: args.annotations,
+                    progress: if args.quiet { ProgressMode::Quiet } else { ProgressMode::Auto },
+                    shard: args.shard,
+                    force: args.force,
+                    fsync: args.fsync,
+                    handle_signals: true,
+                };
+                match generate(&options) {
+                    Ok(summary) => {
+                        if args.json {
+                            println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                        } else {
+                            println!("{}", summary_line(&summary));
+                        }
+                        0
                     }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        e.exit_code()
+                    }
+                }
+            }
+            Command::Merge(args) => match merge(&args.out, &args.shards) {
+                Ok(report) => {
+                    println!("{report}");
                     0
                 }
                 Err(e) => {
                     eprintln!("error: {e}");
                     e.exit_code()
                 }
-            }
-        }
-        Command::Merge(args) => match merge(&args.out, &args.shards) {
-            Ok(report) => {
-                println!("{report}");
-                0
-            }
-            Err(e) => {
-                eprintln!("error: {e}");
-                e.exit_code()
-            }
-        },
-        Command::Export(ExportCommand::Nri(args)) => {
-            let options = NriOptions { layout: args.layout, suffix: args.suffix, directed: args.directed };
-            match export_nri(&args.dataset, &args.out, &options) {
-                Ok(report) => {
-                    for line in report {
-                        println!("{line}");
+            },
+            Command::Export(ExportCommand::Nri(args)) => {
+                let options = NriOptions { layout: args.layout, suffix: args.suffix, directed: args.directed };
+                match export_nri(&args.dataset, &args.out, &options) {
+                    Ok(report) => {
+                        for line in report {
+                            println!("{line}");
+                        }
+                        0
                     }
-                    0
-                }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    1
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        1
+                    }
                 }
             }
-        }
-        Command::Stats(args) => match causalcity::analysis::stats::dataset_stats(&args.dataset) {
-            Ok(stats) => {
-                if args.json {
-                    println!("{}", serde_json::to_string_pretty(&stats).expect("stats serialise"));
-                } else {
-                    print!("{stats}");
-                }
-                0
+            Command::Export(ExportCommand::Nsdr(args)) => finish(
+                causalcity::export::nsdr::export_nsdr(&args.dataset, &args.out, progress_mode(args.quiet)),
+                |n| println!("wrote annotations.json for {n} scenarios under {}", args.out.display()),
+            ),
+            Command::Export(ExportCommand::Vcdn(args)) => finish(
+                causalcity::export::vcdn::export_vcdn(&args.dataset, &args.out, progress_mode(args.quiet)),
+                |n| println!("wrote {n} V-CDN HDF5 files under {}", args.out.display()),
+            ),
+            Command::Preview(args) => {
+                let options = causalcity::preview::PreviewOptions {
+                    scale: args.scale,
+                    every: args.every,
+                    fps: args.fps,
+                    masks: args.masks,
+                    trails: args.trails,
+                    arrows: args.arrows,
+                    sheet_frames: args.sheet_frames,
+                    columns: args.columns,
+                };
+                finish(causalcity::preview::preview(&args.scenario, &args.out, &options), |s| {
+                    println!(
+                        "wrote {} ({}x{}, {} frames, {:.0} KB)",
+                        args.out.display(),
+                        s.width,
+                        s.height,
+                        s.frames,
+                        s.bytes as f64 / 1e3
+                    )
+                })
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                1
-            }
-        },
-        Command::Heatmap(args) => {
-            use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
-            use causalcity::spec::Split;
-            let split = args.split.as_deref().map(|s| match s {
-                "train" => Split::Train,
-                "val" => Split::Val,
-                _ => Split::Test,
-            });
-            match heatmap(&args.dataset, &args.out, &HeatmapFilter { group: args.group, split }) {
-                Ok(summary) => {
+            Command::Baseline(args) => {
+                finish(causalcity::analysis::baseline::baseline(&args.dataset, args.max_lag), |report| {
                     if args.json {
-                        println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                        println!("{}", serde_json::to_string_pretty(&report).expect("report serialises"));
                     } else {
-                        println!(
-                            "wrote {} ({}x{}): {} scenarios, {} car-frames, {} cells visited, dwell CV {:.2}",
-                            args.out.display(),
-                            summary.width,
-                            summary.height,
-                            summary.scenarios,
-                            summary.car_frames,
-                            summary.cells_visited,
-                            summary.visited_cell_cv
-                        );
+                        print!("{report}");
+                    }
+                })
+            }
+            Command::Stats(args) => match causalcity::analysis::stats::dataset_stats(&args.dataset) {
+                Ok(stats) => {
+                    if args.json {
+                        println!("{}", serde_json::to_string_pretty(&stats).expect("stats serialise"));
+                    } else {
+                        print!("{stats}");
                     }
                     0
                 }
@@ -108,28 +118,81 @@ fn main() {
                     eprintln!("error: {e}");
                     1
                 }
-            }
-        }
-        Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
-            Ok(report) => {
-                if args.json {
-                    println!("{}", serde_json::to_string_pretty(&report).expect("report serialises"));
-                } else {
-                    print!("{report}");
+            },
+            Command::Heatmap(args) => {
+                use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
+                use causalcity::spec::Split;
+                let split = args.split.as_deref().map(|s| match s {
+                    "train" => Split::Train,
+                    "val" => Split::Val,
+                    _ => Split::Test,
+                });
+                match heatmap(&args.dataset, &args.out, &HeatmapFilter { group: args.group, split }) {
+                    Ok(summary) => {
+                        if args.json {
+                            println!("{}", serde_json::to_string_pretty(&summary).expect("summary serialises"));
+                        } else {
+                            println!(
+                                "wrote {} ({}x{}): {} scenarios, {} car-frames, {} cells visited, dwell CV {:.2}",
+                                args.out.display(),
+                                summary.width,
+                                summary.height,
+                                summary.scenarios,
+                                summary.car_frames,
+                                summary.cells_visited,
+                                summary.visited_cell_cv
+                            );
+                        }
+                        0
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        1
+                    }
                 }
-                if report.problems.is_empty() {
-                    0
-                } else {
-                    1
+            }
+            Command::Validate(args) => match validate(&args.dir, args.threads.map(|t| t as usize)) {
+                Ok(report) => {
+                    if args.json {
+                        println!("{}", serde_json::to_string_pretty(&report).expect("report serialises"));
+                    } else {
+                        print!("{report}");
+                    }
+                    if report.problems.is_empty() {
+                        0
+                    } else {
+                        1
+                    }
                 }
-            }
-            Err(e) => {
-                eprintln!("error: {e}");
-                2
-            }
-        },
-    };
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    2
+                }
+            },
+        };
     std::process::exit(code);
+}
+
+/// Exit code 0 after `done` on success; the error and exit 1 otherwise.
+fn finish<T>(result: Result<T, String>, done: impl FnOnce(T)) -> i32 {
+    match result {
+        Ok(value) => {
+            done(value);
+            0
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            1
+        }
+    }
+}
+
+fn progress_mode(quiet: bool) -> ProgressMode {
+    if quiet {
+        ProgressMode::Quiet
+    } else {
+        ProgressMode::Auto
+    }
 }
 
 fn summary_line(s: &Summary) -> String {

@@ -60,6 +60,7 @@ impl fmt::Display for ValidationReport {
 struct Expected<'a> {
     spec: &'a DatasetSpec,
     images: bool,
+    annotations: bool,
     digits: usize,
 }
 
@@ -69,8 +70,12 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let manifest_path = dir.join("manifest.json");
     let dataset = Dataset::open(dir)?;
     let (record, keys) = (&dataset.record, &dataset.keys);
-    let expected =
-        Expected { spec: dataset.spec(), images: record.images, digits: frame_digits(dataset.spec().frames) };
+    let expected = Expected {
+        spec: dataset.spec(),
+        images: record.images,
+        annotations: record.annotations,
+        digits: frame_digits(dataset.spec().frames),
+    };
 
     let mut problems = Vec::new();
     if !record.complete {
@@ -142,6 +147,9 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     let mut names: Vec<String> = vec!["scenario.json".into(), "poses.csv".into()];
     if city {
         names.extend(["lights.csv".into(), "events.csv".into()]);
+    }
+    if expected.annotations {
+        names.push(crate::output::annotations::ANNOTATIONS_FILE.into());
     }
     if expected.images {
         for kind in ["rgb", "mask"] {
@@ -340,20 +348,7 @@ fn png_header(data: &[u8]) -> Option<(u32, u32, u8, u8)> {
 }
 
 fn check_mask(data: &[u8], w: u32, h: u32, ids: &BTreeSet<u8>) -> Result<(), String> {
-    let decoder = png::Decoder::new(std::io::Cursor::new(data));
-    let mut reader = decoder.read_info().map_err(|e| format!("cannot decode: {e}"))?;
-    let info = reader.info();
-    if (info.width, info.height) != (w, h)
-        || info.color_type != png::ColorType::Grayscale
-        || info.bit_depth != png::BitDepth::Eight
-    {
-        return Err(format!(
-            "{}x{} {:?} {:?}; expected {w}x{h} 8-bit grey",
-            info.width, info.height, info.color_type, info.bit_depth
-        ));
-    }
-    let mut buf = vec![0; reader.output_buffer_size().ok_or("image too large")?];
-    reader.next_frame(&mut buf).map_err(|e| format!("cannot decode: {e}"))?;
+    let buf = crate::output::png::decode_gray8(data, w, h)?;
     let mut seen = [false; 256];
     for &v in &buf {
         seen[v as usize] = true;

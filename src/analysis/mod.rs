@@ -1,4 +1,6 @@
-//! Analysis of a written dataset (reads files only): summary statistics.
+//! Analysis of a written dataset (reads files only): summary statistics,
+//! dwell-time heat maps and a causal-discovery baseline.
 
+pub mod baseline;
 pub mod heatmap;
 pub mod stats;

@@ -3,3 +3,5 @@
 //! scenario.json), never the simulation.
 
 pub mod nri;
+pub mod nsdr;
+pub mod vcdn;

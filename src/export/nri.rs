@@ -15,7 +15,7 @@
 //! `vel[0] = loc[1] - loc[0]`. Car order is the scenario's (randomly
 //! permuted) ids. One split is held in memory at a time.
 
-use crate::dataset::Dataset;
+use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
 use crate::output::io_err;
 use crate::spec::Split;
 use rayon::prelude::*;
@@ -56,39 +56,18 @@ struct Track {
 }
 
 fn read_track(dir: &Path, cars: usize, frames: usize) -> Result<Track, String> {
-    let poses = dir.join("poses.csv");
-    let mut reader = csv::Reader::from_path(&poses).map_err(|e| format!("{}: {e}", poses.display()))?;
-    let mut loc = vec![vec![[0f32; 2]; cars]; frames];
-    let mut seen = 0usize;
-    for row in reader.records() {
-        let row = row.map_err(|e| format!("{}: {e}", poses.display()))?;
-        let field = |i: usize| row.get(i).unwrap_or("");
-        let (frame, car): (usize, usize) = match (field(0).parse(), field(2).parse()) {
-            (Ok(f), Ok(c)) if f < frames && c < cars => (f, c),
-            _ => return Err(format!("{}: row {} is not a pose of this scenario", poses.display(), seen + 2)),
-        };
-        let (px, py): (f32, f32) = match (field(9).parse(), field(10).parse()) {
-            (Ok(x), Ok(y)) => (x, y),
-            _ => return Err(format!("{}: row {} has no px, py", poses.display(), seen + 2)),
-        };
-        loc[frame][car] = [px, py];
-        seen += 1;
+    let scenario = ScenarioSummary::read(dir)?;
+    if scenario.cars.len() != cars || scenario.frames as usize != frames {
+        return Err(format!(
+            "{}: {} cars x {} frames, the spec says {cars} x {frames}",
+            dir.display(),
+            scenario.cars.len(),
+            scenario.frames
+        ));
     }
-    if seen != frames * cars {
-        return Err(format!("{}: {seen} rows, expected {}", poses.display(), frames * cars));
-    }
-    let scenario = dir.join("scenario.json");
-    let json: serde_json::Value = std::fs::read(&scenario)
-        .map_err(|e| e.to_string())
-        .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
-        .map_err(|e| format!("{}: {e}", scenario.display()))?;
-    let edges = json["edges"]
-        .as_array()
-        .ok_or_else(|| format!("{}: no edges", scenario.display()))?
-        .iter()
-        .filter_map(|e| Some((e[0].as_u64()? as usize, e[1].as_u64()? as usize)))
-        .filter(|&(l, f)| l < cars && f < cars)
-        .collect();
+    let poses = PoseLog::read(dir, frames, cars)?;
+    let loc = (0..frames).map(|f| poses.frame(f).iter().map(|p| [p.px as f32, p.py as f32]).collect()).collect();
+    let edges = scenario.edges.iter().map(|e| (e[0] as usize, e[1] as usize)).collect();
     Ok(Track { loc, edges })
 }
 

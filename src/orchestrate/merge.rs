@@ -70,12 +70,12 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         let shard = record.shard.expect("shard manifests carry their shard");
         if record.spec_sha256 != first.spec_sha256
             || record.version != first.version
-            || record.images != first.images
+            || record.products() != first.products()
             || record.limit != first.limit
             || shard.count != count
         {
             return Err(GenError::Manifest(format!(
-                "{} belongs to another dataset (spec, version, --no-images, --limit or shard count differ) than {}",
+                "{} belongs to another dataset (spec, version, --no-images, --annotations, --limit or shard count differ) than {}",
                 path.display(),
                 manifests[0].0.display()
             )));
@@ -155,7 +155,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             absent[..absent.len().min(3)].join(", ")
         )));
     }
-    let manifest = Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.images, true, None).to_json();
+    let manifest =
+        Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), true, None).to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
     for (path, _) in &manifests {
         fs::remove_file(path).map_err(io_err(path))?;

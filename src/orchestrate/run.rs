@@ -4,10 +4,12 @@
 use super::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use super::progress::{Progress, ProgressMode};
 use crate::map::CityMap;
+use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use crate::output::logs::{write_events, write_lights};
-use crate::output::manifest::{Manifest, ManifestRecord, ShardEntry};
+use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
+use crate::output::number::logged_value;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
-use crate::output::poses::write_poses;
+use crate::output::poses::{write_poses, PIXEL_DECIMALS};
 use crate::output::scenario::scenario_json;
 use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError, PARTIAL_PREFIX};
 use crate::render::weather::SceneLook;
@@ -33,6 +35,8 @@ pub struct GenOptions {
     /// Worker threads; all cores when absent.
     pub threads: Option<usize>,
     pub images: bool,
+    /// Also write NS-DR annotations.json per scenario (needs images).
+    pub annotations: bool,
     pub progress: ProgressMode,
     /// Generate only this part of the dataset.
     pub shard: Option<Shard>,
@@ -158,6 +162,7 @@ struct Job<'e> {
     out: PathBuf,
     intersection_names: Vec<String>,
     fsync: bool,
+    annotations: bool,
 }
 
 /// Reads, checks and expands a spec file; nothing is written.
@@ -245,6 +250,7 @@ pub fn shard_keys(keys: Vec<ScenarioKey>, shard: Option<Shard>) -> Vec<ScenarioK
 pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     let start = Instant::now();
     let expansion = load_spec(&options.spec_path)?;
+    let products = Products { images: options.images, annotations: options.annotations && options.images };
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     std::fs::create_dir_all(&out).map_err(io_err(&out))?;
 
@@ -252,7 +258,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     let existing = existing_manifests(&out)?;
     let differences: Vec<String> = existing
         .iter()
-        .flat_map(|(_, record)| record.differences(&expansion.spec, options.images))
+        .flat_map(|(_, record)| record.differences(&expansion.spec, products))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();
@@ -287,8 +293,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
     let manifest = |complete| {
-        Manifest::new(&expansion.spec, &expansion.camera, options.limit, options.images, complete, shard_entry)
-            .to_json()
+        Manifest::new(&expansion.spec, &expansion.camera, options.limit, products, complete, shard_entry).to_json()
     };
     write_atomically(&manifest_file, &manifest(false))?;
 
@@ -299,8 +304,15 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         WorldKind::City => Box::new(CityWorld::default()),
     };
     let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
-    let job =
-        Job { world, renderer, out: out.clone(), expansion: &expansion, intersection_names, fsync: options.fsync };
+    let job = Job {
+        world,
+        renderer,
+        out: out.clone(),
+        expansion: &expansion,
+        intersection_names,
+        fsync: options.fsync,
+        annotations: products.annotations,
+    };
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
@@ -372,7 +384,7 @@ fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCan
         bytes += dir.write_with("events.csv", |w| write_events(w, &trajectories))?;
     }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
-        bytes += write_frames(renderer, canvas, &mut dir, &plan, &trajectories)?;
+        bytes += write_frames(renderer, canvas, &mut dir, &plan, &trajectories, job.annotations)?;
     }
     bytes += dir.commit()?;
     Ok(bytes)
@@ -384,8 +396,14 @@ fn write_frames(
     dir: &mut ScenarioDir,
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
+    annotations: bool,
 ) -> Result<u64, GenError> {
     let (w, h) = (renderer.camera.width, renderer.camera.height);
+    let scenario_name = plan.key.folder_name();
+    let annotated_cars: Vec<AnnotatedCar> =
+        plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
+    let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, w, h, &annotated_cars));
+    let mut pixels = Vec::with_capacity(plan.cars.len());
     let look = match &plan.city {
         Some(city) => {
             let c = &city.confounders;
@@ -419,6 +437,17 @@ fn write_frames(
         bytes += dir.write_with(&mask_name, |out| {
             encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
         })?;
+        if let Some(builder) = builder.as_mut() {
+            pixels.clear();
+            pixels.extend(states.iter().map(|s| {
+                let p = renderer.camera.to_pixel(s.position);
+                [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
+            }));
+            builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels);
+        }
+    }
+    if let Some(builder) = builder {
+        bytes += dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
     }
     Ok(bytes)
 }

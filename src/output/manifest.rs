@@ -34,6 +34,8 @@ pub struct Manifest<'a> {
     /// Scenarios per split were capped at this (`--limit`).
     pub limit: Option<u32>,
     pub images: bool,
+    /// Scenarios carry NS-DR annotations.json (`gen --annotations`).
+    pub annotations: bool,
     pub camera: &'a Camera,
     pub frames_per_scenario: u32,
     pub frame_file_digits: usize,
@@ -44,6 +46,15 @@ pub struct Manifest<'a> {
     /// Only in the per-shard manifests under `shards/`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shard: Option<ShardEntry>,
+}
+
+/// Which optional files every scenario of a dataset has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Products {
+    /// rgb/ and mask/ PNG frames.
+    pub images: bool,
+    /// annotations.json (needs images).
+    pub annotations: bool,
 }
 
 /// Which part of the dataset a shard run writes.
@@ -68,6 +79,8 @@ pub struct ManifestRecord {
     pub spec_sha256: String,
     pub spec: serde_json::Value,
     pub images: bool,
+    #[serde(default)]
+    pub annotations: bool,
     pub limit: Option<u32>,
     pub groups: Vec<GroupRecord>,
     pub complete: bool,
@@ -93,15 +106,24 @@ impl ManifestRecord {
         }
     }
 
-    /// What differs between this manifest and a run of `spec` (with `images`),
-    /// one line per difference; empty when they agree.
-    pub fn differences(&self, spec: &DatasetSpec, images: bool) -> Vec<String> {
+    /// The per-scenario files this dataset was written with.
+    pub fn products(&self) -> Products {
+        Products { images: self.images, annotations: self.annotations }
+    }
+
+    /// What differs between this manifest and a run of `spec` writing
+    /// `products`, one line per difference; empty when they agree.
+    pub fn differences(&self, spec: &DatasetSpec, products: Products) -> Vec<String> {
+        let images = products.images;
         let mut out = Vec::new();
         if self.version != env!("CARGO_PKG_VERSION") {
             out.push(format!("tool version: {} wrote it, this is {}", self.version, env!("CARGO_PKG_VERSION")));
         }
         if self.images != images {
             out.push(format!("images: {} there, {} now (--no-images)", self.images, images));
+        }
+        if self.annotations != products.annotations {
+            out.push(format!("annotations: {} there, {} now (--annotations)", self.annotations, products.annotations));
         }
         if self.spec_sha256 != spec_sha256(spec) {
             let new = serde_json::to_value(spec).expect("spec serialises");
@@ -144,7 +166,7 @@ impl<'a> Manifest<'a> {
         spec: &'a DatasetSpec,
         camera: &'a Camera,
         limit: Option<u32>,
-        images: bool,
+        products: Products,
         complete: bool,
         shard: Option<ShardEntry>,
     ) -> Manifest<'a> {
@@ -169,7 +191,8 @@ impl<'a> Manifest<'a> {
             spec_sha256: spec_sha256(spec),
             spec,
             limit,
-            images,
+            images: products.images,
+            annotations: products.annotations,
             camera,
             frames_per_scenario: spec.frames,
             frame_file_digits: super::frame_digits(spec.frames),

@@ -6,6 +6,7 @@
 //! `OUT/manifest.json`, `OUT/<group>/<split>/<scenario>/{scenario.json,
 //! poses.csv, rgb/NNNN.png, mask/NNNN.png}`.
 
+pub mod annotations;
 pub mod logs;
 pub mod manifest;
 pub mod number;

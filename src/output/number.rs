@@ -37,6 +37,13 @@ pub fn push_fixed(out: &mut Vec<u8>, x: f64, decimals: u32) {
     out.extend_from_slice(&buf[start..]);
 }
 
+/// The value that `push_fixed(x, decimals)`'s text reads back as, so that
+/// other files can repeat a logged number exactly.
+pub fn logged_value(x: f64, decimals: u32) -> f64 {
+    let scale = 10u64.pow(decimals) as f64;
+    (x * scale).round() / scale + 0.0
+}
+
 /// Appends an unsigned integer.
 pub fn push_int(out: &mut Vec<u8>, n: u64) {
     let mut buf = [0u8; 20];

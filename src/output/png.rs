@@ -61,3 +61,22 @@ pub fn encode_png<W: Write>(
     writer.write_image_data(data)?;
     writer.finish()
 }
+
+/// Decodes an 8-bit greyscale PNG (an instance mask) of the expected size.
+pub fn decode_gray8(data: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(data));
+    let mut reader = decoder.read_info().map_err(|e| format!("cannot decode: {e}"))?;
+    let info = reader.info();
+    if (info.width, info.height) != (width, height)
+        || info.color_type != png::ColorType::Grayscale
+        || info.bit_depth != png::BitDepth::Eight
+    {
+        return Err(format!(
+            "{}x{} {:?} {:?}; expected {width}x{height} 8-bit grey",
+            info.width, info.height, info.color_type, info.bit_depth
+        ));
+    }
+    let mut buf = vec![0; reader.output_buffer_size().ok_or("image too large")?];
+    reader.next_frame(&mut buf).map_err(|e| format!("cannot decode: {e}"))?;
+    Ok(buf)
+}

@@ -9,6 +9,9 @@ use std::io::Write;
 pub const POSE_COLUMNS: [&str; 13] =
     ["frame", "t", "car", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed", "in_view"];
 
+/// Decimals of px and py in the log.
+pub const PIXEL_DECIMALS: u32 = 3;
+
 /// Writes the pose log of `trajectories` for cars with the given ids.
 pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> csv::Result<()> {
     let mut writer = csv::WriterBuilder::new().has_headers(false).from_writer(out);
@@ -27,8 +30,8 @@ pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectorie
             fields.fixed(&mut writer, state.roll, 6)?;
             fields.fixed(&mut writer, state.pitch, 6)?;
             fields.fixed(&mut writer, state.yaw, 6)?;
-            fields.fixed(&mut writer, pixel.x, 3)?;
-            fields.fixed(&mut writer, pixel.y, 3)?;
+            fields.fixed(&mut writer, pixel.x, PIXEL_DECIMALS)?;
+            fields.fixed(&mut writer, pixel.y, PIXEL_DECIMALS)?;
             fields.fixed(&mut writer, state.speed, 4)?;
             fields.int(&mut writer, camera.contains_pixel(pixel) as u64)?;
             writer.write_record(None::<&[u8]>)?;

@@ -1,0 +1,67 @@
+//! `causalcity export nsdr`: NS-DR / CLEVRER-style `annotations.json` per
+//! scenario, made from the written mask PNGs and poses.csv, into
+//! `<out>/<group>/<split>/<scenario>/annotations.json`. The same bytes as
+//! `gen --annotations` writes into the scenario folders (format in
+//! `output::annotations`).
+
+use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
+use crate::orchestrate::progress::{Progress, ProgressMode};
+use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
+use crate::output::png::decode_gray8;
+use crate::output::{frame_digits, io_err, write_atomically};
+use crate::spec::Split;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Writes annotations for every scenario of `dataset` under `out`; returns
+/// how many scenarios were written.
+pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, String> {
+    let opened = Dataset::open_complete(dataset)?;
+    if !opened.record.images {
+        return Err(format!(
+            "{} has no masks (made with --no-images): NS-DR annotations need them; regenerate without --no-images",
+            dataset.display()
+        ));
+    }
+    let (w, h) = (opened.spec().image.width, opened.spec().image.height);
+    let digits = frame_digits(opened.spec().frames);
+    let mut jobs: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for group in &opened.spec().groups {
+        for split in Split::ALL {
+            for dir in opened.scenario_dirs(&group.name(), split) {
+                let name = dir.file_name().expect("scenario folders have names").to_owned();
+                jobs.push((dir, out.join(group.name()).join(split.name()).join(name)));
+            }
+        }
+    }
+    let bar = Progress::new(jobs.len() as u64, progress);
+    jobs.par_iter().try_for_each(|(source, target)| {
+        let json = annotate(source, w, h, digits)?;
+        std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
+        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+        bar.inc();
+        Ok::<(), String>(())
+    })?;
+    bar.finish();
+    Ok(jobs.len())
+}
+
+/// annotations.json of the scenario in `dir`.
+pub fn annotate(dir: &Path, width: u32, height: u32, digits: usize) -> Result<Vec<u8>, String> {
+    let scenario = ScenarioSummary::read(dir)?;
+    let poses = PoseLog::read(dir, scenario.frames as usize, scenario.cars.len())?;
+    let cars: Vec<AnnotatedCar> =
+        scenario.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
+    let mut builder = AnnotationsBuilder::new(&scenario.name, width, height, &cars);
+    let mut pixels = Vec::with_capacity(cars.len());
+    for frame in 0..scenario.frames {
+        let (rgb_name, mask_name) = (format!("rgb/{frame:0digits$}.png"), format!("mask/{frame:0digits$}.png"));
+        let path = dir.join(&mask_name);
+        let data = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let mask = decode_gray8(&data, width, height).map_err(|e| format!("{}: {e}", path.display()))?;
+        pixels.clear();
+        pixels.extend(poses.frame(frame as usize).iter().map(|p| [p.px, p.py]));
+        builder.add_frame(frame, rgb_name, mask_name, &mask, &pixels);
+    }
+    Ok(builder.to_json())
+}

@@ -1,0 +1,225 @@
+//! `causalcity preview`: a look at one written scenario before spending GPU
+//! hours on a dataset. Reads the scenario's files (rgb/, mask/, poses.csv,
+//! scenario.json) and writes either an animated GIF (`.gif`) or a contact
+//! sheet of frames spread over the scenario (`.png`), downscaled by
+//! `scale`. Overlays: mask tint (each car's pixels in its colour), trails
+//! (each car's path so far) and arrows from each leader to its follower.
+
+use crate::dataset::{PoseLog, ScenarioSummary};
+use crate::output::frame_digits;
+use crate::output::png::decode_gray8;
+use image::codecs::gif::{GifEncoder, Repeat};
+use image::{Delay, Frame, RgbaImage};
+use std::path::Path;
+use tiny_skia::{Color, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
+
+/// What to draw and how small.
+#[derive(Debug, Clone)]
+pub struct PreviewOptions {
+    /// 0 < scale <= 1.
+    pub scale: f64,
+    /// Use every Nth frame.
+    pub every: u32,
+    /// GIF frames per second; the scenario's real time when None.
+    pub fps: Option<f64>,
+    pub masks: bool,
+    pub trails: bool,
+    pub arrows: bool,
+    /// Contact sheet: how many frames, and how many per row.
+    pub sheet_frames: u32,
+    pub columns: u32,
+}
+
+/// What was written.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PreviewSummary {
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    pub bytes: u64,
+}
+
+/// Writes the preview of the scenario in `scenario_dir` to `out`.
+pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Result<PreviewSummary, String> {
+    if !(options.scale > 0.0 && options.scale <= 1.0) {
+        return Err(format!("--scale must be in (0, 1], not {}", options.scale));
+    }
+    if let Some(fps) = options.fps {
+        if !(fps > 0.0 && fps <= 100.0) {
+            return Err(format!("--fps must be in (0, 100], not {fps}"));
+        }
+    }
+    let kind = match out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("gif") => Kind::Gif,
+        Some("png") => Kind::Sheet,
+        _ => return Err(format!("{}: the output must end in .gif (animation) or .png (contact sheet)", out.display())),
+    };
+    let scenario = ScenarioSummary::read(scenario_dir)?;
+    let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
+    let poses = PoseLog::read(scenario_dir, frames, cars)?;
+    let digits = frame_digits(scenario.frames);
+    let first = scenario_dir.join(format!("rgb/{:0digits$}.png", 0));
+    if !first.exists() {
+        return Err(format!("{} has no frames (made with --no-images?): nothing to preview", scenario_dir.display()));
+    }
+    let colours: Vec<[u8; 3]> = scenario.cars.iter().map(|c| parse_colour(&c.colour)).collect();
+
+    let chosen: Vec<usize> = match kind {
+        Kind::Gif => (0..frames).step_by(options.every as usize).collect(),
+        Kind::Sheet => {
+            let n = (options.sheet_frames as usize).min(frames);
+            (0..n).map(|i| if n == 1 { 0 } else { i * (frames - 1) / (n - 1) }).collect()
+        }
+    };
+    let draw = |frame: usize| -> Result<RgbaImage, String> {
+        let rgb_path = scenario_dir.join(format!("rgb/{frame:0digits$}.png"));
+        let rgb = image::open(&rgb_path).map_err(|e| format!("{}: {e}", rgb_path.display()))?.to_rgba8();
+        let (w, h) = rgb.dimensions();
+        let mut pixmap = Pixmap::from_vec(rgb.into_raw(), tiny_skia::IntSize::from_wh(w, h).ok_or("empty frame")?)
+            .ok_or("frame size")?;
+        if options.masks {
+            let mask_path = scenario_dir.join(format!("mask/{frame:0digits$}.png"));
+            let data = std::fs::read(&mask_path).map_err(|e| format!("cannot read {}: {e}", mask_path.display()))?;
+            let mask = decode_gray8(&data, w, h).map_err(|e| format!("{}: {e}", mask_path.display()))?;
+            let mut by_mask = [None; 256];
+            for (car, c) in scenario.cars.iter().enumerate() {
+                by_mask[c.mask_id as usize] = Some(colours[car]);
+            }
+            for (pixel, &id) in pixmap.data_mut().chunks_exact_mut(4).zip(&mask) {
+                if let Some(colour) = by_mask[id as usize] {
+                    for k in 0..3 {
+                        pixel[k] = ((pixel[k] as u16 + 2 * colour[k] as u16) / 3) as u8;
+                    }
+                }
+            }
+        }
+        let line = |width: f32| Stroke { width, line_cap: LineCap::Round, ..Stroke::default() };
+        let thickness = (2.0 / options.scale as f32).max(2.0);
+        if options.trails {
+            for (car, colour) in colours.iter().enumerate() {
+                let mut path = PathBuilder::new();
+                for f in 0..=frame {
+                    let p = poses.at(f, car);
+                    if f == 0 {
+                        path.move_to(p.px as f32, p.py as f32);
+                    } else {
+                        path.line_to(p.px as f32, p.py as f32);
+                    }
+                }
+                if let Some(path) = path.finish() {
+                    let mut paint = Paint::default();
+                    paint.set_color_rgba8(colour[0], colour[1], colour[2], 200);
+                    pixmap.stroke_path(&path, &paint, &line(thickness), Transform::identity(), None);
+                }
+            }
+        }
+        if options.arrows {
+            let mut paint = Paint::default();
+            paint.set_color(Color::from_rgba8(255, 235, 40, 255));
+            for edge in &scenario.edges {
+                let (l, f) = (poses.at(frame, edge[0] as usize), poses.at(frame, edge[1] as usize));
+                if let Some(path) = arrow([l.px, l.py], [f.px, f.py], 6.0 * thickness) {
+                    pixmap.stroke_path(&path, &paint, &line(thickness), Transform::identity(), None);
+                }
+            }
+        }
+        let full = RgbaImage::from_raw(w, h, pixmap.take()).ok_or("frame size")?;
+        let (sw, sh) = scaled_size(w, h, options.scale);
+        Ok(image::imageops::resize(&full, sw, sh, image::imageops::FilterType::Triangle))
+    };
+
+    let partial = out.with_extension("partial");
+    let result = (|| -> Result<(u32, u32), String> {
+        let file = std::fs::File::create(&partial).map_err(|e| format!("cannot write {}: {e}", partial.display()))?;
+        let writer = std::io::BufWriter::new(file);
+        match kind {
+            Kind::Gif => {
+                let fps =
+                    options.fps.unwrap_or(1.0 / (scenario.frame_interval * options.every as f64)).clamp(0.5, 50.0);
+                let delay = Delay::from_numer_denom_ms((1000.0 / fps).round() as u32, 1);
+                let mut encoder = GifEncoder::new_with_speed(writer, 10);
+                encoder.set_repeat(Repeat::Infinite).map_err(|e| e.to_string())?;
+                let mut size = (0, 0);
+                for &frame in &chosen {
+                    let image = draw(frame)?;
+                    size = image.dimensions();
+                    encoder
+                        .encode_frame(Frame::from_parts(image, 0, 0, delay))
+                        .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+                }
+                Ok(size)
+            }
+            Kind::Sheet => {
+                let tiles: Vec<RgbaImage> = chosen.iter().map(|&f| draw(f)).collect::<Result<_, _>>()?;
+                let (tw, th) = tiles[0].dimensions();
+                let columns = (options.columns as usize).min(tiles.len()) as u32;
+                let rows = tiles.len().div_ceil(columns as usize) as u32;
+                let gap = 4;
+                let (sw, sh) = (columns * tw + (columns + 1) * gap, rows * th + (rows + 1) * gap);
+                let mut sheet = RgbaImage::from_pixel(sw, sh, image::Rgba([24, 24, 24, 255]));
+                for (i, tile) in tiles.iter().enumerate() {
+                    let (c, r) = (i as u32 % columns, i as u32 / columns);
+                    image::imageops::overlay(
+                        &mut sheet,
+                        tile,
+                        (gap + c * (tw + gap)) as i64,
+                        (gap + r * (th + gap)) as i64,
+                    );
+                }
+                let rgb = image::DynamicImage::ImageRgba8(sheet).to_rgb8();
+                rgb.write_with_encoder(image::codecs::png::PngEncoder::new(writer))
+                    .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+                Ok((sw, sh))
+            }
+        }
+    })();
+    let (width, height) = match result {
+        Ok(size) => size,
+        Err(e) => {
+            let _ = std::fs::remove_file(&partial);
+            return Err(e);
+        }
+    };
+    std::fs::rename(&partial, out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    Ok(PreviewSummary { frames: chosen.len(), width, height, bytes })
+}
+
+enum Kind {
+    Gif,
+    Sheet,
+}
+
+/// The size of a `w` x `h` frame at `scale` (at least 1 x 1).
+pub fn scaled_size(w: u32, h: u32, scale: f64) -> (u32, u32) {
+    (((w as f64 * scale).round() as u32).max(1), ((h as f64 * scale).round() as u32).max(1))
+}
+
+/// "#rrggbb" -> bytes; grey when unreadable.
+fn parse_colour(text: &str) -> [u8; 3] {
+    let hex = text.trim_start_matches('#');
+    let byte = |i: usize| hex.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok());
+    match (byte(0), byte(2), byte(4)) {
+        (Some(r), Some(g), Some(b)) if hex.len() == 6 => [r, g, b],
+        _ => [128, 128, 128],
+    }
+}
+
+/// A line from `from` to `to` with a head of `head` pixels at `to`.
+fn arrow(from: [f64; 2], to: [f64; 2], head: f32) -> Option<tiny_skia::Path> {
+    let (dx, dy) = ((to[0] - from[0]) as f32, (to[1] - from[1]) as f32);
+    let length = (dx * dx + dy * dy).sqrt();
+    if length < 1.0 {
+        return None;
+    }
+    let (ux, uy) = (dx / length, dy / length);
+    let (tx, ty) = (to[0] as f32, to[1] as f32);
+    let mut path = PathBuilder::new();
+    path.move_to(from[0] as f32, from[1] as f32);
+    path.line_to(tx, ty);
+    for side in [-1.0f32, 1.0] {
+        path.move_to(tx, ty);
+        path.line_to(tx - head * (ux * 0.87 - side * uy * 0.5), ty - head * (uy * 0.87 + side * ux * 0.5));
+    }
+    path.finish()
+}
