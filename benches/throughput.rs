@@ -223,9 +223,7 @@ fn main() {
     println!("\n== City world with images (default confounders) vs toy, 1 thread, best of 3 interleaved runs, in /dev/shm ==");
     let city_images = write_world_spec(&root, "cityimg", "city", 12, 8);
     // In memory where possible (/dev/shm), so disk noise does not decide the comparison.
-    let shm = Path::new("/dev/shm");
-    let scratch =
-        if shm.is_dir() { shm.join(format!("causalcity-bench-{}", std::process::id())) } else { root.clone() };
+    let scratch = scratch_root(&root);
     let (mut best_toy, mut best_city) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..3 {
         best_toy = best_toy.min(gen(&images_spec, &scratch.join("img1"), 1, true));
@@ -354,6 +352,35 @@ fn main() {
         let _ = std::fs::remove_dir_all(&out);
     }
 
+    println!("\n== export nri vs gen, 5000 scenarios (4000/500/500), 12 cars x 150 frames, poses only, 2 threads, in /dev/shm ==");
+    for world in ["toy", "city"] {
+        let scratch = scratch_root(&root);
+        let spec = scratch.join(format!("export-{world}.json"));
+        std::fs::write(
+            &spec,
+            world_spec_json(&format!("export-{world}"), world, 12, 4000)
+                .replace(r#""val": 0, "test": 0"#, r#""val": 500, "test": 500"#),
+        )
+        .unwrap();
+        let data = scratch.join(format!("export-{world}"));
+        let gen_time = gen(&spec, &data, 2, false);
+        let out = scratch.join(format!("export-{world}-nri"));
+        let (export_time, peak) =
+            run_measured(&["export", "nri", data.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        // The largest split's loc and vel arrays (float32).
+        let arrays = 2.0 * 4000.0 * 150.0 * 12.0 * 2.0 * 4.0;
+        println!(
+            "{world}: gen {gen_time:.2} s, export nri {export_time:.2} s ({:.1}x faster than generating the poses), \
+             peak memory {:.0} MB = {:.1}x the train split's loc+vel ({:.0} MB)",
+            gen_time / export_time,
+            peak as f64 / 1e6,
+            peak as f64 / arrays,
+            arrays / 1e6
+        );
+        let _ = std::fs::remove_dir_all(&data);
+        let _ = std::fs::remove_dir_all(&out);
+    }
+
     println!("\n== Peak memory of the binary (VmHWM), 2 threads, with images ==");
     for n in [4u32, 40] {
         let spec = write_spec(&root, &format!("mem{n}"), 12, n);
@@ -370,4 +397,43 @@ fn main() {
         println!("{n:>3} scenarios: peak memory {peak}");
     }
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A scratch folder in /dev/shm when there is one (disk timings on this
+/// machine swing with inode allocation), else under `root`.
+fn scratch_root(root: &Path) -> PathBuf {
+    let shm = Path::new("/dev/shm").join(format!("causalcity-bench-{}", std::process::id()));
+    if std::fs::create_dir_all(&shm).is_ok() {
+        shm
+    } else {
+        root.to_path_buf()
+    }
+}
+
+/// Runs the binary with `args`; returns wall seconds and its peak resident
+/// memory (VmHWM, polled from /proc every 5 ms; 0 where there is no /proc).
+fn run_measured(args: &[&str]) -> (f64, u64) {
+    let start = Instant::now();
+    let mut child =
+        Command::new(env!("CARGO_BIN_EXE_causalcity")).args(args).stdout(std::process::Stdio::null()).spawn().unwrap();
+    let status_path = format!("/proc/{}/status", child.id());
+    let mut peak = 0u64;
+    loop {
+        if let Ok(status) = std::fs::read_to_string(&status_path) {
+            if let Some(kb) = status
+                .lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|v| v.parse::<u64>().ok())
+            {
+                peak = peak.max(kb * 1024);
+            }
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success(), "{args:?} failed");
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    (start.elapsed().as_secs_f64(), peak)
 }

@@ -128,12 +128,15 @@ impl PoseLog {
         let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let mut poses = vec![Pose::default(); frames * cars];
         let mut filled = vec![false; frames * cars];
-        for (n, row) in reader.records().enumerate() {
-            let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
-            let bad = || format!("{}: row {} is not a pose of this scenario", path.display(), n + 2);
-            let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
+        let mut row = csv::ByteRecord::new();
+        let mut n = 0usize;
+        while reader.read_byte_record(&mut row).map_err(|e| format!("{}: {e}", path.display()))? {
+            n += 1;
+            let bad = || format!("{}: row {} is not a pose of this scenario", path.display(), n + 1);
+            let field = |i: usize| row.get(i).and_then(|v| std::str::from_utf8(v).ok());
+            let num = |i: usize| field(i).and_then(|v| v.parse::<f64>().ok());
             let (Some(frame), Some(car)) =
-                (row.get(0).and_then(|v| v.parse::<usize>().ok()), row.get(2).and_then(|v| v.parse::<usize>().ok()))
+                (field(0).and_then(|v| v.parse::<usize>().ok()), field(2).and_then(|v| v.parse::<usize>().ok()))
             else {
                 return Err(bad());
             };

@@ -7,7 +7,7 @@
 use crate::dataset::Dataset;
 use crate::orchestrate::plan::ScenarioKey;
 use crate::output::logs::{EVENT_COLUMNS, LIGHT_COLUMNS};
-use crate::output::poses::POSE_COLUMNS;
+use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{frame_digits, hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::spec::{DatasetSpec, WorldKind};
 use rayon::prelude::*;
@@ -144,7 +144,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     let city = spec.world == WorldKind::City;
 
     // The files there should be.
-    let mut names: Vec<String> = vec!["scenario.json".into(), "poses.csv".into()];
+    let mut names: Vec<String> = vec!["scenario.json".into(), "poses.csv".into(), PIXELS_FILE.into()];
     if city {
         names.extend(["lights.csv".into(), "events.csv".into()]);
     }
@@ -248,6 +248,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
             let ok = cars > 0 && frame == i / cars && car == i % cars;
             ok.then_some(()).ok_or(()).ok()
         });
+        if read(PIXELS_FILE, &mut problems).is_some() {
+            if let Err(message) = check_pixels(&dir, &data, frames, cars) {
+                problems.push(Problem { path: dir.join(PIXELS_FILE), message });
+            }
+        }
     }
     if city {
         if let Some(data) = read("lights.csv", &mut problems) {
@@ -278,6 +283,21 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
 
+    if expected.annotations {
+        let name = crate::output::annotations::ANNOTATIONS_FILE;
+        if let Some(data) = read(name, &mut problems) {
+            let frames_listed = serde_json::from_slice::<serde_json::Value>(&data)
+                .ok()
+                .and_then(|v| v["frames"].as_array().map(Vec::len));
+            if frames_listed != Some(frames as usize) {
+                problems.push(Problem {
+                    path: dir.join(name),
+                    message: format!("expected NS-DR annotations of {frames} frames"),
+                });
+            }
+        }
+    }
+
     // Frames: RGB by header (their bytes are covered by the checksums), masks
     // decoded so that every id is checked.
     if expected.images {
@@ -303,6 +323,20 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
     (problems, files, bytes)
+}
+
+/// pixels.npy holds poses.csv's px, py as float32, frame by frame.
+fn check_pixels(dir: &Path, poses_csv: &[u8], frames: usize, cars: usize) -> Result<(), String> {
+    let pixels = read_pixels(&dir.join(PIXELS_FILE), frames, cars)?;
+    let mut reader = csv::Reader::from_reader(poses_csv);
+    for (i, row) in reader.records().enumerate() {
+        let logged = row.ok().and_then(|r| Some([r.get(9)?.parse::<f64>().ok()?, r.get(10)?.parse::<f64>().ok()?]));
+        match (logged, pixels.get(2 * i..2 * i + 2)) {
+            (Some([px, py]), Some(&[x, y])) if px as f32 == x && py as f32 == y => {}
+            _ => return Err(format!("differs from poses.csv's px, py at row {}", i + 2)),
+        }
+    }
+    Ok(())
 }
 
 fn check_csv(

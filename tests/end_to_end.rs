@@ -5,32 +5,7 @@ mod common;
 use common::*;
 use serde_json::Value;
 use sha2::Digest;
-use std::path::{Path, PathBuf};
-
-/// Resolves `$ref`s between the files of data-schema/.
-struct SchemaFolder(PathBuf);
-
-impl jsonschema::Retrieve for SchemaFolder {
-    fn retrieve(&self, uri: &jsonschema::Uri<String>) -> Result<Value, Box<dyn std::error::Error + Send + Sync>> {
-        let name = uri.as_str().rsplit('/').next().unwrap_or_default();
-        let text = std::fs::read_to_string(self.0.join(name))?;
-        Ok(serde_json::from_str(&text)?)
-    }
-}
-
-fn schema_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("data-schema")
-}
-
-fn validator(name: &str) -> jsonschema::Validator {
-    let schema = read_json(&schema_dir().join(name));
-    jsonschema::options().with_retriever(SchemaFolder(schema_dir())).build(&schema).unwrap()
-}
-
-fn assert_valid(v: &jsonschema::Validator, instance: &Value, what: &Path) {
-    let errors: Vec<String> = v.iter_errors(instance).map(|e| format!("{} at {}", e, e.instance_path())).collect();
-    assert!(errors.is_empty(), "{} does not match its schema:\n{}", what.display(), errors.join("\n"));
-}
+use std::path::Path;
 
 #[test]
 fn the_layout_matches_data_schema() {
@@ -61,11 +36,16 @@ fn the_layout_matches_data_schema() {
     for d in &dirs {
         let names: Vec<String> =
             sorted_entries(d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["checksums.sha256", "mask", "poses.csv", "rgb", "scenario.json"], "{}", d.display());
+        assert_eq!(
+            names,
+            ["checksums.sha256", "mask", "pixels.npy", "poses.csv", "rgb", "scenario.json"],
+            "{}",
+            d.display()
+        );
         // sha256sum -c format, covering every other file.
         let listing = std::fs::read_to_string(d.join("checksums.sha256")).unwrap();
         let frames_here = sorted_entries(&d.join("rgb")).len();
-        assert_eq!(listing.lines().count(), 2 + 2 * frames_here);
+        assert_eq!(listing.lines().count(), 3 + 2 * frames_here);
         for line in listing.lines() {
             let (hash, name) = line.split_once("  ").unwrap();
             let digest = sha2::Sha256::digest(std::fs::read(d.join(name)).unwrap());
@@ -123,7 +103,7 @@ fn no_images_writes_poses_and_ground_truth_only() {
     for d in scenario_dirs(&out) {
         let names: Vec<String> =
             sorted_entries(&d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["checksums.sha256", "poses.csv", "scenario.json"]);
+        assert_eq!(names, ["checksums.sha256", "pixels.npy", "poses.csv", "scenario.json"]);
     }
 }
 

@@ -15,8 +15,9 @@
 //! `vel[0] = loc[1] - loc[0]`. Car order is the scenario's (randomly
 //! permuted) ids. One split is held in memory at a time.
 
-use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
-use crate::output::io_err;
+use crate::dataset::{Dataset, ScenarioSummary};
+use crate::output::poses::{read_pixels, PIXELS_FILE};
+use crate::output::{io_err, write_atomically};
 use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -47,15 +48,16 @@ pub fn nri_split_name(split: Split) -> &'static str {
     }
 }
 
-/// One scenario's pixel track and causal links.
-struct Track {
-    /// [frame][car] -> (px, py)
-    loc: Vec<Vec<[f32; 2]>>,
-    /// (leader, follower)
-    edges: Vec<(usize, usize)>,
-}
-
-fn read_track(dir: &Path, cars: usize, frames: usize) -> Result<Track, String> {
+/// Fills one scenario's block of loc, vel (frames x cars x 2, in the
+/// layout's order) and edges (cars x cars) from its pixels.npy and
+/// scenario.json.
+fn fill_scenario(
+    dir: &Path,
+    frames: usize,
+    cars: usize,
+    options: &NriOptions,
+    (loc, vel, edges): (&mut [f32], &mut [f32], &mut [i64]),
+) -> Result<(), String> {
     let scenario = ScenarioSummary::read(dir)?;
     if scenario.cars.len() != cars || scenario.frames as usize != frames {
         return Err(format!(
@@ -65,23 +67,54 @@ fn read_track(dir: &Path, cars: usize, frames: usize) -> Result<Track, String> {
             scenario.frames
         ));
     }
-    let poses = PoseLog::read(dir, frames, cars)?;
-    let loc = (0..frames).map(|f| poses.frame(f).iter().map(|p| [p.px as f32, p.py as f32]).collect()).collect();
-    let edges = scenario.edges.iter().map(|e| (e[0] as usize, e[1] as usize)).collect();
-    Ok(Track { loc, edges })
+    let pixels = read_pixels(&dir.join(PIXELS_FILE), frames, cars)?;
+    let at = |frame: usize, car: usize, axis: usize| pixels[(frame * cars + car) * 2 + axis];
+    for frame in 0..frames {
+        for car in 0..cars {
+            for axis in 0..2 {
+                let here = at(frame, car, axis);
+                let velocity = match frame {
+                    0 if frames > 1 => at(1, car, axis) - here,
+                    0 => 0.0,
+                    _ => here - at(frame - 1, car, axis),
+                };
+                let index = match options.layout {
+                    NriLayout::Causalcity => (frame * cars + car) * 2 + axis,
+                    NriLayout::Nri => (frame * 2 + axis) * cars + car,
+                };
+                loc[index] = here;
+                vel[index] = velocity;
+            }
+        }
+    }
+    if options.layout == NriLayout::Causalcity {
+        for i in 0..cars {
+            edges[i * cars + i] = 1;
+        }
+    }
+    for edge in &scenario.edges {
+        let (leader, follower) = (edge[0] as usize, edge[1] as usize);
+        edges[follower * cars + leader] = 1;
+        if !options.directed {
+            edges[leader * cars + follower] = 1;
+        }
+    }
+    Ok(())
 }
 
 fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[T]) -> Result<(), String> {
-    let partial = path.with_extension("npy.partial");
-    let write = || -> std::io::Result<()> {
-        let file = std::io::BufWriter::new(std::fs::File::create(&partial)?);
-        use npyz::WriterBuilder;
-        let mut writer = npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(file).begin_nd()?;
+    use npyz::WriterBuilder;
+    // Encoded in memory first: npyz writes element by element, which is
+    // several times faster into a Vec than through a file writer.
+    let mut bytes = Vec::with_capacity(128 + std::mem::size_of_val(data));
+    let encode = |bytes: &mut Vec<u8>| -> std::io::Result<()> {
+        let mut writer = npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(bytes).begin_nd()?;
         writer.extend(data.iter().copied())?;
-        writer.finish()?;
-        std::fs::rename(&partial, path)
+        writer.finish()
     };
-    write().map_err(|e| format!("cannot write {}: {e}", path.display()))
+    encode(&mut bytes)
+        .and_then(|()| write_atomically(path, &bytes).map_err(|e| e.source))
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
 /// Exports `dataset` into `out`; returns a one-line report per file group.
@@ -98,33 +131,33 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
             if dirs.is_empty() {
                 continue;
             }
-            let tracks: Vec<Track> = dirs.par_iter().map(|d| read_track(d, cars, frames)).collect::<Result<_, _>>()?;
-            let s = tracks.len();
-            let (loc, vel) = arrange(&tracks, frames, cars, options.layout);
+            let s = dirs.len();
+            let block = frames * cars * 2;
+            let (mut loc, mut vel) = (vec![0f32; s * block], vec![0f32; s * block]);
             let mut edges = vec![0i64; s * cars * cars];
-            for (k, t) in tracks.iter().enumerate() {
-                let base = k * cars * cars;
-                if options.layout == NriLayout::Causalcity {
-                    for i in 0..cars {
-                        edges[base + i * cars + i] = 1;
-                    }
-                }
-                for &(leader, follower) in &t.edges {
-                    edges[base + follower * cars + leader] = 1;
-                    if !options.directed {
-                        edges[base + leader * cars + follower] = 1;
-                    }
-                }
-            }
+            loc.par_chunks_mut(block)
+                .zip(vel.par_chunks_mut(block))
+                .zip(edges.par_chunks_mut(cars * cars))
+                .zip(dirs.par_iter())
+                .try_for_each(|(((loc, vel), edges), dir)| {
+                    fill_scenario(dir, frames, cars, options, (loc, vel, edges))
+                })?;
             let (f, c) = (frames as u64, cars as u64);
             let loc_shape = match options.layout {
                 NriLayout::Causalcity => [s as u64, f, c, 2],
                 NriLayout::Nri => [s as u64, f, 2, c],
             };
             let name = |kind: &str| group_dir.join(format!("{kind}_{}{}.npy", nri_split_name(split), options.suffix));
-            write_npy(&name("loc"), &loc_shape, &loc)?;
-            write_npy(&name("vel"), &loc_shape, &vel)?;
-            write_npy(&name("edges"), &[s as u64, c, c], &edges)?;
+            let (wrote_loc, (wrote_vel, wrote_edges)) = rayon::join(
+                || write_npy(&name("loc"), &loc_shape, &loc),
+                || {
+                    rayon::join(
+                        || write_npy(&name("vel"), &loc_shape, &vel),
+                        || write_npy(&name("edges"), &[s as u64, c, c], &edges),
+                    )
+                },
+            );
+            wrote_loc.and(wrote_vel).and(wrote_edges)?;
             report.push(format!(
                 "{}: {} {} scenarios, loc/vel {:?}",
                 group_dir.display(),
@@ -135,35 +168,4 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
         }
     }
     Ok(report)
-}
-
-/// loc and vel in the layout's order.
-fn arrange(tracks: &[Track], frames: usize, cars: usize, layout: NriLayout) -> (Vec<f32>, Vec<f32>) {
-    let n = tracks.len() * frames * cars * 2;
-    let (mut loc, mut vel) = (vec![0f32; n], vec![0f32; n]);
-    for (k, t) in tracks.iter().enumerate() {
-        for frame in 0..frames {
-            for car in 0..cars {
-                let here = t.loc[frame][car];
-                let velocity = match frame {
-                    0 if frames > 1 => sub(t.loc[1][car], here),
-                    0 => [0.0, 0.0],
-                    _ => sub(here, t.loc[frame - 1][car]),
-                };
-                for axis in 0..2 {
-                    let index = match layout {
-                        NriLayout::Causalcity => ((k * frames + frame) * cars + car) * 2 + axis,
-                        NriLayout::Nri => ((k * frames + frame) * 2 + axis) * cars + car,
-                    };
-                    loc[index] = here[axis];
-                    vel[index] = velocity[axis];
-                }
-            }
-        }
-    }
-    (loc, vel)
-}
-
-fn sub(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
-    [a[0] - b[0], a[1] - b[1]]
 }

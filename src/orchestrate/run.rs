@@ -9,7 +9,7 @@ use crate::output::logs::{write_events, write_lights};
 use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
 use crate::output::number::logged_value;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
-use crate::output::poses::{write_poses, PIXEL_DECIMALS};
+use crate::output::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
 use crate::output::scenario::scenario_json;
 use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError, PARTIAL_PREFIX};
 use crate::render::weather::SceneLook;
@@ -378,6 +378,7 @@ fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCan
     let mut bytes = dir.write_file("scenario.json", &record)?;
     let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
     bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, &trajectories, camera))?;
+    bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, &trajectories, camera))?;
     if let Some(city) = &plan.city {
         bytes +=
             dir.write_with("lights.csv", |w| write_lights(w, &city.lights, &job.intersection_names, &trajectories))?;

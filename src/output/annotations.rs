@@ -211,7 +211,10 @@ fn runs_to_counts(boundaries: &[u32], total: u32) -> (Vec<u32>, u64) {
         area += (end - start) as u64;
         cursor = end;
     }
-    counts.push(total - cursor);
+    // As pycocotools: a mask that ends in foreground has no closing empty run.
+    if cursor < total || counts.is_empty() {
+        counts.push(total - cursor);
+    }
     (counts, area)
 }
 

@@ -1,6 +1,7 @@
 //! `poses.csv`: one row per frame and car, sorted by frame then car id.
 //! Columns are documented in `data-schema/poses.columns.json`.
 
+use super::number::logged_value;
 use crate::render::camera::Camera;
 use crate::world::Trajectories;
 use std::io::Write;
@@ -11,6 +12,43 @@ pub const POSE_COLUMNS: [&str; 13] =
 
 /// Decimals of px and py in the log.
 pub const PIXEL_DECIMALS: u32 = 3;
+
+/// The binary copy of poses.csv's px, py: float32 [frames, cars, 2], cars in
+/// id order, the logged values exactly (loaders and exports read it without
+/// parsing text).
+pub const PIXELS_FILE: &str = "pixels.npy";
+
+/// Writes `pixels.npy` for `trajectories`.
+pub fn write_pixels<W: Write>(out: W, trajectories: &Trajectories, camera: &Camera) -> std::io::Result<()> {
+    use npyz::WriterBuilder;
+    let cars = trajectories.states.first().map_or(0, Vec::len);
+    let shape = [trajectories.states.len() as u64, cars as u64, 2];
+    let mut writer = npyz::WriteOptions::<f32>::new().default_dtype().shape(&shape).writer(out).begin_nd()?;
+    for states in &trajectories.states {
+        for state in states {
+            let pixel = camera.to_pixel(state.position);
+            writer.push(&(logged_value(pixel.x, PIXEL_DECIMALS) as f32))?;
+            writer.push(&(logged_value(pixel.y, PIXEL_DECIMALS) as f32))?;
+        }
+    }
+    writer.finish()
+}
+
+/// Reads a `pixels.npy` of `frames` x `cars`: row-major (px, py) pairs.
+pub fn read_pixels(path: &std::path::Path, frames: usize, cars: usize) -> Result<Vec<f32>, String> {
+    let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| fail(&e))?;
+    let expected = [frames as u64, cars as u64, 2];
+    if npy.shape() != expected || npy.dtype().descr() != "'<f4'" {
+        return Err(fail(&format!(
+            "shape {:?} dtype {}, expected {expected:?} float32",
+            npy.shape(),
+            npy.dtype().descr()
+        )));
+    }
+    npy.into_vec::<f32>().map_err(|e| fail(&e))
+}
 
 /// Writes the pose log of `trajectories` for cars with the given ids.
 pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> csv::Result<()> {

@@ -253,3 +253,28 @@ pub fn city_spec(name: &str, groups: &[(u32, f64)], splits: (u32, u32, u32), fra
         splits.2
     )
 }
+
+/// Resolves `$ref`s between the files of data-schema/.
+pub struct SchemaFolder(PathBuf);
+
+impl jsonschema::Retrieve for SchemaFolder {
+    fn retrieve(&self, uri: &jsonschema::Uri<String>) -> Result<Value, Box<dyn std::error::Error + Send + Sync>> {
+        let name = uri.as_str().rsplit('/').next().unwrap_or_default();
+        let text = std::fs::read_to_string(self.0.join(name))?;
+        Ok(serde_json::from_str(&text)?)
+    }
+}
+
+pub fn schema_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data-schema")
+}
+
+pub fn validator(name: &str) -> jsonschema::Validator {
+    let schema = read_json(&schema_dir().join(name));
+    jsonschema::options().with_retriever(SchemaFolder(schema_dir())).build(&schema).unwrap()
+}
+
+pub fn assert_valid(v: &jsonschema::Validator, instance: &Value, what: &Path) {
+    let errors: Vec<String> = v.iter_errors(instance).map(|e| format!("{} at {}", e, e.instance_path())).collect();
+    assert!(errors.is_empty(), "{} does not match its schema:\n{}", what.display(), errors.join("\n"));
+}

@@ -51,6 +51,17 @@ def test_poses_load_with_the_documented_dtypes(toy_scenarios):
         assert set(poses.car) == {c["id"] for c in scenario["cars"]}
 
 
+def test_pixels_npy_is_the_pose_logs_px_py(toy_scenarios):
+    for d in scenarios(TOY) + scenarios(CITY):
+        scenario = json.loads((d / "scenario.json").read_text())
+        pixels = np.load(d / "pixels.npy")
+        assert pixels.dtype == np.float32
+        assert pixels.shape == (scenario["frames"], len(scenario["cars"]), 2)
+        poses = pd.read_csv(d / "poses.csv")
+        expected = poses[["px", "py"]].to_numpy(dtype=np.float32).reshape(pixels.shape)
+        assert np.array_equal(pixels, expected)
+
+
 def test_city_logs_load_with_the_documented_dtypes():
     for d in scenarios(CITY):
         lights = pd.read_csv(d / "lights.csv")
@@ -119,3 +130,82 @@ def test_nri_exports_match_the_csvs(export, layout, directed):
                     if not directed:
                         expected[leader, follower] = 1
                 np.testing.assert_array_equal(edges[s], expected)
+
+
+def test_annotations_rle_decodes_to_the_mask_pngs(toy_scenarios):
+    """gen --annotations: pycocotools decodes every car's RLE back to exactly
+    its pixels in the mask PNG, and every car in a mask is annotated."""
+    from pycocotools import mask as coco_mask
+
+    checked = 0
+    for d in toy_scenarios:
+        annotations = json.loads((d / "annotations.json").read_text())
+        assert annotations["format"] == "causalcity-nsdr/1"
+        scenario = json.loads((d / "scenario.json").read_text())
+        poses = pd.read_csv(d / "poses.csv").set_index(["frame", "car"])
+        assert len(annotations["frames"]) == scenario["frames"]
+        for frame in annotations["frames"]:
+            mask = np.asarray(Image.open(d / frame["mask_filename"]))
+            assert {o["mask_id"] for o in frame["objects"]} == set(np.unique(mask)) - {0}
+            for obj in frame["objects"]:
+                rle = {"size": obj["mask"]["size"], "counts": obj["mask"]["counts"].encode()}
+                decoded = coco_mask.decode(rle)
+                assert decoded.shape == mask.shape
+                assert np.array_equal(decoded.astype(bool), mask == obj["mask_id"]), (d, frame["frame_index"], obj["name"])
+                assert int(coco_mask.area(rle)) == obj["area"]
+                assert list(coco_mask.toBbox(rle)) == obj["bbox"]
+                pose = poses.loc[(frame["frame_index"], obj["id"])]
+                assert (obj["px"], obj["py"]) == (pose.px, pose.py)
+                checked += 1
+    assert checked > 100
+
+
+def test_export_nsdr_writes_what_gen_annotations_wrote(toy_scenarios):
+    for d in toy_scenarios:
+        exported = ROOT / "nsdr" / d.relative_to(TOY) / "annotations.json"
+        assert exported.read_bytes() == (d / "annotations.json").read_bytes()
+
+
+def test_city_annotations_cover_every_visible_car():
+    from pycocotools import mask as coco_mask
+
+    for d in scenarios(CITY):
+        exported = json.loads((ROOT / "nsdr-city" / d.relative_to(CITY) / "annotations.json").read_text())
+        for frame in exported["frames"][::7]:
+            mask = np.asarray(Image.open(d / frame["mask_filename"]))
+            union = np.zeros(mask.shape, dtype=bool)
+            for obj in frame["objects"]:
+                union |= coco_mask.decode({"size": obj["mask"]["size"], "counts": obj["mask"]["counts"].encode()}).astype(bool)
+            assert np.array_equal(union, mask > 0)
+
+
+def test_vcdn_hdf5_matches_the_csvs(toy_scenarios):
+    """h5py reads every V-CDN file with the documented shapes; states,
+    actions and rels agree with poses.csv and scenario.json."""
+    h5py = pytest.importorskip("h5py")
+    vcdn = ROOT / "vcdn"
+    if not vcdn.exists():
+        pytest.skip("built without the hdf5 feature (make FEATURES=)")
+    for d in toy_scenarios:
+        scenario = json.loads((d / "scenario.json").read_text())
+        n, t = len(scenario["cars"]), scenario["frames"]
+        poses = pd.read_csv(d / "poses.csv")
+        loc = np.stack([poses.pivot(index="frame", columns="car", values=c).to_numpy() for c in ("px", "py")], axis=-1)
+        with h5py.File(vcdn / d.relative_to(TOY).parent / f"{d.name}.h5", "r") as f:
+            assert f["attrs"].shape == (t, n, 1) and np.all(f["attrs"][()] == 1)
+            assert f["states"].shape == (t, n, 4) and f["states"].dtype == np.float32
+            assert f["actions"].shape == (t, n, 2)
+            assert f["rels"].shape == (t, n * (n - 1) // 2, 2)
+            states = f["states"][()]
+            assert np.allclose(states[..., :2], loc, atol=1e-3)
+            vel = np.diff(loc, axis=0)
+            assert np.allclose(states[1:, :, 2:], vel, atol=1e-3)
+            assert np.allclose(f["actions"][2:], np.diff(vel, axis=0), atol=1e-3)
+            linked = {frozenset(e) for e in scenario["edges"]}
+            pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+            flags = f["rels"][0, :, 0]
+            assert [bool(x) for x in flags] == [frozenset(p) in linked for p in pairs]
+            for k, (i, j) in enumerate(pairs):
+                mean = np.linalg.norm(loc[:, i] - loc[:, j], axis=-1).mean()
+                assert abs(f["rels"][5, k, 1] - mean) < 1e-2
+            assert sorted(map(tuple, f["edges"][()])) == sorted(map(tuple, scenario["edges"]))
