@@ -36,6 +36,51 @@ pub enum Command {
     /// Non-learned causal-discovery baseline: lagged path-following scores,
     /// threshold picked on train, precision / recall / F1 on test per group.
     Baseline(BaselineArgs),
+    /// Run hand-written scenarios (the original CausalCity scenario format,
+    /// plus extensions) into one scenario folder each.
+    Run(RunArgs),
+    /// Factual and counterfactual runs of hand-written scenarios: identical
+    /// until an intervention, with per-car divergence and the effect set.
+    Counterfactual(CounterfactualArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Scenario file (JSON): a list of {"Name", "Vehicles": [...]}, see configs/examples/.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: PathBuf,
+
+    /// Output folder; one subfolder per scenario [default: data/<file name>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+
+    /// World to run in [default: the file's "world", else city].
+    #[arg(long, value_enum)]
+    pub world: Option<crate::spec::WorldKind>,
+
+    /// Write scenario.json and the logs only, no PNG frames or masks.
+    #[arg(long)]
+    pub no_images: bool,
+
+    /// Also write NS-DR annotations.json per scenario.
+    #[arg(long, conflicts_with = "no_images")]
+    pub annotations: bool,
+
+    /// Print what was written as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct CounterfactualArgs {
+    #[command(flatten)]
+    pub run: RunArgs,
+
+    /// Interventions to add for the counterfactual (a JSON list, as a
+    /// scenario's "interventions"); without it, the scenario's own
+    /// interventions make the counterfactual.
+    #[arg(long, value_name = "FILE")]
+    pub intervention: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

@@ -105,6 +105,51 @@ fn main() {
                     }
                 })
             }
+            Command::Run(args) => {
+                let options = run_options(&args);
+                match causalcity::orchestrate::handwritten::run_file(&options) {
+                    Ok(written) => {
+                        if args.json {
+                            println!("{}", serde_json::to_string_pretty(&written).expect("report serialises"));
+                        } else {
+                            for w in &written {
+                                println!("wrote {} ({:.1} MB)", w.path.display(), w.bytes as f64 / 1e6);
+                            }
+                        }
+                        0
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        e.exit_code()
+                    }
+                }
+            }
+            Command::Counterfactual(args) => {
+                let options = run_options(&args.run);
+                match causalcity::orchestrate::handwritten::counterfactual(&options, args.intervention.as_deref()) {
+                    Ok(pairs) => {
+                        if args.run.json {
+                            println!("{}", serde_json::to_string_pretty(&pairs).expect("report serialises"));
+                        } else {
+                            for p in &pairs {
+                                println!(
+                                    "{}: {} -> affected {} of {} cars: {}",
+                                    p.scenario,
+                                    p.interventions.join("; "),
+                                    p.affected.len(),
+                                    p.cars.len(),
+                                    if p.affected.is_empty() { "none".to_string() } else { p.affected.join(", ") }
+                                );
+                            }
+                        }
+                        0
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        e.exit_code()
+                    }
+                }
+            }
             Command::Stats(args) => match causalcity::analysis::stats::dataset_stats(&args.dataset) {
                 Ok(stats) => {
                     if args.json {
@@ -184,6 +229,16 @@ fn finish<T>(result: Result<T, String>, done: impl FnOnce(T)) -> i32 {
             eprintln!("error: {e}");
             1
         }
+    }
+}
+
+fn run_options(args: &causalcity::cli::RunArgs) -> causalcity::orchestrate::handwritten::RunOptions {
+    causalcity::orchestrate::handwritten::RunOptions {
+        scenario_file: args.scenario.clone(),
+        out: args.out.clone(),
+        world: args.world,
+        images: !args.no_images,
+        annotations: args.annotations,
     }
 }
 

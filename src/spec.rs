@@ -8,7 +8,7 @@ use std::fmt;
 use std::path::Path;
 
 /// Which dynamics drive the cars.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum WorldKind {
     /// No agency: constant speed along the route, no lights, no collisions.
@@ -293,7 +293,7 @@ impl Default for CitySpec {
 }
 
 impl CitySpec {
-    fn validate(&self) -> Result<(), SpecError> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         positive("city.desired_speed", self.desired_speed, 20.0, "m/s")?;
         unit_interval("city.desired_speed_spread", self.desired_speed_spread, 0.9)?;
         unit_interval("city.red_light_runner_probability", self.red_light_runner_probability, 1.0)?;

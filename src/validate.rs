@@ -289,7 +289,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
             let frames_listed = serde_json::from_slice::<serde_json::Value>(&data)
                 .ok()
                 .and_then(|v| v["frames"].as_array().map(Vec::len));
-            if frames_listed != Some(frames as usize) {
+            if frames_listed != Some(frames) {
                 problems.push(Problem {
                     path: dir.join(name),
                     message: format!("expected NS-DR annotations of {frames} frames"),

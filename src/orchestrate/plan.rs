@@ -9,6 +9,7 @@ use crate::render::camera::Camera;
 use crate::spec::{DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
 use crate::world::confounders::{Confounders, Effects};
 use crate::world::driver::DriverParams;
+use crate::world::interventions::Intervention;
 use crate::world::lights::LightPlan;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -33,12 +34,18 @@ pub struct ScenarioKey {
     pub group_index: usize,
     pub split: Split,
     pub index: u32,
+    /// Hand-written scenarios: the scenario's own name.
+    pub name: Option<String>,
 }
 
 impl ScenarioKey {
-    /// Folder name of the scenario, e.g. `00042`.
+    /// Folder name of the scenario, e.g. `00042` (or a hand-written
+    /// scenario's name).
     pub fn folder_name(&self) -> String {
-        format!("{:05}", self.index)
+        match &self.name {
+            Some(name) => name.clone(),
+            None => format!("{:05}", self.index),
+        }
     }
 }
 
@@ -109,6 +116,26 @@ pub struct ScenarioPlan {
     /// Toy world: metres every car covers per frame.
     pub toy_step_m: f64,
     pub city: Option<CityPlan>,
+    /// City world only: interventions applied while simulating (none for
+    /// `gen`; hand-written scenarios and counterfactuals name them).
+    pub interventions: Vec<Intervention>,
+}
+
+/// A car of a hand-written scenario: where it starts, what it does, and
+/// optional driving overrides (city world).
+#[derive(Debug, Clone)]
+pub struct GivenCar {
+    pub name: String,
+    pub spawn: LaneId,
+    pub spawn_distance: f64,
+    pub actions: Vec<Action>,
+    pub merge_distances: Vec<f64>,
+    pub route: Arc<Route>,
+    /// Desired speed per leg (m/s), used as given.
+    pub desired_speeds: Option<Vec<f64>>,
+    pub time_headway: Option<f64>,
+    pub runs_red_lights: Option<bool>,
+    pub colour: Option<[u8; 3]>,
 }
 
 /// A car placed on the map before ids are assigned.
@@ -192,7 +219,7 @@ impl Expansion {
                 ));
             }
             // A dry run proves the group can be planned before anything is written.
-            let key = ScenarioKey { group: g.name(), group_index: i, split: Split::Train, index: 0 };
+            let key = ScenarioKey { group: g.name(), group_index: i, split: Split::Train, index: 0, name: None };
             expansion.plan(&key).map_err(|e| SpecError::new(format!("groups[{i}]"), e))?;
         }
         Ok(expansion)
@@ -206,7 +233,7 @@ impl Expansion {
             for split in Split::ALL {
                 let n = self.spec.splits.count(split).min(limit.unwrap_or(u32::MAX));
                 for index in 0..n {
-                    keys.push(ScenarioKey { group: g.name(), group_index, split, index });
+                    keys.push(ScenarioKey { group: g.name(), group_index, split, index, name: None });
                 }
             }
         }
@@ -297,7 +324,87 @@ impl Expansion {
         // Random ids so the index order never gives the roles away.
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
+        Ok(self.assemble(key, stream, rng, cars, &pair_indices, &ids))
+    }
 
+    /// Plans a scenario of given cars (hand-written scenario files): ids in
+    /// the given order, (leader, follower) index pairs, desired speeds drawn
+    /// from the scenario stream where not given. Names, colours and driving
+    /// overrides of `GivenCar` are applied on top.
+    pub fn plan_given(
+        &self,
+        key: &ScenarioKey,
+        stream: [u8; 32],
+        given: &[GivenCar],
+        pairs: &[(usize, usize)],
+    ) -> ScenarioPlan {
+        let mut rng = ChaCha8Rng::from_seed(stream);
+        let city = (self.spec.world == WorldKind::City).then(|| self.spec.city_settings());
+        let mut cars: Vec<PlacedCar> = given
+            .iter()
+            .map(|g| {
+                let desired_speeds = match &city {
+                    Some(c) => (0..=g.actions.len())
+                        .map(|_| {
+                            let spread = c.desired_speed_spread;
+                            let factor = if spread > 0.0 { rng.random_range(1.0 - spread..=1.0 + spread) } else { 1.0 };
+                            c.desired_speed * factor
+                        })
+                        .collect(),
+                    None => Vec::new(),
+                };
+                PlacedCar {
+                    role: Role::Independent,
+                    spawn: g.spawn,
+                    distance: g.spawn_distance,
+                    actions: g.actions.clone(),
+                    merges: g.merge_distances.clone(),
+                    route: g.route.clone(),
+                    desired_speeds,
+                }
+            })
+            .collect();
+        for &(leader, follower) in pairs {
+            cars[leader].role = Role::Leader;
+            cars[follower].role = Role::Follower;
+            // A pair drives alike, as in generated scenarios.
+            cars[follower].desired_speeds = cars[leader].desired_speeds.clone();
+        }
+        let ids: Vec<u32> = (0..cars.len() as u32).collect();
+        let mut plan = self.assemble(key, stream, rng, cars, pairs, &ids);
+        for (car, g) in plan.cars.iter_mut().zip(given) {
+            car.name = g.name.clone();
+            if let Some(colour) = g.colour {
+                car.colour = colour;
+            }
+            if let Some(agency) = car.agency.as_mut() {
+                if let Some(speeds) = &g.desired_speeds {
+                    agency.desired_speeds = speeds.clone();
+                }
+                if let Some(headway) = g.time_headway {
+                    agency.driver.time_headway = headway;
+                }
+                if let Some(runs) = g.runs_red_lights {
+                    agency.runs_red_lights = runs;
+                }
+            }
+        }
+        plan
+    }
+
+    /// The rest of a plan once cars are placed: confounders, lights, each
+    /// car's driving, ids (`ids[i]` for `cars[i]`) and edges.
+    fn assemble(
+        &self,
+        key: &ScenarioKey,
+        stream: [u8; 32],
+        mut rng: ChaCha8Rng,
+        cars: Vec<PlacedCar>,
+        pair_indices: &[(usize, usize)],
+        ids: &[u32],
+    ) -> ScenarioPlan {
+        let spec = &self.spec;
+        let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
         // City: confounders, lights and each car's driving, drawn after placement.
         let city_plan = city.as_ref().map(|c| {
             let cs = &c.confounders;
@@ -365,7 +472,7 @@ impl Expansion {
         let mut edges: Vec<(u32, u32)> = pair_indices.iter().map(|&(l, f)| (ids[l], ids[f])).collect();
         edges.sort_unstable();
         planned.sort_by_key(|c| c.id);
-        Ok(ScenarioPlan {
+        ScenarioPlan {
             key: key.clone(),
             world: spec.world,
             seed: spec.seed,
@@ -376,7 +483,8 @@ impl Expansion {
             edges,
             toy_step_m: self.toy_step_m,
             city: city_plan,
-        })
+            interventions: Vec::new(),
+        }
     }
 
     /// The lights of every scenario of this spec.

@@ -154,15 +154,35 @@ fn install_signal_handler() {
     });
 }
 
-/// Everything shared by the workers of one run.
-struct Job<'e> {
-    expansion: &'e Expansion,
-    world: Box<dyn World>,
-    renderer: Option<Renderer>,
-    out: PathBuf,
-    intersection_names: Vec<String>,
-    fsync: bool,
-    annotations: bool,
+/// Everything shared by the workers of one run: the world that simulates
+/// and the writers of a scenario folder.
+pub(crate) struct Job<'e> {
+    pub expansion: &'e Expansion,
+    pub world: Box<dyn World>,
+    pub renderer: Option<Renderer>,
+    pub out: PathBuf,
+    pub intersection_names: Vec<String>,
+    pub fsync: bool,
+    pub annotations: bool,
+}
+
+impl<'e> Job<'e> {
+    /// A job over `expansion`'s world writing into `out`.
+    pub fn new(expansion: &'e Expansion, out: PathBuf, products: Products, fsync: bool) -> Job<'e> {
+        let world: Box<dyn World> = match expansion.spec.world {
+            WorldKind::Toy => Box::new(ToyWorld),
+            WorldKind::City => Box::new(CityWorld::default()),
+        };
+        Job {
+            world,
+            renderer: products.images.then(|| Renderer::new(&expansion.map, expansion.camera)),
+            out,
+            expansion,
+            intersection_names: expansion.map.intersections.iter().map(|i| i.name.clone()).collect(),
+            fsync,
+            annotations: products.annotations && products.images,
+        }
+    }
 }
 
 /// Reads, checks and expands a spec file; nothing is written.
@@ -297,22 +317,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     };
     write_atomically(&manifest_file, &manifest(false))?;
 
-    let map = expansion.map.clone();
-    let renderer = options.images.then(|| Renderer::new(&map, expansion.camera));
-    let world: Box<dyn World> = match expansion.spec.world {
-        WorldKind::Toy => Box::new(ToyWorld),
-        WorldKind::City => Box::new(CityWorld::default()),
-    };
-    let intersection_names = map.intersections.iter().map(|i| i.name.clone()).collect();
-    let job = Job {
-        world,
-        renderer,
-        out: out.clone(),
-        expansion: &expansion,
-        intersection_names,
-        fsync: options.fsync,
-        annotations: products.annotations,
-    };
+    let job = Job::new(&expansion, out.clone(), products, options.fsync);
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
@@ -370,22 +375,34 @@ fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCan
         reason,
     })?;
     let trajectories = job.world.simulate(&job.expansion.map, &plan);
-    let camera = &job.expansion.camera;
     let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
+    write_planned(job, &plan, &trajectories, target, canvas)
+}
+
+/// Writes a simulated scenario into the folder `target` (atomically);
+/// returns the bytes written.
+pub(crate) fn write_planned(
+    job: &Job<'_>,
+    plan: &ScenarioPlan,
+    trajectories: &Trajectories,
+    target: PathBuf,
+    canvas: Option<&mut FrameCanvas>,
+) -> Result<u64, GenError> {
+    let camera = &job.expansion.camera;
     let mut dir = ScenarioDir::begin(target, plan.frames, canvas.is_some(), job.fsync)?;
     let record =
-        scenario_json(&plan, camera, job.expansion.spec.leader_gap_px, &job.intersection_names, job.world.model_name());
+        scenario_json(plan, camera, job.expansion.spec.leader_gap_px, &job.intersection_names, job.world.model_name());
     let mut bytes = dir.write_file("scenario.json", &record)?;
     let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
-    bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, &trajectories, camera))?;
-    bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, &trajectories, camera))?;
+    bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, trajectories, camera))?;
+    bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, trajectories, camera))?;
     if let Some(city) = &plan.city {
         bytes +=
-            dir.write_with("lights.csv", |w| write_lights(w, &city.lights, &job.intersection_names, &trajectories))?;
-        bytes += dir.write_with("events.csv", |w| write_events(w, &trajectories))?;
+            dir.write_with("lights.csv", |w| write_lights(w, &city.lights, &job.intersection_names, trajectories))?;
+        bytes += dir.write_with("events.csv", |w| write_events(w, trajectories))?;
     }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
-        bytes += write_frames(renderer, canvas, &mut dir, &plan, &trajectories, job.annotations)?;
+        bytes += write_frames(renderer, canvas, &mut dir, plan, trajectories, job.annotations)?;
     }
     bytes += dir.commit()?;
     Ok(bytes)

@@ -5,11 +5,15 @@
 //! speeds, and gaps it waits for before merging. Perception is noisy and the
 //! acceleration is held between decisions, so collisions can happen; when they
 //! do, both cars stop for a few seconds. Confounders act through the driver
-//! parameters the plan hands over. Everything random comes from the
-//! scenario's own stream, so runs are reproducible.
+//! parameters the plan hands over. Interventions (`interventions.rs`) fire
+//! at a time or on an event and change one car or light. Everything random
+//! comes from per-car streams derived from the scenario's, so runs are
+//! reproducible and an intervention on one car leaves the randomness of every
+//! other car untouched (counterfactual pairs differ only where it acts).
 
 use super::driver::{CarFollowing, Idm};
-use super::lights::{Colour, Signal};
+use super::interventions::{Effect, Intervention, Trigger};
+use super::lights::{Colour, LightState, Signal};
 use super::{CarState, Event, EventKind, Trajectories, World};
 use crate::geometry::OrientedBox;
 use crate::map::curve::Curve;
@@ -59,6 +63,14 @@ impl World for CityWorld {
     fn simulate(&self, map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
         let city = plan.city.as_ref().expect("a city scenario has a city plan");
         let mut sim = Sim::new(map, plan, city, self.model.as_ref());
+        if plan.frames == 0 {
+            return Trajectories {
+                frame_interval: plan.frame_interval,
+                states: vec![],
+                lights: vec![],
+                events: vec![],
+            };
+        }
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = plan.frame_interval / steps as f64;
         let mut states = Vec::with_capacity(plan.frames as usize);
@@ -71,8 +83,10 @@ impl World for CityWorld {
                 }
             }
             let t = frame as f64 * plan.frame_interval;
+            // Interventions due now show in this frame's record (lights).
+            sim.fire_interventions(t, dt);
             states.push(sim.cars.iter().map(SimCar::state).collect());
-            lights.push(city.lights.states_at(t));
+            lights.push((0..city.lights.lights.len()).map(|l| sim.light_state(l, t)).collect());
         }
         Trajectories { frame_interval: plan.frame_interval, states, lights, events: sim.events }
     }
@@ -104,7 +118,20 @@ struct SimCar<'p> {
     noise: f64,
     /// Half the footprint's diagonal: beyond twice this, two cars cannot touch.
     reach: f64,
+    /// This car's own random stream (decisions, collision stops).
+    rng: ChaCha8Rng,
+    /// Forced through red lights (by the plan or an intervention).
+    runs_red_lights: bool,
+    /// Intervention: hold still until this time.
+    stopped_until: f64,
+    /// Intervention: desired speed replaced.
+    desired_override: Option<f64>,
+    /// Intervention: taken off the map.
+    removed: bool,
 }
+
+/// Where removed cars are parked, far off every camera, metres.
+const PARKING: glam::DVec2 = glam::DVec2::new(10_000.0, 10_000.0);
 
 impl SimCar<'_> {
     fn front(&self) -> f64 {
@@ -112,6 +139,9 @@ impl SimCar<'_> {
     }
 
     fn desired(&self) -> f64 {
+        if let Some(speed) = self.desired_override {
+            return speed;
+        }
         let speeds = &self.agency.desired_speeds;
         speeds.get(self.actions_done.min(speeds.len().saturating_sub(1))).copied().unwrap_or(1.0)
     }
@@ -126,6 +156,10 @@ impl SimCar<'_> {
     }
 
     fn state(&self) -> CarState {
+        if self.removed {
+            let position = PARKING + glam::DVec2::new(10.0 * self.plan.id as f64, 0.0);
+            return CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 };
+        }
         let (position, yaw) = self.pose();
         CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: self.v }
     }
@@ -136,8 +170,11 @@ struct Sim<'a> {
     city: &'a CityPlan,
     model: &'a dyn CarFollowing,
     cars: Vec<SimCar<'a>>,
-    rng: ChaCha8Rng,
     events: Vec<Event>,
+    /// Interventions still waiting for their trigger.
+    pending: Vec<&'a Intervention>,
+    /// Lights forced by interventions: (light, colour, from, until).
+    light_overrides: Vec<(usize, Colour, f64, f64)>,
     /// Per track (lane or connector): (car, arc length on the track).
     occupancy: Vec<Vec<(usize, f64)>>,
     contacts: BTreeSet<(usize, usize)>,
@@ -153,11 +190,12 @@ fn normal(rng: &mut ChaCha8Rng) -> f64 {
 
 impl<'a> Sim<'a> {
     fn new(map: &'a CityMap, plan: &'a ScenarioPlan, city: &'a CityPlan, model: &'a dyn CarFollowing) -> Sim<'a> {
-        let mut rng = ChaCha8Rng::from_seed(city.sim_stream);
         let cars = plan
             .cars
             .iter()
             .map(|c| {
+                let mut rng = ChaCha8Rng::from_seed(city.sim_stream);
+                rng.set_stream(c.id as u64 + 1);
                 let agency = c.agency.as_ref().expect("city cars have agency");
                 let route: Route = (*c.route).clone();
                 let leg = route.leg_index_at(c.spawn_distance);
@@ -180,6 +218,11 @@ impl<'a> Sim<'a> {
                     wander_target: 0.0,
                     noise: normal(&mut rng),
                     reach: c.length.hypot(c.width) / 2.0,
+                    rng,
+                    runs_red_lights: agency.runs_red_lights,
+                    stopped_until: f64::NEG_INFINITY,
+                    desired_override: None,
+                    removed: false,
                 }
             })
             .collect();
@@ -188,8 +231,9 @@ impl<'a> Sim<'a> {
             city,
             model,
             cars,
-            rng,
             events: Vec::new(),
+            pending: plan.interventions.iter().collect(),
+            light_overrides: Vec::new(),
             occupancy: vec![Vec::new(); map.track_count()],
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
@@ -198,16 +242,85 @@ impl<'a> Sim<'a> {
 
     fn step(&mut self, t: f64, dt: f64) {
         self.fill_occupancy();
+        self.fire_interventions(t, dt);
         for i in 0..self.cars.len() {
+            if self.cars[i].removed {
+                continue;
+            }
             if t + 1e-9 >= self.cars[i].next_decision {
                 self.decide(i, t, dt);
                 self.cars[i].next_decision = t + self.cars[i].agency.driver.reaction_time;
             }
         }
         for i in 0..self.cars.len() {
-            self.advance(i, t, dt);
+            if !self.cars[i].removed {
+                self.advance(i, t, dt);
+            }
         }
         self.detect_collisions(t + dt);
+    }
+
+    /// Fires the interventions whose trigger holds at time `t` (the start of
+    /// a step of length `dt`), logging each.
+    fn fire_interventions(&mut self, t: f64, dt: f64) {
+        let mut k = 0;
+        while k < self.pending.len() {
+            let intervention = self.pending[k];
+            if !self.triggered(&intervention.trigger, t, dt) {
+                k += 1;
+                continue;
+            }
+            self.pending.remove(k);
+            let car_id = |car: usize| self.cars[car].plan.id;
+            self.events.push(Event {
+                t,
+                kind: EventKind::Intervention,
+                car: intervention.effect.car().map_or(0, car_id),
+                other: None,
+                detail: intervention.label.clone(),
+            });
+            match intervention.effect {
+                Effect::Stop { car, seconds } => {
+                    let car = &mut self.cars[car];
+                    car.stopped_until = t + seconds;
+                    car.next_decision = t;
+                }
+                Effect::RunRedLights { car } => self.cars[car].runs_red_lights = true,
+                Effect::SetDesiredSpeed { car, speed } => {
+                    let car = &mut self.cars[car];
+                    car.desired_override = Some(speed);
+                    car.next_decision = t;
+                }
+                Effect::Remove { car } => self.cars[car].removed = true,
+                Effect::SetLight { light, colour, seconds } => {
+                    self.light_overrides.push((light, colour, t, t + seconds));
+                    // Drivers see the change at their next decision.
+                }
+            }
+        }
+    }
+
+    fn triggered(&self, trigger: &Trigger, t: f64, dt: f64) -> bool {
+        match *trigger {
+            Trigger::At(time) => t + 1e-9 >= time,
+            Trigger::LightTurns { light, colour } => {
+                self.light_state(light, t).colour == colour && self.light_state(light, t - dt).colour != colour
+            }
+            Trigger::CarReaches { car, intersection } => {
+                let car = &self.cars[car];
+                if car.removed {
+                    return false;
+                }
+                let setback = self.map.layout.stop_line_setback;
+                car.route.legs[car.leg..]
+                    .iter()
+                    .find_map(|leg| match leg.kind {
+                        LegKind::Connector(c) => self.map.connectors[c].intersection.map(|k| (k, leg)),
+                        _ => None,
+                    })
+                    .is_some_and(|(k, leg)| k == intersection && car.front() >= leg.route_start - setback)
+            }
+        }
     }
 
     fn fill_occupancy(&mut self) {
@@ -215,7 +328,7 @@ impl<'a> Sim<'a> {
             track.clear();
         }
         let setback = self.map.layout.stop_line_setback;
-        for (i, car) in self.cars.iter().enumerate() {
+        for (i, car) in self.cars.iter().enumerate().filter(|(_, c)| !c.removed) {
             let leg = &car.route.legs[car.leg];
             let along = car.s - leg.route_start;
             // A car past its stop line, or committed to go, already claims the
@@ -305,16 +418,16 @@ impl<'a> Sim<'a> {
             let LegKind::Connector(c) = leg.kind else { continue };
             let dist = leg.route_start - setback - front;
             // Past the stop line, or forced through: nothing stops the car here.
-            if dist < -0.05 || car.agency.runs_red_lights {
+            if dist < -0.05 || car.runs_red_lights {
                 continue;
             }
-            let Some(light) = Self::light_for(self.map, self.city, c) else { continue };
+            let Some(light) = self.light_for(c) else { continue };
             // Once committed (moving, too close to stop comfortably) the light
             // no longer matters, but cars still crossing the box always do. A
             // car that has come to rest before its line is committed no more.
             let committed = car.committed == Some(c) && car.v > 0.1;
             let must_stop = !committed
-                && match light.state_at(t).colour {
+                && match self.light_state(light, t).colour {
                     Colour::Red => true,
                     Colour::Yellow => braking <= dist,
                     Colour::Green => false,
@@ -334,15 +447,24 @@ impl<'a> Sim<'a> {
         stop
     }
 
-    /// The light that governs entering `connector`: its approach's Left
-    /// signal for left turns, its Straight signal otherwise.
-    fn light_for(map: &'a CityMap, city: &'a CityPlan, connector: usize) -> Option<&'a super::lights::Light> {
-        let c = &map.connectors[connector];
+    /// The light (index in the plan) that governs entering `connector`: its
+    /// approach's Left signal for left turns, its Straight signal otherwise.
+    fn light_for(&self, connector: usize) -> Option<usize> {
+        let c = &self.map.connectors[connector];
         let intersection = c.intersection?;
-        let LaneEnd::Intersection { approach, .. } = map.lanes[c.from].end else { return None };
+        let LaneEnd::Intersection { approach, .. } = self.map.lanes[c.from].end else { return None };
         let signal = if c.turn == Turn::Left { Signal::Left } else { Signal::Straight };
-        let lights = &city.lights;
-        Some(&lights.lights[lights.index(intersection, approach, signal)])
+        Some(self.city.lights.index(intersection, approach, signal))
+    }
+
+    /// Light `index` at time `t`: its plan, unless an intervention forces it.
+    fn light_state(&self, index: usize, t: f64) -> LightState {
+        let forced =
+            self.light_overrides.iter().rev().find(|&&(l, _, from, until)| l == index && t >= from && t < until);
+        match forced {
+            Some(&(_, colour, from, _)) => LightState { colour, since_change: t - from },
+            None => self.city.lights.lights[index].state_at(t),
+        }
     }
 
     fn conflict_occupied(&self, connector: usize) -> bool {
@@ -452,10 +574,13 @@ impl<'a> Sim<'a> {
         if let Some(distance) = self.merge_wait(i, t) {
             target = target.min(model.stop_speed(&p, v, desired, distance, dt));
         }
+        if t < self.cars[i].stopped_until {
+            target = 0.0;
+        }
         let rho = (-p.reaction_time / 2.0).exp();
-        let draw = normal(&mut self.rng);
-        let wander_draw = normal(&mut self.rng);
         let car = &mut self.cars[i];
+        let draw = normal(&mut car.rng);
+        let wander_draw = normal(&mut car.rng);
         car.accel = ((target - v) / dt).clamp(-p.max_deceleration, p.max_acceleration);
         car.noise = rho * car.noise + (1.0 - rho * rho).sqrt() * draw;
         // Sideways wander: an Ornstein-Uhlenbeck target per decision, approached smoothly.
@@ -491,6 +616,7 @@ impl<'a> Sim<'a> {
 
         // Crossing a stop line on red.
         let setback = self.map.layout.stop_line_setback;
+        let car = &self.cars[i];
         for leg in &car.route.legs[car.leg..] {
             if leg.route_start - setback > front_after {
                 break;
@@ -500,9 +626,10 @@ impl<'a> Sim<'a> {
             let Some(intersection) = connector.intersection else { continue };
             let line = leg.route_start - setback;
             if front_before < line && front_after >= line {
-                let Some(light) = Self::light_for(self.map, self.city, c) else { continue };
-                if light.state_at(now).colour == Colour::Red {
-                    let forced = if car.agency.runs_red_lights { "forced" } else { "not forced" };
+                let Some(light) = self.light_for(c) else { continue };
+                if self.light_state(light, now).colour == Colour::Red {
+                    let forced = if car.runs_red_lights { "forced" } else { "not forced" };
+                    let light = &self.city.lights.lights[light];
                     events.push(Event {
                         t: now,
                         kind: EventKind::RedLightRun,
@@ -518,6 +645,7 @@ impl<'a> Sim<'a> {
                 }
             }
         }
+        let car = &mut self.cars[i];
 
         // Legs completed: actions done.
         while car.leg + 1 < car.route.legs.len() {
@@ -567,6 +695,9 @@ impl<'a> Sim<'a> {
         let boxes: Vec<OrientedBox> = self.cars.iter().map(SimCar::footprint).collect();
         for i in 0..boxes.len() {
             for j in i + 1..boxes.len() {
+                if self.cars[i].removed || self.cars[j].removed {
+                    continue;
+                }
                 let reach = self.cars[i].reach + self.cars[j].reach;
                 let near = boxes[i].centre.distance(boxes[j].centre) < reach + CONTACT_RELEASE;
                 if self.contacts.contains(&(i, j)) {
@@ -590,8 +721,8 @@ impl<'a> Sim<'a> {
                     detail: format!("speeds {:.2} and {:.2} m/s", a.v, b.v),
                 });
                 for k in [i, j] {
-                    let stop = self.rng.random_range(2.0..5.0);
                     let car = &mut self.cars[k];
+                    let stop = car.rng.random_range(2.0..5.0);
                     car.v = 0.0;
                     car.accel = 0.0;
                     car.hold_until = now + stop;

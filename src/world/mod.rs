@@ -4,6 +4,7 @@
 pub mod city;
 pub mod confounders;
 pub mod driver;
+pub mod interventions;
 pub mod lights;
 pub mod toy;
 
@@ -47,6 +48,8 @@ pub enum EventKind {
     MergeDone,
     TurnDone,
     ActionsFinished,
+    /// An intervention of the scenario fired.
+    Intervention,
 }
 
 impl EventKind {
@@ -57,6 +60,7 @@ impl EventKind {
             EventKind::MergeDone => "merge_done",
             EventKind::TurnDone => "turn_done",
             EventKind::ActionsFinished => "actions_finished",
+            EventKind::Intervention => "intervention",
         }
     }
 }

@@ -1,0 +1,235 @@
+//! `causalcity run` and `causalcity counterfactual`: hand-written scenario
+//! files simulated and written as scenario folders (the same files as `gen`
+//! writes), and factual / counterfactual pairs with the ground-truth effect
+//! of an intervention.
+//!
+//! A counterfactual pair shares the plan, the initial state and every random
+//! stream (each car draws from its own), so everything before the
+//! intervention fires is byte-identical and afterwards only what the
+//! intervention causes differs. `divergence.csv` gives, per frame and car,
+//! the distance between a car's factual and counterfactual positions;
+//! `summary.json` lists the cars it moved at all (the effect set).
+
+use super::run::{write_planned, GenError, Job};
+use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
+use crate::map::CityMap;
+use crate::output::manifest::Products;
+use crate::output::number::push_fixed;
+use crate::output::write_atomically;
+use crate::spec::WorldKind;
+use crate::world::{EventKind, Trajectories};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Why `run` or `counterfactual` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("{0}")]
+    Input(ScenarioFileError),
+    #[error("{0}")]
+    Usage(String),
+    #[error(transparent)]
+    Write(#[from] GenError),
+}
+
+impl RunError {
+    /// 2 for bad input, otherwise as `gen`.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            RunError::Input(_) | RunError::Usage(_) => 2,
+            RunError::Write(e) => e.exit_code(),
+        }
+    }
+}
+
+/// What `run` / `counterfactual` were asked to do.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub scenario_file: PathBuf,
+    /// Default: `data/<file stem>`.
+    pub out: Option<PathBuf>,
+    pub world: Option<WorldKind>,
+    pub images: bool,
+    pub annotations: bool,
+}
+
+impl RunOptions {
+    fn out(&self) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| {
+            let stem = self.scenario_file.file_stem().map(|s| s.to_string_lossy().into_owned());
+            Path::new("data").join(stem.unwrap_or_else(|| "scenarios".into()))
+        })
+    }
+
+    fn products(&self) -> Products {
+        Products { images: self.images, annotations: self.annotations && self.images }
+    }
+}
+
+/// One written scenario folder.
+#[derive(Debug, Clone, Serialize)]
+pub struct Written {
+    pub scenario: String,
+    pub path: PathBuf,
+    pub bytes: u64,
+}
+
+fn load_file(options: &RunOptions) -> Result<(Arc<CityMap>, Vec<LoadedScenario>), RunError> {
+    let map = Arc::new(CityMap::default());
+    let scenarios =
+        load(&options.scenario_file, FileOptions { world: options.world }, &map).map_err(RunError::Input)?;
+    Ok((map, scenarios))
+}
+
+/// Simulates and writes every scenario of the file into `<out>/<Name>/`.
+pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
+    let (_, scenarios) = load_file(options)?;
+    let out = options.out();
+    scenarios
+        .par_iter()
+        .map(|s| {
+            let job = Job::new(&s.expansion, out.clone(), options.products(), false);
+            let trajectories = job.world.simulate(&s.expansion.map, &s.plan);
+            let path = out.join(&s.name);
+            let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
+            let bytes = write_planned(&job, &s.plan, &trajectories, path.clone(), canvas.as_mut())?;
+            Ok(Written { scenario: s.name.clone(), path, bytes })
+        })
+        .collect()
+}
+
+/// One car's part in a counterfactual pair.
+#[derive(Debug, Clone, Serialize)]
+pub struct CarDivergence {
+    pub id: u32,
+    pub name: String,
+    /// Moved by the intervention at all (any frame differs).
+    pub affected: bool,
+    pub max_divergence_m: f64,
+    pub first_divergent_frame: Option<usize>,
+}
+
+/// `summary.json` of a counterfactual pair.
+#[derive(Debug, Clone, Serialize)]
+pub struct PairSummary {
+    pub scenario: String,
+    pub interventions: Vec<String>,
+    /// When the first intervention fired in the counterfactual (None if it never did).
+    pub intervention_time_s: Option<f64>,
+    /// The ground-truth effect set: names of the cars whose trajectory changed.
+    pub affected: Vec<String>,
+    pub cars: Vec<CarDivergence>,
+}
+
+/// Writes `<out>/<Name>/factual/`, `counterfactual/`, `divergence.csv` and
+/// `summary.json` for every scenario of the file. The counterfactual adds
+/// the interventions of `intervention_file` to the scenario; without one,
+/// the scenario's own interventions make the counterfactual and the factual
+/// runs without them.
+pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) -> Result<Vec<PairSummary>, RunError> {
+    let (map, scenarios) = load_file(options)?;
+    let mut pairs = Vec::new();
+    for s in &scenarios {
+        let (factual, counterfactual) = match intervention_file {
+            Some(file) => {
+                let extra = load_interventions(file, s, &map).map_err(RunError::Input)?;
+                let mut cf = s.plan.clone();
+                cf.interventions.extend(extra);
+                (s.plan.clone(), cf)
+            }
+            None => {
+                let mut f = s.plan.clone();
+                f.interventions.clear();
+                (f, s.plan.clone())
+            }
+        };
+        if counterfactual.interventions.len() == factual.interventions.len() && intervention_file.is_none() {
+            return Err(RunError::Usage(format!(
+                "{}: scenario {:?} has no interventions: name them in its \"interventions\" or pass --intervention FILE",
+                options.scenario_file.display(),
+                s.name
+            )));
+        }
+        pairs.push((s, factual, counterfactual));
+    }
+    let out = options.out();
+    pairs
+        .par_iter()
+        .map(|(s, factual, counterfactual)| {
+            let job = Job::new(&s.expansion, out.clone(), options.products(), false);
+            let folder = out.join(&s.name);
+            let (a, b) = rayon::join(
+                || job.world.simulate(&s.expansion.map, factual),
+                || job.world.simulate(&s.expansion.map, counterfactual),
+            );
+            let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
+            write_planned(&job, factual, &a, folder.join("factual"), canvas.as_mut())?;
+            write_planned(&job, counterfactual, &b, folder.join("counterfactual"), canvas.as_mut())?;
+            let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
+            let labels: Vec<String> =
+                counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
+            let (csv, summary) = divergence(&s.name, &names, &labels, &a, &b, s.expansion.camera.pixels_per_metre);
+            write_atomically(&folder.join("divergence.csv"), &csv)?;
+            let mut json = serde_json::to_vec_pretty(&summary).expect("summary serialises");
+            json.push(b'\n');
+            write_atomically(&folder.join("summary.json"), &json)?;
+            Ok(summary)
+        })
+        .collect::<Result<Vec<_>, GenError>>()
+        .map_err(RunError::Write)
+}
+
+/// divergence.csv (`frame,t,car,distance_m,distance_px`) and the summary.
+fn divergence(
+    scenario: &str,
+    cars: &[(u32, String)],
+    labels: &[String],
+    factual: &Trajectories,
+    counterfactual: &Trajectories,
+    pixels_per_metre: f64,
+) -> (Vec<u8>, PairSummary) {
+    let mut csv = b"frame,t,car,distance_m,distance_px\n".to_vec();
+    let mut per_car: Vec<CarDivergence> = cars
+        .iter()
+        .map(|(id, name)| CarDivergence {
+            id: *id,
+            name: name.clone(),
+            affected: false,
+            max_divergence_m: 0.0,
+            first_divergent_frame: None,
+        })
+        .collect();
+    for (frame, (a, b)) in factual.states.iter().zip(&counterfactual.states).enumerate() {
+        for ((x, y), car) in a.iter().zip(b).zip(per_car.iter_mut()) {
+            let distance = x.position.distance(y.position);
+            if x != y {
+                car.affected = true;
+                car.first_divergent_frame.get_or_insert(frame);
+            }
+            car.max_divergence_m = car.max_divergence_m.max(distance);
+            csv.extend_from_slice(format!("{frame},").as_bytes());
+            push_fixed(&mut csv, frame as f64 * factual.frame_interval, 6);
+            csv.extend_from_slice(format!(",{},", car.id).as_bytes());
+            push_fixed(&mut csv, distance, 4);
+            csv.push(b',');
+            push_fixed(&mut csv, distance * pixels_per_metre, 3);
+            csv.push(b'\n');
+        }
+    }
+    let intervention_time_s = counterfactual
+        .events
+        .iter()
+        .filter(|e| e.kind == EventKind::Intervention)
+        .map(|e| e.t)
+        .find(|t| !factual.events.iter().any(|f| f.kind == EventKind::Intervention && f.t == *t));
+    let summary = PairSummary {
+        scenario: scenario.to_string(),
+        interventions: labels.to_vec(),
+        intervention_time_s,
+        affected: per_car.iter().filter(|c| c.affected).map(|c| c.name.clone()).collect(),
+        cars: per_car,
+    };
+    (csv, summary)
+}

@@ -1,0 +1,58 @@
+//! Interventions: "at this moment, or when this happens, do that" — the
+//! do-operator of a counterfactual. Plain data the city world applies while
+//! it simulates; every one that fires is logged in `events.csv` as kind
+//! `intervention`. Car and light fields are indices into the scenario's cars
+//! (id order) and light plan.
+
+use super::lights::Colour;
+
+/// When an intervention fires (once, at the first step its condition holds).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Trigger {
+    /// At scenario time (seconds; a frame is `frame x frame_interval`).
+    At(f64),
+    /// When the car's front reaches the stop line of the intersection (or
+    /// it is already inside it).
+    CarReaches { car: usize, intersection: usize },
+    /// When the light changes to the colour.
+    LightTurns { light: usize, colour: Colour },
+}
+
+/// What an intervention does.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Effect {
+    /// The car brakes (up to its hard braking limit) to a stop and stays
+    /// stopped for `seconds`, then drives on.
+    Stop { car: usize, seconds: f64 },
+    /// The car drives through every red and yellow light from now on.
+    RunRedLights { car: usize },
+    /// The car's desired speed is `speed` m/s from now on.
+    SetDesiredSpeed { car: usize, speed: f64 },
+    /// The car leaves the scene: it is parked far off the map (speed 0, never
+    /// in view) and no other car sees it.
+    Remove { car: usize },
+    /// The light shows `colour` for `seconds`, then its plan resumes.
+    SetLight { light: usize, colour: Colour, seconds: f64 },
+}
+
+/// One intervention of a scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Intervention {
+    pub trigger: Trigger,
+    pub effect: Effect,
+    /// How `events.csv` describes it, e.g. `stop Car_2 for 4 s (at 6 s)`.
+    pub label: String,
+}
+
+impl Effect {
+    /// The car the effect acts on, if any.
+    pub fn car(&self) -> Option<usize> {
+        match *self {
+            Effect::Stop { car, .. }
+            | Effect::RunRedLights { car }
+            | Effect::SetDesiredSpeed { car, .. }
+            | Effect::Remove { car } => Some(car),
+            Effect::SetLight { .. } => None,
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! Hand-written scenarios (`causalcity run`), interventions and
+//! counterfactual pairs (`causalcity counterfactual`), checked on the files
+//! they write.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+
+fn examples() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn every_example_scenario_runs() {
+    let examples = examples();
+    assert!(examples.len() >= 3);
+    let schema = validator("scenario-file.schema.json");
+    for file in examples {
+        assert_valid(&schema, &read_json(&file), &file);
+        let out = fresh_dir(&format!("hw-example-{}", file.file_stem().unwrap().to_string_lossy()));
+        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+        assert!(output.status.success(), "{}: {}", file.display(), String::from_utf8_lossy(&output.stderr));
+        let scenarios: Vec<serde_json::Value> =
+            match serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap() {
+                serde_json::Value::Array(list) => list,
+                one => vec![one],
+            };
+        for scenario in scenarios {
+            let name = scenario["Name"].as_str().unwrap();
+            let dir = out.join(name);
+            let record = read_json(&dir.join("scenario.json"));
+            let cars = scenario["Vehicles"].as_array().unwrap();
+            assert_eq!(record["cars"].as_array().unwrap().len(), cars.len());
+            for (car, vehicle) in record["cars"].as_array().unwrap().iter().zip(cars) {
+                assert_eq!(car["name"], vehicle["Id"]);
+                assert_eq!(car["spawn"], vehicle["Spawn"]);
+            }
+            let frames = scenario["frames"].as_u64().unwrap_or(150) as usize;
+            assert_eq!(read_poses(&dir.join("poses.csv")).len(), frames * cars.len());
+        }
+    }
+}
+
+#[test]
+fn pairs_are_inferred_as_in_the_original() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let out = fresh_dir("hw-pairs");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    assert!(output.status.success());
+    let record = read_json(&out.join("stop_the_leader/scenario.json"));
+    assert_eq!(record["edges"], serde_json::json!([[0, 1]]), "Car_1 leads Car_2 on the same lane and actions");
+    assert_eq!(record["cars"][2]["role"], "independent");
+    assert_eq!(record["cars"][2]["colour"], "#22aaff");
+    assert_eq!(record["cars"][2]["desired_speeds"], serde_json::json!([2.0, 2.0]));
+}
+
+fn scenario_with(vehicles: &str) -> String {
+    format!(r#"[{{"Name": "Bad_1", "frames": 10, "Vehicles": [{vehicles}]}}]"#)
+}
+
+#[test]
+fn bad_scenarios_exit_2_naming_scenario_car_and_field() {
+    let ok =
+        r#"{"Id": "Car_1", "Spawn": "A1w", "SpawnAtDistance": 5, "DriveQueue": ["straight"], "MergeAtDistances": [0]}"#;
+    let cases = [
+        (r#"{"Id": "Car_2", "Spawn": "Q9q", "DriveQueue": ["straight"]}"#, "Car_2", "field Spawn", "not a spawn point"),
+        (
+            r#"{"Id": "Car_2", "Spawn": "B1w", "DriveQueue": ["straight", "fly"]}"#,
+            "Car_2",
+            "field DriveQueue[1]",
+            "not an action",
+        ),
+        (
+            r#"{"Id": "Car_2", "Spawn": "B1x", "DriveQueue": ["mergeR"], "MergeAtDistances": [500]}"#,
+            "Car_2",
+            "field MergeAtDistances[0]",
+            "past the lane end",
+        ),
+        (
+            r#"{"Id": "Car_2", "Spawn": "B1w", "DriveQueue": ["left"]}"#,
+            "Car_2",
+            "field DriveQueue[0]",
+            "cannot turn left",
+        ),
+        (r#"{"Id": "Car_1", "Spawn": "B1w", "DriveQueue": ["straight"]}"#, "Car_1", "field Id", "duplicate car id"),
+        (
+            r#"{"Id": "Car_2", "Spawn": "A1w", "SpawnAtDistance": 5.5, "DriveQueue": ["straight"]}"#,
+            "Car_2",
+            "field SpawnAtDistance",
+            "on top of Car_1",
+        ),
+        (r#"{"Id": "Car_2", "Spawn": "B1w", "Speed": 3}"#, "Car_2", "field Speed", "unknown field"),
+    ];
+    let dir = fresh_dir("hw-bad");
+    for (k, (vehicle, car, field, message)) in cases.iter().enumerate() {
+        let file = dir.join(format!("bad{k}.json"));
+        std::fs::write(&file, scenario_with(&format!("{ok}, {vehicle}"))).unwrap();
+        let out = dir.join(format!("out{k}"));
+        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "case {k}: {stderr}");
+        for part in ["scenario \"Bad_1\"", &format!("car \"{car}\""), field, message] {
+            assert!(stderr.contains(part), "case {k}: {part:?} missing from {stderr}");
+        }
+        assert!(!out.exists(), "case {k}: nothing may be written");
+    }
+    // Interventions are checked too, with their path.
+    let file = dir.join("bad-intervention.json");
+    std::fs::write(
+        &file,
+        format!(r#"[{{"Name": "Bad_2", "Vehicles": [{ok}], "interventions": [{{"at": 1, "do": "stop", "car": "Car_9", "seconds": 2}}]}}]"#),
+    )
+    .unwrap();
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", dir.join("x").to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("interventions[0].car") && stderr.contains("\"Car_9\" is not a car"), "{stderr}");
+}
+
+fn counterfactual_of(name: &str, extra: &[&str]) -> PathBuf {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let out = fresh_dir(name);
+    let mut args = vec!["counterfactual", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let output = run(&args);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    out.join("stop_the_leader")
+}
+
+#[test]
+fn a_counterfactual_is_identical_before_the_intervention_and_moves_only_what_it_causes() {
+    let pair = counterfactual_of("hw-cf", &[]);
+    let (factual, counterfactual) = (pair.join("factual"), pair.join("counterfactual"));
+    let summary = read_json(&pair.join("summary.json"));
+    let t = summary["intervention_time_s"].as_f64().unwrap();
+    assert_eq!(t, 3.0);
+    let first = (t / 0.2).round() as usize; // frame 15 is the last before it acts
+    for frame in 0..=first {
+        let name = format!("rgb/{frame:04}.png");
+        assert_eq!(
+            std::fs::read(factual.join(&name)).unwrap(),
+            std::fs::read(counterfactual.join(&name)).unwrap(),
+            "{name}"
+        );
+        let name = format!("mask/{frame:04}.png");
+        assert_eq!(
+            std::fs::read(factual.join(&name)).unwrap(),
+            std::fs::read(counterfactual.join(&name)).unwrap(),
+            "{name}"
+        );
+    }
+    let (a, b) = (read_poses(&factual.join("poses.csv")), read_poses(&counterfactual.join("poses.csv")));
+    let text = |p: &Path| std::fs::read_to_string(p).unwrap();
+    let lines = |p: &Path| text(p).lines().map(String::from).collect::<Vec<_>>();
+    let (la, lb) = (lines(&factual.join("poses.csv")), lines(&counterfactual.join("poses.csv")));
+    for (i, row) in a.iter().enumerate() {
+        if row.frame as usize <= first {
+            assert_eq!(la[i + 1], lb[i + 1], "poses row {} before the intervention", i + 2);
+        }
+    }
+    // The leader stops, its follower is held up, the unrelated car is not moved at all.
+    // Distance driven by the end of the stop (9 s, frame 45).
+    let travelled = |poses: &[Pose], car: u32| {
+        poses.iter().filter(|p| p.car == car && p.frame <= 45).map(|p| p.speed * 0.2).sum::<f64>()
+    };
+    assert!(travelled(&b, 0) < travelled(&a, 0) - 3.0, "the stopped leader is behind where it would have been");
+    assert!(travelled(&b, 1) < travelled(&a, 1) - 3.0, "its follower is delayed too");
+    assert!((travelled(&b, 2) - travelled(&a, 2)).abs() < 1e-9, "the unrelated car drives exactly as before");
+    assert_eq!(summary["affected"], serde_json::json!(["Car_1", "Car_2"]));
+    let rows: Vec<(u32, u32, f64)> = text(&pair.join("divergence.csv"))
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[0].parse().unwrap(), f[2].parse().unwrap(), f[3].parse().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 100 * 3);
+    assert!(rows.iter().filter(|r| r.1 == 2).all(|r| r.2 == 0.0), "divergence 0 for the unrelated car");
+    assert!(rows.iter().filter(|r| r.0 as usize <= first).all(|r| r.2 == 0.0));
+    assert!(rows.iter().any(|r| r.1 == 1 && r.2 > 3.0));
+    // The intervention is in the counterfactual's events, not the factual's.
+    assert!(text(&counterfactual.join("events.csv")).contains(",intervention,0,,stop Car_1 for 6 s"));
+    assert!(!text(&factual.join("events.csv")).contains("intervention"));
+}
+
+#[test]
+fn a_no_op_intervention_gives_identical_folders() {
+    let dir = fresh_dir("hw-noop-file");
+    let file = dir.join("noop.json");
+    std::fs::write(&file, r#"[{"at": 2.0, "do": "none"}]"#).unwrap();
+    let pair = counterfactual_of("hw-noop", &["--intervention", file.to_str().unwrap()]);
+    // The scenario's own stop is in both runs; the added intervention does nothing.
+    assert_eq!(hash_tree(&pair.join("factual")), hash_tree(&pair.join("counterfactual")));
+    assert_eq!(read_json(&pair.join("summary.json"))["affected"], serde_json::json!([]));
+}
+
+#[test]
+fn interventions_act_as_documented() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/interventions.json");
+    let out = fresh_dir("hw-tour");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let dir = out.join("interventions_tour");
+    let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
+    let fired: Vec<&EventRow> = events.iter().filter(|e| e.kind == "intervention").collect();
+    assert_eq!(fired.len(), 4, "{events:?}");
+    // set_light: AD/W/straight is red from 4 s for 5 s.
+    let lights: Vec<LightRow> = read_csv(&dir.join("lights.csv"));
+    for l in lights.iter().filter(|l| l.intersection == "AD" && l.approach == "W" && l.signal == "straight") {
+        if (4.0..9.0).contains(&l.t) {
+            assert_eq!(l.colour, "red", "t = {}", l.t);
+        }
+    }
+    // run_red_light fired when that light turned red, and Car_1 then ran it.
+    assert!(events.iter().any(|e| e.kind == "red_light_run" && e.car == 0 && e.detail.contains("forced")));
+    // remove: Car_4 is off camera and still from 15 s on.
+    for p in read_poses(&dir.join("poses.csv")).iter().filter(|p| p.car == 3 && p.t >= 15.0) {
+        assert_eq!((p.in_view, p.speed), (0, 0.0));
+    }
+    // when Car_3 reaches BD it speeds up to 3 m/s.
+    let reach = fired.iter().find(|e| e.detail.contains("reaches BD")).unwrap();
+    let top = read_poses(&dir.join("poses.csv"))
+        .iter()
+        .filter(|p| p.car == 2 && p.t > reach.t)
+        .map(|p| p.speed)
+        .fold(0.0, f64::max);
+    assert!(top > 2.5, "Car_3 reached {top} m/s after the intervention");
+}
