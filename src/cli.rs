@@ -72,15 +72,54 @@ pub struct RunArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["scenario", "sweep"])))]
 pub struct CounterfactualArgs {
-    #[command(flatten)]
-    pub run: RunArgs,
+    /// Scenario file (JSON), as for `run`.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
 
     /// Interventions to add for the counterfactual (a JSON list, as a
     /// scenario's "interventions"); without it, the scenario's own
     /// interventions make the counterfactual.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", requires = "scenario")]
     pub intervention: Option<PathBuf>,
+
+    /// Counterfactual pairs at scale from a `gen` spec (city world): one
+    /// random intervention per scenario.
+    #[arg(long, value_name = "SPEC")]
+    pub sweep: Option<PathBuf>,
+
+    /// --sweep: kinds of intervention to draw from.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "stop,set-desired-speed,run-red-light,remove")]
+    pub kinds: Vec<crate::orchestrate::handwritten::SweepKind>,
+
+    /// --sweep: at most N scenarios per split and group.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub limit: Option<u32>,
+
+    /// --sweep: worker threads [default: every core].
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
+    pub threads: Option<u32>,
+
+    /// Output folder [default: data/<file name>, or data/<spec name>-counterfactual].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+
+    /// World to run a scenario file in [default: the file's "world", else city].
+    #[arg(long, value_enum, requires = "scenario")]
+    pub world: Option<crate::spec::WorldKind>,
+
+    /// Write scenario.json and the logs only, no PNG frames or masks.
+    #[arg(long)]
+    pub no_images: bool,
+
+    /// Print the summaries as JSON.
+    #[arg(long)]
+    pub json: bool,
+
+    /// --sweep: no progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]

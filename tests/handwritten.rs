@@ -234,3 +234,60 @@ fn interventions_act_as_documented() {
         .fold(0.0, f64::max);
     assert!(top > 2.5, "Car_3 reached {top} m/s after the intervention");
 }
+
+#[test]
+fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
+    let dir = fresh_dir("hw-sweep");
+    let spec = write_spec(&dir, &city_spec("sweep", &[(6, 0.5)], (3, 1, 0), 60, "{}"));
+    let mut trees = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.join(format!("out{threads}"));
+        let output = run(&[
+            "counterfactual",
+            "--sweep",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-images",
+            "-q",
+            "-j",
+            threads,
+            "--kinds",
+            "stop,remove",
+        ]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        trees.push(hash_tree(&out));
+        let pairs: Vec<PathBuf> = ["train/00000", "train/00001", "train/00002", "val/00000"]
+            .iter()
+            .map(|p| out.join("cars06_edges50").join(p))
+            .collect();
+        let mut with_effect = 0;
+        for pair in &pairs {
+            let summary = read_json(&pair.join("summary.json"));
+            let label = summary["interventions"][0].as_str().unwrap();
+            assert!(label.starts_with("stop ") || label.starts_with("remove "), "{label}");
+            let t = summary["intervention_time_s"].as_f64().unwrap();
+            let before = (t / 0.2).round() as u32;
+            let factual = std::fs::read_to_string(pair.join("factual/poses.csv")).unwrap();
+            let counterfactual = std::fs::read_to_string(pair.join("counterfactual/poses.csv")).unwrap();
+            let rows = |text: &str| {
+                text.lines()
+                    .filter(|l| l.split(',').next().unwrap().parse::<u32>().is_ok_and(|f| f <= before))
+                    .map(String::from)
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(rows(&factual), rows(&counterfactual), "{}", pair.display());
+            // The car acted on is in the effect set whenever anything moved.
+            let acted_on = label.split_whitespace().nth(1).unwrap();
+            let affected: Vec<&str> =
+                summary["affected"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+            if !affected.is_empty() {
+                assert!(affected.contains(&acted_on), "{label}: {affected:?}");
+                with_effect += 1;
+            }
+        }
+        assert!(with_effect >= 2, "most random stops and removals change something");
+        assert!(out.join("sweep.json").exists());
+    }
+    assert_eq!(trees[0], trees[1], "the same pairs on 1 and 2 threads");
+}

@@ -10,13 +10,16 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::run::{write_planned, GenError, Job};
+use super::plan::ScenarioPlan;
+use super::progress::{Progress, ProgressMode};
+use super::run::{load_spec, write_planned, GenError, Job};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::map::CityMap;
 use crate::output::manifest::Products;
 use crate::output::number::push_fixed;
-use crate::output::write_atomically;
+use crate::output::{scenario_dir, write_atomically};
 use crate::spec::WorldKind;
+use crate::world::interventions::{Effect, Intervention, Trigger};
 use crate::world::{EventKind, Trajectories};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -159,26 +162,171 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let job = Job::new(&s.expansion, out.clone(), options.products(), false);
-            let folder = out.join(&s.name);
-            let (a, b) = rayon::join(
-                || job.world.simulate(&s.expansion.map, factual),
-                || job.world.simulate(&s.expansion.map, counterfactual),
-            );
-            let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
-            write_planned(&job, factual, &a, folder.join("factual"), canvas.as_mut())?;
-            write_planned(&job, counterfactual, &b, folder.join("counterfactual"), canvas.as_mut())?;
-            let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
-            let labels: Vec<String> =
-                counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
-            let (csv, summary) = divergence(&s.name, &names, &labels, &a, &b, s.expansion.camera.pixels_per_metre);
-            write_atomically(&folder.join("divergence.csv"), &csv)?;
-            let mut json = serde_json::to_vec_pretty(&summary).expect("summary serialises");
-            json.push(b'\n');
-            write_atomically(&folder.join("summary.json"), &json)?;
-            Ok(summary)
+            write_pair(&job, &s.name, factual, counterfactual, &out.join(&s.name))
         })
         .collect::<Result<Vec<_>, GenError>>()
         .map_err(RunError::Write)
+}
+
+/// Simulates a factual / counterfactual pair (the counterfactual's extra
+/// interventions come after the factual's) and writes it into `folder`.
+fn write_pair(
+    job: &Job<'_>,
+    name: &str,
+    factual: &ScenarioPlan,
+    counterfactual: &ScenarioPlan,
+    folder: &Path,
+) -> Result<PairSummary, GenError> {
+    let map = &job.expansion.map;
+    let (a, b) = rayon::join(|| job.world.simulate(map, factual), || job.world.simulate(map, counterfactual));
+    let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
+    write_planned(job, factual, &a, folder.join("factual"), canvas.as_mut())?;
+    write_planned(job, counterfactual, &b, folder.join("counterfactual"), canvas.as_mut())?;
+    let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
+    let labels: Vec<String> =
+        counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
+    let (csv, summary) = divergence(name, &names, &labels, &a, &b, job.expansion.camera.pixels_per_metre);
+    write_atomically(&folder.join("divergence.csv"), &csv)?;
+    let mut json = serde_json::to_vec_pretty(&summary).expect("summary serialises");
+    json.push(b'\n');
+    write_atomically(&folder.join("summary.json"), &json)?;
+    Ok(summary)
+}
+
+/// Kinds of random intervention `counterfactual --sweep` draws from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum SweepKind {
+    /// Stop a random car for 2-6 s.
+    Stop,
+    /// Set a random car's desired speed to 30-60 % of the spec's.
+    SetDesiredSpeed,
+    /// Make a random car run red lights.
+    RunRedLight,
+    /// Remove a random car.
+    Remove,
+}
+
+/// What `counterfactual --sweep` was asked to do.
+#[derive(Debug, Clone)]
+pub struct SweepOptions {
+    pub spec_path: PathBuf,
+    /// Default: `data/<spec name>-counterfactual`.
+    pub out: Option<PathBuf>,
+    pub limit: Option<u32>,
+    pub kinds: Vec<SweepKind>,
+    pub products: Products,
+    pub threads: Option<usize>,
+    pub progress: ProgressMode,
+}
+
+/// What a sweep wrote.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepSummary {
+    pub out: PathBuf,
+    pub pairs: usize,
+    /// Pairs whose intervention moved at least one car.
+    pub pairs_with_effect: usize,
+    /// Mean size of the effect set over the pairs.
+    pub mean_affected_cars: f64,
+}
+
+/// Counterfactual pairs at scale: for every scenario of a `gen` spec, one
+/// random intervention of the given kinds (drawn from the scenario's own
+/// stream, so the sweep is reproducible), written as
+/// `<out>/<group>/<split>/<index>/` pairs, in parallel.
+pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
+    let expansion = load_spec(&options.spec_path)?;
+    if expansion.spec.world != WorldKind::City {
+        return Err(RunError::Usage(format!(
+            "{}: --sweep needs a city-world spec (toy cars have no agency to intervene on)",
+            options.spec_path.display()
+        )));
+    }
+    if options.kinds.is_empty() {
+        return Err(RunError::Usage("--kinds: give at least one kind".into()));
+    }
+    let out = options
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("data").join(format!("{}-counterfactual", expansion.spec.name)));
+    let threads = options.threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RunError::Write(GenError::Threads { threads, reason: e.to_string() }))?;
+    let keys = expansion.keys(options.limit);
+    let job = Job::new(&expansion, out.clone(), options.products, false);
+    let bar = Progress::new(keys.len() as u64, options.progress);
+    let summaries: Vec<PairSummary> = pool
+        .install(|| {
+            keys.par_iter()
+                .map(|key| {
+                    let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
+                        scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
+                        reason,
+                    })?;
+                    let mut counterfactual = plan.clone();
+                    counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
+                    let folder = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+                    let summary = write_pair(&job, &key.folder_name(), &plan, &counterfactual, &folder)?;
+                    bar.inc();
+                    Ok(summary)
+                })
+                .collect::<Result<Vec<_>, GenError>>()
+        })
+        .map_err(RunError::Write)?;
+    bar.finish();
+    let record = serde_json::json!({
+        "format": "causalcity-counterfactual-sweep/1",
+        "version": env!("CARGO_PKG_VERSION"),
+        "spec": expansion.spec,
+        "limit": options.limit,
+        "kinds": options.kinds,
+        "pairs": summaries.len(),
+    });
+    let mut json = serde_json::to_vec_pretty(&record).expect("sweep record serialises");
+    json.push(b'\n');
+    write_atomically(&out.join("sweep.json"), &json).map_err(GenError::from)?;
+    let affected: usize = summaries.iter().map(|s| s.affected.len()).sum();
+    Ok(SweepSummary {
+        out,
+        pairs: summaries.len(),
+        pairs_with_effect: summaries.iter().filter(|s| !s.affected.is_empty()).count(),
+        mean_affected_cars: affected as f64 / summaries.len().max(1) as f64,
+    })
+}
+
+/// One random intervention for `plan`, from a stream derived from the
+/// scenario's own key.
+fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention {
+    use rand::{RngExt, SeedableRng};
+    use sha2::Digest;
+    let mut seed = sha2::Sha256::new();
+    seed.update(b"causalcity/sweep/v1\0");
+    seed.update(plan.stream_key.as_bytes());
+    let mut rng = rand_chacha::ChaCha8Rng::from_seed(seed.finalize().into());
+    let kind = kinds[rng.random_range(0..kinds.len())];
+    let car = rng.random_range(0..plan.cars.len());
+    let duration = plan.frames.saturating_sub(1) as f64 * plan.frame_interval;
+    // On a frame, in the first half of the scenario after a moment to get going.
+    let frame = ((rng.random_range(0.1..0.5) * duration) / plan.frame_interval).round();
+    let at = frame * plan.frame_interval;
+    let name = &plan.cars[car].name;
+    let (effect, what) = match kind {
+        SweepKind::Stop => {
+            let seconds = (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0;
+            (Effect::Stop { car, seconds }, format!("stop {name} for {seconds} s"))
+        }
+        SweepKind::SetDesiredSpeed => {
+            let base = plan.cars[car].agency.as_ref().and_then(|a| a.desired_speeds.first().copied()).unwrap_or(1.8);
+            let speed = (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0;
+            (Effect::SetDesiredSpeed { car, speed }, format!("{name} desired speed {speed} m/s"))
+        }
+        SweepKind::RunRedLight => (Effect::RunRedLights { car }, format!("{name} runs red lights")),
+        SweepKind::Remove => (Effect::Remove { car }, format!("remove {name}")),
+    };
+    Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }
 }
 
 /// divergence.csv (`frame,t,car,distance_m,distance_px`) and the summary.
