@@ -36,6 +36,7 @@ fn every_example_scenario_runs() {
             let name = scenario["Name"].as_str().unwrap();
             let dir = out.join(name);
             let record = read_json(&dir.join("scenario.json"));
+            assert_valid(&validator("scenario.schema.json"), &record, &dir.join("scenario.json"));
             let cars = scenario["Vehicles"].as_array().unwrap();
             assert_eq!(record["cars"].as_array().unwrap().len(), cars.len());
             for (car, vehicle) in record["cars"].as_array().unwrap().iter().zip(cars) {
@@ -290,4 +291,86 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
         assert!(out.join("sweep.json").exists());
     }
     assert_eq!(trees[0], trees[1], "the same pairs on 1 and 2 threads");
+}
+
+#[test]
+fn extra_cameras_write_their_own_frames_and_the_chase_camera_keeps_its_car_centred() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/cameras.json");
+    let out = fresh_dir("hw-cameras");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let dir = out.join("cameras");
+    let record = read_json(&dir.join("scenario.json"));
+    assert_eq!(record["cameras"].as_array().unwrap().len(), 2);
+
+    // Chase: 256 x 256 around Car_1 (mask id 1), which stays at the centre.
+    let chase = dir.join("cameras/chase_car1");
+    for frame in 0..40 {
+        let mask = image::open(chase.join(format!("mask/{frame:04}.png"))).unwrap().to_luma8();
+        assert_eq!(mask.dimensions(), (256, 256));
+        let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (x, y, p) in mask.enumerate_pixels() {
+            if p[0] == 1 {
+                n += 1.0;
+                sx += x as f64;
+                sy += y as f64;
+            }
+        }
+        assert!(n > 100.0, "frame {frame}: the chased car is in view");
+        let (cx, cy) = (sx / n, sy / n);
+        assert!((cx - 127.5).abs() <= 1.5 && (cy - 127.5).abs() <= 1.5, "frame {frame}: centroid ({cx:.2}, {cy:.2})");
+        // Longer than wide on screen: it drives up the image.
+        let rows = mask
+            .enumerate_pixels()
+            .filter(|(_, _, p)| p[0] == 1)
+            .map(|(_, y, _)| y)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len();
+        let cols = mask
+            .enumerate_pixels()
+            .filter(|(_, _, p)| p[0] == 1)
+            .map(|(x, _, _)| x)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len();
+        assert!(rows > cols, "frame {frame}: {rows} rows x {cols} columns");
+    }
+    // Depth: 16-bit grey, millimetres; the car is closer than the road beside it.
+    let depth = image::open(chase.join("depth/0020.png")).unwrap();
+    assert_eq!(depth.color(), image::ColorType::L16);
+    let depth = depth.to_luma16();
+    let altitude_mm = 40.0 * 256.0 / 1024.0 / 2.0 * 1000.0;
+    let at_car = depth.get_pixel(128, 128)[0] as f64;
+    let at_road = depth.get_pixel(128 + 20, 128)[0] as f64;
+    assert!((at_car - (altitude_mm - 1500.0)).abs() < 5.0, "car roof at {at_car} mm");
+    assert!(at_road > at_car + 1000.0, "road {at_road} mm, car {at_car} mm");
+
+    // Static: its own pixel log agrees with its masks.
+    let corner = dir.join("cameras/street_A1");
+    let rows: Vec<Vec<String>> = std::fs::read_to_string(corner.join("poses.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    assert_eq!(rows.len(), 40 * 3);
+    let mut checked = 0;
+    for frame in 0..40usize {
+        let mask = image::open(corner.join(format!("mask/{frame:04}.png"))).unwrap().to_luma8();
+        assert_eq!(mask.dimensions(), (384, 256));
+        for row in rows.iter().filter(|r| r[0] == frame.to_string()) {
+            let id: u8 = row[1].parse::<u8>().unwrap() + 1;
+            let (px, py): (f64, f64) = (row[2].parse().unwrap(), row[3].parse().unwrap());
+            let pixels: Vec<(u32, u32)> =
+                mask.enumerate_pixels().filter(|(_, _, p)| p[0] == id).map(|(x, y, _)| (x, y)).collect();
+            // Wholly inside the image: the centroid is the logged position.
+            if pixels.len() > 200 && pixels.iter().all(|&(x, y)| x > 0 && y > 0 && x < 383 && y < 255) {
+                let n = pixels.len() as f64;
+                let cx = pixels.iter().map(|p| p.0 as f64).sum::<f64>() / n;
+                let cy = pixels.iter().map(|p| p.1 as f64).sum::<f64>() / n;
+                assert!((cx - px).abs() < 1.5 && (cy - py).abs() < 1.5, "frame {frame} car {id}");
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 0, "at least one car crossed the corner camera");
 }

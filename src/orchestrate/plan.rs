@@ -119,6 +119,8 @@ pub struct ScenarioPlan {
     /// City world only: interventions applied while simulating (none for
     /// `gen`; hand-written scenarios and counterfactuals name them).
     pub interventions: Vec<Intervention>,
+    /// Extra cameras (hand-written scenarios; none for `gen`).
+    pub cameras: Vec<crate::render::camera::CameraPlan>,
 }
 
 /// A car of a hand-written scenario: where it starts, what it does, and
@@ -484,6 +486,7 @@ impl Expansion {
             toy_step_m: self.toy_step_m,
             city: city_plan,
             interventions: Vec::new(),
+            cameras: Vec::new(),
         }
     }
 

@@ -7,17 +7,18 @@ use crate::map::CityMap;
 use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use crate::output::logs::{write_events, write_lights};
 use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
-use crate::output::number::logged_value;
+use crate::output::number::{logged_value, push_fixed};
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::output::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
 use crate::output::scenario::scenario_json;
 use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError, PARTIAL_PREFIX};
+use crate::render::camera::{CameraKind, CameraPlan};
 use crate::render::weather::SceneLook;
-use crate::render::{CarSprite, FrameCanvas, Renderer};
+use crate::render::{CarSprite, FrameCanvas, Renderer, Scene};
 use crate::spec::{DatasetSpec, SpecError, WorldKind};
 use crate::world::city::CityWorld;
 use crate::world::toy::ToyWorld;
-use crate::world::{Trajectories, World};
+use crate::world::{CarState, Trajectories, World};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -403,6 +404,9 @@ pub(crate) fn write_planned(
     }
     if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
         bytes += write_frames(renderer, canvas, &mut dir, plan, trajectories, job.annotations)?;
+        for camera_plan in &plan.cameras {
+            bytes += write_camera(&job.expansion.map, &mut dir, plan, trajectories, camera_plan)?;
+        }
     }
     bytes += dir.commit()?;
     Ok(bytes)
@@ -422,15 +426,7 @@ fn write_frames(
         plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
     let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, w, h, &annotated_cars));
     let mut pixels = Vec::with_capacity(plan.cars.len());
-    let look = match &plan.city {
-        Some(city) => {
-            let c = &city.confounders;
-            let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
-            SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
-        }
-        None => SceneLook::clear(),
-    };
-    let scene = renderer.scene(look);
+    let scene = renderer.scene(scene_look(plan));
     let mut bytes = 0;
     let mut sprites = Vec::with_capacity(plan.cars.len());
     for (frame, states) in trajectories.states.iter().enumerate() {
@@ -467,6 +463,109 @@ fn write_frames(
     if let Some(builder) = builder {
         bytes += dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
     }
+    Ok(bytes)
+}
+
+/// How a scenario looks: light, water, fog, rain and snow.
+fn scene_look(plan: &ScenarioPlan) -> SceneLook {
+    match &plan.city {
+        Some(city) => {
+            let c = &city.confounders;
+            let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
+            SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
+        }
+        None => SceneLook::clear(),
+    }
+}
+
+/// Writes one extra camera's frames under `cameras/<name>/`: rgb/, mask/,
+/// depth/ (16-bit, millimetres) when asked, and poses.csv (frame, car, px,
+/// py, in_view) in this camera's pixels.
+fn write_camera(
+    map: &crate::map::CityMap,
+    dir: &mut ScenarioDir,
+    plan: &ScenarioPlan,
+    trajectories: &Trajectories,
+    camera_plan: &CameraPlan,
+) -> Result<u64, GenError> {
+    let base = format!("cameras/{}", camera_plan.name);
+    for sub in ["rgb", "mask", "depth"] {
+        if sub != "depth" || camera_plan.depth {
+            dir.create_folder(&format!("{base}/{sub}"))?;
+        }
+    }
+    let look = scene_look(plan);
+    let chased = |states: &[CarState]| match camera_plan.kind {
+        CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
+        CameraKind::Static { .. } => None,
+    };
+    let (w, h) = (camera_plan.width, camera_plan.height);
+    // A static camera draws its background once; a chase camera every frame.
+    let mut fixed: Option<(Renderer, Scene)> = None;
+    let mut canvas: Option<FrameCanvas> = None;
+    let mut depth = Vec::new();
+    let mut poses = b"frame,car,px,py,in_view\n".to_vec();
+    let mut bytes = 0;
+    let mut sprites = Vec::with_capacity(plan.cars.len());
+    for (frame, states) in trajectories.states.iter().enumerate() {
+        if STOP.load(Ordering::Relaxed) {
+            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+        }
+        let camera = camera_plan.camera_at(chased(states));
+        let owned;
+        let (renderer, scene) = match camera_plan.kind {
+            CameraKind::Static { .. } => {
+                let (r, s) = fixed.get_or_insert_with(|| {
+                    let r = Renderer::new(map, camera);
+                    let s = r.scene(look);
+                    (r, s)
+                });
+                (&*r, &*s)
+            }
+            CameraKind::Chase { .. } => {
+                let r = Renderer::new(map, camera);
+                let s = r.scene(look);
+                owned = (r, s);
+                (&owned.0, &owned.1)
+            }
+        };
+        let canvas = canvas.get_or_insert_with(|| renderer.canvas());
+        sprites.clear();
+        sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
+            position: s.position,
+            yaw: s.yaw,
+            length: car.length,
+            width: car.width,
+            colour: car.colour,
+            mask_id: car.mask_id,
+        }));
+        let frame = frame as u32;
+        renderer.render(canvas, scene, &sprites, frame);
+        let [rgb_name, mask_name, depth_name] =
+            ["rgb", "mask", "depth"].map(|kind| format!("{base}/{}", dir.frame_name(kind, frame)));
+        bytes += dir.write_with(&rgb_name, |out| {
+            encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
+        })?;
+        bytes += dir.write_with(&mask_name, |out| {
+            encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
+        })?;
+        if camera_plan.depth {
+            renderer.depth_mm(&canvas.mask, &mut depth);
+            let big_endian: Vec<u8> = depth.iter().flat_map(|d| d.to_be_bytes()).collect();
+            bytes += dir.write_with(&depth_name, |out| {
+                encode_png(out, w, h, PixelFormat::Gray16, &big_endian, PngSettings::mask()).map_err(png_to_io)
+            })?;
+        }
+        for (car, state) in plan.cars.iter().zip(states) {
+            let pixel = camera.to_pixel(state.position);
+            poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
+            push_fixed(&mut poses, pixel.x, PIXEL_DECIMALS);
+            poses.push(b',');
+            push_fixed(&mut poses, pixel.y, PIXEL_DECIMALS);
+            poses.extend_from_slice(format!(",{}\n", camera.contains_pixel(pixel) as u8).as_bytes());
+        }
+    }
+    bytes += dir.write_file(&format!("{base}/poses.csv"), &poses)?;
     Ok(bytes)
 }
 

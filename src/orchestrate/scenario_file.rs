@@ -16,6 +16,7 @@
 use super::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
 use crate::geometry::OrientedBox;
 use crate::map::{Action, CityMap, Route};
+use crate::render::camera::{CameraKind, CameraPlan};
 use crate::spec::{CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
 use crate::world::interventions::{Effect, Intervention, Trigger};
 use crate::world::lights::{Colour, Signal, APPROACHES};
@@ -65,8 +66,8 @@ pub struct FileOptions {
     pub world: Option<WorldKind>,
 }
 
-const SCENARIO_KEYS: [&str; 9] =
-    ["Name", "Vehicles", "world", "seed", "frames", "frame_interval", "city", "interventions", "comment"];
+const SCENARIO_KEYS: [&str; 10] =
+    ["Name", "Vehicles", "world", "seed", "frames", "frame_interval", "city", "interventions", "cameras", "comment"];
 const VEHICLE_KEYS: [&str; 10] = [
     "comment",
     "Id",
@@ -285,7 +286,115 @@ fn load_one(
         }
         Some(v) => parse_interventions(&here, v, "interventions", &cars, map, &expansion)?,
     };
+    plan.cameras = match object.get("cameras") {
+        None => Vec::new(),
+        Some(v) => parse_cameras(&here, v, &cars)?,
+    };
     Ok(LoadedScenario { name, expansion, plan })
+}
+
+const CAMERA_KEYS: [&str; 8] = ["name", "static", "chase", "zoom", "width", "height", "depth", "comment"];
+
+/// Extra cameras: `{"name", "static": {"centre": [x, y], "rotation_deg"}` or
+/// `"chase": CAR`, and optional `zoom` (1), `width`, `height` (1024 x 640
+/// static, 256 x 256 chase), `depth` (false)}.
+fn parse_cameras(here: &Here<'_>, value: &Value, cars: &[GivenCar]) -> Result<Vec<CameraPlan>, ScenarioFileError> {
+    let Some(list) = value.as_array() else {
+        return Err(here.err(None, "cameras", "expected a list of cameras"));
+    };
+    let mut cameras: Vec<CameraPlan> = Vec::new();
+    for (i, item) in list.iter().enumerate() {
+        let field = |sub: &str| format!("cameras[{i}]{sub}");
+        let Some(object) = item.as_object() else {
+            return Err(here.err(None, field(""), "a camera is an object with a name and \"static\" or \"chase\""));
+        };
+        if let Some(key) = unknown_keys(object, &CAMERA_KEYS) {
+            return Err(here.err(
+                None,
+                field(&format!(".{key}")),
+                format!("unknown field: a camera has {}", CAMERA_KEYS.join(", ")),
+            ));
+        }
+        let name = object.get("name").and_then(Value::as_str).filter(|n| valid_name(n)).ok_or_else(|| {
+            here.err(
+                None,
+                field(".name"),
+                "missing or not allowed: 1 to 64 characters from A-Z a-z 0-9 - _ . (it names a folder)",
+            )
+        })?;
+        if cameras.iter().any(|c| c.name == name) {
+            return Err(here.err(None, field(".name"), format!("{name:?} names another camera of this scenario too")));
+        }
+        let kind = match (object.get("static"), object.get("chase")) {
+            (Some(Value::Object(view)), None) => {
+                let centre = view
+                    .get("centre")
+                    .and_then(Value::as_array)
+                    .filter(|c| c.len() == 2)
+                    .and_then(|c| Some([c[0].as_f64()?, c[1].as_f64()?]))
+                    .ok_or_else(|| here.err(None, field(".static.centre"), "expected [x, y] in metres"))?;
+                let rotation_deg = match view.get("rotation_deg") {
+                    None => 0.0,
+                    Some(v) => v.as_f64().filter(|r| r.is_finite()).ok_or_else(|| {
+                        here.err(None, field(".static.rotation_deg"), format!("{v} is not a number of degrees"))
+                    })?,
+                };
+                CameraKind::Static { centre, rotation_deg }
+            }
+            (None, Some(car)) => {
+                let id = car.as_str().unwrap_or_default();
+                let car = cars
+                    .iter()
+                    .position(|c| c.name == id)
+                    .ok_or_else(|| here.err(None, field(".chase"), format!("{car} is not a car of this scenario")))?;
+                CameraKind::Chase { car }
+            }
+            _ => {
+                return Err(here.err(
+                    None,
+                    field(""),
+                    "give exactly one of \"static\": {\"centre\": [x, y], \"rotation_deg\": r} or \"chase\": CAR",
+                ))
+            }
+        };
+        let (default_w, default_h) = match kind {
+            CameraKind::Static { .. } => (1024, 640),
+            CameraKind::Chase { .. } => (256, 256),
+        };
+        let side = |key: &str, default: u32| -> Result<u32, ScenarioFileError> {
+            match object.get(key) {
+                None => Ok(default),
+                Some(v) => v.as_u64().filter(|n| (16..=4096).contains(n)).map(|n| n as u32).ok_or_else(|| {
+                    here.err(None, field(&format!(".{key}")), format!("{v} is not allowed: pixels, 16 to 4096"))
+                }),
+            }
+        };
+        let zoom = match object.get("zoom") {
+            None => 1.0,
+            Some(v) => v.as_f64().filter(|z| *z > 0.0 && *z <= 20.0).ok_or_else(|| {
+                here.err(
+                    None,
+                    field(".zoom"),
+                    format!("{v} is not allowed: above 0 and at most 20 (1 = the bird's-eye scale)"),
+                )
+            })?,
+        };
+        let depth = match object.get("depth") {
+            None => false,
+            Some(v) => {
+                v.as_bool().ok_or_else(|| here.err(None, field(".depth"), format!("{v} is not true or false")))?
+            }
+        };
+        cameras.push(CameraPlan {
+            name: name.to_string(),
+            width: side("width", default_w)?,
+            height: side("height", default_h)?,
+            zoom,
+            depth,
+            kind,
+        });
+    }
+    Ok(cameras)
 }
 
 fn valid_name(name: &str) -> bool {

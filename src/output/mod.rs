@@ -132,6 +132,12 @@ impl ScenarioDir {
         Ok(len)
     }
 
+    /// Creates a folder (and its parents) inside the scenario folder.
+    pub fn create_folder(&mut self, relative: &str) -> Result<(), WriteError> {
+        let path = self.temp.join(relative);
+        fs::create_dir_all(&path).map_err(io_err(&path))
+    }
+
     /// Relative path of frame `frame` in image folder `kind` (`rgb` or `mask`).
     pub fn frame_name(&self, kind: &str, frame: u32) -> String {
         format!("{kind}/{frame:0width$}.png", width = self.frame_digits)

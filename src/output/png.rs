@@ -10,6 +10,8 @@ use std::io::Write;
 pub enum PixelFormat {
     Rgb8,
     Gray8,
+    /// 16-bit grey, big-endian bytes (as PNG stores them).
+    Gray16,
 }
 
 /// Encoder settings, exposed so the benchmark can compare them.
@@ -35,7 +37,7 @@ impl PngSettings {
     pub fn for_format(format: PixelFormat) -> PngSettings {
         match format {
             PixelFormat::Rgb8 => PngSettings::rgb(),
-            PixelFormat::Gray8 => PngSettings::mask(),
+            PixelFormat::Gray8 | PixelFormat::Gray16 => PngSettings::mask(),
         }
     }
 }
@@ -52,9 +54,9 @@ pub fn encode_png<W: Write>(
     let mut encoder = png::Encoder::new(out, width, height);
     encoder.set_color(match format {
         PixelFormat::Rgb8 => png::ColorType::Rgb,
-        PixelFormat::Gray8 => png::ColorType::Grayscale,
+        PixelFormat::Gray8 | PixelFormat::Gray16 => png::ColorType::Grayscale,
     });
-    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_depth(if format == PixelFormat::Gray16 { png::BitDepth::Sixteen } else { png::BitDepth::Eight });
     encoder.set_deflate_compression(settings.compression);
     encoder.set_filter(settings.filter);
     let mut writer = encoder.write_header()?;

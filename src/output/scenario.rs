@@ -78,6 +78,9 @@ struct ScenarioRecord<'a> {
     city: Option<CityRecord<'a>>,
     cars: Vec<CarRecord<'a>>,
     edges: Vec<[u32; 2]>,
+    /// Extra cameras, each writing under cameras/<name>/.
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    cameras: &'a [crate::render::camera::CameraPlan],
 }
 
 /// Serialises the scenario record as pretty JSON. `intersection_names` and
@@ -147,6 +150,7 @@ pub fn scenario_json(
             })
             .collect(),
         edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),
+        cameras: &plan.cameras,
     };
     let mut out = serde_json::to_vec_pretty(&record).expect("scenario record serialises");
     out.push(b'\n');

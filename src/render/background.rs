@@ -21,9 +21,17 @@ const SIDEWALK: f64 = 2.0;
 /// spans `[i, i + 1)`, so its centre is at `i + 0.5`).
 pub fn world_to_canvas(camera: &Camera) -> Transform {
     let ppm = camera.pixels_per_metre as f32;
-    let tx = camera.width as f32 / 2.0 - camera.centre_x as f32 * ppm;
-    let ty = camera.height as f32 / 2.0 + camera.centre_y as f32 * ppm;
-    Transform::from_row(ppm, 0.0, 0.0, -ppm, tx, ty)
+    if camera.rotation_rad == 0.0 {
+        let tx = camera.width as f32 / 2.0 - camera.centre_x as f32 * ppm;
+        let ty = camera.height as f32 / 2.0 + camera.centre_y as f32 * ppm;
+        return Transform::from_row(ppm, 0.0, 0.0, -ppm, tx, ty);
+    }
+    // Move the camera's centre to the origin, turn the view, then scale and flip.
+    let (s, c) = (-camera.rotation_rad).sin_cos();
+    let to_origin = Transform::from_translate(-camera.centre_x as f32, -camera.centre_y as f32);
+    let turn = Transform::from_row(c as f32, s as f32, -s as f32, c as f32, 0.0, 0.0);
+    let to_pixels = Transform::from_row(ppm, 0.0, 0.0, -ppm, camera.width as f32 / 2.0, camera.height as f32 / 2.0);
+    to_pixels.pre_concat(turn).pre_concat(to_origin)
 }
 
 fn paint(rgb: [u8; 3]) -> Paint<'static> {
@@ -41,11 +49,23 @@ fn rect(pixmap: &mut Pixmap, t: Transform, x0: f64, y0: f64, x1: f64, y1: f64, r
     }
 }
 
-/// Draws the background for `map` as seen by `camera`, and returns with it
-/// the asphalt coverage of every pixel (255 on the road), which weather uses.
-pub fn draw_background(map: &CityMap, camera: &Camera) -> (Pixmap, Vec<u8>) {
+/// The background of one camera and what each pixel shows.
+pub struct Background {
+    pub pixmap: Pixmap,
+    /// Asphalt coverage per pixel (255 on the road), which weather uses.
+    pub road: Vec<u8>,
+    /// Roof coverage per pixel (255 on a building), for depth.
+    pub buildings: Vec<u8>,
+}
+
+/// Height of every building, metres (for depth images).
+pub const BUILDING_HEIGHT_M: f64 = 12.0;
+
+/// Draws the background for `map` as seen by `camera`.
+pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     let mut pixmap = Pixmap::new(camera.width, camera.height).expect("image size was validated");
     let mut road = Pixmap::new(camera.width, camera.height).expect("image size was validated");
+    let mut buildings = Pixmap::new(camera.width, camera.height).expect("image size was validated");
     pixmap.fill(Color::from_rgba8(GROUND[0], GROUND[1], GROUND[2], 255));
     let t = world_to_canvas(camera);
     let layout = &map.layout;
@@ -74,14 +94,16 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> (Pixmap, Vec<u8>) {
                 // Two buildings per block, split along the longer side.
                 let gap = 1.5;
                 let roof = |k: usize| ROOFS[(i * 3 + j + k) % ROOFS.len()];
-                if x1 - x0 >= y1 - y0 {
+                let halves = if x1 - x0 >= y1 - y0 {
                     let mid = (x0 + x1) / 2.0;
-                    rect(&mut pixmap, t, x0, y0, mid - gap / 2.0, y1, roof(0));
-                    rect(&mut pixmap, t, mid + gap / 2.0, y0, x1, y1, roof(1));
+                    [(x0, y0, mid - gap / 2.0, y1), (mid + gap / 2.0, y0, x1, y1)]
                 } else {
                     let mid = (y0 + y1) / 2.0;
-                    rect(&mut pixmap, t, x0, y0, x1, mid - gap / 2.0, roof(0));
-                    rect(&mut pixmap, t, x0, mid + gap / 2.0, x1, y1, roof(1));
+                    [(x0, y0, x1, mid - gap / 2.0), (x0, mid + gap / 2.0, x1, y1)]
+                };
+                for (k, (a, b, c, d)) in halves.into_iter().enumerate() {
+                    rect(&mut pixmap, t, a, b, c, d, roof(k));
+                    rect(&mut buildings, t, a, b, c, d, WHITE);
                 }
             }
         }
@@ -130,8 +152,8 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> (Pixmap, Vec<u8>) {
             quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, 1.5 * lw - 0.3, WHITE);
         }
     }
-    let coverage = road.data().chunks_exact(4).map(|p| p[3]).collect();
-    (pixmap, coverage)
+    let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();
+    Background { road: alpha(&road), buildings: alpha(&buildings), pixmap }
 }
 
 fn circle(pixmap: &mut Pixmap, t: Transform, x: f64, y: f64, r: f64, rgb: [u8; 3]) {

@@ -32,7 +32,12 @@ pub struct Renderer {
     background: Arc<Pixmap>,
     /// Asphalt coverage per pixel, for wet roads.
     road: Arc<Vec<u8>>,
+    /// Roof coverage per pixel, for depth.
+    buildings: Arc<Vec<u8>>,
 }
+
+/// Height of a car's roof above the road, metres (for depth images).
+pub const CAR_HEIGHT_M: f64 = 1.5;
 
 /// One scenario's look: its background under its light, water and fog.
 pub struct Scene {
@@ -52,8 +57,40 @@ pub struct FrameCanvas {
 impl Renderer {
     /// Renders the background of `map` for `camera`, once.
     pub fn new(map: &crate::map::CityMap, camera: Camera) -> Renderer {
-        let (background, road) = background::draw_background(map, &camera);
-        Renderer { camera, background: Arc::new(background), road: Arc::new(road) }
+        let drawn = background::draw_background(map, &camera);
+        Renderer {
+            camera,
+            background: Arc::new(drawn.pixmap),
+            road: Arc::new(drawn.road),
+            buildings: Arc::new(drawn.buildings),
+        }
+    }
+
+    /// Distance from the camera to what each pixel shows, in millimetres
+    /// (16-bit, saturating), given the frame's instance mask: cars are
+    /// `CAR_HEIGHT_M` tall, buildings `BUILDING_HEIGHT_M`, the ground 0. The
+    /// distance runs along the pixel's ray to that height.
+    pub fn depth_mm(&self, mask: &[u8], out: &mut Vec<u16>) {
+        let camera = &self.camera;
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let (cx, cy, focal) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0, camera.focal_px());
+        out.clear();
+        out.reserve(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let height = if mask[i] != 0 {
+                    CAR_HEIGHT_M
+                } else if self.buildings[i] >= 128 {
+                    background::BUILDING_HEIGHT_M
+                } else {
+                    0.0
+                };
+                let (u, v) = ((x as f64 - cx) / focal, (y as f64 - cy) / focal);
+                let distance = (camera.altitude_m - height).max(0.0) * (1.0 + u * u + v * v).sqrt();
+                out.push((distance * 1000.0).round().min(u16::MAX as f64) as u16);
+            }
+        }
     }
 
     /// Prepares the background of a scenario that looks like `look`.
