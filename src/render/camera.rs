@@ -69,7 +69,7 @@ impl Camera {
 
     /// Ground point (metres) to pixel coordinates (x right, y down).
     pub fn to_pixel(&self, p: DVec2) -> DVec2 {
-        let d = self.to_view(p - DVec2::new(self.centre_x, self.centre_y));
+        let d = self.view_axes_of(p - DVec2::new(self.centre_x, self.centre_y));
         DVec2::new(
             (self.width as f64 - 1.0) / 2.0 + d.x * self.pixels_per_metre,
             (self.height as f64 - 1.0) / 2.0 - d.y * self.pixels_per_metre,
@@ -77,7 +77,7 @@ impl Camera {
     }
 
     /// A ground offset in the camera's axes (x right, y up in the image).
-    fn to_view(&self, d: DVec2) -> DVec2 {
+    fn view_axes_of(&self, d: DVec2) -> DVec2 {
         if self.rotation_rad == 0.0 {
             return d;
         }
