@@ -212,12 +212,27 @@ fn interventions_act_as_documented() {
     let dir = out.join("interventions_tour");
     let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
     let fired: Vec<&EventRow> = events.iter().filter(|e| e.kind == "intervention").collect();
-    assert_eq!(fired.len(), 4, "{events:?}");
+    assert_eq!(fired.len(), 6, "{events:?}");
+    assert!(fired.iter().all(|e| !e.detail.contains("not applied")), "{fired:?}");
+    assert!(fired.iter().any(|e| e.car == 1 && e.detail.starts_with("Car_2 drives right, straight")));
     // set_light: AD/W/straight is red from 4 s for 5 s.
     let lights: Vec<LightRow> = read_csv(&dir.join("lights.csv"));
     for l in lights.iter().filter(|l| l.intersection == "AD" && l.approach == "W" && l.signal == "straight") {
         if (4.0..9.0).contains(&l.t) {
             assert_eq!(l.colour, "red", "t = {}", l.t);
+        }
+    }
+    // set_light_plan: from 1 s, BD/S/straight runs 20 s green, 5 s red.
+    for l in lights.iter().filter(|l| l.intersection == "BD" && l.approach == "S" && l.signal == "straight") {
+        let expected = if l.t < 1.0 {
+            None
+        } else if l.t < 20.0 || l.t >= 25.0 {
+            Some("green")
+        } else {
+            Some("red")
+        };
+        if let Some(colour) = expected {
+            assert_eq!(l.colour, colour, "t = {}", l.t);
         }
     }
     // run_red_light fired when that light turned red, and Car_1 then ran it.

@@ -19,7 +19,7 @@ use crate::map::{Action, CityMap, Route};
 use crate::render::camera::{CameraKind, CameraPlan};
 use crate::spec::{CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
 use crate::world::interventions::{Effect, Intervention, Trigger};
-use crate::world::lights::{Colour, Signal, APPROACHES};
+use crate::world::lights::{Colour, ScheduleStep, Signal, APPROACHES};
 use serde_json::{Map, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -629,8 +629,23 @@ fn parse_interventions(
     Ok(out)
 }
 
-const INTERVENTION_KEYS: [&str; 11] =
-    ["at", "at_frame", "when", "do", "car", "seconds", "speed", "light", "colour", "comment", "label"];
+const INTERVENTION_KEYS: [&str; 15] = [
+    "at",
+    "at_frame",
+    "when",
+    "do",
+    "car",
+    "seconds",
+    "speed",
+    "light",
+    "colour",
+    "actions",
+    "merge_distances",
+    "schedule",
+    "offset",
+    "comment",
+    "label",
+];
 
 /// One intervention; `None` for `"do": "none"` (does nothing, leaves no trace).
 fn parse_intervention(
@@ -768,12 +783,70 @@ fn parse_intervention(
             let text = object.get("light").and_then(Value::as_str).unwrap_or_default();
             (Effect::SetLight { light, colour, seconds }, format!("{text} {} for {seconds} s", colour.name()))
         }
+        "replace_actions" => {
+            let car = car_named(".car", object.get("car"))?;
+            let list = object
+                .get("actions")
+                .and_then(Value::as_array)
+                .ok_or_else(|| err(".actions", "expected the new drive queue, e.g. [\"left\", \"straight\"]".into()))?;
+            let actions: Vec<Action> = list
+                .iter()
+                .enumerate()
+                .map(|(k, a)| {
+                    a.as_str().and_then(|n| Action::ALL.into_iter().find(|x| x.name() == n)).ok_or_else(|| {
+                        err(&format!(".actions[{k}]"), format!("{a} is not an action: left, right, straight, mergeL, mergeR"))
+                    })
+                })
+                .collect::<Result<_, _>>()?;
+            let merge_distances: Vec<f64> = match object.get("merge_distances") {
+                None => vec![0.0; actions.len()],
+                Some(Value::Array(d)) if d.len() == actions.len() => d
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| {
+                        v.as_f64().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| {
+                            err(&format!(".merge_distances[{k}]"), format!("{v} is not allowed: metres along the lane, 0 or more"))
+                        })
+                    })
+                    .collect::<Result<_, _>>()?,
+                Some(_) => return Err(err(".merge_distances", format!("expected {} numbers, one per action", actions.len()))),
+            };
+            let names: Vec<&str> = actions.iter().map(|a| a.name()).collect();
+            let what = format!("{} drives {} from now on", cars[car].name, names.join(", "));
+            (Effect::ReplaceActions { car, actions, merge_distances }, what)
+        }
+        "set_light_plan" => {
+            let light = light_named(".light", object.get("light"))?;
+            let steps = object
+                .get("schedule")
+                .and_then(Value::as_array)
+                .filter(|l| !l.is_empty())
+                .ok_or_else(|| err(".schedule", "expected [{\"colour\": \"green\", \"duration\": 10}, ...]".into()))?;
+            let schedule: Vec<ScheduleStep> = steps
+                .iter()
+                .enumerate()
+                .map(|(k, step)| {
+                    let colour = colour_named(&format!(".schedule[{k}].colour"), step.get("colour"))?;
+                    let duration = positive(&format!(".schedule[{k}].duration"), step.get("duration"), "seconds")?;
+                    Ok(ScheduleStep { colour, duration })
+                })
+                .collect::<Result<_, ScenarioFileError>>()?;
+            let offset = match object.get("offset") {
+                None => 0.0,
+                Some(v) => {
+                    v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| err(".offset", format!("{v} is not a number of seconds")))?
+                }
+            };
+            let text = object.get("light").and_then(Value::as_str).unwrap_or_default();
+            let period: f64 = schedule.iter().map(|s| s.duration).sum();
+            (Effect::SetLightPlan { light, offset, schedule }, format!("{text} runs a new {period} s plan"))
+        }
         other => {
             return Err(err(
                 ".do",
                 format!(
-                "{other:?} is not an intervention: stop, run_red_light, set_desired_speed, remove, set_light or none"
-            ),
+                    "{other:?} is not an intervention: stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan or none"
+                ),
             ))
         }
     };

@@ -13,11 +13,11 @@
 
 use super::driver::{CarFollowing, Idm};
 use super::interventions::{Effect, Intervention, Trigger};
-use super::lights::{Colour, LightState, Signal};
+use super::lights::{Colour, Light, LightState, Signal};
 use super::{CarState, Event, EventKind, Trajectories, World};
 use crate::geometry::OrientedBox;
 use crate::map::curve::Curve;
-use crate::map::{CityMap, LaneEnd, LegKind, Route, Turn};
+use crate::map::{Action, CityMap, LaneEnd, LegKind, Route, Turn};
 use crate::orchestrate::plan::{CarAgency, CarPlan, CityPlan, ScenarioPlan};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -128,6 +128,10 @@ struct SimCar<'p> {
     desired_override: Option<f64>,
     /// Intervention: taken off the map.
     removed: bool,
+    /// The drive queue: the plan's, until an intervention replaces the rest.
+    actions: Vec<Action>,
+    /// Intervention: actions waiting to replace the rest once on a lane.
+    pending_actions: Option<(Vec<Action>, Vec<f64>)>,
 }
 
 /// Where removed cars are parked, far off every camera, metres.
@@ -175,6 +179,8 @@ struct Sim<'a> {
     pending: Vec<&'a Intervention>,
     /// Lights forced by interventions: (light, colour, from, until).
     light_overrides: Vec<(usize, Colour, f64, f64)>,
+    /// Lights given a new plan by interventions: (light, plan, from).
+    light_plans: Vec<(usize, Light, f64)>,
     /// Per track (lane or connector): (car, arc length on the track).
     occupancy: Vec<Vec<(usize, f64)>>,
     contacts: BTreeSet<(usize, usize)>,
@@ -223,6 +229,8 @@ impl<'a> Sim<'a> {
                     stopped_until: f64::NEG_INFINITY,
                     desired_override: None,
                     removed: false,
+                    actions: c.actions.clone(),
+                    pending_actions: None,
                 }
             })
             .collect();
@@ -234,6 +242,7 @@ impl<'a> Sim<'a> {
             events: Vec::new(),
             pending: plan.interventions.iter().collect(),
             light_overrides: Vec::new(),
+            light_plans: Vec::new(),
             occupancy: vec![Vec::new(); map.track_count()],
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
@@ -241,8 +250,13 @@ impl<'a> Sim<'a> {
     }
 
     fn step(&mut self, t: f64, dt: f64) {
-        self.fill_occupancy();
         self.fire_interventions(t, dt);
+        for i in 0..self.cars.len() {
+            if self.cars[i].pending_actions.is_some() {
+                self.replace_actions(i, t);
+            }
+        }
+        self.fill_occupancy();
         for i in 0..self.cars.len() {
             if self.cars[i].removed {
                 continue;
@@ -279,7 +293,7 @@ impl<'a> Sim<'a> {
                 other: None,
                 detail: intervention.label.clone(),
             });
-            match intervention.effect {
+            match intervention.effect.clone() {
                 Effect::Stop { car, seconds } => {
                     let car = &mut self.cars[car];
                     car.stopped_until = t + seconds;
@@ -296,6 +310,49 @@ impl<'a> Sim<'a> {
                     self.light_overrides.push((light, colour, t, t + seconds));
                     // Drivers see the change at their next decision.
                 }
+                Effect::SetLightPlan { light, offset, schedule } => {
+                    let new = Light { offset, schedule, ..self.city.lights.lights[light].clone() };
+                    self.light_plans.push((light, new, t));
+                }
+                Effect::ReplaceActions { car, actions, merge_distances } => {
+                    self.cars[car].pending_actions = Some((actions, merge_distances));
+                }
+            }
+        }
+    }
+
+    /// Replaces car `i`'s remaining actions once it is on a lane.
+    fn replace_actions(&mut self, i: usize, t: f64) {
+        let max_speed = self.cars[i].agency.desired_speeds.iter().copied().fold(1.0, f64::max);
+        let horizon = self.horizon;
+        let car = &mut self.cars[i];
+        let current = &car.route.legs[car.leg];
+        let LegKind::Lane(lane) = current.kind else { return };
+        let Some((actions, merges)) = car.pending_actions.take() else { return };
+        let lane_s = current.curve_start + (car.s - current.route_start);
+        let min_length = lane_s + max_speed * 1.5 * (horizon - t).max(0.0) + 20.0;
+        match Route::plan(self.map, lane, lane_s, &actions, &merges, min_length) {
+            Ok(route) => {
+                let done = car.actions_done;
+                car.actions.truncate(done);
+                car.actions.extend(actions);
+                car.merges.truncate(done);
+                car.merges.extend(merges);
+                car.route = route;
+                car.s = lane_s;
+                car.leg = car.route.leg_index_at(lane_s);
+                car.action_base = done;
+                car.committed = None;
+            }
+            Err(e) => {
+                let id = car.plan.id;
+                self.events.push(Event {
+                    t,
+                    kind: EventKind::Intervention,
+                    car: id,
+                    other: None,
+                    detail: format!("replacing the actions not applied: {e}; the car keeps its own"),
+                });
             }
         }
     }
@@ -461,8 +518,11 @@ impl<'a> Sim<'a> {
     fn light_state(&self, index: usize, t: f64) -> LightState {
         let forced =
             self.light_overrides.iter().rev().find(|&&(l, _, from, until)| l == index && t >= from && t < until);
-        match forced {
-            Some(&(_, colour, from, _)) => LightState { colour, since_change: t - from },
+        if let Some(&(_, colour, from, _)) = forced {
+            return LightState { colour, since_change: t - from };
+        }
+        match self.light_plans.iter().rev().find(|(l, _, from)| *l == index && t >= *from) {
+            Some((_, light, _)) => light.state_at(t),
             None => self.city.lights.lights[index].state_at(t),
         }
     }
@@ -542,8 +602,7 @@ impl<'a> Sim<'a> {
         let mut merges = car.merges.clone();
         merges[index] = later;
         let min_length = lane_s + max_speed * 1.5 * (self.horizon - t).max(0.0) + 20.0;
-        if let Ok(route) = Route::plan(self.map, lane, lane_s, &car.plan.actions[index..], &merges[index..], min_length)
-        {
+        if let Ok(route) = Route::plan(self.map, lane, lane_s, &car.actions[index..], &merges[index..], min_length) {
             car.merges = merges;
             car.route = route;
             car.s = lane_s;
@@ -663,7 +722,7 @@ impl<'a> Sim<'a> {
                     LegKind::Connector(c) => {
                         let connector = &self.map.connectors[c];
                         let at = connector.intersection.map(|k| self.map.intersections[k].name.as_str()).unwrap_or("");
-                        Some((EventKind::TurnDone, format!("{} at {at}", car.plan.actions[index])))
+                        Some((EventKind::TurnDone, format!("{} at {at}", car.actions[index])))
                     }
                     LegKind::Lane(_) => None,
                 };
@@ -671,13 +730,13 @@ impl<'a> Sim<'a> {
                     events.push(Event { t: now, kind, car: id, other: None, detail });
                 }
                 car.actions_done = index + 1;
-                if index + 1 == car.plan.actions.len() {
+                if index + 1 == car.actions.len() {
                     events.push(Event {
                         t: now,
                         kind: EventKind::ActionsFinished,
                         car: id,
                         other: None,
-                        detail: format!("{} actions", car.plan.actions.len()),
+                        detail: format!("{} actions", car.actions.len()),
                     });
                 }
             }

@@ -4,7 +4,8 @@
 //! `intervention`. Car and light fields are indices into the scenario's cars
 //! (id order) and light plan.
 
-use super::lights::Colour;
+use super::lights::{Colour, ScheduleStep};
+use crate::map::Action;
 
 /// When an intervention fires (once, at the first step its condition holds).
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +34,14 @@ pub enum Effect {
     Remove { car: usize },
     /// The light shows `colour` for `seconds`, then its plan resumes.
     SetLight { light: usize, colour: Colour, seconds: f64 },
+    /// The light runs a new plan (schedule and clock offset) from now on.
+    SetLightPlan { light: usize, offset: f64, schedule: Vec<ScheduleStep> },
+    /// The car's remaining actions are replaced, re-planning its route from
+    /// where it is (at the first moment it is on a lane, not mid-turn or
+    /// mid-merge). Merge distances are metres along the lane, as in scenario
+    /// files. If the new actions cannot be driven from there (a turn the lane
+    /// does not allow), the car keeps its old ones and `events.csv` says so.
+    ReplaceActions { car: usize, actions: Vec<Action>, merge_distances: Vec<f64> },
 }
 
 /// One intervention of a scenario.
@@ -47,12 +56,13 @@ pub struct Intervention {
 impl Effect {
     /// The car the effect acts on, if any.
     pub fn car(&self) -> Option<usize> {
-        match *self {
+        match self {
             Effect::Stop { car, .. }
             | Effect::RunRedLights { car }
             | Effect::SetDesiredSpeed { car, .. }
-            | Effect::Remove { car } => Some(car),
-            Effect::SetLight { .. } => None,
+            | Effect::Remove { car }
+            | Effect::ReplaceActions { car, .. } => Some(*car),
+            Effect::SetLight { .. } | Effect::SetLightPlan { .. } => None,
         }
     }
 }
