@@ -212,7 +212,7 @@ fn interventions_act_as_documented() {
     let dir = out.join("interventions_tour");
     let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
     let fired: Vec<&EventRow> = events.iter().filter(|e| e.kind == "intervention").collect();
-    assert_eq!(fired.len(), 6, "{events:?}");
+    assert_eq!(fired.len(), 7, "{events:?}");
     assert!(fired.iter().all(|e| !e.detail.contains("not applied")), "{fired:?}");
     assert!(fired.iter().any(|e| e.car == 1 && e.detail.starts_with("Car_2 drives right, straight")));
     // set_light: AD/W/straight is red from 4 s for 5 s.
@@ -388,4 +388,36 @@ fn extra_cameras_write_their_own_frames_and_the_chase_camera_keeps_its_car_centr
         }
     }
     assert!(checked > 0, "at least one car crossed the corner camera");
+}
+
+#[test]
+fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
+    let dir = fresh_dir("hw-fog-file");
+    let file = dir.join("fog.json");
+    std::fs::write(&file, r#"[{"at": 2.0, "do": "set_confounder", "confounder": "fog", "value": 1.0}]"#).unwrap();
+    let pair = counterfactual_of("hw-fog", &["--intervention", file.to_str().unwrap()]);
+    let summary = read_json(&pair.join("summary.json"));
+    // Fog is a common cause: every car drives differently, the unrelated one too.
+    assert_eq!(summary["affected"], serde_json::json!(["Car_1", "Car_2", "Car_3"]));
+    let contrast = |path: PathBuf| {
+        let image = image::open(path).unwrap().to_luma8();
+        let n = image.len() as f64;
+        let mean = image.iter().map(|&v| v as f64).sum::<f64>() / n;
+        (image.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    let (factual, counterfactual) = (pair.join("factual"), pair.join("counterfactual"));
+    assert_eq!(
+        std::fs::read(factual.join("rgb/0009.png")).unwrap(),
+        std::fs::read(counterfactual.join("rgb/0009.png")).unwrap()
+    );
+    let (clear, foggy) = (contrast(factual.join("rgb/0010.png")), contrast(counterfactual.join("rgb/0010.png")));
+    assert!(foggy < 0.7 * clear, "fog from frame 10 greys the frame: contrast {foggy:.1} vs {clear:.1}");
+    let speeds = |dir: &Path, car: u32| {
+        read_poses(&dir.join("poses.csv"))
+            .iter()
+            .filter(|p| p.car == car && p.frame > 20)
+            .map(|p| p.speed)
+            .fold(0.0, f64::max)
+    };
+    assert!(speeds(&counterfactual, 2) < speeds(&factual, 2), "fog slows the unrelated car");
 }

@@ -426,12 +426,15 @@ fn write_frames(
         plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
     let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, w, h, &annotated_cars));
     let mut pixels = Vec::with_capacity(plan.cars.len());
-    let scene = renderer.scene(scene_look(plan));
+    let mut scene = renderer.scene(scene_look(plan, trajectories, 0));
     let mut bytes = 0;
     let mut sprites = Vec::with_capacity(plan.cars.len());
     for (frame, states) in trajectories.states.iter().enumerate() {
         if STOP.load(Ordering::Relaxed) {
             return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+        }
+        if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
+            scene = renderer.scene(scene_look(plan, trajectories, frame));
         }
         sprites.clear();
         sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
@@ -466,11 +469,13 @@ fn write_frames(
     Ok(bytes)
 }
 
-/// How a scenario looks: light, water, fog, rain and snow.
-fn scene_look(plan: &ScenarioPlan) -> SceneLook {
+/// How a scenario looks at `frame`: light, water, fog, rain and snow (as
+/// planned, or as an intervention changed them).
+fn scene_look(plan: &ScenarioPlan, trajectories: &Trajectories, frame: usize) -> SceneLook {
     match &plan.city {
         Some(city) => {
-            let c = &city.confounders;
+            let changed = trajectories.confounder_changes.iter().rev().find(|(from, _)| *from <= frame);
+            let c = changed.map_or(&city.confounders, |(_, c)| c);
             let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
             SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
         }
@@ -494,7 +499,6 @@ fn write_camera(
             dir.create_folder(&format!("{base}/{sub}"))?;
         }
     }
-    let look = scene_look(plan);
     let chased = |states: &[CarState]| match camera_plan.kind {
         CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
         CameraKind::Static { .. } => None,
@@ -512,6 +516,10 @@ fn write_camera(
             return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
         }
         let camera = camera_plan.camera_at(chased(states));
+        let look = scene_look(plan, trajectories, frame);
+        if trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
+            fixed = None;
+        }
         let owned;
         let (renderer, scene) = match camera_plan.kind {
             CameraKind::Static { .. } => {

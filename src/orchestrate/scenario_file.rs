@@ -18,7 +18,7 @@ use crate::geometry::OrientedBox;
 use crate::map::{Action, CityMap, Route};
 use crate::render::camera::{CameraKind, CameraPlan};
 use crate::spec::{CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
-use crate::world::interventions::{Effect, Intervention, Trigger};
+use crate::world::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::world::lights::{Colour, ScheduleStep, Signal, APPROACHES};
 use serde_json::{Map, Value};
 use std::fmt;
@@ -629,7 +629,9 @@ fn parse_interventions(
     Ok(out)
 }
 
-const INTERVENTION_KEYS: [&str; 15] = [
+const INTERVENTION_KEYS: [&str; 17] = [
+    "confounder",
+    "value",
     "at",
     "at_frame",
     "when",
@@ -841,11 +843,22 @@ fn parse_intervention(
             let period: f64 = schedule.iter().map(|s| s.duration).sum();
             (Effect::SetLightPlan { light, offset, schedule }, format!("{text} runs a new {period} s plan"))
         }
+        "set_confounder" => {
+            let name = object.get("confounder").and_then(Value::as_str).unwrap_or_default();
+            let (confounder, _) = ConfounderName::ALL.into_iter().find(|(_, n)| *n == name).ok_or_else(|| {
+                err(".confounder", format!("{name:?} is not a confounder: rain, fog, snow, wetness or hour"))
+            })?;
+            let limit = if confounder == ConfounderName::Hour { 24.0 } else { 1.0 };
+            let value = object.get("value").and_then(Value::as_f64).filter(|v| (0.0..=limit).contains(v)).ok_or_else(|| {
+                err(".value", format!("{} is not allowed: 0 to {limit}", object.get("value").cloned().unwrap_or(Value::Null)))
+            })?;
+            (Effect::SetConfounder { confounder, value }, format!("{name} becomes {value}"))
+        }
         other => {
             return Err(err(
                 ".do",
                 format!(
-                    "{other:?} is not an intervention: stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan or none"
+                    "{other:?} is not an intervention: stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan, set_confounder or none"
                 ),
             ))
         }

@@ -11,7 +11,8 @@
 //! reproducible and an intervention on one car leaves the randomness of every
 //! other car untouched (counterfactual pairs differ only where it acts).
 
-use super::driver::{CarFollowing, Idm};
+use super::confounders::Confounders;
+use super::driver::{CarFollowing, DriverParams, Idm};
 use super::interventions::{Effect, Intervention, Trigger};
 use super::lights::{Colour, Light, LightState, Signal};
 use super::{CarState, Event, EventKind, Trajectories, World};
@@ -69,6 +70,7 @@ impl World for CityWorld {
                 states: vec![],
                 lights: vec![],
                 events: vec![],
+                confounder_changes: vec![],
             };
         }
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
@@ -88,7 +90,13 @@ impl World for CityWorld {
             states.push(sim.cars.iter().map(SimCar::state).collect());
             lights.push((0..city.lights.lights.len()).map(|l| sim.light_state(l, t)).collect());
         }
-        Trajectories { frame_interval: plan.frame_interval, states, lights, events: sim.events }
+        // A change shows from the first frame at or after it.
+        let confounder_changes = sim
+            .confounder_changes
+            .iter()
+            .map(|&(t, c)| (((t / plan.frame_interval) - 1e-9).ceil().max(0.0) as usize, c))
+            .collect();
+        Trajectories { frame_interval: plan.frame_interval, states, lights, events: sim.events, confounder_changes }
     }
 }
 
@@ -132,6 +140,10 @@ struct SimCar<'p> {
     actions: Vec<Action>,
     /// Intervention: actions waiting to replace the rest once on a lane.
     pending_actions: Option<(Vec<Action>, Vec<f64>)>,
+    /// The driver's parameters now (the plan's, until a confounder changes).
+    driver: DriverParams,
+    /// Multiplies the planned desired speeds (a confounder change).
+    speed_factor: f64,
 }
 
 /// Where removed cars are parked, far off every camera, metres.
@@ -147,7 +159,7 @@ impl SimCar<'_> {
             return speed;
         }
         let speeds = &self.agency.desired_speeds;
-        speeds.get(self.actions_done.min(speeds.len().saturating_sub(1))).copied().unwrap_or(1.0)
+        self.speed_factor * speeds.get(self.actions_done.min(speeds.len().saturating_sub(1))).copied().unwrap_or(1.0)
     }
 
     fn pose(&self) -> (glam::DVec2, f64) {
@@ -181,6 +193,9 @@ struct Sim<'a> {
     light_overrides: Vec<(usize, Colour, f64, f64)>,
     /// Lights given a new plan by interventions: (light, plan, from).
     light_plans: Vec<(usize, Light, f64)>,
+    /// The confounders now, and the changes interventions made (time, values).
+    confounders: Confounders,
+    confounder_changes: Vec<(f64, Confounders)>,
     /// Per track (lane or connector): (car, arc length on the track).
     occupancy: Vec<Vec<(usize, f64)>>,
     contacts: BTreeSet<(usize, usize)>,
@@ -231,6 +246,8 @@ impl<'a> Sim<'a> {
                     removed: false,
                     actions: c.actions.clone(),
                     pending_actions: None,
+                    driver: agency.driver,
+                    speed_factor: 1.0,
                 }
             })
             .collect();
@@ -243,6 +260,8 @@ impl<'a> Sim<'a> {
             pending: plan.interventions.iter().collect(),
             light_overrides: Vec::new(),
             light_plans: Vec::new(),
+            confounders: city.confounders,
+            confounder_changes: Vec::new(),
             occupancy: vec![Vec::new(); map.track_count()],
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
@@ -263,7 +282,7 @@ impl<'a> Sim<'a> {
             }
             if t + 1e-9 >= self.cars[i].next_decision {
                 self.decide(i, t, dt);
-                self.cars[i].next_decision = t + self.cars[i].agency.driver.reaction_time;
+                self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
             }
         }
         for i in 0..self.cars.len() {
@@ -316,6 +335,24 @@ impl<'a> Sim<'a> {
                 }
                 Effect::ReplaceActions { car, actions, merge_distances } => {
                     self.cars[car].pending_actions = Some((actions, merge_distances));
+                }
+                Effect::SetConfounder { confounder, value } => {
+                    let (old, new) = (self.confounders.effects(), confounder.set(self.confounders, value));
+                    let effects = new.effects();
+                    for car in &mut self.cars {
+                        let d = &mut car.driver;
+                        d.time_headway *= effects.time_headway_factor / old.time_headway_factor;
+                        d.max_deceleration *= effects.grip_factor / old.grip_factor;
+                        d.comfortable_deceleration = (d.comfortable_deceleration * effects.comfortable_braking_factor
+                            / old.comfortable_braking_factor)
+                            .min(d.max_deceleration);
+                        d.perception_noise += effects.perception_noise_added - old.perception_noise_added;
+                        d.reaction_time += effects.reaction_time_added - old.reaction_time_added;
+                        d.lateral_wander += effects.lateral_wander_added - old.lateral_wander_added;
+                        car.speed_factor *= effects.desired_speed_factor / old.desired_speed_factor;
+                    }
+                    self.confounders = new;
+                    self.confounder_changes.push((t, new));
                 }
             }
         }
@@ -463,7 +500,7 @@ impl<'a> Sim<'a> {
     fn stop_ahead(&mut self, i: usize, t: f64) -> Option<f64> {
         let car = &self.cars[i];
         let front = car.front();
-        let p = &car.agency.driver;
+        let p = &car.driver;
         let braking = car.v * car.v / (2.0 * p.comfortable_deceleration);
         let setback = self.map.layout.stop_line_setback;
         let mut commit = None;
@@ -534,7 +571,7 @@ impl<'a> Sim<'a> {
     /// Highest speed that still lets car `i` slow to the curve speed of every curve ahead.
     fn curve_limit(&self, i: usize) -> f64 {
         let car = &self.cars[i];
-        let p = &car.agency.driver;
+        let p = &car.driver;
         let mut limit = f64::INFINITY;
         for leg in &car.route.legs[car.leg..] {
             let d = (leg.route_start - car.s).max(0.0);
@@ -563,7 +600,7 @@ impl<'a> Sim<'a> {
             return None;
         }
         let d = change.route_start - car.s;
-        let rt = car.agency.driver.reaction_time;
+        let rt = car.driver.reaction_time;
         if d > car.v * (rt + 0.5) + 1.5 || self.merge_gap_ok(i, to, at) {
             return None;
         }
@@ -585,7 +622,7 @@ impl<'a> Sim<'a> {
                 return true;
             }
             let other = &self.cars[j];
-            let lengths = (car.plan.length + other.plan.length) / 2.0 + car.agency.driver.min_gap;
+            let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
             pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
         })
     }
@@ -619,7 +656,7 @@ impl<'a> Sim<'a> {
         let model = self.model;
         let (p, v, desired) = {
             let car = &self.cars[i];
-            (car.agency.driver, car.v, car.desired())
+            (car.driver, car.v, car.desired())
         };
         let mut target = model.free_speed(&p, v, desired, dt);
         if let Some((gap, leader_speed)) = self.leader_ahead(i) {
@@ -652,7 +689,7 @@ impl<'a> Sim<'a> {
     fn advance(&mut self, i: usize, t: f64, dt: f64) {
         let now = t + dt;
         let car = &mut self.cars[i];
-        let glide = (dt / car.agency.driver.reaction_time).min(1.0);
+        let glide = (dt / car.driver.reaction_time).min(1.0);
         car.wander += (car.wander_target - car.wander) * glide;
         if now <= car.hold_until {
             car.v = 0.0;

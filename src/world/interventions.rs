@@ -4,6 +4,7 @@
 //! `intervention`. Car and light fields are indices into the scenario's cars
 //! (id order) and light plan.
 
+use super::confounders::Confounders;
 use super::lights::{Colour, ScheduleStep};
 use crate::map::Action;
 
@@ -42,6 +43,43 @@ pub enum Effect {
     /// files. If the new actions cannot be driven from there (a turn the lane
     /// does not allow), the car keeps its old ones and `events.csv` says so.
     ReplaceActions { car: usize, actions: Vec<Action>, merge_distances: Vec<f64> },
+    /// A confounder takes a new value from now on: the look of the scene
+    /// and every driver change as the causal model says (relative to the
+    /// conditions before; red-light runners stay as drawn).
+    SetConfounder { confounder: ConfounderName, value: f64 },
+}
+
+/// The confounders an intervention can change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfounderName {
+    Rain,
+    Fog,
+    Snow,
+    Wetness,
+    Hour,
+}
+
+impl ConfounderName {
+    pub const ALL: [(ConfounderName, &'static str); 5] = [
+        (ConfounderName::Rain, "rain"),
+        (ConfounderName::Fog, "fog"),
+        (ConfounderName::Snow, "snow"),
+        (ConfounderName::Wetness, "wetness"),
+        (ConfounderName::Hour, "hour"),
+    ];
+
+    /// `confounders` with this one set to `value`.
+    pub fn set(self, confounders: Confounders, value: f64) -> Confounders {
+        let mut c = confounders;
+        match self {
+            ConfounderName::Rain => c.rain = value,
+            ConfounderName::Fog => c.fog = value,
+            ConfounderName::Snow => c.snow = value,
+            ConfounderName::Wetness => c.wetness = value,
+            ConfounderName::Hour => c.hour = value,
+        }
+        c
+    }
 }
 
 /// One intervention of a scenario.
@@ -62,7 +100,7 @@ impl Effect {
             | Effect::SetDesiredSpeed { car, .. }
             | Effect::Remove { car }
             | Effect::ReplaceActions { car, .. } => Some(*car),
-            Effect::SetLight { .. } | Effect::SetLightPlan { .. } => None,
+            Effect::SetLight { .. } | Effect::SetLightPlan { .. } | Effect::SetConfounder { .. } => None,
         }
     }
 }

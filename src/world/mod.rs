@@ -74,6 +74,9 @@ pub struct Trajectories {
     pub lights: Vec<Vec<lights::LightState>>,
     /// In time order.
     pub events: Vec<Event>,
+    /// Confounder changes made by interventions: (first frame, new values),
+    /// in order; empty when the scenario's confounders hold throughout.
+    pub confounder_changes: Vec<(usize, confounders::Confounders)>,
 }
 
 impl Trajectories {

@@ -30,6 +30,12 @@ impl World for ToyWorld {
                     .collect()
             })
             .collect();
-        Trajectories { frame_interval: plan.frame_interval, states, lights: Vec::new(), events: Vec::new() }
+        Trajectories {
+            frame_interval: plan.frame_interval,
+            states,
+            lights: Vec::new(),
+            events: Vec::new(),
+            confounder_changes: Vec::new(),
+        }
     }
 }
