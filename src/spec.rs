@@ -142,6 +142,116 @@ pub struct DatasetSpec {
     /// City world only: agency, lights and confounders.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub city: Option<CitySpec>,
+    /// Extra cameras beside the bird's-eye view (need images).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cameras: Vec<CameraSpec>,
+}
+
+/// An extra camera: `{"name", "static": {"centre": [x, y], "rotation_deg"}`
+/// or `"chase": CAR`, and optional `zoom`, `width`, `height`, `depth`}.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    /// Names the folder `cameras/<name>/`.
+    pub name: String,
+    /// Fixed over a point.
+    #[serde(default, rename = "static", skip_serializing_if = "Option::is_none")]
+    pub fixed: Option<StaticView>,
+    /// Follows a car: its id in a spec, its Id in a scenario file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chase: Option<CarRef>,
+    /// Times the bird's-eye scale (12.8 px per metre).
+    #[serde(default = "default_zoom")]
+    pub zoom: f64,
+    /// Pixels; 1024 x 640 for static cameras, 256 x 256 for chase cameras.
+    #[serde(default)]
+    pub width: Option<u32>,
+    #[serde(default)]
+    pub height: Option<u32>,
+    /// Also write 16-bit depth frames.
+    #[serde(default)]
+    pub depth: bool,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub comment: Option<String>,
+}
+
+/// Where a static camera looks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StaticView {
+    /// Metres.
+    pub centre: [f64; 2],
+    /// Counter-clockwise; the image's up direction, 0 = north.
+    #[serde(default)]
+    pub rotation_deg: f64,
+}
+
+/// A car named by id (specs) or by name (scenario files).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum CarRef {
+    Id(u32),
+    Name(String),
+}
+
+fn default_zoom() -> f64 {
+    1.0
+}
+
+impl CameraSpec {
+    /// Checks the camera (at JSON path `field`); `car_index` resolves a
+    /// chased car to its index or says which cars there are.
+    pub fn plan(
+        &self,
+        field: &str,
+        car_index: impl Fn(&CarRef) -> Result<usize, String>,
+    ) -> Result<crate::render::camera::CameraPlan, SpecError> {
+        use crate::render::camera::{CameraKind, CameraPlan};
+        if !valid_folder_name(&self.name) {
+            return Err(SpecError::new(
+                format!("{field}.name"),
+                format!(
+                    "{:?} is not allowed: 1 to 64 characters from A-Z a-z 0-9 - _ . (it names a folder)",
+                    self.name
+                ),
+            ));
+        }
+        let kind = match (&self.fixed, &self.chase) {
+            (Some(view), None) => {
+                if !(view.centre.iter().all(|c| c.is_finite()) && view.rotation_deg.is_finite()) {
+                    return Err(SpecError::new(format!("{field}.static"), "centre and rotation_deg must be numbers"));
+                }
+                CameraKind::Static { centre: view.centre, rotation_deg: view.rotation_deg }
+            }
+            (None, Some(car)) => {
+                CameraKind::Chase { car: car_index(car).map_err(|e| SpecError::new(format!("{field}.chase"), e))? }
+            }
+            _ => {
+                return Err(SpecError::new(
+                    field,
+                    "give exactly one of \"static\": {\"centre\": [x, y], \"rotation_deg\": r} or \"chase\": CAR",
+                ))
+            }
+        };
+        positive(&format!("{field}.zoom"), self.zoom, 20.0, "times the bird's-eye scale")?;
+        let (w, h) = match kind {
+            CameraKind::Static { .. } => (1024, 640),
+            CameraKind::Chase { .. } => (256, 256),
+        };
+        let (width, height) = (self.width.unwrap_or(w), self.height.unwrap_or(h));
+        range(&format!("{field}.width"), width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        range(&format!("{field}.height"), height, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        Ok(CameraPlan { name: self.name.clone(), width, height, zoom: self.zoom, depth: self.depth, kind })
+    }
+}
+
+/// 1 to 64 characters from A-Z a-z 0-9 - _ . not starting with a dot.
+pub fn valid_folder_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && !name.starts_with('.')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 /// A value fixed by the spec or drawn per scenario.
@@ -442,11 +552,7 @@ impl DatasetSpec {
 
     /// Checks every field's range and the groups' consistency.
     pub fn validate(&self) -> Result<(), SpecError> {
-        let name_ok = !self.name.is_empty()
-            && self.name.len() <= 64
-            && !self.name.starts_with('.')
-            && self.name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
-        if !name_ok {
+        if !valid_folder_name(&self.name) {
             return Err(SpecError::new(
                 "name",
                 format!(
@@ -520,6 +626,25 @@ impl DatasetSpec {
                 return Err(SpecError::new("city", "applies to \"world\": \"city\" only: remove it or change world"))
             }
             (None, _) => {}
+        }
+        let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
+        let mut names = std::collections::HashSet::new();
+        for (i, camera) in self.cameras.iter().enumerate() {
+            let field = format!("cameras[{i}]");
+            camera.plan(&field, |car| match car {
+                CarRef::Id(id) if *id < fewest_cars => Ok(*id as usize),
+                CarRef::Id(id) => Err(format!(
+                    "car {id} is not in every scenario: ids run from 0 to {} in the smallest group",
+                    fewest_cars.saturating_sub(1)
+                )),
+                CarRef::Name(name) => Err(format!("{name:?}: in a spec, name the car by its id (0, 1, ...)")),
+            })?;
+            if !names.insert(camera.name.as_str()) {
+                return Err(SpecError::new(
+                    format!("{field}.name"),
+                    format!("{:?} names another camera too", camera.name),
+                ));
+            }
         }
         Ok(())
     }

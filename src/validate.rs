@@ -155,6 +155,15 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         for kind in ["rgb", "mask"] {
             names.extend((0..frames).map(|f| format!("{kind}/{f:0width$}.png", width = expected.digits)));
         }
+        // Extra cameras: their frames and pixel log.
+        for camera in &spec.cameras {
+            let base = format!("cameras/{}", camera.name);
+            let kinds: &[&str] = if camera.depth { &["rgb", "mask", "depth"] } else { &["rgb", "mask"] };
+            for kind in kinds {
+                names.extend((0..frames).map(|f| format!("{base}/{kind}/{f:0width$}.png", width = expected.digits)));
+            }
+            names.push(format!("{base}/poses.csv"));
+        }
     }
     let wanted: BTreeSet<&str> = names.iter().map(String::as_str).collect();
     for extra in list_files(&dir).iter().filter(|n| !wanted.contains(n.as_str()) && n.as_str() != CHECKSUMS) {
@@ -320,6 +329,10 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
                     problems.push(Problem { path: dir.join(&mask), message });
                 }
             }
+        }
+        // Extra cameras: present and as written (checksums).
+        for name in names.iter().filter(|n| n.starts_with("cameras/")) {
+            read(name, &mut problems);
         }
     }
     (problems, files, bytes)

@@ -421,3 +421,41 @@ fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
     };
     assert!(speeds(&counterfactual, 2) < speeds(&factual, 2), "fog slows the unrelated car");
 }
+
+#[test]
+fn a_gen_spec_can_list_cameras_and_validate_checks_their_files() {
+    let dir = fresh_dir("hw-gen-cameras");
+    let spec = city_spec("camspec", &[(4, 0.5)], (2, 0, 0), 12, "{}").replacen(
+        "\"city\": {}",
+        r#""city": {}, "cameras": [{"name": "follow0", "chase": 0, "depth": true},
+            {"name": "west", "static": {"centre": [-24, 0], "rotation_deg": 90}, "width": 320, "height": 200}]"#,
+        1,
+    );
+    let spec_path = write_spec(&dir, &spec);
+    assert_valid(&validator("spec.schema.json"), &read_json(&spec_path), &spec_path);
+    let out = dir.join("out");
+    gen_ok(&spec_path, &out, &["--quiet"]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+    for scenario in scenario_dirs(&out) {
+        for frame in 0..12 {
+            let mask = image::open(scenario.join(format!("cameras/follow0/mask/{frame:04}.png"))).unwrap().to_luma8();
+            let pixels: Vec<(u32, u32)> =
+                mask.enumerate_pixels().filter(|(_, _, p)| p[0] == 1).map(|(x, y, _)| (x, y)).collect();
+            let n = pixels.len() as f64;
+            let cx = pixels.iter().map(|p| p.0 as f64).sum::<f64>() / n;
+            let cy = pixels.iter().map(|p| p.1 as f64).sum::<f64>() / n;
+            assert!((cx - 127.5).abs() <= 1.5 && (cy - 127.5).abs() <= 1.5, "frame {frame}: ({cx:.2}, {cy:.2})");
+        }
+        assert_eq!(image::open(scenario.join("cameras/west/rgb/0011.png")).unwrap().width(), 320);
+    }
+    std::fs::remove_file(scenario_dirs(&out)[0].join("cameras/west/rgb/0005.png")).unwrap();
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(!report.status.success());
+    assert!(String::from_utf8_lossy(&report.stdout).contains("cameras/west/rgb/0005.png"));
+    // A chased car that some scenario lacks is a spec error.
+    let bad = write_spec(&dir, &spec.replace("\"chase\": 0", "\"chase\": 9"));
+    let output = run(&["gen", "--spec", bad.to_str().unwrap(), "--out", dir.join("bad").to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("cameras[0].chase"));
+}

@@ -486,7 +486,18 @@ impl Expansion {
             toy_step_m: self.toy_step_m,
             city: city_plan,
             interventions: Vec::new(),
-            cameras: Vec::new(),
+            // Checked with the spec; chased cars are named by id, and cars are in id order.
+            cameras: spec
+                .cameras
+                .iter()
+                .filter_map(|c| {
+                    c.plan("cameras", |car| match car {
+                        crate::spec::CarRef::Id(id) => Ok(*id as usize),
+                        crate::spec::CarRef::Name(_) => Err(String::new()),
+                    })
+                    .ok()
+                })
+                .collect(),
         }
     }
 

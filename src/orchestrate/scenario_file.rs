@@ -16,8 +16,8 @@
 use super::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
 use crate::geometry::OrientedBox;
 use crate::map::{Action, CityMap, Route};
-use crate::render::camera::{CameraKind, CameraPlan};
-use crate::spec::{CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
+use crate::render::camera::CameraPlan;
+use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
 use crate::world::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::world::lights::{Colour, ScheduleStep, Signal, APPROACHES};
 use serde_json::{Map, Value};
@@ -153,7 +153,7 @@ fn load_one(
         return Err(here.err(None, "", "a scenario must be an object with Name and Vehicles"));
     };
     let name = match object.get("Name") {
-        Some(Value::String(n)) if valid_name(n) => n.clone(),
+        Some(Value::String(n)) if valid_folder_name(n) => n.clone(),
         Some(Value::String(n)) => {
             return Err(here.err(
                 None,
@@ -225,6 +225,7 @@ fn load_one(
         car_length_m: 2.2,
         car_width_m: 1.1,
         city,
+        cameras: Vec::new(),
     };
     let expansion = Expansion::new(spec, map.clone()).map_err(|e| here.err(None, e.field, e.message))?;
 
@@ -293,115 +294,35 @@ fn load_one(
     Ok(LoadedScenario { name, expansion, plan })
 }
 
-const CAMERA_KEYS: [&str; 8] = ["name", "static", "chase", "zoom", "width", "height", "depth", "comment"];
-
-/// Extra cameras: `{"name", "static": {"centre": [x, y], "rotation_deg"}` or
-/// `"chase": CAR`, and optional `zoom` (1), `width`, `height` (1024 x 640
-/// static, 256 x 256 chase), `depth` (false)}.
+/// Extra cameras: as in a spec, with the chased car named by its Id.
 fn parse_cameras(here: &Here<'_>, value: &Value, cars: &[GivenCar]) -> Result<Vec<CameraPlan>, ScenarioFileError> {
-    let Some(list) = value.as_array() else {
-        return Err(here.err(None, "cameras", "expected a list of cameras"));
-    };
-    let mut cameras: Vec<CameraPlan> = Vec::new();
-    for (i, item) in list.iter().enumerate() {
-        let field = |sub: &str| format!("cameras[{i}]{sub}");
-        let Some(object) = item.as_object() else {
-            return Err(here.err(None, field(""), "a camera is an object with a name and \"static\" or \"chase\""));
-        };
-        if let Some(key) = unknown_keys(object, &CAMERA_KEYS) {
-            return Err(here.err(
-                None,
-                field(&format!(".{key}")),
-                format!("unknown field: a camera has {}", CAMERA_KEYS.join(", ")),
-            ));
-        }
-        let name = object.get("name").and_then(Value::as_str).filter(|n| valid_name(n)).ok_or_else(|| {
-            here.err(
-                None,
-                field(".name"),
-                "missing or not allowed: 1 to 64 characters from A-Z a-z 0-9 - _ . (it names a folder)",
-            )
-        })?;
-        if cameras.iter().any(|c| c.name == name) {
-            return Err(here.err(None, field(".name"), format!("{name:?} names another camera of this scenario too")));
-        }
-        let kind = match (object.get("static"), object.get("chase")) {
-            (Some(Value::Object(view)), None) => {
-                let centre = view
-                    .get("centre")
-                    .and_then(Value::as_array)
-                    .filter(|c| c.len() == 2)
-                    .and_then(|c| Some([c[0].as_f64()?, c[1].as_f64()?]))
-                    .ok_or_else(|| here.err(None, field(".static.centre"), "expected [x, y] in metres"))?;
-                let rotation_deg = match view.get("rotation_deg") {
-                    None => 0.0,
-                    Some(v) => v.as_f64().filter(|r| r.is_finite()).ok_or_else(|| {
-                        here.err(None, field(".static.rotation_deg"), format!("{v} is not a number of degrees"))
-                    })?,
+    let specs: Vec<CameraSpec> = serde_path_to_error::deserialize(value.clone()).map_err(|e| {
+        let path = e.path().to_string();
+        let field =
+            if path == "." { "cameras".to_string() } else { format!("cameras{}", path.trim_start_matches('.')) };
+        here.err(None, field, e.into_inner().to_string())
+    })?;
+    let mut plans: Vec<CameraPlan> = Vec::new();
+    for (i, camera) in specs.iter().enumerate() {
+        let field = format!("cameras[{i}]");
+        let plan = camera
+            .plan(&field, |car| {
+                let name = match car {
+                    CarRef::Name(name) => name.clone(),
+                    CarRef::Id(id) => id.to_string(),
                 };
-                CameraKind::Static { centre, rotation_deg }
-            }
-            (None, Some(car)) => {
-                let id = car.as_str().unwrap_or_default();
-                let car = cars
-                    .iter()
-                    .position(|c| c.name == id)
-                    .ok_or_else(|| here.err(None, field(".chase"), format!("{car} is not a car of this scenario")))?;
-                CameraKind::Chase { car }
-            }
-            _ => {
-                return Err(here.err(
-                    None,
-                    field(""),
-                    "give exactly one of \"static\": {\"centre\": [x, y], \"rotation_deg\": r} or \"chase\": CAR",
-                ))
-            }
-        };
-        let (default_w, default_h) = match kind {
-            CameraKind::Static { .. } => (1024, 640),
-            CameraKind::Chase { .. } => (256, 256),
-        };
-        let side = |key: &str, default: u32| -> Result<u32, ScenarioFileError> {
-            match object.get(key) {
-                None => Ok(default),
-                Some(v) => v.as_u64().filter(|n| (16..=4096).contains(n)).map(|n| n as u32).ok_or_else(|| {
-                    here.err(None, field(&format!(".{key}")), format!("{v} is not allowed: pixels, 16 to 4096"))
-                }),
-            }
-        };
-        let zoom = match object.get("zoom") {
-            None => 1.0,
-            Some(v) => v.as_f64().filter(|z| *z > 0.0 && *z <= 20.0).ok_or_else(|| {
-                here.err(
-                    None,
-                    field(".zoom"),
-                    format!("{v} is not allowed: above 0 and at most 20 (1 = the bird's-eye scale)"),
-                )
-            })?,
-        };
-        let depth = match object.get("depth") {
-            None => false,
-            Some(v) => {
-                v.as_bool().ok_or_else(|| here.err(None, field(".depth"), format!("{v} is not true or false")))?
-            }
-        };
-        cameras.push(CameraPlan {
-            name: name.to_string(),
-            width: side("width", default_w)?,
-            height: side("height", default_h)?,
-            zoom,
-            depth,
-            kind,
-        });
+                cars.iter().position(|c| c.name == name).ok_or_else(|| {
+                    let ids: Vec<&str> = cars.iter().map(|c| c.name.as_str()).collect();
+                    format!("{name:?} is not a car of this scenario: one of {}", ids.join(", "))
+                })
+            })
+            .map_err(|e| here.err(None, e.field, e.message))?;
+        if plans.iter().any(|p| p.name == plan.name) {
+            return Err(here.err(None, format!("{field}.name"), format!("{:?} names another camera too", plan.name)));
+        }
+        plans.push(plan);
     }
-    Ok(cameras)
-}
-
-fn valid_name(name: &str) -> bool {
-    !name.is_empty()
-        && name.len() <= 64
-        && !name.starts_with('.')
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+    Ok(plans)
 }
 
 fn load_vehicle(
