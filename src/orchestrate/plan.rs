@@ -293,16 +293,7 @@ impl Expansion {
                 }
                 placed.extend(boxes);
                 let route = Arc::new(route);
-                let desired_speeds = match &city {
-                    Some(c) => (0..=actions.len())
-                        .map(|_| {
-                            let spread = c.desired_speed_spread;
-                            let factor = if spread > 0.0 { rng.random_range(1.0 - spread..=1.0 + spread) } else { 1.0 };
-                            c.desired_speed * factor
-                        })
-                        .collect(),
-                    None => Vec::new(),
-                };
+                let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
                 let role = if is_pair { Role::Leader } else { Role::Independent };
                 let car = PlacedCar { role, spawn: span.lane, distance: front, actions, merges, route, desired_speeds };
                 if is_pair {
@@ -345,16 +336,7 @@ impl Expansion {
         let mut cars: Vec<PlacedCar> = given
             .iter()
             .map(|g| {
-                let desired_speeds = match &city {
-                    Some(c) => (0..=g.actions.len())
-                        .map(|_| {
-                            let spread = c.desired_speed_spread;
-                            let factor = if spread > 0.0 { rng.random_range(1.0 - spread..=1.0 + spread) } else { 1.0 };
-                            c.desired_speed * factor
-                        })
-                        .collect(),
-                    None => Vec::new(),
-                };
+                let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), g.actions.len());
                 PlacedCar {
                     role: Role::Independent,
                     spawn: g.spawn,
@@ -527,6 +509,21 @@ impl Expansion {
             }
         };
         distance + 10.0
+    }
+}
+
+/// City world: a desired speed per leg (before the first of `actions`
+/// actions and after each), `desired_speed x (1 +- spread)`; none for toy.
+fn draw_desired_speeds(rng: &mut ChaCha8Rng, city: Option<&crate::spec::CitySpec>, actions: usize) -> Vec<f64> {
+    match city {
+        Some(c) => (0..=actions)
+            .map(|_| {
+                let spread = c.desired_speed_spread;
+                let factor = if spread > 0.0 { rng.random_range(1.0 - spread..=1.0 + spread) } else { 1.0 };
+                c.desired_speed * factor
+            })
+            .collect(),
+        None => Vec::new(),
     }
 }
 

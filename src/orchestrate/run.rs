@@ -436,15 +436,7 @@ fn write_frames(
         if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
             scene = renderer.scene(scene_look(plan, trajectories, frame));
         }
-        sprites.clear();
-        sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
-            position: s.position,
-            yaw: s.yaw,
-            length: car.length,
-            width: car.width,
-            colour: car.colour,
-            mask_id: car.mask_id,
-        }));
+        fill_sprites(&mut sprites, plan, states);
         let frame = frame as u32;
         renderer.render(canvas, &scene, &sprites, frame);
         let (rgb_name, mask_name) = (dir.frame_name("rgb", frame), dir.frame_name("mask", frame));
@@ -467,6 +459,19 @@ fn write_frames(
         bytes += dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
     }
     Ok(bytes)
+}
+
+/// The cars of one frame as the renderer draws them.
+fn fill_sprites(sprites: &mut Vec<CarSprite>, plan: &ScenarioPlan, states: &[CarState]) {
+    sprites.clear();
+    sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
+        position: s.position,
+        yaw: s.yaw,
+        length: car.length,
+        width: car.width,
+        colour: car.colour,
+        mask_id: car.mask_id,
+    }));
 }
 
 /// How a scenario looks at `frame`: light, water, fog, rain and snow (as
@@ -538,15 +543,7 @@ fn write_camera(
             }
         };
         let canvas = canvas.get_or_insert_with(|| renderer.canvas());
-        sprites.clear();
-        sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
-            position: s.position,
-            yaw: s.yaw,
-            length: car.length,
-            width: car.width,
-            colour: car.colour,
-            mask_id: car.mask_id,
-        }));
+        fill_sprites(&mut sprites, plan, states);
         let frame = frame as u32;
         renderer.render(canvas, scene, &sprites, frame);
         let [rgb_name, mask_name, depth_name] =
