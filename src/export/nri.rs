@@ -16,8 +16,8 @@
 //! permuted) ids. One split is held in memory at a time.
 
 use crate::dataset::{Dataset, ScenarioSummary};
+use crate::output::io_err;
 use crate::output::poses::{read_pixels, PIXELS_FILE};
-use crate::output::{io_err, write_atomically};
 use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -102,19 +102,50 @@ fn fill_scenario(
     Ok(())
 }
 
-fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[T]) -> Result<(), String> {
+/// An array element written as little-endian bytes (the `<f4` / `<i8`
+/// dtypes npyz declares for them).
+trait LittleEndian: npyz::AutoSerialize + Copy {
+    fn put(self, out: &mut Vec<u8>);
+}
+
+impl LittleEndian for f32 {
+    fn put(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+impl LittleEndian for i64 {
+    fn put(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+/// Writes a C-order `.npy`: npyz writes the header (magic, version, dtype,
+/// shape), the data follows as raw little-endian bytes, streamed in chunks
+/// rather than element by element. Atomic: written beside and renamed.
+fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<(), String> {
     use npyz::WriterBuilder;
-    // Encoded in memory first: npyz writes element by element, which is
-    // several times faster into a Vec than through a file writer.
-    let mut bytes = Vec::with_capacity(128 + std::mem::size_of_val(data));
-    let encode = |bytes: &mut Vec<u8>| -> std::io::Result<()> {
-        let mut writer = npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(bytes).begin_nd()?;
-        writer.extend(data.iter().copied())?;
-        writer.finish()
+    use std::io::Write;
+    let partial = path.with_extension("npy.partial");
+    let write = || -> std::io::Result<()> {
+        let mut file = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&partial)?);
+        npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(&mut file).write_header_only()?;
+        let mut chunk = Vec::with_capacity(1 << 16);
+        for part in data.chunks(1 << 13) {
+            chunk.clear();
+            for &value in part {
+                value.put(&mut chunk);
+            }
+            file.write_all(&chunk)?;
+        }
+        file.flush()?;
+        drop(file);
+        std::fs::rename(&partial, path)
     };
-    encode(&mut bytes)
-        .and_then(|()| write_atomically(path, &bytes).map_err(|e| e.source))
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&partial);
+        format!("cannot write {}: {e}", path.display())
+    })
 }
 
 /// Exports `dataset` into `out`; returns a one-line report per file group.
