@@ -49,6 +49,8 @@ test-python: build
 	$(RUN) export nsdr $(PYDATA)/toy --out $(PYDATA)/nsdr --quiet
 	$(RUN) export nsdr $(PYDATA)/city --out $(PYDATA)/nsdr-city --quiet
 	$(if $(filter hdf5,$(FEATURES)),$(RUN) export vcdn $(PYDATA)/toy --out $(PYDATA)/vcdn --quiet)
+	$(RUN) counterfactual --scenario configs/examples/stop-the-leader.json --out $(PYDATA)/counterfactual
+	$(RUN) run --scenario configs/examples/cameras.json --out $(PYDATA)/cameras
 	CAUSALCITY_DATA=$(PYDATA) $(VENV)/bin/python -m pytest -q -p no:cacheprovider -W ignore::DeprecationWarning:pycocotools.mask tests/python
 
 ## Throughput, memory and size figures (prints, asserts nothing).

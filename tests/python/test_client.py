@@ -209,3 +209,36 @@ def test_vcdn_hdf5_matches_the_csvs(toy_scenarios):
                 mean = np.linalg.norm(loc[:, i] - loc[:, j], axis=-1).mean()
                 assert abs(f["rels"][5, k, 1] - mean) < 1e-2
             assert sorted(map(tuple, f["edges"][()])) == sorted(map(tuple, scenario["edges"]))
+
+
+def test_counterfactual_outputs_load():
+    """divergence.csv and summary.json of a counterfactual pair load as
+    documented, and agree with the two pose logs."""
+    pair = ROOT / "counterfactual" / "stop_the_leader"
+    divergence = pd.read_csv(pair / "divergence.csv")
+    assert list(divergence.columns) == ["frame", "t", "car", "distance_m", "distance_px"]
+    assert divergence.frame.dtype == np.int64 and divergence.distance_m.dtype == np.float64
+    summary = json.loads((pair / "summary.json").read_text())
+    factual = pd.read_csv(pair / "factual" / "poses.csv")
+    counterfactual = pd.read_csv(pair / "counterfactual" / "poses.csv")
+    gap = np.hypot(factual.x - counterfactual.x, factual.y - counterfactual.y)
+    assert np.allclose(gap.to_numpy(), divergence.distance_m.to_numpy(), atol=2e-4)
+    moved = set(divergence[divergence.distance_m > 0].car)
+    names = {c["id"]: c["name"] for c in summary["cars"]}
+    assert {names[c] for c in moved} <= set(summary["affected"])
+    assert summary["affected"] == ["Car_1", "Car_2"]
+
+
+def test_camera_frames_and_depth_load():
+    scenario = ROOT / "cameras" / "cameras"
+    chase = scenario / "cameras" / "chase_car1"
+    depth = np.asarray(Image.open(chase / "depth" / "0010.png"))
+    assert depth.dtype in (np.uint16, np.int32) and depth.shape == (256, 256)
+    mask = np.asarray(Image.open(chase / "mask" / "0010.png"))
+    # The followed car (mask id 1) sits at the centre, 1.5 m closer than the road beside it.
+    assert mask[128, 128] == 1 and mask[128, 148] == 0
+    assert int(depth[128, 148]) - int(depth[128, 128]) > 1000
+    poses = pd.read_csv(chase / "poses.csv")
+    assert list(poses.columns) == ["frame", "car", "px", "py", "in_view"]
+    followed = poses[poses.car == 0]
+    assert np.allclose(followed.px, 127.5, atol=1e-3) and np.allclose(followed.py, 127.5, atol=1e-3)
