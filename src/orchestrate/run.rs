@@ -440,12 +440,7 @@ fn write_frames(
         let frame = frame as u32;
         renderer.render(canvas, &scene, &sprites, frame);
         let (rgb_name, mask_name) = (dir.frame_name("rgb", frame), dir.frame_name("mask", frame));
-        bytes += dir.write_with(&rgb_name, |out| {
-            encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
-        })?;
-        bytes += dir.write_with(&mask_name, |out| {
-            encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
-        })?;
+        bytes += write_rgb_and_mask(dir, &rgb_name, &mask_name, canvas, (w, h))?;
         if let Some(builder) = builder.as_mut() {
             pixels.clear();
             pixels.extend(states.iter().map(|s| {
@@ -459,6 +454,24 @@ fn write_frames(
         bytes += dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
     }
     Ok(bytes)
+}
+
+/// Encodes a rendered frame's RGB image and instance mask into the scenario
+/// folder; returns the bytes written.
+fn write_rgb_and_mask(
+    dir: &mut ScenarioDir,
+    rgb_name: &str,
+    mask_name: &str,
+    canvas: &FrameCanvas,
+    (w, h): (u32, u32),
+) -> Result<u64, WriteError> {
+    let rgb = dir.write_with(rgb_name, |out| {
+        encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
+    })?;
+    let mask = dir.write_with(mask_name, |out| {
+        encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
+    })?;
+    Ok(rgb + mask)
 }
 
 /// The cars of one frame as the renderer draws them.
@@ -548,12 +561,7 @@ fn write_camera(
         renderer.render(canvas, scene, &sprites, frame);
         let [rgb_name, mask_name, depth_name] =
             ["rgb", "mask", "depth"].map(|kind| format!("{base}/{}", dir.frame_name(kind, frame)));
-        bytes += dir.write_with(&rgb_name, |out| {
-            encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
-        })?;
-        bytes += dir.write_with(&mask_name, |out| {
-            encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
-        })?;
+        bytes += write_rgb_and_mask(dir, &rgb_name, &mask_name, canvas, (w, h))?;
         if camera_plan.depth {
             renderer.depth_mm(&canvas.mask, &mut depth);
             let big_endian: Vec<u8> = depth.iter().flat_map(|d| d.to_be_bytes()).collect();
