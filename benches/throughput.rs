@@ -63,9 +63,9 @@ fn dir_bytes(dir: &Path, sub: &str) -> (u64, u64) {
     (total, count)
 }
 
-fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
-    let _ = std::fs::remove_dir_all(out);
-    let options = GenOptions {
+/// Options of a quiet `gen` run of `spec` into `out`.
+fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOptions {
+    GenOptions {
         spec_path: spec.to_path_buf(),
         out: Some(out.to_path_buf()),
         limit: None,
@@ -77,8 +77,12 @@ fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
         force: false,
         fsync: false,
         handle_signals: false,
-    };
-    generate(&options).unwrap().elapsed.as_secs_f64()
+    }
+}
+
+fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
+    let _ = std::fs::remove_dir_all(out);
+    generate(&gen_options(spec, out, threads, images)).unwrap().elapsed.as_secs_f64()
 }
 
 fn png_settings_comparison() {
@@ -312,20 +316,7 @@ fn main() {
         let hash_time = t.elapsed().as_secs_f64();
         // A rerun over the finished dataset: every scenario skipped.
         let t = Instant::now();
-        let options = GenOptions {
-            spec_path: root.join("images.json"),
-            out: Some(out.clone()),
-            limit: None,
-            threads: Some(1),
-            images: true,
-            annotations: false,
-            progress: ProgressMode::Quiet,
-            shard: None,
-            force: false,
-            fsync: false,
-            handle_signals: false,
-        };
-        let skipped = generate(&options).unwrap().skipped;
+        let skipped = generate(&gen_options(&root.join("images.json"), &out, 1, true)).unwrap().skipped;
         let resume_time = t.elapsed().as_secs_f64();
         println!("SHA-256 of every file: {:.1} % of generation time", 100.0 * hash_time / gen_time);
         println!(

@@ -42,6 +42,18 @@ impl Dataset {
         &self.expansion.spec
     }
 
+    /// Every scenario folder, in the dataset's order, with its path relative
+    /// to the dataset (`<group>/<split>/<scenario>`), which exports mirror.
+    pub fn scenario_paths(&self) -> Vec<(PathBuf, PathBuf)> {
+        self.keys
+            .iter()
+            .map(|k| {
+                let relative = Path::new(&k.group).join(k.split.name()).join(k.folder_name());
+                (self.dir.join(&relative), relative)
+            })
+            .collect()
+    }
+
     /// Scenario folders of one group and split, in index order.
     pub fn scenario_dirs(&self, group: &str, split: Split) -> Vec<PathBuf> {
         self.keys

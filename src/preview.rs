@@ -62,7 +62,8 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
     if !first.exists() {
         return Err(format!("{} has no frames (made with --no-images?): nothing to preview", scenario_dir.display()));
     }
-    let colours: Vec<[u8; 3]> = scenario.cars.iter().map(|c| parse_colour(&c.colour)).collect();
+    let colours: Vec<[u8; 3]> =
+        scenario.cars.iter().map(|c| crate::render::parse_hex_colour(&c.colour).unwrap_or([128, 128, 128])).collect();
 
     let chosen: Vec<usize> = match kind {
         Kind::Gif => (0..frames).step_by(options.every as usize).collect(),
@@ -193,16 +194,6 @@ enum Kind {
 /// The size of a `w` x `h` frame at `scale` (at least 1 x 1).
 pub fn scaled_size(w: u32, h: u32, scale: f64) -> (u32, u32) {
     (((w as f64 * scale).round() as u32).max(1), ((h as f64 * scale).round() as u32).max(1))
-}
-
-/// "#rrggbb" -> bytes; grey when unreadable.
-fn parse_colour(text: &str) -> [u8; 3] {
-    let hex = text.trim_start_matches('#');
-    let byte = |i: usize| hex.get(i..i + 2).and_then(|h| u8::from_str_radix(h, 16).ok());
-    match (byte(0), byte(2), byte(4)) {
-        (Some(r), Some(g), Some(b)) if hex.len() == 6 => [r, g, b],
-        _ => [128, 128, 128],
-    }
 }
 
 /// A line from `from` to `to` with a head of `head` pixels at `to`.

@@ -9,7 +9,6 @@ use crate::orchestrate::progress::{Progress, ProgressMode};
 use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
-use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -25,15 +24,8 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     }
     let (w, h) = (opened.spec().image.width, opened.spec().image.height);
     let digits = frame_digits(opened.spec().frames);
-    let mut jobs: Vec<(PathBuf, PathBuf)> = Vec::new();
-    for group in &opened.spec().groups {
-        for split in Split::ALL {
-            for dir in opened.scenario_dirs(&group.name(), split) {
-                let name = dir.file_name().expect("scenario folders have names").to_owned();
-                jobs.push((dir, out.join(group.name()).join(split.name()).join(name)));
-            }
-        }
-    }
+    let jobs: Vec<(PathBuf, PathBuf)> =
+        opened.scenario_paths().into_iter().map(|(dir, relative)| (dir, out.join(relative))).collect();
     let bar = Progress::new(jobs.len() as u64, progress);
     jobs.par_iter().try_for_each(|(source, target)| {
         let json = annotate(source, w, h, digits)?;

@@ -16,7 +16,6 @@
 
 use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
 use crate::orchestrate::progress::{Progress, ProgressMode};
-use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -100,15 +99,11 @@ pub fn export_vcdn(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     if !cfg!(feature = "hdf5") {
         return Err(NO_HDF5.into());
     }
-    let mut jobs: Vec<(PathBuf, PathBuf)> = Vec::new();
-    for group in &opened.spec().groups {
-        for split in Split::ALL {
-            for dir in opened.scenario_dirs(&group.name(), split) {
-                let name = dir.file_name().expect("scenario folders have names").to_string_lossy().into_owned();
-                jobs.push((dir, out.join(group.name()).join(split.name()).join(format!("{name}.h5"))));
-            }
-        }
-    }
+    let jobs: Vec<(PathBuf, PathBuf)> = opened
+        .scenario_paths()
+        .into_iter()
+        .map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")))
+        .collect();
     let bar = Progress::new(jobs.len() as u64, progress);
     jobs.par_iter().try_for_each(|(source, target)| {
         let arrays = vcdn_arrays(source)?;

@@ -40,6 +40,11 @@ impl Action {
         }
     }
 
+    /// The action a scenario file names `name`.
+    pub fn from_name(name: &str) -> Option<Action> {
+        Action::ALL.into_iter().find(|a| a.name() == name)
+    }
+
     pub fn is_merge(self) -> bool {
         matches!(self, Action::MergeL | Action::MergeR)
     }

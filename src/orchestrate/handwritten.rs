@@ -133,14 +133,24 @@ pub struct PairSummary {
 /// runs without them.
 pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) -> Result<Vec<PairSummary>, RunError> {
     let (map, scenarios) = load_file(options)?;
+    let extras = match intervention_file {
+        Some(file) => Some(load_interventions(file, &scenarios, &map).map_err(RunError::Input)?),
+        None => None,
+    };
     let mut pairs = Vec::new();
-    for s in &scenarios {
-        let (factual, counterfactual) = match intervention_file {
-            Some(file) => {
-                let extra = load_interventions(file, s, &map).map_err(RunError::Input)?;
+    for (k, s) in scenarios.iter().enumerate() {
+        let (factual, counterfactual) = match &extras {
+            Some(extras) => {
                 let mut cf = s.plan.clone();
-                cf.interventions.extend(extra);
+                cf.interventions.extend(extras[k].iter().cloned());
                 (s.plan.clone(), cf)
+            }
+            None if s.plan.interventions.is_empty() => {
+                return Err(RunError::Usage(format!(
+                    "{}: scenario {:?} has no interventions: name them in its \"interventions\" or pass --intervention FILE",
+                    options.scenario_file.display(),
+                    s.name
+                )));
             }
             None => {
                 let mut f = s.plan.clone();
@@ -148,13 +158,6 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
                 (f, s.plan.clone())
             }
         };
-        if counterfactual.interventions.len() == factual.interventions.len() && intervention_file.is_none() {
-            return Err(RunError::Usage(format!(
-                "{}: scenario {:?} has no interventions: name them in its \"interventions\" or pass --intervention FILE",
-                options.scenario_file.display(),
-                s.name
-            )));
-        }
         pairs.push((s, factual, counterfactual));
     }
     let out = options.out();
@@ -312,20 +315,16 @@ fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention
     // On a frame, in the first half of the scenario after a moment to get going.
     let frame = ((rng.random_range(0.1..0.5) * duration) / plan.frame_interval).round();
     let at = frame * plan.frame_interval;
-    let name = &plan.cars[car].name;
-    let (effect, what) = match kind {
-        SweepKind::Stop => {
-            let seconds = (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0;
-            (Effect::Stop { car, seconds }, format!("stop {name} for {seconds} s"))
-        }
+    let effect = match kind {
+        SweepKind::Stop => Effect::Stop { car, seconds: (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0 },
         SweepKind::SetDesiredSpeed => {
             let base = plan.cars[car].agency.as_ref().and_then(|a| a.desired_speeds.first().copied()).unwrap_or(1.8);
-            let speed = (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0;
-            (Effect::SetDesiredSpeed { car, speed }, format!("{name} desired speed {speed} m/s"))
+            Effect::SetDesiredSpeed { car, speed: (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0 }
         }
-        SweepKind::RunRedLight => (Effect::RunRedLights { car }, format!("{name} runs red lights")),
-        SweepKind::Remove => (Effect::Remove { car }, format!("remove {name}")),
+        SweepKind::RunRedLight => Effect::RunRedLights { car },
+        SweepKind::Remove => Effect::Remove { car },
     };
+    let what = effect.describe(|c| plan.cars[c].name.clone(), |l| format!("light {l}"));
     Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }
 }
 

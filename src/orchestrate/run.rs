@@ -525,7 +525,7 @@ fn write_camera(
     // A static camera draws its background once; a chase camera every frame.
     let mut fixed: Option<(Renderer, Scene)> = None;
     let mut canvas: Option<FrameCanvas> = None;
-    let mut depth = Vec::new();
+    let (mut depth, mut depth_png) = (Vec::new(), Vec::new());
     let mut poses = b"frame,car,px,py,in_view\n".to_vec();
     let mut bytes = 0;
     let mut sprites = Vec::with_capacity(plan.cars.len());
@@ -564,9 +564,10 @@ fn write_camera(
         bytes += write_rgb_and_mask(dir, &rgb_name, &mask_name, canvas, (w, h))?;
         if camera_plan.depth {
             renderer.depth_mm(&canvas.mask, &mut depth);
-            let big_endian: Vec<u8> = depth.iter().flat_map(|d| d.to_be_bytes()).collect();
+            depth_png.clear();
+            depth_png.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
             bytes += dir.write_with(&depth_name, |out| {
-                encode_png(out, w, h, PixelFormat::Gray16, &big_endian, PngSettings::mask()).map_err(png_to_io)
+                encode_png(out, w, h, PixelFormat::Gray16, &depth_png, PngSettings::mask()).map_err(png_to_io)
             })?;
         }
         for (car, state) in plan.cars.iter().zip(states) {

@@ -19,7 +19,7 @@ use crate::map::{Action, CityMap, Route};
 use crate::render::camera::CameraPlan;
 use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
 use crate::world::interventions::{ConfounderName, Effect, Intervention, Trigger};
-use crate::world::lights::{Colour, ScheduleStep, Signal, APPROACHES};
+use crate::world::lights::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
 use serde_json::{Map, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -267,6 +267,7 @@ fn load_one(
         }
     }
     let pairs = infer_pairs(&cars);
+    let names: Vec<String> = cars.iter().map(|c| c.name.clone()).collect();
     let key = ScenarioKey {
         group: "scenarios".into(),
         group_index: 0,
@@ -285,17 +286,17 @@ fn load_one(
                 "need the city world (the toy world has no agency): run with --world city",
             ))
         }
-        Some(v) => parse_interventions(&here, v, "interventions", &cars, map, &expansion)?,
+        Some(v) => parse_interventions(&here, v, "interventions", &names, map, &expansion)?,
     };
     plan.cameras = match object.get("cameras") {
         None => Vec::new(),
-        Some(v) => parse_cameras(&here, v, &cars)?,
+        Some(v) => parse_cameras(&here, v, &names)?,
     };
     Ok(LoadedScenario { name, expansion, plan })
 }
 
 /// Extra cameras: as in a spec, with the chased car named by its Id.
-fn parse_cameras(here: &Here<'_>, value: &Value, cars: &[GivenCar]) -> Result<Vec<CameraPlan>, ScenarioFileError> {
+fn parse_cameras(here: &Here<'_>, value: &Value, names: &[String]) -> Result<Vec<CameraPlan>, ScenarioFileError> {
     let specs: Vec<CameraSpec> = serde_path_to_error::deserialize(value.clone()).map_err(|e| {
         let path = e.path().to_string();
         let field =
@@ -306,15 +307,9 @@ fn parse_cameras(here: &Here<'_>, value: &Value, cars: &[GivenCar]) -> Result<Ve
     for (i, camera) in specs.iter().enumerate() {
         let field = format!("cameras[{i}]");
         let plan = camera
-            .plan(&field, |car| {
-                let name = match car {
-                    CarRef::Name(name) => name.clone(),
-                    CarRef::Id(id) => id.to_string(),
-                };
-                cars.iter().position(|c| c.name == name).ok_or_else(|| {
-                    let ids: Vec<&str> = cars.iter().map(|c| c.name.as_str()).collect();
-                    format!("{name:?} is not a car of this scenario: one of {}", ids.join(", "))
-                })
+            .plan(&field, |car| match car {
+                CarRef::Name(name) => car_index(names, name),
+                CarRef::Id(id) => car_index(names, &id.to_string()),
             })
             .map_err(|e| here.err(None, e.field, e.message))?;
         if plans.iter().any(|p| p.name == plan.name) {
@@ -379,13 +374,12 @@ fn load_vehicle(
         Some(Value::Array(list)) => list.clone(),
         Some(v) => return Err(here.err(car, "DriveQueue", format!("{v} is not a list of actions"))),
     };
-    let allowed: Vec<&str> = Action::ALL.iter().map(|a| a.name()).collect();
     let actions: Vec<Action> = queue
         .iter()
         .enumerate()
         .map(|(i, a)| {
-            a.as_str().and_then(|name| Action::ALL.into_iter().find(|x| x.name() == name)).ok_or_else(|| {
-                here.err(car, format!("DriveQueue[{i}]"), format!("{a} is not an action: use {}", allowed.join(", ")))
+            a.as_str().and_then(Action::from_name).ok_or_else(|| {
+                here.err(car, format!("DriveQueue[{i}]"), format!("{a} is not an action: use {}", action_names()))
             })
         })
         .collect::<Result<_, _>>()?;
@@ -476,7 +470,7 @@ fn load_vehicle(
     let colour =
         match object.get("colour") {
             None => None,
-            Some(v) => Some(v.as_str().and_then(parse_hex_colour).ok_or_else(|| {
+            Some(v) => Some(v.as_str().and_then(crate::render::parse_hex_colour).ok_or_else(|| {
                 here.err(car, "colour", format!("{v} is not allowed: \"#rrggbb\", e.g. \"#ff8800\""))
             })?),
         };
@@ -494,13 +488,23 @@ fn load_vehicle(
     })
 }
 
-fn parse_hex_colour(text: &str) -> Option<[u8; 3]> {
-    let hex = text.strip_prefix('#')?;
-    if hex.len() != 6 {
-        return None;
-    }
-    let byte = |i: usize| u8::from_str_radix(hex.get(i..i + 2)?, 16).ok();
-    Some([byte(0)?, byte(2)?, byte(4)?])
+/// Every action's name, for messages.
+fn action_names() -> String {
+    Action::ALL.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")
+}
+
+/// A light as scenario files name it, e.g. `AC/W/straight`.
+pub fn light_name(map: &CityMap, index: usize) -> String {
+    let (intersection, approach, signal) = light_at(index);
+    format!("{}/{approach}/{}", map.intersections[intersection].name, signal.name())
+}
+
+/// The index of the car called `name`, or a message listing the cars.
+fn car_index(names: &[String], name: &str) -> Result<usize, String> {
+    names
+        .iter()
+        .position(|n| n == name)
+        .ok_or_else(|| format!("{name:?} is not a car of this scenario: one of {}", names.join(", ")))
 }
 
 /// Leader-follower pairs: cars sharing spawn lane, actions and merge
@@ -534,7 +538,7 @@ fn parse_interventions(
     here: &Here<'_>,
     value: &Value,
     field: &str,
-    cars: &[GivenCar],
+    names: &[String],
     map: &CityMap,
     expansion: &Expansion,
 ) -> Result<Vec<Intervention>, ScenarioFileError> {
@@ -543,7 +547,7 @@ fn parse_interventions(
     };
     let mut out = Vec::new();
     for (i, item) in list.iter().enumerate() {
-        if let Some(intervention) = parse_intervention(here, item, &format!("{field}[{i}]"), cars, map, expansion)? {
+        if let Some(intervention) = parse_intervention(here, item, &format!("{field}[{i}]"), names, map, expansion)? {
             out.push(intervention);
         }
     }
@@ -575,7 +579,7 @@ fn parse_intervention(
     here: &Here<'_>,
     item: &Value,
     field: &str,
-    cars: &[GivenCar],
+    names: &[String],
     map: &CityMap,
     expansion: &Expansion,
 ) -> Result<Option<Intervention>, ScenarioFileError> {
@@ -594,11 +598,7 @@ fn parse_intervention(
         ));
     }
     let car_named = |sub: &str, v: Option<&Value>| -> Result<usize, ScenarioFileError> {
-        let name = v.and_then(Value::as_str).unwrap_or_default();
-        cars.iter().position(|c| c.name == name).ok_or_else(|| {
-            let ids: Vec<&str> = cars.iter().map(|c| c.name.as_str()).collect();
-            err(sub, format!("{name:?} is not a car of this scenario: one of {}", ids.join(", ")))
-        })
+        car_index(names, v.and_then(Value::as_str).unwrap_or_default()).map_err(|e| err(sub, e))
     };
     let light_named = |sub: &str, v: Option<&Value>| -> Result<usize, ScenarioFileError> {
         let text = v.and_then(Value::as_str).unwrap_or_default();
@@ -622,8 +622,7 @@ fn parse_intervention(
         let (k, a, s) = found.ok_or_else(|| {
             err(sub, format!("{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"AC/W/straight\" (AC AD BC BD; N E S W; straight left)"))
         })?;
-        let lights = crate::world::lights::LightPlan::cycle(map.intersections.len(), 1.0, &[]);
-        Ok(lights.index(k, a, s))
+        Ok(light_index(k, a, s))
     };
     let colour_named = |sub: &str, v: Option<&Value>| -> Result<Colour, ScenarioFileError> {
         match v.and_then(Value::as_str) {
@@ -658,7 +657,7 @@ fn parse_intervention(
                 let intersection = map.intersections.iter().position(|x| x.name == name).ok_or_else(|| {
                     err(".when.reaches", format!("{name:?} is not an intersection: AC, AD, BC or BD"))
                 })?;
-                (Trigger::CarReaches { car, intersection }, format!("when {} reaches {name}", cars[car].name))
+                (Trigger::CarReaches { car, intersection }, format!("when {} reaches {name}", names[car]))
             } else if when.contains_key("turns") {
                 let light = light_named(".when.light", when.get("light"))?;
                 let colour = colour_named(".when.turns", when.get("turns"))?;
@@ -679,32 +678,29 @@ fn parse_intervention(
         }
     };
     let action = object.get("do").and_then(Value::as_str).unwrap_or_default();
-    let (effect, what) = match action {
+    let effect = match action {
         "none" => return Ok(None),
         "stop" => {
             let car = car_named(".car", object.get("car"))?;
             let seconds = positive(".seconds", object.get("seconds"), "seconds to stay stopped")?;
-            (Effect::Stop { car, seconds }, format!("stop {} for {seconds} s", cars[car].name))
+            Effect::Stop { car, seconds }
         }
         "run_red_light" => {
-            let car = car_named(".car", object.get("car"))?;
-            (Effect::RunRedLights { car }, format!("{} runs red lights", cars[car].name))
+            Effect::RunRedLights { car: car_named(".car", object.get("car"))? }
         }
         "set_desired_speed" => {
             let car = car_named(".car", object.get("car"))?;
             let speed = positive(".speed", object.get("speed"), "m/s")?;
-            (Effect::SetDesiredSpeed { car, speed }, format!("{} desired speed {speed} m/s", cars[car].name))
+            Effect::SetDesiredSpeed { car, speed }
         }
         "remove" => {
-            let car = car_named(".car", object.get("car"))?;
-            (Effect::Remove { car }, format!("remove {}", cars[car].name))
+            Effect::Remove { car: car_named(".car", object.get("car"))? }
         }
         "set_light" => {
             let light = light_named(".light", object.get("light"))?;
             let colour = colour_named(".colour", object.get("colour"))?;
             let seconds = positive(".seconds", object.get("seconds"), "seconds the colour is held")?;
-            let text = object.get("light").and_then(Value::as_str).unwrap_or_default();
-            (Effect::SetLight { light, colour, seconds }, format!("{text} {} for {seconds} s", colour.name()))
+            Effect::SetLight { light, colour, seconds }
         }
         "replace_actions" => {
             let car = car_named(".car", object.get("car"))?;
@@ -716,8 +712,8 @@ fn parse_intervention(
                 .iter()
                 .enumerate()
                 .map(|(k, a)| {
-                    a.as_str().and_then(|n| Action::ALL.into_iter().find(|x| x.name() == n)).ok_or_else(|| {
-                        err(&format!(".actions[{k}]"), format!("{a} is not an action: left, right, straight, mergeL, mergeR"))
+                    a.as_str().and_then(Action::from_name).ok_or_else(|| {
+                        err(&format!(".actions[{k}]"), format!("{a} is not an action: {}", action_names()))
                     })
                 })
                 .collect::<Result<_, _>>()?;
@@ -734,9 +730,7 @@ fn parse_intervention(
                     .collect::<Result<_, _>>()?,
                 Some(_) => return Err(err(".merge_distances", format!("expected {} numbers, one per action", actions.len()))),
             };
-            let names: Vec<&str> = actions.iter().map(|a| a.name()).collect();
-            let what = format!("{} drives {} from now on", cars[car].name, names.join(", "));
-            (Effect::ReplaceActions { car, actions, merge_distances }, what)
+            Effect::ReplaceActions { car, actions, merge_distances }
         }
         "set_light_plan" => {
             let light = light_named(".light", object.get("light"))?;
@@ -760,9 +754,7 @@ fn parse_intervention(
                     v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| err(".offset", format!("{v} is not a number of seconds")))?
                 }
             };
-            let text = object.get("light").and_then(Value::as_str).unwrap_or_default();
-            let period: f64 = schedule.iter().map(|s| s.duration).sum();
-            (Effect::SetLightPlan { light, offset, schedule }, format!("{text} runs a new {period} s plan"))
+            Effect::SetLightPlan { light, offset, schedule }
         }
         "set_confounder" => {
             let name = object.get("confounder").and_then(Value::as_str).unwrap_or_default();
@@ -773,7 +765,7 @@ fn parse_intervention(
             let value = object.get("value").and_then(Value::as_f64).filter(|v| (0.0..=limit).contains(v)).ok_or_else(|| {
                 err(".value", format!("{} is not allowed: 0 to {limit}", object.get("value").cloned().unwrap_or(Value::Null)))
             })?;
-            (Effect::SetConfounder { confounder, value }, format!("{name} becomes {value}"))
+            Effect::SetConfounder { confounder, value }
         }
         other => {
             return Err(err(
@@ -784,41 +776,40 @@ fn parse_intervention(
             ))
         }
     };
-    let label =
-        object.get("label").and_then(Value::as_str).map(String::from).unwrap_or(format!("{what} ({when_text})"));
+    let label = match object.get("label").and_then(Value::as_str) {
+        Some(label) => label.to_string(),
+        None => format!("{} ({when_text})", effect.describe(|c| names[c].clone(), |l| light_name(map, l))),
+    };
     Ok(Some(Intervention { trigger, effect, label }))
 }
 
 /// Reads an intervention file (a list of interventions, as in a scenario's
-/// `interventions`) for one loaded scenario.
+/// `interventions`) once, and checks it against each of `scenarios`: one
+/// list of interventions per scenario.
 pub fn load_interventions(
     path: &Path,
-    scenario: &LoadedScenario,
+    scenarios: &[LoadedScenario],
     map: &CityMap,
-) -> Result<Vec<Intervention>, ScenarioFileError> {
-    let here = Here { file: path, scenario: scenario.name.clone() };
-    let text = std::fs::read_to_string(path).map_err(|e| here.err(None, "", format!("cannot read the file: {e}")))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| here.err(None, "", format!("not valid JSON: {e}")))?;
-    if scenario.plan.world != WorldKind::City {
-        return Err(here.err(None, "", "interventions need the city world (the toy world has no agency)"));
-    }
-    let cars: Vec<GivenCar> = scenario
-        .plan
-        .cars
-        .iter()
-        .map(|c| GivenCar {
-            name: c.name.clone(),
-            spawn: c.spawn,
-            spawn_distance: c.spawn_distance,
-            actions: c.actions.clone(),
-            merge_distances: c.merge_distances.clone(),
-            route: c.route.clone(),
-            desired_speeds: None,
-            time_headway: None,
-            runs_red_lights: None,
-            colour: None,
-        })
-        .collect();
+) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
+    let file_error = |message: String| ScenarioFileError {
+        file: path.to_path_buf(),
+        scenario: None,
+        car: None,
+        field: String::new(),
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| file_error(format!("cannot read the file: {e}")))?;
+    let json: Value = serde_json::from_str(&text).map_err(|e| file_error(format!("not valid JSON: {e}")))?;
     let list = if json.is_array() { json } else { Value::Array(vec![json]) };
-    parse_interventions(&here, &list, "interventions", &cars, map, &scenario.expansion)
+    scenarios
+        .iter()
+        .map(|scenario| {
+            let here = Here { file: path, scenario: scenario.name.clone() };
+            if scenario.plan.world != WorldKind::City {
+                return Err(here.err(None, "", "interventions need the city world (the toy world has no agency)"));
+            }
+            let names: Vec<String> = scenario.plan.cars.iter().map(|c| c.name.clone()).collect();
+            parse_interventions(&here, &list, "interventions", &names, map, &scenario.expansion)
+        })
+        .collect()
 }

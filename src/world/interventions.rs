@@ -68,6 +68,11 @@ impl ConfounderName {
         (ConfounderName::Hour, "hour"),
     ];
 
+    /// The name scenario files use.
+    pub fn name(self) -> &'static str {
+        ConfounderName::ALL.iter().find(|(c, _)| *c == self).map(|(_, n)| *n).expect("every confounder is listed")
+    }
+
     /// `confounders` with this one set to `value`.
     pub fn set(self, confounders: Confounders, value: f64) -> Confounders {
         let mut c = confounders;
@@ -92,6 +97,29 @@ pub struct Intervention {
 }
 
 impl Effect {
+    /// What the effect does, in words (for events.csv), given how to name a
+    /// car and a light by index.
+    pub fn describe(&self, car: impl Fn(usize) -> String, light: impl Fn(usize) -> String) -> String {
+        match self {
+            Effect::Stop { car: c, seconds } => format!("stop {} for {seconds} s", car(*c)),
+            Effect::RunRedLights { car: c } => format!("{} runs red lights", car(*c)),
+            Effect::SetDesiredSpeed { car: c, speed } => format!("{} desired speed {speed} m/s", car(*c)),
+            Effect::Remove { car: c } => format!("remove {}", car(*c)),
+            Effect::SetLight { light: l, colour, seconds } => {
+                format!("{} {} for {seconds} s", light(*l), colour.name())
+            }
+            Effect::SetLightPlan { light: l, schedule, .. } => {
+                let period: f64 = schedule.iter().map(|s| s.duration).sum();
+                format!("{} runs a new {period} s plan", light(*l))
+            }
+            Effect::ReplaceActions { car: c, actions, .. } => {
+                let names: Vec<&str> = actions.iter().map(|a| a.name()).collect();
+                format!("{} drives {} from now on", car(*c), names.join(", "))
+            }
+            Effect::SetConfounder { confounder, value } => format!("{} becomes {value}", confounder.name()),
+        }
+    }
+
     /// The car the effect acts on, if any.
     pub fn car(&self) -> Option<usize> {
         match self {

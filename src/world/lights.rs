@@ -121,6 +121,19 @@ pub struct LightPlan {
 /// Approaches in the order lights are listed.
 pub const APPROACHES: [char; 4] = ['N', 'E', 'S', 'W'];
 
+/// Where light (intersection, approach, signal) stands in every light plan:
+/// by intersection, then approach (N, E, S, W), then Straight before Left.
+pub fn light_index(intersection: usize, approach: char, signal: Signal) -> usize {
+    let a = APPROACHES.iter().position(|&c| c == approach).expect("approach is N, E, S or W");
+    intersection * 8 + a * 2 + if signal == Signal::Left { 1 } else { 0 }
+}
+
+/// The light at `index` of a plan: (intersection, approach, signal).
+pub fn light_at(index: usize) -> (usize, char, Signal) {
+    let signal = if index % 2 == 1 { Signal::Left } else { Signal::Straight };
+    (index / 8, APPROACHES[(index % 8) / 2], signal)
+}
+
 impl LightPlan {
     /// The original cycle with every duration multiplied by `scale`, each
     /// intersection shifted by its `offsets` entry (seconds).
@@ -156,8 +169,7 @@ impl LightPlan {
 
     /// Index of the light for (intersection, approach, signal).
     pub fn index(&self, intersection: usize, approach: char, signal: Signal) -> usize {
-        let a = APPROACHES.iter().position(|&c| c == approach).expect("approach is N, E, S or W");
-        intersection * 8 + a * 2 + if signal == Signal::Left { 1 } else { 0 }
+        light_index(intersection, approach, signal)
     }
 
     /// States of every light at time `t`.
