@@ -2,14 +2,12 @@
 //! Prints figures; asserts nothing (targets live in the issue notes).
 
 use causalcity::map::CityMap;
-use causalcity::orchestrate::plan::Expansion;
-use causalcity::orchestrate::progress::ProgressMode;
 use causalcity::orchestrate::run::{generate, GenOptions};
 use causalcity::output::png::{encode_png, PixelFormat, PngSettings};
+use causalcity::plan::Expansion;
+use causalcity::progress::ProgressMode;
 use causalcity::render::{CarSprite, Renderer};
 use causalcity::spec::DatasetSpec;
-use causalcity::world::toy::ToyWorld;
-use causalcity::world::World;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
@@ -90,7 +88,7 @@ fn png_settings_comparison() {
     let spec = DatasetSpec::from_json(&spec_json("png", 12, 1)).unwrap();
     let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
     let plan = expansion.plan(&expansion.keys(None)[0]).unwrap();
-    let traj = ToyWorld.simulate(&expansion.map, &plan);
+    let traj = causalcity::world::simulate(&expansion.map, &plan);
     let renderer = Renderer::new(&expansion.map, expansion.camera);
     let mut canvas = renderer.canvas();
     let sprites: Vec<CarSprite> = plan
@@ -102,7 +100,7 @@ fn png_settings_comparison() {
             yaw: s.yaw,
             length: c.length,
             width: c.width,
-            colour: c.colour,
+            colour: causalcity::render::palette::colour_of(c),
             mask_id: c.mask_id,
         })
         .collect();
@@ -253,18 +251,18 @@ fn main() {
         let t = Instant::now();
         let plans: Vec<_> = keys.iter().map(|k| expansion.plan(k).unwrap()).collect();
         let plan_ms = t.elapsed().as_secs_f64() * 1e3 / keys.len() as f64;
-        let world = causalcity::world::city::CityWorld::default();
         let t = Instant::now();
         for plan in &plans {
-            std::hint::black_box(world.simulate(&expansion.map, plan));
+            std::hint::black_box(causalcity::world::simulate(&expansion.map, plan));
         }
         let sim_ms = t.elapsed().as_secs_f64() * 1e3 / keys.len() as f64;
-        let trajectories: Vec<_> = plans.iter().take(100).map(|p| world.simulate(&expansion.map, p)).collect();
+        let trajectories: Vec<_> =
+            plans.iter().take(100).map(|p| causalcity::world::simulate(&expansion.map, p)).collect();
         let names: Vec<String> = expansion.map.intersections.iter().map(|i| i.name.clone()).collect();
         let t = Instant::now();
         for (plan, traj) in plans.iter().zip(&trajectories) {
             let mut sink = Vec::with_capacity(1 << 20);
-            causalcity::output::logs::write_lights(&mut sink, &plan.city.as_ref().unwrap().lights, &names, traj)
+            causalcity::output::logs::write_lights(&mut sink, &plan.world.city().unwrap().lights, &names, traj)
                 .unwrap();
         }
         let lights_ms = t.elapsed().as_secs_f64() * 1e3 / trajectories.len() as f64;

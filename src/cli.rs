@@ -1,7 +1,28 @@
-//! Every command-line flag, defined once with its documentation.
+//! Every command-line flag, defined once with its documentation, and the
+//! dispatch from a parsed command line to the library. Nothing here is
+//! domain logic: flags become the library's option types, results are
+//! printed through their `Display` (or as JSON), and every failure is one
+//! [`Error`] whose exit code `main` returns.
 
-use crate::orchestrate::run::Shard;
-use clap::{Args, Parser, Subcommand};
+use causalcity::analysis::baseline::baseline;
+use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
+use causalcity::analysis::stats::dataset_stats;
+use causalcity::error::Error;
+use causalcity::export::nri::{export_nri, NriLayout, NriOptions};
+use causalcity::export::nsdr::export_nsdr;
+use causalcity::export::vcdn::export_vcdn;
+use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
+use causalcity::orchestrate::merge::merge;
+use causalcity::orchestrate::run::{generate, GenOptions, Shard};
+use causalcity::output::manifest::Products;
+use causalcity::preview::{preview, PreviewOptions};
+use causalcity::progress::ProgressMode;
+use causalcity::spec::{Split, WorldKind};
+use causalcity::validate::validate;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use serde::Serialize;
+use std::fmt::Display;
+use std::io::Write;
 use std::path::PathBuf;
 
 /// Generates traffic datasets for causal discovery and counterfactual
@@ -56,7 +77,7 @@ pub struct RunArgs {
 
     /// World to run in [default: the file's "world", else city].
     #[arg(long, value_enum)]
-    pub world: Option<crate::spec::WorldKind>,
+    pub world: Option<WorldArg>,
 
     /// Write scenario.json and the logs only, no PNG frames or masks.
     #[arg(long)]
@@ -91,10 +112,10 @@ pub struct CounterfactualArgs {
 
     /// --sweep: kinds of intervention to draw from.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "stop,set-desired-speed,run-red-light,remove")]
-    pub kinds: Vec<crate::orchestrate::handwritten::SweepKind>,
+    pub kinds: Vec<SweepKindArg>,
 
     /// --sweep: at most N scenarios per split and group.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..))]
     pub limit: Option<u32>,
 
     /// --sweep: worker threads [default: every core].
@@ -107,7 +128,7 @@ pub struct CounterfactualArgs {
 
     /// World to run a scenario file in [default: the file's "world", else city].
     #[arg(long, value_enum, requires = "scenario")]
-    pub world: Option<crate::spec::WorldKind>,
+    pub world: Option<WorldArg>,
 
     /// Write scenario.json and the logs only, no PNG frames or masks.
     #[arg(long)]
@@ -133,7 +154,7 @@ pub struct PreviewArgs {
     pub out: PathBuf,
 
     /// Scale factor of the frames (0 < scale <= 1).
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = 0.4, value_parser = scale_factor)]
     pub scale: f64,
 
     /// Use every Nth frame.
@@ -141,7 +162,7 @@ pub struct PreviewArgs {
     pub every: u32,
 
     /// GIF frames per second [default: the scenario's real time at --every].
-    #[arg(long)]
+    #[arg(long, value_parser = positive_number)]
     pub fps: Option<f64>,
 
     /// Tint every car's mask pixels with its instance colour.
@@ -172,7 +193,7 @@ pub struct BaselineArgs {
     pub dataset: PathBuf,
 
     /// Longest lag tried, in seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 8.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 8.0, value_parser = positive_number)]
     pub max_lag: f64,
 
     /// Print the table as JSON on stdout.
@@ -206,8 +227,8 @@ pub struct HeatmapArgs {
     pub group: Option<String>,
 
     /// Only this split.
-    #[arg(long, value_parser = ["train", "val", "test"])]
-    pub split: Option<String>,
+    #[arg(long, value_enum)]
+    pub split: Option<SplitArg>,
 
     /// Print the summary as JSON on stdout.
     #[arg(long)]
@@ -252,7 +273,7 @@ pub struct ExportNriArgs {
     /// causalcity: [scenarios, frames, cars, 2] with identity edges (the original
     /// CausalCity NRI fork); nri: [scenarios, frames, 2, cars], no self loops.
     #[arg(long, value_enum, default_value = "causalcity")]
-    pub layout: crate::export::nri::NriLayout,
+    pub layout: NriLayoutArg,
 
     /// Appended to every file name, e.g. `_city` gives loc_train_city.npy.
     #[arg(long, default_value = "")]
@@ -274,7 +295,7 @@ pub struct GenArgs {
     pub out: Option<PathBuf>,
 
     /// Generate at most N scenarios per split and group: a quick sample of a big spec.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..))]
     pub limit: Option<u32>,
 
     /// Worker threads [default: every core]. Output is identical for any value.
@@ -338,4 +359,242 @@ pub struct ValidateArgs {
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--world`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WorldArg {
+    /// No agency: constant speed along the route, no lights, no collisions.
+    Toy,
+    /// Agency: car-following, lights, merges, collisions, confounders.
+    City,
+}
+
+impl From<WorldArg> for WorldKind {
+    fn from(w: WorldArg) -> WorldKind {
+        match w {
+            WorldArg::Toy => WorldKind::Toy,
+            WorldArg::City => WorldKind::City,
+        }
+    }
+}
+
+/// `--split`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SplitArg {
+    Train,
+    Val,
+    Test,
+}
+
+impl From<SplitArg> for Split {
+    fn from(s: SplitArg) -> Split {
+        match s {
+            SplitArg::Train => Split::Train,
+            SplitArg::Val => Split::Val,
+            SplitArg::Test => Split::Test,
+        }
+    }
+}
+
+/// `export nri --layout`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum NriLayoutArg {
+    /// loc/vel [scenarios, frames, cars, 2]; edges with the identity.
+    Causalcity,
+    /// loc/vel [scenarios, frames, 2, cars]; edges without self loops.
+    Nri,
+}
+
+impl From<NriLayoutArg> for NriLayout {
+    fn from(l: NriLayoutArg) -> NriLayout {
+        match l {
+            NriLayoutArg::Causalcity => NriLayout::Causalcity,
+            NriLayoutArg::Nri => NriLayout::Nri,
+        }
+    }
+}
+
+/// `counterfactual --kinds`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SweepKindArg {
+    /// Stop a random car for 2-6 s.
+    Stop,
+    /// Set a random car's desired speed to 30-60 % of the spec's.
+    SetDesiredSpeed,
+    /// Make a random car run red lights.
+    RunRedLight,
+    /// Remove a random car.
+    Remove,
+}
+
+impl From<SweepKindArg> for SweepKind {
+    fn from(k: SweepKindArg) -> SweepKind {
+        match k {
+            SweepKindArg::Stop => SweepKind::Stop,
+            SweepKindArg::SetDesiredSpeed => SweepKind::SetDesiredSpeed,
+            SweepKindArg::RunRedLight => SweepKind::RunRedLight,
+            SweepKindArg::Remove => SweepKind::Remove,
+        }
+    }
+}
+
+/// A finite number above 0.
+fn positive_number(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("{text:?} is not allowed: use a number above 0")),
+    }
+}
+
+/// A number in (0, 1].
+fn scale_factor(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x > 0.0 && x <= 1.0 => Ok(x),
+        _ => Err(format!("{text:?} is not allowed: use a number above 0 and at most 1")),
+    }
+}
+
+fn progress(quiet: bool) -> ProgressMode {
+    if quiet {
+        ProgressMode::Quiet
+    } else {
+        ProgressMode::Auto
+    }
+}
+
+/// Writes `text` to stdout. A closed pipe (`causalcity stats D | head`)
+/// ends the program quietly.
+fn say(text: impl Display) -> Result<(), Error> {
+    let mut stdout = std::io::stdout().lock();
+    match writeln!(stdout, "{text}").and_then(|()| stdout.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => Err(Error::failure(format!("cannot write to stdout: {e}"))),
+    }
+}
+
+/// The value as pretty JSON, or its text form.
+fn report<T: Serialize + Display>(value: &T, json: bool) -> Result<(), Error> {
+    if json {
+        say(serde_json::to_string_pretty(value).map_err(Error::failure)?)
+    } else {
+        say(value.to_string().trim_end())
+    }
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> Result<(), Error> {
+    match cli.command {
+        Command::Gen(args) => {
+            let options = GenOptions {
+                spec_path: args.spec,
+                out: args.out,
+                limit: args.limit,
+                threads: args.threads.map(|t| t as usize),
+                images: !args.no_images,
+                annotations: args.annotations,
+                progress: progress(args.quiet),
+                shard: args.shard,
+                force: args.force,
+                fsync: args.fsync,
+                handle_signals: true,
+            };
+            report(&generate(&options)?, args.json)
+        }
+        Command::Merge(args) => say(merge(&args.out, &args.shards)?),
+        Command::Export(ExportCommand::Nri(args)) => {
+            let options = NriOptions { layout: args.layout.into(), suffix: args.suffix, directed: args.directed };
+            for line in export_nri(&args.dataset, &args.out, &options).map_err(Error::Failure)? {
+                say(line)?;
+            }
+            Ok(())
+        }
+        Command::Export(ExportCommand::Nsdr(args)) => {
+            let n = export_nsdr(&args.dataset, &args.out, progress(args.quiet)).map_err(Error::Failure)?;
+            say(format!("wrote annotations.json for {n} scenarios under {}", args.out.display()))
+        }
+        Command::Export(ExportCommand::Vcdn(args)) => {
+            let n = export_vcdn(&args.dataset, &args.out, progress(args.quiet)).map_err(Error::Failure)?;
+            say(format!("wrote {n} V-CDN HDF5 files under {}", args.out.display()))
+        }
+        Command::Preview(args) => {
+            let options = PreviewOptions {
+                scale: args.scale,
+                every: args.every,
+                fps: args.fps,
+                masks: args.masks,
+                trails: args.trails,
+                arrows: args.arrows,
+                sheet_frames: args.sheet_frames,
+                columns: args.columns,
+            };
+            say(preview(&args.scenario, &args.out, &options).map_err(Error::Failure)?)
+        }
+        Command::Baseline(args) => report(&baseline(&args.dataset, args.max_lag).map_err(Error::Failure)?, args.json),
+        Command::Run(args) => {
+            let options = RunOptions {
+                scenario_file: args.scenario,
+                out: args.out,
+                world: args.world.map(Into::into),
+                images: !args.no_images,
+                annotations: args.annotations,
+            };
+            let written = run_file(&options)?;
+            if args.json {
+                return say(serde_json::to_string_pretty(&written).map_err(Error::failure)?);
+            }
+            for w in &written {
+                say(w)?;
+            }
+            Ok(())
+        }
+        Command::Counterfactual(args) => {
+            let images = !args.no_images;
+            if let Some(spec_path) = args.sweep {
+                let options = SweepOptions {
+                    spec_path,
+                    out: args.out,
+                    limit: args.limit,
+                    kinds: args.kinds.into_iter().map(Into::into).collect(),
+                    products: Products { images, annotations: false },
+                    threads: args.threads.map(|t| t as usize),
+                    progress: progress(args.quiet),
+                };
+                return report(&sweep(&options)?, args.json);
+            }
+            let Some(scenario_file) = args.scenario else {
+                return Err(Error::input("give --scenario FILE or --sweep SPEC"));
+            };
+            let options = RunOptions {
+                scenario_file,
+                out: args.out,
+                world: args.world.map(Into::into),
+                images,
+                annotations: false,
+            };
+            let pairs = counterfactual(&options, args.intervention.as_deref())?;
+            if args.json {
+                return say(serde_json::to_string_pretty(&pairs).map_err(Error::failure)?);
+            }
+            for pair in &pairs {
+                say(pair)?;
+            }
+            Ok(())
+        }
+        Command::Stats(args) => report(&dataset_stats(&args.dataset).map_err(Error::Failure)?, args.json),
+        Command::Heatmap(args) => {
+            let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
+            report(&heatmap(&args.dataset, &args.out, &filter).map_err(Error::Failure)?, args.json)
+        }
+        Command::Validate(args) => {
+            let report_ = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::Input)?;
+            report(&report_, args.json)?;
+            if report_.problems.is_empty() {
+                Ok(())
+            } else {
+                Err(Error::Failure(format!("{} problems found", report_.problems.len())))
+            }
+        }
+    }
 }

@@ -3,9 +3,9 @@
 //! reads datasets (stats, heatmap, exports).
 
 use crate::map::CityMap;
-use crate::orchestrate::plan::{Expansion, ScenarioKey};
 use crate::output::manifest::ManifestRecord;
 use crate::output::scenario_dir;
+use crate::plan::{Expansion, ScenarioKey};
 use crate::spec::{DatasetSpec, Split};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -1,18 +1,29 @@
 //! causalcity: traffic datasets for causal discovery and counterfactual
-//! reasoning. Data flows one way: a [`spec::DatasetSpec`] is expanded into
-//! [`orchestrate::plan::ScenarioPlan`]s, a [`world`] simulates each into
-//! trajectories, [`render`] turns them into frames and [`output`] writes files.
+//! reasoning. Data flows one way, and every layer imports only the ones
+//! before it:
+//!
+//! [`geometry`], [`camera`], [`map`] -> [`spec`] -> [`plan`] -> [`world`] ->
+//! [`render`] -> [`output`] -> [`dataset`], [`validate`], [`analysis`],
+//! [`export`], [`preview`] -> [`orchestrate`].
+//!
+//! A [`spec::DatasetSpec`] is expanded into [`plan::ScenarioPlan`]s, a
+//! [`world`] simulates each into trajectories, [`render`] turns them into
+//! frames and [`output`] writes files. The command line lives in the binary.
 
 pub mod analysis;
-pub mod cli;
+pub mod camera;
 pub mod dataset;
+pub mod error;
 pub mod export;
 pub mod geometry;
 pub mod map;
 pub mod orchestrate;
 pub mod output;
+pub mod plan;
 pub mod preview;
+pub mod progress;
 pub mod render;
 pub mod spec;
+pub mod timing;
 pub mod validate;
 pub mod world;

@@ -33,10 +33,19 @@ pub struct PreviewOptions {
 /// What was written.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct PreviewSummary {
+    /// The file written.
+    pub path: std::path::PathBuf,
     pub frames: usize,
     pub width: u32,
     pub height: u32,
     pub bytes: u64,
+}
+
+impl std::fmt::Display for PreviewSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (path, w, h) = (self.path.display(), self.width, self.height);
+        write!(f, "wrote {path} ({w}x{h}, {} frames, {:.0} KB)", self.frames, self.bytes as f64 / 1e3)
+    }
 }
 
 /// Writes the preview of the scenario in `scenario_dir` to `out`.
@@ -62,8 +71,11 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
     if !first.exists() {
         return Err(format!("{} has no frames (made with --no-images?): nothing to preview", scenario_dir.display()));
     }
-    let colours: Vec<[u8; 3]> =
-        scenario.cars.iter().map(|c| crate::render::parse_hex_colour(&c.colour).unwrap_or([128, 128, 128])).collect();
+    let colours: Vec<[u8; 3]> = scenario
+        .cars
+        .iter()
+        .map(|c| crate::render::palette::parse_hex_colour(&c.colour).unwrap_or([128, 128, 128]))
+        .collect();
 
     let chosen: Vec<usize> = match kind {
         Kind::Gif => (0..frames).step_by(options.every as usize).collect(),
@@ -183,7 +195,7 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
     };
     std::fs::rename(&partial, out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
-    Ok(PreviewSummary { frames: chosen.len(), width, height, bytes })
+    Ok(PreviewSummary { path: out.to_path_buf(), frames: chosen.len(), width, height, bytes })
 }
 
 enum Kind {

@@ -1,14 +1,14 @@
 //! The dataset spec: what a user asks for, read from JSON. Every field is
 //! checked here with a message that names it, the value and what is allowed.
 
-use crate::world::driver::DriverParams;
-use crate::world::lights::{ScheduleStep, Signal};
+use crate::camera::{CameraKind, CameraPlan};
+use crate::map::signals::{ScheduleStep, Signal};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 
 /// Which dynamics drive the cars.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum WorldKind {
     /// No agency: constant speed along the route, no lights, no collisions.
@@ -206,8 +206,7 @@ impl CameraSpec {
         &self,
         field: &str,
         car_index: impl Fn(&CarRef) -> Result<usize, String>,
-    ) -> Result<crate::render::camera::CameraPlan, SpecError> {
-        use crate::render::camera::{CameraKind, CameraPlan};
+    ) -> Result<CameraPlan, SpecError> {
         if !valid_folder_name(&self.name) {
             return Err(SpecError::new(
                 format!("{field}.name"),
@@ -252,6 +251,47 @@ pub fn valid_folder_name(name: &str) -> bool {
         && name.len() <= 64
         && !name.starts_with('.')
         && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// One driver's car-following parameters (the city world's drivers), as
+/// the spec gives them and, in plans, after confounders have acted on them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriverParams {
+    /// Desired time gap to the car ahead, seconds.
+    pub time_headway: f64,
+    /// Bumper-to-bumper gap kept when stopped, metres.
+    pub min_gap: f64,
+    /// Maximum acceleration, m/s^2.
+    pub max_acceleration: f64,
+    /// Comfortable deceleration, m/s^2 (IDM's b; used to decide whether a yellow can be stopped for).
+    pub comfortable_deceleration: f64,
+    /// Hard braking limit, m/s^2: the car can never brake harder.
+    pub max_deceleration: f64,
+    /// Seconds between decisions; the acceleration is held in between.
+    pub reaction_time: f64,
+    /// Relative standard deviation of perceived gaps.
+    pub perception_noise: f64,
+    /// Standard deviation of the car's sideways wander in its lane, metres.
+    pub lateral_wander: f64,
+    /// Lateral acceleration accepted in curves, m/s^2 (sets curve speeds).
+    pub curve_acceleration: f64,
+}
+
+impl Default for DriverParams {
+    fn default() -> Self {
+        DriverParams {
+            time_headway: 1.0,
+            min_gap: 0.8,
+            max_acceleration: 1.2,
+            comfortable_deceleration: 1.5,
+            max_deceleration: 6.0,
+            reaction_time: 0.3,
+            perception_noise: 0.04,
+            lateral_wander: 0.03,
+            curve_acceleration: 1.2,
+        }
+    }
 }
 
 /// A value fixed by the spec or drawn per scenario.

@@ -5,11 +5,14 @@
 //! SHA-256 of every file. Reports every problem with its path.
 
 use crate::dataset::Dataset;
-use crate::orchestrate::plan::ScenarioKey;
+use crate::output::layout::{
+    CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
+};
 use crate::output::logs::{EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
-use crate::output::{frame_digits, hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
-use crate::spec::{DatasetSpec, WorldKind};
+use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
+use crate::plan::ScenarioKey;
+use crate::spec::{DatasetSpec, Split, WorldKind};
 use rayon::prelude::*;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -59,9 +62,7 @@ impl fmt::Display for ValidationReport {
 /// What every scenario of the dataset must look like.
 struct Expected<'a> {
     spec: &'a DatasetSpec,
-    images: bool,
-    annotations: bool,
-    digits: usize,
+    layout: ScenarioLayout,
 }
 
 /// Checks the dataset in `dir`. Errors only when `dir` is not a dataset.
@@ -70,12 +71,11 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let manifest_path = dir.join("manifest.json");
     let dataset = Dataset::open(dir)?;
     let (record, keys) = (&dataset.record, &dataset.keys);
-    let expected = Expected {
-        spec: dataset.spec(),
-        images: record.images,
-        annotations: record.annotations,
-        digits: frame_digits(dataset.spec().frames),
-    };
+    let spec = dataset.spec();
+    let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
+    let layout =
+        ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.images, record.annotations, cameras);
+    let expected = Expected { spec, layout };
 
     let mut problems = Vec::new();
     if !record.complete {
@@ -84,7 +84,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
             message: "the run that wrote this dataset did not finish: rerun its gen command to complete it".into(),
         });
     }
-    problems.extend(unexpected_entries(dir, keys));
+    problems.extend(unexpected_entries(dir, keys, spec));
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
     let results: Vec<(Vec<Problem>, u64, u64)> =
@@ -106,12 +106,36 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     })
 }
 
-/// Leftovers of interrupted runs and folders the manifest does not know.
-fn unexpected_entries(dir: &Path, keys: &[ScenarioKey]) -> Vec<Problem> {
+/// Leftovers of interrupted runs, and files and folders the manifest does
+/// not know: at the root (beside manifest.json and the group folders), in a
+/// group folder (beside its splits) and in a split folder.
+fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> Vec<Problem> {
     let known: BTreeSet<PathBuf> =
         keys.iter().map(|k| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name())).collect();
     let splits: BTreeSet<PathBuf> = known.iter().filter_map(|p| p.parent().map(Path::to_path_buf)).collect();
+    let groups: BTreeSet<PathBuf> = spec.groups.iter().map(|g| dir.join(g.name())).collect();
     let mut problems = Vec::new();
+    // The root: manifest.json, the group folders, and an empty or shard-manifest `shards/`.
+    let mut allowed: BTreeSet<PathBuf> = groups.clone();
+    allowed.insert(dir.join("manifest.json"));
+    allowed.insert(dir.join("shards"));
+    let mut parents: Vec<(PathBuf, &str)> = vec![(
+        dir.to_path_buf(),
+        "not part of this dataset: the dataset root holds manifest.json and the group folders of its spec only",
+    )];
+    for group in &groups {
+        allowed.extend(Split::ALL.iter().map(|s| group.join(s.name())).filter(|p| splits.contains(p)));
+        parents
+            .push((group.clone(), "not part of this dataset: a group folder holds the split folders of its spec only"));
+    }
+    for (parent, message) in parents {
+        let Ok(entries) = std::fs::read_dir(&parent) else { continue };
+        for e in entries.flatten() {
+            if !allowed.contains(&e.path()) {
+                problems.push(Problem { path: e.path(), message: message.into() });
+            }
+        }
+    }
     for split in splits {
         let Ok(entries) = std::fs::read_dir(&split) else { continue };
         for e in entries.flatten() {
@@ -140,34 +164,21 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         return (problems, 0, 0);
     }
     let spec = expected.spec;
+    let layout = &expected.layout;
     let frames = spec.frames as usize;
-    let city = spec.world == WorldKind::City;
+    let city = layout.city;
 
-    // The files there should be.
-    let mut names: Vec<String> = vec!["scenario.json".into(), "poses.csv".into(), PIXELS_FILE.into()];
-    if city {
-        names.extend(["lights.csv".into(), "events.csv".into()]);
-    }
-    if expected.annotations {
-        names.push(crate::output::annotations::ANNOTATIONS_FILE.into());
-    }
-    if expected.images {
-        for kind in ["rgb", "mask"] {
-            names.extend((0..frames).map(|f| format!("{kind}/{f:0width$}.png", width = expected.digits)));
-        }
-        // Extra cameras: their frames and pixel log.
-        for camera in &spec.cameras {
-            let base = format!("cameras/{}", camera.name);
-            let kinds: &[&str] = if camera.depth { &["rgb", "mask", "depth"] } else { &["rgb", "mask"] };
-            for kind in kinds {
-                names.extend((0..frames).map(|f| format!("{base}/{kind}/{f:0width$}.png", width = expected.digits)));
-            }
-            names.push(format!("{base}/poses.csv"));
-        }
-    }
+    // The files and folders there should be.
+    let names = layout.files();
     let wanted: BTreeSet<&str> = names.iter().map(String::as_str).collect();
-    for extra in list_files(&dir).iter().filter(|n| !wanted.contains(n.as_str()) && n.as_str() != CHECKSUMS) {
+    let folders = layout.folders();
+    let wanted_folders: BTreeSet<&str> = folders.iter().map(String::as_str).collect();
+    let (found_files, found_folders) = list_entries(&dir);
+    for extra in found_files.iter().filter(|n| !wanted.contains(n.as_str())) {
         problem(&dir.join(extra), "unexpected file".into());
+    }
+    for extra in found_folders.iter().filter(|n| !wanted_folders.contains(n.as_str())) {
+        problem(&dir.join(extra), "unexpected folder".into());
     }
 
     // The checksum listing.
@@ -207,8 +218,8 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     // scenario.json: identity, frames and cars.
     let mut mask_ids: BTreeSet<u8> = BTreeSet::new();
     let mut cars = 0usize;
-    if let Some(data) = read("scenario.json", &mut problems) {
-        let path = dir.join("scenario.json");
+    if let Some(data) = read(SCENARIO_JSON, &mut problems) {
+        let path = dir.join(SCENARIO_JSON);
         match serde_json::from_slice::<serde_json::Value>(&data) {
             Ok(v) => {
                 let checks = [
@@ -251,8 +262,8 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     }
 
     // CSV logs: columns, row counts, ids.
-    if let Some(data) = read("poses.csv", &mut problems) {
-        check_csv(&dir.join("poses.csv"), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
+    if let Some(data) = read(POSES_CSV, &mut problems) {
+        check_csv(&dir.join(POSES_CSV), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
             let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(2)?.parse::<usize>().ok()?);
             let ok = cars > 0 && frame == i / cars && car == i % cars;
             ok.then_some(()).ok_or(()).ok()
@@ -264,13 +275,13 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
     if city {
-        if let Some(data) = read("lights.csv", &mut problems) {
-            check_csv(&dir.join("lights.csv"), &data, &LIGHT_COLUMNS, frames * 32, &mut problems, |row, i| {
+        if let Some(data) = read(LIGHTS_CSV, &mut problems) {
+            check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * 32, &mut problems, |row, i| {
                 (row.get(0)?.parse::<usize>().ok()? == i / 32).then_some(())
             });
         }
-        if let Some(data) = read("events.csv", &mut problems) {
-            let path = dir.join("events.csv");
+        if let Some(data) = read(EVENTS_CSV, &mut problems) {
+            let path = dir.join(EVENTS_CSV);
             let mut reader = csv::Reader::from_reader(&data[..]);
             let header_ok = reader.headers().map(|h| h.iter().eq(EVENT_COLUMNS.iter().copied())).unwrap_or(false);
             if !header_ok {
@@ -292,7 +303,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
 
-    if expected.annotations {
+    if layout.annotations {
         let name = crate::output::annotations::ANNOTATIONS_FILE;
         if let Some(data) = read(name, &mut problems) {
             let frames_listed = serde_json::from_slice::<serde_json::Value>(&data)
@@ -309,10 +320,10 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
 
     // Frames: RGB by header (their bytes are covered by the checksums), masks
     // decoded so that every id is checked.
-    if expected.images {
+    if layout.images {
         let (w, h) = (spec.image.width, spec.image.height);
         for f in 0..frames {
-            let rgb = format!("rgb/{f:0width$}.png", width = expected.digits);
+            let rgb = layout.frame_name(FrameKind::Rgb, f as u32);
             if let Some(data) = read(&rgb, &mut problems) {
                 match png_header(&data) {
                     Some((pw, ph, 8, 2)) if (pw, ph) == (w, h) => {}
@@ -323,7 +334,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
                     None => problems.push(Problem { path: dir.join(&rgb), message: "not a PNG".into() }),
                 }
             }
-            let mask = format!("mask/{f:0width$}.png", width = expected.digits);
+            let mask = layout.frame_name(FrameKind::Mask, f as u32);
             if let Some(data) = read(&mask, &mut problems) {
                 if let Err(message) = check_mask(&data, w, h, &mask_ids) {
                     problems.push(Problem { path: dir.join(&mask), message });
@@ -331,7 +342,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
             }
         }
         // Extra cameras: present and as written (checksums).
-        for name in names.iter().filter(|n| n.starts_with("cameras/")) {
+        for name in names.iter().filter(|n| n.starts_with(crate::output::layout::CAMERAS)) {
             read(name, &mut problems);
         }
     }
@@ -407,20 +418,23 @@ fn check_mask(data: &[u8], w: u32, h: u32, ids: &BTreeSet<u8>) -> Result<(), Str
     Ok(())
 }
 
-/// Relative paths of every file under `dir`.
-fn list_files(dir: &Path) -> Vec<String> {
-    let mut out = Vec::new();
+/// Relative paths of every file and every folder under `dir`.
+fn list_entries(dir: &Path) -> (Vec<String>, Vec<String>) {
+    let (mut files, mut folders) = (Vec::new(), Vec::new());
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
         let Ok(entries) = std::fs::read_dir(&d) else { continue };
         for e in entries.flatten() {
             let path = e.path();
+            let Ok(rel) = path.strip_prefix(dir) else { continue };
+            let rel = rel.to_string_lossy().into_owned();
             if path.is_dir() {
                 stack.push(path);
-            } else if let Ok(rel) = path.strip_prefix(dir) {
-                out.push(rel.to_string_lossy().into_owned());
+                folders.push(rel);
+            } else {
+                files.push(rel);
             }
         }
     }
-    out
+    (files, folders)
 }

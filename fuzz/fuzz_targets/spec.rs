@@ -4,7 +4,7 @@
 #![no_main]
 
 use causalcity::map::CityMap;
-use causalcity::orchestrate::plan::Expansion;
+use causalcity::plan::Expansion;
 use causalcity::spec::DatasetSpec;
 use libfuzzer_sys::fuzz_target;
 use std::sync::Arc;

@@ -18,6 +18,9 @@ const BAR_WIDTH: u32 = 40;
 /// What the heat map summarises.
 #[derive(Debug, Clone, Serialize)]
 pub struct HeatmapSummary {
+    /// The PNG written.
+    #[serde(skip)]
+    pub path: std::path::PathBuf,
     pub scenarios: usize,
     pub car_frames: u64,
     pub cells_visited: usize,
@@ -27,6 +30,22 @@ pub struct HeatmapSummary {
     pub visited_cell_cv: f64,
     pub width: u32,
     pub height: u32,
+}
+
+impl std::fmt::Display for HeatmapSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "wrote {} ({}x{}): {} scenarios, {} car-frames, {} cells visited, dwell CV {:.2}",
+            self.path.display(),
+            self.width,
+            self.height,
+            self.scenarios,
+            self.car_frames,
+            self.cells_visited,
+            self.visited_cell_cv
+        )
+    }
 }
 
 /// Filters on which scenarios count.
@@ -88,6 +107,7 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
     encode_png(std::io::BufWriter::new(file), iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())
         .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
     Ok(HeatmapSummary {
+        path: out.to_path_buf(),
         scenarios: dirs.len(),
         car_frames: counts.iter().sum(),
         cells_visited: visited.len(),

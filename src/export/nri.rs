@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// Array layout of the export.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NriLayout {
     /// loc/vel [scenarios, frames, cars, 2]; edges with the identity.
     Causalcity,

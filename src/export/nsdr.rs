@@ -5,10 +5,10 @@
 //! `output::annotations`).
 
 use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
-use crate::orchestrate::progress::{Progress, ProgressMode};
 use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
+use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 

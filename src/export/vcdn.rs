@@ -15,7 +15,7 @@
 //! feature (`make` installs the library and turns it on).
 
 use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
-use crate::orchestrate::progress::{Progress, ProgressMode};
+use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 

@@ -12,6 +12,7 @@
 
 pub mod curve;
 pub mod route;
+pub mod signals;
 
 use curve::Curve;
 use glam::DVec2;

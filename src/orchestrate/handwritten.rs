@@ -10,16 +10,19 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::plan::ScenarioPlan;
-use super::progress::{Progress, ProgressMode};
-use super::run::{load_spec, write_planned, GenError, Job};
+use super::run::{load_spec, scenario_writer, write_simulated, GenError};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::map::CityMap;
 use crate::output::manifest::Products;
 use crate::output::number::push_fixed;
+use crate::output::writer::ScenarioWriter;
 use crate::output::{scenario_dir, write_atomically};
+use crate::plan::interventions::{Effect, Intervention, Trigger};
+use crate::plan::Expansion;
+use crate::plan::ScenarioPlan;
+use crate::progress::{Progress, ProgressMode};
 use crate::spec::WorldKind;
-use crate::world::interventions::{Effect, Intervention, Trigger};
+use crate::timing::StageTimes;
 use crate::world::{EventKind, Trajectories};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -35,6 +38,15 @@ pub enum RunError {
     Usage(String),
     #[error(transparent)]
     Write(#[from] GenError),
+}
+
+impl From<RunError> for crate::error::Error {
+    fn from(e: RunError) -> Self {
+        match e {
+            RunError::Write(e) => e.into(),
+            RunError::Input(_) | RunError::Usage(_) => crate::error::Error::Input(e.to_string()),
+        }
+    }
 }
 
 impl RunError {
@@ -59,9 +71,12 @@ pub struct RunOptions {
 }
 
 impl RunOptions {
-    fn out(&self) -> PathBuf {
+    /// `--out`, or `data/<file stem>` when the stem can name a folder
+    /// (never `..` or an absolute path), else `data/scenarios`.
+    pub fn out(&self) -> PathBuf {
         self.out.clone().unwrap_or_else(|| {
             let stem = self.scenario_file.file_stem().map(|s| s.to_string_lossy().into_owned());
+            let stem = stem.filter(|s| crate::spec::valid_folder_name(s));
             Path::new("data").join(stem.unwrap_or_else(|| "scenarios".into()))
         })
     }
@@ -93,14 +108,20 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
     scenarios
         .par_iter()
         .map(|s| {
-            let job = Job::new(&s.expansion, out.clone(), options.products(), false);
-            let trajectories = job.world.simulate(&s.expansion.map, &s.plan);
+            let writer = scenario_writer(&s.expansion, options.products(), false);
+            let trajectories = crate::world::simulate(&s.expansion.map, &s.plan);
             let path = out.join(&s.name);
-            let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
-            let bytes = write_planned(&job, &s.plan, &trajectories, path.clone(), canvas.as_mut())?;
+            let times = StageTimes::default();
+            let bytes = write_simulated(&writer, &s.plan, &trajectories, path.clone(), &mut writer.buffers(), &times)?;
             Ok(Written { scenario: s.name.clone(), path, bytes })
         })
         .collect()
+}
+
+impl std::fmt::Display for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "wrote {} ({:.1} MB)", self.path.display(), self.bytes as f64 / 1e6)
+    }
 }
 
 /// One car's part in a counterfactual pair.
@@ -124,6 +145,20 @@ pub struct PairSummary {
     /// The ground-truth effect set: names of the cars whose trajectory changed.
     pub affected: Vec<String>,
     pub cars: Vec<CarDivergence>,
+}
+
+impl std::fmt::Display for PairSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let affected = if self.affected.is_empty() { "none".to_string() } else { self.affected.join(", ") };
+        write!(
+            f,
+            "{}: {} -> affected {} of {} cars: {affected}",
+            self.scenario,
+            self.interventions.join("; "),
+            self.affected.len(),
+            self.cars.len()
+        )
+    }
 }
 
 /// Writes `<out>/<Name>/factual/`, `counterfactual/`, `divergence.csv` and
@@ -164,8 +199,8 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
     pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
-            let job = Job::new(&s.expansion, out.clone(), options.products(), false);
-            write_pair(&job, &s.name, factual, counterfactual, &out.join(&s.name))
+            let writer = scenario_writer(&s.expansion, options.products(), false);
+            write_pair(&s.expansion, &writer, &s.name, factual, counterfactual, &out.join(&s.name))
         })
         .collect::<Result<Vec<_>, GenError>>()
         .map_err(RunError::Write)
@@ -174,21 +209,22 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
 /// Simulates a factual / counterfactual pair (the counterfactual's extra
 /// interventions come after the factual's) and writes it into `folder`.
 fn write_pair(
-    job: &Job<'_>,
+    expansion: &Expansion,
+    writer: &ScenarioWriter,
     name: &str,
     factual: &ScenarioPlan,
     counterfactual: &ScenarioPlan,
     folder: &Path,
 ) -> Result<PairSummary, GenError> {
-    let map = &job.expansion.map;
-    let (a, b) = rayon::join(|| job.world.simulate(map, factual), || job.world.simulate(map, counterfactual));
-    let mut canvas = job.renderer.as_ref().map(|r| r.canvas());
-    write_planned(job, factual, &a, folder.join("factual"), canvas.as_mut())?;
-    write_planned(job, counterfactual, &b, folder.join("counterfactual"), canvas.as_mut())?;
+    let map = &expansion.map;
+    let (a, b) = rayon::join(|| crate::world::simulate(map, factual), || crate::world::simulate(map, counterfactual));
+    let (mut buffers, times) = (writer.buffers(), StageTimes::default());
+    write_simulated(writer, factual, &a, folder.join("factual"), &mut buffers, &times)?;
+    write_simulated(writer, counterfactual, &b, folder.join("counterfactual"), &mut buffers, &times)?;
     let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
     let labels: Vec<String> =
         counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
-    let (csv, summary) = divergence(name, &names, &labels, &a, &b, job.expansion.camera.pixels_per_metre);
+    let (csv, summary) = divergence(name, &names, &labels, &a, &b, expansion.camera.pixels_per_metre);
     write_atomically(&folder.join("divergence.csv"), &csv)?;
     let mut json = serde_json::to_vec_pretty(&summary).expect("summary serialises");
     json.push(b'\n');
@@ -197,7 +233,7 @@ fn write_pair(
 }
 
 /// Kinds of random intervention `counterfactual --sweep` draws from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SweepKind {
     /// Stop a random car for 2-6 s.
@@ -234,6 +270,19 @@ pub struct SweepSummary {
     pub mean_affected_cars: f64,
 }
 
+impl std::fmt::Display for SweepSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "wrote {} counterfactual pairs to {}: {} with an effect, {:.2} cars affected on average",
+            self.pairs,
+            self.out.display(),
+            self.pairs_with_effect,
+            self.mean_affected_cars
+        )
+    }
+}
+
 /// Counterfactual pairs at scale: for every scenario of a `gen` spec, one
 /// random intervention of the given kinds (drawn from the scenario's own
 /// stream, so the sweep is reproducible), written as
@@ -259,7 +308,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         .build()
         .map_err(|e| RunError::Write(GenError::Threads { threads, reason: e.to_string() }))?;
     let keys = expansion.keys(options.limit);
-    let job = Job::new(&expansion, out.clone(), options.products, false);
+    let writer = scenario_writer(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
     let summaries: Vec<PairSummary> = pool
         .install(|| {
@@ -272,7 +321,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                     let mut counterfactual = plan.clone();
                     counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
                     let folder = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
-                    let summary = write_pair(&job, &key.folder_name(), &plan, &counterfactual, &folder)?;
+                    let summary = write_pair(&expansion, &writer, &key.folder_name(), &plan, &counterfactual, &folder)?;
                     bar.inc();
                     Ok(summary)
                 })
@@ -318,7 +367,7 @@ fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention
     let effect = match kind {
         SweepKind::Stop => Effect::Stop { car, seconds: (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0 },
         SweepKind::SetDesiredSpeed => {
-            let base = plan.cars[car].agency.as_ref().and_then(|a| a.desired_speeds.first().copied()).unwrap_or(1.8);
+            let base = plan.world.city().and_then(|c| c.agency[car].desired_speeds.first().copied()).unwrap_or(1.8);
             Effect::SetDesiredSpeed { car, speed: (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0 }
         }
         SweepKind::RunRedLight => Effect::RunRedLights { car },

@@ -109,52 +109,66 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let expansion = crate::dataset::expansion_of(&first, &manifests[0].0).map_err(GenError::Manifest)?;
     let keys = expansion.keys(first.limit);
 
-    // Move every scenario into place.
-    let (mut moved, mut already) = (0u64, 0u64);
-    for source in &others {
-        for key in &keys {
+    // Check every scenario before anything moves: each is in --out or in a
+    // shard folder, and copies of one scenario agree.
+    let mut moves: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let mut duplicates: Vec<PathBuf> = Vec::new();
+    let mut absent: Vec<String> = Vec::new();
+    for key in &keys {
+        let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
+        let mut found = to.is_dir().then(|| to.clone());
+        for source in &others {
             let from = scenario_dir(source, &key.group, key.split.name(), &key.folder_name());
             if !from.is_dir() {
                 continue;
             }
-            let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
-            if to.exists() {
-                let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(to.join(CHECKSUMS)).ok());
-                if a.is_none() || a != b {
-                    return Err(GenError::Manifest(format!(
-                        "{} and {} hold the same scenario with different contents",
-                        from.display(),
-                        to.display()
-                    )));
+            match &found {
+                Some(first) => {
+                    let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(first.join(CHECKSUMS)).ok());
+                    if a.is_none() || a != b {
+                        return Err(GenError::Manifest(format!(
+                            "{} and {} hold the same scenario with different contents; nothing was moved",
+                            from.display(),
+                            first.display()
+                        )));
+                    }
+                    duplicates.push(from);
                 }
-                fs::remove_dir_all(&from).map_err(io_err(&from))?;
-                already += 1;
-                continue;
+                None => {
+                    found = Some(from.clone());
+                    moves.push((from, to.clone()));
+                }
             }
-            let parent = to.parent().expect("scenario folders have parents");
-            fs::create_dir_all(parent).map_err(io_err(parent))?;
-            if fs::rename(&from, &to).is_err() {
-                // Another filesystem: copy, then remove the source.
-                let partial = parent.join(format!("{PARTIAL_PREFIX}{}", key.folder_name()));
-                copy_tree(&from, &partial).map_err(io_err(&partial))?;
-                fs::rename(&partial, &to).map_err(io_err(&to))?;
-                fs::remove_dir_all(&from).map_err(io_err(&from))?;
-            }
-            moved += 1;
+        }
+        if found.is_none() {
+            absent.push(format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()));
         }
     }
-    let absent: Vec<String> = keys
-        .iter()
-        .filter(|k| !scenario_dir(out, &k.group, k.split.name(), &k.folder_name()).is_dir())
-        .map(|k| format!("{}/{}/{}", k.group, k.split.name(), k.folder_name()))
-        .collect();
     if !absent.is_empty() {
         return Err(GenError::Manifest(format!(
-            "{} scenarios are in no shard (first: {}): were all shard folders given?",
+            "{} scenarios are in no shard (first: {}): were all shard folders given? Nothing was moved",
             absent.len(),
             absent[..absent.len().min(3)].join(", ")
         )));
     }
+
+    // Move every scenario into place.
+    for (from, to) in &moves {
+        let parent = to.parent().expect("scenario folders have parents");
+        fs::create_dir_all(parent).map_err(io_err(parent))?;
+        if fs::rename(from, to).is_err() {
+            // Another filesystem: copy, then remove the source.
+            let name = to.file_name().unwrap_or_default().to_string_lossy();
+            let partial = parent.join(format!("{PARTIAL_PREFIX}{name}"));
+            copy_tree(from, &partial).map_err(io_err(&partial))?;
+            fs::rename(&partial, to).map_err(io_err(to))?;
+            fs::remove_dir_all(from).map_err(io_err(from))?;
+        }
+    }
+    for from in &duplicates {
+        fs::remove_dir_all(from).map_err(io_err(from))?;
+    }
+    let (moved, already) = (moves.len(), duplicates.len());
     let manifest =
         Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), true, None).to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;

@@ -1,8 +1,7 @@
-//! Orchestration: spec expansion, the parallel run and its progress report.
+//! Orchestration: the jobs behind the commands (`gen`, `merge`, `run`,
+//! `counterfactual`): read inputs, plan, simulate, write in parallel.
 
 pub mod handwritten;
 pub mod merge;
-pub mod plan;
-pub mod progress;
 pub mod run;
 pub mod scenario_file;

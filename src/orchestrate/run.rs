@@ -1,24 +1,15 @@
 //! The `gen` job: read and check the spec, plan every scenario, simulate,
 //! render and write them in parallel, then write the manifest.
 
-use super::plan::{Expansion, ScenarioKey, ScenarioPlan};
-use super::progress::{Progress, ProgressMode};
 use crate::map::CityMap;
-use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
-use crate::output::logs::{write_events, write_lights};
 use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
-use crate::output::number::{logged_value, push_fixed};
-use crate::output::png::{encode_png, PixelFormat, PngSettings};
-use crate::output::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
-use crate::output::scenario::scenario_json;
-use crate::output::{io_err, scenario_dir, write_atomically, ScenarioDir, WriteError, PARTIAL_PREFIX};
-use crate::render::camera::{CameraKind, CameraPlan};
-use crate::render::weather::SceneLook;
-use crate::render::{CarSprite, FrameCanvas, Renderer, Scene};
-use crate::spec::{DatasetSpec, SpecError, WorldKind};
-use crate::world::city::CityWorld;
-use crate::world::toy::ToyWorld;
-use crate::world::{CarState, Trajectories, World};
+use crate::output::writer::{ScenarioWriteError, ScenarioWriter, WriterBuffers};
+use crate::output::{io_err, scenario_dir, write_atomically, WriteError, PARTIAL_PREFIX};
+use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
+use crate::progress::{Progress, ProgressMode};
+use crate::spec::{DatasetSpec, SpecError};
+use crate::timing::{Stage, StageSeconds, StageTimes};
+use crate::world::Trajectories;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -97,6 +88,34 @@ pub struct Summary {
     /// Peak resident memory of the process, bytes (Linux only).
     pub peak_memory: Option<u64>,
     pub shard: Option<String>,
+    /// Seconds per stage, summed over threads.
+    pub stage_seconds: StageSeconds,
+}
+
+impl std::fmt::Display for Summary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let secs = self.elapsed.as_secs_f64();
+        write!(
+            f,
+            "wrote {} scenarios ({} frame pairs, {:.1} MB), skipped {} already complete, {} failed, to {} in {:.1} s: {:.1} scenarios/s on {} threads",
+            self.written,
+            self.frame_pairs,
+            self.bytes as f64 / 1e6,
+            self.skipped,
+            self.failed,
+            self.out.display(),
+            secs,
+            self.written as f64 / secs.max(1e-9),
+            self.threads
+        )?;
+        if let Some(shard) = &self.shard {
+            write!(f, ", shard {shard}")?;
+        }
+        if let Some(peak) = self.peak_memory {
+            write!(f, ", peak memory {:.0} MB", peak as f64 / 1e6)?;
+        }
+        Ok(())
+    }
 }
 
 fn seconds<S: serde::Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
@@ -128,6 +147,17 @@ impl From<WriteError> for GenError {
     }
 }
 
+impl From<GenError> for crate::error::Error {
+    fn from(e: GenError) -> Self {
+        use crate::error::Error;
+        match e.exit_code() {
+            2 => Error::Input(e.to_string()),
+            130 => Error::Interrupted(e.to_string()),
+            _ => Error::Failure(e.to_string()),
+        }
+    }
+}
+
 impl GenError {
     /// 2 for bad input, 130 when interrupted, 1 for failures while running.
     pub fn exit_code(&self) -> i32 {
@@ -155,35 +185,25 @@ fn install_signal_handler() {
     });
 }
 
-/// Everything shared by the workers of one run: the world that simulates
-/// and the writers of a scenario folder.
-pub(crate) struct Job<'e> {
-    pub expansion: &'e Expansion,
-    pub world: Box<dyn World>,
-    pub renderer: Option<Renderer>,
-    pub out: PathBuf,
-    pub intersection_names: Vec<String>,
-    pub fsync: bool,
-    pub annotations: bool,
+/// The writer of a run over `expansion`'s map, camera and spec.
+pub(crate) fn scenario_writer(expansion: &Expansion, products: Products, fsync: bool) -> ScenarioWriter {
+    ScenarioWriter::new(expansion.map.clone(), expansion.camera, expansion.spec.leader_gap_px, products, fsync)
 }
 
-impl<'e> Job<'e> {
-    /// A job over `expansion`'s world writing into `out`.
-    pub fn new(expansion: &'e Expansion, out: PathBuf, products: Products, fsync: bool) -> Job<'e> {
-        let world: Box<dyn World> = match expansion.spec.world {
-            WorldKind::Toy => Box::new(ToyWorld),
-            WorldKind::City => Box::new(CityWorld::default()),
-        };
-        Job {
-            world,
-            renderer: products.images.then(|| Renderer::new(&expansion.map, expansion.camera)),
-            out,
-            expansion,
-            intersection_names: expansion.map.intersections.iter().map(|i| i.name.clone()).collect(),
-            fsync,
-            annotations: products.annotations && products.images,
-        }
-    }
+/// Writes a simulated scenario into `target` through `writer`, stopping
+/// when the run is interrupted.
+pub(crate) fn write_simulated(
+    writer: &ScenarioWriter,
+    plan: &ScenarioPlan,
+    trajectories: &Trajectories,
+    target: PathBuf,
+    buffers: &mut WriterBuffers,
+    times: &StageTimes,
+) -> Result<u64, GenError> {
+    writer.write(plan, trajectories, target, buffers, &STOP, times).map_err(|e| match e {
+        ScenarioWriteError::Write(error) => GenError::Write { error, done: 0 },
+        ScenarioWriteError::Interrupted => GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() },
+    })
 }
 
 /// Reads, checks and expands a spec file; nothing is written.
@@ -318,22 +338,25 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     };
     write_atomically(&manifest_file, &manifest(false))?;
 
-    let job = Job::new(&expansion, out.clone(), products, options.fsync);
+    let writer = scenario_writer(&expansion, products, options.fsync);
+    let times = StageTimes::default();
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
     let skipped = AtomicU64::new(0);
     let result = pool.install(|| {
         keys.par_iter().try_for_each_init(
-            || job.renderer.as_ref().map(Renderer::canvas),
-            |canvas, key| {
+            || writer.buffers(),
+            |buffers, key| {
                 if STOP.load(Ordering::Relaxed) {
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
                 }
-                if scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name()).exists() {
+                let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+                if target.exists() {
                     skipped.fetch_add(1, Ordering::Relaxed);
                 } else {
-                    bytes.fetch_add(write_scenario(&job, key, canvas.as_mut())?, Ordering::Relaxed);
+                    let written_bytes = write_scenario(&expansion, &writer, key, target, buffers, &times)?;
+                    bytes.fetch_add(written_bytes, Ordering::Relaxed);
                     written.fetch_add(1, Ordering::Relaxed);
                 }
                 progress.inc();
@@ -366,228 +389,25 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
         threads,
         peak_memory: peak_memory_bytes(),
         shard: options.shard.map(|s| s.to_string()),
+        stage_seconds: times.seconds(),
     })
 }
 
 /// Plans, simulates and writes one scenario; returns the bytes written.
-fn write_scenario(job: &Job<'_>, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<u64, GenError> {
-    let plan = job.expansion.plan(key).map_err(|reason| GenError::Plan {
+fn write_scenario(
+    expansion: &Expansion,
+    writer: &ScenarioWriter,
+    key: &ScenarioKey,
+    target: PathBuf,
+    buffers: &mut WriterBuffers,
+    times: &StageTimes,
+) -> Result<u64, GenError> {
+    let plan = times.time(Stage::Plan, || expansion.plan(key)).map_err(|reason| GenError::Plan {
         scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
         reason,
     })?;
-    let trajectories = job.world.simulate(&job.expansion.map, &plan);
-    let target = scenario_dir(&job.out, &key.group, key.split.name(), &key.folder_name());
-    write_planned(job, &plan, &trajectories, target, canvas)
-}
-
-/// Writes a simulated scenario into the folder `target` (atomically);
-/// returns the bytes written.
-pub(crate) fn write_planned(
-    job: &Job<'_>,
-    plan: &ScenarioPlan,
-    trajectories: &Trajectories,
-    target: PathBuf,
-    canvas: Option<&mut FrameCanvas>,
-) -> Result<u64, GenError> {
-    let camera = &job.expansion.camera;
-    let mut dir = ScenarioDir::begin(target, plan.frames, canvas.is_some(), job.fsync)?;
-    let record =
-        scenario_json(plan, camera, job.expansion.spec.leader_gap_px, &job.intersection_names, job.world.model_name());
-    let mut bytes = dir.write_file("scenario.json", &record)?;
-    let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
-    bytes += dir.write_with("poses.csv", |w| write_poses(w, &ids, trajectories, camera))?;
-    bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, trajectories, camera))?;
-    if let Some(city) = &plan.city {
-        bytes +=
-            dir.write_with("lights.csv", |w| write_lights(w, &city.lights, &job.intersection_names, trajectories))?;
-        bytes += dir.write_with("events.csv", |w| write_events(w, trajectories))?;
-    }
-    if let (Some(renderer), Some(canvas)) = (&job.renderer, canvas) {
-        bytes += write_frames(renderer, canvas, &mut dir, plan, trajectories, job.annotations)?;
-        for camera_plan in &plan.cameras {
-            bytes += write_camera(&job.expansion.map, &mut dir, plan, trajectories, camera_plan)?;
-        }
-    }
-    bytes += dir.commit()?;
-    Ok(bytes)
-}
-
-fn write_frames(
-    renderer: &Renderer,
-    canvas: &mut FrameCanvas,
-    dir: &mut ScenarioDir,
-    plan: &ScenarioPlan,
-    trajectories: &Trajectories,
-    annotations: bool,
-) -> Result<u64, GenError> {
-    let (w, h) = (renderer.camera.width, renderer.camera.height);
-    let scenario_name = plan.key.folder_name();
-    let annotated_cars: Vec<AnnotatedCar> =
-        plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
-    let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, w, h, &annotated_cars));
-    let mut pixels = Vec::with_capacity(plan.cars.len());
-    let mut scene = renderer.scene(scene_look(plan, trajectories, 0));
-    let mut bytes = 0;
-    let mut sprites = Vec::with_capacity(plan.cars.len());
-    for (frame, states) in trajectories.states.iter().enumerate() {
-        if STOP.load(Ordering::Relaxed) {
-            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
-        }
-        if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
-            scene = renderer.scene(scene_look(plan, trajectories, frame));
-        }
-        fill_sprites(&mut sprites, plan, states);
-        let frame = frame as u32;
-        renderer.render(canvas, &scene, &sprites, frame);
-        let (rgb_name, mask_name) = (dir.frame_name("rgb", frame), dir.frame_name("mask", frame));
-        bytes += write_rgb_and_mask(dir, &rgb_name, &mask_name, canvas, (w, h))?;
-        if let Some(builder) = builder.as_mut() {
-            pixels.clear();
-            pixels.extend(states.iter().map(|s| {
-                let p = renderer.camera.to_pixel(s.position);
-                [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
-            }));
-            builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels);
-        }
-    }
-    if let Some(builder) = builder {
-        bytes += dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
-    }
-    Ok(bytes)
-}
-
-/// Encodes a rendered frame's RGB image and instance mask into the scenario
-/// folder; returns the bytes written.
-fn write_rgb_and_mask(
-    dir: &mut ScenarioDir,
-    rgb_name: &str,
-    mask_name: &str,
-    canvas: &FrameCanvas,
-    (w, h): (u32, u32),
-) -> Result<u64, WriteError> {
-    let rgb = dir.write_with(rgb_name, |out| {
-        encode_png(out, w, h, PixelFormat::Rgb8, &canvas.rgb, PngSettings::rgb()).map_err(png_to_io)
-    })?;
-    let mask = dir.write_with(mask_name, |out| {
-        encode_png(out, w, h, PixelFormat::Gray8, &canvas.mask, PngSettings::mask()).map_err(png_to_io)
-    })?;
-    Ok(rgb + mask)
-}
-
-/// The cars of one frame as the renderer draws them.
-fn fill_sprites(sprites: &mut Vec<CarSprite>, plan: &ScenarioPlan, states: &[CarState]) {
-    sprites.clear();
-    sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
-        position: s.position,
-        yaw: s.yaw,
-        length: car.length,
-        width: car.width,
-        colour: car.colour,
-        mask_id: car.mask_id,
-    }));
-}
-
-/// How a scenario looks at `frame`: light, water, fog, rain and snow (as
-/// planned, or as an intervention changed them).
-fn scene_look(plan: &ScenarioPlan, trajectories: &Trajectories, frame: usize) -> SceneLook {
-    match &plan.city {
-        Some(city) => {
-            let changed = trajectories.confounder_changes.iter().rev().find(|(from, _)| *from <= frame);
-            let c = changed.map_or(&city.confounders, |(_, c)| c);
-            let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
-            SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
-        }
-        None => SceneLook::clear(),
-    }
-}
-
-/// Writes one extra camera's frames under `cameras/<name>/`: rgb/, mask/,
-/// depth/ (16-bit, millimetres) when asked, and poses.csv (frame, car, px,
-/// py, in_view) in this camera's pixels.
-fn write_camera(
-    map: &crate::map::CityMap,
-    dir: &mut ScenarioDir,
-    plan: &ScenarioPlan,
-    trajectories: &Trajectories,
-    camera_plan: &CameraPlan,
-) -> Result<u64, GenError> {
-    let base = format!("cameras/{}", camera_plan.name);
-    for sub in ["rgb", "mask", "depth"] {
-        if sub != "depth" || camera_plan.depth {
-            dir.create_folder(&format!("{base}/{sub}"))?;
-        }
-    }
-    let chased = |states: &[CarState]| match camera_plan.kind {
-        CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
-        CameraKind::Static { .. } => None,
-    };
-    let (w, h) = (camera_plan.width, camera_plan.height);
-    // A static camera draws its background once; a chase camera every frame.
-    let mut fixed: Option<(Renderer, Scene)> = None;
-    let mut canvas: Option<FrameCanvas> = None;
-    let (mut depth, mut depth_png) = (Vec::new(), Vec::new());
-    let mut poses = b"frame,car,px,py,in_view\n".to_vec();
-    let mut bytes = 0;
-    let mut sprites = Vec::with_capacity(plan.cars.len());
-    for (frame, states) in trajectories.states.iter().enumerate() {
-        if STOP.load(Ordering::Relaxed) {
-            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
-        }
-        let camera = camera_plan.camera_at(chased(states));
-        let look = scene_look(plan, trajectories, frame);
-        if trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
-            fixed = None;
-        }
-        let owned;
-        let (renderer, scene) = match camera_plan.kind {
-            CameraKind::Static { .. } => {
-                let (r, s) = fixed.get_or_insert_with(|| {
-                    let r = Renderer::new(map, camera);
-                    let s = r.scene(look);
-                    (r, s)
-                });
-                (&*r, &*s)
-            }
-            CameraKind::Chase { .. } => {
-                let r = Renderer::new(map, camera);
-                let s = r.scene(look);
-                owned = (r, s);
-                (&owned.0, &owned.1)
-            }
-        };
-        let canvas = canvas.get_or_insert_with(|| renderer.canvas());
-        fill_sprites(&mut sprites, plan, states);
-        let frame = frame as u32;
-        renderer.render(canvas, scene, &sprites, frame);
-        let [rgb_name, mask_name, depth_name] =
-            ["rgb", "mask", "depth"].map(|kind| format!("{base}/{}", dir.frame_name(kind, frame)));
-        bytes += write_rgb_and_mask(dir, &rgb_name, &mask_name, canvas, (w, h))?;
-        if camera_plan.depth {
-            renderer.depth_mm(&canvas.mask, &mut depth);
-            depth_png.clear();
-            depth_png.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
-            bytes += dir.write_with(&depth_name, |out| {
-                encode_png(out, w, h, PixelFormat::Gray16, &depth_png, PngSettings::mask()).map_err(png_to_io)
-            })?;
-        }
-        for (car, state) in plan.cars.iter().zip(states) {
-            let pixel = camera.to_pixel(state.position);
-            poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
-            push_fixed(&mut poses, pixel.x, PIXEL_DECIMALS);
-            poses.push(b',');
-            push_fixed(&mut poses, pixel.y, PIXEL_DECIMALS);
-            poses.extend_from_slice(format!(",{}\n", camera.contains_pixel(pixel) as u8).as_bytes());
-        }
-    }
-    bytes += dir.write_file(&format!("{base}/poses.csv"), &poses)?;
-    Ok(bytes)
-}
-
-fn png_to_io(e: png::EncodingError) -> std::io::Error {
-    match e {
-        png::EncodingError::IoError(e) => e,
-        other => std::io::Error::other(other),
-    }
+    let trajectories = times.time(Stage::Simulate, || crate::world::simulate(&expansion.map, &plan));
+    write_simulated(writer, &plan, &trajectories, target, buffers, times)
 }
 
 /// Peak resident set size of this process (VmHWM), where the OS reports it.

@@ -13,13 +13,13 @@
 //! definition). Every error names the file, the scenario, the car and the
 //! field; nothing is simulated until the whole file is good.
 
-use super::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
+use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
+use crate::map::signals::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
 use crate::map::{Action, CityMap, Route};
-use crate::render::camera::CameraPlan;
+use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
+use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
 use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
-use crate::world::interventions::{ConfounderName, Effect, Intervention, Trigger};
-use crate::world::lights::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
 use serde_json::{Map, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -470,7 +470,7 @@ fn load_vehicle(
     let colour =
         match object.get("colour") {
             None => None,
-            Some(v) => Some(v.as_str().and_then(crate::render::parse_hex_colour).ok_or_else(|| {
+            Some(v) => Some(v.as_str().and_then(crate::render::palette::parse_hex_colour).ok_or_else(|| {
                 here.err(car, "colour", format!("{v} is not allowed: \"#rrggbb\", e.g. \"#ff8800\""))
             })?),
         };
@@ -805,7 +805,7 @@ pub fn load_interventions(
         .iter()
         .map(|scenario| {
             let here = Here { file: path, scenario: scenario.name.clone() };
-            if scenario.plan.world != WorldKind::City {
+            if scenario.plan.world.kind() != WorldKind::City {
                 return Err(here.err(None, "", "interventions need the city world (the toy world has no agency)"));
             }
             let names: Vec<String> = scenario.plan.cars.iter().map(|c| c.name.clone()).collect();

@@ -2,7 +2,7 @@
 //! `data-schema/lights.schema.json` and `data-schema/events.schema.json`.
 
 use super::poses::Fields;
-use crate::world::lights::LightPlan;
+use crate::map::signals::LightPlan;
 use crate::world::Trajectories;
 use serde::Serialize;
 use std::io::Write;

@@ -2,7 +2,7 @@
 //! camera) and what it holds (counts per group and split). Contains nothing
 //! that depends on time or thread count, so identical runs give identical bytes.
 
-use crate::render::camera::Camera;
+use crate::camera::Camera;
 use crate::spec::{DatasetSpec, Split};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};

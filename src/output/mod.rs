@@ -2,17 +2,23 @@
 //! trajectories and rendered pixels as plain data; they know nothing of how
 //! those were produced.
 //!
-//! Layout (documented in README and `data-schema/`):
-//! `OUT/manifest.json`, `OUT/<group>/<split>/<scenario>/{scenario.json,
-//! poses.csv, rgb/NNNN.png, mask/NNNN.png}`.
+//! Layout (documented in README and `data-schema/`): `OUT/manifest.json`,
+//! `OUT/<group>/<split>/<scenario>/` as [`layout`] lists it.
 
 pub mod annotations;
+pub mod layout;
 pub mod logs;
 pub mod manifest;
 pub mod number;
 pub mod png;
 pub mod poses;
 pub mod scenario;
+pub mod writer;
+
+use crate::timing::{Stage, StageTimes};
+pub use layout::frame_digits;
+use layout::ScenarioLayout;
+use std::time::Instant;
 
 use sha2::{Digest, Sha256};
 use std::fs;
@@ -32,11 +38,6 @@ pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError +
     move |source| WriteError { path: path.to_path_buf(), source }
 }
 
-/// Digits in frame file names: at least 4 (`0000.png`), more for long scenarios.
-pub fn frame_digits(frames: u32) -> usize {
-    (frames.saturating_sub(1)).to_string().len().max(4)
-}
-
 /// The folder of one scenario: `OUT/<group>/<split>/<NNNNN>`.
 pub fn scenario_dir(root: &Path, group: &str, split: &str, folder: &str) -> PathBuf {
     root.join(group).join(split).join(folder)
@@ -52,13 +53,14 @@ pub const PARTIAL_PREFIX: &str = ".partial-";
 /// beside the final one, each hashed (SHA-256) as it is written; `commit`
 /// adds `checksums.sha256`, flushes and renames the folder into place, so a
 /// scenario folder that exists is complete.
-pub struct ScenarioDir {
+pub struct ScenarioDir<'t> {
     temp: PathBuf,
     target: PathBuf,
-    frame_digits: usize,
+    folders: Vec<String>,
     committed: bool,
     fsync: bool,
     hashes: Vec<(String, [u8; 32])>,
+    times: &'t StageTimes,
 }
 
 /// Passes bytes through to a writer and hashes them on the way.
@@ -79,44 +81,55 @@ impl<W: Write> Write for HashingWriter<W> {
     }
 }
 
-impl ScenarioDir {
-    /// Starts writing the scenario that will live at `target`; leftovers of
-    /// an interrupted attempt are discarded. With `fsync`, every file and the
-    /// folder reach the disk before the rename (survives power loss, slower).
-    pub fn begin(target: PathBuf, frames: u32, images: bool, fsync: bool) -> Result<ScenarioDir, WriteError> {
+impl<'t> ScenarioDir<'t> {
+    /// Starts writing the scenario that will live at `target` with the
+    /// folders of `layout`; leftovers of an interrupted attempt are
+    /// discarded. With `fsync`, every file and the folder reach the disk
+    /// before the rename (survives power loss, slower). Time spent writing
+    /// and hashing is added to `times`.
+    pub fn begin(
+        target: PathBuf,
+        layout: &ScenarioLayout,
+        fsync: bool,
+        times: &'t StageTimes,
+    ) -> Result<ScenarioDir<'t>, WriteError> {
         let name = target.file_name().expect("scenario folder has a name").to_string_lossy().into_owned();
         let temp = target.with_file_name(format!("{PARTIAL_PREFIX}{name}"));
         if temp.exists() {
             fs::remove_dir_all(&temp).map_err(io_err(&temp))?;
         }
         fs::create_dir_all(&temp).map_err(io_err(&temp))?;
-        if images {
-            for sub in ["rgb", "mask"] {
-                let p = temp.join(sub);
-                fs::create_dir(&p).map_err(io_err(&p))?;
-            }
+        let folders = layout.folders();
+        for sub in &folders {
+            let p = temp.join(sub);
+            fs::create_dir(&p).map_err(io_err(&p))?;
         }
-        Ok(ScenarioDir {
-            temp,
-            target,
-            frame_digits: frame_digits(frames),
-            committed: false,
-            fsync,
-            hashes: Vec::new(),
-        })
+        Ok(ScenarioDir { temp, target, folders, committed: false, fsync, hashes: Vec::new(), times })
     }
 
-    /// Writes a whole file into the scenario folder.
+    /// Writes a whole file into the scenario folder; returns its size.
     pub fn write_file(&mut self, name: &str, bytes: &[u8]) -> Result<u64, WriteError> {
-        self.write_with(name, |w| w.write_all(bytes))
+        let hash: [u8; 32] = self.times.time(Stage::Checksum, || Sha256::digest(bytes).into());
+        let start = Instant::now();
+        let path = self.temp.join(name);
+        let mut file = fs::File::create(&path).map_err(io_err(&path))?;
+        file.write_all(bytes).map_err(io_err(&path))?;
+        if self.fsync {
+            file.sync_all().map_err(io_err(&path))?;
+        }
+        self.times.add(Stage::Write, start.elapsed());
+        self.hashes.push((name.to_string(), hash));
+        Ok(bytes.len() as u64)
     }
 
-    /// Streams a file through `fill`; returns its size.
+    /// Streams a file through `fill` (formatting, hashing and writing all
+    /// count as writing); returns its size.
     pub fn write_with<E: Into<std::io::Error>>(
         &mut self,
         name: &str,
         fill: impl FnOnce(&mut dyn Write) -> Result<(), E>,
     ) -> Result<u64, WriteError> {
+        let start = Instant::now();
         let path = self.temp.join(name);
         let file = fs::File::create(&path).map_err(io_err(&path))?;
         let mut w = HashingWriter { inner: BufWriter::with_capacity(1 << 16, file), hasher: Sha256::new() };
@@ -129,18 +142,8 @@ impl ScenarioDir {
         }
         let len = file.metadata().map_err(io_err(&path))?.len();
         self.hashes.push((name.to_string(), hasher.finalize().into()));
+        self.times.add(Stage::Write, start.elapsed());
         Ok(len)
-    }
-
-    /// Creates a folder (and its parents) inside the scenario folder.
-    pub fn create_folder(&mut self, relative: &str) -> Result<(), WriteError> {
-        let path = self.temp.join(relative);
-        fs::create_dir_all(&path).map_err(io_err(&path))
-    }
-
-    /// Relative path of frame `frame` in image folder `kind` (`rgb` or `mask`).
-    pub fn frame_name(&self, kind: &str, frame: u32) -> String {
-        format!("{kind}/{frame:0width$}.png", width = self.frame_digits)
     }
 
     /// Writes the checksums and moves the finished scenario into place,
@@ -151,10 +154,9 @@ impl ScenarioDir {
         let listing: String = hashes.iter().map(|(name, h)| format!("{}  {name}\n", hex(h))).collect();
         let len = self.write_file(CHECKSUMS, listing.as_bytes())?;
         if self.fsync {
-            for dir in [self.temp.clone(), self.temp.join("rgb"), self.temp.join("mask")] {
-                if dir.exists() {
-                    fs::File::open(&dir).and_then(|d| d.sync_all()).map_err(io_err(&dir))?;
-                }
+            let folders = std::iter::once(self.temp.clone()).chain(self.folders.iter().map(|f| self.temp.join(f)));
+            for dir in folders {
+                fs::File::open(&dir).and_then(|d| d.sync_all()).map_err(io_err(&dir))?;
             }
         }
         if self.target.exists() {
@@ -166,7 +168,7 @@ impl ScenarioDir {
     }
 }
 
-impl Drop for ScenarioDir {
+impl Drop for ScenarioDir<'_> {
     fn drop(&mut self) {
         if !self.committed {
             let _ = fs::remove_dir_all(&self.temp);

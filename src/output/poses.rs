@@ -2,7 +2,7 @@
 //! Columns are documented in `data-schema/poses.columns.json`.
 
 use super::number::logged_value;
-use crate::render::camera::Camera;
+use crate::camera::Camera;
 use crate::world::Trajectories;
 use std::io::Write;
 

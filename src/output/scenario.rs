@@ -1,12 +1,13 @@
 //! `scenario.json`: the ground truth of one scenario (schema in
 //! `data-schema/scenario.schema.json`).
 
+use crate::camera::Camera;
+use crate::map::signals::Light;
 use crate::map::Action;
-use crate::orchestrate::plan::{Role, ScenarioPlan};
-use crate::render::camera::Camera;
-use crate::world::confounders::{Confounders, Effects};
-use crate::world::driver::DriverParams;
-use crate::world::lights::Light;
+use crate::plan::confounders::{Confounders, Effects};
+use crate::plan::{CarPlan, Role, ScenarioPlan, WorldPlan};
+use crate::render::palette::{colour_of, hex_colour};
+use crate::spec::DriverParams;
 use serde::Serialize;
 
 /// Format tag written into every scenario.json.
@@ -39,7 +40,7 @@ struct LightRecord<'a> {
     approach: char,
     signal: &'a str,
     offset: f64,
-    schedule: &'a [crate::world::lights::ScheduleStep],
+    schedule: &'a [crate::map::signals::ScheduleStep],
 }
 
 #[derive(Serialize)]
@@ -80,7 +81,7 @@ struct ScenarioRecord<'a> {
     edges: Vec<[u32; 2]>,
     /// Extra cameras, each writing under cameras/<name>/.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
-    cameras: &'a [crate::render::camera::CameraPlan],
+    cameras: &'a [crate::camera::CameraPlan],
 }
 
 /// Serialises the scenario record as pretty JSON. `intersection_names` and
@@ -94,7 +95,7 @@ pub fn scenario_json(
 ) -> Vec<u8> {
     let light_record =
         |l: &'_ Light| -> (usize, char, &'static str, f64) { (l.intersection, l.approach, l.signal.name(), l.offset) };
-    let city = plan.city.as_ref().map(|c| CityRecord {
+    let city = plan.world.city().map(|c| CityRecord {
         model,
         confounders: &c.confounders,
         effects: &c.effects,
@@ -109,19 +110,23 @@ pub fn scenario_json(
             })
             .collect(),
     });
-    let toy = (plan.world == crate::spec::WorldKind::Toy).then(|| ToyRecord {
-        speed_px_per_frame: camera.metres_to_pixels(plan.toy_step_m),
-        speed_m_per_s: plan.toy_step_m / plan.frame_interval,
-        leader_gap_px,
-        leader_gap_m: camera.pixels_to_metres(leader_gap_px),
-    });
+    let toy = match plan.world {
+        WorldPlan::Toy { step_m } => Some(ToyRecord {
+            speed_px_per_frame: camera.metres_to_pixels(step_m),
+            speed_m_per_s: step_m / plan.frame_interval,
+            leader_gap_px,
+            leader_gap_m: camera.pixels_to_metres(leader_gap_px),
+        }),
+        WorldPlan::City(_) => None,
+    };
+    let agency = |c: &CarPlan| plan.world.city().map(|city| &city.agency[c.id as usize]);
     let record = ScenarioRecord {
         format: SCENARIO_FORMAT,
         name: plan.key.folder_name(),
         group: &plan.key.group,
         split: plan.key.split.name(),
         index: plan.key.index,
-        world: plan.world.name(),
+        world: plan.world.kind().name(),
         seed: plan.seed,
         stream_key: &plan.stream_key,
         frames: plan.frames,
@@ -135,7 +140,7 @@ pub fn scenario_json(
             .map(|c| CarRecord {
                 id: c.id,
                 name: &c.name,
-                colour: format!("#{:02x}{:02x}{:02x}", c.colour[0], c.colour[1], c.colour[2]),
+                colour: hex_colour(colour_of(c)),
                 mask_id: c.mask_id,
                 spawn: &c.spawn_name,
                 spawn_distance: c.spawn_distance,
@@ -144,9 +149,9 @@ pub fn scenario_json(
                 role: c.role,
                 length_m: c.length,
                 width_m: c.width,
-                desired_speeds: c.agency.as_ref().map(|a| a.desired_speeds.as_slice()),
-                driver: c.agency.as_ref().map(|a| &a.driver),
-                runs_red_lights: c.agency.as_ref().map(|a| a.runs_red_lights),
+                desired_speeds: agency(c).map(|a| a.desired_speeds.as_slice()),
+                driver: agency(c).map(|a| &a.driver),
+                runs_red_lights: agency(c).map(|a| a.runs_red_lights),
             })
             .collect(),
         edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),

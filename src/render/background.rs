@@ -2,7 +2,7 @@
 //! central park, roads, lane markings, stop lines and crosswalks. Flat colours
 //! only, so frames compress well.
 
-use super::camera::Camera;
+use crate::camera::Camera;
 use crate::map::CityMap;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
 

@@ -3,24 +3,14 @@
 //! `mask_id` on exactly its pixels, no anti-aliasing).
 
 pub mod background;
-pub mod camera;
+pub mod palette;
 pub mod weather;
 
-use camera::Camera;
+use crate::camera::Camera;
 use glam::DVec2;
 use std::sync::Arc;
 use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
 use weather::SceneLook;
-
-/// `#rrggbb` (as scenario.json and scenario files write colours) to bytes.
-pub fn parse_hex_colour(text: &str) -> Option<[u8; 3]> {
-    let hex = text.strip_prefix('#')?;
-    if hex.len() != 6 {
-        return None;
-    }
-    let byte = |i: usize| u8::from_str_radix(hex.get(i..i + 2)?, 16).ok();
-    Some([byte(0)?, byte(2)?, byte(4)?])
-}
 
 /// What the renderer needs to draw one car in one frame.
 #[derive(Debug, Clone, Copy)]

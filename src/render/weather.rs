@@ -7,6 +7,8 @@
 //! car's colour (the same result for opaque shapes). Rain and snow are drawn
 //! per frame from a seeded stream, so frames are reproducible.
 
+use crate::plan::ScenarioPlan;
+use crate::world::Trajectories;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
@@ -34,6 +36,20 @@ impl SceneLook {
     /// A dry, clear day (the toy world).
     pub fn clear() -> SceneLook {
         SceneLook { daylight: 1.0, wetness: 0.0, fog: 0.0, rain: 0.0, snow: 0.0, seed: 0 }
+    }
+
+    /// How a scenario looks at `frame`: its confounders as planned, or as
+    /// an intervention changed them; the toy world is always clear.
+    pub fn at_frame(plan: &ScenarioPlan, trajectories: &Trajectories, frame: usize) -> SceneLook {
+        match plan.world.city() {
+            Some(city) => {
+                let changed = trajectories.confounder_changes.iter().rev().find(|(from, _)| *from <= frame);
+                let c = changed.map_or(&city.confounders, |(_, c)| c);
+                let seed = u64::from_le_bytes(city.sim_stream[..8].try_into().expect("8 bytes"));
+                SceneLook { daylight: c.daylight(), wetness: c.wetness, fog: c.fog, rain: c.rain, snow: c.snow, seed }
+            }
+            None => SceneLook::clear(),
+        }
     }
 
     pub fn is_clear(&self) -> bool {

@@ -11,15 +11,16 @@
 //! reproducible and an intervention on one car leaves the randomness of every
 //! other car untouched (counterfactual pairs differ only where it acts).
 
-use super::confounders::Confounders;
-use super::driver::{CarFollowing, DriverParams, Idm};
-use super::interventions::{Effect, Intervention, Trigger};
-use super::lights::{Colour, Light, LightState, Signal};
-use super::{CarState, Event, EventKind, Trajectories, World};
+use super::driver::{CarFollowing, Idm};
+use super::{CarState, Event, EventKind, Trajectories};
 use crate::geometry::OrientedBox;
 use crate::map::curve::Curve;
+use crate::map::signals::{Colour, Light, LightState, Signal};
 use crate::map::{Action, CityMap, LaneEnd, LegKind, Route, Turn};
-use crate::orchestrate::plan::{CarAgency, CarPlan, CityPlan, ScenarioPlan};
+use crate::plan::confounders::Confounders;
+use crate::plan::interventions::{Effect, Intervention, Trigger};
+use crate::plan::{CarAgency, CarPlan, CityPlan, ScenarioPlan};
+use crate::spec::DriverParams;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeSet;
@@ -56,13 +57,14 @@ impl CityWorld {
     }
 }
 
-impl World for CityWorld {
-    fn model_name(&self) -> &'static str {
+impl CityWorld {
+    /// Name of the drivers' car-following model, for scenario.json.
+    pub fn model_name(&self) -> &'static str {
         self.model.name()
     }
 
-    fn simulate(&self, map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
-        let city = plan.city.as_ref().expect("a city scenario has a city plan");
+    /// Simulates `plan`, whose city parts are `city`.
+    pub fn simulate(&self, map: &CityMap, plan: &ScenarioPlan, city: &CityPlan) -> Trajectories {
         let mut sim = Sim::new(map, plan, city, self.model.as_ref());
         if plan.frames == 0 {
             return Trajectories {
@@ -214,10 +216,10 @@ impl<'a> Sim<'a> {
         let cars = plan
             .cars
             .iter()
-            .map(|c| {
+            .zip(&city.agency)
+            .map(|(c, agency)| {
                 let mut rng = ChaCha8Rng::from_seed(city.sim_stream);
                 rng.set_stream(c.id as u64 + 1);
-                let agency = c.agency.as_ref().expect("city cars have agency");
                 let route: Route = (*c.route).clone();
                 let leg = route.leg_index_at(c.spawn_distance);
                 SimCar {

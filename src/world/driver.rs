@@ -3,47 +3,7 @@
 //! Model behind it. Kinematic limits (the hard braking limit, no reversing)
 //! are applied by the world, not the model.
 
-use serde::{Deserialize, Serialize};
-
-/// One driver's parameters, after confounders have acted on them.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DriverParams {
-    /// Desired time gap to the car ahead, seconds.
-    pub time_headway: f64,
-    /// Bumper-to-bumper gap kept when stopped, metres.
-    pub min_gap: f64,
-    /// Maximum acceleration, m/s^2.
-    pub max_acceleration: f64,
-    /// Comfortable deceleration, m/s^2 (IDM's b; used to decide whether a yellow can be stopped for).
-    pub comfortable_deceleration: f64,
-    /// Hard braking limit, m/s^2: the car can never brake harder.
-    pub max_deceleration: f64,
-    /// Seconds between decisions; the acceleration is held in between.
-    pub reaction_time: f64,
-    /// Relative standard deviation of perceived gaps.
-    pub perception_noise: f64,
-    /// Standard deviation of the car's sideways wander in its lane, metres.
-    pub lateral_wander: f64,
-    /// Lateral acceleration accepted in curves, m/s^2 (sets curve speeds).
-    pub curve_acceleration: f64,
-}
-
-impl Default for DriverParams {
-    fn default() -> Self {
-        DriverParams {
-            time_headway: 1.0,
-            min_gap: 0.8,
-            max_acceleration: 1.2,
-            comfortable_deceleration: 1.5,
-            max_deceleration: 6.0,
-            reaction_time: 0.3,
-            perception_noise: 0.04,
-            lateral_wander: 0.03,
-            curve_acceleration: 1.2,
-        }
-    }
-}
+use crate::spec::DriverParams;
 
 /// A car-following model: each method returns the speed the driver wants
 /// `dt` seconds from now.

@@ -2,14 +2,14 @@
 //! every frame, in metres and radians. A world never sees pixels or files.
 
 pub mod city;
-pub mod confounders;
 pub mod driver;
-pub mod interventions;
-pub mod lights;
 pub mod toy;
 
+use crate::map::signals::LightState;
 use crate::map::CityMap;
-use crate::orchestrate::plan::ScenarioPlan;
+use crate::plan::confounders::Confounders;
+use crate::plan::{ScenarioPlan, WorldPlan};
+use crate::spec::WorldKind;
 use glam::DVec2;
 
 /// A car's state at one frame.
@@ -71,12 +71,12 @@ pub struct Trajectories {
     pub frame_interval: f64,
     pub states: Vec<Vec<CarState>>,
     /// `lights[frame][light]`, in the order of the scenario's light plan; empty without lights.
-    pub lights: Vec<Vec<lights::LightState>>,
+    pub lights: Vec<Vec<LightState>>,
     /// In time order.
     pub events: Vec<Event>,
     /// Confounder changes made by interventions: (first frame, new values),
     /// in order; empty when the scenario's confounders hold throughout.
-    pub confounder_changes: Vec<(usize, confounders::Confounders)>,
+    pub confounder_changes: Vec<(usize, Confounders)>,
 }
 
 impl Trajectories {
@@ -85,9 +85,19 @@ impl Trajectories {
     }
 }
 
-/// The dynamics of one world.
-pub trait World: Sync {
-    fn simulate(&self, map: &CityMap, plan: &ScenarioPlan) -> Trajectories;
-    /// Name of the behaviour model, for scenario.json.
-    fn model_name(&self) -> &'static str;
+/// Simulates a plan in its world: the toy world's constant speed, or the
+/// city world with its default car-following model (IDM).
+pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
+    match &plan.world {
+        WorldPlan::Toy { step_m } => toy::simulate(plan, *step_m),
+        WorldPlan::City(city) => city::CityWorld::default().simulate(map, plan, city),
+    }
+}
+
+/// Name of a world's behaviour model, for scenario.json.
+pub fn model_name(kind: WorldKind) -> &'static str {
+    match kind {
+        WorldKind::Toy => toy::MODEL_NAME,
+        WorldKind::City => city::CityWorld::default().model_name(),
+    }
 }

@@ -2,40 +2,32 @@
 //! along its route; there are no lights and cars pass through each other, so a
 //! follower's pose at frame t is its leader's pose at frame t - gap / step.
 
-use super::{CarState, Trajectories, World};
-use crate::map::CityMap;
-use crate::orchestrate::plan::ScenarioPlan;
+use super::{CarState, Trajectories};
+use crate::plan::ScenarioPlan;
 
-/// Constant-speed dynamics.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ToyWorld;
+/// Name of the toy world's behaviour model, for scenario.json.
+pub const MODEL_NAME: &str = "constant-speed";
 
-impl World for ToyWorld {
-    fn model_name(&self) -> &'static str {
-        "constant-speed"
-    }
-
-    fn simulate(&self, _map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
-        let step = plan.toy_step_m;
-        let speed = step / plan.frame_interval;
-        let states = (0..plan.frames)
-            .map(|frame| {
-                plan.cars
-                    .iter()
-                    .map(|car| {
-                        let s = car.spawn_distance + step * frame as f64;
-                        let (position, yaw) = car.route.pose_at(s, 0.0);
-                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
-                    })
-                    .collect()
-            })
-            .collect();
-        Trajectories {
-            frame_interval: plan.frame_interval,
-            states,
-            lights: Vec::new(),
-            events: Vec::new(),
-            confounder_changes: Vec::new(),
-        }
+/// Every car of `plan` moves `step` metres per frame along its route.
+pub fn simulate(plan: &ScenarioPlan, step: f64) -> Trajectories {
+    let speed = step / plan.frame_interval;
+    let states = (0..plan.frames)
+        .map(|frame| {
+            plan.cars
+                .iter()
+                .map(|car| {
+                    let s = car.spawn_distance + step * frame as f64;
+                    let (position, yaw) = car.route.pose_at(s, 0.0);
+                    CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
+                })
+                .collect()
+        })
+        .collect();
+    Trajectories {
+        frame_interval: plan.frame_interval,
+        states,
+        lights: Vec::new(),
+        events: Vec::new(),
+        confounder_changes: Vec::new(),
     }
 }

@@ -5,7 +5,7 @@
 //! (id order) and light plan.
 
 use super::confounders::Confounders;
-use super::lights::{Colour, ScheduleStep};
+use crate::map::signals::{Colour, ScheduleStep};
 use crate::map::Action;
 
 /// When an intervention fires (once, at the first step its condition holds).

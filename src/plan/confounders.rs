@@ -16,7 +16,7 @@
 //!
 //! `daylight` is 1 from 08:00 to 17:00, 0 from 20:00 to 05:00, linear between.
 
-use super::driver::DriverParams;
+use crate::spec::DriverParams;
 use serde::Serialize;
 
 /// The confounder values of one scenario.

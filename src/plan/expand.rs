@@ -3,142 +3,18 @@
 //! SHA-256("causalcity/scenario/v1", seed, group, split, index), so its content
 //! never depends on thread count, order, sharding or the other groups.
 
+use super::confounders::Confounders;
+use super::{stream_key, CarAgency, CarPlan, CityPlan, GivenCar, Role, ScenarioKey, ScenarioPlan, WorldPlan};
+use crate::camera::Camera;
 use crate::geometry::OrientedBox;
+use crate::map::signals::LightPlan;
 use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
-use crate::render::camera::Camera;
 use crate::spec::{DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
-use crate::world::confounders::{Confounders, Effects};
-use crate::world::driver::DriverParams;
-use crate::world::interventions::Intervention;
-use crate::world::lights::LightPlan;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
 use sha2::{Digest, Sha256};
 use std::sync::Arc;
-
-/// A car's part in the causal graph.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Role {
-    Leader,
-    Follower,
-    Independent,
-}
-
-/// Where one scenario sits in the dataset.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct ScenarioKey {
-    pub group: String,
-    pub group_index: usize,
-    pub split: Split,
-    pub index: u32,
-    /// Hand-written scenarios: the scenario's own name.
-    pub name: Option<String>,
-}
-
-impl ScenarioKey {
-    /// Folder name of the scenario, e.g. `00042` (or a hand-written
-    /// scenario's name).
-    pub fn folder_name(&self) -> String {
-        match &self.name {
-            Some(name) => name.clone(),
-            None => format!("{:05}", self.index),
-        }
-    }
-}
-
-/// Everything about one car that is fixed before simulation.
-#[derive(Debug, Clone)]
-pub struct CarPlan {
-    /// 0-based, randomly permuted per scenario so the index hides the role.
-    pub id: u32,
-    pub name: String,
-    pub colour: [u8; 3],
-    /// Value of this car's pixels in the instance masks (id + 1).
-    pub mask_id: u8,
-    pub spawn: LaneId,
-    pub spawn_name: String,
-    /// Metres along the spawn lane where the car starts.
-    pub spawn_distance: f64,
-    pub actions: Vec<Action>,
-    /// Metres along the current lane for merges, 0 for other actions.
-    pub merge_distances: Vec<f64>,
-    pub role: Role,
-    pub length: f64,
-    pub width: f64,
-    /// Shared by a leader and its follower.
-    pub route: Arc<Route>,
-    /// City world only: how this car drives.
-    pub agency: Option<CarAgency>,
-}
-
-/// A city car's driving plan: shared by a leader and its follower except for
-/// the red-light flag.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CarAgency {
-    /// Desired speed (m/s, after confounders) before the first action, after
-    /// each action in turn, and after the last.
-    pub desired_speeds: Vec<f64>,
-    /// After confounders.
-    pub driver: DriverParams,
-    /// Forced through red and yellow lights.
-    pub runs_red_lights: bool,
-}
-
-/// City-world parts of a scenario.
-#[derive(Debug, Clone)]
-pub struct CityPlan {
-    pub confounders: Confounders,
-    pub effects: Effects,
-    pub lights: LightPlan,
-    /// Base driver parameters before confounders.
-    pub base_driver: DriverParams,
-    /// Key of the simulation's own random stream (driver noise, collision stops).
-    pub sim_stream: [u8; 32],
-}
-
-/// One scenario, ready to simulate.
-#[derive(Debug, Clone)]
-pub struct ScenarioPlan {
-    pub key: ScenarioKey,
-    pub world: WorldKind,
-    pub seed: u64,
-    /// Hex of the 32-byte key of the scenario's random stream.
-    pub stream_key: String,
-    pub frames: u32,
-    pub frame_interval: f64,
-    /// Cars in id order.
-    pub cars: Vec<CarPlan>,
-    /// (leader id, follower id) pairs.
-    pub edges: Vec<(u32, u32)>,
-    /// Toy world: metres every car covers per frame.
-    pub toy_step_m: f64,
-    pub city: Option<CityPlan>,
-    /// City world only: interventions applied while simulating (none for
-    /// `gen`; hand-written scenarios and counterfactuals name them).
-    pub interventions: Vec<Intervention>,
-    /// Extra cameras (hand-written scenarios; none for `gen`).
-    pub cameras: Vec<crate::render::camera::CameraPlan>,
-}
-
-/// A car of a hand-written scenario: where it starts, what it does, and
-/// optional driving overrides (city world).
-#[derive(Debug, Clone)]
-pub struct GivenCar {
-    pub name: String,
-    pub spawn: LaneId,
-    pub spawn_distance: f64,
-    pub actions: Vec<Action>,
-    pub merge_distances: Vec<f64>,
-    pub route: Arc<Route>,
-    /// Desired speed per leg (m/s), used as given.
-    pub desired_speeds: Option<Vec<f64>>,
-    pub time_headway: Option<f64>,
-    pub runs_red_lights: Option<bool>,
-    pub colour: Option<[u8; 3]>,
-}
 
 /// A car placed on the map before ids are assigned.
 #[derive(Clone)]
@@ -358,10 +234,10 @@ impl Expansion {
         let mut plan = self.assemble(key, stream, rng, cars, pairs, &ids);
         for (car, g) in plan.cars.iter_mut().zip(given) {
             car.name = g.name.clone();
-            if let Some(colour) = g.colour {
-                car.colour = colour;
-            }
-            if let Some(agency) = car.agency.as_mut() {
+            car.colour = g.colour;
+        }
+        if let WorldPlan::City(city) = &mut plan.world {
+            for (agency, g) in city.agency.iter_mut().zip(given) {
                 if let Some(speeds) = &g.desired_speeds {
                     agency.desired_speeds = speeds.clone();
                 }
@@ -388,49 +264,14 @@ impl Expansion {
         ids: &[u32],
     ) -> ScenarioPlan {
         let spec = &self.spec;
-        let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
-        // City: confounders, lights and each car's driving, drawn after placement.
-        let city_plan = city.as_ref().map(|c| {
-            let cs = &c.confounders;
-            let confounders = Confounders {
-                rain: cs.rain.sample(&mut rng),
-                fog: cs.fog.sample(&mut rng),
-                snow: cs.snow.sample(&mut rng),
-                wetness: cs.wetness.sample(&mut rng),
-                hour: cs.hour.sample(&mut rng),
-            };
-            let mut sim_stream = stream;
-            sim_stream[31] ^= 0x5a;
-            CityPlan {
-                confounders,
-                effects: confounders.effects(),
-                lights: self.light_plan(c),
-                base_driver: c.driver,
-                sim_stream: Sha256::digest(sim_stream).into(),
-            }
-        });
-        let agencies: Vec<Option<CarAgency>> = cars
-            .iter()
-            .map(|placed| {
-                let (c, plan) = (city.as_ref()?, city_plan.as_ref()?);
-                let p_run = (c.red_light_runner_probability + plan.effects.red_light_run_probability_added).min(1.0);
-                let runs_red_lights = rng.random_bool(p_run);
-                Some(CarAgency {
-                    desired_speeds: placed
-                        .desired_speeds
-                        .iter()
-                        .map(|v| v * plan.effects.desired_speed_factor)
-                        .collect(),
-                    driver: plan.effects.apply(&c.driver),
-                    runs_red_lights,
-                })
-            })
-            .collect();
+        let world = match spec.world {
+            WorldKind::Toy => WorldPlan::Toy { step_m: self.toy_step_m },
+            WorldKind::City => WorldPlan::City(self.city_plan(stream, &mut rng, &cars, ids)),
+        };
         let mut planned: Vec<CarPlan> = cars
             .into_iter()
             .enumerate()
-            .zip(agencies)
-            .map(|((i, placed), agency)| {
+            .map(|(i, placed)| {
                 let PlacedCar {
                     role, spawn, distance: spawn_distance, actions, merges: merge_distances, route, ..
                 } = placed;
@@ -438,7 +279,7 @@ impl Expansion {
                 CarPlan {
                     id,
                     name: format!("Car_{}", id + 1),
-                    colour: car_colour(id),
+                    colour: None,
                     mask_id: (id + 1) as u8,
                     spawn,
                     spawn_name: self.map.lanes[spawn].name.clone(),
@@ -449,7 +290,6 @@ impl Expansion {
                     length: spec.car_length_m,
                     width: spec.car_width_m,
                     route,
-                    agency,
                 }
             })
             .collect();
@@ -458,15 +298,13 @@ impl Expansion {
         planned.sort_by_key(|c| c.id);
         ScenarioPlan {
             key: key.clone(),
-            world: spec.world,
+            world,
             seed: spec.seed,
             stream_key: stream.iter().map(|b| format!("{b:02x}")).collect(),
             frames: spec.frames,
             frame_interval: spec.frame_interval(),
             cars: planned,
             edges,
-            toy_step_m: self.toy_step_m,
-            city: city_plan,
             interventions: Vec::new(),
             // Checked with the spec; chased cars are named by id, and cars are in id order.
             cameras: spec
@@ -480,6 +318,42 @@ impl Expansion {
                     .ok()
                 })
                 .collect(),
+        }
+    }
+
+    /// City world: confounders, lights and each car's driving (`ids[i]` for
+    /// `cars[i]`), drawn after placement, in placement order.
+    fn city_plan(&self, stream: [u8; 32], rng: &mut ChaCha8Rng, cars: &[PlacedCar], ids: &[u32]) -> CityPlan {
+        let c = self.spec.city_settings();
+        let cs = &c.confounders;
+        let confounders = Confounders {
+            rain: cs.rain.sample(rng),
+            fog: cs.fog.sample(rng),
+            snow: cs.snow.sample(rng),
+            wetness: cs.wetness.sample(rng),
+            hour: cs.hour.sample(rng),
+        };
+        let effects = confounders.effects();
+        let mut sim_stream = stream;
+        sim_stream[31] ^= 0x5a;
+        let p_run = (c.red_light_runner_probability + effects.red_light_run_probability_added).min(1.0);
+        let mut agency: Vec<(u32, CarAgency)> = cars
+            .iter()
+            .zip(ids)
+            .map(|(placed, &id)| {
+                let runs_red_lights = rng.random_bool(p_run);
+                let desired_speeds = placed.desired_speeds.iter().map(|v| v * effects.desired_speed_factor).collect();
+                (id, CarAgency { desired_speeds, driver: effects.apply(&c.driver), runs_red_lights })
+            })
+            .collect();
+        agency.sort_by_key(|(id, _)| *id);
+        CityPlan {
+            confounders,
+            effects,
+            lights: self.light_plan(&c),
+            base_driver: c.driver,
+            sim_stream: Sha256::digest(sim_stream).into(),
+            agency: agency.into_iter().map(|(_, a)| a).collect(),
         }
     }
 
@@ -525,19 +399,6 @@ fn draw_desired_speeds(rng: &mut ChaCha8Rng, city: Option<&crate::spec::CitySpec
             .collect(),
         None => Vec::new(),
     }
-}
-
-/// The 32-byte key of a scenario's random stream.
-pub fn stream_key(seed: u64, group: &str, split: Split, index: u32) -> [u8; 32] {
-    let mut h = Sha256::new();
-    h.update(b"causalcity/scenario/v1\0");
-    h.update(seed.to_le_bytes());
-    h.update(group.as_bytes());
-    h.update([0u8]);
-    h.update(split.name().as_bytes());
-    h.update([0u8]);
-    h.update(index.to_le_bytes());
-    h.finalize().into()
 }
 
 fn round_mm(x: f64) -> f64 {
@@ -628,40 +489,4 @@ fn spawn_spans(map: &CityMap, camera: &Camera, car_length: f64) -> Vec<SpawnSpan
         }
     }
     spans
-}
-
-/// A distinct, saturated colour per car id, away from road and roof colours.
-pub fn car_colour(id: u32) -> [u8; 3] {
-    const PALETTE: [[u8; 3]; 12] = [
-        [230, 25, 75],
-        [60, 180, 75],
-        [255, 225, 25],
-        [0, 130, 200],
-        [245, 130, 48],
-        [145, 30, 180],
-        [70, 240, 240],
-        [240, 50, 230],
-        [210, 245, 60],
-        [250, 190, 212],
-        [0, 128, 128],
-        [170, 110, 40],
-    ];
-    if (id as usize) < PALETTE.len() {
-        return PALETTE[id as usize];
-    }
-    // Golden-angle hues for the rest.
-    let hue = (id as f64 * 137.508) % 360.0;
-    let (s, v) = (0.75, 0.95);
-    let c = v * s;
-    let x = c * (1.0 - ((hue / 60.0) % 2.0 - 1.0).abs());
-    let (r, g, b) = match (hue / 60.0) as u32 {
-        0 => (c, x, 0.0),
-        1 => (x, c, 0.0),
-        2 => (0.0, c, x),
-        3 => (0.0, x, c),
-        4 => (x, 0.0, c),
-        _ => (c, 0.0, x),
-    };
-    let m = v - c;
-    [((r + m) * 255.0) as u8, ((g + m) * 255.0) as u8, ((b + m) * 255.0) as u8]
 }

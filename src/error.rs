@@ -1,0 +1,48 @@
+//! The one error type every command returns, and the one exit-code rule:
+//! 2 for bad input (nothing was written), 1 for a failure while working,
+//! 130 when interrupted.
+
+use std::fmt;
+
+/// Why a command did not finish. The message is complete: it names the
+/// file, field and value where there is one, and what to do.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Error {
+    /// The user's input (a file, a flag, a dataset folder) is not usable.
+    Input(String),
+    /// Something failed while working (a full disk, a failed write).
+    Failure(String),
+    /// Stopped by SIGINT or SIGTERM; what is complete is kept.
+    Interrupted(String),
+}
+
+impl Error {
+    /// The process exit status for this error.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Input(_) => 2,
+            Error::Failure(_) => 1,
+            Error::Interrupted(_) => 130,
+        }
+    }
+
+    /// Bad input, as a message.
+    pub fn input(message: impl fmt::Display) -> Error {
+        Error::Input(message.to_string())
+    }
+
+    /// A failure while working, as a message.
+    pub fn failure(message: impl fmt::Display) -> Error {
+        Error::Failure(message.to_string())
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Input(m) | Error::Failure(m) | Error::Interrupted(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for Error {}

@@ -1,0 +1,172 @@
+//! The layout of a scenario folder, in one place: the writer names its files
+//! from here and `validate` expects exactly these files and folders.
+//!
+//! ```text
+//! scenario.json  poses.csv  pixels.npy  checksums.sha256
+//! lights.csv  events.csv                      (city world)
+//! annotations.json                            (--annotations)
+//! rgb/NNNN.png  mask/NNNN.png                 (images)
+//! cameras/<name>/{rgb,mask,depth}/NNNN.png  cameras/<name>/poses.csv
+//! ```
+
+use super::annotations::ANNOTATIONS_FILE;
+use super::poses::PIXELS_FILE;
+use super::CHECKSUMS;
+
+/// The ground truth of the scenario.
+pub const SCENARIO_JSON: &str = "scenario.json";
+/// Every car's pose per frame.
+pub const POSES_CSV: &str = "poses.csv";
+/// City world: every light's colour per frame.
+pub const LIGHTS_CSV: &str = "lights.csv";
+/// City world: what happened, in time order.
+pub const EVENTS_CSV: &str = "events.csv";
+/// Folder of the extra cameras.
+pub const CAMERAS: &str = "cameras";
+
+/// Kinds of per-frame image folder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameKind {
+    Rgb,
+    Mask,
+    /// 16-bit depth in millimetres (extra cameras that ask for it).
+    Depth,
+}
+
+impl FrameKind {
+    pub fn folder(self) -> &'static str {
+        match self {
+            FrameKind::Rgb => "rgb",
+            FrameKind::Mask => "mask",
+            FrameKind::Depth => "depth",
+        }
+    }
+}
+
+/// An extra camera as the layout sees it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CameraFolder {
+    pub name: String,
+    pub depth: bool,
+}
+
+/// What one scenario folder holds.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScenarioLayout {
+    pub frames: u32,
+    /// Digits in frame file names.
+    pub digits: usize,
+    pub city: bool,
+    pub images: bool,
+    pub annotations: bool,
+    /// Extra cameras; they write files only with images.
+    pub cameras: Vec<CameraFolder>,
+}
+
+/// Digits in frame file names: at least 4 (`0000.png`), more for long scenarios.
+pub fn frame_digits(frames: u32) -> usize {
+    (frames.saturating_sub(1)).to_string().len().max(4)
+}
+
+impl ScenarioLayout {
+    pub fn new(frames: u32, city: bool, images: bool, annotations: bool, cameras: Vec<CameraFolder>) -> ScenarioLayout {
+        ScenarioLayout {
+            frames,
+            digits: frame_digits(frames),
+            city,
+            images,
+            annotations: annotations && images,
+            cameras: if images { cameras } else { Vec::new() },
+        }
+    }
+
+    /// `rgb/0042.png`.
+    pub fn frame_name(&self, kind: FrameKind, frame: u32) -> String {
+        format!("{}/{frame:0width$}.png", kind.folder(), width = self.digits)
+    }
+
+    /// `cameras/<name>`.
+    pub fn camera_dir(camera: &str) -> String {
+        format!("{CAMERAS}/{camera}")
+    }
+
+    /// `cameras/<name>/rgb/0042.png`.
+    pub fn camera_frame_name(&self, camera: &str, kind: FrameKind, frame: u32) -> String {
+        format!("{}/{}", Self::camera_dir(camera), self.frame_name(kind, frame))
+    }
+
+    /// `cameras/<name>/poses.csv`.
+    pub fn camera_poses(camera: &str) -> String {
+        format!("{}/{POSES_CSV}", Self::camera_dir(camera))
+    }
+
+    fn camera_kinds(camera: &CameraFolder) -> &'static [FrameKind] {
+        if camera.depth {
+            &[FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
+        } else {
+            &[FrameKind::Rgb, FrameKind::Mask]
+        }
+    }
+
+    /// Every folder inside the scenario folder, parents first.
+    pub fn folders(&self) -> Vec<String> {
+        let mut folders = Vec::new();
+        if self.images {
+            folders.extend([FrameKind::Rgb.folder().to_string(), FrameKind::Mask.folder().to_string()]);
+            if !self.cameras.is_empty() {
+                folders.push(CAMERAS.to_string());
+            }
+            for camera in &self.cameras {
+                let base = Self::camera_dir(&camera.name);
+                folders.push(base.clone());
+                folders.extend(Self::camera_kinds(camera).iter().map(|k| format!("{base}/{}", k.folder())));
+            }
+        }
+        folders
+    }
+
+    /// Every file of the scenario folder, the checksum listing last.
+    pub fn files(&self) -> Vec<String> {
+        let mut names: Vec<String> = vec![SCENARIO_JSON.into(), POSES_CSV.into(), PIXELS_FILE.into()];
+        if self.city {
+            names.extend([LIGHTS_CSV.into(), EVENTS_CSV.into()]);
+        }
+        if self.annotations {
+            names.push(ANNOTATIONS_FILE.into());
+        }
+        if self.images {
+            for kind in [FrameKind::Rgb, FrameKind::Mask] {
+                names.extend((0..self.frames).map(|f| self.frame_name(kind, f)));
+            }
+            for camera in &self.cameras {
+                for &kind in Self::camera_kinds(camera) {
+                    names.extend((0..self.frames).map(|f| self.camera_frame_name(&camera.name, kind, f)));
+                }
+                names.push(Self::camera_poses(&camera.name));
+            }
+        }
+        names.push(CHECKSUMS.into());
+        names
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_lists_camera_folders_and_files() {
+        let cameras = vec![CameraFolder { name: "corner".into(), depth: true }];
+        let layout = ScenarioLayout::new(3, true, true, false, cameras.clone());
+        let files = layout.files();
+        assert!(files.contains(&"cameras/corner/depth/0002.png".to_string()));
+        assert!(files.contains(&"cameras/corner/poses.csv".to_string()));
+        assert!(files.contains(&"events.csv".to_string()));
+        assert_eq!(files.len(), 5 + 2 * 3 + 3 * 3 + 1 + 1);
+        assert!(layout.folders().contains(&"cameras/corner/depth".to_string()));
+        // Without images there are no frames and no camera files.
+        let bare = ScenarioLayout::new(3, false, false, true, cameras);
+        assert_eq!(bare.files(), vec!["scenario.json", "poses.csv", "pixels.npy", "checksums.sha256"]);
+        assert!(bare.folders().is_empty());
+    }
+}

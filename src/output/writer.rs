@@ -1,0 +1,304 @@
+//! One writer for a simulated scenario folder: the ground truth, the logs
+//! and, with images, the bird's-eye frames and every extra camera's frames,
+//! masks, depth and pixel log, all through the same frame encoder and the
+//! file names of [`super::layout`]. It takes plans, trajectories and
+//! renderers as plain data; it knows nothing of dynamics.
+
+use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
+use super::layout::{CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON};
+use super::logs::{write_events, write_lights};
+use super::manifest::Products;
+use super::number::{logged_value, push_fixed};
+use super::png::{encode_png, PixelFormat, PngSettings};
+use super::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
+use super::scenario::scenario_json;
+use super::{ScenarioDir, WriteError};
+use crate::camera::{Camera, CameraKind, CameraPlan};
+use crate::map::CityMap;
+use crate::plan::ScenarioPlan;
+use crate::render::palette::colour_of;
+use crate::render::weather::SceneLook;
+use crate::render::{CarSprite, FrameCanvas, Renderer, Scene};
+use crate::timing::{Stage, StageTimes};
+use crate::world::{CarState, Trajectories};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Why a scenario was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioWriteError {
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    /// The stop flag was raised; nothing of the scenario is kept.
+    #[error("interrupted")]
+    Interrupted,
+}
+
+/// Writes scenarios of one run; shared by the run's threads.
+pub struct ScenarioWriter {
+    map: Arc<CityMap>,
+    camera: Camera,
+    renderer: Option<Renderer>,
+    leader_gap_px: f64,
+    intersection_names: Vec<String>,
+    fsync: bool,
+    annotations: bool,
+}
+
+/// One thread's reusable buffers: the bird's-eye canvas, encoded PNG bytes
+/// and depth values.
+pub struct WriterBuffers {
+    canvas: Option<FrameCanvas>,
+    png: Vec<u8>,
+    depth: Vec<u16>,
+    depth_bytes: Vec<u8>,
+}
+
+impl ScenarioWriter {
+    /// A writer for scenarios seen by `camera` over `map`; the bird's-eye
+    /// background is drawn here, once, when images are asked for.
+    pub fn new(map: Arc<CityMap>, camera: Camera, leader_gap_px: f64, products: Products, fsync: bool) -> Self {
+        ScenarioWriter {
+            renderer: products.images.then(|| Renderer::new(&map, camera)),
+            intersection_names: map.intersections.iter().map(|i| i.name.clone()).collect(),
+            map,
+            camera,
+            leader_gap_px,
+            fsync,
+            annotations: products.annotations && products.images,
+        }
+    }
+
+    /// Buffers for one thread.
+    pub fn buffers(&self) -> WriterBuffers {
+        WriterBuffers {
+            canvas: self.renderer.as_ref().map(Renderer::canvas),
+            png: Vec::new(),
+            depth: Vec::new(),
+            depth_bytes: Vec::new(),
+        }
+    }
+
+    /// The files `plan` gets from this writer.
+    pub fn layout(&self, plan: &ScenarioPlan) -> ScenarioLayout {
+        ScenarioLayout::new(
+            plan.frames,
+            plan.world.city().is_some(),
+            self.renderer.is_some(),
+            self.annotations,
+            plan.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect(),
+        )
+    }
+
+    /// Writes a simulated scenario into the folder `target`, atomically;
+    /// returns the bytes written. Checks `stop` every frame.
+    pub fn write(
+        &self,
+        plan: &ScenarioPlan,
+        trajectories: &Trajectories,
+        target: PathBuf,
+        buffers: &mut WriterBuffers,
+        stop: &AtomicBool,
+        times: &StageTimes,
+    ) -> Result<u64, ScenarioWriteError> {
+        let layout = self.layout(plan);
+        let camera = &self.camera;
+        let mut dir = ScenarioDir::begin(target, &layout, self.fsync, times)?;
+        let model = crate::world::model_name(plan.world.kind());
+        let record = scenario_json(plan, camera, self.leader_gap_px, &self.intersection_names, model);
+        let mut bytes = dir.write_file(SCENARIO_JSON, &record)?;
+        let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
+        bytes += dir.write_with(POSES_CSV, |w| write_poses(w, &ids, trajectories, camera))?;
+        bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, trajectories, camera))?;
+        if let Some(city) = plan.world.city() {
+            let names = &self.intersection_names;
+            bytes += dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, trajectories))?;
+            bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, trajectories))?;
+        }
+        if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
+            let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };
+            bytes += frames.birds_eye(renderer, canvas, plan, trajectories, self.annotations)?;
+            for camera_plan in &plan.cameras {
+                bytes += frames.extra_camera(
+                    &self.map,
+                    plan,
+                    trajectories,
+                    camera_plan,
+                    &mut buffers.depth,
+                    &mut buffers.depth_bytes,
+                )?;
+            }
+        }
+        bytes += dir.commit()?;
+        Ok(bytes)
+    }
+}
+
+/// Renders, encodes and writes frames into one scenario folder.
+struct FrameWriter<'a, 't> {
+    dir: &'a mut ScenarioDir<'t>,
+    layout: &'a ScenarioLayout,
+    png: &'a mut Vec<u8>,
+    times: &'t StageTimes,
+    stop: &'a AtomicBool,
+}
+
+impl FrameWriter<'_, '_> {
+    fn check_stop(&self) -> Result<(), ScenarioWriteError> {
+        if self.stop.load(Ordering::Relaxed) {
+            return Err(ScenarioWriteError::Interrupted);
+        }
+        Ok(())
+    }
+
+    /// Encodes an image into the PNG buffer, then writes it as `name`.
+    fn image(&mut self, name: &str, (w, h): (u32, u32), format: PixelFormat, data: &[u8]) -> Result<u64, WriteError> {
+        let start = Instant::now();
+        self.png.clear();
+        encode_png(&mut *self.png, w, h, format, data, PngSettings::for_format(format))
+            .map_err(|e| WriteError { path: PathBuf::from(name), source: std::io::Error::other(e) })?;
+        self.times.add(Stage::Encode, start.elapsed());
+        self.dir.write_file(name, self.png)
+    }
+
+    /// A frame's RGB image and instance mask.
+    fn rgb_and_mask(&mut self, names: [&str; 2], canvas: &FrameCanvas, size: (u32, u32)) -> Result<u64, WriteError> {
+        Ok(self.image(names[0], size, PixelFormat::Rgb8, &canvas.rgb)?
+            + self.image(names[1], size, PixelFormat::Gray8, &canvas.mask)?)
+    }
+
+    /// The bird's-eye view: rgb/, mask/ and, when asked, annotations.json.
+    fn birds_eye(
+        &mut self,
+        renderer: &Renderer,
+        canvas: &mut FrameCanvas,
+        plan: &ScenarioPlan,
+        trajectories: &Trajectories,
+        annotations: bool,
+    ) -> Result<u64, ScenarioWriteError> {
+        let size = (renderer.camera.width, renderer.camera.height);
+        let scenario_name = plan.key.folder_name();
+        let annotated_cars: Vec<AnnotatedCar> =
+            plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
+        let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, size.0, size.1, &annotated_cars));
+        let mut pixels = Vec::with_capacity(plan.cars.len());
+        let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
+        let mut bytes = 0;
+        let mut sprites = Vec::with_capacity(plan.cars.len());
+        for (frame, states) in trajectories.states.iter().enumerate() {
+            self.check_stop()?;
+            if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
+                scene = renderer.scene(SceneLook::at_frame(plan, trajectories, frame));
+            }
+            fill_sprites(&mut sprites, plan, states);
+            let frame = frame as u32;
+            self.times.time(Stage::Render, || renderer.render(canvas, &scene, &sprites, frame));
+            let rgb_name = self.layout.frame_name(FrameKind::Rgb, frame);
+            let mask_name = self.layout.frame_name(FrameKind::Mask, frame);
+            bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
+            if let Some(builder) = builder.as_mut() {
+                pixels.clear();
+                pixels.extend(states.iter().map(|s| {
+                    let p = renderer.camera.to_pixel(s.position);
+                    [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
+                }));
+                self.times.time(Stage::Encode, || builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels));
+            }
+        }
+        if let Some(builder) = builder {
+            bytes += self.dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
+        }
+        Ok(bytes)
+    }
+
+    /// One extra camera under `cameras/<name>/`: rgb/, mask/, depth/
+    /// (16-bit, millimetres) when asked, and poses.csv (frame, car, px, py,
+    /// in_view) in this camera's pixels.
+    fn extra_camera(
+        &mut self,
+        map: &CityMap,
+        plan: &ScenarioPlan,
+        trajectories: &Trajectories,
+        camera_plan: &CameraPlan,
+        depth: &mut Vec<u16>,
+        depth_bytes: &mut Vec<u8>,
+    ) -> Result<u64, ScenarioWriteError> {
+        let name = &camera_plan.name;
+        let chased = |states: &[CarState]| match camera_plan.kind {
+            CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
+            CameraKind::Static { .. } => None,
+        };
+        let size = (camera_plan.width, camera_plan.height);
+        // A static camera draws its background once; a chase camera every frame.
+        let mut fixed: Option<(Renderer, Scene)> = None;
+        let mut canvas: Option<FrameCanvas> = None;
+        let mut poses = b"frame,car,px,py,in_view\n".to_vec();
+        let mut bytes = 0;
+        let mut sprites = Vec::with_capacity(plan.cars.len());
+        for (frame, states) in trajectories.states.iter().enumerate() {
+            self.check_stop()?;
+            let camera = camera_plan.camera_at(chased(states));
+            let look = SceneLook::at_frame(plan, trajectories, frame);
+            if trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
+                fixed = None;
+            }
+            let owned;
+            let (renderer, scene) = match camera_plan.kind {
+                CameraKind::Static { .. } => {
+                    let (r, s) = fixed.get_or_insert_with(|| {
+                        let r = Renderer::new(map, camera);
+                        let s = r.scene(look);
+                        (r, s)
+                    });
+                    (&*r, &*s)
+                }
+                CameraKind::Chase { .. } => {
+                    let r = Renderer::new(map, camera);
+                    let s = r.scene(look);
+                    owned = (r, s);
+                    (&owned.0, &owned.1)
+                }
+            };
+            let canvas = canvas.get_or_insert_with(|| renderer.canvas());
+            fill_sprites(&mut sprites, plan, states);
+            let frame = frame as u32;
+            self.times.time(Stage::Render, || renderer.render(canvas, scene, &sprites, frame));
+            let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
+                .map(|k| self.layout.camera_frame_name(name, k, frame));
+            bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
+            if camera_plan.depth {
+                self.times.time(Stage::Render, || {
+                    renderer.depth_mm(&canvas.mask, depth);
+                    depth_bytes.clear();
+                    depth_bytes.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
+                });
+                bytes += self.image(&depth_name, size, PixelFormat::Gray16, depth_bytes)?;
+            }
+            for (car, state) in plan.cars.iter().zip(states) {
+                let pixel = camera.to_pixel(state.position);
+                poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
+                push_fixed(&mut poses, pixel.x, PIXEL_DECIMALS);
+                poses.push(b',');
+                push_fixed(&mut poses, pixel.y, PIXEL_DECIMALS);
+                poses.extend_from_slice(format!(",{}\n", camera.contains_pixel(pixel) as u8).as_bytes());
+            }
+        }
+        bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;
+        Ok(bytes)
+    }
+}
+
+/// The cars of one frame as the renderer draws them.
+fn fill_sprites(sprites: &mut Vec<CarSprite>, plan: &ScenarioPlan, states: &[CarState]) {
+    sprites.clear();
+    sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
+        position: s.position,
+        yaw: s.yaw,
+        length: car.length,
+        width: car.width,
+        colour: colour_of(car),
+        mask_id: car.mask_id,
+    }));
+}
