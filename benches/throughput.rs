@@ -83,6 +83,66 @@ fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
     generate(&gen_options(spec, out, threads, images)).unwrap().elapsed.as_secs_f64()
 }
 
+/// End to end (plan, simulate, render, encode, write, checksum) against
+/// encoding the same frames alone, toy world with images, 1 thread, in
+/// /dev/shm: how close the pipeline runs to the PNG encoder.
+fn frame_pipeline(root: &Path) {
+    println!("== Frame pipeline: toy world with images, 1024x640, 12 cars x 150 frames, 1 thread, in /dev/shm ==");
+    let spec = write_spec(root, "pipeline", 12, 8);
+    let scratch = scratch_root(root);
+    let out = scratch.join("pipeline");
+    let pairs = 8.0 * 150.0;
+    let mut best: Option<causalcity::orchestrate::run::Summary> = None;
+    for _ in 0..3 {
+        let _ = std::fs::remove_dir_all(&out);
+        let summary = generate(&gen_options(&spec, &out, 1, true)).unwrap();
+        if best.as_ref().is_none_or(|b| summary.elapsed < b.elapsed) {
+            best = Some(summary);
+        }
+    }
+    let best = best.unwrap();
+    // The same frames, each decoded back into memory (not timed) and then
+    // encoded alone while it is in cache, as the pipeline encodes it.
+    let mut encode_s = 0.0;
+    let mut frames = 0usize;
+    let mut sink = Vec::with_capacity(1 << 22);
+    for scenario in std::fs::read_dir(out.join("cars12_edges50").join("train")).unwrap() {
+        let dir = scenario.unwrap().path();
+        for f in 0..150 {
+            let rgb = image::open(dir.join(format!("rgb/{f:04}.png"))).unwrap().into_rgb8().into_raw();
+            let mask = image::open(dir.join(format!("mask/{f:04}.png"))).unwrap().into_luma8().into_raw();
+            let t = Instant::now();
+            sink.clear();
+            encode_png(&mut sink, 1024, 640, PixelFormat::Rgb8, &rgb, PngSettings::rgb()).unwrap();
+            sink.clear();
+            encode_png(&mut sink, 1024, 640, PixelFormat::Gray8, &mask, PngSettings::mask()).unwrap();
+            encode_s += t.elapsed().as_secs_f64();
+            frames += 1;
+        }
+    }
+    let _ = std::fs::remove_dir_all(&out);
+    if scratch != root {
+        let _ = std::fs::remove_dir_all(&scratch);
+    }
+    let end_to_end = pairs / best.elapsed.as_secs_f64();
+    let encode_only = frames as f64 / encode_s;
+    println!(
+        "end to end {end_to_end:.0} frame pairs/s, encode only {encode_only:.0} frame pairs/s: end to end at {:.0} % of encode only",
+        100.0 * end_to_end / encode_only
+    );
+    let st = best.stage_seconds;
+    println!(
+        "stage seconds (gen --json): plan {:.2}, simulate {:.2}, render {:.2}, encode {:.2}, write {:.2}, checksum {:.2}; wall {:.2}",
+        st.plan,
+        st.simulate,
+        st.render,
+        st.encode,
+        st.write,
+        st.checksum,
+        best.elapsed.as_secs_f64()
+    );
+}
+
 fn png_settings_comparison() {
     println!("== PNG settings on a real 1024x640 toy frame (12 cars) ==");
     let spec = DatasetSpec::from_json(&spec_json("png", 12, 1)).unwrap();
@@ -202,6 +262,12 @@ fn main() {
     // `cargo bench` passes --bench; ignore arguments.
     let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
     std::fs::create_dir_all(&root).unwrap();
+    frame_pipeline(&root);
+    // BENCH_ONLY=pipeline stops after the frame-pipeline figures.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "pipeline") {
+        let _ = std::fs::remove_dir_all(&root);
+        return;
+    }
     png_settings_comparison();
 
     println!("\n== Toy world with images, 1024x640, 12 cars x 150 frames ==");

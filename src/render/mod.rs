@@ -47,11 +47,70 @@ pub struct Scene {
 
 /// Reusable per-thread buffers: the finished frame is in `rgb` (row-major,
 /// 3 bytes a pixel) and `mask` (1 byte a pixel).
+///
+/// Between frames of one scene only what the previous frame drew (its cars
+/// and their beams) is restored from the background, and only what changed
+/// is converted into `rgb` and `mask`: a frame costs its cars, not its size.
 pub struct FrameCanvas {
     rgba: Pixmap,
     mask_rgba: Pixmap,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
+    /// The background `rgba` was last restored from (kept alive so that
+    /// identity means the same pixels).
+    background: Option<Arc<Pixmap>>,
+    /// Pixel rectangles the previous frame drew over the background.
+    dirty: Vec<PixelRect>,
+}
+
+/// A rectangle of pixels, `x0..x1` by `y0..y1`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct PixelRect {
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
+}
+
+/// Pixels added around a shape's exact bounds for anti-aliased edges.
+const AA_MARGIN_PX: f32 = 2.0;
+/// Beams reach this far ahead of a car's front, metres (weather.rs draws them).
+const BEAM_REACH_M: f32 = 3.5;
+/// Half the width a beam pair can span, metres, beyond 0.3 x the car's width.
+const BEAM_HALF_SPREAD_M: f32 = 0.9;
+
+impl PixelRect {
+    /// The pixels that shapes inside the car-frame box `[x0, x1] x [y0, y1]`
+    /// (metres) can touch under `transform`, clipped to a `w` x `h` image;
+    /// `None` when wholly outside.
+    fn around(transform: Transform, (x0, x1): (f32, f32), (y0, y1): (f32, f32), w: usize, h: usize) -> Option<Self> {
+        let mut corners = [
+            tiny_skia::Point::from_xy(x0, y0),
+            tiny_skia::Point::from_xy(x1, y0),
+            tiny_skia::Point::from_xy(x1, y1),
+            tiny_skia::Point::from_xy(x0, y1),
+        ];
+        transform.map_points(&mut corners);
+        let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) =
+            (f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for p in corners {
+            lo_x = lo_x.min(p.x);
+            lo_y = lo_y.min(p.y);
+            hi_x = hi_x.max(p.x);
+            hi_y = hi_y.max(p.y);
+        }
+        if !(lo_x.is_finite() && lo_y.is_finite() && hi_x.is_finite() && hi_y.is_finite()) {
+            return None;
+        }
+        let clip = |v: f32, max: usize| v.clamp(0.0, max as f32) as usize;
+        let rect = PixelRect {
+            x0: clip((lo_x - AA_MARGIN_PX).floor(), w),
+            y0: clip((lo_y - AA_MARGIN_PX).floor(), h),
+            x1: clip((hi_x + AA_MARGIN_PX).ceil(), w),
+            y1: clip((hi_y + AA_MARGIN_PX).ceil(), h),
+        };
+        (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
+    }
 }
 
 impl Renderer {
@@ -111,6 +170,8 @@ impl Renderer {
             mask_rgba: Pixmap::new(w, h).expect("image size was validated"),
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
+            background: None,
+            dirty: Vec::new(),
         }
     }
 
@@ -118,13 +179,36 @@ impl Renderer {
     /// `canvas.rgb` and `canvas.mask`.
     pub fn render(&self, canvas: &mut FrameCanvas, scene: &Scene, cars: &[CarSprite], frame: u32) {
         let look = &scene.look;
-        canvas.rgba.data_mut().copy_from_slice(scene.background.data());
-        canvas.mask_rgba.data_mut().fill(0);
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let world = background::world_to_canvas(&self.camera);
         // Car frame: x forward, y left, origin at the car's centre.
         let car_frame = |car: &CarSprite| {
             let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
             world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32))
+        };
+        // Rain and snow cover the whole frame; otherwise only the cars (and
+        // their beams) change from frame to frame.
+        let same_background = canvas.background.as_ref().is_some_and(|b| Arc::ptr_eq(b, &scene.background));
+        let whole_frame = !same_background || look.rain > 0.0 || look.snow > 0.0;
+        let drawn: Vec<PixelRect> = cars
+            .iter()
+            .filter_map(|car| {
+                let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
+                let half_span = hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M);
+                PixelRect::around(car_frame(car), (-hl, hl + BEAM_REACH_M), (-half_span, half_span), w, h)
+            })
+            .collect();
+        let previous = std::mem::replace(&mut canvas.dirty, drawn);
+        let changed: Vec<PixelRect> = if whole_frame {
+            canvas.rgba.data_mut().copy_from_slice(scene.background.data());
+            canvas.mask_rgba.data_mut().fill(0);
+            canvas.background = Some(scene.background.clone());
+            vec![PixelRect { x0: 0, y0: 0, x1: w, y1: h }]
+        } else {
+            for r in &previous {
+                restore(&mut canvas.rgba, &mut canvas.mask_rgba, &scene.background, *r);
+            }
+            previous.iter().chain(&canvas.dirty).copied().collect()
         };
         // Beams lie on the road, under every car.
         look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
@@ -148,11 +232,42 @@ impl Renderer {
             canvas.mask_rgba.fill_path(&path, &mask_paint, FillRule::Winding, t, None);
         }
         look.draw_precipitation(&mut canvas.rgba, frame);
-        for (dst, src) in canvas.rgb.chunks_exact_mut(3).zip(canvas.rgba.data().chunks_exact(4)) {
-            dst.copy_from_slice(&src[..3]);
+        if whole_frame {
+            // A weather frame draws everywhere: the next one restores everything.
+            canvas.dirty = changed.clone();
         }
-        for (dst, src) in canvas.mask.iter_mut().zip(canvas.mask_rgba.data().chunks_exact(4)) {
-            *dst = src[0];
+        for r in changed {
+            convert(canvas, r);
+        }
+    }
+}
+
+/// Puts the background back in `r` and clears the mask there.
+fn restore(rgba: &mut Pixmap, mask_rgba: &mut Pixmap, background: &Pixmap, r: PixelRect) {
+    let stride = rgba.width() as usize * 4;
+    let (from, to) = (r.x0 * 4, r.x1 * 4);
+    let (rgba, mask, back) = (rgba.data_mut(), mask_rgba.data_mut(), background.data());
+    for y in r.y0..r.y1 {
+        let row = y * stride;
+        rgba[row + from..row + to].copy_from_slice(&back[row + from..row + to]);
+        mask[row + from..row + to].fill(0);
+    }
+}
+
+/// Copies `r` of the drawing buffers into the frame's RGB image and mask.
+fn convert(canvas: &mut FrameCanvas, r: PixelRect) {
+    let w = canvas.rgba.width() as usize;
+    let (rgba, mask_rgba) = (canvas.rgba.data(), canvas.mask_rgba.data());
+    for y in r.y0..r.y1 {
+        let row = y * w;
+        let src = &rgba[(row + r.x0) * 4..(row + r.x1) * 4];
+        let dst = &mut canvas.rgb[(row + r.x0) * 3..(row + r.x1) * 3];
+        for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
+            d.copy_from_slice(&s[..3]);
+        }
+        let src = &mask_rgba[(row + r.x0) * 4..(row + r.x1) * 4];
+        for (d, s) in canvas.mask[row + r.x0..row + r.x1].iter_mut().zip(src.chunks_exact(4)) {
+            *d = s[0];
         }
     }
 }
