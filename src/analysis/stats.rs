@@ -18,7 +18,7 @@ use std::path::Path;
 pub const STOP_SPEED_PX: f64 = 0.1;
 /// Frames a car must stand to count as stopped.
 pub const STOP_FRAMES: usize = 5;
-/// How far before an intersection box a stop counts as a light stop, metres.
+/// How far before an intersection box a stop counts as a stop at its light, metres.
 const APPROACH_M: f64 = 12.0;
 const HISTOGRAM_BIN_PX: f64 = 0.01;
 const HISTOGRAM_BINS: usize = 3001;
@@ -88,7 +88,7 @@ impl fmt::Display for DatasetStats {
                 100.0 * r.in_view_share
             )?;
         }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m of an intersection; colli: scenarios with a collision")
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision")
     }
 }
 
@@ -176,6 +176,29 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
     }
 }
 
+/// (frame, intersection, approach) where the straight signal showed red or
+/// yellow, from lights.csv (none without lights).
+fn red_approaches(dir: &Path) -> Result<std::collections::HashSet<(usize, String, char)>, String> {
+    let path = dir.join("lights.csv");
+    let mut red = std::collections::HashSet::new();
+    if !path.exists() {
+        return Ok(red);
+    }
+    let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    for row in reader.records() {
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let (Some(frame), Some(i), Some(side), Some(signal), Some(colour)) =
+            (row.get(0).and_then(|f| f.parse().ok()), row.get(2), row.get(3), row.get(4), row.get(5))
+        else {
+            return Err(format!("{}: malformed row", path.display()));
+        };
+        if signal == "straight" && colour != "green" {
+            red.insert((frame, i.to_string(), side.chars().next().unwrap_or('?')));
+        }
+    }
+    Ok(red)
+}
+
 fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     let path = dir.join("scenario.json");
     let scenario: serde_json::Value = std::fs::read(&path)
@@ -189,6 +212,7 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     let mut reader = csv::Reader::from_path(&poses_path).map_err(|e| format!("{}: {e}", poses_path.display()))?;
     // Per car: (x, y, speed px/frame) per frame.
     let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
+    let red = red_approaches(dir)?;
     let mut t = Tally { cars, histogram: vec![0; HISTOGRAM_BINS], ..Tally::default() };
     for row in reader.records() {
         let row = row.map_err(|e| format!("{}: {e}", poses_path.display()))?;
@@ -208,19 +232,39 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
         t.in_view += (view > 0.5) as usize;
     }
     let hw = map.layout.road_half_width();
-    let on_approach = |x: f64, y: f64| {
-        map.intersections.iter().any(|i| {
-            let (dx, dy) = ((x - i.centre.x).abs(), (y - i.centre.y).abs());
-            (dx < hw && dy >= hw && dy < hw + APPROACH_M) || (dy < hw && dx >= hw && dx < hw + APPROACH_M)
+    // The intersection arm a point stands on, as (intersection, the side
+    // its traffic arrives from).
+    let approach = |x: f64, y: f64| {
+        map.intersections.iter().find_map(|i| {
+            let (dx, dy) = (x - i.centre.x, y - i.centre.y);
+            let arm = |along: f64, across: f64| across.abs() < hw && along.abs() >= hw && along.abs() < hw + APPROACH_M;
+            let side = if arm(dy, dx) {
+                if dy > 0.0 {
+                    'N'
+                } else {
+                    'S'
+                }
+            } else if arm(dx, dy) {
+                if dx > 0.0 {
+                    'E'
+                } else {
+                    'W'
+                }
+            } else {
+                return None;
+            };
+            Some((i.name.as_str(), side))
         })
     };
     for track in &tracks {
         let (mut run, mut stopped, mut light) = (0, false, false);
-        for &(x, y, px) in track {
+        for (frame, &(x, y, px)) in track.iter().enumerate() {
             run = if px < STOP_SPEED_PX { run + 1 } else { 0 };
             if run == STOP_FRAMES {
                 stopped = true;
-                light |= on_approach(x, y);
+                // The stop began STOP_FRAMES - 1 frames ago.
+                let began = frame + 1 - STOP_FRAMES;
+                light |= approach(x, y).is_some_and(|(i, side)| red.contains(&(began, i.to_string(), side)));
             }
         }
         t.stopped += stopped as usize;
