@@ -1,7 +1,7 @@
 //! Progress of a long run: an indicatif bar on a terminal, plain lines every
 //! 10 % (or 15 s) when stderr is a file or pipe, nothing with `--quiet`.
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -32,12 +32,15 @@ impl Progress {
             ProgressMode::Quiet => (None, None),
             ProgressMode::Auto if terminal => {
                 let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-                bar.set_style(
-                    ProgressStyle::with_template(
-                        "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({per_sec}, ETA {eta})",
-                    )
-                    .expect("valid template"),
-                );
+                let style = ProgressStyle::with_template(
+                    "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({rate_eta})",
+                )
+                .expect("valid template")
+                .with_key("rate_eta", |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                    let total = state.len().unwrap_or(0);
+                    let _ = w.write_str(&rate_and_eta(state.pos(), total, state.elapsed().as_secs_f64()));
+                });
+                bar.set_style(style);
                 bar.enable_steady_tick(Duration::from_millis(200));
                 (Some(bar), None)
             }
@@ -58,12 +61,11 @@ impl Progress {
             let due = done / step > last.1 / step || last.0.elapsed() > Duration::from_secs(15) || done == self.total;
             if due {
                 let secs = self.start.elapsed().as_secs_f64();
-                let rate = done as f64 / secs.max(1e-9);
-                let eta = (self.total - done) as f64 / rate.max(1e-9);
                 eprintln!(
-                    "progress: {done}/{} scenarios ({:.0} %), {rate:.1}/s, ETA {eta:.0} s",
+                    "progress: {done}/{} scenarios ({:.0} %), {}",
                     self.total,
-                    100.0 * done as f64 / self.total.max(1) as f64
+                    100.0 * done as f64 / self.total.max(1) as f64,
+                    rate_and_eta(done, self.total, secs)
                 );
                 *last = (Instant::now(), done);
             }
@@ -74,5 +76,38 @@ impl Progress {
         if let Some(bar) = &self.bar {
             bar.finish_and_clear();
         }
+    }
+}
+
+/// `12/s, ETA 40 s` (`0.4/s` below 10 per second); `starting` before the
+/// first one finishes, when there is no rate to tell yet.
+pub fn rate_and_eta(done: u64, total: u64, seconds: f64) -> String {
+    if done == 0 || seconds <= 0.0 {
+        return "starting".into();
+    }
+    let rate = done as f64 / seconds;
+    let rate_text = if rate >= 10.0 { format!("{rate:.0}/s") } else { format!("{rate:.1}/s") };
+    let eta = total.saturating_sub(done) as f64 / rate;
+    let eta_text = if eta >= 3600.0 {
+        format!("{}h{:02}m", (eta / 3600.0) as u64, ((eta % 3600.0) / 60.0) as u64)
+    } else if eta >= 60.0 {
+        format!("{}m{:02}s", (eta / 60.0) as u64, (eta % 60.0) as u64)
+    } else {
+        format!("{eta:.0} s")
+    };
+    format!("{rate_text}, ETA {eta_text}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_are_readable_and_there_is_no_eta_before_the_first_scenario() {
+        assert_eq!(rate_and_eta(0, 30, 2.0), "starting");
+        assert_eq!(rate_and_eta(3, 30, 22.44), "0.1/s, ETA 3m21s");
+        assert_eq!(rate_and_eta(150, 1000, 10.0), "15/s, ETA 57 s");
+        assert_eq!(rate_and_eta(10, 100_000, 1.0), "10/s, ETA 2h46m");
+        assert_eq!(rate_and_eta(30, 30, 3.0), "10/s, ETA 0 s");
     }
 }
