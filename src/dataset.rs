@@ -120,6 +120,8 @@ pub struct Pose {
     /// Pixel position in the bird's-eye frame.
     pub px: f64,
     pub py: f64,
+    /// Heading, radians counter-clockwise from east.
+    pub yaw: f64,
     /// Metres per second.
     pub speed: f64,
     pub in_view: bool,
@@ -152,8 +154,8 @@ impl PoseLog {
             else {
                 return Err(bad());
             };
-            let (Some(x), Some(y), Some(px), Some(py), Some(speed), Some(view)) =
-                (num(3), num(4), num(9), num(10), num(11), num(12))
+            let (Some(x), Some(y), Some(yaw), Some(px), Some(py), Some(speed), Some(view)) =
+                (num(3), num(4), num(8), num(9), num(10), num(11), num(12))
             else {
                 return Err(bad());
             };
@@ -161,7 +163,7 @@ impl PoseLog {
                 return Err(bad());
             }
             filled[frame * cars + car] = true;
-            poses[frame * cars + car] = Pose { x, y, px, py, speed, in_view: view > 0.5 };
+            poses[frame * cars + car] = Pose { x, y, px, py, yaw, speed, in_view: view > 0.5 };
         }
         if let Some(missing) = filled.iter().position(|f| !f) {
             return Err(format!(

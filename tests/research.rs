@@ -191,8 +191,28 @@ fn the_baseline_finds_toy_links_calls_few_without_links_and_finds_the_city_harde
     assert!(city_f1 < linked["f1"].as_f64().unwrap() - 0.03, "city F1 {city_f1} should be clearly below the toy's");
     assert!(group(&report, "cars08_edges00")["test_predicted_share"].as_f64().unwrap() <= 0.05);
 
+    // Threshold-free figures beside F1: the city's dynamics still rank
+    // true links first far better than guessing.
+    let city_linked = group(&report, "cars08_edges50");
+    let auroc = city_linked["auroc"].as_f64().unwrap();
+    let ap = city_linked["average_precision"].as_f64().unwrap();
+    assert!(auroc > 0.9 && auroc <= 1.0, "city AUROC {auroc}");
+    assert!(ap > 0.5 && ap <= 1.0, "city AP {ap}");
+    assert!(group(&report, "cars08_edges00")["auroc"].is_null(), "no AUROC without links");
+
+    // The frame-0 row: one per group, learned on train like the dynamics.
+    // The toy world starts every follower exactly leader_gap_px behind its
+    // leader (the paper's rule), so the first frame alone finds its links.
+    let toy_report = baseline_json(&toy);
+    let frame0: Vec<&Value> = toy_report["frame0"].as_array().unwrap().iter().collect();
+    assert_eq!(frame0.len(), 2);
+    let toy_frame0 = frame0.iter().find(|g| g["group"] == "cars08_edges50").unwrap();
+    assert_eq!(toy_frame0["method"], "frame0");
+    assert!(toy_frame0["f1"].as_f64().unwrap() >= 0.95, "toy frame0 {toy_frame0}");
+
     let table = run(&["baseline", toy.to_str().unwrap()]);
-    assert!(String::from_utf8_lossy(&table.stdout).contains("cars08_edges50"));
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(table.contains("cars08_edges50") && table.contains("AUROC") && table.contains("frame0"), "{table}");
 }
 
 #[test]

@@ -11,17 +11,32 @@
 //! split has no pairs use the threshold pooled over all groups). Precision,
 //! recall and F1 are reported on the test split. Positions are the logged
 //! ground-plane positions in metres.
+//!
+//! F1 at a threshold depends on the share of true links (with 10 % of pairs
+//! linked, calling every pair linked already gives F1 0.18; with 40 %, 0.57),
+//! so every row also has the threshold-free AUROC (the chance that a true
+//! link scores below a non-link; 0.5 is guessing) and average precision.
+//!
+//! Next to each group's dynamics row stands a `frame0` row: the best rule
+//! that sees only the first frame, the leak a dataset has. It scores a pair
+//! (a, b) by how far a stands ahead of b along b's heading when both are in
+//! one lane and face the same way (infinite otherwise), and learns its
+//! threshold on train like the dynamics score. A benchmark whose frame0 row
+//! does as well as its dynamics row gives its answer away before anything
+//! moves.
 
-use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
+use crate::dataset::{Dataset, Pose, PoseLog, ScenarioSummary};
 use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
 use std::path::Path;
 
-/// One group's result.
+/// One group's result for one method.
 #[derive(Debug, Clone, Serialize)]
 pub struct GroupBaseline {
+    /// `dynamics` (the following score) or `frame0` (the first frame only).
+    pub method: &'static str,
     pub group: String,
     pub cars: u32,
     pub edge_proportion: f64,
@@ -44,6 +59,11 @@ pub struct GroupBaseline {
     pub precision: Option<f64>,
     pub recall: Option<f64>,
     pub f1: Option<f64>,
+    /// Threshold-free, on test: the chance that a linked pair scores below
+    /// an unlinked one (ties count half); None without both kinds of pair.
+    pub auroc: Option<f64>,
+    /// Threshold-free, on test: precision averaged over the recall steps.
+    pub average_precision: Option<f64>,
 }
 
 /// The baseline over a dataset.
@@ -52,11 +72,26 @@ pub struct BaselineReport {
     pub dataset: String,
     pub world: String,
     pub max_lag_s: f64,
+    /// The dynamics baseline, per group.
     pub groups: Vec<GroupBaseline>,
+    /// The best first-frame rule, per group: the leak.
+    pub frame0: Vec<GroupBaseline>,
 }
 
 /// A scored ordered pair: (score in metres, truly linked).
 type ScoredPair = (f64, bool);
+
+/// Both scores of every ordered pair of a scenario.
+struct ScenarioScores {
+    dynamics: Vec<ScoredPair>,
+    frame0: Vec<ScoredPair>,
+}
+
+/// Widest lateral offset at which two cars count as in one lane, metres
+/// (half the default 3 m lane).
+const SAME_LANE_M: f64 = 1.5;
+/// Largest heading difference at which two cars face the same way, radians.
+const SAME_HEADING_RAD: f64 = 0.5;
 
 /// Runs the baseline over the dataset in `dir`.
 pub fn baseline(dir: &Path, max_lag_s: f64) -> Result<BaselineReport, String> {
@@ -68,75 +103,155 @@ pub fn baseline(dir: &Path, max_lag_s: f64) -> Result<BaselineReport, String> {
     let mut per_group = Vec::new();
     for group in &spec.groups {
         let name = group.name();
-        let score_split = |split: Split| -> Result<Vec<Vec<ScoredPair>>, String> {
+        let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
             dataset.scenario_dirs(&name, split).par_iter().map(|d| score_scenario(d, max_lag_s)).collect()
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }
-    let pooled: Vec<ScoredPair> = per_group.iter().flat_map(|(_, train, _)| train.iter().flatten().copied()).collect();
-    let pooled_threshold = best_threshold(&pooled);
-    let mut groups = Vec::new();
-    for (group, train, test) in per_group {
-        let train_pairs: Vec<ScoredPair> = train.iter().flatten().copied().collect();
-        let (threshold, from) = match best_threshold(&train_pairs) {
-            Some(t) => (t, "train"),
-            None => match pooled_threshold {
-                Some(t) => (t, "pooled"),
-                None => {
+    let pick = |s: &ScenarioScores, frame0: bool| if frame0 { s.frame0.clone() } else { s.dynamics.clone() };
+    let mut methods = [Vec::new(), Vec::new()];
+    for (m, frame0) in [false, true].into_iter().enumerate() {
+        let split_pairs =
+            |scores: &[ScenarioScores]| -> Vec<ScoredPair> { scores.iter().flat_map(|s| pick(s, frame0)).collect() };
+        let pooled: Vec<ScoredPair> = per_group.iter().flat_map(|(_, train, _)| split_pairs(train)).collect();
+        let pooled_threshold = best_threshold(&pooled);
+        for (group, train, test) in &per_group {
+            let (train_pairs, test_pairs) = (split_pairs(train), split_pairs(test));
+            let (threshold, from) = match (best_threshold(&train_pairs), pooled_threshold) {
+                (Some(t), _) => (t, "train"),
+                (None, Some(t)) => (t, "pooled"),
+                (None, None) => {
                     return Err(format!(
                         "{}: no leader-follower pairs in any train split, so there is no threshold to learn; \
                          generate train scenarios with edge_proportion > 0",
                         dir.display()
                     ))
                 }
-            },
-        };
-        let test_pairs: Vec<ScoredPair> = test.iter().flatten().copied().collect();
-        let counts = Counts::at(&test_pairs, threshold);
-        groups.push(GroupBaseline {
-            group: group.name(),
-            cars: group.cars,
-            edge_proportion: group.edge_proportion,
-            threshold_m: threshold,
-            threshold_from: from,
-            train_scenarios: train.len(),
-            train_f1: Counts::at(&train_pairs, threshold).f1(),
-            test_scenarios: test.len(),
-            test_pairs: test_pairs.len(),
-            test_true_edges: counts.true_positives + counts.false_negatives,
-            test_predicted_edges: counts.true_positives + counts.false_positives,
-            test_predicted_share: if test_pairs.is_empty() {
-                0.0
-            } else {
-                (counts.true_positives + counts.false_positives) as f64 / test_pairs.len() as f64
-            },
-            precision: counts.precision(),
-            recall: counts.recall(),
-            f1: counts.f1(),
-        });
+            };
+            let counts = Counts::at(&test_pairs, threshold);
+            let called = counts.true_positives + counts.false_positives;
+            methods[m].push(GroupBaseline {
+                method: if frame0 { "frame0" } else { "dynamics" },
+                group: group.name(),
+                cars: group.cars,
+                edge_proportion: group.edge_proportion,
+                threshold_m: threshold,
+                threshold_from: from,
+                train_scenarios: train.len(),
+                train_f1: Counts::at(&train_pairs, threshold).f1(),
+                test_scenarios: test.len(),
+                test_pairs: test_pairs.len(),
+                test_true_edges: counts.true_positives + counts.false_negatives,
+                test_predicted_edges: called,
+                test_predicted_share: if test_pairs.is_empty() { 0.0 } else { called as f64 / test_pairs.len() as f64 },
+                precision: counts.precision(),
+                recall: counts.recall(),
+                f1: counts.f1(),
+                auroc: auroc(&test_pairs),
+                average_precision: average_precision(&test_pairs),
+            });
+        }
     }
-    Ok(BaselineReport { dataset: dir.display().to_string(), world: spec.world.name().to_string(), max_lag_s, groups })
+    let [groups, frame0] = methods;
+    Ok(BaselineReport {
+        dataset: dir.display().to_string(),
+        world: spec.world.name().to_string(),
+        max_lag_s,
+        groups,
+        frame0,
+    })
 }
 
-/// Scores every ordered pair of the scenario in `dir`.
-fn score_scenario(dir: &Path, max_lag_s: f64) -> Result<Vec<ScoredPair>, String> {
+/// Scores every ordered pair of the scenario in `dir`, both ways.
+fn score_scenario(dir: &Path, max_lag_s: f64) -> Result<ScenarioScores, String> {
     let scenario = ScenarioSummary::read(dir)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
     let poses = PoseLog::read(dir, frames, cars)?;
     let max_lag = ((max_lag_s / scenario.frame_interval).round() as usize).max(1);
     let tracks: Vec<Vec<[f64; 2]>> =
         (0..cars).map(|c| (0..frames).map(|f| [poses.at(f, c).x, poses.at(f, c).y]).collect()).collect();
-    let mut pairs = Vec::with_capacity(cars * cars.saturating_sub(1));
+    let mut scores = ScenarioScores { dynamics: Vec::new(), frame0: Vec::new() };
     for leader in 0..cars {
         for follower in 0..cars {
             if leader == follower {
                 continue;
             }
             let linked = scenario.edges.iter().any(|e| e[0] as usize == leader && e[1] as usize == follower);
-            pairs.push((following_score(&tracks[leader], &tracks[follower], max_lag), linked));
+            scores.dynamics.push((following_score(&tracks[leader], &tracks[follower], max_lag), linked));
+            scores.frame0.push((frame0_score(poses.at(0, leader), poses.at(0, follower)), linked));
         }
     }
-    Ok(pairs)
+    Ok(scores)
+}
+
+/// How far `leader` stands ahead of `follower` along the follower's heading
+/// in the first frame, metres, when both are in one lane facing the same
+/// way; infinite otherwise.
+pub fn frame0_score(leader: &Pose, follower: &Pose) -> f64 {
+    let (dx, dy) = (leader.x - follower.x, leader.y - follower.y);
+    let (c, s) = (follower.yaw.cos(), follower.yaw.sin());
+    let (ahead, lateral) = (dx * c + dy * s, (-dx * s + dy * c).abs());
+    let turn =
+        (leader.yaw - follower.yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if ahead > 0.0 && lateral <= SAME_LANE_M && turn.abs() <= SAME_HEADING_RAD {
+        ahead
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Pairs sorted by score, grouped into runs of equal scores:
+/// (linked, unlinked) counts per run, lowest score first.
+fn tied_runs(pairs: &[ScoredPair]) -> Vec<(usize, usize)> {
+    let mut sorted: Vec<ScoredPair> = pairs.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut last = None;
+    for (score, linked) in sorted {
+        if last != Some(score) {
+            runs.push((0, 0));
+            last = Some(score);
+        }
+        let run = runs.last_mut().expect("a run was pushed");
+        if linked {
+            run.0 += 1;
+        } else {
+            run.1 += 1;
+        }
+    }
+    runs
+}
+
+/// The chance that a linked pair scores below an unlinked one, ties half
+/// (the Mann-Whitney form of the area under the ROC curve).
+pub fn auroc(pairs: &[ScoredPair]) -> Option<f64> {
+    let positives = pairs.iter().filter(|p| p.1).count();
+    let negatives = pairs.len() - positives;
+    if positives == 0 || negatives == 0 {
+        return None;
+    }
+    let (mut wins, mut negatives_above) = (0.0, negatives as f64);
+    for (linked, unlinked) in tied_runs(pairs) {
+        negatives_above -= unlinked as f64;
+        wins += linked as f64 * (negatives_above + unlinked as f64 / 2.0);
+    }
+    Some(wins / (positives * negatives) as f64)
+}
+
+/// Average precision: precision at each distinct threshold, weighted by the
+/// recall it adds (as scikit-learn computes it).
+pub fn average_precision(pairs: &[ScoredPair]) -> Option<f64> {
+    let positives = pairs.iter().filter(|p| p.1).count();
+    if positives == 0 {
+        return None;
+    }
+    let (mut tp, mut called, mut ap) = (0usize, 0usize, 0.0);
+    for (linked, unlinked) in tied_runs(pairs) {
+        tp += linked;
+        called += linked + unlinked;
+        ap += linked as f64 / positives as f64 * (tp as f64 / called as f64);
+    }
+    Some(ap)
 }
 
 /// Mean over frames of the distance from `follower` to the nearest point of
@@ -226,34 +341,57 @@ impl fmt::Display for BaselineReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "following-score baseline on {} ({} world, lags up to {} s): threshold from train, scores on test",
+            "following-score baseline (dynamics) and the best first-frame rule (frame0) on {} ({} world, lags up to {} s): threshold from train, scores on test",
             self.dataset, self.world, self.max_lag_s
         )?;
         writeln!(
             f,
-            "{:<18} {:>4} {:>6} {:>11} {:>6} {:>6} {:>7} {:>9} {:>9} {:>6} {:>6}",
-            "group", "cars", "edges%", "threshold m", "from", "test", "pairs", "linked", "called", "P", "R"
+            "{:<18} {:<8} {:>4} {:>6} {:>11} {:>6} {:>6} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6}",
+            "group",
+            "method",
+            "cars",
+            "edges%",
+            "threshold m",
+            "from",
+            "test",
+            "pairs",
+            "linked",
+            "called",
+            "P",
+            "R",
+            "F1",
+            "AUROC",
+            "AP"
         )?;
         let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
-        for g in &self.groups {
-            writeln!(
-                f,
-                "{:<18} {:>4} {:>6.0} {:>11.3} {:>6} {:>6} {:>7} {:>9} {:>9} {:>6} {:>6}  F1 {}",
-                g.group,
-                g.cars,
-                g.edge_proportion * 100.0,
-                g.threshold_m,
-                g.threshold_from,
-                g.test_scenarios,
-                g.test_pairs,
-                g.test_true_edges,
-                g.test_predicted_edges,
-                show(g.precision),
-                show(g.recall),
-                show(g.f1)
-            )?;
+        for (d, z) in self.groups.iter().zip(&self.frame0) {
+            for g in [d, z] {
+                writeln!(
+                    f,
+                    "{:<18} {:<8} {:>4} {:>6.0} {:>11.3} {:>6} {:>6} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6}",
+                    g.group,
+                    g.method,
+                    g.cars,
+                    g.edge_proportion * 100.0,
+                    g.threshold_m,
+                    g.threshold_from,
+                    g.test_scenarios,
+                    g.test_pairs,
+                    g.test_true_edges,
+                    g.test_predicted_edges,
+                    show(g.precision),
+                    show(g.recall),
+                    show(g.f1),
+                    show(g.auroc),
+                    show(g.average_precision)
+                )?;
+            }
         }
-        Ok(())
+        writeln!(
+            f,
+            "F1 rises with the share of linked pairs whatever the method; AUROC (0.5 = guessing) and AP do not need a threshold. \
+             A frame0 row as good as its dynamics row means the answer is visible before anything moves."
+        )
     }
 }
 
@@ -278,5 +416,37 @@ mod tests {
         assert!(t > 0.2 && t < 3.0);
         assert_eq!(Counts::at(&pairs, t).f1(), Some(1.0));
         assert_eq!(best_threshold(&[(1.0, false)]), None);
+    }
+
+    #[test]
+    fn auroc_and_average_precision_match_their_definitions() {
+        // Perfectly separated, reversed, and with a tie.
+        let clean = [(0.1, true), (0.2, true), (3.0, false), (4.0, false)];
+        assert_eq!(auroc(&clean), Some(1.0));
+        assert_eq!(average_precision(&clean), Some(1.0));
+        let reversed = [(5.0, true), (0.2, false), (0.3, false)];
+        assert_eq!(auroc(&reversed), Some(0.0));
+        assert!((average_precision(&reversed).unwrap() - 1.0 / 3.0).abs() < 1e-12);
+        let tied = [(1.0, true), (1.0, false), (2.0, false), (0.5, true)];
+        // Pairs (pos, neg): 0.5 beats both, 1.0 ties one and beats one: (2 + 1.5) / 4.
+        assert!((auroc(&tied).unwrap() - 3.5 / 4.0).abs() < 1e-12);
+        // Thresholds 0.5 (P 1, R 1/2) and 1.0 (P 2/3, R 1): 0.5 x 1 + 0.5 x 2/3.
+        assert!((average_precision(&tied).unwrap() - (0.5 + 1.0 / 3.0)).abs() < 1e-12);
+        assert_eq!(auroc(&[(1.0, true)]), None);
+        // Infinite scores (frame0's "not in one lane") tie at the end.
+        assert_eq!(auroc(&[(f64::INFINITY, true), (f64::INFINITY, false)]), Some(0.5));
+    }
+
+    #[test]
+    fn frame0_scores_a_car_right_behind_in_its_lane() {
+        let at = |x: f64, y: f64, yaw: f64| Pose { x, y, yaw, ..Pose::default() };
+        // Heading east; the leader 6 m ahead, 0.5 m to the side.
+        assert!((frame0_score(&at(6.0, 0.5, 0.0), &at(0.0, 0.0, 0.0)) - 6.0).abs() < 1e-12);
+        // Behind, beside in the next lane, or facing the other way: never a link.
+        assert_eq!(frame0_score(&at(-6.0, 0.0, 0.0), &at(0.0, 0.0, 0.0)), f64::INFINITY);
+        assert_eq!(frame0_score(&at(6.0, 3.0, 0.0), &at(0.0, 0.0, 0.0)), f64::INFINITY);
+        assert_eq!(frame0_score(&at(6.0, 0.0, 3.1), &at(0.0, 0.0, 0.0)), f64::INFINITY);
+        // Headings either side of east are close (wrap-around).
+        assert!(frame0_score(&at(6.0, 0.0, -0.2), &at(0.0, 0.0, 6.2)).is_finite());
     }
 }
