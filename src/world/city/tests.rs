@@ -1,0 +1,1 @@
+//! Unit tests of the city simulation on tiny hand-made plans.
