@@ -71,22 +71,111 @@ impl CarFollowing for Idm {
 mod tests {
     use super::*;
 
-    #[test]
-    fn idm_accelerates_follows_and_stops() {
-        let idm = Idm::default();
-        let p = DriverParams::default();
-        assert!(idm.free_speed(&p, 0.0, 2.0, 0.1) > 0.0);
-        assert!(idm.free_speed(&p, 2.0, 2.0, 0.1) < 2.0 + 1e-9);
-        // Closing in on a standing car brakes.
-        assert!(idm.follow_speed(&p, 2.0, 2.0, 1.0, 0.0, 0.1) < 2.0);
-        // Simulate a stop line 10 m ahead: the car stops before it.
-        let (mut s, mut v) = (0.0, 2.0);
-        for _ in 0..2000 {
-            let next = idm.stop_speed(&p, v, 2.0, 10.0 - s, 0.01);
-            s += (v + next) / 2.0 * 0.01;
+    /// Every car-following model the crate offers.
+    fn models() -> Vec<Box<dyn CarFollowing>> {
+        let models: Vec<Box<dyn CarFollowing>> = vec![Box::new(Idm::default())];
+        assert!(!models.is_empty());
+        models
+    }
+
+    /// Decision step, seconds.
+    const DT: f64 = 0.1;
+
+    /// Integrates `speed_for(position m, speed m/s, time s)` for `seconds`
+    /// from position `s0` (m) at speed `v0` (m/s), trapezoidal like the city
+    /// world: (time s, position m, speed m/s) at every step.
+    fn drive(s0: f64, v0: f64, seconds: f64, mut speed_for: impl FnMut(f64, f64, f64) -> f64) -> Vec<(f64, f64, f64)> {
+        let (mut s, mut v) = (s0, v0);
+        let mut track = vec![(0.0, s, v)];
+        for k in 1..=(seconds / DT).round() as usize {
+            let next = speed_for(s, v, k as f64 * DT);
+            s += (v + next) / 2.0 * DT;
             v = next;
+            track.push((k as f64 * DT, s, v));
         }
-        assert!(s < 10.0 && s > 9.0, "stopped at {s}");
-        assert!(v < 0.05);
+        track
+    }
+
+    #[test]
+    fn free_road_accelerates_towards_and_never_beyond_the_desired_speed() {
+        let p = DriverParams::default();
+        let desired = 2.0;
+        for model in models() {
+            let track = drive(0.0, 0.0, 60.0, |_, v, _| model.free_speed(&p, v, desired, DT));
+            for w in track.windows(2) {
+                let ((_, _, before), (t, _, after)) = (w[0], w[1]);
+                assert!(after >= before - 1e-12, "{}: slowed from {before} to {after} m/s at {t:.1} s", model.name());
+                assert!(after <= desired + 1e-9, "{}: {after} m/s beyond the desired {desired} m/s", model.name());
+                assert!(
+                    after - before <= p.max_acceleration * DT + 1e-9,
+                    "{}: faster than max acceleration",
+                    model.name()
+                );
+            }
+            let at = |t: f64| track[(t / DT).round() as usize].2;
+            assert!(at(1.0) > 0.5 * p.max_acceleration, "{}: {:.2} m/s after 1 s", model.name(), at(1.0));
+            assert!(at(20.0) > 0.95 * desired, "{}: only {:.2} m/s after 20 s", model.name(), at(20.0));
+            // Starting too fast, it slows down to the desired speed.
+            let fast = drive(0.0, 3.0, 20.0, |_, v, _| model.free_speed(&p, v, desired, DT));
+            let end = fast[fast.len() - 1].2;
+            assert!(end < 3.0 && end > desired - 0.01, "{}: from 3 m/s ends at {end:.3} m/s", model.name());
+        }
+    }
+
+    #[test]
+    fn following_keeps_at_least_the_min_gap_and_settles_behind_the_leader() {
+        let p = DriverParams::default();
+        let (desired, leader_speed, length) = (3.0, 1.5, 4.0);
+        for model in models() {
+            // The leader's centre starts 20 m ahead and drives at 1.5 m/s; the
+            // follower closes in at 3 m/s.
+            let leader = |t: f64| 20.0 + leader_speed * t;
+            let mut gaps = Vec::new();
+            let track = drive(0.0, desired, 60.0, |s, v, t| {
+                let gap = leader(t - DT) - s - length;
+                gaps.push(gap);
+                model.follow_speed(&p, v, desired, gap, leader_speed, DT)
+            });
+            assert_eq!(gaps.len(), 600);
+            let closest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+            assert!(closest >= p.min_gap, "{}: came within {closest:.3} m (min gap {} m)", model.name(), p.min_gap);
+            let (_, _, v) = track[track.len() - 1];
+            let settled = gaps[gaps.len() - 1];
+            assert!((v - leader_speed).abs() < 0.05, "{}: follows at {v:.3} m/s, leader {leader_speed}", model.name());
+            // The IDM equilibrium gap is (min gap + v T) / sqrt(1 - (v / v0)^4).
+            let wanted = p.min_gap + leader_speed * p.time_headway;
+            assert!(settled > wanted && settled < 1.5 * wanted, "{}: settles {settled:.2} m behind", model.name());
+
+            // Behind a standing car it comes to rest at about the min gap.
+            let mut gaps = Vec::new();
+            drive(0.0, 2.0, 60.0, |s, v, _| {
+                gaps.push(20.0 - s - length);
+                model.follow_speed(&p, v, desired, 20.0 - s - length, 0.0, DT)
+            });
+            let closest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+            assert!(closest > 0.9 * p.min_gap, "{}: came within {closest:.3} m of a standing car", model.name());
+            assert!(closest < p.min_gap + 0.3, "{}: stopped {closest:.3} m short", model.name());
+        }
+    }
+
+    #[test]
+    fn stop_speed_brings_the_car_to_rest_before_the_stop_line() {
+        let p = DriverParams::default();
+        for model in models() {
+            for (line, v0) in [(10.0, 2.0), (20.0, 3.0), (4.0, 1.0)] {
+                // `s` is the front of the car, metres; the line stands at `line`.
+                let track = drive(0.0, v0, 60.0, |s, v, _| model.stop_speed(&p, v, v0, line - s, DT));
+                let (_, front, v) = track[track.len() - 1];
+                let furthest = track.iter().map(|&(_, s, _)| s).fold(f64::NEG_INFINITY, f64::max);
+                let name = model.name();
+                assert!(v < 0.01, "{name}: still {v:.3} m/s {:.2} m before a line {line} m ahead", line - front);
+                assert!(furthest < line, "{name}: front reached {furthest:.3} m, past the line at {line} m");
+                assert!(
+                    line - front < STOP_LINE_MARGIN + 0.5,
+                    "{name}: stopped {:.2} m short of the line",
+                    line - front
+                );
+            }
+        }
     }
 }

@@ -1,0 +1,165 @@
+//! A car's state while the scenario runs: where it is on its own copy of the
+//! route, how fast it goes, what its driver decided, and what interventions
+//! changed about it. Its pose follows from the route.
+
+use crate::geometry::OrientedBox;
+use crate::map::{Action, Route};
+use crate::plan::{CarAgency, CarPlan};
+use crate::spec::DriverParams;
+use crate::world::CarState;
+use glam::DVec2;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Where removed cars are parked, far off every camera, metres.
+const PARKING: DVec2 = DVec2::new(10_000.0, 10_000.0);
+
+/// One car while the scenario runs.
+pub(super) struct SimCar<'p> {
+    pub(super) plan: &'p CarPlan,
+    pub(super) agency: &'p CarAgency,
+    /// The car's own copy: merges it defers and replaced actions re-plan it.
+    pub(super) route: Route,
+    /// Drive-queue index of the route's first action.
+    pub(super) action_base: usize,
+    /// Merge distance per drive-queue action, metres along its lane.
+    pub(super) merges: Vec<f64>,
+    /// Route arc length of the car's centre, metres.
+    pub(super) s: f64,
+    /// Speed along the route, m/s.
+    pub(super) v: f64,
+    /// Acceleration held until the next decision, m/s^2.
+    pub(super) accel: f64,
+    /// Index of the route leg the car's centre is on.
+    pub(super) leg: usize,
+    /// Time of the next decision, seconds.
+    pub(super) next_decision: f64,
+    /// After a collision: stand still until this time, seconds.
+    pub(super) hold_until: f64,
+    /// Drive-queue actions carried out so far.
+    pub(super) actions_done: usize,
+    /// Intersection connector the car has decided to drive through.
+    pub(super) committed: Option<usize>,
+    /// Sideways offset from the lane centre, metres.
+    pub(super) wander: f64,
+    /// Where the wander is heading, drawn at each decision, metres.
+    pub(super) wander_target: f64,
+    /// Standard-normal state of the perception error.
+    pub(super) noise: f64,
+    /// Half the footprint's diagonal: beyond twice this, two cars cannot touch.
+    pub(super) reach: f64,
+    /// This car's own random stream (decisions, collision stops).
+    pub(super) rng: ChaCha8Rng,
+    /// Forced through red lights (by the plan or an intervention).
+    pub(super) runs_red_lights: bool,
+    /// Intervention: hold still until this time, seconds.
+    pub(super) stopped_until: f64,
+    /// Intervention: desired speed replaced, m/s.
+    pub(super) desired_override: Option<f64>,
+    /// Intervention: taken off the map.
+    pub(super) removed: bool,
+    /// The drive queue: the plan's, until an intervention replaces the rest.
+    pub(super) actions: Vec<Action>,
+    /// Intervention: actions (and merge distances) waiting to replace the
+    /// rest once the car is on a lane.
+    pub(super) pending_actions: Option<(Vec<Action>, Vec<f64>)>,
+    /// The driver's parameters now (the plan's, until a confounder changes).
+    pub(super) driver: DriverParams,
+    /// Multiplies the planned desired speeds (a confounder change).
+    pub(super) speed_factor: f64,
+}
+
+/// A standard normal draw (Box-Muller).
+pub(super) fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(1e-12);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+impl<'p> SimCar<'p> {
+    /// The car of `plan` at rest at its spawn point, its random stream keyed
+    /// by the scenario's `sim_stream` and its id.
+    pub(super) fn new(plan: &'p CarPlan, agency: &'p CarAgency, sim_stream: [u8; 32]) -> SimCar<'p> {
+        let mut rng = ChaCha8Rng::from_seed(sim_stream);
+        rng.set_stream(plan.id as u64 + 1);
+        let route: Route = (*plan.route).clone();
+        let leg = route.leg_index_at(plan.spawn_distance);
+        SimCar {
+            plan,
+            agency,
+            route,
+            action_base: 0,
+            merges: plan.merge_distances.clone(),
+            s: plan.spawn_distance,
+            v: 0.0,
+            accel: 0.0,
+            leg,
+            // Drivers do not all decide in lockstep.
+            next_decision: rng.random_range(0.0..agency.driver.reaction_time),
+            hold_until: f64::NEG_INFINITY,
+            actions_done: 0,
+            committed: None,
+            wander: 0.0,
+            wander_target: 0.0,
+            noise: normal(&mut rng),
+            reach: plan.length.hypot(plan.width) / 2.0,
+            rng,
+            runs_red_lights: agency.runs_red_lights,
+            stopped_until: f64::NEG_INFINITY,
+            desired_override: None,
+            removed: false,
+            actions: plan.actions.clone(),
+            pending_actions: None,
+            driver: agency.driver,
+            speed_factor: 1.0,
+        }
+    }
+}
+
+impl SimCar<'_> {
+    /// Route arc length of the front bumper, metres.
+    pub(super) fn front(&self) -> f64 {
+        self.s + self.plan.length / 2.0
+    }
+
+    /// Desired speed now, m/s: an intervention's, else the plan's for the
+    /// current stretch of the drive queue scaled by confounder changes.
+    pub(super) fn desired(&self) -> f64 {
+        if let Some(speed) = self.desired_override {
+            return speed;
+        }
+        let speeds = &self.agency.desired_speeds;
+        self.speed_factor * speeds.get(self.actions_done.min(speeds.len().saturating_sub(1))).copied().unwrap_or(1.0)
+    }
+
+    /// Centre (metres) and heading (radians) on the map, wander included.
+    pub(super) fn pose(&self) -> (DVec2, f64) {
+        self.route.pose_at(self.s, self.wander)
+    }
+
+    /// The car's rectangle on the ground.
+    pub(super) fn footprint(&self) -> OrientedBox {
+        let (centre, heading) = self.pose();
+        OrientedBox { centre, heading, length: self.plan.length, width: self.plan.width }
+    }
+
+    /// The state a frame records (removed cars parked far away, at rest).
+    pub(super) fn state(&self) -> CarState {
+        if self.removed {
+            let position = PARKING + DVec2::new(10.0 * self.plan.id as f64, 0.0);
+            return CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 };
+        }
+        let (position, yaw) = self.pose();
+        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: self.v }
+    }
+
+    /// Takes a re-planned `route` that starts on the car's current lane,
+    /// where the car stands `lane_s` metres along it; the route's first
+    /// action is drive-queue action `action_base`.
+    pub(super) fn follow_route(&mut self, route: Route, lane_s: f64, action_base: usize) {
+        self.route = route;
+        self.s = lane_s;
+        self.leg = self.route.leg_index_at(lane_s);
+        self.action_base = action_base;
+    }
+}

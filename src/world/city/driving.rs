@@ -1,0 +1,93 @@
+//! A driver's decision (the target speed the car-following model gives for
+//! everything it perceives, turned into an acceleration held until the next
+//! decision) and the car's motion between decisions.
+
+use super::car::{normal, SimCar};
+use super::Sim;
+
+/// Largest sideways wander from the lane centre, metres.
+const MAX_WANDER: f64 = 0.4;
+/// Correlation time of the sideways wander, seconds.
+const WANDER_TIME: f64 = 3.0;
+
+impl Sim<'_> {
+    /// Car `i` decides at time `t`: the lowest speed the model wants for the
+    /// free road, the leader ahead (gap seen with noise), a stop line, the
+    /// curves and a merge it waits for, reached in `dt` seconds within the
+    /// car's acceleration limits (m/s^2). Also draws the next perception
+    /// error and wander target.
+    pub(super) fn decide(&mut self, i: usize, t: f64, dt: f64) {
+        if t < self.cars[i].hold_until {
+            self.cars[i].accel = 0.0;
+            return;
+        }
+        let model = self.model;
+        let (p, v, desired) = {
+            let car = &self.cars[i];
+            (car.driver, car.v, car.desired())
+        };
+        let mut target = model.free_speed(&p, v, desired, dt);
+        if let Some((gap, leader_speed)) = self.leader_ahead(i) {
+            let perceived = gap * (p.perception_noise * self.cars[i].noise).exp();
+            target = target.min(model.follow_speed(&p, v, desired, perceived, leader_speed, dt));
+        }
+        if let Some(distance) = self.stop_ahead(i, t) {
+            target = target.min(model.stop_speed(&p, v, desired, distance, dt));
+        }
+        target = target.min(self.curve_limit(i));
+        if let Some(distance) = self.merge_wait(i, t) {
+            target = target.min(model.stop_speed(&p, v, desired, distance, dt));
+        }
+        if t < self.cars[i].stopped_until {
+            target = 0.0;
+        }
+        let rho = (-p.reaction_time / 2.0).exp();
+        let car = &mut self.cars[i];
+        let draw = normal(&mut car.rng);
+        let wander_draw = normal(&mut car.rng);
+        car.accel = ((target - v) / dt).clamp(-p.max_deceleration, p.max_acceleration);
+        car.noise = rho * car.noise + (1.0 - rho * rho).sqrt() * draw;
+        // Sideways wander: an Ornstein-Uhlenbeck target per decision, approached smoothly.
+        let wander_rho = (-p.reaction_time / WANDER_TIME).exp();
+        car.wander_target = (wander_rho * car.wander_target
+            + p.lateral_wander * (1.0 - wander_rho * wander_rho).sqrt() * wander_draw)
+            .clamp(-MAX_WANDER, MAX_WANDER);
+    }
+
+    /// Moves car `i` from `t` to `t + dt` seconds, then logs a red light it
+    /// ran and the route legs (actions) it completed.
+    pub(super) fn advance(&mut self, i: usize, t: f64, dt: f64) {
+        let now = t + dt;
+        let Some((front_before, front_after)) = self.cars[i].drive(dt, now) else { return };
+        self.log_red_light_runs(i, front_before, front_after, now);
+        self.complete_legs(i, now);
+    }
+}
+
+impl SimCar<'_> {
+    /// Drives `dt` seconds at the held acceleration (never backwards, never
+    /// past the desired speed when speeding up), easing the wander towards
+    /// its target. Returns the front's route position (metres) before and
+    /// after, or `None` while the car is held after a collision (at rest
+    /// until `now`).
+    fn drive(&mut self, dt: f64, now: f64) -> Option<(f64, f64)> {
+        let glide = (dt / self.driver.reaction_time).min(1.0);
+        self.wander += (self.wander_target - self.wander) * glide;
+        if now <= self.hold_until {
+            self.v = 0.0;
+            return None;
+        }
+        let front_before = self.front();
+        let mut v_new = (self.v + self.accel * dt).max(0.0);
+        if self.accel > 0.0 {
+            // Speeding up towards the desired speed never overshoots it.
+            v_new = v_new.min(self.desired().max(self.v));
+        }
+        self.s += (self.v + v_new) / 2.0 * dt;
+        self.v = v_new;
+        if self.v == 0.0 && self.accel < 0.0 {
+            self.accel = 0.0;
+        }
+        Some((front_before, self.front()))
+    }
+}

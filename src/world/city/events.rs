@@ -1,0 +1,171 @@
+//! What the simulation records in `events.csv`: stop lines crossed on red,
+//! route legs completed (merges, turns, the end of the drive queue), and
+//! collisions, after which both cars stand still for a few seconds.
+
+use super::Sim;
+use crate::geometry::OrientedBox;
+use crate::map::signals::Colour;
+use crate::map::{Action, LegKind};
+use crate::world::{Event, EventKind};
+use rand::RngExt;
+
+/// Gap at which two cars that collided count as apart again, metres.
+const CONTACT_RELEASE: f64 = 0.3;
+
+impl Sim<'_> {
+    /// Logs every stop line car `i` crossed on red while its front moved
+    /// from `front_before` to `front_after` (route metres), at time `now`.
+    pub(super) fn log_red_light_runs(&mut self, i: usize, front_before: f64, front_after: f64, now: f64) {
+        let setback = self.map.layout.stop_line_setback;
+        let car = &self.cars[i];
+        let mut runs = Vec::new();
+        for leg in &car.route.legs[car.leg..] {
+            let line = leg.route_start - setback;
+            if line > front_after {
+                break;
+            }
+            let LegKind::Connector(c) = leg.kind else { continue };
+            if front_before < line && front_after >= line {
+                runs.extend(self.red_light_run(i, c, now));
+            }
+        }
+        self.events.extend(runs);
+    }
+
+    /// The event for car `i` entering connector `c` at time `now`, if that is
+    /// an intersection movement whose light shows red.
+    fn red_light_run(&self, i: usize, c: usize, now: f64) -> Option<Event> {
+        let intersection = self.map.connectors[c].intersection?;
+        let light = self.light_for(c)?;
+        if self.light_state(light, now).colour != Colour::Red {
+            return None;
+        }
+        let car = &self.cars[i];
+        let forced = if car.runs_red_lights { "forced" } else { "not forced" };
+        let light = &self.city.lights.lights[light];
+        Some(Event {
+            t: now,
+            kind: EventKind::RedLightRun,
+            car: car.plan.id,
+            other: None,
+            detail: format!(
+                "{} {} {} ({forced})",
+                self.map.intersections[intersection].name,
+                light.approach,
+                light.signal.name()
+            ),
+        })
+    }
+
+    /// Moves car `i` past every route leg its centre has left (never past
+    /// the last), logging the actions those legs completed at time `now`.
+    pub(super) fn complete_legs(&mut self, i: usize, now: f64) {
+        loop {
+            let car = &self.cars[i];
+            if car.leg + 1 >= car.route.legs.len() {
+                return;
+            }
+            let leg = &car.route.legs[car.leg];
+            if car.s < leg.route_start + leg.length {
+                return;
+            }
+            let (kind, action) = (leg.kind, leg.action);
+            if let Some(relative) = action {
+                self.action_done(i, kind, relative, now);
+            }
+            let car = &mut self.cars[i];
+            if matches!(kind, LegKind::Connector(c) if car.committed == Some(c)) {
+                car.committed = None;
+            }
+            car.leg += 1;
+        }
+    }
+
+    /// Logs the drive-queue action (route action `relative`) that car `i`
+    /// completed on a leg of `kind`, and the end of the queue if it was the last.
+    fn action_done(&mut self, i: usize, kind: LegKind, relative: usize, now: f64) {
+        let car = &self.cars[i];
+        let id = car.plan.id;
+        let index = car.action_base + relative;
+        if let Some((kind, detail)) = self.action_event(kind, car.actions[index]) {
+            self.events.push(Event { t: now, kind, car: id, other: None, detail });
+        }
+        let car = &mut self.cars[i];
+        car.actions_done = index + 1;
+        if index + 1 == car.actions.len() {
+            let detail = format!("{} actions", car.actions.len());
+            self.events.push(Event { t: now, kind: EventKind::ActionsFinished, car: id, other: None, detail });
+        }
+    }
+
+    /// Kind and detail of the event for `action` done on a leg of `kind`:
+    /// a merge (lanes from and to) or a turn (at which intersection).
+    fn action_event(&self, kind: LegKind, action: Action) -> Option<(EventKind, String)> {
+        match kind {
+            LegKind::LaneChange { from, to, .. } => {
+                Some((EventKind::MergeDone, format!("{} -> {}", self.map.lanes[from].name, self.map.lanes[to].name)))
+            }
+            LegKind::Connector(c) => {
+                let connector = &self.map.connectors[c];
+                let at = connector.intersection.map(|k| self.map.intersections[k].name.as_str()).unwrap_or("");
+                Some((EventKind::TurnDone, format!("{action} at {at}")))
+            }
+            LegKind::Lane(_) => None,
+        }
+    }
+
+    /// Finds pairs of cars whose footprints newly overlap at time `now`
+    /// (seconds): logs each collision and holds both cars still.
+    pub(super) fn detect_collisions(&mut self, now: f64) {
+        let boxes: Vec<OrientedBox> = self.cars.iter().map(|car| car.footprint()).collect();
+        for i in 0..boxes.len() {
+            for j in i + 1..boxes.len() {
+                if self.new_contact(i, j, &boxes) {
+                    self.collide(i, j, now);
+                }
+            }
+        }
+    }
+
+    /// Whether cars `i < j` (footprints `boxes`) have just touched. A contact
+    /// ends only once the cars are clearly apart ([`CONTACT_RELEASE`]), so
+    /// sideways wander does not log one crash many times.
+    fn new_contact(&mut self, i: usize, j: usize, boxes: &[OrientedBox]) -> bool {
+        if self.cars[i].removed || self.cars[j].removed {
+            return false;
+        }
+        let reach = self.cars[i].reach + self.cars[j].reach;
+        let near = boxes[i].centre.distance(boxes[j].centre) < reach + CONTACT_RELEASE;
+        if self.contacts.contains(&(i, j)) {
+            if !near || !boxes[i].inflated(CONTACT_RELEASE).overlaps(&boxes[j]) {
+                self.contacts.remove(&(i, j));
+            }
+            return false;
+        }
+        if !near || !boxes[i].overlaps(&boxes[j]) {
+            return false;
+        }
+        self.contacts.insert((i, j));
+        true
+    }
+
+    /// Logs the collision of cars `i` and `j` at time `now` and stops both
+    /// for 2 to 5 seconds each (drawn from each car's own stream).
+    fn collide(&mut self, i: usize, j: usize, now: f64) {
+        let (a, b) = (&self.cars[i], &self.cars[j]);
+        self.events.push(Event {
+            t: now,
+            kind: EventKind::Collision,
+            car: a.plan.id,
+            other: Some(b.plan.id),
+            detail: format!("speeds {:.2} and {:.2} m/s", a.v, b.v),
+        });
+        for k in [i, j] {
+            let car = &mut self.cars[k];
+            let stop = car.rng.random_range(2.0..5.0);
+            car.v = 0.0;
+            car.accel = 0.0;
+            car.hold_until = now + stop;
+        }
+    }
+}

@@ -1,0 +1,179 @@
+//! Interventions while the scenario runs: when each trigger holds, what each
+//! effect changes, and the one routine that re-plans a car's route from where
+//! it stands (replaced actions, deferred merges).
+
+use super::Sim;
+use crate::map::signals::Light;
+use crate::map::{Action, LegKind, Route, RouteError};
+use crate::plan::interventions::{ConfounderName, Effect, Trigger};
+use crate::world::{Event, EventKind};
+
+/// A re-planned route must reach this many times the car's fastest planned
+/// desired speed times the time left, so it outlasts the scenario even if
+/// the car drives faster than planned.
+const ROUTE_SPEED_MARGIN: f64 = 1.5;
+/// Speed a re-planned route allows for at least, m/s (cars with slower
+/// planned desired speeds still get a route this long).
+const ROUTE_MIN_SPEED: f64 = 1.0;
+/// Metres added to a re-planned route beyond that.
+const ROUTE_SLACK: f64 = 20.0;
+
+impl Sim<'_> {
+    /// Fires the interventions whose trigger holds at time `t` (the start of
+    /// a step of length `dt`, seconds), logging each.
+    pub(super) fn fire_interventions(&mut self, t: f64, dt: f64) {
+        let mut k = 0;
+        while k < self.pending.len() {
+            let intervention = self.pending[k];
+            if !self.triggered(&intervention.trigger, t, dt) {
+                k += 1;
+                continue;
+            }
+            self.pending.remove(k);
+            let car_id = |car: usize| self.cars[car].plan.id;
+            self.events.push(Event {
+                t,
+                kind: EventKind::Intervention,
+                car: intervention.effect.car().map_or(0, car_id),
+                other: None,
+                detail: intervention.label.clone(),
+            });
+            self.apply(intervention.effect.clone(), t);
+        }
+    }
+
+    /// Whether `trigger` holds at time `t`, the start of a step of `dt` seconds.
+    fn triggered(&self, trigger: &Trigger, t: f64, dt: f64) -> bool {
+        match *trigger {
+            Trigger::At(time) => t + 1e-9 >= time,
+            Trigger::LightTurns { light, colour } => {
+                self.light_state(light, t).colour == colour && self.light_state(light, t - dt).colour != colour
+            }
+            Trigger::CarReaches { car, intersection } => {
+                let car = &self.cars[car];
+                if car.removed {
+                    return false;
+                }
+                let setback = self.map.layout.stop_line_setback;
+                car.route.legs[car.leg..]
+                    .iter()
+                    .find_map(|leg| match leg.kind {
+                        LegKind::Connector(c) => self.map.connectors[c].intersection.map(|k| (k, leg)),
+                        _ => None,
+                    })
+                    .is_some_and(|(k, leg)| k == intersection && car.front() >= leg.route_start - setback)
+            }
+        }
+    }
+
+    /// Carries out `effect` at time `t` (seconds).
+    fn apply(&mut self, effect: Effect, t: f64) {
+        match effect {
+            Effect::Stop { car, seconds } => {
+                let car = &mut self.cars[car];
+                car.stopped_until = t + seconds;
+                car.next_decision = t;
+            }
+            Effect::RunRedLights { car } => self.cars[car].runs_red_lights = true,
+            Effect::SetDesiredSpeed { car, speed } => {
+                let car = &mut self.cars[car];
+                car.desired_override = Some(speed);
+                car.next_decision = t;
+            }
+            Effect::Remove { car } => self.cars[car].removed = true,
+            Effect::SetLight { light, colour, seconds } => {
+                self.light_overrides.push((light, colour, t, t + seconds));
+                // Drivers see the change at their next decision.
+            }
+            Effect::SetLightPlan { light, offset, schedule } => {
+                let new = Light { offset, schedule, ..self.city.lights.lights[light].clone() };
+                self.light_plans.push((light, new, t));
+            }
+            Effect::ReplaceActions { car, actions, merge_distances } => {
+                self.cars[car].pending_actions = Some((actions, merge_distances));
+            }
+            Effect::SetConfounder { confounder, value } => self.set_confounder(confounder, value, t),
+        }
+    }
+
+    /// Sets a confounder at time `t`: every driver's parameters and desired
+    /// speed change by the ratio (or difference) of the new effects to the old.
+    fn set_confounder(&mut self, confounder: ConfounderName, value: f64, t: f64) {
+        let (old, new) = (self.confounders.effects(), confounder.set(self.confounders, value));
+        let effects = new.effects();
+        for car in &mut self.cars {
+            let d = &mut car.driver;
+            d.time_headway *= effects.time_headway_factor / old.time_headway_factor;
+            d.max_deceleration *= effects.grip_factor / old.grip_factor;
+            d.comfortable_deceleration = (d.comfortable_deceleration * effects.comfortable_braking_factor
+                / old.comfortable_braking_factor)
+                .min(d.max_deceleration);
+            d.perception_noise += effects.perception_noise_added - old.perception_noise_added;
+            d.reaction_time += effects.reaction_time_added - old.reaction_time_added;
+            d.lateral_wander += effects.lateral_wander_added - old.lateral_wander_added;
+            car.speed_factor *= effects.desired_speed_factor / old.desired_speed_factor;
+        }
+        self.confounders = new;
+        self.confounder_changes.push((t, new));
+    }
+
+    /// Replaces car `i`'s remaining actions once it is on a lane (not
+    /// mid-turn or mid-merge); if they cannot be driven from there the car
+    /// keeps its own and an event says so.
+    pub(super) fn replace_actions(&mut self, i: usize, t: f64) {
+        let Some((actions, merges)) = &self.cars[i].pending_actions else { return };
+        let Some((lane_s, planned)) = self.replan(i, t, actions, merges) else { return };
+        let car = &mut self.cars[i];
+        let Some((actions, merges)) = car.pending_actions.take() else { return };
+        match planned {
+            Ok(route) => {
+                let done = car.actions_done;
+                car.actions.truncate(done);
+                car.actions.extend(actions);
+                car.merges.truncate(done);
+                car.merges.extend(merges);
+                car.follow_route(route, lane_s, done);
+                car.committed = None;
+            }
+            Err(e) => {
+                let id = car.plan.id;
+                self.events.push(Event {
+                    t,
+                    kind: EventKind::Intervention,
+                    car: id,
+                    other: None,
+                    detail: format!("replacing the actions not applied: {e}; the car keeps its own"),
+                });
+            }
+        }
+    }
+
+    /// Moves the merge of car `i` (route action `relative`) to `later` metres
+    /// along its lane, if the route can be re-planned that way.
+    pub(super) fn defer_merge(&mut self, i: usize, relative: Option<usize>, later: f64, t: f64) {
+        let Some(relative) = relative else { return };
+        let car = &self.cars[i];
+        let index = car.action_base + relative;
+        let mut merges = car.merges.clone();
+        merges[index] = later;
+        let Some((lane_s, Ok(route))) = self.replan(i, t, &car.actions[index..], &merges[index..]) else { return };
+        let car = &mut self.cars[i];
+        car.merges = merges;
+        car.follow_route(route, lane_s, index);
+    }
+
+    /// The one re-planning routine: a route for car `i` from where it stands
+    /// on its current lane (`lane_s` metres along it, returned first) that
+    /// carries out `actions` (merges at `merges` metres along their lanes)
+    /// and lasts until the scenario's last frame. `None` when the car is not
+    /// on a lane (mid-turn or mid-merge).
+    fn replan(&self, i: usize, t: f64, actions: &[Action], merges: &[f64]) -> Option<(f64, Result<Route, RouteError>)> {
+        let car = &self.cars[i];
+        let current = &car.route.legs[car.leg];
+        let LegKind::Lane(lane) = current.kind else { return None };
+        let max_speed = car.agency.desired_speeds.iter().copied().fold(ROUTE_MIN_SPEED, f64::max);
+        let lane_s = current.curve_start + (car.s - current.route_start);
+        let min_length = lane_s + max_speed * ROUTE_SPEED_MARGIN * (self.horizon - t).max(0.0) + ROUTE_SLACK;
+        Some((lane_s, Route::plan(self.map, lane, lane_s, actions, merges, min_length)))
+    }
+}

@@ -1,0 +1,186 @@
+//! The city world: cars with agency. Each car follows its route (lane centre
+//! lines, turn connectors, lane changes) and chooses its speed every reaction
+//! time from a car-following model: free road, the car ahead on its path, stop
+//! lines at red and yellow lights, cars still crossing the intersection, curve
+//! speeds, and gaps it waits for before merging. Perception is noisy and the
+//! acceleration is held between decisions, so collisions can happen; when they
+//! do, both cars stop for a few seconds. Confounders act through the driver
+//! parameters the plan hands over. Interventions (`plan/interventions.rs`)
+//! fire at a time or on an event and change one car or light. Everything
+//! random comes from per-car streams derived from the scenario's, so runs are
+//! reproducible and an intervention on one car leaves the randomness of every
+//! other car untouched (counterfactual pairs differ only where it acts).
+//!
+//! Layout, one concern per file:
+//! - `mod.rs`: [`CityWorld`], the frame loop and one simulation step;
+//! - `car.rs`: a car's state while the scenario runs, and its pose;
+//! - `perception.rs`: what a driver sees (track occupancy, the leader ahead,
+//!   stop lines and lights, crossing traffic, curves, merge gaps);
+//! - `driving.rs`: each decision (target speed from the model) and the motion
+//!   between decisions;
+//! - `interventions.rs`: triggers, effects and the one re-planning routine;
+//! - `events.rs`: red-light runs, completed actions and collisions.
+//!
+//! Units: metres, seconds, metres per second.
+
+mod car;
+mod driving;
+mod events;
+mod interventions;
+mod perception;
+#[cfg(test)]
+mod tests;
+
+use super::driver::{CarFollowing, Idm};
+use super::{Event, Trajectories};
+use crate::map::signals::{Colour, Light};
+use crate::map::CityMap;
+use crate::plan::confounders::Confounders;
+use crate::plan::interventions::Intervention;
+use crate::plan::{CityPlan, ScenarioPlan};
+use car::SimCar;
+use std::collections::BTreeSet;
+
+/// Longest internal time step, seconds; frames fall on step boundaries.
+pub const MAX_STEP: f64 = 0.05;
+
+/// Agency dynamics over a car-following model (IDM by default).
+pub struct CityWorld {
+    model: Box<dyn CarFollowing>,
+}
+
+impl Default for CityWorld {
+    fn default() -> Self {
+        CityWorld { model: Box::new(Idm::default()) }
+    }
+}
+
+impl CityWorld {
+    /// A city world whose drivers use `model`.
+    pub fn with_model(model: Box<dyn CarFollowing>) -> CityWorld {
+        CityWorld { model }
+    }
+}
+
+impl CityWorld {
+    /// Name of the drivers' car-following model, for scenario.json.
+    pub fn model_name(&self) -> &'static str {
+        self.model.name()
+    }
+
+    /// Simulates `plan`, whose city parts are `city`: one state per car and
+    /// one state per light every `plan.frame_interval` seconds, in steps of
+    /// at most [`MAX_STEP`] seconds.
+    pub fn simulate(&self, map: &CityMap, plan: &ScenarioPlan, city: &CityPlan) -> Trajectories {
+        let mut sim = Sim::new(map, plan, city, self.model.as_ref());
+        if plan.frames == 0 {
+            return Trajectories {
+                frame_interval: plan.frame_interval,
+                states: vec![],
+                lights: vec![],
+                events: vec![],
+                confounder_changes: vec![],
+            };
+        }
+        let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
+        let dt = plan.frame_interval / steps as f64;
+        let mut states = Vec::with_capacity(plan.frames as usize);
+        let mut lights = Vec::with_capacity(plan.frames as usize);
+        for frame in 0..plan.frames as usize {
+            if frame > 0 {
+                for k in 0..steps {
+                    let t = (frame - 1) as f64 * plan.frame_interval + k as f64 * dt;
+                    sim.step(t, dt);
+                }
+            }
+            let t = frame as f64 * plan.frame_interval;
+            // Interventions due now show in this frame's record (lights).
+            sim.fire_interventions(t, dt);
+            states.push(sim.cars.iter().map(SimCar::state).collect());
+            lights.push((0..city.lights.lights.len()).map(|l| sim.light_state(l, t)).collect());
+        }
+        // A change shows from the first frame at or after it.
+        let confounder_changes = sim
+            .confounder_changes
+            .iter()
+            .map(|&(t, c)| (((t / plan.frame_interval) - 1e-9).ceil().max(0.0) as usize, c))
+            .collect();
+        Trajectories { frame_interval: plan.frame_interval, states, lights, events: sim.events, confounder_changes }
+    }
+}
+
+/// A running simulation: the cars, what interventions changed so far (lights,
+/// confounders), who occupies which track, and the events logged.
+struct Sim<'a> {
+    map: &'a CityMap,
+    city: &'a CityPlan,
+    model: &'a dyn CarFollowing,
+    /// In plan (id) order.
+    cars: Vec<SimCar<'a>>,
+    events: Vec<Event>,
+    /// Interventions still waiting for their trigger.
+    pending: Vec<&'a Intervention>,
+    /// Lights forced by interventions: (light, colour, from, until), seconds.
+    light_overrides: Vec<(usize, Colour, f64, f64)>,
+    /// Lights given a new plan by interventions: (light, plan, from), seconds.
+    light_plans: Vec<(usize, Light, f64)>,
+    /// The confounders now, and the changes interventions made (time, values).
+    confounders: Confounders,
+    confounder_changes: Vec<(f64, Confounders)>,
+    /// Per track (lane or connector): (car, arc length on the track, metres).
+    occupancy: Vec<Vec<(usize, f64)>>,
+    /// Pairs of cars (i < j) in contact since a collision.
+    contacts: BTreeSet<(usize, usize)>,
+    /// Time of the last frame, seconds: re-planned routes must last until then.
+    horizon: f64,
+}
+
+impl<'a> Sim<'a> {
+    /// Every car of `plan` at rest at its spawn point, nothing fired yet.
+    fn new(map: &'a CityMap, plan: &'a ScenarioPlan, city: &'a CityPlan, model: &'a dyn CarFollowing) -> Sim<'a> {
+        let cars =
+            plan.cars.iter().zip(&city.agency).map(|(c, agency)| SimCar::new(c, agency, city.sim_stream)).collect();
+        Sim {
+            map,
+            city,
+            model,
+            cars,
+            events: Vec::new(),
+            pending: plan.interventions.iter().collect(),
+            light_overrides: Vec::new(),
+            light_plans: Vec::new(),
+            confounders: city.confounders,
+            confounder_changes: Vec::new(),
+            occupancy: vec![Vec::new(); map.track_count()],
+            contacts: BTreeSet::new(),
+            horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
+        }
+    }
+
+    /// One step from `t` to `t + dt` seconds: interventions, re-plans, who is
+    /// where, the decisions due, motion, then collisions.
+    fn step(&mut self, t: f64, dt: f64) {
+        self.fire_interventions(t, dt);
+        for i in 0..self.cars.len() {
+            if self.cars[i].pending_actions.is_some() {
+                self.replace_actions(i, t);
+            }
+        }
+        self.fill_occupancy();
+        for i in 0..self.cars.len() {
+            if self.cars[i].removed {
+                continue;
+            }
+            if t + 1e-9 >= self.cars[i].next_decision {
+                self.decide(i, t, dt);
+                self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
+            }
+        }
+        for i in 0..self.cars.len() {
+            if !self.cars[i].removed {
+                self.advance(i, t, dt);
+            }
+        }
+        self.detect_collisions(t + dt);
+    }
+}

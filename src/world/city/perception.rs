@@ -1,0 +1,281 @@
+//! What a driver sees: which cars occupy which track, the nearest car ahead
+//! on its path, where it must stop (lights, traffic still crossing), how fast
+//! the curves ahead allow, and whether the gap for a merge is free. All
+//! distances are metres along the car's route or a track.
+
+use super::Sim;
+use crate::map::curve::Curve;
+use crate::map::signals::{Colour, LightState, Signal};
+use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
+
+/// How far ahead along its route a driver looks, metres.
+const LOOKAHEAD: f64 = 30.0;
+/// A car on a sibling movement (same lane, other turn) counts as ahead of
+/// cars behind it until it is this far into its turn, metres.
+const SIBLING_CLEARANCE: f64 = 3.0;
+
+/// A candidate car ahead: (distance along the route to its centre, car).
+type Candidate = (f64, usize);
+
+/// The nearest of `candidates`; the first one on a tie.
+fn nearest(candidates: impl Iterator<Item = Candidate>) -> Option<Candidate> {
+    candidates.fold(None, |best, (d, j)| if best.is_none_or(|(b, _)| d < b) { Some((d, j)) } else { best })
+}
+
+impl Sim<'_> {
+    /// Records, per track, every car on it and how far along it is. Cars past
+    /// their stop line, or committed to go, also claim the connector ahead.
+    pub(super) fn fill_occupancy(&mut self) {
+        for track in &mut self.occupancy {
+            track.clear();
+        }
+        for i in 0..self.cars.len() {
+            if self.cars[i].removed {
+                continue;
+            }
+            if let Some((track, pos)) = self.claimed_connector(i) {
+                self.occupancy[track].push((i, pos));
+            }
+            let car = &self.cars[i];
+            let leg = &car.route.legs[car.leg];
+            let along = car.s - leg.route_start;
+            match leg.kind {
+                LegKind::Lane(lane) => self.occupancy[lane].push((i, leg.curve_start + along)),
+                LegKind::Connector(c) => self.occupancy[self.map.connector_track(c)].push((i, along)),
+                LegKind::LaneChange { from, to, at } => {
+                    // Mid-merge a car occupies both lanes.
+                    let lane_s = at + along * self.map.layout.lane_change_length / leg.length;
+                    self.occupancy[from].push((i, lane_s));
+                    self.occupancy[to].push((i, lane_s));
+                }
+            }
+        }
+    }
+
+    /// A car past its stop line, or committed to go, already claims the
+    /// intersection movement it is about to make: (its track, a negative
+    /// position on it, metres).
+    fn claimed_connector(&self, i: usize) -> Option<(usize, f64)> {
+        let car = &self.cars[i];
+        let leg = &car.route.legs[car.leg];
+        let next = car.route.legs.get(car.leg + 1)?;
+        let (LegKind::Lane(_), LegKind::Connector(c)) = (leg.kind, next.kind) else { return None };
+        let to_box = next.route_start - car.front();
+        let setback = self.map.layout.stop_line_setback;
+        let claims = self.map.connectors[c].intersection.is_some() && (to_box < setback || car.committed == Some(c));
+        claims.then(|| (self.map.connector_track(c), -to_box.max(0.0) - 1.0))
+    }
+
+    /// The nearest car ahead on car `i`'s path within [`LOOKAHEAD`]: (bumper
+    /// gap in metres, its speed in m/s).
+    pub(super) fn leader_ahead(&self, i: usize) -> Option<(f64, f64)> {
+        let car = &self.cars[i];
+        let (d, j) = car.route.legs[car.leg..]
+            .iter()
+            .take_while(|leg| leg.route_start - car.s <= LOOKAHEAD)
+            .find_map(|leg| self.nearest_on_leg(i, leg))?;
+        let other = &self.cars[j];
+        Some((d - (car.plan.length + other.plan.length) / 2.0, other.v))
+    }
+
+    /// The nearest other car ahead of car `i` on `leg` of its route: on the
+    /// leg's tracks, or (at an intersection) still turning away on a sibling
+    /// movement from the same lane.
+    fn nearest_on_leg(&self, i: usize, leg: &RouteLeg) -> Option<Candidate> {
+        let sibling = match leg.kind {
+            LegKind::Connector(c) => self.nearest_on_siblings(i, leg, c),
+            _ => None,
+        };
+        let on_track = self.nearest_on_tracks(i, leg);
+        match (sibling, on_track) {
+            (Some(a), Some(b)) => Some(if b.0 < a.0 { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Cars that left the same lane on another movement than connector `c`
+    /// (a right turn beside my straight): in front until they have turned away.
+    fn nearest_on_siblings(&self, i: usize, leg: &RouteLeg, c: usize) -> Option<Candidate> {
+        let car = &self.cars[i];
+        let from = self.map.connectors[c].from;
+        let occupants = self
+            .map
+            .exits_from(from)
+            .filter(|&o| o != c)
+            .flat_map(|sibling| self.occupancy[self.map.connector_track(sibling)].iter());
+        nearest(
+            occupants
+                .map(|&(j, pos)| (leg.route_start + pos.max(0.0) - car.s, j, pos))
+                .filter(|&(d, j, pos)| j != i && pos < SIBLING_CLEARANCE && d > 0.0)
+                .map(|(d, j, _)| (d, j)),
+        )
+    }
+
+    /// Cars ahead of car `i` on the tracks `leg` runs on (both lanes of a merge).
+    fn nearest_on_tracks(&self, i: usize, leg: &RouteLeg) -> Option<Candidate> {
+        let car = &self.cars[i];
+        let run = self.map.layout.lane_change_length;
+        // Which tracks this leg runs on, and the track arc length at its start and end.
+        let (tracks, start, end): ([Option<usize>; 2], f64, f64) = match leg.kind {
+            LegKind::Lane(l) => ([Some(l), None], leg.curve_start, leg.curve_start + leg.length),
+            LegKind::Connector(c) => ([Some(self.map.connector_track(c)), None], 0.0, leg.length),
+            LegKind::LaneChange { from, to, at } => ([Some(from), Some(to)], at, at + run),
+        };
+        nearest(
+            tracks
+                .into_iter()
+                .flatten()
+                .flat_map(|track| self.occupancy[track].iter())
+                .filter(|&&(j, pos)| j != i && pos >= start - 0.01 && pos <= end + 0.01)
+                .map(|&(j, pos)| (leg.route_start + (pos - start) - car.s, j))
+                .filter(|&(d, _)| d > 0.0),
+        )
+    }
+
+    /// Distance from car `i`'s front to where it must stop for a light or for
+    /// cars crossing the intersection, if it must, metres. Records the
+    /// connector the car commits to once it is too close to stop comfortably.
+    pub(super) fn stop_ahead(&mut self, i: usize, t: f64) -> Option<f64> {
+        let car = &self.cars[i];
+        let front = car.front();
+        let p = &car.driver;
+        let braking = car.v * car.v / (2.0 * p.comfortable_deceleration);
+        let setback = self.map.layout.stop_line_setback;
+        let mut commit = None;
+        let mut stop = None;
+        for leg in &car.route.legs[car.leg..] {
+            if leg.route_start - car.s > LOOKAHEAD {
+                break;
+            }
+            let LegKind::Connector(c) = leg.kind else { continue };
+            let dist = leg.route_start - setback - front;
+            // Past the stop line, or forced through: nothing stops the car here.
+            if dist < -0.05 || car.runs_red_lights {
+                continue;
+            }
+            let Some(light) = self.light_for(c) else { continue };
+            // Once committed (moving, too close to stop comfortably) the light
+            // no longer matters, but cars still crossing the box always do. A
+            // car that has come to rest before its line is committed no more.
+            let committed = car.committed == Some(c) && car.v > 0.1;
+            let must_stop = !committed && self.stops_for(light, t, braking, dist);
+            let crossing = dist < braking + 2.0 && self.conflict_occupied(c);
+            if must_stop || crossing {
+                stop = Some(dist.max(0.0));
+                break;
+            }
+            if car.v > 0.1 && dist < braking {
+                commit = Some(c);
+            }
+        }
+        if commit.is_some() {
+            self.cars[i].committed = commit;
+        }
+        stop
+    }
+
+    /// Whether light `light` at time `t` tells a driver `dist` metres before
+    /// its line, who needs `braking` metres to stop comfortably, to stop:
+    /// always at red, at yellow only if it can.
+    fn stops_for(&self, light: usize, t: f64, braking: f64, dist: f64) -> bool {
+        match self.light_state(light, t).colour {
+            Colour::Red => true,
+            Colour::Yellow => braking <= dist,
+            Colour::Green => false,
+        }
+    }
+
+    /// The light (index in the plan) that governs entering `connector`: its
+    /// approach's Left signal for left turns, its Straight signal otherwise.
+    pub(super) fn light_for(&self, connector: usize) -> Option<usize> {
+        let c = &self.map.connectors[connector];
+        let intersection = c.intersection?;
+        let LaneEnd::Intersection { approach, .. } = self.map.lanes[c.from].end else { return None };
+        let signal = if c.turn == Turn::Left { Signal::Left } else { Signal::Straight };
+        Some(self.city.lights.index(intersection, approach, signal))
+    }
+
+    /// Light `index` at time `t` (seconds): its plan, unless an intervention
+    /// forces it or gave it a new plan.
+    pub(super) fn light_state(&self, index: usize, t: f64) -> LightState {
+        let forced =
+            self.light_overrides.iter().rev().find(|&&(l, _, from, until)| l == index && t >= from && t < until);
+        if let Some(&(_, colour, from, _)) = forced {
+            return LightState { colour, since_change: t - from };
+        }
+        match self.light_plans.iter().rev().find(|(l, _, from)| *l == index && t >= *from) {
+            Some((_, light, _)) => light.state_at(t),
+            None => self.city.lights.lights[index].state_at(t),
+        }
+    }
+
+    /// Whether any car is on (or has claimed) a connector crossing `connector`.
+    fn conflict_occupied(&self, connector: usize) -> bool {
+        self.map.conflicts(connector).iter().any(|&other| !self.occupancy[self.map.connector_track(other)].is_empty())
+    }
+
+    /// Highest speed (m/s) that still lets car `i` slow to the curve speed of
+    /// every curve within [`LOOKAHEAD`] at its comfortable deceleration.
+    pub(super) fn curve_limit(&self, i: usize) -> f64 {
+        let car = &self.cars[i];
+        let p = &car.driver;
+        let mut limit = f64::INFINITY;
+        for leg in &car.route.legs[car.leg..] {
+            let d = (leg.route_start - car.s).max(0.0);
+            if d > LOOKAHEAD {
+                break;
+            }
+            if let Curve::Arc(arc) = &leg.curve {
+                let curve_speed = (p.curve_acceleration * arc.radius).sqrt();
+                limit = limit.min((curve_speed * curve_speed + 2.0 * p.comfortable_deceleration * d).sqrt());
+            }
+        }
+        limit
+    }
+
+    /// For a merge about to start: `None` when car `i` may go on (the gap is
+    /// fine, or the merge was moved further along the lane), else the distance
+    /// to the merge start where it has to wait, metres.
+    pub(super) fn merge_wait(&mut self, i: usize, t: f64) -> Option<f64> {
+        let car = &self.cars[i];
+        let next = car.leg + 1;
+        let (Some(current), Some(change)) = (car.route.legs.get(car.leg), car.route.legs.get(next)) else {
+            return None;
+        };
+        let LegKind::LaneChange { from, to, at } = change.kind else { return None };
+        if current.kind != LegKind::Lane(from) {
+            return None;
+        }
+        let d = change.route_start - car.s;
+        let rt = car.driver.reaction_time;
+        // Looked at only within a reaction time (plus half a second) and 1.5 m.
+        if d > car.v * (rt + 0.5) + 1.5 || self.merge_gap_ok(i, to, at) {
+            return None;
+        }
+        let run = self.map.layout.lane_change_length;
+        // Moved on by the distance covered in a reaction time (at least 1 m),
+        // onto the 0.1 m grid of merge distances, while the lane is long enough.
+        let later = ((at + (car.v * rt + 0.5).max(1.0)) * 10.0).ceil() / 10.0;
+        if later + run <= self.map.lanes[from].curve.length() - 1e-6 {
+            self.defer_merge(i, change.action, later, t);
+            return None;
+        }
+        Some(d.max(0.0))
+    }
+
+    /// Whether lane `to` has room for car `i` merging over `[at, at + run]`
+    /// metres along it: every car on it is clear by half both lengths plus
+    /// the min gap, and a car behind also by a second of its own speed.
+    fn merge_gap_ok(&self, i: usize, to: usize, at: f64) -> bool {
+        let car = &self.cars[i];
+        let run = self.map.layout.lane_change_length;
+        self.occupancy[to].iter().all(|&(j, pos)| {
+            if j == i {
+                return true;
+            }
+            let other = &self.cars[j];
+            let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
+            pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
+        })
+    }
+}

@@ -1,0 +1,239 @@
+//! The city simulation driven on tiny hand-made plans of the default map, in
+//! the spirit of highway-env's `test_stop_before_obstacle`: a car stops
+//! behind a standing car, a queue discharges at green, a merge waits for its
+//! gap. Distances in metres, times in seconds, speeds in m/s.
+
+use super::CityWorld;
+use crate::map::signals::{Colour, LightPlan, ScheduleStep, Signal};
+use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
+use crate::plan::confounders::Confounders;
+use crate::plan::interventions::{Effect, Intervention, Trigger};
+use crate::plan::{CarAgency, CarPlan, CityPlan, Role, ScenarioKey, ScenarioPlan, WorldPlan};
+use crate::spec::{DriverParams, Split};
+use crate::world::{EventKind, Trajectories};
+use std::sync::Arc;
+
+const LENGTH: f64 = 4.0;
+const WIDTH: f64 = 1.8;
+const FRAME: f64 = 0.2;
+
+/// One car of a test plan: centre `at` metres along lane `lane`, driving
+/// `actions` (merges at `merges` metres along their lane) at `desired` m/s.
+struct Given {
+    lane: &'static str,
+    at: f64,
+    actions: Vec<Action>,
+    merges: Vec<f64>,
+    desired: f64,
+}
+
+fn straight(lane: &'static str, at: f64, desired: f64) -> Given {
+    Given { lane, at, actions: vec![], merges: vec![], desired }
+}
+
+fn lane(map: &CityMap, name: &str) -> LaneId {
+    map.lane_by_name(name).unwrap_or_else(|| panic!("no lane {name}"))
+}
+
+/// Drivers without perception noise or wander, so distances are exact.
+fn driver() -> DriverParams {
+    DriverParams { perception_noise: 0.0, lateral_wander: 0.0, ..DriverParams::default() }
+}
+
+/// A city plan of `cars` (ids in order) lasting `seconds`, with `lights`.
+fn plan(
+    map: &CityMap,
+    cars: &[Given],
+    lights: LightPlan,
+    interventions: Vec<Intervention>,
+    seconds: f64,
+) -> ScenarioPlan {
+    let planned = cars
+        .iter()
+        .enumerate()
+        .map(|(i, g)| {
+            let spawn = lane(map, g.lane);
+            let route =
+                Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0).expect("drivable test route");
+            CarPlan {
+                id: i as u32,
+                name: format!("Car_{}", i + 1),
+                colour: None,
+                mask_id: i as u8 + 1,
+                spawn,
+                spawn_name: g.lane.to_string(),
+                spawn_distance: g.at,
+                actions: g.actions.clone(),
+                merge_distances: g.merges.clone(),
+                role: Role::Independent,
+                length: LENGTH,
+                width: WIDTH,
+                route: Arc::new(route),
+            }
+        })
+        .collect();
+    let agency = cars
+        .iter()
+        .map(|g| CarAgency {
+            desired_speeds: vec![g.desired; g.actions.len() + 1],
+            driver: driver(),
+            runs_red_lights: false,
+        })
+        .collect();
+    let confounders = Confounders::default();
+    let city = CityPlan {
+        confounders,
+        effects: confounders.effects(),
+        lights,
+        base_driver: driver(),
+        sim_stream: [7; 32],
+        agency,
+    };
+    ScenarioPlan {
+        key: ScenarioKey { group: "test".into(), group_index: 0, split: Split::Test, index: 0, name: None },
+        world: WorldPlan::City(city),
+        seed: 0,
+        stream_key: String::new(),
+        frames: (seconds / FRAME) as u32 + 1,
+        frame_interval: FRAME,
+        cars: planned,
+        edges: vec![],
+        interventions,
+        cameras: vec![],
+    }
+}
+
+fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
+    CityWorld::default().simulate(map, plan, plan.world.city().expect("city plan"))
+}
+
+/// The default light plan with the lights governing the end of `lanes`
+/// (straight and left) running `schedule` from time 0.
+fn lights_with(map: &CityMap, lanes: &[&str], schedule: &[(Colour, f64)]) -> LightPlan {
+    let mut lights = LightPlan::cycle(map.intersections.len(), 1.0, &[]);
+    for name in lanes {
+        let LaneEnd::Intersection { intersection, approach } = map.lanes[lane(map, name)].end else {
+            panic!("{name} does not end at an intersection")
+        };
+        for signal in [Signal::Straight, Signal::Left] {
+            let index = lights.index(intersection, approach, signal);
+            let light = &mut lights.lights[index];
+            light.offset = 0.0;
+            light.schedule = schedule.iter().map(|&(colour, duration)| ScheduleStep { colour, duration }).collect();
+        }
+    }
+    lights
+}
+
+/// Metres along lane `name` and sideways from its centre line of car `car` at `frame`.
+fn on_lane(map: &CityMap, traj: &Trajectories, name: &str, frame: usize, car: usize) -> (f64, f64) {
+    map.lanes[lane(map, name)].curve.local_coordinates(traj.states[frame][car].position)
+}
+
+#[test]
+fn a_car_stops_behind_a_standing_car_without_touching_it() {
+    let map = CityMap::default();
+    // A1w is 36 m long: the standing car's back is 16 m ahead of the other's front.
+    let cars = [straight("A1w", 25.0, 0.0), straight("A1w", 5.0, 3.0)];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(4, 1.0, &[]), vec![], 30.0));
+    let min_gap = driver().min_gap;
+    let gaps: Vec<f64> =
+        traj.states.iter().map(|frame| frame[0].position.distance(frame[1].position) - LENGTH).collect();
+    let closest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+    let last = &traj.states[traj.frames() - 1];
+    assert!(gaps[0] > 15.9, "the cars start 16 m apart, not {:.2}", gaps[0]);
+    assert!(closest > 0.5 * min_gap, "came within {closest:.3} m of the standing car");
+    assert!(
+        (gaps[gaps.len() - 1] - min_gap).abs() < 0.3,
+        "rests {:.3} m behind it, min gap {min_gap}",
+        gaps[gaps.len() - 1]
+    );
+    assert!(last[1].speed < 0.05, "still moving at {:.3} m/s", last[1].speed);
+    assert!(last[0].position.distance(traj.states[0][0].position) < 1e-9, "the standing car moved");
+    let peak = traj.states.iter().map(|f| f[1].speed).fold(0.0, f64::max);
+    assert!(peak > 1.5, "the car never got going (peak {peak:.2} m/s)");
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+}
+
+#[test]
+fn a_queue_at_red_discharges_in_order_once_green() {
+    let map = CityMap::default();
+    let green_at = 5.0;
+    let lights = lights_with(&map, &["A1w"], &[(Colour::Red, green_at), (Colour::Green, 100.0)]);
+    let setback = map.layout.stop_line_setback;
+    let line = map.lanes[lane(&map, "A1w")].curve.length() - setback;
+    // Three cars at rest, 1 m apart, the first with its front 0.2 m before the line.
+    let spacing = LENGTH + 1.0;
+    let cars: Vec<Given> =
+        (0..3).map(|k| straight("A1w", line - 0.2 - LENGTH / 2.0 - k as f64 * spacing, 2.0)).collect();
+    let traj = simulate(&map, &plan(&map, &cars, lights, vec![], 25.0));
+    let t = |frame: usize| frame as f64 * FRAME;
+    let mut starts = Vec::new();
+    let mut crossings = Vec::new();
+    for car in 0..cars.len() {
+        let start = (0..traj.frames()).find(|&f| traj.states[f][car].speed > 0.5).map(t);
+        let crossed = (0..traj.frames()).find(|&f| on_lane(&map, &traj, "A1w", f, car).0 + LENGTH / 2.0 > line + 0.5);
+        starts.push(start.unwrap_or_else(|| panic!("car {car} never moved off")));
+        crossings.push(t(crossed.unwrap_or_else(|| panic!("car {car} never crossed the stop line"))));
+    }
+    assert_eq!(starts.len(), 3);
+    assert!(starts[0] >= green_at, "the first car left at {:.1} s, before green at {green_at} s", starts[0]);
+    for k in 1..starts.len() {
+        assert!(
+            starts[k] > starts[k - 1],
+            "car {k} moved off at {:.1} s, before the car ahead ({:.1} s)",
+            starts[k],
+            starts[k - 1]
+        );
+        assert!(crossings[k] > crossings[k - 1], "car {k} crossed before the car ahead: {crossings:?}");
+    }
+    // At 2 m/s with 1.2 m/s^2, three cars 5 m apart clear the line well within 15 s.
+    assert!(crossings[2] - green_at < 15.0, "queue cleared {:.1} s after green", crossings[2] - green_at);
+    assert!(crossings[0] - green_at < 3.0, "the first car took {:.1} s to cross", crossings[0] - green_at);
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision && e.kind != EventKind::RedLightRun));
+}
+
+#[test]
+fn a_merge_waits_until_the_car_beside_has_gone() {
+    let map = CityMap::default();
+    let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 100.0)]);
+    // The merge starts at the last possible place (A1w is 36 m, a merge takes
+    // 8 m), so it cannot be moved along: the car must wait for the gap.
+    let merge_at = 28.0;
+    let merging = Given { lane: "A1w", at: 15.0, actions: vec![Action::MergeL], merges: vec![merge_at], desired: 2.0 };
+    // Beside the merge start, a little behind it: not ahead on the merging path.
+    let blocker = straight("A1x", 27.0, 0.0);
+    let free_at = 14.0;
+    let go = Intervention {
+        trigger: Trigger::At(free_at),
+        effect: Effect::SetDesiredSpeed { car: 1, speed: 3.0 },
+        label: "blocker drives off".into(),
+    };
+    let traj = simulate(&map, &plan(&map, &[merging, blocker], lights, vec![go], 30.0));
+    let merged = traj
+        .events
+        .iter()
+        .find(|e| e.kind == EventKind::MergeDone && e.car == 0)
+        .unwrap_or_else(|| panic!("the merge never happened: {:?}", traj.events));
+    assert!(merged.t > free_at, "merged at {:.2} s while the target lane was blocked until {free_at} s", merged.t);
+    assert!(merged.t < free_at + 15.0, "merged only at {:.2} s", merged.t);
+    // While blocked it stays in its own lane, waiting short of the merge start.
+    let blocked: Vec<usize> = (0..traj.frames()).filter(|&f| f as f64 * FRAME <= free_at).collect();
+    assert!(blocked.len() > 30);
+    for &f in &blocked {
+        let (along, sideways) = on_lane(&map, &traj, "A1w", f, 0);
+        assert!(sideways.abs() < 0.3, "{:.2} m off its lane centre at {:.1} s", sideways, f as f64 * FRAME);
+        assert!(
+            along < merge_at + 0.5,
+            "{along:.2} m along its lane at {:.1} s, past the merge start",
+            f as f64 * FRAME
+        );
+    }
+    let waiting = traj.states[blocked[blocked.len() - 1]][0].speed;
+    assert!(waiting < 0.05, "still rolling at {waiting:.2} m/s when the gap opened");
+    // When the merge is done the car is on the target lane's centre line.
+    let done = ((merged.t / FRAME) - 1e-9).ceil() as usize;
+    let (_, sideways) = on_lane(&map, &traj, "A1x", done, 0);
+    assert!(sideways.abs() < 0.3, "{sideways:.2} m off the target lane when the merge was done");
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+}
