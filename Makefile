@@ -46,6 +46,7 @@ test-python: build
 	$(RUN) gen --quiet --spec tests/python/city.json --out $(PYDATA)/city
 	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-causalcity
 	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-reference --layout nri --directed
+	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-original --clip --velocity forward --suffix _airsim_final
 	$(RUN) export nsdr $(PYDATA)/toy --out $(PYDATA)/nsdr --quiet
 	$(RUN) export nsdr $(PYDATA)/city --out $(PYDATA)/nsdr-city --quiet
 	$(if $(filter hdf5,$(FEATURES)),$(RUN) export vcdn $(PYDATA)/toy --out $(PYDATA)/vcdn --quiet)

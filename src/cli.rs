@@ -8,7 +8,7 @@ use causalcity::analysis::baseline::baseline;
 use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
 use causalcity::analysis::stats::dataset_stats;
 use causalcity::error::Error;
-use causalcity::export::nri::{export_nri, NriLayout, NriOptions};
+use causalcity::export::nri::{export_nri, NriLayout, NriOptions, Velocity};
 use causalcity::export::nsdr::export_nsdr;
 use causalcity::export::vcdn::export_vcdn;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
@@ -282,6 +282,16 @@ pub struct ExportNriArgs {
     /// Keep only leader -> follower edges (edges[s, follower, leader] = 1).
     #[arg(long)]
     pub directed: bool,
+
+    /// Clamp pixel positions to the image (0..width x 0..height) before
+    /// differencing, as the original converter did.
+    #[arg(long)]
+    pub clip: bool,
+
+    /// backward: vel[t] = loc[t] - loc[t-1] (vel[0] = vel[1]); forward:
+    /// vel[t] = loc[t+1] - loc[t] (vel[T-1] = vel[T-2]), the original converter's.
+    #[arg(long, value_enum, default_value = "backward")]
+    pub velocity: VelocityArg,
 }
 
 #[derive(Debug, Args)]
@@ -415,6 +425,24 @@ impl From<NriLayoutArg> for NriLayout {
     }
 }
 
+/// `export nri --velocity`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum VelocityArg {
+    /// vel[t] = loc[t] - loc[t-1], the first frame taking the second's.
+    Backward,
+    /// vel[t] = loc[t+1] - loc[t], the last frame repeating (the original converter).
+    Forward,
+}
+
+impl From<VelocityArg> for Velocity {
+    fn from(v: VelocityArg) -> Velocity {
+        match v {
+            VelocityArg::Backward => Velocity::Backward,
+            VelocityArg::Forward => Velocity::Forward,
+        }
+    }
+}
+
 /// `counterfactual --kinds`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum SweepKindArg {
@@ -504,7 +532,13 @@ pub fn run(cli: Cli) -> Result<(), Error> {
         }
         Command::Merge(args) => say(merge(&args.out, &args.shards)?),
         Command::Export(ExportCommand::Nri(args)) => {
-            let options = NriOptions { layout: args.layout.into(), suffix: args.suffix, directed: args.directed };
+            let options = NriOptions {
+                layout: args.layout.into(),
+                suffix: args.suffix,
+                directed: args.directed,
+                clip: args.clip,
+                velocity: args.velocity.into(),
+            };
             for line in export_nri(&args.dataset, &args.out, &options).map_err(Error::Failure)? {
                 say(line)?;
             }

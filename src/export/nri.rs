@@ -11,9 +11,14 @@
 //!
 //! Edges follow NRI's receiver/sender convention: `edges[s, i, j] = 1` when
 //! car j drives car i (j is i's leader). Without `--directed` both directions
-//! of each leader-follower pair are set. `vel[t] = loc[t] - loc[t-1]`, with
-//! `vel[0] = loc[1] - loc[0]`. Car order is the scenario's (randomly
-//! permuted) ids. One split is held in memory at a time.
+//! of each leader-follower pair are set. Velocities are differences of loc:
+//! backward (the default), `vel[t] = loc[t] - loc[t-1]` with `vel[0] =
+//! loc[1] - loc[0]`; or forward, as the original's converter
+//! (`causalcity2nri_data.py`) computed them, `vel[t] = loc[t+1] - loc[t]`
+//! with the last repeated, `vel[T-1] = vel[T-2]`. `clip` clamps positions
+//! to the image (0..width x 0..height) before differencing, as that
+//! converter did. Car order is the scenario's (randomly permuted) ids. One
+//! split is held in memory at a time.
 
 use crate::dataset::{Dataset, ScenarioSummary};
 use crate::output::io_err;
@@ -31,12 +36,26 @@ pub enum NriLayout {
     Nri,
 }
 
+/// How velocities are differenced from positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Velocity {
+    /// `loc[t] - loc[t-1]`, the first frame taking the second's.
+    #[default]
+    Backward,
+    /// `loc[t+1] - loc[t]`, the last frame repeating the one before (the
+    /// original converter).
+    Forward,
+}
+
 /// What `export nri` was asked for.
 #[derive(Debug, Clone)]
 pub struct NriOptions {
     pub layout: NriLayout,
     pub suffix: String,
     pub directed: bool,
+    /// Clamp positions to the image, as the original converter did.
+    pub clip: bool,
+    pub velocity: Velocity,
 }
 
 /// Split names as the NRI loaders spell them.
@@ -53,8 +72,8 @@ pub fn nri_split_name(split: Split) -> &'static str {
 /// scenario.json.
 fn fill_scenario(
     dir: &Path,
-    frames: usize,
-    cars: usize,
+    (frames, cars): (usize, usize),
+    image: (f32, f32),
     options: &NriOptions,
     (loc, vel, edges): (&mut [f32], &mut [f32], &mut [i64]),
 ) -> Result<(), String> {
@@ -67,16 +86,25 @@ fn fill_scenario(
             scenario.frames
         ));
     }
-    let pixels = read_pixels(&dir.join(PIXELS_FILE), frames, cars)?;
+    let mut pixels = read_pixels(&dir.join(PIXELS_FILE), frames, cars)?;
+    if options.clip {
+        for xy in pixels.chunks_exact_mut(2) {
+            xy[0] = xy[0].clamp(0.0, image.0);
+            xy[1] = xy[1].clamp(0.0, image.1);
+        }
+    }
     let at = |frame: usize, car: usize, axis: usize| pixels[(frame * cars + car) * 2 + axis];
     for frame in 0..frames {
         for car in 0..cars {
             for axis in 0..2 {
                 let here = at(frame, car, axis);
-                let velocity = match frame {
-                    0 if frames > 1 => at(1, car, axis) - here,
-                    0 => 0.0,
-                    _ => here - at(frame - 1, car, axis),
+                let step = |from: usize| at(from + 1, car, axis) - at(from, car, axis);
+                let velocity = match (options.velocity, frame) {
+                    _ if frames < 2 => 0.0,
+                    (Velocity::Backward, 0) => step(0),
+                    (Velocity::Backward, t) => step(t - 1),
+                    (Velocity::Forward, t) if t + 1 == frames => step(t - 1),
+                    (Velocity::Forward, t) => step(t),
                 };
                 let index = match options.layout {
                     NriLayout::Causalcity => (frame * cars + car) * 2 + axis,
@@ -152,6 +180,7 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
 pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {
     let opened = Dataset::open_complete(dataset)?;
     let frames = opened.spec().frames as usize;
+    let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
     let mut report = Vec::new();
     for group in &opened.spec().groups {
         let cars = group.cars as usize;
@@ -171,7 +200,7 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
                 .zip(edges.par_chunks_mut(cars * cars))
                 .zip(dirs.par_iter())
                 .try_for_each(|(((loc, vel), edges), dir)| {
-                    fill_scenario(dir, frames, cars, options, (loc, vel, edges))
+                    fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges))
                 })?;
             let (f, c) = (frames as u64, cars as u64);
             let loc_shape = match options.layout {

@@ -132,6 +132,33 @@ def test_nri_exports_match_the_csvs(export, layout, directed):
                 np.testing.assert_array_equal(edges[s], expected)
 
 
+def test_nri_export_as_the_original_converter_clipped_and_forward(toy_scenarios):
+    """export nri --clip --velocity forward --suffix _airsim_final: the files
+    the original CausalCity NRI fork loads, with positions clamped to the
+    1024 x 640 image and vel[t] = loc[t+1] - loc[t], the last repeated."""
+    clipped = 0
+    for group, cars in (("cars04_edges50", 4), ("cars08_edges80", 8)):
+        for split, nri_split in SPLITS.items():
+            folder = nri_dir("nri-original") / group
+            loc = np.load(folder / f"loc_{nri_split}_airsim_final.npy")
+            vel = np.load(folder / f"vel_{nri_split}_airsim_final.npy")
+            dirs = sorted((TOY / group / split).iterdir())
+            assert loc.shape == (len(dirs), 30, cars, 2)
+            assert loc[..., 0].min() >= 0 and loc[..., 0].max() <= 1024
+            assert loc[..., 1].min() >= 0 and loc[..., 1].max() <= 640
+            np.testing.assert_array_equal(vel[:, :-1], loc[:, 1:] - loc[:, :-1])
+            np.testing.assert_array_equal(vel[:, -1], vel[:, -2])
+            for s, d in enumerate(dirs):
+                poses = pd.read_csv(d / "poses.csv").sort_values(["frame", "car"])
+                px = poses.px.to_numpy(np.float32).reshape(30, cars)
+                py = poses.py.to_numpy(np.float32).reshape(30, cars)
+                np.testing.assert_array_equal(loc[s, :, :, 0], np.clip(px, 0, 1024))
+                np.testing.assert_array_equal(loc[s, :, :, 1], np.clip(py, 0, 640))
+                clipped += int(((px < 0) | (px > 1024)).sum() + ((py < 0) | (py > 640)).sum())
+    # The toy data has cars off the image, so clipping was exercised.
+    assert clipped > 0
+
+
 def test_annotations_rle_decodes_to_the_mask_pngs(toy_scenarios):
     """gen --annotations: pycocotools decodes every car's RLE back to exactly
     its pixels in the mask PNG, and every car in a mask is annotated."""
