@@ -2,7 +2,7 @@
 //! reasoning. Data flows one way, and every layer imports only the ones
 //! before it:
 //!
-//! [`geometry`], [`camera`], [`map`] -> [`spec`] -> [`plan`] -> [`world`] ->
+//! [`json`], [`geometry`], [`camera`], [`map`] -> [`spec`] -> [`plan`] -> [`world`] ->
 //! [`render`] -> [`output`] -> [`dataset`], [`validate`], [`analysis`],
 //! [`export`], [`preview`] -> [`orchestrate`].
 //!
@@ -16,6 +16,7 @@ pub mod dataset;
 pub mod error;
 pub mod export;
 pub mod geometry;
+pub mod json;
 pub mod map;
 pub mod orchestrate;
 pub mod output;

@@ -256,7 +256,7 @@ pub fn valid_folder_name(name: &str) -> bool {
 /// One driver's car-following parameters (the city world's drivers), as
 /// the spec gives them and, in plans, after confounders have acted on them.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct DriverParams {
     /// Desired time gap to the car ahead, seconds.
     pub time_headway: f64,
@@ -294,8 +294,10 @@ impl Default for DriverParams {
     }
 }
 
-/// A value fixed by the spec or drawn per scenario.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A value fixed by the spec or drawn per scenario: a number,
+/// `{"uniform": [low, high]}` or `{"choice": [a, b, ...]}` (nothing else in
+/// the object).
+#[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Distribution {
     Fixed(f64),
@@ -307,6 +309,46 @@ pub enum Distribution {
     Choice {
         choice: Vec<f64>,
     },
+}
+
+/// The object form of a [`Distribution`], as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDistribution {
+    uniform: Option<[f64; 2]>,
+    choice: Option<Vec<f64>>,
+}
+
+impl<'de> Deserialize<'de> for Distribution {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Distribution;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number, {\"uniform\": [low, high]} or {\"choice\": [a, b, ...]}")
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<Distribution, E> {
+                Ok(Distribution::Fixed(v))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<Distribution, E> {
+                Ok(Distribution::Fixed(v as f64))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<Distribution, E> {
+                Ok(Distribution::Fixed(v as f64))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Distribution, A::Error> {
+                let raw = RawDistribution::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+                match (raw.uniform, raw.choice) {
+                    (Some(uniform), None) => Ok(Distribution::Uniform { uniform }),
+                    (None, Some(choice)) => Ok(Distribution::Choice { choice }),
+                    _ => Err(serde::de::Error::custom(
+                        "give exactly one of {\"uniform\": [low, high]} or {\"choice\": [a, b, ...]}",
+                    )),
+                }
+            }
+        }
+        deserializer.deserialize_any(Visit)
+    }
 }
 
 impl Distribution {
@@ -571,16 +613,46 @@ const MAX_SCENARIOS_PER_SPLIT: u32 = 10_000_000;
 const MAX_ACTIONS: u32 = 100;
 
 impl DatasetSpec {
-    /// Parses and checks a spec from JSON text.
+    /// Parses and checks a spec from JSON text (strictly: no duplicate
+    /// keys, no trailing data, objects where the spec has objects).
     pub fn from_json(text: &str) -> Result<DatasetSpec, SpecError> {
-        let de = &mut serde_json::Deserializer::from_str(text);
-        let spec: DatasetSpec = serde_path_to_error::deserialize(de).map_err(|e| {
-            let path = e.path().to_string();
-            let field = if path == "." { String::new() } else { path };
-            SpecError::new(field, e.into_inner().to_string())
-        })?;
+        let spec: DatasetSpec = crate::json::parse_strict(text).map_err(|e| SpecError::new(e.path, e.message))?;
         spec.validate()?;
         Ok(spec.resolved())
+    }
+
+    /// Frames per scenario when a file gives none.
+    pub fn default_frames() -> u32 {
+        default_frames()
+    }
+
+    /// A one-scenario spec for cars given by hand (scenario files): every
+    /// setting not named here takes the spec's default.
+    pub fn for_given_cars(
+        name: String,
+        world: WorldKind,
+        seed: u64,
+        frames: u32,
+        frame_interval: Option<f64>,
+        city: Option<CitySpec>,
+    ) -> DatasetSpec {
+        DatasetSpec {
+            name,
+            world,
+            seed,
+            frames,
+            frame_interval,
+            image: ImageSize::default(),
+            groups: Vec::new(),
+            splits: Splits { train: 1, val: 0, test: 0 },
+            actions_per_car: 0,
+            toy_speed_px_per_frame: default_toy_speed(),
+            leader_gap_px: default_leader_gap(),
+            car_length_m: default_car_length(),
+            car_width_m: default_car_width(),
+            city,
+            cameras: Vec::new(),
+        }
     }
 
     /// Reads, parses and checks a spec file.

@@ -459,3 +459,135 @@ fn a_gen_spec_can_list_cameras_and_validate_checks_their_files() {
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("cameras[0].chase"));
 }
+
+/// Runs `args` (ending in `--out DIR`), expects exit 2 with every part in
+/// stderr and nothing written to DIR.
+fn rejected_by(case: &str, args: &[&str], out: &Path, parts: &[&str]) {
+    let output = run(args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
+    for part in parts {
+        assert!(stderr.contains(part), "{case}: {part:?} missing from {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{case}: {stderr}");
+    assert!(!out.exists(), "{case}: nothing may be written");
+}
+
+const OK_CAR: &str =
+    r#"{"Id": "Car_1", "Spawn": "A1w", "SpawnAtDistance": 5, "DriveQueue": ["straight"], "MergeAtDistances": [0]}"#;
+
+#[test]
+fn scenario_files_are_read_strictly() {
+    let dir = fresh_dir("hw-strict");
+    let one = |interventions: &str| {
+        format!(r#"[{{"Name": "Strict", "frames": 10, "Vehicles": [{OK_CAR}], "interventions": [{interventions}]}}]"#)
+    };
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        (
+            "duplicate-vehicle-key",
+            r#"[{"Name": "Strict", "Vehicles": [{"Id": "Car_1", "Spawn": "A1w", "Spawn": "B1w"}]}]"#.into(),
+            vec!["scenario \"Strict\"", "car \"Car_1\"", "field Spawn", "duplicate key"],
+        ),
+        (
+            "duplicate-scenario-key",
+            format!(r#"[{{"Name": "Strict", "frames": 10, "frames": 20, "Vehicles": [{OK_CAR}]}}]"#),
+            vec!["scenario \"Strict\"", "field frames", "duplicate key"],
+        ),
+        ("trailing-data", format!("{} xyz", one("")), vec!["trailing characters"]),
+        ("second-document", format!("{0}{0}", one("")), vec!["trailing characters"]),
+        (
+            "unknown-key-in-when",
+            one(r#"{"when": {"car": "Car_1", "reaches": "AC", "after": 2}, "do": "remove", "car": "Car_1"}"#),
+            vec!["scenario \"Strict\"", "interventions[0].when", "unknown field `after`"],
+        ),
+        (
+            "unknown-key-in-schedule-step",
+            one(
+                r#"{"at": 1, "do": "set_light_plan", "light": "AC/W/straight", "schedule": [{"colour": "red", "duration": 3, "x": 1}]}"#,
+            ),
+            vec!["scenario \"Strict\"", "interventions[0].schedule[0]", "unknown field `x`"],
+        ),
+        (
+            "key-of-another-effect",
+            one(r#"{"at": 1, "do": "stop", "car": "Car_1", "seconds": 2, "speed": 3}"#),
+            vec!["interventions[0]", "unknown field `speed`", "seconds"],
+        ),
+        (
+            "unknown-effect",
+            one(r#"{"at": 1, "do": "fly", "car": "Car_1"}"#),
+            vec!["interventions[0].do", "\"fly\" is not an intervention", "set_light_plan"],
+        ),
+        (
+            "two-triggers",
+            one(r#"{"at": 1, "at_frame": 3, "do": "remove", "car": "Car_1"}"#),
+            vec!["interventions[0]", "exactly one trigger"],
+        ),
+        (
+            "vehicle-as-a-list",
+            r#"[{"Name": "Strict", "Vehicles": [["Car_1", "A1w"]]}]"#.into(),
+            vec!["scenario \"Strict\"", "Vehicles[0]", "invalid type: sequence, expected an object"],
+        ),
+        (
+            "distance-as-text",
+            r#"[{"Name": "Strict", "Vehicles": [{"Id": "Car_1", "Spawn": "A1w", "SpawnAtDistance": "far"}]}]"#.into(),
+            vec!["car \"Car_1\"", "field SpawnAtDistance", "invalid type"],
+        ),
+        (
+            "unknown-key-in-a-distribution",
+            format!(
+                r#"[{{"Name": "Strict", "Vehicles": [{OK_CAR}], "city": {{"confounders": {{"rain": {{"choice": [0.5], "typo": 1}}}}}}}}]"#
+            ),
+            vec!["scenario \"Strict\"", "city.confounders.rain", "typo"],
+        ),
+    ];
+    for (case, text, parts) in &cases {
+        let file = dir.join(format!("{case}.json"));
+        std::fs::write(&file, text).unwrap();
+        let out = dir.join(format!("out-{case}"));
+        let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+        rejected_by(case, &args, &out, parts);
+    }
+}
+
+#[test]
+fn intervention_files_are_read_strictly() {
+    let dir = fresh_dir("hw-strict-interventions");
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let cases = [
+        (
+            "duplicate-key",
+            r#"[{"at": 1, "do": "stop", "car": "Car_1", "seconds": 2, "seconds": 4}]"#,
+            vec!["interventions[0].seconds", "duplicate key"],
+        ),
+        ("trailing-data", r#"[{"at": 1, "do": "none"}] []"#, vec!["trailing characters"]),
+        (
+            "unknown-key-in-when",
+            r#"{"when": {"light": "AC/W/straight", "turns": "red", "car": "Car_1"}, "do": "none"}"#,
+            vec!["interventions[0].when", "expected {\"car\": CAR"],
+        ),
+        (
+            "unknown-key",
+            r#"[{"at": 1, "do": "none"}, {"at": 1, "do": "remove", "car": "Car_1", "colour": "red"}]"#,
+            vec!["interventions[1]", "unknown field `colour`"],
+        ),
+    ];
+    for (case, text, parts) in &cases {
+        let file = dir.join(format!("{case}.json"));
+        std::fs::write(&file, text).unwrap();
+        let out = dir.join(format!("out-{case}"));
+        let args = [
+            "counterfactual",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--intervention",
+            file.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-images",
+        ];
+        let mut parts = parts.clone();
+        let name = file.to_str().unwrap().to_string();
+        parts.push(&name);
+        rejected_by(case, &args, &out, &parts);
+    }
+}

@@ -172,3 +172,85 @@ fn unwritable_output_folder_gets_a_clear_message() {
     assert!(stderr.contains("--out"), "should say what to do: {stderr}");
     assert!(!stderr.contains("panicked"));
 }
+
+#[test]
+fn trailing_data_after_the_spec_is_rejected() {
+    let text = base().to_string();
+    rejected("trailing-garbage", &format!("{text} xyz"), &["invalid spec", "trailing characters"]);
+    rejected("two-specs", &format!("{text}\n{text}"), &["invalid spec", "trailing characters"]);
+}
+
+fn city_with(city: &str) -> String {
+    city_spec("bad", &[(4, 0.5)], (1, 0, 0), 10, city)
+}
+
+#[test]
+fn unknown_or_conflicting_keys_in_a_distribution_are_named() {
+    rejected(
+        "dist-typo",
+        &city_with(r#"{"confounders": {"rain": {"uniform": [0, 0.2], "choice": [0.9], "typo": 1}}}"#),
+        &["city.confounders.rain", "typo", "uniform", "choice"],
+    );
+    rejected(
+        "dist-both",
+        &city_with(r#"{"confounders": {"rain": {"uniform": [0, 0.2], "choice": [0.9]}}}"#),
+        &["city.confounders.rain", "exactly one", "uniform", "choice"],
+    );
+    rejected("dist-empty", &city_with(r#"{"confounders": {"fog": {}}}"#), &["city.confounders.fog", "exactly one"]);
+    rejected(
+        "dist-list",
+        &city_with(r#"{"confounders": {"snow": [0, 1]}}"#),
+        &["city.confounders.snow", "invalid type: sequence"],
+    );
+}
+
+#[test]
+fn lists_in_place_of_objects_are_rejected() {
+    rejected(
+        "image-list",
+        &with(|v| v["image"] = serde_json::json!([1024, 640])),
+        &["`image`", "invalid type: sequence, expected an object"],
+    );
+    rejected(
+        "splits-list",
+        &with(|v| v["splits"] = serde_json::json!([1, 0, 0])),
+        &["`splits`", "invalid type: sequence, expected an object"],
+    );
+    rejected(
+        "group-list",
+        &with(|v| v["groups"][0] = serde_json::json!([8, 0.5])),
+        &["`groups[0]`", "expected an object"],
+    );
+}
+
+#[test]
+fn duplicate_keys_are_named() {
+    // serde_json writes compact text: `{"frames":10,...}`.
+    let text = base().to_string();
+    assert!(text.contains(r#""seed":11"#) && text.contains(r#""train":2"#));
+    rejected("dup-top", &text.replace(r#""seed":11"#, r#""seed":11,"seed":12"#), &["`seed`", "duplicate key"]);
+    rejected(
+        "dup-nested",
+        &text.replace(r#""train":2"#, r#""train":2,"train":3"#),
+        &["`splits.train`", "duplicate key"],
+    );
+    let city = city_with(r#"{"confounders": {"rain": {"uniform": [0, 0.2], "uniform": [0, 0.5]}}}"#);
+    rejected("dup-distribution", &city, &["city.confounders.rain.uniform", "duplicate key"]);
+}
+
+#[test]
+fn a_partial_driver_takes_the_defaults_for_the_rest() {
+    let dir = fresh_dir("spec-partial-driver");
+    let spec =
+        write_spec(&dir, &city_spec("partial", &[(4, 0.5)], (1, 0, 0), 5, r#"{"driver": {"time_headway": 1.7}}"#));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images"]);
+    let driver = &read_json(&out.join("manifest.json"))["spec"]["city"]["driver"];
+    // DriverParams::default() for every field not given.
+    let expected = serde_json::json!({
+        "time_headway": 1.7, "min_gap": 0.8, "max_acceleration": 1.2, "comfortable_deceleration": 1.5,
+        "max_deceleration": 6.0, "reaction_time": 0.3, "perception_noise": 0.04, "lateral_wander": 0.03,
+        "curve_acceleration": 1.2
+    });
+    assert_eq!(driver, &expected);
+}

@@ -3,23 +3,29 @@
 //! "DriveQueue", "MergeAtDistances"}]}`) read unchanged, plus optional
 //! extensions in the same file (snake_case keys):
 //! - per scenario: `world`, `seed`, `frames`, `frame_interval`, `city` (the
-//!   spec's city section: driver, lights and offsets, confounders) and
-//!   `interventions`;
+//!   spec's city section: driver, lights and offsets, confounders),
+//!   `interventions` and `cameras`;
 //! - per vehicle: `desired_speeds` (m/s, one per leg: before the first action,
 //!   after each), `time_headway` (s), `runs_red_lights`, `colour` (`#rrggbb`).
 //!
-//! Cars with the same spawn lane, drive queue and merge distances form
-//! leader-follower pairs, the one further along leading (the original's
-//! definition). Every error names the file, the scenario, the car and the
-//! field; nothing is simulated until the whole file is good.
+//! Reading is two passes. The file is parsed strictly ([`crate::json`]: no
+//! duplicate keys, no trailing data, no unknown keys at any depth) into raw
+//! serde types that mirror the JSON; then one resolving pass turns names into
+//! indices (cars, lanes, lights, intersections), checks ranges and plans every
+//! route on the map. Cars with the same spawn lane, drive queue and merge
+//! distances form leader-follower pairs, the one further along leading (the
+//! original's definition). Every error names the file, the scenario, the car
+//! and the field; nothing is simulated until the whole file is good.
 
 use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
+use crate::json::{self, JsonError};
 use crate::map::signals::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
 use crate::map::{Action, CityMap, Route};
 use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
-use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, ImageSize, Split, Splits, WorldKind};
+use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, Split, WorldKind};
+use serde::Deserialize;
 use serde_json::{Map, Value};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -66,20 +72,163 @@ pub struct FileOptions {
     pub world: Option<WorldKind>,
 }
 
-const SCENARIO_KEYS: [&str; 10] =
-    ["Name", "Vehicles", "world", "seed", "frames", "frame_interval", "city", "interventions", "cameras", "comment"];
-const VEHICLE_KEYS: [&str; 10] = [
-    "comment",
-    "Id",
-    "Spawn",
-    "SpawnAtDistance",
-    "DriveQueue",
-    "MergeAtDistances",
-    "desired_speeds",
-    "time_headway",
-    "runs_red_lights",
-    "colour",
-];
+/// Seed of a scenario file that gives none.
+const DEFAULT_SEED: u64 = 1;
+
+// ---------------------------------------------------------------------------
+// Raw types: the JSON as written, checked for shape only.
+
+/// One scenario as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    #[serde(rename = "Name")]
+    name: String,
+    #[serde(rename = "Vehicles")]
+    vehicles: Vec<RawVehicle>,
+    world: Option<WorldKind>,
+    seed: Option<u64>,
+    frames: Option<u32>,
+    frame_interval: Option<f64>,
+    city: Option<CitySpec>,
+    /// Read by [`raw_interventions`], which keeps the JSON paths of the
+    /// intervention's fields that sit beside their `do` tag.
+    interventions: Option<Vec<Value>>,
+    cameras: Option<Vec<CameraSpec>>,
+    #[allow(dead_code)]
+    comment: Option<String>,
+}
+
+/// One vehicle as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVehicle {
+    #[serde(rename = "Id")]
+    id: String,
+    #[serde(rename = "Spawn")]
+    spawn: String,
+    #[serde(rename = "SpawnAtDistance", default)]
+    spawn_at_distance: f64,
+    #[serde(rename = "DriveQueue", default)]
+    drive_queue: Vec<String>,
+    #[serde(rename = "MergeAtDistances")]
+    merge_at_distances: Option<Vec<f64>>,
+    desired_speeds: Option<Vec<f64>>,
+    time_headway: Option<f64>,
+    runs_red_lights: Option<bool>,
+    colour: Option<String>,
+    #[allow(dead_code)]
+    comment: Option<String>,
+}
+
+/// One intervention as written: a trigger, an effect tagged by `do`, and an
+/// optional label, all keys of one object.
+#[derive(Debug)]
+pub struct RawIntervention {
+    trigger: RawTrigger,
+    effect: RawEffect,
+    label: Option<String>,
+}
+
+/// When an intervention fires: exactly one of these keys.
+#[derive(Debug, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+enum RawTrigger {
+    /// Seconds from the start.
+    At(f64),
+    AtFrame(u64),
+    When(RawWhen),
+}
+
+/// An event: `{"car", "reaches"}` or `{"light", "turns"}`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWhen {
+    car: Option<String>,
+    reaches: Option<String>,
+    light: Option<String>,
+    turns: Option<Colour>,
+}
+
+/// What an intervention does, tagged by its `do` key.
+#[derive(Debug, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+enum RawEffect {
+    Stop { car: String, seconds: f64 },
+    RunRedLight { car: String },
+    SetDesiredSpeed { car: String, speed: f64 },
+    Remove { car: String },
+    ReplaceActions { car: String, actions: Vec<String>, merge_distances: Option<Vec<f64>> },
+    SetLight { light: String, colour: Colour, seconds: f64 },
+    SetLightPlan { light: String, schedule: Vec<ScheduleStep>, offset: Option<f64> },
+    SetConfounder { confounder: String, value: f64 },
+    None {},
+}
+
+/// Keys of an intervention that are not its effect's.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCommon {
+    label: Option<String>,
+    #[allow(dead_code)]
+    comment: Option<String>,
+}
+
+const TRIGGER_KEYS: [&str; 3] = ["at", "at_frame", "when"];
+const COMMON_KEYS: [&str; 2] = ["label", "comment"];
+
+/// Reads one intervention object (at JSON path `path`).
+fn raw_intervention(value: Value, path: &str) -> Result<RawIntervention, JsonError> {
+    let fail = |sub: &str, message: &str| JsonError { path: sub.into(), message: message.into() }.under(path);
+    let Value::Object(object) = value else {
+        return Err(fail(
+            "",
+            "an intervention is an object such as {\"at\": 6.0, \"do\": \"stop\", \"car\": \"Car_1\", \"seconds\": 4}",
+        ));
+    };
+    let (mut trigger, mut common, mut effect) = (Map::new(), Map::new(), Map::new());
+    for (key, v) in object {
+        if TRIGGER_KEYS.contains(&key.as_str()) {
+            trigger.insert(key, v);
+        } else if COMMON_KEYS.contains(&key.as_str()) {
+            common.insert(key, v);
+        } else {
+            effect.insert(key, v);
+        }
+    }
+    if trigger.len() != 1 {
+        return Err(fail(
+            "",
+            "give exactly one trigger: \"at\" (seconds), \"at_frame\" (frame index) or \"when\" (an event)",
+        ));
+    }
+    let trigger: RawTrigger = json::from_value(Value::Object(trigger)).map_err(|e| e.under(path))?;
+    let RawCommon { label, .. } = json::from_value(Value::Object(common)).map_err(|e| e.under(path))?;
+    const DO: &str = "stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan, set_confounder or none";
+    let tag = match effect.remove("do") {
+        Some(Value::String(tag)) => tag,
+        Some(other) => return Err(fail("do", &format!("{other} is not an intervention: {DO}"))),
+        None => return Err(fail("do", &format!("missing: what the intervention does, one of {DO}"))),
+    };
+    // `{"do": TAG, fields...}` read as serde's externally tagged `{TAG: {fields}}`.
+    let tagged = Value::Object(Map::from_iter([(tag.clone(), Value::Object(effect))]));
+    let effect: RawEffect = json::from_value_untagged_path(tagged).map_err(|e| {
+        if e.path.is_empty() && e.message.starts_with("unknown variant") {
+            JsonError { path: "do".into(), message: format!("{tag:?} is not an intervention: {DO}") }.under(path)
+        } else {
+            e.under(path)
+        }
+    })?;
+    Ok(RawIntervention { trigger, effect, label })
+}
+
+/// Reads a list of interventions (at JSON path `path`).
+fn raw_interventions(list: Vec<Value>, path: &str) -> Result<Vec<RawIntervention>, JsonError> {
+    list.into_iter().enumerate().map(|(i, item)| raw_intervention(item, &format!("{path}[{i}]"))).collect()
+}
+
+// ---------------------------------------------------------------------------
+// Loading: parse everything, then resolve.
 
 /// Reads and checks every scenario of `path`.
 pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
@@ -91,7 +240,7 @@ pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec
         message,
     };
     let text = std::fs::read_to_string(path).map_err(|e| fail("", format!("cannot read the file: {e}")))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| fail("", format!("not valid JSON: {e}")))?;
+    let json = json::parse(&text).map_err(|e| parse_error(path, &text, e))?;
     let entries = match json {
         Value::Array(list) => list,
         Value::Object(_) => vec![json],
@@ -101,7 +250,7 @@ pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec
         return Err(fail("", "the list of scenarios is empty".into()));
     }
     let mut loaded: Vec<LoadedScenario> = Vec::new();
-    for (index, entry) in entries.iter().enumerate() {
+    for (index, entry) in entries.into_iter().enumerate() {
         let scenario = load_one(path, index, entry, options, map)?;
         if loaded.iter().any(|l| l.name == scenario.name) {
             return Err(ScenarioFileError {
@@ -117,6 +266,33 @@ pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec
         loaded.push(scenario);
     }
     Ok(loaded)
+}
+
+/// A file that is not strict JSON (say, a duplicate key): the error names
+/// the scenario and car as well as it can, from a lenient reading.
+fn parse_error(file: &Path, text: &str, e: JsonError) -> ScenarioFileError {
+    let lenient: Option<Value> = serde_json::from_str(text).ok();
+    let (index, entry, rest) = match (&lenient, e.path.strip_prefix('[')) {
+        (Some(Value::Array(list)), Some(rest)) => {
+            let (k, rest) = rest.split_once(']').unwrap_or(("", rest));
+            let k = k.parse::<usize>().ok();
+            (k, k.and_then(|k| list.get(k)), rest.strip_prefix('.').unwrap_or(rest).to_string())
+        }
+        (Some(one @ Value::Object(_)), None) => (Some(0), Some(one), e.path.clone()),
+        _ => (None, None, e.path.clone()),
+    };
+    match (index, entry) {
+        (Some(index), Some(entry)) => {
+            let label = match entry.get("Name").and_then(Value::as_str) {
+                Some(n) if valid_folder_name(n) => n.to_string(),
+                _ => format!("#{}", index + 1),
+            };
+            Here { file, scenario: label }.parse_err(entry, JsonError { path: rest, message: e.message })
+        }
+        _ => {
+            ScenarioFileError { file: file.to_path_buf(), scenario: None, car: None, field: e.path, message: e.message }
+        }
+    }
 }
 
 /// Builds errors for one scenario.
@@ -135,114 +311,109 @@ impl Here<'_> {
             message: message.into(),
         }
     }
-}
 
-fn unknown_keys(object: &Map<String, Value>, allowed: &[&str]) -> Option<String> {
-    object.keys().find(|k| !allowed.contains(&k.as_str())).cloned()
+    /// A parse error inside the scenario `entry`: one under `Vehicles[k]`
+    /// names the car by its Id when it has one, and the field inside it.
+    fn parse_err(&self, entry: &Value, e: JsonError) -> ScenarioFileError {
+        if let Some(rest) = e.path.strip_prefix("Vehicles[") {
+            if let Some((k, field)) = rest.split_once(']') {
+                let id = k.parse::<usize>().ok().and_then(|k| entry["Vehicles"][k]["Id"].as_str());
+                if let Some(id) = id.filter(|id| !id.is_empty()) {
+                    let field = field.strip_prefix('.').unwrap_or(field);
+                    let field = if field.is_empty() { format!("Vehicles[{k}]") } else { field.to_string() };
+                    return self.err(Some(id), field, e.message);
+                }
+            }
+        }
+        self.err(None, e.path, e.message)
+    }
 }
 
 fn load_one(
     file: &Path,
     index: usize,
-    entry: &Value,
+    entry: Value,
     options: FileOptions,
     map: &Arc<CityMap>,
 ) -> Result<LoadedScenario, ScenarioFileError> {
-    let mut here = Here { file, scenario: format!("#{}", index + 1) };
-    let Some(object) = entry.as_object() else {
-        return Err(here.err(None, "", "a scenario must be an object with Name and Vehicles"));
+    // Errors name the scenario by its Name as soon as it has a usable one.
+    let label = match entry.get("Name").and_then(Value::as_str) {
+        Some(n) if valid_folder_name(n) => n.to_string(),
+        _ => format!("#{}", index + 1),
     };
-    let name = match object.get("Name") {
-        Some(Value::String(n)) if valid_folder_name(n) => n.clone(),
-        Some(Value::String(n)) => {
+    let here = Here { file, scenario: label };
+    if !entry.is_object() {
+        return Err(here.err(None, "", "a scenario must be an object with Name and Vehicles"));
+    }
+    let raw: RawScenario = json::from_value(entry.clone()).map_err(|e| here.parse_err(&entry, e))?;
+    let interventions = match raw.interventions.clone() {
+        None => None,
+        Some(list) => Some(raw_interventions(list, "interventions").map_err(|e| here.parse_err(&entry, e))?),
+    };
+    resolve(&here, index, raw, interventions, options, map)
+}
+
+/// The resolving pass over one parsed scenario.
+fn resolve(
+    here: &Here<'_>,
+    index: usize,
+    raw: RawScenario,
+    interventions: Option<Vec<RawIntervention>>,
+    options: FileOptions,
+    map: &Arc<CityMap>,
+) -> Result<LoadedScenario, ScenarioFileError> {
+    let name = raw.name.clone();
+    if !valid_folder_name(&name) {
+        return Err(here.err(
+            None,
+            "Name",
+            format!(
+                "{name:?} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (it names the output folder)"
+            ),
+        ));
+    }
+    let world = options.world.or(raw.world).unwrap_or(WorldKind::City);
+    let seed = raw.seed.unwrap_or(DEFAULT_SEED);
+    let frames = raw.frames.unwrap_or_else(DatasetSpec::default_frames);
+    if !(1..=100_000).contains(&frames) {
+        return Err(here.err(None, "frames", format!("{frames} is not allowed: 1 to 100000")));
+    }
+    if let Some(t) = raw.frame_interval {
+        if !(t > 0.0 && t <= 10.0) {
             return Err(here.err(
                 None,
-                "Name",
-                format!(
-                    "{n:?} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (it names the output folder)"
-                ),
-            ))
+                "frame_interval",
+                format!("{t} is not allowed: seconds, above 0 and at most 10"),
+            ));
         }
-        _ => return Err(here.err(None, "Name", "missing: every scenario needs a Name string")),
-    };
-    here.scenario = name.clone();
-    if let Some(key) = unknown_keys(object, &SCENARIO_KEYS) {
-        return Err(here.err(None, key, format!("unknown field: a scenario has {}", SCENARIO_KEYS.join(", "))));
     }
-    let world = match (options.world, object.get("world")) {
-        (Some(w), _) => w,
-        (None, None) => WorldKind::City,
-        (None, Some(v)) => serde_json::from_value(v.clone())
-            .map_err(|_| here.err(None, "world", format!("{v} is not allowed: \"city\" or \"toy\"")))?,
-    };
-    let seed = match object.get("seed") {
-        None => 1,
-        Some(v) => v
-            .as_u64()
-            .ok_or_else(|| here.err(None, "seed", format!("{v} is not allowed: a whole number from 0 to 2^64-1")))?,
-    };
-    let frames = match object.get("frames") {
-        None => 150,
-        Some(v) => {
-            v.as_u64()
-                .filter(|&f| (1..=100_000).contains(&f))
-                .ok_or_else(|| here.err(None, "frames", format!("{v} is not allowed: 1 to 100000")))? as u32
-        }
-    };
-    let frame_interval = match object.get("frame_interval") {
-        None => None,
-        Some(v) => Some(v.as_f64().filter(|&t| t > 0.0 && t <= 10.0).ok_or_else(|| {
-            here.err(None, "frame_interval", format!("{v} is not allowed: seconds, above 0 and at most 10"))
-        })?),
-    };
-    let city: Option<CitySpec> = match (object.get("city"), world) {
+    let city = match (raw.city, world) {
         (None, _) => None,
         (Some(_), WorldKind::Toy) => {
             return Err(here.err(None, "city", "applies to the city world only: remove it or run with --world city"))
         }
-        (Some(v), WorldKind::City) => {
-            let city: CitySpec = serde_path_to_error::deserialize(v.clone()).map_err(|e| {
-                let path = e.path().to_string();
-                let field = if path == "." { "city".to_string() } else { format!("city.{path}") };
-                here.err(None, field, e.into_inner().to_string())
-            })?;
+        (Some(city), WorldKind::City) => {
             city.validate().map_err(|e| here.err(None, e.field, e.message))?;
             Some(city)
         }
     };
-    let spec = DatasetSpec {
-        name: name.clone(),
-        world,
-        seed,
-        frames,
-        frame_interval,
-        image: ImageSize::default(),
-        groups: Vec::new(),
-        splits: Splits { train: 1, val: 0, test: 0 },
-        actions_per_car: 0,
-        toy_speed_px_per_frame: 2.0,
-        leader_gap_px: 30.0,
-        car_length_m: 2.2,
-        car_width_m: 1.1,
-        city,
-        cameras: Vec::new(),
-    };
+    let spec = DatasetSpec::for_given_cars(name.clone(), world, seed, frames, raw.frame_interval, city);
     let expansion = Expansion::new(spec, map.clone()).map_err(|e| here.err(None, e.field, e.message))?;
 
-    let vehicles = match object.get("Vehicles") {
-        Some(Value::Array(list)) if !list.is_empty() => list,
-        Some(Value::Array(_)) => {
-            return Err(here.err(None, "Vehicles", "the list is empty: a scenario needs at least one car"))
-        }
-        _ => return Err(here.err(None, "Vehicles", "missing: a list of cars")),
-    };
-    if vehicles.len() > 255 {
-        return Err(here.err(None, "Vehicles", format!("{} cars: at most 255 (mask ids are 8-bit)", vehicles.len())));
+    if raw.vehicles.is_empty() {
+        return Err(here.err(None, "Vehicles", "the list is empty: a scenario needs at least one car"));
+    }
+    if raw.vehicles.len() > 255 {
+        return Err(here.err(
+            None,
+            "Vehicles",
+            format!("{} cars: at most 255 (mask ids are 8-bit)", raw.vehicles.len()),
+        ));
     }
     let travel = expansion.max_travel();
     let mut cars: Vec<GivenCar> = Vec::new();
-    for (k, vehicle) in vehicles.iter().enumerate() {
-        cars.push(load_vehicle(&here, k, vehicle, map, world, travel, &cars)?);
+    for (k, vehicle) in raw.vehicles.iter().enumerate() {
+        cars.push(resolve_vehicle(here, k, vehicle, map, world, travel, &cars)?);
     }
     // Nobody may start on top of anybody else.
     let boxes: Vec<OrientedBox> = cars
@@ -277,7 +448,7 @@ fn load_one(
     };
     let stream = stream_key(seed, &format!("scenario-file/{name}"), Split::Train, 0);
     let mut plan = expansion.plan_given(&key, stream, &cars, &pairs);
-    plan.interventions = match object.get("interventions") {
+    plan.interventions = match interventions {
         None => Vec::new(),
         Some(_) if world == WorldKind::Toy => {
             return Err(here.err(
@@ -286,23 +457,21 @@ fn load_one(
                 "need the city world (the toy world has no agency): run with --world city",
             ))
         }
-        Some(v) => parse_interventions(&here, v, "interventions", &names, map, &expansion)?,
+        Some(list) => resolve_interventions(here, &list, "interventions", &names, map, &expansion)?,
     };
-    plan.cameras = match object.get("cameras") {
+    plan.cameras = match &raw.cameras {
         None => Vec::new(),
-        Some(v) => parse_cameras(&here, v, &names)?,
+        Some(specs) => resolve_cameras(here, specs, &names)?,
     };
     Ok(LoadedScenario { name, expansion, plan })
 }
 
 /// Extra cameras: as in a spec, with the chased car named by its Id.
-fn parse_cameras(here: &Here<'_>, value: &Value, names: &[String]) -> Result<Vec<CameraPlan>, ScenarioFileError> {
-    let specs: Vec<CameraSpec> = serde_path_to_error::deserialize(value.clone()).map_err(|e| {
-        let path = e.path().to_string();
-        let field =
-            if path == "." { "cameras".to_string() } else { format!("cameras{}", path.trim_start_matches('.')) };
-        here.err(None, field, e.into_inner().to_string())
-    })?;
+fn resolve_cameras(
+    here: &Here<'_>,
+    specs: &[CameraSpec],
+    names: &[String],
+) -> Result<Vec<CameraPlan>, ScenarioFileError> {
     let mut plans: Vec<CameraPlan> = Vec::new();
     for (i, camera) in specs.iter().enumerate() {
         let field = format!("cameras[{i}]");
@@ -320,37 +489,39 @@ fn parse_cameras(here: &Here<'_>, value: &Value, names: &[String]) -> Result<Vec
     Ok(plans)
 }
 
-fn load_vehicle(
+/// Actions by name; `field(i)` is the JSON path of entry `i`.
+fn resolve_actions(names: &[String], field: impl Fn(usize) -> String) -> Result<Vec<Action>, (String, String)> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            Action::from_name(a).ok_or_else(|| (field(i), format!("{a:?} is not an action: use {}", action_names())))
+        })
+        .collect()
+}
+
+fn resolve_vehicle(
     here: &Here<'_>,
     k: usize,
-    vehicle: &Value,
+    vehicle: &RawVehicle,
     map: &CityMap,
     world: WorldKind,
     travel: f64,
     earlier: &[GivenCar],
 ) -> Result<GivenCar, ScenarioFileError> {
-    let position = format!("Vehicles[{k}]");
-    let Some(object) = vehicle.as_object() else {
-        return Err(here.err(None, position, "a vehicle must be an object with Id, Spawn and DriveQueue"));
-    };
-    let id = match object.get("Id") {
-        Some(Value::String(id)) if !id.is_empty() => id.clone(),
-        _ => {
-            return Err(here.err(
-                None,
-                format!("{position}.Id"),
-                "missing: every vehicle needs an Id string such as \"Car_1\"",
-            ))
-        }
-    };
+    let id = vehicle.id.clone();
+    if id.is_empty() {
+        return Err(here.err(
+            None,
+            format!("Vehicles[{k}].Id"),
+            "is empty: every vehicle needs an Id such as \"Car_1\"",
+        ));
+    }
     let car = Some(id.as_str());
     if earlier.iter().any(|c| c.name == id) {
         return Err(here.err(car, "Id", "duplicate car id: every vehicle of a scenario needs its own"));
     }
-    if let Some(key) = unknown_keys(object, &VEHICLE_KEYS) {
-        return Err(here.err(car, key, format!("unknown field: a vehicle has {}", VEHICLE_KEYS.join(", "))));
-    }
-    let spawn_name = object.get("Spawn").and_then(Value::as_str).unwrap_or_default();
+    let spawn_name = vehicle.spawn.as_str();
     let spawn = map.lane_by_name(spawn_name).ok_or_else(|| {
         here.err(
             car,
@@ -359,33 +530,21 @@ fn load_vehicle(
         )
     })?;
     let lane_length = map.lanes[spawn].curve.length();
-    let spawn_distance = match object.get("SpawnAtDistance") {
-        None => 0.0,
-        Some(v) => v.as_f64().filter(|d| (0.0..lane_length).contains(d)).ok_or_else(|| {
-            here.err(
-                car,
-                "SpawnAtDistance",
-                format!("{v} is not allowed: metres along lane {spawn_name}, from 0 to below {lane_length:.2}"),
-            )
-        })?,
-    };
-    let queue = match object.get("DriveQueue") {
-        None => Vec::new(),
-        Some(Value::Array(list)) => list.clone(),
-        Some(v) => return Err(here.err(car, "DriveQueue", format!("{v} is not a list of actions"))),
-    };
-    let actions: Vec<Action> = queue
-        .iter()
-        .enumerate()
-        .map(|(i, a)| {
-            a.as_str().and_then(Action::from_name).ok_or_else(|| {
-                here.err(car, format!("DriveQueue[{i}]"), format!("{a} is not an action: use {}", action_names()))
-            })
-        })
-        .collect::<Result<_, _>>()?;
-    let merge_distances: Vec<f64> = match object.get("MergeAtDistances") {
+    let spawn_distance = vehicle.spawn_at_distance;
+    if !(0.0..lane_length).contains(&spawn_distance) {
+        return Err(here.err(
+            car,
+            "SpawnAtDistance",
+            format!(
+                "{spawn_distance} is not allowed: metres along lane {spawn_name}, from 0 to below {lane_length:.2}"
+            ),
+        ));
+    }
+    let actions = resolve_actions(&vehicle.drive_queue, |i| format!("DriveQueue[{i}]"))
+        .map_err(|(field, message)| here.err(car, field, message))?;
+    let merge_distances: Vec<f64> = match &vehicle.merge_at_distances {
         None => vec![0.0; actions.len()],
-        Some(Value::Array(list)) => {
+        Some(list) => {
             if list.len() != actions.len() {
                 return Err(here.err(
                     car,
@@ -397,20 +556,15 @@ fn load_vehicle(
                     ),
                 ));
             }
-            list.iter()
-                .enumerate()
-                .map(|(i, d)| {
-                    d.as_f64().filter(|d| d.is_finite() && *d >= 0.0).ok_or_else(|| {
-                        here.err(
-                            car,
-                            format!("MergeAtDistances[{i}]"),
-                            format!("{d} is not allowed: metres along the lane, 0 or more"),
-                        )
-                    })
-                })
-                .collect::<Result<_, _>>()?
+            if let Some((i, d)) = list.iter().enumerate().find(|(_, d)| !(d.is_finite() && **d >= 0.0)) {
+                return Err(here.err(
+                    car,
+                    format!("MergeAtDistances[{i}]"),
+                    format!("{d} is not allowed: metres along the lane, 0 or more"),
+                ));
+            }
+            list.clone()
         }
-        Some(v) => return Err(here.err(car, "MergeAtDistances", format!("{v} is not a list of numbers"))),
     };
     let route =
         Route::plan(map, spawn, spawn_distance, &actions, &merge_distances, spawn_distance + travel).map_err(|e| {
@@ -422,31 +576,28 @@ fn load_vehicle(
             here.err(car, field, format!("{}: {}", e.action, e.reason))
         })?;
 
-    let city_only = |field: &str| -> Result<(), ScenarioFileError> {
-        if world == WorldKind::Toy && object.contains_key(field) {
-            return Err(here.err(car, field, "applies to the city world only (toy cars have no agency)"));
+    if world == WorldKind::Toy {
+        let given = [
+            ("desired_speeds", vehicle.desired_speeds.is_some()),
+            ("time_headway", vehicle.time_headway.is_some()),
+            ("runs_red_lights", vehicle.runs_red_lights.is_some()),
+        ];
+        if let Some((field, _)) = given.iter().find(|(_, given)| *given) {
+            return Err(here.err(car, *field, "applies to the city world only (toy cars have no agency)"));
         }
-        Ok(())
-    };
-    for field in ["desired_speeds", "time_headway", "runs_red_lights"] {
-        city_only(field)?;
     }
-    let desired_speeds = match object.get("desired_speeds") {
+    let desired_speeds = match &vehicle.desired_speeds {
         None => None,
-        Some(Value::Array(list)) if list.len() == actions.len() + 1 => Some(
-            list.iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    v.as_f64().filter(|v| *v > 0.0 && *v <= 20.0).ok_or_else(|| {
-                        here.err(
-                            car,
-                            format!("desired_speeds[{i}]"),
-                            format!("{v} is not allowed: m/s, above 0 and at most 20"),
-                        )
-                    })
-                })
-                .collect::<Result<Vec<f64>, _>>()?,
-        ),
+        Some(list) if list.len() == actions.len() + 1 => {
+            if let Some((i, v)) = list.iter().enumerate().find(|(_, v)| !(**v > 0.0 && **v <= 20.0)) {
+                return Err(here.err(
+                    car,
+                    format!("desired_speeds[{i}]"),
+                    format!("{v} is not allowed: m/s, above 0 and at most 20"),
+                ));
+            }
+            Some(list.clone())
+        }
         Some(_) => {
             return Err(here.err(
                 car,
@@ -455,25 +606,17 @@ fn load_vehicle(
             ))
         }
     };
-    let time_headway = match object.get("time_headway") {
+    if let Some(h) = vehicle.time_headway {
+        if !(h > 0.0 && h <= 10.0) {
+            return Err(here.err(car, "time_headway", format!("{h} is not allowed: seconds, above 0 and at most 10")));
+        }
+    }
+    let colour = match &vehicle.colour {
         None => None,
-        Some(v) => Some(v.as_f64().filter(|h| *h > 0.0 && *h <= 10.0).ok_or_else(|| {
-            here.err(car, "time_headway", format!("{v} is not allowed: seconds, above 0 and at most 10"))
+        Some(text) => Some(crate::render::palette::parse_hex_colour(text).ok_or_else(|| {
+            here.err(car, "colour", format!("{text:?} is not allowed: \"#rrggbb\", e.g. \"#ff8800\""))
         })?),
     };
-    let runs_red_lights = match object.get("runs_red_lights") {
-        None => None,
-        Some(v) => {
-            Some(v.as_bool().ok_or_else(|| here.err(car, "runs_red_lights", format!("{v} is not true or false")))?)
-        }
-    };
-    let colour =
-        match object.get("colour") {
-            None => None,
-            Some(v) => Some(v.as_str().and_then(crate::render::palette::parse_hex_colour).ok_or_else(|| {
-                here.err(car, "colour", format!("{v} is not allowed: \"#rrggbb\", e.g. \"#ff8800\""))
-            })?),
-        };
     Ok(GivenCar {
         name: id,
         spawn,
@@ -482,8 +625,8 @@ fn load_vehicle(
         merge_distances,
         route: Arc::new(route),
         desired_speeds,
-        time_headway,
-        runs_red_lights,
+        time_headway: vehicle.time_headway,
+        runs_red_lights: vehicle.runs_red_lights,
         colour,
     })
 }
@@ -497,6 +640,30 @@ fn action_names() -> String {
 pub fn light_name(map: &CityMap, index: usize) -> String {
     let (intersection, approach, signal) = light_at(index);
     format!("{}/{approach}/{}", map.intersections[intersection].name, signal.name())
+}
+
+/// The index of the light called `text` (`AC/W/straight`), or a message.
+fn light_by_name(map: &CityMap, text: &str) -> Result<usize, String> {
+    let parts: Vec<&str> = text.split('/').collect();
+    let found = match parts.as_slice() {
+        [intersection, approach, signal] => {
+            let k = map.intersections.iter().position(|x| x.name == *intersection);
+            let a = approach.chars().next().filter(|c| approach.len() == 1 && APPROACHES.contains(c));
+            let s = match *signal {
+                "straight" => Some(Signal::Straight),
+                "left" => Some(Signal::Left),
+                _ => None,
+            };
+            match (k, a, s) {
+                (Some(k), Some(a), Some(s)) => Some(light_index(k, a, s)),
+                _ => None,
+            }
+        }
+        _ => None,
+    };
+    found.ok_or_else(|| {
+        format!("{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"AC/W/straight\" (AC AD BC BD; N E S W; straight left)")
+    })
 }
 
 /// The index of the car called `name`, or a message listing the cars.
@@ -533,274 +700,168 @@ fn infer_pairs(cars: &[GivenCar]) -> Vec<(usize, usize)> {
     pairs
 }
 
-/// Parses interventions (a list) at JSON path `field`.
-fn parse_interventions(
+/// Resolves parsed interventions (a list at JSON path `field`).
+fn resolve_interventions(
     here: &Here<'_>,
-    value: &Value,
+    list: &[RawIntervention],
     field: &str,
     names: &[String],
     map: &CityMap,
     expansion: &Expansion,
 ) -> Result<Vec<Intervention>, ScenarioFileError> {
-    let Some(list) = value.as_array() else {
-        return Err(here.err(None, field, "expected a list of interventions"));
-    };
     let mut out = Vec::new();
-    for (i, item) in list.iter().enumerate() {
-        if let Some(intervention) = parse_intervention(here, item, &format!("{field}[{i}]"), names, map, expansion)? {
-            out.push(intervention);
-        }
+    for (i, raw) in list.iter().enumerate() {
+        let at = format!("{field}[{i}]");
+        let resolved = resolve_intervention(raw, names, map, expansion).map_err(|(sub, message)| {
+            here.err(None, if sub.is_empty() { at.clone() } else { format!("{at}.{sub}") }, message)
+        })?;
+        out.extend(resolved);
     }
     Ok(out)
 }
 
-const INTERVENTION_KEYS: [&str; 17] = [
-    "confounder",
-    "value",
-    "at",
-    "at_frame",
-    "when",
-    "do",
-    "car",
-    "seconds",
-    "speed",
-    "light",
-    "colour",
-    "actions",
-    "merge_distances",
-    "schedule",
-    "offset",
-    "comment",
-    "label",
-];
-
-/// One intervention; `None` for `"do": "none"` (does nothing, leaves no trace).
-fn parse_intervention(
-    here: &Here<'_>,
-    item: &Value,
-    field: &str,
+/// One intervention; `None` for `"do": "none"` (does nothing, leaves no
+/// trace). Errors are (field inside the intervention, message).
+fn resolve_intervention(
+    raw: &RawIntervention,
     names: &[String],
     map: &CityMap,
     expansion: &Expansion,
-) -> Result<Option<Intervention>, ScenarioFileError> {
-    let err = |sub: &str, message: String| here.err(None, format!("{field}{sub}"), message);
-    let Some(object) = item.as_object() else {
-        return Err(err(
-            "",
-            "an intervention is an object such as {\"at\": 6.0, \"do\": \"stop\", \"car\": \"Car_1\", \"seconds\": 4}"
+) -> Result<Option<Intervention>, (String, String)> {
+    let car_named = |field: &str, name: &str| car_index(names, name).map_err(|e| (field.to_string(), e));
+    let light_named = |field: &str, name: &str| light_by_name(map, name).map_err(|e| (field.to_string(), e));
+    let positive = |field: &str, v: f64, what: &str| {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err((field.to_string(), format!("{v} is not allowed: {what}, above 0")))
+        }
+    };
+    let (trigger, when_text) = match &raw.trigger {
+        RawTrigger::At(t) => {
+            if !(t.is_finite() && *t >= 0.0) {
+                return Err(("at".into(), format!("{t} is not allowed: seconds from the start, 0 or more")));
+            }
+            (Trigger::At(*t), format!("at {t} s"))
+        }
+        RawTrigger::AtFrame(f) => (Trigger::At(*f as f64 * expansion.spec.frame_interval()), format!("at frame {f}")),
+        RawTrigger::When(RawWhen { car: Some(car), reaches: Some(name), light: None, turns: None }) => {
+            let car = car_named("when.car", car)?;
+            let intersection = map.intersections.iter().position(|x| x.name == *name).ok_or_else(|| {
+                ("when.reaches".to_string(), format!("{name:?} is not an intersection: AC, AD, BC or BD"))
+            })?;
+            (Trigger::CarReaches { car, intersection }, format!("when {} reaches {name}", names[car]))
+        }
+        RawTrigger::When(RawWhen { car: None, reaches: None, light: Some(text), turns: Some(colour) }) => {
+            let light = light_named("when.light", text)?;
+            (Trigger::LightTurns { light, colour: *colour }, format!("when {text} turns {}", colour.name()))
+        }
+        RawTrigger::When(_) => return Err((
+            "when".into(),
+            "expected {\"car\": CAR, \"reaches\": INTERSECTION} or {\"light\": \"AC/W/straight\", \"turns\": COLOUR}"
                 .into(),
-        ));
+        )),
     };
-    if let Some(key) = unknown_keys(object, &INTERVENTION_KEYS) {
-        return Err(err(
-            &format!(".{key}"),
-            format!("unknown field: an intervention has {}", INTERVENTION_KEYS.join(", ")),
-        ));
-    }
-    let car_named = |sub: &str, v: Option<&Value>| -> Result<usize, ScenarioFileError> {
-        car_index(names, v.and_then(Value::as_str).unwrap_or_default()).map_err(|e| err(sub, e))
-    };
-    let light_named = |sub: &str, v: Option<&Value>| -> Result<usize, ScenarioFileError> {
-        let text = v.and_then(Value::as_str).unwrap_or_default();
-        let parts: Vec<&str> = text.split('/').collect();
-        let found = match parts.as_slice() {
-            [intersection, approach, signal] => {
-                let k = map.intersections.iter().position(|x| x.name == *intersection);
-                let a = approach.chars().next().filter(|c| approach.len() == 1 && APPROACHES.contains(c));
-                let s = match *signal {
-                    "straight" => Some(Signal::Straight),
-                    "left" => Some(Signal::Left),
-                    _ => None,
-                };
-                match (k, a, s) {
-                    (Some(k), Some(a), Some(s)) => Some((k, a, s)),
-                    _ => None,
-                }
-            }
-            _ => None,
-        };
-        let (k, a, s) = found.ok_or_else(|| {
-            err(sub, format!("{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"AC/W/straight\" (AC AD BC BD; N E S W; straight left)"))
-        })?;
-        Ok(light_index(k, a, s))
-    };
-    let colour_named = |sub: &str, v: Option<&Value>| -> Result<Colour, ScenarioFileError> {
-        match v.and_then(Value::as_str) {
-            Some("red") => Ok(Colour::Red),
-            Some("yellow") => Ok(Colour::Yellow),
-            Some("green") => Ok(Colour::Green),
-            _ => Err(err(sub, format!("{} is not a colour: red, yellow or green", v.cloned().unwrap_or(Value::Null)))),
+    let effect = match &raw.effect {
+        RawEffect::None {} => return Ok(None),
+        RawEffect::Stop { car, seconds } => Effect::Stop {
+            car: car_named("car", car)?,
+            seconds: positive("seconds", *seconds, "seconds to stay stopped")?,
+        },
+        RawEffect::RunRedLight { car } => Effect::RunRedLights { car: car_named("car", car)? },
+        RawEffect::SetDesiredSpeed { car, speed } => {
+            Effect::SetDesiredSpeed { car: car_named("car", car)?, speed: positive("speed", *speed, "m/s")? }
         }
-    };
-    let positive = |sub: &str, v: Option<&Value>, what: &str| -> Result<f64, ScenarioFileError> {
-        v.and_then(Value::as_f64)
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .ok_or_else(|| err(sub, format!("{} is not allowed: {what}, above 0", v.cloned().unwrap_or(Value::Null))))
-    };
-    let interval = expansion.spec.frame_interval();
-    let (trigger, when_text) = match (object.get("at"), object.get("at_frame"), object.get("when")) {
-        (Some(at), None, None) => {
-            let t = at
-                .as_f64()
-                .filter(|t| t.is_finite() && *t >= 0.0)
-                .ok_or_else(|| err(".at", format!("{at} is not allowed: seconds from the start, 0 or more")))?;
-            (Trigger::At(t), format!("at {t} s"))
-        }
-        (None, Some(frame), None) => {
-            let f = frame.as_u64().ok_or_else(|| err(".at_frame", format!("{frame} is not a frame index")))?;
-            (Trigger::At(f as f64 * interval), format!("at frame {f}"))
-        }
-        (None, None, Some(Value::Object(when))) => {
-            if when.contains_key("reaches") {
-                let car = car_named(".when.car", when.get("car"))?;
-                let name = when.get("reaches").and_then(Value::as_str).unwrap_or_default();
-                let intersection = map.intersections.iter().position(|x| x.name == name).ok_or_else(|| {
-                    err(".when.reaches", format!("{name:?} is not an intersection: AC, AD, BC or BD"))
-                })?;
-                (Trigger::CarReaches { car, intersection }, format!("when {} reaches {name}", names[car]))
-            } else if when.contains_key("turns") {
-                let light = light_named(".when.light", when.get("light"))?;
-                let colour = colour_named(".when.turns", when.get("turns"))?;
-                let text = when.get("light").and_then(Value::as_str).unwrap_or_default();
-                (Trigger::LightTurns { light, colour }, format!("when {text} turns {}", colour.name()))
-            } else {
-                return Err(err(
-                    ".when",
-                    "expected {\"car\": CAR, \"reaches\": INTERSECTION} or {\"light\": \"AC/W/straight\", \"turns\": COLOUR}".into(),
-                ));
-            }
-        }
-        _ => {
-            return Err(err(
-                "",
-                "give exactly one trigger: \"at\" (seconds), \"at_frame\" (frame index) or \"when\" (an event)".into(),
-            ))
-        }
-    };
-    let action = object.get("do").and_then(Value::as_str).unwrap_or_default();
-    let effect = match action {
-        "none" => return Ok(None),
-        "stop" => {
-            let car = car_named(".car", object.get("car"))?;
-            let seconds = positive(".seconds", object.get("seconds"), "seconds to stay stopped")?;
-            Effect::Stop { car, seconds }
-        }
-        "run_red_light" => {
-            Effect::RunRedLights { car: car_named(".car", object.get("car"))? }
-        }
-        "set_desired_speed" => {
-            let car = car_named(".car", object.get("car"))?;
-            let speed = positive(".speed", object.get("speed"), "m/s")?;
-            Effect::SetDesiredSpeed { car, speed }
-        }
-        "remove" => {
-            Effect::Remove { car: car_named(".car", object.get("car"))? }
-        }
-        "set_light" => {
-            let light = light_named(".light", object.get("light"))?;
-            let colour = colour_named(".colour", object.get("colour"))?;
-            let seconds = positive(".seconds", object.get("seconds"), "seconds the colour is held")?;
-            Effect::SetLight { light, colour, seconds }
-        }
-        "replace_actions" => {
-            let car = car_named(".car", object.get("car"))?;
-            let list = object
-                .get("actions")
-                .and_then(Value::as_array)
-                .ok_or_else(|| err(".actions", "expected the new drive queue, e.g. [\"left\", \"straight\"]".into()))?;
-            let actions: Vec<Action> = list
-                .iter()
-                .enumerate()
-                .map(|(k, a)| {
-                    a.as_str().and_then(Action::from_name).ok_or_else(|| {
-                        err(&format!(".actions[{k}]"), format!("{a} is not an action: {}", action_names()))
-                    })
-                })
-                .collect::<Result<_, _>>()?;
-            let merge_distances: Vec<f64> = match object.get("merge_distances") {
+        RawEffect::Remove { car } => Effect::Remove { car: car_named("car", car)? },
+        RawEffect::SetLight { light, colour, seconds } => Effect::SetLight {
+            light: light_named("light", light)?,
+            colour: *colour,
+            seconds: positive("seconds", *seconds, "seconds the colour is held")?,
+        },
+        RawEffect::ReplaceActions { car, actions, merge_distances } => {
+            let car = car_named("car", car)?;
+            let actions = resolve_actions(actions, |k| format!("actions[{k}]"))?;
+            let merge_distances = match merge_distances {
                 None => vec![0.0; actions.len()],
-                Some(Value::Array(d)) if d.len() == actions.len() => d
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| {
-                        v.as_f64().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| {
-                            err(&format!(".merge_distances[{k}]"), format!("{v} is not allowed: metres along the lane, 0 or more"))
-                        })
-                    })
-                    .collect::<Result<_, _>>()?,
-                Some(_) => return Err(err(".merge_distances", format!("expected {} numbers, one per action", actions.len()))),
+                Some(d) if d.len() == actions.len() => {
+                    if let Some((k, v)) = d.iter().enumerate().find(|(_, v)| !(v.is_finite() && **v >= 0.0)) {
+                        return Err((
+                            format!("merge_distances[{k}]"),
+                            format!("{v} is not allowed: metres along the lane, 0 or more"),
+                        ));
+                    }
+                    d.clone()
+                }
+                Some(_) => {
+                    return Err((
+                        "merge_distances".into(),
+                        format!("expected {} numbers, one per action", actions.len()),
+                    ))
+                }
             };
             Effect::ReplaceActions { car, actions, merge_distances }
         }
-        "set_light_plan" => {
-            let light = light_named(".light", object.get("light"))?;
-            let steps = object
-                .get("schedule")
-                .and_then(Value::as_array)
-                .filter(|l| !l.is_empty())
-                .ok_or_else(|| err(".schedule", "expected [{\"colour\": \"green\", \"duration\": 10}, ...]".into()))?;
-            let schedule: Vec<ScheduleStep> = steps
-                .iter()
-                .enumerate()
-                .map(|(k, step)| {
-                    let colour = colour_named(&format!(".schedule[{k}].colour"), step.get("colour"))?;
-                    let duration = positive(&format!(".schedule[{k}].duration"), step.get("duration"), "seconds")?;
-                    Ok(ScheduleStep { colour, duration })
-                })
-                .collect::<Result<_, ScenarioFileError>>()?;
-            let offset = match object.get("offset") {
-                None => 0.0,
-                Some(v) => {
-                    v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| err(".offset", format!("{v} is not a number of seconds")))?
-                }
-            };
-            Effect::SetLightPlan { light, offset, schedule }
+        RawEffect::SetLightPlan { light, schedule, offset } => {
+            let light = light_named("light", light)?;
+            if schedule.is_empty() {
+                return Err(("schedule".into(), "expected [{\"colour\": \"green\", \"duration\": 10}, ...]".into()));
+            }
+            for (k, step) in schedule.iter().enumerate() {
+                positive(&format!("schedule[{k}].duration"), step.duration, "seconds")?;
+            }
+            let offset = offset.unwrap_or(0.0);
+            if !offset.is_finite() {
+                return Err(("offset".into(), format!("{offset} is not a number of seconds")));
+            }
+            Effect::SetLightPlan { light, offset, schedule: schedule.clone() }
         }
-        "set_confounder" => {
-            let name = object.get("confounder").and_then(Value::as_str).unwrap_or_default();
-            let (confounder, _) = ConfounderName::ALL.into_iter().find(|(_, n)| *n == name).ok_or_else(|| {
-                err(".confounder", format!("{name:?} is not a confounder: rain, fog, snow, wetness or hour"))
+        RawEffect::SetConfounder { confounder: name, value } => {
+            let (confounder, _) = ConfounderName::ALL.into_iter().find(|(_, n)| n == name).ok_or_else(|| {
+                ("confounder".to_string(), format!("{name:?} is not a confounder: rain, fog, snow, wetness or hour"))
             })?;
             let limit = if confounder == ConfounderName::Hour { 24.0 } else { 1.0 };
-            let value = object.get("value").and_then(Value::as_f64).filter(|v| (0.0..=limit).contains(v)).ok_or_else(|| {
-                err(".value", format!("{} is not allowed: 0 to {limit}", object.get("value").cloned().unwrap_or(Value::Null)))
-            })?;
-            Effect::SetConfounder { confounder, value }
-        }
-        other => {
-            return Err(err(
-                ".do",
-                format!(
-                    "{other:?} is not an intervention: stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan, set_confounder or none"
-                ),
-            ))
+            if !(0.0..=limit).contains(value) {
+                return Err(("value".into(), format!("{value} is not allowed: 0 to {limit}")));
+            }
+            Effect::SetConfounder { confounder, value: *value }
         }
     };
-    let label = match object.get("label").and_then(Value::as_str) {
-        Some(label) => label.to_string(),
+    let label = match &raw.label {
+        Some(label) => label.clone(),
         None => format!("{} ({when_text})", effect.describe(|c| names[c].clone(), |l| light_name(map, l))),
     };
     Ok(Some(Intervention { trigger, effect, label }))
 }
 
 /// Reads an intervention file (a list of interventions, as in a scenario's
-/// `interventions`) once, and checks it against each of `scenarios`: one
-/// list of interventions per scenario.
+/// `interventions`, or one intervention object) once, and checks it against
+/// each of `scenarios`: one list of interventions per scenario.
 pub fn load_interventions(
     path: &Path,
     scenarios: &[LoadedScenario],
     map: &CityMap,
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
-    let file_error = |message: String| ScenarioFileError {
+    let file_error = |field: String, message: String| ScenarioFileError {
         file: path.to_path_buf(),
         scenario: None,
         car: None,
-        field: String::new(),
+        field,
         message,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| file_error(format!("cannot read the file: {e}")))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| file_error(format!("not valid JSON: {e}")))?;
-    let list = if json.is_array() { json } else { Value::Array(vec![json]) };
+    let text =
+        std::fs::read_to_string(path).map_err(|e| file_error(String::new(), format!("cannot read the file: {e}")))?;
+    // Paths as in a scenario's `interventions`, whether the file is a list or one object.
+    let json = json::parse(&text).map_err(|e| {
+        let field =
+            if e.path.is_empty() || e.path.starts_with('[') { e.path.clone() } else { format!("[0].{}", e.path) };
+        let field = if field.is_empty() { field } else { format!("interventions{field}") };
+        file_error(field, e.message)
+    })?;
+    let list = match json {
+        Value::Array(list) => raw_interventions(list, "interventions"),
+        one => raw_intervention(one, "interventions[0]").map(|one| vec![one]),
+    }
+    .map_err(|e| file_error(e.path, e.message))?;
     scenarios
         .iter()
         .map(|scenario| {
@@ -809,7 +870,7 @@ pub fn load_interventions(
                 return Err(here.err(None, "", "interventions need the city world (the toy world has no agency)"));
             }
             let names: Vec<String> = scenario.plan.cars.iter().map(|c| c.name.clone()).collect();
-            parse_interventions(&here, &list, "interventions", &names, map, &scenario.expansion)
+            resolve_interventions(&here, &list, "interventions", &names, map, &scenario.expansion)
         })
         .collect()
 }
