@@ -53,7 +53,9 @@ pub struct Scene {
 /// is converted into `rgb` and `mask`: a frame costs its cars, not its size.
 pub struct FrameCanvas {
     rgba: Pixmap,
-    mask_rgba: Pixmap,
+    /// One car's coverage at a time (0 or 255, no anti-aliasing), stamped
+    /// into `mask` as the car's id and cleared again.
+    coverage: tiny_skia::Mask,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
     /// The background `rgba` was last restored from (kept alive so that
@@ -167,7 +169,7 @@ impl Renderer {
         let (w, h) = (self.camera.width, self.camera.height);
         FrameCanvas {
             rgba: Pixmap::new(w, h).expect("image size was validated"),
-            mask_rgba: Pixmap::new(w, h).expect("image size was validated"),
+            coverage: tiny_skia::Mask::new(w, h).expect("image size was validated"),
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
             background: None,
@@ -201,12 +203,12 @@ impl Renderer {
         let previous = std::mem::replace(&mut canvas.dirty, drawn);
         let changed: Vec<PixelRect> = if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
-            canvas.mask_rgba.data_mut().fill(0);
+            canvas.mask.fill(0);
             canvas.background = Some(scene.background.clone());
             vec![PixelRect { x0: 0, y0: 0, x1: w, y1: h }]
         } else {
             for r in &previous {
-                restore(&mut canvas.rgba, &mut canvas.mask_rgba, &scene.background, *r);
+                restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
             }
             previous.iter().chain(&canvas.dirty).copied().collect()
         };
@@ -226,10 +228,12 @@ impl Renderer {
             if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
                 canvas.rgba.fill_rect(glass, &paint, t, None);
             }
-            let mut mask_paint = Paint { anti_alias: false, ..Paint::default() };
-            mask_paint.set_color_rgba8(car.mask_id, 0, 0, 255);
-            let path = PathBuilder::from_rect(body);
-            canvas.mask_rgba.fill_path(&path, &mask_paint, FillRule::Winding, t, None);
+            // The mask: exactly the pixels whose centres the body covers,
+            // later cars over earlier ones.
+            if let Some(r) = PixelRect::around(t, (-hl, hl), (-hw, hw), w, h) {
+                canvas.coverage.fill_path(&PathBuilder::from_rect(body), FillRule::Winding, false, t);
+                stamp(&mut canvas.mask, &mut canvas.coverage, r, car.mask_id);
+            }
         }
         look.draw_precipitation(&mut canvas.rgba, frame);
         if whole_frame {
@@ -243,31 +247,42 @@ impl Renderer {
 }
 
 /// Puts the background back in `r` and clears the mask there.
-fn restore(rgba: &mut Pixmap, mask_rgba: &mut Pixmap, background: &Pixmap, r: PixelRect) {
-    let stride = rgba.width() as usize * 4;
-    let (from, to) = (r.x0 * 4, r.x1 * 4);
-    let (rgba, mask, back) = (rgba.data_mut(), mask_rgba.data_mut(), background.data());
+fn restore(rgba: &mut Pixmap, mask: &mut [u8], background: &Pixmap, r: PixelRect) {
+    let w = rgba.width() as usize;
+    let (rgba, back) = (rgba.data_mut(), background.data());
     for y in r.y0..r.y1 {
-        let row = y * stride;
-        rgba[row + from..row + to].copy_from_slice(&back[row + from..row + to]);
-        mask[row + from..row + to].fill(0);
+        let (from, to) = ((y * w + r.x0) * 4, (y * w + r.x1) * 4);
+        rgba[from..to].copy_from_slice(&back[from..to]);
+        mask[y * w + r.x0..y * w + r.x1].fill(0);
     }
 }
 
-/// Copies `r` of the drawing buffers into the frame's RGB image and mask.
+/// Writes `id` into `mask` wherever `coverage` is set within `r`, and
+/// clears `coverage` there for the next car.
+fn stamp(mask: &mut [u8], coverage: &mut tiny_skia::Mask, r: PixelRect, id: u8) {
+    let w = coverage.width() as usize;
+    let covered = coverage.data_mut();
+    for y in r.y0..r.y1 {
+        let row = y * w;
+        for (m, c) in mask[row + r.x0..row + r.x1].iter_mut().zip(&mut covered[row + r.x0..row + r.x1]) {
+            if *c != 0 {
+                *m = id;
+                *c = 0;
+            }
+        }
+    }
+}
+
+/// Copies `r` of the drawing buffer into the frame's RGB image.
 fn convert(canvas: &mut FrameCanvas, r: PixelRect) {
     let w = canvas.rgba.width() as usize;
-    let (rgba, mask_rgba) = (canvas.rgba.data(), canvas.mask_rgba.data());
+    let rgba = canvas.rgba.data();
     for y in r.y0..r.y1 {
         let row = y * w;
         let src = &rgba[(row + r.x0) * 4..(row + r.x1) * 4];
         let dst = &mut canvas.rgb[(row + r.x0) * 3..(row + r.x1) * 3];
         for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
             d.copy_from_slice(&s[..3]);
-        }
-        let src = &mask_rgba[(row + r.x0) * 4..(row + r.x1) * 4];
-        for (d, s) in canvas.mask[row + r.x0..row + r.x1].iter_mut().zip(src.chunks_exact(4)) {
-            *d = s[0];
         }
     }
 }
