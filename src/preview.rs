@@ -8,6 +8,7 @@
 use crate::dataset::{PoseLog, ScenarioSummary};
 use crate::output::frame_digits;
 use crate::output::png::decode_gray8;
+use crate::render::text::{draw_label, Canvas};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use std::path::Path;
@@ -172,12 +173,14 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
                 let mut sheet = RgbaImage::from_pixel(sw, sh, image::Rgba([24, 24, 24, 255]));
                 for (i, tile) in tiles.iter().enumerate() {
                     let (c, r) = (i as u32 % columns, i as u32 / columns);
-                    image::imageops::overlay(
-                        &mut sheet,
-                        tile,
-                        (gap + c * (tw + gap)) as i64,
-                        (gap + r * (th + gap)) as i64,
-                    );
+                    let (x, y) = ((gap + c * (tw + gap)) as i64, (gap + r * (th + gap)) as i64);
+                    image::imageops::overlay(&mut sheet, tile, x, y);
+                    // Which frame, and when.
+                    let frame = chosen[i];
+                    let label = format!("frame {frame}  {:.1} s", frame as f64 * scenario.frame_interval);
+                    let (sw, sh) = sheet.dimensions();
+                    let mut canvas = Canvas { data: &mut sheet, width: sw, height: sh, channels: 4 };
+                    draw_label(&mut canvas, x, y, &label, 1, [245, 245, 245], [20, 20, 20]);
                 }
                 let rgb = image::DynamicImage::ImageRgba8(sheet).to_rgb8();
                 rgb.write_with_encoder(image::codecs::png::PngEncoder::new(writer))

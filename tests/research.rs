@@ -152,6 +152,20 @@ fn preview_writes_a_downscaled_gif_and_a_contact_sheet() {
     let image = image::open(&sheet).unwrap();
     // 3 x 2 tiles of 256x160 with 4 px gaps.
     assert_eq!((image.width(), image.height()), (3 * 256 + 4 * 4, 2 * 160 + 3 * 4));
+    // Every tile carries its frame number and time as a light label on a
+    // dark box in its top-left corner; different frames, different labels.
+    let rgb = image.to_rgb8();
+    let label = |tile: u32| -> Vec<[u8; 3]> {
+        let (x0, y0) = (4 + (tile % 3) * (256 + 4), 4 + (tile / 3) * (160 + 4));
+        (y0..y0 + 10).flat_map(|y| (x0..x0 + 120).map(move |x| (x, y))).map(|(x, y)| rgb.get_pixel(x, y).0).collect()
+    };
+    let labels: Vec<Vec<[u8; 3]>> = (0..6).map(label).collect();
+    for (i, l) in labels.iter().enumerate() {
+        let text = l.iter().filter(|p| **p == [245, 245, 245]).count();
+        let boxed = l.iter().filter(|p| **p == [20, 20, 20]).count();
+        assert!(text > 40 && boxed > 200, "tile {i}: {text} text and {boxed} box pixels");
+    }
+    assert!(labels.windows(2).all(|w| w[0] != w[1]), "tiles of different frames share a label");
 
     let bad = run(&["preview", scenario.to_str().unwrap(), "--out", dir.join("s.jpg").to_str().unwrap()]);
     assert_eq!(bad.status.code(), Some(1));

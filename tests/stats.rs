@@ -94,7 +94,11 @@ fn the_toy_heat_map_is_more_uniform_than_the_city_one() {
         let summary: Value = serde_json::from_slice(&output.stdout).unwrap();
         assert_eq!(summary["scenarios"], 5 * 20, "--split train keeps the train scenarios of every group");
         let image = image::open(&png).unwrap().into_rgb8();
-        assert_eq!(image.dimensions(), (1024 + 40, 640), "the view plus a colour bar");
+        assert_eq!(image.dimensions(), (1024 + 100, 640), "the view plus a colour bar and its labels");
+        // The bar's tick labels: light digits right of the bar, top to bottom.
+        let lit = (0..640).flat_map(|y| (1024 + 36..1024 + 100).map(move |x| (x, y)));
+        let digits = lit.filter(|&(x, y)| image.get_pixel(x, y).0 == [235, 235, 235]).count();
+        assert!(digits > 100, "colour bar labels: {digits} digit pixels");
         cvs.push(summary["visited_cell_cv"].as_f64().unwrap());
     }
     assert!(cvs[0] < 0.6 * cvs[1], "toy dwell CV {} should be well below the city's {}", cvs[0], cvs[1]);

@@ -6,6 +6,7 @@
 
 use crate::dataset::Dataset;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
+use crate::render::text::{draw_label, label_size, Canvas};
 use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -13,7 +14,12 @@ use std::path::Path;
 
 /// Side of a heat-map cell, pixels.
 pub const CELL_PX: u32 = 4;
-const BAR_WIDTH: u32 = 40;
+/// The colour bar's column: the bar, then its tick labels.
+pub const BAR_WIDTH: u32 = 40 + LABEL_WIDTH;
+/// Room for the tick labels (car-frames per cell) right of the bar.
+const LABEL_WIDTH: u32 = 60;
+/// Ticks on the colour bar, from top (the maximum) to bottom (1).
+const TICKS: usize = 5;
 
 /// What the heat map summarises.
 #[derive(Debug, Clone, Serialize)]
@@ -98,10 +104,21 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             rgb[i..i + 3].copy_from_slice(&colour);
         }
         let level = 1.0 - y as f64 / (h - 1).max(1) as f64;
-        for x in w + 8..iw - 8 {
+        for x in w + 8..w + 32 {
             let i = ((y * iw + x) * 3) as usize;
             rgb[i..i + 3].copy_from_slice(&ramp(level));
         }
+    }
+    // Tick labels: the count each height of the bar stands for.
+    let mut canvas = Canvas { data: &mut rgb, width: iw, height: ih, channels: 3 };
+    for k in 0..TICKS {
+        let level = 1.0 - k as f64 / (TICKS - 1) as f64;
+        let count = ((level * scale).exp() - 1.0).round().max(1.0) as u64;
+        let y = (1.0 - level) * (h - 1) as f64;
+        let text = count.to_string();
+        let (_, lh) = label_size(&text, 1);
+        let top = (y as i64 - lh as i64 / 2).clamp(0, ih as i64 - lh as i64);
+        draw_label(&mut canvas, (w + 36) as i64, top, &text, 1, [235, 235, 235], [24, 24, 28]);
     }
     let file = std::fs::File::create(out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
     encode_png(std::io::BufWriter::new(file), iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())

@@ -4,6 +4,7 @@
 
 pub mod background;
 pub mod palette;
+pub mod text;
 pub mod weather;
 
 use crate::camera::Camera;
