@@ -226,3 +226,70 @@ fn weather_changes_the_frames_but_never_the_masks() {
         assert!(changed > still + 2000, "{name}: only {changed} pixels changed (clear day: {still})");
     }
 }
+
+/// Headlight beams lie on the road: at night, a car right behind another
+/// lights the road between them but never a pixel of the car in front, and
+/// with the dirty-rectangle pipeline a frame is the same as one drawn from
+/// scratch.
+#[test]
+fn beams_light_the_road_never_the_car_in_front() {
+    use causalcity::camera::Camera;
+    use causalcity::map::CityMap;
+    use causalcity::render::weather::SceneLook;
+    use causalcity::render::{CarSprite, Renderer};
+    use glam::DVec2;
+
+    let map = CityMap::default();
+    let renderer = Renderer::new(&map, Camera::birds_eye(1024, 640));
+    let night = renderer.scene(SceneLook { daylight: 0.0, ..SceneLook::clear() });
+    let car = |x: f64, id: u8| CarSprite {
+        position: DVec2::new(x, 2.0),
+        yaw: 0.0,
+        length: 2.2,
+        width: 1.1,
+        colour: [200, 40, 40],
+        mask_id: id,
+    };
+    // Heading east; the rear car's front is 1 m behind the front car's back,
+    // so its 3.5 m beams reach under the front car.
+    let (front, rear) = (car(4.0, 1), car(0.8, 2));
+    let mut alone = renderer.canvas();
+    renderer.render(&mut alone, &night, &[front], 0);
+    let mut queued = renderer.canvas();
+    renderer.render(&mut queued, &night, &[front, rear], 0);
+    // Inside the car, away from its anti-aliased outline (whose pixels
+    // blend the road beneath, lit or not).
+    let inside = |i: usize| {
+        let (x, y) = ((i % 1024) as i64, (i / 1024) as i64);
+        (-1..=1).all(|dy| (-1..=1).all(|dx| queued.mask[((y + dy) * 1024 + x + dx) as usize] == 1))
+    };
+    let mut front_pixels = 0;
+    let mut lit = Vec::new();
+    for (i, &id) in queued.mask.iter().enumerate() {
+        if id == 1 && inside(i) {
+            front_pixels += 1;
+            if queued.rgb[i * 3..i * 3 + 3] != alone.rgb[i * 3..i * 3 + 3] {
+                lit.push((i % 1024, i / 1024, &queued.rgb[i * 3..i * 3 + 3], &alone.rgb[i * 3..i * 3 + 3]));
+            }
+        }
+    }
+    assert!(
+        lit.is_empty(),
+        "{} of {front_pixels} pixels of the front car are lit: {:?}",
+        lit.len(),
+        &lit[..lit.len().min(8)]
+    );
+    assert!(front_pixels > 200, "only {front_pixels} inner pixels of the front car");
+    // The road between the cars is lit in the queue and dark without the rear car.
+    let gap = renderer.camera.to_pixel(DVec2::new(2.45, 2.0 + 0.3 * 1.1)); // on the left beam
+    let i = gap.y.round() as usize * 1024 + gap.x.round() as usize;
+    let luma = |c: &causalcity::render::FrameCanvas| c.rgb[i * 3..i * 3 + 3].iter().map(|&v| v as u32).sum::<u32>();
+    assert!(luma(&queued) > luma(&alone) + 30, "the beam does not light the road between the cars");
+
+    // Drawing the queue again over the lone car's frame (only its rectangle
+    // restored) gives the frame drawn from scratch, byte for byte.
+    renderer.render(&mut alone, &night, &[front, rear], 1);
+    let mut fresh = renderer.canvas();
+    renderer.render(&mut fresh, &night, &[front, rear], 1);
+    assert!(alone.rgb == fresh.rgb && alone.mask == fresh.mask, "incremental frame differs from a fresh one");
+}
