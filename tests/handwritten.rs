@@ -6,20 +6,9 @@ mod common;
 use common::*;
 use std::path::{Path, PathBuf};
 
-fn examples() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    files
-}
-
 #[test]
 fn every_example_scenario_runs() {
-    let examples = examples();
+    let examples = json_files("configs/examples");
     assert!(examples.len() >= 3);
     let schema = validator("scenario-file.schema.json");
     for file in examples {

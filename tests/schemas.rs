@@ -11,19 +11,8 @@ use causalcity::orchestrate::scenario_file::{load, load_interventions, FileOptio
 use causalcity::spec::DatasetSpec;
 use common::*;
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
-
-fn files(dir: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    files
-}
 
 fn schema_errors(schema: &jsonschema::Validator, doc: &Value) -> Vec<String> {
     schema.iter_errors(doc).map(|e| format!("{e} at {}", e.instance_path())).collect()
@@ -62,7 +51,7 @@ fn edited(base: &Value, edit: impl FnOnce(&mut Value)) -> Value {
 fn spec_schema_and_parser_agree() {
     let schema = validator("spec.schema.json");
     let mut good: Vec<(String, Value)> =
-        files("configs").into_iter().map(|f| (f.display().to_string(), read_json(&f))).collect();
+        json_files("configs").into_iter().map(|f| (f.display().to_string(), read_json(&f))).collect();
     let base = city_base();
     good.push(("city base".into(), base.clone()));
     good.push(("empty driver".into(), edited(&base, |v| v["city"]["driver"] = json!({}))));
@@ -185,7 +174,7 @@ fn scenario_file_schema_and_parser_agree() {
     let schema = validator("scenario-file.schema.json");
     let dir = fresh_dir("schemas-scenario");
     let mut good: Vec<(String, Value)> =
-        files("configs/examples").into_iter().map(|f| (f.display().to_string(), read_json(&f))).collect();
+        json_files("configs/examples").into_iter().map(|f| (f.display().to_string(), read_json(&f))).collect();
     let base = scenario_base();
     good.push(("base".into(), base.clone()));
     good.push(("one object".into(), base[0].clone()));

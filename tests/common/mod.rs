@@ -40,6 +40,18 @@ pub fn gen_ok(spec: &Path, out: &Path, extra: &[&str]) -> Output {
     output
 }
 
+/// The `.json` files of a folder of the repository, sorted.
+pub fn json_files(dir: &str) -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    files.sort();
+    files
+}
+
 /// A toy spec with the given groups `(cars, proportion)` and splits.
 pub fn toy_spec(name: &str, groups: &[(u32, f64)], splits: (u32, u32, u32), frames: u32) -> String {
     let groups: Vec<String> =
