@@ -622,12 +622,12 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             report(&heatmap(&args.dataset, &args.out, &filter).map_err(Error::Failure)?, args.json)
         }
         Command::Validate(args) => {
-            let report_ = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::Input)?;
-            report(&report_, args.json)?;
-            if report_.problems.is_empty() {
+            let found = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::Input)?;
+            report(&found, args.json)?;
+            if found.problems.is_empty() {
                 Ok(())
             } else {
-                Err(Error::Failure(format!("{} problems found", report_.problems.len())))
+                Err(Error::Failure(format!("{} problems found", found.problems.len())))
             }
         }
     }

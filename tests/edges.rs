@@ -75,9 +75,8 @@ fn run_without_out_stays_inside_data() {
     let output =
         Command::new(bin()).args(["run", "--no-images", "--scenario", "./...json"]).current_dir(&dir).output().unwrap();
     assert!(output.status.success(), "{}", text(&output));
-    let written: Vec<String> =
+    let mut written: Vec<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    let mut written = written;
     written.sort();
     assert_eq!(written, ["...json", "data"], "run wrote outside data/");
     let inside: Vec<_> = std::fs::read_dir(dir.join("data")).unwrap().map(|e| e.unwrap().path()).collect();

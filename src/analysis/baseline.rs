@@ -108,11 +108,11 @@ pub fn baseline(dir: &Path, max_lag_s: f64) -> Result<BaselineReport, String> {
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }
-    let pick = |s: &ScenarioScores, frame0: bool| if frame0 { s.frame0.clone() } else { s.dynamics.clone() };
     let mut methods = [Vec::new(), Vec::new()];
     for (m, frame0) in [false, true].into_iter().enumerate() {
-        let split_pairs =
-            |scores: &[ScenarioScores]| -> Vec<ScoredPair> { scores.iter().flat_map(|s| pick(s, frame0)).collect() };
+        let split_pairs = |scores: &[ScenarioScores]| -> Vec<ScoredPair> {
+            scores.iter().flat_map(|s| if frame0 { &s.frame0 } else { &s.dynamics }).copied().collect()
+        };
         let pooled: Vec<ScoredPair> = per_group.iter().flat_map(|(_, train, _)| split_pairs(train)).collect();
         let pooled_threshold = best_threshold(&pooled);
         for (group, train, test) in &per_group {

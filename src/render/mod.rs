@@ -62,8 +62,10 @@ pub struct FrameCanvas {
     /// The background `rgba` was last restored from (kept alive so that
     /// identity means the same pixels).
     background: Option<Arc<Pixmap>>,
-    /// Pixel rectangles the previous frame drew over the background.
+    /// Pixel rectangles the last frame drew over the background.
     dirty: Vec<PixelRect>,
+    /// The frame before's, kept to reuse its allocation.
+    previous: Vec<PixelRect>,
 }
 
 /// A rectangle of pixels, `x0..x1` by `y0..y1`.
@@ -175,6 +177,7 @@ impl Renderer {
             mask: vec![0; (w * h) as usize],
             background: None,
             dirty: Vec::new(),
+            previous: Vec::new(),
         }
     }
 
@@ -193,26 +196,25 @@ impl Renderer {
         // their beams) change from frame to frame.
         let same_background = canvas.background.as_ref().is_some_and(|b| Arc::ptr_eq(b, &scene.background));
         let whole_frame = !same_background || look.rain > 0.0 || look.snow > 0.0;
-        let drawn: Vec<PixelRect> = cars
-            .iter()
-            .filter_map(|car| {
-                let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
-                let half_span = hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M);
-                PixelRect::around(car_frame(car), (-hl, hl + BEAM_REACH_M), (-half_span, half_span), w, h)
-            })
-            .collect();
-        let previous = std::mem::replace(&mut canvas.dirty, drawn);
-        let changed: Vec<PixelRect> = if whole_frame {
+        let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
+        std::mem::swap(&mut canvas.dirty, &mut canvas.previous);
+        canvas.dirty.clear();
+        canvas.dirty.extend(cars.iter().filter_map(|car| {
+            let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
+            let half_span = hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M);
+            PixelRect::around(car_frame(car), (-hl, hl + BEAM_REACH_M), (-half_span, half_span), w, h)
+        }));
+        if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.mask.fill(0);
             canvas.background = Some(scene.background.clone());
-            vec![PixelRect { x0: 0, y0: 0, x1: w, y1: h }]
+            canvas.previous.clear();
+            canvas.previous.push(full);
         } else {
-            for r in &previous {
+            for r in &canvas.previous {
                 restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
             }
-            previous.iter().chain(&canvas.dirty).copied().collect()
-        };
+        }
         // Beams lie on the road, under every car.
         look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
         for car in cars {
@@ -237,12 +239,16 @@ impl Renderer {
             }
         }
         look.draw_precipitation(&mut canvas.rgba, frame);
+        // What changed: what the previous frame drew and what this one drew
+        // (the whole frame when it was redrawn).
+        let drawn: &[PixelRect] = if whole_frame { &[] } else { &canvas.dirty };
+        for r in canvas.previous.iter().chain(drawn) {
+            convert(&canvas.rgba, &mut canvas.rgb, *r);
+        }
         if whole_frame {
             // A weather frame draws everywhere: the next one restores everything.
-            canvas.dirty = changed.clone();
-        }
-        for r in changed {
-            convert(canvas, r);
+            canvas.dirty.clear();
+            canvas.dirty.push(full);
         }
     }
 }
@@ -275,13 +281,13 @@ fn stamp(mask: &mut [u8], coverage: &mut tiny_skia::Mask, r: PixelRect, id: u8) 
 }
 
 /// Copies `r` of the drawing buffer into the frame's RGB image.
-fn convert(canvas: &mut FrameCanvas, r: PixelRect) {
-    let w = canvas.rgba.width() as usize;
-    let rgba = canvas.rgba.data();
+fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
+    let w = rgba.width() as usize;
+    let rgba = rgba.data();
     for y in r.y0..r.y1 {
         let row = y * w;
         let src = &rgba[(row + r.x0) * 4..(row + r.x1) * 4];
-        let dst = &mut canvas.rgb[(row + r.x0) * 3..(row + r.x1) * 3];
+        let dst = &mut rgb[(row + r.x0) * 3..(row + r.x1) * 3];
         for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
             d.copy_from_slice(&s[..3]);
         }

@@ -98,6 +98,6 @@ pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
 pub fn model_name(kind: WorldKind) -> &'static str {
     match kind {
         WorldKind::Toy => toy::MODEL_NAME,
-        WorldKind::City => city::CityWorld::default().model_name(),
+        WorldKind::City => driver::CarFollowing::name(&driver::Idm::default()),
     }
 }
