@@ -87,6 +87,13 @@ pub struct RunArgs {
     #[arg(long, conflicts_with = "no_images")]
     pub annotations: bool,
 
+    /// Exit 2 on the first action, merge distance or spawn that would need
+    /// adapting (a turn from the wrong lane, a merge past its lane's end, a
+    /// distance that is not a number, two cars on one spot), instead of
+    /// adapting it with a warning.
+    #[arg(long)]
+    pub strict: bool,
+
     /// Print what was written as JSON.
     #[arg(long)]
     pub json: bool,
@@ -573,8 +580,12 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images: !args.no_images,
                 annotations: args.annotations,
+                strict: args.strict,
             };
             let written = run_file(&options)?;
+            for warning in written.iter().flat_map(|w| &w.warnings) {
+                eprintln!("warning: {warning}");
+            }
             if args.json {
                 return say(serde_json::to_string_pretty(&written).map_err(Error::failure)?);
             }
@@ -606,6 +617,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images,
                 annotations: false,
+                strict: false,
             };
             let pairs = counterfactual(&options, args.intervention.as_deref())?;
             if args.json {

@@ -455,6 +455,19 @@ impl Default for LightsSpec {
     }
 }
 
+/// How `gen` draws a city car's actions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionDrawing {
+    /// As the original's `scenarioGenerator.py`: left, right or straight at
+    /// random whatever lane the car will be in; the drivers change lanes
+    /// for their turns, and a turn that cannot be prepared is skipped.
+    Original,
+    /// Only actions the lane the car is in allows, with merges where they
+    /// fit (no lane changes needed).
+    LaneValid,
+}
+
 /// City-world settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -465,6 +478,8 @@ pub struct CitySpec {
     pub desired_speed_spread: f64,
     /// Chance that a car is forced through red lights.
     pub red_light_runner_probability: f64,
+    /// How `gen` draws each car's drive queue.
+    pub action_drawing: ActionDrawing,
     /// Base driver parameters, before confounders.
     pub driver: DriverParams,
     pub lights: LightsSpec,
@@ -477,6 +492,7 @@ impl Default for CitySpec {
             desired_speed: 1.8,
             desired_speed_spread: 0.25,
             red_light_runner_probability: 0.02,
+            action_drawing: ActionDrawing::Original,
             driver: DriverParams::default(),
             lights: LightsSpec::default(),
             confounders: ConfounderSpec::default(),

@@ -5,7 +5,7 @@
 
 mod common;
 use causalcity::geometry::OrientedBox;
-use causalcity::map::{curve::wrap_angle, Action, CityMap, LaneEnd, LegKind, Route};
+use causalcity::map::{curve::wrap_angle, CityMap, LaneEnd, LegKind};
 use common::*;
 use glam::DVec2;
 use std::collections::{BTreeMap, BTreeSet};
@@ -55,14 +55,6 @@ fn lane_at(map: &CityMap, p: DVec2, yaw: f64, tolerance: f64) -> Option<usize> {
     })
 }
 
-/// The route a car's spawn and actions describe (merges may happen later in
-/// the simulation, which changes neither its lanes nor its turns).
-fn planned_route(map: &CityMap, car: &Car) -> Route {
-    let actions: Vec<Action> = car.actions.iter().map(|a| serde_json::from_value(a.as_str().into()).unwrap()).collect();
-    let spawn = map.lane_by_name(&car.spawn).unwrap();
-    Route::plan(map, spawn, car.spawn_distance, &actions, &car.merge_distances, 500.0).unwrap()
-}
-
 #[test]
 fn no_car_enters_an_intersection_against_red_unless_forced() {
     let out = dataset();
@@ -80,7 +72,7 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
         for (car_id, track) in &by_car {
             let car = &s.cars[*car_id as usize];
             // The movement the car makes after each lane, from its plan.
-            let route = planned_route(&map, car);
+            let route = planned_route(&map, &s.cars, *car_id, &events);
             let legs: Vec<LegKind> = route.kinds().collect();
             let signal_after = |lane: usize| -> Option<&'static str> {
                 legs.windows(2).find_map(|w| match (w[0], w[1]) {
@@ -107,7 +99,9 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
                     }
                     crossings += 1;
                     let lane_id = map.lane_by_name(&lane.name).unwrap();
-                    let signal = signal_after(lane_id).expect("a crossed stop line lies on the planned route");
+                    let signal = signal_after(lane_id).unwrap_or_else(|| {
+                        panic!("{}: car {car_id} crossed the stop line of {} at frame {}, not on its planned route {:?}", d.display(), lane.name, b.frame, route.kinds().collect::<Vec<_>>())
+                    });
                     let name = &map.intersections[intersection].name;
                     let colour = &lights[&(a.frame, name.clone(), approach.to_string(), signal.to_string())];
                     if colour == "red" {
@@ -254,9 +248,9 @@ fn lane_sequences_follow_the_action_lists() {
     let mut merges_seen = 0;
     for d in scenario_dirs(&out).into_iter().take(25) {
         let s = read_scenario(&d);
+        let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
         for (car_id, track) in poses_by_car(&read_poses(&d.join("poses.csv"))) {
-            let car = &s.cars[car_id as usize];
-            let route = planned_route(&map, car);
+            let route = planned_route(&map, &s.cars, car_id, &events);
             let mut planned: Vec<usize> = Vec::new();
             for kind in route.kinds() {
                 let lane = match kind {

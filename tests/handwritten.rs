@@ -93,7 +93,9 @@ fn bad_scenarios_exit_2_naming_scenario_car_and_field() {
         let file = dir.join(format!("bad{k}.json"));
         std::fs::write(&file, scenario_with(&format!("{ok}, {vehicle}"))).unwrap();
         let out = dir.join(format!("out{k}"));
-        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        // --strict: the wrong lane, the merge past the lane end and the car on
+        // top of another would otherwise be adapted (see the next tests).
+        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--strict"]);
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert_eq!(output.status.code(), Some(2), "case {k}: {stderr}");
         for part in ["scenario \"Bad_1\"", &format!("car \"{car}\""), field, message] {
@@ -579,4 +581,140 @@ fn intervention_files_are_read_strictly() {
         parts.push(&name);
         rejected_by(case, &args, &out, &parts);
     }
+}
+
+/// The original release's README example scenario, byte for byte as it
+/// gives it (its mergeR cannot be done: the lane it is on is the outer one).
+const ORIGINAL_README_EXAMPLE: &str = r#"[
+    {
+        "Name": "Scenario_1",
+        "Vehicles": [
+            {
+                "Id": "Car_1",
+                "Spawn": "C0w",
+                "SpawnAtDistance": 0,
+                "DriveQueue": [
+                    "right",
+                    "straight",
+                    "right",
+                    "mergeR",
+                    "left"
+                ],
+                "MergeAtDistances": [
+                    0,
+                    0,
+                    0,
+                    50,
+                    0
+                ]
+            }
+        ]
+   }
+]
+"#;
+
+/// Runs `file` leniently and strictly: the lenient run succeeds and each
+/// adaptation in events.csv is a warning on stderr; the strict run exits 2
+/// naming the scenario, a car and a field, and writes nothing. Returns the
+/// scenario folder of the lenient run and its stderr.
+fn run_lenient_and_strict(file: &Path, scenario: &str, out: &Path) -> (PathBuf, String) {
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "{}: {stderr}", file.display());
+    let dir = out.join(scenario);
+    let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
+    let adaptations: Vec<&EventRow> =
+        events.iter().filter(|e| e.kind == "action_adapted" || e.kind == "action_skipped").collect();
+    for e in &adaptations {
+        assert!(
+            stderr.lines().any(|l| l.starts_with("warning: ") && l.ends_with(&e.detail)),
+            "{}: no warning for {:?}:\n{stderr}",
+            file.display(),
+            e.detail
+        );
+    }
+    let strict_out = out.with_extension("strict");
+    let output = run(&[
+        "run",
+        "--scenario",
+        file.to_str().unwrap(),
+        "--out",
+        strict_out.to_str().unwrap(),
+        "--no-images",
+        "--strict",
+    ]);
+    let strict_err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{}: --strict: {strict_err}", file.display());
+    for part in [format!("scenario \"{scenario}\""), "car \"Car_".into(), "field ".into()] {
+        assert!(strict_err.contains(&part), "{}: --strict: {part:?} missing from {strict_err}", file.display());
+    }
+    assert!(!strict_out.exists(), "--strict wrote output");
+    (dir, stderr)
+}
+
+#[test]
+fn the_original_readme_example_runs_unchanged_with_its_adaptation_logged() {
+    let dir = fresh_dir("hw-original-readme");
+    let file = dir.join("readme-example.json");
+    std::fs::write(&file, ORIGINAL_README_EXAMPLE).unwrap();
+    let (scenario, stderr) = run_lenient_and_strict(&file, "Scenario_1", &dir.join("out"));
+    let events: Vec<EventRow> = read_csv(&scenario.join("events.csv"));
+    let skipped: Vec<&EventRow> = events.iter().filter(|e| e.kind == "action_skipped").collect();
+    assert_eq!(skipped.len(), 1, "{events:?}");
+    assert!(skipped[0].detail.starts_with("DriveQueue[3] mergeR: lane D1w is the outer lane"), "{}", skipped[0].detail);
+    assert!(stderr.contains("car \"Car_1\""));
+    // Its first turn is done from the lane it was meant for.
+    let first = events.iter().find(|e| e.kind == "turn_done").expect("a turn within the scenario");
+    assert_eq!(first.detail, "right at BC from C0w");
+}
+
+#[test]
+fn files_from_the_original_generator_run_with_every_adaptation_logged() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/original-generator");
+    let files: Vec<PathBuf> = (1..=10).map(|seed| fixtures.join(format!("seed-{seed:02}.json"))).collect();
+    let map = causalcity::map::CityMap::default();
+    let out = fresh_dir("hw-original-generator");
+    let (mut planned_adaptations, mut lane_changes, mut turns) = (0, 0, 0);
+    for file in &files {
+        let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
+        let (dir, stderr) = run_lenient_and_strict(file, "Scenario", &out.join(&stem));
+        // One warning per car for the merge names in MergeAtDistances.
+        let names = stderr.lines().filter(|l| l.contains("field MergeAtDistances[0, 1, 2, 3, 4]")).count();
+        assert_eq!(names, 8, "{stem}: {stderr}");
+        let s = read_scenario(&dir);
+        let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
+        for (id, _) in s.cars.iter().enumerate() {
+            let id = id as u32;
+            // Everything planning adapted is in events.csv at the start, by field.
+            let route = planned_route(&map, &s.cars, id, &events);
+            for a in &route.adaptations {
+                planned_adaptations += 1;
+                let field = match a.kind {
+                    causalcity::map::AdaptationKind::Adapted => "MergeAtDistances",
+                    causalcity::map::AdaptationKind::Skipped => "DriveQueue",
+                };
+                let prefix = format!("{field}[{}] {}: ", a.action_index, a.action);
+                let detail = format!("{prefix}{}", a.reason);
+                // A turn given up for want of a gap is logged when the driver gives up.
+                let given_up = |e: &EventRow| a.reason.contains("no gap") && e.detail.starts_with(&prefix);
+                assert!(
+                    events.iter().any(|e| e.car == id && (e.detail == detail || given_up(e))),
+                    "{stem}: car {id}: {detail:?} not in events.csv"
+                );
+            }
+            // Every turn is made from a lane that allows it.
+            for e in events.iter().filter(|e| e.car == id && e.kind == "turn_done") {
+                turns += 1;
+                let (action, from) = (e.detail.split(' ').next().unwrap(), e.detail.rsplit(' ').next().unwrap());
+                let letter = from.chars().last().unwrap();
+                match action {
+                    "left" => assert!("xy".contains(letter), "{stem}: {}", e.detail),
+                    "right" => assert!("wz".contains(letter), "{stem}: {}", e.detail),
+                    _ => {}
+                }
+            }
+            lane_changes += events.iter().filter(|e| e.car == id && e.kind == "lane_change").count();
+        }
+    }
+    assert!(planned_adaptations > 0 && lane_changes >= 10 && turns >= 20, "{planned_adaptations} {lane_changes} {turns}");
 }

@@ -1,6 +1,6 @@
 //! The city map: continuity, spawn points, and which actions each spawn lane allows.
 
-use causalcity::map::{Action, CityMap, LaneEnd, LegKind, Route, Turn};
+use causalcity::map::{Action, AdaptationKind, CityMap, LaneEnd, LanePolicy, LegKind, MapLayout, Route, Turn};
 
 fn heading_diff(a: f64, b: f64) -> f64 {
     causalcity::map::curve::wrap_angle(a - b).abs()
@@ -77,7 +77,7 @@ fn every_action_from_every_spawn_lane_is_valid_or_rejected_with_a_reason() {
         let outer = letter == 'w' || letter == 'z';
         for action in Action::ALL {
             let merge_at = if action.is_merge() { 1.0 } else { 0.0 };
-            let result = Route::plan(&map, lane, 0.0, &[action], &[merge_at], 100.0);
+            let result = Route::plan(&map, lane, 0.0, &[action], &[merge_at], 100.0, &LanePolicy::Strict);
             let expected_ok = match action {
                 Action::Straight => true,
                 Action::Right | Action::MergeL => outer,
@@ -102,7 +102,7 @@ fn every_action_from_every_spawn_lane_is_valid_or_rejected_with_a_reason() {
         }
         // A merge past the lane end is rejected and says how far it may go.
         let merge = if outer { Action::MergeL } else { Action::MergeR };
-        let err = Route::plan(&map, lane, 0.0, &[merge], &[500.0], 10.0).unwrap_err();
+        let err = Route::plan(&map, lane, 0.0, &[merge], &[500.0], 10.0, &LanePolicy::Strict).unwrap_err();
         assert!(err.reason.contains("past the lane end"), "{err}");
     }
 }
@@ -119,7 +119,7 @@ fn routes_are_continuous_and_never_run_out() {
     for lane in map.spawn_points() {
         for queue in queues {
             let merges: Vec<f64> = queue.iter().map(|a| if a.is_merge() { 2.0 } else { 0.0 }).collect();
-            let Ok(route) = Route::plan(&map, lane, 0.0, queue, &merges, 3000.0) else {
+            let Ok(route) = Route::plan(&map, lane, 0.0, queue, &merges, 3000.0, &LanePolicy::Adapt) else {
                 continue;
             };
             assert!(route.length >= 3000.0);
@@ -141,4 +141,128 @@ fn routes_are_continuous_and_never_run_out() {
             }
         }
     }
+}
+
+/// Plans `actions` from the start of `lane` (merges at `merges`) adaptively.
+fn adaptive(map: &CityMap, lane: &str, entry: f64, actions: &[Action], merges: &[f64]) -> Route {
+    let spawn = map.lane_by_name(lane).unwrap();
+    Route::plan(map, spawn, entry, actions, merges, 300.0, &LanePolicy::Adapt).expect("adaptive planning never fails")
+}
+
+#[test]
+fn a_turn_from_the_wrong_lane_gets_a_lane_change_before_the_stop_line() {
+    let map = CityMap::default();
+    let setback = map.layout.stop_line_setback;
+    for (lane, action, target) in [("A1w", Action::Left, "A1x"), ("A1x", Action::Right, "A1w"), ("C1z", Action::Left, "C1y")] {
+        let route = adaptive(&map, lane, 0.0, &[action], &[0.0]);
+        assert!(route.adaptations.is_empty(), "{lane} {action}: {:?}", route.adaptations);
+        let legs: Vec<_> = route.legs.iter().collect();
+        let k = legs.iter().position(|l| matches!(l.kind, LegKind::LaneChange { .. })).expect("a lane change");
+        let LegKind::LaneChange { from, to, at } = legs[k].kind else { unreachable!() };
+        assert_eq!(map.lanes[from].name, lane);
+        assert_eq!(map.lanes[to].name, target);
+        assert_eq!(legs[k].prepares, Some(0), "the change prepares the turn");
+        assert_eq!(legs[k].action, None, "the change is no action of the queue");
+        assert!(at >= 1.0 - 1e-9, "starts {at} m along, before the car could look");
+        assert!(
+            at + map.layout.lane_change_length <= map.lanes[from].curve.length() - setback + 1e-9,
+            "the change must end before the stop line"
+        );
+        // Then the turn itself, from the target lane, carried out as action 0.
+        let turn = legs[k + 1..].iter().find(|l| matches!(l.kind, LegKind::Connector(_))).unwrap();
+        let LegKind::Connector(c) = turn.kind else { unreachable!() };
+        assert_eq!(map.connectors[c].from, to);
+        let expected = if action == Action::Left { Turn::Left } else { Turn::Right };
+        assert_eq!(map.connectors[c].turn, expected);
+        assert_eq!(turn.action, Some(0));
+        // Strict planning rejects the same queue, naming the lane.
+        let spawn = map.lane_by_name(lane).unwrap();
+        let err = Route::plan(&map, spawn, 0.0, &[action], &[0.0], 300.0, &LanePolicy::Strict).unwrap_err();
+        assert!(err.reason.contains("cannot turn") && err.reason.contains(lane), "{err}");
+    }
+}
+
+#[test]
+fn impossible_actions_are_adapted_or_skipped_never_silently() {
+    let map = CityMap::default();
+    let run = map.layout.lane_change_length;
+    // mergeR from the outer lane: there is nothing to the right.
+    let r = adaptive(&map, "D1w", 0.0, &[Action::MergeR, Action::Straight], &[2.0, 0.0]);
+    assert_eq!(r.adaptations.len(), 1);
+    assert_eq!(r.adaptations[0].kind, AdaptationKind::Skipped);
+    assert!(r.adaptations[0].reason.contains("no lane to its right"), "{}", r.adaptations[0].reason);
+    assert!(!r.kinds().any(|k| matches!(k, LegKind::LaneChange { .. })));
+    assert!(r.skips(0) && !r.skips(1));
+    // A merge distance past the lane end moves to the last feasible point.
+    let len = map.lanes[map.lane_by_name("D1w").unwrap()].curve.length();
+    let r = adaptive(&map, "D1w", 0.0, &[Action::MergeL], &[50.0]);
+    assert_eq!(r.adaptations.len(), 1);
+    assert_eq!(r.adaptations[0].kind, AdaptationKind::Adapted);
+    let at = r.legs.iter().find_map(|l| match l.kind {
+        LegKind::LaneChange { at, .. } => Some(at),
+        _ => None,
+    });
+    assert!((at.unwrap() - (len - run)).abs() < 0.1 + 1e-9, "moved to {at:?}, lane {len} m");
+    // A merge behind the car moves up to the car.
+    let r = adaptive(&map, "A1w", 10.0, &[Action::MergeL], &[2.0]);
+    assert_eq!(r.adaptations[0].kind, AdaptationKind::Adapted);
+    assert!(r.adaptations[0].reason.contains("behind the car"));
+    let at = r.legs.iter().find_map(|l| match l.kind {
+        LegKind::LaneChange { at, .. } => Some(at),
+        _ => None,
+    });
+    assert_eq!(at, Some(10.0));
+    // A turn whose lane change has no room (the car starts near the stop
+    // line, and came from no lane before) is skipped: straight on instead.
+    let lane = map.lane_by_name("C1z").unwrap();
+    let near_line = map.lanes[lane].curve.length() - map.layout.stop_line_setback - 1.0;
+    let r = adaptive(&map, "C1z", near_line, &[Action::Left, Action::Right], &[0.0, 0.0]);
+    assert_eq!(r.adaptations.len(), 1, "{:?}", r.adaptations);
+    assert_eq!((r.adaptations[0].action_index, r.adaptations[0].kind), (0, AdaptationKind::Skipped));
+    assert!(r.adaptations[0].reason.contains("no room"), "{}", r.adaptations[0].reason);
+    let first_turn = r.legs.iter().find_map(|l| match l.kind {
+        LegKind::Connector(c) if map.connectors[c].intersection.is_some() => Some((c, l.action)),
+        _ => None,
+    });
+    let (c, action) = first_turn.unwrap();
+    assert_eq!((map.connectors[c].turn, action), (Turn::Straight, Some(0)), "straight on, in place of action 0");
+    // Strict planning rejects each of these.
+    for (lane, entry, actions, merges) in [
+        ("D1w", 0.0, vec![Action::MergeR], vec![2.0]),
+        ("D1w", 0.0, vec![Action::MergeL], vec![50.0]),
+        ("A1w", 10.0, vec![Action::MergeL], vec![2.0]),
+    ] {
+        let spawn = map.lane_by_name(lane).unwrap();
+        assert!(Route::plan(&map, spawn, entry, &actions, &merges, 300.0, &LanePolicy::Strict).is_err());
+    }
+}
+
+#[test]
+fn a_turn_lane_change_with_no_room_moves_to_the_lane_before() {
+    // East-west roads 20 m apart: the middle segments of C and D are 8 m,
+    // too short for a lane change before their stop lines.
+    let layout = MapLayout { east_west_roads: [('B', -10.0), ('A', 10.0)], ..MapLayout::default() };
+    let map = CityMap::new(layout);
+    let c1w = map.lane_by_name("C1w").unwrap();
+    assert!(map.lanes[c1w].curve.length() < map.layout.lane_change_length + map.layout.stop_line_setback);
+    let direct = adaptive(&map, "C1w", 0.0, &[Action::Left], &[0.0]);
+    assert!(direct.skips(0), "no room on C1w itself: {:?}", direct.adaptations);
+    // From C0w straight on through BC, then left at AC: the change into the
+    // inner lane happens on C0w, before the straight move.
+    let r = adaptive(&map, "C0w", 0.0, &[Action::Straight, Action::Left], &[0.0, 0.0]);
+    assert!(r.adaptations.is_empty(), "{:?}", r.adaptations);
+    let names: Vec<String> = r
+        .kinds()
+        .take(6)
+        .map(|k| match k {
+            LegKind::Lane(l) => map.lanes[l].name.clone(),
+            LegKind::LaneChange { from, to, .. } => format!("{}->{}", map.lanes[from].name, map.lanes[to].name),
+            LegKind::Connector(c) => format!("{:?}", map.connectors[c].turn),
+        })
+        .collect();
+    assert_eq!(names, ["C0w", "C0w->C0x", "C0x", "Straight", "C1x", "Left"]);
+    let change = r.legs.iter().find(|l| matches!(l.kind, LegKind::LaneChange { .. })).unwrap();
+    assert_eq!((change.prepares, change.action), (Some(1), None));
+    let left = r.legs.iter().find(|l| l.action == Some(1)).unwrap();
+    assert!(matches!(left.kind, LegKind::Connector(c) if map.connectors[c].turn == Turn::Left));
 }

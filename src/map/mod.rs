@@ -19,7 +19,7 @@ use glam::DVec2;
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
-pub use route::{Action, LegKind, Route, RouteError, RouteLeg};
+pub use route::{Action, Adaptation, AdaptationKind, LanePolicy, LegKind, Route, RouteError, RouteLeg};
 
 /// Index of a lane in [`CityMap::lanes`].
 pub type LaneId = usize;

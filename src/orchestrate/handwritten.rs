@@ -68,6 +68,8 @@ pub struct RunOptions {
     pub world: Option<WorldKind>,
     pub images: bool,
     pub annotations: bool,
+    /// Reject what would need adapting (see [`FileOptions::strict`]).
+    pub strict: bool,
 }
 
 impl RunOptions {
@@ -92,12 +94,32 @@ pub struct Written {
     pub scenario: String,
     pub path: PathBuf,
     pub bytes: u64,
+    /// What was read leniently or adapted while planning and driving, one
+    /// sentence each naming the scenario, car and field (events.csv has the
+    /// adaptations too).
+    pub warnings: Vec<String>,
+}
+
+/// The warnings of scenario `s`: what reading adapted, then every action
+/// the simulation adapted or skipped, in time order.
+fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
+    let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
+    let driven = trajectories
+        .events
+        .iter()
+        .filter(|e| matches!(e.kind, EventKind::ActionAdapted | EventKind::ActionSkipped))
+        .map(|e| {
+            let car = s.plan.cars.iter().find(|c| c.id == e.car).map_or("?", |c| c.name.as_str());
+            let what = if e.kind == EventKind::ActionSkipped { "skipped" } else { "adapted" };
+            format!("scenario {:?}, car {car:?}, at {:.1} s, {what}: {}", s.name, e.t, e.detail)
+        });
+    read.chain(driven).collect()
 }
 
 fn load_file(options: &RunOptions) -> Result<(Arc<CityMap>, Vec<LoadedScenario>), RunError> {
     let map = Arc::new(CityMap::default());
     let scenarios =
-        load(&options.scenario_file, FileOptions { world: options.world }, &map).map_err(RunError::Input)?;
+        load(&options.scenario_file, FileOptions { world: options.world, strict: options.strict }, &map).map_err(RunError::Input)?;
     Ok((map, scenarios))
 }
 
@@ -113,7 +135,8 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
             let path = out.join(&s.name);
             let times = StageTimes::default();
             let bytes = write_simulated(&writer, &s.plan, &trajectories, path.clone(), &mut writer.buffers(), &times)?;
-            Ok(Written { scenario: s.name.clone(), path, bytes })
+            let warnings = warnings(s, &trajectories);
+            Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
         .collect()
 }

@@ -21,7 +21,7 @@ use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
 use crate::json::{self, JsonError};
 use crate::map::signals::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
-use crate::map::{Action, CityMap, Route};
+use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
 use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, Split, WorldKind};
@@ -64,13 +64,22 @@ pub struct LoadedScenario {
     pub name: String,
     pub expansion: Expansion,
     pub plan: ScenarioPlan,
+    /// What reading adapted (quirks of the original's files, spawns moved),
+    /// one sentence each naming the car and field.
+    pub warnings: Vec<String>,
 }
 
 /// What the command line may override.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct FileOptions {
     pub world: Option<WorldKind>,
+    /// Reject every action, merge distance and spawn that would need
+    /// adapting, instead of adapting it with a warning.
+    pub strict: bool,
 }
+
+/// Step by which a car that would start on top of another moves forward, metres.
+const SPAWN_STEP: f64 = 0.1;
 
 /// Seed of a scenario file that gives none.
 const DEFAULT_SEED: u64 = 1;
@@ -111,8 +120,10 @@ struct RawVehicle {
     spawn_at_distance: f64,
     #[serde(rename = "DriveQueue", default)]
     drive_queue: Vec<String>,
+    /// Numbers, or (the original generator's quirk) action names, read in
+    /// the resolving pass.
     #[serde(rename = "MergeAtDistances")]
-    merge_at_distances: Option<Vec<f64>>,
+    merge_at_distances: Option<Vec<Value>>,
     desired_speeds: Option<Vec<f64>>,
     time_headway: Option<f64>,
     runs_red_lights: Option<bool>,
@@ -412,32 +423,58 @@ fn resolve(
     }
     let travel = expansion.max_travel();
     let mut cars: Vec<GivenCar> = Vec::new();
+    let mut warnings = Vec::new();
     for (k, vehicle) in raw.vehicles.iter().enumerate() {
-        cars.push(resolve_vehicle(here, k, vehicle, map, world, travel, &cars)?);
+        let car = resolve_vehicle(here, k, vehicle, map, world, travel, &cars, options.strict, &mut warnings)?;
+        cars.push(car);
     }
-    // Nobody may start on top of anybody else.
-    let boxes: Vec<OrientedBox> = cars
-        .iter()
-        .map(|c| {
-            let (centre, heading) = c.route.pose_at(c.spawn_distance, 0.0);
-            OrientedBox { centre, heading, length: expansion.spec.car_length_m, width: expansion.spec.car_width_m }
-        })
-        .collect();
-    for j in 0..cars.len() {
-        for i in 0..j {
-            if boxes[i].overlaps(&boxes[j]) {
-                return Err(here.err(
-                    Some(&cars[j].name),
-                    "SpawnAtDistance",
-                    format!(
-                        "starts on top of {}: move one of them (a car is {} m long)",
-                        cars[i].name, expansion.spec.car_length_m
-                    ),
-                ));
-            }
-        }
-    }
+    // The leader-follower pairs are the file's as written.
     let pairs = infer_pairs(&cars);
+    // Nobody may start on top of anybody else: strictly an error, else the
+    // later car moves forward along its lane to the first free place.
+    let footprint = |c: &GivenCar, s: f64| {
+        let lane = &map.lanes[c.spawn].curve;
+        let (centre, heading) = (lane.lane_center_at(s), lane.heading_at(s));
+        OrientedBox { centre, heading, length: expansion.spec.car_length_m, width: expansion.spec.car_width_m }
+    };
+    let mut boxes: Vec<OrientedBox> = Vec::new();
+    for j in 0..cars.len() {
+        let given = cars[j].spawn_distance;
+        let lane_end = map.lanes[cars[j].spawn].curve.length() - expansion.spec.car_length_m / 2.0;
+        let mut s = given;
+        let blocker = loop {
+            let here_box = footprint(&cars[j], s);
+            match boxes.iter().position(|b| b.overlaps(&here_box)) {
+                None => break None,
+                Some(i) if options.strict || s + SPAWN_STEP > lane_end => break Some(i),
+                Some(_) => s += SPAWN_STEP,
+            }
+        };
+        if let Some(i) = blocker {
+            let why = if options.strict { "move one of them" } else { "and no free place is left on its lane" };
+            return Err(here.err(
+                Some(&cars[j].name),
+                "SpawnAtDistance",
+                format!(
+                    "starts on top of {}: {why} (a car is {} m long)",
+                    cars[i].name, expansion.spec.car_length_m
+                ),
+            ));
+        }
+        if s != given {
+            let s = (s * 10.0).round() / 10.0;
+            warnings.push(format!(
+                "car {:?}, field SpawnAtDistance: {given} m would start on top of another car: starting at {s} m",
+                cars[j].name
+            ));
+            let car = &mut cars[j];
+            car.spawn_distance = s;
+            let route = Route::plan(map, car.spawn, s, &car.actions, &car.merge_distances, s + travel, &LanePolicy::Adapt)
+                .map_err(|e| here.err(Some(&car.name), "DriveQueue", e.to_string()))?;
+            car.route = Arc::new(route);
+        }
+        boxes.push(footprint(&cars[j], cars[j].spawn_distance));
+    }
     let names: Vec<String> = cars.iter().map(|c| c.name.clone()).collect();
     let key = ScenarioKey {
         group: "scenarios".into(),
@@ -463,7 +500,7 @@ fn resolve(
         None => Vec::new(),
         Some(specs) => resolve_cameras(here, specs, &names)?,
     };
-    Ok(LoadedScenario { name, expansion, plan })
+    Ok(LoadedScenario { name, expansion, plan, warnings })
 }
 
 /// Extra cameras: as in a spec, with the chased car named by its Id.
@@ -500,6 +537,9 @@ fn resolve_actions(names: &[String], field: impl Fn(usize) -> String) -> Result<
         .collect()
 }
 
+/// One vehicle resolved; under `strict` nothing is adapted, otherwise
+/// each quirk read leniently adds a sentence to `warnings`.
+#[allow(clippy::too_many_arguments)]
 fn resolve_vehicle(
     here: &Here<'_>,
     k: usize,
@@ -508,6 +548,8 @@ fn resolve_vehicle(
     world: WorldKind,
     travel: f64,
     earlier: &[GivenCar],
+    strict: bool,
+    warnings: &mut Vec<String>,
 ) -> Result<GivenCar, ScenarioFileError> {
     let id = vehicle.id.clone();
     if id.is_empty() {
@@ -556,18 +598,45 @@ fn resolve_vehicle(
                     ),
                 ));
             }
-            if let Some((i, d)) = list.iter().enumerate().find(|(_, d)| !(d.is_finite() && **d >= 0.0)) {
-                return Err(here.err(
-                    car,
-                    format!("MergeAtDistances[{i}]"),
-                    format!("{d} is not allowed: metres along the lane, 0 or more"),
+            let mut distances = Vec::with_capacity(list.len());
+            let mut names_read = Vec::new();
+            for (i, entry) in list.iter().enumerate() {
+                let field = format!("MergeAtDistances[{i}]");
+                match entry {
+                    Value::Number(n) => match n.as_f64().filter(|d| d.is_finite() && *d >= 0.0) {
+                        Some(d) => distances.push(d),
+                        None => {
+                            return Err(here.err(car, field, format!("{n} is not allowed: metres along the lane, 0 or more")))
+                        }
+                    },
+                    // The original generator writes action names here.
+                    Value::String(_) if !strict => {
+                        names_read.push(i);
+                        distances.push(0.0);
+                    }
+                    other => {
+                        return Err(here.err(
+                            car,
+                            field,
+                            format!("{other} is not allowed: metres along the lane, 0 or more"),
+                        ))
+                    }
+                }
+            }
+            if !names_read.is_empty() {
+                let texts: Vec<String> = names_read.iter().map(|&i| list[i].to_string()).collect();
+                warnings.push(format!(
+                    "car {id:?}, field MergeAtDistances{names_read:?}: {} {} not distances (the original generator writes merge names there): read as no distance given (0)",
+                    texts.join(", "),
+                    if texts.len() == 1 { "is" } else { "are" }
                 ));
             }
-            list.clone()
+            distances
         }
     };
-    let route =
-        Route::plan(map, spawn, spawn_distance, &actions, &merge_distances, spawn_distance + travel).map_err(|e| {
+    let policy = if strict { LanePolicy::Strict } else { LanePolicy::Adapt };
+    let route = Route::plan(map, spawn, spawn_distance, &actions, &merge_distances, spawn_distance + travel, &policy)
+        .map_err(|e| {
             let field = if e.action.is_merge() && e.reason.contains("merge distance") {
                 format!("MergeAtDistances[{}]", e.action_index)
             } else {

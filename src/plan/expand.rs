@@ -8,8 +8,8 @@ use super::{stream_key, CarAgency, CarPlan, CityPlan, GivenCar, Role, ScenarioKe
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::LightPlan;
-use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
-use crate::spec::{DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
+use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
+use crate::spec::{ActionDrawing, DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -149,9 +149,13 @@ impl Expansion {
                 }
                 let back = round_mm(rng.random_range(span.lo..=span.hi - gap));
                 let front = back + gap;
-                let (actions, merges) = random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car);
-                let route = Route::plan(&self.map, span.lane, front, &actions, &merges, front + travel)
-                    .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[span.lane].name))?;
+                let (actions, merges) = match city.as_ref().map(|c| c.action_drawing) {
+                    Some(ActionDrawing::Original) => original_actions(&mut rng, spec.actions_per_car),
+                    _ => random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car),
+                };
+                let route =
+                    Route::plan(&self.map, span.lane, front, &actions, &merges, front + travel, &LanePolicy::Adapt)
+                        .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[span.lane].name))?;
                 let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
                 let boxes: Vec<OrientedBox> = starts
                     .iter()
@@ -405,6 +409,18 @@ fn round_mm(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
 }
 
+/// Chance that a lane-valid drawn action is a merge, where one fits.
+const MERGE_SHARE: f64 = 0.25;
+
+/// A random drive queue drawn as the original's `scenarioGenerator.py`
+/// draws it, whatever lane the car will be in: each action `left`, `right`
+/// or `straight` with equal chance. (The original writes merge names only
+/// into `MergeAtDistances`, where its engine never carried them out, so no
+/// merges are drawn.) Drivers plan the lane changes their turns need.
+fn original_actions(rng: &mut ChaCha8Rng, count: u32) -> (Vec<Action>, Vec<f64>) {
+    (0..count).map(|_| ([Action::Left, Action::Right, Action::Straight][rng.random_range(0..3)], 0.0)).unzip()
+}
+
 /// A valid random drive queue from `lane`, where the first car on the route
 /// starts `entry` metres along it. Merges are drawn only where they fit.
 fn random_actions(
@@ -430,7 +446,7 @@ fn random_actions(
             .map(|l| (Action::MergeL, l))
             .or_else(|| map.adjacent_lane(lane, false).map(|l| (Action::MergeR, l)));
         if let (Some((action, target)), true) = (merge_side, lo <= hi) {
-            if rng.random_bool(0.25) {
+            if rng.random_bool(MERGE_SHARE) {
                 let at = ((rng.random_range(lo..=hi) * 10.0).round() / 10.0).clamp(lo, hi);
                 actions.push(action);
                 merges.push(at);

@@ -11,8 +11,14 @@ pub trait CarFollowing: Send + Sync {
     fn name(&self) -> &'static str;
     /// On an empty road, towards `desired`.
     fn free_speed(&self, p: &DriverParams, speed: f64, desired: f64, dt: f64) -> f64;
+    /// The acceleration (m/s^2, negative when braking) the driver wants
+    /// behind a car `gap` metres ahead (bumper to bumper) driving at
+    /// `leader_speed`, before any kinematic limit.
+    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64;
     /// Behind a car `gap` metres ahead (bumper to bumper) driving at `leader_speed`.
-    fn follow_speed(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64, dt: f64) -> f64;
+    fn follow_speed(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64, dt: f64) -> f64 {
+        (speed + self.follow_acceleration(p, speed, desired, gap, leader_speed) * dt).max(0.0)
+    }
     /// Stopping for a standing obstacle (a stop line) `distance` metres ahead.
     fn stop_speed(&self, p: &DriverParams, speed: f64, desired: f64, distance: f64, dt: f64) -> f64 {
         // A stop line is a standing car whose back is `distance` + min_gap away.
@@ -55,15 +61,14 @@ impl CarFollowing for Idm {
         (speed + a * dt).max(0.0)
     }
 
-    fn follow_speed(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64, dt: f64) -> f64 {
+    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
         let gap = gap.max(0.01);
         let approach = speed - leader_speed;
         let wanted = p.min_gap
             + (speed * p.time_headway
                 + speed * approach / (2.0 * (p.max_acceleration * p.comfortable_deceleration).sqrt()))
             .max(0.0);
-        let a = p.max_acceleration * (1.0 - self.free_term(speed, desired) - (wanted / gap).powi(2));
-        (speed + a * dt).max(0.0)
+        p.max_acceleration * (1.0 - self.free_term(speed, desired) - (wanted / gap).powi(2))
     }
 }
 

@@ -50,6 +50,12 @@ pub enum EventKind {
     ActionsFinished,
     /// An intervention of the scenario fired.
     Intervention,
+    /// A lane change the driver chose to reach the lane a turn needs.
+    LaneChange,
+    /// An action carried out otherwise than written (a merge moved).
+    ActionAdapted,
+    /// An action not carried out (no lane, no room, no gap).
+    ActionSkipped,
 }
 
 impl EventKind {
@@ -61,6 +67,9 @@ impl EventKind {
             EventKind::TurnDone => "turn_done",
             EventKind::ActionsFinished => "actions_finished",
             EventKind::Intervention => "intervention",
+            EventKind::LaneChange => "lane_change",
+            EventKind::ActionAdapted => "action_adapted",
+            EventKind::ActionSkipped => "action_skipped",
         }
     }
 }

@@ -290,3 +290,27 @@ pub fn assert_valid(v: &jsonschema::Validator, instance: &Value, what: &Path) {
     let errors: Vec<String> = v.iter_errors(instance).map(|e| format!("{} at {}", e, e.instance_path())).collect();
     assert!(errors.is_empty(), "{} does not match its schema:\n{}", what.display(), errors.join("\n"));
 }
+
+/// The route a car's spawn and actions describe, with the lane changes its
+/// driver plans for turns and the actions it gave up on (events.csv's
+/// `action_skipped` rows for a gap that never came). Lane changes may happen
+/// later in the simulation than planned, which changes neither the car's
+/// lanes nor its turns. A pair shares the route planned from its leader's
+/// start.
+pub fn planned_route(map: &causalcity::map::CityMap, cars: &[Car], car_id: u32, events: &[EventRow]) -> causalcity::map::Route {
+    let car = &cars[car_id as usize];
+    let actions: Vec<causalcity::map::Action> = car.actions.iter().map(|a| serde_json::from_value(a.as_str().into()).unwrap()).collect();
+    let spawn = map.lane_by_name(&car.spawn).unwrap();
+    let entry = cars
+        .iter()
+        .filter(|c| c.spawn == car.spawn && c.actions == car.actions && c.merge_distances == car.merge_distances)
+        .map(|c| c.spawn_distance)
+        .fold(car.spawn_distance, f64::max);
+    let given_up: Vec<usize> = events
+        .iter()
+        .filter(|e| e.car == car_id && e.kind == "action_skipped" && e.detail.contains("no gap"))
+        .map(|e| e.detail["DriveQueue[".len()..e.detail.find(']').unwrap()].parse().unwrap())
+        .collect();
+    let policy = causalcity::map::LanePolicy::AdaptGivingUp(given_up);
+    causalcity::map::Route::plan(map, spawn, entry, &actions, &car.merge_distances, 500.0, &policy).unwrap()
+}

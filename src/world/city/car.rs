@@ -63,6 +63,13 @@ pub(super) struct SimCar<'p> {
     /// Intervention: actions (and merge distances) waiting to replace the
     /// rest once the car is on a lane.
     pub(super) pending_actions: Option<(Vec<Action>, Vec<f64>)>,
+    /// Drive-queue actions the driver gave up on (no gap came), skipped.
+    pub(super) given_up: Vec<usize>,
+    /// Drive-queue actions whose adaptation events.csv already has.
+    pub(super) logged_adaptations: Vec<usize>,
+    /// Since when the car has waited for a lane-change gap at the last
+    /// point of its lane, seconds.
+    pub(super) waiting_since: Option<f64>,
     /// The driver's parameters now (the plan's, until a confounder changes).
     pub(super) driver: DriverParams,
     /// Multiplies the planned desired speeds (a confounder change).
@@ -110,6 +117,9 @@ impl<'p> SimCar<'p> {
             removed: false,
             actions: plan.actions.clone(),
             pending_actions: None,
+            given_up: Vec::new(),
+            logged_adaptations: Vec::new(),
+            waiting_since: None,
             driver: agency.driver,
             speed_factor: 1.0,
         }

@@ -1,11 +1,12 @@
 //! What the simulation records in `events.csv`: stop lines crossed on red,
-//! route legs completed (merges, turns, the end of the drive queue), and
-//! collisions, after which both cars stand still for a few seconds.
+//! route legs completed (merges, turns, lane changes a driver chose for a
+//! turn, the end of the drive queue), actions planning adapted or skipped,
+//! and collisions, after which both cars stand still for a few seconds.
 
 use super::Sim;
 use crate::geometry::OrientedBox;
 use crate::map::signals::Colour;
-use crate::map::{Action, LegKind};
+use crate::map::{Action, AdaptationKind, LegKind};
 use crate::world::{Event, EventKind};
 use rand::RngExt;
 
@@ -69,9 +70,19 @@ impl Sim<'_> {
             if car.s < leg.route_start + leg.length {
                 return;
             }
-            let (kind, action) = (leg.kind, leg.action);
+            let (kind, action, prepares) = (leg.kind, leg.action, leg.prepares);
             if let Some(relative) = action {
                 self.action_done(i, kind, relative, now);
+            }
+            if let (Some(relative), LegKind::LaneChange { from, to, .. }) = (prepares, kind) {
+                let car = &self.cars[i];
+                let index = car.action_base + relative;
+                let detail = format!(
+                    "{} -> {} for DriveQueue[{index}] {}",
+                    self.map.lanes[from].name, self.map.lanes[to].name, car.actions[index]
+                );
+                let id = car.plan.id;
+                self.events.push(Event { t: now, kind: EventKind::LaneChange, car: id, other: None, detail });
             }
             let car = &mut self.cars[i];
             if matches!(kind, LegKind::Connector(c) if car.committed == Some(c)) {
@@ -82,17 +93,22 @@ impl Sim<'_> {
     }
 
     /// Logs the drive-queue action (route action `relative`) that car `i`
-    /// completed on a leg of `kind`, and the end of the queue if it was the last.
+    /// completed on a leg of `kind` (nothing for a skipped turn, whose
+    /// straight move is no action), and the end of the queue if no action
+    /// after it is left to do.
     fn action_done(&mut self, i: usize, kind: LegKind, relative: usize, now: f64) {
         let car = &self.cars[i];
         let id = car.plan.id;
         let index = car.action_base + relative;
-        if let Some((kind, detail)) = self.action_event(kind, car.actions[index]) {
-            self.events.push(Event { t: now, kind, car: id, other: None, detail });
+        if !car.route.skips(relative) {
+            if let Some((kind, detail)) = self.action_event(kind, car.actions[index]) {
+                self.events.push(Event { t: now, kind, car: id, other: None, detail });
+            }
         }
         let car = &mut self.cars[i];
         car.actions_done = index + 1;
-        if index + 1 == car.actions.len() {
+        let rest_skipped = (relative + 1..car.actions.len() - car.action_base).all(|k| car.route.skips(k));
+        if rest_skipped {
             let detail = format!("{} actions", car.actions.len());
             self.events.push(Event { t: now, kind: EventKind::ActionsFinished, car: id, other: None, detail });
         }
@@ -108,9 +124,32 @@ impl Sim<'_> {
             LegKind::Connector(c) => {
                 let connector = &self.map.connectors[c];
                 let at = connector.intersection.map(|k| self.map.intersections[k].name.as_str()).unwrap_or("");
-                Some((EventKind::TurnDone, format!("{action} at {at}")))
+                Some((EventKind::TurnDone, format!("{action} at {at} from {}", self.map.lanes[connector.from].name)))
             }
             LegKind::Lane(_) => None,
+        }
+    }
+
+    /// Logs, at time `t`, each adaptation of car `i`'s route not logged yet:
+    /// `action_adapted` or `action_skipped`, the detail naming the field.
+    pub(super) fn log_adaptations(&mut self, i: usize, t: f64) {
+        let car = &self.cars[i];
+        let mut new = Vec::new();
+        for a in &car.route.adaptations {
+            let index = car.action_base + a.action_index;
+            if car.logged_adaptations.contains(&index) {
+                continue;
+            }
+            let (kind, field) = match a.kind {
+                AdaptationKind::Adapted => (EventKind::ActionAdapted, "MergeAtDistances"),
+                AdaptationKind::Skipped => (EventKind::ActionSkipped, "DriveQueue"),
+            };
+            let detail = format!("{field}[{index}] {}: {}", a.action, a.reason);
+            new.push((index, Event { t, kind, car: car.plan.id, other: None, detail }));
+        }
+        for (index, event) in new {
+            self.cars[i].logged_adaptations.push(index);
+            self.events.push(event);
         }
     }
 

@@ -1,10 +1,10 @@
 //! Interventions while the scenario runs: when each trigger holds, what each
 //! effect changes, and the one routine that re-plans a car's route from where
-//! it stands (replaced actions, deferred merges).
+//! it stands (replaced actions, lane changes given up).
 
 use super::Sim;
 use crate::map::signals::Light;
-use crate::map::{Action, LegKind, Route, RouteError};
+use crate::map::{Action, LanePolicy, LegKind, Route, RouteError};
 use crate::plan::interventions::{ConfounderName, Effect, Trigger};
 use crate::world::{Event, EventKind};
 
@@ -122,7 +122,7 @@ impl Sim<'_> {
     /// keeps its own and an event says so.
     pub(super) fn replace_actions(&mut self, i: usize, t: f64) {
         let Some((actions, merges)) = &self.cars[i].pending_actions else { return };
-        let Some((lane_s, planned)) = self.replan(i, t, actions, merges) else { return };
+        let Some((lane_s, planned)) = self.replan(i, t, actions, merges, &LanePolicy::Adapt) else { return };
         let car = &mut self.cars[i];
         let Some((actions, merges)) = car.pending_actions.take() else { return };
         match planned {
@@ -134,6 +134,10 @@ impl Sim<'_> {
                 car.merges.extend(merges);
                 car.follow_route(route, lane_s, done);
                 car.committed = None;
+                car.given_up.retain(|&k| k < done);
+                car.logged_adaptations.retain(|&k| k < done);
+                car.waiting_since = None;
+                self.log_adaptations(i, t);
             }
             Err(e) => {
                 let id = car.plan.id;
@@ -148,18 +152,36 @@ impl Sim<'_> {
         }
     }
 
-    /// Moves the merge of car `i` (route action `relative`) to `later` metres
-    /// along its lane, if the route can be re-planned that way.
-    pub(super) fn defer_merge(&mut self, i: usize, relative: Option<usize>, later: f64, t: f64) {
-        let Some(relative) = relative else { return };
+    /// Car `i` gives up the lane change just ahead of it (no gap came in
+    /// [`super::perception::LANE_CHANGE_PATIENCE`]): the merge, or the turn
+    /// the change prepared, is skipped and the route re-planned from here.
+    pub(super) fn give_up_lane_change(&mut self, i: usize, t: f64) {
         let car = &self.cars[i];
+        let Some(change) = car.route.legs.get(car.leg + 1) else { return };
+        let LegKind::LaneChange { from, to, .. } = change.kind else { return };
+        let Some(relative) = change.action.or(change.prepares) else { return };
         let index = car.action_base + relative;
-        let mut merges = car.merges.clone();
-        merges[index] = later;
-        let Some((lane_s, Ok(route))) = self.replan(i, t, &car.actions[index..], &merges[index..]) else { return };
+        let mut given_up = car.given_up.clone();
+        given_up.push(index);
+        let policy = LanePolicy::AdaptGivingUp(given_up.iter().filter_map(|&k| k.checked_sub(index)).collect());
+        let Some((lane_s, Ok(route))) = self.replan(i, t, &car.actions[index..], &car.merges[index..], &policy) else {
+            return;
+        };
+        let (from, to) = (&self.map.lanes[from].name, &self.map.lanes[to].name);
+        let instead = if change.prepares.is_some() { ": going straight on instead" } else { "" };
+        let detail = format!(
+            "DriveQueue[{index}] {}: no gap to change from {from} into {to} came in {} s{instead}",
+            car.actions[index],
+            super::perception::LANE_CHANGE_PATIENCE
+        );
+        let id = car.plan.id;
+        self.events.push(Event { t, kind: EventKind::ActionSkipped, car: id, other: None, detail });
         let car = &mut self.cars[i];
-        car.merges = merges;
+        car.given_up = given_up;
+        car.logged_adaptations.push(index);
+        car.waiting_since = None;
         car.follow_route(route, lane_s, index);
+        self.log_adaptations(i, t);
     }
 
     /// The one re-planning routine: a route for car `i` from where it stands
@@ -167,13 +189,20 @@ impl Sim<'_> {
     /// carries out `actions` (merges at `merges` metres along their lanes)
     /// and lasts until the scenario's last frame. `None` when the car is not
     /// on a lane (mid-turn or mid-merge).
-    fn replan(&self, i: usize, t: f64, actions: &[Action], merges: &[f64]) -> Option<(f64, Result<Route, RouteError>)> {
+    fn replan(
+        &self,
+        i: usize,
+        t: f64,
+        actions: &[Action],
+        merges: &[f64],
+        policy: &LanePolicy,
+    ) -> Option<(f64, Result<Route, RouteError>)> {
         let car = &self.cars[i];
         let current = &car.route.legs[car.leg];
         let LegKind::Lane(lane) = current.kind else { return None };
         let max_speed = car.agency.desired_speeds.iter().copied().fold(ROUTE_MIN_SPEED, f64::max);
         let lane_s = current.curve_start + (car.s - current.route_start);
         let min_length = lane_s + max_speed * ROUTE_SPEED_MARGIN * (self.horizon - t).max(0.0) + ROUTE_SLACK;
-        Some((lane_s, Route::plan(self.map, lane, lane_s, actions, merges, min_length)))
+        Some((lane_s, Route::plan(self.map, lane, lane_s, actions, merges, min_length, policy)))
     }
 }

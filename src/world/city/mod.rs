@@ -15,11 +15,13 @@
 //! - `mod.rs`: [`CityWorld`], the frame loop and one simulation step;
 //! - `car.rs`: a car's state while the scenario runs, and its pose;
 //! - `perception.rs`: what a driver sees (track occupancy, the leader ahead,
-//!   stop lines and lights, crossing traffic, curves, merge gaps);
+//!   stop lines and lights, crossing traffic, curves, lane-change gaps and
+//!   the wait for them);
 //! - `driving.rs`: each decision (target speed from the model) and the motion
 //!   between decisions;
 //! - `interventions.rs`: triggers, effects and the one re-planning routine;
-//! - `events.rs`: red-light runs, completed actions and collisions.
+//! - `events.rs`: red-light runs, completed actions, lane changes and
+//!   adaptations of the drive queue, and collisions.
 //!
 //! Units: metres, seconds, metres per second.
 
@@ -140,7 +142,7 @@ impl<'a> Sim<'a> {
     fn new(map: &'a CityMap, plan: &'a ScenarioPlan, city: &'a CityPlan, model: &'a dyn CarFollowing) -> Sim<'a> {
         let cars =
             plan.cars.iter().zip(&city.agency).map(|(c, agency)| SimCar::new(c, agency, city.sim_stream)).collect();
-        Sim {
+        let mut sim = Sim {
             map,
             city,
             model,
@@ -154,7 +156,12 @@ impl<'a> Sim<'a> {
             occupancy: vec![Vec::new(); map.track_count()],
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
+        };
+        // What planning adapted shows at the start.
+        for i in 0..sim.cars.len() {
+            sim.log_adaptations(i, 0.0);
         }
+        sim
     }
 
     /// One step from `t` to `t + dt` seconds: interventions, re-plans, who is

@@ -6,8 +6,12 @@
 use super::Sim;
 use crate::map::curve::Curve;
 use crate::map::signals::{Colour, LightState, Signal};
+use crate::map::route::last_change_start;
 use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
 
+/// How long a driver waits at the last point of its lane for a lane-change
+/// gap before it gives the action up, seconds.
+pub(super) const LANE_CHANGE_PATIENCE: f64 = 20.0;
 /// How far ahead along its route a driver looks, metres.
 const LOOKAHEAD: f64 = 30.0;
 /// A car on a sibling movement (same lane, other turn) counts as ahead of
@@ -233,49 +237,84 @@ impl Sim<'_> {
         limit
     }
 
-    /// For a merge about to start: `None` when car `i` may go on (the gap is
-    /// fine, or the merge was moved further along the lane), else the distance
-    /// to the merge start where it has to wait, metres.
+    /// For a lane change about to start (a merge, or one the driver planned
+    /// for a turn): `None` when car `i` may go on (the gap is fine, or the
+    /// change was moved further along the lane), else the distance to the
+    /// change's start where it has to wait, metres. A car that has waited
+    /// [`LANE_CHANGE_PATIENCE`] at the last feasible point gives the action up.
     pub(super) fn merge_wait(&mut self, i: usize, t: f64) -> Option<f64> {
         let car = &self.cars[i];
         let next = car.leg + 1;
-        let (Some(current), Some(change)) = (car.route.legs.get(car.leg), car.route.legs.get(next)) else {
+        let upcoming = match (car.route.legs.get(car.leg), car.route.legs.get(next)) {
+            (Some(current), Some(change)) => match change.kind {
+                LegKind::LaneChange { from, to, at } if current.kind == LegKind::Lane(from) => {
+                    Some((change, from, to, at))
+                }
+                _ => None,
+            },
+            _ => None,
+        };
+        let Some((change, from, to, at)) = upcoming else {
+            self.cars[i].waiting_since = None;
             return None;
         };
-        let LegKind::LaneChange { from, to, at } = change.kind else { return None };
-        if current.kind != LegKind::Lane(from) {
+        let (d, for_turn) = (change.route_start - car.s, change.prepares.is_some());
+        let (v, rt) = (car.v, car.driver.reaction_time);
+        if self.merge_gap_ok(i, to, at) {
+            self.cars[i].waiting_since = None;
             return None;
         }
-        let d = change.route_start - car.s;
-        let rt = car.driver.reaction_time;
         // Looked at only within a reaction time (plus half a second) and 1.5 m.
-        if d > car.v * (rt + 0.5) + 1.5 || self.merge_gap_ok(i, to, at) {
-            return None;
+        let near = d <= v * (rt + 0.5) + 1.5;
+        if near {
+            // Moved on by the distance covered in a reaction time (at least 1 m),
+            // onto the 0.1 m grid of merge distances, while the lane is long enough.
+            let later = ((at + (v * rt + 0.5).max(1.0)) * 10.0).ceil() / 10.0;
+            let last = last_change_start(self.map, from, for_turn);
+            if later <= last + 1e-6 && self.cars[i].route.move_lane_change(self.map, next, later) {
+                return None;
+            }
         }
-        let run = self.map.layout.lane_change_length;
-        // Moved on by the distance covered in a reaction time (at least 1 m),
-        // onto the 0.1 m grid of merge distances, while the lane is long enough.
-        let later = ((at + (car.v * rt + 0.5).max(1.0)) * 10.0).ceil() / 10.0;
-        if later + run <= self.map.lanes[from].curve.length() - 1e-6 {
-            self.defer_merge(i, change.action, later, t);
-            return None;
+        // Held up by the change: waiting at its start, or at rest before it
+        // (behind a car already in the lane it wants).
+        if near || v < 0.1 {
+            let since = *self.cars[i].waiting_since.get_or_insert(t);
+            if t - since >= LANE_CHANGE_PATIENCE {
+                self.give_up_lane_change(i, t);
+                return None;
+            }
+        } else {
+            self.cars[i].waiting_since = None;
         }
-        Some(d.max(0.0))
+        near.then_some(d.max(0.0))
     }
 
-    /// Whether lane `to` has room for car `i` merging over `[at, at + run]`
-    /// metres along it: every car on it is clear by half both lengths plus
-    /// the min gap, and a car behind also by a second of its own speed.
+    /// Whether lane `to` has room for car `i` changing into it over
+    /// `[at, at + run]` metres along it: every car on it is clear by half
+    /// both lengths plus the min gap, a car behind also by a second of its
+    /// own speed, and (MOBIL's safety criterion, Kesting, Treiber and Helbing
+    /// 2007) the new follower would not have to brake harder than its
+    /// comfortable deceleration.
     fn merge_gap_ok(&self, i: usize, to: usize, at: f64) -> bool {
         let car = &self.cars[i];
         let run = self.map.layout.lane_change_length;
-        self.occupancy[to].iter().all(|&(j, pos)| {
+        let clear = self.occupancy[to].iter().all(|&(j, pos)| {
             if j == i {
                 return true;
             }
             let other = &self.cars[j];
             let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
             pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
-        })
+        });
+        let new_follower = nearest(
+            self.occupancy[to].iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)),
+        );
+        clear
+            && new_follower.is_none_or(|(d, j)| {
+                let other = &self.cars[j];
+                let gap = d - (car.plan.length + other.plan.length) / 2.0;
+                let braking = self.model.follow_acceleration(&other.driver, other.v, other.desired(), gap, car.v);
+                braking >= -other.driver.comfortable_deceleration
+            })
     }
 }

@@ -5,7 +5,7 @@
 
 use super::CityWorld;
 use crate::map::signals::{Colour, LightPlan, ScheduleStep, Signal};
-use crate::map::{Action, CityMap, LaneEnd, LaneId, Route};
+use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
 use crate::plan::confounders::Confounders;
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::{CarAgency, CarPlan, CityPlan, Role, ScenarioKey, ScenarioPlan, WorldPlan};
@@ -54,7 +54,7 @@ fn plan(
         .map(|(i, g)| {
             let spawn = lane(map, g.lane);
             let route =
-                Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0).expect("drivable test route");
+                Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0, &LanePolicy::Adapt).expect("drivable test route");
             CarPlan {
                 id: i as u32,
                 name: format!("Car_{}", i + 1),
@@ -236,4 +236,66 @@ fn a_merge_waits_until_the_car_beside_has_gone() {
     let (_, sideways) = on_lane(&map, &traj, "A1x", done, 0);
     assert!(sideways.abs() < 0.3, "{sideways:.2} m off the target lane when the merge was done");
     assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+}
+
+/// A car on A1w told to turn left at AD, which needs the inner lane A1x, and
+/// a car standing on A1x beside the last point where the change still ends
+/// before the stop line; lights on A1x green throughout.
+fn wrong_lane_for_a_left_turn(interventions: Vec<Intervention>, seconds: f64) -> Trajectories {
+    let map = CityMap::default();
+    let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 1000.0)]);
+    // Every start from 1 m ahead of the car to the last one overlaps the blocker.
+    let turning = Given { lane: "A1w", at: 14.0, actions: vec![Action::Left], merges: vec![0.0], desired: 2.0 };
+    let blocker = straight("A1x", 26.0, 0.0);
+    simulate(&map, &plan(&map, &[turning, blocker], lights, interventions, seconds))
+}
+
+#[test]
+fn a_car_changes_into_the_turn_lane_once_the_gap_comes_and_turns_from_it() {
+    let free_at = 16.0;
+    let go = Intervention {
+        trigger: Trigger::At(free_at),
+        effect: Effect::SetDesiredSpeed { car: 1, speed: 3.0 },
+        label: "blocker drives off".into(),
+    };
+    let traj = wrong_lane_for_a_left_turn(vec![go], 60.0);
+    let of_car = |kind: EventKind| traj.events.iter().filter(move |e| e.car == 0 && e.kind == kind);
+    let change: Vec<_> = of_car(EventKind::LaneChange).collect();
+    assert_eq!(change.len(), 1, "{:?}", traj.events);
+    assert_eq!(change[0].detail, "A1w -> A1x for DriveQueue[0] left");
+    assert!(change[0].t > free_at, "changed lanes at {:.1} s, while A1x was blocked until {free_at} s", change[0].t);
+    let turn: Vec<_> = of_car(EventKind::TurnDone).collect();
+    assert_eq!(turn.len(), 1, "{:?}", traj.events);
+    assert_eq!(turn[0].detail, "left at AD from A1x");
+    assert!(turn[0].t > change[0].t);
+    assert_eq!(of_car(EventKind::ActionSkipped).count(), 0);
+    // It waited in its own lane, at rest, before the stop line.
+    let map = CityMap::default();
+    let line = map.lanes[lane(&map, "A1w")].curve.length() - map.layout.stop_line_setback;
+    let waiting = ((free_at - 1.0) / FRAME) as usize;
+    let (along, sideways) = on_lane(&map, &traj, "A1w", waiting, 0);
+    assert!(sideways.abs() < 0.3, "{sideways:.2} m off A1w while waiting");
+    assert!(along + LENGTH / 2.0 < line, "front {:.2} m along, past the stop line at {line:.2} m", along + LENGTH / 2.0);
+    assert!(traj.states[waiting][0].speed < 0.05, "still rolling at {:.2} m/s", traj.states[waiting][0].speed);
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+}
+
+#[test]
+fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
+    let traj = wrong_lane_for_a_left_turn(vec![], 60.0);
+    let skipped: Vec<_> = traj.events.iter().filter(|e| e.car == 0 && e.kind == EventKind::ActionSkipped).collect();
+    assert_eq!(skipped.len(), 1, "{:?}", traj.events);
+    assert!(skipped[0].detail.starts_with("DriveQueue[0] left: no gap to change from A1w into A1x"), "{}", skipped[0].detail);
+    // It waited the whole patience at the last point, and not much longer.
+    let t = skipped[0].t;
+    assert!(t > super::perception::LANE_CHANGE_PATIENCE && t < super::perception::LANE_CHANGE_PATIENCE + 15.0, "gave up at {t:.1} s");
+    assert!(traj.events.iter().all(|e| e.car != 0 || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
+    // Then straight on through AD into A2w.
+    let map = CityMap::default();
+    let a2w = map.lanes[lane(&map, "A2w")].curve.length();
+    let on_a2w = (0..traj.frames()).filter(|&f| {
+        let (along, sideways) = on_lane(&map, &traj, "A2w", f, 0);
+        sideways.abs() < 0.3 && (1.0..a2w - 1.0).contains(&along)
+    });
+    assert!(on_a2w.count() > 5, "never drove along A2w after giving up");
 }
