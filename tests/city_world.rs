@@ -100,7 +100,13 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
                     crossings += 1;
                     let lane_id = map.lane_by_name(&lane.name).unwrap();
                     let signal = signal_after(lane_id).unwrap_or_else(|| {
-                        panic!("{}: car {car_id} crossed the stop line of {} at frame {}, not on its planned route {:?}", d.display(), lane.name, b.frame, route.kinds().collect::<Vec<_>>())
+                        panic!(
+                            "{}: car {car_id} crossed the stop line of {} at frame {}, not on its planned route {:?}",
+                            d.display(),
+                            lane.name,
+                            b.frame,
+                            route.kinds().collect::<Vec<_>>()
+                        )
                     });
                     let name = &map.intersections[intersection].name;
                     let colour = &lights[&(a.frame, name.clone(), approach.to_string(), signal.to_string())];

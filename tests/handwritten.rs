@@ -716,5 +716,8 @@ fn files_from_the_original_generator_run_with_every_adaptation_logged() {
             lane_changes += events.iter().filter(|e| e.car == id && e.kind == "lane_change").count();
         }
     }
-    assert!(planned_adaptations > 0 && lane_changes >= 10 && turns >= 20, "{planned_adaptations} {lane_changes} {turns}");
+    assert!(
+        planned_adaptations > 0 && lane_changes >= 10 && turns >= 20,
+        "{planned_adaptations} {lane_changes} {turns}"
+    );
 }

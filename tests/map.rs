@@ -153,7 +153,9 @@ fn adaptive(map: &CityMap, lane: &str, entry: f64, actions: &[Action], merges: &
 fn a_turn_from_the_wrong_lane_gets_a_lane_change_before_the_stop_line() {
     let map = CityMap::default();
     let setback = map.layout.stop_line_setback;
-    for (lane, action, target) in [("A1w", Action::Left, "A1x"), ("A1x", Action::Right, "A1w"), ("C1z", Action::Left, "C1y")] {
+    for (lane, action, target) in
+        [("A1w", Action::Left, "A1x"), ("A1x", Action::Right, "A1w"), ("C1z", Action::Left, "C1y")]
+    {
         let route = adaptive(&map, lane, 0.0, &[action], &[0.0]);
         assert!(route.adaptations.is_empty(), "{lane} {action}: {:?}", route.adaptations);
         let legs: Vec<_> = route.legs.iter().collect();

@@ -41,6 +41,7 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     // Recompute the train row from the files.
     let (mut speed, mut n, mut cars, mut stopped, mut reds, mut in_view) =
         (0.0, 0usize, 0usize, 0usize, 0usize, 0usize);
+    let (mut changers, mut adapted, mut skipped) = (0usize, 0usize, 0usize);
     for d in scenario_dirs(&city).into_iter().filter(|d| d.to_string_lossy().contains("/train/")) {
         let s = read_scenario(&d);
         let to_px = s.frame_interval * s.camera.pixels_per_metre;
@@ -56,7 +57,13 @@ fn stats_match_the_logs_and_separate_the_worlds() {
             }
             stopped += stop as usize;
         }
-        reds += read_csv::<EventRow>(&d.join("events.csv")).iter().filter(|e| e.kind == "red_light_run").count();
+        let events = read_csv::<EventRow>(&d.join("events.csv"));
+        reds += events.iter().filter(|e| e.kind == "red_light_run").count();
+        let changed: std::collections::BTreeSet<u32> =
+            events.iter().filter(|e| e.kind == "lane_change").map(|e| e.car).collect();
+        changers += changed.len();
+        adapted += events.iter().filter(|e| e.kind == "action_adapted").count();
+        skipped += events.iter().filter(|e| e.kind == "action_skipped").count();
     }
     assert_eq!(train["scenarios"], 6);
     assert_eq!(train["cars"], cars);
@@ -64,13 +71,19 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     assert!((train["stopped_share"].as_f64().unwrap() - stopped as f64 / cars as f64).abs() < 1e-12);
     assert!((train["in_view_share"].as_f64().unwrap() - in_view as f64 / n as f64).abs() < 1e-12);
     assert_eq!(train["red_light_runs"], reds);
+    assert!(changers > 0, "city drivers change lanes for their turns");
+    assert!((train["lane_change_share"].as_f64().unwrap() - changers as f64 / cars as f64).abs() < 1e-12);
+    assert_eq!(
+        (train["actions_adapted"].as_u64(), train["actions_skipped"].as_u64()),
+        (Some(adapted as u64), Some(skipped as u64))
+    );
     assert!(train["stopped_share"].as_f64().unwrap() > 0.2, "city cars stop");
     assert!(train["gap_cv_median"].as_f64().unwrap() > 0.05, "city gaps vary");
     assert!(train["p95_speed_px"].as_f64().unwrap() > train["mean_speed_px"].as_f64().unwrap());
 
     // The plain table names every column.
     let table = String::from_utf8(run(&["stats", city.to_str().unwrap()]).stdout).unwrap();
-    assert!(table.contains("gapCV") && table.contains("cars12_edges50"));
+    assert!(table.contains("gapCV") && table.contains("lanechg") && table.contains("cars12_edges50"));
 }
 
 #[test]

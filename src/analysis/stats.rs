@@ -3,8 +3,9 @@
 //! per frame), share of cars that stop (under 0.1 px/frame for 5 frames or
 //! more) and that stop on an intersection approach (light stops), scenarios
 //! with collisions, red-light runs, leader-follower distance (mean, and the
-//! median over pairs of its coefficient of variation), and the share of
-//! car-frames on camera.
+//! median over pairs of its coefficient of variation), the share of
+//! car-frames on camera, and the drivers' own lane choice: the share of cars
+//! that made a lane change for a turn, and the actions adapted or skipped.
 
 use crate::dataset::Dataset;
 use crate::map::CityMap;
@@ -40,6 +41,10 @@ pub struct SplitStats {
     pub gap_mean_m: Option<f64>,
     pub gap_cv_median: Option<f64>,
     pub in_view_share: f64,
+    /// Share of cars that changed lanes for a turn at least once.
+    pub lane_change_share: f64,
+    pub actions_adapted: usize,
+    pub actions_skipped: usize,
 }
 
 /// The whole table.
@@ -53,7 +58,7 @@ impl fmt::Display for DatasetStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6}",
+            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5}",
             "group",
             "split",
             "scen",
@@ -66,13 +71,16 @@ impl fmt::Display for DatasetStats {
             "reds",
             "gap m",
             "gapCV",
-            "inview"
+            "inview",
+            "lanechg",
+            "adapt",
+            "skip"
         )?;
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
         for r in &self.rows {
             writeln!(
                 f,
-                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}%",
+                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5}",
                 r.group,
                 r.split,
                 r.scenarios,
@@ -85,10 +93,13 @@ impl fmt::Display for DatasetStats {
                 r.red_light_runs,
                 opt(r.gap_mean_m, 2),
                 opt(r.gap_cv_median, 2),
-                100.0 * r.in_view_share
+                100.0 * r.in_view_share,
+                100.0 * r.lane_change_share,
+                r.actions_adapted,
+                r.actions_skipped
             )?;
         }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision")
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv)")
     }
 }
 
@@ -106,6 +117,10 @@ struct Tally {
     gap_means: Vec<f64>,
     gap_cvs: Vec<f64>,
     in_view: usize,
+    /// Cars with a `lane_change` event.
+    lane_changers: usize,
+    actions_adapted: usize,
+    actions_skipped: usize,
 }
 
 /// Computes the statistics of the dataset in `dir`.
@@ -145,6 +160,9 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         all.gap_means.extend(t.gap_means);
         all.gap_cvs.extend(t.gap_cvs);
         all.in_view += t.in_view;
+        all.lane_changers += t.lane_changers;
+        all.actions_adapted += t.actions_adapted;
+        all.actions_skipped += t.actions_skipped;
     }
     let target = (0.95 * all.car_frames as f64).ceil() as u64;
     let mut seen = 0;
@@ -173,6 +191,9 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         gap_mean_m: (!all.gap_means.is_empty()).then(|| all.gap_means.iter().sum::<f64>() / all.gap_means.len() as f64),
         gap_cv_median: all.gap_cvs.get(all.gap_cvs.len() / 2).copied(),
         in_view_share: all.in_view as f64 / frames,
+        lane_change_share: all.lane_changers as f64 / all.cars.max(1) as f64,
+        actions_adapted: all.actions_adapted,
+        actions_skipped: all.actions_skipped,
     }
 }
 
@@ -285,14 +306,21 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     let events = dir.join("events.csv");
     if events.exists() {
         let mut reader = csv::Reader::from_path(&events).map_err(|e| format!("{}: {e}", events.display()))?;
+        let mut changers = std::collections::BTreeSet::new();
         for row in reader.records() {
             let row = row.map_err(|e| format!("{}: {e}", events.display()))?;
             match row.get(2) {
                 Some("collision") => t.collisions += 1,
                 Some("red_light_run") => t.red_light_runs += 1,
+                Some("lane_change") => {
+                    changers.insert(row.get(3).unwrap_or_default().to_string());
+                }
+                Some("action_adapted") => t.actions_adapted += 1,
+                Some("action_skipped") => t.actions_skipped += 1,
                 _ => {}
             }
         }
+        t.lane_changers = changers.len();
     }
     Ok(t)
 }

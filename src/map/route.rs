@@ -460,10 +460,10 @@ fn place_merge(
     let lane_len = map.lanes[lane].curve.length();
     let (first, last) = (grid_up(earliest), grid_down(lane_len - run));
     if !asked.is_finite() || asked < earliest - 1e-9 {
-        let moved = format!(
-            "merge distance {asked} m lies behind the car, which is {earliest:.2} m along lane {name}"
-        );
-        return if first <= last { Ok((target, first, Some(format!("{moved}: merging from {first:.1} m")))) } else {
+        let moved = format!("merge distance {asked} m lies behind the car, which is {earliest:.2} m along lane {name}");
+        return if first <= last {
+            Ok((target, first, Some(format!("{moved}: merging from {first:.1} m"))))
+        } else {
             Err(format!("{moved}, and the lane has no room for a merge after it"))
         };
     }
@@ -473,7 +473,11 @@ fn place_merge(
             lane_len - run
         );
         return if first <= last {
-            Ok((target, last.max(first), Some(format!("{moved}; merging at {:.1} m, the last feasible point", last.max(first)))))
+            Ok((
+                target,
+                last.max(first),
+                Some(format!("{moved}; merging at {:.1} m, the last feasible point", last.max(first))),
+            ))
         } else {
             Err(format!("{moved}, and the car is already past that"))
         };
@@ -529,7 +533,13 @@ pub fn last_change_start(map: &CityMap, lane: LaneId, for_turn: bool) -> f64 {
 /// the lane allowing `turn` at its end: (target lane, start), as early as it
 /// can start ([`STRATEGIC_CHANGE_LEAD`] after the car) and ending before the
 /// stop line; or why there is none (no room, or the driver gave up).
-fn plan_turn_lane(map: &CityMap, lane: LaneId, turn: Turn, earliest: f64, given_up: bool) -> Result<(LaneId, f64), String> {
+fn plan_turn_lane(
+    map: &CityMap,
+    lane: LaneId,
+    turn: Turn,
+    earliest: f64,
+    given_up: bool,
+) -> Result<(LaneId, f64), String> {
     let name = &map.lanes[lane].name;
     let Some(target) = map.adjacent_lane(lane, turn == Turn::Left) else {
         return Err(format!("no lane beside {name} allows the turn"));

@@ -118,8 +118,8 @@ fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
 
 fn load_file(options: &RunOptions) -> Result<(Arc<CityMap>, Vec<LoadedScenario>), RunError> {
     let map = Arc::new(CityMap::default());
-    let scenarios =
-        load(&options.scenario_file, FileOptions { world: options.world, strict: options.strict }, &map).map_err(RunError::Input)?;
+    let scenarios = load(&options.scenario_file, FileOptions { world: options.world, strict: options.strict }, &map)
+        .map_err(RunError::Input)?;
     Ok((map, scenarios))
 }
 

@@ -455,10 +455,7 @@ fn resolve(
             return Err(here.err(
                 Some(&cars[j].name),
                 "SpawnAtDistance",
-                format!(
-                    "starts on top of {}: {why} (a car is {} m long)",
-                    cars[i].name, expansion.spec.car_length_m
-                ),
+                format!("starts on top of {}: {why} (a car is {} m long)", cars[i].name, expansion.spec.car_length_m),
             ));
         }
         if s != given {
@@ -469,8 +466,9 @@ fn resolve(
             ));
             let car = &mut cars[j];
             car.spawn_distance = s;
-            let route = Route::plan(map, car.spawn, s, &car.actions, &car.merge_distances, s + travel, &LanePolicy::Adapt)
-                .map_err(|e| here.err(Some(&car.name), "DriveQueue", e.to_string()))?;
+            let route =
+                Route::plan(map, car.spawn, s, &car.actions, &car.merge_distances, s + travel, &LanePolicy::Adapt)
+                    .map_err(|e| here.err(Some(&car.name), "DriveQueue", e.to_string()))?;
             car.route = Arc::new(route);
         }
         boxes.push(footprint(&cars[j], cars[j].spawn_distance));
@@ -606,7 +604,11 @@ fn resolve_vehicle(
                     Value::Number(n) => match n.as_f64().filter(|d| d.is_finite() && *d >= 0.0) {
                         Some(d) => distances.push(d),
                         None => {
-                            return Err(here.err(car, field, format!("{n} is not allowed: metres along the lane, 0 or more")))
+                            return Err(here.err(
+                                car,
+                                field,
+                                format!("{n} is not allowed: metres along the lane, 0 or more"),
+                            ))
                         }
                     },
                     // The original generator writes action names here.
@@ -637,13 +639,13 @@ fn resolve_vehicle(
     let policy = if strict { LanePolicy::Strict } else { LanePolicy::Adapt };
     let route = Route::plan(map, spawn, spawn_distance, &actions, &merge_distances, spawn_distance + travel, &policy)
         .map_err(|e| {
-            let field = if e.action.is_merge() && e.reason.contains("merge distance") {
-                format!("MergeAtDistances[{}]", e.action_index)
-            } else {
-                format!("DriveQueue[{}]", e.action_index)
-            };
-            here.err(car, field, format!("{}: {}", e.action, e.reason))
-        })?;
+        let field = if e.action.is_merge() && e.reason.contains("merge distance") {
+            format!("MergeAtDistances[{}]", e.action_index)
+        } else {
+            format!("DriveQueue[{}]", e.action_index)
+        };
+        here.err(car, field, format!("{}: {}", e.action, e.reason))
+    })?;
 
     if world == WorldKind::Toy {
         let given = [

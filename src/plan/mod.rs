@@ -104,6 +104,8 @@ pub struct CityPlan {
 }
 
 /// The world a scenario runs in, with what only that world needs.
+// One plan per scenario in flight, never stored in bulk: boxing buys nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum WorldPlan {
     /// No agency: every car covers `step_m` metres per frame.

@@ -297,9 +297,15 @@ pub fn assert_valid(v: &jsonschema::Validator, instance: &Value, what: &Path) {
 /// later in the simulation than planned, which changes neither the car's
 /// lanes nor its turns. A pair shares the route planned from its leader's
 /// start.
-pub fn planned_route(map: &causalcity::map::CityMap, cars: &[Car], car_id: u32, events: &[EventRow]) -> causalcity::map::Route {
+pub fn planned_route(
+    map: &causalcity::map::CityMap,
+    cars: &[Car],
+    car_id: u32,
+    events: &[EventRow],
+) -> causalcity::map::Route {
     let car = &cars[car_id as usize];
-    let actions: Vec<causalcity::map::Action> = car.actions.iter().map(|a| serde_json::from_value(a.as_str().into()).unwrap()).collect();
+    let actions: Vec<causalcity::map::Action> =
+        car.actions.iter().map(|a| serde_json::from_value(a.as_str().into()).unwrap()).collect();
     let spawn = map.lane_by_name(&car.spawn).unwrap();
     let entry = cars
         .iter()

@@ -71,7 +71,7 @@ def test_city_logs_load_with_the_documented_dtypes():
         assert len(lights) == 30 * 32
         events = pd.read_csv(d / "events.csv")
         assert list(events.columns) == ["frame", "t", "kind", "car", "other_car", "detail"]
-        assert set(events.kind) <= {"collision", "red_light_run", "merge_done", "turn_done", "actions_finished", "intervention"}
+        assert set(events.kind) <= {"collision", "red_light_run", "merge_done", "turn_done", "lane_change", "action_adapted", "action_skipped", "actions_finished", "intervention"}
 
 
 def test_frames_and_masks_decode_and_agree_with_the_poses(toy_scenarios):

@@ -5,8 +5,8 @@
 
 use super::Sim;
 use crate::map::curve::Curve;
-use crate::map::signals::{Colour, LightState, Signal};
 use crate::map::route::last_change_start;
+use crate::map::signals::{Colour, LightState, Signal};
 use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
 
 /// How long a driver waits at the last point of its lane for a lane-change
@@ -306,9 +306,8 @@ impl Sim<'_> {
             let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
             pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
         });
-        let new_follower = nearest(
-            self.occupancy[to].iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)),
-        );
+        let new_follower =
+            nearest(self.occupancy[to].iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)));
         clear
             && new_follower.is_none_or(|(d, j)| {
                 let other = &self.cars[j];

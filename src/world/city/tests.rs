@@ -53,8 +53,8 @@ fn plan(
         .enumerate()
         .map(|(i, g)| {
             let spawn = lane(map, g.lane);
-            let route =
-                Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0, &LanePolicy::Adapt).expect("drivable test route");
+            let route = Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0, &LanePolicy::Adapt)
+                .expect("drivable test route");
             CarPlan {
                 id: i as u32,
                 name: format!("Car_{}", i + 1),
@@ -275,7 +275,11 @@ fn a_car_changes_into_the_turn_lane_once_the_gap_comes_and_turns_from_it() {
     let waiting = ((free_at - 1.0) / FRAME) as usize;
     let (along, sideways) = on_lane(&map, &traj, "A1w", waiting, 0);
     assert!(sideways.abs() < 0.3, "{sideways:.2} m off A1w while waiting");
-    assert!(along + LENGTH / 2.0 < line, "front {:.2} m along, past the stop line at {line:.2} m", along + LENGTH / 2.0);
+    assert!(
+        along + LENGTH / 2.0 < line,
+        "front {:.2} m along, past the stop line at {line:.2} m",
+        along + LENGTH / 2.0
+    );
     assert!(traj.states[waiting][0].speed < 0.05, "still rolling at {:.2} m/s", traj.states[waiting][0].speed);
     assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
 }
@@ -285,11 +289,21 @@ fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
     let traj = wrong_lane_for_a_left_turn(vec![], 60.0);
     let skipped: Vec<_> = traj.events.iter().filter(|e| e.car == 0 && e.kind == EventKind::ActionSkipped).collect();
     assert_eq!(skipped.len(), 1, "{:?}", traj.events);
-    assert!(skipped[0].detail.starts_with("DriveQueue[0] left: no gap to change from A1w into A1x"), "{}", skipped[0].detail);
+    assert!(
+        skipped[0].detail.starts_with("DriveQueue[0] left: no gap to change from A1w into A1x"),
+        "{}",
+        skipped[0].detail
+    );
     // It waited the whole patience at the last point, and not much longer.
     let t = skipped[0].t;
-    assert!(t > super::perception::LANE_CHANGE_PATIENCE && t < super::perception::LANE_CHANGE_PATIENCE + 15.0, "gave up at {t:.1} s");
-    assert!(traj.events.iter().all(|e| e.car != 0 || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
+    assert!(
+        t > super::perception::LANE_CHANGE_PATIENCE && t < super::perception::LANE_CHANGE_PATIENCE + 15.0,
+        "gave up at {t:.1} s"
+    );
+    assert!(traj
+        .events
+        .iter()
+        .all(|e| e.car != 0 || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
     // Then straight on through AD into A2w.
     let map = CityMap::default();
     let a2w = map.lanes[lane(&map, "A2w")].curve.length();
