@@ -219,9 +219,9 @@ impl Route {
                     };
                     let (target, at) = match placement {
                         Ok((target, at, None)) => (target, at),
-                        Ok((_, _, Some(reason))) | Err(reason) if strict => return Err(error(reason)),
-                        Ok((target, at, Some(reason))) => {
-                            route.adapt(next, action, AdaptationKind::Adapted, reason);
+                        Ok((_, _, Some((problem, _)))) | Err(problem) if strict => return Err(error(problem)),
+                        Ok((target, at, Some((problem, instead)))) => {
+                            route.adapt(next, action, AdaptationKind::Adapted, format!("{problem}; {instead}"));
                             (target, at)
                         }
                         Err(reason) => {
@@ -437,15 +437,16 @@ fn grid_down(x: f64) -> f64 {
 }
 
 /// Where a merge asked for `asked` metres along `lane` can start, for a car
-/// `earliest` metres along it: (target lane, start, why it moved if it did),
-/// or why it cannot be done on this lane at all.
+/// `earliest` metres along it: (target lane, start, and if it moved: what
+/// is wrong with the distance asked, and where the merge goes instead), or
+/// why it cannot be done on this lane at all.
 fn place_merge(
     map: &CityMap,
     lane: LaneId,
     action: Action,
     asked: f64,
     earliest: f64,
-) -> Result<(LaneId, f64, Option<String>), String> {
+) -> Result<(LaneId, f64, Option<(String, String)>), String> {
     let to_left = action == Action::MergeL;
     let name = &map.lanes[lane].name;
     let Some(target) = map.adjacent_lane(lane, to_left) else {
@@ -462,7 +463,7 @@ fn place_merge(
     if !asked.is_finite() || asked < earliest - 1e-9 {
         let moved = format!("merge distance {asked} m lies behind the car, which is {earliest:.2} m along lane {name}");
         return if first <= last {
-            Ok((target, first, Some(format!("{moved}: merging from {first:.1} m"))))
+            Ok((target, first, Some((moved, format!("merging from {first:.1} m")))))
         } else {
             Err(format!("{moved}, and the lane has no room for a merge after it"))
         };
@@ -473,11 +474,8 @@ fn place_merge(
             lane_len - run
         );
         return if first <= last {
-            Ok((
-                target,
-                last.max(first),
-                Some(format!("{moved}; merging at {:.1} m, the last feasible point", last.max(first))),
-            ))
+            let at = last.max(first);
+            Ok((target, at, Some((moved, format!("merging at {at:.1} m, the last feasible point")))))
         } else {
             Err(format!("{moved}, and the car is already past that"))
         };
