@@ -404,3 +404,33 @@ fn the_default_city_design_shows_agency_and_confounding() {
     assert!(median_cv >= 0.2, "leader-follower gaps barely vary: median CV {median_cv}");
     assert!((dry_crashes as f64) < 0.05 * dry as f64, "{dry_crashes} of {dry} dry scenarios have collisions");
 }
+
+#[test]
+fn in_the_default_city_drivers_change_lanes_for_their_turns_and_turn_from_the_right_lane() {
+    let dir = fresh_dir("city-default-lanes");
+    let spec = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json");
+    gen_ok(&spec, &dir, &["--no-images", "--quiet", "--limit", "4"]);
+    let (mut cars, mut changers, mut turns) = (0usize, 0usize, 0usize);
+    for d in scenario_dirs(&dir) {
+        let s = read_scenario(&d);
+        cars += s.cars.len();
+        let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
+        let changed: BTreeSet<u32> = events.iter().filter(|e| e.kind == "lane_change").map(|e| e.car).collect();
+        changers += changed.len();
+        for e in events.iter().filter(|e| e.kind == "turn_done") {
+            // "left at AD from A1x": the lane the car turned from allows the turn.
+            let words: Vec<&str> = e.detail.split(' ').collect();
+            let letter = words.last().and_then(|lane| lane.chars().last()).unwrap();
+            let allowed = match words[0] {
+                "left" => "xy",
+                "right" => "wz",
+                _ => "wxyz",
+            };
+            assert!(allowed.contains(letter), "{}: car {}: {}", d.display(), e.car, e.detail);
+            turns += 1;
+        }
+    }
+    assert!(turns > 100, "only {turns} turns");
+    let share = changers as f64 / cars as f64;
+    assert!(share >= 0.20, "{changers} of {cars} cars ({:.1} %) changed lanes for a turn", 100.0 * share);
+}

@@ -8,7 +8,8 @@
 //! Planning is the driver's strategic layer (the lanes its actions need, as
 //! SUMO's strategic lane changes or highway-env's route planning): under
 //! [`LanePolicy::Adapt`] a turn that the current lane does not allow gets a
-//! lane change into the lane that does, as early on the lane as it fits; an
+//! lane change into the lane that does, as early as it fits (on the lane
+//! before, when the car reaches this one straight on or round a loop); an
 //! action that cannot be done as written is adapted (a merge moved to the
 //! nearest feasible point) or skipped, and each such change is recorded in
 //! [`Route::adaptations`]. [`LanePolicy::Strict`] rejects the first action
@@ -196,8 +197,8 @@ impl Route {
         let change_run = map.layout.lane_change_length;
         // The planner's state where the lane before the current one began to
         // be driven to its end, when the current lane was reached from it
-        // straight on (or round a loop): a turn lane change with no room on
-        // the current lane can be planned there instead.
+        // straight on (or round a loop): a turn's lane change is planned
+        // there when it fits, as a driver changes lanes early.
         let mut previous: Option<Snapshot> = None;
         // A lane change that look-back decided on: (lane, into, queue index served).
         let mut forced: Option<(LaneId, LaneId, usize)> = None;
@@ -255,6 +256,19 @@ impl Route {
                         if strict {
                             return Err(error(wrong_lane(map, lane, action)));
                         }
+                        // As early as it fits: on the lane before, if the car came
+                        // straight on (or round a loop) from it, else on this one.
+                        let to_left = turn == Turn::Left;
+                        let back = previous.take().filter(|p| !given_up(next) && p.has_room(map, to_left));
+                        if let Some(p) = back {
+                            let before = map.adjacent_lane(p.lane, to_left).expect("room means a lane beside");
+                            forced = Some((p.lane, before, next));
+                            (lane, lane_entry, earliest, next) = (p.lane, p.lane_entry, p.earliest, p.next);
+                            route.legs.truncate(p.legs);
+                            route.length = p.length;
+                            route.adaptations.truncate(p.adaptations);
+                            continue;
+                        }
                         match plan_turn_lane(map, lane, turn, earliest, given_up(next)) {
                             Ok((target, at)) => {
                                 route.push_lane_change(map, lane, target, lane_entry, at, None, Some(next));
@@ -264,19 +278,6 @@ impl Route {
                                 continue;
                             }
                             Err(reason) => {
-                                // No room here: change lanes on the lane before, if the
-                                // car came straight on from it and it has room.
-                                let to_left = turn == Turn::Left;
-                                let back = previous.take().filter(|p| !given_up(next) && p.has_room(map, to_left));
-                                if let Some(p) = back {
-                                    let before = map.adjacent_lane(p.lane, to_left).expect("room means a lane beside");
-                                    forced = Some((p.lane, before, next));
-                                    (lane, lane_entry, earliest, next) = (p.lane, p.lane_entry, p.earliest, p.next);
-                                    route.legs.truncate(p.legs);
-                                    route.length = p.length;
-                                    route.adaptations.truncate(p.adaptations);
-                                    continue;
-                                }
                                 route.adapt(next, action, AdaptationKind::Skipped, reason);
                                 carried_out = true;
                             }
