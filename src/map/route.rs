@@ -437,6 +437,10 @@ fn grid_down(x: f64) -> f64 {
     (x * 10.0 + 1e-6).floor() / 10.0
 }
 
+/// Why a merge moved: what is wrong with the distance asked, and where the
+/// merge goes instead.
+type Moved = (String, String);
+
 /// Where a merge asked for `asked` metres along `lane` can start, for a car
 /// `earliest` metres along it: (target lane, start, and if it moved: what
 /// is wrong with the distance asked, and where the merge goes instead), or
@@ -447,7 +451,7 @@ fn place_merge(
     action: Action,
     asked: f64,
     earliest: f64,
-) -> Result<(LaneId, f64, Option<(String, String)>), String> {
+) -> Result<(LaneId, f64, Option<Moved>), String> {
     let to_left = action == Action::MergeL;
     let name = &map.lanes[lane].name;
     let Some(target) = map.adjacent_lane(lane, to_left) else {
