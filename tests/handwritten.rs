@@ -583,36 +583,6 @@ fn intervention_files_are_read_strictly() {
     }
 }
 
-/// The original release's README example scenario, byte for byte as it
-/// gives it (its mergeR cannot be done: the lane it is on is the outer one).
-const ORIGINAL_README_EXAMPLE: &str = r#"[
-    {
-        "Name": "Scenario_1",
-        "Vehicles": [
-            {
-                "Id": "Car_1",
-                "Spawn": "C0w",
-                "SpawnAtDistance": 0,
-                "DriveQueue": [
-                    "right",
-                    "straight",
-                    "right",
-                    "mergeR",
-                    "left"
-                ],
-                "MergeAtDistances": [
-                    0,
-                    0,
-                    0,
-                    50,
-                    0
-                ]
-            }
-        ]
-   }
-]
-"#;
-
 /// Runs `file` leniently and strictly: the lenient run succeeds and each
 /// adaptation in events.csv is a warning on stderr; the strict run exits 2
 /// naming the scenario, a car and a field, and writes nothing. Returns the
@@ -654,9 +624,10 @@ fn run_lenient_and_strict(file: &Path, scenario: &str, out: &Path) -> (PathBuf, 
 
 #[test]
 fn the_original_readme_example_runs_unchanged_with_its_adaptation_logged() {
+    // The original release's README example, byte for byte as it gives it:
+    // its mergeR cannot be done (the lane is the outer one by then).
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/original-readme.json");
     let dir = fresh_dir("hw-original-readme");
-    let file = dir.join("readme-example.json");
-    std::fs::write(&file, ORIGINAL_README_EXAMPLE).unwrap();
     let (scenario, stderr) = run_lenient_and_strict(&file, "Scenario_1", &dir.join("out"));
     let events: Vec<EventRow> = read_csv(&scenario.join("events.csv"));
     let skipped: Vec<&EventRow> = events.iter().filter(|e| e.kind == "action_skipped").collect();
@@ -675,7 +646,9 @@ fn files_from_the_original_generator_run_with_every_adaptation_logged() {
     let map = causalcity::map::CityMap::default();
     let out = fresh_dir("hw-original-generator");
     let (mut planned_adaptations, mut lane_changes, mut turns) = (0, 0, 0);
+    let schema = validator("scenario-file.schema.json");
     for file in &files {
+        assert_valid(&schema, &read_json(file), file);
         let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
         let (dir, stderr) = run_lenient_and_strict(file, "Scenario", &out.join(&stem));
         // One warning per car for the merge names in MergeAtDistances.
