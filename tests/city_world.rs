@@ -434,3 +434,68 @@ fn in_the_default_city_drivers_change_lanes_for_their_turns_and_turn_from_the_ri
     let share = changers as f64 / cars as f64;
     assert!(share >= 0.20, "{changers} of {cars} cars ({:.1} %) changed lanes for a turn", 100.0 * share);
 }
+
+/// How far ahead along its route a driver looks, metres (the city world's
+/// look-ahead).
+const LOOKAHEAD_M: f64 = 30.0;
+
+#[test]
+fn interactions_name_a_car_ahead_on_the_path_within_the_look_ahead() {
+    let out = dataset();
+    let (mut checked, mut kinds) = (0, BTreeSet::new());
+    for d in scenario_dirs(&out).into_iter().take(20) {
+        let s = read_scenario(&d);
+        let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
+        let rows: Vec<InteractionRow> = read_csv(&d.join("interactions.csv"));
+        assert_eq!(rows.len(), s.frames as usize * s.cars.len(), "{}: one row per frame and car", d.display());
+        for (k, row) in rows.iter().enumerate() {
+            // Sorted by frame, then car.
+            assert_eq!((row.frame as usize, row.car as usize), (k / s.cars.len(), k % s.cars.len()));
+            kinds.insert(row.bound_by.clone());
+            match row.bound_by.as_str() {
+                "car" | "conflict" | "collision" => assert!(row.other_car.is_some() && row.light.is_none(), "{row:?}"),
+                "light" => assert!(row.light.is_some() && row.other_car.is_none(), "{row:?}"),
+                _ => assert!(row.light.is_none() && row.other_car.is_none(), "{row:?}"),
+            }
+            if row.bound_by != "car" {
+                continue;
+            }
+            // The car named lies ahead on this car's own path (where its
+            // later poses pass, lane changes included), its centre within the
+            // look-ahead (plus the sideways wander of both).
+            let (me, other) = (&by_car[&row.car], &by_car[&row.other_car.unwrap()]);
+            let f = row.frame as usize;
+            let target = DVec2::new(other[f].x, other[f].y);
+            let mut along = 0.0;
+            let mut found = None;
+            for g in f..me.len() {
+                if g > f {
+                    along += DVec2::new(me[g].x - me[g - 1].x, me[g].y - me[g - 1].y).length();
+                }
+                if along > LOOKAHEAD_M + 1.0 {
+                    break;
+                }
+                if DVec2::new(me[g].x, me[g].y).distance(target) < 3.5 {
+                    found = Some(along);
+                    break;
+                }
+            }
+            let remaining = along;
+            match found {
+                Some(_) => checked += 1,
+                // The scenario ended before this car got there: cannot tell.
+                None if remaining <= LOOKAHEAD_M + 1.0 => {}
+                None => panic!(
+                    "{}: frame {f}: car {} bound by car {} which is not ahead on its path",
+                    d.display(),
+                    row.car,
+                    row.other_car.unwrap()
+                ),
+            }
+        }
+    }
+    assert!(checked > 500, "only {checked} car bindings checked");
+    for kind in ["free", "car", "light"] {
+        assert!(kinds.contains(kind), "no {kind} rows: {kinds:?}");
+    }
+}

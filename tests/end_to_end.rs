@@ -149,9 +149,12 @@ fn the_city_layout_matches_data_schema_and_validates() {
         let scenario = read_json(&d.join("scenario.json"));
         assert_valid(&scenario_schema, &scenario, &d.join("scenario.json"));
         assert!(scenario["city"]["effects"]["desired_speed_factor"].is_number());
-        for (file, schema, rows_per_frame) in
-            [("lights.csv", "lights.schema.json", Some(32)), ("events.csv", "events.schema.json", None)]
-        {
+        let cars = scenario["cars"].as_array().unwrap().len();
+        for (file, schema, rows_per_frame) in [
+            ("lights.csv", "lights.schema.json", Some(32)),
+            ("events.csv", "events.schema.json", None),
+            ("interactions.csv", "interactions.schema.json", Some(cars)),
+        ] {
             let mut reader = csv::Reader::from_path(d.join(file)).unwrap();
             let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
             assert_eq!(header, columns(schema), "{file} columns");

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! scenario.json  poses.csv  pixels.npy  checksums.sha256
-//! lights.csv  events.csv                      (city world)
+//! lights.csv  events.csv  interactions.csv    (city world)
 //! annotations.json                            (--annotations)
 //! rgb/NNNN.png  mask/NNNN.png                 (images)
 //! cameras/<name>/{rgb,mask,depth}/NNNN.png  cameras/<name>/poses.csv
@@ -21,6 +21,8 @@ pub const POSES_CSV: &str = "poses.csv";
 pub const LIGHTS_CSV: &str = "lights.csv";
 /// City world: what happened, in time order.
 pub const EVENTS_CSV: &str = "events.csv";
+/// What bound each car's speed, per frame (city world).
+pub const INTERACTIONS_CSV: &str = "interactions.csv";
 /// Folder of the extra cameras.
 pub const CAMERAS: &str = "cameras";
 
@@ -129,7 +131,7 @@ impl ScenarioLayout {
     pub fn files(&self) -> Vec<String> {
         let mut names: Vec<String> = vec![SCENARIO_JSON.into(), POSES_CSV.into(), PIXELS_FILE.into()];
         if self.city {
-            names.extend([LIGHTS_CSV.into(), EVENTS_CSV.into()]);
+            names.extend([LIGHTS_CSV.into(), EVENTS_CSV.into(), INTERACTIONS_CSV.into()]);
         }
         if self.annotations {
             names.push(ANNOTATIONS_FILE.into());

@@ -1,5 +1,6 @@
-//! `lights.csv` and `events.csv` (city world). Columns are documented in
-//! `data-schema/lights.schema.json` and `data-schema/events.schema.json`.
+//! `lights.csv`, `events.csv` and `interactions.csv` (city world). Columns
+//! are documented in `data-schema/lights.schema.json`,
+//! `data-schema/events.schema.json` and `data-schema/interactions.schema.json`.
 
 use super::poses::Fields;
 use crate::map::signals::LightPlan;
@@ -9,6 +10,7 @@ use std::io::Write;
 
 pub const LIGHT_COLUMNS: [&str; 7] = ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"];
 pub const EVENT_COLUMNS: [&str; 6] = ["frame", "t", "kind", "car", "other_car", "detail"];
+pub const INTERACTION_COLUMNS: [&str; 5] = ["frame", "car", "bound_by", "other_car", "light"];
 
 fn round(x: f64, decimals: i32) -> f64 {
     let f = 10f64.powi(decimals);
@@ -68,6 +70,40 @@ pub fn write_events<W: Write>(out: W, trajectories: &Trajectories) -> csv::Resul
             other_car: e.other,
             detail: &e.detail,
         })?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// One row per frame and car (cars in id order): what bound the car's speed
+/// choice at its latest decision, and the other car or the light
+/// (`AC/W/straight`, as scenario files name lights) it names.
+pub fn write_interactions<W: Write>(
+    out: W,
+    plan: &LightPlan,
+    intersection_names: &[String],
+    trajectories: &Trajectories,
+) -> csv::Result<()> {
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
+    w.write_record(INTERACTION_COLUMNS)?;
+    let mut fields = Fields::default();
+    let light_names: Vec<String> = plan
+        .lights
+        .iter()
+        .map(|l| format!("{}/{}/{}", intersection_names[l.intersection], l.approach, l.signal.name()))
+        .collect();
+    for (frame, cars) in trajectories.interactions.iter().enumerate() {
+        for (car, interaction) in cars.iter().enumerate() {
+            fields.int(&mut w, frame as u64)?;
+            fields.int(&mut w, car as u64)?;
+            w.write_field(interaction.bound_by.name())?;
+            match interaction.other_car {
+                Some(other) => fields.int(&mut w, other as u64)?,
+                None => w.write_field("")?,
+            }
+            w.write_field(interaction.light.map_or("", |l| light_names[l].as_str()))?;
+            w.write_record(None::<&[u8]>)?;
+        }
     }
     w.flush()?;
     Ok(())

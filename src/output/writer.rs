@@ -5,8 +5,10 @@
 //! renderers as plain data; it knows nothing of dynamics.
 
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
-use super::layout::{CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON};
-use super::logs::{write_events, write_lights};
+use super::layout::{
+    CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
+};
+use super::logs::{write_events, write_interactions, write_lights};
 use super::manifest::Products;
 use super::number::{logged_value, push_fixed};
 use super::png::{encode_png, PixelFormat, PngSettings};
@@ -116,6 +118,7 @@ impl ScenarioWriter {
             let names = &self.intersection_names;
             bytes += dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, trajectories))?;
             bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, trajectories))?;
+            bytes += dir.write_with(INTERACTIONS_CSV, |w| write_interactions(w, &city.lights, names, trajectories))?;
         }
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
             let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };

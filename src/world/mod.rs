@@ -74,6 +74,56 @@ impl EventKind {
     }
 }
 
+/// What bound a city car's speed choice: the constraint that gave the
+/// lowest target speed at its latest decision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BoundBy {
+    /// Nothing but its own desired speed.
+    Free,
+    /// The car ahead on its path.
+    Car,
+    /// A stop line at a red or yellow light.
+    Light,
+    /// A car still crossing the intersection on a conflicting movement.
+    Conflict,
+    /// Waiting for a lane-change gap.
+    Merge,
+    /// A curve ahead.
+    Curve,
+    /// Standing after a collision.
+    Collision,
+    /// Held by an intervention (stopped, or removed).
+    Intervention,
+}
+
+impl BoundBy {
+    pub fn name(self) -> &'static str {
+        match self {
+            BoundBy::Free => "free",
+            BoundBy::Car => "car",
+            BoundBy::Light => "light",
+            BoundBy::Conflict => "conflict",
+            BoundBy::Merge => "merge",
+            BoundBy::Curve => "curve",
+            BoundBy::Collision => "collision",
+            BoundBy::Intervention => "intervention",
+        }
+    }
+}
+
+/// One car's binding constraint at one frame, with the other car or the
+/// light it names (light index in the scenario's light plan).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interaction {
+    pub bound_by: BoundBy,
+    pub other_car: Option<u32>,
+    pub light: Option<usize>,
+}
+
+impl Interaction {
+    pub const FREE: Interaction = Interaction { bound_by: BoundBy::Free, other_car: None, light: None };
+}
+
 /// The simulated scenario: `states[frame][car]`, cars in plan (id) order.
 #[derive(Debug, Clone)]
 pub struct Trajectories {
@@ -86,6 +136,9 @@ pub struct Trajectories {
     /// Confounder changes made by interventions: (first frame, new values),
     /// in order; empty when the scenario's confounders hold throughout.
     pub confounder_changes: Vec<(usize, Confounders)>,
+    /// City world: `interactions[frame][car]`, what bound each car's speed
+    /// choice at its latest decision; empty for the toy world.
+    pub interactions: Vec<Vec<Interaction>>,
 }
 
 impl Trajectories {

@@ -29,5 +29,6 @@ pub fn simulate(plan: &ScenarioPlan, step: f64) -> Trajectories {
         lights: Vec::new(),
         events: Vec::new(),
         confounder_changes: Vec::new(),
+        interactions: Vec::new(),
     }
 }

@@ -320,3 +320,13 @@ pub fn planned_route(
     let policy = causalcity::map::LanePolicy::AdaptGivingUp(given_up);
     causalcity::map::Route::plan(map, spawn, entry, &actions, &car.merge_distances, 500.0, &policy).unwrap()
 }
+
+/// One row of interactions.csv.
+#[derive(Debug, Clone, Deserialize)]
+pub struct InteractionRow {
+    pub frame: u32,
+    pub car: u32,
+    pub bound_by: String,
+    pub other_car: Option<u32>,
+    pub light: Option<String>,
+}

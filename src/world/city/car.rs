@@ -6,7 +6,7 @@ use crate::geometry::OrientedBox;
 use crate::map::{Action, Route};
 use crate::plan::{CarAgency, CarPlan};
 use crate::spec::DriverParams;
-use crate::world::CarState;
+use crate::world::{CarState, Interaction};
 use glam::DVec2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -70,6 +70,10 @@ pub(super) struct SimCar<'p> {
     /// Since when the car has waited for a lane-change gap at the last
     /// point of its lane, seconds.
     pub(super) waiting_since: Option<f64>,
+    /// What bound the latest decision (for interactions.csv).
+    pub(super) binding: Interaction,
+    /// The car it last collided with.
+    pub(super) collided_with: Option<u32>,
     /// The driver's parameters now (the plan's, until a confounder changes).
     pub(super) driver: DriverParams,
     /// Multiplies the planned desired speeds (a confounder change).
@@ -120,6 +124,8 @@ impl<'p> SimCar<'p> {
             given_up: Vec::new(),
             logged_adaptations: Vec::new(),
             waiting_since: None,
+            binding: Interaction::FREE,
+            collided_with: None,
             driver: agency.driver,
             speed_factor: 1.0,
         }

@@ -3,7 +3,9 @@
 //! decision) and the car's motion between decisions.
 
 use super::car::{normal, SimCar};
+use super::perception::Stop;
 use super::Sim;
+use crate::world::{BoundBy, Interaction};
 
 /// Largest sideways wander from the lane centre, metres.
 const MAX_WANDER: f64 = 0.4;
@@ -18,7 +20,9 @@ impl Sim<'_> {
     /// error and wander target.
     pub(super) fn decide(&mut self, i: usize, t: f64, dt: f64) {
         if t < self.cars[i].hold_until {
-            self.cars[i].accel = 0.0;
+            let car = &mut self.cars[i];
+            car.accel = 0.0;
+            car.binding = Interaction { bound_by: BoundBy::Collision, other_car: car.collided_with, light: None };
             return;
         }
         let model = self.model;
@@ -26,21 +30,42 @@ impl Sim<'_> {
             let car = &self.cars[i];
             (car.driver, car.v, car.desired())
         };
+        // The lowest target wins; on a tie the constraint found first.
         let mut target = model.free_speed(&p, v, desired, dt);
-        if let Some((gap, leader_speed)) = self.leader_ahead(i) {
+        let mut binding = Interaction::FREE;
+        let mut bind = |speed: f64, by: Interaction| {
+            if speed < target {
+                target = speed;
+                binding = by;
+            }
+        };
+        if let Some((gap, leader_speed, j)) = self.leader_ahead(i) {
             let perceived = gap * (p.perception_noise * self.cars[i].noise).exp();
-            target = target.min(model.follow_speed(&p, v, desired, perceived, leader_speed, dt));
+            let other = Some(self.cars[j].plan.id);
+            bind(
+                model.follow_speed(&p, v, desired, perceived, leader_speed, dt),
+                Interaction { bound_by: BoundBy::Car, other_car: other, light: None },
+            );
         }
-        if let Some(distance) = self.stop_ahead(i, t) {
-            target = target.min(model.stop_speed(&p, v, desired, distance, dt));
+        if let Some((distance, stop)) = self.stop_ahead(i, t) {
+            let by = match stop {
+                Stop::Light(light) => Interaction { bound_by: BoundBy::Light, other_car: None, light: Some(light) },
+                Stop::Crossing(j) => {
+                    Interaction { bound_by: BoundBy::Conflict, other_car: Some(self.cars[j].plan.id), light: None }
+                }
+            };
+            bind(model.stop_speed(&p, v, desired, distance, dt), by);
         }
-        target = target.min(self.curve_limit(i));
+        bind(self.curve_limit(i), Interaction { bound_by: BoundBy::Curve, other_car: None, light: None });
         if let Some(distance) = self.merge_wait(i, t) {
-            target = target.min(model.stop_speed(&p, v, desired, distance, dt));
+            let by = Interaction { bound_by: BoundBy::Merge, other_car: None, light: None };
+            bind(model.stop_speed(&p, v, desired, distance, dt), by);
         }
         if t < self.cars[i].stopped_until {
             target = 0.0;
+            binding = Interaction { bound_by: BoundBy::Intervention, other_car: None, light: None };
         }
+        self.cars[i].binding = binding;
         let rho = (-p.reaction_time / 2.0).exp();
         let car = &mut self.cars[i];
         let draw = normal(&mut car.rng);

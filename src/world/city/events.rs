@@ -199,8 +199,10 @@ impl Sim<'_> {
             other: Some(b.plan.id),
             detail: format!("speeds {:.2} and {:.2} m/s", a.v, b.v),
         });
-        for k in [i, j] {
+        let ids = [self.cars[i].plan.id, self.cars[j].plan.id];
+        for (k, other) in [(i, ids[1]), (j, ids[0])] {
             let car = &mut self.cars[k];
+            car.collided_with = Some(other);
             let stop = car.rng.random_range(2.0..5.0);
             car.v = 0.0;
             car.accel = 0.0;

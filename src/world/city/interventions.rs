@@ -6,7 +6,7 @@ use super::Sim;
 use crate::map::signals::Light;
 use crate::map::{Action, LanePolicy, LegKind, Route, RouteError};
 use crate::plan::interventions::{ConfounderName, Effect, Trigger};
-use crate::world::{Event, EventKind};
+use crate::world::{BoundBy, Event, EventKind, Interaction};
 
 /// A re-planned route must reach this many times the car's fastest planned
 /// desired speed times the time left, so it outlasts the scenario even if
@@ -80,7 +80,11 @@ impl Sim<'_> {
                 car.desired_override = Some(speed);
                 car.next_decision = t;
             }
-            Effect::Remove { car } => self.cars[car].removed = true,
+            Effect::Remove { car } => {
+                let car = &mut self.cars[car];
+                car.removed = true;
+                car.binding = Interaction { bound_by: BoundBy::Intervention, other_car: None, light: None };
+            }
             Effect::SetLight { light, colour, seconds } => {
                 self.light_overrides.push((light, colour, t, t + seconds));
                 // Drivers see the change at their next decision.

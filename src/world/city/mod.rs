@@ -82,12 +82,14 @@ impl CityWorld {
                 lights: vec![],
                 events: vec![],
                 confounder_changes: vec![],
+                interactions: vec![],
             };
         }
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = plan.frame_interval / steps as f64;
         let mut states = Vec::with_capacity(plan.frames as usize);
         let mut lights = Vec::with_capacity(plan.frames as usize);
+        let mut interactions = Vec::with_capacity(plan.frames as usize);
         for frame in 0..plan.frames as usize {
             if frame > 0 {
                 for k in 0..steps {
@@ -99,6 +101,7 @@ impl CityWorld {
             // Interventions due now show in this frame's record (lights).
             sim.fire_interventions(t, dt);
             states.push(sim.cars.iter().map(SimCar::state).collect());
+            interactions.push(sim.cars.iter().map(|c| c.binding).collect());
             lights.push((0..city.lights.lights.len()).map(|l| sim.light_state(l, t)).collect());
         }
         // A change shows from the first frame at or after it.
@@ -107,7 +110,14 @@ impl CityWorld {
             .iter()
             .map(|&(t, c)| (((t / plan.frame_interval) - 1e-9).ceil().max(0.0) as usize, c))
             .collect();
-        Trajectories { frame_interval: plan.frame_interval, states, lights, events: sim.events, confounder_changes }
+        Trajectories {
+            frame_interval: plan.frame_interval,
+            states,
+            lights,
+            events: sim.events,
+            confounder_changes,
+            interactions,
+        }
     }
 }
 

@@ -18,6 +18,15 @@ const LOOKAHEAD: f64 = 30.0;
 /// cars behind it until it is this far into its turn, metres.
 const SIBLING_CLEARANCE: f64 = 3.0;
 
+/// Why a driver must stop before an intersection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Stop {
+    /// Its light (index in the plan) shows red, or yellow it can stop for.
+    Light(usize),
+    /// This car is still crossing the box on a conflicting movement.
+    Crossing(usize),
+}
+
 /// A candidate car ahead: (distance along the route to its centre, car).
 type Candidate = (f64, usize);
 
@@ -70,16 +79,18 @@ impl Sim<'_> {
         claims.then(|| (self.map.connector_track(c), -to_box.max(0.0) - 1.0))
     }
 
-    /// The nearest car ahead on car `i`'s path within [`LOOKAHEAD`]: (bumper
-    /// gap in metres, its speed in m/s).
-    pub(super) fn leader_ahead(&self, i: usize) -> Option<(f64, f64)> {
+    /// The nearest car ahead on car `i`'s path whose centre is within
+    /// [`LOOKAHEAD`] of its own along the route: (bumper gap in metres, its
+    /// speed in m/s, the car).
+    pub(super) fn leader_ahead(&self, i: usize) -> Option<(f64, f64, usize)> {
         let car = &self.cars[i];
         let (d, j) = car.route.legs[car.leg..]
             .iter()
             .take_while(|leg| leg.route_start - car.s <= LOOKAHEAD)
-            .find_map(|leg| self.nearest_on_leg(i, leg))?;
+            .find_map(|leg| self.nearest_on_leg(i, leg))
+            .filter(|&(d, _)| d <= LOOKAHEAD)?;
         let other = &self.cars[j];
-        Some((d - (car.plan.length + other.plan.length) / 2.0, other.v))
+        Some((d - (car.plan.length + other.plan.length) / 2.0, other.v, j))
     }
 
     /// The nearest other car ahead of car `i` on `leg` of its route: on the
@@ -137,9 +148,10 @@ impl Sim<'_> {
     }
 
     /// Distance from car `i`'s front to where it must stop for a light or for
-    /// cars crossing the intersection, if it must, metres. Records the
-    /// connector the car commits to once it is too close to stop comfortably.
-    pub(super) fn stop_ahead(&mut self, i: usize, t: f64) -> Option<f64> {
+    /// cars crossing the intersection, if it must (metres), and why. Records
+    /// the connector the car commits to once it is too close to stop
+    /// comfortably.
+    pub(super) fn stop_ahead(&mut self, i: usize, t: f64) -> Option<(f64, Stop)> {
         let car = &self.cars[i];
         let front = car.front();
         let p = &car.driver;
@@ -163,9 +175,14 @@ impl Sim<'_> {
             // car that has come to rest before its line is committed no more.
             let committed = car.committed == Some(c) && car.v > 0.1;
             let must_stop = !committed && self.stops_for(light, t, braking, dist);
-            let crossing = dist < braking + 2.0 && self.conflict_occupied(c);
-            if must_stop || crossing {
-                stop = Some(dist.max(0.0));
+            let crossing = if dist < braking + 2.0 { self.conflict_occupant(c) } else { None };
+            let why = match (must_stop, crossing) {
+                (true, _) => Some(Stop::Light(light)),
+                (false, Some(j)) => Some(Stop::Crossing(j)),
+                (false, None) => None,
+            };
+            if let Some(why) = why {
+                stop = Some((dist.max(0.0), why));
                 break;
             }
             if car.v > 0.1 && dist < braking {
@@ -213,9 +230,13 @@ impl Sim<'_> {
         }
     }
 
-    /// Whether any car is on (or has claimed) a connector crossing `connector`.
-    fn conflict_occupied(&self, connector: usize) -> bool {
-        self.map.conflicts(connector).iter().any(|&other| !self.occupancy[self.map.connector_track(other)].is_empty())
+    /// A car on (or claiming) a connector crossing `connector`, if any: the
+    /// first found.
+    fn conflict_occupant(&self, connector: usize) -> Option<usize> {
+        self.map
+            .conflicts(connector)
+            .iter()
+            .find_map(|&other| self.occupancy[self.map.connector_track(other)].first().map(|&(j, _)| j))
     }
 
     /// Highest speed (m/s) that still lets car `i` slow to the curve speed of
