@@ -59,10 +59,30 @@ impl Default for MapLayout {
     }
 }
 
+/// Room a car needs on a lane that ends at an intersection beyond the lane
+/// change and the stop-line setback, metres: with both, the shortest such
+/// lane on which a car can still change lanes before its turn.
+pub const APPROACH_MARGIN_M: f64 = 4.0;
+
 impl MapLayout {
     /// Half the width of a road (two lanes each way).
     pub fn road_half_width(&self) -> f64 {
         2.0 * self.lane_width
+    }
+
+    /// Shortest allowed lane ending at an intersection, metres:
+    /// `lane_change_length + stop_line_setback + APPROACH_MARGIN_M`.
+    pub fn min_approach_length(&self) -> f64 {
+        self.lane_change_length + self.stop_line_setback + APPROACH_MARGIN_M
+    }
+
+    /// What the bird's-eye camera must show: the four intersection boxes and
+    /// the stop lines before them, as (min corner, max corner), metres.
+    pub fn framed_area(&self) -> (DVec2, DVec2) {
+        let reach = self.road_half_width() + self.stop_line_setback;
+        let xs = [self.north_south_roads[0].1, self.north_south_roads[1].1];
+        let ys = [self.east_west_roads[0].1, self.east_west_roads[1].1];
+        (DVec2::new(xs[0] - reach, ys[0] - reach), DVec2::new(xs[1] + reach, ys[1] + reach))
     }
 }
 

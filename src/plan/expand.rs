@@ -52,9 +52,16 @@ const SPAWN_CLEARANCE: f64 = 0.1;
 const PLACEMENT_ATTEMPTS: usize = 2000;
 
 impl Expansion {
+    /// The spec's map (`map` section) and camera, checked as [`Expansion::new`] does.
+    pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
+        spec.map.validate()?;
+        let map = Arc::new(CityMap::new(spec.map.layout()));
+        Expansion::new(spec, map)
+    }
+
     /// Checks that every group can be planned on this map and camera.
     pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
-        let camera = Camera::birds_eye(spec.image.width, spec.image.height);
+        let camera = spec.birds_eye_camera()?;
         let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px);
         if leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
             return Err(SpecError::new(
