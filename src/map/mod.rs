@@ -46,13 +46,19 @@ pub struct MapLayout {
 }
 
 impl Default for MapLayout {
+    /// Roads 28 m apart both ways (a 16 m square central block) and every
+    /// road 16 m long beyond its intersection, the least that
+    /// [`MapLayout::min_approach_length`] allows: at the original's 40 m
+    /// camera (80 m x 50 m) the east-west roads turn back almost wholly in
+    /// view and the north-south ones 11 m beyond it, so cars spend little
+    /// time off camera.
     fn default() -> Self {
         MapLayout {
             lane_width: 3.0,
             east_west_roads: [('B', -14.0), ('A', 14.0)],
-            north_south_roads: [('C', -24.0), ('D', 24.0)],
-            extent_x: 52.0,
-            extent_y: 37.0,
+            north_south_roads: [('C', -14.0), ('D', 14.0)],
+            extent_x: 36.0,
+            extent_y: 36.0,
             lane_change_length: 8.0,
             stop_line_setback: 3.6,
         }

@@ -195,7 +195,12 @@ fn a_queue_at_red_discharges_in_order_once_green() {
 
 #[test]
 fn a_merge_waits_until_the_car_beside_has_gone() {
-    let map = CityMap::default();
+    // Blocks 48 m wide, so that A1w is 36 m long.
+    let map = CityMap::new(crate::map::MapLayout {
+        north_south_roads: [('C', -24.0), ('D', 24.0)],
+        extent_x: 52.0,
+        ..Default::default()
+    });
     let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 100.0)]);
     // The merge starts at the last possible place (A1w is 36 m, a merge takes
     // 8 m), so it cannot be moved along: the car must wait for the gap.
