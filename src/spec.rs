@@ -559,11 +559,31 @@ pub struct LightsSpec {
     /// Seconds added to the clock of each intersection, in the order AC, AD, BC, BD.
     pub offsets: Vec<f64>,
     pub overrides: Vec<LightOverride>,
+    /// Where in its cycle each scenario starts. Absent: `random` in a
+    /// dataset spec, `fixed` in a scenario file (one scenario written out
+    /// by hand, timed by its author).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phase: Option<LightPhase>,
+}
+
+/// Where each scenario's lights start in their cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightPhase {
+    /// Each scenario draws one point of the cycle (uniform over one period),
+    /// shared by every light, on top of `offsets`: the intersections keep
+    /// their relative timing.
+    Random,
+    /// Each scenario draws a point of the cycle per intersection, on top of
+    /// `offsets`.
+    RandomPerIntersection,
+    /// Every scenario starts the cycle at 0, shifted by `offsets` only.
+    Fixed,
 }
 
 impl Default for LightsSpec {
     fn default() -> Self {
-        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new() }
+        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new(), phase: None }
     }
 }
 
@@ -762,7 +782,11 @@ impl DatasetSpec {
             leader_gap_px: default_leader_gap(),
             car_length_m: default_car_length(),
             car_width_m: default_car_width(),
-            city,
+            // A hand-written scenario is timed by its author: lights start at 0 unless it says otherwise.
+            city: city.map(|mut c| {
+                c.lights.phase.get_or_insert(LightPhase::Fixed);
+                c
+            }),
             cameras: Vec::new(),
             map: MapSpec::default(),
         }
@@ -922,7 +946,9 @@ impl DatasetSpec {
         let mut spec = self.clone();
         spec.frame_interval = Some(self.frame_interval());
         if self.world == WorldKind::City {
-            spec.city = Some(self.city_settings());
+            let mut city = self.city_settings();
+            city.lights.phase.get_or_insert(LightPhase::Random);
+            spec.city = Some(city);
         }
         spec
     }

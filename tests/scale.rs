@@ -47,3 +47,64 @@ fn most_car_frames_of_the_default_datasets_are_on_camera() {
         assert!((weighted / frames - share).abs() < 1e-9, "{world}: stats says {}", weighted / frames);
     }
 }
+
+/// lights.csv of every scenario under `root`, in dataset order.
+fn all_lights(root: &Path) -> Vec<(PathBuf, String)> {
+    scenario_dirs(root)
+        .into_iter()
+        .map(|d| (d.clone(), std::fs::read_to_string(d.join("lights.csv")).unwrap()))
+        .collect()
+}
+
+/// First-frame rows of poses.csv (where cars were placed).
+fn first_frame(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("poses.csv"))
+        .unwrap()
+        .lines()
+        .filter(|l| l.starts_with("0,"))
+        .map(String::from)
+        .collect()
+}
+
+#[test]
+fn lights_differ_between_scenarios_unless_fixed() {
+    let dir = fresh_dir("scale-lights");
+    let mut sets = Vec::new();
+    for phase in ["", r#""phase": "fixed""#, r#""phase": "random_per_intersection""#] {
+        let city =
+            format!(r#"{{"lights": {{"cycle_scale": 0.5{}{phase}}}}}"#, if phase.is_empty() { "" } else { ", " });
+        let spec = write_spec(&dir, &city_spec("lights", &[(4, 0.5), (8, 0.5)], (4, 1, 1), 20, &city));
+        let out = dir.join(format!("out{}", sets.len()));
+        gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+        sets.push(all_lights(&out));
+    }
+    let (random, fixed, per_intersection) = (&sets[0], &sets[1], &sets[2]);
+    assert_eq!(random.len(), 12);
+    // Default: every scenario starts at its own point of the cycle.
+    let distinct: std::collections::BTreeSet<&String> = random.iter().map(|(_, l)| l).collect();
+    assert_eq!(distinct.len(), random.len(), "scenarios share a lights.csv");
+    // Fixed: one lights.csv for all, the original cycle from 0 (AC's east-west straight green since 0 s).
+    assert!(fixed.iter().all(|(_, l)| *l == fixed[0].1));
+    let row = fixed[0].1.lines().find(|l| l.starts_with("0,0.0,AC,W,straight,")).unwrap();
+    assert_eq!(row, "0,0.0,AC,W,straight,green,0.0");
+    // The phase comes from a stream of its own: cars are placed exactly as with fixed lights.
+    for ((a, _), (b, _)) in random.iter().zip(fixed) {
+        assert_eq!(first_frame(a), first_frame(b), "{}", a.display());
+    }
+    // Per intersection: the four intersections of one scenario do not all show the same.
+    let by_intersection = |text: &str, name: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| l.split(',').nth(2) == Some(name))
+            .map(|l| l.splitn(4, ',').nth(3).unwrap().to_string())
+            .collect()
+    };
+    for (_, text) in per_intersection {
+        let ac = by_intersection(text, "AC");
+        assert!(["AD", "BC", "BD"].iter().any(|i| by_intersection(text, i) != ac));
+    }
+    // With one shared phase the intersections stay in step (offsets 0).
+    for (_, text) in random {
+        let ac = by_intersection(text, "AC");
+        assert!(["AD", "BC", "BD"].iter().all(|i| by_intersection(text, i) == ac));
+    }
+}

@@ -58,6 +58,11 @@ fn spec_schema_and_parser_agree() {
     good.push(("no city".into(), edited(&base, |v| v.as_object_mut().unwrap().remove("city").map(|_| ()).unwrap())));
     good.push(("fixed rain".into(), edited(&base, |v| v["city"]["confounders"]["rain"] = json!(0.3))));
     good.push((
+        "lights per intersection".into(),
+        edited(&base, |v| v["city"]["lights"]["phase"] = json!("random_per_intersection")),
+    ));
+    good.push(("fixed lights".into(), edited(&base, |v| v["city"]["lights"]["phase"] = json!("fixed"))));
+    good.push((
         "a bigger map".into(),
         edited(&base, |v| {
             v["map"] = json!({"lane_width": 3.5, "east_west_roads": [-30, 30], "north_south_roads": [-40, 45],
@@ -77,6 +82,7 @@ fn spec_schema_and_parser_agree() {
         ("unknown key in city", edited(&base, |v| v["city"]["speed"] = json!(1))),
         ("unknown key in driver", edited(&base, |v| v["city"]["driver"]["patience"] = json!(1))),
         ("unknown key in lights", edited(&base, |v| v["city"]["lights"]["colour_order"] = json!(1))),
+        ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
         ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
         ("map roads as an object", edited(&base, |v| v["map"] = json!({"east_west_roads": {"A": 14, "B": -14}}))),
         ("three map roads", edited(&base, |v| v["map"] = json!({"north_south_roads": [-30, 0, 30]}))),
