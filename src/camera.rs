@@ -3,6 +3,16 @@
 use glam::DVec2;
 use serde::Serialize;
 
+/// The original's dataset camera height, metres.
+pub const ORIGINAL_ALTITUDE_M: f64 = 40.0;
+/// The original's horizontal field of view, degrees.
+pub const ORIGINAL_FOV_DEG: f64 = 90.0;
+
+/// Focal length in pixels of the bird's-eye lens for an image `width` wide.
+fn birds_eye_focal_px(width: u32) -> f64 {
+    (width as f64 / 2.0) / (ORIGINAL_FOV_DEG.to_radians() / 2.0).tan()
+}
+
 /// A pinhole camera looking straight down, possibly turned about the
 /// vertical. Pixel coordinates are in pixel-index units: pixel column `i` has
 /// its centre at `px = i`, so the mean index of a car's mask pixels is its
@@ -31,19 +41,30 @@ impl Camera {
     /// The original's dataset camera: 40 m up, 90 degree horizontal field of
     /// view, over the centre of the city (12.8 px per metre at 1024 px wide).
     pub fn birds_eye(width: u32, height: u32) -> Camera {
-        let altitude_m = 40.0;
-        let horizontal_fov_deg: f64 = 90.0;
-        let focal_px = (width as f64 / 2.0) / (horizontal_fov_deg.to_radians() / 2.0).tan();
+        Camera::birds_eye_over(width, height, DVec2::ZERO, ORIGINAL_ALTITUDE_M)
+    }
+
+    /// The bird's-eye lens (90 degree horizontal field of view) looking
+    /// straight down on `centre` from `altitude_m` metres.
+    pub fn birds_eye_over(width: u32, height: u32, centre: DVec2, altitude_m: f64) -> Camera {
         Camera {
             width,
             height,
-            centre_x: 0.0,
-            centre_y: 0.0,
+            centre_x: centre.x,
+            centre_y: centre.y,
             altitude_m,
-            horizontal_fov_deg,
-            pixels_per_metre: focal_px / altitude_m,
+            horizontal_fov_deg: ORIGINAL_FOV_DEG,
+            pixels_per_metre: birds_eye_focal_px(width) / altitude_m,
             rotation_rad: 0.0,
         }
+    }
+
+    /// The lowest altitude (metres) from which the bird's-eye lens shows a
+    /// ground box of `size` metres (width, height) whole in a `width` x
+    /// `height` image.
+    pub fn altitude_to_frame(width: u32, height: u32, size: DVec2) -> f64 {
+        let ppm = (width as f64 / size.x).min(height as f64 / size.y);
+        birds_eye_focal_px(width) / ppm
     }
 
     /// A camera with the bird's-eye lens (90 degree field of view) over

@@ -2,13 +2,11 @@
 //! from, and where each of its scenarios lives. Used by every command that
 //! reads datasets (stats, heatmap, exports).
 
-use crate::map::CityMap;
 use crate::output::manifest::ManifestRecord;
 use crate::output::scenario_dir;
 use crate::plan::{Expansion, ScenarioKey};
 use crate::spec::{DatasetSpec, Split};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 /// A dataset folder and what its manifest says it holds.
 pub struct Dataset {
@@ -68,8 +66,7 @@ impl Dataset {
 pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, String> {
     let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
         .map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
-    Expansion::new(spec, Arc::new(CityMap::default()))
-        .map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
+    Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 
 /// One car as a scenario.json names it.

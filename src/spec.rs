@@ -1,8 +1,9 @@
 //! The dataset spec: what a user asks for, read from JSON. Every field is
 //! checked here with a message that names it, the value and what is allowed.
 
-use crate::camera::{CameraKind, CameraPlan};
+use crate::camera::{Camera, CameraKind, CameraPlan};
 use crate::map::signals::{ScheduleStep, Signal};
+use crate::map::MapLayout;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
@@ -145,6 +146,122 @@ pub struct DatasetSpec {
     /// Extra cameras beside the bird's-eye view (need images).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub cameras: Vec<CameraSpec>,
+    /// The city map's dimensions and the bird's-eye camera's height.
+    #[serde(default)]
+    pub map: MapSpec,
+}
+
+/// The city map's dimensions, metres (every field optional; the defaults
+/// are the default layout, [`MapLayout::default`]), and the height of the
+/// bird's-eye camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapSpec {
+    /// Width of every lane; a road is four lanes wide.
+    pub lane_width: f64,
+    /// y of the centre lines of the east-west roads B and A, ascending.
+    pub east_west_roads: [f64; 2],
+    /// x of the centre lines of the north-south roads C and D, ascending.
+    pub north_south_roads: [f64; 2],
+    /// East-west roads run from -extent_x to +extent_x, then loop back.
+    pub extent_x: f64,
+    /// North-south roads run from -extent_y to +extent_y, then loop back.
+    pub extent_y: f64,
+    /// Distance along the lane a lane change takes, metres.
+    pub lane_change_m: f64,
+    /// Height of the bird's-eye camera. Absent: the original's 40 m, or
+    /// higher when the intersections and their stop lines do not fit the
+    /// view from there.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_altitude_m: Option<f64>,
+}
+
+impl Default for MapSpec {
+    fn default() -> Self {
+        let l = MapLayout::default();
+        MapSpec {
+            lane_width: l.lane_width,
+            east_west_roads: [l.east_west_roads[0].1, l.east_west_roads[1].1],
+            north_south_roads: [l.north_south_roads[0].1, l.north_south_roads[1].1],
+            extent_x: l.extent_x,
+            extent_y: l.extent_y,
+            lane_change_m: l.lane_change_length,
+            camera_altitude_m: None,
+        }
+    }
+}
+
+/// Largest map coordinate a spec may give, metres.
+const MAX_MAP_EXTENT: f64 = 5000.0;
+
+impl MapSpec {
+    /// The layout the map is built from.
+    pub fn layout(&self) -> MapLayout {
+        let d = MapLayout::default();
+        MapLayout {
+            lane_width: self.lane_width,
+            east_west_roads: [
+                (d.east_west_roads[0].0, self.east_west_roads[0]),
+                (d.east_west_roads[1].0, self.east_west_roads[1]),
+            ],
+            north_south_roads: [
+                (d.north_south_roads[0].0, self.north_south_roads[0]),
+                (d.north_south_roads[1].0, self.north_south_roads[1]),
+            ],
+            extent_x: self.extent_x,
+            extent_y: self.extent_y,
+            lane_change_length: self.lane_change_m,
+            ..d
+        }
+    }
+
+    /// Checks sizes, and that every lane ending at an intersection is at
+    /// least [`MapLayout::min_approach_length`] long.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        positive("map.lane_width", self.lane_width, 10.0, "metres")?;
+        positive("map.lane_change_m", self.lane_change_m, 200.0, "metres")?;
+        let layout = self.layout();
+        let hw = layout.road_half_width();
+        let need = layout.min_approach_length();
+        let axes = [
+            ("map.north_south_roads", self.north_south_roads, "map.extent_x", self.extent_x, "C", "D", "east-west"),
+            ("map.east_west_roads", self.east_west_roads, "map.extent_y", self.extent_y, "B", "A", "north-south"),
+        ];
+        for (field, roads, extent_field, extent, first, second, crossing) in axes {
+            if !roads.iter().all(|r| r.is_finite() && r.abs() <= MAX_MAP_EXTENT) {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{roads:?} is not allowed: give two finite centre-line positions within +-{MAX_MAP_EXTENT} m"
+                    ),
+                ));
+            }
+            positive(extent_field, extent, MAX_MAP_EXTENT, "metres")?;
+            let segments = [
+                (format!("from -{extent_field} to road {first}"), roads[0] - hw + extent),
+                (format!("between roads {first} and {second}"), roads[1] - roads[0] - 2.0 * hw),
+                (format!("from road {second} to +{extent_field}"), extent - roads[1] - hw),
+            ];
+            for (what, length) in segments {
+                if length < need - 1e-9 {
+                    return Err(SpecError::new(
+                        if what.contains("between") { field } else { extent_field },
+                        format!(
+                            "roads {first} and {second} at {roads:?} m with {extent_field} {extent} m leave {length:.2} m of the {crossing} roads {what}: every lane that ends at an intersection must be at least {need:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
+                            layout.lane_change_length,
+                            layout.stop_line_setback,
+                            crate::map::APPROACH_MARGIN_M,
+                            self.lane_width
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(altitude) = self.camera_altitude_m {
+            positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
+        }
+        Ok(())
+    }
 }
 
 /// An extra camera: `{"name", "static": {"centre": [x, y], "rotation_deg"}`
@@ -447,11 +564,31 @@ pub struct LightsSpec {
     /// Seconds added to the clock of each intersection, in the order AC, AD, BC, BD.
     pub offsets: Vec<f64>,
     pub overrides: Vec<LightOverride>,
+    /// Where in its cycle each scenario starts. Absent: `random` in a
+    /// dataset spec, `fixed` in a scenario file (one scenario written out
+    /// by hand, timed by its author).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phase: Option<LightPhase>,
+}
+
+/// Where each scenario's lights start in their cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightPhase {
+    /// Each scenario draws one point of the cycle (uniform over one period),
+    /// shared by every light, on top of `offsets`: the intersections keep
+    /// their relative timing.
+    Random,
+    /// Each scenario draws a point of the cycle per intersection, on top of
+    /// `offsets`.
+    RandomPerIntersection,
+    /// Every scenario starts the cycle at 0, shifted by `offsets` only.
+    Fixed,
 }
 
 impl Default for LightsSpec {
     fn default() -> Self {
-        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new() }
+        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new(), phase: None }
     }
 }
 
@@ -666,8 +803,13 @@ impl DatasetSpec {
             leader_gap_px: default_leader_gap(),
             car_length_m: default_car_length(),
             car_width_m: default_car_width(),
-            city,
+            // A hand-written scenario is timed by its author: lights start at 0 unless it says otherwise.
+            city: city.map(|mut c| {
+                c.lights.phase.get_or_insert(LightPhase::Fixed);
+                c
+            }),
             cameras: Vec::new(),
+            map: MapSpec::default(),
         }
     }
 
@@ -755,6 +897,8 @@ impl DatasetSpec {
             }
             (None, _) => {}
         }
+        self.map.validate()?;
+        self.birds_eye_camera()?;
         let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
         let mut names = std::collections::HashSet::new();
         for (i, camera) in self.cameras.iter().enumerate() {
@@ -785,6 +929,34 @@ impl DatasetSpec {
         })
     }
 
+    /// The bird's-eye camera over the map: centred on the four
+    /// intersections, at `map.camera_altitude_m`, or else at the original's
+    /// 40 m ([`Camera::birds_eye`]) unless the intersections and their stop
+    /// lines do not fit the view from there, then just high enough that they
+    /// do. Errs when a given altitude leaves them out of view.
+    pub fn birds_eye_camera(&self) -> Result<Camera, SpecError> {
+        let (lo, hi) = self.map.layout().framed_area();
+        let (width, height) = (self.image.width, self.image.height);
+        let original = Camera::birds_eye(width, height);
+        let fits = Camera::altitude_to_frame(width, height, hi - lo);
+        let altitude = match self.map.camera_altitude_m {
+            Some(a) if a < fits - 1e-9 => {
+                return Err(SpecError::new(
+                    "map.camera_altitude_m",
+                    format!(
+                        "{a} m shows less than the four intersections and their stop lines ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
+                        hi.x - lo.x,
+                        hi.y - lo.y,
+                        fits
+                    ),
+                ))
+            }
+            Some(a) => a,
+            None => original.altitude_m.max(fits),
+        };
+        Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
+    }
+
     /// The city settings (defaults when the spec has none).
     pub fn city_settings(&self) -> CitySpec {
         self.city.clone().unwrap_or_default()
@@ -795,7 +967,9 @@ impl DatasetSpec {
         let mut spec = self.clone();
         spec.frame_interval = Some(self.frame_interval());
         if self.world == WorldKind::City {
-            spec.city = Some(self.city_settings());
+            let mut city = self.city_settings();
+            city.lights.phase.get_or_insert(LightPhase::Random);
+            spec.city = Some(city);
         }
         spec
     }
@@ -837,5 +1011,39 @@ mod tests {
         assert_eq!(g(4, 0.1), 1);
         assert_eq!(g(4, 0.0), 0);
         assert_eq!(GroupSpec { cars: 8, edge_proportion: 0.5 }.name(), "cars08_edges50");
+    }
+
+    fn spec_with_map(map: &str) -> DatasetSpec {
+        DatasetSpec::from_json(&format!(
+            r#"{{"name": "m", "world": "city", "seed": 1, "groups": [{{"cars": 4, "edge_proportion": 0.5}}],
+                "splits": {{"train": 1, "val": 0, "test": 0}}, "map": {map}}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_camera_frames_the_intersections_whatever_their_size() {
+        // The default layout: the original's camera, 40 m up, 12.8 px per metre, over the centre.
+        let c = spec_with_map("{}").birds_eye_camera().unwrap();
+        assert_eq!((c.altitude_m, c.centre_x, c.centre_y), (40.0, 0.0, 0.0));
+        assert!((c.pixels_per_metre - 12.8).abs() < 1e-9);
+        // Blocks too big for 40 m: the camera climbs until the intersections and stop lines fit, centred on them.
+        let spec = spec_with_map(
+            r#"{"east_west_roads": [-30, 30], "north_south_roads": [-50, 40], "extent_x": 100, "extent_y": 80}"#,
+        );
+        let c = spec.birds_eye_camera().unwrap();
+        let (lo, hi) = spec.map.layout().framed_area();
+        let (view_lo, view_hi) = c.ground_view();
+        assert!(c.altitude_m > 40.0);
+        assert!(view_lo.x <= lo.x + 1e-9 && view_lo.y <= lo.y + 1e-9, "{view_lo} {lo}");
+        assert!(view_hi.x >= hi.x - 1e-9 && view_hi.y >= hi.y - 1e-9, "{view_hi} {hi}");
+        // Just high enough: the tighter side (here the height, 60 + 2 x 9.6 m) fills the image.
+        assert!(((view_hi.y - view_lo.y) - (hi.y - lo.y)).abs() < 1e-9);
+        assert_eq!((c.centre_x, c.centre_y), (-5.0, 0.0));
+        // A given altitude is used as given.
+        let c = spec_with_map(r#"{"east_west_roads": [-30, 30], "extent_y": 80, "camera_altitude_m": 90}"#)
+            .birds_eye_camera()
+            .unwrap();
+        assert_eq!(c.altitude_m, 90.0);
     }
 }

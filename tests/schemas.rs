@@ -57,6 +57,18 @@ fn spec_schema_and_parser_agree() {
     good.push(("empty driver".into(), edited(&base, |v| v["city"]["driver"] = json!({}))));
     good.push(("no city".into(), edited(&base, |v| v.as_object_mut().unwrap().remove("city").map(|_| ()).unwrap())));
     good.push(("fixed rain".into(), edited(&base, |v| v["city"]["confounders"]["rain"] = json!(0.3))));
+    good.push((
+        "lights per intersection".into(),
+        edited(&base, |v| v["city"]["lights"]["phase"] = json!("random_per_intersection")),
+    ));
+    good.push(("fixed lights".into(), edited(&base, |v| v["city"]["lights"]["phase"] = json!("fixed"))));
+    good.push((
+        "a bigger map".into(),
+        edited(&base, |v| {
+            v["map"] = json!({"lane_width": 3.5, "east_west_roads": [-30, 30], "north_south_roads": [-40, 45],
+                              "extent_x": 80, "extent_y": 60, "camera_altitude_m": 80})
+        }),
+    ));
     for (what, doc) in &good {
         let errors = schema_errors(&schema, doc);
         assert!(errors.is_empty(), "{what}: schema rejects a good spec: {errors:?}");
@@ -69,7 +81,13 @@ fn spec_schema_and_parser_agree() {
         ("unknown key in splits", edited(&base, |v| v["splits"]["dev"] = json!(1))),
         ("unknown key in city", edited(&base, |v| v["city"]["speed"] = json!(1))),
         ("unknown key in driver", edited(&base, |v| v["city"]["driver"]["patience"] = json!(1))),
-        ("unknown key in lights", edited(&base, |v| v["city"]["lights"]["phase"] = json!(1))),
+        ("unknown key in lights", edited(&base, |v| v["city"]["lights"]["colour_order"] = json!(1))),
+        ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
+        ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
+        ("map roads as an object", edited(&base, |v| v["map"] = json!({"east_west_roads": {"A": 14, "B": -14}}))),
+        ("three map roads", edited(&base, |v| v["map"] = json!({"north_south_roads": [-30, 0, 30]}))),
+        ("map lane width 0", edited(&base, |v| v["map"] = json!({"lane_width": 0}))),
+        ("camera altitude 0", edited(&base, |v| v["map"] = json!({"camera_altitude_m": 0}))),
         ("unknown key in an override", edited(&base, |v| v["city"]["lights"]["overrides"][0]["x"] = json!(1))),
         (
             "unknown key in a schedule step",

@@ -254,3 +254,24 @@ fn a_partial_driver_takes_the_defaults_for_the_rest() {
     });
     assert_eq!(driver, &expected);
 }
+
+#[test]
+fn a_map_too_small_for_a_lane_change_before_the_stop_line_is_named() {
+    // Roads 20 m apart leave 8 m between the 12 m wide roads: too short for a lane change before the stop line.
+    rejected(
+        "map-central",
+        &with(|v| v["map"] = serde_json::json!({"north_south_roads": [-10, 10]})),
+        &["map.north_south_roads", "8.00 m", "between roads C and D", "at least 13.6 m"],
+    );
+    rejected(
+        "map-extent",
+        &with(|v| v["map"] = serde_json::json!({"extent_y": 30})),
+        &["map.extent_y", "leave 10.00 m", "north-south roads from -map.extent_y to road B"],
+    );
+    rejected("map-lane", &with(|v| v["map"] = serde_json::json!({"lane_width": 0})), &["map.lane_width", "above 0"]);
+    rejected(
+        "map-camera",
+        &with(|v| v["map"] = serde_json::json!({"camera_altitude_m": 20})),
+        &["map.camera_altitude_m", "20 m shows less than the four intersections", "use at least"],
+    );
+}

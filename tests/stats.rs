@@ -32,7 +32,9 @@ fn stats_match_the_logs_and_separate_the_worlds() {
         assert!((row["p95_speed_px"].as_f64().unwrap() - 2.0).abs() < 0.011);
         assert_eq!(row["stopped_share"], 0.0);
         assert_eq!(row["collisions"], 0);
-        assert!(row["gap_cv_median"].as_f64().unwrap() < 0.01, "toy gaps are constant");
+        // Constant along the path; the straight-line distance shrinks only
+        // on turns and the U-turn loops at the view's sides.
+        assert!(row["gap_cv_median"].as_f64().unwrap() < 0.05, "toy gaps are constant: {row}");
     }
 
     let city_stats = stats(&city);

@@ -38,7 +38,8 @@ pub struct MapLayout {
     pub extent_x: f64,
     /// North-south roads run from -extent_y to +extent_y before looping back.
     pub extent_y: f64,
-    /// Distance along the lane over which a merge moves to the next lane.
+    /// Distance along the lane over which a lane change (a merge, or one a
+    /// driver plans for a turn) moves to the next lane, metres.
     pub lane_change_length: f64,
     /// Stop lines stand this far before the intersection box (the crosswalk
     /// lies between), metres.
@@ -46,23 +47,51 @@ pub struct MapLayout {
 }
 
 impl Default for MapLayout {
+    /// Roads 28 m apart both ways (a 16 m square central block) and every
+    /// road 16 m long beyond its intersection, the least that
+    /// [`MapLayout::min_approach_length`] allows: at the original's 40 m
+    /// camera (80 m x 50 m) the east-west roads turn back almost wholly in
+    /// view and the north-south ones 11 m beyond it, so cars spend little
+    /// time off camera.
     fn default() -> Self {
         MapLayout {
             lane_width: 3.0,
             east_west_roads: [('B', -14.0), ('A', 14.0)],
-            north_south_roads: [('C', -24.0), ('D', 24.0)],
-            extent_x: 52.0,
-            extent_y: 37.0,
-            lane_change_length: 8.0,
+            north_south_roads: [('C', -14.0), ('D', 14.0)],
+            extent_x: 36.0,
+            extent_y: 36.0,
+            // About three lengths of the default 2.2 m car: a lane change at
+            // the low speeds of the default (slowed, scaled) city.
+            lane_change_length: 6.0,
             stop_line_setback: 3.6,
         }
     }
 }
 
+/// Room a car needs on a lane that ends at an intersection beyond the lane
+/// change and the stop-line setback, metres: with both, the shortest such
+/// lane on which a car can still change lanes before its turn.
+pub const APPROACH_MARGIN_M: f64 = 4.0;
+
 impl MapLayout {
     /// Half the width of a road (two lanes each way).
     pub fn road_half_width(&self) -> f64 {
         2.0 * self.lane_width
+    }
+
+    /// Shortest allowed lane ending at an intersection, metres:
+    /// `lane_change_length + stop_line_setback + APPROACH_MARGIN_M`.
+    pub fn min_approach_length(&self) -> f64 {
+        self.lane_change_length + self.stop_line_setback + APPROACH_MARGIN_M
+    }
+
+    /// What the bird's-eye camera must show: the four intersection boxes and
+    /// the stop lines before them, as (min corner, max corner), metres.
+    pub fn framed_area(&self) -> (DVec2, DVec2) {
+        let reach = self.road_half_width() + self.stop_line_setback;
+        let xs = [self.north_south_roads[0].1, self.north_south_roads[1].1];
+        let ys = [self.east_west_roads[0].1, self.east_west_roads[1].1];
+        (DVec2::new(xs[0] - reach, ys[0] - reach), DVec2::new(xs[1] + reach, ys[1] + reach))
     }
 }
 

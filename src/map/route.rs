@@ -107,9 +107,12 @@ pub enum LanePolicy {
     AdaptGivingUp(Vec<usize>),
 }
 
-/// Lane changes planned for a turn start at least this far after the car
-/// (or the lane entry), metres, so the driver can check the gap first.
+/// Lane changes planned for a turn start at least this far after where the
+/// car enters the lane, metres, so the driver can check the gap first.
 pub const STRATEGIC_CHANGE_LEAD: f64 = 1.0;
+/// ... and this far ahead of a car that starts the scenario at rest on the
+/// lane, which checks the gap before it moves, metres.
+pub const SPAWN_CHANGE_LEAD: f64 = 0.1;
 
 /// Whether an adapted action is still carried out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -269,7 +272,9 @@ impl Route {
                             route.adaptations.truncate(p.adaptations);
                             continue;
                         }
-                        match plan_turn_lane(map, lane, turn, earliest, given_up(next)) {
+                        let on_spawn = route.legs.iter().all(|l| l.kind == LegKind::Lane(spawn));
+                        let lead = if on_spawn && entry > 0.0 { SPAWN_CHANGE_LEAD } else { STRATEGIC_CHANGE_LEAD };
+                        match plan_turn_lane(map, lane, turn, earliest + lead, given_up(next)) {
                             Ok((target, at)) => {
                                 route.push_lane_change(map, lane, target, lane_entry, at, None, Some(next));
                                 lane = target;
@@ -532,15 +537,15 @@ pub fn last_change_start(map: &CityMap, lane: LaneId, for_turn: bool) -> f64 {
     l.curve.length() - line - map.layout.lane_change_length
 }
 
-/// The lane change a driver `earliest` metres along `lane` plans to reach
-/// the lane allowing `turn` at its end: (target lane, start), as early as it
-/// can start ([`STRATEGIC_CHANGE_LEAD`] after the car) and ending before the
-/// stop line; or why there is none (no room, or the driver gave up).
+/// The lane change a driver plans to reach the lane allowing `turn` at the
+/// end of `lane`: (target lane, start), starting as early as it can, at
+/// `first` metres along the lane, and ending before the stop line; or why
+/// there is none (no room, or the driver gave up).
 fn plan_turn_lane(
     map: &CityMap,
     lane: LaneId,
     turn: Turn,
-    earliest: f64,
+    first: f64,
     given_up: bool,
 ) -> Result<(LaneId, f64), String> {
     let name = &map.lanes[lane].name;
@@ -553,7 +558,7 @@ fn plan_turn_lane(
     }
     let run = map.layout.lane_change_length;
     let end = map.lanes[lane].curve.length() - map.layout.stop_line_setback;
-    let (first, last) = (grid_up(earliest + STRATEGIC_CHANGE_LEAD), grid_down(last_change_start(map, lane, true)));
+    let (first, last) = (grid_up(first), grid_down(last_change_start(map, lane, true)));
     if first > last {
         return Err(format!(
             "lane {name} leaves no room to change into {target_name} before the stop line (the change needs {run} m from {first:.1} m, the line is at {end:.2} m): going straight on instead"

@@ -1,7 +1,6 @@
 //! The `gen` job: read and check the spec, plan every scenario, simulate,
 //! render and write them in parallel, then write the manifest.
 
-use crate::map::CityMap;
 use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
 use crate::output::writer::{ScenarioWriteError, ScenarioWriter, WriterBuffers};
 use crate::output::{io_err, scenario_dir, write_atomically, WriteError, PARTIAL_PREFIX};
@@ -13,7 +12,6 @@ use crate::world::Trajectories;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// What `causalcity gen` was asked to do.
@@ -210,7 +208,7 @@ pub(crate) fn write_simulated(
 pub fn load_spec(path: &Path) -> Result<Expansion, GenError> {
     let spec_err = |error| GenError::Spec { path: path.to_path_buf(), error };
     let spec = DatasetSpec::from_file(path).map_err(spec_err)?;
-    Expansion::new(spec, Arc::new(CityMap::default())).map_err(spec_err)
+    Expansion::from_spec(spec).map_err(spec_err)
 }
 
 /// Where a run's manifest lives: `manifest.json`, or `shards/K-of-N.json`.

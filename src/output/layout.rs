@@ -164,7 +164,8 @@ mod tests {
         assert!(files.contains(&"cameras/corner/depth/0002.png".to_string()));
         assert!(files.contains(&"cameras/corner/poses.csv".to_string()));
         assert!(files.contains(&"events.csv".to_string()));
-        assert_eq!(files.len(), 5 + 2 * 3 + 3 * 3 + 1 + 1);
+        assert!(files.contains(&"interactions.csv".to_string()));
+        assert_eq!(files.len(), 6 + 2 * 3 + 3 * 3 + 1 + 1);
         assert!(layout.folders().contains(&"cameras/corner/depth".to_string()));
         // Without images there are no frames and no camera files.
         let bare = ScenarioLayout::new(3, false, false, true, cameras);

@@ -7,9 +7,9 @@ use super::confounders::Confounders;
 use super::{stream_key, CarAgency, CarPlan, CityPlan, GivenCar, Role, ScenarioKey, ScenarioPlan, WorldPlan};
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
-use crate::map::signals::LightPlan;
+use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
 use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
-use crate::spec::{ActionDrawing, DatasetSpec, GroupSpec, SpecError, Split, WorldKind};
+use crate::spec::{ActionDrawing, DatasetSpec, GroupSpec, LightPhase, SpecError, Split, WorldKind};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -47,14 +47,24 @@ pub struct Expansion {
     toy_step_m: f64,
 }
 
+/// Keys the stream a scenario's light phase is drawn from.
+const LIGHT_PHASE_TAG: &[u8] = b"causalcity/light-phase/v1";
+
 /// Clearance kept between cars at spawn, metres.
 const SPAWN_CLEARANCE: f64 = 0.1;
 const PLACEMENT_ATTEMPTS: usize = 2000;
 
 impl Expansion {
+    /// The spec's map (`map` section) and camera, checked as [`Expansion::new`] does.
+    pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
+        spec.map.validate()?;
+        let map = Arc::new(CityMap::new(spec.map.layout()));
+        Expansion::new(spec, map)
+    }
+
     /// Checks that every group can be planned on this map and camera.
     pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
-        let camera = Camera::birds_eye(spec.image.width, spec.image.height);
+        let camera = spec.birds_eye_camera()?;
         let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px);
         if leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
             return Err(SpecError::new(
@@ -354,23 +364,37 @@ impl Expansion {
         CityPlan {
             confounders,
             effects,
-            lights: self.light_plan(&c),
+            lights: self.light_plan(&c, stream),
             base_driver: c.driver,
             sim_stream: Sha256::digest(sim_stream).into(),
             agency: agency.into_iter().map(|(_, a)| a).collect(),
         }
     }
 
-    /// The lights of every scenario of this spec.
-    fn light_plan(&self, city: &crate::spec::CitySpec) -> LightPlan {
+    /// The lights of the scenario with stream key `stream`: the cycle, its
+    /// offsets and overrides, every light's clock shifted by the scenario's
+    /// phase (`lights.phase`). The phase comes from a stream of its own
+    /// (keyed by the scenario's), so drawing it moves no other random number.
+    fn light_plan(&self, city: &crate::spec::CitySpec, stream: [u8; 32]) -> LightPlan {
         let lights = &city.lights;
-        let mut plan = LightPlan::cycle(self.map.intersections.len(), lights.cycle_scale, &lights.offsets);
+        let n = self.map.intersections.len();
+        let period: f64 =
+            DEFAULT_CYCLE.iter().map(|(_, _, green, yellow)| green + yellow).sum::<f64>() * lights.cycle_scale;
+        let mut rng = ChaCha8Rng::from_seed(Sha256::digest([LIGHT_PHASE_TAG, &stream[..]].concat()).into());
+        let mut draw = || round_mm(rng.random_range(0.0..period));
+        let phases: Vec<f64> = match lights.phase.unwrap_or(LightPhase::Random) {
+            LightPhase::Fixed => vec![0.0; n],
+            LightPhase::Random => vec![draw(); n],
+            LightPhase::RandomPerIntersection => (0..n).map(|_| draw()).collect(),
+        };
+        let offsets: Vec<f64> = (0..n).map(|i| lights.offsets.get(i).copied().unwrap_or(0.0) + phases[i]).collect();
+        let mut plan = LightPlan::cycle(n, lights.cycle_scale, &offsets);
         for o in &lights.overrides {
             let Some(intersection) = self.map.intersections.iter().position(|i| i.name == o.intersection) else {
                 continue; // names were checked with the spec
             };
             let index = plan.index(intersection, o.approach, o.signal);
-            plan.lights[index].offset = o.offset;
+            plan.lights[index].offset = o.offset + phases[intersection];
             plan.lights[index].schedule = o.schedule.clone();
         }
         plan

@@ -92,12 +92,10 @@ impl Sim<'_> {
 impl SimCar<'_> {
     /// Drives `dt` seconds at the held acceleration (never backwards, never
     /// past the desired speed when speeding up), easing the wander towards
-    /// its target. Returns the front's route position (metres) before and
+    /// its target as the car moves. Returns the front's route position (metres) before and
     /// after, or `None` while the car is held after a collision (at rest
     /// until `now`).
     fn drive(&mut self, dt: f64, now: f64) -> Option<(f64, f64)> {
-        let glide = (dt / self.driver.reaction_time).min(1.0);
-        self.wander += (self.wander_target - self.wander) * glide;
         if now <= self.hold_until {
             self.v = 0.0;
             return None;
@@ -108,8 +106,13 @@ impl SimCar<'_> {
             // Speeding up towards the desired speed never overshoots it.
             v_new = v_new.min(self.desired().max(self.v));
         }
-        self.s += (self.v + v_new) / 2.0 * dt;
+        let ds = (self.v + v_new) / 2.0 * dt;
+        self.s += ds;
         self.v = v_new;
+        // The wander advances with distance (one reaction time's worth of
+        // it at the desired speed), so a standing car does not slide.
+        let glide = (ds / (self.driver.reaction_time * self.desired().max(1e-3))).min(1.0);
+        self.wander += (self.wander_target - self.wander) * glide;
         if self.v == 0.0 && self.accel < 0.0 {
             self.accel = 0.0;
         }

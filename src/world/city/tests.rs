@@ -195,7 +195,7 @@ fn a_queue_at_red_discharges_in_order_once_green() {
 
 #[test]
 fn a_merge_waits_until_the_car_beside_has_gone() {
-    let map = CityMap::default();
+    let map = wide_blocks();
     let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 100.0)]);
     // The merge starts at the last possible place (A1w is 36 m, a merge takes
     // 8 m), so it cannot be moved along: the car must wait for the gap.
@@ -238,11 +238,22 @@ fn a_merge_waits_until_the_car_beside_has_gone() {
     assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
 }
 
-/// A car on A1w told to turn left at AD, which needs the inner lane A1x, and
+/// A map whose blocks are 48 m wide, so that A1w is 36 m long, with 8 m
+/// lane changes.
+fn wide_blocks() -> CityMap {
+    CityMap::new(crate::map::MapLayout {
+        north_south_roads: [('C', -24.0), ('D', 24.0)],
+        extent_x: 52.0,
+        lane_change_length: 8.0,
+        ..Default::default()
+    })
+}
+
+/// A car on A1w (36 m, see [`wide_blocks`]) told to turn left at AD, which needs the inner lane A1x, and
 /// a car standing on A1x beside the last point where the change still ends
 /// before the stop line; lights on A1x green throughout.
 fn wrong_lane_for_a_left_turn(interventions: Vec<Intervention>, seconds: f64) -> Trajectories {
-    let map = CityMap::default();
+    let map = wide_blocks();
     let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 1000.0)]);
     // Every start from 1 m ahead of the car to the last one overlaps the blocker.
     let turning = Given { lane: "A1w", at: 14.0, actions: vec![Action::Left], merges: vec![0.0], desired: 2.0 };
@@ -270,7 +281,7 @@ fn a_car_changes_into_the_turn_lane_once_the_gap_comes_and_turns_from_it() {
     assert!(turn[0].t > change[0].t);
     assert_eq!(of_car(EventKind::ActionSkipped).count(), 0);
     // It waited in its own lane, at rest, before the stop line.
-    let map = CityMap::default();
+    let map = wide_blocks();
     let line = map.lanes[lane(&map, "A1w")].curve.length() - map.layout.stop_line_setback;
     let waiting = ((free_at - 1.0) / FRAME) as usize;
     let (along, sideways) = on_lane(&map, &traj, "A1w", waiting, 0);
@@ -305,7 +316,7 @@ fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
         .iter()
         .all(|e| e.car != 0 || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
     // Then straight on through AD into A2w.
-    let map = CityMap::default();
+    let map = wide_blocks();
     let a2w = map.lanes[lane(&map, "A2w")].curve.length();
     let on_a2w = (0..traj.frames()).filter(|&f| {
         let (along, sideways) = on_lane(&map, &traj, "A2w", f, 0);
