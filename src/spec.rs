@@ -592,6 +592,17 @@ impl Default for LightsSpec {
     }
 }
 
+/// The car-following model city drivers use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriverModel {
+    /// The Intelligent Driver Model (Treiber, Hennecke and Helbing 2000).
+    Idm,
+    /// The Improved IDM (Treiber and Kesting 2013): the IDM without its
+    /// widened gaps near the desired speed.
+    Iidm,
+}
+
 /// How `gen` draws a city car's actions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -617,6 +628,8 @@ pub struct CitySpec {
     pub red_light_runner_probability: f64,
     /// How `gen` draws each car's drive queue.
     pub action_drawing: ActionDrawing,
+    /// The drivers' car-following model.
+    pub driver_model: DriverModel,
     /// Base driver parameters, before confounders.
     pub driver: DriverParams,
     pub lights: LightsSpec,
@@ -630,6 +643,7 @@ impl Default for CitySpec {
             desired_speed_spread: 0.25,
             red_light_runner_probability: 0.02,
             action_drawing: ActionDrawing::Original,
+            driver_model: DriverModel::Iidm,
             driver: DriverParams::default(),
             lights: LightsSpec::default(),
             confounders: ConfounderSpec::default(),

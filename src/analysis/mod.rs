@@ -2,5 +2,6 @@
 //! dwell-time heat maps and a causal-discovery baseline.
 
 pub mod baseline;
+pub mod flow;
 pub mod heatmap;
 pub mod stats;

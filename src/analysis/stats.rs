@@ -4,9 +4,12 @@
 //! more) and that stop on an intersection approach (light stops), scenarios
 //! with collisions, red-light runs, leader-follower distance (mean, and the
 //! median over pairs of its coefficient of variation), the share of
-//! car-frames on camera, and the drivers' own lane choice: the share of cars
-//! that made a lane change for a turn, and the actions adapted or skipped.
+//! car-frames on camera, the drivers' own lane choice (the share of cars
+//! that made a lane change for a turn, the actions adapted or skipped), and
+//! city traffic-flow figures (`flow.rs`): median headway and time gap while
+//! following, queue discharge at green, and speed on free road.
 
+use super::flow::{median, read_scenario_flow, FlowSamples};
 use crate::dataset::Dataset;
 use crate::map::CityMap;
 use crate::spec::Split;
@@ -45,6 +48,15 @@ pub struct SplitStats {
     pub lane_change_share: f64,
     pub actions_adapted: usize,
     pub actions_skipped: usize,
+    /// City: median front-to-front headway while following, seconds.
+    pub headway_median_s: Option<f64>,
+    /// City: median time gap while following (bumper gap less min gap,
+    /// over speed), seconds.
+    pub time_gap_median_s: Option<f64>,
+    /// City: queue discharge at green, vehicles per second per lane.
+    pub discharge_per_lane_s: Option<f64>,
+    /// City: median speed over desired speed on free road, moving.
+    pub free_speed_ratio_median: Option<f64>,
 }
 
 /// The whole table.
@@ -58,7 +70,7 @@ impl fmt::Display for DatasetStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5}",
+            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
             "group",
             "split",
             "scen",
@@ -74,13 +86,17 @@ impl fmt::Display for DatasetStats {
             "inview",
             "lanechg",
             "adapt",
-            "skip"
+            "skip",
+            "hdwy",
+            "tgap",
+            "disch",
+            "free"
         )?;
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
         for r in &self.rows {
             writeln!(
                 f,
-                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5}",
+                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
                 r.group,
                 r.split,
                 r.scenarios,
@@ -96,10 +112,14 @@ impl fmt::Display for DatasetStats {
                 100.0 * r.in_view_share,
                 100.0 * r.lane_change_share,
                 r.actions_adapted,
-                r.actions_skipped
+                r.actions_skipped,
+                opt(r.headway_median_s, 2),
+                opt(r.time_gap_median_s, 2),
+                opt(r.discharge_per_lane_s, 2),
+                opt(r.free_speed_ratio_median, 2)
             )?;
         }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv)")
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road")
     }
 }
 
@@ -121,6 +141,7 @@ struct Tally {
     lane_changers: usize,
     actions_adapted: usize,
     actions_skipped: usize,
+    flow: FlowSamples,
 }
 
 /// Computes the statistics of the dataset in `dir`.
@@ -163,6 +184,7 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         all.lane_changers += t.lane_changers;
         all.actions_adapted += t.actions_adapted;
         all.actions_skipped += t.actions_skipped;
+        all.flow.extend(t.flow);
     }
     let target = (0.95 * all.car_frames as f64).ceil() as u64;
     let mut seen = 0;
@@ -194,6 +216,10 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         lane_change_share: all.lane_changers as f64 / all.cars.max(1) as f64,
         actions_adapted: all.actions_adapted,
         actions_skipped: all.actions_skipped,
+        headway_median_s: median(&mut all.flow.headways_s),
+        time_gap_median_s: median(&mut all.flow.time_gaps_s),
+        discharge_per_lane_s: median(&mut all.flow.discharge_headways_s).filter(|&h| h > 0.0).map(|h| 1.0 / h),
+        free_speed_ratio_median: median(&mut all.flow.free_speed_ratios),
     }
 }
 
@@ -321,6 +347,9 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
             }
         }
         t.lane_changers = changers.len();
+    }
+    if let Some(flow) = read_scenario_flow(dir, map)? {
+        t.flow = flow.samples();
     }
     Ok(t)
 }

@@ -108,7 +108,7 @@ impl ScenarioWriter {
         let layout = self.layout(plan);
         let camera = &self.camera;
         let mut dir = ScenarioDir::begin(target, &layout, self.fsync, times)?;
-        let model = crate::world::model_name(plan.world.kind());
+        let model = crate::world::model_name(&plan.world);
         let record = scenario_json(plan, camera, self.leader_gap_px, &self.intersection_names, model);
         let mut bytes = dir.write_file(SCENARIO_JSON, &record)?;
         let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();

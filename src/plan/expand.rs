@@ -366,6 +366,7 @@ impl Expansion {
             effects,
             lights: self.light_plan(&c, stream),
             base_driver: c.driver,
+            driver_model: c.driver_model,
             sim_stream: Sha256::digest(sim_stream).into(),
             agency: agency.into_iter().map(|(_, a)| a).collect(),
         }

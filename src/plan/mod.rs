@@ -11,7 +11,7 @@ pub mod interventions;
 use crate::camera::CameraPlan;
 use crate::map::signals::LightPlan;
 use crate::map::{Action, LaneId, Route};
-use crate::spec::{DriverParams, Split, WorldKind};
+use crate::spec::{DriverModel, DriverParams, Split, WorldKind};
 use confounders::{Confounders, Effects};
 use interventions::Intervention;
 use serde::Serialize;
@@ -97,6 +97,8 @@ pub struct CityPlan {
     pub lights: LightPlan,
     /// Base driver parameters before confounders.
     pub base_driver: DriverParams,
+    /// The drivers' car-following model.
+    pub driver_model: DriverModel,
     /// Key of the simulation's own random stream (driver noise, collision stops).
     pub sim_stream: [u8; 32],
     /// How each car drives, in id order.

@@ -9,7 +9,6 @@ use crate::map::signals::LightState;
 use crate::map::CityMap;
 use crate::plan::confounders::Confounders;
 use crate::plan::{ScenarioPlan, WorldPlan};
-use crate::spec::WorldKind;
 use glam::DVec2;
 
 /// A car's state at one frame.
@@ -148,18 +147,20 @@ impl Trajectories {
 }
 
 /// Simulates a plan in its world: the toy world's constant speed, or the
-/// city world with its default car-following model (IDM).
+/// city world with the plan's car-following model.
 pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
     match &plan.world {
         WorldPlan::Toy { step_m } => toy::simulate(plan, *step_m),
-        WorldPlan::City(city) => city::CityWorld::default().simulate(map, plan, city),
+        WorldPlan::City(city) => {
+            city::CityWorld::with_model(driver::model_by_name(city.driver_model)).simulate(map, plan, city)
+        }
     }
 }
 
 /// Name of a world's behaviour model, for scenario.json.
-pub fn model_name(kind: WorldKind) -> &'static str {
-    match kind {
-        WorldKind::Toy => toy::MODEL_NAME,
-        WorldKind::City => driver::CarFollowing::name(&driver::Idm::default()),
+pub fn model_name(world: &WorldPlan) -> &'static str {
+    match world {
+        WorldPlan::Toy { .. } => toy::MODEL_NAME,
+        WorldPlan::City(city) => driver::model_by_name(city.driver_model).name(),
     }
 }

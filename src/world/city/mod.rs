@@ -33,7 +33,7 @@ mod perception;
 #[cfg(test)]
 mod tests;
 
-use super::driver::{CarFollowing, Idm};
+use super::driver::{CarFollowing, Iidm};
 use super::{Event, Trajectories};
 use crate::map::signals::{Colour, Light};
 use crate::map::CityMap;
@@ -46,14 +46,14 @@ use std::collections::BTreeSet;
 /// Longest internal time step, seconds; frames fall on step boundaries.
 pub const MAX_STEP: f64 = 0.05;
 
-/// Agency dynamics over a car-following model (IDM by default).
+/// Agency dynamics over a car-following model (the improved IDM by default).
 pub struct CityWorld {
     model: Box<dyn CarFollowing>,
 }
 
 impl Default for CityWorld {
     fn default() -> Self {
-        CityWorld { model: Box::new(Idm::default()) }
+        CityWorld { model: Box::new(Iidm::default()) }
     }
 }
 

@@ -86,6 +86,7 @@ fn plan(
         effects: confounders.effects(),
         lights,
         base_driver: driver(),
+        driver_model: crate::spec::DriverModel::Iidm,
         sim_stream: [7; 32],
         agency,
     };
