@@ -121,3 +121,34 @@ fn the_toy_heat_map_is_more_uniform_than_the_city_one() {
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("use one of cars04_edges50"));
 }
+
+#[test]
+fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
+    let dir = fresh_dir("stats-presets");
+    let configs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    // The default (slowed, scaled) city: the time gap while following, the
+    // part that grows with speed, is a real driver's 1-2 s.
+    let city = dir.join("city");
+    gen_ok(&configs.join("city.json"), &city, &["--quiet", "--no-images", "--limit", "3"]);
+    let rows = stats(&city)["rows"].as_array().unwrap().clone();
+    assert_eq!(rows.len(), 15);
+    for row in &rows {
+        let gap = row["time_gap_median_s"].as_f64().unwrap_or_else(|| panic!("no time gap: {row}"));
+        assert!((1.0..=2.0).contains(&gap), "time gap {gap:.2} s: {row}");
+        let speed = row["mean_speed_px"].as_f64().unwrap();
+        assert!((1.5..=3.0).contains(&speed), "mean {speed:.2} px per frame: {row}");
+    }
+    // The real-scale preset: headways of urban traffic, cars at their
+    // desired speed on free road.
+    let metric = dir.join("metric");
+    gen_ok(&configs.join("city-metric.json"), &metric, &["--quiet", "--no-images", "--limit", "4"]);
+    let rows = stats(&metric)["rows"].as_array().unwrap().clone();
+    assert_eq!(rows.len(), 6);
+    for row in &rows {
+        let headway = row["headway_median_s"].as_f64().unwrap_or_else(|| panic!("no headway: {row}"));
+        assert!((1.0..=2.5).contains(&headway), "headway {headway:.2} s: {row}");
+        let free = row["free_speed_ratio_median"].as_f64().unwrap();
+        assert!((0.9..=1.05).contains(&free), "free-road speed {free:.2} of desired: {row}");
+        assert!(row["discharge_per_lane_s"].as_f64().is_some(), "no queue discharged: {row}");
+    }
+}

@@ -3,29 +3,38 @@
 //! `interactions.csv`, i.e. from what the driver model actually used.
 //!
 //! - **Headway** (front to front): while a car follows the car ahead
-//!   steadily (`bound_by = car`, moving at [`MOVING_SPEED`] or more, the two
-//!   speeds within [`STEADY_SPEED_DIFFERENCE`] of the follower's), the distance
+//!   steadily at speed (`bound_by = car`, at [`AT_SPEED`] of its desired
+//!   speed or more, the two speeds within [`STEADY_SPEED_DIFFERENCE`] of the
+//!   follower's), the distance
 //!   between the two centres (equal to front-to-front for equal lengths)
 //!   over the follower's speed, seconds.
 //! - **Time gap** (the part that grows with speed): the same frames, the
 //!   bumper-to-bumper gap less the follower's `min_gap`, over its speed.
-//! - **Queue discharge**: at every green onset of a straight signal, the
-//!   cars standing on a lane that ends at that approach cross its stop line
-//!   one after another; the headways between successive crossings in one
-//!   lane (from the second car on, while the signal is not red again) give
-//!   the saturation flow, 1 / median headway, vehicles per second per lane.
+//! - **Queue discharge**: when a signal turns green, its queue is the car
+//!   standing at its stop line bound by that light and the cars standing
+//!   behind it, each bound by the one ahead. They leave one after another;
+//!   the headways between them where they have crossed the intersection (a
+//!   road's width past the stop line along each car's path, where a queue's
+//!   outflow is measured, past the start-up at the line) give the discharge
+//!   flow, 1 / median headway, vehicles per second per lane.
 //! - **Free speed**: while a car is bound by nothing (`bound_by = free`) and
-//!   moves, its speed over its desired speed for the current stretch of its
-//!   drive queue (the stretch after as many turns and merges as
-//!   `events.csv` shows done).
+//!   cruises at speed (speed changing by at most [`CRUISING_CHANGE`]), its
+//!   speed over its desired speed for the current stretch of its drive queue
+//!   (the stretch after as many turns and merges as `events.csv` shows done).
 
-use crate::map::{CityMap, LaneEnd};
+use crate::map::CityMap;
 use glam::DVec2;
 use std::collections::HashMap;
 use std::path::Path;
 
 /// Speed from which a car counts as moving, m/s.
 pub const MOVING_SPEED: f64 = 0.3;
+/// Share of its desired speed from which a car counts as driving at speed
+/// (headways and free speed are traffic at speed, not creeping queues).
+pub const AT_SPEED: f64 = 0.5;
+/// Largest change of speed, m/s per second, at which a free car counts as
+/// cruising.
+pub const CRUISING_CHANGE: f64 = 0.2;
 /// Largest speed difference, as a share of the follower's speed, at which a
 /// car counts as following steadily (not closing in, not falling back).
 pub const STEADY_SPEED_DIFFERENCE: f64 = 0.2;
@@ -73,6 +82,8 @@ pub struct Pose {
 pub enum Bound {
     Free,
     Car(usize),
+    /// A light, by index in [`ScenarioFlow::signals`].
+    Light(usize),
     Other,
 }
 
@@ -85,8 +96,7 @@ pub struct CarFacts {
 }
 
 /// Everything the figures need of one scenario.
-pub struct ScenarioFlow<'a> {
-    pub map: &'a CityMap,
+pub struct ScenarioFlow {
     pub frame_interval: f64,
     pub cars: Vec<CarFacts>,
     /// `tracks[car][frame]`.
@@ -95,18 +105,24 @@ pub struct ScenarioFlow<'a> {
     pub bound: Vec<Vec<Bound>>,
     /// Per car, the frames at which it completed a turn or merge, ascending.
     pub actions_done: Vec<Vec<usize>>,
-    /// (intersection name, approach side) -> colour of its straight signal per frame.
-    pub straight_signals: HashMap<(String, char), Vec<String>>,
+    /// Half a road's width (two lanes), metres.
+    pub road_half_width: f64,
+    /// Every light, named as interactions.csv names it (`AC/W/straight`),
+    /// with its colour per frame.
+    pub signals: Vec<(String, Vec<String>)>,
 }
 
-impl ScenarioFlow<'_> {
+impl ScenarioFlow {
     /// The samples of this scenario.
     pub fn samples(&self) -> FlowSamples {
         let mut out = FlowSamples::default();
         for (frame, cars) in self.bound.iter().enumerate() {
             for (i, bound) in cars.iter().enumerate() {
                 let me = self.tracks[i][frame];
-                if me.speed < MOVING_SPEED {
+                let speeds = &self.cars[i].desired_speeds;
+                let done = self.actions_done[i].partition_point(|&f| f <= frame);
+                let Some(&desired) = speeds.get(done.min(speeds.len().saturating_sub(1))) else { continue };
+                if me.speed < MOVING_SPEED.max(AT_SPEED * desired) {
                     continue;
                 }
                 match *bound {
@@ -121,13 +137,13 @@ impl ScenarioFlow<'_> {
                         out.time_gaps_s.push((gap - self.cars[i].min_gap) / me.speed);
                     }
                     Bound::Free => {
-                        let speeds = &self.cars[i].desired_speeds;
-                        let done = self.actions_done[i].partition_point(|&f| f <= frame);
-                        if let Some(&desired) = speeds.get(done.min(speeds.len().saturating_sub(1))) {
+                        // Cruising: no longer speeding up or slowing down.
+                        let before = self.tracks[i][frame.saturating_sub(1)].speed;
+                        if (me.speed - before).abs() <= CRUISING_CHANGE * self.frame_interval {
                             out.free_speed_ratios.push(me.speed / desired);
                         }
                     }
-                    Bound::Other => {}
+                    Bound::Light(_) | Bound::Other => {}
                 }
             }
         }
@@ -135,71 +151,66 @@ impl ScenarioFlow<'_> {
         out
     }
 
-    /// The lane a point lies on (within half a lane width of its centre
-    /// line, heading within 30 degrees) and how far along it, if any.
-    fn lane_at(&self, p: DVec2, heading: Option<f64>) -> Option<(usize, f64)> {
-        let half = self.map.layout.lane_width / 2.0;
-        self.map.lanes.iter().enumerate().find_map(|(k, lane)| {
-            let (s, lateral) = lane.curve.local_coordinates(p);
-            let on = s >= 0.0 && s <= lane.curve.length() && lateral.abs() < half;
-            let aligned =
-                heading.is_none_or(|h| crate::map::curve::wrap_angle(lane.curve.heading_at(s) - h).abs() < 0.5);
-            (on && aligned).then_some((k, s))
-        })
-    }
-
-    /// Headways between successive stop-line crossings of cars that stood
-    /// queued on one lane when its straight signal turned green, seconds.
+    /// Headways between successive stop-line crossings of the queues
+    /// standing at each signal when it turns green, seconds.
     fn discharge_headways(&self) -> Vec<f64> {
         let mut headways = Vec::new();
         let frames = self.bound.len();
-        for ((intersection, side), colours) in &self.straight_signals {
+        for (light, (_, colours)) in self.signals.iter().enumerate() {
             for onset in 1..colours.len().min(frames) {
                 if colours[onset] != "green" || colours[onset - 1] == "green" {
                     continue;
                 }
-                // The signal's phase lasts until it is red again.
+                let standing = |i: usize| self.tracks[i][onset].speed < STANDING_SPEED;
+                let bound = &self.bound[onset];
+                // The queue, front to back.
+                let Some(mut last) = (0..bound.len()).find(|&i| bound[i] == Bound::Light(light) && standing(i)) else {
+                    continue;
+                };
+                let mut queue = vec![last];
+                while let Some(next) = (0..bound.len()).find(|&j| bound[j] == Bound::Car(last) && standing(j)) {
+                    if queue.contains(&next) {
+                        break;
+                    }
+                    queue.push(next);
+                    last = next;
+                }
+                // Each car has crossed the box once it has covered its distance
+                // to the head car, the head's distance to the line and the box.
                 let end = (onset..colours.len().min(frames)).find(|&f| colours[f] == "red").unwrap_or(frames);
-                // Standing cars per lane of this approach: (car, lane).
-                let mut by_lane: HashMap<usize, Vec<usize>> = HashMap::new();
-                for (i, track) in self.tracks.iter().enumerate() {
-                    let p = track[onset];
-                    if p.speed >= STANDING_SPEED {
-                        continue;
-                    }
-                    let Some((lane, _)) = self.lane_at(p.position, None) else { continue };
-                    let LaneEnd::Intersection { intersection: k, approach } = self.map.lanes[lane].end else {
-                        continue;
-                    };
-                    if self.map.intersections[k].name == *intersection && approach == *side {
-                        by_lane.entry(lane).or_default().push(i);
-                    }
-                }
-                for (lane, cars) in by_lane {
-                    let line = self.map.lanes[lane].curve.length() - self.map.layout.stop_line_setback;
-                    let mut crossings: Vec<f64> = cars
-                        .iter()
-                        .filter_map(|&i| {
-                            let front = self.cars[i].length / 2.0;
-                            (onset..end).find_map(|f| {
-                                let p = self.tracks[i][f].position;
-                                let (s, lateral) = self.map.lanes[lane].curve.local_coordinates(p);
-                                let past = s + front >= line || lateral.abs() > self.map.layout.lane_width;
-                                past.then_some(f as f64 * self.frame_interval)
-                            })
+                let head = self.tracks[queue[0]][onset].position;
+                let box_width = 2.0 * self.road_half_width;
+                let crossings: Vec<f64> = queue
+                    .iter()
+                    .map_while(|&i| {
+                        let start = self.tracks[i][onset].position;
+                        let to_head = start.distance(head);
+                        (onset..end).find_map(|f| {
+                            let moved = self.path_length(i, onset, f);
+                            (moved >= to_head + HEAD_TO_LINE_M + box_width).then_some(f as f64 * self.frame_interval)
                         })
-                        .collect();
-                    crossings.sort_by(f64::total_cmp);
-                    headways.extend(crossings.windows(2).map(|w| w[1] - w[0]));
-                }
+                    })
+                    .collect();
+                headways.extend(crossings.windows(2).map(|w| w[1] - w[0]));
             }
         }
         headways
     }
+
+    /// Distance car `i` travelled from frame `from` to frame `to`, metres.
+    fn path_length(&self, i: usize, from: usize, to: usize) -> f64 {
+        self.tracks[i][from..=to].windows(2).map(|w| w[0].position.distance(w[1].position)).sum()
+    }
 }
 
+/// How far ahead of a queue's head car (its centre, standing at the stop
+/// line) a car counts as having crossed the line, metres: the head stands
+/// with its front a few decimetres before the line, so a car whose centre
+/// has moved this far beyond the head's has its front across.
+const HEAD_TO_LINE_M: f64 = 3.0;
+
 /// Reads one city scenario folder's files into a [`ScenarioFlow`].
-pub fn read_scenario_flow<'a>(dir: &Path, map: &'a CityMap) -> Result<Option<ScenarioFlow<'a>>, String> {
+pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFlow>, String> {
     let interactions = dir.join("interactions.csv");
     if !interactions.exists() {
         return Ok(None);
@@ -239,6 +250,22 @@ pub fn read_scenario_flow<'a>(dir: &Path, map: &'a CityMap) -> Result<Option<Sce
             tracks[car][frame] = Pose { position: DVec2::new(x, y), speed };
         }
     }
+    let mut signals: Vec<(String, Vec<String>)> = Vec::new();
+    let mut light_index: HashMap<String, usize> = HashMap::new();
+    let path = dir.join("lights.csv");
+    let mut reader = csv::Reader::from_path(&path).map_err(|e| err(&path, &e))?;
+    for row in reader.records() {
+        let row = row.map_err(|e| err(&path, &e))?;
+        let (Some(i), Some(side), Some(signal), Some(colour)) = (row.get(2), row.get(3), row.get(4), row.get(5)) else {
+            return Err(format!("{}: malformed row", path.display()));
+        };
+        let name = format!("{i}/{side}/{signal}");
+        let k = *light_index.entry(name.clone()).or_insert_with(|| {
+            signals.push((name, Vec::new()));
+            signals.len() - 1
+        });
+        signals[k].1.push(colour.to_string());
+    }
     let mut bound = vec![vec![Bound::Other; n]; frames];
     let mut reader = csv::Reader::from_path(&interactions).map_err(|e| err(&interactions, &e))?;
     for row in reader.records() {
@@ -252,6 +279,10 @@ pub fn read_scenario_flow<'a>(dir: &Path, map: &'a CityMap) -> Result<Option<Sce
         let b = match (row.get(2), other) {
             (Some("free"), _) => Bound::Free,
             (Some("car"), Some(j)) => Bound::Car(j),
+            (Some("light"), _) => match row.get(4).and_then(|name| light_index.get(name)) {
+                Some(&k) => Bound::Light(k),
+                None => Bound::Other,
+            },
             _ => Bound::Other,
         };
         if frame < frames && car < n {
@@ -273,21 +304,8 @@ pub fn read_scenario_flow<'a>(dir: &Path, map: &'a CityMap) -> Result<Option<Sce
             }
         }
     }
-    let mut straight_signals: HashMap<(String, char), Vec<String>> = HashMap::new();
-    let path = dir.join("lights.csv");
-    let mut reader = csv::Reader::from_path(&path).map_err(|e| err(&path, &e))?;
-    for row in reader.records() {
-        let row = row.map_err(|e| err(&path, &e))?;
-        if row.get(4) != Some("straight") {
-            continue;
-        }
-        let (Some(i), Some(side), Some(colour)) = (row.get(2), row.get(3).and_then(|s| s.chars().next()), row.get(5))
-        else {
-            return Err(format!("{}: malformed row", path.display()));
-        };
-        straight_signals.entry((i.to_string(), side)).or_default().push(colour.to_string());
-    }
-    Ok(Some(ScenarioFlow { map, frame_interval, cars, tracks, bound, actions_done, straight_signals }))
+    let road_half_width = map.layout.road_half_width();
+    Ok(Some(ScenarioFlow { frame_interval, cars, tracks, bound, actions_done, road_half_width, signals }))
 }
 
 #[cfg(test)]
@@ -300,7 +318,6 @@ mod tests {
 
     #[test]
     fn headway_time_gap_and_free_speed_come_from_the_bound_frames() {
-        let map = CityMap::default();
         // Car 1 follows car 0 at 10 m/s, centres 20 m apart; car 2 drives
         // free at 8 m/s, its first action done at frame 1.
         let at = |x: f64, speed: f64| Pose { position: DVec2::new(x, 100.0), speed };
@@ -310,60 +327,66 @@ mod tests {
             vec![at(50.0, 8.0), at(51.6, 4.0)],
         ];
         let flow = ScenarioFlow {
-            map: &map,
             frame_interval: 0.2,
             cars: vec![facts(4.0), facts(4.0), facts(4.0)],
             tracks,
             bound: vec![vec![Bound::Free, Bound::Car(0), Bound::Free]; 2],
             actions_done: vec![vec![], vec![], vec![1]],
-            straight_signals: HashMap::new(),
+            road_half_width: 6.0,
+            signals: Vec::new(),
         };
         let s = flow.samples();
         assert_eq!(s.headways_s, vec![2.0, 2.0]);
         // (20 - 4 - 1) / 10
         assert_eq!(s.time_gaps_s, vec![1.5, 1.5]);
-        // Car 0 at 10 of 10 m/s; car 2 at 8 of 10, then 4 of 5 after its action.
-        assert_eq!(s.free_speed_ratios, vec![1.0, 0.8, 1.0, 0.8]);
+        // Car 0 cruises at 10 of 10 m/s; car 2 at 8 of 10, then it brakes to
+        // 4 (of 5 after its action): not cruising, not counted.
+        assert_eq!(s.free_speed_ratios, vec![1.0, 0.8, 1.0]);
         assert!(s.discharge_headways_s.is_empty());
     }
 
     #[test]
-    fn a_queue_discharging_at_green_gives_the_crossing_headways() {
-        let map = CityMap::default();
-        // Three cars stand on A1w before AD's stop line; the light turns
-        // green at frame 1 and they cross at frames 3, 13 and 23 (2 s apart).
-        let lane = map.lane_by_name("A1w").unwrap();
-        let curve = &map.lanes[lane].curve;
-        let line = curve.length() - map.layout.stop_line_setback;
-        let length = 2.2;
+    fn a_queue_discharging_at_green_gives_the_headways_past_the_box() {
+        // Three cars stand in a queue along x (car 0 at the line, bound by
+        // light 0; car 1 behind it, bound by car 0; car 2 behind car 1); the
+        // light turns green at frame 1. Each then drives at 5 m/s (1 m per
+        // frame), starting 2 s after the one ahead.
+        let spacing = 6.0;
         let mut tracks = Vec::new();
-        for (k, cross) in [3usize, 13, 23].into_iter().enumerate() {
-            let start = line - length / 2.0 - 0.3 - k as f64 * 3.0;
-            // Standing until it crosses, then past the line.
-            let track: Vec<Pose> = (0..30)
-                .map(|f| match f < cross {
-                    true => Pose { position: curve.lane_center_at(start), speed: 0.0 },
-                    false => Pose { position: curve.lane_center_at(line), speed: 1.0 },
+        for k in 0..3usize {
+            let start = -(k as f64) * spacing;
+            let go = 1 + 10 * k;
+            let track: Vec<Pose> = (0..80usize)
+                .map(|f| {
+                    let moved = f.saturating_sub(go) as f64;
+                    Pose { position: DVec2::new(start + moved, 0.0), speed: if f > go { 5.0 } else { 0.0 } }
                 })
                 .collect();
             tracks.push(track);
         }
         let mut colours = vec!["red".to_string()];
-        colours.extend(std::iter::repeat_n("green".to_string(), 29));
-        let mut signals = HashMap::new();
-        signals.insert(("AD".to_string(), 'W'), colours);
+        colours.extend(std::iter::repeat_n("green".to_string(), 79));
+        let mut bound = vec![vec![Bound::Light(0), Bound::Car(0), Bound::Car(1)]; 80];
+        bound[0] = vec![Bound::Other; 3];
         let flow = ScenarioFlow {
-            map: &map,
             frame_interval: 0.2,
-            cars: vec![facts(length), facts(length), facts(length)],
+            cars: vec![facts(4.0), facts(4.0), facts(4.0)],
             tracks,
-            bound: vec![vec![Bound::Other; 3]; 30],
+            bound,
             actions_done: vec![vec![]; 3],
-            straight_signals: signals,
+            road_half_width: 6.0,
+            signals: vec![("AD/W/straight".to_string(), colours)],
         };
         let mut h = flow.samples().discharge_headways_s;
+        // Car k leaves 2 s after car k - 1 and has 6 m further to go: 3.2 s.
         assert_eq!(h.len(), 2, "{h:?}");
-        assert!(h.iter().all(|x| (x - 2.0).abs() < 1e-9), "{h:?}");
-        assert_eq!(median(&mut h), Some(2.0));
+        assert!(h.iter().all(|x| (x - 3.2).abs() < 1e-9), "{h:?}");
+        assert!((median(&mut h).unwrap() - 3.2).abs() < 1e-9);
+        // Without the chain (car 2 not bound by car 1) the queue is two cars.
+        let mut flow = flow;
+        for b in &mut flow.bound {
+            b[2] = Bound::Free;
+        }
+        assert_eq!(flow.samples().discharge_headways_s.len(), 1);
     }
 }

@@ -56,7 +56,11 @@ impl Sim<'_> {
             };
             bind(model.stop_speed(&p, v, desired, distance, dt), by);
         }
-        bind(self.curve_limit(i), Interaction { bound_by: BoundBy::Curve, other_car: None, light: None });
+        // A curve limit below the speed is reached over a reaction time, not
+        // in one step (the acceleration is held until the next decision).
+        let curve = self.curve_limit(i);
+        let curve_target = if curve < v { v + (curve - v) * (dt / p.reaction_time).min(1.0) } else { curve };
+        bind(curve_target, Interaction { bound_by: BoundBy::Curve, other_car: None, light: None });
         if let Some(distance) = self.merge_wait(i, t) {
             let by = Interaction { bound_by: BoundBy::Merge, other_car: None, light: None };
             bind(model.stop_speed(&p, v, desired, distance, dt), by);
