@@ -30,6 +30,16 @@ pub trait CarFollowing: Send + Sync {
 /// How far before a stop line a car's front comes to rest, metres.
 pub const STOP_LINE_MARGIN: f64 = 0.2;
 
+/// The gap (metres) a driver at `speed` wants behind a car at
+/// `leader_speed`: the IDM's and the IIDM's `s*`, the min gap plus the time
+/// headway plus a braking term while closing in.
+fn desired_gap(p: &DriverParams, speed: f64, leader_speed: f64) -> f64 {
+    let approach = speed - leader_speed;
+    p.min_gap
+        + (speed * p.time_headway + speed * approach / (2.0 * (p.max_acceleration * p.comfortable_deceleration).sqrt()))
+            .max(0.0)
+}
+
 /// The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000).
 #[derive(Debug, Clone, Copy)]
 pub struct Idm {
@@ -64,11 +74,7 @@ impl CarFollowing for Idm {
 
     fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
         let gap = gap.max(0.01);
-        let approach = speed - leader_speed;
-        let wanted = p.min_gap
-            + (speed * p.time_headway
-                + speed * approach / (2.0 * (p.max_acceleration * p.comfortable_deceleration).sqrt()))
-            .max(0.0);
+        let wanted = desired_gap(p, speed, leader_speed);
         p.max_acceleration * (1.0 - self.free_term(speed, desired) - (wanted / gap).powi(2))
     }
 }
@@ -118,11 +124,7 @@ impl CarFollowing for Iidm {
 
     fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
         let gap = gap.max(0.01);
-        let approach = speed - leader_speed;
-        let wanted = p.min_gap
-            + (speed * p.time_headway
-                + speed * approach / (2.0 * (p.max_acceleration * p.comfortable_deceleration).sqrt()))
-            .max(0.0);
+        let wanted = desired_gap(p, speed, leader_speed);
         let z = wanted / gap;
         let free = self.free_acceleration(p, speed, desired);
         let a = p.max_acceleration;
