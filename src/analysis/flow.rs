@@ -22,6 +22,7 @@
 //!   speed over its desired speed for the current stretch of its drive queue
 //!   (the stretch after as many turns and merges as `events.csv` shows done).
 
+use crate::map::signals::light_label;
 use crate::map::CityMap;
 use glam::DVec2;
 use std::collections::HashMap;
@@ -259,7 +260,7 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
         let (Some(i), Some(side), Some(signal), Some(colour)) = (row.get(2), row.get(3), row.get(4), row.get(5)) else {
             return Err(format!("{}: malformed row", path.display()));
         };
-        let name = format!("{i}/{side}/{signal}");
+        let name = light_label(i, side, signal);
         let k = *light_index.entry(name.clone()).or_insert_with(|| {
             signals.push((name, Vec::new()));
             signals.len() - 1

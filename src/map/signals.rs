@@ -25,6 +25,13 @@ impl Signal {
     }
 }
 
+/// How files name a light: `AC/W/straight` (intersection, the side its
+/// traffic arrives from, signal), as scenario files' interventions and
+/// `interactions.csv` write it.
+pub fn light_label(intersection: &str, approach: impl std::fmt::Display, signal: &str) -> String {
+    format!("{intersection}/{approach}/{signal}")
+}
+
 /// A signal's colour.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -20,7 +20,7 @@
 use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
 use crate::json::{self, JsonError};
-use crate::map::signals::{light_at, light_index, Colour, ScheduleStep, Signal, APPROACHES};
+use crate::map::signals::{light_at, light_index, light_label, Colour, ScheduleStep, Signal, APPROACHES};
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
@@ -710,7 +710,7 @@ fn action_names() -> String {
 /// A light as scenario files name it, e.g. `AC/W/straight`.
 pub fn light_name(map: &CityMap, index: usize) -> String {
     let (intersection, approach, signal) = light_at(index);
-    format!("{}/{approach}/{}", map.intersections[intersection].name, signal.name())
+    light_label(&map.intersections[intersection].name, approach, signal.name())
 }
 
 /// The index of the light called `text` (`AC/W/straight`), or a message.

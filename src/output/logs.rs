@@ -3,7 +3,7 @@
 //! `data-schema/events.schema.json` and `data-schema/interactions.schema.json`.
 
 use super::poses::Fields;
-use crate::map::signals::LightPlan;
+use crate::map::signals::{light_label, LightPlan};
 use crate::world::Trajectories;
 use serde::Serialize;
 use std::io::Write;
@@ -90,7 +90,7 @@ pub fn write_interactions<W: Write>(
     let light_names: Vec<String> = plan
         .lights
         .iter()
-        .map(|l| format!("{}/{}/{}", intersection_names[l.intersection], l.approach, l.signal.name()))
+        .map(|l| light_label(&intersection_names[l.intersection], l.approach, l.signal.name()))
         .collect();
     for (frame, cars) in trajectories.interactions.iter().enumerate() {
         for (car, interaction) in cars.iter().enumerate() {
