@@ -132,9 +132,11 @@ pub struct DatasetSpec {
     /// Toy world: distance every car covers per frame, in pixels of `image`.
     #[serde(default = "default_toy_speed")]
     pub toy_speed_px_per_frame: f64,
-    /// Distance along the shared path from follower to leader at the start, pixels.
-    #[serde(default = "default_leader_gap")]
-    pub leader_gap_px: f64,
+    /// Toy world only (the paper's rule): distance along the shared path
+    /// from follower to leader at the start, pixels; 30 when absent. The
+    /// city draws its gaps from `city.start.follower_gap_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub leader_gap_px: Option<f64>,
     /// Car footprint, metres.
     #[serde(default = "default_car_length")]
     pub car_length_m: f64,
@@ -493,6 +495,15 @@ impl Distribution {
         Ok(())
     }
 
+    /// The lowest value it can draw.
+    pub fn lowest(&self) -> f64 {
+        match self {
+            Distribution::Fixed(v) => *v,
+            Distribution::Uniform { uniform } => uniform[0],
+            Distribution::Choice { choice } => choice.iter().copied().fold(f64::INFINITY, f64::min),
+        }
+    }
+
     /// Draws a value.
     pub fn sample<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         use rand::RngExt;
@@ -632,8 +643,45 @@ pub struct CitySpec {
     pub driver_model: DriverModel,
     /// Base driver parameters, before confounders.
     pub driver: DriverParams,
+    /// How `gen` starts cars: gaps, speeds, hard negatives.
+    pub start: StartSpec,
     pub lights: LightsSpec,
     pub confounders: ConfounderSpec,
+}
+
+/// How `gen` starts the city's cars (hand-written scenario files start
+/// every car at rest where the file puts it, as the original did).
+///
+/// A follower starts behind its leader on the leader's route, `follower_gap_m`
+/// from bumper to bumper. A *hard negative* is a car with no leader (an
+/// independent car, or the leader of a pair) that starts in the same way
+/// right behind another car, with a first action different from that car's:
+/// in the first frame it looks like a follower, and the two part ways at the
+/// next intersection. Every car then starts at `speed_fraction` of its first
+/// desired speed, or slower where what it sees ahead at the start (a car, a
+/// stop line it must stop at, a curve) asks for less, by the same rule for
+/// every car whatever its role.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StartSpec {
+    /// Bumper-to-bumper gap behind the car ahead, metres, for followers and
+    /// hard negatives; never below `city.driver.min_gap`.
+    pub follower_gap_m: Distribution,
+    /// Share of cars without a leader that start as hard negatives, 0..1.
+    pub hard_negative_share: f64,
+    /// Starting speed as a share of the car's first desired speed, 0..1,
+    /// before what it sees ahead limits it.
+    pub speed_fraction: Distribution,
+}
+
+impl Default for StartSpec {
+    fn default() -> Self {
+        StartSpec {
+            follower_gap_m: Distribution::Uniform { uniform: [1.0, 6.0] },
+            hard_negative_share: 0.0,
+            speed_fraction: Distribution::Uniform { uniform: [0.5, 1.0] },
+        }
+    }
 }
 
 impl Default for CitySpec {
@@ -645,6 +693,7 @@ impl Default for CitySpec {
             action_drawing: ActionDrawing::Original,
             driver_model: DriverModel::Iidm,
             driver: DriverParams::default(),
+            start: StartSpec::default(),
             lights: LightsSpec::default(),
             confounders: ConfounderSpec::default(),
         }
@@ -675,6 +724,18 @@ impl CitySpec {
         unit_interval("city.driver.perception_noise", d.perception_noise, 1.0)?;
         unit_interval("city.driver.lateral_wander", d.lateral_wander, 0.5)?;
         positive("city.driver.curve_acceleration", d.curve_acceleration, 10.0, "m/s^2")?;
+        let start = &self.start;
+        if let Err(e) = start.follower_gap_m.check("city.start.follower_gap_m", d.min_gap, 200.0) {
+            return Err(SpecError::new(
+                e.field,
+                format!(
+                    "{} (bumper-to-bumper metres: a driver accepts no gap below city.driver.min_gap = {})",
+                    e.message, d.min_gap
+                ),
+            ));
+        }
+        unit_interval("city.start.hard_negative_share", start.hard_negative_share, 1.0)?;
+        start.speed_fraction.check("city.start.speed_fraction", 0.0, 1.0)?;
         positive("city.lights.cycle_scale", self.lights.cycle_scale, 10.0, "factor")?;
         if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !o.is_finite()) {
             return Err(SpecError::new(
@@ -735,9 +796,8 @@ fn default_actions() -> u32 {
 fn default_toy_speed() -> f64 {
     2.0
 }
-fn default_leader_gap() -> f64 {
-    30.0
-}
+/// The paper's toy-world start gap from follower to leader, pixels.
+const DEFAULT_LEADER_GAP_PX: f64 = 30.0;
 fn default_car_length() -> f64 {
     2.2
 }
@@ -814,7 +874,7 @@ impl DatasetSpec {
             splits: Splits { train: 1, val: 0, test: 0 },
             actions_per_car: 0,
             toy_speed_px_per_frame: default_toy_speed(),
-            leader_gap_px: default_leader_gap(),
+            leader_gap_px: None,
             car_length_m: default_car_length(),
             car_width_m: default_car_width(),
             // A hand-written scenario is timed by its author: lights start at 0 unless it says otherwise.
@@ -903,7 +963,18 @@ impl DatasetSpec {
         positive("toy_speed_px_per_frame", self.toy_speed_px_per_frame, 100.0, "pixels per frame")?;
         positive("car_length_m", self.car_length_m, 20.0, "metres")?;
         positive("car_width_m", self.car_width_m, 3.0, "metres")?;
-        positive("leader_gap_px", self.leader_gap_px, 2000.0, "pixels")?;
+        match (self.leader_gap_px, self.world) {
+            (Some(gap), WorldKind::Toy) => positive("leader_gap_px", gap, 2000.0, "pixels")?,
+            (Some(gap), WorldKind::City) => {
+                return Err(SpecError::new(
+                    "leader_gap_px",
+                    format!(
+                        "{gap} applies to \"world\": \"toy\" only (the paper's exact start gap); the city draws each follower's gap from city.start.follower_gap_m (metres): remove it"
+                    ),
+                ))
+            }
+            (None, _) => {}
+        }
         match (&self.city, self.world) {
             (Some(city), WorldKind::City) => city.validate()?,
             (Some(_), WorldKind::Toy) => {
@@ -971,6 +1042,11 @@ impl DatasetSpec {
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
     }
 
+    /// Toy world: pixels from follower to leader along their path at the start.
+    pub fn leader_gap_px(&self) -> f64 {
+        self.leader_gap_px.unwrap_or(DEFAULT_LEADER_GAP_PX)
+    }
+
     /// The city settings (defaults when the spec has none).
     pub fn city_settings(&self) -> CitySpec {
         self.city.clone().unwrap_or_default()
@@ -980,6 +1056,9 @@ impl DatasetSpec {
     pub fn resolved(&self) -> DatasetSpec {
         let mut spec = self.clone();
         spec.frame_interval = Some(self.frame_interval());
+        if self.world == WorldKind::Toy {
+            spec.leader_gap_px = Some(self.leader_gap_px());
+        }
         if self.world == WorldKind::City {
             let mut city = self.city_settings();
             city.lights.phase.get_or_insert(LightPhase::Random);

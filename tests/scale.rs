@@ -57,13 +57,18 @@ fn all_lights(root: &Path) -> Vec<(PathBuf, String)> {
 }
 
 /// First-frame rows of poses.csv (where cars were placed).
+/// Where every car stands in the first frame: poses.csv's frame-0 rows up
+/// to the yaw (start speeds depend on the lights: a car before a red line
+/// starts slow enough to stop).
 fn first_frame(dir: &Path) -> Vec<String> {
-    std::fs::read_to_string(dir.join("poses.csv"))
-        .unwrap()
+    let text = std::fs::read_to_string(dir.join("poses.csv")).unwrap();
+    let rows: Vec<String> = text
         .lines()
         .filter(|l| l.starts_with("0,"))
-        .map(String::from)
-        .collect()
+        .map(|l| l.split(',').take(9).collect::<Vec<_>>().join(","))
+        .collect();
+    assert!(!rows.is_empty(), "no frame-0 rows in {}", dir.display());
+    rows
 }
 
 #[test]

@@ -275,3 +275,25 @@ fn a_map_too_small_for_a_lane_change_before_the_stop_line_is_named() {
         &["map.camera_altitude_m", "20 m shows less than the four intersections", "use at least"],
     );
 }
+
+#[test]
+fn city_starts_are_checked_against_the_driver() {
+    rejected(
+        "gap-below-min-gap",
+        &city_with(r#"{"driver": {"min_gap": 2.0}, "start": {"follower_gap_m": {"uniform": [1.0, 8.0]}}}"#),
+        &["city.start.follower_gap_m", "1 is not allowed", "min_gap = 2"],
+    );
+    rejected(
+        "hard-negative-share",
+        &city_with(r#"{"start": {"hard_negative_share": 1.5}}"#),
+        &["city.start.hard_negative_share", "1.5", "0 to 1"],
+    );
+    rejected(
+        "speed-fraction",
+        &city_with(r#"{"start": {"speed_fraction": {"choice": [0.5, 2]}}}"#),
+        &["city.start.speed_fraction", "2 is not allowed"],
+    );
+    let toy_gap_in_the_city =
+        city_with("{}").replacen(r#""world": "city","#, r#""world": "city", "leader_gap_px": 30,"#, 1);
+    rejected("leader-gap-in-city", &toy_gap_in_the_city, &["leader_gap_px", "toy", "city.start.follower_gap_m"]);
+}

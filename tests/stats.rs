@@ -129,7 +129,7 @@ fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
     // The default (slowed, scaled) city: the time gap while following, the
     // part that grows with speed, is a real driver's 1-2 s.
     let city = dir.join("city");
-    gen_ok(&configs.join("city.json"), &city, &["--quiet", "--no-images", "--limit", "3"]);
+    gen_ok(&configs.join("city.json"), &city, &["--quiet", "--no-images", "--limit", "12"]);
     let rows = stats(&city)["rows"].as_array().unwrap().clone();
     assert_eq!(rows.len(), 15);
     for row in &rows {

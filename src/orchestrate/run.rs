@@ -185,7 +185,7 @@ fn install_signal_handler() {
 
 /// The writer of a run over `expansion`'s map, camera and spec.
 pub(crate) fn scenario_writer(expansion: &Expansion, products: Products, fsync: bool) -> ScenarioWriter {
-    ScenarioWriter::new(expansion.map.clone(), expansion.camera, expansion.spec.leader_gap_px, products, fsync)
+    ScenarioWriter::new(expansion.map.clone(), expansion.camera, expansion.spec.leader_gap_px(), products, fsync)
 }
 
 /// Writes a simulated scenario into `target` through `writer`, stopping

@@ -32,6 +32,8 @@ struct CarRecord<'a> {
     driver: Option<&'a DriverParams>,
     #[serde(skip_serializing_if = "Option::is_none")]
     runs_red_lights: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    hard_negative_behind: Option<u32>,
 }
 
 #[derive(Serialize)]
@@ -152,6 +154,7 @@ pub fn scenario_json(
                 desired_speeds: agency(c).map(|a| a.desired_speeds.as_slice()),
                 driver: agency(c).map(|a| &a.driver),
                 runs_red_lights: agency(c).map(|a| a.runs_red_lights),
+                hard_negative_behind: c.hard_negative_behind,
             })
             .collect(),
         edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),

@@ -26,6 +26,8 @@ struct PlacedCar {
     merges: Vec<f64>,
     route: Arc<Route>,
     desired_speeds: Vec<f64>,
+    /// A hard negative: the index of the car it starts right behind.
+    behind: Option<usize>,
 }
 
 /// A span of a spawn lane where a car's centre is on camera.
@@ -65,13 +67,13 @@ impl Expansion {
     /// Checks that every group can be planned on this map and camera.
     pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
         let camera = spec.birds_eye_camera()?;
-        let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px);
-        if leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
+        let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px());
+        if spec.world == WorldKind::Toy && leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
             return Err(SpecError::new(
                 "leader_gap_px",
                 format!(
                     "{} px ({leader_gap_m:.2} m) would make a follower overlap its leader: a car is {} m ({:.1} px) long, so use at least {:.1}",
-                    spec.leader_gap_px,
+                    spec.leader_gap_px(),
                     spec.car_length_m,
                     camera.metres_to_pixels(spec.car_length_m),
                     camera.metres_to_pixels(spec.car_length_m + SPAWN_CLEARANCE)
@@ -82,6 +84,11 @@ impl Expansion {
         let slot = spec.car_length_m + SPAWN_CLEARANCE;
         let capacity: u32 = spans.iter().map(|s| ((s.hi - s.lo) / slot) as u32 + 1).sum();
         let toy_step_m = camera.pixels_to_metres(spec.toy_speed_px_per_frame);
+        // The shortest start a pair can have, centre to centre, metres.
+        let shortest_pair = match spec.world {
+            WorldKind::Toy => leader_gap_m,
+            WorldKind::City => spec.car_length_m + spec.city_settings().start.follower_gap_m.lowest(),
+        };
         let expansion = Expansion { spec, map, camera, spans, leader_gap_m, toy_step_m };
         for (i, g) in expansion.spec.groups.iter().enumerate() {
             // Random placement needs room to spare: allow half the packed capacity.
@@ -97,12 +104,15 @@ impl Expansion {
                     ),
                 ));
             }
-            if g.edges() > 0 && !expansion.spans.iter().any(|s| s.hi - s.lo >= leader_gap_m) {
+            if g.edges() > 0 && !expansion.spans.iter().any(|s| s.hi - s.lo >= shortest_pair) {
+                let field = match expansion.spec.world {
+                    WorldKind::Toy => "leader_gap_px",
+                    WorldKind::City => "city.start.follower_gap_m",
+                };
                 return Err(SpecError::new(
-                    "leader_gap_px",
+                    field,
                     format!(
-                        "{} px is longer than any visible spawn lane: no pair can start on camera",
-                        expansion.spec.leader_gap_px
+                        "a pair {shortest_pair:.2} m long from centre to centre is longer than any visible spawn lane: no pair can start on camera"
                     ),
                 ));
             }
@@ -139,7 +149,6 @@ impl Expansion {
         let group: &GroupSpec = &spec.groups[key.group_index];
         let stream = stream_key(spec.seed, &key.group, key.split, key.index);
         let mut rng = ChaCha8Rng::from_seed(stream);
-        let travel = self.max_travel();
         let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
 
         // Units to place: pairs first (they need the most room), then singles.
@@ -150,22 +159,50 @@ impl Expansion {
         let mut pair_indices = Vec::new();
         for unit in 0..pairs + singles {
             let is_pair = unit < pairs;
-            let gap = if is_pair { self.leader_gap_m } else { 0.0 };
-            let mut done = false;
-            for _ in 0..PLACEMENT_ATTEMPTS {
-                let span = self.spans[rng.random_range(0..self.spans.len())];
-                if span.hi - span.lo < gap {
-                    continue;
+            // City: a car with no leader may start right behind another car
+            // (a hard negative), decided once per unit.
+            let hard_negative = match &city {
+                Some(c) if !cars.is_empty() && c.start.hard_negative_share > 0.0 => {
+                    rng.random_bool(c.start.hard_negative_share)
                 }
-                let back = round_mm(rng.random_range(span.lo..=span.hi - gap));
-                let front = back + gap;
+                _ => false,
+            };
+            let mut done = false;
+            for attempt in 0..PLACEMENT_ATTEMPTS {
+                let spacing = if is_pair { self.draw_spacing(&mut rng, city.as_ref()) } else { 0.0 };
+                // A hard negative that finds no room in half the attempts starts anywhere.
+                let behind =
+                    (hard_negative && attempt < PLACEMENT_ATTEMPTS / 2).then(|| rng.random_range(0..cars.len()));
+                let (span, front, back) = match behind {
+                    Some(k) => {
+                        let ahead = &cars[k];
+                        let Some(span) = self.spans.iter().find(|s| s.lane == ahead.spawn).copied() else { continue };
+                        let front = round_mm(ahead.distance - self.draw_spacing(&mut rng, city.as_ref()));
+                        if front - spacing < span.lo {
+                            continue;
+                        }
+                        (span, front, front - spacing)
+                    }
+                    None => {
+                        let span = self.spans[rng.random_range(0..self.spans.len())];
+                        if span.hi - span.lo < spacing {
+                            continue;
+                        }
+                        let back = round_mm(rng.random_range(span.lo..=span.hi - spacing));
+                        (span, back + spacing, back)
+                    }
+                };
                 let (actions, merges) = match city.as_ref().map(|c| c.action_drawing) {
                     Some(ActionDrawing::Original) => original_actions(&mut rng, spec.actions_per_car),
                     _ => random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car),
                 };
-                let route =
-                    Route::plan(&self.map, span.lane, front, &actions, &merges, front + travel, &LanePolicy::Adapt)
-                        .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[span.lane].name))?;
+                // A hard negative parts ways with the car ahead at the next intersection.
+                if let Some(k) = behind {
+                    if actions.is_empty() || actions.first() == cars[k].actions.first() {
+                        continue;
+                    }
+                }
+                let route = self.plan_route(span.lane, front, &actions, &merges)?;
                 let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
                 let boxes: Vec<OrientedBox> = starts
                     .iter()
@@ -178,17 +215,40 @@ impl Expansion {
                     let grown = b.inflated(SPAWN_CLEARANCE / 2.0);
                     placed.iter().all(|p| !grown.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
                 });
-                if !clear {
+                // City: no car starts closer to another in its lane than the
+                // shortest follower gap, so no driver starts below its min gap.
+                let spaced = city.as_ref().is_none_or(|c| {
+                    let shortest = spec.car_length_m + c.start.follower_gap_m.lowest() - 1e-6;
+                    cars.iter()
+                        .filter(|o| o.spawn == span.lane)
+                        .all(|o| starts.iter().all(|s| (o.distance - s).abs() >= shortest))
+                });
+                if !clear || !spaced {
                     continue;
                 }
                 placed.extend(boxes);
                 let route = Arc::new(route);
                 let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
                 let role = if is_pair { Role::Leader } else { Role::Independent };
-                let car = PlacedCar { role, spawn: span.lane, distance: front, actions, merges, route, desired_speeds };
+                let car = PlacedCar {
+                    role,
+                    spawn: span.lane,
+                    distance: front,
+                    actions,
+                    merges,
+                    route,
+                    desired_speeds,
+                    behind,
+                };
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    let follower = PlacedCar { role: Role::Follower, distance: back, ..car.clone() };
+                    // A pair shares route and actions, not personality.
+                    let desired_speeds = match city {
+                        Some(_) => draw_desired_speeds(&mut rng, city.as_ref(), car.actions.len()),
+                        None => car.desired_speeds.clone(),
+                    };
+                    let follower =
+                        PlacedCar { role: Role::Follower, distance: back, desired_speeds, behind: None, ..car.clone() };
                     cars.extend([car, follower]);
                 } else {
                     cars.push(car);
@@ -208,6 +268,23 @@ impl Expansion {
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
         Ok(self.assemble(key, stream, rng, cars, &pair_indices, &ids))
+    }
+
+    /// Centre-to-centre distance from a car to the car starting right
+    /// behind it, metres: the toy world's exact `leader_gap_px`, or a car
+    /// length plus a bumper gap drawn from `city.start.follower_gap_m`.
+    fn draw_spacing(&self, rng: &mut ChaCha8Rng, city: Option<&crate::spec::CitySpec>) -> f64 {
+        match city {
+            Some(c) => round_mm(self.spec.car_length_m + c.start.follower_gap_m.sample(rng)),
+            None => self.leader_gap_m,
+        }
+    }
+
+    /// The route of a car entering at `front` metres along `lane`, long
+    /// enough for the whole scenario.
+    fn plan_route(&self, lane: LaneId, front: f64, actions: &[Action], merges: &[f64]) -> Result<Route, String> {
+        Route::plan(&self.map, lane, front, actions, merges, front + self.max_travel(), &LanePolicy::Adapt)
+            .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[lane].name))
     }
 
     /// Plans a scenario of given cars (hand-written scenario files): ids in
@@ -235,14 +312,13 @@ impl Expansion {
                     merges: g.merge_distances.clone(),
                     route: g.route.clone(),
                     desired_speeds,
+                    behind: None,
                 }
             })
             .collect();
         for &(leader, follower) in pairs {
             cars[leader].role = Role::Leader;
             cars[follower].role = Role::Follower;
-            // A pair drives alike, as in generated scenarios.
-            cars[follower].desired_speeds = cars[leader].desired_speeds.clone();
         }
         let ids: Vec<u32> = (0..cars.len() as u32).collect();
         let mut plan = self.assemble(key, stream, rng, cars, pairs, &ids);
@@ -261,6 +337,8 @@ impl Expansion {
                 if let Some(runs) = g.runs_red_lights {
                     agency.runs_red_lights = runs;
                 }
+                // Hand-written scenarios start every car at rest, as the original did.
+                agency.start_speed = 0.0;
             }
         }
         plan
@@ -287,7 +365,14 @@ impl Expansion {
             .enumerate()
             .map(|(i, placed)| {
                 let PlacedCar {
-                    role, spawn, distance: spawn_distance, actions, merges: merge_distances, route, ..
+                    role,
+                    spawn,
+                    distance: spawn_distance,
+                    actions,
+                    merges: merge_distances,
+                    route,
+                    behind,
+                    ..
                 } = placed;
                 let id = ids[i];
                 CarPlan {
@@ -304,6 +389,7 @@ impl Expansion {
                     length: spec.car_length_m,
                     width: spec.car_width_m,
                     route,
+                    hard_negative_behind: behind.map(|k| ids[k]),
                 }
             })
             .collect();
@@ -357,9 +443,13 @@ impl Expansion {
             .map(|(placed, &id)| {
                 let runs_red_lights = rng.random_bool(p_run);
                 let desired_speeds = placed.desired_speeds.iter().map(|v| v * effects.desired_speed_factor).collect();
-                (id, CarAgency { desired_speeds, driver: effects.apply(&c.driver), runs_red_lights })
+                (id, CarAgency { desired_speeds, start_speed: 0.0, driver: effects.apply(&c.driver), runs_red_lights })
             })
             .collect();
+        // Drawn after everything else, so the draws above stay as they were.
+        for (_, a) in agency.iter_mut() {
+            a.start_speed = a.desired_speeds.first().copied().unwrap_or(0.0) * c.start.speed_fraction.sample(rng);
+        }
         agency.sort_by_key(|(id, _)| *id);
         CityPlan {
             confounders,

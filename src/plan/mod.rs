@@ -74,15 +74,21 @@ pub struct CarPlan {
     pub width: f64,
     /// Shared by a leader and its follower.
     pub route: Arc<Route>,
+    /// City world, hard negatives only: the car it starts right behind,
+    /// looking like its follower, though not linked to it.
+    pub hard_negative_behind: Option<u32>,
 }
 
-/// A city car's driving plan: shared by a leader and its follower except for
-/// the red-light flag.
+/// A city car's driving plan, its own (a follower shares its leader's route
+/// and actions, not its driving).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CarAgency {
     /// Desired speed (m/s, after confounders) before the first action, after
     /// each action in turn, and after the last.
     pub desired_speeds: Vec<f64>,
+    /// Speed the driver would like to start at, m/s; the world lowers it to
+    /// what the driver sees ahead at the start.
+    pub start_speed: f64,
     /// After confounders.
     pub driver: DriverParams,
     /// Forced through red and yellow lights.

@@ -185,6 +185,9 @@ pub struct Car {
     pub driver: Option<Driver>,
     #[serde(default)]
     pub runs_red_lights: bool,
+    /// City hard negatives: the car it starts right behind.
+    #[serde(default)]
+    pub hard_negative_behind: Option<u32>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -88,7 +88,8 @@ pub(super) fn normal(rng: &mut ChaCha8Rng) -> f64 {
 }
 
 impl<'p> SimCar<'p> {
-    /// The car of `plan` at rest at its spawn point, its random stream keyed
+    /// The car of `plan` at its spawn point at its planned start speed (the
+    /// world may lower it before the first step), its random stream keyed
     /// by the scenario's `sim_stream` and its id.
     pub(super) fn new(plan: &'p CarPlan, agency: &'p CarAgency, sim_stream: [u8; 32]) -> SimCar<'p> {
         let mut rng = ChaCha8Rng::from_seed(sim_stream);
@@ -102,7 +103,7 @@ impl<'p> SimCar<'p> {
             action_base: 0,
             merges: plan.merge_distances.clone(),
             s: plan.spawn_distance,
-            v: 0.0,
+            v: agency.start_speed,
             accel: 0.0,
             leg,
             // Drivers do not all decide in lockstep.

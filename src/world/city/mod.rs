@@ -19,6 +19,7 @@
 //!   the wait for them);
 //! - `driving.rs`: each decision (target speed from the model) and the motion
 //!   between decisions;
+//! - `start.rs`: start speeds, lowered to what each driver sees at time 0;
 //! - `interventions.rs`: triggers, effects and the one re-planning routine;
 //! - `events.rs`: red-light runs, completed actions, lane changes and
 //!   adaptations of the drive queue, and collisions.
@@ -30,6 +31,7 @@ mod driving;
 mod events;
 mod interventions;
 mod perception;
+mod start;
 #[cfg(test)]
 mod tests;
 
@@ -148,7 +150,7 @@ struct Sim<'a> {
 }
 
 impl<'a> Sim<'a> {
-    /// Every car of `plan` at rest at its spawn point, nothing fired yet.
+    /// Every car of `plan` at its spawn point at its start speed, nothing fired yet.
     fn new(map: &'a CityMap, plan: &'a ScenarioPlan, city: &'a CityPlan, model: &'a dyn CarFollowing) -> Sim<'a> {
         let cars =
             plan.cars.iter().zip(&city.agency).map(|(c, agency)| SimCar::new(c, agency, city.sim_stream)).collect();
@@ -171,6 +173,7 @@ impl<'a> Sim<'a> {
         for i in 0..sim.cars.len() {
             sim.log_adaptations(i, 0.0);
         }
+        sim.settle_start_speeds();
         sim
     }
 

@@ -152,13 +152,22 @@ impl Sim<'_> {
     /// the connector the car commits to once it is too close to stop
     /// comfortably.
     pub(super) fn stop_ahead(&mut self, i: usize, t: f64) -> Option<(f64, Stop)> {
+        let (stop, commit) = self.stop_seen(i, t);
+        if commit.is_some() {
+            self.cars[i].committed = commit;
+        }
+        stop
+    }
+
+    /// What [`Sim::stop_ahead`] finds, without recording anything: the stop,
+    /// and the connector the car would commit to.
+    pub(super) fn stop_seen(&self, i: usize, t: f64) -> (Option<(f64, Stop)>, Option<usize>) {
         let car = &self.cars[i];
         let front = car.front();
         let p = &car.driver;
         let braking = car.v * car.v / (2.0 * p.comfortable_deceleration);
         let setback = self.map.layout.stop_line_setback;
         let mut commit = None;
-        let mut stop = None;
         for leg in &car.route.legs[car.leg..] {
             if leg.route_start - car.s > LOOKAHEAD {
                 break;
@@ -182,17 +191,13 @@ impl Sim<'_> {
                 (false, None) => None,
             };
             if let Some(why) = why {
-                stop = Some((dist.max(0.0), why));
-                break;
+                return (Some((dist.max(0.0), why)), commit);
             }
             if car.v > 0.1 && dist < braking {
                 commit = Some(c);
             }
         }
-        if commit.is_some() {
-            self.cars[i].committed = commit;
-        }
-        stop
+        (None, commit)
     }
 
     /// Whether light `light` at time `t` tells a driver `dist` metres before

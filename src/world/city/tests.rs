@@ -25,10 +25,12 @@ struct Given {
     actions: Vec<Action>,
     merges: Vec<f64>,
     desired: f64,
+    /// The start speed the plan wishes for, m/s.
+    start: f64,
 }
 
 fn straight(lane: &'static str, at: f64, desired: f64) -> Given {
-    Given { lane, at, actions: vec![], merges: vec![], desired }
+    Given { lane, at, actions: vec![], merges: vec![], desired, start: 0.0 }
 }
 
 fn lane(map: &CityMap, name: &str) -> LaneId {
@@ -69,6 +71,7 @@ fn plan(
                 length: LENGTH,
                 width: WIDTH,
                 route: Arc::new(route),
+                hard_negative_behind: None,
             }
         })
         .collect();
@@ -76,6 +79,7 @@ fn plan(
         .iter()
         .map(|g| CarAgency {
             desired_speeds: vec![g.desired; g.actions.len() + 1],
+            start_speed: g.start,
             driver: driver(),
             runs_red_lights: false,
         })
@@ -201,7 +205,14 @@ fn a_merge_waits_until_the_car_beside_has_gone() {
     // The merge starts at the last possible place (A1w is 36 m, a merge takes
     // 8 m), so it cannot be moved along: the car must wait for the gap.
     let merge_at = 28.0;
-    let merging = Given { lane: "A1w", at: 15.0, actions: vec![Action::MergeL], merges: vec![merge_at], desired: 2.0 };
+    let merging = Given {
+        lane: "A1w",
+        at: 15.0,
+        actions: vec![Action::MergeL],
+        merges: vec![merge_at],
+        desired: 2.0,
+        start: 0.0,
+    };
     // Beside the merge start, a little behind it: not ahead on the merging path.
     let blocker = straight("A1x", 27.0, 0.0);
     let free_at = 14.0;
@@ -257,7 +268,8 @@ fn wrong_lane_for_a_left_turn(interventions: Vec<Intervention>, seconds: f64) ->
     let map = wide_blocks();
     let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 1000.0)]);
     // Every start from 1 m ahead of the car to the last one overlaps the blocker.
-    let turning = Given { lane: "A1w", at: 14.0, actions: vec![Action::Left], merges: vec![0.0], desired: 2.0 };
+    let turning =
+        Given { lane: "A1w", at: 14.0, actions: vec![Action::Left], merges: vec![0.0], desired: 2.0, start: 0.0 };
     let blocker = straight("A1x", 26.0, 0.0);
     simulate(&map, &plan(&map, &[turning, blocker], lights, interventions, seconds))
 }
@@ -324,4 +336,56 @@ fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
         sideways.abs() < 0.3 && (1.0..a2w - 1.0).contains(&along)
     });
     assert!(on_a2w.count() > 5, "never drove along A2w after giving up");
+}
+
+/// Largest deceleration of car `car` between consecutive frames, m/s^2.
+fn hardest_braking(traj: &Trajectories, car: usize) -> f64 {
+    traj.states.windows(2).map(|w| (w[0][car].speed - w[1][car].speed) / FRAME).fold(0.0, f64::max)
+}
+
+#[test]
+fn a_car_starting_right_behind_another_starts_no_faster_than_its_gap_allows() {
+    let map = wide_blocks();
+    let lights = lights_with(&map, &["A1w"], &[(Colour::Green, 1000.0)]);
+    let p = driver();
+    // 3 m apart bumper to bumper on A1w (36 m, see [`wide_blocks`]): the car
+    // ahead starts at the speed whose desired gap s0 + v T is those 3 m,
+    // the car behind wishes to start faster.
+    let gap = 3.0;
+    let equilibrium = (gap - p.min_gap) / p.time_headway;
+    let ahead = Given { start: equilibrium, ..straight("A1w", 12.0, 3.0) };
+    let behind = Given { start: 3.0, ..straight("A1w", 12.0 - LENGTH - gap, 3.0) };
+    let traj = simulate(&map, &plan(&map, &[ahead, behind], lights, vec![], 6.0));
+    let start: Vec<f64> = traj.states[0].iter().map(|c| c.speed).collect();
+    // Free road: the wish stands.
+    assert!((start[0] - equilibrium).abs() < 1e-9, "the car ahead started at {:.3} m/s", start[0]);
+    // Behind: no faster than the gap allows at the speed of the car ahead.
+    assert!(
+        start[1] > equilibrium - 0.05 && start[1] <= equilibrium + 1e-9,
+        "the car behind started at {:.3} m/s, its gap allows {equilibrium:.3}",
+        start[1]
+    );
+    // Content at the start: it never stands, never brakes hard.
+    assert!(traj.states.iter().all(|f| f[1].speed > 0.5), "the car behind stalled");
+    assert!(hardest_braking(&traj, 1) < 0.3, "the car behind braked at {:.2} m/s^2", hardest_braking(&traj, 1));
+}
+
+#[test]
+fn a_car_starting_before_a_red_light_starts_slow_enough_to_stop_comfortably() {
+    let map = wide_blocks();
+    let lights = lights_with(&map, &["A1w"], &[(Colour::Red, 1000.0)]);
+    let p = driver();
+    let line = map.lanes[lane(&map, "A1w")].curve.length() - map.layout.stop_line_setback;
+    // Front 6 m before the line, wishing 5 m/s: it could not stop from there.
+    let car = Given { start: 5.0, ..straight("A1w", line - 6.0 - LENGTH / 2.0, 5.0) };
+    let traj = simulate(&map, &plan(&map, &[car], lights, vec![], 12.0));
+    let start = traj.states[0][0].speed;
+    assert!(start > 0.5 && start < 5.0, "started at {start:.3} m/s");
+    assert!(start * start / (2.0 * p.comfortable_deceleration) < 6.0, "cannot stop in 6 m from {start:.3} m/s");
+    let last = traj.frames() - 1;
+    let front = on_lane(&map, &traj, "A1w", last, 0).0 + LENGTH / 2.0;
+    assert!(traj.states[last][0].speed < 0.05 && front <= line, "front at {front:.2}, line at {line:.2}");
+    let braking = hardest_braking(&traj, 0);
+    assert!(braking <= p.comfortable_deceleration * 1.5, "braked at {braking:.2} m/s^2");
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::RedLightRun), "{:?}", traj.events);
 }

@@ -1,0 +1,147 @@
+//! The city benchmark does not give its answer away in the first frame:
+//! followers start at drawn gaps and speeds like every other car, hard
+//! negatives look like followers at the start and part ways later, and a
+//! rule that sees only frame 0 finds the links far worse than in the toy
+//! world, while the dynamics still rank them well. Checked on the default
+//! city spec (`configs/city.json`), as a user would run it.
+
+mod common;
+
+use common::*;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// The default city dataset, 100 scenarios per split and group, poses only;
+/// generated once for every test here.
+fn default_city() -> PathBuf {
+    static DATA: Mutex<Option<PathBuf>> = Mutex::new(None);
+    let mut guard = DATA.lock().unwrap();
+    if let Some(path) = guard.as_ref() {
+        return path.clone();
+    }
+    let dir = fresh_dir("honest-benchmark");
+    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json");
+    let data = dir.join("city");
+    gen_ok(&spec, &data, &["--quiet", "--no-images", "--limit", "100"]);
+    *guard = Some(data.clone());
+    data
+}
+
+/// Frame-0 poses by car id.
+fn first_frame(dir: &Path) -> BTreeMap<u32, Pose> {
+    read_poses(&dir.join("poses.csv")).into_iter().filter(|p| p.frame == 0).map(|p| (p.car, p)).collect()
+}
+
+/// Bumper gap (metres) from `behind` to `ahead` when both are in one lane
+/// facing the same way with `ahead` in front, else None.
+fn gap_in_lane(ahead: &Pose, behind: &Pose, length: f64) -> Option<f64> {
+    let (dx, dy) = (ahead.x - behind.x, ahead.y - behind.y);
+    let (c, s) = (behind.yaw.cos(), behind.yaw.sin());
+    let (along, across) = (dx * c + dy * s, -dx * s + dy * c);
+    let turn = (ahead.yaw - behind.yaw).sin().abs();
+    (along > 0.0 && across.abs() < 0.5 && turn < 0.05).then_some(along - length)
+}
+
+#[test]
+fn followers_and_hard_negatives_start_at_drawn_gaps_with_their_own_driving() {
+    let data = default_city();
+    let spec: Value = serde_json::from_str(&std::fs::read_to_string("configs/city.json").unwrap()).unwrap();
+    let gaps = &spec["city"]["start"]["follower_gap_m"]["uniform"];
+    let (lo, hi) = (gaps[0].as_f64().unwrap(), gaps[1].as_f64().unwrap());
+    let (mut followers, mut hard_negatives, mut shared_speeds, mut cars) = (0, 0, 0, 0);
+    let mut follower_gaps = Vec::new();
+    for dir in scenario_dirs(&data) {
+        let scenario = read_scenario(&dir);
+        let poses = first_frame(&dir);
+        let car = |id: u32| scenario.cars.iter().find(|c| c.id == id).unwrap();
+        cars += scenario.cars.len();
+        for &[leader, follower] in &scenario.edges {
+            followers += 1;
+            let gap = gap_in_lane(&poses[&leader], &poses[&follower], car(leader).length_m)
+                .unwrap_or_else(|| panic!("{}: follower {follower} is not behind leader {leader}", dir.display()));
+            // Millimetre placement and lateral wander aside, the drawn gap.
+            assert!(gap > lo - 0.01 && gap < hi + 0.01, "{}: follower gap {gap:.3} m", dir.display());
+            follower_gaps.push(gap);
+            shared_speeds += (car(leader).desired_speeds == car(follower).desired_speeds) as usize;
+            assert_eq!(car(leader).actions, car(follower).actions, "a pair shares its actions");
+        }
+        for c in scenario.cars.iter().filter(|c| c.hard_negative_behind.is_some()) {
+            hard_negatives += 1;
+            let ahead = car(c.hard_negative_behind.unwrap());
+            assert!(!scenario.edges.contains(&[ahead.id, c.id]), "a hard negative is no follower");
+            assert_ne!(c.actions[0], ahead.actions[0], "{}: car {} keeps with car {}", dir.display(), c.id, ahead.id);
+            let gap = gap_in_lane(&poses[&ahead.id], &poses[&c.id], ahead.length_m)
+                .unwrap_or_else(|| panic!("{}: hard negative {} is not behind car {}", dir.display(), c.id, ahead.id));
+            assert!(gap > lo - 0.01 && gap < hi + 0.01, "{}: hard negative gap {gap:.3} m", dir.display());
+        }
+    }
+    assert!(followers > 500, "only {followers} followers");
+    // Gaps spread over the drawn range, not one exact value.
+    follower_gaps.sort_by(f64::total_cmp);
+    let (q10, q90) = (follower_gaps[follower_gaps.len() / 10], follower_gaps[follower_gaps.len() * 9 / 10]);
+    assert!(q90 - q10 > 0.5 * (hi - lo), "follower gaps from {q10:.2} to {q90:.2} m");
+    assert_eq!(shared_speeds, 0, "followers with their leader's desired speeds");
+    // Hard negatives are on by default: about as many as followers.
+    assert!(hard_negatives * 2 > followers, "{hard_negatives} hard negatives for {followers} followers in {cars} cars");
+}
+
+/// Share of `ids` (by scenario folder) that never reach 0.1 m/s in the first second.
+fn standing_share(cars: &[(PathBuf, u32)], speeds: &BTreeMap<(PathBuf, u32), f64>) -> f64 {
+    let standing = cars.iter().filter(|k| speeds[*k] < 0.1).count();
+    standing as f64 / cars.len() as f64
+}
+
+#[test]
+fn followers_do_not_stand_still_at_the_start_more_than_other_cars() {
+    let data = default_city();
+    let mut fastest = BTreeMap::new();
+    let (mut followers, mut others) = (Vec::new(), Vec::new());
+    for dir in scenario_dirs(&data) {
+        let scenario = read_scenario(&dir);
+        for p in read_poses(&dir.join("poses.csv")).into_iter().filter(|p| p.t <= 1.0 + 1e-9) {
+            let v = fastest.entry((dir.clone(), p.car)).or_insert(0.0f64);
+            *v = v.max(p.speed);
+        }
+        for c in &scenario.cars {
+            let is_follower = scenario.edges.iter().any(|e| e[1] == c.id);
+            if is_follower { &mut followers } else { &mut others }.push((dir.clone(), c.id));
+        }
+    }
+    assert!(followers.len() > 500 && others.len() > 1000);
+    let (f, o) = (standing_share(&followers, &fastest), standing_share(&others, &fastest));
+    // Before leak-free starts: 100 % of followers against 1.5 % of other
+    // cars; now under 1 % of either.
+    assert!((f - o).abs() <= 0.10, "followers standing {:.1} %, other cars {:.1} %", 100.0 * f, 100.0 * o);
+    assert!(f < 0.05, "followers standing {:.1} %", 100.0 * f);
+}
+
+fn baseline_rows(data: &Path) -> (Vec<Value>, Vec<Value>) {
+    let output = run(&["baseline", data.to_str().unwrap(), "--json"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: Value = serde_json::from_slice(&output.stdout).unwrap();
+    (report["groups"].as_array().unwrap().clone(), report["frame0"].as_array().unwrap().clone())
+}
+
+#[test]
+fn the_first_frame_no_longer_finds_the_links_and_the_dynamics_still_rank_them() {
+    let data = default_city();
+    let (dynamics, frame0) = baseline_rows(&data);
+    assert_eq!(frame0.len(), 5, "one frame0 row per group");
+    for (d, z) in dynamics.iter().zip(&frame0) {
+        let group = z["group"].as_str().unwrap();
+        assert_eq!(d["group"], z["group"]);
+        let f1 = z["f1"].as_f64().unwrap();
+        // Before: 0.998-1.000 on every group; now 0.30-0.49 on 200 test
+        // scenarios. With 3 pairs and 2 other cars among 8, at most 4 cars
+        // can start behind a car they do not follow, so "right behind means
+        // linked" keeps a precision near 3/7 and an F1 near 0.6 there
+        // (measured 0.59).
+        let most = if group == "cars08_edges80" { 0.66 } else { 0.55 };
+        assert!(f1 <= most, "{group}: frame0 F1 {f1:.3}");
+        // 0.81-0.94 on 200 test scenarios; fewer here, so some slack.
+        let auroc = d["auroc"].as_f64().unwrap();
+        assert!(auroc >= 0.75, "{group}: dynamics AUROC {auroc:.3}");
+    }
+}
