@@ -202,13 +202,16 @@ impl Expansion {
                         continue;
                     }
                 }
-                let route = self.plan_route(span.lane, front, &actions, &merges)?;
+                // Checked on the spawn lane before the (costlier) route is planned.
                 let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
+                let curve = &self.map.lanes[span.lane].curve;
                 let boxes: Vec<OrientedBox> = starts
                     .iter()
-                    .map(|&s| {
-                        let (centre, heading) = route.pose_at(s, 0.0);
-                        OrientedBox { centre, heading, length: spec.car_length_m, width: spec.car_width_m }
+                    .map(|&s| OrientedBox {
+                        centre: curve.position(s, 0.0),
+                        heading: curve.heading_at(s),
+                        length: spec.car_length_m,
+                        width: spec.car_width_m,
                     })
                     .collect();
                 let clear = boxes.iter().all(|b| {
@@ -227,7 +230,7 @@ impl Expansion {
                     continue;
                 }
                 placed.extend(boxes);
-                let route = Arc::new(route);
+                let route = Arc::new(self.plan_route(span.lane, front, &actions, &merges)?);
                 let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
                 let role = if is_pair { Role::Leader } else { Role::Independent };
                 let car = PlacedCar {
