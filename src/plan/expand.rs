@@ -46,6 +46,10 @@ pub struct Expansion {
     pub camera: Camera,
     spans: Vec<SpawnSpan>,
     leader_gap_m: f64,
+    /// The closest two cars of one lane may start, centre to centre, metres:
+    /// the toy's exact leader gap, or a car length plus the city's shortest
+    /// follower gap.
+    shortest_spacing_m: f64,
     toy_step_m: f64,
 }
 
@@ -84,12 +88,11 @@ impl Expansion {
         let slot = spec.car_length_m + SPAWN_CLEARANCE;
         let capacity: u32 = spans.iter().map(|s| ((s.hi - s.lo) / slot) as u32 + 1).sum();
         let toy_step_m = camera.pixels_to_metres(spec.toy_speed_px_per_frame);
-        // The shortest start a pair can have, centre to centre, metres.
-        let shortest_pair = match spec.world {
+        let shortest_spacing_m = match spec.world {
             WorldKind::Toy => leader_gap_m,
             WorldKind::City => spec.car_length_m + spec.city_settings().start.follower_gap_m.lowest(),
         };
-        let expansion = Expansion { spec, map, camera, spans, leader_gap_m, toy_step_m };
+        let expansion = Expansion { spec, map, camera, spans, leader_gap_m, shortest_spacing_m, toy_step_m };
         for (i, g) in expansion.spec.groups.iter().enumerate() {
             // Random placement needs room to spare: allow half the packed capacity.
             if g.cars > capacity / 2 {
@@ -104,6 +107,7 @@ impl Expansion {
                     ),
                 ));
             }
+            let shortest_pair = expansion.shortest_spacing_m;
             if g.edges() > 0 && !expansion.spans.iter().any(|s| s.hi - s.lo >= shortest_pair) {
                 let field = match expansion.spec.world {
                     WorldKind::Toy => "leader_gap_px",
@@ -149,6 +153,7 @@ impl Expansion {
         let group: &GroupSpec = &spec.groups[key.group_index];
         let stream = stream_key(spec.seed, &key.group, key.split, key.index);
         let mut rng = ChaCha8Rng::from_seed(stream);
+        let travel = self.max_travel();
         let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
 
         // Units to place: pairs first (they need the most room), then singles.
@@ -220,17 +225,16 @@ impl Expansion {
                 });
                 // City: no car starts closer to another in its lane than the
                 // shortest follower gap, so no driver starts below its min gap.
-                let spaced = city.as_ref().is_none_or(|c| {
-                    let shortest = spec.car_length_m + c.start.follower_gap_m.lowest() - 1e-6;
-                    cars.iter()
+                let spaced = city.is_none()
+                    || cars
+                        .iter()
                         .filter(|o| o.spawn == span.lane)
-                        .all(|o| starts.iter().all(|s| (o.distance - s).abs() >= shortest))
-                });
+                        .all(|o| starts.iter().all(|s| (o.distance - s).abs() >= self.shortest_spacing_m - 1e-6));
                 if !clear || !spaced {
                     continue;
                 }
                 placed.extend(boxes);
-                let route = Arc::new(self.plan_route(span.lane, front, &actions, &merges)?);
+                let route = Arc::new(self.plan_route(span.lane, front, &actions, &merges, travel)?);
                 let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
                 let role = if is_pair { Role::Leader } else { Role::Independent };
                 let car = PlacedCar {
@@ -245,11 +249,8 @@ impl Expansion {
                 };
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    // A pair shares route and actions, not personality.
-                    let desired_speeds = match city {
-                        Some(_) => draw_desired_speeds(&mut rng, city.as_ref(), car.actions.len()),
-                        None => car.desired_speeds.clone(),
-                    };
+                    // A pair shares route and actions, not personality (the toy has no speeds to draw).
+                    let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), car.actions.len());
                     let follower =
                         PlacedCar { role: Role::Follower, distance: back, desired_speeds, behind: None, ..car.clone() };
                     cars.extend([car, follower]);
@@ -283,10 +284,17 @@ impl Expansion {
         }
     }
 
-    /// The route of a car entering at `front` metres along `lane`, long
-    /// enough for the whole scenario.
-    fn plan_route(&self, lane: LaneId, front: f64, actions: &[Action], merges: &[f64]) -> Result<Route, String> {
-        Route::plan(&self.map, lane, front, actions, merges, front + self.max_travel(), &LanePolicy::Adapt)
+    /// The route of a car entering at `front` metres along `lane`, `travel`
+    /// metres long (enough for the whole scenario).
+    fn plan_route(
+        &self,
+        lane: LaneId,
+        front: f64,
+        actions: &[Action],
+        merges: &[f64],
+        travel: f64,
+    ) -> Result<Route, String> {
+        Route::plan(&self.map, lane, front, actions, merges, front + travel, &LanePolicy::Adapt)
             .map_err(|e| format!("internal planning error on {}: {e}", self.map.lanes[lane].name))
     }
 
