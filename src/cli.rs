@@ -299,6 +299,12 @@ pub struct ExportNriArgs {
     /// vel[t] = loc[t+1] - loc[t] (vel[T-1] = vel[T-2]), the original converter's.
     #[arg(long, value_enum, default_value = "backward")]
     pub velocity: VelocityArg,
+
+    /// Also write dynamic_edges_<split>.npy, uint8 [scenarios, frames, cars, cars]:
+    /// per frame, edges[i, j] = 1 when car j bound car i's speed (interactions.csv;
+    /// city world only), for time-varying graph methods such as dNRI.
+    #[arg(long)]
+    pub dynamic: bool,
 }
 
 #[derive(Debug, Args)]
@@ -545,8 +551,9 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 directed: args.directed,
                 clip: args.clip,
                 velocity: args.velocity.into(),
+                dynamic: args.dynamic,
             };
-            for line in export_nri(&args.dataset, &args.out, &options).map_err(Error::Failure)? {
+            for line in export_nri(&args.dataset, &args.out, &options)? {
                 say(line)?;
             }
             Ok(())

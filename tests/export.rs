@@ -93,3 +93,63 @@ fn nri_exports_match_the_pose_logs_in_both_layouts() {
     assert_eq!(output.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&output.stderr).contains("no manifest.json"));
 }
+
+#[test]
+fn dynamic_edges_are_the_per_frame_interactions() {
+    let dir = fresh_dir("export-nri-dynamic");
+    let spec = write_spec(&dir, &city_spec("dyn", &[(8, 0.5)], (2, 1, 1), 120, "{}"));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let mut bonds = 0;
+    for (layout, directed) in [("causalcity", false), ("nri", true)] {
+        let out = dir.join(format!("out-{layout}"));
+        let mut args = vec!["export", "nri", data.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        args.extend(["--layout", layout, "--dynamic"]);
+        if directed {
+            args.push("--directed");
+        }
+        let output = run(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        for (split, nri_split, count) in [("train", "train", 2usize), ("val", "valid", 1), ("test", "test", 1)] {
+            let (shape, graph, dtype) =
+                load::<u8>(&out.join("cars08_edges50").join(format!("dynamic_edges_{nri_split}.npy")));
+            assert_eq!(dtype, "'|u1'");
+            assert_eq!(shape, vec![count as u64, 120, 8, 8]);
+            for s in 0..count {
+                let scenario_dir = data.join("cars08_edges50").join(split).join(format!("{s:05}"));
+                let mut expected = vec![0u8; 120 * 64];
+                for frame in 0..120 {
+                    for car in 0..8 {
+                        expected[frame * 64 + car * 9] = (layout == "causalcity") as u8;
+                    }
+                }
+                for row in read_csv::<InteractionRow>(&scenario_dir.join("interactions.csv")) {
+                    let (t, i) = (row.frame as usize, row.car as usize);
+                    let named = ["car", "conflict", "collision"].contains(&row.bound_by.as_str());
+                    assert_eq!(named, row.other_car.is_some(), "{row:?}");
+                    if let Some(j) = row.other_car {
+                        let j = j as usize;
+                        expected[t * 64 + i * 8 + j] = 1;
+                        if !directed {
+                            expected[t * 64 + j * 8 + i] = 1;
+                        }
+                        bonds += 1;
+                    }
+                }
+                assert_eq!(&graph[s * 120 * 64..(s + 1) * 120 * 64], &expected[..], "{layout} {split} {s}");
+            }
+        }
+    }
+    // Eight cars in traffic for 120 frames: some car binds another somewhere.
+    assert!(bonds > 0, "no interaction named another car");
+
+    // A toy dataset has no interactions: refused before anything is written.
+    let toy = write_spec(&dir, &toy_spec("toy", &[(4, 0.5)], (1, 1, 1), 10));
+    gen_ok(&toy, &dir.join("toy"), &["--quiet", "--no-images"]);
+    let out = dir.join("out-toy");
+    let output =
+        run(&["export", "nri", dir.join("toy").to_str().unwrap(), "--out", out.to_str().unwrap(), "--dynamic"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("--dynamic needs a city-world dataset"));
+    assert!(!out.exists());
+}

@@ -44,6 +44,9 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     let (mut speed, mut n, mut cars, mut stopped, mut reds, mut in_view) =
         (0.0, 0usize, 0usize, 0usize, 0usize, 0usize);
     let (mut changers, mut adapted, mut skipped) = (0usize, 0usize, 0usize);
+    // Pair-frames in which one car of a pair names the other in
+    // interactions.csv, for leader-follower pairs and the rest.
+    let (mut edge_frames, mut edge_together, mut other_frames, mut other_together) = (0usize, 0usize, 0usize, 0usize);
     for d in scenario_dirs(&city).into_iter().filter(|d| d.to_string_lossy().contains("/train/")) {
         let s = read_scenario(&d);
         let to_px = s.frame_interval * s.camera.pixels_per_metre;
@@ -66,7 +69,31 @@ fn stats_match_the_logs_and_separate_the_worlds() {
         changers += changed.len();
         adapted += events.iter().filter(|e| e.kind == "action_adapted").count();
         skipped += events.iter().filter(|e| e.kind == "action_skipped").count();
+        let mut named = std::collections::BTreeSet::new();
+        for row in read_csv::<InteractionRow>(&d.join("interactions.csv")) {
+            if let Some(other) = row.other_car {
+                named.insert((row.frame, row.car.min(other), row.car.max(other)));
+            }
+        }
+        let n_cars = s.cars.len() as u32;
+        for a in 0..n_cars {
+            for b in a + 1..n_cars {
+                let linked = s.edges.iter().any(|e| (e[0], e[1]) == (a, b) || (e[0], e[1]) == (b, a));
+                let together = (0..s.frames).filter(|&f| named.contains(&(f, a, b))).count();
+                if linked {
+                    (edge_frames, edge_together) = (edge_frames + s.frames as usize, edge_together + together);
+                } else {
+                    (other_frames, other_together) = (other_frames + s.frames as usize, other_together + together);
+                }
+            }
+        }
     }
+    assert!(edge_frames > 0 && other_frames > 0);
+    let share = |key: &str| train[key]["frame_share"].as_f64().unwrap();
+    assert!((share("edge_pairs") - edge_together as f64 / edge_frames as f64).abs() < 1e-12);
+    assert!((share("non_edge_pairs") - other_together as f64 / other_frames as f64).abs() < 1e-12);
+    // Leaders hold up their followers far more often than unrelated cars meet.
+    assert!(share("edge_pairs") > 3.0 * share("non_edge_pairs"), "{train}");
     assert_eq!(train["scenarios"], 6);
     assert_eq!(train["cars"], cars);
     assert!((train["mean_speed_px"].as_f64().unwrap() - speed / n as f64).abs() < 1e-9);
@@ -85,7 +112,12 @@ fn stats_match_the_logs_and_separate_the_worlds() {
 
     // The plain table names every column.
     let table = String::from_utf8(run(&["stats", city.to_str().unwrap()]).stdout).unwrap();
-    assert!(table.contains("gapCV") && table.contains("lanechg") && table.contains("cars12_edges50"));
+    assert!(
+        table.contains("gapCV")
+            && table.contains("lanechg")
+            && table.contains("e-int")
+            && table.contains("cars12_edges50")
+    );
 }
 
 #[test]

@@ -24,6 +24,8 @@
 
 use crate::map::signals::light_label;
 use crate::map::CityMap;
+use crate::output::logs::read_interactions;
+use crate::world::BoundBy;
 use glam::DVec2;
 use std::collections::HashMap;
 use std::path::Path;
@@ -267,29 +269,20 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
         });
         signals[k].1.push(colour.to_string());
     }
-    let mut bound = vec![vec![Bound::Other; n]; frames];
-    let mut reader = csv::Reader::from_path(&interactions).map_err(|e| err(&interactions, &e))?;
-    for row in reader.records() {
-        let row = row.map_err(|e| err(&interactions, &e))?;
-        let (Some(frame), Some(car)) =
-            (row.get(0).and_then(|v| v.parse::<usize>().ok()), row.get(1).and_then(|v| v.parse::<usize>().ok()))
-        else {
-            return Err(format!("{}: malformed row", interactions.display()));
-        };
-        let other = row.get(3).and_then(|v| v.parse::<usize>().ok()).filter(|&j| j < n);
-        let b = match (row.get(2), other) {
-            (Some("free"), _) => Bound::Free,
-            (Some("car"), Some(j)) => Bound::Car(j),
-            (Some("light"), _) => match row.get(4).and_then(|name| light_index.get(name)) {
-                Some(&k) => Bound::Light(k),
-                None => Bound::Other,
-            },
-            _ => Bound::Other,
-        };
-        if frame < frames && car < n {
-            bound[frame][car] = b;
-        }
-    }
+    let records = read_interactions(&interactions, frames, n)?;
+    let bound = (0..frames)
+        .map(|frame| {
+            records[frame * n..(frame + 1) * n]
+                .iter()
+                .map(|r| match (r.bound_by, r.other_car, &r.light) {
+                    (BoundBy::Free, _, _) => Bound::Free,
+                    (BoundBy::Car, Some(j), _) => Bound::Car(j),
+                    (BoundBy::Light, _, Some(name)) => light_index.get(name).map_or(Bound::Other, |&k| Bound::Light(k)),
+                    _ => Bound::Other,
+                })
+                .collect()
+        })
+        .collect();
     let mut actions_done = vec![Vec::new(); n];
     let path = dir.join("events.csv");
     let mut reader = csv::Reader::from_path(&path).map_err(|e| err(&path, &e))?;

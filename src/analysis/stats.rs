@@ -7,11 +7,15 @@
 //! car-frames on camera, the drivers' own lane choice (the share of cars
 //! that made a lane change for a turn, the actions adapted or skipped), and
 //! city traffic-flow figures (`flow.rs`): median headway and time gap while
-//! following, queue discharge at green, and speed on free road.
+//! following, queue discharge at green, and speed on free road; and how far
+//! the causal graph is what happened (`interactions.csv`): how often true
+//! leader-follower pairs actually interact, and how often non-edge pairs do.
 
 use super::flow::{median, read_scenario_flow, FlowSamples};
 use crate::dataset::Dataset;
 use crate::map::CityMap;
+use crate::output::layout::INTERACTIONS_CSV;
+use crate::output::logs::read_interactions;
 use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -25,6 +29,9 @@ pub const STOP_FRAMES: usize = 5;
 /// How far before an intersection box a stop counts as a stop at its light, metres.
 const APPROACH_M: f64 = 12.0;
 const HISTOGRAM_BIN_PX: f64 = 0.01;
+/// Share of its frames in which a pair must interact to count as "mostly
+/// interacting".
+pub const MOSTLY: f64 = 0.5;
 const HISTOGRAM_BINS: usize = 3001;
 
 /// Statistics of one group and split.
@@ -57,6 +64,50 @@ pub struct SplitStats {
     pub discharge_per_lane_s: Option<f64>,
     /// City: median speed over desired speed on free road, moving.
     pub free_speed_ratio_median: Option<f64>,
+    /// City: true pairs (a leader and its follower), as one of them binding
+    /// the other's speed in interactions.csv (car, conflict, collision).
+    pub edge_pairs: PairInteraction,
+    /// City: every other pair of cars, in the same sense.
+    pub non_edge_pairs: PairInteraction,
+}
+
+/// How often a set of car pairs actually interacts (city world).
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct PairInteraction {
+    pub pairs: usize,
+    /// Share of pair-frames in which one car of the pair binds the other.
+    pub frame_share: Option<f64>,
+    /// Share of pairs that interact in at least [`MOSTLY`] of the frames.
+    pub mostly_share: Option<f64>,
+    #[serde(skip)]
+    frames: usize,
+    #[serde(skip)]
+    interacting_frames: usize,
+    #[serde(skip)]
+    mostly: usize,
+}
+
+impl PairInteraction {
+    /// Counts one pair that interacted in `interacting` of `frames` frames.
+    fn add(&mut self, interacting: usize, frames: usize) {
+        self.pairs += 1;
+        self.frames += frames;
+        self.interacting_frames += interacting;
+        self.mostly += (interacting as f64 >= MOSTLY * frames as f64 && frames > 0) as usize;
+    }
+
+    fn merge(&mut self, other: &PairInteraction) {
+        self.pairs += other.pairs;
+        self.frames += other.frames;
+        self.interacting_frames += other.interacting_frames;
+        self.mostly += other.mostly;
+    }
+
+    fn finish(mut self) -> PairInteraction {
+        self.frame_share = (self.frames > 0).then(|| self.interacting_frames as f64 / self.frames as f64);
+        self.mostly_share = (self.pairs > 0).then(|| self.mostly as f64 / self.pairs as f64);
+        self
+    }
 }
 
 /// The whole table.
@@ -70,7 +121,7 @@ impl fmt::Display for DatasetStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
+            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
             "group",
             "split",
             "scen",
@@ -90,13 +141,18 @@ impl fmt::Display for DatasetStats {
             "hdwy",
             "tgap",
             "disch",
-            "free"
+            "free",
+            "e-int",
+            "e-mst",
+            "n-int",
+            "n-mst"
         )?;
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
+        let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
         for r in &self.rows {
             writeln!(
                 f,
-                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
+                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
                 r.group,
                 r.split,
                 r.scenarios,
@@ -116,10 +172,14 @@ impl fmt::Display for DatasetStats {
                 opt(r.headway_median_s, 2),
                 opt(r.time_gap_median_s, 2),
                 opt(r.discharge_per_lane_s, 2),
-                opt(r.free_speed_ratio_median, 2)
+                opt(r.free_speed_ratio_median, 2),
+                pct(r.edge_pairs.frame_share),
+                pct(r.edge_pairs.mostly_share),
+                pct(r.non_edge_pairs.frame_share),
+                pct(r.non_edge_pairs.mostly_share)
             )?;
         }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road")
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road; pairs interacting (interactions.csv: one car's speed bound by the other, as car ahead, conflict or collision), e-: leader-follower pairs, n-: all other pairs, int: share of pair-frames, mst: share of pairs interacting in at least {:.0}% of frames", 100.0 * MOSTLY)
     }
 }
 
@@ -142,6 +202,8 @@ struct Tally {
     actions_adapted: usize,
     actions_skipped: usize,
     flow: FlowSamples,
+    edge_pairs: PairInteraction,
+    non_edge_pairs: PairInteraction,
 }
 
 /// Computes the statistics of the dataset in `dir`.
@@ -185,6 +247,8 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         all.actions_adapted += t.actions_adapted;
         all.actions_skipped += t.actions_skipped;
         all.flow.extend(t.flow);
+        all.edge_pairs.merge(&t.edge_pairs);
+        all.non_edge_pairs.merge(&t.non_edge_pairs);
     }
     let target = (0.95 * all.car_frames as f64).ceil() as u64;
     let mut seen = 0;
@@ -220,6 +284,8 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         time_gap_median_s: median(&mut all.flow.time_gaps_s),
         discharge_per_lane_s: median(&mut all.flow.discharge_headways_s).filter(|&h| h > 0.0).map(|h| 1.0 / h),
         free_speed_ratio_median: median(&mut all.flow.free_speed_ratios),
+        edge_pairs: all.edge_pairs.finish(),
+        non_edge_pairs: all.non_edge_pairs.finish(),
     }
 }
 
@@ -350,6 +416,40 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     }
     if let Some(flow) = read_scenario_flow(dir, map)? {
         t.flow = flow.samples();
+    }
+    let interactions = dir.join(INTERACTIONS_CSV);
+    if interactions.exists() {
+        let frames = scenario["frames"].as_u64().unwrap_or(0) as usize;
+        let records = read_interactions(&interactions, frames, cars)?;
+        let mut linked = vec![false; cars * cars];
+        for edge in scenario["edges"].as_array().into_iter().flatten() {
+            if let (Some(l), Some(f)) = (edge[0].as_u64(), edge[1].as_u64()) {
+                let (l, f) = (l as usize, f as usize);
+                if l < cars && f < cars {
+                    linked[l * cars + f] = true;
+                    linked[f * cars + l] = true;
+                }
+            }
+        }
+        // Per unordered pair (a < b), the frames in which one binds the other.
+        let mut together = vec![0usize; cars * cars];
+        for frame in records.chunks_exact(cars.max(1)) {
+            for (a, record) in frame.iter().enumerate() {
+                if let Some(b) = record.other_car.filter(|&b| b != a) {
+                    let bound_back = frame[b].other_car == Some(a);
+                    // Counted once per frame when both bind each other.
+                    if !bound_back || a < b {
+                        together[a.min(b) * cars + a.max(b)] += 1;
+                    }
+                }
+            }
+        }
+        for a in 0..cars {
+            for b in a + 1..cars {
+                let tally = if linked[a * cars + b] { &mut t.edge_pairs } else { &mut t.non_edge_pairs };
+                tally.add(together[a * cars + b], frames);
+            }
+        }
     }
     Ok(t)
 }

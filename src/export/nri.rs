@@ -19,11 +19,22 @@
 //! to the image (0..width x 0..height) before differencing, as that
 //! converter did. Car order is the scenario's (randomly permuted) ids. One
 //! split is held in memory at a time.
+//!
+//! `dynamic` (city world) adds `dynamic_edges_<split><suffix>.npy`, uint8
+//! [scenarios, frames, cars, cars]: the per-frame car-to-car graph for
+//! methods that discover time-varying graphs (such as dNRI), read from
+//! `interactions.csv`. `dynamic_edges[s, t, i, j] = 1` when car j bound car
+//! i's speed choice at frame t (`bound_by` car, conflict or collision with
+//! `other_car` j); the same receiver/sender, `--directed` and identity
+//! conventions as `edges`.
 
 use crate::dataset::{Dataset, ScenarioSummary};
+use crate::error::Error;
 use crate::output::io_err;
+use crate::output::layout::INTERACTIONS_CSV;
+use crate::output::logs::read_interactions;
 use crate::output::poses::{read_pixels, PIXELS_FILE};
-use crate::spec::Split;
+use crate::spec::{Split, WorldKind};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -56,6 +67,8 @@ pub struct NriOptions {
     /// Clamp positions to the image, as the original converter did.
     pub clip: bool,
     pub velocity: Velocity,
+    /// Also write the per-frame graph from interactions.csv (city world).
+    pub dynamic: bool,
 }
 
 /// Split names as the NRI loaders spell them.
@@ -75,7 +88,7 @@ fn fill_scenario(
     (frames, cars): (usize, usize),
     image: (f32, f32),
     options: &NriOptions,
-    (loc, vel, edges): (&mut [f32], &mut [f32], &mut [i64]),
+    (loc, vel, edges, dynamic): (&mut [f32], &mut [f32], &mut [i64], &mut [u8]),
 ) -> Result<(), String> {
     let scenario = ScenarioSummary::read(dir)?;
     if scenario.cars.len() != cars || scenario.frames as usize != frames {
@@ -127,6 +140,22 @@ fn fill_scenario(
             edges[leader * cars + follower] = 1;
         }
     }
+    if options.dynamic {
+        let records = read_interactions(&dir.join(INTERACTIONS_CSV), frames, cars)?;
+        for (frame, graph) in dynamic.chunks_exact_mut(cars * cars).enumerate() {
+            for receiver in 0..cars {
+                if options.layout == NriLayout::Causalcity {
+                    graph[receiver * cars + receiver] = 1;
+                }
+                if let Some(sender) = records[frame * cars + receiver].other_car {
+                    graph[receiver * cars + sender] = 1;
+                    if !options.directed {
+                        graph[sender * cars + receiver] = 1;
+                    }
+                }
+            }
+        }
+    }
     Ok(())
 }
 
@@ -139,6 +168,12 @@ trait LittleEndian: npyz::AutoSerialize + Copy {
 impl LittleEndian for f32 {
     fn put(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
+impl LittleEndian for u8 {
+    fn put(self, out: &mut Vec<u8>) {
+        out.push(self);
     }
 }
 
@@ -177,8 +212,21 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
 }
 
 /// Exports `dataset` into `out`; returns a one-line report per file group.
-pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {
-    let opened = Dataset::open_complete(dataset)?;
+/// `dynamic` on a toy-world dataset is an input error, found before anything
+/// is written.
+pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, Error> {
+    let opened = Dataset::open_complete(dataset).map_err(Error::Failure)?;
+    if options.dynamic && opened.spec().world != WorldKind::City {
+        return Err(Error::Input(format!(
+            "{}: --dynamic needs a city-world dataset (its interactions.csv); this one is {}-world",
+            dataset.display(),
+            opened.spec().world.name()
+        )));
+    }
+    export_nri_groups(&opened, out, options).map_err(Error::Failure)
+}
+
+fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {
     let frames = opened.spec().frames as usize;
     let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
     let mut report = Vec::new();
@@ -195,12 +243,16 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
             let block = frames * cars * 2;
             let (mut loc, mut vel) = (vec![0f32; s * block], vec![0f32; s * block]);
             let mut edges = vec![0i64; s * cars * cars];
+            // Without `dynamic`, a placeholder byte per scenario keeps the zip even.
+            let graphs = if options.dynamic { frames * cars * cars } else { 1 };
+            let mut dynamic = vec![0u8; s * graphs];
             loc.par_chunks_mut(block)
                 .zip(vel.par_chunks_mut(block))
                 .zip(edges.par_chunks_mut(cars * cars))
+                .zip(dynamic.par_chunks_mut(graphs))
                 .zip(dirs.par_iter())
-                .try_for_each(|(((loc, vel), edges), dir)| {
-                    fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges))
+                .try_for_each(|((((loc, vel), edges), dynamic), dir)| {
+                    fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges, dynamic))
                 })?;
             let (f, c) = (frames as u64, cars as u64);
             let loc_shape = match options.layout {
@@ -218,12 +270,16 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
                 },
             );
             wrote_loc.and(wrote_vel).and(wrote_edges)?;
+            if options.dynamic {
+                write_npy(&name("dynamic_edges"), &[s as u64, f, c, c], &dynamic)?;
+            }
             report.push(format!(
-                "{}: {} {} scenarios, loc/vel {:?}",
+                "{}: {} {} scenarios, loc/vel {:?}{}",
                 group_dir.display(),
                 nri_split_name(split),
                 s,
-                loc_shape
+                loc_shape,
+                if options.dynamic { format!(", dynamic_edges {:?}", [s as u64, f, c, c]) } else { String::new() }
             ));
         }
     }

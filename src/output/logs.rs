@@ -4,9 +4,10 @@
 
 use super::poses::Fields;
 use crate::map::signals::{light_label, LightPlan};
-use crate::world::Trajectories;
+use crate::world::{BoundBy, Trajectories};
 use serde::Serialize;
 use std::io::Write;
+use std::path::Path;
 
 pub const LIGHT_COLUMNS: [&str; 7] = ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"];
 pub const EVENT_COLUMNS: [&str; 6] = ["frame", "t", "kind", "car", "other_car", "detail"];
@@ -107,4 +108,49 @@ pub fn write_interactions<W: Write>(
     }
     w.flush()?;
     Ok(())
+}
+
+/// One `interactions.csv` row as read back: what bound the car, and the
+/// other car or the light (`AC/W/straight`) it names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InteractionRecord {
+    pub bound_by: BoundBy,
+    pub other_car: Option<usize>,
+    pub light: Option<String>,
+}
+
+/// Reads a scenario's `interactions.csv` of `frames` x `cars`: one record per
+/// frame and car, at `frame * cars + car`. Every row must be there once,
+/// with a known `bound_by` and an `other_car` below `cars`.
+pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<InteractionRecord>, String> {
+    let fail = |what: String| format!("{}: {what}", path.display());
+    let mut reader = csv::Reader::from_path(path).map_err(|e| fail(e.to_string()))?;
+    let mut records: Vec<Option<InteractionRecord>> = vec![None; frames * cars];
+    for (line, row) in reader.records().enumerate() {
+        let row = row.map_err(|e| fail(e.to_string()))?;
+        let line = line + 2;
+        let index =
+            |column: usize, limit: usize| row.get(column).and_then(|v| v.parse::<usize>().ok()).filter(|&v| v < limit);
+        let (Some(frame), Some(car)) = (index(0, frames), index(1, cars)) else {
+            return Err(fail(format!("line {line}: frame or car outside {frames} frames x {cars} cars")));
+        };
+        let bound_by = row.get(2).and_then(BoundBy::from_name).ok_or_else(|| {
+            fail(format!("line {line}: bound_by {:?} is not one of the kinds in interactions.schema.json", row.get(2)))
+        })?;
+        let other_car = match row.get(3) {
+            None | Some("") => None,
+            Some(_) => Some(index(3, cars).ok_or_else(|| fail(format!("line {line}: other_car is not a car id")))?),
+        };
+        let light = row.get(4).filter(|l| !l.is_empty()).map(str::to_string);
+        let slot = &mut records[frame * cars + car];
+        if slot.is_some() {
+            return Err(fail(format!("line {line}: a second row for frame {frame}, car {car}")));
+        }
+        *slot = Some(InteractionRecord { bound_by, other_car, light });
+    }
+    let missing = records.iter().filter(|r| r.is_none()).count();
+    if missing > 0 {
+        return Err(fail(format!("{missing} of {} frame-car rows are missing", frames * cars)));
+    }
+    Ok(records.into_iter().flatten().collect())
 }

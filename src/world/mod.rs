@@ -108,6 +108,23 @@ impl BoundBy {
             BoundBy::Intervention => "intervention",
         }
     }
+
+    /// Every kind, in the order of `data-schema/interactions.schema.json`.
+    pub const ALL: [BoundBy; 8] = [
+        BoundBy::Free,
+        BoundBy::Car,
+        BoundBy::Light,
+        BoundBy::Conflict,
+        BoundBy::Merge,
+        BoundBy::Curve,
+        BoundBy::Collision,
+        BoundBy::Intervention,
+    ];
+
+    /// The kind `interactions.csv` spells `name`.
+    pub fn from_name(name: &str) -> Option<BoundBy> {
+        BoundBy::ALL.into_iter().find(|b| b.name() == name)
+    }
 }
 
 /// One car's binding constraint at one frame, with the other car or the
