@@ -504,6 +504,18 @@ impl Distribution {
         }
     }
 
+    /// The value at `u` in [0, 1) of its inverse cumulative distribution:
+    /// the draw a uniform exogenous `u` stands for.
+    pub fn quantile(&self, u: f64) -> f64 {
+        match self {
+            Distribution::Fixed(v) => *v,
+            Distribution::Uniform { uniform } => uniform[0] + u * (uniform[1] - uniform[0]),
+            Distribution::Choice { choice } => {
+                choice[((u * choice.len() as f64) as usize).min(choice.len().saturating_sub(1))]
+            }
+        }
+    }
+
     /// Draws a value.
     pub fn sample<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         use rand::RngExt;
@@ -521,18 +533,24 @@ impl Distribution {
     }
 }
 
-/// Confounders per scenario: each a fixed value or a distribution.
+/// Confounders per scenario (the causal model is in `plan/confounders.rs`).
+/// Rain, snow and the hour are exogenous: the spec gives their
+/// distribution. Fog and wetness follow their structural equations unless
+/// the spec gives them, which replaces the equation by the given value or
+/// distribution (a do-intervention on that variable).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ConfounderSpec {
     /// Rain intensity 0..1.
     pub rain: Distribution,
-    /// Fog density 0..1.
-    pub fog: Distribution,
+    /// Fog density 0..1; absent: its equation (fog in the early hours).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fog: Option<Distribution>,
     /// Snowfall 0..1.
     pub snow: Distribution,
-    /// Water on the road 0..1.
-    pub wetness: Distribution,
+    /// Water on the road 0..1; absent: its equation (from rain and snow).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wetness: Option<Distribution>,
     /// Time of day, hours 0..24.
     pub hour: Distribution,
 }
@@ -541,9 +559,9 @@ impl Default for ConfounderSpec {
     fn default() -> Self {
         ConfounderSpec {
             rain: Distribution::Fixed(0.0),
-            fog: Distribution::Fixed(0.0),
+            fog: None,
             snow: Distribution::Fixed(0.0),
-            wetness: Distribution::Fixed(0.0),
+            wetness: None,
             hour: Distribution::Fixed(12.0),
         }
     }
@@ -772,9 +790,13 @@ impl CitySpec {
         }
         let c = &self.confounders;
         c.rain.check("city.confounders.rain", 0.0, 1.0)?;
-        c.fog.check("city.confounders.fog", 0.0, 1.0)?;
+        if let Some(fog) = &c.fog {
+            fog.check("city.confounders.fog", 0.0, 1.0)?;
+        }
         c.snow.check("city.confounders.snow", 0.0, 1.0)?;
-        c.wetness.check("city.confounders.wetness", 0.0, 1.0)?;
+        if let Some(wetness) = &c.wetness {
+            wetness.check("city.confounders.wetness", 0.0, 1.0)?;
+        }
         c.hour.check("city.confounders.hour", 0.0, 24.0)?;
         Ok(())
     }

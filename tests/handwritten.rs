@@ -414,6 +414,37 @@ fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
 }
 
 #[test]
+fn setting_the_rain_wets_the_road_by_its_equation_unless_the_wetness_is_held() {
+    let dir = fresh_dir("hw-rain-file");
+    let rain = dir.join("rain.json");
+    std::fs::write(&rain, r#"[{"at": 2.0, "do": "set_confounder", "confounder": "rain", "value": 0.8}]"#).unwrap();
+    let pair = counterfactual_of("hw-rain", &["--intervention", rain.to_str().unwrap()]);
+    let events = read_csv::<EventRow>(&pair.join("counterfactual/events.csv"));
+    let wetted: Vec<&EventRow> = events.iter().filter(|e| e.detail.starts_with("wetness 0.000 -> ")).collect();
+    assert_eq!(wetted.len(), 1, "{events:?}");
+    let wetness: f64 = wetted[0].detail["wetness 0.000 -> ".len()..].split(' ').next().unwrap().parse().unwrap();
+    assert!(wetness >= 0.3, "rain 0.8 leaves the road at wetness {wetness}");
+    assert!(wetted[0].detail.contains("after rain was set to 0.8"));
+    // The factual run stays dry: nothing but the intervention changed the weather.
+    let factual = read_json(&pair.join("factual/scenario.json"));
+    assert_eq!(factual["city"]["confounders"]["wetness"].as_f64(), Some(0.0));
+    assert_eq!(factual["city"]["confounder_model"]["source"]["wetness"], "equation");
+
+    // Held by an earlier intervention, wetness no longer follows the rain.
+    let held = dir.join("held.json");
+    std::fs::write(
+        &held,
+        r#"[{"at": 1.0, "do": "set_confounder", "confounder": "wetness", "value": 0.1},
+            {"at": 2.0, "do": "set_confounder", "confounder": "rain", "value": 0.8}]"#,
+    )
+    .unwrap();
+    let pair = counterfactual_of("hw-rain-held", &["--intervention", held.to_str().unwrap()]);
+    let events = read_csv::<EventRow>(&pair.join("counterfactual/events.csv"));
+    assert!(events.iter().filter(|e| e.kind == "intervention").count() >= 2, "{events:?}");
+    assert!(!events.iter().any(|e| e.detail.contains("by its equation")), "{events:?}");
+}
+
+#[test]
 fn a_gen_spec_can_list_cameras_and_validate_checks_their_files() {
     let dir = fresh_dir("hw-gen-cameras");
     let spec = city_spec("camspec", &[(4, 0.5)], (2, 0, 0), 12, "{}").replacen(

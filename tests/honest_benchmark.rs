@@ -145,3 +145,57 @@ fn the_first_frame_no_longer_finds_the_links_and_the_dynamics_still_rank_them() 
         assert!(auroc >= 0.75, "{group}: dynamics AUROC {auroc:.3}");
     }
 }
+
+#[test]
+fn the_weather_follows_its_equations_and_a_value_the_spec_gives_overrides_them() {
+    let data = default_city();
+    let (mut rainy, mut dry, mut fog_early, mut early, mut fog_late, mut late) = (0, 0, 0, 0, 0, 0);
+    let dirs = scenario_dirs(&data);
+    assert!(dirs.len() >= 500, "{} scenarios", dirs.len());
+    for d in &dirs {
+        let city = &read_json(&d.join("scenario.json"))["city"];
+        let value = |name: &str| city["confounders"][name].as_f64().unwrap();
+        let (rain, snow, wetness, fog, hour) =
+            (value("rain"), value("snow"), value("wetness"), value("fog"), value("hour"));
+        assert_eq!(city["confounder_model"]["source"]["wetness"], "equation");
+        assert_eq!(city["confounder_model"]["source"]["fog"], "equation");
+        if rain >= 0.5 {
+            assert!(wetness >= 0.3, "{}: rain {rain}, wetness {wetness}", d.display());
+            rainy += 1;
+        }
+        // A dry day is dry; rain or snow always leaves water.
+        assert_eq!(wetness > 0.0, rain > 0.0 || snow > 0.0, "{}", d.display());
+        dry += (rain == 0.0 && snow == 0.0) as usize;
+        if hour < 8.0 {
+            (early, fog_early) = (early + 1, fog_early + (fog > 0.0) as usize);
+        } else if hour >= 11.0 {
+            (late, fog_late) = (late + 1, fog_late + (fog > 0.0) as usize);
+        }
+    }
+    assert!(rainy > 100 && dry > 100, "{rainy} rainy, {dry} dry scenarios");
+    // Fog comes in the early hours (before 08:00: 5-8 h in this spec), not later than 11:00.
+    assert!(early > 50 && fog_early as f64 > 0.3 * early as f64, "{fog_early} of {early} early scenarios foggy");
+    assert_eq!(fog_late, 0, "fog after 11:00 in {fog_late} of {late} scenarios");
+
+    // Fixing wetness and fog in the spec (a do-intervention) overrides their equations.
+    let dir = fresh_dir("weather-do");
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json")).unwrap();
+    let mut spec: Value = serde_json::from_str(&text).unwrap();
+    spec["city"]["confounders"]["wetness"] = 0.0.into();
+    spec["city"]["confounders"]["fog"] = 0.5.into();
+    spec["city"]["confounders"]["hour"] = 15.into();
+    spec["city"]["confounders"]["rain"] = 0.8.into();
+    let spec = write_spec(&dir, &spec.to_string());
+    gen_ok(&spec, &dir.join("data"), &["--quiet", "--no-images", "--limit", "2"]);
+    let dirs = scenario_dirs(&dir.join("data"));
+    assert!(!dirs.is_empty());
+    for d in dirs {
+        let city = &read_json(&d.join("scenario.json"))["city"];
+        assert_eq!(
+            (city["confounders"]["wetness"].as_f64(), city["confounders"]["fog"].as_f64()),
+            (Some(0.0), Some(0.5))
+        );
+        assert_eq!(city["confounder_model"]["source"]["wetness"], "spec");
+        assert_eq!(city["confounder_model"]["source"]["fog"], "spec");
+    }
+}

@@ -4,7 +4,7 @@
 use crate::camera::Camera;
 use crate::map::signals::Light;
 use crate::map::Action;
-use crate::plan::confounders::{Confounders, Effects};
+use crate::plan::confounders::{ConfounderModel, Confounders, Effects};
 use crate::plan::{CarPlan, Role, ScenarioPlan, WorldPlan};
 use crate::render::palette::{colour_of, hex_colour};
 use crate::spec::DriverParams;
@@ -49,6 +49,7 @@ struct LightRecord<'a> {
 struct CityRecord<'a> {
     model: &'a str,
     confounders: &'a Confounders,
+    confounder_model: &'a ConfounderModel,
     effects: &'a Effects,
     base_driver: &'a DriverParams,
     lights: Vec<LightRecord<'a>>,
@@ -100,6 +101,7 @@ pub fn scenario_json(
     let city = plan.world.city().map(|c| CityRecord {
         model,
         confounders: &c.confounders,
+        confounder_model: &c.confounder_model,
         effects: &c.effects,
         base_driver: &c.base_driver,
         lights: c

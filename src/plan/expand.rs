@@ -3,7 +3,7 @@
 //! SHA-256("causalcity/scenario/v1", seed, group, split, index), so its content
 //! never depends on thread count, order, sharding or the other groups.
 
-use super::confounders::Confounders;
+use super::confounders::ConfounderModel;
 use super::{stream_key, CarAgency, CarPlan, CityPlan, GivenCar, Role, ScenarioKey, ScenarioPlan, WorldPlan};
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
@@ -437,13 +437,7 @@ impl Expansion {
     fn city_plan(&self, stream: [u8; 32], rng: &mut ChaCha8Rng, cars: &[PlacedCar], ids: &[u32]) -> CityPlan {
         let c = self.spec.city_settings();
         let cs = &c.confounders;
-        let confounders = Confounders {
-            rain: cs.rain.sample(rng),
-            fog: cs.fog.sample(rng),
-            snow: cs.snow.sample(rng),
-            wetness: cs.wetness.sample(rng),
-            hour: cs.hour.sample(rng),
-        };
+        let (confounders, confounder_model) = ConfounderModel::draw(cs, rng);
         let effects = confounders.effects();
         let mut sim_stream = stream;
         sim_stream[31] ^= 0x5a;
@@ -464,6 +458,7 @@ impl Expansion {
         agency.sort_by_key(|(id, _)| *id);
         CityPlan {
             confounders,
+            confounder_model,
             effects,
             lights: self.light_plan(&c, stream),
             base_driver: c.driver,

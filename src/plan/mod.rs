@@ -12,7 +12,7 @@ use crate::camera::CameraPlan;
 use crate::map::signals::LightPlan;
 use crate::map::{Action, LaneId, Route};
 use crate::spec::{DriverModel, DriverParams, Split, WorldKind};
-use confounders::{Confounders, Effects};
+use confounders::{ConfounderModel, Confounders, Effects};
 use interventions::Intervention;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -99,6 +99,8 @@ pub struct CarAgency {
 #[derive(Debug, Clone)]
 pub struct CityPlan {
     pub confounders: Confounders,
+    /// The confounders' exogenous draws and which equations set them.
+    pub confounder_model: ConfounderModel,
     pub effects: Effects,
     pub lights: LightPlan,
     /// Base driver parameters before confounders.

@@ -100,11 +100,28 @@ impl Sim<'_> {
         }
     }
 
-    /// Sets a confounder at time `t`: every driver's parameters and desired
-    /// speed change by the ratio (or difference) of the new effects to the old.
+    /// Sets a confounder at time `t` (a do-intervention: the variables still
+    /// set by their equations follow, each change logged as an intervention
+    /// event): every driver's parameters and desired speed change by the
+    /// ratio (or difference) of the new effects to the old.
     fn set_confounder(&mut self, confounder: ConfounderName, value: f64, t: f64) {
-        let (old, new) = (self.confounders.effects(), confounder.set(self.confounders, value));
-        let effects = new.effects();
+        let before = self.confounders;
+        let new = self.confounder_model.intervene(before, confounder, value);
+        for (name, was, now) in [("fog", before.fog, new.fog), ("wetness", before.wetness, new.wetness)] {
+            if was != now && name != confounder.name() {
+                self.events.push(Event {
+                    t,
+                    kind: EventKind::Intervention,
+                    car: 0,
+                    other: None,
+                    detail: format!(
+                        "{name} {was:.3} -> {now:.3} by its equation, after {} was set to {value}",
+                        confounder.name()
+                    ),
+                });
+            }
+        }
+        let (old, effects) = (before.effects(), new.effects());
         for car in &mut self.cars {
             let d = &mut car.driver;
             d.time_headway *= effects.time_headway_factor / old.time_headway_factor;

@@ -39,7 +39,7 @@ use super::driver::{CarFollowing, Iidm};
 use super::{Event, Trajectories};
 use crate::map::signals::{Colour, Light};
 use crate::map::CityMap;
-use crate::plan::confounders::Confounders;
+use crate::plan::confounders::{ConfounderModel, Confounders};
 use crate::plan::interventions::Intervention;
 use crate::plan::{CityPlan, ScenarioPlan};
 use car::SimCar;
@@ -141,6 +141,8 @@ struct Sim<'a> {
     /// The confounders now, and the changes interventions made (time, values).
     confounders: Confounders,
     confounder_changes: Vec<(f64, Confounders)>,
+    /// The confounders' model now (interventions hold what they set).
+    confounder_model: ConfounderModel,
     /// Per track (lane or connector): (car, arc length on the track, metres).
     occupancy: Vec<Vec<(usize, f64)>>,
     /// Pairs of cars (i < j) in contact since a collision.
@@ -165,6 +167,7 @@ impl<'a> Sim<'a> {
             light_plans: Vec::new(),
             confounders: city.confounders,
             confounder_changes: Vec::new(),
+            confounder_model: city.confounder_model,
             occupancy: vec![Vec::new(); map.track_count()],
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,

@@ -6,11 +6,12 @@
 use super::CityWorld;
 use crate::map::signals::{Colour, LightPlan, ScheduleStep, Signal};
 use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
-use crate::plan::confounders::Confounders;
+use crate::plan::confounders::ConfounderModel;
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::{CarAgency, CarPlan, CityPlan, Role, ScenarioKey, ScenarioPlan, WorldPlan};
 use crate::spec::{DriverParams, Split};
 use crate::world::{EventKind, Trajectories};
+use rand::SeedableRng;
 use std::sync::Arc;
 
 const LENGTH: f64 = 4.0;
@@ -84,9 +85,12 @@ fn plan(
             runs_red_lights: false,
         })
         .collect();
-    let confounders = Confounders::default();
+    let mut clear_noon = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let (confounders, confounder_model) =
+        ConfounderModel::draw(&crate::spec::ConfounderSpec::default(), &mut clear_noon);
     let city = CityPlan {
         confounders,
+        confounder_model,
         effects: confounders.effects(),
         lights,
         base_driver: driver(),
