@@ -162,6 +162,7 @@ fn png_settings_comparison() {
             width: c.width,
             colour: causalcity::render::palette::colour_of(c),
             mask_id: c.mask_id,
+            braking: false,
         })
         .collect();
     let reps = 40;
@@ -178,7 +179,7 @@ fn png_settings_comparison() {
         let t = Instant::now();
         let mut size = 0;
         for k in 0..reps {
-            renderer.render(&mut canvas, &scene, &sprites, k);
+            renderer.render(&mut canvas, &scene, &sprites, &[], k);
         }
         let render_ms = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
         let t = Instant::now();
@@ -206,7 +207,7 @@ fn png_settings_comparison() {
     let t = Instant::now();
     let scene = renderer.scene(causalcity::render::weather::SceneLook::clear());
     for _ in 0..reps {
-        renderer.render(&mut canvas, &scene, &sprites, 75);
+        renderer.render(&mut canvas, &scene, &sprites, &[], 75);
     }
     println!("render (RGB + mask, no encode): {:.2} ms", t.elapsed().as_secs_f64() * 1e3 / reps as f64);
     use png::{DeflateCompression as D, Filter as F};
@@ -328,8 +329,18 @@ fn main() {
         let t = Instant::now();
         for (plan, traj) in plans.iter().zip(&trajectories) {
             let mut sink = Vec::with_capacity(1 << 20);
-            causalcity::output::logs::write_lights(&mut sink, &plan.world.city().unwrap().lights, &names, traj)
-                .unwrap();
+            let lights = &plan.world.city().unwrap().lights;
+            let heads: Vec<_> = lights
+                .lights
+                .iter()
+                .map(|l| {
+                    expansion
+                        .map
+                        .signal_head(l.intersection, l.approach, l.signal)
+                        .map(|p| expansion.camera.to_pixel(p))
+                })
+                .collect();
+            causalcity::output::logs::write_lights(&mut sink, lights, &names, &heads, traj).unwrap();
         }
         let lights_ms = t.elapsed().as_secs_f64() * 1e3 / trajectories.len() as f64;
         let t = Instant::now();

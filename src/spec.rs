@@ -213,6 +213,7 @@ impl MapSpec {
             extent_x: self.extent_x,
             extent_y: self.extent_y,
             lane_change_length: self.lane_change_m,
+            sidewalk_width: d.sidewalk_width,
             ..d
         }
     }
@@ -665,6 +666,21 @@ pub struct CitySpec {
     pub start: StartSpec,
     pub lights: LightsSpec,
     pub confounders: ConfounderSpec,
+    /// Whether frames show the signal heads (the lights, a confounder of
+    /// every car) or hide them.
+    pub signal_heads: SignalHeads,
+}
+
+/// Whether the frames show the traffic lights' signal heads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SignalHeads {
+    /// Drawn at every approach in their current colour: a measured confounder.
+    #[default]
+    Visible,
+    /// Not drawn: the lights act on the cars but no frame shows them (a
+    /// hidden confounder).
+    Hidden,
 }
 
 /// How `gen` starts the city's cars (hand-written scenario files start
@@ -714,6 +730,7 @@ impl Default for CitySpec {
             start: StartSpec::default(),
             lights: LightsSpec::default(),
             confounders: ConfounderSpec::default(),
+            signal_heads: SignalHeads::Visible,
         }
     }
 }

@@ -249,14 +249,15 @@ fn beams_light_the_road_never_the_car_in_front() {
         width: 1.1,
         colour: [200, 40, 40],
         mask_id: id,
+        braking: false,
     };
     // Heading east; the rear car's front is 1 m behind the front car's back,
     // so its 3.5 m beams reach under the front car.
     let (front, rear) = (car(4.0, 1), car(0.8, 2));
     let mut alone = renderer.canvas();
-    renderer.render(&mut alone, &night, &[front], 0);
+    renderer.render(&mut alone, &night, &[front], &[], 0);
     let mut queued = renderer.canvas();
-    renderer.render(&mut queued, &night, &[front, rear], 0);
+    renderer.render(&mut queued, &night, &[front, rear], &[], 0);
     // Inside the car, away from its anti-aliased outline (whose pixels
     // blend the road beneath, lit or not).
     let inside = |i: usize| {
@@ -288,8 +289,8 @@ fn beams_light_the_road_never_the_car_in_front() {
 
     // Drawing the queue again over the lone car's frame (only its rectangle
     // restored) gives the frame drawn from scratch, byte for byte.
-    renderer.render(&mut alone, &night, &[front, rear], 1);
+    renderer.render(&mut alone, &night, &[front, rear], &[], 1);
     let mut fresh = renderer.canvas();
-    renderer.render(&mut fresh, &night, &[front, rear], 1);
+    renderer.render(&mut fresh, &night, &[front, rear], &[], 1);
     assert!(alone.rgb == fresh.rgb && alone.mask == fresh.mask, "incremental frame differs from a fresh one");
 }

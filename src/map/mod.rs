@@ -44,6 +44,8 @@ pub struct MapLayout {
     /// Stop lines stand this far before the intersection box (the crosswalk
     /// lies between), metres.
     pub stop_line_setback: f64,
+    /// Pavement between a road's kerb and the buildings, metres.
+    pub sidewalk_width: f64,
 }
 
 impl Default for MapLayout {
@@ -64,6 +66,7 @@ impl Default for MapLayout {
             // the low speeds of the default (slowed, scaled) city.
             lane_change_length: 6.0,
             stop_line_setback: 3.6,
+            sidewalk_width: 2.0,
         }
     }
 }
@@ -183,7 +186,27 @@ impl Default for CityMap {
 
 const LANE_LETTERS: [char; 4] = ['w', 'x', 'y', 'z'];
 
+/// Distance between the straight and the left signal head of one approach,
+/// metres: the left head stands this far before the straight one.
+pub const SIGNAL_HEAD_SPACING_M: f64 = 1.1;
+
 impl CityMap {
+    /// Where the head of light (`intersection`, `approach`, `signal`) stands,
+    /// metres: on the pavement beside the kerb of the approach's outer lane,
+    /// level with its stop line (the left head [`SIGNAL_HEAD_SPACING_M`]
+    /// further back), where no car drives over it. `None` for an approach
+    /// the map does not have.
+    pub fn signal_head(&self, intersection: usize, approach: char, signal: signals::Signal) -> Option<DVec2> {
+        let lane = self.lanes.iter().find(|l| {
+            l.position == LanePosition::Outer
+                && matches!(l.end, LaneEnd::Intersection { intersection: i, approach: a } if i == intersection && a == approach)
+        })?;
+        let back =
+            self.layout.stop_line_setback + if signal == signals::Signal::Left { SIGNAL_HEAD_SPACING_M } else { 0.0 };
+        let kerb = self.layout.lane_width / 2.0;
+        Some(lane.curve.position(lane.curve.length() - back, -(kerb + self.layout.sidewalk_width / 2.0)))
+    }
+
     /// Builds the network for `layout`.
     pub fn new(layout: MapLayout) -> CityMap {
         let hw = layout.road_half_width();

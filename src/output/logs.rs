@@ -2,14 +2,15 @@
 //! are documented in `data-schema/lights.schema.json`,
 //! `data-schema/events.schema.json` and `data-schema/interactions.schema.json`.
 
-use super::poses::Fields;
+use super::poses::{Fields, PIXEL_DECIMALS};
 use crate::map::signals::{light_label, LightPlan};
 use crate::world::{BoundBy, Trajectories};
 use serde::Serialize;
 use std::io::Write;
 use std::path::Path;
 
-pub const LIGHT_COLUMNS: [&str; 7] = ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"];
+pub const LIGHT_COLUMNS: [&str; 9] =
+    ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
 pub const EVENT_COLUMNS: [&str; 6] = ["frame", "t", "kind", "car", "other_car", "detail"];
 pub const INTERACTION_COLUMNS: [&str; 5] = ["frame", "car", "bound_by", "other_car", "light"];
 
@@ -18,11 +19,13 @@ fn round(x: f64, decimals: i32) -> f64 {
     (x * f).round() / f
 }
 
-/// One row per frame and light, lights in plan order.
+/// One row per frame and light, lights in plan order; `head_pixels` is each
+/// light's signal head in the bird's-eye view (empty cells without one).
 pub fn write_lights<W: Write>(
     out: W,
     plan: &LightPlan,
     intersection_names: &[String],
+    head_pixels: &[Option<glam::DVec2>],
     trajectories: &Trajectories,
 ) -> csv::Result<()> {
     let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
@@ -31,7 +34,7 @@ pub fn write_lights<W: Write>(
     let mut approach = [0u8; 4];
     for (frame, states) in trajectories.lights.iter().enumerate() {
         let t = frame as f64 * trajectories.frame_interval;
-        for (light, state) in plan.lights.iter().zip(states) {
+        for ((light, state), head) in plan.lights.iter().zip(states).zip(head_pixels) {
             fields.int(&mut w, frame as u64)?;
             fields.fixed(&mut w, t, 6)?;
             w.write_field(&intersection_names[light.intersection])?;
@@ -39,6 +42,16 @@ pub fn write_lights<W: Write>(
             w.write_field(light.signal.name())?;
             w.write_field(state.colour.name())?;
             fields.fixed(&mut w, state.since_change, 3)?;
+            match head {
+                Some(p) => {
+                    fields.fixed(&mut w, p.x, PIXEL_DECIMALS)?;
+                    fields.fixed(&mut w, p.y, PIXEL_DECIMALS)?;
+                }
+                None => {
+                    w.write_field("")?;
+                    w.write_field("")?;
+                }
+            }
             w.write_record(None::<&[u8]>)?;
         }
     }

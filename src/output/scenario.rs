@@ -53,6 +53,7 @@ struct CityRecord<'a> {
     effects: &'a Effects,
     base_driver: &'a DriverParams,
     lights: Vec<LightRecord<'a>>,
+    signal_heads: crate::spec::SignalHeads,
 }
 
 #[derive(Serialize)]
@@ -104,6 +105,7 @@ pub fn scenario_json(
         confounder_model: &c.confounder_model,
         effects: &c.effects,
         base_driver: &c.base_driver,
+        signal_heads: c.signal_heads,
         lights: c
             .lights
             .lights

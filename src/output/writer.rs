@@ -20,9 +20,11 @@ use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
 use crate::render::palette::colour_of;
 use crate::render::weather::SceneLook;
-use crate::render::{CarSprite, FrameCanvas, Renderer, Scene};
+use crate::render::{CarSprite, FrameCanvas, HeadSprite, Renderer, Scene};
+use crate::spec::SignalHeads;
 use crate::timing::{Stage, StageTimes};
 use crate::world::{CarState, Trajectories};
+use glam::DVec2;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -114,20 +116,23 @@ impl ScenarioWriter {
         let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
         bytes += dir.write_with(POSES_CSV, |w| write_poses(w, &ids, trajectories, camera))?;
         bytes += dir.write_with(PIXELS_FILE, |w| write_pixels(w, trajectories, camera))?;
+        let heads = signal_heads(&self.map, plan);
         if let Some(city) = plan.world.city() {
             let names = &self.intersection_names;
-            bytes += dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, trajectories))?;
+            let head_pixels: Vec<Option<DVec2>> = heads.iter().map(|h| h.map(|p| camera.to_pixel(p))).collect();
+            bytes +=
+                dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, &head_pixels, trajectories))?;
             bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, trajectories))?;
             bytes += dir.write_with(INTERACTIONS_CSV, |w| write_interactions(w, &city.lights, names, trajectories))?;
         }
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
             let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };
-            bytes += frames.birds_eye(renderer, canvas, plan, trajectories, self.annotations)?;
+            let footage = Footage { plan, trajectories, heads: drawn_heads(plan, &heads) };
+            bytes += frames.birds_eye(renderer, canvas, &footage, self.annotations)?;
             for camera_plan in &plan.cameras {
                 bytes += frames.extra_camera(
                     &self.map,
-                    plan,
-                    trajectories,
+                    &footage,
                     camera_plan,
                     &mut buffers.depth,
                     &mut buffers.depth_bytes,
@@ -177,10 +182,10 @@ impl FrameWriter<'_, '_> {
         &mut self,
         renderer: &Renderer,
         canvas: &mut FrameCanvas,
-        plan: &ScenarioPlan,
-        trajectories: &Trajectories,
+        footage: &Footage,
         annotations: bool,
     ) -> Result<u64, ScenarioWriteError> {
+        let Footage { plan, trajectories, .. } = *footage;
         let size = (renderer.camera.width, renderer.camera.height);
         let scenario_name = plan.key.folder_name();
         let annotated_cars: Vec<AnnotatedCar> =
@@ -190,14 +195,15 @@ impl FrameWriter<'_, '_> {
         let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
         let mut bytes = 0;
         let mut sprites = Vec::with_capacity(plan.cars.len());
+        let mut head_sprites = Vec::with_capacity(footage.heads.len());
         for (frame, states) in trajectories.states.iter().enumerate() {
             self.check_stop()?;
             if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 scene = renderer.scene(SceneLook::at_frame(plan, trajectories, frame));
             }
-            fill_sprites(&mut sprites, plan, states);
+            footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
             let frame = frame as u32;
-            self.times.time(Stage::Render, || renderer.render(canvas, &scene, &sprites, frame));
+            self.times.time(Stage::Render, || renderer.render(canvas, &scene, &sprites, &head_sprites, frame));
             let rgb_name = self.layout.frame_name(FrameKind::Rgb, frame);
             let mask_name = self.layout.frame_name(FrameKind::Mask, frame);
             bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
@@ -222,12 +228,12 @@ impl FrameWriter<'_, '_> {
     fn extra_camera(
         &mut self,
         map: &CityMap,
-        plan: &ScenarioPlan,
-        trajectories: &Trajectories,
+        footage: &Footage,
         camera_plan: &CameraPlan,
         depth: &mut Vec<u16>,
         depth_bytes: &mut Vec<u8>,
     ) -> Result<u64, ScenarioWriteError> {
+        let Footage { plan, trajectories, .. } = *footage;
         let name = &camera_plan.name;
         let chased = |states: &[CarState]| match camera_plan.kind {
             CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
@@ -240,6 +246,7 @@ impl FrameWriter<'_, '_> {
         let mut poses = b"frame,car,px,py,in_view\n".to_vec();
         let mut bytes = 0;
         let mut sprites = Vec::with_capacity(plan.cars.len());
+        let mut head_sprites = Vec::with_capacity(footage.heads.len());
         for (frame, states) in trajectories.states.iter().enumerate() {
             self.check_stop()?;
             let camera = camera_plan.camera_at(chased(states));
@@ -265,9 +272,9 @@ impl FrameWriter<'_, '_> {
                 }
             };
             let canvas = canvas.get_or_insert_with(|| renderer.canvas());
-            fill_sprites(&mut sprites, plan, states);
+            footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
             let frame = frame as u32;
-            self.times.time(Stage::Render, || renderer.render(canvas, scene, &sprites, frame));
+            self.times.time(Stage::Render, || renderer.render(canvas, scene, &sprites, &head_sprites, frame));
             let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
                 .map(|k| self.layout.camera_frame_name(name, k, frame));
             bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
@@ -293,15 +300,55 @@ impl FrameWriter<'_, '_> {
     }
 }
 
-/// The cars of one frame as the renderer draws them.
-fn fill_sprites(sprites: &mut Vec<CarSprite>, plan: &ScenarioPlan, states: &[CarState]) {
-    sprites.clear();
-    sprites.extend(plan.cars.iter().zip(states).map(|(car, s)| CarSprite {
-        position: s.position,
-        yaw: s.yaw,
-        length: car.length,
-        width: car.width,
-        colour: colour_of(car),
-        mask_id: car.mask_id,
-    }));
+/// Where each light of a city plan has its signal head (in light-plan
+/// order), metres; empty for the toy world.
+fn signal_heads(map: &CityMap, plan: &ScenarioPlan) -> Vec<Option<DVec2>> {
+    plan.world.city().map_or_else(Vec::new, |city| {
+        city.lights.lights.iter().map(|l| map.signal_head(l.intersection, l.approach, l.signal)).collect()
+    })
+}
+
+/// The signal heads the frames draw: all of them, unless the plan hides them.
+fn drawn_heads(plan: &ScenarioPlan, heads: &[Option<DVec2>]) -> Vec<Option<DVec2>> {
+    match plan.world.city() {
+        Some(city) if city.signal_heads == SignalHeads::Visible => heads.to_vec(),
+        _ => Vec::new(),
+    }
+}
+
+/// What the frames of one scenario show: its plan, what happened, and the
+/// signal heads they draw (metres, in light-plan order; none when hidden).
+struct Footage<'a> {
+    plan: &'a ScenarioPlan,
+    trajectories: &'a Trajectories,
+    heads: Vec<Option<DVec2>>,
+}
+
+impl Footage<'_> {
+    /// The cars and signal heads of `frame` as the renderer draws them;
+    /// brake lights in the city world only (the toy world has no drivers).
+    fn fill_sprites(&self, sprites: &mut Vec<CarSprite>, head_sprites: &mut Vec<HeadSprite>, frame: usize) {
+        let (plan, trajectories) = (self.plan, self.trajectories);
+        let states: &[CarState] = &trajectories.states[frame];
+        let city = plan.world.city().is_some();
+        sprites.clear();
+        sprites.extend(plan.cars.iter().zip(states).enumerate().map(|(i, (car, s))| CarSprite {
+            position: s.position,
+            yaw: s.yaw,
+            length: car.length,
+            width: car.width,
+            colour: colour_of(car),
+            mask_id: car.mask_id,
+            braking: city && trajectories.braking(frame, i),
+        }));
+        head_sprites.clear();
+        if let Some(colours) = trajectories.lights.get(frame) {
+            head_sprites.extend(
+                self.heads
+                    .iter()
+                    .zip(colours)
+                    .filter_map(|(head, state)| head.map(|position| HeadSprite { position, colour: state.colour })),
+            );
+        }
+    }
 }

@@ -463,6 +463,7 @@ impl Expansion {
             lights: self.light_plan(&c, stream),
             base_driver: c.driver,
             driver_model: c.driver_model,
+            signal_heads: c.signal_heads,
             sim_stream: Sha256::digest(sim_stream).into(),
             agency: agency.into_iter().map(|(_, a)| a).collect(),
         }

@@ -11,7 +11,7 @@ pub mod interventions;
 use crate::camera::CameraPlan;
 use crate::map::signals::LightPlan;
 use crate::map::{Action, LaneId, Route};
-use crate::spec::{DriverModel, DriverParams, Split, WorldKind};
+use crate::spec::{DriverModel, DriverParams, SignalHeads, Split, WorldKind};
 use confounders::{ConfounderModel, Confounders, Effects};
 use interventions::Intervention;
 use serde::Serialize;
@@ -111,6 +111,8 @@ pub struct CityPlan {
     pub sim_stream: [u8; 32],
     /// How each car drives, in id order.
     pub agency: Vec<CarAgency>,
+    /// Whether frames draw the signal heads.
+    pub signal_heads: SignalHeads,
 }
 
 /// The world a scenario runs in, with what only that world needs.

@@ -14,9 +14,6 @@ const CENTRE_LINE: [u8; 3] = [232, 190, 40];
 const WHITE: [u8; 3] = [240, 240, 240];
 const ROOFS: [[u8; 3]; 4] = [[150, 110, 96], [128, 134, 150], [176, 160, 132], [104, 112, 118]];
 
-/// Sidewalk between the kerb and the buildings, metres.
-const SIDEWALK: f64 = 2.0;
-
 /// The transform from world metres to tiny-skia pixel space (whose pixel `i`
 /// spans `[i, i + 1)`, so its centre is at `i + 0.5`).
 pub fn world_to_canvas(camera: &Camera) -> Transform {
@@ -78,10 +75,10 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     let ys = [-far, layout.east_west_roads[0].1, layout.east_west_roads[1].1, far];
     for i in 0..3 {
         for j in 0..3 {
-            let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + SIDEWALK }).max(view_lo.x - 5.0);
-            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + SIDEWALK }).min(view_hi.x + 5.0);
-            let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + SIDEWALK }).max(view_lo.y - 5.0);
-            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + SIDEWALK }).min(view_hi.y + 5.0);
+            let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(view_lo.x - 5.0);
+            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(view_hi.x + 5.0);
+            let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(view_lo.y - 5.0);
+            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(view_hi.y + 5.0);
             if x1 <= x0 || y1 <= y0 {
                 continue;
             }

@@ -1,6 +1,7 @@
-//! Rendering: the static background once per camera, then per frame the cars
-//! into an RGB image and an 8-bit instance mask (0 = background, a car's
-//! `mask_id` on exactly its pixels, no anti-aliasing).
+//! Rendering: the static background once per camera, then per frame the
+//! signal heads and the cars into an RGB image and an 8-bit instance mask (0
+//! = background, a car's `mask_id` on exactly its pixels, no anti-aliasing;
+//! signal heads and brake lights are never in the mask).
 
 pub mod background;
 pub mod palette;
@@ -8,6 +9,7 @@ pub mod text;
 pub mod weather;
 
 use crate::camera::Camera;
+use crate::map::signals::Colour;
 use glam::DVec2;
 use std::sync::Arc;
 use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
@@ -24,7 +26,37 @@ pub struct CarSprite {
     pub width: f64,
     pub colour: [u8; 3],
     pub mask_id: u8,
+    /// Brake lights on (drawn inside the body, so the mask is the same).
+    pub braking: bool,
 }
+
+/// What the renderer needs to draw one signal head in one frame.
+#[derive(Debug, Clone, Copy)]
+pub struct HeadSprite {
+    /// Centre on the ground, metres.
+    pub position: DVec2,
+    /// The colour it shows.
+    pub colour: Colour,
+}
+
+/// Side of a signal head's dark housing, metres.
+pub const HEAD_HOUSING_M: f64 = 0.9;
+/// Radius of its lit lamp, metres.
+pub const HEAD_LAMP_RADIUS_M: f64 = 0.33;
+/// A lamp's light in each colour (lamps shine: darkness does not dim them, fog veils them).
+fn lamp_rgb(colour: Colour) -> [u8; 3] {
+    match colour {
+        Colour::Red => [235, 35, 30],
+        Colour::Yellow => [250, 200, 20],
+        Colour::Green => [30, 215, 90],
+    }
+}
+const HOUSING_RGB: [u8; 3] = [28, 28, 30];
+const BRAKE_LIGHT_RGB: [u8; 3] = [255, 30, 30];
+/// Each brake light covers this share of the car's length from its rear,
+/// and across from this to that share of its half width on either side.
+const BRAKE_LIGHT_LENGTH: f32 = 0.12;
+const BRAKE_LIGHT_ACROSS: (f32, f32) = (0.35, 0.9);
 
 /// Draws frames for one camera over a pre-rendered background.
 #[derive(Clone)]
@@ -181,9 +213,17 @@ impl Renderer {
         }
     }
 
-    /// Draws frame `frame` of `scene` with `cars` (later ones on top) into
+    /// Draws frame `frame` of `scene` with its signal `heads` (on the
+    /// pavement, under everything else) and `cars` (later ones on top) into
     /// `canvas.rgb` and `canvas.mask`.
-    pub fn render(&self, canvas: &mut FrameCanvas, scene: &Scene, cars: &[CarSprite], frame: u32) {
+    pub fn render(
+        &self,
+        canvas: &mut FrameCanvas,
+        scene: &Scene,
+        cars: &[CarSprite],
+        heads: &[HeadSprite],
+        frame: u32,
+    ) {
         let look = &scene.look;
         let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let world = background::world_to_canvas(&self.camera);
@@ -204,6 +244,12 @@ impl Renderer {
             let half_span = hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M);
             PixelRect::around(car_frame(car), (-hl, hl + BEAM_REACH_M), (-half_span, half_span), w, h)
         }));
+        let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
+        let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
+        let housing = (-half_housing, half_housing);
+        canvas
+            .dirty
+            .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
         if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.mask.fill(0);
@@ -213,6 +259,19 @@ impl Renderer {
         } else {
             for r in &canvas.previous {
                 restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
+            }
+        }
+        let mut paint = Paint { anti_alias: true, ..Paint::default() };
+        for head in heads {
+            let t = head_frame(head);
+            let rgb = look.shade(HOUSING_RGB);
+            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+            let body = Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
+            canvas.rgba.fill_rect(body, &paint, t, None);
+            let rgb = look.veil(lamp_rgb(head.colour));
+            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+            if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
+                canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
             }
         }
         // Beams lie on the road, under every car.
@@ -230,6 +289,16 @@ impl Renderer {
             paint.set_color_rgba8(glass_colour[0], glass_colour[1], glass_colour[2], 255);
             if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
                 canvas.rgba.fill_rect(glass, &paint, t, None);
+            }
+            if car.braking {
+                let rgb = look.veil(BRAKE_LIGHT_RGB);
+                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                let (back, front) = (-hl, -hl + 2.0 * hl * BRAKE_LIGHT_LENGTH);
+                let (inner, outer) = (hw * BRAKE_LIGHT_ACROSS.0, hw * BRAKE_LIGHT_ACROSS.1);
+                let lights = [Rect::from_ltrb(back, inner, front, outer), Rect::from_ltrb(back, -outer, front, -inner)];
+                for light in lights.into_iter().flatten() {
+                    canvas.rgba.fill_rect(light, &paint, t, None);
+                }
             }
             // The mask: exactly the pixels whose centres the body covers,
             // later cars over earlier ones.

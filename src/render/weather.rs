@@ -19,6 +19,10 @@ fn wet_rgb(rgb: [u8; 3], wet: f64, cover: u8) -> [u8; 3] {
     [(rgb[0] as f64 * k) as u8, (rgb[1] as f64 * k) as u8, (rgb[2] as f64 * (k + 0.08 * wet)).min(255.0) as u8]
 }
 
+/// Colour of fog, and how much of a colour full fog (1.0) replaces by it.
+const FOG_RGB: [f64; 3] = [206.0, 208.0, 212.0];
+const FOG_VEIL: f64 = 0.65;
+
 /// The visual state of a scenario.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SceneLook {
@@ -52,6 +56,11 @@ impl SceneLook {
         }
     }
 
+    /// How much light falls on the scene: 1 by day, 0.28 at night.
+    fn light_level(&self) -> f64 {
+        0.28 + 0.72 * self.daylight
+    }
+
     pub fn is_clear(&self) -> bool {
         self.daylight >= 1.0 && self.wetness == 0.0 && self.fog == 0.0 && self.rain == 0.0 && self.snow == 0.0
     }
@@ -59,18 +68,28 @@ impl SceneLook {
     /// A colour under this scene's light and fog.
     pub fn shade(&self, rgb: [u8; 3]) -> [u8; 3] {
         let dark = 1.0 - self.daylight;
-        let level = 0.28 + 0.72 * self.daylight;
+        let level = self.light_level();
         // Night is blue, dusk and dawn warm.
         let dusk = (std::f64::consts::PI * self.daylight).sin();
         let tint =
             [(1.0 - 0.25 * dark) * (1.0 + 0.10 * dusk), (1.0 - 0.12 * dark) * (1.0 - 0.02 * dusk), 1.0 - 0.12 * dusk];
-        let alpha = 0.65 * self.fog;
-        let fog = [206.0, 208.0, 212.0];
+        let (alpha, fog) = (FOG_VEIL * self.fog, FOG_RGB);
         let mut out = [0u8; 3];
         for k in 0..3 {
             let lit = rgb[k] as f64 * level * tint[k];
             let veiled = (1.0 - alpha) * lit + alpha * fog[k] * level;
             out[k] = veiled.round().clamp(0.0, 255.0) as u8;
+        }
+        out
+    }
+
+    /// A light source's colour under this scene's fog: darkness does not dim
+    /// what shines, fog veils it as it veils everything.
+    pub fn veil(&self, rgb: [u8; 3]) -> [u8; 3] {
+        let (level, alpha, fog) = (self.light_level(), FOG_VEIL * self.fog, FOG_RGB);
+        let mut out = [0u8; 3];
+        for k in 0..3 {
+            out[k] = ((1.0 - alpha) * rgb[k] as f64 + alpha * fog[k] * level).round().clamp(0.0, 255.0) as u8;
         }
         out
     }

@@ -157,9 +157,26 @@ pub struct Trajectories {
     pub interactions: Vec<Vec<Interaction>>,
 }
 
+/// Deceleration above which a driver is on the brake, m/s^2: below it a car
+/// slows by rolling resistance, drag and engine braking alone, about 0.2-0.5
+/// m/s^2 for a car in gear at city speeds; the lower end, as the default city
+/// is slowed.
+pub const BRAKE_LIGHT_DECELERATION: f64 = 0.2;
+/// Speed under which a car counts as standing (and holds its brake), m/s.
+pub const HOLDING_SPEED: f64 = 0.05;
+
 impl Trajectories {
     pub fn frames(&self) -> usize {
         self.states.len()
+    }
+
+    /// Whether `car`'s brake lights are on at `frame`: it slowed by more than
+    /// [`BRAKE_LIGHT_DECELERATION`] since the frame before, or it stands.
+    pub fn braking(&self, frame: usize, car: usize) -> bool {
+        let now = self.states[frame][car].speed;
+        let slowed =
+            frame > 0 && self.states[frame - 1][car].speed - now > BRAKE_LIGHT_DECELERATION * self.frame_interval;
+        slowed || now < HOLDING_SPEED
     }
 }
 

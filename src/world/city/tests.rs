@@ -97,6 +97,7 @@ fn plan(
         driver_model: crate::spec::DriverModel::Iidm,
         sim_stream: [7; 32],
         agency,
+        signal_heads: crate::spec::SignalHeads::Visible,
     };
     ScenarioPlan {
         key: ScenarioKey { group: "test".into(), group_index: 0, split: Split::Test, index: 0, name: None },
