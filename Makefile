@@ -47,6 +47,7 @@ test-python: build
 	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-causalcity
 	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-reference --layout nri --directed
 	$(RUN) export nri $(PYDATA)/toy --out $(PYDATA)/nri-original --clip --velocity forward --suffix _airsim_final
+	$(RUN) export nri $(PYDATA)/city --out $(PYDATA)/nri-dynamic --dynamic --directed
 	$(RUN) export nsdr $(PYDATA)/toy --out $(PYDATA)/nsdr --quiet
 	$(RUN) export nsdr $(PYDATA)/city --out $(PYDATA)/nsdr-city --quiet
 	$(if $(filter hdf5,$(FEATURES)),$(RUN) export vcdn $(PYDATA)/toy --out $(PYDATA)/vcdn --quiet)

@@ -65,8 +65,11 @@ def test_pixels_npy_is_the_pose_logs_px_py(toy_scenarios):
 def test_city_logs_load_with_the_documented_dtypes():
     for d in scenarios(CITY):
         lights = pd.read_csv(d / "lights.csv")
-        assert list(lights.columns) == ["frame", "t", "intersection", "approach", "signal", "colour", "since_change"]
+        assert list(lights.columns) == ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"]
         assert lights.frame.dtype == np.int64 and lights.since_change.dtype == np.float64
+        assert lights.head_px.dtype == np.float64 and lights.head_py.dtype == np.float64
+        # A head stands still: one pixel per light over the whole scenario.
+        assert (lights.groupby(["intersection", "approach", "signal"])[["head_px", "head_py"]].nunique() == 1).all().all()
         assert set(lights.colour) <= {"green", "yellow", "red"}
         assert len(lights) == 30 * 32
         events = pd.read_csv(d / "events.csv")
@@ -157,6 +160,32 @@ def test_nri_export_as_the_original_converter_clipped_and_forward(toy_scenarios)
                 clipped += int(((px < 0) | (px > 1024)).sum() + ((py < 0) | (py > 640)).sum())
     # The toy data has cars off the image, so clipping was exercised.
     assert clipped > 0
+
+
+def test_dynamic_edges_load_and_match_interactions_csv():
+    """export nri --dynamic --directed (causalcity layout): uint8 [scenarios,
+    frames, cars, cars], the identity plus 1 where interactions.csv names the
+    car that bound the receiver."""
+    checked = 0
+    for group in sorted(p.name for p in CITY.iterdir() if p.is_dir()):
+        for split, nri_split in SPLITS.items():
+            dirs = sorted((CITY / group / split).glob("*"))
+            if not dirs:
+                continue
+            graph = np.load(ROOT / "nri-dynamic" / group / f"dynamic_edges_{nri_split}.npy")
+            assert graph.dtype == np.uint8
+            for s, d in enumerate(dirs):
+                rows = pd.read_csv(d / "interactions.csv", dtype={"other_car": "Int64"})
+                frames = rows.frame.max() + 1
+                cars = rows.car.max() + 1
+                assert graph.shape[1:] == (frames, cars, cars)
+                expected = np.zeros((frames, cars, cars), dtype=np.uint8)
+                expected[:, np.arange(cars), np.arange(cars)] = 1
+                named = rows[rows.other_car.notna()]
+                expected[named.frame.to_numpy(), named.car.to_numpy(), named.other_car.to_numpy(dtype=np.int64)] = 1
+                np.testing.assert_array_equal(graph[s], expected)
+                checked += int(expected.sum()) - frames * cars
+    assert checked > 0
 
 
 def test_annotations_rle_decodes_to_the_mask_pngs(toy_scenarios):
