@@ -91,16 +91,18 @@ fn lights_differ_between_scenarios_unless_fixed() {
     // Fixed: one lights.csv for all, the original cycle from 0 (AC's east-west straight green since 0 s).
     assert!(fixed.iter().all(|(_, l)| *l == fixed[0].1));
     let row = fixed[0].1.lines().find(|l| l.starts_with("0,0.0,AC,W,straight,")).unwrap();
-    assert_eq!(row, "0,0.0,AC,W,straight,green,0.0");
+    assert!(row.starts_with("0,0.0,AC,W,straight,green,0.0,"), "{row}");
     // The phase comes from a stream of its own: cars are placed exactly as with fixed lights.
     for ((a, _), (b, _)) in random.iter().zip(fixed) {
         assert_eq!(first_frame(a), first_frame(b), "{}", a.display());
     }
-    // Per intersection: the four intersections of one scenario do not all show the same.
+    // Per intersection: the four intersections of one scenario do not all
+    // show the same (approach, signal, colour, since_change; the heads stand
+    // at each intersection's own pixels).
     let by_intersection = |text: &str, name: &str| -> Vec<String> {
         text.lines()
             .filter(|l| l.split(',').nth(2) == Some(name))
-            .map(|l| l.splitn(4, ',').nth(3).unwrap().to_string())
+            .map(|l| l.split(',').skip(3).take(4).collect::<Vec<_>>().join(","))
             .collect()
     };
     for (_, text) in per_intersection {
