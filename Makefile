@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build system-deps dataset test test-rust test-python bench fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python bench fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -23,6 +23,11 @@ endif
 
 build: system-deps
 	$(CARGO) build --release --locked $(CARGO_FEATURES)
+
+## Put the causalcity binary on the PATH (cargo's bin folder, ~/.cargo/bin).
+install: system-deps
+	$(CARGO) install --path . --locked $(CARGO_FEATURES)
+	@command -v causalcity >/dev/null || echo "note: add $${CARGO_HOME:-$$HOME/.cargo}/bin to your PATH"
 
 ## Generate the small built-in toy and city datasets into data/ci-toy and data/ci-city.
 dataset: build

@@ -115,13 +115,15 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
     let splits: BTreeSet<PathBuf> = known.iter().filter_map(|p| p.parent().map(Path::to_path_buf)).collect();
     let groups: BTreeSet<PathBuf> = spec.groups.iter().map(|g| dir.join(g.name())).collect();
     let mut problems = Vec::new();
-    // The root: manifest.json, the group folders, and an empty or shard-manifest `shards/`.
+    // The root: manifest.json, the group folders, an empty or shard-manifest
+    // `shards/`, and the jobs' `logs/`.
     let mut allowed: BTreeSet<PathBuf> = groups.clone();
     allowed.insert(dir.join("manifest.json"));
     allowed.insert(dir.join("shards"));
+    allowed.insert(dir.join(crate::output::layout::JOB_LOGS_DIR));
     let mut parents: Vec<(PathBuf, &str)> = vec![(
         dir.to_path_buf(),
-        "not part of this dataset: the dataset root holds manifest.json and the group folders of its spec only",
+        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec and logs/ only",
     )];
     for group in &groups {
         allowed.extend(Split::ALL.iter().map(|s| group.join(s.name())).filter(|p| splits.contains(p)));

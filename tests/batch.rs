@@ -248,6 +248,14 @@ fn validate_catches_each_kind_of_damage() {
     let clean = dir.join("clean");
     gen_ok(&spec, &clean, &["--quiet"]);
     assert_eq!(validate_dir(&clean).0, 0);
+    // The cluster examples' job logs may sit beside the dataset; any other folder may not.
+    std::fs::create_dir(clean.join("logs")).unwrap();
+    std::fs::write(clean.join("logs/gen-7_0.log"), "progress: 1/3 scenarios\n").unwrap();
+    assert_eq!(validate_dir(&clean).0, 0);
+    std::fs::create_dir(clean.join("notes")).unwrap();
+    let (code, report) = validate_dir(&clean);
+    assert!(code != 0 && report.contains("notes: not part of this dataset"), "{report}");
+    std::fs::remove_dir(clean.join("notes")).unwrap();
     let scenario = "cars04_edges50/train/00001";
 
     type Damage = fn(&Path);

@@ -23,6 +23,10 @@ pub const LIGHTS_CSV: &str = "lights.csv";
 pub const EVENTS_CSV: &str = "events.csv";
 /// What bound each car's speed, per frame (city world).
 pub const INTERACTIONS_CSV: &str = "interactions.csv";
+/// A folder at a dataset's root for the logs of the jobs that made it
+/// (`examples/slurm` writes there); not part of the dataset, which
+/// `validate` accepts beside it.
+pub const JOB_LOGS_DIR: &str = "logs";
 /// Folder of the extra cameras.
 pub const CAMERAS: &str = "cameras";
 
