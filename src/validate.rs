@@ -292,8 +292,14 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
                     message: format!("columns should be {}", EVENT_COLUMNS.join(",")),
                 });
             }
+            // `car` names a car of the scenario, or is empty for an
+            // intervention on no car (a light, the weather).
             for (i, row) in reader.records().enumerate() {
-                let ok = row.as_ref().ok().and_then(|r| r.get(3)?.parse::<usize>().ok()).is_some_and(|c| c < cars);
+                let ok = row.as_ref().ok().is_some_and(|r| match r.get(3) {
+                    Some("") => r.get(2) == Some("intervention"),
+                    Some(c) => c.parse::<usize>().is_ok_and(|c| c < cars),
+                    None => false,
+                });
                 if !ok {
                     problems.push(Problem {
                         path: path.clone(),

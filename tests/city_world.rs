@@ -118,9 +118,9 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
                             lane.name,
                             b.frame
                         );
-                        let logged = events
-                            .iter()
-                            .any(|e| e.kind == "red_light_run" && e.car == *car_id && e.frame.abs_diff(b.frame) <= 1);
+                        let logged = events.iter().any(|e| {
+                            e.kind == "red_light_run" && e.car == Some(*car_id) && e.frame.abs_diff(b.frame) <= 1
+                        });
                         assert!(
                             logged,
                             "{}: red-light run of car {car_id} at frame {} not in events.csv",
@@ -133,7 +133,11 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
             }
         }
         for e in events.iter().filter(|e| e.kind == "red_light_run") {
-            assert!(s.cars[e.car as usize].runs_red_lights && e.detail.ends_with("(forced)"), "{e:?}");
+            assert!(
+                s.cars[e.car.expect("a red-light run names its car") as usize].runs_red_lights
+                    && e.detail.ends_with("(forced)"),
+                "{e:?}"
+            );
         }
     }
     assert!(crossings > 100, "only {crossings} stop-line crossings seen");
@@ -151,7 +155,8 @@ fn cars_overlap_only_after_a_logged_collision() {
         let mut logged: BTreeMap<(u32, u32), u32> = BTreeMap::new();
         for e in events.iter().filter(|e| e.kind == "collision") {
             let other = e.other_car.expect("a collision names the other car");
-            logged.entry((e.car.min(other), e.car.max(other))).or_insert(e.frame);
+            let car = e.car.expect("a collision names its car");
+            logged.entry((car.min(other), car.max(other))).or_insert(e.frame);
             collisions += 1;
         }
         let mut frame_poses: BTreeMap<u32, Vec<&Pose>> = BTreeMap::new();
@@ -192,7 +197,7 @@ fn speeds_accelerations_and_positions_stay_physical() {
         let crashed: BTreeSet<(u32, u32)> = events
             .iter()
             .filter(|e| e.kind == "collision")
-            .flat_map(|e| [(e.car, e.frame), (e.other_car.unwrap(), e.frame)])
+            .flat_map(|e| [(e.car.unwrap(), e.frame), (e.other_car.unwrap(), e.frame)])
             .collect();
         let dt = s.frame_interval;
         for (car_id, track) in poses_by_car(&read_poses(&d.join("poses.csv"))) {
@@ -415,7 +420,7 @@ fn in_the_default_city_drivers_change_lanes_for_their_turns_and_turn_from_the_ri
         let s = read_scenario(&d);
         cars += s.cars.len();
         let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
-        let changed: BTreeSet<u32> = events.iter().filter(|e| e.kind == "lane_change").map(|e| e.car).collect();
+        let changed: BTreeSet<u32> = events.iter().filter(|e| e.kind == "lane_change").filter_map(|e| e.car).collect();
         changers += changed.len();
         for e in events.iter().filter(|e| e.kind == "turn_done") {
             // "left at AD from A1x": the lane the car turned from allows the turn.
@@ -426,7 +431,7 @@ fn in_the_default_city_drivers_change_lanes_for_their_turns_and_turn_from_the_ri
                 "right" => "wz",
                 _ => "wxyz",
             };
-            assert!(allowed.contains(letter), "{}: car {}: {}", d.display(), e.car, e.detail);
+            assert!(allowed.contains(letter), "{}: car {:?}: {}", d.display(), e.car, e.detail);
             turns += 1;
         }
     }

@@ -126,6 +126,14 @@ fn counterfactual_of(name: &str, extra: &[&str]) -> PathBuf {
     out.join("stop_the_leader")
 }
 
+/// The stop-the-leader pair with `interventions` (a JSON list) for the counterfactual.
+fn counterfactual_with(name: &str, interventions: &str) -> PathBuf {
+    let dir = fresh_dir(&format!("{name}-file"));
+    let file = dir.join("interventions.json");
+    std::fs::write(&file, interventions).unwrap();
+    counterfactual_of(name, &["--intervention", file.to_str().unwrap()])
+}
+
 #[test]
 fn a_counterfactual_is_identical_before_the_intervention_and_moves_only_what_it_causes() {
     let pair = counterfactual_of("hw-cf", &[]);
@@ -179,7 +187,7 @@ fn a_counterfactual_is_identical_before_the_intervention_and_moves_only_what_it_
     assert!(rows.iter().filter(|r| r.0 as usize <= first).all(|r| r.2 == 0.0));
     assert!(rows.iter().any(|r| r.1 == 1 && r.2 > 3.0));
     // The intervention is in the counterfactual's events, not the factual's.
-    assert!(text(&counterfactual.join("events.csv")).contains(",intervention,0,,stop Car_1 for 6 s"));
+    assert!(text(&counterfactual.join("events.csv")).contains(",intervention,0,,,stop Car_1 for 6 s"));
     assert!(!text(&factual.join("events.csv")).contains("intervention"));
 }
 
@@ -205,7 +213,7 @@ fn interventions_act_as_documented() {
     let fired: Vec<&EventRow> = events.iter().filter(|e| e.kind == "intervention").collect();
     assert_eq!(fired.len(), 7, "{events:?}");
     assert!(fired.iter().all(|e| !e.detail.contains("not applied")), "{fired:?}");
-    assert!(fired.iter().any(|e| e.car == 1 && e.detail.starts_with("Car_2 drives right, straight")));
+    assert!(fired.iter().any(|e| e.car == Some(1) && e.detail.starts_with("Car_2 drives right, straight")));
     // set_light: AD/W/straight is red from 4 s for 5 s.
     let lights: Vec<LightRow> = read_csv(&dir.join("lights.csv"));
     for l in lights.iter().filter(|l| l.intersection == "AD" && l.approach == "W" && l.signal == "straight") {
@@ -227,7 +235,7 @@ fn interventions_act_as_documented() {
         }
     }
     // run_red_light fired when that light turned red, and Car_1 then ran it.
-    assert!(events.iter().any(|e| e.kind == "red_light_run" && e.car == 0 && e.detail.contains("forced")));
+    assert!(events.iter().any(|e| e.kind == "red_light_run" && e.car == Some(0) && e.detail.contains("forced")));
     // remove: Car_4 is off camera and still from 15 s on.
     for p in read_poses(&dir.join("poses.csv")).iter().filter(|p| p.car == 3 && p.t >= 15.0) {
         assert_eq!((p.in_view, p.speed), (0, 0.0));
@@ -383,10 +391,8 @@ fn extra_cameras_write_their_own_frames_and_the_chase_camera_keeps_its_car_centr
 
 #[test]
 fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
-    let dir = fresh_dir("hw-fog-file");
-    let file = dir.join("fog.json");
-    std::fs::write(&file, r#"[{"at": 2.0, "do": "set_confounder", "confounder": "fog", "value": 1.0}]"#).unwrap();
-    let pair = counterfactual_of("hw-fog", &["--intervention", file.to_str().unwrap()]);
+    let pair =
+        counterfactual_with("hw-fog", r#"[{"at": 2.0, "do": "set_confounder", "confounder": "fog", "value": 1.0}]"#);
     let summary = read_json(&pair.join("summary.json"));
     // Fog is a common cause: every car drives differently, the unrelated one too.
     assert_eq!(summary["affected"], serde_json::json!(["Car_1", "Car_2", "Car_3"]));
@@ -415,30 +421,29 @@ fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
 
 #[test]
 fn setting_the_rain_wets_the_road_by_its_equation_unless_the_wetness_is_held() {
-    let dir = fresh_dir("hw-rain-file");
-    let rain = dir.join("rain.json");
-    std::fs::write(&rain, r#"[{"at": 2.0, "do": "set_confounder", "confounder": "rain", "value": 0.8}]"#).unwrap();
-    let pair = counterfactual_of("hw-rain", &["--intervention", rain.to_str().unwrap()]);
+    let pair =
+        counterfactual_with("hw-rain", r#"[{"at": 2.0, "do": "set_confounder", "confounder": "rain", "value": 0.8}]"#);
     let events = read_csv::<EventRow>(&pair.join("counterfactual/events.csv"));
     let wetted: Vec<&EventRow> = events.iter().filter(|e| e.detail.starts_with("wetness 0.000 -> ")).collect();
     assert_eq!(wetted.len(), 1, "{events:?}");
     let wetness: f64 = wetted[0].detail["wetness 0.000 -> ".len()..].split(' ').next().unwrap().parse().unwrap();
     assert!(wetness >= 0.3, "rain 0.8 leaves the road at wetness {wetness}");
     assert!(wetted[0].detail.contains("after rain was set to 0.8"));
+    // The weather is no car: neither row names one (a light or the weather was car 0 before).
+    let weather: Vec<&EventRow> =
+        events.iter().filter(|e| e.kind == "intervention" && e.detail.contains("rain")).collect();
+    assert!(weather.len() == 2 && weather.iter().all(|e| e.car.is_none() && e.light.is_none()), "{weather:?}");
     // The factual run stays dry: nothing but the intervention changed the weather.
     let factual = read_json(&pair.join("factual/scenario.json"));
     assert_eq!(factual["city"]["confounders"]["wetness"].as_f64(), Some(0.0));
     assert_eq!(factual["city"]["confounder_model"]["source"]["wetness"], "equation");
 
     // Held by an earlier intervention, wetness no longer follows the rain.
-    let held = dir.join("held.json");
-    std::fs::write(
-        &held,
+    let pair = counterfactual_with(
+        "hw-rain-held",
         r#"[{"at": 1.0, "do": "set_confounder", "confounder": "wetness", "value": 0.1},
             {"at": 2.0, "do": "set_confounder", "confounder": "rain", "value": 0.8}]"#,
-    )
-    .unwrap();
-    let pair = counterfactual_of("hw-rain-held", &["--intervention", held.to_str().unwrap()]);
+    );
     let events = read_csv::<EventRow>(&pair.join("counterfactual/events.csv"));
     assert!(events.iter().filter(|e| e.kind == "intervention").count() >= 2, "{events:?}");
     assert!(!events.iter().any(|e| e.detail.contains("by its equation")), "{events:?}");
@@ -699,12 +704,12 @@ fn files_from_the_original_generator_run_with_every_adaptation_logged() {
                 // A turn given up for want of a gap is logged when the driver gives up.
                 let given_up = |e: &EventRow| a.reason.contains("no gap") && e.detail.starts_with(&prefix);
                 assert!(
-                    events.iter().any(|e| e.car == id && (e.detail == detail || given_up(e))),
+                    events.iter().any(|e| e.car == Some(id) && (e.detail == detail || given_up(e))),
                     "{stem}: car {id}: {detail:?} not in events.csv"
                 );
             }
             // Every turn is made from a lane that allows it.
-            for e in events.iter().filter(|e| e.car == id && e.kind == "turn_done") {
+            for e in events.iter().filter(|e| e.car == Some(id) && e.kind == "turn_done") {
                 turns += 1;
                 let (action, from) = (e.detail.split(' ').next().unwrap(), e.detail.rsplit(' ').next().unwrap());
                 let letter = from.chars().last().unwrap();
@@ -714,7 +719,7 @@ fn files_from_the_original_generator_run_with_every_adaptation_logged() {
                     _ => {}
                 }
             }
-            lane_changes += events.iter().filter(|e| e.car == id && e.kind == "lane_change").count();
+            lane_changes += events.iter().filter(|e| e.car == Some(id) && e.kind == "lane_change").count();
         }
     }
     assert!(

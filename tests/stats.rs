@@ -65,7 +65,7 @@ fn stats_match_the_logs_and_separate_the_worlds() {
         let events = read_csv::<EventRow>(&d.join("events.csv"));
         reds += events.iter().filter(|e| e.kind == "red_light_run").count();
         let changed: std::collections::BTreeSet<u32> =
-            events.iter().filter(|e| e.kind == "lane_change").map(|e| e.car).collect();
+            events.iter().filter(|e| e.kind == "lane_change").filter_map(|e| e.car).collect();
         changers += changed.len();
         adapted += events.iter().filter(|e| e.kind == "action_adapted").count();
         skipped += events.iter().filter(|e| e.kind == "action_skipped").count();

@@ -109,7 +109,7 @@ fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
         .iter()
         .filter(|e| matches!(e.kind, EventKind::ActionAdapted | EventKind::ActionSkipped))
         .map(|e| {
-            let car = s.plan.cars.iter().find(|c| c.id == e.car).map_or("?", |c| c.name.as_str());
+            let car = s.plan.cars.iter().find(|c| Some(c.id) == e.car).map_or("?", |c| c.name.as_str());
             let what = if e.kind == EventKind::ActionSkipped { "skipped" } else { "adapted" };
             format!("scenario {:?}, car {car:?}, at {:.1} s, {what}: {}", s.name, e.t, e.detail)
         });

@@ -11,7 +11,7 @@ use std::path::Path;
 
 pub const LIGHT_COLUMNS: [&str; 9] =
     ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
-pub const EVENT_COLUMNS: [&str; 6] = ["frame", "t", "kind", "car", "other_car", "detail"];
+pub const EVENT_COLUMNS: [&str; 7] = ["frame", "t", "kind", "car", "other_car", "light", "detail"];
 pub const INTERACTION_COLUMNS: [&str; 5] = ["frame", "car", "bound_by", "other_car", "light"];
 
 fn round(x: f64, decimals: i32) -> f64 {
@@ -64,16 +64,31 @@ struct EventRow<'a> {
     frame: u64,
     t: f64,
     kind: &'a str,
-    car: u32,
+    car: Option<u32>,
     other_car: Option<u32>,
+    light: &'a str,
     detail: &'a str,
 }
 
+/// Every light's name (`AC/W/straight`, as scenario files name lights), in
+/// plan order.
+fn light_names(plan: &LightPlan, intersection_names: &[String]) -> Vec<String> {
+    plan.lights.iter().map(|l| light_label(&intersection_names[l.intersection], l.approach, l.signal.name())).collect()
+}
+
 /// One row per event; `frame` is the first frame that shows its outcome.
-pub fn write_events<W: Write>(out: W, trajectories: &Trajectories) -> csv::Result<()> {
+/// `car` is empty for events of no car (a light or the weather changed),
+/// `light` names the light of light interventions and red-light runs.
+pub fn write_events<W: Write>(
+    out: W,
+    plan: &LightPlan,
+    intersection_names: &[String],
+    trajectories: &Trajectories,
+) -> csv::Result<()> {
     // The header is written by hand so that a scenario without events still has one.
     let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
     w.write_record(EVENT_COLUMNS)?;
+    let light_names = light_names(plan, intersection_names);
     for e in &trajectories.events {
         let frame = (e.t / trajectories.frame_interval - 1e-6).ceil().max(0.0) as u64;
         w.serialize(EventRow {
@@ -82,6 +97,7 @@ pub fn write_events<W: Write>(out: W, trajectories: &Trajectories) -> csv::Resul
             kind: e.kind.name(),
             car: e.car,
             other_car: e.other,
+            light: e.light.map_or("", |l| light_names[l].as_str()),
             detail: &e.detail,
         })?;
     }
@@ -101,11 +117,7 @@ pub fn write_interactions<W: Write>(
     let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
     w.write_record(INTERACTION_COLUMNS)?;
     let mut fields = Fields::default();
-    let light_names: Vec<String> = plan
-        .lights
-        .iter()
-        .map(|l| light_label(&intersection_names[l.intersection], l.approach, l.signal.name()))
-        .collect();
+    let light_names = light_names(plan, intersection_names);
     for (frame, cars) in trajectories.interactions.iter().enumerate() {
         for (car, interaction) in cars.iter().enumerate() {
             fields.int(&mut w, frame as u64)?;

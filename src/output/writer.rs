@@ -122,7 +122,7 @@ impl ScenarioWriter {
             let head_pixels: Vec<Option<DVec2>> = heads.iter().map(|h| h.map(|p| camera.to_pixel(p))).collect();
             bytes +=
                 dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, &head_pixels, trajectories))?;
-            bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, trajectories))?;
+            bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, &city.lights, names, trajectories))?;
             bytes += dir.write_with(INTERACTIONS_CSV, |w| write_interactions(w, &city.lights, names, trajectories))?;
         }
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {

@@ -131,4 +131,12 @@ impl Effect {
             Effect::SetLight { .. } | Effect::SetLightPlan { .. } | Effect::SetConfounder { .. } => None,
         }
     }
+
+    /// The light the effect acts on, if any (index in the light plan).
+    pub fn light(&self) -> Option<usize> {
+        match self {
+            Effect::SetLight { light, .. } | Effect::SetLightPlan { light, .. } => Some(*light),
+            _ => None,
+        }
+    }
 }

@@ -32,10 +32,12 @@ pub struct Event {
     /// Seconds since the start.
     pub t: f64,
     pub kind: EventKind,
-    /// Car id.
-    pub car: u32,
+    /// Car id; `None` for events of no car (a light or the weather changed).
+    pub car: Option<u32>,
     /// The other car involved (collisions).
     pub other: Option<u32>,
+    /// The light involved (light interventions), by index in the light plan.
+    pub light: Option<usize>,
     pub detail: String,
 }
 

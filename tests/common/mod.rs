@@ -238,8 +238,11 @@ pub struct EventRow {
     pub frame: u32,
     pub t: f64,
     pub kind: String,
-    pub car: u32,
+    /// Empty for an intervention on no car (a light, the weather).
+    pub car: Option<u32>,
     pub other_car: Option<u32>,
+    /// The light of light interventions and red-light runs.
+    pub light: Option<String>,
     pub detail: String,
 }
 
@@ -317,7 +320,7 @@ pub fn planned_route(
         .fold(car.spawn_distance, f64::max);
     let given_up: Vec<usize> = events
         .iter()
-        .filter(|e| e.car == car_id && e.kind == "action_skipped" && e.detail.contains("no gap"))
+        .filter(|e| e.car == Some(car_id) && e.kind == "action_skipped" && e.detail.contains("no gap"))
         .map(|e| e.detail["DriveQueue[".len()..e.detail.find(']').unwrap()].parse().unwrap())
         .collect();
     let policy = causalcity::map::LanePolicy::AdaptGivingUp(given_up);

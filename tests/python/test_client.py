@@ -72,9 +72,49 @@ def test_city_logs_load_with_the_documented_dtypes():
         assert (lights.groupby(["intersection", "approach", "signal"])[["head_px", "head_py"]].nunique() == 1).all().all()
         assert set(lights.colour) <= {"green", "yellow", "red"}
         assert len(lights) == 30 * 32
-        events = pd.read_csv(d / "events.csv")
-        assert list(events.columns) == ["frame", "t", "kind", "car", "other_car", "detail"]
+        events = pd.read_csv(d / "events.csv", dtype={"car": "Int64", "other_car": "Int64"})
+        assert list(events.columns) == ["frame", "t", "kind", "car", "other_car", "light", "detail"]
+        # A light is never car 0: red-light runs name their car and their light.
+        runs = events[events.kind == "red_light_run"]
+        assert runs.car.notna().all() and runs.light.notna().all()
         assert set(events.kind) <= {"collision", "red_light_run", "merge_done", "turn_done", "lane_change", "action_adapted", "action_skipped", "actions_finished", "intervention"}
+
+
+SCHEMAS = Path(__file__).resolve().parents[2] / "data-schema"
+
+
+def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
+    """Plain pandas.read_csv gives int64 for required integers, float64 for
+    numbers and strings for text, in the schema's column order; the integer
+    columns that may be empty read as nullable Int64, as README says."""
+    checked = {}
+    for d in scenarios(TOY) + scenarios(CITY):
+        for name in ["poses.csv", "lights.csv", "events.csv", "interactions.csv"]:
+            if not (d / name).exists():
+                continue
+            fields = json.loads((SCHEMAS / name.replace(".csv", ".schema.json")).read_text())["fields"]
+            table = pd.read_csv(d / name)
+            assert list(table.columns) == [f["name"] for f in fields], name
+            if table.empty:  # a header alone has no dtypes to infer
+                continue
+            nullable = {}
+            for f in fields:
+                column = table[f["name"]]
+                required = f.get("constraints", {}).get("required", False)
+                if f["type"] == "integer" and required:
+                    assert column.dtype == np.int64, (name, f["name"], column.dtype)
+                elif f["type"] == "integer":
+                    nullable[f["name"]] = "Int64"
+                elif f["type"] == "number":
+                    assert column.dtype == np.float64, (name, f["name"], column.dtype)
+                elif f["type"] == "string" and column.notna().any():
+                    assert pd.api.types.is_string_dtype(column), (name, f["name"], column.dtype)
+            if nullable:
+                typed = pd.read_csv(d / name, dtype=nullable)
+                for column in nullable:
+                    assert typed[column].dtype == pd.Int64Dtype(), (name, column)
+            checked[name] = checked.get(name, 0) + 1
+    assert set(checked) == {"poses.csv", "lights.csv", "events.csv", "interactions.csv"}, checked
 
 
 def test_frames_and_masks_decode_and_agree_with_the_poses(toy_scenarios):

@@ -43,12 +43,14 @@ impl Sim<'_> {
         }
         let car = &self.cars[i];
         let forced = if car.runs_red_lights { "forced" } else { "not forced" };
+        let light_index = light;
         let light = &self.city.lights.lights[light];
         Some(Event {
             t: now,
             kind: EventKind::RedLightRun,
-            car: car.plan.id,
+            car: Some(car.plan.id),
             other: None,
+            light: Some(light_index),
             detail: format!(
                 "{} {} {} ({forced})",
                 self.map.intersections[intersection].name,
@@ -82,7 +84,14 @@ impl Sim<'_> {
                     self.map.lanes[from].name, self.map.lanes[to].name, car.actions[index]
                 );
                 let id = car.plan.id;
-                self.events.push(Event { t: now, kind: EventKind::LaneChange, car: id, other: None, detail });
+                self.events.push(Event {
+                    t: now,
+                    kind: EventKind::LaneChange,
+                    car: Some(id),
+                    other: None,
+                    light: None,
+                    detail,
+                });
             }
             let car = &mut self.cars[i];
             if matches!(kind, LegKind::Connector(c) if car.committed == Some(c)) {
@@ -102,7 +111,7 @@ impl Sim<'_> {
         let index = car.action_base + relative;
         if !car.route.skips(relative) {
             if let Some((kind, detail)) = self.action_event(kind, car.actions[index]) {
-                self.events.push(Event { t: now, kind, car: id, other: None, detail });
+                self.events.push(Event { t: now, kind, car: Some(id), other: None, light: None, detail });
             }
         }
         let car = &mut self.cars[i];
@@ -110,7 +119,14 @@ impl Sim<'_> {
         let rest_skipped = (relative + 1..car.actions.len() - car.action_base).all(|k| car.route.skips(k));
         if rest_skipped {
             let detail = format!("{} actions", car.actions.len());
-            self.events.push(Event { t: now, kind: EventKind::ActionsFinished, car: id, other: None, detail });
+            self.events.push(Event {
+                t: now,
+                kind: EventKind::ActionsFinished,
+                car: Some(id),
+                other: None,
+                light: None,
+                detail,
+            });
         }
     }
 
@@ -145,7 +161,7 @@ impl Sim<'_> {
                 AdaptationKind::Skipped => (EventKind::ActionSkipped, "DriveQueue"),
             };
             let detail = format!("{field}[{index}] {}: {}", a.action, a.reason);
-            new.push((index, Event { t, kind, car: car.plan.id, other: None, detail }));
+            new.push((index, Event { t, kind, car: Some(car.plan.id), other: None, light: None, detail }));
         }
         for (index, event) in new {
             self.cars[i].logged_adaptations.push(index);
@@ -195,8 +211,9 @@ impl Sim<'_> {
         self.events.push(Event {
             t: now,
             kind: EventKind::Collision,
-            car: a.plan.id,
+            car: Some(a.plan.id),
             other: Some(b.plan.id),
+            light: None,
             detail: format!("speeds {:.2} and {:.2} m/s", a.v, b.v),
         });
         let ids = [self.cars[i].plan.id, self.cars[j].plan.id];

@@ -34,8 +34,9 @@ impl Sim<'_> {
             self.events.push(Event {
                 t,
                 kind: EventKind::Intervention,
-                car: intervention.effect.car().map_or(0, car_id),
+                car: intervention.effect.car().map(car_id),
                 other: None,
+                light: intervention.effect.light(),
                 detail: intervention.label.clone(),
             });
             self.apply(intervention.effect.clone(), t);
@@ -112,8 +113,9 @@ impl Sim<'_> {
                 self.events.push(Event {
                     t,
                     kind: EventKind::Intervention,
-                    car: 0,
+                    car: None,
                     other: None,
+                    light: None,
                     detail: format!(
                         "{name} {was:.3} -> {now:.3} by its equation, after {} was set to {value}",
                         confounder.name()
@@ -165,8 +167,9 @@ impl Sim<'_> {
                 self.events.push(Event {
                     t,
                     kind: EventKind::Intervention,
-                    car: id,
+                    car: Some(id),
                     other: None,
+                    light: None,
                     detail: format!("replacing the actions not applied: {e}; the car keeps its own"),
                 });
             }
@@ -196,7 +199,7 @@ impl Sim<'_> {
             super::perception::LANE_CHANGE_PATIENCE
         );
         let id = car.plan.id;
-        self.events.push(Event { t, kind: EventKind::ActionSkipped, car: id, other: None, detail });
+        self.events.push(Event { t, kind: EventKind::ActionSkipped, car: Some(id), other: None, light: None, detail });
         let car = &mut self.cars[i];
         car.given_up = given_up;
         car.logged_adaptations.push(index);

@@ -230,7 +230,7 @@ fn a_merge_waits_until_the_car_beside_has_gone() {
     let merged = traj
         .events
         .iter()
-        .find(|e| e.kind == EventKind::MergeDone && e.car == 0)
+        .find(|e| e.kind == EventKind::MergeDone && e.car == Some(0))
         .unwrap_or_else(|| panic!("the merge never happened: {:?}", traj.events));
     assert!(merged.t > free_at, "merged at {:.2} s while the target lane was blocked until {free_at} s", merged.t);
     assert!(merged.t < free_at + 15.0, "merged only at {:.2} s", merged.t);
@@ -288,7 +288,7 @@ fn a_car_changes_into_the_turn_lane_once_the_gap_comes_and_turns_from_it() {
         label: "blocker drives off".into(),
     };
     let traj = wrong_lane_for_a_left_turn(vec![go], 60.0);
-    let of_car = |kind: EventKind| traj.events.iter().filter(move |e| e.car == 0 && e.kind == kind);
+    let of_car = |kind: EventKind| traj.events.iter().filter(move |e| e.car == Some(0) && e.kind == kind);
     let change: Vec<_> = of_car(EventKind::LaneChange).collect();
     assert_eq!(change.len(), 1, "{:?}", traj.events);
     assert_eq!(change[0].detail, "A1w -> A1x for DriveQueue[0] left");
@@ -316,7 +316,8 @@ fn a_car_changes_into_the_turn_lane_once_the_gap_comes_and_turns_from_it() {
 #[test]
 fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
     let traj = wrong_lane_for_a_left_turn(vec![], 60.0);
-    let skipped: Vec<_> = traj.events.iter().filter(|e| e.car == 0 && e.kind == EventKind::ActionSkipped).collect();
+    let skipped: Vec<_> =
+        traj.events.iter().filter(|e| e.car == Some(0) && e.kind == EventKind::ActionSkipped).collect();
     assert_eq!(skipped.len(), 1, "{:?}", traj.events);
     assert!(
         skipped[0].detail.starts_with("DriveQueue[0] left: no gap to change from A1w into A1x"),
@@ -332,7 +333,7 @@ fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
     assert!(traj
         .events
         .iter()
-        .all(|e| e.car != 0 || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
+        .all(|e| e.car != Some(0) || (e.kind != EventKind::LaneChange && e.kind != EventKind::TurnDone)));
     // Then straight on through AD into A2w.
     let map = wide_blocks();
     let a2w = map.lanes[lane(&map, "A2w")].curve.length();
