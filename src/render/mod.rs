@@ -31,7 +31,7 @@ pub struct CarSprite {
 }
 
 /// What the renderer needs to draw one signal head in one frame.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeadSprite {
     /// Centre on the ground, metres.
     pub position: DVec2,
@@ -98,6 +98,19 @@ pub struct FrameCanvas {
     dirty: Vec<PixelRect>,
     /// The frame before's, kept to reuse its allocation.
     previous: Vec<PixelRect>,
+    /// The signal heads last drawn and the pixels they left: heads change
+    /// colour every few seconds, so most frames copy these back instead of
+    /// drawing them again.
+    heads: Option<DrawnHeads>,
+}
+
+/// Signal heads as drawn over one background under one look, and the pixels
+/// of their rectangles afterwards (RGBA rows).
+struct DrawnHeads {
+    background: Arc<Pixmap>,
+    look: SceneLook,
+    heads: Vec<HeadSprite>,
+    pixels: Vec<(PixelRect, Vec<u8>)>,
 }
 
 /// A rectangle of pixels, `x0..x1` by `y0..y1`.
@@ -210,6 +223,7 @@ impl Renderer {
             background: None,
             dirty: Vec::new(),
             previous: Vec::new(),
+            heads: None,
         }
     }
 
@@ -247,9 +261,9 @@ impl Renderer {
         let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
         let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
         let housing = (-half_housing, half_housing);
-        canvas
-            .dirty
-            .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
+        let head_rects: Vec<PixelRect> =
+            heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)).collect();
+        canvas.dirty.extend(&head_rects);
         if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.mask.fill(0);
@@ -261,18 +275,36 @@ impl Renderer {
                 restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
             }
         }
-        let mut paint = Paint { anti_alias: true, ..Paint::default() };
-        for head in heads {
-            let t = head_frame(head);
-            let rgb = look.shade(HOUSING_RGB);
-            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-            let body = Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
-            canvas.rgba.fill_rect(body, &paint, t, None);
-            let rgb = look.veil(lamp_rgb(head.colour));
-            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-            if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
-                canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+        // The heads' rectangles hold the background now (they were dirty
+        // last frame, or the whole frame was restored), so the same heads
+        // over the same background give the same pixels as last time.
+        let same_heads = canvas
+            .heads
+            .as_ref()
+            .is_some_and(|d| Arc::ptr_eq(&d.background, &scene.background) && d.look == *look && d.heads == heads);
+        if same_heads {
+            let drawn = canvas.heads.as_ref().expect("checked above");
+            for (r, pixels) in &drawn.pixels {
+                put_rect(&mut canvas.rgba, *r, pixels);
             }
+        } else if !heads.is_empty() {
+            let mut paint = Paint { anti_alias: true, ..Paint::default() };
+            for head in heads {
+                let t = head_frame(head);
+                let rgb = look.shade(HOUSING_RGB);
+                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                let body =
+                    Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
+                canvas.rgba.fill_rect(body, &paint, t, None);
+                let rgb = look.veil(lamp_rgb(head.colour));
+                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
+                    canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+                }
+            }
+            let pixels = head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
+            canvas.heads =
+                Some(DrawnHeads { background: scene.background.clone(), look: *look, heads: heads.to_vec(), pixels });
         }
         // Beams lie on the road, under every car.
         look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
@@ -319,6 +351,21 @@ impl Renderer {
             canvas.dirty.clear();
             canvas.dirty.push(full);
         }
+    }
+}
+
+/// The RGBA rows of `r`.
+fn get_rect(rgba: &Pixmap, r: PixelRect) -> Vec<u8> {
+    let w = rgba.width() as usize;
+    (r.y0..r.y1).flat_map(|y| &rgba.data()[(y * w + r.x0) * 4..(y * w + r.x1) * 4]).copied().collect()
+}
+
+/// Writes RGBA rows taken by [`get_rect`] back into `r`.
+fn put_rect(rgba: &mut Pixmap, r: PixelRect, pixels: &[u8]) {
+    let w = rgba.width() as usize;
+    let row = (r.x1 - r.x0) * 4;
+    for (y, src) in (r.y0..r.y1).zip(pixels.chunks_exact(row)) {
+        rgba.data_mut()[(y * w + r.x0) * 4..(y * w + r.x1) * 4].copy_from_slice(src);
     }
 }
 
