@@ -106,6 +106,9 @@ pub struct ScenarioFlow {
     pub tracks: Vec<Vec<Pose>>,
     /// `bound[frame][car]`.
     pub bound: Vec<Vec<Bound>>,
+    /// `named[frame][car]`: the other car its interactions.csv row names
+    /// (bound by it as the car ahead, a conflict or a collision).
+    pub named: Vec<Vec<Option<usize>>>,
     /// Per car, the frames at which it completed a turn or merge, ascending.
     pub actions_done: Vec<Vec<usize>>,
     /// Half a road's width (two lanes), metres.
@@ -270,6 +273,8 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
         signals[k].1.push(colour.to_string());
     }
     let records = read_interactions(&interactions, frames, n)?;
+    let named =
+        (0..frames).map(|frame| records[frame * n..(frame + 1) * n].iter().map(|r| r.other_car).collect()).collect();
     let bound = (0..frames)
         .map(|frame| {
             records[frame * n..(frame + 1) * n]
@@ -299,7 +304,7 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
         }
     }
     let road_half_width = map.layout.road_half_width();
-    Ok(Some(ScenarioFlow { frame_interval, cars, tracks, bound, actions_done, road_half_width, signals }))
+    Ok(Some(ScenarioFlow { frame_interval, cars, tracks, bound, named, actions_done, road_half_width, signals }))
 }
 
 #[cfg(test)]
@@ -325,6 +330,7 @@ mod tests {
             cars: vec![facts(4.0), facts(4.0), facts(4.0)],
             tracks,
             bound: vec![vec![Bound::Free, Bound::Car(0), Bound::Free]; 2],
+            named: vec![vec![None, Some(0), None]; 2],
             actions_done: vec![vec![], vec![], vec![1]],
             road_half_width: 6.0,
             signals: Vec::new(),
@@ -367,6 +373,7 @@ mod tests {
             cars: vec![facts(4.0), facts(4.0), facts(4.0)],
             tracks,
             bound,
+            named: Vec::new(),
             actions_done: vec![vec![]; 3],
             road_half_width: 6.0,
             signals: vec![("AD/W/straight".to_string(), colours)],

@@ -14,8 +14,6 @@
 use super::flow::{median, read_scenario_flow, FlowSamples};
 use crate::dataset::Dataset;
 use crate::map::CityMap;
-use crate::output::layout::INTERACTIONS_CSV;
-use crate::output::logs::read_interactions;
 use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -416,11 +414,6 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     }
     if let Some(flow) = read_scenario_flow(dir, map)? {
         t.flow = flow.samples();
-    }
-    let interactions = dir.join(INTERACTIONS_CSV);
-    if interactions.exists() {
-        let frames = scenario["frames"].as_u64().unwrap_or(0) as usize;
-        let records = read_interactions(&interactions, frames, cars)?;
         let mut linked = vec![false; cars * cars];
         for edge in scenario["edges"].as_array().into_iter().flatten() {
             if let (Some(l), Some(f)) = (edge[0].as_u64(), edge[1].as_u64()) {
@@ -433,17 +426,17 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
         }
         // Per unordered pair (a < b), the frames in which one binds the other.
         let mut together = vec![0usize; cars * cars];
-        for frame in records.chunks_exact(cars.max(1)) {
-            for (a, record) in frame.iter().enumerate() {
-                if let Some(b) = record.other_car.filter(|&b| b != a) {
-                    let bound_back = frame[b].other_car == Some(a);
+        for frame in &flow.named {
+            for (a, other) in frame.iter().enumerate() {
+                if let Some(b) = other.filter(|&b| b != a) {
                     // Counted once per frame when both bind each other.
-                    if !bound_back || a < b {
+                    if frame[b] != Some(a) || a < b {
                         together[a.min(b) * cars + a.max(b)] += 1;
                     }
                 }
             }
         }
+        let frames = flow.named.len();
         for a in 0..cars {
             for b in a + 1..cars {
                 let tally = if linked[a * cars + b] { &mut t.edge_pairs } else { &mut t.non_edge_pairs };
