@@ -102,6 +102,8 @@ pub struct FrameCanvas {
     /// colour every few seconds, so most frames copy these back instead of
     /// drawing them again.
     heads: Option<DrawnHeads>,
+    /// This frame's head rectangles (kept to reuse the allocation).
+    head_rects: Vec<PixelRect>,
 }
 
 /// Signal heads as drawn over one background under one look, and the pixels
@@ -224,6 +226,7 @@ impl Renderer {
             dirty: Vec::new(),
             previous: Vec::new(),
             heads: None,
+            head_rects: Vec::new(),
         }
     }
 
@@ -261,9 +264,11 @@ impl Renderer {
         let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
         let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
         let housing = (-half_housing, half_housing);
-        let head_rects: Vec<PixelRect> =
-            heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)).collect();
-        canvas.dirty.extend(&head_rects);
+        canvas.head_rects.clear();
+        canvas
+            .head_rects
+            .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
+        canvas.dirty.extend(&canvas.head_rects);
         if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.mask.fill(0);
@@ -302,7 +307,7 @@ impl Renderer {
                     canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
                 }
             }
-            let pixels = head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
+            let pixels = canvas.head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
             canvas.heads =
                 Some(DrawnHeads { background: scene.background.clone(), look: *look, heads: heads.to_vec(), pixels });
         }
