@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python bench fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env bench fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -42,10 +42,9 @@ test-rust: system-deps
 	$(CARGO) test --locked $(CARGO_FEATURES)
 
 ## Python clients (numpy, pandas, Pillow, pycocotools, h5py from PyPI, in a venv under target/)
-## load a small generated dataset and its exports.
-test-python: build
-	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+## load a small generated dataset and its exports; the Python package
+## (python/, installed with pip) must give the same values as those files.
+test-python: build python-env
 	rm -rf $(PYDATA)
 	$(RUN) gen --quiet --annotations --spec tests/python/toy.json --out $(PYDATA)/toy
 	$(RUN) gen --quiet --spec tests/python/city.json --out $(PYDATA)/city
@@ -58,11 +57,20 @@ test-python: build
 	$(if $(filter hdf5,$(FEATURES)),$(RUN) export vcdn $(PYDATA)/toy --out $(PYDATA)/vcdn --quiet)
 	$(RUN) counterfactual --scenario configs/examples/stop-the-leader.json --out $(PYDATA)/counterfactual
 	$(RUN) run --scenario configs/examples/cameras.json --out $(PYDATA)/cameras
-	CAUSALCITY_DATA=$(PYDATA) $(VENV)/bin/python -m pytest -q -p no:cacheprovider -W ignore::DeprecationWarning:pycocotools.mask tests/python
+	CAUSALCITY_DATA=$(PYDATA) CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python -m pytest -q -p no:cacheprovider -W ignore::DeprecationWarning:pycocotools.mask tests/python python/tests
 
-## Throughput, memory and size figures (prints, asserts nothing).
-bench: system-deps
+## A venv under target/ with the test clients' packages and the Python
+## package itself, installed as README says (pip install ./python).
+python-env:
+	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check ./python
+
+## Throughput, memory and size figures (prints, asserts nothing); then the
+## Python package's rates beside the command line's.
+bench: build python-env
 	$(CARGO) bench --locked $(CARGO_FEATURES) --bench throughput
+	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/python_throughput.py
 
 ## Fuzz the spec parser (not part of CI). Needs cargo-fuzz; runs on stable
 ## through RUSTC_BOOTSTRAP. FUZZ_SECONDS sets how long (default 600).

@@ -195,6 +195,27 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
         Some(file) => Some(load_interventions(file, &scenarios, &map).map_err(RunError::Input)?),
         None => None,
     };
+    let pairs = pair_plans(&options.scenario_file, &scenarios, extras)?;
+    let out = options.out();
+    pairs
+        .par_iter()
+        .map(|(s, factual, counterfactual)| {
+            let writer = scenario_writer(&s.expansion, options.products(), false);
+            write_pair(&s.expansion, &writer, &s.name, factual, counterfactual, &out.join(&s.name))
+        })
+        .collect::<Result<Vec<_>, GenError>>()
+        .map_err(RunError::Write)
+}
+
+/// Each scenario of `file` with its factual and counterfactual plans. The
+/// counterfactual adds the scenario's `extras`; without extras, the
+/// scenario's own interventions make the counterfactual and the factual
+/// runs without them.
+pub fn pair_plans<'s>(
+    file: &Path,
+    scenarios: &'s [LoadedScenario],
+    extras: Option<Vec<Vec<Intervention>>>,
+) -> Result<Vec<(&'s LoadedScenario, ScenarioPlan, ScenarioPlan)>, RunError> {
     let mut pairs = Vec::new();
     for (k, s) in scenarios.iter().enumerate() {
         let (factual, counterfactual) = match &extras {
@@ -206,7 +227,7 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
             None if s.plan.interventions.is_empty() => {
                 return Err(RunError::Usage(format!(
                     "{}: scenario {:?} has no interventions: name them in its \"interventions\" or pass --intervention FILE",
-                    options.scenario_file.display(),
+                    file.display(),
                     s.name
                 )));
             }
@@ -218,15 +239,36 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
         };
         pairs.push((s, factual, counterfactual));
     }
-    let out = options.out();
-    pairs
-        .par_iter()
-        .map(|(s, factual, counterfactual)| {
-            let writer = scenario_writer(&s.expansion, options.products(), false);
-            write_pair(&s.expansion, &writer, &s.name, factual, counterfactual, &out.join(&s.name))
-        })
-        .collect::<Result<Vec<_>, GenError>>()
-        .map_err(RunError::Write)
+    Ok(pairs)
+}
+
+/// A simulated factual / counterfactual pair and what the intervention did.
+pub struct SimulatedPair {
+    pub factual: Trajectories,
+    pub counterfactual: Trajectories,
+    /// divergence.csv's text.
+    pub divergence_csv: Vec<u8>,
+    /// Metres between each car's factual and counterfactual positions,
+    /// `[frames, cars]`, as divergence.csv gives them.
+    pub divergence_m: Vec<f64>,
+    pub summary: PairSummary,
+}
+
+/// Simulates both plans of a pair (in parallel) and measures their divergence.
+pub fn simulate_pair(
+    expansion: &Expansion,
+    name: &str,
+    factual: &ScenarioPlan,
+    counterfactual: &ScenarioPlan,
+) -> SimulatedPair {
+    let map = &expansion.map;
+    let (a, b) = rayon::join(|| crate::world::simulate(map, factual), || crate::world::simulate(map, counterfactual));
+    let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
+    let labels: Vec<String> =
+        counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
+    let (divergence_csv, divergence_m, summary) =
+        divergence(name, &names, &labels, &a, &b, expansion.camera.pixels_per_metre);
+    SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary }
 }
 
 /// Simulates a factual / counterfactual pair (the counterfactual's extra
@@ -239,20 +281,15 @@ fn write_pair(
     counterfactual: &ScenarioPlan,
     folder: &Path,
 ) -> Result<PairSummary, GenError> {
-    let map = &expansion.map;
-    let (a, b) = rayon::join(|| crate::world::simulate(map, factual), || crate::world::simulate(map, counterfactual));
+    let pair = simulate_pair(expansion, name, factual, counterfactual);
     let (mut buffers, times) = (writer.buffers(), StageTimes::default());
-    write_simulated(writer, factual, &a, folder.join("factual"), &mut buffers, &times)?;
-    write_simulated(writer, counterfactual, &b, folder.join("counterfactual"), &mut buffers, &times)?;
-    let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
-    let labels: Vec<String> =
-        counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
-    let (csv, summary) = divergence(name, &names, &labels, &a, &b, expansion.camera.pixels_per_metre);
-    write_atomically(&folder.join("divergence.csv"), &csv)?;
-    let mut json = serde_json::to_vec_pretty(&summary).expect("summary serialises");
+    write_simulated(writer, factual, &pair.factual, folder.join("factual"), &mut buffers, &times)?;
+    write_simulated(writer, counterfactual, &pair.counterfactual, folder.join("counterfactual"), &mut buffers, &times)?;
+    write_atomically(&folder.join("divergence.csv"), &pair.divergence_csv)?;
+    let mut json = serde_json::to_vec_pretty(&pair.summary).expect("summary serialises");
     json.push(b'\n');
     write_atomically(&folder.join("summary.json"), &json)?;
-    Ok(summary)
+    Ok(pair.summary)
 }
 
 /// Kinds of random intervention `counterfactual --sweep` draws from.
@@ -400,7 +437,8 @@ fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention
     Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }
 }
 
-/// divergence.csv (`frame,t,car,distance_m,distance_px`) and the summary.
+/// divergence.csv (`frame,t,car,distance_m,distance_px`), its distances in
+/// metres (`[frames, cars]`) and the summary.
 fn divergence(
     scenario: &str,
     cars: &[(u32, String)],
@@ -408,8 +446,9 @@ fn divergence(
     factual: &Trajectories,
     counterfactual: &Trajectories,
     pixels_per_metre: f64,
-) -> (Vec<u8>, PairSummary) {
+) -> (Vec<u8>, Vec<f64>, PairSummary) {
     let mut csv = b"frame,t,car,distance_m,distance_px\n".to_vec();
+    let mut distances = Vec::with_capacity(factual.frames() * cars.len());
     let mut per_car: Vec<CarDivergence> = cars
         .iter()
         .map(|(id, name)| CarDivergence {
@@ -432,6 +471,7 @@ fn divergence(
             push_fixed(&mut csv, frame as f64 * factual.frame_interval, 6);
             csv.extend_from_slice(format!(",{},", car.id).as_bytes());
             push_fixed(&mut csv, distance, 4);
+            distances.push(crate::output::number::logged_value(distance, 4));
             csv.push(b',');
             push_fixed(&mut csv, distance * pixels_per_metre, 3);
             csv.push(b'\n');
@@ -450,5 +490,5 @@ fn divergence(
         affected: per_car.iter().filter(|c| c.affected).map(|c| c.name.clone()).collect(),
         cars: per_car,
     };
-    (csv, summary)
+    (csv, distances, summary)
 }

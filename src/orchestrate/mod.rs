@@ -2,6 +2,7 @@
 //! `counterfactual`): read inputs, plan, simulate, write in parallel.
 
 pub mod handwritten;
+pub mod in_memory;
 pub mod merge;
 pub mod run;
 pub mod scenario_file;

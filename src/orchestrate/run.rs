@@ -289,6 +289,12 @@ pub fn shard_keys(keys: Vec<ScenarioKey>, shard: Option<Shard>) -> Vec<ScenarioK
 pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     let start = Instant::now();
     let expansion = load_spec(&options.spec_path)?;
+    generate_expansion(&expansion, options, start)
+}
+
+/// [`generate`] of a spec already read and expanded (`options.spec_path` is
+/// not read again); `start` is when the run began, for its summary.
+pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
     let products = Products { images: options.images, annotations: options.annotations && options.images };
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     std::fs::create_dir_all(&out).map_err(io_err(&out))?;
@@ -336,7 +342,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
     };
     write_atomically(&manifest_file, &manifest(false))?;
 
-    let writer = scenario_writer(&expansion, products, options.fsync);
+    let writer = scenario_writer(expansion, products, options.fsync);
     let times = StageTimes::default();
     let progress = Progress::new(keys.len() as u64, options.progress);
     let bytes = AtomicU64::new(0);
@@ -353,7 +359,7 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
                 if target.exists() {
                     skipped.fetch_add(1, Ordering::Relaxed);
                 } else {
-                    let written_bytes = write_scenario(&expansion, &writer, key, target, buffers, &times)?;
+                    let written_bytes = write_scenario(expansion, &writer, key, target, buffers, &times)?;
                     bytes.fetch_add(written_bytes, Ordering::Relaxed);
                     written.fetch_add(1, Ordering::Relaxed);
                 }

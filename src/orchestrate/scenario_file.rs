@@ -251,7 +251,25 @@ pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec
         message,
     };
     let text = std::fs::read_to_string(path).map_err(|e| fail("", format!("cannot read the file: {e}")))?;
-    let json = json::parse(&text).map_err(|e| parse_error(path, &text, e))?;
+    load_text(path, &text, options, map)
+}
+
+/// Reads and checks every scenario of `text`, a file's contents; errors name
+/// `path` (a file, or a label such as `<dict>` for text made in memory).
+pub fn load_text(
+    path: &Path,
+    text: &str,
+    options: FileOptions,
+    map: &Arc<CityMap>,
+) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
+    let fail = |field: &str, message: String| ScenarioFileError {
+        file: path.to_path_buf(),
+        scenario: None,
+        car: None,
+        field: field.into(),
+        message,
+    };
+    let json = json::parse(text).map_err(|e| parse_error(path, text, e))?;
     let entries = match json {
         Value::Array(list) => list,
         Value::Object(_) => vec![json],
@@ -921,8 +939,25 @@ pub fn load_interventions(
     };
     let text =
         std::fs::read_to_string(path).map_err(|e| file_error(String::new(), format!("cannot read the file: {e}")))?;
+    load_interventions_text(path, &text, scenarios, map)
+}
+
+/// [`load_interventions`] of `text`, a file's contents; errors name `path`.
+pub fn load_interventions_text(
+    path: &Path,
+    text: &str,
+    scenarios: &[LoadedScenario],
+    map: &CityMap,
+) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
+    let file_error = |field: String, message: String| ScenarioFileError {
+        file: path.to_path_buf(),
+        scenario: None,
+        car: None,
+        field,
+        message,
+    };
     // Paths as in a scenario's `interventions`, whether the file is a list or one object.
-    let json = json::parse(&text).map_err(|e| {
+    let json = json::parse(text).map_err(|e| {
         let field =
             if e.path.is_empty() || e.path.starts_with('[') { e.path.clone() } else { format!("[0].{}", e.path) };
         let field = if field.is_empty() { field } else { format!("interventions{field}") };

@@ -72,8 +72,18 @@ struct EventRow<'a> {
 
 /// Every light's name (`AC/W/straight`, as scenario files name lights), in
 /// plan order.
-fn light_names(plan: &LightPlan, intersection_names: &[String]) -> Vec<String> {
+pub fn light_names(plan: &LightPlan, intersection_names: &[String]) -> Vec<String> {
     plan.lights.iter().map(|l| light_label(&intersection_names[l.intersection], l.approach, l.signal.name())).collect()
+}
+
+/// The first frame that shows the outcome of an event at `t` seconds.
+pub fn event_frame(t: f64, frame_interval: f64) -> u64 {
+    (t / frame_interval - 1e-6).ceil().max(0.0) as u64
+}
+
+/// An event's time as `events.csv` gives it (seconds, 4 decimals).
+pub fn event_time(t: f64) -> f64 {
+    round(t, 4)
 }
 
 /// One row per event; `frame` is the first frame that shows its outcome.
@@ -90,10 +100,9 @@ pub fn write_events<W: Write>(
     w.write_record(EVENT_COLUMNS)?;
     let light_names = light_names(plan, intersection_names);
     for e in &trajectories.events {
-        let frame = (e.t / trajectories.frame_interval - 1e-6).ceil().max(0.0) as u64;
         w.serialize(EventRow {
-            frame,
-            t: round(e.t, 4),
+            frame: event_frame(e.t, trajectories.frame_interval),
+            t: event_time(e.t),
             kind: e.kind.name(),
             car: e.car,
             other_car: e.other,

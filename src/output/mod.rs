@@ -6,6 +6,8 @@
 //! `OUT/<group>/<split>/<scenario>/` as [`layout`] lists it.
 
 pub mod annotations;
+pub mod arrays;
+pub mod footage;
 pub mod layout;
 pub mod logs;
 pub mod manifest;

@@ -5,6 +5,7 @@
 //! renderers as plain data; it knows nothing of dynamics.
 
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
+use super::footage::{signal_heads, Footage};
 use super::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -18,10 +19,8 @@ use super::{ScenarioDir, WriteError};
 use crate::camera::{Camera, CameraKind, CameraPlan};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
-use crate::render::palette::colour_of;
 use crate::render::weather::SceneLook;
-use crate::render::{CarSprite, FrameCanvas, HeadSprite, Renderer, Scene};
-use crate::spec::SignalHeads;
+use crate::render::{FrameCanvas, Renderer, Scene};
 use crate::timing::{Stage, StageTimes};
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
@@ -127,7 +126,7 @@ impl ScenarioWriter {
         }
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
             let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };
-            let footage = Footage { plan, trajectories, heads: drawn_heads(plan, &heads) };
+            let footage = Footage::new(plan, trajectories, &heads);
             bytes += frames.birds_eye(renderer, canvas, &footage, self.annotations)?;
             for camera_plan in &plan.cameras {
                 bytes += frames.extra_camera(
@@ -192,30 +191,23 @@ impl FrameWriter<'_, '_> {
             plan.cars.iter().map(|c| AnnotatedCar { id: c.id, name: c.name.clone(), mask_id: c.mask_id }).collect();
         let mut builder = annotations.then(|| AnnotationsBuilder::new(&scenario_name, size.0, size.1, &annotated_cars));
         let mut pixels = Vec::with_capacity(plan.cars.len());
-        let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
         let mut bytes = 0;
-        let mut sprites = Vec::with_capacity(plan.cars.len());
-        let mut head_sprites = Vec::with_capacity(footage.heads.len());
-        for (frame, states) in trajectories.states.iter().enumerate() {
+        let times = self.times;
+        footage.birds_eye(renderer, canvas, times, |frame, canvas| {
             self.check_stop()?;
-            if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
-                scene = renderer.scene(SceneLook::at_frame(plan, trajectories, frame));
-            }
-            footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
-            let frame = frame as u32;
-            self.times.time(Stage::Render, || renderer.render(canvas, &scene, &sprites, &head_sprites, frame));
             let rgb_name = self.layout.frame_name(FrameKind::Rgb, frame);
             let mask_name = self.layout.frame_name(FrameKind::Mask, frame);
             bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
             if let Some(builder) = builder.as_mut() {
                 pixels.clear();
-                pixels.extend(states.iter().map(|s| {
+                pixels.extend(trajectories.states[frame as usize].iter().map(|s| {
                     let p = renderer.camera.to_pixel(s.position);
                     [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
                 }));
-                self.times.time(Stage::Encode, || builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels));
+                times.time(Stage::Encode, || builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels));
             }
-        }
+            Ok::<(), ScenarioWriteError>(())
+        })?;
         if let Some(builder) = builder {
             bytes += self.dir.write_file(ANNOTATIONS_FILE, &builder.to_json())?;
         }
@@ -297,58 +289,5 @@ impl FrameWriter<'_, '_> {
         }
         bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;
         Ok(bytes)
-    }
-}
-
-/// Where each light of a city plan has its signal head (in light-plan
-/// order), metres; empty for the toy world.
-fn signal_heads(map: &CityMap, plan: &ScenarioPlan) -> Vec<Option<DVec2>> {
-    plan.world.city().map_or_else(Vec::new, |city| {
-        city.lights.lights.iter().map(|l| map.signal_head(l.intersection, l.approach, l.signal)).collect()
-    })
-}
-
-/// The signal heads the frames draw: all of them, unless the plan hides them.
-fn drawn_heads(plan: &ScenarioPlan, heads: &[Option<DVec2>]) -> Vec<Option<DVec2>> {
-    match plan.world.city() {
-        Some(city) if city.signal_heads == SignalHeads::Visible => heads.to_vec(),
-        _ => Vec::new(),
-    }
-}
-
-/// What the frames of one scenario show: its plan, what happened, and the
-/// signal heads they draw (metres, in light-plan order; none when hidden).
-struct Footage<'a> {
-    plan: &'a ScenarioPlan,
-    trajectories: &'a Trajectories,
-    heads: Vec<Option<DVec2>>,
-}
-
-impl Footage<'_> {
-    /// The cars and signal heads of `frame` as the renderer draws them;
-    /// brake lights in the city world only (the toy world has no drivers).
-    fn fill_sprites(&self, sprites: &mut Vec<CarSprite>, head_sprites: &mut Vec<HeadSprite>, frame: usize) {
-        let (plan, trajectories) = (self.plan, self.trajectories);
-        let states: &[CarState] = &trajectories.states[frame];
-        let city = plan.world.city().is_some();
-        sprites.clear();
-        sprites.extend(plan.cars.iter().zip(states).enumerate().map(|(i, (car, s))| CarSprite {
-            position: s.position,
-            yaw: s.yaw,
-            length: car.length,
-            width: car.width,
-            colour: colour_of(car),
-            mask_id: car.mask_id,
-            braking: city && trajectories.braking(frame, i),
-        }));
-        head_sprites.clear();
-        if let Some(colours) = trajectories.lights.get(frame) {
-            head_sprites.extend(
-                self.heads
-                    .iter()
-                    .zip(colours)
-                    .filter_map(|(head, state)| head.map(|position| HeadSprite { position, colour: state.colour })),
-            );
-        }
     }
 }

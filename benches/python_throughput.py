@@ -1,0 +1,84 @@
+"""Python package throughput against the command line's, measured side by
+side in one run (`make bench` runs it after the Rust benchmarks). Prints
+figures and ratios; asserts nothing.
+
+- poses only: city scenarios per second, `gen --no-images` (files written)
+  against `causalcity.stream` (numpy arrays, nothing written);
+- with images: frame pairs (RGB + mask) per second, `gen` with its PNG
+  encoding time taken out, against `stream(images=True)`.
+
+Same spec, same scenarios, same thread counts. $CAUSALCITY_CLI is the
+command that runs the binary.
+"""
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import causalcity
+
+ROOT = Path(__file__).resolve().parents[1]
+POSES_SPEC = ROOT / "configs" / "city.json"
+IMAGES_SPEC = ROOT / "configs" / "ci-city.json"
+POSES_LIMIT = int(os.environ.get("BENCH_POSES_LIMIT", "20"))
+IMAGES_LIMIT = int(os.environ.get("BENCH_IMAGES_LIMIT", "1"))
+
+
+def cli_run(spec_path, threads, limit, images):
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", str(ROOT / "target" / "release" / "causalcity")))
+    with tempfile.TemporaryDirectory(prefix="causalcity-bench-") as out:
+        args = ["gen", "--spec", str(spec_path), "--out", out, "--limit", str(limit), "-j", str(threads), "--json", "-q"]
+        if not images:
+            args.append("--no-images")
+        result = subprocess.run(command + args, capture_output=True, text=True, check=True)
+    return json.loads(result.stdout)
+
+
+def python_run(spec, threads, limit, images):
+    start = time.perf_counter()
+    scenarios = frames = 0
+    for split in spec.splits:
+        for s in causalcity.stream(spec, split, limit=limit, images=images, threads=threads):
+            scenarios += 1
+            frames += s.frames if images else 0
+    return scenarios, frames, time.perf_counter() - start
+
+
+def main():
+    cores = os.cpu_count() or 1
+    thread_counts = sorted({1, cores})
+    spec = causalcity.Spec.load(POSES_SPEC)
+    print(f"python package vs CLI, {cores} cores")
+    print(f"poses only (city scenarios/s, {POSES_SPEC.relative_to(ROOT)} --limit {POSES_LIMIT}):")
+    for threads in thread_counts:
+        python_run(spec, threads, 1, False)  # warm up
+        cli = cli_run(POSES_SPEC, threads, POSES_LIMIT, False)
+        cli_rate = cli["written"] / cli["elapsed"]
+        n, _, seconds = python_run(spec, threads, POSES_LIMIT, False)
+        rate = n / seconds
+        print(f"  {threads} thread(s): CLI {cli_rate:.0f}/s, python {rate:.0f}/s, ratio {rate / cli_rate:.0%} ({n} scenarios)")
+    spec = causalcity.Spec.load(IMAGES_SPEC)
+    print(
+        f"with images (frame pairs/s, {IMAGES_SPEC.relative_to(ROOT)} --limit {IMAGES_LIMIT}; "
+        "CLI with its PNG encoding taken out):"
+    )
+    for threads in thread_counts:
+        cli = cli_run(IMAGES_SPEC, threads, IMAGES_LIMIT, True)
+        encode = cli["stage_seconds"]["encode"] / cli["threads"]
+        cli_rate = cli["frame_pairs"] / cli["elapsed"]
+        cli_no_encode = cli["frame_pairs"] / max(cli["elapsed"] - encode, 1e-9)
+        _, frames, seconds = python_run(spec, threads, IMAGES_LIMIT, True)
+        rate = frames / seconds
+        print(
+            f"  {threads} thread(s): CLI {cli_rate:.0f}/s ({cli_no_encode:.0f}/s without encoding), "
+            f"python {rate:.0f}/s, ratio {rate / cli_no_encode:.0%} ({frames} frame pairs)"
+        )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,575 @@
+"""causalcity from Python: traffic scenarios for causal discovery and
+counterfactual reasoning, generated on the fly into numpy arrays.
+
+The same Rust library as the ``causalcity`` command runs underneath, so a
+scenario from :func:`simulate` holds exactly what ``causalcity gen`` writes
+for the same spec and key: every number as its CSV log gives it, every frame
+as its PNG decodes. Nothing goes through the disk.
+
+>>> import causalcity
+>>> spec = causalcity.Spec.load("configs/ci-city.json")
+>>> s = causalcity.simulate(spec, "cars08_edges50", "train", 0)
+>>> s.position.shape, s.graph.shape          # (frames, cars, 3), (cars, cars)
+>>> for s in causalcity.stream(spec, "train", images=True):
+...     frames = s.rgb                        # (frames, height, width, 3) uint8
+
+The GIL is released while Rust works, and :func:`stream` generates the
+next scenarios on all cores (one per DataLoader worker) while you use the
+current one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from dataclasses import dataclass
+from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _native
+from ._native import GenerationError, InputError
+
+__all__ = [
+    "Spec",
+    "Key",
+    "Scenario",
+    "Lights",
+    "Interactions",
+    "Event",
+    "Counterfactual",
+    "Stream",
+    "simulate",
+    "stream",
+    "counterfactual",
+    "generate",
+    "InputError",
+    "GenerationError",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class Key(NamedTuple):
+    """One scenario of a spec: its group (e.g. ``cars08_edges50``), split
+    (``train``, ``val`` or ``test``) and index within the split, as ``gen``
+    numbers the folders (``<group>/<split>/<index:05>``)."""
+
+    group: str
+    split: str
+    index: int
+
+    @property
+    def folder(self) -> str:
+        """The scenario's folder under a dataset made by ``gen``."""
+        return f"{self.group}/{self.split}/{self.index:05d}"
+
+
+class Spec:
+    """A dataset spec, read and checked as ``causalcity gen`` reads it.
+
+    Build one with :meth:`Spec.load` (a JSON file) or :meth:`Spec.from_dict`.
+    Invalid specs raise :class:`InputError` with the command line's message,
+    naming the field, the value and what is allowed.
+    """
+
+    def __init__(self, native: "_native.Spec") -> None:
+        self._native = native
+
+    @classmethod
+    def load(cls, path: PathLike) -> "Spec":
+        """Reads the spec file at ``path``."""
+        return cls(_native.Spec.load(os.fspath(path)))
+
+    @classmethod
+    def from_dict(cls, spec: Dict[str, Any]) -> "Spec":
+        """A spec from a dict with the fields of a spec file."""
+        return cls(_native.Spec.from_json(json.dumps(spec), "<dict>"))
+
+    @property
+    def name(self) -> str:
+        return self._native.name
+
+    @property
+    def world(self) -> str:
+        """``"toy"`` or ``"city"``."""
+        return self._native.world
+
+    @property
+    def seed(self) -> int:
+        return self._native.seed
+
+    @property
+    def frames(self) -> int:
+        """Frames per scenario."""
+        return self._native.frames
+
+    @property
+    def frame_interval(self) -> float:
+        """Seconds between frames."""
+        return self._native.frame_interval
+
+    @property
+    def image_size(self) -> Tuple[int, int]:
+        """(width, height) of the bird's-eye frames, pixels."""
+        return self._native.image_size
+
+    @property
+    def groups(self) -> List[str]:
+        """Group names, e.g. ``["cars04_edges50", "cars08_edges20"]``."""
+        return self._native.groups
+
+    @property
+    def splits(self) -> Dict[str, int]:
+        """Scenarios per group in each split."""
+        return dict(self._native.splits)
+
+    @property
+    def path(self) -> Optional[str]:
+        """The file the spec was read from (None for :meth:`from_dict`)."""
+        return self._native.path
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The spec's JSON as given."""
+        return json.loads(self._native.json)
+
+    def keys(self, split: Optional[str] = None, limit: Optional[int] = None) -> List[Key]:
+        """Every scenario of ``split`` (all splits when None), at most ``limit``
+        per split and group, in ``gen``'s fixed order."""
+        return [Key(*k) for k in self._native.keys(split, limit)]
+
+    def __reduce__(self):
+        # Picklable (DataLoader workers started with "spawn" receive a copy).
+        return (_spec_from_state, (self._native.json, self.path))
+
+    def __repr__(self) -> str:
+        return f"Spec(name={self.name!r}, world={self.world!r}, groups={self.groups}, splits={self.splits})"
+
+
+def _spec_from_state(text: str, path: Optional[str]) -> Spec:
+    if path is not None:
+        return Spec.load(path)
+    return Spec(_native.Spec.from_json(text, "<dict>"))
+
+
+def _as_spec(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Spec:
+    if isinstance(spec, Spec):
+        return spec
+    if isinstance(spec, dict):
+        return Spec.from_dict(spec)
+    return Spec.load(spec)
+
+
+class Event(NamedTuple):
+    """One row of ``events.csv``. ``car`` is None for events of no car (a
+    light or the weather changed); ``light`` names the light (``AC/W/straight``)."""
+
+    frame: int
+    t: float
+    kind: str
+    car: Optional[int]
+    other_car: Optional[int]
+    light: Optional[str]
+    detail: str
+
+
+@dataclass(frozen=True)
+class Lights:
+    """``lights.csv`` as arrays (city world): ``L`` lights in plan order."""
+
+    names: List[str]
+    """Each light's name, ``AC/W/straight``, as scenario files and events name it."""
+    colour: np.ndarray
+    """``[frames, L]`` uint8: index into :attr:`colour_names`."""
+    colour_names: List[str]
+    """``["green", "yellow", "red"]``."""
+    since_change: np.ndarray
+    """``[frames, L]`` float64: seconds since the colour changed."""
+    head_pixels: np.ndarray
+    """``[L, 2]`` float64: the signal head in bird's-eye pixels (NaN without one)."""
+
+
+@dataclass(frozen=True)
+class Interactions:
+    """``interactions.csv`` as arrays (city world): what bound each car's
+    speed choice at each frame, as the driver model used it."""
+
+    kinds: List[str]
+    """``["free", "car", "light", "conflict", "merge", "curve", "collision", "intervention"]``."""
+    bound_by: np.ndarray
+    """``[frames, cars]`` uint8: index into :attr:`kinds`."""
+    other_car: np.ndarray
+    """``[frames, cars]`` int16: the car that bound it, -1 for none."""
+    light: np.ndarray
+    """``[frames, cars]`` int16: the light that bound it (index into the
+    scenario's ``lights.names``), -1 for none."""
+
+    def car_graph(self) -> np.ndarray:
+        """``[frames, cars, cars]`` uint8: ``[t, i, j] = 1`` when car j bound
+        car i at frame t (``car``, ``conflict`` or ``collision``), as ``export
+        nri --dynamic --directed`` writes it."""
+        frames, cars = self.bound_by.shape
+        binding = np.isin(self.bound_by, [self.kinds.index(k) for k in ("car", "conflict", "collision")])
+        binding &= self.other_car >= 0
+        graph = np.zeros((frames, cars, cars), dtype=np.uint8)
+        t, i = np.nonzero(binding)
+        graph[t, i, self.other_car[t, i]] = 1
+        return graph
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulated scenario. Car axes follow the car ids (0-based); the
+    values are those of the files ``gen`` writes for the same key."""
+
+    key: Optional[Key]
+    """Its key (None for scenario files)."""
+    metadata: Dict[str, Any]
+    """``scenario.json``: cars, roles, routes, confounders, lights, camera."""
+    car_ids: np.ndarray
+    """``[cars]`` uint32."""
+    car_names: List[str]
+    t: np.ndarray
+    """``[frames]`` float64, seconds."""
+    position: np.ndarray
+    """``[frames, cars, 3]`` float64: x, y, z in metres (x east, y north)."""
+    rotation: np.ndarray
+    """``[frames, cars, 3]`` float64: roll, pitch, yaw in radians (yaw
+    counter-clockwise from east)."""
+    pixels: np.ndarray
+    """``[frames, cars, 2]`` float64: px, py in the bird's-eye image
+    (``pixels.npy`` holds the same values as float32)."""
+    speed: np.ndarray
+    """``[frames, cars]`` float64, metres per second."""
+    in_view: np.ndarray
+    """``[frames, cars]`` bool: the car's centre is in the bird's-eye image."""
+    graph: np.ndarray
+    """``[cars, cars]`` uint8: ``graph[i, j] = 1`` when car i leads car j
+    (the causal graph, cause to effect)."""
+    edges: List[Tuple[int, int]]
+    """(leader, follower) pairs, as ``scenario.json``'s ``edges``."""
+    lights: Optional[Lights]
+    interactions: Optional[Interactions]
+    events: List[Event]
+    rgb: Optional[np.ndarray]
+    """With ``images=True``: ``[frames, height, width, 3]`` uint8."""
+    mask: Optional[np.ndarray]
+    """With ``images=True``: ``[frames, height, width]`` uint8, 0 for no
+    car, else the car's id + 1."""
+
+    @property
+    def yaw(self) -> np.ndarray:
+        """``[frames, cars]``: heading in radians."""
+        return self.rotation[..., 2]
+
+    @property
+    def frames(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def cars(self) -> int:
+        return int(self.car_ids.shape[0])
+
+
+def _scenario(raw: Dict[str, Any], key: Optional[Key]) -> Scenario:
+    lights = raw.get("lights")
+    interactions = raw.get("interactions")
+    return Scenario(
+        key=key,
+        metadata=json.loads(raw["scenario_json"]),
+        car_ids=np.asarray(raw["car_ids"]),
+        car_names=raw["car_names"],
+        t=np.asarray(raw["t"]),
+        position=np.asarray(raw["position"]),
+        rotation=np.asarray(raw["rotation"]),
+        pixels=np.asarray(raw["pixels"]),
+        speed=np.asarray(raw["speed"]),
+        in_view=np.asarray(raw["in_view"]).view(np.bool_),
+        graph=np.asarray(raw["graph"]),
+        edges=raw["edges"],
+        lights=None
+        if lights is None
+        else Lights(
+            names=lights["names"],
+            colour=np.asarray(lights["colour"]),
+            colour_names=lights["colour_names"],
+            since_change=np.asarray(lights["since_change"]),
+            head_pixels=np.asarray(lights["head_pixels"]),
+        ),
+        interactions=None
+        if interactions is None
+        else Interactions(
+            kinds=interactions["kinds"],
+            bound_by=np.asarray(interactions["bound_by"]),
+            other_car=np.asarray(interactions["other_car"]),
+            light=np.asarray(interactions["light"]),
+        ),
+        events=[Event(*e) for e in raw["events"]],
+        rgb=np.asarray(raw["rgb"]) if "rgb" in raw else None,
+        mask=np.asarray(raw["mask"]) if "mask" in raw else None,
+    )
+
+
+def simulate(
+    spec: Union[Spec, PathLike, Dict[str, Any]],
+    group: str,
+    split: str,
+    index: int,
+    images: bool = False,
+) -> Scenario:
+    """Plans and simulates scenario ``index`` of ``group`` in ``split``; with
+    ``images=True``, also renders its bird's-eye frames and masks.
+
+    ``spec`` is a :class:`Spec`, a spec file's path or a dict. Raises
+    :class:`InputError` for a group, split or index the spec does not have.
+    """
+    spec = _as_spec(spec)
+    raw = _native.simulate(spec._native, group, split, index, images)
+    return _scenario(raw, Key(group, split, index))
+
+
+def _worker() -> Tuple[int, int]:
+    """(worker id, workers) of the DataLoader worker this runs in, else (0, 1).
+    torch is asked only when the program has imported it already."""
+    if "torch" in sys.modules:
+        try:
+            info = sys.modules["torch"].utils.data.get_worker_info()
+        except AttributeError:
+            info = None
+        if info is not None:
+            return int(info.id), int(info.num_workers)
+    return 0, 1
+
+
+def _process_shard(shard: Optional[Tuple[int, int]]) -> Tuple[int, int]:
+    """(rank, processes): ``shard``, else the RANK / WORLD_SIZE that
+    torch.distributed launchers set, else (0, 1)."""
+    if shard is None:
+        rank, world = os.environ.get("RANK"), os.environ.get("WORLD_SIZE")
+        if rank is not None and world is not None:
+            shard = (int(rank), int(world))
+        else:
+            shard = (0, 1)
+    rank, processes = shard
+    if not (0 <= rank < processes):
+        raise InputError(f"shard {shard!r} is not a shard: use (rank, processes) with 0 <= rank < processes")
+    return rank, processes
+
+
+class Stream:
+    """Scenarios of one split generated on the fly, in ``gen``'s order,
+    deterministic per key. See :func:`stream`."""
+
+    def __init__(
+        self,
+        spec: Spec,
+        split: str,
+        groups: Optional[Sequence[str]] = None,
+        limit: Optional[int] = None,
+        images: bool = False,
+        shard: Optional[Tuple[int, int]] = None,
+        threads: Optional[int] = None,
+        ahead: Optional[int] = None,
+    ) -> None:
+        self.spec = spec
+        self.split = split
+        self.images = images
+        self.threads = threads
+        self.ahead = ahead
+        self.shard = _process_shard(shard)
+        keys = spec.keys(split, limit)
+        if groups is not None:
+            unknown = [g for g in groups if g not in spec.groups]
+            if unknown:
+                raise InputError(
+                    f"groups {unknown} are not in spec {spec.name!r}: its groups are {', '.join(spec.groups)}"
+                )
+            keys = [k for k in keys if k.group in groups]
+        self._all_keys = keys
+
+    def keys(self, worker: Optional[Tuple[int, int]] = None) -> List[Key]:
+        """The keys this process (and DataLoader worker) generates: every
+        ``n``-th key of the split, so processes and workers never overlap
+        and together cover every key. ``worker`` overrides the detected
+        (worker id, workers)."""
+        rank, processes = self.shard
+        worker_id, workers = worker if worker is not None else _worker()
+        slot, slots = rank * workers + worker_id, processes * workers
+        return self._all_keys[slot::slots]
+
+    def __len__(self) -> int:
+        """Scenarios this process yields (over all its DataLoader workers)."""
+        rank, processes = self.shard
+        return len(self._all_keys[rank::processes])
+
+    def __iter__(self) -> Iterator[Scenario]:
+        worker_id, workers = _worker()
+        # Inside a DataLoader worker each worker is one process: one thread each.
+        threads = self.threads if self.threads is not None else (1 if workers > 1 else None)
+        keys = self.keys((worker_id, workers))
+        scenarios = _native.Prefetch(self.spec._native, [tuple(k) for k in keys], self.images, threads, self.ahead)
+        for key, raw in zip(keys, scenarios):
+            yield _scenario(raw, key)
+
+
+def stream(
+    spec: Union[Spec, PathLike, Dict[str, Any]],
+    split: str,
+    *,
+    groups: Optional[Sequence[str]] = None,
+    limit: Optional[int] = None,
+    images: bool = False,
+    shard: Optional[Tuple[int, int]] = None,
+    threads: Optional[int] = None,
+    ahead: Optional[int] = None,
+) -> Stream:
+    """An iterable of the scenarios of ``split`` (of ``groups``, all when
+    None; at most ``limit`` per group), generated on the fly.
+
+    Sharding: across processes by ``shard=(rank, processes)`` (default: the
+    ``RANK`` and ``WORLD_SIZE`` environment variables when both are set), and
+    across ``torch.utils.data.DataLoader`` workers by
+    ``torch.utils.data.get_worker_info()``. Each key goes to exactly one
+    process and worker. When torch has been imported, the stream is a
+    ``torch.utils.data.IterableDataset``; give the DataLoader
+    ``batch_size=None`` (or your own ``collate_fn``) since items are
+    :class:`Scenario` objects.
+
+    Work: ``threads`` worker threads (default: all cores; one per
+    DataLoader worker) generate the next scenarios while you use the
+    current one, each taking the next key as soon as it is free; at most
+    ``ahead`` scenarios (default: threads + 1) wait or are under way, which
+    bounds the memory with ``images=True`` (a 150-frame 1024 x 640 scenario
+    holds 393 MB of frames). The order is the keys' order whatever the
+    thread count.
+    """
+    spec = _as_spec(spec)
+    args = (spec, split, groups, limit, images, shard, threads, ahead)
+    if "torch" in sys.modules:
+        return _torch_stream_class()(*args)
+    return Stream(*args)
+
+
+_TORCH_STREAM: Optional[type] = None
+
+
+def _torch_stream_class() -> type:
+    global _TORCH_STREAM
+    if _TORCH_STREAM is None:
+        from torch.utils.data import IterableDataset
+
+        class TorchStream(Stream, IterableDataset):  # type: ignore[misc, valid-type]
+            """A :class:`Stream` that is a torch IterableDataset."""
+
+        TorchStream.__module__ = __name__
+        _TORCH_STREAM = TorchStream
+        globals()["TorchStream"] = TorchStream
+    return _TORCH_STREAM
+
+
+@dataclass(frozen=True)
+class Counterfactual:
+    """One scenario's factual and counterfactual runs (as ``causalcity
+    counterfactual`` writes them): everything before the intervention fires
+    is identical; afterwards only what it causes differs."""
+
+    name: str
+    factual: Scenario
+    counterfactual: Scenario
+    divergence: np.ndarray
+    """``[frames, cars]`` float64: metres between each car's factual and
+    counterfactual positions (``divergence.csv``)."""
+    summary: Dict[str, Any]
+    """``summary.json``: the interventions, when the first fired, and the
+    cars it moved (the effect set)."""
+
+    @property
+    def affected(self) -> List[str]:
+        """Names of the cars whose trajectory changed."""
+        return list(self.summary["affected"])
+
+    @property
+    def intervention_time(self) -> Optional[float]:
+        """Seconds at which the first intervention fired (None if never)."""
+        return self.summary["intervention_time_s"]
+
+
+def _json_input(value: Union[PathLike, Dict[str, Any], List[Any]], label: str) -> Tuple[str, str]:
+    """(text, origin) of a file path or an already parsed JSON value."""
+    if isinstance(value, (dict, list)):
+        return json.dumps(value), label
+    path = os.fspath(value)
+    try:
+        with open(path, encoding="utf-8") as f:
+            return f.read(), path
+    except OSError as e:
+        raise InputError(f"{path}: cannot read the file: {e.strerror}") from None
+
+
+def counterfactual(
+    scenario: Union[PathLike, Dict[str, Any], List[Any]],
+    intervention: Union[PathLike, Dict[str, Any], List[Any], None] = None,
+    *,
+    images: bool = False,
+) -> List[Counterfactual]:
+    """Factual and counterfactual runs of every scenario of a scenario file
+    (a path, or the file's JSON as a dict or list), one per scenario in file
+    order. The counterfactual adds ``intervention`` (an intervention file's
+    path, or its JSON: one intervention object or a list); without it, the
+    scenario's own ``interventions`` make the counterfactual and the factual
+    runs without them. City world only; see README "Counterfactuals".
+    """
+    text, origin = _json_input(scenario, "<dict>")
+    if intervention is None:
+        raws = _native.counterfactual(text, origin, None, None, images)
+    else:
+        itext, iorigin = _json_input(intervention, "<intervention>")
+        raws = _native.counterfactual(text, origin, itext, iorigin, images)
+    return [
+        Counterfactual(
+            name=r["name"],
+            factual=_scenario(r["factual"], None),
+            counterfactual=_scenario(r["counterfactual"], None),
+            divergence=np.asarray(r["divergence"]),
+            summary=json.loads(r["summary"]),
+        )
+        for r in raws
+    ]
+
+
+def generate(
+    spec: Union[Spec, PathLike, Dict[str, Any]],
+    out: Optional[PathLike] = None,
+    *,
+    limit: Optional[int] = None,
+    threads: Optional[int] = None,
+    images: bool = True,
+    annotations: bool = False,
+    shard: Union[str, Tuple[int, int], None] = None,
+    force: bool = False,
+    fsync: bool = False,
+    progress: bool = True,
+) -> Dict[str, Any]:
+    """``causalcity gen`` from Python: writes the dataset to ``out`` (default
+    ``data/<spec name>``), resuming an interrupted run, and returns the
+    run's summary (as ``gen --json`` prints it). The keywords are ``gen``'s
+    flags: ``images=False`` is ``--no-images``, ``shard=(k, n)`` or ``"k/n"``
+    is ``--shard k/n``, ``progress=False`` is ``--quiet``.
+    """
+    spec = _as_spec(spec)
+    if isinstance(shard, tuple):
+        shard = f"{shard[0]}/{shard[1]}"
+    summary = _native.generate(
+        spec._native,
+        None if out is None else os.fspath(out),
+        limit,
+        threads,
+        images,
+        annotations,
+        shard,
+        force,
+        fsync,
+        progress,
+    )
+    return json.loads(summary)

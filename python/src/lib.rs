@@ -1,0 +1,397 @@
+//! `causalcity._native`: the Rust side of the Python package. It hands the
+//! library's in-memory scenarios ([`causalcity::output::arrays`]) to Python
+//! without copying them: every array is an [`Array`] that numpy wraps
+//! through `__array_interface__`. The GIL is released while Rust works:
+//! streams generate ahead on worker threads of their own
+//! ([`causalcity::orchestrate::in_memory::Prefetch`]), `generate` and
+//! `counterfactual` on rayon's. The public API (docstrings, types) lives
+//! in `causalcity/__init__.py`.
+
+use causalcity::error::Error;
+use causalcity::orchestrate::in_memory::Prefetch as Prefetch_;
+use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
+use causalcity::orchestrate::run::{generate_expansion, load_spec, GenError, GenOptions, Shard};
+use causalcity::output::arrays::{recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
+use causalcity::plan::{Expansion, ScenarioKey};
+use causalcity::progress::ProgressMode;
+use causalcity::spec::DatasetSpec;
+use causalcity::world::BoundBy;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+pyo3::create_exception!(
+    _native,
+    InputError,
+    PyValueError,
+    "Bad input (a spec, scenario or intervention file, a key): the message names the file, field and value, as the command line's exit-status-2 errors do."
+);
+pyo3::create_exception!(
+    _native,
+    GenerationError,
+    PyRuntimeError,
+    "A failure while working (a full disk, a failed write), as the command line's exit-status-1 errors."
+);
+
+/// The library's one error, as the Python exception of its kind.
+fn py_err(e: impl Into<Error>) -> PyErr {
+    match e.into() {
+        Error::Input(m) => InputError::new_err(m),
+        Error::Failure(m) | Error::Interrupted(m) => GenerationError::new_err(m),
+    }
+}
+
+/// Typed values that numpy views without copying.
+enum Data {
+    U8(Vec<u8>),
+    I16(Vec<i16>),
+    U32(Vec<u32>),
+    F64(Vec<f64>),
+}
+
+impl Data {
+    fn parts(&self) -> (usize, &'static str, usize) {
+        match self {
+            Data::U8(v) => (v.as_ptr() as usize, "|u1", v.len()),
+            Data::I16(v) => (v.as_ptr() as usize, "<i2", v.len()),
+            Data::U32(v) => (v.as_ptr() as usize, "<u4", v.len()),
+            Data::F64(v) => (v.as_ptr() as usize, "<f8", v.len()),
+        }
+    }
+}
+
+/// One array, owned by Rust and lent to numpy (`numpy.asarray(a)`), which
+/// keeps this object alive as long as it views the values.
+#[pyclass(frozen, module = "causalcity._native")]
+struct Array {
+    data: Data,
+    shape: Vec<usize>,
+}
+
+impl Drop for Array {
+    /// Frames go back to the library for the next scenario (bounded; see
+    /// `causalcity::output::arrays::recycle_frame_buffer`).
+    fn drop(&mut self) {
+        if let Data::U8(values) = &mut self.data {
+            recycle_frame_buffer(std::mem::take(values));
+        }
+    }
+}
+
+impl Array {
+    fn new(data: Data, shape: &[usize]) -> Array {
+        debug_assert_eq!(data.parts().2, shape.iter().product::<usize>());
+        Array { data, shape: shape.to_vec() }
+    }
+}
+
+#[pymethods]
+impl Array {
+    /// numpy's array interface (version 3): the values' address, type and shape.
+    #[getter]
+    fn __array_interface__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (address, typestr, _) = self.data.parts();
+        let d = PyDict::new(py);
+        d.set_item("version", 3)?;
+        d.set_item("shape", PyTuple::new(py, &self.shape)?)?;
+        d.set_item("typestr", typestr)?;
+        d.set_item("data", (address, false))?;
+        Ok(d)
+    }
+}
+
+/// A checked, expanded dataset spec (see `causalcity.Spec`).
+#[pyclass(frozen, module = "causalcity._native")]
+struct Spec {
+    generator: Arc<Generator>,
+    /// The spec's JSON as read.
+    json: String,
+    /// The file it came from, if any.
+    path: Option<PathBuf>,
+}
+
+impl Spec {
+    fn expansion(&self) -> &Expansion {
+        self.generator.expansion()
+    }
+}
+
+#[pymethods]
+impl Spec {
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Spec> {
+        let json = std::fs::read_to_string(&path).unwrap_or_default();
+        let expansion = py.detach(|| load_spec(&path)).map_err(py_err)?;
+        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json, path: Some(path) })
+    }
+
+    #[staticmethod]
+    fn from_json(py: Python<'_>, text: String, origin: PathBuf) -> PyResult<Spec> {
+        let expansion = py
+            .detach(|| {
+                let spec_err = |error| GenError::Spec { path: origin.clone(), error };
+                let spec = DatasetSpec::from_json(&text).map_err(spec_err)?;
+                Expansion::from_spec(spec).map_err(spec_err)
+            })
+            .map_err(py_err)?;
+        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path: None })
+    }
+
+    #[getter]
+    fn name(&self) -> String {
+        self.expansion().spec.name.clone()
+    }
+
+    #[getter]
+    fn world(&self) -> &'static str {
+        self.expansion().spec.world.name()
+    }
+
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.expansion().spec.seed
+    }
+
+    #[getter]
+    fn frames(&self) -> u32 {
+        self.expansion().spec.frames
+    }
+
+    #[getter]
+    fn frame_interval(&self) -> f64 {
+        self.expansion().spec.frame_interval()
+    }
+
+    #[getter]
+    fn image_size(&self) -> (u32, u32) {
+        (self.expansion().camera.width, self.expansion().camera.height)
+    }
+
+    #[getter]
+    fn groups(&self) -> Vec<String> {
+        self.expansion().spec.groups.iter().map(|g| g.name()).collect()
+    }
+
+    #[getter]
+    fn splits(&self) -> Vec<(&'static str, u32)> {
+        let splits = &self.expansion().spec.splits;
+        causalcity::spec::Split::ALL.iter().map(|&s| (s.name(), splits.count(s))).collect()
+    }
+
+    #[getter]
+    fn json(&self) -> &str {
+        &self.json
+    }
+
+    #[getter]
+    fn path(&self) -> Option<PathBuf> {
+        self.path.clone()
+    }
+
+    /// (group, split, index) of every scenario of `split` (all when None), at
+    /// most `limit` per split and group, in the order `gen` numbers them.
+    #[pyo3(signature = (split=None, limit=None))]
+    fn keys(&self, split: Option<&str>, limit: Option<u32>) -> PyResult<Vec<(String, &'static str, u32)>> {
+        let split = split.map(parse_split).transpose().map_err(|e| InputError::new_err(e.0))?;
+        Ok(self.generator.keys(split, limit).into_iter().map(|k| (k.group, k.split.name(), k.index)).collect())
+    }
+}
+
+fn key_of(spec: &Spec, (group, split, index): (String, String, u32)) -> PyResult<ScenarioKey> {
+    spec.generator.key(&group, &split, index).map_err(|e| InputError::new_err(e.0))
+}
+
+/// One scenario of `spec` as a dict of arrays (see `causalcity.Scenario`).
+#[pyfunction]
+#[pyo3(signature = (spec, group, split, index, images=false))]
+fn simulate<'py>(
+    py: Python<'py>,
+    spec: &Spec,
+    group: String,
+    split: String,
+    index: u32,
+    images: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let key = key_of(spec, (group, split, index))?;
+    let generator = spec.generator.clone();
+    let arrays = py.detach(|| generator.scenario(&key, images)).map_err(py_err)?;
+    scenario_dict(py, arrays)
+}
+
+/// Scenarios of `spec` generated ahead on `threads` worker threads, yielded
+/// in the order of `keys` (see `causalcity.stream`).
+#[pyclass(frozen, module = "causalcity._native")]
+struct Prefetch {
+    inner: Prefetch_,
+}
+
+#[pymethods]
+impl Prefetch {
+    #[new]
+    #[pyo3(signature = (spec, keys, images=false, threads=None, ahead=None))]
+    fn new(
+        spec: &Spec,
+        keys: Vec<(String, String, u32)>,
+        images: bool,
+        threads: Option<usize>,
+        ahead: Option<usize>,
+    ) -> PyResult<Prefetch> {
+        let keys: Vec<ScenarioKey> = keys.into_iter().map(|k| key_of(spec, k)).collect::<PyResult<_>>()?;
+        let threads = threads
+            .filter(|&t| t > 0)
+            .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+        let ahead = ahead.unwrap_or(threads + 1);
+        Ok(Prefetch { inner: Prefetch_::start(spec.generator.clone(), keys, images, threads, ahead) })
+    }
+
+    fn __iter__(slf: Bound<'_, Self>) -> Bound<'_, Self> {
+        slf
+    }
+
+    fn __next__<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        match py.detach(|| self.inner.next()) {
+            None => Ok(None),
+            Some(result) => scenario_dict(py, result.map_err(py_err)?).map(Some),
+        }
+    }
+}
+
+/// `causalcity counterfactual` into memory: one dict per scenario of the file.
+#[pyfunction]
+#[pyo3(signature = (scenario_text, scenario_origin, intervention_text=None, intervention_origin=None, images=false))]
+fn counterfactual<'py>(
+    py: Python<'py>,
+    scenario_text: String,
+    scenario_origin: PathBuf,
+    intervention_text: Option<String>,
+    intervention_origin: Option<PathBuf>,
+    images: bool,
+) -> PyResult<Bound<'py, PyList>> {
+    let intervention_origin = intervention_origin.unwrap_or_else(|| PathBuf::from("<intervention>"));
+    let pairs = py
+        .detach(|| {
+            let scenarios = Text { origin: &scenario_origin, text: &scenario_text };
+            let interventions = intervention_text.as_deref().map(|text| Text { origin: &intervention_origin, text });
+            counterfactual_arrays(scenarios, interventions, images)
+        })
+        .map_err(py_err)?;
+    let list = PyList::empty(py);
+    for pair in pairs {
+        list.append(pair_dict(py, pair)?)?;
+    }
+    Ok(list)
+}
+
+/// `causalcity gen` from Python: the run's summary as JSON text.
+#[pyfunction]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, shard=None, force=false, fsync=false, progress=true))]
+#[allow(clippy::too_many_arguments)]
+fn generate(
+    py: Python<'_>,
+    spec: &Spec,
+    out: Option<PathBuf>,
+    limit: Option<u32>,
+    threads: Option<usize>,
+    images: bool,
+    annotations: bool,
+    shard: Option<String>,
+    force: bool,
+    fsync: bool,
+    progress: bool,
+) -> PyResult<String> {
+    let shard: Option<Shard> =
+        shard.map(|s| s.parse()).transpose().map_err(|e: String| InputError::new_err(format!("shard: {e}")))?;
+    let options = GenOptions {
+        spec_path: spec.path.clone().unwrap_or_else(|| PathBuf::from("<dict>")),
+        out,
+        limit,
+        threads,
+        images,
+        annotations,
+        progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
+        shard,
+        force,
+        fsync,
+        handle_signals: false,
+    };
+    let generator = spec.generator.clone();
+    let summary = py.detach(|| generate_expansion(generator.expansion(), &options, Instant::now())).map_err(py_err)?;
+    serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
+}
+
+fn array<'py>(py: Python<'py>, data: Data, shape: &[usize]) -> PyResult<Bound<'py, Array>> {
+    Bound::new(py, Array::new(data, shape))
+}
+
+/// A scenario's arrays as a dict (no copies: each array moves into an [`Array`]).
+fn scenario_dict(py: Python<'_>, a: ScenarioArrays) -> PyResult<Bound<'_, PyDict>> {
+    let (t, c) = (a.frames, a.cars);
+    let d = PyDict::new(py);
+    d.set_item("scenario_json", String::from_utf8_lossy(&a.scenario_json))?;
+    d.set_item("car_names", a.car_names)?;
+    d.set_item("car_ids", array(py, Data::U32(a.car_ids), &[c])?)?;
+    d.set_item("t", array(py, Data::F64(a.t), &[t])?)?;
+    d.set_item("position", array(py, Data::F64(a.position), &[t, c, 3])?)?;
+    d.set_item("rotation", array(py, Data::F64(a.rotation), &[t, c, 3])?)?;
+    d.set_item("pixels", array(py, Data::F64(a.pixels), &[t, c, 2])?)?;
+    d.set_item("speed", array(py, Data::F64(a.speed), &[t, c])?)?;
+    d.set_item("in_view", array(py, Data::U8(a.in_view), &[t, c])?)?;
+    d.set_item("graph", array(py, Data::U8(a.graph), &[c, c])?)?;
+    d.set_item("edges", a.edges.iter().map(|e| (e[0], e[1])).collect::<Vec<_>>())?;
+    if let Some(lights) = a.lights {
+        let l = lights.names.len();
+        let ld = PyDict::new(py);
+        ld.set_item("colour_names", LIGHT_COLOURS.map(|c| c.name()).to_vec())?;
+        ld.set_item("names", lights.names)?;
+        ld.set_item("colour", array(py, Data::U8(lights.colour), &[t, l])?)?;
+        ld.set_item("since_change", array(py, Data::F64(lights.since_change), &[t, l])?)?;
+        ld.set_item("head_pixels", array(py, Data::F64(lights.head_pixels), &[l, 2])?)?;
+        d.set_item("lights", ld)?;
+    }
+    if let Some(i) = a.interactions {
+        let id = PyDict::new(py);
+        id.set_item("kinds", BoundBy::ALL.map(|b| b.name()).to_vec())?;
+        id.set_item("bound_by", array(py, Data::U8(i.bound_by), &[t, c])?)?;
+        id.set_item("other_car", array(py, Data::I16(i.other_car), &[t, c])?)?;
+        id.set_item("light", array(py, Data::I16(i.light), &[t, c])?)?;
+        d.set_item("interactions", id)?;
+    }
+    let events = PyList::empty(py);
+    for e in a.events {
+        events.append((e.frame, e.t, e.kind, e.car, e.other_car, e.light, e.detail))?;
+    }
+    d.set_item("events", events)?;
+    if let Some(images) = a.images {
+        let (h, w) = (images.height as usize, images.width as usize);
+        d.set_item("rgb", array(py, Data::U8(images.rgb), &[t, h, w, 3])?)?;
+        d.set_item("mask", array(py, Data::U8(images.mask), &[t, h, w])?)?;
+    }
+    Ok(d)
+}
+
+fn pair_dict(py: Python<'_>, p: PairArrays) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    let (t, c) = (p.factual.frames, p.factual.cars);
+    d.set_item("name", p.name)?;
+    d.set_item("summary", serde_json::to_string(&p.summary).map_err(|e| GenerationError::new_err(e.to_string()))?)?;
+    d.set_item("divergence", array(py, Data::F64(p.divergence_m), &[t, c])?)?;
+    d.set_item("factual", scenario_dict(py, p.factual)?)?;
+    d.set_item("counterfactual", scenario_dict(py, p.counterfactual)?)?;
+    Ok(d)
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Spec>()?;
+    m.add_class::<Array>()?;
+    m.add("InputError", m.py().get_type::<InputError>())?;
+    m.add("GenerationError", m.py().get_type::<GenerationError>())?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_class::<Prefetch>()?;
+    m.add_function(wrap_pyfunction!(counterfactual, m)?)?;
+    m.add_function(wrap_pyfunction!(generate, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,320 @@
+"""The Python package against the files the command line writes.
+
+`make test-python` installs the package (`pip install ./python`), generates
+small datasets with `causalcity gen` / `counterfactual` into
+$CAUSALCITY_DATA and runs these tests; $CAUSALCITY_CLI is the command that
+runs the binary. Every comparison is exact: the package must hold the very
+values the files hold.
+"""
+
+import hashlib
+import json
+import os
+import shlex
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+import causalcity
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = Path(os.environ.get("CAUSALCITY_DATA", ROOT / "target" / "python-data"))
+CITY_SPEC = ROOT / "tests" / "python" / "city.json"
+TOY_SPEC = ROOT / "tests" / "python" / "toy.json"
+STOP_THE_LEADER = ROOT / "configs" / "examples" / "stop-the-leader.json"
+
+
+def cli(*args, check=True):
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", str(ROOT / "target" / "release" / "causalcity")))
+    return subprocess.run(command + list(args), capture_output=True, text=True, check=check)
+
+
+def read_csv(path):
+    """Every cell as its text ("" when empty): numbers are parsed by number()."""
+    return pd.read_csv(path, dtype=str, keep_default_na=False)
+
+
+def number(column):
+    """Python's exact decimal parsing (NaN for empty cells): the files'
+    numbers read back to the very values logged."""
+    return np.array([float(v) if v != "" else np.nan for v in column], dtype=np.float64)
+
+
+def by_frame_and_car(table, column, frames, cars):
+    ordered = table.assign(_f=number(table["frame"]), _c=number(table["car"])).sort_values(["_f", "_c"])
+    assert len(ordered) == frames * cars
+    return number(ordered[column]).reshape(frames, cars)
+
+
+def assert_poses_match(scenario, folder):
+    """poses.csv, pixels.npy and scenario.json against the scenario's arrays."""
+    frames, cars = scenario.frames, scenario.cars
+    poses = read_csv(folder / "poses.csv")
+    assert sorted(set(number(poses["car"]))) == list(scenario.car_ids)
+    for column, values in {
+        "x": scenario.position[..., 0],
+        "y": scenario.position[..., 1],
+        "z": scenario.position[..., 2],
+        "roll": scenario.rotation[..., 0],
+        "pitch": scenario.rotation[..., 1],
+        "yaw": scenario.yaw,
+        "px": scenario.pixels[..., 0],
+        "py": scenario.pixels[..., 1],
+        "speed": scenario.speed,
+        "in_view": scenario.in_view.astype(np.float64),
+    }.items():
+        np.testing.assert_array_equal(values, by_frame_and_car(poses, column, frames, cars), err_msg=column)
+    np.testing.assert_array_equal(scenario.t, by_frame_and_car(poses, "t", frames, cars)[:, 0])
+    np.testing.assert_array_equal(scenario.pixels.astype(np.float32), np.load(folder / "pixels.npy"))
+    metadata = json.loads((folder / "scenario.json").read_text())
+    assert scenario.metadata == metadata
+    expected_graph = np.zeros((cars, cars), dtype=np.uint8)
+    for leader, follower in metadata["edges"]:
+        expected_graph[leader, follower] = 1
+    np.testing.assert_array_equal(scenario.graph, expected_graph)
+    assert scenario.edges == [tuple(e) for e in metadata["edges"]]
+
+
+def assert_city_logs_match(scenario, folder):
+    """lights.csv, events.csv and interactions.csv against the arrays."""
+    lights = read_csv(folder / "lights.csv")
+    count = len(scenario.lights.names)
+    assert count > 0
+    names = (lights["intersection"] + "/" + lights["approach"] + "/" + lights["signal"]).to_numpy()
+    assert list(names[:count]) == scenario.lights.names
+    colours = np.array(scenario.lights.colour_names)[scenario.lights.colour].reshape(-1)
+    assert list(colours) == list(lights["colour"])
+    np.testing.assert_array_equal(scenario.lights.since_change.reshape(-1), number(lights["since_change"]))
+    heads = np.stack([number(lights["head_px"]), number(lights["head_py"])], axis=1)[:count]
+    np.testing.assert_array_equal(scenario.lights.head_pixels, heads)
+
+    events = read_csv(folder / "events.csv")
+    assert len(events) == len(scenario.events)
+
+    def as_read(text, kind):
+        return None if text == "" else kind(text)
+
+    for row, event in zip(events.itertuples(index=False), scenario.events):
+        read = (row.frame, row.t, row.kind, row.car, row.other_car, row.light, row.detail)
+        kinds = (int, float, str, int, int, str, str)
+        assert tuple(as_read(text, kind) for text, kind in zip(read, kinds)) == tuple(
+            None if v == "" else v for v in event
+        )
+
+    interactions = read_csv(folder / "interactions.csv")
+    frames, cars = scenario.frames, scenario.cars
+    order = np.lexsort((number(interactions["car"]), number(interactions["frame"])))
+    interactions = interactions.iloc[order]
+    kinds = np.array(scenario.interactions.kinds)[scenario.interactions.bound_by]
+    assert list(kinds.reshape(-1)) == list(interactions["bound_by"])
+    other = np.nan_to_num(number(interactions["other_car"]), nan=-1).reshape(frames, cars)
+    np.testing.assert_array_equal(scenario.interactions.other_car, other)
+    light_names = np.array(scenario.lights.names + [""], dtype=object)
+    light = light_names[scenario.interactions.light].reshape(-1)
+    assert list(light) == list(interactions["light"])
+
+
+def assert_frames_match(scenario, folder):
+    """Every RGB frame and mask decodes to the arrays, pixel for pixel."""
+    rgb_files = sorted((folder / "rgb").glob("*.png"))
+    mask_files = sorted((folder / "mask").glob("*.png"))
+    assert len(rgb_files) == len(mask_files) == scenario.frames
+    for frame, (rgb, mask) in enumerate(zip(rgb_files, mask_files)):
+        np.testing.assert_array_equal(np.asarray(Image.open(rgb)), scenario.rgb[frame], err_msg=str(rgb))
+        np.testing.assert_array_equal(np.asarray(Image.open(mask)), scenario.mask[frame], err_msg=str(mask))
+
+
+def test_city_scenarios_equal_what_gen_writes():
+    spec = causalcity.Spec.load(CITY_SPEC)
+    keys = spec.keys()
+    assert len(keys) == 3
+    for key in keys:
+        folder = DATA / "city" / key.folder
+        scenario = causalcity.simulate(spec, *key, images=True)
+        assert scenario.rgb.shape == (spec.frames, spec.image_size[1], spec.image_size[0], 3)
+        assert scenario.rgb.dtype == np.uint8 and scenario.mask.shape == scenario.rgb.shape[:3]
+        assert_poses_match(scenario, folder)
+        assert_city_logs_match(scenario, folder)
+        assert_frames_match(scenario, folder)
+
+
+def test_toy_scenarios_equal_what_gen_writes():
+    spec = causalcity.Spec.load(TOY_SPEC)
+    keys = spec.keys()
+    assert len(keys) == 8
+    for key in keys:
+        scenario = causalcity.simulate(spec, key.group, key.split, key.index)
+        assert scenario.rgb is None and scenario.lights is None and scenario.interactions is None
+        assert_poses_match(scenario, DATA / "toy" / key.folder)
+    key = keys[-1]
+    assert_frames_match(causalcity.simulate(spec, *key, images=True), DATA / "toy" / key.folder)
+
+
+def test_spec_from_a_dict_gives_the_same_scenarios_as_its_file():
+    as_dict = json.loads(CITY_SPEC.read_text())
+    from_dict = causalcity.simulate(as_dict, "cars08_edges50", "val", 0)
+    from_file = causalcity.simulate(causalcity.Spec.load(CITY_SPEC), "cars08_edges50", "val", 0)
+    np.testing.assert_array_equal(from_dict.position, from_file.position)
+    assert from_dict.events == from_file.events
+    assert causalcity.Spec.from_dict(as_dict).to_dict() == as_dict
+
+
+def test_stream_shards_over_processes_and_workers_without_overlap_or_gap():
+    spec = causalcity.Spec.load(TOY_SPEC)
+    every = spec.keys("train")
+    assert len(every) == 4
+    seen = []
+    for rank in range(2):
+        stream = causalcity.stream(spec, "train", shard=(rank, 2))
+        assert len(stream) == 2
+        for worker in range(2):
+            seen.extend(stream.keys(worker=(worker, 2)))
+    assert sorted(seen) == sorted(every) and len(set(seen)) == len(every)
+    # Iterating yields exactly its keys, each scenario as simulate gives it.
+    stream = causalcity.stream(spec, "train", shard=(1, 2), threads=2, ahead=2)
+    got = list(stream)
+    assert [s.key for s in got] == every[1::2]
+    for s in got:
+        np.testing.assert_array_equal(s.position, causalcity.simulate(spec, *s.key).position)
+
+
+def test_stream_order_and_values_do_not_depend_on_threads():
+    spec = causalcity.Spec.load(TOY_SPEC)
+    one = list(causalcity.stream(spec, "train", threads=1, images=True))
+    two = list(causalcity.stream(spec, "train", threads=2, ahead=3, images=True))
+    assert [s.key for s in one] == [s.key for s in two] == spec.keys("train")
+    assert len(one) == 4
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a.position, b.position)
+        np.testing.assert_array_equal(a.rgb, b.rgb)
+    # Consumed one at a time, each scenario's frame buffers are reused for
+    # the next ones: the pixels must still be each scenario's own.
+    def digest(s):
+        return hashlib.sha256(s.rgb.tobytes() + s.mask.tobytes()).hexdigest()
+
+    digests = [digest(s) for s in causalcity.stream(spec, "train", threads=1, images=True)]
+    assert digests == [digest(s) for s in one]
+    assert len(set(digests)) == len(digests)
+    # Leaving early stops the workers (this would hang otherwise).
+    for s in causalcity.stream(spec, "train", threads=2):
+        break
+
+
+def test_stream_follows_rank_and_world_size(monkeypatch):
+    monkeypatch.setenv("RANK", "2")
+    monkeypatch.setenv("WORLD_SIZE", "3")
+    spec = causalcity.Spec.load(TOY_SPEC)
+    stream = causalcity.stream(spec, "train", groups=["cars08_edges80"])
+    assert [k for k in stream.keys()] == [k for k in spec.keys("train") if k.group == "cars08_edges80"][2::3]
+    with pytest.raises(causalcity.InputError, match="cars99"):
+        causalcity.stream(spec, "train", groups=["cars99"])
+
+
+def test_stream_in_torch_dataloader_workers():
+    torch = pytest.importorskip("torch")
+    spec = causalcity.Spec.load(TOY_SPEC)
+    stream = causalcity.stream(spec, "train", threads=1)
+    assert isinstance(stream, torch.utils.data.IterableDataset)
+    loader = torch.utils.data.DataLoader(stream, batch_size=None, num_workers=2)
+    keys = [s.key for s in loader]
+    assert sorted(keys) == sorted(spec.keys("train")) and len(set(keys)) == len(keys)
+
+
+def test_errors_carry_the_command_lines_messages(tmp_path):
+    bad = tmp_path / "bad.json"
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["frames"] = 0
+    bad.write_text(json.dumps(spec))
+    result = cli("gen", "--spec", str(bad), "--out", str(tmp_path / "out"), check=False)
+    assert result.returncode == 2
+    message = result.stderr.strip().removeprefix("error: ")
+    assert "frames" in message
+    with pytest.raises(causalcity.InputError) as error:
+        causalcity.Spec.load(bad)
+    assert str(error.value) == message
+    with pytest.raises(ValueError, match="frames"):
+        causalcity.Spec.from_dict(spec)
+    good = causalcity.Spec.load(CITY_SPEC)
+    with pytest.raises(causalcity.InputError, match='split "holdout" is not one of train, val, test'):
+        causalcity.simulate(good, "cars08_edges50", "holdout", 0)
+    with pytest.raises(causalcity.InputError, match="index 1 is not in split"):
+        causalcity.simulate(good, "cars08_edges50", "val", 1)
+    with pytest.raises(causalcity.InputError, match="Car_9"):
+        causalcity.counterfactual(STOP_THE_LEADER, {"at": 1.0, "do": "stop", "car": "Car_9", "seconds": 2})
+
+
+def test_counterfactual_equals_the_command_and_is_identical_before_the_intervention():
+    (pair,) = causalcity.counterfactual(STOP_THE_LEADER)
+    folder = DATA / "counterfactual" / pair.name
+    assert_poses_match(pair.factual, folder / "factual")
+    assert_poses_match(pair.counterfactual, folder / "counterfactual")
+    assert_city_logs_match(pair.counterfactual, folder / "counterfactual")
+    divergence = read_csv(folder / "divergence.csv")
+    np.testing.assert_array_equal(
+        pair.divergence, by_frame_and_car(divergence, "distance_m", pair.factual.frames, pair.factual.cars)
+    )
+    assert pair.summary == json.loads((folder / "summary.json").read_text())
+    # Before the intervention fires both runs are the same; afterwards only its effects differ.
+    fired = int(np.ceil(pair.intervention_time / pair.factual.metadata["frame_interval"] - 1e-6))
+    assert fired > 0
+    np.testing.assert_array_equal(pair.factual.position[:fired], pair.counterfactual.position[:fired])
+    assert not pair.divergence[:fired].any()
+    moved = [pair.factual.car_names[c] for c in range(pair.factual.cars) if pair.divergence[:, c].any()]
+    assert moved == pair.affected and "Car_3" not in moved and "Car_1" in moved
+
+
+def test_counterfactual_from_dicts():
+    scenario = json.loads(STOP_THE_LEADER.read_text())
+    del scenario[0]["interventions"]
+    (pair,) = causalcity.counterfactual(scenario, {"at": 3.0, "do": "stop", "car": "Car_1", "seconds": 6})
+    (from_file,) = causalcity.counterfactual(STOP_THE_LEADER)
+    np.testing.assert_array_equal(pair.counterfactual.position, from_file.counterfactual.position)
+    np.testing.assert_array_equal(pair.divergence, from_file.divergence)
+
+
+def test_generate_writes_the_dataset_gen_writes(tmp_path):
+    spec = causalcity.Spec.load(TOY_SPEC)
+    summary = causalcity.generate(spec, tmp_path / "toy", images=False, progress=False, limit=1)
+    assert summary["written"] == summary["scenarios"] == len(spec.keys(limit=1)) == 6
+    manifest = json.loads((tmp_path / "toy" / "manifest.json").read_text())
+    assert manifest["complete"] is True
+    for key in spec.keys(limit=1):
+        folder = tmp_path / "toy" / key.folder
+        assert not (folder / "rgb").exists()
+        assert (folder / "poses.csv").read_bytes() == (DATA / "toy" / key.folder / "poses.csv").read_bytes()
+    with pytest.raises(causalcity.InputError, match="made differently"):
+        causalcity.generate(causalcity.Spec.load(CITY_SPEC), tmp_path / "toy", progress=False)
+
+
+def test_the_gil_is_released_while_rust_works():
+    spec = causalcity.Spec.load(CITY_SPEC)
+    # Threads swap every 10 us: holding the GIL would let the counter run
+    # only for such slivers, never for the whole call.
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1e-5)
+    counter = [0]
+    running = threading.Event()
+    done = threading.Event()
+
+    def count():
+        running.set()
+        while not done.is_set():
+            counter[0] += 1
+
+    thread = threading.Thread(target=count)
+    thread.start()
+    running.wait()
+    before = counter[0]
+    causalcity.simulate(spec, "cars08_edges50", "test", 0, images=True)
+    during = counter[0] - before
+    done.set()
+    thread.join()
+    sys.setswitchinterval(switch)
+    # With the GIL held for the whole call the other thread could not count at all.
+    assert during > 1000

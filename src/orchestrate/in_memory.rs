@@ -1,0 +1,270 @@
+//! Scenarios generated into memory instead of files, for loaders inside a
+//! training loop (the Python package): the same plans, simulations and
+//! frames as `gen`, `run` and `counterfactual`, returned as
+//! [`ScenarioArrays`] that hold exactly what those commands write.
+
+use super::handwritten::{pair_plans, simulate_pair, PairSummary, RunError};
+use super::run::GenError;
+use super::scenario_file::{load_interventions_text, load_text, FileOptions};
+use crate::map::CityMap;
+use crate::output::arrays::{scenario_arrays, ScenarioArrays};
+use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
+use crate::render::{FrameCanvas, Renderer};
+use crate::spec::Split;
+use crate::world::Trajectories;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::{Arc, Condvar, Mutex, OnceLock};
+
+/// Generates the scenarios of one expanded spec into memory; shared by
+/// threads. The bird's-eye background is drawn once, on first use.
+pub struct Generator {
+    expansion: Expansion,
+    renderer: OnceLock<Renderer>,
+}
+
+/// A scenario key that names no scenario of the spec.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct KeyError(pub String);
+
+impl Generator {
+    pub fn new(expansion: Expansion) -> Self {
+        Generator { expansion, renderer: OnceLock::new() }
+    }
+
+    pub fn expansion(&self) -> &Expansion {
+        &self.expansion
+    }
+
+    /// The key of scenario `index` of `group` (a name such as
+    /// `cars08_edges50`) in `split`, checked against the spec.
+    pub fn key(&self, group: &str, split: &str, index: u32) -> Result<ScenarioKey, KeyError> {
+        let spec = &self.expansion.spec;
+        let names: Vec<String> = spec.groups.iter().map(|g| g.name()).collect();
+        let group_index = names.iter().position(|n| n == group).ok_or_else(|| {
+            KeyError(format!("group {group:?} is not in spec {:?}: its groups are {}", spec.name, names.join(", ")))
+        })?;
+        let split = parse_split(split)?;
+        let count = spec.splits.count(split);
+        if index >= count {
+            return Err(KeyError(format!(
+                "index {index} is not in split {:?} of spec {:?}: it has {count} scenarios per group (0 to {})",
+                split.name(),
+                spec.name,
+                count as i64 - 1
+            )));
+        }
+        Ok(ScenarioKey { group: group.to_string(), group_index, split, index, name: None })
+    }
+
+    /// Every key of `split` (all splits when `None`), at most `limit` per
+    /// split and group, in the dataset's fixed order (as `gen` numbers them).
+    pub fn keys(&self, split: Option<Split>, limit: Option<u32>) -> Vec<ScenarioKey> {
+        self.expansion.keys(limit).into_iter().filter(|k| split.is_none_or(|s| k.split == s)).collect()
+    }
+
+    fn renderer(&self) -> &Renderer {
+        self.renderer.get_or_init(|| Renderer::new(&self.expansion.map, self.expansion.camera))
+    }
+
+    /// Plans and simulates one scenario; with `images`, renders its frames.
+    pub fn scenario(&self, key: &ScenarioKey, images: bool) -> Result<ScenarioArrays, GenError> {
+        let mut canvas = images.then(|| self.renderer().canvas());
+        self.scenario_with(key, canvas.as_mut())
+    }
+
+    fn scenario_with(&self, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<ScenarioArrays, GenError> {
+        let plan = self.expansion.plan(key).map_err(|reason| GenError::Plan {
+            scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
+            reason,
+        })?;
+        let trajectories = crate::world::simulate(&self.expansion.map, &plan);
+        Ok(arrays(&self.expansion, &plan, &trajectories, canvas.map(|c| (self.renderer(), c))))
+    }
+}
+
+/// Scenarios generated ahead of their reader on worker threads of their
+/// own, handed out in the keys' order: the reader gets the same sequence
+/// whatever the thread count, while every thread takes the next key as
+/// soon as it is free. At most `ahead` scenarios are in flight (generating
+/// or waiting), which bounds the memory when frames are asked for.
+pub struct Prefetch {
+    shared: Arc<(Mutex<Queue>, Condvar)>,
+    workers: Vec<std::thread::JoinHandle<()>>,
+}
+
+struct Queue {
+    keys: Vec<ScenarioKey>,
+    /// The next key a worker takes, and the next the reader gets.
+    next_key: usize,
+    next_out: usize,
+    ahead: usize,
+    ready: BTreeMap<usize, Result<ScenarioArrays, GenError>>,
+    stop: bool,
+}
+
+impl Prefetch {
+    /// Starts `threads` workers on `keys`, at most `ahead` scenarios (at
+    /// least one per thread) ahead of the reader.
+    pub fn start(
+        generator: Arc<Generator>,
+        keys: Vec<ScenarioKey>,
+        images: bool,
+        threads: usize,
+        ahead: usize,
+    ) -> Self {
+        let threads = threads.clamp(1, keys.len().max(1));
+        let ahead = ahead.max(threads);
+        let queue = Queue { keys, next_key: 0, next_out: 0, ahead, ready: BTreeMap::new(), stop: false };
+        let shared = Arc::new((Mutex::new(queue), Condvar::new()));
+        let workers = (0..threads)
+            .map(|_| {
+                let (shared, generator) = (shared.clone(), generator.clone());
+                std::thread::spawn(move || prefetch_worker(&shared, &generator, images))
+            })
+            .collect();
+        Prefetch { shared, workers }
+    }
+
+    /// The next scenario in key order, waiting for it; `None` after the last.
+    pub fn next(&self) -> Option<Result<ScenarioArrays, GenError>> {
+        let (lock, wake) = &*self.shared;
+        let mut queue = lock.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            if queue.next_out >= queue.keys.len() {
+                return None;
+            }
+            let index = queue.next_out;
+            if let Some(result) = queue.ready.remove(&index) {
+                queue.next_out += 1;
+                wake.notify_all();
+                return Some(result);
+            }
+            queue = wake.wait(queue).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+}
+
+impl Drop for Prefetch {
+    /// Stops the workers (each finishes the scenario it is on), waits for
+    /// them, and frees the spare frame buffers.
+    fn drop(&mut self) {
+        let (lock, wake) = &*self.shared;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).stop = true;
+        wake.notify_all();
+        for worker in self.workers.drain(..) {
+            let _ = worker.join();
+        }
+        crate::output::arrays::release_spare_frame_buffers();
+    }
+}
+
+/// One worker: takes the next key while the reader is less than `ahead`
+/// behind, generates it, and queues the result under its index.
+fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, images: bool) {
+    let (lock, wake) = shared;
+    let mut canvas = images.then(|| generator.renderer().canvas());
+    loop {
+        let (index, key) = {
+            let mut queue = lock.lock().unwrap_or_else(|e| e.into_inner());
+            loop {
+                if queue.stop || queue.next_key >= queue.keys.len() {
+                    return;
+                }
+                if queue.next_key < queue.next_out + queue.ahead {
+                    break;
+                }
+                queue = wake.wait(queue).unwrap_or_else(|e| e.into_inner());
+            }
+            queue.next_key += 1;
+            (queue.next_key - 1, queue.keys[queue.next_key - 1].clone())
+        };
+        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut()));
+        let result = std::panic::catch_unwind(work).unwrap_or_else(|_| {
+            // A bug, not the user's input: the reader gets an error instead of waiting forever.
+            Err(GenError::Plan {
+                scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
+                reason: "internal error: the simulation panicked (please report it with the spec)".into(),
+            })
+        });
+        lock.lock().unwrap_or_else(|e| e.into_inner()).ready.insert(index, result);
+        wake.notify_all();
+    }
+}
+
+/// `split` by name, or an error listing the names.
+pub fn parse_split(split: &str) -> Result<Split, KeyError> {
+    Split::ALL.into_iter().find(|s| s.name() == split).ok_or_else(|| {
+        let names: Vec<&str> = Split::ALL.iter().map(|s| s.name()).collect();
+        KeyError(format!("split {split:?} is not one of {}", names.join(", ")))
+    })
+}
+
+fn arrays(
+    expansion: &Expansion,
+    plan: &ScenarioPlan,
+    trajectories: &Trajectories,
+    renderer: Option<(&Renderer, &mut FrameCanvas)>,
+) -> ScenarioArrays {
+    let spec = &expansion.spec;
+    scenario_arrays(&expansion.map, &expansion.camera, spec.leader_gap_px(), plan, trajectories, renderer)
+}
+
+/// A scenario file's or an intervention file's text, and the name its
+/// errors give it (the file's path, or a label such as `<dict>`).
+#[derive(Debug, Clone, Copy)]
+pub struct Text<'a> {
+    pub origin: &'a Path,
+    pub text: &'a str,
+}
+
+/// One scenario's factual and counterfactual runs, as `counterfactual`
+/// writes them under `<out>/<Name>/`.
+pub struct PairArrays {
+    pub name: String,
+    pub factual: ScenarioArrays,
+    pub counterfactual: ScenarioArrays,
+    /// Metres between each car's factual and counterfactual positions,
+    /// `[frames, cars]` (divergence.csv's `distance_m`).
+    pub divergence_m: Vec<f64>,
+    /// summary.json.
+    pub summary: PairSummary,
+}
+
+/// `causalcity counterfactual` into memory: every scenario of `scenarios`
+/// with the interventions of `interventions` added (or, without them, the
+/// scenario's own interventions against a run without), in file order.
+pub fn counterfactual_arrays(
+    scenarios: Text,
+    interventions: Option<Text>,
+    images: bool,
+) -> Result<Vec<PairArrays>, RunError> {
+    let map = Arc::new(CityMap::default());
+    let loaded = load_text(scenarios.origin, scenarios.text, FileOptions::default(), &map).map_err(RunError::Input)?;
+    let extras = match interventions {
+        Some(i) => Some(load_interventions_text(i.origin, i.text, &loaded, &map).map_err(RunError::Input)?),
+        None => None,
+    };
+    let pairs = pair_plans(scenarios.origin, &loaded, extras)?;
+    Ok(pairs
+        .par_iter()
+        .map(|(s, factual, counterfactual)| {
+            let pair = simulate_pair(&s.expansion, &s.name, factual, counterfactual);
+            let renderer = images.then(|| Renderer::new(&s.expansion.map, s.expansion.camera));
+            let mut canvas = renderer.as_ref().map(Renderer::canvas);
+            let mut run = |plan: &ScenarioPlan, trajectories: &Trajectories| {
+                let r = renderer.as_ref().zip(canvas.as_mut());
+                arrays(&s.expansion, plan, trajectories, r)
+            };
+            PairArrays {
+                name: s.name.clone(),
+                factual: run(factual, &pair.factual),
+                counterfactual: run(counterfactual, &pair.counterfactual),
+                divergence_m: pair.divergence_m,
+                summary: pair.summary,
+            }
+        })
+        .collect())
+}

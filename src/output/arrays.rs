@@ -1,0 +1,276 @@
+//! One scenario as typed arrays in memory instead of files: the values the
+//! files hold, exactly (every number rounded as its log writes it, the
+//! frames' pixels as their PNGs decode), for loaders that never touch the
+//! disk (the Python package). Row-major; shapes are in each field's doc.
+
+use super::footage::{signal_heads, Footage};
+use super::logs::{event_frame, event_time, light_names};
+use super::number::logged_value;
+use super::poses::PIXEL_DECIMALS;
+use super::scenario::scenario_json;
+use crate::camera::Camera;
+use crate::map::signals::Colour;
+use crate::map::CityMap;
+use crate::plan::ScenarioPlan;
+use crate::render::{FrameCanvas, Renderer};
+use crate::timing::StageTimes;
+use crate::world::{BoundBy, Trajectories};
+use std::sync::Mutex;
+
+/// Light colours in the order of [`LightArrays::colour`]'s codes.
+pub const LIGHT_COLOURS: [Colour; 3] = [Colour::Green, Colour::Yellow, Colour::Red];
+
+/// A scenario's poses, graph, logs and (when asked) frames, in memory.
+#[derive(Debug, Clone)]
+pub struct ScenarioArrays {
+    /// `scenario.json`, byte for byte.
+    pub scenario_json: Vec<u8>,
+    pub frames: usize,
+    pub cars: usize,
+    /// Car ids (0-based, the order of every car axis) and names.
+    pub car_ids: Vec<u32>,
+    pub car_names: Vec<String>,
+    /// Seconds since the start, `[frames]` (poses.csv `t`).
+    pub t: Vec<f64>,
+    /// Metres, `[frames, cars, 3]`: x, y, z (poses.csv).
+    pub position: Vec<f64>,
+    /// Radians, `[frames, cars, 3]`: roll, pitch, yaw (poses.csv).
+    pub rotation: Vec<f64>,
+    /// Bird's-eye pixels, `[frames, cars, 2]`: px, py (poses.csv; pixels.npy
+    /// holds the same values as float32).
+    pub pixels: Vec<f64>,
+    /// Metres per second, `[frames, cars]`.
+    pub speed: Vec<f64>,
+    /// 1 when the car's centre is in the bird's-eye image, `[frames, cars]`.
+    pub in_view: Vec<u8>,
+    /// `[cars, cars]`: `graph[i * cars + j] = 1` when car i leads car j.
+    pub graph: Vec<u8>,
+    /// (leader, follower) ids, as scenario.json's `edges`.
+    pub edges: Vec<[u32; 2]>,
+    /// City world: the lights (lights.csv).
+    pub lights: Option<LightArrays>,
+    /// City world: what bound each car (interactions.csv).
+    pub interactions: Option<InteractionArrays>,
+    /// events.csv's rows, in order (empty in the toy world).
+    pub events: Vec<EventRow>,
+    /// With images: the bird's-eye frames.
+    pub images: Option<FrameArrays>,
+}
+
+/// lights.csv as arrays: `L` lights in plan order.
+#[derive(Debug, Clone)]
+pub struct LightArrays {
+    /// `AC/W/straight`, as scenario files and events.csv name lights.
+    pub names: Vec<String>,
+    /// `[frames, L]`: index into [`LIGHT_COLOURS`].
+    pub colour: Vec<u8>,
+    /// Seconds since the colour changed, `[frames, L]`.
+    pub since_change: Vec<f64>,
+    /// Signal head in bird's-eye pixels, `[L, 2]`; NaN without a head.
+    pub head_pixels: Vec<f64>,
+}
+
+/// interactions.csv as arrays, `[frames, cars]` each.
+#[derive(Debug, Clone)]
+pub struct InteractionArrays {
+    /// Index into [`BoundBy::ALL`].
+    pub bound_by: Vec<u8>,
+    /// The car that bound it, -1 for none.
+    pub other_car: Vec<i16>,
+    /// The light that bound it (index into [`LightArrays::names`]), -1 for none.
+    pub light: Vec<i16>,
+}
+
+/// One events.csv row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EventRow {
+    pub frame: u64,
+    pub t: f64,
+    pub kind: &'static str,
+    pub car: Option<u32>,
+    pub other_car: Option<u32>,
+    /// Light name, as events.csv writes it.
+    pub light: Option<String>,
+    pub detail: String,
+}
+
+/// The bird's-eye frames as their PNGs decode.
+#[derive(Debug, Clone)]
+pub struct FrameArrays {
+    pub width: u32,
+    pub height: u32,
+    /// `[frames, height, width, 3]`.
+    pub rgb: Vec<u8>,
+    /// `[frames, height, width]`: 0 for no car, else the car's id + 1.
+    pub mask: Vec<u8>,
+}
+
+/// Arrays of a simulated scenario, seen by `camera`; with a renderer (whose
+/// camera must be `camera`), the frames too.
+pub fn scenario_arrays(
+    map: &CityMap,
+    camera: &Camera,
+    leader_gap_px: f64,
+    plan: &ScenarioPlan,
+    trajectories: &Trajectories,
+    renderer: Option<(&Renderer, &mut FrameCanvas)>,
+) -> ScenarioArrays {
+    let (frames, cars) = (trajectories.frames(), plan.cars.len());
+    let intersection_names: Vec<String> = map.intersections.iter().map(|i| i.name.clone()).collect();
+    let model = crate::world::model_name(&plan.world);
+    let scenario_json = scenario_json(plan, camera, leader_gap_px, &intersection_names, model);
+    let mut a = ScenarioArrays {
+        scenario_json,
+        frames,
+        cars,
+        car_ids: plan.cars.iter().map(|c| c.id).collect(),
+        car_names: plan.cars.iter().map(|c| c.name.clone()).collect(),
+        t: (0..frames).map(|f| logged_value(f as f64 * trajectories.frame_interval, 6)).collect(),
+        position: Vec::with_capacity(frames * cars * 3),
+        rotation: Vec::with_capacity(frames * cars * 3),
+        pixels: Vec::with_capacity(frames * cars * 2),
+        speed: Vec::with_capacity(frames * cars),
+        in_view: Vec::with_capacity(frames * cars),
+        graph: vec![0; cars * cars],
+        edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),
+        lights: None,
+        interactions: None,
+        events: Vec::new(),
+        images: None,
+    };
+    for states in &trajectories.states {
+        for s in states {
+            let pixel = camera.to_pixel(s.position);
+            a.position.extend([logged_value(s.position.x, 4), logged_value(s.position.y, 4), logged_value(s.z, 4)]);
+            a.rotation.extend([s.roll, s.pitch, s.yaw].map(|r| logged_value(r, 6)));
+            a.pixels.extend([logged_value(pixel.x, PIXEL_DECIMALS), logged_value(pixel.y, PIXEL_DECIMALS)]);
+            a.speed.push(logged_value(s.speed, 4));
+            a.in_view.push(camera.contains_pixel(pixel) as u8);
+        }
+    }
+    for &(leader, follower) in &plan.edges {
+        a.graph[leader as usize * cars + follower as usize] = 1;
+    }
+    let heads = signal_heads(map, plan);
+    if let Some(city) = plan.world.city() {
+        let names = light_names(&city.lights, &intersection_names);
+        a.lights = Some(LightArrays {
+            colour: trajectories
+                .lights
+                .iter()
+                .flatten()
+                .map(|s| LIGHT_COLOURS.iter().position(|&c| c == s.colour).unwrap_or(0) as u8)
+                .collect(),
+            since_change: trajectories.lights.iter().flatten().map(|s| logged_value(s.since_change, 3)).collect(),
+            head_pixels: heads
+                .iter()
+                .flat_map(|h| match h {
+                    Some(p) => {
+                        let p = camera.to_pixel(*p);
+                        [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
+                    }
+                    None => [f64::NAN; 2],
+                })
+                .collect(),
+            names: names.clone(),
+        });
+        let interactions = trajectories.interactions.iter().flatten();
+        a.interactions = Some(InteractionArrays {
+            bound_by: interactions
+                .clone()
+                .map(|i| BoundBy::ALL.iter().position(|&b| b == i.bound_by).unwrap_or(0) as u8)
+                .collect(),
+            other_car: interactions.clone().map(|i| i.other_car.map_or(-1, |c| c as i16)).collect(),
+            light: interactions.map(|i| i.light.map_or(-1, |l| l as i16)).collect(),
+        });
+        a.events = trajectories
+            .events
+            .iter()
+            .map(|e| EventRow {
+                frame: event_frame(e.t, trajectories.frame_interval),
+                t: event_time(e.t),
+                kind: e.kind.name(),
+                car: e.car,
+                other_car: e.other,
+                light: e.light.map(|l| names[l].clone()),
+                detail: e.detail.clone(),
+            })
+            .collect();
+    }
+    if let Some((renderer, canvas)) = renderer {
+        let (width, height) = (renderer.camera.width, renderer.camera.height);
+        let pixels = width as usize * height as usize;
+        let mut images =
+            FrameArrays { width, height, rgb: frame_buffer(frames * pixels * 3), mask: frame_buffer(frames * pixels) };
+        let footage = Footage::new(plan, trajectories, &heads);
+        let _ = footage.birds_eye(renderer, canvas, &StageTimes::default(), |_, canvas| {
+            images.rgb.extend_from_slice(&canvas.rgb);
+            images.mask.extend_from_slice(&canvas.mask);
+            Ok::<(), std::convert::Infallible>(())
+        });
+        a.images = Some(images);
+    }
+    a
+}
+
+/// Frame buffers handed back by their last reader ([`recycle_frame_buffer`]),
+/// kept for the next scenario's frames: fresh memory must first be zeroed
+/// by the kernel, which took a quarter of the in-memory frame rate
+/// (measured with perf on a 1-thread stream of city scenarios).
+static SPARE_FRAME_BUFFERS: Mutex<Vec<Vec<u8>>> = Mutex::new(Vec::new());
+
+/// At most this many bytes of spare frame buffers are kept: a few
+/// scenarios' frames (one 150-frame 1024 x 640 scenario holds 393 MB).
+pub const SPARE_FRAME_BYTES: usize = 1 << 30;
+
+/// Buffers smaller than this are not worth keeping (their pages are few).
+const SPARE_MIN_BYTES: usize = 16 << 20;
+
+/// Hands a frame buffer back for reuse (kept while the spares stay under
+/// [`SPARE_FRAME_BYTES`], else freed).
+pub fn recycle_frame_buffer(buffer: Vec<u8>) {
+    if buffer.capacity() < SPARE_MIN_BYTES {
+        return;
+    }
+    let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
+    let kept: usize = spares.iter().map(Vec::capacity).sum();
+    if kept + buffer.capacity() <= SPARE_FRAME_BYTES {
+        spares.push(buffer);
+    }
+}
+
+/// Frees every spare frame buffer (when a stream of scenarios ends).
+pub fn release_spare_frame_buffers() {
+    SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner()).clear();
+}
+
+/// An empty buffer with room for `len` bytes of frames: a spare one of
+/// about that size when there is one, else a fresh one. On Linux the kernel
+/// is asked to back a fresh one with transparent huge pages (2 MiB): a
+/// scenario's frames are hundreds of megabytes, written once, and filling
+/// them 4 KiB page by page cost about as much as drawing them (measured:
+/// 364 ms per 150-frame city scenario before, 188 ms after).
+fn frame_buffer(len: usize) -> Vec<u8> {
+    if len >= SPARE_MIN_BYTES {
+        let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = spares.iter().position(|b| b.capacity() >= len && b.capacity() <= len + len / 4) {
+            let mut buffer = spares.swap_remove(i);
+            buffer.clear();
+            return buffer;
+        }
+    }
+    let buffer = Vec::with_capacity(len);
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE_PAGE: usize = 2 << 20;
+        let start = buffer.as_ptr() as usize;
+        let (first, end) = (start.next_multiple_of(HUGE_PAGE), (start + len) / HUGE_PAGE * HUGE_PAGE);
+        if end > first {
+            // SAFETY: the range lies inside this vector's own allocation;
+            // the advice changes how the kernel backs the pages, never
+            // their contents or validity (an error leaves them as they were).
+            unsafe { libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE) };
+        }
+    }
+    buffer
+}
