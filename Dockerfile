@@ -14,6 +14,9 @@ WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
 COPY src ./src
 COPY benches ./benches
+# A member of the workspace (the Python package): cargo reads its manifest.
+COPY python/Cargo.toml ./python/Cargo.toml
+COPY python/src ./python/src
 RUN cargo build --release --locked --features hdf5 --bin causalcity
 
 FROM debian:bookworm-slim
