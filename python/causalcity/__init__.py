@@ -140,7 +140,8 @@ class Spec:
         return [Key(*k) for k in self._native.keys(split, limit)]
 
     def __reduce__(self):
-        # Picklable (DataLoader workers started with "spawn" receive a copy).
+        # Picklable (DataLoader workers started with "spawn" receive a copy):
+        # the JSON as read, not the file again.
         return (_spec_from_state, (self._native.json, self.path))
 
     def __repr__(self) -> str:
@@ -148,9 +149,7 @@ class Spec:
 
 
 def _spec_from_state(text: str, path: Optional[str]) -> Spec:
-    if path is not None:
-        return Spec.load(path)
-    return Spec(_native.Spec.from_json(text, "<dict>"))
+    return Spec(_native.Spec.from_json(text, path if path is not None else "<dict>", path))
 
 
 def _as_spec(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Spec:
@@ -389,13 +388,14 @@ class Stream:
         self._all_keys = keys
 
     def keys(self, worker: Optional[Tuple[int, int]] = None) -> List[Key]:
-        """The keys this process (and DataLoader worker) generates: every
-        ``n``-th key of the split, so processes and workers never overlap
-        and together cover every key. ``worker`` overrides the detected
-        (worker id, workers)."""
+        """The keys this process (and DataLoader worker) generates: process
+        ``rank`` of ``processes`` takes every ``processes``-th key from its
+        rank on, and its workers share those in turn, so processes and
+        workers never overlap and together cover every key. ``worker``
+        overrides the detected (worker id, workers)."""
         rank, processes = self.shard
         worker_id, workers = worker if worker is not None else _worker()
-        slot, slots = rank * workers + worker_id, processes * workers
+        slot, slots = worker_id * processes + rank, processes * workers
         return self._all_keys[slot::slots]
 
     def __len__(self) -> int:
@@ -455,6 +455,8 @@ _TORCH_STREAM: Optional[type] = None
 
 
 def _torch_stream_class() -> type:
+    """``causalcity.TorchStream``, made on first use so that importing
+    causalcity never imports torch."""
     global _TORCH_STREAM
     if _TORCH_STREAM is None:
         from torch.utils.data import IterableDataset
@@ -462,10 +464,18 @@ def _torch_stream_class() -> type:
         class TorchStream(Stream, IterableDataset):  # type: ignore[misc, valid-type]
             """A :class:`Stream` that is a torch IterableDataset."""
 
+        # Picklable by name (DataLoader workers started with "spawn").
         TorchStream.__module__ = __name__
+        TorchStream.__qualname__ = "TorchStream"
         _TORCH_STREAM = TorchStream
-        globals()["TorchStream"] = TorchStream
     return _TORCH_STREAM
+
+
+def __getattr__(name: str) -> Any:
+    # causalcity.TorchStream, for pickle in a fresh worker process.
+    if name == "TorchStream":
+        return _torch_stream_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)

@@ -53,21 +53,26 @@ enum Data {
 }
 
 impl Data {
-    fn parts(&self) -> (usize, &'static str, usize) {
+    /// The values' address (taken mutably: numpy may write), numpy type and count.
+    fn parts(&mut self) -> (usize, &'static str, usize) {
         match self {
-            Data::U8(v) => (v.as_ptr() as usize, "|u1", v.len()),
-            Data::I16(v) => (v.as_ptr() as usize, "<i2", v.len()),
-            Data::U32(v) => (v.as_ptr() as usize, "<u4", v.len()),
-            Data::F64(v) => (v.as_ptr() as usize, "<f8", v.len()),
+            Data::U8(v) => (v.as_mut_ptr() as usize, "|u1", v.len()),
+            Data::I16(v) => (v.as_mut_ptr() as usize, "<i2", v.len()),
+            Data::U32(v) => (v.as_mut_ptr() as usize, "<u4", v.len()),
+            Data::F64(v) => (v.as_mut_ptr() as usize, "<f8", v.len()),
         }
     }
 }
 
 /// One array, owned by Rust and lent to numpy (`numpy.asarray(a)`), which
-/// keeps this object alive as long as it views the values.
+/// keeps this object alive as long as it views the values. The values never
+/// move or change on the Rust side once lent.
 #[pyclass(frozen, module = "causalcity._native")]
 struct Array {
     data: Data,
+    /// Where the values are, as numpy is told.
+    address: usize,
+    typestr: &'static str,
     shape: Vec<usize>,
 }
 
@@ -82,9 +87,16 @@ impl Drop for Array {
 }
 
 impl Array {
-    fn new(data: Data, shape: &[usize]) -> Array {
-        debug_assert_eq!(data.parts().2, shape.iter().product::<usize>());
-        Array { data, shape: shape.to_vec() }
+    /// An array of `shape`; an error (never an out-of-bounds view) when the
+    /// values do not fill it exactly.
+    fn new(mut data: Data, shape: &[usize]) -> PyResult<Array> {
+        let (address, typestr, len) = data.parts();
+        if len != shape.iter().product::<usize>() {
+            return Err(GenerationError::new_err(format!(
+                "internal error: {len} values for an array of shape {shape:?} (please report it)"
+            )));
+        }
+        Ok(Array { data, address, typestr, shape: shape.to_vec() })
     }
 }
 
@@ -93,12 +105,11 @@ impl Array {
     /// numpy's array interface (version 3): the values' address, type and shape.
     #[getter]
     fn __array_interface__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let (address, typestr, _) = self.data.parts();
         let d = PyDict::new(py);
         d.set_item("version", 3)?;
         d.set_item("shape", PyTuple::new(py, &self.shape)?)?;
-        d.set_item("typestr", typestr)?;
-        d.set_item("data", (address, false))?;
+        d.set_item("typestr", self.typestr)?;
+        d.set_item("data", (self.address, false))?;
         Ok(d)
     }
 }
@@ -123,13 +134,22 @@ impl Spec {
 impl Spec {
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Spec> {
-        let json = std::fs::read_to_string(&path).unwrap_or_default();
-        let expansion = py.detach(|| load_spec(&path)).map_err(py_err)?;
-        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json, path: Some(path) })
+        match std::fs::read_to_string(&path) {
+            Ok(text) => Spec::from_json(py, text, path.clone(), Some(path)),
+            // The command line's message for a file it cannot read.
+            Err(_) => Err(py_err(
+                py.detach(|| load_spec(&path))
+                    .err()
+                    .unwrap_or_else(|| GenError::Manifest(format!("cannot read spec file {}", path.display()))),
+            )),
+        }
     }
 
+    /// A spec from its JSON; errors name `origin`; `path` is the file it
+    /// came from, if any.
     #[staticmethod]
-    fn from_json(py: Python<'_>, text: String, origin: PathBuf) -> PyResult<Spec> {
+    #[pyo3(signature = (text, origin, path=None))]
+    fn from_json(py: Python<'_>, text: String, origin: PathBuf, path: Option<PathBuf>) -> PyResult<Spec> {
         let expansion = py
             .detach(|| {
                 let spec_err = |error| GenError::Spec { path: origin.clone(), error };
@@ -137,7 +157,7 @@ impl Spec {
                 Expansion::from_spec(spec).map_err(spec_err)
             })
             .map_err(py_err)?;
-        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path: None })
+        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path })
     }
 
     #[getter]
@@ -187,8 +207,8 @@ impl Spec {
     }
 
     #[getter]
-    fn path(&self) -> Option<PathBuf> {
-        self.path.clone()
+    fn path(&self) -> Option<String> {
+        self.path.as_ref().map(|p| p.to_string_lossy().into_owned())
     }
 
     /// (group, split, index) of every scenario of `split` (all when None), at
@@ -323,7 +343,7 @@ fn generate(
 }
 
 fn array<'py>(py: Python<'py>, data: Data, shape: &[usize]) -> PyResult<Bound<'py, Array>> {
-    Bound::new(py, Array::new(data, shape))
+    Bound::new(py, Array::new(data, shape)?)
 }
 
 /// A scenario's arrays as a dict (no copies: each array moves into an [`Array`]).

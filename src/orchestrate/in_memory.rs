@@ -103,6 +103,8 @@ struct Queue {
     ahead: usize,
     ready: BTreeMap<usize, Result<ScenarioArrays, GenError>>,
     stop: bool,
+    /// A worker died (a bug): the reader gets an error instead of waiting forever.
+    broken: bool,
 }
 
 impl Prefetch {
@@ -117,12 +119,20 @@ impl Prefetch {
     ) -> Self {
         let threads = threads.clamp(1, keys.len().max(1));
         let ahead = ahead.max(threads);
-        let queue = Queue { keys, next_key: 0, next_out: 0, ahead, ready: BTreeMap::new(), stop: false };
+        let queue = Queue { keys, next_key: 0, next_out: 0, ahead, ready: BTreeMap::new(), stop: false, broken: false };
+        crate::output::arrays::hold_spare_frame_buffers();
         let shared = Arc::new((Mutex::new(queue), Condvar::new()));
         let workers = (0..threads)
             .map(|_| {
                 let (shared, generator) = (shared.clone(), generator.clone());
-                std::thread::spawn(move || prefetch_worker(&shared, &generator, images))
+                std::thread::spawn(move || {
+                    let work = std::panic::AssertUnwindSafe(|| prefetch_worker(&shared, &generator, images));
+                    if std::panic::catch_unwind(work).is_err() {
+                        let (lock, wake) = &*shared;
+                        lock.lock().unwrap_or_else(|e| e.into_inner()).broken = true;
+                        wake.notify_all();
+                    }
+                })
             })
             .collect();
         Prefetch { shared, workers }
@@ -142,6 +152,15 @@ impl Prefetch {
                 wake.notify_all();
                 return Some(result);
             }
+            if queue.broken {
+                let key = &queue.keys[index];
+                let scenario = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
+                queue.next_out = queue.keys.len();
+                return Some(Err(GenError::Plan {
+                    scenario,
+                    reason: "internal error: a worker thread panicked (please report it with the spec)".into(),
+                }));
+            }
             queue = wake.wait(queue).unwrap_or_else(|e| e.into_inner());
         }
     }
@@ -149,7 +168,7 @@ impl Prefetch {
 
 impl Drop for Prefetch {
     /// Stops the workers (each finishes the scenario it is on), waits for
-    /// them, and frees the spare frame buffers.
+    /// them, and frees the spare frame buffers unless another stream runs.
     fn drop(&mut self) {
         let (lock, wake) = &*self.shared;
         lock.lock().unwrap_or_else(|e| e.into_inner()).stop = true;
@@ -157,7 +176,7 @@ impl Drop for Prefetch {
         for worker in self.workers.drain(..) {
             let _ = worker.join();
         }
-        crate::output::arrays::release_spare_frame_buffers();
+        crate::output::arrays::let_go_of_spare_frame_buffers();
     }
 }
 

@@ -15,6 +15,7 @@ use crate::plan::ScenarioPlan;
 use crate::render::{FrameCanvas, Renderer};
 use crate::timing::StageTimes;
 use crate::world::{BoundBy, Trajectories};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 /// Light colours in the order of [`LightArrays::colour`]'s codes.
@@ -226,22 +227,34 @@ pub const SPARE_FRAME_BYTES: usize = 1 << 30;
 /// Buffers smaller than this are not worth keeping (their pages are few).
 const SPARE_MIN_BYTES: usize = 16 << 20;
 
-/// Hands a frame buffer back for reuse (kept while the spares stay under
-/// [`SPARE_FRAME_BYTES`], else freed).
+/// Streams running now ([`hold_spare_frame_buffers`]): spares are kept only
+/// while one runs, so nothing stays allocated once the last one ends.
+static SPARE_HOLDERS: AtomicUsize = AtomicUsize::new(0);
+
+/// A stream of scenarios starts: buffers handed back are kept for it.
+pub fn hold_spare_frame_buffers() {
+    SPARE_HOLDERS.fetch_add(1, Ordering::SeqCst);
+}
+
+/// A stream ends: when it was the last, the spares are freed.
+pub fn let_go_of_spare_frame_buffers() {
+    let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
+    if SPARE_HOLDERS.fetch_sub(1, Ordering::SeqCst) == 1 {
+        spares.clear();
+    }
+}
+
+/// Hands a frame buffer back for reuse: kept while a stream runs and the
+/// spares stay under [`SPARE_FRAME_BYTES`], else freed.
 pub fn recycle_frame_buffer(buffer: Vec<u8>) {
     if buffer.capacity() < SPARE_MIN_BYTES {
         return;
     }
     let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
     let kept: usize = spares.iter().map(Vec::capacity).sum();
-    if kept + buffer.capacity() <= SPARE_FRAME_BYTES {
+    if SPARE_HOLDERS.load(Ordering::SeqCst) > 0 && kept + buffer.capacity() <= SPARE_FRAME_BYTES {
         spares.push(buffer);
     }
-}
-
-/// Frees every spare frame buffer (when a stream of scenarios ends).
-pub fn release_spare_frame_buffers() {
-    SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner()).clear();
 }
 
 /// An empty buffer with room for `len` bytes of frames: a spare one of
