@@ -170,10 +170,11 @@ fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
         let speed = row["mean_speed_px"].as_f64().unwrap();
         assert!((1.5..=3.0).contains(&speed), "mean {speed:.2} px per frame: {row}");
     }
-    // The real-scale preset: headways of urban traffic, cars at their
-    // desired speed on free road.
+    // The real-scale preset: headways of urban traffic, queues leaving at
+    // the saturation flow of real signalised lanes, cars at their desired
+    // speed on free road.
     let metric = dir.join("metric");
-    gen_ok(&configs.join("city-metric.json"), &metric, &["--quiet", "--no-images", "--limit", "4"]);
+    gen_ok(&configs.join("city-metric.json"), &metric, &["--quiet", "--no-images", "--limit", "20"]);
     let rows = stats(&metric)["rows"].as_array().unwrap().clone();
     assert_eq!(rows.len(), 6);
     for row in &rows {
@@ -181,6 +182,7 @@ fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
         assert!((1.0..=2.5).contains(&headway), "headway {headway:.2} s: {row}");
         let free = row["free_speed_ratio_median"].as_f64().unwrap();
         assert!((0.9..=1.05).contains(&free), "free-road speed {free:.2} of desired: {row}");
-        assert!(row["discharge_per_lane_s"].as_f64().is_some(), "no queue discharged: {row}");
+        let discharge = row["discharge_per_lane_s"].as_f64().unwrap_or_else(|| panic!("no queue discharged: {row}"));
+        assert!((0.4..=0.6).contains(&discharge), "queue discharge {discharge:.3} vehicles/s/lane: {row}");
     }
 }
