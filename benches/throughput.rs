@@ -143,6 +143,68 @@ fn frame_pipeline(root: &Path) {
     );
 }
 
+/// Perspective frame pairs (RGB + mask drawn and PNG-encoded) per second on
+/// one core at 1024 x 640: the pinhole bird's-eye view (static parts drawn
+/// once) and a first-person camera driving along a road (everything drawn
+/// every frame), with 12 cars.
+fn perspective_rates() {
+    use causalcity::camera::Pinhole;
+    use causalcity::render::perspective::{empty_frame, CarSolid, PerspectiveRenderer, World3d};
+    println!("\n== Perspective cameras, 1024x640, 12 cars, one core (render + PNG encode) ==");
+    let map = CityMap::default();
+    let world = World3d::new(&map);
+    let road_y = map.layout.east_west_roads[1].1 - map.layout.lane_width / 2.0;
+    let frames = 150;
+    let cars_at = |f: usize| -> Vec<CarSolid> {
+        (0..12)
+            .map(|k| CarSolid {
+                position: glam::DVec2::new(-30.0 + 6.0 * k as f64 + 0.2 * f as f64, road_y - 3.0 * (k % 2) as f64),
+                yaw: 0.0,
+                length: 2.2,
+                width: 1.1,
+                colour: [180, 40 + 15 * k as u8, 60],
+                mask_id: k as u8 + 1,
+            })
+            .collect()
+    };
+    let moving = |f: usize| Pinhole {
+        width: 1024,
+        height: 640,
+        position: [-36.0 + 0.2 * f as f64, road_y, 1.2],
+        yaw_rad: 0.0,
+        pitch_rad: 0.0,
+        roll_rad: 0.0,
+        horizontal_fov_deg: 90.0,
+    };
+    let fixed = Pinhole::original_birds_eye(1024, 640);
+    let mut sink = Vec::new();
+    for (label, camera_at) in [
+        ("pinhole bird's-eye (static)", &(|_| fixed) as &dyn Fn(usize) -> Pinhole),
+        ("first-person (moving)", &moving as &dyn Fn(usize) -> Pinhole),
+    ] {
+        let mut renderer = PerspectiveRenderer::new();
+        let mut frame = empty_frame(&fixed);
+        let (mut render_s, mut encode_s) = (0.0, 0.0);
+        for f in 0..frames {
+            let cars = cars_at(f);
+            let start = Instant::now();
+            renderer.render(&world, &camera_at(f), &[], &cars, None, &mut frame);
+            render_s += start.elapsed().as_secs_f64();
+            let start = Instant::now();
+            sink.clear();
+            encode_png(&mut sink, 1024, 640, PixelFormat::Rgb8, &frame.rgb, PngSettings::rgb()).unwrap();
+            encode_png(&mut sink, 1024, 640, PixelFormat::Gray8, &frame.mask, PngSettings::mask()).unwrap();
+            encode_s += start.elapsed().as_secs_f64();
+        }
+        println!(
+            "{label}: {:.0} frame pairs/s ({:.2} ms render, {:.2} ms encode per frame)",
+            frames as f64 / (render_s + encode_s),
+            1e3 * render_s / frames as f64,
+            1e3 * encode_s / frames as f64
+        );
+    }
+}
+
 fn png_settings_comparison() {
     println!("== PNG settings on a real 1024x640 toy frame (12 cars) ==");
     let spec = DatasetSpec::from_json(&spec_json("png", 12, 1)).unwrap();
@@ -263,6 +325,11 @@ fn main() {
     // `cargo bench` passes --bench; ignore arguments.
     let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
     std::fs::create_dir_all(&root).unwrap();
+    // BENCH_ONLY=perspective: only the perspective cameras' figures.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "perspective") {
+        perspective_rates();
+        return;
+    }
     frame_pipeline(&root);
     // BENCH_ONLY=pipeline stops after the frame-pipeline figures.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "pipeline") {
@@ -270,6 +337,7 @@ fn main() {
         return;
     }
     png_settings_comparison();
+    perspective_rates();
 
     println!("\n== Toy world with images, 1024x640, 12 cars x 150 frames ==");
     let images_spec = write_spec(&root, "images", 12, 8);

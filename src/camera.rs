@@ -1,6 +1,6 @@
 //! The camera: the only place where metres become pixels.
 
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use serde::Serialize;
 
 /// The original's dataset camera height, metres.
@@ -146,6 +146,114 @@ pub struct CameraPlan {
     pub kind: CameraKind,
 }
 
+/// A pinhole camera anywhere, looking any way: position (metres), yaw
+/// (radians counter-clockwise from east, as a car's heading), pitch
+/// (radians above the horizontal: -pi/2 looks straight down) and roll
+/// (radians, clockwise as seen from behind), with a horizontal field of
+/// view. Pixel coordinates as [`Camera`]'s: column `i` has its centre at
+/// `px = i`, x right and y down.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Pinhole {
+    pub width: u32,
+    pub height: u32,
+    pub position: [f64; 3],
+    pub yaw_rad: f64,
+    pub pitch_rad: f64,
+    pub roll_rad: f64,
+    pub horizontal_fov_deg: f64,
+}
+
+/// Closer than this to a pinhole (metres along its axis) nothing is drawn.
+pub const NEAR_M: f64 = 0.05;
+
+impl Pinhole {
+    /// The original's bird's-eye camera as a true pinhole: 40 m over the
+    /// centre, looking straight down with north up, 90 degrees across.
+    pub fn original_birds_eye(width: u32, height: u32) -> Pinhole {
+        Pinhole {
+            width,
+            height,
+            position: [0.0, 0.0, ORIGINAL_ALTITUDE_M],
+            yaw_rad: std::f64::consts::FRAC_PI_2,
+            pitch_rad: -std::f64::consts::FRAC_PI_2,
+            roll_rad: 0.0,
+            horizontal_fov_deg: ORIGINAL_FOV_DEG,
+        }
+    }
+
+    /// Focal length in pixels.
+    pub fn focal_px(&self) -> f64 {
+        (self.width as f64 / 2.0) / (self.horizontal_fov_deg.to_radians() / 2.0).tan()
+    }
+
+    /// The image centre in pixels.
+    pub fn centre_px(&self) -> DVec2 {
+        DVec2::new((self.width as f64 - 1.0) / 2.0, (self.height as f64 - 1.0) / 2.0)
+    }
+
+    pub fn position(&self) -> DVec3 {
+        DVec3::from_array(self.position)
+    }
+
+    /// The camera's axes in the world: right, down and forward (unit vectors).
+    pub fn axes(&self) -> [DVec3; 3] {
+        let (sy, cy) = self.yaw_rad.sin_cos();
+        let (sp, cp) = self.pitch_rad.sin_cos();
+        let forward = DVec3::new(cp * cy, cp * sy, sp);
+        let right = DVec3::new(sy, -cy, 0.0);
+        let up = right.cross(forward);
+        let (sr, cr) = self.roll_rad.sin_cos();
+        let (right, up) = (right * cr - up * sr, up * cr + right * sr);
+        [right, -up, forward]
+    }
+
+    /// A world point in the camera's axes (x right, y down, z forward), metres.
+    pub fn to_camera(&self, p: DVec3) -> DVec3 {
+        let [right, down, forward] = self.axes();
+        let d = p - self.position();
+        DVec3::new(d.dot(right), d.dot(down), d.dot(forward))
+    }
+
+    /// Pixel of a point in the camera's axes in front of it (z >= [`NEAR_M`]).
+    pub fn camera_to_pixel(&self, c: DVec3) -> Option<DVec2> {
+        (c.z >= NEAR_M).then(|| self.centre_px() + DVec2::new(c.x, c.y) * (self.focal_px() / c.z))
+    }
+
+    /// Pixel of a world point in front of the camera.
+    pub fn to_pixel(&self, p: DVec3) -> Option<DVec2> {
+        self.camera_to_pixel(self.to_camera(p))
+    }
+
+    /// The ray through pixel (px, py) in the world, scaled so that its
+    /// component along the camera's axis is 1: a point at distance `z` along
+    /// the axis lies at `position + z * ray`.
+    pub fn ray(&self, px: f64, py: f64) -> DVec3 {
+        let [right, down, forward] = self.axes();
+        let c = self.centre_px();
+        let f = self.focal_px();
+        forward + right * ((px - c.x) / f) + down * ((py - c.y) / f)
+    }
+
+    /// A pixel position lies on the image.
+    pub fn contains_pixel(&self, px: DVec2) -> bool {
+        px.x >= -0.5 && px.y >= -0.5 && px.x < self.width as f64 - 0.5 && px.y < self.height as f64 - 0.5
+    }
+}
+
+/// Third-person view: metres behind the car, metres up, and the pitch.
+pub const THIRD_PERSON_BEHIND_M: f64 = 8.0;
+pub const THIRD_PERSON_UP_M: f64 = 4.0;
+pub const THIRD_PERSON_PITCH_DEG: f64 = -18.0;
+/// Share of the way a third-person camera turns and moves towards its
+/// place behind the car each frame: it follows smoothly, not rigidly.
+pub const THIRD_PERSON_FOLLOW: f64 = 0.25;
+/// First-person view: eye height (a seated driver, metres) and how far
+/// ahead of the car's centre the windscreen is, as a share of its length.
+pub const FIRST_PERSON_EYE_M: f64 = 1.2;
+pub const FIRST_PERSON_AHEAD: f64 = 0.15;
+/// Field of view of the third- and first-person cameras, degrees.
+pub const PERSON_FOV_DEG: f64 = 90.0;
+
 /// Where an extra camera looks.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -156,9 +264,75 @@ pub enum CameraKind {
     /// Follows car `car` (index in id order), centred on it and turned so
     /// that it drives up the image.
     Chase { car: usize },
+    /// A fixed pinhole in perspective (`width` and `height` are its own).
+    Pinhole(Pinhole),
+    /// In perspective, behind and above car `car`, following it smoothly.
+    ThirdPerson { car: usize },
+    /// In perspective, at car `car`'s windscreen, looking ahead.
+    FirstPerson { car: usize },
+}
+
+impl CameraKind {
+    /// Seen in perspective (solids, depth along rays) rather than looking
+    /// straight down on a flat drawing.
+    pub fn is_perspective(&self) -> bool {
+        matches!(self, CameraKind::Pinhole(_) | CameraKind::ThirdPerson { .. } | CameraKind::FirstPerson { .. })
+    }
+
+    /// The car a moving camera follows.
+    pub fn followed_car(&self) -> Option<usize> {
+        match self {
+            CameraKind::Chase { car } | CameraKind::ThirdPerson { car } | CameraKind::FirstPerson { car } => Some(*car),
+            CameraKind::Static { .. } | CameraKind::Pinhole(_) => None,
+        }
+    }
 }
 
 impl CameraPlan {
+    /// A perspective camera's pinhole for a frame in which the followed car
+    /// (if any) is at `position` (ground, metres) heading `yaw`, with car
+    /// `length`; `previous` is the last frame's pinhole (third-person
+    /// cameras move towards their place from there). None for the
+    /// straight-down kinds.
+    pub fn pinhole_at(&self, followed: Option<(DVec2, f64, f64)>, previous: Option<&Pinhole>) -> Option<Pinhole> {
+        let (w, h) = (self.width, self.height);
+        let person = |position: [f64; 3], yaw_rad: f64, pitch_deg: f64| Pinhole {
+            width: w,
+            height: h,
+            position,
+            yaw_rad,
+            pitch_rad: pitch_deg.to_radians(),
+            roll_rad: 0.0,
+            horizontal_fov_deg: PERSON_FOV_DEG,
+        };
+        let (position, yaw, length) = followed.unwrap_or((DVec2::ZERO, 0.0, 0.0));
+        match &self.kind {
+            CameraKind::Pinhole(p) => Some(*p),
+            CameraKind::FirstPerson { .. } => {
+                let eye = position + DVec2::from_angle(yaw) * (FIRST_PERSON_AHEAD * length);
+                Some(person([eye.x, eye.y, FIRST_PERSON_EYE_M], yaw, 0.0))
+            }
+            CameraKind::ThirdPerson { .. } => {
+                let target_yaw = match previous {
+                    Some(p) => {
+                        let turn = (yaw - p.yaw_rad + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                            - std::f64::consts::PI;
+                        p.yaw_rad + THIRD_PERSON_FOLLOW * turn
+                    }
+                    None => yaw,
+                };
+                let behind = position - DVec2::from_angle(target_yaw) * THIRD_PERSON_BEHIND_M;
+                let place = DVec3::new(behind.x, behind.y, THIRD_PERSON_UP_M);
+                let place = match previous {
+                    Some(p) => p.position() + (place - p.position()) * THIRD_PERSON_FOLLOW,
+                    None => place,
+                };
+                Some(person(place.to_array(), target_yaw, THIRD_PERSON_PITCH_DEG))
+            }
+            CameraKind::Static { .. } | CameraKind::Chase { .. } => None,
+        }
+    }
+
     /// The camera for a frame in which the chased car (if any) is at
     /// `position` heading `yaw` (radians counter-clockwise from east).
     pub fn camera_at(&self, chased: Option<(DVec2, f64)>) -> Camera {
@@ -173,7 +347,7 @@ impl CameraPlan {
                 rotation_deg.to_radians(),
                 self.zoom,
             ),
-            (CameraKind::Chase { .. }, None) => {
+            (CameraKind::Chase { .. }, None) | (_, _) => {
                 Camera::looking_down(self.width, self.height, DVec2::ZERO, 0.0, self.zoom)
             }
         }

@@ -1,7 +1,7 @@
 //! The dataset spec: what a user asks for, read from JSON. Every field is
 //! checked here with a message that names it, the value and what is allowed.
 
-use crate::camera::{Camera, CameraKind, CameraPlan};
+use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
 use crate::map::signals::{ScheduleStep, Signal};
 use crate::map::MapLayout;
 use serde::{Deserialize, Serialize};
@@ -280,6 +280,15 @@ pub struct CameraSpec {
     /// Follows a car: its id in a spec, its Id in a scenario file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chase: Option<CarRef>,
+    /// A fixed pinhole in perspective.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pinhole: Option<PinholeView>,
+    /// In perspective, behind and above a car, following it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub third_person: Option<CarRef>,
+    /// In perspective, at a car's windscreen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_person: Option<CarRef>,
     /// Times the bird's-eye scale (12.8 px per metre).
     #[serde(default = "default_zoom")]
     pub zoom: f64,
@@ -305,6 +314,41 @@ pub struct StaticView {
     /// Counter-clockwise; the image's up direction, 0 = north.
     #[serde(default)]
     pub rotation_deg: f64,
+}
+
+/// Where a pinhole camera stands and looks; every field defaults to the
+/// original's bird's-eye camera (40 m over the centre, straight down, north
+/// up, 90 degrees across).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PinholeView {
+    /// Metres: x east, y north, z up.
+    #[serde(default = "default_pinhole_position")]
+    pub position: [f64; 3],
+    /// Degrees counter-clockwise from east (the direction it looks).
+    #[serde(default = "default_pinhole_yaw")]
+    pub yaw_deg: f64,
+    /// Degrees above the horizontal (-90 looks straight down).
+    #[serde(default = "default_pinhole_pitch")]
+    pub pitch_deg: f64,
+    #[serde(default)]
+    pub roll_deg: f64,
+    /// Horizontal field of view, degrees.
+    #[serde(default = "default_pinhole_fov")]
+    pub fov_deg: f64,
+}
+
+fn default_pinhole_position() -> [f64; 3] {
+    [0.0, 0.0, crate::camera::ORIGINAL_ALTITUDE_M]
+}
+fn default_pinhole_yaw() -> f64 {
+    90.0
+}
+fn default_pinhole_pitch() -> f64 {
+    -90.0
+}
+fn default_pinhole_fov() -> f64 {
+    crate::camera::ORIGINAL_FOV_DEG
 }
 
 /// A car named by id (specs) or by name (scenario files).
@@ -336,31 +380,65 @@ impl CameraSpec {
                 ),
             ));
         }
-        let kind = match (&self.fixed, &self.chase) {
-            (Some(view), None) => {
-                if !(view.centre.iter().all(|c| c.is_finite()) && view.rotation_deg.is_finite()) {
-                    return Err(SpecError::new(format!("{field}.static"), "centre and rotation_deg must be numbers"));
-                }
-                CameraKind::Static { centre: view.centre, rotation_deg: view.rotation_deg }
+        let given = [
+            self.fixed.is_some(),
+            self.chase.is_some(),
+            self.pinhole.is_some(),
+            self.third_person.is_some(),
+            self.first_person.is_some(),
+        ];
+        if given.iter().filter(|&&g| g).count() != 1 {
+            return Err(SpecError::new(
+                field,
+                "give exactly one of \"static\": {\"centre\": [x, y], \"rotation_deg\": r}, \"chase\": CAR, \"pinhole\": {\"position\": [x, y, z], \"yaw_deg\", \"pitch_deg\", \"roll_deg\", \"fov_deg\"}, \"third_person\": CAR or \"first_person\": CAR",
+            ));
+        }
+        let car = |name: &str, car: &CarRef| car_index(car).map_err(|e| SpecError::new(format!("{field}.{name}"), e));
+        let kind = if let Some(view) = &self.fixed {
+            if !(view.centre.iter().all(|c| c.is_finite()) && view.rotation_deg.is_finite()) {
+                return Err(SpecError::new(format!("{field}.static"), "centre and rotation_deg must be numbers"));
             }
-            (None, Some(car)) => {
-                CameraKind::Chase { car: car_index(car).map_err(|e| SpecError::new(format!("{field}.chase"), e))? }
+            CameraKind::Static { centre: view.centre, rotation_deg: view.rotation_deg }
+        } else if let Some(c) = &self.chase {
+            CameraKind::Chase { car: car("chase", c)? }
+        } else if let Some(c) = &self.third_person {
+            CameraKind::ThirdPerson { car: car("third_person", c)? }
+        } else if let Some(c) = &self.first_person {
+            CameraKind::FirstPerson { car: car("first_person", c)? }
+        } else {
+            let view = self.pinhole.as_ref().expect("exactly one kind was given");
+            let here = format!("{field}.pinhole");
+            if !(view.position.iter().chain([&view.yaw_deg, &view.pitch_deg, &view.roll_deg]).all(|v| v.is_finite())) {
+                return Err(SpecError::new(here, "position, yaw_deg, pitch_deg and roll_deg must be numbers"));
             }
-            _ => {
+            if !(1.0..=170.0).contains(&view.fov_deg) {
                 return Err(SpecError::new(
-                    field,
-                    "give exactly one of \"static\": {\"centre\": [x, y], \"rotation_deg\": r} or \"chase\": CAR",
-                ))
+                    format!("{here}.fov_deg"),
+                    format!("{} is not allowed: a horizontal field of view from 1 to 170 degrees", view.fov_deg),
+                ));
             }
+            CameraKind::Pinhole(Pinhole {
+                width: 0,
+                height: 0,
+                position: view.position,
+                yaw_rad: view.yaw_deg.to_radians(),
+                pitch_rad: view.pitch_deg.to_radians(),
+                roll_rad: view.roll_deg.to_radians(),
+                horizontal_fov_deg: view.fov_deg,
+            })
         };
         positive(&format!("{field}.zoom"), self.zoom, 20.0, "times the bird's-eye scale")?;
         let (w, h) = match kind {
-            CameraKind::Static { .. } => (1024, 640),
             CameraKind::Chase { .. } => (256, 256),
+            _ => (1024, 640),
         };
         let (width, height) = (self.width.unwrap_or(w), self.height.unwrap_or(h));
         range(&format!("{field}.width"), width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
         range(&format!("{field}.height"), height, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        let kind = match kind {
+            CameraKind::Pinhole(p) => CameraKind::Pinhole(Pinhole { width, height, ..p }),
+            other => other,
+        };
         Ok(CameraPlan { name: self.name.clone(), width, height, zoom: self.zoom, depth: self.depth, kind })
     }
 }

@@ -16,11 +16,12 @@ use super::png::{encode_png, PixelFormat, PngSettings};
 use super::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
 use super::scenario::scenario_json;
 use super::{ScenarioDir, WriteError};
-use crate::camera::{Camera, CameraKind, CameraPlan};
+use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
+use crate::render::perspective::{self, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
 use crate::render::weather::SceneLook;
-use crate::render::{FrameCanvas, Renderer, Scene};
+use crate::render::{FrameCanvas, Renderer, Scene, CAR_HEIGHT_M};
 use crate::timing::{Stage, StageTimes};
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
@@ -48,6 +49,8 @@ pub struct ScenarioWriter {
     intersection_names: Vec<String>,
     fsync: bool,
     annotations: bool,
+    /// The map as solids, for perspective cameras (built on first use).
+    world3d: std::sync::OnceLock<World3d>,
 }
 
 /// One thread's reusable buffers: the bird's-eye canvas, encoded PNG bytes
@@ -71,6 +74,7 @@ impl ScenarioWriter {
             leader_gap_px,
             fsync,
             annotations: products.annotations && products.images,
+            world3d: std::sync::OnceLock::new(),
         }
     }
 
@@ -129,13 +133,24 @@ impl ScenarioWriter {
             let footage = Footage::new(plan, trajectories, &heads);
             bytes += frames.birds_eye(renderer, canvas, &footage, self.annotations)?;
             for camera_plan in &plan.cameras {
-                bytes += frames.extra_camera(
-                    &self.map,
-                    &footage,
-                    camera_plan,
-                    &mut buffers.depth,
-                    &mut buffers.depth_bytes,
-                )?;
+                bytes += if camera_plan.kind.is_perspective() {
+                    let world = self.world3d.get_or_init(|| World3d::new(&self.map));
+                    frames.perspective_camera(
+                        world,
+                        &footage,
+                        camera_plan,
+                        &mut buffers.depth,
+                        &mut buffers.depth_bytes,
+                    )?
+                } else {
+                    frames.extra_camera(
+                        &self.map,
+                        &footage,
+                        camera_plan,
+                        &mut buffers.depth,
+                        &mut buffers.depth_bytes,
+                    )?
+                };
             }
         }
         bytes += dir.commit()?;
@@ -214,6 +229,91 @@ impl FrameWriter<'_, '_> {
         Ok(bytes)
     }
 
+    /// One perspective camera under `cameras/<name>/`: rgb/, mask/, depth/
+    /// (16-bit, millimetres along each pixel's ray) when asked, and
+    /// poses.csv (frame, car, px, py, in_view, visible_px): each car's
+    /// centre (half its height up) in this camera's pixels (empty when
+    /// behind it), whether that lies on the image, and how many pixels of
+    /// the car are visible.
+    fn perspective_camera(
+        &mut self,
+        world: &World3d,
+        footage: &Footage,
+        camera_plan: &CameraPlan,
+        depth: &mut Vec<u16>,
+        depth_bytes: &mut Vec<u8>,
+    ) -> Result<u64, ScenarioWriteError> {
+        let Footage { plan, trajectories, .. } = *footage;
+        let name = &camera_plan.name;
+        let size = (camera_plan.width, camera_plan.height);
+        let followed = camera_plan.kind.followed_car();
+        let hidden = match camera_plan.kind {
+            CameraKind::FirstPerson { car } => plan.cars.get(car).map(|c| c.mask_id),
+            _ => None,
+        };
+        let mut renderer = PerspectiveRenderer::new();
+        let mut pinhole: Option<Pinhole> = None;
+        let mut frame_buffer = None;
+        let mut poses = b"frame,car,px,py,in_view,visible_px\n".to_vec();
+        let mut bytes = 0;
+        let (mut sprites, mut head_sprites) = (Vec::new(), Vec::new());
+        for (frame, states) in trajectories.states.iter().enumerate() {
+            self.check_stop()?;
+            let follow = followed.and_then(|k| Some((states.get(k)?, plan.cars.get(k)?)));
+            let camera = camera_plan
+                .pinhole_at(follow.map(|(s, c)| (s.position, s.yaw, c.length)), pinhole.as_ref())
+                .expect("a perspective kind has a pinhole");
+            pinhole = Some(camera);
+            footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
+            let cars: Vec<CarSolid> = sprites
+                .iter()
+                .map(|s| CarSolid {
+                    position: s.position,
+                    yaw: s.yaw,
+                    length: s.length,
+                    width: s.width,
+                    colour: s.colour,
+                    mask_id: s.mask_id,
+                })
+                .collect();
+            let heads: Vec<HeadSolid> =
+                head_sprites.iter().map(|h| HeadSolid { position: h.position, colour: h.colour }).collect();
+            let target = frame_buffer.get_or_insert_with(|| perspective::empty_frame(&camera));
+            self.times.time(Stage::Render, || renderer.render(world, &camera, &heads, &cars, hidden, target));
+            let frame = frame as u32;
+            let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
+                .map(|k| self.layout.camera_frame_name(name, k, frame));
+            bytes += self.image(&rgb_name, size, PixelFormat::Rgb8, &target.rgb)?;
+            bytes += self.image(&mask_name, size, PixelFormat::Gray8, &target.mask)?;
+            if camera_plan.depth {
+                self.times.time(Stage::Render, || {
+                    target.depth_mm(depth);
+                    depth_bytes.clear();
+                    depth_bytes.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
+                });
+                bytes += self.image(&depth_name, size, PixelFormat::Gray16, depth_bytes)?;
+            }
+            for (car, state) in plan.cars.iter().zip(states) {
+                let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
+                poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
+                let pixel = camera.to_pixel(centre);
+                if let Some(p) = pixel {
+                    push_fixed(&mut poses, p.x, PIXEL_DECIMALS);
+                    poses.push(b',');
+                    push_fixed(&mut poses, p.y, PIXEL_DECIMALS);
+                } else {
+                    poses.push(b',');
+                }
+                let in_view = pixel.is_some_and(|p| camera.contains_pixel(p));
+                poses.extend_from_slice(
+                    format!(",{},{}\n", in_view as u8, target.visible_pixels(car.mask_id)).as_bytes(),
+                );
+            }
+        }
+        bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;
+        Ok(bytes)
+    }
+
     /// One extra camera under `cameras/<name>/`: rgb/, mask/, depth/
     /// (16-bit, millimetres) when asked, and poses.csv (frame, car, px, py,
     /// in_view) in this camera's pixels.
@@ -229,7 +329,7 @@ impl FrameWriter<'_, '_> {
         let name = &camera_plan.name;
         let chased = |states: &[CarState]| match camera_plan.kind {
             CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
-            CameraKind::Static { .. } => None,
+            _ => None,
         };
         let size = (camera_plan.width, camera_plan.height);
         // A static camera draws its background once; a chase camera every frame.
@@ -256,7 +356,7 @@ impl FrameWriter<'_, '_> {
                     });
                     (&*r, &*s)
                 }
-                CameraKind::Chase { .. } => {
+                _ => {
                     let r = Renderer::new(map, camera);
                     let s = r.scene(look);
                     owned = (r, s);

@@ -4,9 +4,11 @@
 
 use crate::camera::Camera;
 use crate::map::CityMap;
+use glam::DVec2;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
 
-const GROUND: [u8; 3] = [200, 198, 190];
+/// Bare ground (pavements, and beyond the drawn map).
+pub const GROUND: [u8; 3] = [200, 198, 190];
 const ASPHALT: [u8; 3] = [66, 68, 72];
 const PARK: [u8; 3] = [122, 168, 98];
 const PARK_PATH: [u8; 3] = [214, 204, 170];
@@ -58,6 +60,55 @@ pub struct Background {
 /// Height of every building, metres (for depth images).
 pub const BUILDING_HEIGHT_M: f64 = 12.0;
 
+/// What fills a block between the roads.
+pub enum Block {
+    /// The central park: [x0, y0, x1, y1], metres.
+    Park([f64; 4]),
+    /// A building [`BUILDING_HEIGHT_M`] tall on [x0, y0, x1, y1], metres,
+    /// with its roof colour.
+    Building { footprint: [f64; 4], roof: [u8; 3] },
+}
+
+/// The blocks between the roads within the box (lo, hi), metres: two
+/// buildings per block, split along the longer side, and a park in the
+/// middle. Shared by the flat drawing and the perspective solids.
+pub fn blocks(map: &CityMap, lo: DVec2, hi: DVec2) -> Vec<Block> {
+    let layout = &map.layout;
+    let hw = layout.road_half_width();
+    let far = 1000.0;
+    let xs = [-far, layout.north_south_roads[0].1, layout.north_south_roads[1].1, far];
+    let ys = [-far, layout.east_west_roads[0].1, layout.east_west_roads[1].1, far];
+    let mut found = Vec::new();
+    for i in 0..3 {
+        for j in 0..3 {
+            let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(lo.x);
+            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.x);
+            let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(lo.y);
+            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.y);
+            if x1 <= x0 || y1 <= y0 {
+                continue;
+            }
+            if i == 1 && j == 1 {
+                found.push(Block::Park([x0, y0, x1, y1]));
+                continue;
+            }
+            let gap = 1.5;
+            let roof = |k: usize| ROOFS[(i * 3 + j + k) % ROOFS.len()];
+            let halves = if x1 - x0 >= y1 - y0 {
+                let mid = (x0 + x1) / 2.0;
+                [[x0, y0, mid - gap / 2.0, y1], [mid + gap / 2.0, y0, x1, y1]]
+            } else {
+                let mid = (y0 + y1) / 2.0;
+                [[x0, y0, x1, mid - gap / 2.0], [x0, mid + gap / 2.0, x1, y1]]
+            };
+            for (k, footprint) in halves.into_iter().enumerate() {
+                found.push(Block::Building { footprint, roof: roof(k) });
+            }
+        }
+    }
+    found
+}
+
 /// Draws the background for `map` as seen by `camera`.
 pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     let mut pixmap = Pixmap::new(camera.width, camera.height).expect("image size was validated");
@@ -68,40 +119,19 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     let layout = &map.layout;
     let hw = layout.road_half_width();
     let (view_lo, view_hi) = camera.ground_view();
-    let far = 1000.0;
 
     // Blocks between the roads: buildings, and a park in the middle.
-    let xs = [-far, layout.north_south_roads[0].1, layout.north_south_roads[1].1, far];
-    let ys = [-far, layout.east_west_roads[0].1, layout.east_west_roads[1].1, far];
-    for i in 0..3 {
-        for j in 0..3 {
-            let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(view_lo.x - 5.0);
-            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(view_hi.x + 5.0);
-            let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(view_lo.y - 5.0);
-            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(view_hi.y + 5.0);
-            if x1 <= x0 || y1 <= y0 {
-                continue;
-            }
-            if i == 1 && j == 1 {
+    for block in blocks(map, view_lo - DVec2::splat(5.0), view_hi + DVec2::splat(5.0)) {
+        match block {
+            Block::Park([x0, y0, x1, y1]) => {
                 rect(&mut pixmap, t, x0, y0, x1, y1, PARK);
                 let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
                 rect(&mut pixmap, t, x0, cy - 0.8, x1, cy + 0.8, PARK_PATH);
                 rect(&mut pixmap, t, cx - 0.8, y0, cx + 0.8, y1, PARK_PATH);
-            } else {
-                // Two buildings per block, split along the longer side.
-                let gap = 1.5;
-                let roof = |k: usize| ROOFS[(i * 3 + j + k) % ROOFS.len()];
-                let halves = if x1 - x0 >= y1 - y0 {
-                    let mid = (x0 + x1) / 2.0;
-                    [(x0, y0, mid - gap / 2.0, y1), (mid + gap / 2.0, y0, x1, y1)]
-                } else {
-                    let mid = (y0 + y1) / 2.0;
-                    [(x0, y0, x1, mid - gap / 2.0), (x0, mid + gap / 2.0, x1, y1)]
-                };
-                for (k, (a, b, c, d)) in halves.into_iter().enumerate() {
-                    rect(&mut pixmap, t, a, b, c, d, roof(k));
-                    rect(&mut buildings, t, a, b, c, d, WHITE);
-                }
+            }
+            Block::Building { footprint: [a, b, c, d], roof } => {
+                rect(&mut pixmap, t, a, b, c, d, roof);
+                rect(&mut buildings, t, a, b, c, d, WHITE);
             }
         }
     }

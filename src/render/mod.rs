@@ -5,6 +5,7 @@
 
 pub mod background;
 pub mod palette;
+pub mod perspective;
 pub mod text;
 pub mod weather;
 
