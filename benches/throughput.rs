@@ -188,7 +188,15 @@ fn perspective_rates() {
         for f in 0..frames {
             let cars = cars_at(f);
             let start = Instant::now();
-            renderer.render(&world, &camera_at(f), &[], &cars, None, &mut frame);
+            renderer.render(
+                &world,
+                &camera_at(f),
+                &causalcity::render::weather::SceneLook::clear(),
+                &[],
+                &cars,
+                None,
+                &mut frame,
+            );
             render_s += start.elapsed().as_secs_f64();
             let start = Instant::now();
             sink.clear();

@@ -27,6 +27,27 @@ impl WorldKind {
     }
 }
 
+/// How the dataset's own bird's-eye frames are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BirdsEyeView {
+    /// A flat drawing seen straight down: every car the same shape wherever
+    /// it is (the default; what the paper's pixel figures describe).
+    #[default]
+    Flat,
+    /// The same camera as a true pinhole, in perspective: walls lean
+    /// outwards and a car's roof sits off its footprint towards the edge,
+    /// as the original's 40 m, 90 degree camera recorded. Ground points
+    /// land on the same pixels, so the pose logs are the same.
+    Pinhole,
+}
+
+impl BirdsEyeView {
+    pub fn is_flat(&self) -> bool {
+        *self == BirdsEyeView::Flat
+    }
+}
+
 /// Image size of the bird's-eye camera, pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -124,6 +145,9 @@ pub struct DatasetSpec {
     pub frame_interval: Option<f64>,
     #[serde(default)]
     pub image: ImageSize,
+    /// How the bird's-eye frames are drawn: `flat` (default) or `pinhole`.
+    #[serde(default, skip_serializing_if = "BirdsEyeView::is_flat")]
+    pub birds_eye: BirdsEyeView,
     pub groups: Vec<GroupSpec>,
     pub splits: Splits,
     /// High-level actions in each car's drive queue.
@@ -987,6 +1011,7 @@ impl DatasetSpec {
             frames,
             frame_interval,
             image: ImageSize::default(),
+            birds_eye: BirdsEyeView::Flat,
             groups: Vec::new(),
             splits: Splits { train: 1, val: 0, test: 0 },
             actions_per_car: 0,

@@ -9,13 +9,14 @@ use causalcity::camera::Pinhole;
 use causalcity::map::CityMap;
 use causalcity::render::background::{blocks, Block, BUILDING_HEIGHT_M};
 use causalcity::render::perspective::{empty_frame, CarSolid, PerspectiveFrame, PerspectiveRenderer, World3d};
+use causalcity::render::weather::SceneLook;
 use causalcity::render::CAR_HEIGHT_M;
 use common::{fresh_dir, gen_ok, run, write_spec};
 use glam::{DVec2, DVec3};
 
 fn render(world: &World3d, camera: &Pinhole, cars: &[CarSolid], hidden: Option<u8>) -> PerspectiveFrame {
     let mut frame = empty_frame(camera);
-    PerspectiveRenderer::new().render(world, camera, &[], cars, hidden, &mut frame);
+    PerspectiveRenderer::new().render(world, camera, &SceneLook::clear(), &[], cars, hidden, &mut frame);
     frame
 }
 
@@ -240,4 +241,42 @@ fn perspective_cameras_work_from_scenario_files_and_specs() {
     let checked = run(&["validate", one.to_str().unwrap()]);
     assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
     assert!(one.join("cars04_edges50/train/00000/cameras/driver/poses.csv").exists());
+
+    // The dataset's own bird's-eye view as the original's pinhole: the same
+    // poses (ground points land on the same pixels), other pictures.
+    let flat = r#"{ "name": "view", "world": "city", "seed": 3, "frames": 4, "image": {"width": 256, "height": 160},
+        "groups": [{ "cars": 4, "edge_proportion": 0.5 }], "splits": { "train": 1, "val": 0, "test": 0 } }"#;
+    let pinhole = flat.replace(r#""frames": 4,"#, r#""frames": 4, "birds_eye": "pinhole","#);
+    let (flat_out, pinhole_out) = (dir.join("flat"), dir.join("pinhole"));
+    for sub in ["f", "p"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    gen_ok(&write_spec(&dir.join("f"), flat), &flat_out, &["--quiet"]);
+    gen_ok(&write_spec(&dir.join("p"), &pinhole), &pinhole_out, &["--quiet"]);
+    let scenario = "cars04_edges50/train/00000";
+    let read = |root: &std::path::Path, file: &str| std::fs::read(root.join(scenario).join(file)).unwrap();
+    assert_eq!(read(&flat_out, "poses.csv"), read(&pinhole_out, "poses.csv"));
+    assert_ne!(read(&flat_out, "rgb/0000.png"), read(&pinhole_out, "rgb/0000.png"));
+    assert!(run(&["validate", pinhole_out.to_str().unwrap()]).status.success());
+
+    // counterfactual: the perspective cameras of both runs, identical before
+    // the intervention, Car_2's view changed after its leader stopped.
+    let intervention = dir.join("stop.json");
+    std::fs::write(&intervention, r#"{"at": 2.0, "do": "stop", "car": "Car_1", "seconds": 4}"#).unwrap();
+    let pair = dir.join("pair");
+    let result = run(&[
+        "counterfactual",
+        "--scenario",
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/perspective.json").to_str().unwrap(),
+        "--intervention",
+        intervention.to_str().unwrap(),
+        "--out",
+        pair.to_str().unwrap(),
+    ]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let view = |run: &str, frame: &str| {
+        std::fs::read(pair.join("perspective").join(run).join("cameras/driver_car2/rgb").join(frame)).unwrap()
+    };
+    assert_eq!(view("factual", "0005.png"), view("counterfactual", "0005.png"));
+    assert_ne!(view("factual", "0039.png"), view("counterfactual", "0039.png"));
 }

@@ -24,7 +24,7 @@ use crate::map::signals::{light_at, light_index, light_label, Colour, ScheduleSt
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
 use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
-use crate::spec::{valid_folder_name, CameraSpec, CarRef, CitySpec, DatasetSpec, Split, WorldKind};
+use crate::spec::{valid_folder_name, BirdsEyeView, CameraSpec, CarRef, CitySpec, DatasetSpec, Split, WorldKind};
 use serde::Deserialize;
 use serde_json::{Map, Value};
 use std::fmt;
@@ -104,6 +104,8 @@ struct RawScenario {
     /// intervention's fields that sit beside their `do` tag.
     interventions: Option<Vec<Value>>,
     cameras: Option<Vec<CameraSpec>>,
+    /// How the bird's-eye frames are drawn (`flat` or `pinhole`).
+    birds_eye: Option<BirdsEyeView>,
     #[allow(dead_code)]
     comment: Option<String>,
 }
@@ -426,7 +428,8 @@ fn resolve(
             Some(city)
         }
     };
-    let spec = DatasetSpec::for_given_cars(name.clone(), world, seed, frames, raw.frame_interval, city);
+    let mut spec = DatasetSpec::for_given_cars(name.clone(), world, seed, frames, raw.frame_interval, city);
+    spec.birds_eye = raw.birds_eye.unwrap_or_default();
     let expansion = Expansion::new(spec, map.clone()).map_err(|e| here.err(None, e.field, e.message))?;
 
     if raw.vehicles.is_empty() {

@@ -12,7 +12,9 @@ use crate::camera::Camera;
 use crate::map::signals::Colour;
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
+use crate::render::perspective::World3d;
 use crate::render::{FrameCanvas, Renderer};
+use crate::spec::BirdsEyeView;
 use crate::timing::StageTimes;
 use crate::world::{BoundBy, Trajectories};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -204,9 +206,10 @@ pub fn scenario_arrays(
         let mut images =
             FrameArrays { width, height, rgb: frame_buffer(frames * pixels * 3), mask: frame_buffer(frames * pixels) };
         let footage = Footage::new(plan, trajectories, &heads);
-        let _ = footage.birds_eye(renderer, canvas, &StageTimes::default(), |_, canvas| {
-            images.rgb.extend_from_slice(&canvas.rgb);
-            images.mask.extend_from_slice(&canvas.mask);
+        let world = (plan.birds_eye == BirdsEyeView::Pinhole).then(|| World3d::new(map));
+        let _ = footage.birds_eye(renderer, canvas, world.as_ref(), &StageTimes::default(), |_, rgb, mask| {
+            images.rgb.extend_from_slice(rgb);
+            images.mask.extend_from_slice(mask);
             Ok::<(), std::convert::Infallible>(())
         });
         a.images = Some(images);

@@ -2,12 +2,14 @@
 //! bird's-eye frames: shared by the file writer and the in-memory arrays, so
 //! both hold the same pixels.
 
+use crate::camera::{Camera, Pinhole};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
 use crate::render::palette::colour_of;
+use crate::render::perspective::{empty_frame, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
 use crate::render::weather::SceneLook;
 use crate::render::{CarSprite, FrameCanvas, HeadSprite, Renderer};
-use crate::spec::SignalHeads;
+use crate::spec::{BirdsEyeView, SignalHeads};
 use crate::timing::{Stage, StageTimes};
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
@@ -69,21 +71,41 @@ impl<'a> Footage<'a> {
         }
     }
 
-    /// Draws every bird's-eye frame into `canvas` in order and hands each to
-    /// `each` (frame index, the drawn canvas); stops at `each`'s first error.
-    /// The scene's look is redrawn only where an intervention changed the
-    /// confounders.
+    /// Draws every bird's-eye frame in order and hands each to `each`
+    /// (frame index, RGB, mask); stops at `each`'s first error. Flat frames
+    /// are drawn into `canvas`, the scene's look redrawn only where an
+    /// intervention changed the confounders; a plan that asks for the
+    /// pinhole view is drawn in perspective over `world` (needed then).
     pub fn birds_eye<E>(
         &self,
         renderer: &Renderer,
         canvas: &mut FrameCanvas,
+        world: Option<&World3d>,
         times: &StageTimes,
-        mut each: impl FnMut(u32, &FrameCanvas) -> Result<(), E>,
+        mut each: impl FnMut(u32, &[u8], &[u8]) -> Result<(), E>,
     ) -> Result<(), E> {
         let (plan, trajectories) = (self.plan, self.trajectories);
-        let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
         let mut sprites = Vec::with_capacity(plan.cars.len());
         let mut head_sprites = Vec::with_capacity(self.heads.len());
+        if let (BirdsEyeView::Pinhole, Some(world)) = (plan.birds_eye, world) {
+            let pinhole = birds_eye_pinhole(&renderer.camera);
+            let mut perspective = PerspectiveRenderer::new();
+            let mut frame = empty_frame(&pinhole);
+            let mut look = SceneLook::at_frame(plan, trajectories, 0);
+            for f in 0..trajectories.frames() {
+                if f > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == f) {
+                    look = SceneLook::at_frame(plan, trajectories, f);
+                }
+                self.fill_sprites(&mut sprites, &mut head_sprites, f);
+                let (cars, heads) = solids(&sprites, &head_sprites);
+                times.time(Stage::Render, || {
+                    perspective.render(world, &pinhole, &look, &heads, &cars, None, &mut frame)
+                });
+                each(f as u32, &frame.rgb, &frame.mask)?;
+            }
+            return Ok(());
+        }
+        let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
         for frame in 0..trajectories.frames() {
             if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 scene = renderer.scene(SceneLook::at_frame(plan, trajectories, frame));
@@ -91,8 +113,38 @@ impl<'a> Footage<'a> {
             self.fill_sprites(&mut sprites, &mut head_sprites, frame);
             let frame = frame as u32;
             times.time(Stage::Render, || renderer.render(canvas, &scene, &sprites, &head_sprites, frame));
-            each(frame, canvas)?;
+            each(frame, &canvas.rgb, &canvas.mask)?;
         }
         Ok(())
     }
+}
+
+/// A straight-down bird's-eye camera as the pinhole it models: the same
+/// place, altitude, lens and image, so ground points land on the same pixels.
+pub fn birds_eye_pinhole(camera: &Camera) -> Pinhole {
+    Pinhole {
+        width: camera.width,
+        height: camera.height,
+        position: [camera.centre_x, camera.centre_y, camera.altitude_m],
+        yaw_rad: std::f64::consts::FRAC_PI_2 + camera.rotation_rad,
+        pitch_rad: -std::f64::consts::FRAC_PI_2,
+        roll_rad: 0.0,
+        horizontal_fov_deg: camera.horizontal_fov_deg,
+    }
+}
+
+/// The flat sprites of a frame as perspective solids.
+pub fn solids(sprites: &[CarSprite], heads: &[HeadSprite]) -> (Vec<CarSolid>, Vec<HeadSolid>) {
+    let cars = sprites
+        .iter()
+        .map(|s| CarSolid {
+            position: s.position,
+            yaw: s.yaw,
+            length: s.length,
+            width: s.width,
+            colour: s.colour,
+            mask_id: s.mask_id,
+        })
+        .collect();
+    (cars, heads.iter().map(|h| HeadSolid { position: h.position, colour: h.colour }).collect())
 }

@@ -5,7 +5,7 @@
 //! renderers as plain data; it knows nothing of dynamics.
 
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
-use super::footage::{signal_heads, Footage};
+use super::footage::{signal_heads, solids, Footage};
 use super::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -19,9 +19,10 @@ use super::{ScenarioDir, WriteError};
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
-use crate::render::perspective::{self, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
+use crate::render::perspective::{self, PerspectiveRenderer, World3d};
 use crate::render::weather::SceneLook;
 use crate::render::{FrameCanvas, Renderer, Scene, CAR_HEIGHT_M};
+use crate::spec::BirdsEyeView;
 use crate::timing::{Stage, StageTimes};
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
@@ -131,7 +132,9 @@ impl ScenarioWriter {
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
             let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };
             let footage = Footage::new(plan, trajectories, &heads);
-            bytes += frames.birds_eye(renderer, canvas, &footage, self.annotations)?;
+            let world =
+                (plan.birds_eye == BirdsEyeView::Pinhole).then(|| self.world3d.get_or_init(|| World3d::new(&self.map)));
+            bytes += frames.birds_eye(renderer, canvas, world, &footage, self.annotations)?;
             for camera_plan in &plan.cameras {
                 bytes += if camera_plan.kind.is_perspective() {
                     let world = self.world3d.get_or_init(|| World3d::new(&self.map));
@@ -196,6 +199,7 @@ impl FrameWriter<'_, '_> {
         &mut self,
         renderer: &Renderer,
         canvas: &mut FrameCanvas,
+        world: Option<&World3d>,
         footage: &Footage,
         annotations: bool,
     ) -> Result<u64, ScenarioWriteError> {
@@ -208,18 +212,19 @@ impl FrameWriter<'_, '_> {
         let mut pixels = Vec::with_capacity(plan.cars.len());
         let mut bytes = 0;
         let times = self.times;
-        footage.birds_eye(renderer, canvas, times, |frame, canvas| {
+        footage.birds_eye(renderer, canvas, world, times, |frame, rgb, mask| {
             self.check_stop()?;
             let rgb_name = self.layout.frame_name(FrameKind::Rgb, frame);
             let mask_name = self.layout.frame_name(FrameKind::Mask, frame);
-            bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
+            bytes += self.image(&rgb_name, size, PixelFormat::Rgb8, rgb)?;
+            bytes += self.image(&mask_name, size, PixelFormat::Gray8, mask)?;
             if let Some(builder) = builder.as_mut() {
                 pixels.clear();
                 pixels.extend(trajectories.states[frame as usize].iter().map(|s| {
                     let p = renderer.camera.to_pixel(s.position);
                     [logged_value(p.x, PIXEL_DECIMALS), logged_value(p.y, PIXEL_DECIMALS)]
                 }));
-                times.time(Stage::Encode, || builder.add_frame(frame, rgb_name, mask_name, &canvas.mask, &pixels));
+                times.time(Stage::Encode, || builder.add_frame(frame, rgb_name, mask_name, mask, &pixels));
             }
             Ok::<(), ScenarioWriteError>(())
         })?;
@@ -252,6 +257,7 @@ impl FrameWriter<'_, '_> {
             _ => None,
         };
         let mut renderer = PerspectiveRenderer::new();
+        let mut look = SceneLook::clear();
         let mut pinhole: Option<Pinhole> = None;
         let mut frame_buffer = None;
         let mut poses = b"frame,car,px,py,in_view,visible_px\n".to_vec();
@@ -265,21 +271,12 @@ impl FrameWriter<'_, '_> {
                 .expect("a perspective kind has a pinhole");
             pinhole = Some(camera);
             footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
-            let cars: Vec<CarSolid> = sprites
-                .iter()
-                .map(|s| CarSolid {
-                    position: s.position,
-                    yaw: s.yaw,
-                    length: s.length,
-                    width: s.width,
-                    colour: s.colour,
-                    mask_id: s.mask_id,
-                })
-                .collect();
-            let heads: Vec<HeadSolid> =
-                head_sprites.iter().map(|h| HeadSolid { position: h.position, colour: h.colour }).collect();
+            let (cars, heads) = solids(&sprites, &head_sprites);
             let target = frame_buffer.get_or_insert_with(|| perspective::empty_frame(&camera));
-            self.times.time(Stage::Render, || renderer.render(world, &camera, &heads, &cars, hidden, target));
+            if frame == 0 || trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
+                look = SceneLook::at_frame(plan, trajectories, frame);
+            }
+            self.times.time(Stage::Render, || renderer.render(world, &camera, &look, &heads, &cars, hidden, target));
             let frame = frame as u32;
             let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
                 .map(|k| self.layout.camera_frame_name(name, k, frame));

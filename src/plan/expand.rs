@@ -417,6 +417,7 @@ impl Expansion {
             cars: planned,
             edges,
             interventions: Vec::new(),
+            birds_eye: spec.birds_eye,
             // Checked with the spec; chased cars are named by id, and cars are in id order.
             cameras: spec
                 .cameras

@@ -162,6 +162,8 @@ pub struct ScenarioPlan {
     pub interventions: Vec<Intervention>,
     /// Extra cameras (hand-written scenarios; none for `gen`).
     pub cameras: Vec<CameraPlan>,
+    /// How the bird's-eye frames are drawn.
+    pub birds_eye: crate::spec::BirdsEyeView,
 }
 
 /// A car of a hand-written scenario: where it starts, what it does, and

@@ -16,6 +16,7 @@
 //! lines.
 
 use super::background::{blocks, draw_background, Block, BUILDING_HEIGHT_M, GROUND};
+use super::weather::SceneLook;
 use super::CAR_HEIGHT_M;
 use crate::camera::{Camera, Pinhole, NEAR_M};
 use crate::map::signals::Colour;
@@ -145,10 +146,10 @@ impl World3d {
         World3d { texture, ground, buildings }
     }
 
-    /// The ground's colour at a point, metres (nearest texture pixel; the
-    /// bare ground colour beyond the texture).
+    /// The colour of `ground` (this world's texture, or a shaded copy) at a
+    /// point, metres: the nearest texture pixel; bare ground beyond it.
     #[inline]
-    fn ground_at(&self, p: DVec2) -> [u8; 3] {
+    fn ground_at(&self, ground: &[u8], p: DVec2) -> [u8; 3] {
         let t = &self.texture;
         let px = (t.width as f64 - 1.0) / 2.0 + (p.x - t.centre_x) * t.pixels_per_metre;
         let py = (t.height as f64 - 1.0) / 2.0 - (p.y - t.centre_y) * t.pixels_per_metre;
@@ -161,7 +162,7 @@ impl World3d {
             return GROUND;
         }
         let i = (y * t.width as usize + x) * 3;
-        [self.ground[i], self.ground[i + 1], self.ground[i + 2]]
+        [ground[i], ground[i + 1], ground[i + 2]]
     }
 }
 
@@ -201,7 +202,9 @@ impl PerspectiveFrame {
 /// Draws perspective frames of one camera; keeps the static part (ground
 /// and buildings) while the camera does not move.
 pub struct PerspectiveRenderer {
-    statics: Option<(Pinhole, PerspectiveFrame)>,
+    statics: Option<(Pinhole, SceneLook, PerspectiveFrame)>,
+    /// The ground texture under the last look (the clear one needs none).
+    shaded: Option<(SceneLook, Vec<u8>)>,
     /// Each pixel's ray length per metre along the axis, for the lens of
     /// `lens` (width, height, field of view).
     ray_length: Vec<f32>,
@@ -218,15 +221,19 @@ impl Default for PerspectiveRenderer {
 
 impl PerspectiveRenderer {
     pub fn new() -> Self {
-        PerspectiveRenderer { statics: None, ray_length: Vec::new(), lens: (0, 0, 0.0), last: None }
+        PerspectiveRenderer { statics: None, shaded: None, ray_length: Vec::new(), lens: (0, 0, 0.0), last: None }
     }
 
     /// Draws `world`, the signal heads and the cars (less any car whose
-    /// mask id is `hidden`, the first-person camera's own) into `frame`.
+    /// mask id is `hidden`, the first-person camera's own) into `frame`,
+    /// under `look`'s light and fog (rain streaks and snowflakes are drawn
+    /// in the flat views only).
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         &mut self,
         world: &World3d,
         camera: &Pinhole,
+        look: &SceneLook,
         heads: &[HeadSolid],
         cars: &[CarSolid],
         hidden: Option<u8>,
@@ -246,11 +253,19 @@ impl PerspectiveRenderer {
             self.lens = lens;
             self.statics = None;
         }
+        if !look.is_clear() && !matches!(&self.shaded, Some((l, _)) if l == look) {
+            let texture = world.ground.chunks_exact(3).flat_map(|p| look.shade([p[0], p[1], p[2]])).collect();
+            self.shaded = Some((*look, texture));
+        }
+        let ground: &[u8] = match &self.shaded {
+            Some((_, texture)) if !look.is_clear() => texture,
+            _ => &world.ground,
+        };
         let ray_length = &self.ray_length;
-        let still = matches!(&self.statics, Some((c, _)) if c == camera);
+        let still = matches!(&self.statics, Some((c, l, _)) if c == camera && l == look);
         if still {
             // The camera has not moved: start from its ground and buildings.
-            let (_, statics) = self.statics.as_ref().expect("checked above");
+            let (_, _, statics) = self.statics.as_ref().expect("checked above");
             frame.width = statics.width;
             frame.height = statics.height;
             frame.rgb.clone_from(&statics.rgb);
@@ -263,28 +278,34 @@ impl PerspectiveRenderer {
             frame.distance.resize(n, f32::INFINITY);
             frame.mask.clear();
             frame.mask.resize(n, 0);
-            draw_ground(world, camera, ray_length, frame);
+            draw_ground(world, ground, camera, ray_length, frame);
             for solid in &world.buildings {
-                draw_solid(camera, ray_length, solid, frame);
+                draw_solid(camera, ray_length, &shaded(solid, look), frame);
             }
             // A camera that stood still since the last frame is a fixed one:
             // its ground and buildings are kept for the frames to come.
             if self.last.as_ref() == Some(camera) {
-                self.statics = Some((*camera, frame.clone()));
+                self.statics = Some((*camera, *look, frame.clone()));
             }
         }
         self.last = Some(*camera);
         for head in heads {
-            for solid in head_solids(head) {
-                draw_solid(camera, ray_length, &solid, frame);
-            }
+            let [pole, lamp] = head_solids(head);
+            draw_solid(camera, ray_length, &shaded(&pole, look), frame);
+            // A lit lamp is not dimmed by the dark, only veiled by fog.
+            draw_solid(camera, ray_length, &Solid { colour: look.veil(lamp.colour), ..lamp }, frame);
         }
         for car in cars.iter().filter(|c| Some(c.mask_id) != hidden) {
             for solid in car.solids() {
-                draw_solid(camera, ray_length, &solid, frame);
+                draw_solid(camera, ray_length, &shaded(&solid, look), frame);
             }
         }
     }
+}
+
+/// A solid in `look`'s light.
+fn shaded(solid: &Solid, look: &SceneLook) -> Solid {
+    Solid { colour: look.shade(solid.colour), ..*solid }
 }
 
 /// An empty frame of `camera`'s size.
@@ -328,7 +349,7 @@ fn head_solids(head: &HeadSolid) -> [Solid; 2] {
 }
 
 /// The ground: each pixel whose ray goes down meets the plane z = 0.
-fn draw_ground(world: &World3d, camera: &Pinhole, ray_length: &[f32], frame: &mut PerspectiveFrame) {
+fn draw_ground(world: &World3d, ground: &[u8], camera: &Pinhole, ray_length: &[f32], frame: &mut PerspectiveFrame) {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let origin = camera.position();
     let [right, down, forward] = camera.axes();
@@ -342,7 +363,7 @@ fn draw_ground(world: &World3d, camera: &Pinhole, ray_length: &[f32], frame: &mu
                 let t = -origin.z / ray.z;
                 let hit = origin + ray * t;
                 frame.distance[i] = ray_length[i] * t as f32;
-                world.ground_at(DVec2::new(hit.x, hit.y))
+                world.ground_at(ground, DVec2::new(hit.x, hit.y))
             } else {
                 frame.distance[i] = f32::INFINITY;
                 SKY

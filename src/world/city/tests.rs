@@ -110,6 +110,7 @@ fn plan(
         edges: vec![],
         interventions,
         cameras: vec![],
+        birds_eye: crate::spec::BirdsEyeView::Flat,
     }
 }
 
