@@ -280,3 +280,27 @@ fn perspective_cameras_work_from_scenario_files_and_specs() {
     assert_eq!(view("factual", "0005.png"), view("counterfactual", "0005.png"));
     assert_ne!(view("factual", "0039.png"), view("counterfactual", "0039.png"));
 }
+
+#[test]
+fn weather_shades_perspective_views_and_leaves_masks_alone() {
+    use causalcity::render::perspective::draw_precipitation;
+    let map = CityMap::default();
+    let world = World3d::new(&map);
+    let (camera, road_y) = driver_camera(&map);
+    let cars = [car(-20.0, road_y, 3)];
+    let draw = |look: SceneLook| {
+        let mut frame = empty_frame(&camera);
+        PerspectiveRenderer::new().render(&world, &camera, &look, &[], &cars, None, &mut frame);
+        draw_precipitation(&look, 7, &mut frame);
+        frame
+    };
+    let clear = draw(SceneLook::clear());
+    let night = draw(SceneLook { daylight: 0.0, ..SceneLook::clear() });
+    let rain = draw(SceneLook { rain: 1.0, ..SceneLook::clear() });
+    let brightness = |f: &PerspectiveFrame| f.rgb.iter().map(|&v| v as u64).sum::<u64>();
+    assert!(brightness(&night) * 10 < brightness(&clear) * 7, "night is darker");
+    let streaked = clear.rgb.chunks_exact(3).zip(rain.rgb.chunks_exact(3)).filter(|(a, b)| a != b).count();
+    assert!(streaked > 200, "rain streaks over {streaked} pixels");
+    assert_eq!(clear.mask, rain.mask);
+    assert_eq!(clear.mask, night.mask);
+}

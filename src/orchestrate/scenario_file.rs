@@ -243,16 +243,19 @@ fn raw_interventions(list: Vec<Value>, path: &str) -> Result<Vec<RawIntervention
 // ---------------------------------------------------------------------------
 // Loading: parse everything, then resolve.
 
+/// An error about a whole file (no scenario or car), at JSON path `field`.
+fn file_error(path: &Path, field: String, message: String) -> ScenarioFileError {
+    ScenarioFileError { file: path.to_path_buf(), scenario: None, car: None, field, message }
+}
+
+/// A file that cannot be read.
+fn unreadable(path: &Path, e: std::io::Error) -> ScenarioFileError {
+    file_error(path, String::new(), format!("cannot read the file: {e}"))
+}
+
 /// Reads and checks every scenario of `path`.
 pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
-    let fail = |field: &str, message: String| ScenarioFileError {
-        file: path.to_path_buf(),
-        scenario: None,
-        car: None,
-        field: field.into(),
-        message,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| fail("", format!("cannot read the file: {e}")))?;
+    let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
     load_text(path, &text, options, map)
 }
 
@@ -264,13 +267,7 @@ pub fn load_text(
     options: FileOptions,
     map: &Arc<CityMap>,
 ) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
-    let fail = |field: &str, message: String| ScenarioFileError {
-        file: path.to_path_buf(),
-        scenario: None,
-        car: None,
-        field: field.into(),
-        message,
-    };
+    let fail = |field: &str, message: String| file_error(path, field.into(), message);
     let json = json::parse(text).map_err(|e| parse_error(path, text, e))?;
     let entries = match json {
         Value::Array(list) => list,
@@ -933,15 +930,7 @@ pub fn load_interventions(
     scenarios: &[LoadedScenario],
     map: &CityMap,
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
-    let file_error = |field: String, message: String| ScenarioFileError {
-        file: path.to_path_buf(),
-        scenario: None,
-        car: None,
-        field,
-        message,
-    };
-    let text =
-        std::fs::read_to_string(path).map_err(|e| file_error(String::new(), format!("cannot read the file: {e}")))?;
+    let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
     load_interventions_text(path, &text, scenarios, map)
 }
 
@@ -952,13 +941,7 @@ pub fn load_interventions_text(
     scenarios: &[LoadedScenario],
     map: &CityMap,
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
-    let file_error = |field: String, message: String| ScenarioFileError {
-        file: path.to_path_buf(),
-        scenario: None,
-        car: None,
-        field,
-        message,
-    };
+    let file_error = |field: String, message: String| file_error(path, field, message);
     // Paths as in a scenario's `interventions`, whether the file is a list or one object.
     let json = json::parse(text).map_err(|e| {
         let field =

@@ -6,7 +6,7 @@ use crate::camera::{Camera, Pinhole};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
 use crate::render::palette::colour_of;
-use crate::render::perspective::{empty_frame, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
+use crate::render::perspective::{draw_precipitation, empty_frame, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
 use crate::render::weather::SceneLook;
 use crate::render::{CarSprite, FrameCanvas, HeadSprite, Renderer};
 use crate::spec::{BirdsEyeView, SignalHeads};
@@ -99,7 +99,8 @@ impl<'a> Footage<'a> {
                 self.fill_sprites(&mut sprites, &mut head_sprites, f);
                 let (cars, heads) = solids(&sprites, &head_sprites);
                 times.time(Stage::Render, || {
-                    perspective.render(world, &pinhole, &look, &heads, &cars, None, &mut frame)
+                    perspective.render(world, &pinhole, &look, &heads, &cars, None, &mut frame);
+                    draw_precipitation(&look, f as u32, &mut frame);
                 });
                 each(f as u32, &frame.rgb, &frame.mask)?;
             }

@@ -188,6 +188,21 @@ impl FrameWriter<'_, '_> {
         self.dir.write_file(name, self.png)
     }
 
+    /// Millimetres as a 16-bit PNG (big-endian samples, through `bytes`).
+    fn depth_image(
+        &mut self,
+        name: &str,
+        size: (u32, u32),
+        mm: &[u16],
+        bytes: &mut Vec<u8>,
+    ) -> Result<u64, WriteError> {
+        let start = Instant::now();
+        bytes.clear();
+        bytes.extend(mm.iter().flat_map(|d| d.to_be_bytes()));
+        self.times.add(Stage::Render, start.elapsed());
+        self.image(name, size, PixelFormat::Gray16, bytes)
+    }
+
     /// A frame's RGB image and instance mask.
     fn rgb_and_mask(&mut self, names: [&str; 2], canvas: &FrameCanvas, size: (u32, u32)) -> Result<u64, WriteError> {
         Ok(self.image(names[0], size, PixelFormat::Rgb8, &canvas.rgb)?
@@ -276,19 +291,18 @@ impl FrameWriter<'_, '_> {
             if frame == 0 || trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 look = SceneLook::at_frame(plan, trajectories, frame);
             }
-            self.times.time(Stage::Render, || renderer.render(world, &camera, &look, &heads, &cars, hidden, target));
             let frame = frame as u32;
+            self.times.time(Stage::Render, || {
+                renderer.render(world, &camera, &look, &heads, &cars, hidden, target);
+                perspective::draw_precipitation(&look, frame, target);
+            });
             let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
                 .map(|k| self.layout.camera_frame_name(name, k, frame));
             bytes += self.image(&rgb_name, size, PixelFormat::Rgb8, &target.rgb)?;
             bytes += self.image(&mask_name, size, PixelFormat::Gray8, &target.mask)?;
             if camera_plan.depth {
-                self.times.time(Stage::Render, || {
-                    target.depth_mm(depth);
-                    depth_bytes.clear();
-                    depth_bytes.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
-                });
-                bytes += self.image(&depth_name, size, PixelFormat::Gray16, depth_bytes)?;
+                self.times.time(Stage::Render, || target.depth_mm(depth));
+                bytes += self.depth_image(&depth_name, size, depth, depth_bytes)?;
             }
             for (car, state) in plan.cars.iter().zip(states) {
                 let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
@@ -368,12 +382,8 @@ impl FrameWriter<'_, '_> {
                 .map(|k| self.layout.camera_frame_name(name, k, frame));
             bytes += self.rgb_and_mask([&rgb_name, &mask_name], canvas, size)?;
             if camera_plan.depth {
-                self.times.time(Stage::Render, || {
-                    renderer.depth_mm(&canvas.mask, depth);
-                    depth_bytes.clear();
-                    depth_bytes.extend(depth.iter().flat_map(|d| d.to_be_bytes()));
-                });
-                bytes += self.image(&depth_name, size, PixelFormat::Gray16, depth_bytes)?;
+                self.times.time(Stage::Render, || renderer.depth_mm(&canvas.mask, depth));
+                bytes += self.depth_image(&depth_name, size, depth, depth_bytes)?;
             }
             for (car, state) in plan.cars.iter().zip(states) {
                 let pixel = camera.to_pixel(state.position);

@@ -226,8 +226,8 @@ impl PerspectiveRenderer {
 
     /// Draws `world`, the signal heads and the cars (less any car whose
     /// mask id is `hidden`, the first-person camera's own) into `frame`,
-    /// under `look`'s light and fog (rain streaks and snowflakes are drawn
-    /// in the flat views only).
+    /// under `look`'s light and fog ([`draw_precipitation`] adds rain and
+    /// snow).
     #[allow(clippy::too_many_arguments)]
     pub fn render(
         &mut self,
@@ -300,6 +300,23 @@ impl PerspectiveRenderer {
                 draw_solid(camera, ray_length, &shaded(&solid, look), frame);
             }
         }
+    }
+}
+
+/// Rain streaks and snowflakes of frame `index` over a drawn frame, as the
+/// flat views draw them (in image space; the masks stay as they are).
+pub fn draw_precipitation(look: &SceneLook, index: u32, frame: &mut PerspectiveFrame) {
+    if look.rain <= 0.0 && look.snow <= 0.0 {
+        return;
+    }
+    let Some(mut pixmap) = tiny_skia::Pixmap::new(frame.width, frame.height) else { return };
+    for (px, rgb) in pixmap.data_mut().chunks_exact_mut(4).zip(frame.rgb.chunks_exact(3)) {
+        px[..3].copy_from_slice(rgb);
+        px[3] = 255;
+    }
+    look.draw_precipitation(&mut pixmap, index);
+    for (rgb, px) in frame.rgb.chunks_exact_mut(3).zip(pixmap.data().chunks_exact(4)) {
+        rgb.copy_from_slice(&px[..3]);
     }
 }
 
