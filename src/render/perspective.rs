@@ -365,16 +365,39 @@ fn head_solids(head: &HeadSolid) -> [Solid; 2] {
     [base, lit]
 }
 
-/// The ground: each pixel whose ray goes down meets the plane z = 0.
+/// The ground: each pixel whose ray goes down meets the plane z = 0. With
+/// no roll the camera's right axis is level, so along a row every ray meets
+/// the ground at the same depth and the hit point moves in equal steps:
+/// one division per row, not per pixel.
 fn draw_ground(world: &World3d, ground: &[u8], camera: &Pinhole, ray_length: &[f32], frame: &mut PerspectiveFrame) {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let origin = camera.position();
     let [right, down, forward] = camera.axes();
     let (centre, focal) = (camera.centre_px(), camera.focal_px());
+    let level = right.z.abs() < 1e-12;
     for y in 0..h {
         let row = forward + down * ((y as f64 - centre.y) / focal);
-        for x in 0..w {
-            let i = y * w + x;
+        let pixels = y * w..(y + 1) * w;
+        if level {
+            if row.z >= 0.0 || origin.z <= 0.0 {
+                frame.distance[pixels.clone()].fill(f32::INFINITY);
+                for px in frame.rgb[pixels.start * 3..pixels.end * 3].chunks_exact_mut(3) {
+                    px.copy_from_slice(&SKY);
+                }
+                continue;
+            }
+            let t = -origin.z / row.z;
+            let first = origin + (row + right * (-centre.x / focal)) * t;
+            let step = right * (t / focal);
+            for (x, i) in pixels.enumerate() {
+                let hit = first + step * x as f64;
+                frame.distance[i] = ray_length[i] * t as f32;
+                let colour = world.ground_at(ground, DVec2::new(hit.x, hit.y));
+                frame.rgb[i * 3..i * 3 + 3].copy_from_slice(&colour);
+            }
+            continue;
+        }
+        for (x, i) in pixels.enumerate() {
             let ray = row + right * ((x as f64 - centre.x) / focal);
             let colour = if ray.z < 0.0 && origin.z > 0.0 {
                 let t = -origin.z / ray.z;
