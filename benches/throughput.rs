@@ -149,21 +149,22 @@ fn frame_pipeline(root: &Path) {
 /// every frame), with 12 cars.
 fn perspective_rates() {
     use causalcity::camera::Pinhole;
-    use causalcity::render::perspective::{empty_frame, CarSolid, PerspectiveRenderer, World3d};
+    use causalcity::render::perspective::{empty_frame, PerspectiveRenderer, World3d};
     println!("\n== Perspective cameras, 1024x640, 12 cars, one core (render + PNG encode) ==");
     let map = CityMap::default();
     let world = World3d::new(&map);
     let road_y = map.layout.east_west_roads[1].1 - map.layout.lane_width / 2.0;
     let frames = 150;
-    let cars_at = |f: usize| -> Vec<CarSolid> {
+    let cars_at = |f: usize| -> Vec<CarSprite> {
         (0..12)
-            .map(|k| CarSolid {
+            .map(|k| CarSprite {
                 position: glam::DVec2::new(-30.0 + 6.0 * k as f64 + 0.2 * f as f64, road_y - 3.0 * (k % 2) as f64),
                 yaw: 0.0,
                 length: 2.2,
                 width: 1.1,
                 colour: [180, 40 + 15 * k as u8, 60],
                 mask_id: k as u8 + 1,
+                braking: false,
             })
             .collect()
     };

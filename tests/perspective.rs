@@ -8,20 +8,29 @@ mod common;
 use causalcity::camera::Pinhole;
 use causalcity::map::CityMap;
 use causalcity::render::background::{blocks, Block, BUILDING_HEIGHT_M};
-use causalcity::render::perspective::{empty_frame, CarSolid, PerspectiveFrame, PerspectiveRenderer, World3d};
+use causalcity::render::perspective::{empty_frame, PerspectiveFrame, PerspectiveRenderer, World3d};
 use causalcity::render::weather::SceneLook;
+use causalcity::render::CarSprite;
 use causalcity::render::CAR_HEIGHT_M;
 use common::{fresh_dir, gen_ok, run, write_spec};
 use glam::{DVec2, DVec3};
 
-fn render(world: &World3d, camera: &Pinhole, cars: &[CarSolid], hidden: Option<u8>) -> PerspectiveFrame {
+fn render(world: &World3d, camera: &Pinhole, cars: &[CarSprite], hidden: Option<u8>) -> PerspectiveFrame {
     let mut frame = empty_frame(camera);
     PerspectiveRenderer::new().render(world, camera, &SceneLook::clear(), &[], cars, hidden, &mut frame);
     frame
 }
 
-fn car(x: f64, y: f64, mask_id: u8) -> CarSolid {
-    CarSolid { position: DVec2::new(x, y), yaw: 0.0, length: 4.5, width: 1.8, colour: [200, 30, 30], mask_id }
+fn car(x: f64, y: f64, mask_id: u8) -> CarSprite {
+    CarSprite {
+        position: DVec2::new(x, y),
+        yaw: 0.0,
+        length: 4.5,
+        width: 1.8,
+        colour: [200, 30, 30],
+        mask_id,
+        braking: false,
+    }
 }
 
 /// The distance from the camera along pixel (x, y)'s ray to the plane z = h.

@@ -6,7 +6,7 @@ use crate::camera::{Camera, Pinhole};
 use crate::map::CityMap;
 use crate::plan::ScenarioPlan;
 use crate::render::palette::colour_of;
-use crate::render::perspective::{draw_precipitation, empty_frame, CarSolid, HeadSolid, PerspectiveRenderer, World3d};
+use crate::render::perspective::{draw_precipitation, empty_frame, PerspectiveRenderer, World3d};
 use crate::render::weather::SceneLook;
 use crate::render::{CarSprite, FrameCanvas, HeadSprite, Renderer};
 use crate::spec::{BirdsEyeView, SignalHeads};
@@ -97,9 +97,8 @@ impl<'a> Footage<'a> {
                     look = SceneLook::at_frame(plan, trajectories, f);
                 }
                 self.fill_sprites(&mut sprites, &mut head_sprites, f);
-                let (cars, heads) = solids(&sprites, &head_sprites);
                 times.time(Stage::Render, || {
-                    perspective.render(world, &pinhole, &look, &heads, &cars, None, &mut frame);
+                    perspective.render(world, &pinhole, &look, &head_sprites, &sprites, None, &mut frame);
                     draw_precipitation(&look, f as u32, &mut frame);
                 });
                 each(f as u32, &frame.rgb, &frame.mask)?;
@@ -132,20 +131,4 @@ pub fn birds_eye_pinhole(camera: &Camera) -> Pinhole {
         roll_rad: 0.0,
         horizontal_fov_deg: camera.horizontal_fov_deg,
     }
-}
-
-/// The flat sprites of a frame as perspective solids.
-pub fn solids(sprites: &[CarSprite], heads: &[HeadSprite]) -> (Vec<CarSolid>, Vec<HeadSolid>) {
-    let cars = sprites
-        .iter()
-        .map(|s| CarSolid {
-            position: s.position,
-            yaw: s.yaw,
-            length: s.length,
-            width: s.width,
-            colour: s.colour,
-            mask_id: s.mask_id,
-        })
-        .collect();
-    (cars, heads.iter().map(|h| HeadSolid { position: h.position, colour: h.colour }).collect())
 }

@@ -5,7 +5,7 @@
 //! renderers as plain data; it knows nothing of dynamics.
 
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
-use super::footage::{signal_heads, solids, Footage};
+use super::footage::{signal_heads, Footage};
 use super::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -286,14 +286,13 @@ impl FrameWriter<'_, '_> {
                 .expect("a perspective kind has a pinhole");
             pinhole = Some(camera);
             footage.fill_sprites(&mut sprites, &mut head_sprites, frame);
-            let (cars, heads) = solids(&sprites, &head_sprites);
             let target = frame_buffer.get_or_insert_with(|| perspective::empty_frame(&camera));
             if frame == 0 || trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 look = SceneLook::at_frame(plan, trajectories, frame);
             }
             let frame = frame as u32;
             self.times.time(Stage::Render, || {
-                renderer.render(world, &camera, &look, &heads, &cars, hidden, target);
+                renderer.render(world, &camera, &look, &head_sprites, &sprites, hidden, target);
                 perspective::draw_precipitation(&look, frame, target);
             });
             let [rgb_name, mask_name, depth_name] = [FrameKind::Rgb, FrameKind::Mask, FrameKind::Depth]
@@ -304,6 +303,7 @@ impl FrameWriter<'_, '_> {
                 self.times.time(Stage::Render, || target.depth_mm(depth));
                 bytes += self.depth_image(&depth_name, size, depth, depth_bytes)?;
             }
+            let visible = target.mask_counts();
             for (car, state) in plan.cars.iter().zip(states) {
                 let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
                 poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
@@ -316,9 +316,7 @@ impl FrameWriter<'_, '_> {
                     poses.push(b',');
                 }
                 let in_view = pixel.is_some_and(|p| camera.contains_pixel(p));
-                poses.extend_from_slice(
-                    format!(",{},{}\n", in_view as u8, target.visible_pixels(car.mask_id)).as_bytes(),
-                );
+                poses.extend_from_slice(format!(",{},{}\n", in_view as u8, visible[car.mask_id as usize]).as_bytes());
             }
         }
         bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;

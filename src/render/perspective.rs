@@ -17,7 +17,7 @@
 
 use super::background::{blocks, draw_background, Block, BUILDING_HEIGHT_M, GROUND};
 use super::weather::SceneLook;
-use super::CAR_HEIGHT_M;
+use super::{CarSprite, HeadSprite, CAR_HEIGHT_M};
 use crate::camera::{Camera, Pinhole, NEAR_M};
 use crate::map::signals::Colour;
 use crate::map::CityMap;
@@ -61,52 +61,31 @@ pub struct Solid {
     pub mask_id: u8,
 }
 
-/// A car as the perspective view draws it: a body and a cabin.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CarSolid {
-    pub position: DVec2,
-    pub yaw: f64,
-    pub length: f64,
-    pub width: f64,
-    pub colour: [u8; 3],
-    pub mask_id: u8,
-}
-
-impl CarSolid {
-    /// The car's body and cabin boxes.
-    pub fn solids(&self) -> [Solid; 2] {
-        let body_top = CAR_HEIGHT_M * BODY_SHARE;
-        let back = DVec2::from_angle(self.yaw) * (-0.1 * self.length);
-        [
-            Solid {
-                centre: self.position,
-                yaw: self.yaw,
-                length: self.length,
-                width: self.width,
-                bottom: 0.0,
-                top: body_top,
-                colour: self.colour,
-                mask_id: self.mask_id,
-            },
-            Solid {
-                centre: self.position + back,
-                yaw: self.yaw,
-                length: self.length * CABIN_LENGTH_SHARE,
-                width: self.width * CABIN_WIDTH_SHARE,
-                bottom: body_top,
-                top: CAR_HEIGHT_M,
-                colour: GLASS,
-                mask_id: self.mask_id,
-            },
-        ]
-    }
-}
-
-/// A signal head for the perspective view: where it stands and its colour.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HeadSolid {
-    pub position: DVec2,
-    pub colour: Colour,
+/// A car as the perspective view draws it: its body and, on top, its cabin
+/// (the flat views' sprite, given height).
+pub fn car_solids(car: &CarSprite) -> [Solid; 2] {
+    let body_top = CAR_HEIGHT_M * BODY_SHARE;
+    let back = DVec2::from_angle(car.yaw) * (-0.1 * car.length);
+    let body = Solid {
+        centre: car.position,
+        yaw: car.yaw,
+        length: car.length,
+        width: car.width,
+        bottom: 0.0,
+        top: body_top,
+        colour: car.colour,
+        mask_id: car.mask_id,
+    };
+    let cabin = Solid {
+        centre: car.position + back,
+        length: car.length * CABIN_LENGTH_SHARE,
+        width: car.width * CABIN_WIDTH_SHARE,
+        bottom: body_top,
+        top: CAR_HEIGHT_M,
+        colour: GLASS,
+        ..body
+    };
+    [body, cabin]
 }
 
 /// The map as solids, shared by every perspective camera of a run: the
@@ -197,6 +176,15 @@ impl PerspectiveFrame {
     pub fn visible_pixels(&self, mask_id: u8) -> usize {
         self.mask.iter().filter(|&&m| m == mask_id).count()
     }
+
+    /// Pixels per mask value, every value counted in one pass.
+    pub fn mask_counts(&self) -> [usize; 256] {
+        let mut counts = [0; 256];
+        for &m in &self.mask {
+            counts[m as usize] += 1;
+        }
+        counts
+    }
 }
 
 /// Draws perspective frames of one camera; keeps the static part (ground
@@ -234,8 +222,8 @@ impl PerspectiveRenderer {
         world: &World3d,
         camera: &Pinhole,
         look: &SceneLook,
-        heads: &[HeadSolid],
-        cars: &[CarSolid],
+        heads: &[HeadSprite],
+        cars: &[CarSprite],
         hidden: Option<u8>,
         frame: &mut PerspectiveFrame,
     ) {
@@ -296,7 +284,7 @@ impl PerspectiveRenderer {
             draw_solid(camera, ray_length, &Solid { colour: look.veil(lamp.colour), ..lamp }, frame);
         }
         for car in cars.iter().filter(|c| Some(c.mask_id) != hidden) {
-            for solid in car.solids() {
+            for solid in car_solids(car) {
                 draw_solid(camera, ray_length, &shaded(&solid, look), frame);
             }
         }
@@ -338,7 +326,7 @@ pub fn empty_frame(camera: &Pinhole) -> PerspectiveFrame {
 }
 
 /// A light pole and its head, lit in `colour`.
-fn head_solids(head: &HeadSolid) -> [Solid; 2] {
+fn head_solids(head: &HeadSprite) -> [Solid; 2] {
     let lamp = match head.colour {
         Colour::Green => [40, 220, 90],
         Colour::Yellow => [250, 200, 40],
