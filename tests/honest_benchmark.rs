@@ -133,16 +133,15 @@ fn the_first_frame_no_longer_finds_the_links_and_the_dynamics_still_rank_them() 
         let group = z["group"].as_str().unwrap();
         assert_eq!(d["group"], z["group"]);
         let f1 = z["f1"].as_f64().unwrap();
-        // Before: 0.998-1.000 on every group; now 0.30-0.49 on 200 test
-        // scenarios. With 3 pairs and 2 other cars among 8, at most 4 cars
-        // can start behind a car they do not follow, so "right behind means
-        // linked" keeps a precision near 3/7 and an F1 near 0.6 there
-        // (measured 0.59).
-        let most = if group == "cars08_edges80" { 0.66 } else { 0.55 };
-        assert!(f1 <= most, "{group}: frame0 F1 {f1:.3}");
-        // 0.81-0.94 on 200 test scenarios; fewer here, so some slack.
+        // Before leak-free starts: 0.998-1.000 on every group. The rule
+        // finds every pair that starts in one lane; on the default layout's
+        // 16 m lanes between intersections it still reached 0.59 with 8
+        // cars and 3 pairs; with the preset's 36 m east-west blocks
+        // 0.20-0.47, here and on 200 test scenarios.
+        assert!(f1 <= 0.5, "{group}: frame0 F1 {f1:.3}");
+        // 0.87-0.94 here, 0.85-0.93 on 200 test scenarios.
         let auroc = d["auroc"].as_f64().unwrap();
-        assert!(auroc >= 0.75, "{group}: dynamics AUROC {auroc:.3}");
+        assert!(auroc >= 0.8, "{group}: dynamics AUROC {auroc:.3}");
     }
 }
 
