@@ -306,17 +306,9 @@ impl FrameWriter<'_, '_> {
             let visible = target.mask_counts();
             for (car, state) in plan.cars.iter().zip(states) {
                 let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
-                poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
                 let pixel = camera.to_pixel(centre);
-                if let Some(p) = pixel {
-                    push_fixed(&mut poses, p.x, PIXEL_DECIMALS);
-                    poses.push(b',');
-                    push_fixed(&mut poses, p.y, PIXEL_DECIMALS);
-                } else {
-                    poses.push(b',');
-                }
                 let in_view = pixel.is_some_and(|p| camera.contains_pixel(p));
-                poses.extend_from_slice(format!(",{},{}\n", in_view as u8, visible[car.mask_id as usize]).as_bytes());
+                push_camera_pose(&mut poses, frame, car.id, pixel, in_view, Some(visible[car.mask_id as usize]));
             }
         }
         bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;
@@ -385,14 +377,38 @@ impl FrameWriter<'_, '_> {
             }
             for (car, state) in plan.cars.iter().zip(states) {
                 let pixel = camera.to_pixel(state.position);
-                poses.extend_from_slice(format!("{frame},{},", car.id).as_bytes());
-                push_fixed(&mut poses, pixel.x, PIXEL_DECIMALS);
-                poses.push(b',');
-                push_fixed(&mut poses, pixel.y, PIXEL_DECIMALS);
-                poses.extend_from_slice(format!(",{}\n", camera.contains_pixel(pixel) as u8).as_bytes());
+                push_camera_pose(&mut poses, frame, car.id, Some(pixel), camera.contains_pixel(pixel), None);
             }
         }
         bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;
         Ok(bytes)
     }
+}
+
+/// One row of an extra camera's poses.csv: frame, car, px, py (both empty
+/// for a car behind a perspective camera), in_view, and visible_px where the
+/// camera counts it.
+fn push_camera_pose(
+    out: &mut Vec<u8>,
+    frame: u32,
+    car: u32,
+    pixel: Option<DVec2>,
+    in_view: bool,
+    visible_px: Option<usize>,
+) {
+    use std::io::Write;
+    // Writing into a Vec cannot fail.
+    let _ = write!(out, "{frame},{car},");
+    if let Some(p) = pixel {
+        push_fixed(out, p.x, PIXEL_DECIMALS);
+        out.push(b',');
+        push_fixed(out, p.y, PIXEL_DECIMALS);
+    } else {
+        out.push(b',');
+    }
+    let _ = write!(out, ",{}", in_view as u8);
+    if let Some(n) = visible_px {
+        let _ = write!(out, ",{n}");
+    }
+    out.push(b'\n');
 }
