@@ -70,6 +70,7 @@ fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOpti
         threads: Some(threads),
         images,
         annotations: false,
+        effects: false,
         progress: ProgressMode::Quiet,
         shard: None,
         force: false,

@@ -334,6 +334,12 @@ pub struct GenArgs {
     #[arg(long, conflicts_with = "no_images")]
     pub annotations: bool,
 
+    /// Skip the interventional ground truth (effects.csv, `causal_edges` and
+    /// `direct_edges` in scenario.json): only the designed graph, and no
+    /// re-runs (each scenario is otherwise simulated again twice per car).
+    #[arg(long)]
+    pub no_effects: bool,
+
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
     /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.
     #[arg(long, value_name = "K/N")]
@@ -535,6 +541,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 threads: args.threads.map(|t| t as usize),
                 images: !args.no_images,
                 annotations: args.annotations,
+                effects: !args.no_effects,
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -609,7 +616,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     out: args.out,
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
-                    products: Products { images, annotations: false },
+                    products: Products { images, annotations: false, effects: false },
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };

@@ -1,5 +1,5 @@
 //! Where a run's time goes: seconds per stage (plan, simulate, render,
-//! encode, write, checksum), summed over every worker thread.
+//! encode, write, checksum, effects), summed over every worker thread.
 
 use serde::Serialize;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -20,9 +20,11 @@ pub enum Stage {
     Write,
     /// SHA-256 of every file written.
     Checksum,
+    /// The interventional re-runs behind `effects.csv`.
+    Effects,
 }
 
-const STAGES: usize = 6;
+const STAGES: usize = 7;
 
 /// Nanoseconds per stage, added to from any thread.
 #[derive(Debug, Default)]
@@ -54,6 +56,7 @@ impl StageTimes {
             encode: s(Stage::Encode),
             write: s(Stage::Write),
             checksum: s(Stage::Checksum),
+            effects: s(Stage::Effects),
         }
     }
 }
@@ -68,11 +71,12 @@ pub struct StageSeconds {
     pub encode: f64,
     pub write: f64,
     pub checksum: f64,
+    pub effects: f64,
 }
 
 impl StageSeconds {
     /// All stages together.
     pub fn total(&self) -> f64 {
-        self.plan + self.simulate + self.render + self.encode + self.write + self.checksum
+        self.plan + self.simulate + self.render + self.encode + self.write + self.checksum + self.effects
     }
 }

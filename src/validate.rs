@@ -6,13 +6,14 @@
 
 use crate::dataset::Dataset;
 use crate::output::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
+    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
-use crate::output::logs::{EVENT_COLUMNS, LIGHT_COLUMNS};
+use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
 use crate::spec::{DatasetSpec, Split, WorldKind};
+use crate::world::effects::{EffectReport, InterventionKind};
 use rayon::prelude::*;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -73,8 +74,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let (record, keys) = (&dataset.record, &dataset.keys);
     let spec = dataset.spec();
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
-    let layout =
-        ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.images, record.annotations, cameras);
+    let layout = ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.products(), cameras);
     let expected = Expected { spec, layout };
 
     let mut problems = Vec::new();
@@ -220,10 +220,12 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     // scenario.json: identity, frames and cars.
     let mut mask_ids: BTreeSet<u8> = BTreeSet::new();
     let mut cars = 0usize;
+    let mut record = serde_json::Value::Null;
     if let Some(data) = read(SCENARIO_JSON, &mut problems) {
         let path = dir.join(SCENARIO_JSON);
         match serde_json::from_slice::<serde_json::Value>(&data) {
             Ok(v) => {
+                record = v.clone();
                 let checks = [
                     (v["format"] == crate::output::scenario::SCENARIO_FORMAT, "format"),
                     (v["group"] == key.group.as_str(), "group"),
@@ -311,6 +313,14 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
 
+    if layout.effects {
+        if let Some(data) = read(EFFECTS_CSV, &mut problems) {
+            if let Err(message) = check_effects(&dir, &data, &record, cars, frames) {
+                problems.push(Problem { path: dir.join(EFFECTS_CSV), message });
+            }
+        }
+    }
+
     if layout.annotations {
         let name = crate::output::annotations::ANNOTATIONS_FILE;
         if let Some(data) = read(name, &mut problems) {
@@ -355,6 +365,58 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
         }
     }
     (problems, files, bytes)
+}
+
+/// effects.csv parses (every field checked), has one row per cause, other
+/// car and intervention (every car removed; its next action changed where it
+/// has one), and scenario.json's graphs are the ones its rows give.
+fn check_effects(
+    dir: &Path,
+    data: &[u8],
+    record: &serde_json::Value,
+    cars: usize,
+    frames: usize,
+) -> Result<(), String> {
+    let json = dir.join(SCENARIO_JSON);
+    let threshold = record["effect_threshold_m"]
+        .as_f64()
+        .ok_or_else(|| format!("{} has no effect_threshold_m to check effects.csv against", json.display()))?;
+    let rows = parse_effects(&dir.join(EFFECTS_CSV), data, cars, frames, threshold)?;
+    let mut seen = BTreeSet::new();
+    for r in &rows {
+        if !seen.insert((r.cause, r.intervention, r.effect)) {
+            return Err(format!("two rows for cause {}, effect {}, {}", r.cause, r.effect, r.intervention.name()));
+        }
+    }
+    for (cause, kind) in seen.iter().map(|&(c, k, _)| (c, k)).collect::<BTreeSet<_>>() {
+        let n = seen.iter().filter(|&&(c, k, _)| (c, k) == (cause, kind)).count();
+        if n + 1 != cars {
+            return Err(format!("cause {cause}, {}: {n} rows, expected one per other car ({})", kind.name(), cars - 1));
+        }
+    }
+    let removed = seen.iter().filter(|&&(_, k, _)| k == InterventionKind::Remove).count();
+    if removed != cars * cars.saturating_sub(1) {
+        return Err(format!("{removed} removal rows, expected {} (every car removed in turn)", cars * (cars - 1)));
+    }
+    let report = EffectReport { threshold_m: threshold, rows };
+    let edges = |field: &str| -> Option<Vec<(u32, u32)>> {
+        record[field].as_array()?.iter().map(|e| Some((e[0].as_u64()? as u32, e[1].as_u64()? as u32))).collect()
+    };
+    let causal = report.causal_edges();
+    let designed = edges("edges").unwrap_or_default();
+    let without: Vec<(u32, u32)> = designed.iter().filter(|e| !causal.contains(e)).copied().collect();
+    for (field, expected) in
+        [("causal_edges", causal.clone()), ("direct_edges", report.direct_edges()), ("edges_without_effect", without)]
+    {
+        match edges(field) {
+            Some(found) if found == expected => {}
+            Some(found) => {
+                return Err(format!("{} `{field}` is {found:?}; effects.csv's rows give {expected:?}", json.display()))
+            }
+            None => return Err(format!("{} has no list of pairs `{field}`", json.display())),
+        }
+    }
+    Ok(())
 }
 
 /// pixels.npy holds poses.csv's px, py as float32, frame by frame.

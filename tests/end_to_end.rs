@@ -38,14 +38,14 @@ fn the_layout_matches_data_schema() {
             sorted_entries(d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
         assert_eq!(
             names,
-            ["checksums.sha256", "mask", "pixels.npy", "poses.csv", "rgb", "scenario.json"],
+            ["checksums.sha256", "effects.csv", "mask", "pixels.npy", "poses.csv", "rgb", "scenario.json"],
             "{}",
             d.display()
         );
         // sha256sum -c format, covering every other file.
         let listing = std::fs::read_to_string(d.join("checksums.sha256")).unwrap();
         let frames_here = sorted_entries(&d.join("rgb")).len();
-        assert_eq!(listing.lines().count(), 3 + 2 * frames_here);
+        assert_eq!(listing.lines().count(), 4 + 2 * frames_here);
         for line in listing.lines() {
             let (hash, name) = line.split_once("  ").unwrap();
             let digest = sha2::Sha256::digest(std::fs::read(d.join(name)).unwrap());
@@ -103,7 +103,7 @@ fn no_images_writes_poses_and_ground_truth_only() {
     for d in scenario_dirs(&out) {
         let names: Vec<String> =
             sorted_entries(&d).iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
-        assert_eq!(names, ["checksums.sha256", "pixels.npy", "poses.csv", "scenario.json"]);
+        assert_eq!(names, ["checksums.sha256", "effects.csv", "pixels.npy", "poses.csv", "scenario.json"]);
     }
 }
 
@@ -151,16 +151,18 @@ fn the_city_layout_matches_data_schema_and_validates() {
         assert!(scenario["city"]["effects"]["desired_speed_factor"].is_number());
         let cars = scenario["cars"].as_array().unwrap().len();
         for (file, schema, rows_per_frame) in [
-            ("lights.csv", "lights.schema.json", Some(32)),
+            ("lights.csv", "lights.schema.json", Some(20 * 32)),
             ("events.csv", "events.schema.json", None),
-            ("interactions.csv", "interactions.schema.json", Some(cars)),
+            ("interactions.csv", "interactions.schema.json", Some(20 * cars)),
+            // Every car removed and its next action changed, each compared with every other car.
+            ("effects.csv", "effects.schema.json", Some(2 * cars * (cars - 1))),
         ] {
             let mut reader = csv::Reader::from_path(d.join(file)).unwrap();
             let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
             assert_eq!(header, columns(schema), "{file} columns");
             let rows = reader.records().count();
             if let Some(n) = rows_per_frame {
-                assert_eq!(rows, 20 * n);
+                assert_eq!(rows, n, "{file} rows");
             }
         }
     }

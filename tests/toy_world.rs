@@ -79,3 +79,41 @@ fn poses_are_physical_and_in_range() {
         }
     }
 }
+
+/// The toy's follower follows: with its leader's next action changed, it
+/// still trails the leader by exactly the gap along the leader's new path
+/// (and leaves its old one); with its leader removed it stands still.
+#[test]
+fn a_toy_follower_follows_its_leader_under_interventions() {
+    use causalcity::plan::Expansion;
+    use causalcity::world::effects::{intervened, InterventionKind};
+    let spec = causalcity::spec::DatasetSpec::from_json(&toy_spec("follows", &[(8, 0.5)], (16, 2, 2), 150)).unwrap();
+    let expansion = Expansion::from_spec(spec).unwrap();
+    let map = &expansion.map;
+    let lag = 15;
+    let (mut diverted, mut pairs) = (0, 0);
+    for key in expansion.keys(None) {
+        let plan = expansion.plan(&key).unwrap();
+        let factual = causalcity::world::simulate(map, &plan);
+        for &(leader, follower) in &plan.edges {
+            let (l, f) = (leader as usize, follower as usize);
+            pairs += 1;
+            let changed = intervened(map, &plan, l, InterventionKind::NextAction).expect("toy cars have actions");
+            let rerun = causalcity::world::simulate(map, &changed);
+            for t in lag..rerun.frames() {
+                let gap = rerun.states[t][f].position.distance(rerun.states[t - lag][l].position);
+                assert!(gap < 1e-6, "{key:?}: follower {f} is {gap} m off its leader's path at frame {t}");
+            }
+            let moved =
+                (0..rerun.frames()).any(|t| rerun.states[t][f].position.distance(factual.states[t][f].position) > 0.5);
+            diverted += moved as usize;
+            let removed =
+                causalcity::world::simulate(map, &intervened(map, &plan, l, InterventionKind::Remove).unwrap());
+            let start = factual.states[0][f].position;
+            assert!(removed.states.iter().all(|frame| frame[f].position == start && frame[f].speed == 0.0));
+        }
+    }
+    assert!(pairs >= 30, "{pairs} pairs");
+    // Most leaders reach their next turn in time for the follower to take it too.
+    assert!(diverted * 2 > pairs, "only {diverted} of {pairs} followers took the changed turn");
+}

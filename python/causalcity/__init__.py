@@ -37,6 +37,7 @@ __all__ = [
     "Scenario",
     "Lights",
     "Interactions",
+    "Effects",
     "Event",
     "Counterfactual",
     "Stream",
@@ -218,6 +219,44 @@ class Interactions:
 
 
 @dataclass(frozen=True)
+class Effects:
+    """``effects.csv`` as arrays: one row per cause, intervention and other
+    car, in the file's order. Every car was intervened on in turn from time
+    0 (``remove``: taken off the map; ``next_action``: its first action
+    changed) and every other car compared with its factual trajectory."""
+
+    interventions: List[str]
+    """``["remove", "next_action"]``."""
+    cause: np.ndarray
+    """``[rows]`` uint32: the car intervened on."""
+    effect: np.ndarray
+    """``[rows]`` uint32: the car compared."""
+    intervention: np.ndarray
+    """``[rows]`` uint8: index into :attr:`interventions`."""
+    max_divergence_m: np.ndarray
+    """``[rows]`` float64: largest distance from the factual position, metres."""
+    first_frame: np.ndarray
+    """``[rows]`` int32: first frame beyond the threshold, -1 for no effect."""
+    direct: np.ndarray
+    """``[rows]`` bool: the effect car reacted to the cause itself."""
+
+    def graph(self, cars: int, direct: bool = False, intervention: Optional[str] = None) -> np.ndarray:
+        """``[cars, cars]`` uint8: ``[i, j] = 1`` when intervening on car i
+        moved car j beyond the threshold (only direct effects with
+        ``direct=True``; only one kind of intervention when named)."""
+        keep = self.first_frame >= 0
+        if direct:
+            keep &= self.direct
+        if intervention is not None:
+            if intervention not in self.interventions:
+                raise InputError(f"intervention {intervention!r} is not one of {', '.join(self.interventions)}")
+            keep &= self.intervention == self.interventions.index(intervention)
+        graph = np.zeros((cars, cars), dtype=np.uint8)
+        graph[self.cause[keep], self.effect[keep]] = 1
+        return graph
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One simulated scenario. Car axes follow the car ids (0-based); the
     values are those of the files ``gen`` writes for the same key."""
@@ -248,6 +287,9 @@ class Scenario:
     (the causal graph, cause to effect)."""
     edges: List[Tuple[int, int]]
     """(leader, follower) pairs, as ``scenario.json``'s ``edges``."""
+    effects: Optional[Effects]
+    """The interventional ground truth (``effects.csv``); None with
+    ``effects=False``."""
     lights: Optional[Lights]
     interactions: Optional[Interactions]
     events: List[Event]
@@ -256,6 +298,19 @@ class Scenario:
     mask: Optional[np.ndarray]
     """With ``images=True``: ``[frames, height, width]`` uint8, 0 for no
     car, else the car's id + 1."""
+
+    @property
+    def causal_graph(self) -> Optional[np.ndarray]:
+        """``[cars, cars]`` uint8: ``[i, j] = 1`` when intervening on car i
+        moves car j (``scenario.json``'s ``causal_edges``); None without
+        effects."""
+        return None if self.effects is None else self.effects.graph(self.cars)
+
+    @property
+    def direct_graph(self) -> Optional[np.ndarray]:
+        """``[cars, cars]`` uint8: the causal graph's direct effects
+        (``direct_edges``); None without effects."""
+        return None if self.effects is None else self.effects.graph(self.cars, direct=True)
 
     @property
     def yaw(self) -> np.ndarray:
@@ -274,6 +329,7 @@ class Scenario:
 def _scenario(raw: Dict[str, Any], key: Optional[Key]) -> Scenario:
     lights = raw.get("lights")
     interactions = raw.get("interactions")
+    effects = raw.get("effects")
     return Scenario(
         key=key,
         metadata=json.loads(raw["scenario_json"]),
@@ -287,6 +343,17 @@ def _scenario(raw: Dict[str, Any], key: Optional[Key]) -> Scenario:
         in_view=np.asarray(raw["in_view"]).view(np.bool_),
         graph=np.asarray(raw["graph"]),
         edges=raw["edges"],
+        effects=None
+        if effects is None
+        else Effects(
+            interventions=effects["interventions"],
+            cause=np.asarray(effects["cause"]),
+            effect=np.asarray(effects["effect"]),
+            intervention=np.asarray(effects["intervention"]),
+            max_divergence_m=np.asarray(effects["max_divergence_m"]),
+            first_frame=np.asarray(effects["first_frame"]),
+            direct=np.asarray(effects["direct"]).view(np.bool_),
+        ),
         lights=None
         if lights is None
         else Lights(
@@ -316,15 +383,18 @@ def simulate(
     split: str,
     index: int,
     images: bool = False,
+    effects: bool = True,
 ) -> Scenario:
     """Plans and simulates scenario ``index`` of ``group`` in ``split``; with
-    ``images=True``, also renders its bird's-eye frames and masks.
+    ``images=True``, also renders its bird's-eye frames and masks; with
+    ``effects=True`` (as ``gen``), measures its interventional effects
+    (:attr:`Scenario.effects`, re-simulating it twice per car).
 
     ``spec`` is a :class:`Spec`, a spec file's path or a dict. Raises
     :class:`InputError` for a group, split or index the spec does not have.
     """
     spec = _as_spec(spec)
-    raw = _native.simulate(spec._native, group, split, index, images)
+    raw = _native.simulate(spec._native, group, split, index, images, effects)
     return _scenario(raw, Key(group, split, index))
 
 
@@ -367,6 +437,7 @@ class Stream:
         groups: Optional[Sequence[str]] = None,
         limit: Optional[int] = None,
         images: bool = False,
+        effects: bool = True,
         shard: Optional[Tuple[int, int]] = None,
         threads: Optional[int] = None,
         ahead: Optional[int] = None,
@@ -374,6 +445,7 @@ class Stream:
         self.spec = spec
         self.split = split
         self.images = images
+        self.effects = effects
         self.threads = threads
         self.ahead = ahead
         self.shard = _process_shard(shard)
@@ -408,7 +480,9 @@ class Stream:
         # Inside a DataLoader worker each worker is one process: one thread each.
         threads = self.threads if self.threads is not None else (1 if workers > 1 else None)
         keys = self.keys((worker_id, workers))
-        scenarios = _native.Prefetch(self.spec._native, [tuple(k) for k in keys], self.images, threads, self.ahead)
+        scenarios = _native.Prefetch(
+            self.spec._native, [tuple(k) for k in keys], self.images, self.effects, threads, self.ahead
+        )
         for key, raw in zip(keys, scenarios):
             yield _scenario(raw, key)
 
@@ -420,6 +494,7 @@ def stream(
     groups: Optional[Sequence[str]] = None,
     limit: Optional[int] = None,
     images: bool = False,
+    effects: bool = True,
     shard: Optional[Tuple[int, int]] = None,
     threads: Optional[int] = None,
     ahead: Optional[int] = None,
@@ -442,10 +517,12 @@ def stream(
     ``ahead`` scenarios (default: threads + 1) wait or are under way, which
     bounds the memory with ``images=True`` (a 150-frame 1024 x 640 scenario
     holds 393 MB of frames). The order is the keys' order whatever the
-    thread count.
+    thread count. ``effects=False`` skips the interventional ground truth
+    (``Scenario.effects``), which re-simulates each scenario twice per car:
+    poses-only streams run several times faster without it.
     """
     spec = _as_spec(spec)
-    args = (spec, split, groups, limit, images, shard, threads, ahead)
+    args = (spec, split, groups, limit, images, effects, shard, threads, ahead)
     if "torch" in sys.modules:
         return _torch_stream_class()(*args)
     return Stream(*args)
@@ -556,6 +633,7 @@ def generate(
     threads: Optional[int] = None,
     images: bool = True,
     annotations: bool = False,
+    effects: bool = True,
     shard: Union[str, Tuple[int, int], None] = None,
     force: bool = False,
     fsync: bool = False,
@@ -564,7 +642,8 @@ def generate(
     """``causalcity gen`` from Python: writes the dataset to ``out`` (default
     ``data/<spec name>``), resuming an interrupted run, and returns the
     run's summary (as ``gen --json`` prints it). The keywords are ``gen``'s
-    flags: ``images=False`` is ``--no-images``, ``shard=(k, n)`` or ``"k/n"``
+    flags: ``images=False`` is ``--no-images``, ``effects=False`` is
+    ``--no-effects``, ``shard=(k, n)`` or ``"k/n"``
     is ``--shard k/n``, ``progress=False`` is ``--quiet``.
     """
     spec = _as_spec(spec)
@@ -577,6 +656,7 @@ def generate(
         threads,
         images,
         annotations,
+        effects,
         shard,
         force,
         fsync,

@@ -41,13 +41,16 @@ class Spec:
     def path(self) -> Optional[str]: ...
     def keys(self, split: Optional[str] = None, limit: Optional[int] = None) -> List[Tuple[str, str, int]]: ...
 
-def simulate(spec: Spec, group: str, split: str, index: int, images: bool = False) -> Dict[str, Any]: ...
+def simulate(
+    spec: Spec, group: str, split: str, index: int, images: bool = False, effects: bool = True
+) -> Dict[str, Any]: ...
 class Prefetch:
     def __init__(
         self,
         spec: Spec,
         keys: List[Tuple[str, str, int]],
         images: bool = False,
+        effects: bool = True,
         threads: Optional[int] = None,
         ahead: Optional[int] = None,
     ) -> None: ...
@@ -68,6 +71,7 @@ def generate(
     threads: Optional[int] = None,
     images: bool = True,
     annotations: bool = False,
+    effects: bool = True,
     shard: Optional[str] = None,
     force: bool = False,
     fsync: bool = False,

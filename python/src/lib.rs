@@ -15,6 +15,7 @@ use causalcity::output::arrays::{recycle_frame_buffer, ScenarioArrays, LIGHT_COL
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::DatasetSpec;
+use causalcity::world::effects::{EffectRow, InterventionKind};
 use causalcity::world::BoundBy;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -48,6 +49,7 @@ fn py_err(e: impl Into<Error>) -> PyErr {
 enum Data {
     U8(Vec<u8>),
     I16(Vec<i16>),
+    I32(Vec<i32>),
     U32(Vec<u32>),
     F64(Vec<f64>),
 }
@@ -58,6 +60,7 @@ impl Data {
         match self {
             Data::U8(v) => (v.as_mut_ptr() as usize, "|u1", v.len()),
             Data::I16(v) => (v.as_mut_ptr() as usize, "<i2", v.len()),
+            Data::I32(v) => (v.as_mut_ptr() as usize, "<i4", v.len()),
             Data::U32(v) => (v.as_mut_ptr() as usize, "<u4", v.len()),
             Data::F64(v) => (v.as_mut_ptr() as usize, "<f8", v.len()),
         }
@@ -226,7 +229,7 @@ fn key_of(spec: &Spec, (group, split, index): (String, String, u32)) -> PyResult
 
 /// One scenario of `spec` as a dict of arrays (see `causalcity.Scenario`).
 #[pyfunction]
-#[pyo3(signature = (spec, group, split, index, images=false))]
+#[pyo3(signature = (spec, group, split, index, images=false, effects=true))]
 fn simulate<'py>(
     py: Python<'py>,
     spec: &Spec,
@@ -234,10 +237,11 @@ fn simulate<'py>(
     split: String,
     index: u32,
     images: bool,
+    effects: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let key = key_of(spec, (group, split, index))?;
     let generator = spec.generator.clone();
-    let arrays = py.detach(|| generator.scenario(&key, images)).map_err(py_err)?;
+    let arrays = py.detach(|| generator.scenario(&key, images, effects)).map_err(py_err)?;
     scenario_dict(py, arrays)
 }
 
@@ -251,11 +255,12 @@ struct Prefetch {
 #[pymethods]
 impl Prefetch {
     #[new]
-    #[pyo3(signature = (spec, keys, images=false, threads=None, ahead=None))]
+    #[pyo3(signature = (spec, keys, images=false, effects=true, threads=None, ahead=None))]
     fn new(
         spec: &Spec,
         keys: Vec<(String, String, u32)>,
         images: bool,
+        effects: bool,
         threads: Option<usize>,
         ahead: Option<usize>,
     ) -> PyResult<Prefetch> {
@@ -264,7 +269,7 @@ impl Prefetch {
             .filter(|&t| t > 0)
             .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
         let ahead = ahead.unwrap_or(threads + 1);
-        Ok(Prefetch { inner: Prefetch_::start(spec.generator.clone(), keys, images, threads, ahead) })
+        Ok(Prefetch { inner: Prefetch_::start(spec.generator.clone(), keys, images, effects, threads, ahead) })
     }
 
     fn __iter__(slf: Bound<'_, Self>) -> Bound<'_, Self> {
@@ -307,7 +312,7 @@ fn counterfactual<'py>(
 
 /// `causalcity gen` from Python: the run's summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, shard=None, force=false, fsync=false, progress=true))]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true))]
 #[allow(clippy::too_many_arguments)]
 fn generate(
     py: Python<'_>,
@@ -317,6 +322,7 @@ fn generate(
     threads: Option<usize>,
     images: bool,
     annotations: bool,
+    effects: bool,
     shard: Option<String>,
     force: bool,
     fsync: bool,
@@ -331,6 +337,7 @@ fn generate(
         threads,
         images,
         annotations,
+        effects,
         progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
         shard,
         force,
@@ -361,6 +368,21 @@ fn scenario_dict(py: Python<'_>, a: ScenarioArrays) -> PyResult<Bound<'_, PyDict
     d.set_item("in_view", array(py, Data::U8(a.in_view), &[t, c])?)?;
     d.set_item("graph", array(py, Data::U8(a.graph), &[c, c])?)?;
     d.set_item("edges", a.edges.iter().map(|e| (e[0], e[1])).collect::<Vec<_>>())?;
+    if let Some(rows) = a.effects {
+        let n = rows.len();
+        let ed = PyDict::new(py);
+        ed.set_item("interventions", InterventionKind::ALL.map(|k| k.name()).to_vec())?;
+        ed.set_item("cause", array(py, Data::U32(rows.iter().map(|r| r.cause).collect()), &[n])?)?;
+        ed.set_item("effect", array(py, Data::U32(rows.iter().map(|r| r.effect).collect()), &[n])?)?;
+        let kind = |r: &EffectRow| InterventionKind::ALL.iter().position(|&k| k == r.intervention).unwrap_or(0) as u8;
+        ed.set_item("intervention", array(py, Data::U8(rows.iter().map(kind).collect()), &[n])?)?;
+        let divergence = rows.iter().map(|r| r.max_divergence_m).collect();
+        ed.set_item("max_divergence_m", array(py, Data::F64(divergence), &[n])?)?;
+        let first = rows.iter().map(|r| r.first_frame.map_or(-1, |f| f.min(i32::MAX as u32) as i32)).collect();
+        ed.set_item("first_frame", array(py, Data::I32(first), &[n])?)?;
+        ed.set_item("direct", array(py, Data::U8(rows.iter().map(|r| r.direct as u8).collect()), &[n])?)?;
+        d.set_item("effects", ed)?;
+    }
     if let Some(lights) = a.lights {
         let l = lights.names.len();
         let ld = PyDict::new(py);

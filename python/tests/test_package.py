@@ -89,6 +89,27 @@ def assert_poses_match(scenario, folder):
         expected_graph[leader, follower] = 1
     np.testing.assert_array_equal(scenario.graph, expected_graph)
     assert scenario.edges == [tuple(e) for e in metadata["edges"]]
+    if (folder / "effects.csv").exists():
+        assert_effects_match(scenario, folder, metadata)
+
+
+def assert_effects_match(scenario, folder, metadata):
+    """effects.csv and scenario.json's causal graphs against Scenario.effects."""
+    effects = read_csv(folder / "effects.csv")
+    e = scenario.effects
+    assert len(e.cause) == len(effects["cause"]) > 0
+    np.testing.assert_array_equal(e.cause, number(effects["cause"]))
+    np.testing.assert_array_equal(e.effect, number(effects["effect"]))
+    assert [e.interventions[k] for k in e.intervention] == list(effects["intervention"])
+    np.testing.assert_array_equal(e.max_divergence_m, number(effects["max_divergence_m"]))
+    first = number(effects["first_frame"])
+    np.testing.assert_array_equal(e.first_frame, np.where(np.isnan(first), -1, first))
+    np.testing.assert_array_equal(e.direct, number(effects["direct"]) == 1)
+    for graph, field in ((scenario.causal_graph, "causal_edges"), (scenario.direct_graph, "direct_edges")):
+        expected = np.zeros((scenario.cars, scenario.cars), dtype=np.uint8)
+        for cause, effect in metadata[field]:
+            expected[cause, effect] = 1
+        np.testing.assert_array_equal(graph, expected, err_msg=field)
 
 
 def assert_city_logs_match(scenario, folder):
@@ -165,7 +186,15 @@ def test_toy_scenarios_equal_what_gen_writes():
     for key in keys:
         scenario = causalcity.simulate(spec, key.group, key.split, key.index)
         assert scenario.rgb is None and scenario.lights is None and scenario.interactions is None
+        assert (DATA / "toy" / key.folder / "effects.csv").exists()
         assert_poses_match(scenario, DATA / "toy" / key.folder)
+        # Toy: only followers react, each to its leader.
+        np.testing.assert_array_equal(scenario.causal_graph, scenario.graph)
+    # Without effects: the same scenario, no graph by intervention.
+    bare = causalcity.simulate(spec, *keys[0], effects=False)
+    assert bare.effects is None and bare.causal_graph is None
+    assert "causal_edges" not in bare.metadata
+    np.testing.assert_array_equal(bare.position, causalcity.simulate(spec, *keys[0]).position)
     key = keys[-1]
     assert_frames_match(causalcity.simulate(spec, *key, images=True), DATA / "toy" / key.folder)
 

@@ -9,7 +9,10 @@
 //! city traffic-flow figures (`flow.rs`): median headway and time gap while
 //! following, queue discharge at green, and speed on free road; and how far
 //! the causal graph is what happened (`interactions.csv`): how often true
-//! leader-follower pairs actually interact, and how often non-edge pairs do.
+//! leader-follower pairs actually interact, and how often non-edge pairs do;
+//! and how far the designed graph is the causal one (`effects.csv`'s graphs
+//! in scenario.json): designed edges backed by an interventional effect, and
+//! effects no design explains.
 
 use super::flow::{median, read_scenario_flow, FlowSamples};
 use crate::dataset::Dataset;
@@ -67,6 +70,56 @@ pub struct SplitStats {
     pub edge_pairs: PairInteraction,
     /// City: every other pair of cars, in the same sense.
     pub non_edge_pairs: PairInteraction,
+    /// Designed against interventional edges; absent without effects.
+    pub causal: Option<CausalTally>,
+}
+
+/// Designed leader-follower edges against the interventional ground truth
+/// (scenario.json's `causal_edges` and `direct_edges`), summed over scenarios.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct CausalTally {
+    pub designed_edges: usize,
+    /// Designed edges that some intervention on the leader backs.
+    pub designed_with_effect: usize,
+    pub causal_edges: usize,
+    pub direct_edges: usize,
+    /// Causal edges that are not designed edges.
+    pub causal_not_designed: usize,
+}
+
+impl CausalTally {
+    fn merge(&mut self, other: &CausalTally) {
+        self.designed_edges += other.designed_edges;
+        self.designed_with_effect += other.designed_with_effect;
+        self.causal_edges += other.causal_edges;
+        self.direct_edges += other.direct_edges;
+        self.causal_not_designed += other.causal_not_designed;
+    }
+
+    /// Share of designed edges backed by an effect.
+    pub fn backed_share(&self) -> Option<f64> {
+        (self.designed_edges > 0).then(|| self.designed_with_effect as f64 / self.designed_edges as f64)
+    }
+
+    /// Share of causal edges that no designed edge explains.
+    pub fn unexplained_share(&self) -> Option<f64> {
+        (self.causal_edges > 0).then(|| self.causal_not_designed as f64 / self.causal_edges as f64)
+    }
+
+    /// The tally of one scenario.json (`None` without effects).
+    pub fn of_scenario(scenario: &serde_json::Value) -> Option<CausalTally> {
+        let pairs = |field: &str| -> Option<Vec<(u64, u64)>> {
+            scenario[field].as_array()?.iter().map(|e| Some((e[0].as_u64()?, e[1].as_u64()?))).collect()
+        };
+        let (designed, causal, direct) = (pairs("edges")?, pairs("causal_edges")?, pairs("direct_edges")?);
+        Some(CausalTally {
+            designed_edges: designed.len(),
+            designed_with_effect: designed.iter().filter(|e| causal.contains(e)).count(),
+            causal_edges: causal.len(),
+            direct_edges: direct.len(),
+            causal_not_designed: causal.iter().filter(|e| !designed.contains(e)).count(),
+        })
+    }
 }
 
 /// How often a set of car pairs actually interacts (city world).
@@ -119,7 +172,7 @@ impl fmt::Display for DatasetStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
+            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>6} {:>6} {:>6}",
             "group",
             "split",
             "scen",
@@ -143,14 +196,17 @@ impl fmt::Display for DatasetStats {
             "e-int",
             "e-mst",
             "n-int",
-            "n-mst"
+            "n-mst",
+            "backed",
+            "c/scen",
+            "unexpl"
         )?;
         let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
         let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
         for r in &self.rows {
             writeln!(
                 f,
-                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5}",
+                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>6} {:>6} {:>6}",
                 r.group,
                 r.split,
                 r.scenarios,
@@ -174,10 +230,13 @@ impl fmt::Display for DatasetStats {
                 pct(r.edge_pairs.frame_share),
                 pct(r.edge_pairs.mostly_share),
                 pct(r.non_edge_pairs.frame_share),
-                pct(r.non_edge_pairs.mostly_share)
+                pct(r.non_edge_pairs.mostly_share),
+                pct(r.causal.and_then(|c| c.backed_share())),
+                opt(r.causal.map(|c| c.causal_edges as f64 / r.scenarios.max(1) as f64), 2),
+                pct(r.causal.and_then(|c| c.unexplained_share()))
             )?;
         }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road; pairs interacting (interactions.csv: one car's speed bound by the other, as car ahead, conflict or collision), e-: leader-follower pairs, n-: all other pairs, int: share of pair-frames, mst: share of pairs interacting in at least {:.0}% of frames", 100.0 * MOSTLY)
+        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road; pairs interacting (interactions.csv: one car's speed bound by the other, as car ahead, conflict or collision), e-: leader-follower pairs, n-: all other pairs, int: share of pair-frames, mst: share of pairs interacting in at least {:.0}% of frames; interventional effects (effects.csv): backed, designed edges that an intervention on the leader moves its follower for; c/scen, causal edges per scenario; unexpl, causal edges that are no designed edge", 100.0 * MOSTLY)
     }
 }
 
@@ -202,6 +261,7 @@ struct Tally {
     flow: FlowSamples,
     edge_pairs: PairInteraction,
     non_edge_pairs: PairInteraction,
+    causal: Option<CausalTally>,
 }
 
 /// Computes the statistics of the dataset in `dir`.
@@ -247,6 +307,9 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         all.flow.extend(t.flow);
         all.edge_pairs.merge(&t.edge_pairs);
         all.non_edge_pairs.merge(&t.non_edge_pairs);
+        if let Some(c) = &t.causal {
+            all.causal.get_or_insert_with(CausalTally::default).merge(c);
+        }
     }
     let target = (0.95 * all.car_frames as f64).ceil() as u64;
     let mut seen = 0;
@@ -284,6 +347,7 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         free_speed_ratio_median: median(&mut all.flow.free_speed_ratios),
         edge_pairs: all.edge_pairs.finish(),
         non_edge_pairs: all.non_edge_pairs.finish(),
+        causal: all.causal,
     }
 }
 
@@ -324,7 +388,8 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     // Per car: (x, y, speed px/frame) per frame.
     let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
     let red = red_approaches(dir)?;
-    let mut t = Tally { cars, histogram: vec![0; HISTOGRAM_BINS], ..Tally::default() };
+    let causal = CausalTally::of_scenario(&scenario);
+    let mut t = Tally { cars, histogram: vec![0; HISTOGRAM_BINS], causal, ..Tally::default() };
     for row in reader.records() {
         let row = row.map_err(|e| format!("{}: {e}", poses_path.display()))?;
         let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());

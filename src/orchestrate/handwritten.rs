@@ -84,7 +84,8 @@ impl RunOptions {
     }
 
     fn products(&self) -> Products {
-        Products { images: self.images, annotations: self.annotations && self.images }
+        // Effects are a dataset's (gen's) ground truth.
+        Products { images: self.images, annotations: self.annotations && self.images, effects: false }
     }
 }
 
@@ -134,7 +135,8 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
             let trajectories = crate::world::simulate(&s.expansion.map, &s.plan);
             let path = out.join(&s.name);
             let times = StageTimes::default();
-            let bytes = write_simulated(&writer, &s.plan, &trajectories, path.clone(), &mut writer.buffers(), &times)?;
+            let bytes =
+                write_simulated(&writer, &s.plan, &trajectories, None, path.clone(), &mut writer.buffers(), &times)?;
             let warnings = warnings(s, &trajectories);
             Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
@@ -283,8 +285,16 @@ fn write_pair(
 ) -> Result<PairSummary, GenError> {
     let pair = simulate_pair(expansion, name, factual, counterfactual);
     let (mut buffers, times) = (writer.buffers(), StageTimes::default());
-    write_simulated(writer, factual, &pair.factual, folder.join("factual"), &mut buffers, &times)?;
-    write_simulated(writer, counterfactual, &pair.counterfactual, folder.join("counterfactual"), &mut buffers, &times)?;
+    write_simulated(writer, factual, &pair.factual, None, folder.join("factual"), &mut buffers, &times)?;
+    write_simulated(
+        writer,
+        counterfactual,
+        &pair.counterfactual,
+        None,
+        folder.join("counterfactual"),
+        &mut buffers,
+        &times,
+    )?;
     write_atomically(&folder.join("divergence.csv"), &pair.divergence_csv)?;
     let mut json = serde_json::to_vec_pretty(&pair.summary).expect("summary serialises");
     json.push(b'\n');

@@ -69,19 +69,28 @@ impl Generator {
         self.renderer.get_or_init(|| Renderer::new(&self.expansion.map, self.expansion.camera))
     }
 
-    /// Plans and simulates one scenario; with `images`, renders its frames.
-    pub fn scenario(&self, key: &ScenarioKey, images: bool) -> Result<ScenarioArrays, GenError> {
+    /// Plans and simulates one scenario; with `images`, renders its frames;
+    /// with `effects`, measures its interventional effects as `gen` does
+    /// (re-simulating it twice per car).
+    pub fn scenario(&self, key: &ScenarioKey, images: bool, effects: bool) -> Result<ScenarioArrays, GenError> {
         let mut canvas = images.then(|| self.renderer().canvas());
-        self.scenario_with(key, canvas.as_mut())
+        self.scenario_with(key, canvas.as_mut(), effects)
     }
 
-    fn scenario_with(&self, key: &ScenarioKey, canvas: Option<&mut FrameCanvas>) -> Result<ScenarioArrays, GenError> {
+    fn scenario_with(
+        &self,
+        key: &ScenarioKey,
+        canvas: Option<&mut FrameCanvas>,
+        effects: bool,
+    ) -> Result<ScenarioArrays, GenError> {
         let plan = self.expansion.plan(key).map_err(|reason| GenError::Plan {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
-        let trajectories = crate::world::simulate(&self.expansion.map, &plan);
-        Ok(arrays(&self.expansion, &plan, &trajectories, canvas.map(|c| (self.renderer(), c))))
+        let map = &self.expansion.map;
+        let trajectories = crate::world::simulate(map, &plan);
+        let effects = effects.then(|| crate::world::effects::measure(map, &plan, &trajectories));
+        Ok(arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c))))
     }
 }
 
@@ -114,6 +123,7 @@ impl Prefetch {
         generator: Arc<Generator>,
         keys: Vec<ScenarioKey>,
         images: bool,
+        effects: bool,
         threads: usize,
         ahead: usize,
     ) -> Self {
@@ -126,7 +136,7 @@ impl Prefetch {
             .map(|_| {
                 let (shared, generator) = (shared.clone(), generator.clone());
                 std::thread::spawn(move || {
-                    let work = std::panic::AssertUnwindSafe(|| prefetch_worker(&shared, &generator, images));
+                    let work = std::panic::AssertUnwindSafe(|| prefetch_worker(&shared, &generator, images, effects));
                     if std::panic::catch_unwind(work).is_err() {
                         let (lock, wake) = &*shared;
                         lock.lock().unwrap_or_else(|e| e.into_inner()).broken = true;
@@ -182,7 +192,7 @@ impl Drop for Prefetch {
 
 /// One worker: takes the next key while the reader is less than `ahead`
 /// behind, generates it, and queues the result under its index.
-fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, images: bool) {
+fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, images: bool, effects: bool) {
     let (lock, wake) = shared;
     let mut canvas = images.then(|| generator.renderer().canvas());
     loop {
@@ -200,7 +210,7 @@ fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, imag
             queue.next_key += 1;
             (queue.next_key - 1, queue.keys[queue.next_key - 1].clone())
         };
-        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut()));
+        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut(), effects));
         let result = std::panic::catch_unwind(work).unwrap_or_else(|_| {
             // A bug, not the user's input: the reader gets an error instead of waiting forever.
             Err(GenError::Plan {
@@ -225,10 +235,11 @@ fn arrays(
     expansion: &Expansion,
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
+    effects: Option<crate::world::effects::EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
 ) -> ScenarioArrays {
     let spec = &expansion.spec;
-    scenario_arrays(&expansion.map, &expansion.camera, spec.leader_gap_px(), plan, trajectories, renderer)
+    scenario_arrays(&expansion.map, &expansion.camera, spec.leader_gap_px(), plan, trajectories, effects, renderer)
 }
 
 /// A scenario file's or an intervention file's text, and the name its
@@ -275,7 +286,7 @@ pub fn counterfactual_arrays(
             let mut canvas = renderer.as_ref().map(Renderer::canvas);
             let mut run = |plan: &ScenarioPlan, trajectories: &Trajectories| {
                 let r = renderer.as_ref().zip(canvas.as_mut());
-                arrays(&s.expansion, plan, trajectories, r)
+                arrays(&s.expansion, plan, trajectories, None, r)
             };
             PairArrays {
                 name: s.name.clone(),

@@ -8,6 +8,7 @@ use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::progress::{Progress, ProgressMode};
 use crate::spec::{DatasetSpec, SpecError};
 use crate::timing::{Stage, StageSeconds, StageTimes};
+use crate::world::effects::EffectReport;
 use crate::world::Trajectories;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -27,6 +28,9 @@ pub struct GenOptions {
     pub images: bool,
     /// Also write NS-DR annotations.json per scenario (needs images).
     pub annotations: bool,
+    /// Measure and write every scenario's interventional effects
+    /// (effects.csv, causal graphs in scenario.json).
+    pub effects: bool,
     pub progress: ProgressMode,
     /// Generate only this part of the dataset.
     pub shard: Option<Shard>,
@@ -194,11 +198,12 @@ pub(crate) fn write_simulated(
     writer: &ScenarioWriter,
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
+    effects: Option<&EffectReport>,
     target: PathBuf,
     buffers: &mut WriterBuffers,
     times: &StageTimes,
 ) -> Result<u64, GenError> {
-    writer.write(plan, trajectories, target, buffers, &STOP, times).map_err(|e| match e {
+    writer.write(plan, trajectories, effects, target, buffers, &STOP, times).map_err(|e| match e {
         ScenarioWriteError::Write(error) => GenError::Write { error, done: 0 },
         ScenarioWriteError::Interrupted => GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() },
     })
@@ -295,7 +300,11 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 /// [`generate`] of a spec already read and expanded (`options.spec_path` is
 /// not read again); `start` is when the run began, for its summary.
 pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
-    let products = Products { images: options.images, annotations: options.annotations && options.images };
+    let products = Products {
+        images: options.images,
+        annotations: options.annotations && options.images,
+        effects: options.effects,
+    };
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     std::fs::create_dir_all(&out).map_err(io_err(&out))?;
 
@@ -411,7 +420,11 @@ fn write_scenario(
         reason,
     })?;
     let trajectories = times.time(Stage::Simulate, || crate::world::simulate(&expansion.map, &plan));
-    write_simulated(writer, &plan, &trajectories, target, buffers, times)
+    let effects = writer
+        .products()
+        .effects
+        .then(|| times.time(Stage::Effects, || crate::world::effects::measure(&expansion.map, &plan, &trajectories)));
+    write_simulated(writer, &plan, &trajectories, effects.as_ref(), target, buffers, times)
 }
 
 /// Peak resident set size of this process (VmHWM), where the OS reports it.

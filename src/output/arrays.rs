@@ -4,7 +4,7 @@
 //! disk (the Python package). Row-major; shapes are in each field's doc.
 
 use super::footage::{signal_heads, Footage};
-use super::logs::{event_frame, event_time, light_names};
+use super::logs::{event_frame, event_time, light_names, DIVERGENCE_DECIMALS};
 use super::number::logged_value;
 use super::poses::PIXEL_DECIMALS;
 use super::scenario::scenario_json;
@@ -16,6 +16,7 @@ use crate::render::perspective::World3d;
 use crate::render::{FrameCanvas, Renderer};
 use crate::spec::BirdsEyeView;
 use crate::timing::StageTimes;
+use crate::world::effects::{EffectReport, EffectRow};
 use crate::world::{BoundBy, Trajectories};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -58,6 +59,9 @@ pub struct ScenarioArrays {
     pub events: Vec<EventRow>,
     /// With images: the bird's-eye frames.
     pub images: Option<FrameArrays>,
+    /// Where measured: effects.csv's rows, in order, divergences rounded as
+    /// the file writes them.
+    pub effects: Option<Vec<EffectRow>>,
 }
 
 /// lights.csv as arrays: `L` lights in plan order.
@@ -116,12 +120,13 @@ pub fn scenario_arrays(
     leader_gap_px: f64,
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
+    effects: Option<EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
 ) -> ScenarioArrays {
     let (frames, cars) = (trajectories.frames(), plan.cars.len());
     let intersection_names: Vec<String> = map.intersections.iter().map(|i| i.name.clone()).collect();
     let model = crate::world::model_name(&plan.world);
-    let scenario_json = scenario_json(plan, camera, leader_gap_px, &intersection_names, model);
+    let scenario_json = scenario_json(plan, camera, leader_gap_px, &intersection_names, model, effects.as_ref());
     let mut a = ScenarioArrays {
         scenario_json,
         frames,
@@ -140,6 +145,13 @@ pub fn scenario_arrays(
         interactions: None,
         events: Vec::new(),
         images: None,
+        effects: effects.map(|report| {
+            let round = |row: EffectRow| EffectRow {
+                max_divergence_m: logged_value(row.max_divergence_m, DIVERGENCE_DECIMALS),
+                ..row
+            };
+            report.rows.into_iter().map(round).collect()
+        }),
     };
     for states in &trajectories.states {
         for s in states {

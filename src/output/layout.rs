@@ -5,11 +5,13 @@
 //! scenario.json  poses.csv  pixels.npy  checksums.sha256
 //! lights.csv  events.csv  interactions.csv    (city world)
 //! annotations.json                            (--annotations)
+//! effects.csv                                 (gen, unless --no-effects)
 //! rgb/NNNN.png  mask/NNNN.png                 (images)
 //! cameras/<name>/{rgb,mask,depth}/NNNN.png  cameras/<name>/poses.csv
 //! ```
 
 use super::annotations::ANNOTATIONS_FILE;
+use super::manifest::Products;
 use super::poses::PIXELS_FILE;
 use super::CHECKSUMS;
 
@@ -23,6 +25,8 @@ pub const LIGHTS_CSV: &str = "lights.csv";
 pub const EVENTS_CSV: &str = "events.csv";
 /// What bound each car's speed, per frame (city world).
 pub const INTERACTIONS_CSV: &str = "interactions.csv";
+/// Which car moves which under interventions (`gen`, unless `--no-effects`).
+pub const EFFECTS_CSV: &str = "effects.csv";
 /// A folder at a dataset's root for the logs of the jobs that made it
 /// (`examples/slurm` writes there); not part of the dataset, which
 /// `validate` accepts beside it.
@@ -65,6 +69,7 @@ pub struct ScenarioLayout {
     pub city: bool,
     pub images: bool,
     pub annotations: bool,
+    pub effects: bool,
     /// Extra cameras; they write files only with images.
     pub cameras: Vec<CameraFolder>,
 }
@@ -75,13 +80,15 @@ pub fn frame_digits(frames: u32) -> usize {
 }
 
 impl ScenarioLayout {
-    pub fn new(frames: u32, city: bool, images: bool, annotations: bool, cameras: Vec<CameraFolder>) -> ScenarioLayout {
+    pub fn new(frames: u32, city: bool, products: Products, cameras: Vec<CameraFolder>) -> ScenarioLayout {
+        let images = products.images;
         ScenarioLayout {
             frames,
             digits: frame_digits(frames),
             city,
             images,
-            annotations: annotations && images,
+            annotations: products.annotations && images,
+            effects: products.effects,
             cameras: if images { cameras } else { Vec::new() },
         }
     }
@@ -140,6 +147,9 @@ impl ScenarioLayout {
         if self.annotations {
             names.push(ANNOTATIONS_FILE.into());
         }
+        if self.effects {
+            names.push(EFFECTS_CSV.into());
+        }
         if self.images {
             for kind in [FrameKind::Rgb, FrameKind::Mask] {
                 names.extend((0..self.frames).map(|f| self.frame_name(kind, f)));
@@ -163,16 +173,19 @@ mod tests {
     #[test]
     fn layout_lists_camera_folders_and_files() {
         let cameras = vec![CameraFolder { name: "corner".into(), depth: true }];
-        let layout = ScenarioLayout::new(3, true, true, false, cameras.clone());
+        let all = Products { images: true, annotations: false, effects: true };
+        let layout = ScenarioLayout::new(3, true, all, cameras.clone());
         let files = layout.files();
         assert!(files.contains(&"cameras/corner/depth/0002.png".to_string()));
         assert!(files.contains(&"cameras/corner/poses.csv".to_string()));
         assert!(files.contains(&"events.csv".to_string()));
         assert!(files.contains(&"interactions.csv".to_string()));
-        assert_eq!(files.len(), 6 + 2 * 3 + 3 * 3 + 1 + 1);
+        assert!(files.contains(&"effects.csv".to_string()));
+        assert_eq!(files.len(), 7 + 2 * 3 + 3 * 3 + 1 + 1);
         assert!(layout.folders().contains(&"cameras/corner/depth".to_string()));
         // Without images there are no frames and no camera files.
-        let bare = ScenarioLayout::new(3, false, false, true, cameras);
+        let bare =
+            ScenarioLayout::new(3, false, Products { images: false, annotations: true, effects: false }, cameras);
         assert_eq!(bare.files(), vec!["scenario.json", "poses.csv", "pixels.npy", "checksums.sha256"]);
         assert!(bare.folders().is_empty());
     }

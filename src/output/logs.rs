@@ -1,9 +1,11 @@
-//! `lights.csv`, `events.csv` and `interactions.csv` (city world). Columns
-//! are documented in `data-schema/lights.schema.json`,
-//! `data-schema/events.schema.json` and `data-schema/interactions.schema.json`.
+//! `lights.csv`, `events.csv` and `interactions.csv` (city world), and
+//! `effects.csv` (both worlds). Columns are documented in
+//! `data-schema/lights.schema.json`, `data-schema/events.schema.json`,
+//! `data-schema/interactions.schema.json` and `data-schema/effects.schema.json`.
 
 use super::poses::{Fields, PIXEL_DECIMALS};
 use crate::map::signals::{light_label, LightPlan};
+use crate::world::effects::{EffectReport, EffectRow, InterventionKind};
 use crate::world::{BoundBy, Trajectories};
 use serde::Serialize;
 use std::io::Write;
@@ -13,6 +15,9 @@ pub const LIGHT_COLUMNS: [&str; 9] =
     ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
 pub const EVENT_COLUMNS: [&str; 7] = ["frame", "t", "kind", "car", "other_car", "light", "detail"];
 pub const INTERACTION_COLUMNS: [&str; 5] = ["frame", "car", "bound_by", "other_car", "light"];
+pub const EFFECT_COLUMNS: [&str; 6] = ["cause", "effect", "intervention", "max_divergence_m", "first_frame", "direct"];
+/// Decimals of `max_divergence_m` (millimetres).
+pub const DIVERGENCE_DECIMALS: u32 = 3;
 
 fn round(x: f64, decimals: i32) -> f64 {
     let f = 10f64.powi(decimals);
@@ -187,4 +192,104 @@ pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<
         return Err(fail(format!("{missing} of {} frame-car rows are missing", frames * cars)));
     }
     Ok(records.into_iter().flatten().collect())
+}
+
+/// One row per cause, intervention and other car, in the report's order:
+/// how far the other car moved from its factual trajectory, the first frame
+/// beyond the report's threshold (empty when none) and whether the effect is
+/// direct (`1`) or not (`0`).
+pub fn write_effects<W: Write>(out: W, report: &EffectReport) -> csv::Result<()> {
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
+    w.write_record(EFFECT_COLUMNS)?;
+    let mut fields = Fields::default();
+    for row in &report.rows {
+        fields.int(&mut w, row.cause as u64)?;
+        fields.int(&mut w, row.effect as u64)?;
+        w.write_field(row.intervention.name())?;
+        fields.fixed(&mut w, row.max_divergence_m, DIVERGENCE_DECIMALS)?;
+        match row.first_frame {
+            Some(frame) => fields.int(&mut w, frame as u64)?,
+            None => w.write_field("")?,
+        }
+        w.write_field(if row.direct { "1" } else { "0" })?;
+        w.write_record(None::<&[u8]>)?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// Reads a scenario's `effects.csv` of `cars` cars and `frames` frames,
+/// checking every field: ids below `cars` and distinct, a known
+/// intervention, a divergence of at least 0, a first frame below `frames`
+/// exactly when the divergence exceeds `threshold_m`, and `direct` only
+/// with an effect. Rows come back in file order.
+pub fn read_effects(path: &Path, cars: usize, frames: usize, threshold_m: f64) -> Result<Vec<EffectRow>, String> {
+    let data = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    parse_effects(path, &data, cars, frames, threshold_m)
+}
+
+/// [`read_effects`] of the file's bytes (`path` names it in messages).
+pub fn parse_effects(
+    path: &Path,
+    data: &[u8],
+    cars: usize,
+    frames: usize,
+    threshold_m: f64,
+) -> Result<Vec<EffectRow>, String> {
+    let fail = |what: String| format!("{}: {what}", path.display());
+    let mut reader = csv::Reader::from_reader(data);
+    let header = reader.headers().map_err(|e| fail(e.to_string()))?;
+    if header.iter().ne(EFFECT_COLUMNS) {
+        return Err(fail(format!("columns {:?}, expected {EFFECT_COLUMNS:?}", header.iter().collect::<Vec<_>>())));
+    }
+    let mut rows = Vec::new();
+    for (line, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| fail(e.to_string()))?;
+        let line = line + 2;
+        let field = |k: usize| record.get(k).unwrap_or("");
+        let car = |k: usize| {
+            field(k).parse::<u32>().ok().filter(|&c| (c as usize) < cars).ok_or_else(|| {
+                fail(format!("line {line}: {} {:?} is not a car id below {cars}", EFFECT_COLUMNS[k], field(k)))
+            })
+        };
+        let (cause, effect) = (car(0)?, car(1)?);
+        if cause == effect {
+            return Err(fail(format!("line {line}: car {cause} is its own effect")));
+        }
+        let intervention = InterventionKind::from_name(field(2)).ok_or_else(|| {
+            fail(format!("line {line}: intervention {:?} is not one of remove, next_action", field(2)))
+        })?;
+        let max_divergence_m =
+            field(3).parse::<f64>().ok().filter(|d| d.is_finite() && *d >= 0.0).ok_or_else(|| {
+                fail(format!("line {line}: max_divergence_m {:?} is not a distance of 0 or more", field(3)))
+            })?;
+        let first_frame = match field(4) {
+            "" => None,
+            text => Some(
+                text.parse::<u32>()
+                    .ok()
+                    .filter(|&f| (f as usize) < frames)
+                    .ok_or_else(|| fail(format!("line {line}: first_frame {text:?} is not a frame below {frames}")))?,
+            ),
+        };
+        // The divergence is rounded to millimetres: compare with that slack.
+        let exceeds = max_divergence_m > threshold_m + 0.0005;
+        let within = max_divergence_m <= threshold_m - 0.0005;
+        if (first_frame.is_none() && exceeds) || (first_frame.is_some() && within) {
+            return Err(fail(format!(
+                "line {line}: first_frame {:?} disagrees with max_divergence_m {max_divergence_m} and the threshold {threshold_m} m",
+                field(4)
+            )));
+        }
+        let direct = match field(5) {
+            "1" => true,
+            "0" => false,
+            other => return Err(fail(format!("line {line}: direct {other:?} is not 0 or 1"))),
+        };
+        if direct && first_frame.is_none() {
+            return Err(fail(format!("line {line}: direct is 1 but there is no effect")));
+        }
+        rows.push(EffectRow { cause, effect, intervention, max_divergence_m, first_frame, direct });
+    }
+    Ok(rows)
 }

@@ -36,6 +36,8 @@ pub struct Manifest<'a> {
     pub images: bool,
     /// Scenarios carry NS-DR annotations.json (`gen --annotations`).
     pub annotations: bool,
+    /// Scenarios carry effects.csv and causal graphs (off with `gen --no-effects`).
+    pub effects: bool,
     pub camera: &'a Camera,
     pub frames_per_scenario: u32,
     pub frame_file_digits: usize,
@@ -55,6 +57,9 @@ pub struct Products {
     pub images: bool,
     /// annotations.json (needs images).
     pub annotations: bool,
+    /// effects.csv and the causal graphs in scenario.json (`gen`; off with
+    /// `--no-effects`).
+    pub effects: bool,
 }
 
 /// Which part of the dataset a shard run writes.
@@ -81,6 +86,9 @@ pub struct ManifestRecord {
     pub images: bool,
     #[serde(default)]
     pub annotations: bool,
+    /// Datasets written before effects existed have none.
+    #[serde(default)]
+    pub effects: bool,
     pub limit: Option<u32>,
     pub groups: Vec<GroupRecord>,
     pub complete: bool,
@@ -108,7 +116,7 @@ impl ManifestRecord {
 
     /// The per-scenario files this dataset was written with.
     pub fn products(&self) -> Products {
-        Products { images: self.images, annotations: self.annotations }
+        Products { images: self.images, annotations: self.annotations, effects: self.effects }
     }
 
     /// What differs between this manifest and a run of `spec` writing
@@ -124,6 +132,9 @@ impl ManifestRecord {
         }
         if self.annotations != products.annotations {
             out.push(format!("annotations: {} there, {} now (--annotations)", self.annotations, products.annotations));
+        }
+        if self.effects != products.effects {
+            out.push(format!("effects: {} there, {} now (--no-effects)", self.effects, products.effects));
         }
         if self.spec_sha256 != spec_sha256(spec) {
             let new = serde_json::to_value(spec).expect("spec serialises");
@@ -193,6 +204,7 @@ impl<'a> Manifest<'a> {
             limit,
             images: products.images,
             annotations: products.annotations,
+            effects: products.effects,
             camera,
             frames_per_scenario: spec.frames,
             frame_file_digits: super::frame_digits(spec.frames),

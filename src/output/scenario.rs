@@ -5,9 +5,10 @@ use crate::camera::Camera;
 use crate::map::signals::Light;
 use crate::map::Action;
 use crate::plan::confounders::{ConfounderModel, Confounders, Effects};
-use crate::plan::{CarPlan, Role, ScenarioPlan, WorldPlan};
+use crate::plan::{CarPlan, OnLeaderLost, Role, ScenarioPlan, WorldPlan};
 use crate::render::palette::{colour_of, hex_colour};
 use crate::spec::DriverParams;
+use crate::world::effects::{EffectReport, InterventionKind};
 use serde::Serialize;
 
 /// Format tag written into every scenario.json.
@@ -34,6 +35,45 @@ struct CarRecord<'a> {
     runs_red_lights: Option<bool>,
     #[serde(skip_serializing_if = "Option::is_none")]
     hard_negative_behind: Option<u32>,
+    /// Followers: the car it follows.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    follows: Option<u32>,
+    /// Followers: `"stop"`, or `{"drive": {actions, merge_distances}}`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    on_leader_lost: Option<LeaderLostRecord<'a>>,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "lowercase")]
+enum LeaderLostRecord<'a> {
+    Stop,
+    Drive { actions: &'a [Action], merge_distances: &'a [f64] },
+}
+
+impl<'a> LeaderLostRecord<'a> {
+    fn of(lost: &'a OnLeaderLost) -> LeaderLostRecord<'a> {
+        match lost {
+            OnLeaderLost::Stop => LeaderLostRecord::Stop,
+            OnLeaderLost::Drive(f) => {
+                LeaderLostRecord::Drive { actions: &f.actions, merge_distances: &f.merge_distances }
+            }
+        }
+    }
+}
+
+/// The interventional ground truth's summary (effects.csv has every row).
+#[derive(Serialize)]
+struct EffectsRecord {
+    /// A car moved more than this from its factual trajectory, metres.
+    effect_threshold_m: f64,
+    /// Applied to every car in turn, from time 0.
+    effect_interventions: Vec<&'static str>,
+    /// (cause, effect) pairs with an effect under some intervention.
+    causal_edges: Vec<[u32; 2]>,
+    /// The causal edges where the effect car reacted to the cause itself.
+    direct_edges: Vec<[u32; 2]>,
+    /// Designed edges that no intervention backs.
+    edges_without_effect: Vec<[u32; 2]>,
 }
 
 #[derive(Serialize)]
@@ -83,20 +123,36 @@ struct ScenarioRecord<'a> {
     city: Option<CityRecord<'a>>,
     cars: Vec<CarRecord<'a>>,
     edges: Vec<[u32; 2]>,
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    effects: Option<EffectsRecord>,
     /// Extra cameras, each writing under cameras/<name>/.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     cameras: &'a [crate::camera::CameraPlan],
 }
 
 /// Serialises the scenario record as pretty JSON. `intersection_names` and
-/// `model` describe the city world's lights and car-following model.
+/// `model` describe the city world's lights and car-following model;
+/// `effects`, where measured, adds the causal graphs.
 pub fn scenario_json(
     plan: &ScenarioPlan,
     camera: &Camera,
     leader_gap_px: f64,
     intersection_names: &[String],
     model: &str,
+    effects: Option<&EffectReport>,
 ) -> Vec<u8> {
+    let pairs = |edges: &[(u32, u32)]| edges.iter().map(|&(a, b)| [a, b]).collect::<Vec<_>>();
+    let effects = effects.map(|report| {
+        let causal = report.causal_edges();
+        let without: Vec<(u32, u32)> = plan.edges.iter().filter(|e| !causal.contains(e)).copied().collect();
+        EffectsRecord {
+            effect_threshold_m: report.threshold_m,
+            effect_interventions: InterventionKind::ALL.iter().map(|k| k.name()).collect(),
+            causal_edges: pairs(&causal),
+            direct_edges: pairs(&report.direct_edges()),
+            edges_without_effect: pairs(&without),
+        }
+    });
     let light_record =
         |l: &'_ Light| -> (usize, char, &'static str, f64) { (l.intersection, l.approach, l.signal.name(), l.offset) };
     let city = plan.world.city().map(|c| CityRecord {
@@ -159,9 +215,12 @@ pub fn scenario_json(
                 driver: agency(c).map(|a| &a.driver),
                 runs_red_lights: agency(c).map(|a| a.runs_red_lights),
                 hard_negative_behind: c.hard_negative_behind,
+                follows: c.leader,
+                on_leader_lost: c.on_leader_lost.as_ref().map(LeaderLostRecord::of),
             })
             .collect(),
-        edges: plan.edges.iter().map(|&(l, f)| [l, f]).collect(),
+        edges: pairs(&plan.edges),
+        effects,
         cameras: &plan.cameras,
     };
     let mut out = serde_json::to_vec_pretty(&record).expect("scenario record serialises");

@@ -7,9 +7,10 @@
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use super::footage::{signal_heads, Footage};
 use super::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
+    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV,
+    SCENARIO_JSON,
 };
-use super::logs::{write_events, write_interactions, write_lights};
+use super::logs::{write_effects, write_events, write_interactions, write_lights};
 use super::manifest::Products;
 use super::number::{logged_value, push_fixed};
 use super::png::{encode_png, PixelFormat, PngSettings};
@@ -24,6 +25,7 @@ use crate::render::weather::SceneLook;
 use crate::render::{FrameCanvas, Renderer, Scene, CAR_HEIGHT_M};
 use crate::spec::BirdsEyeView;
 use crate::timing::{Stage, StageTimes};
+use crate::world::effects::EffectReport;
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
 use std::path::PathBuf;
@@ -49,7 +51,7 @@ pub struct ScenarioWriter {
     leader_gap_px: f64,
     intersection_names: Vec<String>,
     fsync: bool,
-    annotations: bool,
+    products: Products,
     /// The map as solids, for perspective cameras (built on first use).
     world3d: std::sync::OnceLock<World3d>,
 }
@@ -74,7 +76,7 @@ impl ScenarioWriter {
             camera,
             leader_gap_px,
             fsync,
-            annotations: products.annotations && products.images,
+            products: Products { annotations: products.annotations && products.images, ..products },
             world3d: std::sync::OnceLock::new(),
         }
     }
@@ -89,23 +91,31 @@ impl ScenarioWriter {
         }
     }
 
+    /// Which optional files this writer writes.
+    pub fn products(&self) -> Products {
+        self.products
+    }
+
     /// The files `plan` gets from this writer.
     pub fn layout(&self, plan: &ScenarioPlan) -> ScenarioLayout {
         ScenarioLayout::new(
             plan.frames,
             plan.world.city().is_some(),
-            self.renderer.is_some(),
-            self.annotations,
+            self.products,
             plan.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect(),
         )
     }
 
     /// Writes a simulated scenario into the folder `target`, atomically;
-    /// returns the bytes written. Checks `stop` every frame.
+    /// returns the bytes written. Checks `stop` every frame. `effects` are
+    /// the scenario's measured interventional effects, written when this
+    /// writer's products ask for them.
+    #[allow(clippy::too_many_arguments)]
     pub fn write(
         &self,
         plan: &ScenarioPlan,
         trajectories: &Trajectories,
+        effects: Option<&EffectReport>,
         target: PathBuf,
         buffers: &mut WriterBuffers,
         stop: &AtomicBool,
@@ -115,7 +125,8 @@ impl ScenarioWriter {
         let camera = &self.camera;
         let mut dir = ScenarioDir::begin(target, &layout, self.fsync, times)?;
         let model = crate::world::model_name(&plan.world);
-        let record = scenario_json(plan, camera, self.leader_gap_px, &self.intersection_names, model);
+        let effects = effects.filter(|_| layout.effects);
+        let record = scenario_json(plan, camera, self.leader_gap_px, &self.intersection_names, model, effects);
         let mut bytes = dir.write_file(SCENARIO_JSON, &record)?;
         let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
         bytes += dir.write_with(POSES_CSV, |w| write_poses(w, &ids, trajectories, camera))?;
@@ -129,12 +140,15 @@ impl ScenarioWriter {
             bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, &city.lights, names, trajectories))?;
             bytes += dir.write_with(INTERACTIONS_CSV, |w| write_interactions(w, &city.lights, names, trajectories))?;
         }
+        if let Some(report) = effects {
+            bytes += dir.write_with(EFFECTS_CSV, |w| write_effects(w, report))?;
+        }
         if let (Some(renderer), Some(canvas)) = (&self.renderer, buffers.canvas.as_mut()) {
             let mut frames = FrameWriter { dir: &mut dir, layout: &layout, png: &mut buffers.png, times, stop };
             let footage = Footage::new(plan, trajectories, &heads);
             let world =
                 (plan.birds_eye == BirdsEyeView::Pinhole).then(|| self.world3d.get_or_init(|| World3d::new(&self.map)));
-            bytes += frames.birds_eye(renderer, canvas, world, &footage, self.annotations)?;
+            bytes += frames.birds_eye(renderer, canvas, world, &footage, self.products.annotations)?;
             for camera_plan in &plan.cameras {
                 bytes += if camera_plan.kind.is_perspective() {
                     let world = self.world3d.get_or_init(|| World3d::new(&self.map));

@@ -4,7 +4,10 @@
 //! never depends on thread count, order, sharding or the other groups.
 
 use super::confounders::ConfounderModel;
-use super::{stream_key, CarAgency, CarPlan, CityPlan, GivenCar, Role, ScenarioKey, ScenarioPlan, WorldPlan};
+use super::{
+    stream_key, CarAgency, CarPlan, CityPlan, Fallback, GivenCar, OnLeaderLost, Role, ScenarioKey, ScenarioPlan,
+    WorldPlan,
+};
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
@@ -28,6 +31,10 @@ struct PlacedCar {
     desired_speeds: Vec<f64>,
     /// A hard negative: the index of the car it starts right behind.
     behind: Option<usize>,
+    /// A follower: the index of its leader.
+    leader: Option<usize>,
+    /// A follower: what it does once it loses its leader.
+    on_leader_lost: Option<OnLeaderLost>,
 }
 
 /// A span of a spawn lane where a car's centre is on camera.
@@ -55,9 +62,13 @@ pub struct Expansion {
 
 /// Keys the stream a scenario's light phase is drawn from.
 const LIGHT_PHASE_TAG: &[u8] = b"causalcity/light-phase/v1";
+/// Keys the stream followers' fallback drive queues are drawn from (its own,
+/// so drawing them moves no other random number).
+const FALLBACK_TAG: &[u8] = b"causalcity/follower-fallback/v1";
 
 /// Clearance kept between cars at spawn, metres.
 const SPAWN_CLEARANCE: f64 = 0.1;
+
 const PLACEMENT_ATTEMPTS: usize = 2000;
 
 impl Expansion {
@@ -246,13 +257,22 @@ impl Expansion {
                     route,
                     desired_speeds,
                     behind,
+                    leader: None,
+                    on_leader_lost: None,
                 };
                 if is_pair {
                     pair_indices.push((cars.len(), cars.len() + 1));
-                    // A pair shares route and actions, not personality (the toy has no speeds to draw).
+                    // A follower drives what its leader drives, not its own
+                    // personality (the toy has no speeds to draw).
                     let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), car.actions.len());
-                    let follower =
-                        PlacedCar { role: Role::Follower, distance: back, desired_speeds, behind: None, ..car.clone() };
+                    let follower = PlacedCar {
+                        role: Role::Follower,
+                        distance: back,
+                        desired_speeds,
+                        behind: None,
+                        leader: Some(cars.len()),
+                        ..car.clone()
+                    };
                     cars.extend([car, follower]);
                 } else {
                     cars.push(car);
@@ -268,10 +288,35 @@ impl Expansion {
             }
         }
 
+        self.draw_fallbacks(stream, &mut cars, travel)?;
         // Random ids so the index order never gives the roles away.
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
         Ok(self.assemble(key, stream, rng, cars, &pair_indices, &ids))
+    }
+
+    /// What every follower does when it loses its leader: in the toy world
+    /// it stops (no agency); in the city it drives a queue of its own, drawn
+    /// as an independent car's from its start (from a stream of its own).
+    fn draw_fallbacks(&self, stream: [u8; 32], cars: &mut [PlacedCar], travel: f64) -> Result<(), String> {
+        let mut rng = ChaCha8Rng::from_seed(Sha256::digest([FALLBACK_TAG, &stream[..]].concat()).into());
+        let count = self.spec.actions_per_car;
+        for car in cars.iter_mut().filter(|c| c.leader.is_some()) {
+            let drawing = match self.spec.world {
+                WorldKind::Toy => {
+                    car.on_leader_lost = Some(OnLeaderLost::Stop);
+                    continue;
+                }
+                WorldKind::City => self.spec.city_settings().action_drawing,
+            };
+            let (actions, merges) = match drawing {
+                ActionDrawing::Original => original_actions(&mut rng, count),
+                _ => random_actions(&mut rng, &self.map, car.spawn, car.distance, count),
+            };
+            let route = Arc::new(self.plan_route(car.spawn, car.distance, &actions, &merges, travel)?);
+            car.on_leader_lost = Some(OnLeaderLost::Drive(Fallback { actions, merge_distances: merges, route }));
+        }
+        Ok(())
     }
 
     /// Centre-to-centre distance from a car to the car starting right
@@ -324,12 +369,25 @@ impl Expansion {
                     route: g.route.clone(),
                     desired_speeds,
                     behind: None,
+                    leader: None,
+                    on_leader_lost: None,
                 }
             })
             .collect();
         for &(leader, follower) in pairs {
             cars[leader].role = Role::Leader;
-            cars[follower].role = Role::Follower;
+            let f = &mut cars[follower];
+            f.role = Role::Follower;
+            f.leader = Some(leader);
+            // A written follower falls back on its own written actions (toy: stops).
+            f.on_leader_lost = Some(match self.spec.world {
+                WorldKind::Toy => OnLeaderLost::Stop,
+                WorldKind::City => OnLeaderLost::Drive(Fallback {
+                    actions: f.actions.clone(),
+                    merge_distances: f.merges.clone(),
+                    route: f.route.clone(),
+                }),
+            });
         }
         let ids: Vec<u32> = (0..cars.len() as u32).collect();
         let mut plan = self.assemble(key, stream, rng, cars, pairs, &ids);
@@ -383,6 +441,8 @@ impl Expansion {
                     merges: merge_distances,
                     route,
                     behind,
+                    leader,
+                    on_leader_lost,
                     ..
                 } = placed;
                 let id = ids[i];
@@ -401,6 +461,8 @@ impl Expansion {
                     width: spec.car_width_m,
                     route,
                     hard_negative_behind: behind.map(|k| ids[k]),
+                    leader: leader.map(|k| ids[k]),
+                    on_leader_lost,
                 }
             })
             .collect();

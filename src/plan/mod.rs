@@ -77,6 +77,36 @@ pub struct CarPlan {
     /// City world, hard negatives only: the car it starts right behind,
     /// looking like its follower, though not linked to it.
     pub hard_negative_behind: Option<u32>,
+    /// Followers: the id of the car it follows, taking the turns and merges
+    /// its leader takes (see [`Fallback`] for when it loses it).
+    pub leader: Option<u32>,
+    /// Followers: what the car does if its leader leaves the scene.
+    pub on_leader_lost: Option<OnLeaderLost>,
+}
+
+/// What a follower does once it has lost its leader (the leader was
+/// removed). While its leader is in the scene a follower drives what its
+/// leader drives: a red light between them does not make it lose its leader
+/// (it has seen where the leader went), and when the leader's remaining
+/// actions change, so do the follower's.
+#[derive(Debug, Clone)]
+pub enum OnLeaderLost {
+    /// It stops where it is and stays (the toy world: no agency, so a
+    /// follower goes only where its leader goes).
+    Stop,
+    /// It drives a queue of its own (the city world: agency), carried on
+    /// from the actions it has done so far.
+    Drive(Fallback),
+}
+
+/// A follower's own drive queue, from the same start as its leader's.
+#[derive(Debug, Clone)]
+pub struct Fallback {
+    pub actions: Vec<Action>,
+    /// Metres along the current lane for merges, 0 for other actions.
+    pub merge_distances: Vec<f64>,
+    /// The route of `actions` from the follower's start.
+    pub route: Arc<Route>,
 }
 
 /// A city car's driving plan, its own (a follower shares its leader's route

@@ -3,6 +3,7 @@
 
 pub mod city;
 pub mod driver;
+pub mod effects;
 pub mod toy;
 
 use crate::map::signals::LightState;
@@ -24,6 +25,18 @@ pub struct CarState {
     pub yaw: f64,
     /// Speed along the path, metres per second.
     pub speed: f64,
+}
+
+/// Where removed cars are parked, far off every camera, metres.
+const PARKING: DVec2 = DVec2::new(10_000.0, 10_000.0);
+
+impl CarState {
+    /// A car taken off the map by an intervention: parked far off every
+    /// camera (each car on its own spot), at rest.
+    pub fn parked(id: u32) -> CarState {
+        let position = PARKING + DVec2::new(10.0 * id as f64, 0.0);
+        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 }
+    }
 }
 
 /// Something that happened during a scenario, for `events.csv`.
@@ -186,7 +199,7 @@ impl Trajectories {
 /// city world with the plan's car-following model.
 pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
     match &plan.world {
-        WorldPlan::Toy { step_m } => toy::simulate(plan, *step_m),
+        WorldPlan::Toy { step_m } => toy::simulate(map, plan, *step_m),
         WorldPlan::City(city) => {
             city::CityWorld::with_model(driver::model_by_name(city.driver_model)).simulate(map, plan, city)
         }

@@ -1,24 +1,52 @@
 //! The toy world: no agency. Every car moves the same fixed distance per frame
-//! along its route; there are no lights and cars pass through each other, so a
-//! follower's pose at frame t is its leader's pose at frame t - gap / step.
+//! along its route; there are no lights and cars pass through each other. A
+//! follower drives its leader's route (the turns and merges its leader
+//! takes), so its pose at frame t is its leader's pose at frame t - gap /
+//! step; if its leader is removed it stops (it has no agency to go anywhere
+//! of its own), as its plan's `on_leader_lost` says.
+//!
+//! Interventions act from the start (time 0), as the interventional re-runs
+//! of [`super::effects`] use them: `Remove` takes a car off the map and
+//! `ReplaceActions` re-plans its route from its start. Other effects need
+//! agency and change nothing here (scenario files refuse toy interventions).
 
 use super::{CarState, Trajectories};
-use crate::plan::ScenarioPlan;
+use crate::map::{CityMap, LanePolicy, Route};
+use crate::plan::interventions::Effect;
+use crate::plan::{OnLeaderLost, ScenarioPlan};
+use std::sync::Arc;
 
 /// Name of the toy world's behaviour model, for scenario.json.
 pub const MODEL_NAME: &str = "constant-speed";
 
+/// What a toy car drives once the interventions are applied.
+enum Drive {
+    Route(Arc<Route>),
+    /// Standing at its start (a follower that lost its leader).
+    Stopped,
+    Removed,
+}
+
 /// Every car of `plan` moves `step` metres per frame along its route.
-pub fn simulate(plan: &ScenarioPlan, step: f64) -> Trajectories {
+pub fn simulate(map: &CityMap, plan: &ScenarioPlan, step: f64) -> Trajectories {
     let speed = step / plan.frame_interval;
+    let drives = drives(map, plan);
     let states = (0..plan.frames)
         .map(|frame| {
             plan.cars
                 .iter()
-                .map(|car| {
-                    let s = car.spawn_distance + step * frame as f64;
-                    let (position, yaw) = car.route.pose_at(s, 0.0);
-                    CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
+                .zip(&drives)
+                .map(|(car, drive)| match drive {
+                    Drive::Removed => CarState::parked(car.id),
+                    Drive::Stopped => {
+                        let (position, yaw) = car.route.pose_at(car.spawn_distance, 0.0);
+                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: 0.0 }
+                    }
+                    Drive::Route(route) => {
+                        let s = car.spawn_distance + step * frame as f64;
+                        let (position, yaw) = route.pose_at(s, 0.0);
+                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
+                    }
                 })
                 .collect()
         })
@@ -31,4 +59,63 @@ pub fn simulate(plan: &ScenarioPlan, step: f64) -> Trajectories {
         confounder_changes: Vec::new(),
         interactions: Vec::new(),
     }
+}
+
+/// Each car's route (in id order) after the plan's interventions: its own,
+/// re-planned where its actions were replaced; a follower's is its leader's
+/// (unless its own actions were replaced), or its fallback's once the leader
+/// is removed.
+fn drives(map: &CityMap, plan: &ScenarioPlan) -> Vec<Drive> {
+    let mut own: Vec<Drive> = plan.cars.iter().map(|c| Drive::Route(c.route.clone())).collect();
+    let mut replaced = vec![false; plan.cars.len()];
+    for intervention in &plan.interventions {
+        match &intervention.effect {
+            Effect::Remove { car } => own[*car] = Drive::Removed,
+            Effect::ReplaceActions { car, actions, merge_distances } => {
+                let c = &plan.cars[*car];
+                let planned = Route::plan(
+                    map,
+                    c.spawn,
+                    c.spawn_distance,
+                    actions,
+                    merge_distances,
+                    c.route.length,
+                    &LanePolicy::Adapt,
+                );
+                // Actions that cannot be driven leave the car on its own route.
+                if let (Ok(route), Drive::Route(_)) = (planned, &own[*car]) {
+                    own[*car] = Drive::Route(Arc::new(route));
+                    replaced[*car] = true;
+                }
+            }
+            _ => {}
+        }
+    }
+    (0..plan.cars.len())
+        .map(|i| {
+            if matches!(own[i], Drive::Removed) {
+                return Drive::Removed;
+            }
+            // Along the chain of leaders; no plan has a cycle, but a chain
+            // longer than the cars would be one, and ends there.
+            let mut current = i;
+            for _ in 0..plan.cars.len() {
+                let c = &plan.cars[current];
+                let Some(leader) = c.leader.map(|l| l as usize).filter(|_| !replaced[current]) else { break };
+                match (&own[leader], &c.on_leader_lost) {
+                    (Drive::Removed, Some(OnLeaderLost::Drive(fallback))) => {
+                        return Drive::Route(fallback.route.clone())
+                    }
+                    (Drive::Removed, Some(OnLeaderLost::Stop)) => return Drive::Stopped,
+                    (Drive::Removed, None) => break,
+                    (Drive::Route(_) | Drive::Stopped, _) => current = leader,
+                }
+            }
+            match &own[current] {
+                Drive::Route(route) => Drive::Route(route.clone()),
+                Drive::Stopped => Drive::Stopped,
+                Drive::Removed => Drive::Removed,
+            }
+        })
+        .collect()
 }

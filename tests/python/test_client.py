@@ -89,7 +89,7 @@ def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
     columns that may be empty read as nullable Int64, as README says."""
     checked = {}
     for d in scenarios(TOY) + scenarios(CITY):
-        for name in ["poses.csv", "lights.csv", "events.csv", "interactions.csv"]:
+        for name in ["poses.csv", "lights.csv", "events.csv", "interactions.csv", "effects.csv"]:
             if not (d / name).exists():
                 continue
             fields = json.loads((SCHEMAS / name.replace(".csv", ".schema.json")).read_text())["fields"]
@@ -114,7 +114,7 @@ def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
                 for column in nullable:
                     assert typed[column].dtype == pd.Int64Dtype(), (name, column)
             checked[name] = checked.get(name, 0) + 1
-    assert set(checked) == {"poses.csv", "lights.csv", "events.csv", "interactions.csv"}, checked
+    assert set(checked) == {"poses.csv", "lights.csv", "events.csv", "interactions.csv", "effects.csv"}, checked
 
 
 def test_frames_and_masks_decode_and_agree_with_the_poses(toy_scenarios):

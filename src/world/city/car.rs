@@ -11,9 +11,6 @@ use glam::DVec2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// Where removed cars are parked, far off every camera, metres.
-const PARKING: DVec2 = DVec2::new(10_000.0, 10_000.0);
-
 /// One car while the scenario runs.
 pub(super) struct SimCar<'p> {
     pub(super) plan: &'p CarPlan,
@@ -78,6 +75,8 @@ pub(super) struct SimCar<'p> {
     pub(super) driver: DriverParams,
     /// Multiplies the planned desired speeds (a confounder change).
     pub(super) speed_factor: f64,
+    /// Followers: the index of the car it follows (cars are in id order).
+    pub(super) leader: Option<usize>,
 }
 
 /// A standard normal draw (Box-Muller).
@@ -129,6 +128,7 @@ impl<'p> SimCar<'p> {
             collided_with: None,
             driver: agency.driver,
             speed_factor: 1.0,
+            leader: plan.leader.map(|id| id as usize),
         }
     }
 }
@@ -163,8 +163,7 @@ impl SimCar<'_> {
     /// The state a frame records (removed cars parked far away, at rest).
     pub(super) fn state(&self) -> CarState {
         if self.removed {
-            let position = PARKING + DVec2::new(10.0 * self.plan.id as f64, 0.0);
-            return CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 };
+            return CarState::parked(self.plan.id);
         }
         let (position, yaw) = self.pose();
         CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: self.v }

@@ -6,6 +6,7 @@ use super::Sim;
 use crate::map::signals::Light;
 use crate::map::{Action, LanePolicy, LegKind, Route, RouteError};
 use crate::plan::interventions::{ConfounderName, Effect, Trigger};
+use crate::plan::OnLeaderLost;
 use crate::world::{BoundBy, Event, EventKind, Interaction};
 
 /// A re-planned route must reach this many times the car's fastest planned
@@ -81,10 +82,27 @@ impl Sim<'_> {
                 car.desired_override = Some(speed);
                 car.next_decision = t;
             }
-            Effect::Remove { car } => {
-                let car = &mut self.cars[car];
+            Effect::Remove { car: removed } => {
+                let car = &mut self.cars[removed];
                 car.removed = true;
                 car.binding = Interaction { bound_by: BoundBy::Intervention, other_car: None, light: None };
+                // Its followers have lost it: each drives its own queue from
+                // the actions it has done.
+                for follower in self.followers_of(removed) {
+                    let car = &mut self.cars[follower];
+                    match &car.plan.on_leader_lost {
+                        Some(OnLeaderLost::Drive(fallback)) => {
+                            let done = car.actions_done.min(fallback.actions.len());
+                            car.pending_actions =
+                                Some((fallback.actions[done..].to_vec(), fallback.merge_distances[done..].to_vec()));
+                        }
+                        Some(OnLeaderLost::Stop) => {
+                            car.stopped_until = f64::INFINITY;
+                            car.next_decision = t;
+                        }
+                        None => {}
+                    }
+                }
             }
             Effect::SetLight { light, colour, seconds } => {
                 self.light_overrides.push((light, colour, t, t + seconds));
@@ -161,6 +179,7 @@ impl Sim<'_> {
                 car.logged_adaptations.retain(|&k| k < done);
                 car.waiting_since = None;
                 self.log_adaptations(i, t);
+                self.show_followers(i);
             }
             Err(e) => {
                 let id = car.plan.id;
@@ -173,6 +192,27 @@ impl Sim<'_> {
                     detail: format!("replacing the actions not applied: {e}; the car keeps its own"),
                 });
             }
+        }
+    }
+
+    /// The cars that follow car `i` and are still in the scene.
+    fn followers_of(&self, i: usize) -> Vec<usize> {
+        (0..self.cars.len()).filter(|&j| self.cars[j].leader == Some(i) && !self.cars[j].removed).collect()
+    }
+
+    /// Car `i`'s remaining actions changed: its followers see it (turn
+    /// signals, the lane it takes) and take the same actions from the ones
+    /// they have done, re-planning once they are on a lane.
+    fn show_followers(&mut self, i: usize) {
+        if self.cars[i].removed {
+            return;
+        }
+        for follower in self.followers_of(i) {
+            let done = self.cars[follower].actions_done;
+            let leader = &self.cars[i];
+            let from = done.min(leader.actions.len());
+            let queue = (leader.actions[from..].to_vec(), leader.merges[from..].to_vec());
+            self.cars[follower].pending_actions = Some(queue);
         }
     }
 

@@ -73,6 +73,8 @@ fn plan(
                 width: WIDTH,
                 route: Arc::new(route),
                 hard_negative_behind: None,
+                leader: None,
+                on_leader_lost: None,
             }
         })
         .collect();
@@ -395,4 +397,64 @@ fn a_car_starting_before_a_red_light_starts_slow_enough_to_stop_comfortably() {
     let braking = hardest_braking(&traj, 0);
     assert!(braking <= p.comfortable_deceleration * 1.5, "braked at {braking:.2} m/s^2");
     assert!(traj.events.iter().all(|e| e.kind != EventKind::RedLightRun), "{:?}", traj.events);
+}
+
+/// A leader 8 m ahead of its follower on A1w (16 m long), both planned straight on at
+/// AD (lights green), the follower falling back on a right turn, driven for
+/// 20 s with `interventions`.
+fn follow_scene(map: &CityMap, interventions: Vec<Intervention>) -> Trajectories {
+    let cars = [
+        Given { lane: "A1w", at: 12.0, actions: vec![Action::Straight], merges: vec![0.0], desired: 2.5, start: 1.0 },
+        Given { lane: "A1w", at: 4.0, actions: vec![Action::Straight], merges: vec![0.0], desired: 2.5, start: 1.0 },
+    ];
+    let lights = lights_with(map, &["A1w"], &[(Colour::Green, 100.0)]);
+    let mut plan = plan(map, &cars, lights, interventions, 20.0);
+    let spawn = lane(map, "A1w");
+    let (actions, merges) = (vec![Action::Right], vec![0.0]);
+    let route = Route::plan(map, spawn, 4.0, &actions, &merges, 204.0, &LanePolicy::Adapt).expect("drivable");
+    let follower = &mut plan.cars[1];
+    follower.role = Role::Follower;
+    follower.leader = Some(0);
+    follower.on_leader_lost = Some(crate::plan::OnLeaderLost::Drive(crate::plan::Fallback {
+        actions,
+        merge_distances: merges,
+        route: Arc::new(route),
+    }));
+    plan.cars[0].role = Role::Leader;
+    plan.edges = vec![(0, 1)];
+    simulate(map, &plan)
+}
+
+/// Whether car `car` drives along the lane that `turn` from A1w leads to
+/// at some frame.
+fn passes_after(map: &CityMap, traj: &Trajectories, car: usize, turn: crate::map::Turn) -> bool {
+    let exit = map.exit(lane(map, "A1w"), turn).expect("A1w has the turn");
+    let to = &map.lanes[map.connectors[exit].to];
+    traj.states.iter().any(|frame| {
+        let (s, lateral) = to.curve.local_coordinates(frame[car].position);
+        s > 1.0 && s < to.curve.length() - 1.0 && lateral.abs() < 0.3
+    })
+}
+
+#[test]
+fn a_follower_takes_the_turn_its_leader_takes_and_its_own_once_the_leader_is_gone() {
+    use crate::map::Turn;
+    let map = CityMap::default();
+    // As planned: both straight on.
+    let factual = follow_scene(&map, vec![]);
+    assert!(passes_after(&map, &factual, 0, Turn::Straight) && passes_after(&map, &factual, 1, Turn::Straight));
+    // The leader told to turn right: the follower sees it and turns right too.
+    let turn = Intervention {
+        trigger: Trigger::At(0.0),
+        effect: Effect::ReplaceActions { car: 0, actions: vec![Action::Right], merge_distances: vec![0.0] },
+        label: "leader turns right".into(),
+    };
+    let turned = follow_scene(&map, vec![turn]);
+    assert!(passes_after(&map, &turned, 0, Turn::Right), "the leader did not turn right");
+    assert!(passes_after(&map, &turned, 1, Turn::Right), "the follower did not take its leader's turn");
+    // The leader removed: the follower drives its own queue (a right turn here).
+    let remove =
+        Intervention { trigger: Trigger::At(0.0), effect: Effect::Remove { car: 0 }, label: "remove leader".into() };
+    let lost = follow_scene(&map, vec![remove]);
+    assert!(passes_after(&map, &lost, 1, Turn::Right), "the follower did not fall back on its own queue");
 }

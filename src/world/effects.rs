@@ -1,0 +1,210 @@
+//! Interventional ground truth: which cars move which. For every car `a` the
+//! scenario is simulated again with `a` intervened on from the start, once
+//! with `a` removed and once with its next action changed, every other car
+//! keeping its own random stream (the counterfactual machinery guarantees
+//! that), and every other car's trajectory is compared with the factual one.
+//! A car `b` is an effect of `a` when one of these re-runs moves it more than
+//! [`EFFECT_THRESHOLD_M`] at some frame; the effect is direct when `b`
+//! reacted to `a` itself (it follows `a`, or `a` bound its speed at the frame
+//! where it first moved), not through another car or a light.
+//!
+//! Units: metres; frames are the scenario's frame indices.
+
+use super::{simulate, Interaction, Trajectories};
+use crate::map::{Action, CityMap, LegKind, Turn};
+use crate::plan::interventions::{Effect, Intervention, Trigger};
+use crate::plan::ScenarioPlan;
+
+/// How far (metres, at one frame) a car must move from its factual
+/// trajectory to count as an effect: a change a camera sees, not a rounding
+/// or a millimetre of drift. 0.5 m is 6.4 px in the default bird's-eye view
+/// (12.8 px per metre), over 60 times the pose log's pixel rounding, a
+/// quarter of a default car's length and a ninth of a real-scale car's.
+pub const EFFECT_THRESHOLD_M: f64 = 0.5;
+
+/// A car counts as having moved at all (for where an effect began) beyond
+/// this, metres: re-runs that change nothing about a car reproduce it bit for
+/// bit, so this only ignores round-off.
+const ONSET_M: f64 = 1e-6;
+
+/// The interventions each car gets, all from time 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum InterventionKind {
+    /// The car is taken off the map.
+    Remove,
+    /// The first action of its drive queue is replaced by another (see
+    /// [`changed_action`]).
+    NextAction,
+}
+
+impl InterventionKind {
+    pub const ALL: [InterventionKind; 2] = [InterventionKind::Remove, InterventionKind::NextAction];
+
+    /// The name `effects.csv` uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            InterventionKind::Remove => "remove",
+            InterventionKind::NextAction => "next_action",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<InterventionKind> {
+        InterventionKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// What one intervention on `cause` did to `effect` (car ids).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectRow {
+    pub cause: u32,
+    pub effect: u32,
+    pub intervention: InterventionKind,
+    /// Largest distance between the factual and the re-run position over
+    /// the frames, metres.
+    pub max_divergence_m: f64,
+    /// First frame where that distance exceeds the threshold; `None` when
+    /// it never does (no effect).
+    pub first_frame: Option<u32>,
+    /// The car reacted to `cause` itself (see the module documentation);
+    /// false when there is no effect.
+    pub direct: bool,
+}
+
+/// Every car's effect on every other car, for one scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectReport {
+    pub threshold_m: f64,
+    /// By cause, then intervention, then effect.
+    pub rows: Vec<EffectRow>,
+}
+
+impl EffectReport {
+    /// (cause, effect) pairs with an effect under some intervention, sorted.
+    pub fn causal_edges(&self) -> Vec<(u32, u32)> {
+        self.edges(|_| true)
+    }
+
+    /// The causal edges where the effect is direct, sorted.
+    pub fn direct_edges(&self) -> Vec<(u32, u32)> {
+        self.edges(|r| r.direct)
+    }
+
+    fn edges(&self, keep: impl Fn(&EffectRow) -> bool) -> Vec<(u32, u32)> {
+        let mut edges: Vec<(u32, u32)> =
+            self.rows.iter().filter(|r| r.first_frame.is_some() && keep(r)).map(|r| (r.cause, r.effect)).collect();
+        edges.sort_unstable();
+        edges.dedup();
+        edges
+    }
+}
+
+/// The action that replaces `car`'s next action under
+/// [`InterventionKind::NextAction`]: a turn becomes straight on; straight on
+/// becomes a right turn where the lane it reaches the intersection in has
+/// one, else a left turn; a merge goes to the other side. `None` for a car
+/// with no actions.
+pub fn changed_action(map: &CityMap, plan: &ScenarioPlan, car: usize) -> Option<Action> {
+    let c = &plan.cars[car];
+    let next = *c.actions.first()?;
+    Some(match next {
+        Action::Left | Action::Right => Action::Straight,
+        Action::MergeL => Action::MergeR,
+        Action::MergeR => Action::MergeL,
+        Action::Straight => {
+            // The lane before the connector that carries out action 0.
+            let legs = &c.route.legs;
+            let approach =
+                legs.iter().position(|l| l.action == Some(0)).and_then(|k| match legs[k.checked_sub(1)?].kind {
+                    LegKind::Lane(lane) => Some(lane),
+                    _ => None,
+                });
+            match approach {
+                Some(lane) if map.exit(lane, Turn::Right).is_none() => Action::Left,
+                _ => Action::Right,
+            }
+        }
+    })
+}
+
+/// `plan` with `kind` applied to car `car` from time 0; `None` when the
+/// intervention does not apply (no action to change).
+pub fn intervened(map: &CityMap, plan: &ScenarioPlan, car: usize, kind: InterventionKind) -> Option<ScenarioPlan> {
+    let c = &plan.cars[car];
+    let (effect, label) = match kind {
+        InterventionKind::Remove => (Effect::Remove { car }, format!("remove {} (effects re-run)", c.name)),
+        InterventionKind::NextAction => {
+            let action = changed_action(map, plan, car)?;
+            let mut actions = c.actions.clone();
+            actions[0] = action;
+            let label = format!("{} drives {action} first (effects re-run)", c.name);
+            (Effect::ReplaceActions { car, actions, merge_distances: c.merge_distances.clone() }, label)
+        }
+    };
+    let mut plan = plan.clone();
+    plan.interventions.push(Intervention { trigger: Trigger::At(0.0), effect, label });
+    Some(plan)
+}
+
+/// Re-simulates `plan` once per car and intervention and compares every
+/// other car with `factual` (the plan's own simulation).
+pub fn measure(map: &CityMap, plan: &ScenarioPlan, factual: &Trajectories) -> EffectReport {
+    let mut rows = Vec::new();
+    for (a, cause) in plan.cars.iter().enumerate() {
+        for kind in InterventionKind::ALL {
+            let Some(changed) = intervened(map, plan, a, kind) else { continue };
+            let rerun = simulate(map, &changed);
+            for (b, effect) in plan.cars.iter().enumerate().filter(|&(b, _)| b != a) {
+                rows.push(compare(plan, factual, &rerun, b, cause.id, effect.id, kind));
+            }
+        }
+    }
+    EffectReport { threshold_m: EFFECT_THRESHOLD_M, rows }
+}
+
+/// How car `b` (index; id `effect`) differs between the factual run and the
+/// re-run with car `cause` intervened on.
+fn compare(
+    plan: &ScenarioPlan,
+    factual: &Trajectories,
+    rerun: &Trajectories,
+    b: usize,
+    cause: u32,
+    effect: u32,
+    intervention: InterventionKind,
+) -> EffectRow {
+    let distance = |frame: usize| factual.states[frame][b].position.distance(rerun.states[frame][b].position);
+    let frames = factual.states.len().min(rerun.states.len());
+    let mut max_divergence_m = 0.0f64;
+    let mut first_frame = None;
+    let mut onset = None;
+    for frame in 0..frames {
+        let d = distance(frame);
+        max_divergence_m = max_divergence_m.max(d);
+        if d > ONSET_M && onset.is_none() {
+            onset = Some(frame);
+        }
+        if d > EFFECT_THRESHOLD_M && first_frame.is_none() {
+            first_frame = Some(frame as u32);
+        }
+    }
+    let follows = plan.cars[b].leader == Some(cause);
+    // What bound b's speed where it first moved (and the frame before, as a
+    // decision shows at the frame after it), in either run.
+    let bound_by_a = onset.is_some_and(|f| {
+        let names_a = |run: &Trajectories, frame: usize| {
+            run.interactions
+                .get(frame)
+                .and_then(|cars| cars.get(b))
+                .is_some_and(|i: &Interaction| i.other_car == Some(cause))
+        };
+        (f.saturating_sub(1)..=f).any(|frame| names_a(factual, frame) || names_a(rerun, frame))
+    });
+    EffectRow {
+        cause,
+        effect,
+        intervention,
+        max_divergence_m,
+        first_frame,
+        direct: first_frame.is_some() && (follows || bound_by_a),
+    }
+}
