@@ -87,14 +87,17 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     problems.extend(unexpected_entries(dir, keys, spec));
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
-    let results: Vec<(Vec<Problem>, u64, u64)> =
+    let results: Vec<ScenarioCheck> =
         pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect());
     let (mut files, mut bytes) = (0, 0);
-    for (p, f, b) in results {
+    let mut prints = Vec::with_capacity(keys.len());
+    for (p, f, b, cars) in results {
         problems.extend(p);
         files += f;
         bytes += b;
+        prints.push(cars);
     }
+    problems.extend(split_twins(dir, keys, &prints));
     Ok(ValidationReport {
         dir: dir.to_path_buf(),
         scenarios_expected: keys.len(),
@@ -157,13 +160,21 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
 }
 
 /// Checks one scenario; returns its problems, files and bytes read.
-fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (Vec<Problem>, u64, u64) {
+/// One scenario's findings: problems, files and bytes read, and each car's
+/// trajectory fingerprint (from poses.csv).
+type ScenarioCheck = (Vec<Problem>, u64, u64, Vec<Fingerprint>);
+
+/// SHA-256 (first 16 bytes) of a car's logged x, y at every frame: equal
+/// for two cars exactly when their trajectories are identical as logged.
+type Fingerprint = [u8; 16];
+
+fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> ScenarioCheck {
     let dir = scenario_dir(root, &key.group, key.split.name(), &key.folder_name());
     let mut problems = Vec::new();
     let mut problem = |path: &Path, message: String| problems.push(Problem { path: path.to_path_buf(), message });
     if !dir.is_dir() {
         problem(&dir, "missing scenario folder: rerun gen to write it".into());
-        return (problems, 0, 0);
+        return (problems, 0, 0, Vec::new());
     }
     let spec = expected.spec;
     let layout = &expected.layout;
@@ -266,7 +277,9 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
     }
 
     // CSV logs: columns, row counts, ids.
+    let mut fingerprints_here = Vec::new();
     if let Some(data) = read(POSES_CSV, &mut problems) {
+        fingerprints_here = fingerprints(&data, cars);
         check_csv(&dir.join(POSES_CSV), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
             let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(2)?.parse::<usize>().ok()?);
             let ok = cars > 0 && frame == i / cars && car == i % cars;
@@ -364,7 +377,51 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> (V
             read(name, &mut problems);
         }
     }
-    (problems, files, bytes)
+    (problems, files, bytes, fingerprints_here)
+}
+
+/// Each car's [`Fingerprint`] from poses.csv (rows by frame, then car; `x`
+/// and `y` are its fourth and fifth columns); empty when it does not parse.
+fn fingerprints(poses_csv: &[u8], cars: usize) -> Vec<Fingerprint> {
+    let mut hashers = vec![Sha256::new(); cars];
+    let mut reader = csv::Reader::from_reader(poses_csv);
+    for (i, row) in reader.records().enumerate() {
+        let Ok(row) = row else { return Vec::new() };
+        let (Some(x), Some(y)) = (row.get(3), row.get(4)) else { return Vec::new() };
+        let h = &mut hashers[i % cars.max(1)];
+        h.update(x.as_bytes());
+        h.update(b",");
+        h.update(y.as_bytes());
+        h.update(b";");
+    }
+    hashers.into_iter().map(|h| h.finalize()[..16].try_into().expect("16 of 32 bytes")).collect()
+}
+
+/// Val and test cars whose trajectory has an identical twin in train (the
+/// splits must not overlap), one problem per car, naming the twin.
+fn split_twins(root: &Path, keys: &[ScenarioKey], prints: &[Vec<Fingerprint>]) -> Vec<Problem> {
+    let folder = |k: &ScenarioKey| format!("{}/{}/{}", k.group, k.split.name(), k.folder_name());
+    let mut train: std::collections::HashMap<Fingerprint, (usize, usize)> = std::collections::HashMap::new();
+    for (k, (_, cars)) in keys.iter().zip(prints).enumerate().filter(|(_, (key, _))| key.split == Split::Train) {
+        for (car, print) in cars.iter().enumerate() {
+            train.entry(*print).or_insert((k, car));
+        }
+    }
+    let mut problems = Vec::new();
+    for (key, cars) in keys.iter().zip(prints).filter(|(key, _)| key.split != Split::Train) {
+        for (car, print) in cars.iter().enumerate() {
+            if let Some(&(k, twin)) = train.get(print) {
+                problems.push(Problem {
+                    path: scenario_dir(root, &key.group, key.split.name(), &key.folder_name()).join(POSES_CSV),
+                    message: format!(
+                        "car {car}'s trajectory is identical to car {twin}'s in {}: the splits overlap",
+                        folder(&keys[k])
+                    ),
+                });
+            }
+        }
+    }
+    problems
 }
 
 /// effects.csv parses (every field checked), has one row per cause, other

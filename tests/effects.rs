@@ -157,3 +157,39 @@ fn no_effects_leaves_them_out_and_a_rerun_with_them_is_refused() {
     assert_eq!(again.status.code(), Some(2), "{message}");
     assert!(message.contains("--no-effects"), "{message}");
 }
+
+/// Splits own their start points, so no val or test car can have an
+/// identical trajectory in train; validate checks it, and says so when a
+/// train scenario is copied into test.
+#[test]
+fn splits_share_no_start_and_validate_finds_a_trajectory_twin() {
+    use causalcity::map::CityMap;
+    use causalcity::plan::expand::split_owning_start;
+    let dir = fresh_dir("effects-splits");
+    let spec = write_spec(&dir, &toy_spec("splits", &[(4, 0.5), (12, 0.5)], (6, 3, 3), 20));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-images", "--no-effects"]);
+    let map = CityMap::default();
+    let mut cars = 0;
+    for d in scenario_dirs(&out) {
+        let scenario = read_json(&d.join("scenario.json"));
+        let split = ["train", "val", "test"].iter().position(|s| scenario["split"] == *s).unwrap();
+        for car in scenario["cars"].as_array().unwrap() {
+            let lane = map.lane_by_name(car["spawn"].as_str().unwrap()).unwrap();
+            assert_eq!(split_owning_start(lane, car["spawn_distance"].as_f64().unwrap()), split, "{car}");
+            cars += 1;
+        }
+    }
+    assert_eq!(cars, 12 * 4 + 12 * 12);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert_eq!(report.status.code(), Some(0), "{}", String::from_utf8_lossy(&report.stdout));
+    // A train scenario's poses copied into a test scenario: its cars now have twins in train.
+    let train = out.join("cars04_edges50/train/00002");
+    let test = out.join("cars04_edges50/test/00001");
+    std::fs::copy(train.join("poses.csv"), test.join("poses.csv")).unwrap();
+    let report = run(&["validate", out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout).to_string() + &String::from_utf8_lossy(&report.stderr);
+    assert_eq!(report.status.code(), Some(1), "{text}");
+    let twins = text.lines().filter(|l| l.contains("cars04_edges50/train/00002: the splits overlap")).count();
+    assert_eq!(twins, 4, "{text}");
+}

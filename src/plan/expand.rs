@@ -69,6 +69,25 @@ const FALLBACK_TAG: &[u8] = b"causalcity/follower-fallback/v1";
 /// Clearance kept between cars at spawn, metres.
 const SPAWN_CLEARANCE: f64 = 0.1;
 
+/// The split that owns the start `s` metres along `lane` (to 0.1 mm, the
+/// pose log's precision): train, val or test (0, 1, 2), by a hash that
+/// interleaves the three finely along every lane. Every car of a split
+/// starts on a point that split owns, so no car of one split starts where
+/// a car of another does, and no car trajectory (starting point first) has
+/// an identical twin in another split, while each split's starts still
+/// cover every lane uniformly.
+pub fn split_owning_start(lane: LaneId, s: f64) -> usize {
+    // SplitMix64's finaliser over (lane, position in tenths of a millimetre).
+    let mut z = ((lane as u64) << 40) ^ ((s * 1e4).round() as i64 as u64);
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    ((z ^ (z >> 31)) % 3) as usize
+}
+
+/// Most millimetres a drawn start moves forward to a point its split owns
+/// (a pair needs both cars' points: one in nine on average).
+const OWNED_START_SEARCH_MM: usize = 200;
 const PLACEMENT_ATTEMPTS: usize = 2000;
 
 impl Expansion {
@@ -208,6 +227,18 @@ impl Expansion {
                         (span, back + spacing, back)
                     }
                 };
+                // The nearest start forward (in whole millimetres) that this
+                // split owns, for both cars of a pair.
+                let split = Split::ALL.iter().position(|&s| s == key.split).unwrap_or(0);
+                let owned = (0..OWNED_START_SEARCH_MM).map(|mm| round_mm(back + mm as f64 / 1000.0)).find(|&b| {
+                    split_owning_start(span.lane, b + (front - back)) == split
+                        && (!is_pair || split_owning_start(span.lane, b) == split)
+                });
+                let Some(owned_back) = owned else { continue };
+                let (front, back) = (owned_back + (front - back), owned_back);
+                if front > span.hi {
+                    continue;
+                }
                 let (actions, merges) = match city.as_ref().map(|c| c.action_drawing) {
                     Some(ActionDrawing::Original) => original_actions(&mut rng, spec.actions_per_car),
                     _ => random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car),
