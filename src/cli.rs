@@ -7,6 +7,7 @@
 use causalcity::analysis::baseline::baseline;
 use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
 use causalcity::analysis::stats::dataset_stats;
+use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
 use causalcity::export::nri::{export_nri, NriLayout, NriOptions, Velocity};
 use causalcity::export::nsdr::export_nsdr;
@@ -203,6 +204,11 @@ pub struct BaselineArgs {
     #[arg(long, value_name = "SECONDS", default_value_t = 8.0, value_parser = positive_number)]
     pub max_lag: f64,
 
+    /// The graph to score against: designed (leader-follower edges), causal
+    /// or direct (measured by intervention; not with gen --no-effects).
+    #[arg(long, value_enum, default_value = "designed")]
+    pub graph: GraphArg,
+
     /// Print the table as JSON on stdout.
     #[arg(long)]
     pub json: bool,
@@ -247,7 +253,7 @@ pub enum ExportCommand {
     /// NRI: loc/vel/edges .npy files per group and split (train, valid, test).
     Nri(ExportNriArgs),
     /// V-CDN: one HDF5 file per scenario (attrs, states, actions, rels).
-    Vcdn(ExportDirArgs),
+    Vcdn(ExportVcdnArgs),
     /// NS-DR: annotations.json per scenario, masks as COCO RLE.
     Nsdr(ExportDirArgs),
 }
@@ -305,6 +311,43 @@ pub struct ExportNriArgs {
     /// city world only), for time-varying graph methods such as dNRI.
     #[arg(long)]
     pub dynamic: bool,
+
+    /// The graph `edges` holds: designed (leader-follower edges), causal or
+    /// direct (measured by intervention; not with gen --no-effects).
+    #[arg(long, value_enum, default_value = "designed")]
+    pub graph: GraphArg,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportVcdnArgs {
+    #[command(flatten)]
+    pub dir: ExportDirArgs,
+
+    /// The graph `rels` and `edges` link: designed (leader-follower edges),
+    /// causal or direct (measured by intervention; not with gen --no-effects).
+    #[arg(long, value_enum, default_value = "designed")]
+    pub graph: GraphArg,
+}
+
+/// A causal graph of a dataset.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum GraphArg {
+    /// Leader-follower pairs, as designed (scenario.json `edges`).
+    Designed,
+    /// Pairs where intervening on the first car moves the second (`causal_edges`).
+    Causal,
+    /// The causal pairs where the second car reacts to the first itself (`direct_edges`).
+    Direct,
+}
+
+impl From<GraphArg> for GraphKind {
+    fn from(g: GraphArg) -> GraphKind {
+        match g {
+            GraphArg::Designed => GraphKind::Designed,
+            GraphArg::Causal => GraphKind::Causal,
+            GraphArg::Direct => GraphKind::Direct,
+        }
+    }
 }
 
 #[derive(Debug, Args)]
@@ -559,6 +602,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 clip: args.clip,
                 velocity: args.velocity.into(),
                 dynamic: args.dynamic,
+                graph: args.graph.into(),
             };
             for line in export_nri(&args.dataset, &args.out, &options)? {
                 say(line)?;
@@ -570,8 +614,9 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             say(format!("wrote annotations.json for {n} scenarios under {}", args.out.display()))
         }
         Command::Export(ExportCommand::Vcdn(args)) => {
-            let n = export_vcdn(&args.dataset, &args.out, progress(args.quiet)).map_err(Error::Failure)?;
-            say(format!("wrote {n} V-CDN HDF5 files under {}", args.out.display()))
+            let ExportVcdnArgs { dir, graph } = args;
+            let n = export_vcdn(&dir.dataset, &dir.out, graph.into(), progress(dir.quiet))?;
+            say(format!("wrote {n} V-CDN HDF5 files under {}", dir.out.display()))
         }
         Command::Preview(args) => {
             let options = PreviewOptions {
@@ -586,7 +631,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             };
             say(preview(&args.scenario, &args.out, &options).map_err(Error::Failure)?)
         }
-        Command::Baseline(args) => report(&baseline(&args.dataset, args.max_lag).map_err(Error::Failure)?, args.json),
+        Command::Baseline(args) => report(&baseline(&args.dataset, args.max_lag, args.graph.into())?, args.json),
         Command::Run(args) => {
             let options = RunOptions {
                 scenario_file: args.scenario,

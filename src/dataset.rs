@@ -40,6 +40,20 @@ impl Dataset {
         &self.expansion.spec
     }
 
+    /// Checks that every scenario carries `graph` (the causal and direct
+    /// graphs need effects, which `gen --no-effects` leaves out).
+    pub fn require_graph(&self, graph: GraphKind) -> Result<(), String> {
+        if graph != GraphKind::Designed && !self.record.effects {
+            return Err(format!(
+                "{} has no {} graph: it was generated with gen --no-effects (regenerate it without that flag, \
+                 or use the designed graph)",
+                self.dir.display(),
+                graph.name()
+            ));
+        }
+        Ok(())
+    }
+
     /// Every scenario folder, in the dataset's order, with its path relative
     /// to the dataset (`<group>/<split>/<scenario>`), which exports mirror.
     pub fn scenario_paths(&self) -> Vec<(PathBuf, PathBuf)> {
@@ -80,6 +94,40 @@ pub struct ScenarioCar {
     pub colour: String,
 }
 
+/// Which causal graph of a scenario a reader scores or exports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GraphKind {
+    /// The design: leader-follower pairs (`edges`).
+    #[default]
+    Designed,
+    /// Total effects under intervention (`causal_edges`).
+    Causal,
+    /// Direct effects under intervention (`direct_edges`).
+    Direct,
+}
+
+impl GraphKind {
+    pub const ALL: [GraphKind; 3] = [GraphKind::Designed, GraphKind::Causal, GraphKind::Direct];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            GraphKind::Designed => "designed",
+            GraphKind::Causal => "causal",
+            GraphKind::Direct => "direct",
+        }
+    }
+
+    /// The scenario.json field holding it.
+    pub fn field(self) -> &'static str {
+        match self {
+            GraphKind::Designed => "edges",
+            GraphKind::Causal => "causal_edges",
+            GraphKind::Direct => "direct_edges",
+        }
+    }
+}
+
 /// What readers need from a scenario.json.
 #[derive(Debug, Clone, serde::Deserialize)]
 pub struct ScenarioSummary {
@@ -89,18 +137,39 @@ pub struct ScenarioSummary {
     pub cars: Vec<ScenarioCar>,
     /// (leader, follower) car ids.
     pub edges: Vec<[u32; 2]>,
+    /// (cause, effect) car ids, where effects were measured.
+    #[serde(default)]
+    pub causal_edges: Option<Vec<[u32; 2]>>,
+    #[serde(default)]
+    pub direct_edges: Option<Vec<[u32; 2]>>,
+    /// The graph asked for by [`ScenarioSummary::read_graph`] (the designed
+    /// one by default), (cause, effect) car ids.
+    #[serde(skip)]
+    pub graph: Vec<[u32; 2]>,
 }
 
 impl ScenarioSummary {
     /// Reads `dir/scenario.json`; errors name the file.
     pub fn read(dir: &Path) -> Result<ScenarioSummary, String> {
+        ScenarioSummary::read_graph(dir, GraphKind::Designed)
+    }
+
+    /// Reads `dir/scenario.json` with `graph` in [`ScenarioSummary::graph`];
+    /// errors name the file (and the field, when the graph is missing).
+    pub fn read_graph(dir: &Path, graph: GraphKind) -> Result<ScenarioSummary, String> {
         let path = dir.join("scenario.json");
         let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let summary: ScenarioSummary = serde_json::from_slice(&bytes)
+        let mut summary: ScenarioSummary = serde_json::from_slice(&bytes)
             .map_err(|e| format!("{}: not a causalcity scenario: {e}", path.display()))?;
+        summary.graph = match graph {
+            GraphKind::Designed => Some(summary.edges.clone()),
+            GraphKind::Causal => summary.causal_edges.clone(),
+            GraphKind::Direct => summary.direct_edges.clone(),
+        }
+        .ok_or_else(|| format!("{}: no `{}` (it was written without effects)", path.display(), graph.field()))?;
         let cars = summary.cars.len() as u32;
         if summary.cars.iter().enumerate().any(|(i, c)| c.id != i as u32)
-            || summary.edges.iter().any(|e| e[0] >= cars || e[1] >= cars)
+            || summary.edges.iter().chain(&summary.graph).any(|e| e[0] >= cars || e[1] >= cars)
         {
             return Err(format!("{}: car ids must be 0..{cars} in order, and edges must name them", path.display()));
         }

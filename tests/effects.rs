@@ -110,6 +110,44 @@ fn city_effects_back_the_designed_edges_and_validate_checks_them() {
     let table = run(&["stats", out.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&table.stdout).contains("backed"));
 
+    // The causal graph exports as NRI edges (receiver, sender) and scores in baseline.
+    let nri = dir.join("nri");
+    let export = run(&[
+        "export",
+        "nri",
+        out.to_str().unwrap(),
+        "--out",
+        nri.to_str().unwrap(),
+        "--graph",
+        "causal",
+        "--directed",
+    ]);
+    assert!(export.status.success(), "{}", String::from_utf8_lossy(&export.stderr));
+    let file = std::fs::File::open(nri.join("cars08_edges80/edges_test.npy")).unwrap();
+    let npy = npyz::NpyFile::new(std::io::BufReader::new(file)).unwrap();
+    let shape = npy.shape().to_vec();
+    let edges: Vec<i64> = npy.into_vec().unwrap();
+    let (scenarios, cars) = (shape[0] as usize, shape[1] as usize);
+    let mut exported = BTreeSet::new();
+    for s in 0..scenarios {
+        for (i, j) in (0..cars).flat_map(|i| (0..cars).map(move |j| (i, j))).filter(|&(i, j)| i != j) {
+            if edges[(s * cars + i) * cars + j] == 1 {
+                exported.insert((s, j as u32, i as u32));
+            }
+        }
+    }
+    let mut expected = BTreeSet::new();
+    for (s, d) in sorted_entries(&out.join("cars08_edges80/test")).iter().enumerate() {
+        expected
+            .extend(pairs(&read_json(&d.join("scenario.json")), "causal_edges").into_iter().map(|(a, b)| (s, a, b)));
+    }
+    assert!(!expected.is_empty());
+    assert_eq!(exported, expected);
+    let scored = run(&["baseline", out.to_str().unwrap(), "--graph", "direct", "--json"]);
+    assert!(scored.status.success(), "{}", String::from_utf8_lossy(&scored.stderr));
+    let scored: Value = serde_json::from_slice(&scored.stdout).unwrap();
+    assert_eq!(scored["graph"], "direct");
+
     // validate passes, then catches a graph that disagrees with the rows.
     let report = run(&["validate", out.to_str().unwrap()]);
     assert_eq!(report.status.code(), Some(0), "{}", String::from_utf8_lossy(&report.stdout));
@@ -156,6 +194,18 @@ fn no_effects_leaves_them_out_and_a_rerun_with_them_is_refused() {
     let message = String::from_utf8_lossy(&again.stderr);
     assert_eq!(again.status.code(), Some(2), "{message}");
     assert!(message.contains("--no-effects"), "{message}");
+    // Readers asked for a measured graph say the dataset has none, and write nothing.
+    let nri = dir.join("nri");
+    for args in [
+        vec!["export", "nri", out.to_str().unwrap(), "--out", nri.to_str().unwrap(), "--graph", "causal"],
+        vec!["baseline", out.to_str().unwrap(), "--graph", "direct"],
+    ] {
+        let refused = run(&args);
+        let message = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{args:?}: {message}");
+        assert!(message.contains("--no-effects"), "{message}");
+    }
+    assert!(!nri.exists());
 }
 
 /// Splits own their start points, so no val or test car can have an

@@ -24,8 +24,13 @@
 //! threshold on train like the dynamics score. A benchmark whose frame0 row
 //! does as well as its dynamics row gives its answer away before anything
 //! moves.
+//!
+//! Either graph of a dataset can be the truth: the designed leader-follower
+//! edges (default), or the causal or direct graph measured by intervention
+//! (`effects.csv`), a (cause, effect) pair counting as (leader, follower).
 
-use crate::dataset::{Dataset, Pose, PoseLog, ScenarioSummary};
+use crate::dataset::{Dataset, GraphKind, Pose, PoseLog, ScenarioSummary};
+use crate::error::Error;
 use crate::spec::Split;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -72,6 +77,8 @@ pub struct BaselineReport {
     pub dataset: String,
     pub world: String,
     pub max_lag_s: f64,
+    /// The graph scored against: designed, causal or direct.
+    pub graph: GraphKind,
     /// The dynamics baseline, per group.
     pub groups: Vec<GroupBaseline>,
     /// The best first-frame rule, per group: the leak.
@@ -94,17 +101,25 @@ const SAME_LANE_M: f64 = 1.5;
 const SAME_HEADING_RAD: f64 = 0.5;
 
 /// Runs the baseline over the dataset in `dir`.
-pub fn baseline(dir: &Path, max_lag_s: f64) -> Result<BaselineReport, String> {
+/// Bad input (a lag that is no positive number, a graph the dataset does not
+/// have) is an [`Error::Input`]; unreadable files an [`Error::Failure`].
+pub fn baseline(dir: &Path, max_lag_s: f64, graph: GraphKind) -> Result<BaselineReport, Error> {
     if !(max_lag_s > 0.0 && max_lag_s.is_finite()) {
-        return Err(format!("--max-lag must be a positive number of seconds, not {max_lag_s}"));
+        return Err(Error::Input(format!("--max-lag must be a positive number of seconds, not {max_lag_s}")));
     }
-    let dataset = Dataset::open_complete(dir)?;
+    let dataset = Dataset::open_complete(dir).map_err(Error::Failure)?;
+    dataset.require_graph(graph).map_err(Error::Input)?;
+    score(dir, &dataset, max_lag_s, graph).map_err(Error::Failure)
+}
+
+/// [`baseline`] of an opened dataset.
+fn score(dir: &Path, dataset: &Dataset, max_lag_s: f64, graph: GraphKind) -> Result<BaselineReport, String> {
     let spec = dataset.spec();
     let mut per_group = Vec::new();
     for group in &spec.groups {
         let name = group.name();
         let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
-            dataset.scenario_dirs(&name, split).par_iter().map(|d| score_scenario(d, max_lag_s)).collect()
+            dataset.scenario_dirs(&name, split).par_iter().map(|d| score_scenario(d, max_lag_s, graph)).collect()
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }
@@ -157,14 +172,15 @@ pub fn baseline(dir: &Path, max_lag_s: f64) -> Result<BaselineReport, String> {
         dataset: dir.display().to_string(),
         world: spec.world.name().to_string(),
         max_lag_s,
+        graph,
         groups,
         frame0,
     })
 }
 
 /// Scores every ordered pair of the scenario in `dir`, both ways.
-fn score_scenario(dir: &Path, max_lag_s: f64) -> Result<ScenarioScores, String> {
-    let scenario = ScenarioSummary::read(dir)?;
+fn score_scenario(dir: &Path, max_lag_s: f64, graph: GraphKind) -> Result<ScenarioScores, String> {
+    let scenario = ScenarioSummary::read_graph(dir, graph)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
     let poses = PoseLog::read(dir, frames, cars)?;
     let max_lag = ((max_lag_s / scenario.frame_interval).round() as usize).max(1);
@@ -176,7 +192,7 @@ fn score_scenario(dir: &Path, max_lag_s: f64) -> Result<ScenarioScores, String> 
             if leader == follower {
                 continue;
             }
-            let linked = scenario.edges.iter().any(|e| e[0] as usize == leader && e[1] as usize == follower);
+            let linked = scenario.graph.iter().any(|e| e[0] as usize == leader && e[1] as usize == follower);
             scores.dynamics.push((following_score(&tracks[leader], &tracks[follower], max_lag), linked));
             scores.frame0.push((frame0_score(poses.at(0, leader), poses.at(0, follower)), linked));
         }
@@ -341,8 +357,8 @@ impl fmt::Display for BaselineReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "following-score baseline (dynamics) and the best first-frame rule (frame0) on {} ({} world, lags up to {} s): threshold from train, scores on test",
-            self.dataset, self.world, self.max_lag_s
+            "following-score baseline (dynamics) and the best first-frame rule (frame0) on {} ({} world, lags up to {} s) against the {} graph: threshold from train, scores on test",
+            self.dataset, self.world, self.max_lag_s, self.graph.name()
         )?;
         writeln!(
             f,

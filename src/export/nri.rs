@@ -28,7 +28,7 @@
 //! `other_car` j); the same receiver/sender, `--directed` and identity
 //! conventions as `edges`.
 
-use crate::dataset::{Dataset, ScenarioSummary};
+use crate::dataset::{Dataset, GraphKind, ScenarioSummary};
 use crate::error::Error;
 use crate::output::io_err;
 use crate::output::layout::INTERACTIONS_CSV;
@@ -69,6 +69,8 @@ pub struct NriOptions {
     pub velocity: Velocity,
     /// Also write the per-frame graph from interactions.csv (city world).
     pub dynamic: bool,
+    /// Which graph `edges` holds.
+    pub graph: GraphKind,
 }
 
 /// Split names as the NRI loaders spell them.
@@ -90,7 +92,7 @@ fn fill_scenario(
     options: &NriOptions,
     (loc, vel, edges, dynamic): (&mut [f32], &mut [f32], &mut [i64], &mut [u8]),
 ) -> Result<(), String> {
-    let scenario = ScenarioSummary::read(dir)?;
+    let scenario = ScenarioSummary::read_graph(dir, options.graph)?;
     if scenario.cars.len() != cars || scenario.frames as usize != frames {
         return Err(format!(
             "{}: {} cars x {} frames, the spec says {cars} x {frames}",
@@ -133,7 +135,7 @@ fn fill_scenario(
             edges[i * cars + i] = 1;
         }
     }
-    for edge in &scenario.edges {
+    for edge in &scenario.graph {
         let (leader, follower) = (edge[0] as usize, edge[1] as usize);
         edges[follower * cars + leader] = 1;
         if !options.directed {
@@ -216,6 +218,7 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
 /// is written.
 pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, Error> {
     let opened = Dataset::open_complete(dataset).map_err(Error::Failure)?;
+    opened.require_graph(options.graph).map_err(Error::Input)?;
     if options.dynamic && opened.spec().world != WorldKind::City {
         return Err(Error::Input(format!(
             "{}: --dynamic needs a city-world dataset (its interactions.csv); this one is {}-world",

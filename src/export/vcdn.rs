@@ -14,7 +14,8 @@
 //! HDF5 needs the system library, so this export is behind the `hdf5` cargo
 //! feature (`make` installs the library and turns it on).
 
-use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
+use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary};
+use crate::error::Error;
 use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -31,9 +32,10 @@ pub struct VcdnArrays {
     pub edges: Vec<i64>,
 }
 
-/// Builds the V-CDN arrays of the scenario in `dir`.
-pub fn vcdn_arrays(dir: &Path) -> Result<VcdnArrays, String> {
-    let scenario = ScenarioSummary::read(dir)?;
+/// Builds the V-CDN arrays of the scenario in `dir`, linking the pairs of
+/// `graph`.
+pub fn vcdn_arrays(dir: &Path, graph: GraphKind) -> Result<VcdnArrays, String> {
+    let scenario = ScenarioSummary::read_graph(dir, graph)?;
     let (t_count, n) = (scenario.frames as usize, scenario.cars.len());
     let poses = PoseLog::read(dir, t_count, n)?;
     let position = |t: usize, car: usize| {
@@ -66,7 +68,7 @@ pub fn vcdn_arrays(dir: &Path) -> Result<VcdnArrays, String> {
     let mut pair_values = Vec::new();
     for i in 0..n {
         for j in i + 1..n {
-            let linked = scenario.edges.iter().any(|e| {
+            let linked = scenario.graph.iter().any(|e| {
                 let (l, f) = (e[0] as usize, e[1] as usize);
                 (l, f) == (i, j) || (l, f) == (j, i)
             });
@@ -88,16 +90,17 @@ pub fn vcdn_arrays(dir: &Path) -> Result<VcdnArrays, String> {
         states,
         actions,
         rels,
-        edges: scenario.edges.iter().flat_map(|e| [e[0] as i64, e[1] as i64]).collect(),
+        edges: scenario.graph.iter().flat_map(|e| [e[0] as i64, e[1] as i64]).collect(),
     })
 }
 
-/// Exports every scenario of `dataset` into `out`; returns how many files
-/// were written.
-pub fn export_vcdn(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, String> {
-    let opened = Dataset::open_complete(dataset)?;
+/// Exports every scenario of `dataset` into `out`, linking the pairs of
+/// `graph`; returns how many files were written.
+pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: ProgressMode) -> Result<usize, Error> {
+    let opened = Dataset::open_complete(dataset).map_err(Error::Failure)?;
+    opened.require_graph(graph).map_err(Error::Input)?;
     if !cfg!(feature = "hdf5") {
-        return Err(NO_HDF5.into());
+        return Err(Error::Failure(NO_HDF5.into()));
     }
     let jobs: Vec<(PathBuf, PathBuf)> = opened
         .scenario_paths()
@@ -105,16 +108,18 @@ pub fn export_vcdn(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
         .map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")))
         .collect();
     let bar = Progress::new(jobs.len() as u64, progress);
-    jobs.par_iter().try_for_each(|(source, target)| {
-        let arrays = vcdn_arrays(source)?;
-        let parent = target.parent().expect("files have a folder");
-        std::fs::create_dir_all(parent).map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
-        let partial = target.with_extension("h5.partial");
-        write_hdf5(&partial, &arrays).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-        std::fs::rename(&partial, target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-        bar.inc();
-        Ok::<(), String>(())
-    })?;
+    jobs.par_iter()
+        .try_for_each(|(source, target)| {
+            let arrays = vcdn_arrays(source, graph)?;
+            let parent = target.parent().expect("files have a folder");
+            std::fs::create_dir_all(parent).map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+            let partial = target.with_extension("h5.partial");
+            write_hdf5(&partial, &arrays).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+            std::fs::rename(&partial, target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+            bar.inc();
+            Ok::<(), String>(())
+        })
+        .map_err(Error::Failure)?;
     bar.finish();
     Ok(jobs.len())
 }
