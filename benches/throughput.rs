@@ -84,6 +84,55 @@ fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
     generate(&gen_options(spec, out, threads, images)).unwrap().elapsed.as_secs_f64()
 }
 
+/// The interventional ground truth against the re-runs it needs: measuring a
+/// scenario's effects (24 re-runs for 12 cars, then comparing every car)
+/// beside simulating the same intervened plans alone, and `gen` with and
+/// without effects, poses only, 1 thread.
+fn effects_cost(root: &Path) {
+    use causalcity::world::effects::{intervened, measure, InterventionKind};
+    for world in ["toy", "city"] {
+        println!("\n== Interventional effects, {world} world, 12 cars x 150 frames, 1 thread ==");
+        let spec = DatasetSpec::from_json(&world_spec_json(&format!("fx-{world}"), world, 12, 200)).unwrap();
+        let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
+        let map = &expansion.map;
+        let plans: Vec<_> = expansion.keys(None).iter().map(|k| expansion.plan(k).unwrap()).collect();
+        let factual: Vec<_> = plans.iter().map(|p| causalcity::world::simulate(map, p)).collect();
+        let mut reruns = Vec::new();
+        for p in &plans {
+            for car in 0..p.cars.len() {
+                reruns.extend(InterventionKind::ALL.into_iter().filter_map(|k| intervened(map, p, car, k)));
+            }
+        }
+        let t = Instant::now();
+        for plan in &reruns {
+            std::hint::black_box(causalcity::world::simulate(map, plan));
+        }
+        let alone = t.elapsed().as_secs_f64() * 1e3 / plans.len() as f64;
+        let t = Instant::now();
+        for (plan, traj) in plans.iter().zip(&factual) {
+            std::hint::black_box(measure(map, plan, traj));
+        }
+        let measured = t.elapsed().as_secs_f64() * 1e3 / plans.len() as f64;
+        let spec_path = write_world_spec(root, &format!("fx-gen-{world}"), world, 12, 200);
+        let time = |effects: bool| {
+            let out = root.join(format!("fx-{world}-{effects}"));
+            let _ = std::fs::remove_dir_all(&out);
+            let options = GenOptions { effects, ..gen_options(&spec_path, &out, 1, false) };
+            generate(&options).unwrap().elapsed.as_secs_f64()
+        };
+        let (without, with) = (time(false), time(true));
+        println!(
+            "per scenario: effects {measured:.2} ms, the same {} re-runs alone {alone:.2} ms (ratio {:.2}); \
+             gen poses only {:.1} ms without effects, {:.1} ms with ({:.1}x)",
+            reruns.len() / plans.len(),
+            measured / alone,
+            without * 1e3 / 200.0,
+            with * 1e3 / 200.0,
+            with / without
+        );
+    }
+}
+
 /// End to end (plan, simulate, render, encode, write, checksum) against
 /// encoding the same frames alone, toy world with images, 1 thread, in
 /// /dev/shm: how close the pipeline runs to the PNG encoder.
@@ -340,6 +389,12 @@ fn main() {
         perspective_rates();
         return;
     }
+    // BENCH_ONLY=effects: only the interventional effects' figures.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "effects") {
+        effects_cost(&root);
+        let _ = std::fs::remove_dir_all(&root);
+        return;
+    }
     frame_pipeline(&root);
     // BENCH_ONLY=pipeline stops after the frame-pipeline figures.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "pipeline") {
@@ -432,6 +487,7 @@ fn main() {
             "\n== city scenario cost, 12 cars x 150 frames: plan {plan_ms:.2} ms, simulate {sim_ms:.2} ms, lights.csv {lights_ms:.2} ms, poses.csv {poses_ms:.2} ms =="
         );
     }
+    effects_cost(&root);
     for world in ["toy", "city"] {
         println!("\n== {world} world, poses only, 12 cars x 150 frames (CSV included) ==");
         let poses_spec = write_world_spec(&root, &format!("poses-{world}"), world, 12, 2000);
