@@ -67,10 +67,12 @@ python-env:
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check ./python
 
 ## Throughput, memory and size figures (prints, asserts nothing); then the
-## Python package's rates beside the command line's.
+## Python package's rates beside the command line's; then issue 23's ground
+## truth figures (effects backing the design, the learned leak classifiers).
 bench: build python-env
 	$(CARGO) bench --locked $(CARGO_FEATURES) --bench throughput
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/python_throughput.py
+	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/ground_truth.py
 
 ## Fuzz the spec parser (not part of CI). Needs cargo-fuzz; runs on stable
 ## through RUSTC_BOOTSTRAP. FUZZ_SECONDS sets how long (default 600).

@@ -7,7 +7,8 @@ figures and ratios; asserts nothing.
 - with images: frame pairs (RGB + mask) per second, `gen` with its PNG
   encoding time taken out, against `stream(images=True)`.
 
-Same spec, same scenarios, same thread counts. $CAUSALCITY_CLI is the
+Same spec, same scenarios, same thread counts, without the interventional
+effects on either side. $CAUSALCITY_CLI is the
 command that runs the binary.
 """
 
@@ -33,6 +34,8 @@ def cli_run(spec_path, threads, limit, images):
     command = shlex.split(os.environ.get("CAUSALCITY_CLI", str(ROOT / "target" / "release" / "causalcity")))
     with tempfile.TemporaryDirectory(prefix="causalcity-bench-") as out:
         args = ["gen", "--spec", str(spec_path), "--out", out, "--limit", str(limit), "-j", str(threads), "--json", "-q"]
+        # The generation pipeline itself: the effects' re-runs are measured by `BENCH_ONLY=effects`.
+        args.append("--no-effects")
         if not images:
             args.append("--no-images")
         result = subprocess.run(command + args, capture_output=True, text=True, check=True)
@@ -43,7 +46,7 @@ def python_run(spec, threads, limit, images):
     start = time.perf_counter()
     scenarios = frames = 0
     for split in spec.splits:
-        for s in causalcity.stream(spec, split, limit=limit, images=images, threads=threads):
+        for s in causalcity.stream(spec, split, limit=limit, images=images, effects=False, threads=threads):
             scenarios += 1
             frames += s.frames if images else 0
     return scenarios, frames, time.perf_counter() - start
