@@ -94,6 +94,13 @@ pub struct ScenarioCar {
     pub colour: String,
 }
 
+/// A list of car pairs `[[a, b], ...]` of a scenario.json (`edges`,
+/// `causal_edges`, ...); `None` when the field is missing or malformed.
+pub fn edge_pairs(scenario: &serde_json::Value, field: &str) -> Option<Vec<(u32, u32)>> {
+    let pair = |e: &serde_json::Value| Some((u32::try_from(e[0].as_u64()?).ok()?, u32::try_from(e[1].as_u64()?).ok()?));
+    scenario[field].as_array()?.iter().map(pair).collect()
+}
+
 /// Which causal graph of a scenario a reader scores or exports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]

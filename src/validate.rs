@@ -4,7 +4,7 @@
 //! ids consistent across scenario.json, the CSV logs and the masks, and the
 //! SHA-256 of every file. Reports every problem with its path.
 
-use crate::dataset::Dataset;
+use crate::dataset::{edge_pairs, Dataset};
 use crate::output::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -279,7 +279,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     // CSV logs: columns, row counts, ids.
     let mut fingerprints_here = Vec::new();
     if let Some(data) = read(POSES_CSV, &mut problems) {
-        fingerprints_here = fingerprints(&data, cars);
+        fingerprints_here = fingerprints(&data, frames, cars);
         check_csv(&dir.join(POSES_CSV), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
             let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(2)?.parse::<usize>().ok()?);
             let ok = cars > 0 && frame == i / cars && car == i % cars;
@@ -381,36 +381,49 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
 }
 
 /// Each car's [`Fingerprint`] from poses.csv (rows by frame, then car; `x`
-/// and `y` are its fourth and fifth columns); empty when it does not parse.
-fn fingerprints(poses_csv: &[u8], cars: usize) -> Vec<Fingerprint> {
+/// and `y` are its fourth and fifth columns); empty unless it holds exactly
+/// `frames` x `cars` rows (the row check reports that).
+fn fingerprints(poses_csv: &[u8], frames: usize, cars: usize) -> Vec<Fingerprint> {
+    if cars == 0 {
+        return Vec::new();
+    }
     let mut hashers = vec![Sha256::new(); cars];
     let mut reader = csv::Reader::from_reader(poses_csv);
-    for (i, row) in reader.records().enumerate() {
+    let mut rows = 0;
+    for row in reader.records() {
         let Ok(row) = row else { return Vec::new() };
         let (Some(x), Some(y)) = (row.get(3), row.get(4)) else { return Vec::new() };
-        let h = &mut hashers[i % cars.max(1)];
+        let h = &mut hashers[rows % cars];
         h.update(x.as_bytes());
         h.update(b",");
         h.update(y.as_bytes());
         h.update(b";");
+        rows += 1;
+    }
+    if rows != frames * cars {
+        return Vec::new();
     }
     hashers.into_iter().map(|h| h.finalize()[..16].try_into().expect("16 of 32 bytes")).collect()
 }
 
-/// Val and test cars whose trajectory has an identical twin in train (the
-/// splits must not overlap), one problem per car, naming the twin.
+/// Cars whose trajectory has an identical twin in another split (the splits
+/// must not overlap): one problem per car, naming the twin it meets first
+/// in the dataset's order (train before val before test within a group).
 fn split_twins(root: &Path, keys: &[ScenarioKey], prints: &[Vec<Fingerprint>]) -> Vec<Problem> {
     let folder = |k: &ScenarioKey| format!("{}/{}/{}", k.group, k.split.name(), k.folder_name());
-    let mut train: std::collections::HashMap<Fingerprint, (usize, usize)> = std::collections::HashMap::new();
-    for (k, (_, cars)) in keys.iter().zip(prints).enumerate().filter(|(_, (key, _))| key.split == Split::Train) {
+    // Every split's first car with each fingerprint.
+    let mut first: std::collections::HashMap<(Fingerprint, Split), (usize, usize)> = std::collections::HashMap::new();
+    for (k, (key, cars)) in keys.iter().zip(prints).enumerate() {
         for (car, print) in cars.iter().enumerate() {
-            train.entry(*print).or_insert((k, car));
+            first.entry((*print, key.split)).or_insert((k, car));
         }
     }
     let mut problems = Vec::new();
-    for (key, cars) in keys.iter().zip(prints).filter(|(key, _)| key.split != Split::Train) {
+    for (key, cars) in keys.iter().zip(prints) {
         for (car, print) in cars.iter().enumerate() {
-            if let Some(&(k, twin)) = train.get(print) {
+            // Each pair of splits once: a car is reported against the splits before its own.
+            let earlier = Split::ALL.iter().take_while(|&&s| s != key.split);
+            if let Some(&(k, twin)) = earlier.filter_map(|&s| first.get(&(*print, s))).next() {
                 problems.push(Problem {
                     path: scenario_dir(root, &key.group, key.split.name(), &key.folder_name()).join(POSES_CSV),
                     message: format!(
@@ -451,21 +464,29 @@ fn check_effects(
             return Err(format!("cause {cause}, {}: {n} rows, expected one per other car ({})", kind.name(), cars - 1));
         }
     }
-    let removed = seen.iter().filter(|&&(_, k, _)| k == InterventionKind::Remove).count();
-    if removed != cars * cars.saturating_sub(1) {
-        return Err(format!("{removed} removal rows, expected {} (every car removed in turn)", cars * (cars - 1)));
+    // Every car removed; every car with actions given another next action.
+    let with_actions = |car: usize| record["cars"][car]["actions"].as_array().is_some_and(|a| !a.is_empty());
+    for (kind, causes) in [
+        (InterventionKind::Remove, cars),
+        (InterventionKind::NextAction, (0..cars).filter(|&c| with_actions(c)).count()),
+    ] {
+        let rows = seen.iter().filter(|&&(_, k, _)| k == kind).count();
+        if rows != causes * cars.saturating_sub(1) {
+            return Err(format!(
+                "{rows} {} rows, expected {} ({causes} cars intervened on, each against every other car)",
+                kind.name(),
+                causes * cars.saturating_sub(1)
+            ));
+        }
     }
     let report = EffectReport { threshold_m: threshold, rows };
-    let edges = |field: &str| -> Option<Vec<(u32, u32)>> {
-        record[field].as_array()?.iter().map(|e| Some((e[0].as_u64()? as u32, e[1].as_u64()? as u32))).collect()
-    };
-    let causal = report.causal_edges();
-    let designed = edges("edges").unwrap_or_default();
-    let without: Vec<(u32, u32)> = designed.iter().filter(|e| !causal.contains(e)).copied().collect();
-    for (field, expected) in
-        [("causal_edges", causal.clone()), ("direct_edges", report.direct_edges()), ("edges_without_effect", without)]
-    {
-        match edges(field) {
+    let designed = edge_pairs(record, "edges").unwrap_or_default();
+    for (field, expected) in [
+        ("causal_edges", report.causal_edges()),
+        ("direct_edges", report.direct_edges()),
+        ("edges_without_effect", report.edges_without_effect(&designed)),
+    ] {
+        match edge_pairs(record, field) {
             Some(found) if found == expected => {}
             Some(found) => {
                 return Err(format!("{} `{field}` is {found:?}; effects.csv's rows give {expected:?}", json.display()))

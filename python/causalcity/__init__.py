@@ -437,10 +437,10 @@ class Stream:
         groups: Optional[Sequence[str]] = None,
         limit: Optional[int] = None,
         images: bool = False,
-        effects: bool = True,
         shard: Optional[Tuple[int, int]] = None,
         threads: Optional[int] = None,
         ahead: Optional[int] = None,
+        effects: bool = True,
     ) -> None:
         self.spec = spec
         self.split = split
@@ -522,7 +522,7 @@ def stream(
     poses-only streams run several times faster without it.
     """
     spec = _as_spec(spec)
-    args = (spec, split, groups, limit, images, effects, shard, threads, ahead)
+    args = (spec, split, groups, limit, images, shard, threads, ahead, effects)
     if "torch" in sys.modules:
         return _torch_stream_class()(*args)
     return Stream(*args)

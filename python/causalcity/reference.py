@@ -63,7 +63,8 @@ class Scored:
     precision: float
     recall: float
     f1: float
-    auroc: float
+    auroc: Optional[float]
+    """None when test has only one class."""
     same_lane_pairs: int
     same_lane_auroc: Optional[float]
 
@@ -290,7 +291,7 @@ def evaluate(
                     precision=precision,
                     recall=recall,
                     f1=f1,
-                    auroc=_auroc(scores, test[1]) or float("nan"),
+                    auroc=_auroc(scores, test[1]),
                     same_lane_pairs=int(lane.sum()),
                     same_lane_auroc=_auroc(scores[lane], test[1][lane]),
                 )
@@ -302,9 +303,10 @@ def _print(results: List[Scored]) -> None:
     print(f"{'group':<16} {'method':<11} {'pairs':>6} {'linked':>6} {'P':>6} {'R':>6} {'F1':>6} {'AUROC':>6} {'lane':>6} {'lAUROC':>7}")
     for r in results:
         lane = "-" if r.same_lane_auroc is None else f"{r.same_lane_auroc:.3f}"
+        auroc = "-" if r.auroc is None else f"{r.auroc:.3f}"
         print(
             f"{r.group:<16} {r.method:<11} {r.pairs:>6} {r.linked:>6} {r.precision:>6.3f} {r.recall:>6.3f} "
-            f"{r.f1:>6.3f} {r.auroc:>6.3f} {r.same_lane_pairs:>6} {lane:>7}"
+            f"{r.f1:>6.3f} {auroc:>6} {r.same_lane_pairs:>6} {lane:>7}"
         )
     print(
         "gradient-boosted classifiers per group, trained on train, threshold for the best F1 on val, scored on "

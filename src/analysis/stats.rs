@@ -15,7 +15,7 @@
 //! effects no design explains.
 
 use super::flow::{median, read_scenario_flow, FlowSamples};
-use crate::dataset::Dataset;
+use crate::dataset::{edge_pairs, Dataset};
 use crate::map::CityMap;
 use crate::spec::Split;
 use rayon::prelude::*;
@@ -108,9 +108,7 @@ impl CausalTally {
 
     /// The tally of one scenario.json (`None` without effects).
     pub fn of_scenario(scenario: &serde_json::Value) -> Option<CausalTally> {
-        let pairs = |field: &str| -> Option<Vec<(u64, u64)>> {
-            scenario[field].as_array()?.iter().map(|e| Some((e[0].as_u64()?, e[1].as_u64()?))).collect()
-        };
+        let pairs = |field: &str| edge_pairs(scenario, field);
         let (designed, causal, direct) = (pairs("edges")?, pairs("causal_edges")?, pairs("direct_edges")?);
         Some(CausalTally {
             designed_edges: designed.len(),

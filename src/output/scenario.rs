@@ -142,16 +142,12 @@ pub fn scenario_json(
     effects: Option<&EffectReport>,
 ) -> Vec<u8> {
     let pairs = |edges: &[(u32, u32)]| edges.iter().map(|&(a, b)| [a, b]).collect::<Vec<_>>();
-    let effects = effects.map(|report| {
-        let causal = report.causal_edges();
-        let without: Vec<(u32, u32)> = plan.edges.iter().filter(|e| !causal.contains(e)).copied().collect();
-        EffectsRecord {
-            effect_threshold_m: report.threshold_m,
-            effect_interventions: InterventionKind::ALL.iter().map(|k| k.name()).collect(),
-            causal_edges: pairs(&causal),
-            direct_edges: pairs(&report.direct_edges()),
-            edges_without_effect: pairs(&without),
-        }
+    let effects = effects.map(|report| EffectsRecord {
+        effect_threshold_m: report.threshold_m,
+        effect_interventions: InterventionKind::ALL.iter().map(|k| k.name()).collect(),
+        causal_edges: pairs(&report.causal_edges()),
+        direct_edges: pairs(&report.direct_edges()),
+        edges_without_effect: pairs(&report.edges_without_effect(&plan.edges)),
     });
     let light_record =
         |l: &'_ Light| -> (usize, char, &'static str, f64) { (l.intersection, l.approach, l.signal.name(), l.offset) };

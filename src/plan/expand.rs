@@ -319,7 +319,7 @@ impl Expansion {
             }
         }
 
-        self.draw_fallbacks(stream, &mut cars, travel)?;
+        self.draw_fallbacks(stream, &mut cars);
         // Random ids so the index order never gives the roles away.
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
@@ -329,7 +329,7 @@ impl Expansion {
     /// What every follower does when it loses its leader: in the toy world
     /// it stops (no agency); in the city it drives a queue of its own, drawn
     /// as an independent car's from its start (from a stream of its own).
-    fn draw_fallbacks(&self, stream: [u8; 32], cars: &mut [PlacedCar], travel: f64) -> Result<(), String> {
+    fn draw_fallbacks(&self, stream: [u8; 32], cars: &mut [PlacedCar]) {
         let mut rng = ChaCha8Rng::from_seed(Sha256::digest([FALLBACK_TAG, &stream[..]].concat()).into());
         let count = self.spec.actions_per_car;
         for car in cars.iter_mut().filter(|c| c.leader.is_some()) {
@@ -344,10 +344,9 @@ impl Expansion {
                 ActionDrawing::Original => original_actions(&mut rng, count),
                 _ => random_actions(&mut rng, &self.map, car.spawn, car.distance, count),
             };
-            let route = Arc::new(self.plan_route(car.spawn, car.distance, &actions, &merges, travel)?);
-            car.on_leader_lost = Some(OnLeaderLost::Drive(Fallback { actions, merge_distances: merges, route }));
+            // Its route is planned when it is needed, from where the follower is then.
+            car.on_leader_lost = Some(OnLeaderLost::Drive(Fallback { actions, merge_distances: merges }));
         }
-        Ok(())
     }
 
     /// Centre-to-centre distance from a car to the car starting right
@@ -413,11 +412,9 @@ impl Expansion {
             // A written follower falls back on its own written actions (toy: stops).
             f.on_leader_lost = Some(match self.spec.world {
                 WorldKind::Toy => OnLeaderLost::Stop,
-                WorldKind::City => OnLeaderLost::Drive(Fallback {
-                    actions: f.actions.clone(),
-                    merge_distances: f.merges.clone(),
-                    route: f.route.clone(),
-                }),
+                WorldKind::City => {
+                    OnLeaderLost::Drive(Fallback { actions: f.actions.clone(), merge_distances: f.merges.clone() })
+                }
             });
         }
         let ids: Vec<u32> = (0..cars.len() as u32).collect();

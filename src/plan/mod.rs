@@ -105,8 +105,6 @@ pub struct Fallback {
     pub actions: Vec<Action>,
     /// Metres along the current lane for merges, 0 for other actions.
     pub merge_distances: Vec<f64>,
-    /// The route of `actions` from the follower's start.
-    pub route: Arc<Route>,
 }
 
 /// A city car's driving plan, its own (a follower shares its leader's route

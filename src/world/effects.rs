@@ -18,8 +18,9 @@ use crate::plan::ScenarioPlan;
 /// How far (metres, at one frame) a car must move from its factual
 /// trajectory to count as an effect: a change a camera sees, not a rounding
 /// or a millimetre of drift. 0.5 m is 6.4 px in the default bird's-eye view
-/// (12.8 px per metre), over 60 times the pose log's pixel rounding, a
-/// quarter of a default car's length and a ninth of a real-scale car's.
+/// (12.8 px per metre), thousands of times the pose log's rounding (0.1 mm,
+/// 0.001 px), a quarter of a default car's length and a ninth of a
+/// real-scale car's.
 pub const EFFECT_THRESHOLD_M: f64 = 0.5;
 
 /// A car counts as having moved at all (for where an effect began) beyond
@@ -87,6 +88,12 @@ impl EffectReport {
     /// The causal edges where the effect is direct, sorted.
     pub fn direct_edges(&self) -> Vec<(u32, u32)> {
         self.edges(|r| r.direct)
+    }
+
+    /// The `designed` (leader, follower) edges that no intervention backs.
+    pub fn edges_without_effect(&self, designed: &[(u32, u32)]) -> Vec<(u32, u32)> {
+        let causal = self.causal_edges();
+        designed.iter().filter(|e| !causal.contains(e)).copied().collect()
     }
 
     fn edges(&self, keep: impl Fn(&EffectRow) -> bool) -> Vec<(u32, u32)> {

@@ -103,8 +103,21 @@ fn drives(map: &CityMap, plan: &ScenarioPlan) -> Vec<Drive> {
                 let c = &plan.cars[current];
                 let Some(leader) = c.leader.map(|l| l as usize).filter(|_| !replaced[current]) else { break };
                 match (&own[leader], &c.on_leader_lost) {
-                    (Drive::Removed, Some(OnLeaderLost::Drive(fallback))) => {
-                        return Drive::Route(fallback.route.clone())
+                    (Drive::Removed, Some(OnLeaderLost::Drive(f))) => {
+                        let planned = Route::plan(
+                            map,
+                            c.spawn,
+                            c.spawn_distance,
+                            &f.actions,
+                            &f.merge_distances,
+                            c.route.length,
+                            &LanePolicy::Adapt,
+                        );
+                        // A queue that cannot be driven leaves it on its leader's route.
+                        match planned {
+                            Ok(route) => return Drive::Route(Arc::new(route)),
+                            Err(_) => break,
+                        }
                     }
                     (Drive::Removed, Some(OnLeaderLost::Stop)) => return Drive::Stopped,
                     (Drive::Removed, None) => break,

@@ -59,7 +59,7 @@ pub(super) struct SimCar<'p> {
     pub(super) actions: Vec<Action>,
     /// Intervention: actions (and merge distances) waiting to replace the
     /// rest once the car is on a lane.
-    pub(super) pending_actions: Option<(Vec<Action>, Vec<f64>)>,
+    pub(super) pending_actions: Option<PendingQueue>,
     /// Drive-queue actions the driver gave up on (no gap came), skipped.
     pub(super) given_up: Vec<usize>,
     /// Drive-queue actions whose adaptation events.csv already has.
@@ -77,6 +77,34 @@ pub(super) struct SimCar<'p> {
     pub(super) speed_factor: f64,
     /// Followers: the index of the car it follows (cars are in id order).
     pub(super) leader: Option<usize>,
+}
+
+/// A drive queue waiting to replace the rest of a car's own.
+pub(super) struct PendingQueue {
+    pub(super) actions: Vec<Action>,
+    /// Merge distance per action, metres along its lane.
+    pub(super) merges: Vec<f64>,
+    /// The drive-queue index of the first action, when the queue is a slice
+    /// of another (a follower's of its leader's, or of its fallback): actions
+    /// the car carries out before the queue is applied are dropped from its
+    /// front. `None`: it replaces whatever comes next (an intervention's).
+    pub(super) from: Option<usize>,
+}
+
+impl PendingQueue {
+    /// `actions[from..]` (and the merges beside them) as a queue that
+    /// starts at drive-queue index `from`.
+    pub(super) fn slice(actions: &[Action], merges: &[f64], from: usize) -> PendingQueue {
+        let (a, m) = (from.min(actions.len()), from.min(merges.len()));
+        PendingQueue { actions: actions[a..].to_vec(), merges: merges[m..].to_vec(), from: Some(from) }
+    }
+
+    /// The actions and merges still to apply for a car that has done `done`
+    /// actions.
+    pub(super) fn remaining(&self, done: usize) -> (&[Action], &[f64]) {
+        let skip = self.from.map_or(0, |from| done.saturating_sub(from));
+        (&self.actions[skip.min(self.actions.len())..], &self.merges[skip.min(self.merges.len())..])
+    }
 }
 
 /// A standard normal draw (Box-Muller).

@@ -2,6 +2,7 @@
 //! effect changes, and the one routine that re-plans a car's route from where
 //! it stands (replaced actions, lane changes given up).
 
+use super::car::PendingQueue;
 use super::Sim;
 use crate::map::signals::Light;
 use crate::map::{Action, LanePolicy, LegKind, Route, RouteError};
@@ -92,9 +93,14 @@ impl Sim<'_> {
                     let car = &mut self.cars[follower];
                     match &car.plan.on_leader_lost {
                         Some(OnLeaderLost::Drive(fallback)) => {
-                            let done = car.actions_done.min(fallback.actions.len());
-                            car.pending_actions =
-                                Some((fallback.actions[done..].to_vec(), fallback.merge_distances[done..].to_vec()));
+                            let done = car.actions_done;
+                            let own = (car.actions.get(done..), car.merges.get(done..));
+                            let lost = (fallback.actions.get(done..), fallback.merge_distances.get(done..));
+                            // A queue like the one it drives changes nothing (scenario files' followers).
+                            if own != lost {
+                                car.pending_actions =
+                                    Some(PendingQueue::slice(&fallback.actions, &fallback.merge_distances, done));
+                            }
                         }
                         Some(OnLeaderLost::Stop) => {
                             car.stopped_until = f64::INFINITY;
@@ -113,7 +119,7 @@ impl Sim<'_> {
                 self.light_plans.push((light, new, t));
             }
             Effect::ReplaceActions { car, actions, merge_distances } => {
-                self.cars[car].pending_actions = Some((actions, merge_distances));
+                self.cars[car].pending_actions = Some(PendingQueue { actions, merges: merge_distances, from: None });
             }
             Effect::SetConfounder { confounder, value } => self.set_confounder(confounder, value, t),
         }
@@ -162,10 +168,12 @@ impl Sim<'_> {
     /// mid-turn or mid-merge); if they cannot be driven from there the car
     /// keeps its own and an event says so.
     pub(super) fn replace_actions(&mut self, i: usize, t: f64) {
-        let Some((actions, merges)) = &self.cars[i].pending_actions else { return };
+        let Some(pending) = &self.cars[i].pending_actions else { return };
+        let (actions, merges) = pending.remaining(self.cars[i].actions_done);
         let Some((lane_s, planned)) = self.replan(i, t, actions, merges, &LanePolicy::Adapt) else { return };
+        let (actions, merges) = (actions.to_vec(), merges.to_vec());
         let car = &mut self.cars[i];
-        let Some((actions, merges)) = car.pending_actions.take() else { return };
+        car.pending_actions = None;
         match planned {
             Ok(route) => {
                 let done = car.actions_done;
@@ -210,8 +218,7 @@ impl Sim<'_> {
         for follower in self.followers_of(i) {
             let done = self.cars[follower].actions_done;
             let leader = &self.cars[i];
-            let from = done.min(leader.actions.len());
-            let queue = (leader.actions[from..].to_vec(), leader.merges[from..].to_vec());
+            let queue = PendingQueue::slice(&leader.actions, &leader.merges, done);
             self.cars[follower].pending_actions = Some(queue);
         }
     }

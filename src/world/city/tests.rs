@@ -409,16 +409,12 @@ fn follow_scene(map: &CityMap, interventions: Vec<Intervention>) -> Trajectories
     ];
     let lights = lights_with(map, &["A1w"], &[(Colour::Green, 100.0)]);
     let mut plan = plan(map, &cars, lights, interventions, 20.0);
-    let spawn = lane(map, "A1w");
-    let (actions, merges) = (vec![Action::Right], vec![0.0]);
-    let route = Route::plan(map, spawn, 4.0, &actions, &merges, 204.0, &LanePolicy::Adapt).expect("drivable");
     let follower = &mut plan.cars[1];
     follower.role = Role::Follower;
     follower.leader = Some(0);
     follower.on_leader_lost = Some(crate::plan::OnLeaderLost::Drive(crate::plan::Fallback {
-        actions,
-        merge_distances: merges,
-        route: Arc::new(route),
+        actions: vec![Action::Right],
+        merge_distances: vec![0.0],
     }));
     plan.cars[0].role = Role::Leader;
     plan.edges = vec![(0, 1)];
