@@ -200,9 +200,11 @@ pub struct BaselineArgs {
     #[arg(value_name = "DATASET")]
     pub dataset: PathBuf,
 
-    /// Longest lag tried, in seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 8.0, value_parser = positive_number)]
-    pub max_lag: f64,
+    /// Longest lag of the following score, in seconds [default: the one of
+    /// 2, 4, 8, 15, 30, 60 s, up to the scenario's length, with the best
+    /// AUROC on each group's train split].
+    #[arg(long, value_name = "SECONDS", value_parser = positive_number)]
+    pub max_lag: Option<f64>,
 
     /// The graph to score against: designed (leader-follower edges), causal
     /// or direct (measured by intervention; not with gen --no-effects).

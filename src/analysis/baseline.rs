@@ -4,7 +4,9 @@
 //! Every ordered pair of cars (a, b) of a scenario gets a *following score*:
 //! for each frame t, the distance from b's position to the nearest of a's
 //! positions over the last `max_lag` seconds (lags of at least one frame),
-//! averaged over the frames. A follower drives where its leader drove a
+//! averaged over the frames. Unless `--max-lag` gives it, `max_lag` is the
+//! one of [`LAG_GRID_S`] (up to the scenario's length) with the best AUROC
+//! on each group's train split. A follower drives where its leader drove a
 //! moment before, so its score is small; unrelated cars score large. The pair
 //! is called "a leads b" when the score is below a threshold, picked per
 //! group as the one that maximises F1 on the train split (groups whose train
@@ -42,6 +44,10 @@ use std::path::Path;
 pub struct GroupBaseline {
     /// `dynamics` (the following score) or `frame0` (the first frame only).
     pub method: &'static str,
+    /// Dynamics: the longest lag of the following score, seconds.
+    pub max_lag_s: Option<f64>,
+    /// Dynamics: "train" when picked by train AUROC, "given" by --max-lag.
+    pub lag_from: Option<&'static str>,
     pub group: String,
     pub cars: u32,
     pub edge_proportion: f64,
@@ -76,7 +82,8 @@ pub struct GroupBaseline {
 pub struct BaselineReport {
     pub dataset: String,
     pub world: String,
-    pub max_lag_s: f64,
+    /// The lags the dynamics score tried, seconds (one when given).
+    pub lags_s: Vec<f64>,
     /// The graph scored against: designed, causal or direct.
     pub graph: GraphKind,
     /// The dynamics baseline, per group.
@@ -88,9 +95,10 @@ pub struct BaselineReport {
 /// A scored ordered pair: (score in metres, truly linked).
 type ScoredPair = (f64, bool);
 
-/// Both scores of every ordered pair of a scenario.
+/// Both scores of every ordered pair of a scenario (the dynamics score at
+/// each lag tried).
 struct ScenarioScores {
-    dynamics: Vec<ScoredPair>,
+    dynamics: Vec<Vec<ScoredPair>>,
     frame0: Vec<ScoredPair>,
 }
 
@@ -100,38 +108,66 @@ const SAME_LANE_M: f64 = 1.5;
 /// Largest heading difference at which two cars face the same way, radians.
 const SAME_HEADING_RAD: f64 = 0.5;
 
-/// Runs the baseline over the dataset in `dir`.
+/// Longest lags the dynamics score tries when none is given, seconds: the
+/// one with the best AUROC on each group's train split is used (a follower
+/// at walking pace trails its leader by many seconds, more behind a light).
+pub const LAG_GRID_S: [f64; 6] = [2.0, 4.0, 8.0, 15.0, 30.0, 60.0];
+
+/// Runs the baseline over the dataset in `dir`, with lags up to `max_lag_s`
+/// seconds, or (`None`) the lag of [`LAG_GRID_S`] that ranks train best.
 /// Bad input (a lag that is no positive number, a graph the dataset does not
 /// have) is an [`Error::Input`]; unreadable files an [`Error::Failure`].
-pub fn baseline(dir: &Path, max_lag_s: f64, graph: GraphKind) -> Result<BaselineReport, Error> {
-    if !(max_lag_s > 0.0 && max_lag_s.is_finite()) {
-        return Err(Error::Input(format!("--max-lag must be a positive number of seconds, not {max_lag_s}")));
+pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<BaselineReport, Error> {
+    if let Some(lag) = max_lag_s.filter(|l| !(*l > 0.0 && l.is_finite())) {
+        return Err(Error::Input(format!("--max-lag must be a positive number of seconds, not {lag}")));
     }
     let dataset = Dataset::open_complete(dir).map_err(Error::Failure)?;
     dataset.require_graph(graph).map_err(Error::Input)?;
-    score(dir, &dataset, max_lag_s, graph).map_err(Error::Failure)
+    let duration = dataset.spec().frames as f64 * dataset.spec().frame_interval();
+    let lags: Vec<f64> = match max_lag_s {
+        Some(lag) => vec![lag],
+        // Lags beyond the scenario add nothing: the grid up to the first that covers it.
+        None => {
+            let covering = LAG_GRID_S.iter().position(|&l| l >= duration).unwrap_or(LAG_GRID_S.len() - 1);
+            LAG_GRID_S[..=covering].to_vec()
+        }
+    };
+    score(dir, &dataset, &lags, graph).map_err(Error::Failure)
 }
 
-/// [`baseline`] of an opened dataset.
-fn score(dir: &Path, dataset: &Dataset, max_lag_s: f64, graph: GraphKind) -> Result<BaselineReport, String> {
+/// [`baseline`] of an opened dataset, the dynamics score at each of `lags`.
+fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Result<BaselineReport, String> {
     let spec = dataset.spec();
     let mut per_group = Vec::new();
     for group in &spec.groups {
         let name = group.name();
         let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
-            dataset.scenario_dirs(&name, split).par_iter().map(|d| score_scenario(d, max_lag_s, graph)).collect()
+            dataset.scenario_dirs(&name, split).par_iter().map(|d| score_scenario(d, lags, graph)).collect()
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }
+    // The dynamics score's lag per group: the best train AUROC (the first on a tie).
+    let pairs_at = |scores: &[ScenarioScores], lag: Option<usize>| -> Vec<ScoredPair> {
+        match lag {
+            Some(k) => scores.iter().flat_map(|s| &s.dynamics[k]).copied().collect(),
+            None => scores.iter().flat_map(|s| &s.frame0).copied().collect(),
+        }
+    };
+    let chosen: Vec<usize> = per_group
+        .iter()
+        .map(|(_, train, _)| {
+            let rank = |k: usize| auroc(&pairs_at(train, Some(k))).unwrap_or(0.0);
+            (0..lags.len()).fold(0, |best, k| if rank(k) > rank(best) { k } else { best })
+        })
+        .collect();
     let mut methods = [Vec::new(), Vec::new()];
     for (m, frame0) in [false, true].into_iter().enumerate() {
-        let split_pairs = |scores: &[ScenarioScores]| -> Vec<ScoredPair> {
-            scores.iter().flat_map(|s| if frame0 { &s.frame0 } else { &s.dynamics }).copied().collect()
-        };
-        let pooled: Vec<ScoredPair> = per_group.iter().flat_map(|(_, train, _)| split_pairs(train)).collect();
+        let lag_of = |g: usize| (!frame0).then(|| chosen[g]);
+        let pooled: Vec<ScoredPair> =
+            per_group.iter().enumerate().flat_map(|(g, (_, train, _))| pairs_at(train, lag_of(g))).collect();
         let pooled_threshold = best_threshold(&pooled);
-        for (group, train, test) in &per_group {
-            let (train_pairs, test_pairs) = (split_pairs(train), split_pairs(test));
+        for (g, (group, train, test)) in per_group.iter().enumerate() {
+            let (train_pairs, test_pairs) = (pairs_at(train, lag_of(g)), pairs_at(test, lag_of(g)));
             let (threshold, from) = match (best_threshold(&train_pairs), pooled_threshold) {
                 (Some(t), _) => (t, "train"),
                 (None, Some(t)) => (t, "pooled"),
@@ -147,6 +183,8 @@ fn score(dir: &Path, dataset: &Dataset, max_lag_s: f64, graph: GraphKind) -> Res
             let called = counts.true_positives + counts.false_positives;
             methods[m].push(GroupBaseline {
                 method: if frame0 { "frame0" } else { "dynamics" },
+                max_lag_s: lag_of(g).map(|k| lags[k]),
+                lag_from: lag_of(g).map(|_| if lags.len() > 1 { "train" } else { "given" }),
                 group: group.name(),
                 cars: group.cars,
                 edge_proportion: group.edge_proportion,
@@ -171,7 +209,7 @@ fn score(dir: &Path, dataset: &Dataset, max_lag_s: f64, graph: GraphKind) -> Res
     Ok(BaselineReport {
         dataset: dir.display().to_string(),
         world: spec.world.name().to_string(),
-        max_lag_s,
+        lags_s: lags.to_vec(),
         graph,
         groups,
         frame0,
@@ -179,21 +217,23 @@ fn score(dir: &Path, dataset: &Dataset, max_lag_s: f64, graph: GraphKind) -> Res
 }
 
 /// Scores every ordered pair of the scenario in `dir`, both ways.
-fn score_scenario(dir: &Path, max_lag_s: f64, graph: GraphKind) -> Result<ScenarioScores, String> {
+fn score_scenario(dir: &Path, lags_s: &[f64], graph: GraphKind) -> Result<ScenarioScores, String> {
     let scenario = ScenarioSummary::read_graph(dir, graph)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
     let poses = PoseLog::read(dir, frames, cars)?;
-    let max_lag = ((max_lag_s / scenario.frame_interval).round() as usize).max(1);
+    let lags: Vec<usize> = lags_s.iter().map(|s| ((s / scenario.frame_interval).round() as usize).max(1)).collect();
     let tracks: Vec<Vec<[f64; 2]>> =
         (0..cars).map(|c| (0..frames).map(|f| [poses.at(f, c).x, poses.at(f, c).y]).collect()).collect();
-    let mut scores = ScenarioScores { dynamics: Vec::new(), frame0: Vec::new() };
+    let mut scores = ScenarioScores { dynamics: vec![Vec::new(); lags.len()], frame0: Vec::new() };
     for leader in 0..cars {
         for follower in 0..cars {
             if leader == follower {
                 continue;
             }
             let linked = scenario.graph.iter().any(|e| e[0] as usize == leader && e[1] as usize == follower);
-            scores.dynamics.push((following_score(&tracks[leader], &tracks[follower], max_lag), linked));
+            for (k, score) in following_scores(&tracks[leader], &tracks[follower], &lags).into_iter().enumerate() {
+                scores.dynamics[k].push((score, linked));
+            }
             scores.frame0.push((frame0_score(poses.at(0, leader), poses.at(0, follower)), linked));
         }
     }
@@ -273,21 +313,35 @@ pub fn average_precision(pairs: &[ScoredPair]) -> Option<f64> {
 /// Mean over frames of the distance from `follower` to the nearest point of
 /// `leader`'s path over the previous `max_lag` frames.
 pub fn following_score(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lag: usize) -> f64 {
+    following_scores(leader, follower, &[max_lag])[0]
+}
+
+/// [`following_score`] at each of `max_lags` (frames), in one pass: the
+/// nearest leader position over the last k frames is a running minimum as
+/// k grows.
+pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[usize]) -> Vec<f64> {
     let frames = leader.len().min(follower.len());
     if frames < 2 {
-        return f64::INFINITY;
+        return vec![f64::INFINITY; max_lags.len()];
     }
-    let mut total = 0.0;
+    let longest = max_lags.iter().copied().max().unwrap_or(1).max(1);
+    let mut totals = vec![0.0; max_lags.len()];
+    let mut nearest_within = vec![f64::INFINITY; longest + 1];
     for (t, &[fx, fy]) in follower.iter().enumerate().take(frames).skip(1) {
-        let nearest = (t.saturating_sub(max_lag)..t)
-            .map(|s| {
+        // nearest_within[k]: the least squared distance to the leader's last k positions.
+        let mut nearest = f64::INFINITY;
+        for k in 1..=longest {
+            if let Some(s) = t.checked_sub(k) {
                 let [lx, ly] = leader[s];
-                (fx - lx) * (fx - lx) + (fy - ly) * (fy - ly)
-            })
-            .fold(f64::INFINITY, f64::min);
-        total += nearest.sqrt();
+                nearest = nearest.min((fx - lx) * (fx - lx) + (fy - ly) * (fy - ly));
+            }
+            nearest_within[k] = nearest;
+        }
+        for (total, &lag) in totals.iter_mut().zip(max_lags) {
+            *total += nearest_within[lag.max(1)].sqrt();
+        }
     }
-    total / (frames - 1) as f64
+    totals.into_iter().map(|total| total / (frames - 1) as f64).collect()
 }
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -357,8 +411,8 @@ impl fmt::Display for BaselineReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "following-score baseline (dynamics) and the best first-frame rule (frame0) on {} ({} world, lags up to {} s) against the {} graph: threshold from train, scores on test",
-            self.dataset, self.world, self.max_lag_s, self.graph.name()
+            "following-score baseline (dynamics) and the best first-frame rule (frame0) on {} ({} world, lags tried: {:?} s) against the {} graph: lag and threshold from train, scores on test",
+            self.dataset, self.world, self.lags_s, self.graph.name()
         )?;
         writeln!(
             f,
@@ -414,6 +468,32 @@ impl fmt::Display for BaselineReport {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scores_at_many_lags_in_one_pass_equal_each_lag_alone() {
+        // A leader that wanders and a follower that lags it by 7 frames, offset.
+        let leader: Vec<[f64; 2]> = (0..60).map(|t| [t as f64 * 0.7, (t as f64 * 0.3).sin() * 4.0]).collect();
+        let follower: Vec<[f64; 2]> =
+            (0..60usize).map(|t| leader[t.saturating_sub(7)]).map(|[x, y]| [x + 0.2, y - 0.1]).collect();
+        let brute = |lag: usize| {
+            let mut total = 0.0;
+            for t in 1..60usize {
+                let nearest = (t.saturating_sub(lag)..t)
+                    .map(|s| ((follower[t][0] - leader[s][0]).powi(2) + (follower[t][1] - leader[s][1]).powi(2)).sqrt())
+                    .fold(f64::INFINITY, f64::min);
+                total += nearest;
+            }
+            total / 59.0
+        };
+        let lags = [1, 3, 7, 8, 20, 100];
+        let scores = following_scores(&leader, &follower, &lags);
+        for (score, lag) in scores.iter().zip(lags) {
+            assert!((score - brute(lag)).abs() < 1e-12, "lag {lag}: {score} vs {}", brute(lag));
+        }
+        // Longer lags never score worse, and reaching the follower's lag helps.
+        assert!(scores.windows(2).all(|w| w[1] <= w[0] + 1e-12));
+        assert!(scores[2] < 0.5 * scores[1], "{scores:?}");
+    }
 
     #[test]
     fn a_follower_on_its_leaders_path_scores_zero_and_the_reverse_does_not() {
