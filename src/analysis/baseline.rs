@@ -156,8 +156,8 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
     let chosen: Vec<usize> = per_group
         .iter()
         .map(|(_, train, _)| {
-            let rank = |k: usize| auroc(&pairs_at(train, Some(k))).unwrap_or(0.0);
-            (0..lags.len()).fold(0, |best, k| if rank(k) > rank(best) { k } else { best })
+            let ranks: Vec<f64> = (0..lags.len()).map(|k| auroc(&pairs_at(train, Some(k))).unwrap_or(0.0)).collect();
+            (0..lags.len()).fold(0, |best, k| if ranks[k] > ranks[best] { k } else { best })
         })
         .collect();
     let mut methods = [Vec::new(), Vec::new()];
