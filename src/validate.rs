@@ -453,13 +453,14 @@ fn check_effects(
         .ok_or_else(|| format!("{} has no effect_threshold_m to check effects.csv against", json.display()))?;
     let rows = parse_effects(&dir.join(EFFECTS_CSV), data, cars, frames, threshold)?;
     let mut seen = BTreeSet::new();
+    let mut per_cause: BTreeMap<(u32, InterventionKind), usize> = BTreeMap::new();
     for r in &rows {
         if !seen.insert((r.cause, r.intervention, r.effect)) {
             return Err(format!("two rows for cause {}, effect {}, {}", r.cause, r.effect, r.intervention.name()));
         }
+        *per_cause.entry((r.cause, r.intervention)).or_default() += 1;
     }
-    for (cause, kind) in seen.iter().map(|&(c, k, _)| (c, k)).collect::<BTreeSet<_>>() {
-        let n = seen.iter().filter(|&&(c, k, _)| (c, k) == (cause, kind)).count();
+    for (&(cause, kind), &n) in &per_cause {
         if n + 1 != cars {
             return Err(format!("cause {cause}, {}: {n} rows, expected one per other car ({})", kind.name(), cars - 1));
         }

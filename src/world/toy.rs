@@ -11,9 +11,9 @@
 //! agency and change nothing here (scenario files refuse toy interventions).
 
 use super::{CarState, Trajectories};
-use crate::map::{CityMap, LanePolicy, Route};
+use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::Effect;
-use crate::plan::{OnLeaderLost, ScenarioPlan};
+use crate::plan::{CarPlan, OnLeaderLost, ScenarioPlan};
 use std::sync::Arc;
 
 /// Name of the toy world's behaviour model, for scenario.json.
@@ -72,19 +72,10 @@ fn drives(map: &CityMap, plan: &ScenarioPlan) -> Vec<Drive> {
         match &intervention.effect {
             Effect::Remove { car } => own[*car] = Drive::Removed,
             Effect::ReplaceActions { car, actions, merge_distances } => {
-                let c = &plan.cars[*car];
-                let planned = Route::plan(
-                    map,
-                    c.spawn,
-                    c.spawn_distance,
-                    actions,
-                    merge_distances,
-                    c.route.length,
-                    &LanePolicy::Adapt,
-                );
                 // Actions that cannot be driven leave the car on its own route.
-                if let (Ok(route), Drive::Route(_)) = (planned, &own[*car]) {
-                    own[*car] = Drive::Route(Arc::new(route));
+                let planned = route_from_start(map, &plan.cars[*car], actions, merge_distances);
+                if let (Some(route), Drive::Route(_)) = (planned, &own[*car]) {
+                    own[*car] = Drive::Route(route);
                     replaced[*car] = true;
                 }
             }
@@ -104,19 +95,10 @@ fn drives(map: &CityMap, plan: &ScenarioPlan) -> Vec<Drive> {
                 let Some(leader) = c.leader.map(|l| l as usize).filter(|_| !replaced[current]) else { break };
                 match (&own[leader], &c.on_leader_lost) {
                     (Drive::Removed, Some(OnLeaderLost::Drive(f))) => {
-                        let planned = Route::plan(
-                            map,
-                            c.spawn,
-                            c.spawn_distance,
-                            &f.actions,
-                            &f.merge_distances,
-                            c.route.length,
-                            &LanePolicy::Adapt,
-                        );
                         // A queue that cannot be driven leaves it on its leader's route.
-                        match planned {
-                            Ok(route) => return Drive::Route(Arc::new(route)),
-                            Err(_) => break,
+                        match route_from_start(map, c, &f.actions, &f.merge_distances) {
+                            Some(route) => return Drive::Route(route),
+                            None => break,
                         }
                     }
                     (Drive::Removed, Some(OnLeaderLost::Stop)) => return Drive::Stopped,
@@ -131,4 +113,11 @@ fn drives(map: &CityMap, plan: &ScenarioPlan) -> Vec<Drive> {
             }
         })
         .collect()
+}
+
+/// The route of `actions` from `car`'s start, as long as its own; `None`
+/// when they cannot be driven.
+fn route_from_start(map: &CityMap, car: &CarPlan, actions: &[Action], merges: &[f64]) -> Option<Arc<Route>> {
+    let length = car.route.length;
+    Route::plan(map, car.spawn, car.spawn_distance, actions, merges, length, &LanePolicy::Adapt).ok().map(Arc::new)
 }
