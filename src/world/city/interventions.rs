@@ -210,16 +210,23 @@ impl Sim<'_> {
 
     /// Car `i`'s remaining actions changed: its followers see it (turn
     /// signals, the lane it takes) and take the same actions from the ones
-    /// they have done, re-planning once they are on a lane.
-    fn show_followers(&mut self, i: usize) {
+    /// they have done, re-planning once they are on a lane. A turn the
+    /// leader gave up is one it drives straight through, so they do too.
+    pub(super) fn show_followers(&mut self, i: usize) {
         if self.cars[i].removed {
             return;
         }
+        let leader = &self.cars[i];
+        let mut seen = leader.actions.clone();
+        for &k in &leader.given_up {
+            if let Some(action) = seen.get_mut(k).filter(|a| !a.is_merge()) {
+                *action = Action::Straight;
+            }
+        }
+        let merges = leader.merges.clone();
         for follower in self.followers_of(i) {
             let done = self.cars[follower].actions_done;
-            let leader = &self.cars[i];
-            let queue = PendingQueue::slice(&leader.actions, &leader.merges, done);
-            self.cars[follower].pending_actions = Some(queue);
+            self.cars[follower].pending_actions = Some(PendingQueue::slice(&seen, &merges, done));
         }
     }
 
@@ -239,7 +246,8 @@ impl Sim<'_> {
             return;
         };
         let (from, to) = (&self.map.lanes[from].name, &self.map.lanes[to].name);
-        let instead = if change.prepares.is_some() { ": going straight on instead" } else { "" };
+        let turn_given_up = change.prepares.is_some();
+        let instead = if turn_given_up { ": going straight on instead" } else { "" };
         let detail = format!(
             "DriveQueue[{index}] {}: no gap to change from {from} into {to} came in {} s{instead}",
             car.actions[index],
@@ -253,6 +261,10 @@ impl Sim<'_> {
         car.waiting_since = None;
         car.follow_route(route, lane_s, index);
         self.log_adaptations(i, t);
+        // Its followers see it drive straight on.
+        if turn_given_up {
+            self.show_followers(i);
+        }
     }
 
     /// The one re-planning routine: a route for car `i` from where it stands
