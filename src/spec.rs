@@ -797,17 +797,39 @@ pub enum SignalHeads {
 /// desired speed, or slower where what it sees ahead at the start (a car, a
 /// stop line it must stop at, a curve) asks for less, by the same rule for
 /// every car whatever its role.
+///
+/// With `platoon_cars`, the first frame is drawn blind to roles instead:
+/// every car starts in a platoon of that many cars on the two lanes of one
+/// direction of one road segment, each car in one of the two lanes drawn at
+/// random and queued `follower_gap_m` behind the car ahead in its lane; the
+/// leader-follower pairs are then drawn uniformly among the ordered (ahead,
+/// behind) pairs of each platoon. Where a pair stands says nothing about
+/// whether it is an edge: every pair of a platoon is one with the same
+/// chance.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StartSpec {
     /// Bumper-to-bumper gap behind the car ahead, metres, for followers and
     /// hard negatives; never below `city.driver.min_gap`.
     pub follower_gap_m: Distribution,
-    /// Share of cars without a leader that start as hard negatives, 0..1.
+    /// Share of cars without a leader that start as hard negatives, 0..1
+    /// (without platoons only).
     pub hard_negative_share: f64,
+    /// Cars per platoon, 2..=16, the last platoon of a scenario taking the
+    /// rest; 0 (the default) for none.
+    #[serde(skip_serializing_if = "is_zero_u32")]
+    pub platoon_cars: u32,
     /// Starting speed as a share of the car's first desired speed, 0..1,
     /// before what it sees ahead limits it.
     pub speed_fraction: Distribution,
+}
+
+/// Most cars one platoon may hold: two lanes of the longest on-camera
+/// segment hold about this many queued cars.
+const MAX_PLATOON_CARS: u32 = 16;
+
+fn is_zero_u32(n: &u32) -> bool {
+    *n == 0
 }
 
 impl Default for StartSpec {
@@ -815,6 +837,7 @@ impl Default for StartSpec {
         StartSpec {
             follower_gap_m: Distribution::Uniform { uniform: [1.0, 6.0] },
             hard_negative_share: 0.0,
+            platoon_cars: 0,
             speed_fraction: Distribution::Uniform { uniform: [0.5, 1.0] },
         }
     }
@@ -872,6 +895,24 @@ impl CitySpec {
             ));
         }
         unit_interval("city.start.hard_negative_share", start.hard_negative_share, 1.0)?;
+        if start.platoon_cars != 0 && !(2..=MAX_PLATOON_CARS).contains(&start.platoon_cars) {
+            return Err(SpecError::new(
+                "city.start.platoon_cars",
+                format!(
+                    "{} is not allowed: give 2 to {MAX_PLATOON_CARS} cars per platoon, or 0 for none",
+                    start.platoon_cars
+                ),
+            ));
+        }
+        if start.platoon_cars != 0 && start.hard_negative_share != 0.0 {
+            return Err(SpecError::new(
+                "city.start.hard_negative_share",
+                format!(
+                    "{} is not allowed with city.start.platoon_cars = {}: in a platoon every car already starts behind another, so remove hard_negative_share (or set it to 0)",
+                    start.hard_negative_share, start.platoon_cars
+                ),
+            ));
+        }
         start.speed_fraction.check("city.start.speed_fraction", 0.0, 1.0)?;
         positive("city.lights.cycle_scale", self.lights.cycle_scale, 10.0, "factor")?;
         if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !o.is_finite()) {

@@ -293,6 +293,22 @@ fn city_starts_are_checked_against_the_driver() {
         &city_with(r#"{"start": {"speed_fraction": {"choice": [0.5, 2]}}}"#),
         &["city.start.speed_fraction", "2 is not allowed"],
     );
+    rejected(
+        "platoon-of-one",
+        &city_with(r#"{"start": {"platoon_cars": 1}}"#),
+        &["city.start.platoon_cars", "1 is not allowed", "2 to 16"],
+    );
+    rejected(
+        "platoons-and-hard-negatives",
+        &city_with(r#"{"start": {"platoon_cars": 4, "hard_negative_share": 0.5}}"#),
+        &["city.start.hard_negative_share", "platoon_cars = 4", "remove hard_negative_share"],
+    );
+    // 3 pairs cannot be drawn from two platoons of 3 cars.
+    rejected(
+        "odd-platoons",
+        &city_spec("bad", &[(6, 1.0)], (1, 0, 0), 10, r#"{"start": {"platoon_cars": 3}}"#),
+        &["groups[0]", "3 leader-follower pairs do not fit in platoons of 3", "even city.start.platoon_cars"],
+    );
     let toy_gap_in_the_city =
         city_with("{}").replacen(r#""world": "city","#, r#""world": "city", "leader_gap_px": 30,"#, 1);
     rejected("leader-gap-in-city", &toy_gap_in_the_city, &["leader_gap_px", "toy", "city.start.follower_gap_m"]);

@@ -11,7 +11,7 @@ use super::{
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
-use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
+use crate::map::{Action, AdaptationKind, CityMap, LaneEnd, LaneId, LanePolicy, Route};
 use crate::spec::{ActionDrawing, DatasetSpec, GroupSpec, LightPhase, SpecError, Split, WorldKind};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -185,6 +185,10 @@ impl Expansion {
         let mut rng = ChaCha8Rng::from_seed(stream);
         let travel = self.max_travel();
         let city = (spec.world == WorldKind::City).then(|| spec.city_settings());
+        if let Some(c) = city.as_ref().filter(|c| c.start.platoon_cars > 0) {
+            let (cars, pair_indices) = self.place_platoons(key, &mut rng, c, group)?;
+            return Ok(self.finish(key, stream, rng, cars, &pair_indices));
+        }
 
         // Units to place: pairs first (they need the most room), then singles.
         let pairs = group.edges() as usize;
@@ -319,11 +323,198 @@ impl Expansion {
             }
         }
 
+        Ok(self.finish(key, stream, rng, cars, &pair_indices))
+    }
+
+    /// A plan from placed cars: followers' fallbacks, random ids (so the
+    /// index order never gives the roles away), then the rest.
+    fn finish(
+        &self,
+        key: &ScenarioKey,
+        stream: [u8; 32],
+        mut rng: ChaCha8Rng,
+        mut cars: Vec<PlacedCar>,
+        pair_indices: &[(usize, usize)],
+    ) -> ScenarioPlan {
         self.draw_fallbacks(stream, &mut cars);
-        // Random ids so the index order never gives the roles away.
         let mut ids: Vec<u32> = (0..cars.len() as u32).collect();
         ids.shuffle(&mut rng);
-        Ok(self.assemble(key, stream, rng, cars, &pair_indices, &ids))
+        self.assemble(key, stream, rng, cars, pair_indices, &ids)
+    }
+
+    /// City with platoons (see [`crate::spec::StartSpec`]): places every car
+    /// of the group in platoons, blind to roles, then draws the
+    /// leader-follower pairs uniformly among each platoon's (ahead, behind)
+    /// pairs. Returns the cars and the (leader, follower) indices.
+    fn place_platoons(
+        &self,
+        key: &ScenarioKey,
+        rng: &mut ChaCha8Rng,
+        city: &crate::spec::CitySpec,
+        group: &GroupSpec,
+    ) -> Result<(Vec<PlacedCar>, Vec<(usize, usize)>), String> {
+        let size = city.start.platoon_cars as usize;
+        let total = group.cars as usize;
+        let split = Split::ALL.iter().position(|&s| s == key.split).unwrap_or(0);
+        let travel = self.max_travel();
+        let mut boxes: Vec<OrientedBox> = Vec::new();
+        let mut cars: Vec<PlacedCar> = Vec::new();
+        let mut platoon_of: Vec<usize> = Vec::new();
+        for (platoon, first) in (0..total).step_by(size).enumerate() {
+            let count = size.min(total - first);
+            let placed = (0..PLACEMENT_ATTEMPTS).find_map(|_| self.try_platoon(rng, city, split, count, &cars, &boxes));
+            let Some(starts) = placed else {
+                return Err(format!(
+                    "could not place {} cars in platoons of {size} without overlap after {PLACEMENT_ATTEMPTS} tries: use fewer cars or smaller platoons",
+                    group.cars
+                ));
+            };
+            for (lane, s) in starts {
+                let curve = &self.map.lanes[lane].curve;
+                boxes.push(OrientedBox {
+                    centre: curve.position(s, 0.0),
+                    heading: curve.heading_at(s),
+                    length: self.spec.car_length_m,
+                    width: self.spec.car_width_m,
+                });
+                let (mut actions, merges) = match city.action_drawing {
+                    ActionDrawing::Original => original_actions(rng, self.spec.actions_per_car),
+                    _ => random_actions(rng, &self.map, lane, s, self.spec.actions_per_car),
+                };
+                let route = Arc::new(self.plan_feasible_route(lane, s, &mut actions, &merges, travel)?);
+                let desired_speeds = draw_desired_speeds(rng, Some(city), actions.len());
+                cars.push(PlacedCar {
+                    role: Role::Independent,
+                    spawn: lane,
+                    distance: s,
+                    actions,
+                    merges,
+                    route,
+                    desired_speeds,
+                    behind: None,
+                    leader: None,
+                    on_leader_lost: None,
+                });
+                platoon_of.push(platoon);
+            }
+        }
+        // Every (ahead, behind) pair of a platoon in random order, taken
+        // while both cars are free: each is a pair with the same chance.
+        let mut candidates: Vec<(usize, usize)> = Vec::new();
+        for a in 0..cars.len() {
+            for b in 0..cars.len() {
+                if platoon_of[a] == platoon_of[b] && cars[a].distance > cars[b].distance {
+                    candidates.push((a, b));
+                }
+            }
+        }
+        candidates.shuffle(rng);
+        let wanted = group.edges() as usize;
+        let mut taken = vec![false; cars.len()];
+        let mut pairs = Vec::new();
+        for (a, b) in candidates {
+            if pairs.len() < wanted && !taken[a] && !taken[b] {
+                taken[a] = true;
+                taken[b] = true;
+                pairs.push((a, b));
+            }
+        }
+        if pairs.len() < wanted {
+            return Err(format!(
+                "{wanted} leader-follower pairs do not fit in platoons of {size} cars (a car is in one pair at most): use an even city.start.platoon_cars"
+            ));
+        }
+        pairs.sort_unstable();
+        // A follower drives what its leader drives, from where it starts.
+        for &(leader, follower) in &pairs {
+            let (actions, merges) = (cars[leader].actions.clone(), cars[leader].merges.clone());
+            let f = &cars[follower];
+            let route = Arc::new(self.plan_route(f.spawn, f.distance, &actions, &merges, travel)?);
+            cars[leader].role = Role::Leader;
+            let f = &mut cars[follower];
+            f.role = Role::Follower;
+            f.leader = Some(leader);
+            f.actions = actions;
+            f.merges = merges;
+            f.route = route;
+        }
+        Ok((cars, pairs))
+    }
+
+    /// One try at the starts (lane, metres along it) of a platoon of `count`
+    /// cars: a random on-camera stretch of one direction of one road
+    /// segment, each car in one of its lanes at random, queued in its lane
+    /// `follower_gap_m` apart, every start on a point the split owns and
+    /// clear of the cars already placed.
+    fn try_platoon(
+        &self,
+        rng: &mut ChaCha8Rng,
+        city: &crate::spec::CitySpec,
+        split: usize,
+        count: usize,
+        cars: &[PlacedCar],
+        boxes: &[OrientedBox],
+    ) -> Option<Vec<(LaneId, f64)>> {
+        let span = self.spans[rng.random_range(0..self.spans.len())];
+        let mut lanes = vec![span];
+        let beside = self.map.adjacent_lane(span.lane, true).or_else(|| self.map.adjacent_lane(span.lane, false));
+        if let Some(other) = beside.and_then(|l| self.spans.iter().find(|s| s.lane == l)) {
+            lanes.push(*other);
+        }
+        let lane_of: Vec<usize> = (0..count).map(|_| rng.random_range(0..lanes.len())).collect();
+        let mut starts = Vec::with_capacity(count);
+        for (i, lane) in lanes.iter().enumerate() {
+            let queued = lane_of.iter().filter(|&&l| l == i).count();
+            if queued == 0 {
+                continue;
+            }
+            let spacings: Vec<f64> = (1..queued).map(|_| self.draw_spacing(rng, Some(city))).collect();
+            let length: f64 = spacings.iter().sum();
+            if lane.hi - lane.lo < length {
+                return None;
+            }
+            let mut s = round_mm(rng.random_range(lane.lo + length..=lane.hi));
+            let mut queue = vec![s];
+            for spacing in spacings {
+                s = round_mm(s - spacing);
+                queue.push(s);
+            }
+            // Each start moved forward to the nearest point this split owns.
+            for s in queue {
+                let owned = (0..OWNED_START_SEARCH_MM)
+                    .map(|mm| round_mm(s + mm as f64 / 1000.0))
+                    .find(|&o| split_owning_start(lane.lane, o) == split)?;
+                if owned > lane.hi {
+                    return None;
+                }
+                starts.push((lane.lane, owned));
+            }
+        }
+        // No car closer to another of its lane than the shortest follower
+        // gap, and none overlapping another.
+        let spaced = starts.iter().enumerate().all(|(i, &(lane, s))| {
+            let others = cars.iter().map(|c| (c.spawn, c.distance)).chain(starts[i + 1..].iter().copied());
+            others.filter(|&(l, _)| l == lane).all(|(_, o)| (o - s).abs() >= self.shortest_spacing_m - 1e-6)
+        });
+        if !spaced {
+            return None;
+        }
+        let mut grown: Vec<OrientedBox> = boxes.iter().map(|b| b.inflated(SPAWN_CLEARANCE / 2.0)).collect();
+        for &(lane, s) in &starts {
+            let curve = &self.map.lanes[lane].curve;
+            let b = OrientedBox {
+                centre: curve.position(s, 0.0),
+                heading: curve.heading_at(s),
+                length: self.spec.car_length_m,
+                width: self.spec.car_width_m,
+            }
+            .inflated(SPAWN_CLEARANCE / 2.0);
+            if grown.iter().any(|p| b.overlaps(p)) {
+                return None;
+            }
+            grown.push(b);
+        }
+        Some(starts)
     }
 
     /// What every follower does when it loses its leader: in the toy world
@@ -357,6 +548,38 @@ impl Expansion {
             Some(c) => round_mm(self.spec.car_length_m + c.start.follower_gap_m.sample(rng)),
             None => self.leader_gap_m,
         }
+    }
+
+    /// As [`Self::plan_route`], with every turn the route must skip (no
+    /// room to change into its lane from the start) written as the straight
+    /// on the car drives instead, so the queue says what the car does and a
+    /// follower copying it takes the turns its leader takes.
+    fn plan_feasible_route(
+        &self,
+        lane: LaneId,
+        front: f64,
+        actions: &mut [Action],
+        merges: &[f64],
+        travel: f64,
+    ) -> Result<Route, String> {
+        let mut route = self.plan_route(lane, front, actions, merges, travel)?;
+        // Each pass can only turn skipped turns into straights: it ends.
+        for _ in 0..actions.len() {
+            let skipped: Vec<usize> = route
+                .adaptations
+                .iter()
+                .filter(|a| a.kind == AdaptationKind::Skipped && !a.action.is_merge() && a.action != Action::Straight)
+                .map(|a| a.action_index)
+                .collect();
+            if skipped.is_empty() {
+                break;
+            }
+            for k in skipped {
+                actions[k] = Action::Straight;
+            }
+            route = self.plan_route(lane, front, actions, merges, travel)?;
+        }
+        Ok(route)
     }
 
     /// The route of a car entering at `front` metres along `lane`, `travel`
