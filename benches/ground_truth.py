@@ -6,7 +6,8 @@ per group and split (default 200; BENCH_GROUND_TRUTH_LIMIT), poses only:
 - `baseline`'s dynamics score against its frame-0 rule (AUROC);
 - the learned classifiers of `causalcity.reference`: frame 0 only against
   the whole trajectory (F1, AUROC, and AUROC among pairs that start in one
-  lane one behind the other).
+  lane one behind the other), the toy world's trajectory F1 beside the
+  city's, and whether the paper's trends hold.
 
 Prints the table and the targets beside it; asserts nothing. Needs
 scikit-learn (the package's `reference` extra). $CAUSALCITY_CLI is the
@@ -51,8 +52,12 @@ def main():
                 b[3] += c["causal_edges"]
             print(f"\n== {world}: configs/{world}.json --limit {LIMIT} --no-images (generated in {made:.0f} s) ==")
             if world == "toy":
+                toy = {r.group: r for r in reference.evaluate(out, methods=("trajectory",))}
                 for group, (w, d, u, c) in backed.items():
-                    print(f"{group:<16} designed edges backed by an effect {w / d:6.1%} (target >= 90 %), causal edges no design explains {u / max(c, 1):6.1%}")
+                    print(
+                        f"{group:<16} designed edges backed by an effect {w / d:6.1%} (target >= 90 %), "
+                        f"causal edges no design explains {u / max(c, 1):6.1%}, learned trajectory F1 {toy[group].f1:.3f}"
+                    )
                 continue
             base = json.loads(cli("baseline", str(out), "--json"))
             start = time.perf_counter()
@@ -76,6 +81,17 @@ def main():
                 f"(learned classifiers {learned:.0f} s) targets: backed >= 90 %; baseline dynamics AUROC above frame0's; "
                 "learned frame0 F1 <= 0.5 and its same-lane AUROC (f0 lane) <= 0.7; trajectory F1 >= frame0 F1 + 0.15"
             )
+            f1 = {g: by[(g, "trajectory")].f1 for g, _ in by}
+            trends = [
+                ("falls from 4 to 12 cars at 50 %", "cars04_edges50", "cars12_edges50", lambda a, b: a > b),
+                ("rises from 20 % to 80 % at 8 cars", "cars08_edges20", "cars08_edges80", lambda a, b: a < b),
+            ]
+            for what, a, b, holds in trends:
+                if a in f1 and b in f1:
+                    verdict = "holds" if holds(f1[a], f1[b]) else "DOES NOT HOLD"
+                    print(f"paper's trend, learned trajectory F1 {what}: {f1[a]:.3f} -> {f1[b]:.3f} ({verdict})")
+            harder = all(f1[g] < toy[g].f1 for g in f1 if g in toy)
+            print(f"city harder than toy (trajectory F1 lower in every group): {'yes' if harder else 'NO'}")
 
 
 if __name__ == "__main__":

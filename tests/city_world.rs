@@ -361,19 +361,26 @@ fn the_default_city_design_shows_agency_and_confounding() {
     let out = dir.join("out");
     let spec = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json");
     gen_ok(&spec, &out, &["--quiet", "--no-images", "--limit", "12"]);
-    let (mut speed_px, mut n) = (0.0, 0);
+    let (mut speed, mut n, mut seen) = (0.0, 0, 0);
     let (mut cars, mut stopped) = (0, 0);
+    let mut driven = Vec::new();
     let mut cvs = Vec::new();
     let (mut dry, mut dry_crashes) = (0, 0);
     for d in scenario_dirs(&out) {
         let s = read_scenario(&d);
-        let to_px = s.frame_interval * s.camera.pixels_per_metre;
+        assert_eq!((s.frames, s.frame_interval), (150, 1.0), "{}", d.display());
+        let still_frames = (5.0 / s.frame_interval).ceil() as usize;
         let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
         for track in by_car.values() {
-            speed_px += track.iter().map(|p| p.speed * to_px).sum::<f64>();
+            speed += track.iter().map(|p| p.speed).sum::<f64>();
             n += track.len();
+            seen += track.iter().filter(|p| p.in_view == 1).count();
+            driven.push(
+                track.windows(2).map(|w| ((w[1].x - w[0].x).powi(2) + (w[1].y - w[0].y).powi(2)).sqrt()).sum::<f64>(),
+            );
             cars += 1;
-            stopped += (longest_run(track.iter().map(|p| p.speed * to_px < 0.1)) >= 5) as usize;
+            // Standing (under 0.1 m/s) for 5 s or more.
+            stopped += (longest_run(track.iter().map(|p| p.speed < 0.1)) >= still_frames) as usize;
         }
         for [l, f] in &s.edges {
             let gaps: Vec<f64> = by_car[l]
@@ -399,12 +406,23 @@ fn the_default_city_design_shows_agency_and_confounding() {
             dry_crashes += read_csv::<EventRow>(&d.join("events.csv")).iter().any(|e| e.kind == "collision") as usize;
         }
     }
-    let mean_speed = speed_px / n as f64;
+    let mean_speed = speed / n as f64;
+    let on_camera = seen as f64 / n as f64;
+    driven.sort_by(f64::total_cmp);
+    let median_driven = driven[driven.len() / 2];
     cvs.sort_by(f64::total_cmp);
     let median_cv = cvs[cvs.len() / 2];
     let stop_share = stopped as f64 / cars as f64;
-    eprintln!("mean {mean_speed:.2} px/frame, {stop_share:.2} of cars stop, median gap CV {median_cv:.2}, dry collisions {dry_crashes}/{dry}");
-    assert!((1.5..=3.0).contains(&mean_speed), "mean speed {mean_speed} px/frame");
+    eprintln!(
+        "mean {mean_speed:.2} m/s, median {median_driven:.0} m driven, {on_camera:.3} of car-frames on camera, {stop_share:.2} of cars stop, median gap CV {median_cv:.2}, dry collisions {dry_crashes}/{dry}"
+    );
+    // Issue 23: 150 frames at 1 Hz as the paper samples, so cars pass
+    // intersections and choose turns within the scene (the roads C and D
+    // are 48 m apart; at 0.2 s frames the median car drove 25 m), and stay
+    // on camera (>= 85 % of car-frames; 91-92 % on 200 scenarios per split).
+    assert!(median_driven >= 96.0, "the median car drives {median_driven:.0} m in the scene");
+    assert!(on_camera >= 0.85, "{:.1} % of car-frames on camera", 100.0 * on_camera);
+    assert!((0.5..=1.8).contains(&mean_speed), "mean speed {mean_speed:.2} m/s");
     assert!(stop_share >= 0.25, "only {stop_share} of cars stop");
     assert!(median_cv >= 0.2, "leader-follower gaps barely vary: median CV {median_cv}");
     assert!((dry_crashes as f64) < 0.05 * dry as f64, "{dry_crashes} of {dry} dry scenarios have collisions");

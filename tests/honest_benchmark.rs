@@ -1,8 +1,8 @@
 //! The city benchmark does not give its answer away in the first frame:
-//! followers start at drawn gaps and speeds like every other car, hard
-//! negatives look like followers at the start and part ways later, and a
-//! rule that sees only frame 0 finds the links far worse than in the toy
-//! world, while the dynamics still rank them well. Checked on the default
+//! cars start in platoons blind to their roles, followers at speeds drawn
+//! like every other car's, and a rule that sees only frame 0 finds the
+//! links far worse than in the toy world, while the dynamics rank them
+//! well. Checked on the default
 //! city spec (`configs/city.json`), as a user would run it.
 
 mod common;
@@ -13,7 +13,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// The default city dataset, 100 scenarios per split and group, poses only;
+/// The default city dataset, 100 scenarios per split and group, poses only
+/// (no effects: nothing here reads them);
 /// generated once for every test here.
 fn default_city() -> PathBuf {
     static DATA: Mutex<Option<PathBuf>> = Mutex::new(None);
@@ -24,67 +25,78 @@ fn default_city() -> PathBuf {
     let dir = fresh_dir("honest-benchmark");
     let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json");
     let data = dir.join("city");
-    gen_ok(&spec, &data, &["--quiet", "--no-images", "--limit", "100"]);
+    gen_ok(&spec, &data, &["--quiet", "--no-images", "--no-effects", "--limit", "100"]);
     *guard = Some(data.clone());
     data
 }
 
-/// Frame-0 poses by car id.
-fn first_frame(dir: &Path) -> BTreeMap<u32, Pose> {
-    read_poses(&dir.join("poses.csv")).into_iter().filter(|p| p.frame == 0).map(|p| (p.car, p)).collect()
-}
-
-/// Bumper gap (metres) from `behind` to `ahead` when both are in one lane
-/// facing the same way with `ahead` in front, else None.
-fn gap_in_lane(ahead: &Pose, behind: &Pose, length: f64) -> Option<f64> {
-    let (dx, dy) = (ahead.x - behind.x, ahead.y - behind.y);
-    let (c, s) = (behind.yaw.cos(), behind.yaw.sin());
-    let (along, across) = (dx * c + dy * s, -dx * s + dy * c);
-    let turn = (ahead.yaw - behind.yaw).sin().abs();
-    (along > 0.0 && across.abs() < 0.5 && turn < 0.05).then_some(along - length)
+/// The carriageway a spawn lane belongs to: its road segment ("A1") and
+/// direction (lanes w and x run one way, y and z the other).
+fn carriageway(lane: &str) -> (String, bool) {
+    let (segment, letter) = lane.split_at(lane.len() - 1);
+    (segment.to_string(), matches!(letter, "w" | "x"))
 }
 
 #[test]
-fn followers_and_hard_negatives_start_at_drawn_gaps_with_their_own_driving() {
+fn platoons_start_blind_to_roles_and_followers_drive_their_own_way() {
     let data = default_city();
     let spec: Value = serde_json::from_str(&std::fs::read_to_string("configs/city.json").unwrap()).unwrap();
-    let gaps = &spec["city"]["start"]["follower_gap_m"]["uniform"];
-    let (lo, hi) = (gaps[0].as_f64().unwrap(), gaps[1].as_f64().unwrap());
-    let (mut followers, mut hard_negatives, mut shared_speeds, mut cars) = (0, 0, 0, 0);
-    let mut follower_gaps = Vec::new();
+    assert_eq!(spec["city"]["start"]["platoon_cars"], 4, "the default city starts cars in platoons of 4");
+    let lo = spec["city"]["start"]["follower_gap_m"]["uniform"][0].as_f64().unwrap();
+    // For (ahead, behind) pairs on one carriageway: [edges, other pairs] of
+    // each kind, and how many of them have the car ahead first on its
+    // carriageway, or another car between them.
+    let (mut pairs, mut first, mut between) = ([0usize; 2], [0usize; 2], [0usize; 2]);
+    let (mut followers, mut shared_speeds, mut alone) = (0, 0, 0);
     for dir in scenario_dirs(&data) {
         let scenario = read_scenario(&dir);
-        let poses = first_frame(&dir);
-        let car = |id: u32| scenario.cars.iter().find(|c| c.id == id).unwrap();
-        cars += scenario.cars.len();
+        let cars = &scenario.cars;
+        let on = |c: &common::Car| carriageway(&c.spawn);
+        // No car starts alone on its carriageway (every group here has a multiple of 4 cars).
+        alone += cars.iter().filter(|c| cars.iter().filter(|o| on(o) == on(c)).count() < 2).count();
+        for a in cars {
+            for b in cars.iter().filter(|b| on(b) == on(a) && b.spawn_distance < a.spawn_distance) {
+                let is_edge = scenario.edges.contains(&[a.id, b.id]);
+                let k = if is_edge { 0 } else { 1 };
+                pairs[k] += 1;
+                first[k] += cars.iter().all(|o| on(o) != on(a) || o.spawn_distance <= a.spawn_distance) as usize;
+                between[k] += cars.iter().any(|o| {
+                    on(o) == on(a) && o.spawn_distance < a.spawn_distance && o.spawn_distance > b.spawn_distance
+                }) as usize;
+                // Two cars of one lane start at least the shortest follower gap apart.
+                if a.spawn == b.spawn {
+                    let gap = a.spawn_distance - b.spawn_distance - a.length_m;
+                    assert!(gap > lo - 0.01, "{}: cars {} and {} start {gap:.3} m apart", dir.display(), a.id, b.id);
+                }
+            }
+        }
+        let car = |id: u32| cars.iter().find(|c| c.id == id).unwrap();
         for &[leader, follower] in &scenario.edges {
             followers += 1;
-            let gap = gap_in_lane(&poses[&leader], &poses[&follower], car(leader).length_m)
-                .unwrap_or_else(|| panic!("{}: follower {follower} is not behind leader {leader}", dir.display()));
-            // Millimetre placement and lateral wander aside, the drawn gap.
-            assert!(gap > lo - 0.01 && gap < hi + 0.01, "{}: follower gap {gap:.3} m", dir.display());
-            follower_gaps.push(gap);
-            shared_speeds += (car(leader).desired_speeds == car(follower).desired_speeds) as usize;
-            assert_eq!(car(leader).actions, car(follower).actions, "a pair shares its actions");
-        }
-        for c in scenario.cars.iter().filter(|c| c.hard_negative_behind.is_some()) {
-            hard_negatives += 1;
-            let ahead = car(c.hard_negative_behind.unwrap());
-            assert!(!scenario.edges.contains(&[ahead.id, c.id]), "a hard negative is no follower");
-            assert_ne!(c.actions[0], ahead.actions[0], "{}: car {} keeps with car {}", dir.display(), c.id, ahead.id);
-            let gap = gap_in_lane(&poses[&ahead.id], &poses[&c.id], ahead.length_m)
-                .unwrap_or_else(|| panic!("{}: hard negative {} is not behind car {}", dir.display(), c.id, ahead.id));
-            assert!(gap > lo - 0.01 && gap < hi + 0.01, "{}: hard negative gap {gap:.3} m", dir.display());
+            let (l, f) = (car(leader), car(follower));
+            assert_eq!(on(l), on(f), "{}: follower {follower} starts on another carriageway", dir.display());
+            assert!(l.spawn_distance > f.spawn_distance, "{}: follower {follower} starts ahead", dir.display());
+            shared_speeds += (l.desired_speeds == f.desired_speeds) as usize;
+            assert_eq!(l.actions, f.actions, "a follower takes its leader's actions");
         }
     }
     assert!(followers > 500, "only {followers} followers");
-    // Gaps spread over the drawn range, not one exact value.
-    follower_gaps.sort_by(f64::total_cmp);
-    let (q10, q90) = (follower_gaps[follower_gaps.len() / 10], follower_gaps[follower_gaps.len() * 9 / 10]);
-    assert!(q90 - q10 > 0.5 * (hi - lo), "follower gaps from {q10:.2} to {q90:.2} m");
+    assert_eq!(alone, 0, "cars starting alone on their carriageway");
     assert_eq!(shared_speeds, 0, "followers with their leader's desired speeds");
-    // Hard negatives are on by default: about as many as followers.
-    assert!(hard_negatives * 2 > followers, "{hard_negatives} hard negatives for {followers} followers in {cars} cars");
+    // Many more look-alikes than edges, and an edge is placed like any of
+    // them: (with the old pairs design, the car ahead was first on its
+    // carriageway for 74 % of edges and 37 % of look-alikes).
+    assert!(pairs[1] > 3 * pairs[0], "{pairs:?} (edges, other pairs) one behind the other");
+    let share = |n: [usize; 2], k: usize| n[k] as f64 / pairs[k] as f64;
+    for (what, n) in [("first on its carriageway", first), ("with a car between", between)] {
+        let (edge, other) = (share(n, 0), share(n, 1));
+        assert!(
+            (edge - other).abs() < 0.06,
+            "{what}: {:.1} % of edges, {:.1} % of other pairs",
+            100.0 * edge,
+            100.0 * other
+        );
+    }
 }
 
 /// Share of `ids` (by scenario folder) that never reach 0.1 m/s in the first second.

@@ -167,8 +167,10 @@ fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
     for row in &rows {
         let gap = row["time_gap_median_s"].as_f64().unwrap_or_else(|| panic!("no time gap: {row}"));
         assert!((1.0..=2.0).contains(&gap), "time gap {gap:.2} s: {row}");
+        // One frame a second as the paper samples (issue 23): a car moves
+        // about 10 px a frame on the 48 m camera (1.5-3 px at 0.2 s frames).
         let speed = row["mean_speed_px"].as_f64().unwrap();
-        assert!((1.5..=3.0).contains(&speed), "mean {speed:.2} px per frame: {row}");
+        assert!((6.0..=14.0).contains(&speed), "mean {speed:.2} px per frame: {row}");
     }
     // The real-scale preset: headways of urban traffic, queues leaving at
     // the saturation flow of real signalised lanes, cars at their desired
