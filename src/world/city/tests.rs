@@ -20,6 +20,7 @@ const FRAME: f64 = 0.2;
 
 /// One car of a test plan: centre `at` metres along lane `lane`, driving
 /// `actions` (merges at `merges` metres along their lane) at `desired` m/s.
+#[derive(Clone)]
 struct Given {
     lane: &'static str,
     at: f64,
@@ -345,6 +346,41 @@ fn a_driver_gives_up_the_turn_when_no_gap_comes_and_goes_straight_on() {
         sideways.abs() < 0.3 && (1.0..a2w - 1.0).contains(&along)
     });
     assert!(on_a2w.count() > 5, "never drove along A2w after giving up");
+}
+
+#[test]
+fn a_follower_drives_straight_on_where_its_leader_gave_up_the_turn() {
+    // The leader of `wrong_lane_for_a_left_turn` gives up its left turn;
+    // its follower waits on the turn lane A1x behind the blocker, which
+    // drives off once the leader has given up.
+    let map = wide_blocks();
+    let lights = lights_with(&map, &["A1x"], &[(Colour::Green, 1000.0)]);
+    let leader =
+        Given { lane: "A1w", at: 14.0, actions: vec![Action::Left], merges: vec![0.0], desired: 2.0, start: 0.0 };
+    let blocker = straight("A1x", 26.0, 0.0);
+    let follower = Given { lane: "A1x", at: 14.0, ..leader.clone() };
+    let go = Intervention {
+        trigger: Trigger::At(super::perception::LANE_CHANGE_PATIENCE + 20.0),
+        effect: Effect::SetDesiredSpeed { car: 1, speed: 3.0 },
+        label: "blocker drives off".into(),
+    };
+    let mut plan = plan(&map, &[leader, blocker, follower], lights, vec![go], 90.0);
+    plan.cars[0].role = Role::Leader;
+    plan.cars[2].role = Role::Follower;
+    plan.cars[2].leader = Some(0);
+    plan.edges = vec![(0, 2)];
+    let traj = simulate(&map, &plan);
+    let gave_up = traj.events.iter().find(|e| e.car == Some(0) && e.kind == EventKind::ActionSkipped);
+    assert!(gave_up.is_some_and(|e| e.t < super::perception::LANE_CHANGE_PATIENCE + 20.0), "{:?}", traj.events);
+    // From A1x a left turn was open to it; it went straight on into A2x as its leader did.
+    let turns: Vec<_> = traj.events.iter().filter(|e| e.car == Some(2) && e.kind == EventKind::TurnDone).collect();
+    assert!(turns.iter().all(|e| !e.detail.starts_with("left")), "{turns:?}");
+    let a2x = map.lanes[lane(&map, "A2x")].curve.length();
+    let on_a2x = (0..traj.frames()).filter(|&f| {
+        let (along, sideways) = on_lane(&map, &traj, "A2x", f, 2);
+        sideways.abs() < 0.3 && (1.0..a2x - 1.0).contains(&along)
+    });
+    assert!(on_a2x.count() > 5, "the follower never drove along A2x: {:?}", traj.events);
 }
 
 /// Largest deceleration of car `car` between consecutive frames, m/s^2.
