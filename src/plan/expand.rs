@@ -243,10 +243,9 @@ impl Expansion {
                 if front > span.hi {
                     continue;
                 }
-                let (actions, merges) = match city.as_ref().map(|c| c.action_drawing) {
-                    Some(ActionDrawing::Original) => original_actions(&mut rng, spec.actions_per_car),
-                    _ => random_actions(&mut rng, &self.map, span.lane, front, spec.actions_per_car),
-                };
+                // The toy world always draws lane-valid actions.
+                let drawing = city.as_ref().map_or(ActionDrawing::LaneValid, |c| c.action_drawing);
+                let (actions, merges) = self.draw_actions(&mut rng, drawing, span.lane, front);
                 // A hard negative parts ways with the car ahead at the next intersection.
                 if let Some(k) = behind {
                     if actions.is_empty() || actions.first() == cars[k].actions.first() {
@@ -255,16 +254,7 @@ impl Expansion {
                 }
                 // Checked on the spawn lane before the (costlier) route is planned.
                 let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
-                let curve = &self.map.lanes[span.lane].curve;
-                let boxes: Vec<OrientedBox> = starts
-                    .iter()
-                    .map(|&s| OrientedBox {
-                        centre: curve.position(s, 0.0),
-                        heading: curve.heading_at(s),
-                        length: spec.car_length_m,
-                        width: spec.car_width_m,
-                    })
-                    .collect();
+                let boxes: Vec<OrientedBox> = starts.iter().map(|&s| self.car_box(span.lane, s)).collect();
                 let clear = boxes.iter().all(|b| {
                     let grown = b.inflated(SPAWN_CLEARANCE / 2.0);
                     placed.iter().all(|p| !grown.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
@@ -370,17 +360,8 @@ impl Expansion {
                 ));
             };
             for (lane, s) in starts {
-                let curve = &self.map.lanes[lane].curve;
-                boxes.push(OrientedBox {
-                    centre: curve.position(s, 0.0),
-                    heading: curve.heading_at(s),
-                    length: self.spec.car_length_m,
-                    width: self.spec.car_width_m,
-                });
-                let (mut actions, merges) = match city.action_drawing {
-                    ActionDrawing::Original => original_actions(rng, self.spec.actions_per_car),
-                    _ => random_actions(rng, &self.map, lane, s, self.spec.actions_per_car),
-                };
+                boxes.push(self.car_box(lane, s));
+                let (mut actions, merges) = self.draw_actions(rng, city.action_drawing, lane, s);
                 let route = Arc::new(self.plan_feasible_route(lane, s, &mut actions, &merges, travel)?);
                 let desired_speeds = draw_desired_speeds(rng, Some(city), actions.len());
                 cars.push(PlacedCar {
@@ -501,14 +482,7 @@ impl Expansion {
         }
         let mut grown: Vec<OrientedBox> = boxes.iter().map(|b| b.inflated(SPAWN_CLEARANCE / 2.0)).collect();
         for &(lane, s) in &starts {
-            let curve = &self.map.lanes[lane].curve;
-            let b = OrientedBox {
-                centre: curve.position(s, 0.0),
-                heading: curve.heading_at(s),
-                length: self.spec.car_length_m,
-                width: self.spec.car_width_m,
-            }
-            .inflated(SPAWN_CLEARANCE / 2.0);
+            let b = self.car_box(lane, s).inflated(SPAWN_CLEARANCE / 2.0);
             if grown.iter().any(|p| b.overlaps(p)) {
                 return None;
             }
@@ -522,7 +496,6 @@ impl Expansion {
     /// as an independent car's from its start (from a stream of its own).
     fn draw_fallbacks(&self, stream: [u8; 32], cars: &mut [PlacedCar]) {
         let mut rng = ChaCha8Rng::from_seed(Sha256::digest([FALLBACK_TAG, &stream[..]].concat()).into());
-        let count = self.spec.actions_per_car;
         for car in cars.iter_mut().filter(|c| c.leader.is_some()) {
             let drawing = match self.spec.world {
                 WorldKind::Toy => {
@@ -531,10 +504,7 @@ impl Expansion {
                 }
                 WorldKind::City => self.spec.city_settings().action_drawing,
             };
-            let (actions, merges) = match drawing {
-                ActionDrawing::Original => original_actions(&mut rng, count),
-                _ => random_actions(&mut rng, &self.map, car.spawn, car.distance, count),
-            };
+            let (actions, merges) = self.draw_actions(&mut rng, drawing, car.spawn, car.distance);
             // Its route is planned when it is needed, from where the follower is then.
             car.on_leader_lost = Some(OnLeaderLost::Drive(Fallback { actions, merge_distances: merges }));
         }
@@ -580,6 +550,33 @@ impl Expansion {
             route = self.plan_route(lane, front, actions, merges, travel)?;
         }
         Ok(route)
+    }
+
+    /// The footprint of a car centred `s` metres along `lane`.
+    fn car_box(&self, lane: LaneId, s: f64) -> OrientedBox {
+        let curve = &self.map.lanes[lane].curve;
+        OrientedBox {
+            centre: curve.position(s, 0.0),
+            heading: curve.heading_at(s),
+            length: self.spec.car_length_m,
+            width: self.spec.car_width_m,
+        }
+    }
+
+    /// A city drive queue as `drawing` draws it for a car starting `s`
+    /// metres along `lane`.
+    fn draw_actions(
+        &self,
+        rng: &mut ChaCha8Rng,
+        drawing: ActionDrawing,
+        lane: LaneId,
+        s: f64,
+    ) -> (Vec<Action>, Vec<f64>) {
+        let count = self.spec.actions_per_car;
+        match drawing {
+            ActionDrawing::Original => original_actions(rng, count),
+            _ => random_actions(rng, &self.map, lane, s, count),
+        }
     }
 
     /// The route of a car entering at `front` metres along `lane`, `travel`
