@@ -117,6 +117,15 @@ impl Split {
             Split::Test => "test",
         }
     }
+
+    /// Its place in [`Split::ALL`]: train 0, val 1, test 2.
+    pub fn index(self) -> usize {
+        match self {
+            Split::Train => 0,
+            Split::Val => 1,
+            Split::Test => 2,
+        }
+    }
 }
 
 impl Splits {

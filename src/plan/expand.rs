@@ -196,6 +196,7 @@ impl Expansion {
         let mut placed: Vec<OrientedBox> = Vec::new();
         let mut cars: Vec<PlacedCar> = Vec::new();
         let mut pair_indices = Vec::new();
+        let split = key.split.index();
         for unit in 0..pairs + singles {
             let is_pair = unit < pairs;
             // City: a car with no leader may start right behind another car
@@ -233,7 +234,6 @@ impl Expansion {
                 };
                 // The nearest start forward (in whole millimetres) that this
                 // split owns, for both cars of a pair.
-                let split = Split::ALL.iter().position(|&s| s == key.split).unwrap_or(0);
                 let owned = (0..OWNED_START_SEARCH_MM).map(|mm| round_mm(back + mm as f64 / 1000.0)).find(|&b| {
                     split_owning_start(span.lane, b + (front - back)) == split
                         && (!is_pair || split_owning_start(span.lane, b) == split)
@@ -345,7 +345,7 @@ impl Expansion {
     ) -> Result<(Vec<PlacedCar>, Vec<(usize, usize)>), String> {
         let size = city.start.platoon_cars as usize;
         let total = group.cars as usize;
-        let split = Split::ALL.iter().position(|&s| s == key.split).unwrap_or(0);
+        let split = key.split.index();
         let travel = self.max_travel();
         let mut boxes: Vec<OrientedBox> = Vec::new();
         let mut cars: Vec<PlacedCar> = Vec::new();
