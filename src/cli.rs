@@ -5,6 +5,7 @@
 //! [`Error`] whose exit code `main` returns.
 
 use causalcity::analysis::baseline::baseline;
+use causalcity::analysis::evaluate::{evaluate, EvaluateOptions, DEFAULT_HISTORY_FRAMES};
 use causalcity::analysis::heatmap::{heatmap, HeatmapFilter};
 use causalcity::analysis::stats::dataset_stats;
 use causalcity::dataset::GraphKind;
@@ -58,6 +59,10 @@ pub enum Command {
     /// Non-learned causal-discovery baseline: lagged path-following scores,
     /// threshold picked on train, precision / recall / F1 on test per group.
     Baseline(BaselineArgs),
+    /// Score a predictions file (.npz: edge scores and predicted trajectories
+    /// per scenario) with the paper's metrics: F1 at a threshold from val,
+    /// AUROC, AUPRC, SHD, and trajectory error 1..N steps ahead.
+    Evaluate(EvaluateArgs),
     /// Run hand-written scenarios (the original CausalCity scenario format,
     /// plus extensions) into one scenario folder each.
     Run(RunArgs),
@@ -212,6 +217,44 @@ pub struct BaselineArgs {
     pub graph: GraphArg,
 
     /// Print the table as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct EvaluateArgs {
+    /// Dataset folder (the one holding manifest.json).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// Predictions (.npz, as numpy's np.savez writes it): per scenario, an
+    /// array named by its folder (cars08_edges50/test/00000) of shape
+    /// [cars, cars], [i, j] scoring "car i leads car j", and optionally one
+    /// named <folder>/trajectory of shape [steps, cars, 2]: predicted
+    /// bird's-eye pixel positions of the frames after the history.
+    #[arg(value_name = "PREDICTIONS")]
+    pub predictions: PathBuf,
+
+    /// The graphs to score edges against (repeat or separate with commas):
+    /// designed, causal, direct (the last two not with gen --no-effects).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "designed")]
+    pub graph: Vec<GraphArg>,
+
+    /// Frames observed before a predicted trajectory's first frame.
+    #[arg(long, value_name = "FRAMES", default_value_t = DEFAULT_HISTORY_FRAMES)]
+    pub history: usize,
+
+    /// Call a pair linked when its score is above this [default: the
+    /// threshold with the best F1 on each group's val split; 0.5 without val
+    /// predictions].
+    #[arg(long, value_name = "SCORE")]
+    pub threshold: Option<f64>,
+
+    /// Also write the results as a CSV table (one value per row) to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+
+    /// Print the results as JSON on stdout.
     #[arg(long)]
     pub json: bool,
 }
@@ -634,6 +677,21 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             say(preview(&args.scenario, &args.out, &options).map_err(Error::Failure)?)
         }
         Command::Baseline(args) => report(&baseline(&args.dataset, args.max_lag, args.graph.into())?, args.json),
+        Command::Evaluate(args) => {
+            let mut graphs: Vec<GraphKind> = Vec::new();
+            for graph in args.graph.into_iter().map(GraphKind::from) {
+                if !graphs.contains(&graph) {
+                    graphs.push(graph);
+                }
+            }
+            let options = EvaluateOptions { graphs, history: args.history, threshold: args.threshold };
+            let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
+            if let Some(path) = &args.csv {
+                std::fs::write(path, evaluated.to_csv())
+                    .map_err(|e| Error::Failure(format!("cannot write {}: {e}", path.display())))?;
+            }
+            report(&evaluated, args.json)
+        }
         Command::Run(args) => {
             let options = RunOptions {
                 scenario_file: args.scenario,

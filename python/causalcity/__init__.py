@@ -24,7 +24,7 @@ import json
 import os
 import sys
 from dataclasses import dataclass
-from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterator, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -45,6 +45,9 @@ __all__ = [
     "stream",
     "counterfactual",
     "generate",
+    "evaluate",
+    "save_predictions",
+    "HISTORY_FRAMES",
     "InputError",
     "GenerationError",
 ]
@@ -663,3 +666,61 @@ def generate(
         progress,
     )
     return json.loads(summary)
+
+
+HISTORY_FRAMES = 100
+"""Frames observed before a predicted trajectory's first frame, as in the
+paper (``causalcity evaluate --history``'s default)."""
+
+
+def save_predictions(
+    path: PathLike,
+    edges: Optional[Mapping[str, np.ndarray]] = None,
+    trajectories: Optional[Mapping[str, np.ndarray]] = None,
+) -> None:
+    """Writes a predictions file for :func:`evaluate` (``np.savez_compressed``).
+
+    ``edges`` maps a scenario folder (``Key.folder``, e.g.
+    ``cars08_edges50/test/00000``) to its ``[cars, cars]`` edge scores,
+    ``[i, j]`` scoring "car i leads car j" as :attr:`Scenario.graph` is
+    oriented, higher meaning more likely. ``trajectories`` maps a folder to
+    ``[steps, cars, 2]`` predicted bird's-eye pixel positions of the frames
+    after the first :data:`HISTORY_FRAMES` (the history the method saw).
+    """
+    arrays: Dict[str, np.ndarray] = {}
+    for folder, scores in (edges or {}).items():
+        arrays[str(folder)] = np.asarray(scores, dtype=np.float64)
+    for folder, trajectory in (trajectories or {}).items():
+        arrays[f"{folder}/trajectory"] = np.asarray(trajectory, dtype=np.float64)
+    if not arrays:
+        raise InputError("save_predictions: give edge scores or trajectories for at least one scenario")
+    with open(os.fspath(path), "wb") as f:
+        np.savez_compressed(f, **arrays)
+
+
+def evaluate(
+    dataset: PathLike,
+    predictions: PathLike,
+    *,
+    graph: Union[str, Sequence[str]] = "designed",
+    history: int = HISTORY_FRAMES,
+    threshold: Optional[float] = None,
+    csv: Optional[PathLike] = None,
+) -> Dict[str, Any]:
+    """``causalcity evaluate`` from Python: scores the predictions file
+    ``predictions`` (see :func:`save_predictions`) against the dataset
+    ``gen`` wrote to ``dataset``, and returns the report as ``evaluate
+    --json`` prints it: ``edges`` (per graph, group and split: F1 at the
+    threshold with the best F1 on val, with its standard error, precision,
+    recall, AUROC, AUPRC, SHD) and ``trajectories`` (per group and split:
+    normalised squared error at each step ahead). ``graph`` is one of
+    ``designed``, ``causal``, ``direct`` or a list of them; ``csv`` also
+    writes the table as ``--csv`` does. Bad predictions (a wrong shape, a
+    NaN, a partly scored split) raise :class:`InputError`.
+    """
+    graphs = [graph] if isinstance(graph, str) else list(graph)
+    text, table = _native.evaluate(os.fspath(dataset), os.fspath(predictions), graphs, int(history), threshold)
+    if csv is not None:
+        with open(os.fspath(csv), "w", encoding="utf-8") as f:
+            f.write(table)
+    return json.loads(text)

@@ -77,3 +77,10 @@ def generate(
     fsync: bool = False,
     progress: bool = True,
 ) -> str: ...
+def evaluate(
+    dataset: str,
+    predictions: str,
+    graphs: List[str],
+    history: int,
+    threshold: Optional[float] = None,
+) -> Tuple[str, str]: ...

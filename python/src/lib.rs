@@ -7,6 +7,8 @@
 //! `counterfactual` on rayon's. The public API (docstrings, types) lives
 //! in `causalcity/__init__.py`.
 
+use causalcity::analysis::evaluate::{evaluate as evaluate_, EvaluateOptions};
+use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
 use causalcity::orchestrate::in_memory::Prefetch as Prefetch_;
 use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
@@ -349,6 +351,32 @@ fn generate(
     serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
 }
 
+/// `causalcity evaluate` from Python: the report as JSON text and as CSV.
+#[pyfunction]
+#[pyo3(signature = (dataset, predictions, graphs, history, threshold=None))]
+fn evaluate(
+    py: Python<'_>,
+    dataset: PathBuf,
+    predictions: PathBuf,
+    graphs: Vec<String>,
+    history: usize,
+    threshold: Option<f64>,
+) -> PyResult<(String, String)> {
+    let mut kinds: Vec<GraphKind> = Vec::new();
+    for name in &graphs {
+        let Some(kind) = GraphKind::ALL.into_iter().find(|k| k.name() == name) else {
+            return Err(InputError::new_err(format!("graph {name:?} is not one of designed, causal, direct")));
+        };
+        if !kinds.contains(&kind) {
+            kinds.push(kind);
+        }
+    }
+    let options = EvaluateOptions { graphs: kinds, history, threshold };
+    let report = py.detach(|| evaluate_(&dataset, &predictions, &options)).map_err(py_err)?;
+    let json = serde_json::to_string(&report).map_err(|e| GenerationError::new_err(e.to_string()))?;
+    Ok((json, report.to_csv()))
+}
+
 fn array<'py>(py: Python<'py>, data: Data, shape: &[usize]) -> PyResult<Bound<'py, Array>> {
     Bound::new(py, Array::new(data, shape)?)
 }
@@ -435,5 +463,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Prefetch>()?;
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     Ok(())
 }

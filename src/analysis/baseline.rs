@@ -31,6 +31,7 @@
 //! edges (default), or the causal or direct graph measured by intervention
 //! (`effects.csv`), a (cause, effect) pair counting as (leader, follower).
 
+use super::metrics::{auroc, average_precision, best_threshold, Counts, ScoredPair};
 use crate::dataset::{Dataset, GraphKind, Pose, PoseLog, ScenarioSummary};
 use crate::error::Error;
 use crate::spec::Split;
@@ -91,9 +92,6 @@ pub struct BaselineReport {
     /// The best first-frame rule, per group: the leak.
     pub frame0: Vec<GroupBaseline>,
 }
-
-/// A scored ordered pair: (score in metres, truly linked).
-type ScoredPair = (f64, bool);
 
 /// Both scores of every ordered pair of a scenario (the dynamics score at
 /// each lag tried).
@@ -256,60 +254,6 @@ pub fn frame0_score(leader: &Pose, follower: &Pose) -> f64 {
     }
 }
 
-/// Pairs sorted by score, grouped into runs of equal scores:
-/// (linked, unlinked) counts per run, lowest score first.
-fn tied_runs(pairs: &[ScoredPair]) -> Vec<(usize, usize)> {
-    let mut sorted: Vec<ScoredPair> = pairs.to_vec();
-    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    let mut last = None;
-    for (score, linked) in sorted {
-        if last != Some(score) {
-            runs.push((0, 0));
-            last = Some(score);
-        }
-        let run = runs.last_mut().expect("a run was pushed");
-        if linked {
-            run.0 += 1;
-        } else {
-            run.1 += 1;
-        }
-    }
-    runs
-}
-
-/// The chance that a linked pair scores below an unlinked one, ties half
-/// (the Mann-Whitney form of the area under the ROC curve).
-pub fn auroc(pairs: &[ScoredPair]) -> Option<f64> {
-    let positives = pairs.iter().filter(|p| p.1).count();
-    let negatives = pairs.len() - positives;
-    if positives == 0 || negatives == 0 {
-        return None;
-    }
-    let (mut wins, mut negatives_above) = (0.0, negatives as f64);
-    for (linked, unlinked) in tied_runs(pairs) {
-        negatives_above -= unlinked as f64;
-        wins += linked as f64 * (negatives_above + unlinked as f64 / 2.0);
-    }
-    Some(wins / (positives * negatives) as f64)
-}
-
-/// Average precision: precision at each distinct threshold, weighted by the
-/// recall it adds (as scikit-learn computes it).
-pub fn average_precision(pairs: &[ScoredPair]) -> Option<f64> {
-    let positives = pairs.iter().filter(|p| p.1).count();
-    if positives == 0 {
-        return None;
-    }
-    let (mut tp, mut called, mut ap) = (0usize, 0usize, 0.0);
-    for (linked, unlinked) in tied_runs(pairs) {
-        tp += linked;
-        called += linked + unlinked;
-        ap += linked as f64 / positives as f64 * (tp as f64 / called as f64);
-    }
-    Some(ap)
-}
-
 /// Mean over frames of the distance from `follower` to the nearest point of
 /// `leader`'s path over the previous `max_lag` frames.
 pub fn following_score(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lag: usize) -> f64 {
@@ -342,69 +286,6 @@ pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[
         }
     }
     totals.into_iter().map(|total| total / (frames - 1) as f64).collect()
-}
-
-#[derive(Debug, Default, Clone, Copy)]
-struct Counts {
-    true_positives: usize,
-    false_positives: usize,
-    false_negatives: usize,
-}
-
-impl Counts {
-    fn at(pairs: &[ScoredPair], threshold: f64) -> Counts {
-        let mut c = Counts::default();
-        for &(score, linked) in pairs {
-            match (score < threshold, linked) {
-                (true, true) => c.true_positives += 1,
-                (true, false) => c.false_positives += 1,
-                (false, true) => c.false_negatives += 1,
-                (false, false) => {}
-            }
-        }
-        c
-    }
-
-    fn precision(&self) -> Option<f64> {
-        let called = self.true_positives + self.false_positives;
-        (called > 0).then(|| self.true_positives as f64 / called as f64)
-    }
-
-    fn recall(&self) -> Option<f64> {
-        let there = self.true_positives + self.false_negatives;
-        (there > 0).then(|| self.true_positives as f64 / there as f64)
-    }
-
-    fn f1(&self) -> Option<f64> {
-        let denominator = 2 * self.true_positives + self.false_positives + self.false_negatives;
-        (denominator > 0).then(|| 2.0 * self.true_positives as f64 / denominator as f64)
-    }
-}
-
-/// The threshold that maximises F1 over `pairs` (midway between the scores
-/// it separates); None without a linked pair.
-fn best_threshold(pairs: &[ScoredPair]) -> Option<f64> {
-    let positives = pairs.iter().filter(|p| p.1).count();
-    if positives == 0 {
-        return None;
-    }
-    let mut sorted: Vec<ScoredPair> = pairs.iter().copied().filter(|p| p.0.is_finite()).collect();
-    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-    // Calling the first k pairs linked: F1 = 2 tp / (k + positives).
-    let (mut best_f1, mut best_k, mut tp) = (-1.0, 0, 0usize);
-    for k in 1..=sorted.len() {
-        tp += sorted[k - 1].1 as usize;
-        let tied_with_next = k < sorted.len() && sorted[k].0 == sorted[k - 1].0;
-        let f1 = 2.0 * tp as f64 / (k + positives) as f64;
-        if !tied_with_next && f1 > best_f1 {
-            (best_f1, best_k) = (f1, k);
-        }
-    }
-    let below = sorted[best_k - 1].0;
-    Some(match sorted.get(best_k) {
-        Some(&(above, _)) => (below + above) / 2.0,
-        None => below * 1.5 + 1e-9,
-    })
 }
 
 impl fmt::Display for BaselineReport {
@@ -503,34 +384,6 @@ mod tests {
         // follower is, add to the score: (4 + 3 + 2 + 1) / 49.
         assert!((following_score(&leader, &follower, 10) - 10.0 / 49.0).abs() < 1e-9);
         assert!(following_score(&follower, &leader, 10) > 5.0);
-    }
-
-    #[test]
-    fn the_threshold_separates_a_clean_split() {
-        let pairs = vec![(0.1, true), (0.2, true), (3.0, false), (4.0, false)];
-        let t = best_threshold(&pairs).unwrap();
-        assert!(t > 0.2 && t < 3.0);
-        assert_eq!(Counts::at(&pairs, t).f1(), Some(1.0));
-        assert_eq!(best_threshold(&[(1.0, false)]), None);
-    }
-
-    #[test]
-    fn auroc_and_average_precision_match_their_definitions() {
-        // Perfectly separated, reversed, and with a tie.
-        let clean = [(0.1, true), (0.2, true), (3.0, false), (4.0, false)];
-        assert_eq!(auroc(&clean), Some(1.0));
-        assert_eq!(average_precision(&clean), Some(1.0));
-        let reversed = [(5.0, true), (0.2, false), (0.3, false)];
-        assert_eq!(auroc(&reversed), Some(0.0));
-        assert!((average_precision(&reversed).unwrap() - 1.0 / 3.0).abs() < 1e-12);
-        let tied = [(1.0, true), (1.0, false), (2.0, false), (0.5, true)];
-        // Pairs (pos, neg): 0.5 beats both, 1.0 ties one and beats one: (2 + 1.5) / 4.
-        assert!((auroc(&tied).unwrap() - 3.5 / 4.0).abs() < 1e-12);
-        // Thresholds 0.5 (P 1, R 1/2) and 1.0 (P 2/3, R 1): 0.5 x 1 + 0.5 x 2/3.
-        assert!((average_precision(&tied).unwrap() - (0.5 + 1.0 / 3.0)).abs() < 1e-12);
-        assert_eq!(auroc(&[(1.0, true)]), None);
-        // Infinite scores (frame0's "not in one lane") tie at the end.
-        assert_eq!(auroc(&[(f64::INFINITY, true), (f64::INFINITY, false)]), Some(0.5));
     }
 
     #[test]

@@ -2,6 +2,9 @@
 //! dwell-time heat maps and a causal-discovery baseline.
 
 pub mod baseline;
+pub mod evaluate;
 pub mod flow;
 pub mod heatmap;
+pub mod metrics;
+pub mod predictions;
 pub mod stats;
