@@ -1,0 +1,214 @@
+"""causalcity evaluate (and causalcity.evaluate): its metrics agree with
+scikit-learn and numpy computed from the dataset's own files, any dtype and
+memory order numpy saves is read the same, and bad predictions files are
+refused with exit status 2 and nothing written."""
+
+import json
+import os
+import shlex
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sklearn.metrics import average_precision_score, f1_score, roc_auc_score
+
+import causalcity
+
+DATA = Path(os.environ.get("CAUSALCITY_DATA", "target/python-data"))
+TOY = DATA / "toy"
+HISTORY = 20  # the test toy has 30 frames
+STEPS = 6
+
+
+def scenarios(split=None):
+    for meta_path in sorted(TOY.glob("*/*/*/scenario.json")):
+        folder = meta_path.parent
+        rel = folder.relative_to(TOY).as_posix()
+        if split is None or rel.split("/")[1] == split:
+            yield rel, json.loads(meta_path.read_text())
+
+
+def truth(meta, field="edges"):
+    n = len(meta["cars"])
+    g = np.zeros((n, n), dtype=bool)
+    for a, b in meta[field]:
+        g[a, b] = True
+    return g
+
+
+def pixels(rel, meta):
+    table = np.loadtxt(TOY / rel / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+    return table[:, [9, 10]].reshape(meta["frames"], len(meta["cars"]), 2)
+
+
+@pytest.fixture(scope="module")
+def predictions(tmp_path_factory):
+    """Noisy scores (truth + noise, so every metric is between its extremes)
+    and trajectories (truth + noise) for every val and test scenario."""
+    if not (TOY / "manifest.json").is_file():
+        pytest.skip("needs the test toy dataset (make test-python generates it)")
+    rng = np.random.default_rng(11)
+    edges, trajectories = {}, {}
+    for rel, meta in scenarios():
+        if "/train/" in rel:
+            continue
+        g = truth(meta)
+        edges[rel] = g * 0.6 + rng.random(g.shape)
+        trajectories[rel] = pixels(rel, meta)[HISTORY : HISTORY + STEPS] + rng.normal(0, 4.0, (STEPS, g.shape[0], 2))
+    path = tmp_path_factory.mktemp("evaluate") / "pred.npz"
+    causalcity.save_predictions(path, edges, trajectories)
+    return path, edges, trajectories
+
+
+def test_edge_metrics_agree_with_scikit_learn(predictions):
+    path, edges, _ = predictions
+    report = causalcity.evaluate(TOY, path, graph=["designed", "causal"], history=HISTORY)
+    checked = 0
+    for row in report["edges"]:
+        field = {"designed": "edges", "causal": "causal_edges"}[row["graph"]]
+        group, split = row["group"], row["split"]
+        rels = [(rel, meta) for rel, meta in scenarios(split) if rel.startswith(group + "/")]
+        assert row["scenarios"] == len(rels) > 0
+        ys, ss, f1s, shds = [], [], [], []
+        for rel, meta in rels:
+            n = len(meta["cars"])
+            off = ~np.eye(n, dtype=bool)
+            y, s = truth(meta, field)[off], edges[rel][off]
+            called = s > row["threshold"]
+            f1s.append(f1_score(y, called, zero_division=1.0))
+            shds.append(int((called != y).sum()))
+            ys.append(y)
+            ss.append(s)
+        y, s = np.concatenate(ys), np.concatenate(ss)
+        assert row["pairs"] == len(y) and row["true_edges"] == int(y.sum())
+        assert row["f1"] == pytest.approx(np.mean(f1s), abs=1e-9)
+        if len(f1s) > 1:
+            assert row["f1_se"] == pytest.approx(np.std(f1s, ddof=1) / np.sqrt(len(f1s)), abs=1e-9)
+        assert row["shd"] == pytest.approx(np.mean(shds), abs=1e-9)
+        if 0 < y.sum() < len(y):
+            assert row["auroc"] == pytest.approx(roc_auc_score(y, s), abs=1e-9)
+            assert row["auprc"] == pytest.approx(average_precision_score(y, s), abs=1e-9)
+        else:
+            assert row["auroc"] is None
+        checked += 1
+    assert checked == 2 * 2 * 2  # graphs x groups x (val, test)
+
+
+def test_the_threshold_is_the_best_f1_on_val(predictions):
+    path, edges, _ = predictions
+    report = causalcity.evaluate(TOY, path, history=HISTORY)
+    for row in [r for r in report["edges"] if r["split"] == "val"]:
+        rels = [(rel, meta) for rel, meta in scenarios("val") if rel.startswith(row["group"] + "/")]
+        y = np.concatenate([truth(m)[~np.eye(len(m["cars"]), dtype=bool)] for _, m in rels])
+        s = np.concatenate([edges[r][~np.eye(len(m["cars"]), dtype=bool)] for r, m in rels])
+        best = max(f1_score(y, s >= t) for t in np.unique(s))
+        assert row["threshold_from"] == "val"
+        assert f1_score(y, s > row["threshold"]) == pytest.approx(best)
+
+
+def test_trajectory_error_is_the_normalised_squared_error_per_step(predictions):
+    path, _, trajectories = predictions
+    report = causalcity.evaluate(TOY, path, history=HISTORY)
+    width, height = 1024, 640
+    assert report["image_size"] == [width, height]
+    rows = report["trajectories"]
+    assert len(rows) == 4
+    for row in rows:
+        rels = [(rel, meta) for rel, meta in scenarios(row["split"]) if rel.startswith(row["group"] + "/")]
+        per = np.array(
+            [
+                ((((trajectories[r] - pixels(r, m)[HISTORY : HISTORY + STEPS]) / [width, height]) ** 2).mean(axis=(1, 2)))
+                for r, m in rels
+            ]
+        )
+        assert [s["step"] for s in row["steps"]] == list(range(1, STEPS + 1))
+        assert [s["mse"] for s in row["steps"]] == pytest.approx(list(per.mean(axis=0)), rel=1e-9)
+
+
+def test_dtypes_and_memory_order_numpy_saves_are_read_the_same(predictions, tmp_path):
+    path, edges, _ = predictions
+    base = causalcity.evaluate(TOY, path, history=HISTORY)
+    # float32 of the transposed-back transpose (Fortran order on disk), and int scores.
+    other = {k: np.asfortranarray(v.astype(np.float32)) for k, v in edges.items()}
+    assert not next(iter(other.values())).flags["C_CONTIGUOUS"]
+    np.savez(tmp_path / "f32.npz", **other)
+    again = causalcity.evaluate(TOY, tmp_path / "f32.npz", history=HISTORY)
+    for a, b in zip(base["edges"], again["edges"]):
+        assert a["auroc"] == pytest.approx(b["auroc"], abs=1e-6)
+    # A transposed array really is transposed: scores of "j leads i" rank worse.
+    np.savez(tmp_path / "t.npz", **{k: v.T for k, v in edges.items()})
+    flipped = causalcity.evaluate(TOY, tmp_path / "t.npz", history=HISTORY)
+    assert all(f["auroc"] < b["auroc"] for f, b in zip(flipped["edges"], base["edges"]))
+
+
+def cli(*args):
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", "target/release/causalcity"))
+    return subprocess.run(command + [str(a) for a in args], capture_output=True, text=True)
+
+
+def test_the_command_line_prints_the_table_and_writes_the_csv(predictions, tmp_path):
+    path, _, _ = predictions
+    out = tmp_path / "results.csv"
+    run = cli("evaluate", TOY, path, "--history", HISTORY, "--csv", out)
+    assert run.returncode == 0, run.stderr
+    assert "cars08_edges80" in run.stdout and "F1" in run.stdout and "MSE@1" in run.stdout
+    lines = out.read_text().splitlines()
+    assert lines[0] == "group,cars,edge_proportion,split,graph,metric,step,value,se,scenarios"
+    f1_rows = [l for l in lines if ",f1," in l]
+    assert len(f1_rows) == 4
+    assert len([l for l in lines if ",trajectory_mse," in l]) == 4 * STEPS
+    as_json = json.loads(cli("evaluate", TOY, path, "--history", HISTORY, "--json").stdout)
+    assert len(as_json["edges"]) == 4
+
+
+def bad_files(predictions, tmp_path):
+    _, edges, trajectories = predictions
+    one = sorted(edges)[0]
+    n = edges[one].shape[0]
+    cases = {}
+
+    def save(name, arrays):
+        p = tmp_path / f"{name}.npz"
+        np.savez(p, **arrays)
+        cases[name] = p
+
+    save("shape", {**edges, one: np.zeros((n + 1, n))})
+    save("nan", {**edges, one: np.where(np.eye(n) == 0, np.nan, 0.0)})
+    # one of the two train scenarios of a group: a split scored in part
+    train, meta = next(scenarios("train"))
+    save("missing", {**edges, train: np.zeros((len(meta["cars"]),) * 2)})
+    save("unknown", {**edges, "cars99_edges50/test/00000": np.zeros((n, n))})
+    save("trajectory", {**edges, one + "/trajectory": np.zeros((STEPS, n, 3))})
+    save("horizon", {**edges, **{k + "/trajectory": np.zeros((40, edges[k].shape[0], 2)) for k in edges}})
+    save("empty", {})
+    p = tmp_path / "text.npz"
+    p.write_text("not a zip")
+    cases["text"] = p
+    return cases, one
+
+
+@pytest.mark.parametrize(
+    "case, says",
+    [
+        ("shape", "has shape"),
+        ("nan", "NaN"),
+        ("missing", "missing 1"),
+        ("unknown", "names no scenario"),
+        ("trajectory", "[steps,"),
+        ("horizon", "--history"),
+        ("empty", "holds no arrays"),
+        ("text", "not an .npz"),
+    ],
+)
+def test_bad_predictions_exit_2_naming_the_file_and_write_nothing(predictions, tmp_path, case, says):
+    cases, one = bad_files(predictions, tmp_path)
+    out = tmp_path / "results.csv"
+    run = cli("evaluate", TOY, cases[case], "--history", HISTORY, "--csv", out)
+    assert run.returncode == 2, (run.returncode, run.stderr)
+    assert str(cases[case]) in run.stderr and says in run.stderr, run.stderr
+    assert run.stdout == "" and not out.exists()
+    if case in ("shape", "nan"):
+        assert one in run.stderr
+    with pytest.raises(causalcity.InputError):
+        causalcity.evaluate(TOY, cases[case], history=HISTORY)
