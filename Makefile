@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env bench fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env paper bench fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -60,11 +60,20 @@ test-python: build python-env
 	CAUSALCITY_DATA=$(PYDATA) CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python -m pytest -q -p no:cacheprovider -W ignore::DeprecationWarning:pycocotools.mask tests/python python/tests
 
 ## A venv under target/ with the test clients' packages and the Python
-## package itself, installed as README says (pip install ./python).
+## package itself with its reference methods, installed as README says
+## (pip install "./python[methods]": PyTorch from PyPI, ~1 minute, ~5 GB).
 python-env:
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
-	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check ./python
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check "./python[methods]"
+
+## The paper's experiments on toy and city: datasets, every reference method
+## trained and evaluated, results CSV, figures and Markdown table under
+## results/. Quick by default (<= 30 min on 2 cores); the paper's full
+## 4000/500/500 setting: make paper PAPER_FLAGS="--device cuda".
+PAPER_FLAGS ?= --quick
+paper: python-env
+	$(VENV)/bin/python -m causalcity.paper $(PAPER_FLAGS)
 
 ## Throughput, memory and size figures (prints, asserts nothing); then the
 ## Python package's rates beside the command line's; then issue 23's ground

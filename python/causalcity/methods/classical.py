@@ -1,0 +1,227 @@
+"""Reference methods without a neural network: the constant-velocity floor,
+Granger causality, PCMCI, and the learned first-frame classifier (the leak
+row). Discovery methods see the observed frames only (the first
+:data:`~causalcity.methods.common.HISTORY`), as NRI's encoder does."""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress, auroc_of
+
+
+def observed(episodes: Episodes) -> int:
+    """Frames a method may look at: the history, or all when there are fewer."""
+    return min(HISTORY, episodes.frames)
+
+
+def velocities(pixels: np.ndarray) -> np.ndarray:
+    """``[..., frames - 1, cars, 2]`` px per frame from ``[..., frames, cars, 2]``."""
+    return np.diff(pixels, axis=-3)
+
+
+class ConstantVelocity(Method):
+    """Every car keeps the velocity of its last observed frame: the floor any
+    dynamics model must beat."""
+
+    name = "constant_velocity"
+    predicts = True
+
+    def __init__(self, steps: int = STEPS) -> None:
+        self.steps = steps
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        h = observed(episodes)
+        steps = min(self.steps, episodes.frames - h)
+        if steps < 1:
+            return Predicted()
+        last = episodes.pixels[:, h - 1]
+        v = last - episodes.pixels[:, h - 2]
+        k = np.arange(1, steps + 1, dtype=np.float64)[None, :, None, None]
+        return Predicted(trajectories=last[:, None] + k * v[:, None])
+
+
+def granger_scores(series: np.ndarray, lags: int) -> np.ndarray:
+    """``[cars, cars]``: for each ordered pair (i, j), the largest over the
+    series' components of -log10 p of the Granger F-test "i's past improves
+    the prediction of j beyond j's own past" (``lags`` lags and a constant,
+    statsmodels' ``ssr_ftest``). ``series``: ``[frames, cars, components]``.
+    A component that does not vary scores 0."""
+    from scipy.stats import f as f_dist
+
+    frames, cars, components = series.shape
+    rows = frames - lags
+    scores = np.zeros((cars, cars))
+    if rows - 2 * lags - 1 < 1:
+        return scores
+
+    def lagged(x: np.ndarray) -> np.ndarray:  # [rows, lags]: x(t - 1) .. x(t - lags)
+        return np.stack([x[lags - k : frames - k] for k in range(1, lags + 1)], axis=1)
+
+    ones = np.ones((rows, 1))
+    for c in range(components):
+        own = [lagged(series[:, j, c]) for j in range(cars)]
+        for j in range(cars):
+            y = series[lags:, j, c]
+            if np.ptp(y) < 1e-9:
+                continue
+            restricted = np.hstack([ones, own[j]])
+            rss_r = np.sum((y - restricted @ np.linalg.lstsq(restricted, y, rcond=None)[0]) ** 2)
+            for i in range(cars):
+                if i == j:
+                    continue
+                full = np.hstack([restricted, own[i]])
+                rss_u = np.sum((y - full @ np.linalg.lstsq(full, y, rcond=None)[0]) ** 2)
+                df = rows - 2 * lags - 1
+                if rss_u <= 1e-12 * max(rss_r, 1e-300):
+                    score = 300.0 if rss_r > 1e-12 else 0.0
+                else:
+                    stat = max((rss_r - rss_u) / lags / (rss_u / df), 0.0)
+                    score = float(-f_dist.logsf(stat, lags, df) / np.log(10.0))
+                scores[i, j] = max(scores[i, j], min(score, 300.0))
+    return scores
+
+
+class Granger(Method):
+    """Pairwise Granger causality on each car's velocity (px per frame, x and
+    y): scores -log10 p of the F-test, at the lag of ``lags`` with the best
+    AUROC on the train split."""
+
+    name = "granger"
+    discovers = True
+
+    def __init__(self, lags: Sequence[int] = (4, 8, 16), quiet: bool = False) -> None:
+        self.lag_grid = tuple(lags)
+        self.lags = self.lag_grid[-1]
+        self.quiet = quiet
+
+    def _scores(self, episodes: Episodes, lags: int, label: str) -> np.ndarray:
+        h = observed(episodes)
+        progress = Progress(f"granger {label}", len(episodes), self.quiet)
+        out = []
+        for s in range(len(episodes)):
+            out.append(granger_scores(velocities(episodes.pixels[s, :h]), lags))
+            progress.step()
+        return np.stack(out) if out else np.zeros((0, episodes.cars, episodes.cars))
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        if len(self.lag_grid) == 1:
+            return
+        usable = [lag for lag in self.lag_grid if observed(train) - 1 - 3 * lag >= 2] or [min(self.lag_grid)]
+        best = max(usable, key=lambda lag: auroc_of(self._scores(train, lag, f"{train.group} lag {lag}"), train.graph))
+        self.lags = best
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        return Predicted(edges=self._scores(episodes, self.lags, f"{episodes.group} {episodes.split}"))
+
+
+class Pcmci(Method):
+    """PCMCI (tigramite, partial correlations) over every car's velocity (x
+    and y, px per frame) with lags up to ``tau_max``: scores the largest
+    absolute partial correlation from any of car i's components at any lag
+    to any of car j's."""
+
+    name = "pcmci"
+    discovers = True
+
+    def __init__(self, tau_max: int = 8, pc_alpha: float = 0.05, workers: int = 0, quiet: bool = False) -> None:
+        self.tau_max, self.pc_alpha, self.quiet = tau_max, pc_alpha, quiet
+        self.workers = workers or (os.cpu_count() or 1)
+
+    def scores(self, series: np.ndarray) -> np.ndarray:
+        """``[cars, cars]`` from ``[frames, cars, components]``."""
+        try:
+            from tigramite import data_processing as pp
+            from tigramite.independence_tests.parcorr import ParCorr
+            from tigramite.pcmci import PCMCI
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError('pcmci needs tigramite: pip install "./python[methods]"') from e
+        frames, cars, components = series.shape
+        data = series.reshape(frames, cars * components)
+        # Components that never vary carry nothing and break partial correlations.
+        varies = np.ptp(data, axis=0) > 1e-9
+        scores = np.zeros((cars, cars))
+        if varies.sum() < 2:
+            return scores
+        keep = np.flatnonzero(varies)
+        noise = np.random.default_rng(0).normal(0.0, 1e-6, size=(frames, len(keep)))
+        frame = pp.DataFrame(data[:, keep] + noise)
+        pcmci = PCMCI(dataframe=frame, cond_ind_test=ParCorr(significance="analytic"), verbosity=0)
+        tau_max = max(1, min(self.tau_max, frames // 4))
+        results = pcmci.run_pcmci(tau_min=1, tau_max=tau_max, pc_alpha=self.pc_alpha)
+        strength = np.nan_to_num(np.abs(results["val_matrix"][:, :, 1:]).max(axis=2))  # [source, target]
+        car = keep // components
+        for a in range(len(keep)):
+            for b in range(len(keep)):
+                i, j = car[a], car[b]
+                if i != j:
+                    scores[i, j] = max(scores[i, j], strength[a, b])
+        return scores
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        h = observed(episodes)
+        progress = Progress(f"pcmci {episodes.group} {episodes.split}", len(episodes), self.quiet)
+        series = [velocities(episodes.pixels[s, :h]) for s in range(len(episodes))]
+        out = []
+        if self.workers > 1 and len(series) > 1:
+            # One scenario per process, results in scenario order: the same
+            # scores whatever the number of workers.
+            with ProcessPoolExecutor(self.workers) as pool:
+                for scores in pool.map(self.scores, series):
+                    out.append(scores)
+                    progress.step()
+        else:
+            for one in series:
+                out.append(self.scores(one))
+                progress.step()
+        return Predicted(edges=np.stack(out) if out else np.zeros((0, episodes.cars, episodes.cars)))
+
+
+class Frame0(Method):
+    """The learned first-frame classifier of :mod:`causalcity.reference`
+    (gradient boosting on where each car stands relative to each other at
+    frame 0): how much of a score the first frame alone explains."""
+
+    name = "frame0"
+    discovers = True
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = seed
+        self.model = None
+
+    @staticmethod
+    def _pairs(episodes: Episodes):
+        from ..reference import _frame_features
+
+        n = episodes.cars
+        off = ~np.eye(n, dtype=bool)
+        feats = [_frame_features(episodes.metres[s, 0])[off] for s in range(len(episodes))]
+        labels = [episodes.graph[s][off] for s in range(len(episodes))]
+        return np.concatenate(feats), np.concatenate(labels).astype(bool), off
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        try:
+            from sklearn.ensemble import HistGradientBoostingClassifier
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError('frame0 needs scikit-learn: pip install "./python[methods]"') from e
+        x, y, _ = self._pairs(train)
+        self.model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=self.seed)
+        if y.all() or not y.any():
+            self.model = float(y.mean())
+        else:
+            self.model.fit(x, y)
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        x, _, off = self._pairs(episodes)
+        n = episodes.cars
+        if isinstance(self.model, float):
+            p = np.full(len(x), self.model)
+        else:
+            p = self.model.predict_proba(x)[:, 1]
+        edges = np.zeros((len(episodes), n, n))
+        edges[:, off] = p.reshape(len(episodes), -1)
+        return Predicted(edges=edges)

@@ -1,0 +1,229 @@
+"""What every reference method shares: a dataset's scenarios of one group and
+split as arrays, the method interface, progress lines, and the predictions
+file ``causalcity evaluate`` scores."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+HISTORY = 100
+"""Frames a method observes before the ones it predicts (the paper's 100)."""
+STEPS = 20
+"""Frames predicted after the history (the paper's 20)."""
+SPLITS = ("train", "val", "test")
+
+
+@dataclass
+class Episodes:
+    """The scenarios of one group and split, as arrays (car axes by car id)."""
+
+    dataset: Path
+    group: str
+    split: str
+    folders: List[str]
+    """Each scenario's folder relative to the dataset (the predictions' names)."""
+    pixels: np.ndarray
+    """``[scenarios, frames, cars, 2]`` float64: bird's-eye px, py."""
+    metres: np.ndarray
+    """``[scenarios, frames, cars, 4]`` float64: x, y (metres), yaw (radians), speed (m/s)."""
+    graph: np.ndarray
+    """``[scenarios, cars, cars]`` uint8: designed edges, ``[i, j] = 1`` when car i leads car j."""
+    image_size: Tuple[int, int]
+    frame_interval: float
+
+    def __len__(self) -> int:
+        return len(self.folders)
+
+    @property
+    def cars(self) -> int:
+        return int(self.pixels.shape[2])
+
+    @property
+    def frames(self) -> int:
+        return int(self.pixels.shape[1])
+
+
+@dataclass
+class Predicted:
+    """A method's output on one :class:`Episodes`: either may be None."""
+
+    edges: Optional[np.ndarray] = None
+    """``[scenarios, cars, cars]``: ``[i, j]`` scores "car i leads car j"."""
+    trajectories: Optional[np.ndarray] = None
+    """``[scenarios, steps, cars, 2]``: bird's-eye px, py of frames history .. history + steps."""
+
+
+class Method:
+    """A reference method: :meth:`fit` on a group's train (and val) split,
+    then :meth:`predict` any split of that group."""
+
+    name = "method"
+    discovers = False
+    predicts = False
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        """Learns from ``train`` (``val`` for early choices); the default learns nothing."""
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        raise NotImplementedError
+
+
+def _manifest(dataset: Path) -> dict:
+    path = dataset / "manifest.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"no manifest.json in {dataset}: not a dataset gen wrote")
+    manifest = json.loads(path.read_text())
+    if not manifest.get("complete", False):
+        raise ValueError(f"{dataset} is not complete: finish it with its gen command first")
+    return manifest
+
+
+def groups_of(dataset: "str | Path") -> List[str]:
+    """The dataset's group names, in its spec's order."""
+    return [g["name"] for g in _manifest(Path(dataset))["groups"]]
+
+
+def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
+    """Reads every scenario of ``group`` and ``split`` (pixels.npy, poses.csv, scenario.json)."""
+    root = Path(dataset)
+    manifest = _manifest(root)
+    spec = manifest["spec"]
+    if group not in groups_of(root):
+        raise ValueError(f"group {group!r} is not in {root}: its groups are {', '.join(groups_of(root))}")
+    folders = sorted(p for p in (root / group / split).glob("*") if (p / "scenario.json").is_file())
+    pixels, metres, graphs = [], [], []
+    interval = float(spec.get("frame_interval") or 0.1)
+    for folder in folders:
+        meta = json.loads((folder / "scenario.json").read_text())
+        n, frames = len(meta["cars"]), meta["frames"]
+        interval = float(meta["frame_interval"])
+        pixels.append(np.load(folder / "pixels.npy").astype(np.float64))
+        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+        metres.append(table[:, [3, 4, 8, 11]].reshape(frames, n, 4))
+        g = np.zeros((n, n), dtype=np.uint8)
+        for a, b in meta["edges"]:
+            g[a, b] = 1
+        graphs.append(g)
+    image = spec.get("image", {"width": 1024, "height": 640})
+    shape_px, shape_m = (0, spec["frames"], 0, 2), (0, spec["frames"], 0, 4)
+    return Episodes(
+        dataset=root,
+        group=group,
+        split=split,
+        folders=[str(f.relative_to(root)).replace(os.sep, "/") for f in folders],
+        pixels=np.stack(pixels) if pixels else np.zeros(shape_px),
+        metres=np.stack(metres) if metres else np.zeros(shape_m),
+        graph=np.stack(graphs) if graphs else np.zeros((0, 0, 0), dtype=np.uint8),
+        image_size=(int(image["width"]), int(image["height"])),
+        frame_interval=interval,
+    )
+
+
+def auroc_of(scores: np.ndarray, graph: np.ndarray) -> float:
+    """AUROC of ``[scenarios, cars, cars]`` edge scores against the graph
+    over every off-diagonal pair (ties count half); 0.5 without both kinds."""
+    n = graph.shape[-1]
+    off = ~np.eye(n, dtype=bool)
+    s, y = scores[:, off].ravel(), graph[:, off].ravel().astype(bool)
+    positives, negatives = int(y.sum()), int((~y).sum())
+    if positives == 0 or negatives == 0:
+        return 0.5
+    order = np.argsort(s, kind="stable")
+    ranks = np.empty(len(s))
+    sorted_s = s[order]
+    # average ranks over ties
+    starts = np.r_[0, np.flatnonzero(sorted_s[1:] != sorted_s[:-1]) + 1]
+    ends = np.r_[starts[1:], len(s)]
+    for a, b in zip(starts, ends):
+        ranks[order[a:b]] = (a + b + 1) / 2.0
+    return float((ranks[y].sum() - positives * (positives + 1) / 2.0) / (positives * negatives))
+
+
+class Progress:
+    """A progress line on stderr: redrawn in place on a terminal, every tenth
+    of the work otherwise (logs), silent with ``quiet``."""
+
+    def __init__(self, label: str, total: int, quiet: bool = False) -> None:
+        self.label, self.total, self.done, self.quiet = label, max(total, 1), 0, quiet
+        self.start = time.monotonic()
+        self.tty = sys.stderr.isatty()
+        self._last_tenth = -1
+
+    def step(self, n: int = 1, note: str = "") -> None:
+        self.done += n
+        if self.quiet:
+            return
+        tenth = self.done * 10 // self.total
+        elapsed = time.monotonic() - self.start
+        eta = elapsed / self.done * (self.total - self.done) if self.done else 0.0
+        width = 24
+        bar = "#" * (self.done * width // self.total) + "." * (width - self.done * width // self.total)
+        line = f"{self.label} [{bar}] {self.done}/{self.total} {elapsed:.0f}s eta {eta:.0f}s {note}"
+        if self.tty:
+            sys.stderr.write("\r" + line[:150].ljust(150))
+            if self.done >= self.total:
+                sys.stderr.write("\n")
+            sys.stderr.flush()
+        elif tenth != self._last_tenth or self.done >= self.total:
+            self._last_tenth = tenth
+            sys.stderr.write(line + "\n")
+            sys.stderr.flush()
+
+
+def write_predictions(path: "str | Path", edges: Dict[str, np.ndarray], trajectories: Dict[str, np.ndarray]) -> None:
+    """Saves the predictions file (see :func:`causalcity.save_predictions`),
+    its arrays in sorted order so that the same predictions give the same
+    bytes."""
+    from .. import save_predictions
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    save_predictions(
+        path,
+        edges={k: edges[k] for k in sorted(edges)},
+        trajectories={k: trajectories[k] for k in sorted(trajectories)},
+    )
+
+
+def run_method(
+    make_method,
+    dataset: "str | Path",
+    out: "str | Path",
+    groups: Optional[Sequence[str]] = None,
+    splits: Iterable[str] = ("val", "test"),
+    quiet: bool = False,
+) -> Path:
+    """Fits a fresh method (``make_method()``) per group of ``dataset`` on its
+    train split and writes its predictions for ``splits`` to ``out``."""
+    root = Path(dataset)
+    names = groups_of(root) if groups is None else list(groups)
+    edges: Dict[str, np.ndarray] = {}
+    trajectories: Dict[str, np.ndarray] = {}
+    for group in names:
+        method = make_method()
+        train = load_split(root, group, "train")
+        val = load_split(root, group, "val")
+        if len(train) == 0:
+            raise ValueError(f"{root / group}: no train scenarios to fit {method.name} on")
+        if not quiet:
+            print(f"{method.name}: {group} (train {len(train)}, val {len(val)})", file=sys.stderr)
+        method.fit(train, val if len(val) else None)
+        for split in splits:
+            episodes = val if split == "val" else load_split(root, group, split)
+            if len(episodes) == 0:
+                continue
+            predicted = method.predict(episodes)
+            for k, folder in enumerate(episodes.folders):
+                if predicted.edges is not None:
+                    edges[folder] = predicted.edges[k]
+                if predicted.trajectories is not None:
+                    trajectories[folder] = predicted.trajectories[k]
+    write_predictions(out, edges, trajectories)
+    return Path(out)

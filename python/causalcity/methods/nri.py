@@ -1,0 +1,308 @@
+"""Neural relational inference (Kipf et al., 2018), written from its paper's
+description in PyTorch, and the same dynamics model without discovery.
+
+- Encoder: an MLP over each car's observed frames (x, y, vx, vy of the first
+  :data:`~causalcity.methods.common.HISTORY` frames, flattened), passed
+  node -> edge -> node -> edge (NRI's MLP encoder), giving each ordered pair
+  (i, j) a distribution over two edge types: "none" and "i acts on j".
+- Decoder: NRI's recurrent decoder. Each car has a GRU state; at every frame
+  the pairs of the "acts on" type send messages (an MLP of both states) to
+  the receiving car, which updates its state from the summed messages and
+  its current observation and predicts the change of its state. Training
+  feeds it the truth every ``teacher_every`` frames and its own predictions
+  in between; at test it sees the history and predicts the next
+  :data:`~causalcity.methods.common.STEPS` frames from its own outputs.
+- Loss: the Gaussian negative log-likelihood of the predicted states
+  (variance 5e-5, NRI's) plus the KL divergence from a sparse prior over
+  edge types; edge samples are Gumbel-softmax (temperature 0.5).
+
+An edge score is the encoder's probability of "i acts on j": nothing about
+the true graph is used to train. ``discover=False`` is the prediction-only
+model (the role NS-DR plays in the paper): the same decoder on the complete
+graph, every pair one edge type, no encoder.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Optional
+
+import numpy as np
+
+from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress
+
+try:
+    import torch
+    from torch import nn
+    from torch.nn import functional as F
+except ImportError as e:  # pragma: no cover - depends on the environment
+    raise ImportError('the NRI reference methods need PyTorch: pip install "./python[methods]"') from e
+
+
+def pick_device(device: str) -> torch.device:
+    """``auto``: CUDA when available, else the CPU."""
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device {device!r}: no CUDA device is available (use cpu)")
+    return torch.device(device)
+
+
+class _Mlp(nn.Module):
+    """NRI's encoder block: two ELU layers, then batch normalisation over
+    every car or pair of the batch."""
+
+    def __init__(self, n_in: int, hidden: int, n_out: int) -> None:
+        super().__init__()
+        self.layers = nn.Sequential(nn.Linear(n_in, hidden), nn.ELU(), nn.Linear(hidden, n_out), nn.ELU())
+        self.norm = nn.BatchNorm1d(n_out)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.layers(x)
+        return self.norm(y.reshape(-1, y.shape[-1])).reshape(y.shape)
+
+
+def _mlp(n_in: int, hidden: int, n_out: int) -> nn.Module:
+    return _Mlp(n_in, hidden, n_out)
+
+
+class Encoder(nn.Module):
+    """NRI's MLP encoder: [B, N, T * D] -> edge-type logits [B, E, K]."""
+
+    def __init__(self, n_in: int, hidden: int, types: int, send: torch.Tensor, recv: torch.Tensor) -> None:
+        super().__init__()
+        self.send, self.recv = send, recv
+        self.mlp1 = _mlp(n_in, hidden, hidden)
+        self.mlp2 = _mlp(2 * hidden, hidden, hidden)
+        self.mlp3 = _mlp(hidden, hidden, hidden)
+        self.mlp4 = _mlp(3 * hidden, hidden, hidden)
+        self.out = nn.Linear(hidden, types)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        cars = x.shape[1]
+        h = self.mlp1(x)
+        e = self.mlp2(torch.cat([h[:, self.send], h[:, self.recv]], dim=-1))
+        skip = e
+        node = torch.zeros(x.shape[0], cars, e.shape[-1], device=x.device).index_add_(1, self.recv, e) / cars
+        h = self.mlp3(node)
+        e = self.mlp4(torch.cat([h[:, self.send], h[:, self.recv], skip], dim=-1))
+        return self.out(e)
+
+
+class RnnDecoder(nn.Module):
+    """NRI's recurrent decoder: one GRU state per car, messages per edge type."""
+
+    def __init__(self, n_in: int, hidden: int, types: int, skip_first: bool, send, recv) -> None:
+        super().__init__()
+        self.send, self.recv, self.skip_first, self.hidden = send, recv, skip_first, hidden
+        self.msg1 = nn.ModuleList([nn.Linear(2 * hidden, hidden) for _ in range(types)])
+        self.msg2 = nn.ModuleList([nn.Linear(hidden, hidden) for _ in range(types)])
+        self.hidden_r = nn.Linear(hidden, hidden, bias=False)
+        self.hidden_i = nn.Linear(hidden, hidden, bias=False)
+        self.hidden_h = nn.Linear(hidden, hidden, bias=False)
+        self.input_r = nn.Linear(n_in, hidden)
+        self.input_i = nn.Linear(n_in, hidden)
+        self.input_n = nn.Linear(n_in, hidden)
+        self.out1 = nn.Linear(hidden, hidden)
+        self.out2 = nn.Linear(hidden, hidden)
+        self.out3 = nn.Linear(hidden, 2)
+        # standardised velocity -> standardised position change (set by the owner)
+        self.register_buffer("vel_to_pos", torch.ones(2))
+        self.register_buffer("vel_offset", torch.zeros(2))
+
+    def step(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor):
+        """One frame: x [B, N, D], h [B, N, H], edges [B, E, K] -> (next x, next h)."""
+        pre = torch.cat([h[:, self.send], h[:, self.recv]], dim=-1)
+        msg = torch.zeros(pre.shape[0], pre.shape[1], self.hidden, device=x.device)
+        for k in range(1 if self.skip_first else 0, len(self.msg1)):
+            m = torch.tanh(self.msg2[k](torch.tanh(self.msg1[k](pre))))
+            msg = msg + m * edges[:, :, k : k + 1]
+        agg = torch.zeros_like(h).index_add_(1, self.recv, msg) / len(self.msg1)
+        r = torch.sigmoid(self.input_r(x) + self.hidden_r(agg))
+        i = torch.sigmoid(self.input_i(x) + self.hidden_i(agg))
+        n = torch.tanh(self.input_n(x) + r * self.hidden_h(agg))
+        h = (1 - i) * n + i * h
+        # The network predicts the change of velocity; the position moves by
+        # the new velocity, so an untrained decoder drives at constant velocity.
+        velocity = x[..., 2:] + self.out3(F.relu(self.out2(F.relu(self.out1(h)))))
+        position = x[..., :2] + velocity * self.vel_to_pos + self.vel_offset
+        return torch.cat([position, velocity], dim=-1), h
+
+    def forward(self, states: torch.Tensor, edges: torch.Tensor, truth_until: int, teacher_every: int):
+        """Predicts states[:, 1:] from states [B, T, N, D]: the truth is fed
+        at frames before ``truth_until`` and every ``teacher_every`` frames
+        (0: never) after it, its own prediction otherwise."""
+        batch, frames, cars, _ = states.shape
+        h = torch.zeros(batch, cars, self.hidden, device=states.device)
+        x = states[:, 0]
+        out = []
+        for t in range(frames - 1):
+            if t < truth_until or (teacher_every and t % teacher_every == 0):
+                x = states[:, t]
+            x, h = self.step(x, h, edges)
+            out.append(x)
+        return torch.stack(out, dim=1)
+
+
+class Nri(Method):
+    """NRI (``discover=True``) or its decoder on the complete graph
+    (``discover=False``); one model per group, trained on train, the epoch
+    with the best val loss kept."""
+
+    def __init__(
+        self,
+        discover: bool = True,
+        epochs: int = 30,
+        hidden: int = 64,
+        batch_size: int = 16,
+        lr: float = 1e-3,
+        prior: float = 0.1,
+        teacher_every: int = 10,
+        history: int = HISTORY,
+        steps: int = STEPS,
+        seed: int = 0,
+        device: str = "auto",
+        quiet: bool = False,
+    ) -> None:
+        self.discover = discover
+        self.name = "nri" if discover else "interaction"
+        self.discovers = discover
+        self.predicts = True
+        self.epochs, self.hidden, self.batch_size, self.lr = epochs, hidden, batch_size, lr
+        self.prior, self.teacher_every, self.seed = prior, teacher_every, seed
+        self.history, self.steps = history, steps
+        self.device = pick_device(device)
+        self.quiet = quiet
+        self.losses: list = []
+        """(epoch, train loss, val loss) per epoch."""
+
+    # -- data ---------------------------------------------------------------
+    def _states(self, episodes: Episodes) -> np.ndarray:
+        """[S, T, N, 4]: positions normalised by the image, velocity in the same units, standardised."""
+        w, h = episodes.image_size
+        pos = episodes.pixels / np.array([w, h], dtype=np.float64)
+        vel = np.concatenate([np.zeros_like(pos[:, :1]), np.diff(pos, axis=1)], axis=1)
+        return np.concatenate([pos, vel], axis=-1)
+
+    def _frames(self, episodes: Episodes):
+        hist = min(self.history, episodes.frames - 1)
+        steps = min(self.steps, episodes.frames - hist)
+        return hist, steps
+
+    def _tensor(self, states: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor((states - self.mean) / self.std, dtype=torch.float32, device=self.device)
+
+    # -- model ---------------------------------------------------------------
+    def _build(self, cars: int, hist: int) -> None:
+        pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
+        send = torch.tensor([p[0] for p in pairs], device=self.device)
+        recv = torch.tensor([p[1] for p in pairs], device=self.device)
+        self.cars, self.pairs = cars, pairs
+        types = 2 if self.discover else 1
+        self.encoder = Encoder(hist * 4, self.hidden, 2, send, recv).to(self.device) if self.discover else None
+        self.decoder = RnnDecoder(4, self.hidden, types, self.discover, send, recv)
+        # position(t + 1) = position(t) + velocity(t + 1), in standardised units
+        self.decoder.vel_to_pos = torch.as_tensor(self.std[2:] / self.std[:2], dtype=torch.float32)
+        self.decoder.vel_offset = torch.as_tensor(self.mean[2:] / self.std[:2], dtype=torch.float32)
+        self.decoder = self.decoder.to(self.device)
+        self.log_prior = torch.log(torch.tensor([1 - self.prior, self.prior], device=self.device))
+
+    def _edges(self, x: torch.Tensor, hist: int, sample: bool):
+        """(edge weights [B, E, K], edge probabilities or None, logits or None)."""
+        batch = x.shape[0]
+        if not self.discover:
+            return torch.ones(batch, len(self.pairs), 1, device=self.device), None, None
+        inp = x[:, :hist].permute(0, 2, 1, 3).reshape(batch, self.cars, -1)
+        logits = self.encoder(inp)
+        prob = F.softmax(logits, dim=-1)
+        edges = F.gumbel_softmax(logits, tau=0.5, hard=False) if sample else prob
+        return edges, prob, logits
+
+    def _loss(self, x: torch.Tensor, hist: int, steps: int, sample: bool) -> torch.Tensor:
+        edges, prob, _ = self._edges(x, hist, sample)
+        seq = x[:, : hist + steps]
+        pred = self.decoder(seq, edges, truth_until=0, teacher_every=self.teacher_every)
+        nll = ((pred - seq[:, 1:]) ** 2).sum() / (2 * 5e-5) / (x.shape[0] * self.cars * (seq.shape[1] - 1))
+        if prob is None:
+            return nll
+        kl = (prob * (torch.log(prob + 1e-16) - self.log_prior)).sum() / (x.shape[0] * self.cars)
+        return nll + kl
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        torch.manual_seed(self.seed)
+        gen = np.random.default_rng(self.seed)
+        hist, steps = self._frames(train)
+        states = self._states(train)
+        flat = states[:, : hist + steps].reshape(-1, 4)
+        self.mean = flat.mean(axis=0)
+        self.std = np.maximum(flat.std(axis=0), 1e-9)
+        self._build(train.cars, hist)
+        params = list(self.decoder.parameters()) + (list(self.encoder.parameters()) if self.encoder else [])
+        opt = torch.optim.Adam(params, lr=self.lr)
+        x_train = self._tensor(states)
+        x_val = self._tensor(self._states(val)) if val is not None and len(val) else None
+        best, best_loss = None, float("inf")
+        progress = Progress(f"{self.name} {train.group}", self.epochs, self.quiet)
+        for epoch in range(self.epochs):
+            self._train_mode(True)
+            order = gen.permutation(len(train))
+            total = 0.0
+            for start in range(0, len(order), self.batch_size):
+                batch = x_train[torch.as_tensor(order[start : start + self.batch_size])]
+                opt.zero_grad()
+                loss = self._loss(batch, hist, steps, sample=True)
+                loss.backward()
+                opt.step()
+                total += float(loss.detach()) * len(batch)
+            train_loss = total / len(order)
+            val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
+            self.losses.append((epoch, train_loss, val_loss))
+            if val_loss < best_loss:
+                best_loss = val_loss
+                best = copy.deepcopy((self.encoder.state_dict() if self.encoder else None, self.decoder.state_dict()))
+            progress.step(note=f"train {train_loss:.1f} val {val_loss:.1f}")
+        if best is not None:
+            if self.encoder:
+                self.encoder.load_state_dict(best[0])
+            self.decoder.load_state_dict(best[1])
+        self._train_mode(False)
+
+    def _train_mode(self, on: bool) -> None:
+        for m in (self.encoder, self.decoder):
+            if m is not None:
+                m.train(on)
+
+    @torch.no_grad()
+    def _evaluate_loss(self, x: torch.Tensor, hist: int, steps: int) -> float:
+        self._train_mode(False)
+        total = 0.0
+        for start in range(0, len(x), self.batch_size):
+            batch = x[start : start + self.batch_size]
+            total += float(self._loss(batch, hist, steps, sample=False)) * len(batch)
+        return total / max(len(x), 1)
+
+    @torch.no_grad()
+    def predict(self, episodes: Episodes) -> Predicted:
+        self._train_mode(False)
+        hist, steps = self._frames(episodes)
+        x = self._tensor(self._states(episodes))
+        w, h = episodes.image_size
+        edges_out, traj_out = [], []
+        for start in range(0, len(x), self.batch_size):
+            batch = x[start : start + self.batch_size]
+            edges, prob, _ = self._edges(batch, hist, sample=False)
+            if prob is not None:
+                scores = np.zeros((len(batch), self.cars, self.cars))
+                p = prob[:, :, 1].cpu().double().numpy()
+                for e, (i, j) in enumerate(self.pairs):
+                    scores[:, i, j] = p[:, e]
+                edges_out.append(scores)
+            if steps >= 1:
+                pred = self.decoder(batch[:, : hist + steps], edges, truth_until=hist, teacher_every=0)
+                future = pred[:, hist - 1 : hist - 1 + steps].cpu().double().numpy()
+                future = future * self.std + self.mean
+                traj_out.append(future[..., :2] * np.array([w, h]))
+        return Predicted(
+            edges=np.concatenate(edges_out) if edges_out else None,
+            trajectories=np.concatenate(traj_out) if traj_out else None,
+        )

@@ -1,0 +1,350 @@
+"""The paper's experiments on our data, one command: generates the toy and
+city datasets, trains and evaluates every reference method on both, and
+writes a results CSV, figures in the style of the paper's figures 4 and 5,
+and a Markdown table::
+
+    python -m causalcity.paper --quick            # <= 30 min on 2 CPU cores
+    python -m causalcity.paper --device cuda      # the paper's 4000/500/500
+
+Both worlds use the paper's groups (4, 8 and 12 cars with 50 % of cars
+linked; 20, 50 and 80 % at 8 cars) from ``configs/toy.json`` and
+``configs/city.json``; ``--quick`` draws fewer scenarios per split and
+trains for fewer epochs. Everything is seeded: the same command gives the
+same numbers on the same machine (CPU). Needs the ``methods`` extra:
+``pip install "./python[methods]"`` (``make paper`` installs it).
+
+Written under ``--out`` (default ``results/paper`` or ``results/paper-quick``):
+``results.csv`` (one value per row: world, method, group, split, graph,
+metric, step, value, se), ``f1.png`` (figure 5: F1 by number of cars and by
+share of linked cars), ``trajectory.png`` (figure 4: error 1..20 steps
+ahead), ``results.md`` (the tables), and the datasets and predictions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+from . import InputError, Spec, evaluate, generate
+from .methods import make
+from .methods.common import run_method
+
+WORLDS = ("toy", "city")
+METHOD_ORDER = ("constant_velocity", "interaction", "nri", "granger", "pcmci", "frame0")
+LABELS = {
+    "constant_velocity": "constant velocity",
+    "interaction": "interaction net (no discovery; NS-DR's role)",
+    "nri": "NRI",
+    "granger": "Granger",
+    "pcmci": "PCMCI",
+    "frame0": "frame-0 classifier (leak)",
+}
+# The paper's groups: number of cars at 50 % linked, share linked at 8 cars.
+BY_CARS = ("cars04_edges50", "cars08_edges50", "cars12_edges50")
+BY_SHARE = ("cars08_edges20", "cars08_edges50", "cars08_edges80")
+TRAJECTORY_GROUP = "cars08_edges50"
+
+
+@dataclass
+class Setting:
+    """Sizes of one run of the experiments."""
+
+    name: str
+    splits: Dict[str, int]
+    epochs: int
+    methods: Sequence[str] = METHOD_ORDER
+    extra: Dict[str, dict] = field(default_factory=dict)
+
+
+QUICK = Setting(name="quick", splits={"train": 80, "val": 30, "test": 30}, epochs=25)
+FULL = Setting(name="full", splits={"train": 4000, "val": 500, "test": 500}, epochs=100)
+
+
+def _spec(path: Path, world: str, setting: Setting, splits: Optional[Dict[str, int]]) -> Spec:
+    if not path.is_file():
+        raise InputError(f"{path}: no such spec file (run from the repository root, or give --{world}-spec)")
+    raw = json.loads(path.read_text())
+    raw["name"] = f"paper-{setting.name}-{world}"
+    raw["splits"] = dict(splits or setting.splits)
+    return Spec.from_dict(raw)
+
+
+def _method_options(name: str, setting: Setting, device: str, seed: int, quiet: bool) -> dict:
+    if name in ("nri", "interaction"):
+        return dict(epochs=setting.epochs, device=device, seed=seed, quiet=quiet, batch_size=8)
+    if name in ("granger", "pcmci"):
+        return dict(quiet=quiet)
+    if name == "frame0":
+        return dict(seed=seed)
+    return {}
+
+
+def run(
+    out: Path,
+    setting: Setting,
+    worlds: Sequence[str] = WORLDS,
+    methods: Optional[Sequence[str]] = None,
+    device: str = "auto",
+    seed: int = 0,
+    specs: Optional[Dict[str, Path]] = None,
+    splits: Optional[Dict[str, int]] = None,
+    quiet: bool = False,
+) -> List[dict]:
+    """Runs the experiments and writes everything under ``out``; returns the result rows."""
+    out.mkdir(parents=True, exist_ok=True)
+    methods = list(methods or setting.methods)
+    specs = specs or {w: Path("configs") / f"{w}.json" for w in WORLDS}
+    rows: List[dict] = []
+    timings: Dict[str, float] = {}
+    for world in worlds:
+        spec = _spec(Path(specs[world]), world, setting, splits)
+        data = out / "data" / world
+        start = time.monotonic()
+        if not quiet:
+            print(f"[paper] generating {world}: {spec.splits} per group into {data}", file=sys.stderr)
+        generate(spec, data, images=False, progress=not quiet)
+        timings[f"{world}/generate"] = time.monotonic() - start
+        graphs = ["designed", "causal"]
+        for name in methods:
+            start = time.monotonic()
+            predictions = out / "predictions" / world / f"{name}.npz"
+            options = _method_options(name, setting, device, seed, quiet)
+            if not quiet:
+                print(f"[paper] {world}: {LABELS[name]}", file=sys.stderr)
+            run_method(lambda: make(name, **options), data, predictions, quiet=quiet)
+            report = evaluate(data, predictions, graph=graphs, csv=None)
+            rows += _rows(world, name, report)
+            timings[f"{world}/{name}"] = time.monotonic() - start
+    _write_csv(out / "results.csv", rows)
+    (out / "timings.json").write_text(json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
+    _figures(out, rows, worlds)
+    (out / "results.md").write_text(markdown(rows, setting, worlds))
+    return rows
+
+
+def _rows(world: str, method: str, report: dict) -> List[dict]:
+    rows = []
+    for e in report["edges"]:
+        for metric, se in (("f1", "f1_se"), ("auroc", None), ("auprc", None), ("shd", "shd_se")):
+            rows.append(
+                dict(
+                    world=world,
+                    method=method,
+                    group=e["group"],
+                    split=e["split"],
+                    graph=e["graph"],
+                    metric=metric,
+                    step="",
+                    value=e[metric],
+                    se=e[se] if se else None,
+                    scenarios=e["scenarios"],
+                )
+            )
+    for t in report["trajectories"]:
+        for s in t["steps"]:
+            rows.append(
+                dict(
+                    world=world,
+                    method=method,
+                    group=t["group"],
+                    split=t["split"],
+                    graph="",
+                    metric="trajectory_mse",
+                    step=s["step"],
+                    value=s["mse"],
+                    se=s["se"],
+                    scenarios=s["scenarios"],
+                )
+            )
+    return rows
+
+
+COLUMNS = ("world", "method", "group", "split", "graph", "metric", "step", "value", "se", "scenarios")
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def _write_csv(path: Path, rows: List[dict]) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COLUMNS)
+    for r in rows:
+        w.writerow([_fmt(r[c]) for c in COLUMNS])
+    path.write_text(buf.getvalue())
+
+
+def read_results(path: "str | Path") -> List[dict]:
+    """Rows of a results.csv, numbers parsed."""
+    rows = []
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            r["value"] = float(r["value"]) if r["value"] else None
+            r["se"] = float(r["se"]) if r["se"] else None
+            r["step"] = int(r["step"]) if r["step"] else None
+            r["scenarios"] = int(r["scenarios"])
+            rows.append(r)
+    return rows
+
+
+def _get(rows, **match) -> Optional[dict]:
+    for r in rows:
+        if all(r[k] == v for k, v in match.items()):
+            return r
+    return None
+
+
+def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colours = {"nri": "#1f77b4", "granger": "#ff7f0e", "pcmci": "#2ca02c", "frame0": "#7f7f7f",
+               "constant_velocity": "#7f7f7f", "interaction": "#d62728"}
+    discovering = [m for m in METHOD_ORDER if any(r["method"] == m and r["metric"] == "f1" for r in rows)]
+    fig, axes = plt.subplots(len(worlds), 2, figsize=(11, 3.6 * len(worlds)), squeeze=False)
+    for wi, world in enumerate(worlds):
+        for ci, (groups, xlabel, ticks) in enumerate(
+            [(BY_CARS, "cars (50 % linked)", ["4", "8", "12"]), (BY_SHARE, "share of cars linked (8 cars)", ["20 %", "50 %", "80 %"])]
+        ):
+            ax = axes[wi][ci]
+            width = 0.8 / max(len(discovering), 1)
+            for mi, method in enumerate(discovering):
+                values, errors = [], []
+                for g in groups:
+                    r = _get(rows, world=world, method=method, group=g, split="test", graph="designed", metric="f1")
+                    values.append(r["value"] if r else 0.0)
+                    errors.append((r["se"] or 0.0) if r else 0.0)
+                xs = [k + (mi - (len(discovering) - 1) / 2) * width for k in range(len(groups))]
+                hatch = "//" if method == "frame0" else None
+                ax.bar(xs, values, width, yerr=errors, capsize=3, label=LABELS[method], color=colours[method],
+                       hatch=hatch, alpha=0.9)
+            ax.set_xticks(range(len(groups)), ticks)
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel("F1 (test)")
+            ax.set_ylim(0, 1.05)
+            ax.set_title(f"{world}: edge discovery F1 by {'number of cars' if ci == 0 else 'share linked'}")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.savefig(out / "f1.png", dpi=110)
+    plt.close(fig)
+
+    predicting = [m for m in METHOD_ORDER if any(r["method"] == m and r["metric"] == "trajectory_mse" for r in rows)]
+    fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 3.8), squeeze=False)
+    for wi, world in enumerate(worlds):
+        ax = axes[0][wi]
+        for method in predicting:
+            pts = sorted(
+                (r["step"], r["value"], r["se"] or 0.0)
+                for r in rows
+                if r["world"] == world and r["method"] == method and r["group"] == TRAJECTORY_GROUP
+                and r["split"] == "test" and r["metric"] == "trajectory_mse"
+            )
+            if not pts:
+                continue
+            steps, values, ses = zip(*pts)
+            style = "--" if method == "constant_velocity" else "-"
+            ax.plot(steps, values, style, label=LABELS[method], color=colours[method])
+            ax.fill_between(steps, [v - s for v, s in zip(values, ses)], [v + s for v, s in zip(values, ses)],
+                            color=colours[method], alpha=0.2)
+        ax.set_yscale("log")
+        ax.set_xlabel("steps ahead (frames)")
+        ax.set_ylabel("MSE, positions normalised by image size")
+        ax.set_title(f"{world}: trajectory prediction, 8 cars, 50 % linked (test)")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "trajectory.png", dpi=110)
+    plt.close(fig)
+
+
+def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
+    """The results as Markdown tables: F1 (test, designed graph) per group and
+    method, AUROC, and trajectory error at 1, 10 and 20 steps."""
+    groups = list(dict.fromkeys(BY_CARS + BY_SHARE))
+    lines = [f"Setting: {setting.name} ({setting.splits['train']}/{setting.splits['val']}/{setting.splits['test']} "
+             f"scenarios per group, {setting.epochs} epochs for the neural methods); test split, designed graph; "
+             "F1 at the threshold with the best F1 on val, ± standard error over scenarios.", ""]
+    lines.append("| world | method | " + " | ".join(f"F1 {g}" for g in groups) + " | AUROC 8 cars 50 % |")
+    lines.append("|---" * (len(groups) + 3) + "|")
+    for world in worlds:
+        for method in METHOD_ORDER:
+            cells = []
+            for g in groups:
+                r = _get(rows, world=world, method=method, group=g, split="test", graph="designed", metric="f1")
+                cells.append("" if r is None else f"{r['value']:.2f} ± {r['se'] or 0:.2f}")
+            if not any(cells):
+                continue
+            a = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test", graph="designed",
+                     metric="auroc")
+            lines.append(f"| {world} | {LABELS[method]} | " + " | ".join(cells) + f" | {a['value']:.2f} |")
+    lines += ["", "Trajectory error (MSE of positions normalised by image size; 8 cars, 50 % linked; test):", ""]
+    lines.append("| world | method | 1 step | 10 steps | 20 steps |")
+    lines.append("|---|---|---|---|---|")
+    for world in worlds:
+        for method in METHOD_ORDER:
+            cells = []
+            for step in (1, 10, 20):
+                r = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test",
+                         metric="trajectory_mse", step=step)
+                cells.append("" if r is None else f"{r['value']:.2e}")
+            if any(cells):
+                lines.append(f"| {world} | {LABELS[method]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m causalcity.paper", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: <= 30 min on 2 CPU cores")
+    parser.add_argument("--out", type=Path, help="output folder [results/paper or results/paper-quick]")
+    parser.add_argument("--world", nargs="+", choices=WORLDS, default=list(WORLDS))
+    parser.add_argument("--method", nargs="+", choices=METHOD_ORDER, help="only these methods")
+    parser.add_argument("--device", default="auto", help="cpu, cuda or auto (default: cuda when available)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--toy-spec", type=Path, default=Path("configs/toy.json"))
+    parser.add_argument("--city-spec", type=Path, default=Path("configs/city.json"))
+    parser.add_argument("--splits", help="override scenarios per split, e.g. 40/10/10 (train/val/test)")
+    parser.add_argument("--epochs", type=int, help="override the neural methods' epochs")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    setting = QUICK if args.quick else FULL
+    splits = None
+    if args.splits:
+        try:
+            train, val, test = (int(v) for v in args.splits.split("/"))
+        except ValueError:
+            print(f"error: --splits {args.splits!r}: give train/val/test counts, e.g. 40/10/10", file=sys.stderr)
+            return 2
+        splits = {"train": train, "val": val, "test": test}
+        setting = Setting(name=setting.name, splits=splits, epochs=setting.epochs)
+    if args.epochs is not None:
+        setting = Setting(name=setting.name, splits=setting.splits, epochs=args.epochs)
+    out = args.out or Path("results") / ("paper-quick" if args.quick else "paper")
+    start = time.monotonic()
+    try:
+        run(out, setting, args.world, args.method, args.device, args.seed,
+            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet)
+    except (InputError, ValueError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print((out / "results.md").read_text())
+    print(f"wrote {out / 'results.csv'}, {out / 'f1.png'}, {out / 'trajectory.png'} and {out / 'results.md'} "
+          f"in {time.monotonic() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,117 @@
+"""The reference methods (causalcity.methods) and the paper pipeline
+(causalcity.paper) on datasets generated here: Granger's test is
+statsmodels' test, NRI's predictions get worse with the horizon and are the
+same for the same seed, and the whole pipeline runs end to end, writing a
+results table, a CSV and two figures."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import causalcity
+
+torch = pytest.importorskip("torch", reason='the reference methods need pip install "./python[methods]"')
+
+from causalcity.methods import make, run_method  # noqa: E402
+from causalcity.methods.classical import granger_scores  # noqa: E402
+from causalcity.methods.common import auroc_of, load_split  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+TOY = {
+    "name": "methods-toy",
+    "world": "toy",
+    "seed": 3,
+    "frames": 130,
+    "groups": [{"cars": 6, "edge_proportion": 0.5}],
+    "splits": {"train": 24, "val": 6, "test": 8},
+}
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    out = tmp_path_factory.mktemp("methods") / "toy"
+    causalcity.generate(TOY, out, images=False, effects=False, progress=False)
+    return out
+
+
+def test_granger_scores_are_statsmodels_ssr_f_test():
+    from statsmodels.tsa.stattools import grangercausalitytests
+
+    rng = np.random.default_rng(4)
+    frames, lags = 120, 3
+    cause = rng.normal(size=frames)
+    effect = np.zeros(frames)
+    for t in range(2, frames):
+        effect[t] = 0.5 * cause[t - 2] + 0.3 * effect[t - 1] + rng.normal(scale=0.5)
+    unrelated = rng.normal(size=frames)
+    series = np.stack([cause, effect, unrelated], axis=1)[:, :, None]
+    scores = granger_scores(series, lags)
+    for i, j in [(0, 1), (2, 1), (1, 0)]:
+        p = grangercausalitytests(np.stack([series[:, j, 0], series[:, i, 0]], axis=1), [lags])
+        p = p[lags][0]["ssr_ftest"][1]
+        assert scores[i, j] == pytest.approx(-np.log10(p), rel=1e-6, abs=1e-9)
+    assert scores[0, 1] > 10 and scores[2, 1] < 3
+
+
+def test_granger_and_the_leak_classifier_find_the_toy_edges(toy):
+    train, val, test = (load_split(toy, "cars06_edges50", s) for s in ("train", "val", "test"))
+    for name in ("granger", "frame0"):
+        method = make(name, **({"quiet": True} if name == "granger" else {}))
+        method.fit(train, val)
+        assert auroc_of(method.predict(test).edges, test.graph) > 0.7, name
+
+
+def test_nri_predicts_worse_further_ahead_and_is_the_same_for_the_same_seed(toy, tmp_path):
+    def fitted():
+        m = make("nri", epochs=4, device="cpu", quiet=True, seed=1)
+        m.fit(load_split(toy, "cars06_edges50", "train"), load_split(toy, "cars06_edges50", "val"))
+        return m
+
+    test = load_split(toy, "cars06_edges50", "test")
+    first, second = fitted().predict(test), fitted().predict(test)
+    assert np.array_equal(first.edges, second.edges)
+    assert np.array_equal(first.trajectories, second.trajectories)
+    assert first.edges.shape == (8, 6, 6) and first.trajectories.shape == (8, 20, 6, 2)
+    assert np.all((first.edges >= 0) & (first.edges <= 1))
+    truth = test.pixels[:, 100:120] / np.array(test.image_size)
+    error = ((first.trajectories / np.array(test.image_size) - truth) ** 2).mean(axis=(0, 2, 3))
+    assert error[19] > error[9] > error[0], error
+
+
+def test_the_paper_pipeline_runs_end_to_end(tmp_path):
+    from PIL import Image
+
+    from causalcity import paper
+
+    out = tmp_path / "paper"
+    code = paper.main(
+        [
+            "--splits", "3/2/2",
+            "--epochs", "1",
+            "--device", "cpu",
+            "--out", str(out),
+            "--toy-spec", str(ROOT / "configs" / "toy.json"),
+            "--city-spec", str(ROOT / "configs" / "city.json"),
+            "--quiet",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    rows = paper.read_results(out / "results.csv")
+    for world in paper.WORLDS:
+        for method in paper.METHOD_ORDER:
+            mine = [r for r in rows if r["world"] == world and r["method"] == method]
+            assert mine, (world, method)
+            kinds = {r["metric"] for r in mine}
+            discovers = method not in ("constant_velocity", "interaction")
+            assert ("f1" in kinds) == discovers and ("trajectory_mse" in kinds) == (method in ("constant_velocity", "interaction", "nri"))
+        groups = {r["group"] for r in rows if r["world"] == world}
+        assert groups == set(paper.BY_CARS + paper.BY_SHARE)
+    for figure in ("f1.png", "trajectory.png"):
+        with Image.open(out / figure) as image:
+            assert image.size[0] > 800 and image.size[1] > 300
+    table = (out / "results.md").read_text()
+    assert "| toy | NRI |" in table and "| city | frame-0 classifier (leak) |" in table
+    assert json.loads((out / "timings.json").read_text())
