@@ -1,17 +1,31 @@
 """Neural relational inference (Kipf et al., 2018), written from its paper's
 description in PyTorch, and the same dynamics model without discovery.
 
-- Encoder: an MLP over each car's observed frames (x, y, vx, vy of the first
-  :data:`~causalcity.methods.common.HISTORY` frames, flattened), passed
-  node -> edge -> node -> edge (NRI's MLP encoder), giving each ordered pair
-  (i, j) a distribution over two edge types: "none" and "i acts on j".
+- Encoder: NRI's MLP encoder (edge -> node -> edge, batch-normalised ELU
+  MLPs), fed each ordered pair's relative positions over the first
+  :data:`~causalcity.methods.common.HISTORY` frames (every ``pair_every``-th
+  frame), giving each pair (i, j) a distribution over two edge types: "none"
+  and "i acts on j". Per-car inputs are left out: with a few hundred training
+  scenarios they let the encoder give each scenario its own edge pattern,
+  which the decoder learns to read as that scenario's future (train loss a
+  third of val, edge AUROC 0.73 where pairs alone give 0.83, toy, 60 train).
 - Decoder: NRI's recurrent decoder. Each car has a GRU state; at every frame
-  the pairs of the "acts on" type send messages (an MLP of both states) to
-  the receiving car, which updates its state from the summed messages and
-  its current observation and predicts the change of its state. Training
-  feeds it the truth every ``teacher_every`` frames and its own predictions
-  in between; at test it sees the history and predicts the next
-  :data:`~causalcity.methods.common.STEPS` frames from its own outputs.
+  the pairs of the "acts on" type send messages to the receiving car, which
+  updates its state from the summed messages and its current observation
+  and predicts its change of velocity (an untrained decoder drives at
+  constant velocity). A message is an MLP of both states, the receiver's
+  observation and what the sender did in its last ``window`` frames
+  (positions relative to the receiver, velocities): a follower repeats its
+  leader's motion some frames later, which one GRU state did not learn to
+  carry (edge AUROC 0.54-0.59 without it).
+- Training: windows of ``warm`` true frames then
+  :data:`~causalcity.methods.common.STEPS` frames predicted from its own
+  outputs, starting where the test window starts (frame ``HISTORY - warm``)
+  or later, so that the encoder never sees frames the decoder predicts.
+  The first ``warmup_epochs`` train the decoder alone, with no edges, so
+  that messages are left to explain what a car's own past cannot (without
+  this the decoder learnt to use edges as extra capacity and the edges
+  found nothing: AUROC 0.49-0.56).
 - Loss: the Gaussian negative log-likelihood of the predicted states
   (variance 5e-5, NRI's) plus the KL divergence from a sparse prior over
   edge types; edge samples are Gumbel-softmax (temperature 0.5).
@@ -67,35 +81,32 @@ def _mlp(n_in: int, hidden: int, n_out: int) -> nn.Module:
 
 
 class Encoder(nn.Module):
-    """NRI's MLP encoder: [B, N, T * D] -> edge-type logits [B, E, K]."""
+    """NRI's MLP encoder, started from pairs: each ordered pair's relative
+    history [B, E, P] -> edge -> node -> edge -> edge-type logits [B, E, K]."""
 
-    def __init__(self, n_in: int, hidden: int, types: int, send: torch.Tensor, recv: torch.Tensor) -> None:
+    def __init__(self, n_pair: int, hidden: int, types: int, send: torch.Tensor, recv: torch.Tensor) -> None:
         super().__init__()
         self.send, self.recv = send, recv
-        self.mlp1 = _mlp(n_in, hidden, hidden)
-        self.mlp2 = _mlp(2 * hidden, hidden, hidden)
-        self.mlp3 = _mlp(hidden, hidden, hidden)
-        self.mlp4 = _mlp(3 * hidden, hidden, hidden)
+        self.pair_mlp = _mlp(n_pair, hidden, hidden)
+        self.node_mlp = _mlp(hidden, hidden, hidden)
+        self.edge_mlp = _mlp(3 * hidden, hidden, hidden)
         self.out = nn.Linear(hidden, types)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        cars = x.shape[1]
-        h = self.mlp1(x)
-        e = self.mlp2(torch.cat([h[:, self.send], h[:, self.recv]], dim=-1))
-        skip = e
-        node = torch.zeros(x.shape[0], cars, e.shape[-1], device=x.device).index_add_(1, self.recv, e) / cars
-        h = self.mlp3(node)
-        e = self.mlp4(torch.cat([h[:, self.send], h[:, self.recv], skip], dim=-1))
-        return self.out(e)
+    def forward(self, pair: torch.Tensor, cars: int) -> torch.Tensor:
+        e = self.pair_mlp(pair)
+        node = torch.zeros(pair.shape[0], cars, e.shape[-1], device=pair.device).index_add_(1, self.recv, e) / cars
+        h = self.node_mlp(node)
+        return self.out(self.edge_mlp(torch.cat([h[:, self.send], h[:, self.recv], e], dim=-1)))
 
 
 class RnnDecoder(nn.Module):
     """NRI's recurrent decoder: one GRU state per car, messages per edge type."""
 
-    def __init__(self, n_in: int, hidden: int, types: int, skip_first: bool, send, recv) -> None:
+    def __init__(self, n_in: int, hidden: int, types: int, skip_first: bool, send, recv, window: int) -> None:
         super().__init__()
         self.send, self.recv, self.skip_first, self.hidden = send, recv, skip_first, hidden
-        self.msg1 = nn.ModuleList([nn.Linear(2 * hidden, hidden) for _ in range(types)])
+        self.window = window
+        self.msg1 = nn.ModuleList([nn.Linear(2 * hidden + 4 * window + n_in, hidden) for _ in range(types)])
         self.msg2 = nn.ModuleList([nn.Linear(hidden, hidden) for _ in range(types)])
         self.hidden_r = nn.Linear(hidden, hidden, bias=False)
         self.hidden_i = nn.Linear(hidden, hidden, bias=False)
@@ -103,16 +114,21 @@ class RnnDecoder(nn.Module):
         self.input_r = nn.Linear(n_in, hidden)
         self.input_i = nn.Linear(n_in, hidden)
         self.input_n = nn.Linear(n_in, hidden)
-        self.out1 = nn.Linear(hidden, hidden)
+        self.out1 = nn.Linear(2 * hidden + n_in, hidden)
         self.out2 = nn.Linear(hidden, hidden)
         self.out3 = nn.Linear(hidden, 2)
         # standardised velocity -> standardised position change (set by the owner)
         self.register_buffer("vel_to_pos", torch.ones(2))
         self.register_buffer("vel_offset", torch.zeros(2))
 
-    def step(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor):
-        """One frame: x [B, N, D], h [B, N, H], edges [B, E, K] -> (next x, next h)."""
-        pre = torch.cat([h[:, self.send], h[:, self.recv]], dim=-1)
+    def step(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor, past: torch.Tensor):
+        """One frame: x [B, N, D], h [B, N, H], edges [B, E, K], past [B, N, W, D]
+        (the last W inputs, newest first) -> (next x, next h)."""
+        # What the sender did in its last W frames, seen from the receiver:
+        # its positions relative to the receiver's now, and its velocities.
+        rel = (past[:, self.send, :, :2] - x[:, self.recv, None, :2]) / (self.vel_to_pos * self.window)
+        seen = torch.cat([rel, past[:, self.send, :, 2:]], dim=-1).flatten(2)
+        pre = torch.cat([h[:, self.send], h[:, self.recv], seen, x[:, self.recv]], dim=-1)
         msg = torch.zeros(pre.shape[0], pre.shape[1], self.hidden, device=x.device)
         for k in range(1 if self.skip_first else 0, len(self.msg1)):
             m = torch.tanh(self.msg2[k](torch.tanh(self.msg1[k](pre))))
@@ -124,22 +140,23 @@ class RnnDecoder(nn.Module):
         h = (1 - i) * n + i * h
         # The network predicts the change of velocity; the position moves by
         # the new velocity, so an untrained decoder drives at constant velocity.
-        velocity = x[..., 2:] + self.out3(F.relu(self.out2(F.relu(self.out1(h)))))
+        velocity = x[..., 2:] + self.out3(F.relu(self.out2(F.relu(self.out1(torch.cat([h, agg, x], dim=-1))))))
         position = x[..., :2] + velocity * self.vel_to_pos + self.vel_offset
         return torch.cat([position, velocity], dim=-1), h
 
-    def forward(self, states: torch.Tensor, edges: torch.Tensor, truth_until: int, teacher_every: int):
-        """Predicts states[:, 1:] from states [B, T, N, D]: the truth is fed
-        at frames before ``truth_until`` and every ``teacher_every`` frames
-        (0: never) after it, its own prediction otherwise."""
-        batch, frames, cars, _ = states.shape
-        h = torch.zeros(batch, cars, self.hidden, device=states.device)
-        x = states[:, 0]
+    def forward(self, seq: torch.Tensor, past: torch.Tensor, edges: torch.Tensor, truth_until: int):
+        """Predicts seq[:, 1:] from seq [B, L, N, D], given the W true frames
+        before seq[:, 0] (past [B, N, W, D], newest first): the truth is fed
+        at frames before ``truth_until``, its own prediction after."""
+        batch, frames, cars, _ = seq.shape
+        h = torch.zeros(batch, cars, self.hidden, device=seq.device)
+        x = seq[:, 0]
         out = []
         for t in range(frames - 1):
-            if t < truth_until or (teacher_every and t % teacher_every == 0):
-                x = states[:, t]
-            x, h = self.step(x, h, edges)
+            if t < truth_until:
+                x = seq[:, t]
+            past = torch.cat([x[:, :, None], past[:, :, :-1]], dim=2)
+            x, h = self.step(x, h, edges, past)
             out.append(x)
         return torch.stack(out, dim=1)
 
@@ -157,7 +174,11 @@ class Nri(Method):
         batch_size: int = 16,
         lr: float = 1e-3,
         prior: float = 0.1,
-        teacher_every: int = 10,
+        warm: int = 10,
+        window: int = 20,
+        windows: int = 4,
+        warmup_epochs: int = 5,
+        pair_every: int = 5,
         history: int = HISTORY,
         steps: int = STEPS,
         seed: int = 0,
@@ -169,7 +190,11 @@ class Nri(Method):
         self.discovers = discover
         self.predicts = True
         self.epochs, self.hidden, self.batch_size, self.lr = epochs, hidden, batch_size, lr
-        self.prior, self.teacher_every, self.seed = prior, teacher_every, seed
+        self.prior, self.seed = prior, seed
+        self.warm, self.window, self.windows = warm, window, windows
+        self.warmup_epochs, self.pair_every = warmup_epochs, pair_every
+        self.epoch = epochs
+        """The epoch being trained (``epochs`` once trained)."""
         self.history, self.steps = history, steps
         self.device = pick_device(device)
         self.quiet = quiet
@@ -199,8 +224,9 @@ class Nri(Method):
         recv = torch.tensor([p[1] for p in pairs], device=self.device)
         self.cars, self.pairs = cars, pairs
         types = 2 if self.discover else 1
-        self.encoder = Encoder(hist * 4, self.hidden, 2, send, recv).to(self.device) if self.discover else None
-        self.decoder = RnnDecoder(4, self.hidden, types, self.discover, send, recv)
+        n_pair = 2 * len(range(0, hist, self.pair_every))
+        self.encoder = Encoder(n_pair, self.hidden, 2, send, recv).to(self.device) if self.discover else None
+        self.decoder = RnnDecoder(4, self.hidden, types, self.discover, send, recv, self.window)
         # position(t + 1) = position(t) + velocity(t + 1), in standardised units
         self.decoder.vel_to_pos = torch.as_tensor(self.std[2:] / self.std[:2], dtype=torch.float32)
         self.decoder.vel_offset = torch.as_tensor(self.mean[2:] / self.std[:2], dtype=torch.float32)
@@ -212,16 +238,34 @@ class Nri(Method):
         batch = x.shape[0]
         if not self.discover:
             return torch.ones(batch, len(self.pairs), 1, device=self.device), None, None
-        inp = x[:, :hist].permute(0, 2, 1, 3).reshape(batch, self.cars, -1)
-        logits = self.encoder(inp)
+        # where i was relative to j, every `pair_every` frames of the history
+        pos = x[:, :hist : self.pair_every, :, :2]
+        pair = (pos[:, :, self.encoder.send] - pos[:, :, self.encoder.recv]).permute(0, 2, 1, 3).flatten(2)
+        logits = self.encoder(pair, self.cars)
         prob = F.softmax(logits, dim=-1)
-        edges = F.gumbel_softmax(logits, tau=0.5, hard=False) if sample else prob
+        if self.epoch < self.warmup_epochs:
+            # the decoder first learns each car's own motion, with no edges
+            edges = torch.zeros_like(prob).index_fill_(-1, torch.tensor([0], device=prob.device), 1.0)
+        else:
+            edges = F.gumbel_softmax(logits, tau=0.5, hard=False) if sample else prob
         return edges, prob, logits
 
-    def _loss(self, x: torch.Tensor, hist: int, steps: int, sample: bool) -> torch.Tensor:
+    def _window(self, x: torch.Tensor, starts: torch.Tensor, length: int):
+        """The decoder's view of each scenario from frame ``starts[b]``: the
+        ``length`` frames it replays and predicts [B, L, N, D], and the
+        ``window`` frames before them, newest first [B, N, W, D]."""
+        rows = torch.arange(len(x), device=x.device)[:, None]
+        seq_frames = starts[:, None] + torch.arange(length, device=x.device)[None]
+        past_frames = (starts[:, None] - 1 - torch.arange(self.window, device=x.device)[None]).clamp(min=0)
+        return x[rows, seq_frames], x[rows, past_frames].permute(0, 2, 1, 3)
+
+    def _loss(self, x: torch.Tensor, hist: int, steps: int, starts: torch.Tensor, sample: bool) -> torch.Tensor:
+        """NRI's loss on the windows from ``starts`` (``warm`` true frames,
+        then ``steps`` predicted from its own outputs): the Gaussian negative
+        log-likelihood of every predicted frame plus the KL to the prior."""
         edges, prob, _ = self._edges(x, hist, sample)
-        seq = x[:, : hist + steps]
-        pred = self.decoder(seq, edges, truth_until=0, teacher_every=self.teacher_every)
+        seq, past = self._window(x, starts, self.warm + steps)
+        pred = self.decoder(seq, past, edges, truth_until=self.warm)
         nll = ((pred - seq[:, 1:]) ** 2).sum() / (2 * 5e-5) / (x.shape[0] * self.cars * (seq.shape[1] - 1))
         if prob is None:
             return nll
@@ -236,28 +280,39 @@ class Nri(Method):
         flat = states[:, : hist + steps].reshape(-1, 4)
         self.mean = flat.mean(axis=0)
         self.std = np.maximum(flat.std(axis=0), 1e-9)
+        self.warm = max(1, min(self.warm, hist))
         self._build(train.cars, hist)
         params = list(self.decoder.parameters()) + (list(self.encoder.parameters()) if self.encoder else [])
         opt = torch.optim.Adam(params, lr=self.lr)
         x_train = self._tensor(states)
+        # Training windows start where the test window does or later, so the
+        # frames the decoder predicts are never ones the encoder saw: edges
+        # cannot carry a car's own future to the decoder.
+        low = hist - self.warm
+        high = max(train.frames - self.warm - steps, low)
         x_val = self._tensor(self._states(val)) if val is not None and len(val) else None
         best, best_loss = None, float("inf")
         progress = Progress(f"{self.name} {train.group}", self.epochs, self.quiet)
         for epoch in range(self.epochs):
+            self.epoch = epoch
             self._train_mode(True)
-            order = gen.permutation(len(train))
+            # every scenario `windows` times, each from a random frame
+            order = np.concatenate([gen.permutation(len(train)) for _ in range(self.windows)])
+            starts = gen.integers(low, high + 1, size=len(order))
             total = 0.0
             for start in range(0, len(order), self.batch_size):
                 batch = x_train[torch.as_tensor(order[start : start + self.batch_size])]
+                first = torch.as_tensor(starts[start : start + self.batch_size], device=self.device)
                 opt.zero_grad()
-                loss = self._loss(batch, hist, steps, sample=True)
+                loss = self._loss(batch, hist, steps, first, sample=True)
                 loss.backward()
                 opt.step()
                 total += float(loss.detach()) * len(batch)
             train_loss = total / len(order)
             val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
             self.losses.append((epoch, train_loss, val_loss))
-            if val_loss < best_loss:
+            # (the epochs without edges cannot be the one kept)
+            if val_loss < best_loss and (epoch >= self.warmup_epochs or not self.discover):
                 best_loss = val_loss
                 best = copy.deepcopy((self.encoder.state_dict() if self.encoder else None, self.decoder.state_dict()))
             progress.step(note=f"train {train_loss:.1f} val {val_loss:.1f}")
@@ -278,12 +333,14 @@ class Nri(Method):
         total = 0.0
         for start in range(0, len(x), self.batch_size):
             batch = x[start : start + self.batch_size]
-            total += float(self._loss(batch, hist, steps, sample=False)) * len(batch)
+            first = torch.full((len(batch),), hist - self.warm, device=self.device)
+            total += float(self._loss(batch, hist, steps, first, sample=False)) * len(batch)
         return total / max(len(x), 1)
 
     @torch.no_grad()
     def predict(self, episodes: Episodes) -> Predicted:
         self._train_mode(False)
+        self.epoch = self.epochs
         hist, steps = self._frames(episodes)
         x = self._tensor(self._states(episodes))
         w, h = episodes.image_size
@@ -298,8 +355,10 @@ class Nri(Method):
                     scores[:, i, j] = p[:, e]
                 edges_out.append(scores)
             if steps >= 1:
-                pred = self.decoder(batch[:, : hist + steps], edges, truth_until=hist, teacher_every=0)
-                future = pred[:, hist - 1 : hist - 1 + steps].cpu().double().numpy()
+                first = torch.full((len(batch),), hist - self.warm, device=self.device)
+                seq, past = self._window(batch, first, self.warm + steps)
+                pred = self.decoder(seq, past, edges, truth_until=self.warm)
+                future = pred[:, self.warm - 1 :].cpu().double().numpy()
                 future = future * self.std + self.mean
                 traj_out.append(future[..., :2] * np.array([w, h]))
         return Predicted(
