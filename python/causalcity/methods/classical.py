@@ -121,15 +121,17 @@ class Granger(Method):
 
 class Pcmci(Method):
     """PCMCI (tigramite, partial correlations) over every car's velocity (x
-    and y, px per frame) with lags up to ``tau_max``: scores the largest
-    absolute partial correlation from any of car i's components at any lag
-    to any of car j's."""
+    and y, px per ``every`` frames, sampled every ``every`` frames) with lags
+    up to ``tau_max`` samples (16 frames by default: a toy follower is 15
+    frames behind its leader): scores the largest absolute partial
+    correlation from any of car i's components at any lag to any of car
+    j's."""
 
     name = "pcmci"
     discovers = True
 
-    def __init__(self, tau_max: int = 8, pc_alpha: float = 0.05, workers: int = 0, quiet: bool = False) -> None:
-        self.tau_max, self.pc_alpha, self.quiet = tau_max, pc_alpha, quiet
+    def __init__(self, tau_max: int = 8, every: int = 2, pc_alpha: float = 0.05, workers: int = 0, quiet: bool = False) -> None:
+        self.tau_max, self.every, self.pc_alpha, self.quiet = tau_max, every, pc_alpha, quiet
         self.workers = workers or (os.cpu_count() or 1)
 
     def scores(self, series: np.ndarray) -> np.ndarray:
@@ -165,7 +167,7 @@ class Pcmci(Method):
     def predict(self, episodes: Episodes) -> Predicted:
         h = observed(episodes)
         progress = Progress(f"pcmci {episodes.group} {episodes.split}", len(episodes), self.quiet)
-        series = [velocities(episodes.pixels[s, :h]) for s in range(len(episodes))]
+        series = [velocities(episodes.pixels[s, :h : self.every]) for s in range(len(episodes))]
         out = []
         if self.workers > 1 and len(series) > 1:
             # One scenario per process, results in scenario order: the same
