@@ -134,39 +134,19 @@ def run(
 
 
 def _rows(world: str, method: str, report: dict) -> List[dict]:
+    """One row per value of an evaluation report (``evaluate(...)``'s JSON)."""
+
+    def row(entry: dict, graph: str, metric: str, step, value, se, scenarios) -> dict:
+        return dict(world=world, method=method, group=entry["group"], split=entry["split"], graph=graph,
+                    metric=metric, step=step, value=value, se=se, scenarios=scenarios)  # fmt: skip
+
     rows = []
     for e in report["edges"]:
         for metric, se in (("f1", "f1_se"), ("auroc", None), ("auprc", None), ("shd", "shd_se")):
-            rows.append(
-                dict(
-                    world=world,
-                    method=method,
-                    group=e["group"],
-                    split=e["split"],
-                    graph=e["graph"],
-                    metric=metric,
-                    step="",
-                    value=e[metric],
-                    se=e[se] if se else None,
-                    scenarios=e["scenarios"],
-                )
-            )
+            rows.append(row(e, e["graph"], metric, "", e[metric], e[se] if se else None, e["scenarios"]))
     for t in report["trajectories"]:
         for s in t["steps"]:
-            rows.append(
-                dict(
-                    world=world,
-                    method=method,
-                    group=t["group"],
-                    split=t["split"],
-                    graph="",
-                    metric="trajectory_mse",
-                    step=s["step"],
-                    value=s["mse"],
-                    se=s["se"],
-                    scenarios=s["scenarios"],
-                )
-            )
+            rows.append(row(t, "", "trajectory_mse", s["step"], s["mse"], s["se"], s["scenarios"]))
     return rows
 
 
