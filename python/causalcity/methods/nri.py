@@ -76,10 +76,6 @@ class _Mlp(nn.Module):
         return self.norm(y.reshape(-1, y.shape[-1])).reshape(y.shape)
 
 
-def _mlp(n_in: int, hidden: int, n_out: int) -> nn.Module:
-    return _Mlp(n_in, hidden, n_out)
-
-
 class Encoder(nn.Module):
     """NRI's MLP encoder, started from pairs: each ordered pair's relative
     history [B, E, P] -> edge -> node -> edge -> edge-type logits [B, E, K]."""
@@ -87,9 +83,9 @@ class Encoder(nn.Module):
     def __init__(self, n_pair: int, hidden: int, types: int, send: torch.Tensor, recv: torch.Tensor) -> None:
         super().__init__()
         self.send, self.recv = send, recv
-        self.pair_mlp = _mlp(n_pair, hidden, hidden)
-        self.node_mlp = _mlp(hidden, hidden, hidden)
-        self.edge_mlp = _mlp(3 * hidden, hidden, hidden)
+        self.pair_mlp = _Mlp(n_pair, hidden, hidden)
+        self.node_mlp = _Mlp(hidden, hidden, hidden)
+        self.edge_mlp = _Mlp(3 * hidden, hidden, hidden)
         self.out = nn.Linear(hidden, types)
 
     def forward(self, pair: torch.Tensor, cars: int) -> torch.Tensor:
@@ -245,7 +241,8 @@ class Nri(Method):
         prob = F.softmax(logits, dim=-1)
         if self.epoch < self.warmup_epochs:
             # the decoder first learns each car's own motion, with no edges
-            edges = torch.zeros_like(prob).index_fill_(-1, torch.tensor([0], device=prob.device), 1.0)
+            edges = torch.zeros_like(prob)
+            edges[..., 0] = 1.0
         else:
             edges = F.gumbel_softmax(logits, tau=0.5, hard=False) if sample else prob
         return edges, prob, logits
