@@ -274,12 +274,12 @@ pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[
     for (t, &[fx, fy]) in follower.iter().enumerate().take(frames).skip(1) {
         // nearest_within[k]: the least squared distance to the leader's last k positions.
         let mut nearest = f64::INFINITY;
-        for k in 1..=longest {
+        for (k, within) in nearest_within.iter_mut().enumerate().skip(1) {
             if let Some(s) = t.checked_sub(k) {
                 let [lx, ly] = leader[s];
                 nearest = nearest.min((fx - lx) * (fx - lx) + (fy - ly) * (fy - ly));
             }
-            nearest_within[k] = nearest;
+            *within = nearest;
         }
         for (total, &lag) in totals.iter_mut().zip(max_lags) {
             *total += nearest_within[lag.max(1)].sqrt();
@@ -358,9 +358,9 @@ mod tests {
             (0..60usize).map(|t| leader[t.saturating_sub(7)]).map(|[x, y]| [x + 0.2, y - 0.1]).collect();
         let brute = |lag: usize| {
             let mut total = 0.0;
-            for t in 1..60usize {
+            for (t, [fx, fy]) in follower.iter().enumerate().skip(1) {
                 let nearest = (t.saturating_sub(lag)..t)
-                    .map(|s| ((follower[t][0] - leader[s][0]).powi(2) + (follower[t][1] - leader[s][1]).powi(2)).sqrt())
+                    .map(|s| ((fx - leader[s][0]).powi(2) + (fy - leader[s][1]).powi(2)).sqrt())
                     .fold(f64::INFINITY, f64::min);
                 total += nearest;
             }

@@ -90,6 +90,9 @@ pub fn split_owning_start(lane: LaneId, s: f64) -> usize {
 const OWNED_START_SEARCH_MM: usize = 200;
 const PLACEMENT_ATTEMPTS: usize = 2000;
 
+/// (leader, follower) indices into a scenario's placed cars.
+type LeaderFollowerPairs = Vec<(usize, usize)>;
+
 impl Expansion {
     /// The spec's map (`map` section) and camera, checked as [`Expansion::new`] does.
     pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
@@ -342,7 +345,7 @@ impl Expansion {
         rng: &mut ChaCha8Rng,
         city: &crate::spec::CitySpec,
         group: &GroupSpec,
-    ) -> Result<(Vec<PlacedCar>, Vec<(usize, usize)>), String> {
+    ) -> Result<(Vec<PlacedCar>, LeaderFollowerPairs), String> {
         let size = city.start.platoon_cars as usize;
         let total = group.cars as usize;
         let split = key.split.index();
