@@ -56,6 +56,7 @@ test-python: build python-env
 	$(RUN) export nsdr $(PYDATA)/city --out $(PYDATA)/nsdr-city --quiet
 	$(if $(filter hdf5,$(FEATURES)),$(RUN) export vcdn $(PYDATA)/toy --out $(PYDATA)/vcdn --quiet)
 	$(RUN) counterfactual --scenario configs/examples/stop-the-leader.json --out $(PYDATA)/counterfactual
+	$(RUN) counterfactual --sweep tests/python/city.json --no-images --quiet --kinds remove,stop --out $(PYDATA)/sweep
 	$(RUN) run --scenario configs/examples/cameras.json --out $(PYDATA)/cameras
 	CAUSALCITY_DATA=$(PYDATA) CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python -m pytest -q -p no:cacheprovider -W ignore::DeprecationWarning:pycocotools.mask tests/python python/tests
 

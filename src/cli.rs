@@ -223,15 +223,20 @@ pub struct BaselineArgs {
 
 #[derive(Debug, Args)]
 pub struct EvaluateArgs {
-    /// Dataset folder (the one holding manifest.json).
+    /// Dataset folder (the one holding manifest.json), or a counterfactual
+    /// --sweep output (the one holding sweep.json).
     #[arg(value_name = "DATASET")]
     pub dataset: PathBuf,
 
     /// Predictions (.npz, as numpy's np.savez writes it): per scenario, an
     /// array named by its folder (cars08_edges50/test/00000) of shape
-    /// [cars, cars], [i, j] scoring "car i leads car j", and optionally one
-    /// named <folder>/trajectory of shape [steps, cars, 2]: predicted
-    /// bird's-eye pixel positions of the frames after the history.
+    /// [cars, cars], [i, j] scoring "car i leads car j"; optionally
+    /// <folder>/trajectory, [steps, cars, 2]: predicted bird's-eye pixel
+    /// positions of the frames after the history; <folder>/frames (city),
+    /// [frames, cars, cars]: [t, i, j] scoring "car i bound car j's speed
+    /// at frame t" (interactions.csv); <folder>/counterfactual (a sweep),
+    /// [steps, cars, 2]: the counterfactual run's positions after the
+    /// history.
     #[arg(value_name = "PREDICTIONS")]
     pub predictions: PathBuf,
 

@@ -258,3 +258,50 @@ impl PoseLog {
         &self.poses[frame * self.cars..(frame + 1) * self.cars]
     }
 }
+
+/// The record `counterfactual --sweep` writes last (`sweep.json`), so a
+/// folder holding it is a finished sweep.
+pub const SWEEP_RECORD: &str = "sweep.json";
+
+/// A finished `counterfactual --sweep` output opened for reading: the spec
+/// it expanded and its pairs, `<group>/<split>/<index>/{factual,
+/// counterfactual}/`, one per scenario key.
+pub struct Sweep {
+    pub dir: PathBuf,
+    pub expansion: Expansion,
+    pub keys: Vec<ScenarioKey>,
+}
+
+impl Sweep {
+    /// Opens the sweep in `dir`; `Ok(None)` when `dir` has no sweep.json.
+    /// Errors name the file and what is wrong.
+    pub fn open(dir: &Path) -> Result<Option<Sweep>, String> {
+        let path = dir.join(SWEEP_RECORD);
+        let bytes = match std::fs::read(&path) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("cannot read {}: {e}", path.display())),
+        };
+        #[derive(serde::Deserialize)]
+        struct Record {
+            format: String,
+            spec: serde_json::Value,
+            limit: Option<u32>,
+        }
+        let record: Record = serde_json::from_slice(&bytes)
+            .map_err(|e| format!("{}: not a counterfactual sweep's record: {e}", path.display()))?;
+        if !record.format.starts_with("causalcity-counterfactual-sweep/") {
+            return Err(format!(
+                "{}: format {:?} is not causalcity-counterfactual-sweep/1",
+                path.display(),
+                record.format
+            ));
+        }
+        let spec: DatasetSpec = serde_json::from_value(record.spec)
+            .map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
+        let expansion =
+            Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
+        let keys = expansion.keys(record.limit);
+        Ok(Some(Sweep { dir: dir.to_path_buf(), expansion, keys }))
+    }
+}

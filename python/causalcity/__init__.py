@@ -677,6 +677,9 @@ def save_predictions(
     path: PathLike,
     edges: Optional[Mapping[str, np.ndarray]] = None,
     trajectories: Optional[Mapping[str, np.ndarray]] = None,
+    *,
+    frames: Optional[Mapping[str, np.ndarray]] = None,
+    counterfactuals: Optional[Mapping[str, np.ndarray]] = None,
 ) -> None:
     """Writes a predictions file for :func:`evaluate` (``np.savez_compressed``).
 
@@ -686,14 +689,20 @@ def save_predictions(
     oriented, higher meaning more likely. ``trajectories`` maps a folder to
     ``[steps, cars, 2]`` predicted bird's-eye pixel positions of the frames
     after the first :data:`HISTORY_FRAMES` (the history the method saw).
+    ``frames`` (city world) maps a folder to ``[frames, cars, cars]``
+    per-frame edge scores, ``[t, i, j]`` scoring "car i bound car j's speed
+    at frame t" (scored against ``interactions.csv``; note that
+    :meth:`Interactions.car_graph` is ``[t, j, i]``, receiver first).
+    ``counterfactuals`` (a ``counterfactual --sweep`` output) maps a pair's
+    folder to ``[steps, cars, 2]`` predicted positions of its counterfactual
+    run after the history.
     """
     arrays: Dict[str, np.ndarray] = {}
-    for folder, scores in (edges or {}).items():
-        arrays[str(folder)] = np.asarray(scores, dtype=np.float64)
-    for folder, trajectory in (trajectories or {}).items():
-        arrays[f"{folder}/trajectory"] = np.asarray(trajectory, dtype=np.float64)
+    for suffix, given in (("", edges), ("/trajectory", trajectories), ("/frames", frames), ("/counterfactual", counterfactuals)):
+        for folder, values in (given or {}).items():
+            arrays[f"{folder}{suffix}"] = np.asarray(values, dtype=np.float64)
     if not arrays:
-        raise InputError("save_predictions: give edge scores or trajectories for at least one scenario")
+        raise InputError("save_predictions: give edge scores, trajectories, per-frame scores or counterfactuals for at least one scenario")
     with open(os.fspath(path), "wb") as f:
         np.savez_compressed(f, **arrays)
 
@@ -709,11 +718,13 @@ def evaluate(
 ) -> Dict[str, Any]:
     """``causalcity evaluate`` from Python: scores the predictions file
     ``predictions`` (see :func:`save_predictions`) against the dataset
-    ``gen`` wrote to ``dataset``, and returns the report as ``evaluate
-    --json`` prints it: ``edges`` (per graph, group and split: F1 at the
-    threshold with the best F1 on val, with its standard error, precision,
-    recall, AUROC, AUPRC, SHD) and ``trajectories`` (per group and split:
-    normalised squared error at each step ahead). ``graph`` is one of
+    ``gen`` wrote to ``dataset`` (or a ``counterfactual --sweep`` output),
+    and returns the report as ``evaluate --json`` prints it: ``edges`` (per
+    graph, group and split: F1 at the threshold with the best F1 on val,
+    with its standard error, precision, recall, AUROC, AUPRC, SHD; graph
+    ``per-frame`` for per-frame scores), ``trajectories`` and
+    ``counterfactuals`` (per group and split: normalised squared error at
+    each step ahead). ``graph`` is one of
     ``designed``, ``causal``, ``direct`` or a list of them; ``csv`` also
     writes the table as ``--csv`` does. Bad predictions (a wrong shape, a
     NaN, a partly scored split) raise :class:`InputError`.

@@ -3,6 +3,7 @@ scikit-learn and numpy computed from the dataset's own files, any dtype and
 memory order numpy saves is read the same, and bad predictions files are
 refused with exit status 2 and nothing written."""
 
+import csv
 import json
 import os
 import shlex
@@ -181,6 +182,7 @@ def bad_files(predictions, tmp_path):
     save("unknown", {**edges, "cars99_edges50/test/00000": np.zeros((n, n))})
     save("trajectory", {**edges, one + "/trajectory": np.zeros((STEPS, n, 3))})
     save("horizon", {**edges, **{k + "/trajectory": np.zeros((40, edges[k].shape[0], 2)) for k in edges}})
+    save("frames_toy", {**edges, one + "/frames": np.zeros((30, n, n))})
     save("empty", {})
     p = tmp_path / "text.npz"
     p.write_text("not a zip")
@@ -197,6 +199,7 @@ def bad_files(predictions, tmp_path):
         ("unknown", "names no scenario"),
         ("trajectory", "[steps,"),
         ("horizon", "--history"),
+        ("frames_toy", "only the city world"),
         ("empty", "holds no arrays"),
         ("text", "not an .npz"),
     ],
@@ -212,3 +215,102 @@ def test_bad_predictions_exit_2_naming_the_file_and_write_nothing(predictions, t
         assert one in run.stderr
     with pytest.raises(causalcity.InputError):
         causalcity.evaluate(TOY, cases[case], history=HISTORY)
+
+
+CITY = DATA / "city"
+SWEEP = DATA / "sweep"
+
+
+def binding(folder, frames, cars):
+    """[t, i, j] = True when interactions.csv says car i bound car j at frame t."""
+    g = np.zeros((frames, cars, cars), dtype=bool)
+    with open(folder / "interactions.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            if row["other_car"] != "":
+                g[int(row["frame"]), int(row["other_car"]), int(row["car"])] = True
+    return g
+
+
+def test_per_frame_scores_are_scored_against_interactions(tmp_path):
+    if not (CITY / "manifest.json").is_file():
+        pytest.skip("needs the test city dataset (make test-python generates it)")
+    rng = np.random.default_rng(5)
+    truths, frames = {}, {}
+    for meta_path in sorted(CITY.glob("*/*/*/scenario.json")):
+        rel = meta_path.parent.relative_to(CITY).as_posix()
+        meta = json.loads(meta_path.read_text())
+        g = binding(meta_path.parent, meta["frames"], len(meta["cars"]))
+        truths[rel] = g
+        frames[rel] = g * 0.5 + rng.random(g.shape)
+    assert sum(int(g.sum()) for g in truths.values()) > 0, "the test city has no car binding another"
+    path = tmp_path / "frames.npz"
+    causalcity.save_predictions(path, frames=frames)
+    report = causalcity.evaluate(CITY, path, history=HISTORY)
+    rows = [r for r in report["edges"] if r["graph"] == "per-frame"]
+    assert len(rows) == 3 and report["trajectories"] == []
+    for row in rows:
+        rels = [r for r in truths if r.split("/")[1] == row["split"]]
+        ys, ss, f1s, shds = [], [], [], []
+        for rel in rels:
+            t, n, _ = truths[rel].shape
+            off = np.broadcast_to(~np.eye(n, dtype=bool), (t, n, n))
+            y, s = truths[rel][off], frames[rel][off]
+            called = s > row["threshold"]
+            f1s.append(f1_score(y, called, zero_division=1.0))
+            shds.append((called != y).sum() / t)
+            ys.append(y)
+            ss.append(s)
+        y, s = np.concatenate(ys), np.concatenate(ss)
+        assert row["pairs"] == len(y) and row["true_edges"] == int(y.sum())
+        assert row["f1"] == pytest.approx(np.mean(f1s), abs=1e-9)
+        assert row["shd"] == pytest.approx(np.mean(shds), abs=1e-9)
+        if 0 < y.sum() < len(y):
+            assert row["auroc"] == pytest.approx(roc_auc_score(y, s), abs=1e-9)
+            assert row["auprc"] == pytest.approx(average_precision_score(y, s), abs=1e-9)
+    # Receiver-first (car_graph's [t, j, i]) really is the other orientation.
+    flipped = {k: v.transpose(0, 2, 1) for k, v in frames.items()}
+    causalcity.save_predictions(tmp_path / "flipped.npz", frames=flipped)
+    worse = causalcity.evaluate(CITY, tmp_path / "flipped.npz", history=HISTORY)
+    test = [r for r in report["edges"] if r["split"] == "test"][0]
+    assert [r for r in worse["edges"] if r["split"] == "test"][0]["auroc"] < test["auroc"]
+
+
+def test_counterfactual_trajectories_are_scored_against_the_resimulated_run(tmp_path):
+    if not (SWEEP / "sweep.json").is_file():
+        pytest.skip("needs the test sweep (make test-python runs counterfactual --sweep)")
+    history, steps = 15, 10
+    rng = np.random.default_rng(3)
+    predicted, expected, factual_guess, removed_cars = {}, {}, {}, 0
+    for summary_path in sorted(SWEEP.glob("*/*/*/summary.json")):
+        rel = summary_path.parent.relative_to(SWEEP).as_posix()
+        meta = json.loads((summary_path.parent / "factual" / "scenario.json").read_text())
+        n = len(meta["cars"])
+        table = np.loadtxt(summary_path.parent / "counterfactual" / "poses.csv", delimiter=",", skiprows=1)
+        xy = table[:, [3, 4]].reshape(meta["frames"], n, 2)[history : history + steps]
+        truth = table[:, [9, 10]].reshape(meta["frames"], n, 2)[history : history + steps]
+        guess = truth + rng.normal(0, 3.0, truth.shape)
+        on_map = xy[..., 0] < 5000  # removed cars are parked 10 km away
+        removed_cars += int((~on_map).any(axis=0).sum())
+        guess[~on_map] = 0.0  # a method cannot know where a removed car is parked
+        predicted[rel] = guess
+        err = (((guess - truth) / [1024, 640]) ** 2).mean(axis=2)
+        expected[rel] = np.array([err[k][on_map[k]].mean() for k in range(steps)])
+        fpx = np.loadtxt(summary_path.parent / "factual" / "poses.csv", delimiter=",", skiprows=1)[:, [9, 10]]
+        factual_guess[rel] = fpx.reshape(meta["frames"], n, 2)[history : history + steps]
+    assert removed_cars > 0, "the test sweep should remove a car before frame 15"
+    causalcity.save_predictions(tmp_path / "cf.npz", counterfactuals=predicted, trajectories=factual_guess)
+    report = causalcity.evaluate(SWEEP, tmp_path / "cf.npz", history=history)
+    rows = report["counterfactuals"]
+    assert len(rows) == 3
+    for row in rows:
+        rels = [r for r in predicted if r.split("/")[1] == row["split"]]
+        want = np.mean([expected[r] for r in rels], axis=0)
+        assert [s["mse"] for s in row["steps"]] == pytest.approx(list(want), rel=1e-9)
+    # The factual guess is exact against the factual run.
+    assert all(s["mse"] < 1e-10 for row in report["trajectories"] for s in row["steps"])
+    run = cli("evaluate", SWEEP, tmp_path / "cf.npz", "--history", history)
+    assert run.returncode == 0 and "counterfactual trajectories" in run.stdout, run.stderr
+    # On a gen dataset (no re-simulated runs), a counterfactual array is refused.
+    np.savez(tmp_path / "wrong.npz", **{k + "/counterfactual": v for k, v in predicted.items()})
+    run = cli("evaluate", CITY, tmp_path / "wrong.npz", "--history", history)
+    assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr

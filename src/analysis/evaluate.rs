@@ -2,8 +2,10 @@
 //! ground truth with the paper's metrics, so that every method is scored
 //! the same way.
 //!
-//! The predictions file is an `.npz` (numpy's `np.savez`) holding, for each
-//! scored scenario, arrays named by its folder relative to the dataset:
+//! The ground truth is a `gen` dataset, or a `counterfactual --sweep`
+//! output, whose factual runs then stand for the scenarios. The predictions
+//! file is an `.npz` (numpy's `np.savez`) holding, for each scored scenario,
+//! arrays named by its folder relative to the dataset:
 //!
 //! - `<group>/<split>/<index>`, e.g. `cars08_edges50/test/00000`: `[cars,
 //!   cars]` edge scores, `[i, j]` scoring "car i leads car j" (cause to
@@ -12,9 +14,18 @@
 //! - `<group>/<split>/<index>/trajectory`: `[steps, cars, 2]` predicted
 //!   bird's-eye pixel positions (px, py) of frames `history ..
 //!   history + steps` after observing frames `0 .. history` (the paper
-//!   observes 100 frames and predicts up to 20).
+//!   observes 100 frames and predicts up to 20);
+//! - `<group>/<split>/<index>/frames` (city world): `[frames, cars, cars]`
+//!   per-frame edge scores, `[t, i, j]` scoring "car i bound car j's speed
+//!   at frame t", scored against `interactions.csv` (car j's `other_car`
+//!   is i: the car ahead, a conflicting car or one it collided with);
+//! - `<group>/<split>/<index>/counterfactual` (a sweep): `[steps, cars, 2]`
+//!   predicted positions of the counterfactual run (after its
+//!   intervention) at frames `history .. history + steps`, scored against
+//!   `counterfactual/poses.csv`; a car the intervention removed is not
+//!   scored once it has left the map.
 //!
-//! Either kind may be left out; within a group and split, every scenario of
+//! Any kind may be left out; within a group and split, every scenario of
 //! the dataset must be scored once one is, so that no method is scored on a
 //! subset of its choosing. Edge scores get, per graph kind, group and split:
 //! F1 at a threshold chosen on the validation split (the one with the best
@@ -22,16 +33,22 @@
 //! precision and recall over all pairs; AUROC and AUPRC (average precision)
 //! over all pairs, needing no threshold; and the structural Hamming distance
 //! (SHD: ordered pairs whose called link differs from the truth, so a
-//! reversed edge counts twice), mean over scenarios. Trajectories get the
-//! mean squared error of positions normalised by the image size (x / width,
-//! y / height, both 0 to 1, averaged over the two coordinates and the cars),
-//! per step ahead, mean over scenarios with its standard error.
+//! reversed edge counts twice), mean over scenarios. Per-frame graphs get
+//! the same over every frame's pairs (graph `per-frame`), their SHD per
+//! frame. Trajectories, factual and counterfactual, get the mean squared
+//! error of positions normalised by the image size (x / width, y / height,
+//! both 0 to 1, averaged over the two coordinates and the cars), per step
+//! ahead, mean over scenarios with its standard error.
 
 use super::metrics::{auroc, average_precision, best_threshold, Counts, ScoredPair};
 use super::predictions::{read_npz, NamedArray};
-use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary};
+use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary, Sweep};
 use crate::error::Error;
-use crate::spec::Split;
+use crate::output::layout::INTERACTIONS_CSV;
+use crate::output::logs::read_interactions;
+use crate::plan::{Expansion, ScenarioKey};
+use crate::spec::{Split, WorldKind};
+use crate::world::CarState;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -44,6 +61,13 @@ pub const DEFAULT_HISTORY_FRAMES: usize = 100;
 
 /// Suffix of a scenario's predicted-trajectory array.
 pub const TRAJECTORY_SUFFIX: &str = "/trajectory";
+/// Suffix of a scenario's per-frame edge scores.
+pub const PER_FRAME_SUFFIX: &str = "/frames";
+/// Suffix of a sweep pair's predicted counterfactual trajectory.
+pub const COUNTERFACTUAL_SUFFIX: &str = "/counterfactual";
+
+/// The name reports give the per-frame graph (next to [`GraphKind::name`]).
+pub const PER_FRAME_GRAPH: &str = "per-frame";
 
 /// What to score and how.
 #[derive(Debug, Clone)]
@@ -64,16 +88,18 @@ impl Default for EvaluateOptions {
     }
 }
 
-/// Edge-discovery scores of one graph kind, group and split.
+/// Edge-discovery scores of one graph, group and split.
 #[derive(Debug, Clone, Serialize)]
 pub struct EdgeScores {
-    pub graph: GraphKind,
+    /// `designed`, `causal`, `direct` ([`GraphKind::name`]) or `per-frame`.
+    pub graph: &'static str,
     pub group: String,
     pub cars: u32,
     pub edge_proportion: f64,
     pub split: &'static str,
     pub scenarios: usize,
-    /// Ordered pairs scored (cars x (cars - 1) per scenario).
+    /// Ordered pairs scored (cars x (cars - 1) per scenario, and per frame
+    /// for the per-frame graph).
     pub pairs: usize,
     pub true_edges: usize,
     /// Pairs scored above the threshold.
@@ -96,7 +122,8 @@ pub struct EdgeScores {
     pub auroc: Option<f64>,
     /// Average precision over all pairs; None without a linked pair.
     pub auprc: Option<f64>,
-    /// Mean structural Hamming distance per scenario.
+    /// Mean structural Hamming distance per scenario (per frame for the
+    /// per-frame graph).
     pub shd: f64,
     pub shd_se: Option<f64>,
 }
@@ -135,29 +162,125 @@ pub struct EvaluationReport {
     pub history_frames: usize,
     pub edges: Vec<EdgeScores>,
     pub trajectories: Vec<TrajectoryScores>,
+    /// Predicted counterfactual trajectories against the re-simulated ones
+    /// (a sweep only).
+    pub counterfactuals: Vec<TrajectoryScores>,
+}
+
+/// What an array of a predictions file predicts, told by its name's suffix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Predicted {
+    Edges,
+    Trajectory,
+    PerFrame,
+    Counterfactual,
+}
+
+impl Predicted {
+    const ALL: [Predicted; 4] =
+        [Predicted::Edges, Predicted::Trajectory, Predicted::PerFrame, Predicted::Counterfactual];
+
+    fn suffix(self) -> &'static str {
+        match self {
+            Predicted::Edges => "",
+            Predicted::Trajectory => TRAJECTORY_SUFFIX,
+            Predicted::PerFrame => PER_FRAME_SUFFIX,
+            Predicted::Counterfactual => COUNTERFACTUAL_SUFFIX,
+        }
+    }
+
+    fn what(self) -> &'static str {
+        match self {
+            Predicted::Edges => "edge scores",
+            Predicted::Trajectory => "trajectories",
+            Predicted::PerFrame => "per-frame edge scores",
+            Predicted::Counterfactual => "counterfactual trajectories",
+        }
+    }
+
+    /// The scenario folder an array names and what it predicts.
+    fn of(name: &str) -> (&str, Predicted) {
+        Predicted::ALL[1..]
+            .iter()
+            .find_map(|&p| name.strip_suffix(p.suffix()).map(|folder| (folder, p)))
+            .unwrap_or((name, Predicted::Edges))
+    }
+}
+
+/// Where the truth is: a `gen` dataset, or a sweep's pairs.
+struct Truth {
+    dir: PathBuf,
+    expansion: Expansion,
+    keys: Vec<ScenarioKey>,
+    /// Scenario folders carry the causal and direct graphs.
+    effects: bool,
+    sweep: bool,
+}
+
+impl Truth {
+    fn open(dir: &Path) -> Result<Truth, String> {
+        if !dir.join("manifest.json").exists() {
+            if let Some(sweep) = Sweep::open(dir)? {
+                return Ok(Truth {
+                    dir: sweep.dir,
+                    expansion: sweep.expansion,
+                    keys: sweep.keys,
+                    effects: false,
+                    sweep: true,
+                });
+            }
+        }
+        let Dataset { dir, record, expansion, keys } = Dataset::open_complete(dir)?;
+        Ok(Truth { dir, effects: record.effects, expansion, keys, sweep: false })
+    }
+
+    fn require_graph(&self, graph: GraphKind) -> Result<(), String> {
+        if graph != GraphKind::Designed && !self.effects {
+            let why = if self.sweep {
+                "a counterfactual sweep's factual runs carry the designed graph only"
+            } else {
+                "it was generated with gen --no-effects (regenerate it without that flag, or use the designed graph)"
+            };
+            return Err(format!("{} has no {} graph: {why}", self.dir.display(), graph.name()));
+        }
+        Ok(())
+    }
 }
 
 /// One scored scenario's predictions, checked against its files.
 struct ScenarioPredictions {
     group: String,
     split: Split,
+    /// The scenario's folder (a sweep pair's factual run).
     dir: PathBuf,
-    edges: Option<Vec<f64>>,
-    trajectory: Option<(usize, Vec<f64>)>,
+    /// A sweep pair's counterfactual run.
+    counterfactual_dir: Option<PathBuf>,
+    /// Indexed by [`Predicted`] (in `Predicted::ALL` order).
+    arrays: [Option<NamedArray>; 4],
+}
+
+impl ScenarioPredictions {
+    fn get(&self, what: Predicted) -> Option<&NamedArray> {
+        self.arrays[what as usize].as_ref()
+    }
 }
 
 /// What one scenario contributes: per graph, its scored pairs (negated
-/// scores, so that lower is more likely, as [`super::metrics`] ranks); and
-/// its trajectory error per step.
+/// scores, so that lower is more likely, as [`super::metrics`] ranks); the
+/// pairs of every frame with the frame count; and its trajectory errors
+/// per step.
 struct ScenarioResult {
     pairs: Vec<Vec<ScoredPair>>,
+    frame_pairs: Option<(Vec<ScoredPair>, usize)>,
     step_errors: Vec<f64>,
+    counterfactual_errors: Vec<f64>,
 }
 
-/// Scores the predictions file `predictions` against the dataset in
-/// `dataset`. Everything wrong with the predictions (an array naming no
-/// scenario, a wrong shape, a NaN, a partly scored split, nothing to score)
-/// is an [`Error::Input`] naming the file and array; nothing is scored then.
+/// Scores the predictions file `predictions` against the dataset (or
+/// counterfactual sweep) in `dataset`. Everything wrong with the
+/// predictions (an array naming no scenario, a wrong shape, a NaN, a partly
+/// scored split, nothing to score) is an [`Error::Input`] naming the file
+/// and array; nothing is scored then.
 pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -> Result<EvaluationReport, Error> {
     if let Some(t) = options.threshold.filter(|t| !t.is_finite()) {
         return Err(Error::Input(format!("--threshold must be a finite number, not {t}")));
@@ -165,24 +288,24 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     if options.graphs.is_empty() {
         return Err(Error::input("give at least one graph kind to score against"));
     }
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
+    let truth = Truth::open(dataset).map_err(Error::Input)?;
     for &graph in &options.graphs {
-        opened.require_graph(graph).map_err(Error::Input)?;
+        truth.require_graph(graph).map_err(Error::Input)?;
     }
     let arrays = read_npz(predictions).map_err(Error::Input)?;
-    let scored = match_scenarios(&opened, predictions, arrays, options)?;
+    let scored = match_scenarios(&truth, predictions, arrays, options)?;
     let results: Vec<ScenarioResult> = scored
         .par_iter()
-        .map(|s| score_scenario(s, &opened, options))
+        .map(|s| score_scenario(s, &truth, options))
         .collect::<Result<_, String>>()
         .map_err(Error::Input)?;
-    Ok(summarise(&opened, dataset, predictions, options, &scored, &results))
+    Ok(summarise(&truth, dataset, predictions, options, &scored, &results))
 }
 
 /// Pairs every array with its scenario and checks names, shapes, values and
 /// coverage.
 fn match_scenarios(
-    opened: &Dataset,
+    truth: &Truth,
     file: &Path,
     arrays: Vec<NamedArray>,
     options: &EvaluateOptions,
@@ -190,13 +313,21 @@ fn match_scenarios(
     let bad = |message: String| Error::Input(format!("{}: {message}", file.display()));
     let mut by_folder: BTreeMap<String, ScenarioPredictions> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
-    for key in &opened.keys {
+    for key in &truth.keys {
         let folder = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
-        let dir = opened.dir.join(&key.group).join(key.split.name()).join(key.folder_name());
+        let pair = truth.dir.join(&key.group).join(key.split.name()).join(key.folder_name());
+        let (dir, counterfactual_dir) =
+            if truth.sweep { (pair.join("factual"), Some(pair.join("counterfactual"))) } else { (pair, None) };
         order.push(folder.clone());
         by_folder.insert(
             folder,
-            ScenarioPredictions { group: key.group.clone(), split: key.split, dir, edges: None, trajectory: None },
+            ScenarioPredictions {
+                group: key.group.clone(),
+                split: key.split,
+                dir,
+                counterfactual_dir,
+                arrays: Default::default(),
+            },
         );
     }
     if arrays.is_empty() {
@@ -204,51 +335,78 @@ fn match_scenarios(
                         folder (e.g. cars08_edges50/test/00000)"
             .to_string()));
     }
+    let world = truth.expansion.spec.world;
     for array in arrays {
-        let (folder, is_trajectory) = match array.name.strip_suffix(TRAJECTORY_SUFFIX) {
-            Some(folder) => (folder.to_string(), true),
-            None => (array.name.clone(), false),
-        };
+        let (folder, what) = Predicted::of(&array.name);
         let example = order.first().map(String::as_str).unwrap_or("<group>/<split>/<index>");
-        let Some(scenario) = by_folder.get_mut(&folder) else {
+        let Some(scenario) = by_folder.get_mut(folder) else {
             return Err(bad(format!(
-                "array {:?} names no scenario of {}: name arrays by scenario folder, e.g. {example} (edge scores) or \
-                 {example}{TRAJECTORY_SUFFIX} (a predicted trajectory)",
+                "array {:?} names no scenario of {}: name arrays by scenario folder, e.g. {example} (edge scores), \
+                 {example}{TRAJECTORY_SUFFIX} (a predicted trajectory), {example}{PER_FRAME_SUFFIX} (per-frame edge \
+                 scores) or {example}{COUNTERFACTUAL_SUFFIX} (a counterfactual trajectory, for a sweep)",
                 array.name,
-                opened.dir.display()
+                truth.dir.display()
             )));
         };
+        if what == Predicted::PerFrame && world != WorldKind::City {
+            return Err(bad(format!(
+                "array {:?}: per-frame graphs come from interactions.csv, which only the city world writes; this \
+                 dataset is {}-world",
+                array.name,
+                world.name()
+            )));
+        }
+        if what == Predicted::Counterfactual && !truth.sweep {
+            return Err(bad(format!(
+                "array {:?}: counterfactual trajectories are scored against a counterfactual --sweep output, and {} \
+                 is a gen dataset",
+                array.name,
+                truth.dir.display()
+            )));
+        }
         let summary = ScenarioSummary::read(&scenario.dir).map_err(Error::Failure)?;
         let (cars, frames) = (summary.cars.len(), summary.frames as usize);
         let shape = &array.shape;
-        if is_trajectory {
-            let fits = shape.len() == 3 && shape[1] == cars && shape[2] == 2 && shape[0] >= 1;
-            if !fits {
+        match what {
+            Predicted::Trajectory | Predicted::Counterfactual => {
+                let fits = shape.len() == 3 && shape[1] == cars && shape[2] == 2 && shape[0] >= 1;
+                if !fits {
+                    return Err(bad(format!(
+                        "array {:?} has shape {shape:?}; a predicted trajectory of this scenario is [steps, {cars}, \
+                         2] (steps >= 1; px, py in bird's-eye pixels)",
+                        array.name
+                    )));
+                }
+                if options.history + shape[0] > frames {
+                    return Err(bad(format!(
+                        "array {:?} predicts {} steps after {} frames of history, but the scenario has {frames} \
+                         frames: predict at most {} steps, or give --history at most {}",
+                        array.name,
+                        shape[0],
+                        options.history,
+                        frames.saturating_sub(options.history),
+                        frames.saturating_sub(shape[0])
+                    )));
+                }
+            }
+            Predicted::PerFrame if shape.as_slice() != [frames, cars, cars] => {
                 return Err(bad(format!(
-                    "array {:?} has shape {shape:?}; a predicted trajectory of this scenario is [steps, {cars}, 2] \
-                     (steps >= 1; px, py in bird's-eye pixels)",
+                    "array {:?} has shape {shape:?}; per-frame edge scores of this scenario are [{frames}, {cars}, \
+                     {cars}] ([t, i, j]: car i bound car j's speed at frame t)",
                     array.name
                 )));
             }
-            if options.history + shape[0] > frames {
+            Predicted::Edges if shape.as_slice() != [cars, cars] => {
                 return Err(bad(format!(
-                    "array {:?} predicts {} steps after {} frames of history, but the scenario has {frames} frames: \
-                     predict at most {} steps, or give --history at most {}",
-                    array.name,
-                    shape[0],
-                    options.history,
-                    frames.saturating_sub(options.history),
-                    frames.saturating_sub(shape[0])
+                    "array {:?} has shape {shape:?}; edge scores of this scenario are [{cars}, {cars}] ([i, j]: car \
+                     i leads car j)",
+                    array.name
                 )));
             }
-        } else if shape.as_slice() != [cars, cars] {
-            return Err(bad(format!(
-                "array {:?} has shape {shape:?}; edge scores of this scenario are [{cars}, {cars}] ([i, j]: car i \
-                 leads car j)",
-                array.name
-            )));
+            Predicted::Edges | Predicted::PerFrame => {}
         }
-        let off_diagonal = |i: usize| is_trajectory || i / cars != i % cars;
+        let graph_like = matches!(what, Predicted::Edges | Predicted::PerFrame);
+        let off_diagonal = |i: usize| !graph_like || (i % (cars * cars)) / cars != i % cars;
         if let Some(i) = (0..array.values.len()).find(|&i| off_diagonal(i) && !array.values[i].is_finite()) {
             let mut index = Vec::new();
             let mut rest = i;
@@ -262,22 +420,15 @@ fn match_scenarios(
                 array.name, array.values[i]
             )));
         }
-        if is_trajectory {
-            scenario.trajectory = Some((shape[0], array.values));
-        } else {
-            scenario.edges = Some(array.values);
-        }
+        scenario.arrays[what as usize] = Some(array);
     }
     // Coverage: a group and split scored in part is an error.
-    for (kind, has) in [
-        ("edge scores", (|s: &ScenarioPredictions| s.edges.is_some()) as fn(&ScenarioPredictions) -> bool),
-        ("trajectories", |s: &ScenarioPredictions| s.trajectory.is_some()),
-    ] {
+    for what in Predicted::ALL {
         let mut splits: BTreeMap<(String, &'static str), (usize, Vec<&str>)> = BTreeMap::new();
         for folder in &order {
             let s = &by_folder[folder];
             let entry = splits.entry((s.group.clone(), s.split.name())).or_default();
-            if has(s) {
+            if s.get(what).is_some() {
                 entry.0 += 1;
             } else {
                 entry.1.push(folder);
@@ -286,8 +437,9 @@ fn match_scenarios(
         for ((group, split), (present, missing)) in splits {
             if present > 0 && !missing.is_empty() {
                 return Err(bad(format!(
-                    "has {kind} for {present} of the {} scenarios of {group}/{split}; missing {} (first {:?}): score \
+                    "has {} for {present} of the {} scenarios of {group}/{split}; missing {} (first {:?}): score \
                      every scenario of a split, or none",
+                    what.what(),
                     present + missing.len(),
                     missing.len(),
                     missing[0]
@@ -298,49 +450,87 @@ fn match_scenarios(
     Ok(order
         .into_iter()
         .filter_map(|folder| by_folder.remove(&folder))
-        .filter(|s| s.edges.is_some() || s.trajectory.is_some())
+        .filter(|s| s.arrays.iter().any(Option::is_some))
         .collect())
 }
 
 /// Reads one scenario's truth and scores its predictions.
-fn score_scenario(
-    s: &ScenarioPredictions,
-    opened: &Dataset,
-    options: &EvaluateOptions,
-) -> Result<ScenarioResult, String> {
+fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOptions) -> Result<ScenarioResult, String> {
+    let summary = ScenarioSummary::read(&s.dir)?;
+    let (frames, cars) = (summary.frames as usize, summary.cars.len());
+    let off_diagonal = |i: &usize| i / cars != i % cars;
     let mut pairs = Vec::new();
-    if let Some(scores) = &s.edges {
+    if let Some(scores) = s.get(Predicted::Edges) {
         for &graph in &options.graphs {
-            let summary = ScenarioSummary::read_graph(&s.dir, graph)?;
-            let cars = summary.cars.len();
+            let graph = if graph == GraphKind::Designed {
+                summary.clone()
+            } else {
+                ScenarioSummary::read_graph(&s.dir, graph)?
+            };
             let mut linked = vec![false; cars * cars];
-            for [a, b] in &summary.graph {
+            for [a, b] in &graph.graph {
                 linked[*a as usize * cars + *b as usize] = true;
             }
-            let scored = (0..cars * cars).filter(|i| i / cars != i % cars).map(|i| (-scores[i], linked[i])).collect();
-            pairs.push(scored);
+            pairs.push((0..cars * cars).filter(off_diagonal).map(|i| (-scores.values[i], linked[i])).collect());
         }
     }
-    let mut step_errors = Vec::new();
-    if let Some((steps, predicted)) = &s.trajectory {
-        let summary = ScenarioSummary::read(&s.dir)?;
-        let (frames, cars) = (summary.frames as usize, summary.cars.len());
-        let poses = PoseLog::read(&s.dir, frames, cars)?;
-        let image = &opened.spec().image;
-        let (w, h) = (image.width as f64, image.height as f64);
-        for step in 0..*steps {
-            let frame = options.history + step;
-            let mut total = 0.0;
-            for car in 0..cars {
-                let truth = poses.at(frame, car);
-                let at = (step * cars + car) * 2;
-                let (dx, dy) = ((predicted[at] - truth.px) / w, (predicted[at + 1] - truth.py) / h);
-                total += (dx * dx + dy * dy) / 2.0;
+    let frame_pairs = match s.get(Predicted::PerFrame) {
+        None => None,
+        Some(scores) => {
+            let records = read_interactions(&s.dir.join(INTERACTIONS_CSV), frames, cars)?;
+            let mut scored = Vec::with_capacity(frames * cars * cars.saturating_sub(1));
+            for t in 0..frames {
+                let at = t * cars * cars;
+                for i in (0..cars * cars).filter(off_diagonal) {
+                    let (cause, effect) = (i / cars, i % cars);
+                    let linked = records[t * cars + effect].other_car == Some(cause);
+                    scored.push((-scores.values[at + i], linked));
+                }
             }
-            step_errors.push(total / cars as f64);
+            Some((scored, frames))
         }
+    };
+    let image = &truth.expansion.spec.image;
+    let size = (image.width as f64, image.height as f64);
+    let mut step_errors = Vec::new();
+    if let Some(predicted) = s.get(Predicted::Trajectory) {
+        let poses = PoseLog::read(&s.dir, frames, cars)?;
+        step_errors = trajectory_errors(predicted, &poses, options.history, size);
     }
-    Ok(ScenarioResult { pairs, step_errors })
+    let mut counterfactual_errors = Vec::new();
+    if let (Some(predicted), Some(dir)) = (s.get(Predicted::Counterfactual), &s.counterfactual_dir) {
+        let poses = PoseLog::read(dir, frames, cars)?;
+        counterfactual_errors = trajectory_errors(predicted, &poses, options.history, size);
+    }
+    Ok(ScenarioResult { pairs, frame_pairs, step_errors, counterfactual_errors })
+}
+
+/// The normalised squared error of a predicted `[steps, cars, 2]`
+/// trajectory against `poses` at each step after `history`, over the cars
+/// on the map (a removed car is parked off it and not scored).
+fn trajectory_errors(predicted: &NamedArray, poses: &PoseLog, history: usize, (w, h): (f64, f64)) -> Vec<f64> {
+    let (steps, cars) = (predicted.shape[0], predicted.shape[1]);
+    (0..steps)
+        .map(|step| {
+            let (mut total, mut scored) = (0.0, 0usize);
+            for car in 0..cars {
+                let truth = poses.at(history + step, car);
+                if CarState::is_parked_at(truth.x, truth.y) {
+                    continue;
+                }
+                let at = (step * cars + car) * 2;
+                let (dx, dy) = ((predicted.values[at] - truth.px) / w, (predicted.values[at + 1] - truth.py) / h);
+                total += (dx * dx + dy * dy) / 2.0;
+                scored += 1;
+            }
+            // Every car removed: nothing was left to predict.
+            if scored == 0 {
+                0.0
+            } else {
+                total / scored as f64
+            }
+        })
+        .collect()
 }
 
 /// Mean and standard error (None for fewer than two values).
@@ -367,96 +557,132 @@ fn threshold_for(options: &EvaluateOptions, val_pairs: &[ScoredPair]) -> (f64, &
     }
 }
 
+/// A scenario's scored pairs of one graph and how many graphs they span
+/// (1, or the frames of a per-frame graph), for SHD per graph.
+type GraphPairs<'a> = (&'a [ScoredPair], usize);
+
+/// Edge rows of one graph for every group and split that has its scores.
+fn edge_rows<'a>(
+    graph: &'static str,
+    truth: &Truth,
+    options: &EvaluateOptions,
+    scored: &[ScenarioPredictions],
+    results: &'a [ScenarioResult],
+    pairs_of: impl Fn(&'a ScenarioResult) -> Option<GraphPairs<'a>>,
+) -> Vec<EdgeScores> {
+    let mut rows = Vec::new();
+    for group in &truth.expansion.spec.groups {
+        let name = group.name();
+        let in_split = |split: Split| -> Vec<GraphPairs<'a>> {
+            scored
+                .iter()
+                .zip(results)
+                .filter(|(s, _)| s.group == name && s.split == split)
+                .filter_map(|(_, r)| pairs_of(r))
+                .collect()
+        };
+        let val: Vec<ScoredPair> = in_split(Split::Val).iter().flat_map(|(p, _)| p.iter().copied()).collect();
+        let (threshold, threshold_from) = threshold_for(options, &val);
+        for split in Split::ALL {
+            let scenarios = in_split(split);
+            if scenarios.is_empty() {
+                continue;
+            }
+            let all: Vec<ScoredPair> = scenarios.iter().flat_map(|(p, _)| p.iter().copied()).collect();
+            let per_scenario: Vec<(Counts, usize)> =
+                scenarios.iter().map(|(p, graphs)| (Counts::at(p, -threshold), *graphs)).collect();
+            let f1s: Vec<f64> = per_scenario.iter().map(|(c, _)| c.f1().unwrap_or(1.0)).collect();
+            let shds: Vec<f64> = per_scenario
+                .iter()
+                .map(|(c, graphs)| (c.false_positives + c.false_negatives) as f64 / *graphs as f64)
+                .collect();
+            let counts = Counts::at(&all, -threshold);
+            let (f1, f1_se) = mean_se(&f1s);
+            let (shd, shd_se) = mean_se(&shds);
+            rows.push(EdgeScores {
+                graph,
+                group: name.clone(),
+                cars: group.cars,
+                edge_proportion: group.edge_proportion,
+                split: split.name(),
+                scenarios: scenarios.len(),
+                pairs: all.len(),
+                true_edges: counts.true_positives + counts.false_negatives,
+                predicted_edges: counts.true_positives + counts.false_positives,
+                threshold,
+                threshold_from,
+                precision: counts.precision(),
+                recall: counts.recall(),
+                f1,
+                f1_se,
+                auroc: auroc(&all),
+                auprc: average_precision(&all),
+                shd,
+                shd_se,
+            });
+        }
+    }
+    rows
+}
+
+/// Error rows per group and split from each scenario's per-step errors.
+fn trajectory_rows(
+    truth: &Truth,
+    scored: &[ScenarioPredictions],
+    results: &[ScenarioResult],
+    errors_of: impl Fn(&ScenarioResult) -> &[f64],
+) -> Vec<TrajectoryScores> {
+    let mut rows = Vec::new();
+    for group in &truth.expansion.spec.groups {
+        let name = group.name();
+        for split in Split::ALL {
+            let errors: Vec<&[f64]> = scored
+                .iter()
+                .zip(results)
+                .filter(|(s, r)| s.group == name && s.split == split && !errors_of(r).is_empty())
+                .map(|(_, r)| errors_of(r))
+                .collect();
+            let longest = errors.iter().map(|e| e.len()).max().unwrap_or(0);
+            let steps = (0..longest)
+                .map(|k| {
+                    let at_step: Vec<f64> = errors.iter().filter_map(|e| e.get(k).copied()).collect();
+                    let (mse, se) = mean_se(&at_step);
+                    StepError { step: k + 1, mse, se, scenarios: at_step.len() }
+                })
+                .collect::<Vec<_>>();
+            if !steps.is_empty() {
+                rows.push(TrajectoryScores {
+                    group: name.clone(),
+                    cars: group.cars,
+                    edge_proportion: group.edge_proportion,
+                    split: split.name(),
+                    scenarios: errors.len(),
+                    steps,
+                });
+            }
+        }
+    }
+    rows
+}
+
 fn summarise(
-    opened: &Dataset,
+    truth: &Truth,
     dataset: &Path,
     predictions: &Path,
     options: &EvaluateOptions,
     scored: &[ScenarioPredictions],
     results: &[ScenarioResult],
 ) -> EvaluationReport {
-    let spec = opened.spec();
+    let spec = &truth.expansion.spec;
     let mut edges = Vec::new();
-    let mut trajectories = Vec::new();
     for (g, &graph) in options.graphs.iter().enumerate() {
-        for group in &spec.groups {
-            let name = group.name();
-            let in_split = |split: Split| -> Vec<&ScenarioResult> {
-                scored
-                    .iter()
-                    .zip(results)
-                    .filter(|(s, r)| s.group == name && s.split == split && !r.pairs.is_empty())
-                    .map(|(_, r)| r)
-                    .collect()
-            };
-            let val: Vec<ScoredPair> = in_split(Split::Val).iter().flat_map(|r| r.pairs[g].iter().copied()).collect();
-            let (threshold, threshold_from) = threshold_for(options, &val);
-            for split in Split::ALL {
-                let rows = in_split(split);
-                if rows.is_empty() {
-                    continue;
-                }
-                let all: Vec<ScoredPair> = rows.iter().flat_map(|r| r.pairs[g].iter().copied()).collect();
-                let per_scenario: Vec<Counts> = rows.iter().map(|r| Counts::at(&r.pairs[g], -threshold)).collect();
-                let f1s: Vec<f64> = per_scenario.iter().map(|c| c.f1().unwrap_or(1.0)).collect();
-                let shds: Vec<f64> =
-                    per_scenario.iter().map(|c| (c.false_positives + c.false_negatives) as f64).collect();
-                let counts = Counts::at(&all, -threshold);
-                let (f1, f1_se) = mean_se(&f1s);
-                let (shd, shd_se) = mean_se(&shds);
-                edges.push(EdgeScores {
-                    graph,
-                    group: name.clone(),
-                    cars: group.cars,
-                    edge_proportion: group.edge_proportion,
-                    split: split.name(),
-                    scenarios: rows.len(),
-                    pairs: all.len(),
-                    true_edges: counts.true_positives + counts.false_negatives,
-                    predicted_edges: counts.true_positives + counts.false_positives,
-                    threshold,
-                    threshold_from,
-                    precision: counts.precision(),
-                    recall: counts.recall(),
-                    f1,
-                    f1_se,
-                    auroc: auroc(&all),
-                    auprc: average_precision(&all),
-                    shd,
-                    shd_se,
-                });
-            }
-        }
+        edges.extend(edge_rows(graph.name(), truth, options, scored, results, |r| {
+            r.pairs.get(g).map(|p| (p.as_slice(), 1))
+        }));
     }
-    for group in &spec.groups {
-        let name = group.name();
-        for split in Split::ALL {
-            let rows: Vec<&ScenarioResult> = scored
-                .iter()
-                .zip(results)
-                .filter(|(s, r)| s.group == name && s.split == split && !r.step_errors.is_empty())
-                .map(|(_, r)| r)
-                .collect();
-            let longest = rows.iter().map(|r| r.step_errors.len()).max().unwrap_or(0);
-            let steps = (0..longest)
-                .map(|k| {
-                    let at_step: Vec<f64> = rows.iter().filter_map(|r| r.step_errors.get(k).copied()).collect();
-                    let (mse, se) = mean_se(&at_step);
-                    StepError { step: k + 1, mse, se, scenarios: at_step.len() }
-                })
-                .collect::<Vec<_>>();
-            if !steps.is_empty() {
-                trajectories.push(TrajectoryScores {
-                    group: name.clone(),
-                    cars: group.cars,
-                    edge_proportion: group.edge_proportion,
-                    split: split.name(),
-                    scenarios: rows.len(),
-                    steps,
-                });
-            }
-        }
-    }
+    edges.extend(edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, |r| {
+        r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
+    }));
     EvaluationReport {
         dataset: dataset.display().to_string(),
         predictions: predictions.display().to_string(),
@@ -464,7 +690,8 @@ fn summarise(
         image_size: [spec.image.width, spec.image.height],
         history_frames: options.history,
         edges,
-        trajectories,
+        trajectories: trajectory_rows(truth, scored, results, |r| &r.step_errors),
+        counterfactuals: trajectory_rows(truth, scored, results, |r| &r.counterfactual_errors),
     }
 }
 
@@ -476,8 +703,9 @@ fn cell(value: Option<f64>, none: &str) -> String {
 impl EvaluationReport {
     /// The report as a long CSV table, one measured value per row: `group,
     /// cars, edge_proportion, split, graph, metric, step, value, se,
-    /// scenarios` (graph empty for trajectory errors, step empty for edge
-    /// metrics, se empty where there is none).
+    /// scenarios` (graph empty for trajectory errors, `trajectory_mse` and
+    /// `counterfactual_mse`; step empty for edge metrics; se empty where
+    /// there is none).
     pub fn to_csv(&self) -> String {
         let mut out = String::from("group,cars,edge_proportion,split,graph,metric,step,value,se,scenarios\n");
         for e in &self.edges {
@@ -497,17 +725,18 @@ impl EvaluationReport {
                     e.cars,
                     e.edge_proportion,
                     e.split,
-                    e.graph.name(),
+                    e.graph,
                     cell(value, ""),
                     cell(se, ""),
                     e.scenarios
                 );
             }
         }
-        for t in &self.trajectories {
+        let trajectories = self.trajectories.iter().map(|t| ("trajectory_mse", t));
+        for (metric, t) in trajectories.chain(self.counterfactuals.iter().map(|t| ("counterfactual_mse", t))) {
             for s in &t.steps {
                 out += &format!(
-                    "{},{},{},{},,trajectory_mse,{},{},{},{}\n",
+                    "{},{},{},{},,{metric},{},{},{},{}\n",
                     t.group,
                     t.cars,
                     t.edge_proportion,
@@ -552,7 +781,7 @@ impl fmt::Display for EvaluationReport {
                 writeln!(
                     f,
                     "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>9.4} {:<7} {:>6} {:>6} {:>12} {:>6} {:>6} {:>12}",
-                    e.graph.name(),
+                    e.graph,
                     e.group,
                     e.split,
                     e.scenarios,
@@ -573,17 +802,26 @@ impl fmt::Display for EvaluationReport {
                 f,
                 "edges: a pair is called linked when its score is above the threshold (from: val = best F1 on the val \
                  split, given, or default 0.5); F1 and SHD are means over scenarios, P, R, AUROC and AUPRC over all \
-                 pairs"
+                 pairs; per-frame: every frame's pairs against interactions.csv, SHD per frame"
             )?;
         }
-        if !self.trajectories.is_empty() {
+        for (rows, title) in [
+            (&self.trajectories, "trajectories"),
+            (
+                &self.counterfactuals,
+                "counterfactual trajectories (against the re-simulated runs; removed cars not scored)",
+            ),
+        ] {
+            if rows.is_empty() {
+                continue;
+            }
             let shown = [1usize, 5, 10, 20];
             write!(f, "{:<16} {:<5} {:>5} {:>6}", "group", "split", "scen", "steps")?;
             for step in &shown {
                 write!(f, " {:>15}", format!("MSE@{step}"))?;
             }
             writeln!(f)?;
-            for t in &self.trajectories {
+            for t in rows {
                 write!(f, "{:<16} {:<5} {:>5} {:>6}", t.group, t.split, t.scenarios, t.steps.len())?;
                 for step in &shown {
                     let value = t.steps.get(step - 1).map_or("-".to_string(), |s| {
@@ -595,8 +833,8 @@ impl fmt::Display for EvaluationReport {
             }
             writeln!(
                 f,
-                "trajectories: mean squared error of bird's-eye positions normalised by the image size ({} x {} px) \
-                 at steps ahead of frame {}, mean over scenarios ± standard error",
+                "{title}: mean squared error of bird's-eye positions normalised by the image size ({} x {} px) at \
+                 steps ahead of frame {}, mean over scenarios ± standard error",
                 self.image_size[0], self.image_size[1], self.history_frames
             )?;
         }

@@ -37,6 +37,12 @@ impl CarState {
         let position = PARKING + DVec2::new(10.0 * id as f64, 0.0);
         CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 }
     }
+
+    /// Whether a logged position (metres, as poses.csv rounds it) is a
+    /// removed car's parking spot rather than a place on the map.
+    pub fn is_parked_at(x: f64, y: f64) -> bool {
+        (y - PARKING.y).abs() < 0.5 && x > PARKING.x - 0.5
+    }
 }
 
 /// Something that happened during a scenario, for `events.csv`.
