@@ -660,7 +660,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             Ok(())
         }
         Command::Export(ExportCommand::Nsdr(args)) => {
-            let n = export_nsdr(&args.dataset, &args.out, progress(args.quiet)).map_err(Error::Failure)?;
+            let n = export_nsdr(&args.dataset, &args.out, progress(args.quiet))?;
             say(format!("wrote annotations.json for {n} scenarios under {}", args.out.display()))
         }
         Command::Export(ExportCommand::Vcdn(args)) => {

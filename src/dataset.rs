@@ -259,8 +259,8 @@ impl PoseLog {
     }
 }
 
-/// The record `counterfactual --sweep` writes last (`sweep.json`), so a
-/// folder holding it is a finished sweep.
+/// The record of a `counterfactual --sweep` (`sweep.json`): written with
+/// `"complete": false` when it starts, and `true` when it has finished.
 pub const SWEEP_RECORD: &str = "sweep.json";
 
 /// A finished `counterfactual --sweep` output opened for reading: the spec
@@ -287,6 +287,12 @@ impl Sweep {
             format: String,
             spec: serde_json::Value,
             limit: Option<u32>,
+            /// Written false when a sweep starts, true when it has finished.
+            #[serde(default = "finished")]
+            complete: bool,
+        }
+        fn finished() -> bool {
+            true
         }
         let record: Record = serde_json::from_slice(&bytes)
             .map_err(|e| format!("{}: not a counterfactual sweep's record: {e}", path.display()))?;
@@ -295,6 +301,12 @@ impl Sweep {
                 "{}: format {:?} is not causalcity-counterfactual-sweep/1",
                 path.display(),
                 record.format
+            ));
+        }
+        if !record.complete {
+            return Err(format!(
+                "{} is not complete: finish it with its counterfactual --sweep command first",
+                dir.display()
             ));
         }
         let spec: DatasetSpec = serde_json::from_value(record.spec)

@@ -136,7 +136,8 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
     for (parent, message) in parents {
         let Ok(entries) = std::fs::read_dir(&parent) else { continue };
         for e in entries.flatten() {
-            if !allowed.contains(&e.path()) {
+            let lock = parent == dir && crate::output::claim::is_lock_file(&e.file_name().to_string_lossy());
+            if !allowed.contains(&e.path()) && !lock {
                 problems.push(Problem { path: e.path(), message: message.into() });
             }
         }

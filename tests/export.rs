@@ -90,7 +90,7 @@ fn nri_exports_match_the_pose_logs_in_both_layouts() {
     }
     // An unfinished or foreign folder is refused with a clear message.
     let output = run(&["export", "nri", dir.to_str().unwrap(), "--out", dir.join("x").to_str().unwrap()]);
-    assert_eq!(output.status.code(), Some(1));
+    assert_eq!(output.status.code(), Some(2), "a folder that is no dataset is bad input");
     assert!(String::from_utf8_lossy(&output.stderr).contains("no manifest.json"));
 }
 

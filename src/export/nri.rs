@@ -30,6 +30,7 @@
 
 use crate::dataset::{Dataset, GraphKind, ScenarioSummary};
 use crate::error::Error;
+use crate::output::claim::{claim, Writer};
 use crate::output::io_err;
 use crate::output::layout::INTERACTIONS_CSV;
 use crate::output::logs::read_interactions;
@@ -217,7 +218,7 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
 /// `dynamic` on a toy-world dataset is an input error, found before anything
 /// is written.
 pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Failure)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
     opened.require_graph(options.graph).map_err(Error::Input)?;
     if options.dynamic && opened.spec().world != WorldKind::City {
         return Err(Error::Input(format!(
@@ -226,7 +227,22 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
             opened.spec().world.name()
         )));
     }
+    if !valid_suffix(&options.suffix) {
+        return Err(Error::Input(format!(
+            "--suffix {:?}: a suffix is part of a file name: letters, digits, '-', '_' and '.' only, no '..' \
+             (e.g. _airsim_final)",
+            options.suffix
+        )));
+    }
+    let _claim = claim(out, Writer::Export, &format!("export nri {}", dataset.display()))?;
     export_nri_groups(&opened, out, options).map_err(Error::Failure)
+}
+
+/// Whether `suffix` keeps every file it names inside its group folder.
+fn valid_suffix(suffix: &str) -> bool {
+    suffix.len() <= 64
+        && !suffix.contains("..")
+        && suffix.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {

@@ -5,7 +5,9 @@
 //! `output::annotations`).
 
 use crate::dataset::{Dataset, PoseLog, ScenarioSummary};
+use crate::error::Error;
 use crate::output::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
+use crate::output::claim::{claim, Writer};
 use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
 use crate::progress::{Progress, ProgressMode};
@@ -14,26 +16,29 @@ use std::path::{Path, PathBuf};
 
 /// Writes annotations for every scenario of `dataset` under `out`; returns
 /// how many scenarios were written.
-pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, String> {
-    let opened = Dataset::open_complete(dataset)?;
+pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, Error> {
+    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
     if !opened.record.images {
-        return Err(format!(
+        return Err(Error::Input(format!(
             "{} has no masks (made with --no-images): NS-DR annotations need them; regenerate without --no-images",
             dataset.display()
-        ));
+        )));
     }
+    let _claim = claim(out, Writer::Export, &format!("export nsdr {}", dataset.display()))?;
     let (w, h) = (opened.spec().image.width, opened.spec().image.height);
     let digits = frame_digits(opened.spec().frames);
     let jobs: Vec<(PathBuf, PathBuf)> =
         opened.scenario_paths().into_iter().map(|(dir, relative)| (dir, out.join(relative))).collect();
     let bar = Progress::new(jobs.len() as u64, progress);
-    jobs.par_iter().try_for_each(|(source, target)| {
-        let json = annotate(source, w, h, digits)?;
-        std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
-        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-        bar.inc();
-        Ok::<(), String>(())
-    })?;
+    jobs.par_iter()
+        .try_for_each(|(source, target)| {
+            let json = annotate(source, w, h, digits)?;
+            std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
+            write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+            bar.inc();
+            Ok::<(), String>(())
+        })
+        .map_err(Error::Failure)?;
     bar.finish();
     Ok(jobs.len())
 }

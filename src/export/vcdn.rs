@@ -97,11 +97,16 @@ pub fn vcdn_arrays(dir: &Path, graph: GraphKind) -> Result<VcdnArrays, String> {
 /// Exports every scenario of `dataset` into `out`, linking the pairs of
 /// `graph`; returns how many files were written.
 pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: ProgressMode) -> Result<usize, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Failure)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
     opened.require_graph(graph).map_err(Error::Input)?;
     if !cfg!(feature = "hdf5") {
         return Err(Error::Failure(NO_HDF5.into()));
     }
+    let _claim = crate::output::claim::claim(
+        out,
+        crate::output::claim::Writer::Export,
+        &format!("export vcdn {}", dataset.display()),
+    )?;
     let jobs: Vec<(PathBuf, PathBuf)> = opened
         .scenario_paths()
         .into_iter()

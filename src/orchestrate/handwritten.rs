@@ -12,7 +12,9 @@
 
 use super::run::{load_spec, scenario_writer, write_simulated, GenError};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
+use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
+use crate::output::claim::{claim, Writer};
 use crate::output::manifest::Products;
 use crate::output::number::push_fixed;
 use crate::output::writer::ScenarioWriter;
@@ -128,6 +130,8 @@ fn load_file(options: &RunOptions) -> Result<(Arc<CityMap>, Vec<LoadedScenario>)
 pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
     let (_, scenarios) = load_file(options)?;
     let out = options.out();
+    let describe = format!("run {}", options.scenario_file.display());
+    let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
     scenarios
         .par_iter()
         .map(|s| {
@@ -199,6 +203,8 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
     };
     let pairs = pair_plans(&options.scenario_file, &scenarios, extras)?;
     let out = options.out();
+    let describe = format!("counterfactual {}", options.scenario_file.display());
+    let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
     pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
@@ -377,6 +383,41 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         .num_threads(threads)
         .build()
         .map_err(|e| RunError::Write(GenError::Threads { threads, reason: e.to_string() }))?;
+    let describe = format!("counterfactual --sweep {}", options.spec_path.display());
+    let _claim = claim(&out, Writer::Sweep, &describe).map_err(GenError::Claim)?;
+    let record = |pairs: Option<usize>| {
+        let mut json = serde_json::to_vec_pretty(&serde_json::json!({
+            "format": "causalcity-counterfactual-sweep/1",
+            "version": env!("CARGO_PKG_VERSION"),
+            "spec": expansion.spec,
+            "limit": options.limit,
+            "kinds": options.kinds,
+            "complete": pairs.is_some(),
+            "pairs": pairs,
+        }))
+        .expect("sweep record serialises");
+        json.push(b'\n');
+        json
+    };
+    // One sweep per folder: the same spec, limit and kinds, or a new folder.
+    let record_path = out.join(SWEEP_RECORD);
+    if let Ok(old) = std::fs::read(&record_path) {
+        let differs = |field: &str| {
+            let old: serde_json::Value = serde_json::from_slice(&old).unwrap_or_default();
+            let new: serde_json::Value = serde_json::from_slice(&record(None)).expect("our own JSON");
+            old[field] != new[field]
+        };
+        let differences: Vec<&str> =
+            ["version", "spec", "limit", "kinds"].into_iter().filter(|field| differs(field)).collect();
+        if !differences.is_empty() {
+            return Err(RunError::Usage(format!(
+                "{} holds a sweep made differently (differs: {}): use another --out",
+                out.display(),
+                differences.join(", ")
+            )));
+        }
+    }
+    write_atomically(&record_path, &record(None)).map_err(GenError::from)?;
     let keys = expansion.keys(options.limit);
     let writer = scenario_writer(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
@@ -399,17 +440,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         })
         .map_err(RunError::Write)?;
     bar.finish();
-    let record = serde_json::json!({
-        "format": "causalcity-counterfactual-sweep/1",
-        "version": env!("CARGO_PKG_VERSION"),
-        "spec": expansion.spec,
-        "limit": options.limit,
-        "kinds": options.kinds,
-        "pairs": summaries.len(),
-    });
-    let mut json = serde_json::to_vec_pretty(&record).expect("sweep record serialises");
-    json.push(b'\n');
-    write_atomically(&out.join("sweep.json"), &json).map_err(GenError::from)?;
+    write_atomically(&record_path, &record(Some(summaries.len()))).map_err(GenError::from)?;
     let affected: usize = summaries.iter().map(|s| s.affected.len()).sum();
     Ok(SweepSummary {
         out,

@@ -4,8 +4,10 @@
 //! own; either way the shard manifests say what each contains.
 
 use super::run::GenError;
+use crate::output::claim::{claim, Writer};
 use crate::output::manifest::{Manifest, ManifestRecord};
-use crate::output::{io_err, scenario_dir, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use rayon::prelude::*;
 use std::collections::BTreeSet;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -43,21 +45,33 @@ fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
 
 /// Merges shard outputs in `sources` (and any already in `out`) into `out`.
 pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
-    fs::create_dir_all(out).map_err(io_err(out))?;
+    for source in sources {
+        if !source.is_dir() {
+            return Err(GenError::Input(format!("{} is not a folder", source.display())));
+        }
+    }
+    // No shard may still be running, and --out takes nothing but a dataset.
+    let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
     let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
     };
     let others: Vec<&PathBuf> = sources.iter().filter(|s| !same(s, out)).collect();
+    let mut source_claims = Vec::new();
     let mut manifests = shard_manifests(out)?;
     for source in &others {
-        if !source.is_dir() {
-            return Err(GenError::Manifest(format!("{} is not a folder", source.display())));
+        source_claims.push(claim(source, Writer::Merge, "merge").map_err(GenError::Claim)?);
+        let found = shard_manifests(source)?;
+        if found.is_empty() {
+            return Err(GenError::Input(format!(
+                "{} holds no shard manifest (shards/K-of-N.json): it is no `gen --shard K/N` output; nothing was moved",
+                source.display()
+            )));
         }
-        manifests.extend(shard_manifests(source)?);
+        manifests.extend(found);
     }
     let Some((_, first)) = manifests.first().cloned() else {
-        return Err(GenError::Manifest(format!(
+        return Err(GenError::Input(format!(
             "no shard manifests (shards/K-of-N.json) in {}{}: run `causalcity gen --shard K/N` first",
             out.display(),
             if others.is_empty() { "" } else { " or the shard folders given" }
@@ -74,7 +88,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             || record.limit != first.limit
             || shard.count != count
         {
-            return Err(GenError::Manifest(format!(
+            return Err(GenError::Input(format!(
                 "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --limit or shard count differ) than {}",
                 path.display(),
                 manifests[0].0.display()
@@ -84,7 +98,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let present: BTreeSet<u32> = manifests.iter().map(|(_, r)| r.shard.expect("shard").index).collect();
     let missing: Vec<String> = (0..count).filter(|i| !present.contains(i)).map(|i| i.to_string()).collect();
     if !missing.is_empty() {
-        return Err(GenError::Manifest(format!(
+        return Err(GenError::Input(format!(
             "shards {} of {count} are missing: run `causalcity gen --shard K/{count}` for them",
             missing.join(", ")
         )));
@@ -92,14 +106,14 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let incomplete: Vec<String> =
         manifests.iter().filter(|(_, r)| !r.complete).map(|(_, r)| r.shard.expect("shard").index.to_string()).collect();
     if !incomplete.is_empty() {
-        return Err(GenError::Manifest(format!(
+        return Err(GenError::Input(format!(
             "shards {} did not finish: rerun their gen commands to resume them",
             incomplete.join(", ")
         )));
     }
     if let Some(existing) = ManifestRecord::read(&out.join("manifest.json")).map_err(GenError::Manifest)? {
         if existing.spec_sha256 != first.spec_sha256 || existing.version != first.version {
-            return Err(GenError::Manifest(format!(
+            return Err(GenError::Input(format!(
                 "{} already holds another dataset: merge into an empty folder",
                 out.display()
             )));
@@ -126,7 +140,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
                 Some(first) => {
                     let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(first.join(CHECKSUMS)).ok());
                     if a.is_none() || a != b {
-                        return Err(GenError::Manifest(format!(
+                        return Err(GenError::Input(format!(
                             "{} and {} hold the same scenario with different contents; nothing was moved",
                             from.display(),
                             first.display()
@@ -145,10 +159,28 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         }
     }
     if !absent.is_empty() {
-        return Err(GenError::Manifest(format!(
+        return Err(GenError::Input(format!(
             "{} scenarios are in no shard (first: {}): were all shard folders given? Nothing was moved",
             absent.len(),
             absent[..absent.len().min(3)].join(", ")
+        )));
+    }
+
+    // Every scenario is whole: its files are there and match its checksums.
+    let in_place: Vec<PathBuf> = keys
+        .iter()
+        .map(|k| scenario_dir(out, &k.group, k.split.name(), &k.folder_name()))
+        .filter(|to| to.is_dir())
+        .collect();
+    let to_check: Vec<&Path> =
+        moves.iter().map(|(from, _)| from.as_path()).chain(in_place.iter().map(PathBuf::as_path)).collect();
+    let damaged: Vec<String> = to_check.par_iter().filter_map(|dir| verify_scenario(dir).err()).collect();
+    if !damaged.is_empty() {
+        return Err(GenError::Input(format!(
+            "{} scenarios are damaged (first: {}): rerun their shards' gen commands, which rewrite damaged \
+             scenarios; nothing was moved",
+            damaged.len(),
+            damaged[0]
         )));
     }
 

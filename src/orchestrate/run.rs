@@ -1,9 +1,10 @@
 //! The `gen` job: read and check the spec, plan every scenario, simulate,
 //! render and write them in parallel, then write the manifest.
 
+use crate::output::claim::{claim, ClaimError, Writer};
 use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
 use crate::output::writer::{ScenarioWriteError, ScenarioWriter, WriterBuffers};
-use crate::output::{io_err, scenario_dir, write_atomically, WriteError, PARTIAL_PREFIX};
+use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, WriteError, PARTIAL_PREFIX};
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::progress::{Progress, ProgressMode};
 use crate::spec::{DatasetSpec, SpecError};
@@ -79,8 +80,11 @@ pub struct Summary {
     /// Scenarios this run was asked for (its shard's share when sharded).
     pub scenarios: u64,
     pub written: u64,
-    /// Already complete from an earlier run.
+    /// Already complete from an earlier run (verified against their
+    /// checksums).
     pub skipped: u64,
+    /// Found damaged (a file missing or changed) and written again.
+    pub repaired: u64,
     pub failed: u64,
     pub frame_pairs: u64,
     pub bytes: u64,
@@ -99,11 +103,12 @@ impl std::fmt::Display for Summary {
         let secs = self.elapsed.as_secs_f64();
         write!(
             f,
-            "wrote {} scenarios ({} frame pairs, {:.1} MB), skipped {} already complete, {} failed, to {} in {:.1} s: {:.1} scenarios/s on {} threads",
+            "wrote {} scenarios ({} frame pairs, {:.1} MB), skipped {} already complete, {}{} failed, to {} in {:.1} s: {:.1} scenarios/s on {} threads",
             self.written,
             self.frame_pairs,
             self.bytes as f64 / 1e6,
             self.skipped,
+            if self.repaired > 0 { format!("rewrote {} damaged, ", self.repaired) } else { String::new() },
             self.failed,
             self.out.display(),
             secs,
@@ -141,6 +146,11 @@ pub enum GenError {
     Manifest(String),
     #[error("interrupted: {done} of {total} scenarios are complete in {out}. Rerun the same command to resume.")]
     Interrupted { done: u64, total: u64, out: PathBuf },
+    #[error(transparent)]
+    Claim(ClaimError),
+    /// Input that cannot be used (a folder that is no shard, a missing shard).
+    #[error("{0}")]
+    Input(String),
 }
 
 impl From<WriteError> for GenError {
@@ -164,7 +174,8 @@ impl GenError {
     /// 2 for bad input, 130 when interrupted, 1 for failures while running.
     pub fn exit_code(&self) -> i32 {
         match self {
-            GenError::Spec { .. } | GenError::Mixed { .. } => 2,
+            GenError::Spec { .. } | GenError::Mixed { .. } | GenError::Input(_) => 2,
+            GenError::Claim(e) => e.exit_code(),
             GenError::Interrupted { .. } => 130,
             _ => 1,
         }
@@ -306,16 +317,36 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
         effects: options.effects,
     };
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
-    std::fs::create_dir_all(&out).map_err(io_err(&out))?;
+    // One writer per folder (the shards of one job together), and only into
+    // a folder that holds nothing but a dataset.
+    let shard = options.shard.map(|s| (s.index, s.count));
+    let describe = match options.shard {
+        Some(s) => format!("gen {} --shard {s}", options.spec_path.display()),
+        None => format!("gen {}", options.spec_path.display()),
+    };
+    let _claim = claim(&out, Writer::Gen { shard }, &describe).map_err(GenError::Claim)?;
 
-    // One dataset per folder: same spec, tool version and image setting.
+    // One dataset per folder: same spec, tool version and image setting;
+    // the shards of one folder split it the same way.
     let existing = existing_manifests(&out)?;
-    let differences: Vec<String> = existing
+    let mut differences: Vec<String> = existing
         .iter()
         .flat_map(|(_, record)| record.differences(&expansion.spec, products))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();
+    if let Some(ours) = options.shard {
+        for (path, record) in &existing {
+            if let Some(theirs) = record.shard.filter(|theirs| theirs.count != ours.count) {
+                differences.push(format!(
+                    "shards: {} splits the dataset into {} shards, this run into {}",
+                    path.display(),
+                    theirs.count,
+                    ours.count
+                ));
+            }
+        }
+    }
     if !differences.is_empty() {
         if !options.force {
             return Err(GenError::Mixed { out, differences });
@@ -357,6 +388,7 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
     let skipped = AtomicU64::new(0);
+    let repaired = AtomicU64::new(0);
     let result = pool.install(|| {
         keys.par_iter().try_for_each_init(
             || writer.buffers(),
@@ -365,7 +397,14 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
                 }
                 let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
-                if target.exists() {
+                let intact = target.exists()
+                    && verify_scenario(&target)
+                        .map_err(|why| {
+                            eprintln!("warning: {} is damaged ({why}): writing it again", target.display());
+                            repaired.fetch_add(1, Ordering::Relaxed);
+                        })
+                        .is_ok();
+                if intact {
                     skipped.fetch_add(1, Ordering::Relaxed);
                 } else {
                     let written_bytes = write_scenario(expansion, &writer, key, target, buffers, &times)?;
@@ -395,6 +434,7 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
         scenarios: keys.len() as u64,
         written,
         skipped: skipped.load(Ordering::Relaxed),
+        repaired: repaired.load(Ordering::Relaxed),
         failed: 0,
         frame_pairs: if options.images { written * expansion.spec.frames as u64 } else { 0 },
         bytes: bytes.load(Ordering::Relaxed) + final_manifest.len() as u64,

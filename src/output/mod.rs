@@ -7,6 +7,7 @@
 
 pub mod annotations;
 pub mod arrays;
+pub mod claim;
 pub mod footage;
 pub mod layout;
 pub mod logs;
@@ -190,4 +191,32 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let temp = path.with_file_name(name);
     fs::write(&temp, bytes).map_err(io_err(&temp))?;
     fs::rename(&temp, path).map_err(io_err(path))
+}
+
+/// Checks a finished scenario folder against its `checksums.sha256`: the
+/// listing is there and every file it lists is there with its hash. Says
+/// what is wrong otherwise (a rerun rewrites such a scenario; `merge`
+/// refuses it).
+pub fn verify_scenario(dir: &Path) -> Result<(), String> {
+    let listing_path = dir.join(CHECKSUMS);
+    let listing = fs::read_to_string(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let mut listed = 0usize;
+    for line in listing.lines() {
+        let Some((hash, name)) = line.split_once("  ") else {
+            return Err(format!("{}: {line:?} is not a checksum line", listing_path.display()));
+        };
+        if name.contains("..") || name.starts_with('/') {
+            return Err(format!("{}: {name:?} is not a file of the scenario", listing_path.display()));
+        }
+        let path = dir.join(name);
+        let data = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        if hex(&Sha256::digest(&data)) != hash {
+            return Err(format!("{}: its checksum does not match {CHECKSUMS}", path.display()));
+        }
+        listed += 1;
+    }
+    if listed == 0 {
+        return Err(format!("{}: lists no files", listing_path.display()));
+    }
+    Ok(())
 }

@@ -1,0 +1,425 @@
+//! Who may write into an output folder: one command at a time, and only a
+//! command that would have written what the folder already holds.
+//!
+//! A writer *claims* its folder before it writes anything: it takes an
+//! advisory lock on `<out>/.causalcity.lock` (exclusive; `gen --shard K/N`
+//! takes it shared, plus an exclusive lock of its own shard, so the shards
+//! of one job can share a folder while a duplicated shard cannot), then
+//! checks the folder's top level against what it writes itself. The OS
+//! drops a lock when its process ends, however it ends, so a killed run
+//! never leaves a folder locked. A claim removes its lock files when it
+//! ends; a killed run leaves its (hidden) one, which the next claim takes
+//! over and `validate` ignores.
+
+use std::fs::{self, File, TryLockError};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The folder lock's file name.
+pub const LOCK_FILE: &str = ".causalcity.lock";
+
+/// How every sweep.json's `format` begins.
+pub const SWEEP_FORMAT_PREFIX: &str = "causalcity-counterfactual-sweep/";
+
+/// Whether `name` (a file in an output folder's top level) is one of the
+/// lock files claims leave.
+pub fn is_lock_file(name: &str) -> bool {
+    name.starts_with(".causalcity") && name.ends_with(".lock")
+}
+
+/// What a command writes into its folder, which decides what it may find
+/// there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Writer {
+    /// `gen` (with its shard, if any): manifest.json, shards/, group folders.
+    Gen { shard: Option<(u32, u32)> },
+    /// `merge --out`: a dataset's files.
+    Merge,
+    /// `counterfactual --sweep`: sweep.json and group folders of pairs.
+    Sweep,
+    /// `run` / `counterfactual`: one folder per scenario of a file.
+    Scenarios,
+    /// `export nri|nsdr|vcdn`: arrays or per-scenario files, never inside a
+    /// dataset.
+    Export,
+}
+
+impl Writer {
+    fn command(self) -> &'static str {
+        match self {
+            Writer::Gen { shard: None } => "gen",
+            Writer::Gen { shard: Some(_) } => "gen --shard",
+            Writer::Merge => "merge",
+            Writer::Sweep => "counterfactual --sweep",
+            Writer::Scenarios => "run / counterfactual",
+            Writer::Export => "export",
+        }
+    }
+}
+
+/// Why a folder cannot be claimed; every case is the user's to resolve
+/// (exit status 2), except [`ClaimError::Io`].
+#[derive(Debug, thiserror::Error)]
+pub enum ClaimError {
+    #[error(
+        "{dir} is in use by another causalcity process ({holder}): wait for it to finish, or stop it and rerun \
+         (a stopped run resumes; the lock goes with its process, so a killed run never keeps a folder locked)"
+    )]
+    InUse { dir: PathBuf, holder: String },
+    #[error("{dir} holds {what}: {command} writes only {writes}. Use another --out{hint}")]
+    Foreign { dir: PathBuf, what: String, command: &'static str, writes: &'static str, hint: &'static str },
+    #[error("{dir} is inside {inside} ({ancestor}), which it would then fail to validate: use an --out outside it")]
+    Inside { dir: PathBuf, inside: &'static str, ancestor: PathBuf },
+    #[error("cannot write {path}: {source}\nFix the folder's permissions, or choose another --out.")]
+    Io { path: PathBuf, source: std::io::Error },
+}
+
+impl ClaimError {
+    /// 2 when the folder is the problem (in use, foreign content), 1 for
+    /// an I/O failure.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            ClaimError::Io { .. } => 1,
+            _ => 2,
+        }
+    }
+}
+
+impl From<ClaimError> for crate::error::Error {
+    fn from(e: ClaimError) -> Self {
+        match e.exit_code() {
+            2 => crate::error::Error::Input(e.to_string()),
+            _ => crate::error::Error::Failure(e.to_string()),
+        }
+    }
+}
+
+/// A claimed folder: the locks are held until this is dropped, and their
+/// files removed then (the last of a job's shards removes the shared one),
+/// so a finished folder holds no lock file; one left by a killed process
+/// is simply taken over. A folder the claim created is removed again if
+/// nothing was written into it (a command refused after claiming leaves no
+/// trace).
+#[derive(Debug)]
+pub struct Claim {
+    /// (path, open file holding the lock, shared).
+    locks: Vec<(PathBuf, File, bool)>,
+    /// False where the filesystem does not support locks (some network
+    /// filesystems): the claim then only checked the folder's contents.
+    pub locked: bool,
+    created: Option<PathBuf>,
+}
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        for (path, file, shared) in self.locks.drain(..).rev() {
+            // A shared lock's file goes only with its last holder: taking it
+            // exclusively succeeds only then.
+            if !shared || file.try_lock().is_ok() {
+                let _ = fs::remove_file(&path);
+            }
+            drop(file);
+        }
+        if let Some(dir) = &self.created {
+            let _ = fs::remove_dir(dir); // only when empty
+        }
+    }
+}
+
+/// Claims `dir` (created if missing) for `writer`: locks it, then checks
+/// what it holds. `describe` says who holds the lock, for a refused second
+/// writer (e.g. the command line).
+pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ClaimError::Io { path, source }
+    };
+    check_ancestors(dir)?;
+    check_contents(dir, writer)?;
+    let created = (!dir.exists()).then(|| dir.to_path_buf());
+    fs::create_dir_all(dir).map_err(io(dir))?;
+    let holder = format!("pid {} on {}: {describe}", std::process::id(), host_name());
+    let mut claim = Claim { locks: Vec::new(), locked: true, created };
+    let shard = match writer {
+        Writer::Gen { shard: Some((index, count)) } => {
+            Some(dir.join(format!(".causalcity-shard-{index}-of-{count}.lock")))
+        }
+        _ => None,
+    };
+    let folder_lock = dir.join(LOCK_FILE);
+    match lock(&folder_lock, shard.is_some()).map_err(io(&folder_lock))? {
+        Lock::Held(file) => {
+            if shard.is_none() {
+                record_holder(&file, &holder);
+            }
+            claim.locks.push((folder_lock, file, shard.is_some()));
+        }
+        Lock::Busy => return Err(ClaimError::InUse { dir: dir.to_path_buf(), holder: holders(dir) }),
+        Lock::Unsupported => claim.locked = false,
+    }
+    if let Some(shard_lock) = shard {
+        match lock(&shard_lock, false).map_err(io(&shard_lock))? {
+            Lock::Held(file) => {
+                record_holder(&file, &holder);
+                claim.locks.push((shard_lock, file, false));
+            }
+            Lock::Busy => return Err(ClaimError::InUse { dir: dir.to_path_buf(), holder: read_holder(&shard_lock) }),
+            Lock::Unsupported => claim.locked = false,
+        }
+    }
+    // Checked again under the lock: another writer may have finished in between.
+    check_contents(dir, writer)?;
+    Ok(claim)
+}
+
+/// The outcome of trying one lock file.
+enum Lock {
+    Held(File),
+    Busy,
+    Unsupported,
+}
+
+/// Takes the lock of the file at `path` without waiting. A holder removes
+/// its file when it is done, so a lock taken on a file that is no longer
+/// the one at `path` is let go and taken again on the new one.
+fn lock(path: &Path, shared: bool) -> std::io::Result<Lock> {
+    loop {
+        let file = fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(path)?;
+        let taken = if shared { file.try_lock_shared() } else { file.try_lock() };
+        match taken {
+            Ok(()) if is_at(&file, path) => return Ok(Lock::Held(file)),
+            Ok(()) => continue,
+            // Its holder may be removing it as it finishes.
+            Err(TryLockError::WouldBlock) if !is_at(&file, path) => continue,
+            Err(TryLockError::WouldBlock) => return Ok(Lock::Busy),
+            Err(TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => return Ok(Lock::Unsupported),
+            Err(TryLockError::Error(e)) => return Err(e),
+        }
+    }
+}
+
+/// Whether `file` is the file now at `path`.
+fn is_at(file: &File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (file.metadata(), fs::metadata(path)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (file, path);
+        true
+    }
+}
+
+/// Writes who holds a lock into its file (best effort: it only improves a
+/// refused writer's message).
+fn record_holder(mut file: &File, holder: &str) {
+    let _ = file.set_len(0);
+    let _ = file.write_all(format!("{holder}\n").as_bytes());
+}
+
+fn read_holder(path: &Path) -> String {
+    match fs::read_to_string(path) {
+        Ok(text) if !text.trim().is_empty() => text.trim().to_string(),
+        _ => "a process that did not say who it is".to_string(),
+    }
+}
+
+/// Who holds `dir`'s locks: the exclusive holder, or the shards running.
+fn holders(dir: &Path) -> String {
+    let mut shard_holders: Vec<String> = fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".causalcity-shard-"))
+        .filter(|e| File::open(e.path()).is_ok_and(|f| matches!(f.try_lock_shared(), Err(TryLockError::WouldBlock))))
+        .map(|e| read_holder(&e.path()))
+        .collect();
+    shard_holders.sort();
+    if shard_holders.is_empty() {
+        read_holder(&dir.join(LOCK_FILE))
+    } else {
+        shard_holders.join("; ")
+    }
+}
+
+fn host_name() -> String {
+    fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .unwrap_or_else(|| "this host".to_string())
+}
+
+/// A group folder's name (`cars08_edges50`), as every spec names them.
+fn is_group_folder(name: &str) -> bool {
+    name.strip_prefix("cars").and_then(|rest| rest.split_once("_edges")).is_some_and(|(cars, edges)| {
+        !cars.is_empty()
+            && !edges.is_empty()
+            && cars.chars().all(|c| c.is_ascii_digit())
+            && edges.chars().all(|c| c.is_ascii_digit())
+    })
+}
+
+/// What a folder's top level shows it to be.
+struct Contents {
+    /// manifest.json or shards/*.json: a `gen` dataset.
+    dataset: bool,
+    /// sweep.json: a counterfactual sweep.
+    sweep: bool,
+    /// Entries by name, with whether each is a folder.
+    entries: Vec<(String, bool)>,
+}
+
+fn read_contents(dir: &Path) -> Result<Option<Contents>, ClaimError> {
+    let listing = match fs::read_dir(dir) {
+        Ok(listing) => listing,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) if e.kind() == std::io::ErrorKind::NotADirectory => {
+            return Err(ClaimError::Io { path: dir.to_path_buf(), source: e });
+        }
+        Err(source) => return Err(ClaimError::Io { path: dir.to_path_buf(), source }),
+    };
+    let mut entries: Vec<(String, bool)> = listing
+        .flatten()
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), e.file_type().is_ok_and(|t| t.is_dir())))
+        .filter(|(name, _)| !is_lock_file(name))
+        .collect();
+    entries.sort();
+    let has = |name: &str| entries.iter().any(|(n, _)| n == name);
+    let shard_manifests = fs::read_dir(dir.join("shards"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|e| e.file_name().to_string_lossy().ends_with(".json"));
+    Ok(Some(Contents { dataset: has("manifest.json") || shard_manifests, sweep: has("sweep.json"), entries }))
+}
+
+/// A few names for a message.
+fn some_names(names: &[&str]) -> String {
+    let shown: Vec<String> = names.iter().take(3).map(|n| format!("{n:?}")).collect();
+    match names.len() {
+        n if n > 3 => format!("{} and {} more", shown.join(", "), n - 3),
+        _ => shown.join(", "),
+    }
+}
+
+/// Refuses a folder that holds anything `writer` would not have written.
+fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
+    let Some(contents) = read_contents(dir)? else { return Ok(()) };
+    let foreign = |what: String, writes: &'static str, hint: &'static str| {
+        Err(ClaimError::Foreign { dir: dir.to_path_buf(), what, command: writer.command(), writes, hint })
+    };
+    let unknown = |allowed: &dyn Fn(&str, bool) -> bool| -> Vec<&str> {
+        contents.entries.iter().filter(|(n, is_dir)| !allowed(n, *is_dir)).map(|(n, _)| n.as_str()).collect()
+    };
+    match writer {
+        Writer::Gen { .. } | Writer::Merge => {
+            const WRITES: &str = "a dataset (manifest.json, shards/, group folders such as cars08_edges50/)";
+            if contents.sweep {
+                return foreign("a counterfactual sweep (sweep.json)".into(), WRITES, "");
+            }
+            let dataset_entry = |n: &str, is_dir: bool| {
+                matches!(n, "manifest.json" | "manifest.json.partial")
+                    || (is_dir && (n == "shards" || n == super::layout::JOB_LOGS_DIR || is_group_folder(n)))
+            };
+            let strangers = unknown(&dataset_entry);
+            if !strangers.is_empty() {
+                return foreign(format!("what no dataset holds ({})", some_names(&strangers)), WRITES, "");
+            }
+            let groups: Vec<&str> =
+                contents.entries.iter().filter(|(n, d)| *d && is_group_folder(n)).map(|(n, _)| n.as_str()).collect();
+            if !contents.dataset && !groups.is_empty() {
+                return foreign(
+                    format!(
+                        "group folders ({}) but no manifest.json, so no dataset says it wrote them",
+                        some_names(&groups)
+                    ),
+                    WRITES,
+                    ", or move them away if they are yours",
+                );
+            }
+        }
+        Writer::Sweep => {
+            const WRITES: &str = "counterfactual pairs (sweep.json, group folders such as cars08_edges50/)";
+            if contents.dataset {
+                return foreign("a gen dataset (manifest.json)".into(), WRITES, "");
+            }
+            let sweep_entry = |n: &str, is_dir: bool| {
+                matches!(n, "sweep.json" | "sweep.json.partial") || (is_dir && is_group_folder(n))
+            };
+            let strangers = unknown(&sweep_entry);
+            if !strangers.is_empty() {
+                return foreign(format!("what no sweep holds ({})", some_names(&strangers)), WRITES, "");
+            }
+            let has_groups = contents.entries.iter().any(|(n, d)| *d && is_group_folder(n));
+            if !contents.sweep && has_groups {
+                return foreign(
+                    "group folders but no sweep.json, so no sweep says it wrote them".into(),
+                    WRITES,
+                    ", or move them away if they are yours",
+                );
+            }
+        }
+        Writer::Scenarios | Writer::Export => {
+            let writes = if writer == Writer::Scenarios {
+                "one folder per scenario of the file"
+            } else {
+                "an export (.npy arrays, or per-scenario folders of annotations or .h5 files)"
+            };
+            if contents.dataset {
+                return foreign("a gen dataset (manifest.json)".into(), writes, "");
+            }
+            if contents.sweep {
+                return foreign("a counterfactual sweep (sweep.json)".into(), writes, "");
+            }
+            let own = |n: &str, is_dir: bool| {
+                is_dir || (writer == Writer::Export && n.ends_with(".npy") && !n.starts_with('.'))
+            };
+            let strangers = unknown(&own);
+            if !strangers.is_empty() {
+                return foreign(format!("files it did not write ({})", some_names(&strangers)), writes, "");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a folder inside a dataset or sweep (an export or scenario run
+/// into `data/toy/exports` would make the dataset fail `validate`).
+fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
+    let absolute = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let holds = |path: PathBuf, format: &str| {
+        path.is_file() && fs::read(&path).is_ok_and(|b| b.windows(format.len()).any(|w| w == format.as_bytes()))
+    };
+    for ancestor in absolute.ancestors().skip(1) {
+        let inside = if holds(ancestor.join("manifest.json"), super::manifest::MANIFEST_FORMAT) {
+            "a gen dataset"
+        } else if holds(ancestor.join("sweep.json"), SWEEP_FORMAT_PREFIX) {
+            "a counterfactual sweep"
+        } else {
+            continue;
+        };
+        return Err(ClaimError::Inside { dir: dir.to_path_buf(), inside, ancestor: ancestor.to_path_buf() });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn group_folders_are_recognised_by_name() {
+        assert!(is_group_folder("cars08_edges50"));
+        assert!(is_group_folder("cars12_edges100"));
+        assert!(!is_group_folder("cars_edges50"));
+        assert!(!is_group_folder("cars08_edges"));
+        assert!(!is_group_folder("Scenario_1"));
+    }
+}

@@ -1,0 +1,275 @@
+//! One writer per folder, and only into folders a command would have
+//! written itself: concurrent `gen` runs never mix, a damaged scenario is
+//! rewritten on rerun and refused by `merge`, and every command refuses a
+//! foreign `--out` with exit 2, leaving it as it was.
+
+mod common;
+
+use common::{bin, city_spec, fresh_dir, gen_ok, hash_tree, run, toy_spec, write_spec};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn stderr(output: &std::process::Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn assert_valid(dir: &Path) {
+    let output = run(&["validate", dir.to_str().unwrap()]);
+    assert!(
+        output.status.success(),
+        "validate {}: {}{}",
+        dir.display(),
+        String::from_utf8_lossy(&output.stdout),
+        stderr(&output)
+    );
+}
+
+/// A city spec with images that takes about a second to generate, so that
+/// two runs started a few hundred milliseconds apart overlap.
+fn slow_spec(dir: &Path) -> std::path::PathBuf {
+    write_spec(dir, &city_spec("busy", &[(8, 0.5), (4, 0.5)], (6, 1, 1), 100, "{}"))
+}
+
+/// Start offsets in milliseconds, drawn from a seeded stream (the same on
+/// every run of the test).
+fn offsets(n: usize) -> Vec<u64> {
+    let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
+    (0..n)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % 400
+        })
+        .collect()
+}
+
+#[test]
+fn two_gen_runs_on_one_folder_never_mix() {
+    let dir = fresh_dir("folders-two-gen");
+    let spec = slow_spec(&dir);
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet"]);
+    let expected = hash_tree(&reference);
+    let mut refused = 0;
+    for (trial, offset) in offsets(5).into_iter().enumerate() {
+        let out = dir.join(format!("trial{trial}"));
+        let args = ["gen", "--quiet", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        let first = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
+        std::thread::sleep(Duration::from_millis(offset));
+        let second = Command::new(bin()).args(args).output().unwrap();
+        let first = first.wait_with_output().unwrap();
+        for (who, output) in [("first", &first), ("second", &second)] {
+            let code = output.status.code();
+            assert!(
+                code == Some(0) || code == Some(2),
+                "trial {trial}: the {who} run exited {code:?}: {}",
+                stderr(output)
+            );
+            if code == Some(2) {
+                let message = stderr(output);
+                assert!(
+                    message.contains("is in use by another causalcity process") && message.contains("pid "),
+                    "{message}"
+                );
+                refused += 1;
+            }
+        }
+        assert!(first.status.success() || second.status.success(), "trial {trial}: neither run finished");
+        assert_valid(&out);
+        assert_eq!(hash_tree(&out), expected, "trial {trial} (second run {offset} ms later) differs from one run");
+    }
+    // The runs overlapped: the lock, not luck, kept them apart.
+    assert!(refused >= 3, "only {refused} of 5 overlapping second runs were refused");
+}
+
+#[test]
+fn duplicated_shards_are_refused_while_the_shards_of_one_job_share_a_folder() {
+    let dir = fresh_dir("folders-shards");
+    let spec = slow_spec(&dir);
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet"]);
+    let out = dir.join("shared");
+    let start = |shard: &str| {
+        Command::new(bin())
+            .args([
+                "gen",
+                "--quiet",
+                "--spec",
+                spec.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--shard",
+                shard,
+            ])
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (zero, one) = (start("0/2"), start("1/2"));
+    std::thread::sleep(Duration::from_millis(150));
+    let duplicate = start("0/2").wait_with_output().unwrap();
+    let (zero, one) = (zero.wait_with_output().unwrap(), one.wait_with_output().unwrap());
+    assert!(zero.status.success() && one.status.success(), "{}{}", stderr(&zero), stderr(&one));
+    assert_eq!(duplicate.status.code(), Some(2), "a duplicated shard ran beside its twin: {}", stderr(&duplicate));
+    assert!(stderr(&duplicate).contains("--shard 0/2"), "{}", stderr(&duplicate));
+    let merged = run(&["merge", "--out", out.to_str().unwrap()]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+    assert_valid(&out);
+    assert_eq!(hash_tree(&out), hash_tree(&reference), "shards in one folder, merged, differ from one run");
+}
+
+/// The first scenario folder of a dataset, in sorted order.
+fn first_scenario(root: &Path) -> std::path::PathBuf {
+    let groups = common::sorted_entries(root);
+    let group = groups.iter().find(|g| g.file_name().unwrap().to_string_lossy().starts_with("cars")).expect("a group");
+    let split = common::sorted_entries(group).into_iter().next().expect("a split");
+    common::sorted_entries(&split).into_iter().next().expect("a scenario")
+}
+
+#[test]
+fn a_damaged_scenario_is_rewritten_on_rerun_and_refused_by_merge() {
+    let dir = fresh_dir("folders-damaged");
+    let spec = write_spec(&dir, &toy_spec("damaged", &[(4, 0.5)], (2, 1, 1), 20));
+    let out = dir.join("data");
+    gen_ok(&spec, &out, &["--quiet"]);
+    let expected = hash_tree(&out);
+    let scenarios = common::scenario_dirs(&out);
+    std::fs::remove_file(scenarios[0].join("rgb").join("0005.png")).unwrap();
+    let poses = scenarios[1].join("poses.csv");
+    let mut bytes = std::fs::read(&poses).unwrap();
+    let last = bytes.len() - 2;
+    bytes[last] = if bytes[last] == b'0' { b'1' } else { b'0' };
+    std::fs::write(&poses, bytes).unwrap();
+    let rerun = gen_ok(&spec, &out, &["--quiet"]);
+    let message = stderr(&rerun);
+    assert_eq!(message.matches("is damaged").count(), 2, "{message}");
+    assert!(String::from_utf8_lossy(&rerun.stdout).contains("rewrote 2 damaged"));
+    assert_eq!(hash_tree(&out), expected, "the rerun did not restore the damaged scenarios");
+
+    // Shards in folders of their own; one holds a damaged scenario.
+    let shards: Vec<_> = (0..2).map(|k| dir.join(format!("shard{k}"))).collect();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--shard", &format!("{k}/2")]);
+    }
+    let victim = first_scenario(&shards[1]).join("poses.csv");
+    std::fs::write(&victim, "frame,t,car\n").unwrap();
+    let before = [hash_tree(&shards[0]), hash_tree(&shards[1])];
+    let merged = dir.join("merged");
+    let output =
+        run(&["merge", "--out", merged.to_str().unwrap(), shards[0].to_str().unwrap(), shards[1].to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
+    assert!(stderr(&output).contains("damaged") && stderr(&output).contains("poses.csv"), "{}", stderr(&output));
+    assert!(!merged.exists(), "a refused merge created its --out");
+    assert_eq!([hash_tree(&shards[0]), hash_tree(&shards[1])], before, "a refused merge moved something");
+}
+
+#[test]
+fn every_command_refuses_a_folder_it_did_not_write() {
+    let dir = fresh_dir("folders-foreign");
+    let toy_spec_path = write_spec(&dir, &toy_spec("owner", &[(4, 0.5)], (1, 1, 1), 20));
+    let toy = dir.join("toy");
+    gen_ok(&toy_spec_path, &toy, &["--quiet"]);
+    let city_dir = dir.join("cityspec");
+    std::fs::create_dir_all(&city_dir).unwrap();
+    let city_spec_path = write_spec(&city_dir, &city_spec("neighbour", &[(4, 0.5)], (1, 1, 1), 20, "{}"));
+    let sweep = dir.join("sweep");
+    let output = run(&[
+        "counterfactual",
+        "--sweep",
+        city_spec_path.to_str().unwrap(),
+        "--out",
+        sweep.to_str().unwrap(),
+        "--quiet",
+        "--no-images",
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let orphans = dir.join("orphans");
+    std::fs::create_dir_all(&orphans).unwrap();
+    common::scenario_dirs(&toy).iter().take(1).for_each(|s| {
+        let rel = s.strip_prefix(&toy).unwrap();
+        std::fs::create_dir_all(orphans.join(rel)).unwrap();
+        std::fs::write(orphans.join(rel).join("scenario.json"), "{}").unwrap();
+    });
+    let stray = dir.join("stray");
+    std::fs::create_dir_all(&stray).unwrap();
+    std::fs::write(stray.join("notes.txt"), "mine").unwrap();
+
+    let p = |path: &Path| path.to_str().unwrap().to_string();
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let cases: Vec<(Vec<String>, &Path, &str)> = vec![
+        (
+            vec!["gen".into(), "--spec".into(), p(&toy_spec_path), "--out".into(), p(&sweep)],
+            &sweep,
+            "counterfactual sweep",
+        ),
+        (
+            vec!["gen".into(), "--spec".into(), p(&toy_spec_path), "--out".into(), p(&orphans)],
+            &orphans,
+            "no manifest.json",
+        ),
+        (vec!["gen".into(), "--spec".into(), p(&toy_spec_path), "--out".into(), p(&stray)], &stray, "notes.txt"),
+        (
+            vec!["counterfactual".into(), "--sweep".into(), p(&toy_spec_path), "--out".into(), p(&sweep)],
+            &sweep,
+            "city-world",
+        ),
+        (
+            vec![
+                "counterfactual".into(),
+                "--sweep".into(),
+                p(&city_spec_path),
+                "--out".into(),
+                p(&toy),
+                "--no-images".into(),
+            ],
+            &toy,
+            "gen dataset",
+        ),
+        (vec!["export".into(), "nri".into(), p(&toy), "--out".into(), p(&toy)], &toy, "gen dataset"),
+        (
+            vec!["export".into(), "nri".into(), p(&toy), "--out".into(), p(&toy.join("nri"))],
+            &toy,
+            "inside a gen dataset",
+        ),
+        (vec!["export".into(), "nsdr".into(), p(&toy), "--out".into(), p(&sweep)], &sweep, "counterfactual sweep"),
+        (vec!["export".into(), "nri".into(), p(&toy), "--out".into(), p(&stray)], &stray, "notes.txt"),
+        (
+            vec![
+                "export".into(),
+                "nri".into(),
+                p(&toy),
+                "--out".into(),
+                p(&dir.join("nri")),
+                "--suffix".into(),
+                "/../../escaped".into(),
+            ],
+            &dir,
+            "--suffix",
+        ),
+        (vec!["run".into(), "--scenario".into(), p(&example), "--out".into(), p(&toy)], &toy, "gen dataset"),
+        (
+            vec!["counterfactual".into(), "--scenario".into(), p(&example), "--out".into(), p(&sweep)],
+            &sweep,
+            "counterfactual sweep",
+        ),
+        (vec!["merge".into(), "--out".into(), p(&dir.join("merged")), p(&toy)], &toy, "no shard manifest"),
+    ];
+    let mut checked = 0;
+    for (args, folder, says) in &cases {
+        let before = hash_tree(folder);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let output = run(&args);
+        let message = stderr(&output);
+        assert_eq!(output.status.code(), Some(2), "{args:?} exited {:?}: {message}", output.status.code());
+        assert!(message.contains(says), "{args:?} should say {says:?}: {message}");
+        assert_eq!(hash_tree(folder), before, "{args:?} changed {}", folder.display());
+        checked += 1;
+    }
+    assert_eq!(checked, cases.len());
+    for never in ["nri", "escaped.npy", "merged"] {
+        assert!(!dir.join(never).exists(), "a refused command left {never}");
+    }
+    assert_valid(&toy);
+}
