@@ -679,7 +679,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 sheet_frames: args.sheet_frames,
                 columns: args.columns,
             };
-            say(preview(&args.scenario, &args.out, &options).map_err(Error::Failure)?)
+            say(preview(&args.scenario, &args.out, &options)?)
         }
         Command::Baseline(args) => report(&baseline(&args.dataset, args.max_lag, args.graph.into())?, args.json),
         Command::Evaluate(args) => {
@@ -755,7 +755,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
         Command::Stats(args) => report(&dataset_stats(&args.dataset).map_err(Error::Failure)?, args.json),
         Command::Heatmap(args) => {
             let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
-            report(&heatmap(&args.dataset, &args.out, &filter).map_err(Error::Failure)?, args.json)
+            report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)
         }
         Command::Validate(args) => {
             let found = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::Input)?;

@@ -6,6 +6,7 @@
 //! (each car's path so far) and arrows from each leader to its follower.
 
 use crate::dataset::{PoseLog, ScenarioSummary};
+use crate::error::Error;
 use crate::output::frame_digits;
 use crate::output::png::decode_gray8;
 use crate::render::text::{draw_label, Canvas};
@@ -50,7 +51,14 @@ impl std::fmt::Display for PreviewSummary {
 }
 
 /// Writes the preview of the scenario in `scenario_dir` to `out`.
-pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Result<PreviewSummary, String> {
+pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Result<PreviewSummary, Error> {
+    let kind = check_options(out, options).map_err(Error::Input)?;
+    render(scenario_dir, out, options, kind).map_err(Error::Failure)
+}
+
+/// The options' errors, found before anything is read (exit status 2), and
+/// what the output's extension asks for.
+fn check_options(out: &Path, options: &PreviewOptions) -> Result<Kind, String> {
     if !(options.scale > 0.0 && options.scale <= 1.0) {
         return Err(format!("--scale must be in (0, 1], not {}", options.scale));
     }
@@ -59,11 +67,14 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
             return Err(format!("--fps must be in (0, 100], not {fps}"));
         }
     }
-    let kind = match out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("gif") => Kind::Gif,
-        Some("png") => Kind::Sheet,
-        _ => return Err(format!("{}: the output must end in .gif (animation) or .png (contact sheet)", out.display())),
-    };
+    match out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("gif") => Ok(Kind::Gif),
+        Some("png") => Ok(Kind::Sheet),
+        _ => Err(format!("--out {}: the output must end in .gif (animation) or .png (contact sheet)", out.display())),
+    }
+}
+
+fn render(scenario_dir: &Path, out: &Path, options: &PreviewOptions, kind: Kind) -> Result<PreviewSummary, String> {
     let scenario = ScenarioSummary::read(scenario_dir)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
     let poses = PoseLog::read(scenario_dir, frames, cars)?;

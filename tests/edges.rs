@@ -132,9 +132,11 @@ fn out_of_range_flags_exit_2_naming_the_flag() {
     let out = small_dataset(&dir, (1, 0, 0));
     let scenario = out.join("cars04_edges50/train/00000");
     let spec = dir.join("spec.json");
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 7] = [
         (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--scale", "0"], "--scale"),
         (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "0"], "--fps"),
+        (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "200"], "--fps"),
+        (&["preview", scenario.to_str().unwrap(), "--out", "x.bmp"], "--out"),
         (&["baseline", out.to_str().unwrap(), "--max-lag", "NaN"], "--max-lag"),
         (&["gen", "--spec", spec.to_str().unwrap(), "--limit", "-1"], "--limit"),
         (&["gen", "--spec", spec.to_str().unwrap(), "--shard", "3/2"], "--shard"),

@@ -168,7 +168,7 @@ fn preview_writes_a_downscaled_gif_and_a_contact_sheet() {
     assert!(labels.windows(2).all(|w| w[0] != w[1]), "tiles of different frames share a label");
 
     let bad = run(&["preview", scenario.to_str().unwrap(), "--out", dir.join("s.jpg").to_str().unwrap()]);
-    assert_eq!(bad.status.code(), Some(1));
+    assert_eq!(bad.status.code(), Some(2), "an output format preview cannot write is bad input");
     assert!(String::from_utf8_lossy(&bad.stderr).contains(".gif"));
     assert!(!dir.join("s.jpg").exists());
 }

@@ -150,8 +150,12 @@ fn the_toy_heat_map_is_more_uniform_than_the_city_one() {
     }
     assert!(cvs[0] < 0.6 * cvs[1], "toy dwell CV {} should be well below the city's {}", cvs[0], cvs[1]);
     let bad = run(&["heatmap", dir.join("toy").to_str().unwrap(), "--out", "/tmp/x.png", "--group", "cars99_edges50"]);
-    assert_eq!(bad.status.code(), Some(1));
+    assert_eq!(bad.status.code(), Some(2), "a group the dataset lacks is bad input");
     assert!(String::from_utf8_lossy(&bad.stderr).contains("use one of cars04_edges50"));
+    let gif = dir.join("h.gif");
+    let bad = run(&["heatmap", dir.join("toy").to_str().unwrap(), "--out", gif.to_str().unwrap()]);
+    assert_eq!(bad.status.code(), Some(2), "{}", String::from_utf8_lossy(&bad.stderr));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains(".png") && !gif.exists());
 }
 
 #[test]

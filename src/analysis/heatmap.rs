@@ -5,6 +5,7 @@
 //! lights for the city, as in the paper's figure.
 
 use crate::dataset::Dataset;
+use crate::error::Error;
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::render::text::{draw_label, label_size, Canvas};
 use crate::spec::Split;
@@ -62,15 +63,23 @@ pub struct HeatmapFilter {
 }
 
 /// Writes the heat map of `dataset` to `out` (PNG).
-pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
-    let opened = Dataset::open_complete(dataset)?;
+pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, Error> {
+    if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        return Err(Error::Input(format!("--out {}: a heat map is a PNG: give a name ending in .png", out.display())));
+    }
+    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
     let spec = opened.spec();
     if let Some(g) = &filter.group {
         if !spec.groups.iter().any(|x| &x.name() == g) {
             let names: Vec<String> = spec.groups.iter().map(|x| x.name()).collect();
-            return Err(format!("--group {g} is not in this dataset: use one of {}", names.join(", ")));
+            return Err(Error::Input(format!("--group {g} is not in this dataset: use one of {}", names.join(", "))));
         }
     }
+    draw(&opened, out, filter).map_err(Error::Failure)
+}
+
+fn draw(opened: &Dataset, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
+    let spec = opened.spec();
     let mut dirs = Vec::new();
     for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
         for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
