@@ -78,8 +78,13 @@ impl Dataset {
 
 /// The expansion of the spec a manifest (at `path`) records.
 pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, String> {
-    let spec: DatasetSpec = serde_json::from_value(record.spec.clone())
-        .map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
+    expansion_from(record.spec.clone(), path)
+}
+
+/// The expansion of a spec recorded (as JSON) in the file at `path`.
+fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, String> {
+    let spec: DatasetSpec =
+        serde_json::from_value(spec).map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
     Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 
@@ -309,10 +314,7 @@ impl Sweep {
                 dir.display()
             ));
         }
-        let spec: DatasetSpec = serde_json::from_value(record.spec)
-            .map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
-        let expansion =
-            Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
+        let expansion = expansion_from(record.spec, &path)?;
         let keys = expansion.keys(record.limit);
         Ok(Some(Sweep { dir: dir.to_path_buf(), expansion, keys }))
     }

@@ -402,13 +402,10 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     // One sweep per folder: the same spec, limit and kinds, or a new folder.
     let record_path = out.join(SWEEP_RECORD);
     if let Ok(old) = std::fs::read(&record_path) {
-        let differs = |field: &str| {
-            let old: serde_json::Value = serde_json::from_slice(&old).unwrap_or_default();
-            let new: serde_json::Value = serde_json::from_slice(&record(None)).expect("our own JSON");
-            old[field] != new[field]
-        };
+        let old: serde_json::Value = serde_json::from_slice(&old).unwrap_or_default();
+        let new: serde_json::Value = serde_json::from_slice(&record(None)).expect("our own JSON");
         let differences: Vec<&str> =
-            ["version", "spec", "limit", "kinds"].into_iter().filter(|field| differs(field)).collect();
+            ["version", "spec", "limit", "kinds"].into_iter().filter(|field| old[field] != new[field]).collect();
         if !differences.is_empty() {
             return Err(RunError::Usage(format!(
                 "{} holds a sweep made differently (differs: {}): use another --out",
