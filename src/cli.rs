@@ -15,7 +15,7 @@ use causalcity::export::nsdr::export_nsdr;
 use causalcity::export::vcdn::export_vcdn;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
 use causalcity::orchestrate::merge::merge;
-use causalcity::orchestrate::run::{generate, GenOptions, Shard};
+use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
 use causalcity::output::manifest::Products;
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
@@ -132,7 +132,7 @@ pub struct CounterfactualArgs {
     pub limit: Option<u32>,
 
     /// --sweep: worker threads [default: every core].
-    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u32>,
 
     /// Output folder [default: data/<file name>, or data/<spec name>-counterfactual].
@@ -415,7 +415,7 @@ pub struct GenArgs {
     pub limit: Option<u32>,
 
     /// Worker threads [default: every core]. Output is identical for any value.
-    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u32>,
 
     /// Write scenario.json and the CSV logs only, no PNG frames or masks.
@@ -475,7 +475,7 @@ pub struct ValidateArgs {
     pub dir: PathBuf,
 
     /// Worker threads [default: every core].
-    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..1025))]
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u32>,
 
     /// Print the report as JSON on stdout.

@@ -21,6 +21,7 @@ current one.
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import sys
 from dataclasses import dataclass
@@ -48,11 +49,56 @@ __all__ = [
     "evaluate",
     "save_predictions",
     "HISTORY_FRAMES",
+    "MAX_THREADS",
     "InputError",
     "GenerationError",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+_U32_MAX = 2**32 - 1
+MAX_THREADS = _native.MAX_THREADS
+"""The most worker threads ``threads=`` takes, as ``gen -j``."""
+
+
+def _whole(name: str, value: Any, minimum: int, maximum: int, flag: Optional[str] = None) -> int:
+    """``value`` as an int in ``minimum..=maximum``, else :class:`InputError`
+    naming the argument, the value and the range (and the command line's
+    flag, which has the same limits)."""
+    as_flag = f" (as {flag})" if flag else ""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise InputError(f"{name}={value!r} is not a whole number: use {minimum} to {maximum}{as_flag}")
+    value = int(value)
+    if not minimum <= value <= maximum:
+        raise InputError(f"{name}={value} is out of range: use {minimum} to {maximum}{as_flag}")
+    return value
+
+
+def _optional_whole(name: str, value: Any, minimum: int, maximum: int, flag: Optional[str] = None) -> Optional[int]:
+    return None if value is None else _whole(name, value, minimum, maximum, flag)
+
+
+def _shard_pair(value: Any, name: str = "shard") -> Tuple[int, int]:
+    """(k, n) from ``(k, n)`` or ``"k/n"`` with 0 <= k < n, else :class:`InputError`."""
+    if name == "worker":
+        what, usage = "a worker", "use (worker id, workers) with 0 <= worker id < workers, e.g. (0, 2)"
+    else:
+        what, usage = "a shard", "use (k, n) or \"k/n\" with 0 <= k < n, e.g. (0, 2) or \"0/2\""
+    if isinstance(value, str):
+        parts = value.split("/")
+        if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+            raise InputError(f"{name}={value!r} is not {what}: {usage}")
+        pair: Tuple[Any, ...] = (int(parts[0]), int(parts[1]))
+    elif isinstance(value, (tuple, list)) and len(value) == 2:
+        pair = tuple(value)
+    else:
+        raise InputError(f"{name}={value!r} is not {what}: {usage}")
+    if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in pair):
+        raise InputError(f"{name}={value!r} is not {what}: {usage}")
+    k, n = int(pair[0]), int(pair[1])
+    if not (0 <= k < n <= _U32_MAX):
+        raise InputError(f"{name}={value!r} is not {what}: {usage}")
+    return k, n
 
 
 class Key(NamedTuple):
@@ -141,6 +187,7 @@ class Spec:
     def keys(self, split: Optional[str] = None, limit: Optional[int] = None) -> List[Key]:
         """Every scenario of ``split`` (all splits when None), at most ``limit``
         per split and group, in ``gen``'s fixed order."""
+        limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
         return [Key(*k) for k in self._native.keys(split, limit)]
 
     def __reduce__(self):
@@ -397,6 +444,7 @@ def simulate(
     :class:`InputError` for a group, split or index the spec does not have.
     """
     spec = _as_spec(spec)
+    index = _whole("index", index, 0, _U32_MAX)
     raw = _native.simulate(spec._native, group, split, index, images, effects)
     return _scenario(raw, Key(group, split, index))
 
@@ -417,16 +465,26 @@ def _worker() -> Tuple[int, int]:
 def _process_shard(shard: Optional[Tuple[int, int]]) -> Tuple[int, int]:
     """(rank, processes): ``shard``, else the RANK / WORLD_SIZE that
     torch.distributed launchers set, else (0, 1)."""
-    if shard is None:
-        rank, world = os.environ.get("RANK"), os.environ.get("WORLD_SIZE")
-        if rank is not None and world is not None:
-            shard = (int(rank), int(world))
-        else:
-            shard = (0, 1)
-    rank, processes = shard
-    if not (0 <= rank < processes):
-        raise InputError(f"shard {shard!r} is not a shard: use (rank, processes) with 0 <= rank < processes")
-    return rank, processes
+    if shard is not None:
+        return _shard_pair(shard)
+    rank, world = os.environ.get("RANK"), os.environ.get("WORLD_SIZE")
+    if rank is None or world is None:
+        return (0, 1)
+    values = []
+    for variable, text in (("RANK", rank), ("WORLD_SIZE", world)):
+        try:
+            values.append(int(text))
+        except ValueError:
+            raise InputError(
+                f"environment variable {variable}={text!r} is not a whole number: torch.distributed launchers "
+                "set RANK and WORLD_SIZE to integers; unset them or pass shard=(rank, processes)"
+            ) from None
+    if not 0 <= values[0] < values[1]:
+        raise InputError(
+            f"environment variables RANK={rank!r} and WORLD_SIZE={world!r} are not a shard: "
+            "use 0 <= RANK < WORLD_SIZE, or pass shard=(rank, processes)"
+        )
+    return values[0], values[1]
 
 
 class Stream:
@@ -440,7 +498,7 @@ class Stream:
         groups: Optional[Sequence[str]] = None,
         limit: Optional[int] = None,
         images: bool = False,
-        shard: Optional[Tuple[int, int]] = None,
+        shard: Union[str, Tuple[int, int], None] = None,
         threads: Optional[int] = None,
         ahead: Optional[int] = None,
         effects: bool = True,
@@ -449,8 +507,8 @@ class Stream:
         self.split = split
         self.images = images
         self.effects = effects
-        self.threads = threads
-        self.ahead = ahead
+        self.threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
+        self.ahead = _optional_whole("ahead", ahead, 1, _U32_MAX)
         self.shard = _process_shard(shard)
         keys = spec.keys(split, limit)
         if groups is not None:
@@ -469,7 +527,10 @@ class Stream:
         workers never overlap and together cover every key. ``worker``
         overrides the detected (worker id, workers)."""
         rank, processes = self.shard
-        worker_id, workers = worker if worker is not None else _worker()
+        if worker is None:
+            worker_id, workers = _worker()
+        else:
+            worker_id, workers = _shard_pair(worker, "worker")
         slot, slots = worker_id * processes + rank, processes * workers
         return self._all_keys[slot::slots]
 
@@ -498,14 +559,15 @@ def stream(
     limit: Optional[int] = None,
     images: bool = False,
     effects: bool = True,
-    shard: Optional[Tuple[int, int]] = None,
+    shard: Union[str, Tuple[int, int], None] = None,
     threads: Optional[int] = None,
     ahead: Optional[int] = None,
 ) -> Stream:
     """An iterable of the scenarios of ``split`` (of ``groups``, all when
     None; at most ``limit`` per group), generated on the fly.
 
-    Sharding: across processes by ``shard=(rank, processes)`` (default: the
+    Sharding: across processes by ``shard=(rank, processes)`` or
+    ``"rank/processes"`` (default: the
     ``RANK`` and ``WORLD_SIZE`` environment variables when both are set), and
     across ``torch.utils.data.DataLoader`` workers by
     ``torch.utils.data.get_worker_info()``. Each key goes to exactly one
@@ -650,8 +712,16 @@ def generate(
     is ``--shard k/n``, ``progress=False`` is ``--quiet``.
     """
     spec = _as_spec(spec)
-    if isinstance(shard, tuple):
-        shard = f"{shard[0]}/{shard[1]}"
+    limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
+    threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
+    if annotations and not images:
+        raise InputError(
+            "annotations=True needs images=True: annotations.json holds the frames' masks "
+            "(gen refuses --annotations with --no-images)"
+        )
+    if shard is not None:
+        k, n = _shard_pair(shard)
+        shard = f"{k}/{n}"
     summary = _native.generate(
         spec._native,
         None if out is None else os.fspath(out),
@@ -730,7 +800,8 @@ def evaluate(
     NaN, a partly scored split) raise :class:`InputError`.
     """
     graphs = [graph] if isinstance(graph, str) else list(graph)
-    text, table = _native.evaluate(os.fspath(dataset), os.fspath(predictions), graphs, int(history), threshold)
+    history = _whole("history", history, 0, 2**63 - 1, "evaluate --history")
+    text, table = _native.evaluate(os.fspath(dataset), os.fspath(predictions), graphs, history, threshold)
     if csv is not None:
         with open(os.fspath(csv), "w", encoding="utf-8") as f:
             f.write(table)

@@ -8,6 +8,8 @@ class InputError(ValueError):
 class GenerationError(RuntimeError):
     """A failure while working (a full disk, a failed write)."""
 
+MAX_THREADS: int
+
 class Array:
     """Values owned by Rust that numpy views without copying."""
 

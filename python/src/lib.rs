@@ -12,7 +12,7 @@ use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
 use causalcity::orchestrate::in_memory::Prefetch as Prefetch_;
 use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
-use causalcity::orchestrate::run::{generate_expansion, load_spec, GenError, GenOptions, Shard};
+use causalcity::orchestrate::run::{generate_expansion, load_spec, GenError, GenOptions, Shard, MAX_THREADS};
 use causalcity::output::arrays::{recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
@@ -459,6 +459,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Array>()?;
     m.add("InputError", m.py().get_type::<InputError>())?;
     m.add("GenerationError", m.py().get_type::<GenerationError>())?;
+    m.add("MAX_THREADS", MAX_THREADS)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_class::<Prefetch>()?;
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;

@@ -380,3 +380,52 @@ def test_the_gil_is_released_while_rust_works():
         sys.setswitchinterval(switch)
     assert free_rate > 0
     assert rate > 0.3 * free_rate, (rate, free_rate)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda s: causalcity.simulate(s, "cars08_edges50", "val", -1), r"index=-1 is out of range: use 0 to 4294967295"),
+        (lambda s: causalcity.simulate(s, "cars08_edges50", "val", 2**40), r"index=1099511627776 is out of range"),
+        (lambda s: causalcity.stream(s, "val", limit=-1), r"limit=-1 is out of range: use 1 to .*gen --limit"),
+        (lambda s: causalcity.stream(s, "val", threads=0), r"threads=0 is out of range: use 1 to 1024 \(as gen -j\)"),
+        (lambda s: causalcity.stream(s, "val", ahead=-2), r"ahead=-2 is out of range"),
+        (lambda s: causalcity.stream(s, "val", limit=1.5), r"limit=1.5 is not a whole number"),
+        (lambda s: causalcity.stream(s, "val", shard=(1,)), r"shard=\(1,\) is not a shard: use \(k, n\) or \"k/n\""),
+        (lambda s: causalcity.stream(s, "val", shard="2/2"), r"shard='2/2' is not a shard"),
+        (lambda s: causalcity.stream(s, "val").keys(worker=(0, 0)), r"worker=\(0, 0\) is not a worker: use \(worker id, workers\)"),
+        (lambda s: causalcity.stream(s, "val").keys(worker=(5, 2)), r"worker=\(5, 2\) is not a worker"),
+        (lambda s: causalcity.generate(s, "never-written", limit=0), r"limit=0 is out of range: use 1 to .*gen --limit"),
+        (lambda s: causalcity.generate(s, "never-written", threads=0), r"threads=0 is out of range: use 1 to 1024"),
+        (lambda s: causalcity.generate(s, "never-written", threads=100000), r"threads=100000 is out of range: use 1 to 1024"),
+        (lambda s: causalcity.generate(s, "never-written", annotations=True, images=False), r"annotations=True needs images=True"),
+        (lambda s: causalcity.generate(s, "never-written", shard=(1,)), r"shard=\(1,\) is not a shard"),
+        (lambda s: causalcity.generate(s, "never-written", shard="1/x"), r"shard='1/x' is not a shard"),
+        (lambda s: s.keys(limit=-5), r"limit=-5 is out of range"),
+    ],
+)
+def test_bad_arguments_raise_input_error_naming_argument_and_value(tmp_path, monkeypatch, call, message):
+    # Every argument is checked as the command line checks its flag: an
+    # InputError naming the argument, the value and what is allowed, and
+    # nothing written (before: OverflowError, IndexError, "too many values
+    # to unpack", or an empty dataset marked complete).
+    monkeypatch.chdir(tmp_path)
+    spec = causalcity.Spec.load(CITY_SPEC)
+    with pytest.raises(causalcity.InputError, match=message):
+        call(spec)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_shards_are_accepted_as_pairs_and_text_alike(monkeypatch):
+    spec = causalcity.Spec.load(TOY_SPEC)
+    as_text = causalcity.stream(spec, "train", shard="1/3").keys()
+    assert as_text == causalcity.stream(spec, "train", shard=(1, 3)).keys() == spec.keys("train")[1::3]
+    assert as_text and causalcity.stream(spec, "train", shard=[1, 3]).keys() == as_text
+
+
+@pytest.mark.parametrize("rank, world, named", [("abc", "2", "RANK='abc'"), ("0", "two", "WORLD_SIZE='two'"), ("3", "2", "RANK='3' and WORLD_SIZE='2'")])
+def test_malformed_rank_and_world_size_are_named(monkeypatch, rank, world, named):
+    monkeypatch.setenv("RANK", rank)
+    monkeypatch.setenv("WORLD_SIZE", world)
+    with pytest.raises(causalcity.InputError, match=named.replace("(", r"\(")):
+        causalcity.stream(causalcity.Spec.load(TOY_SPEC), "train")

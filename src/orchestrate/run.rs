@@ -43,6 +43,11 @@ pub struct GenOptions {
     pub handle_signals: bool,
 }
 
+/// The most worker threads a run takes (`-j`): more than any machine's
+/// cores, so a typo (`-j 100000`) is refused instead of starting a hundred
+/// thousand threads.
+pub const MAX_THREADS: usize = 1024;
+
 /// Shard `index` of `count` (0-based): scenario i of the dataset's fixed order
 /// belongs to shard i mod count, so every shard gets its share of every group
 /// and split.
