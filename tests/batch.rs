@@ -81,6 +81,33 @@ fn ctrl_c_stops_quickly_and_says_how_to_resume() {
 }
 
 #[test]
+fn ctrl_c_stops_inside_one_long_poses_only_scenario() {
+    // One poses-only scenario of 100,000 frames and 80 cars: 28 s of
+    // simulating and writing (958 MB). Before, Ctrl-C was looked at only
+    // between scenarios, so the run finished it and exited 0; now every
+    // frame of the simulation checks, and nothing half-done is kept.
+    let dir = fresh_dir("batch-sigint-long");
+    let spec = write_spec(&dir, &city_spec("long", &[(80, 0.5)], (1, 0, 0), 100_000, "{}"));
+    let out = dir.join("out");
+    let child = gen_cmd(&spec, &out, &["--no-images", "--no-effects"]).stderr(Stdio::piped()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !out.join("manifest.json").exists() {
+        assert!(Instant::now() < deadline, "the run never started");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "the scenario ran to its end: {stderr}");
+    assert!(stderr.contains("0 of 1 scenarios are complete"), "{stderr}");
+    assert!(!out.join("cars80_edges50/train/00000").exists());
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 1, "{report}");
+    assert!(report.contains("did not finish"), "{report}");
+}
+
+#[test]
 fn three_shards_merged_equal_one_run() {
     let dir = fresh_dir("batch-shards");
     let spec = small_spec(&dir);

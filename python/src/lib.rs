@@ -10,9 +10,11 @@
 use causalcity::analysis::evaluate::{evaluate as evaluate_, EvaluateOptions};
 use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
-use causalcity::orchestrate::in_memory::Prefetch as Prefetch_;
 use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
-use causalcity::orchestrate::run::{generate_expansion, load_spec, GenError, GenOptions, Shard, MAX_THREADS};
+use causalcity::orchestrate::in_memory::{Prefetch as Prefetch_, Waited};
+use causalcity::orchestrate::run::{
+    clear_stop, generate_expansion, load_spec, request_stop, GenError, GenOptions, Shard, MAX_THREADS,
+};
 use causalcity::output::arrays::{recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
@@ -23,8 +25,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 pyo3::create_exception!(
     _native,
@@ -44,6 +47,51 @@ fn py_err(e: impl Into<Error>) -> PyErr {
     match e.into() {
         Error::Input(m) => InputError::new_err(m),
         Error::Failure(m) | Error::Interrupted(m) => GenerationError::new_err(m),
+    }
+}
+
+/// How often a call that works on threads of its own looks for Ctrl-C.
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+/// Runs `work` on a thread of its own, without the GIL, while this thread
+/// answers Ctrl-C: Python's signal handlers run every [`SIGNAL_POLL`], and
+/// when one raises (KeyboardInterrupt), `on_signal` asks the work to stop,
+/// the work is waited for (it gives up at its next frame) and the
+/// handler's exception is raised. Without this, a KeyboardInterrupt would
+/// wait until the whole call had finished.
+fn interruptible<T: Send>(py: Python<'_>, on_signal: impl Fn() + Sync, work: impl FnOnce() -> T + Send) -> PyResult<T> {
+    let on_signal = &on_signal;
+    let (value, signal) = py.detach(|| {
+        std::thread::scope(|scope| {
+            let (send, receive) = std::sync::mpsc::channel();
+            let worker = scope.spawn(move || {
+                let _ = send.send(work());
+            });
+            let mut signal = None;
+            let value = loop {
+                match receive.recv_timeout(SIGNAL_POLL) {
+                    Ok(value) => break Some(value),
+                    Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break None,
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                        if signal.is_none() {
+                            if let Err(e) = Python::attach(|py| py.check_signals()) {
+                                on_signal();
+                                signal = Some(e);
+                            }
+                        }
+                    }
+                }
+            };
+            let _ = worker.join();
+            (value, signal)
+        })
+    });
+    match (signal, value) {
+        (Some(e), _) => Err(e),
+        (None, Some(value)) => Ok(value),
+        (None, None) => {
+            Err(GenerationError::new_err("internal error: the work panicked (please report it with the spec)"))
+        }
     }
 }
 
@@ -243,7 +291,9 @@ fn simulate<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let key = key_of(spec, (group, split, index))?;
     let generator = spec.generator.clone();
-    let arrays = py.detach(|| generator.scenario(&key, images, effects)).map_err(py_err)?;
+    let stop = AtomicBool::new(false);
+    let work = || generator.scenario_until(&key, images, effects, &stop);
+    let arrays = interruptible(py, || stop.store(true, Ordering::SeqCst), work)?.map_err(py_err)?;
     scenario_dict(py, arrays)
 }
 
@@ -279,9 +329,13 @@ impl Prefetch {
     }
 
     fn __next__<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        match py.detach(|| self.inner.next()) {
-            None => Ok(None),
-            Some(result) => scenario_dict(py, result.map_err(py_err)?).map(Some),
+        loop {
+            match py.detach(|| self.inner.next_within(SIGNAL_POLL)) {
+                Waited::Done => return Ok(None),
+                Waited::Ready(result) => return scenario_dict(py, result.map_err(py_err)?).map(Some),
+                // Ctrl-C while waiting raises here; the workers stop when the stream is dropped.
+                Waited::Pending => py.check_signals()?,
+            }
         }
     }
 }
@@ -347,7 +401,12 @@ fn generate(
         handle_signals: false,
     };
     let generator = spec.generator.clone();
-    let summary = py.detach(|| generate_expansion(generator.expansion(), &options, Instant::now())).map_err(py_err)?;
+    // Ctrl-C stops the run as it stops `gen`: every worker gives up at its
+    // next frame, what is complete stays, and the same call resumes.
+    let work = || generate_expansion(generator.expansion(), &options, Instant::now());
+    let result = interruptible(py, request_stop, work);
+    clear_stop();
+    let summary = result?.map_err(py_err)?;
     serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
 }
 

@@ -14,8 +14,10 @@ use crate::spec::Split;
 use crate::world::Trajectories;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, OnceLock};
+use std::time::{Duration, Instant};
 
 /// Generates the scenarios of one expanded spec into memory; shared by
 /// threads. The bird's-eye background is drawn once, on first use.
@@ -73,8 +75,21 @@ impl Generator {
     /// with `effects`, measures its interventional effects as `gen` does
     /// (re-simulating it twice per car).
     pub fn scenario(&self, key: &ScenarioKey, images: bool, effects: bool) -> Result<ScenarioArrays, GenError> {
+        let never = AtomicBool::new(false);
+        self.scenario_until(key, images, effects, &never)
+    }
+
+    /// [`Generator::scenario`], giving up with [`GenError::Interrupted`] at
+    /// the first simulated frame at which `stop` is set.
+    pub fn scenario_until(
+        &self,
+        key: &ScenarioKey,
+        images: bool,
+        effects: bool,
+        stop: &AtomicBool,
+    ) -> Result<ScenarioArrays, GenError> {
         let mut canvas = images.then(|| self.renderer().canvas());
-        self.scenario_with(key, canvas.as_mut(), effects)
+        self.scenario_with(key, canvas.as_mut(), effects, stop)
     }
 
     fn scenario_with(
@@ -82,14 +97,21 @@ impl Generator {
         key: &ScenarioKey,
         canvas: Option<&mut FrameCanvas>,
         effects: bool,
+        stop: &AtomicBool,
     ) -> Result<ScenarioArrays, GenError> {
         let plan = self.expansion.plan(key).map_err(|reason| GenError::Plan {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
         let map = &self.expansion.map;
-        let trajectories = crate::world::simulate(map, &plan);
-        let effects = effects.then(|| crate::world::effects::measure(map, &plan, &trajectories));
+        let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
+        let trajectories = crate::world::simulate_until(map, &plan, stop).ok_or_else(interrupted)?;
+        let effects = match effects {
+            true => {
+                Some(crate::world::effects::measure_until(map, &plan, &trajectories, stop).ok_or_else(interrupted)?)
+            }
+            false => None,
+        };
         Ok(arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c))))
     }
 }
@@ -102,6 +124,18 @@ impl Generator {
 pub struct Prefetch {
     shared: Arc<(Mutex<Queue>, Condvar)>,
     workers: Vec<std::thread::JoinHandle<()>>,
+    /// Set when the reader leaves: workers give up mid-scenario.
+    halt: Arc<AtomicBool>,
+}
+
+/// What [`Prefetch::next_within`] found.
+pub enum Waited {
+    /// The next scenario in key order.
+    Ready(Result<ScenarioArrays, GenError>),
+    /// Every key has been handed out.
+    Done,
+    /// Not ready within the wait: ask again.
+    Pending,
 }
 
 struct Queue {
@@ -132,11 +166,13 @@ impl Prefetch {
         let queue = Queue { keys, next_key: 0, next_out: 0, ahead, ready: BTreeMap::new(), stop: false, broken: false };
         crate::output::arrays::hold_spare_frame_buffers();
         let shared = Arc::new((Mutex::new(queue), Condvar::new()));
+        let halt = Arc::new(AtomicBool::new(false));
         let workers = (0..threads)
             .map(|_| {
-                let (shared, generator) = (shared.clone(), generator.clone());
+                let (shared, generator, halt) = (shared.clone(), generator.clone(), halt.clone());
                 std::thread::spawn(move || {
-                    let work = std::panic::AssertUnwindSafe(|| prefetch_worker(&shared, &generator, images, effects));
+                    let work =
+                        std::panic::AssertUnwindSafe(|| prefetch_worker(&shared, &generator, images, effects, &halt));
                     if std::panic::catch_unwind(work).is_err() {
                         let (lock, wake) = &*shared;
                         lock.lock().unwrap_or_else(|e| e.into_inner()).broken = true;
@@ -145,33 +181,50 @@ impl Prefetch {
                 })
             })
             .collect();
-        Prefetch { shared, workers }
+        Prefetch { shared, workers, halt }
     }
 
     /// The next scenario in key order, waiting for it; `None` after the last.
     pub fn next(&self) -> Option<Result<ScenarioArrays, GenError>> {
+        loop {
+            match self.next_within(Duration::from_secs(3600)) {
+                Waited::Ready(result) => return Some(result),
+                Waited::Done => return None,
+                Waited::Pending => {}
+            }
+        }
+    }
+
+    /// The next scenario in key order, waiting at most `wait` for it (a
+    /// reader that must answer Ctrl-C meanwhile asks again).
+    pub fn next_within(&self, wait: Duration) -> Waited {
+        let deadline = Instant::now() + wait;
         let (lock, wake) = &*self.shared;
         let mut queue = lock.lock().unwrap_or_else(|e| e.into_inner());
         loop {
             if queue.next_out >= queue.keys.len() {
-                return None;
+                return Waited::Done;
             }
             let index = queue.next_out;
             if let Some(result) = queue.ready.remove(&index) {
                 queue.next_out += 1;
                 wake.notify_all();
-                return Some(result);
+                return Waited::Ready(result);
             }
             if queue.broken {
                 let key = &queue.keys[index];
                 let scenario = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
                 queue.next_out = queue.keys.len();
-                return Some(Err(GenError::Plan {
+                return Waited::Ready(Err(GenError::Plan {
                     scenario,
                     reason: "internal error: a worker thread panicked (please report it with the spec)".into(),
                 }));
             }
-            queue = wake.wait(queue).unwrap_or_else(|e| e.into_inner());
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Waited::Pending;
+            }
+            queue = wake.wait_timeout(queue, left).unwrap_or_else(|e| e.into_inner()).0;
         }
     }
 }
@@ -181,6 +234,7 @@ impl Drop for Prefetch {
     /// them, and frees the spare frame buffers unless another stream runs.
     fn drop(&mut self) {
         let (lock, wake) = &*self.shared;
+        self.halt.store(true, Ordering::SeqCst);
         lock.lock().unwrap_or_else(|e| e.into_inner()).stop = true;
         wake.notify_all();
         for worker in self.workers.drain(..) {
@@ -192,7 +246,13 @@ impl Drop for Prefetch {
 
 /// One worker: takes the next key while the reader is less than `ahead`
 /// behind, generates it, and queues the result under its index.
-fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, images: bool, effects: bool) {
+fn prefetch_worker(
+    shared: &(Mutex<Queue>, Condvar),
+    generator: &Generator,
+    images: bool,
+    effects: bool,
+    halt: &AtomicBool,
+) {
     let (lock, wake) = shared;
     let mut canvas = images.then(|| generator.renderer().canvas());
     loop {
@@ -210,7 +270,7 @@ fn prefetch_worker(shared: &(Mutex<Queue>, Condvar), generator: &Generator, imag
             queue.next_key += 1;
             (queue.next_key - 1, queue.keys[queue.next_key - 1].clone())
         };
-        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut(), effects));
+        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut(), effects, halt));
         let result = std::panic::catch_unwind(work).unwrap_or_else(|_| {
             // A bug, not the user's input: the reader gets an error instead of waiting forever.
             Err(GenError::Plan {

@@ -191,6 +191,18 @@ impl GenError {
 static STOP: AtomicBool = AtomicBool::new(false);
 static HANDLER: std::sync::Once = std::sync::Once::new();
 
+/// Asks a running `gen` to stop as SIGINT does: every worker gives up at
+/// its next frame and what is complete is kept. For callers that catch the
+/// interrupt themselves (Python's KeyboardInterrupt).
+pub fn request_stop() {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+/// Forgets a stop request once the run it was meant for has ended.
+pub fn clear_stop() {
+    STOP.store(false, Ordering::SeqCst);
+}
+
 fn install_signal_handler() {
     HANDLER.call_once(|| {
         let _ = ctrlc::set_handler(|| {
@@ -464,11 +476,18 @@ fn write_scenario(
         scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
         reason,
     })?;
-    let trajectories = times.time(Stage::Simulate, || crate::world::simulate(&expansion.map, &plan));
-    let effects = writer
-        .products()
-        .effects
-        .then(|| times.time(Stage::Effects, || crate::world::effects::measure(&expansion.map, &plan, &trajectories)));
+    let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
+    let map = &expansion.map;
+    let trajectories =
+        times.time(Stage::Simulate, || crate::world::simulate_until(map, &plan, &STOP)).ok_or_else(interrupted)?;
+    let effects = match writer.products().effects {
+        true => Some(
+            times
+                .time(Stage::Effects, || crate::world::effects::measure_until(map, &plan, &trajectories, &STOP))
+                .ok_or_else(interrupted)?,
+        ),
+        false => None,
+    };
     write_simulated(writer, &plan, &trajectories, effects.as_ref(), target, buffers, times)
 }
 

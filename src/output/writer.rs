@@ -170,6 +170,11 @@ impl ScenarioWriter {
                 };
             }
         }
+        // A stop raised while simulating may have cut the trajectories
+        // short: nothing is committed once it is set.
+        if stop.load(Ordering::Relaxed) {
+            return Err(ScenarioWriteError::Interrupted);
+        }
         bytes += dir.commit()?;
         Ok(bytes)
     }

@@ -10,10 +10,11 @@
 //!
 //! Units: metres; frames are the scenario's frame indices.
 
-use super::{simulate, Interaction, Trajectories};
+use super::{simulate_until, Interaction, Trajectories};
 use crate::map::{Action, CityMap, LegKind, Turn};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::ScenarioPlan;
+use std::sync::atomic::AtomicBool;
 
 /// How far (metres, at one frame) a car must move from its factual
 /// trajectory to count as an effect: a change a camera sees, not a rounding
@@ -155,17 +156,29 @@ pub fn intervened(map: &CityMap, plan: &ScenarioPlan, car: usize, kind: Interven
 /// Re-simulates `plan` once per car and intervention and compares every
 /// other car with `factual` (the plan's own simulation).
 pub fn measure(map: &CityMap, plan: &ScenarioPlan, factual: &Trajectories) -> EffectReport {
+    let never = AtomicBool::new(false);
+    measure_until(map, plan, factual, &never).expect("a measurement that is never stopped finishes")
+}
+
+/// [`measure`], giving up (`None`) at the first re-simulated frame at which
+/// `stop` is set.
+pub fn measure_until(
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    factual: &Trajectories,
+    stop: &AtomicBool,
+) -> Option<EffectReport> {
     let mut rows = Vec::new();
     for (a, cause) in plan.cars.iter().enumerate() {
         for kind in InterventionKind::ALL {
             let Some(changed) = intervened(map, plan, a, kind) else { continue };
-            let rerun = simulate(map, &changed);
+            let rerun = simulate_until(map, &changed, stop)?;
             for (b, effect) in plan.cars.iter().enumerate().filter(|&(b, _)| b != a) {
                 rows.push(compare(plan, factual, &rerun, b, cause.id, effect.id, kind));
             }
         }
     }
-    EffectReport { threshold_m: EFFECT_THRESHOLD_M, rows }
+    Some(EffectReport { threshold_m: EFFECT_THRESHOLD_M, rows })
 }
 
 /// How car `b` (index; id `effect`) differs between the factual run and the

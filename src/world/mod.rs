@@ -11,6 +11,7 @@ use crate::map::CityMap;
 use crate::plan::confounders::Confounders;
 use crate::plan::{ScenarioPlan, WorldPlan};
 use glam::DVec2;
+use std::sync::atomic::AtomicBool;
 
 /// A car's state at one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -204,10 +205,18 @@ impl Trajectories {
 /// Simulates a plan in its world: the toy world's constant speed, or the
 /// city world with the plan's car-following model.
 pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
+    let never = AtomicBool::new(false);
+    simulate_until(map, plan, &never).expect("a simulation that is never stopped finishes")
+}
+
+/// [`simulate`], giving up (`None`) at the first frame at which `stop` is
+/// set: a long scenario (100,000 frames of 80 cars take seconds) must not
+/// hold up an interrupted run.
+pub fn simulate_until(map: &CityMap, plan: &ScenarioPlan, stop: &AtomicBool) -> Option<Trajectories> {
     match &plan.world {
-        WorldPlan::Toy { step_m } => toy::simulate(map, plan, *step_m),
+        WorldPlan::Toy { step_m } => toy::simulate(map, plan, *step_m, stop),
         WorldPlan::City(city) => {
-            city::CityWorld::with_model(driver::model_by_name(city.driver_model)).simulate(map, plan, city)
+            city::CityWorld::with_model(driver::model_by_name(city.driver_model)).simulate_until(map, plan, city, stop)
         }
     }
 }

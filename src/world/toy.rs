@@ -14,6 +14,7 @@ use super::{CarState, Trajectories};
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::Effect;
 use crate::plan::{CarPlan, OnLeaderLost, ScenarioPlan};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Name of the toy world's behaviour model, for scenario.json.
@@ -27,38 +28,44 @@ enum Drive {
     Removed,
 }
 
-/// Every car of `plan` moves `step` metres per frame along its route.
-pub fn simulate(map: &CityMap, plan: &ScenarioPlan, step: f64) -> Trajectories {
+/// Every car of `plan` moves `step` metres per frame along its route;
+/// `None` once `stop` is set (checked every frame).
+pub fn simulate(map: &CityMap, plan: &ScenarioPlan, step: f64, stop: &AtomicBool) -> Option<Trajectories> {
     let speed = step / plan.frame_interval;
     let drives = drives(map, plan);
     let states = (0..plan.frames)
         .map(|frame| {
-            plan.cars
-                .iter()
-                .zip(&drives)
-                .map(|(car, drive)| match drive {
-                    Drive::Removed => CarState::parked(car.id),
-                    Drive::Stopped => {
-                        let (position, yaw) = car.route.pose_at(car.spawn_distance, 0.0);
-                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: 0.0 }
-                    }
-                    Drive::Route(route) => {
-                        let s = car.spawn_distance + step * frame as f64;
-                        let (position, yaw) = route.pose_at(s, 0.0);
-                        CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
-                    }
-                })
-                .collect()
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            Some(
+                plan.cars
+                    .iter()
+                    .zip(&drives)
+                    .map(|(car, drive)| match drive {
+                        Drive::Removed => CarState::parked(car.id),
+                        Drive::Stopped => {
+                            let (position, yaw) = car.route.pose_at(car.spawn_distance, 0.0);
+                            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: 0.0 }
+                        }
+                        Drive::Route(route) => {
+                            let s = car.spawn_distance + step * frame as f64;
+                            let (position, yaw) = route.pose_at(s, 0.0);
+                            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
+                        }
+                    })
+                    .collect(),
+            )
         })
-        .collect();
-    Trajectories {
+        .collect::<Option<_>>()?;
+    Some(Trajectories {
         frame_interval: plan.frame_interval,
         states,
         lights: Vec::new(),
         events: Vec::new(),
         confounder_changes: Vec::new(),
         interactions: Vec::new(),
-    }
+    })
 }
 
 /// Each car's route (in id order) after the plan's interventions: its own,

@@ -44,6 +44,7 @@ use crate::plan::interventions::Intervention;
 use crate::plan::{CityPlan, ScenarioPlan};
 use car::SimCar;
 use std::collections::BTreeSet;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Longest internal time step, seconds; frames fall on step boundaries.
 pub const MAX_STEP: f64 = 0.05;
@@ -76,16 +77,29 @@ impl CityWorld {
     /// one state per light every `plan.frame_interval` seconds, in steps of
     /// at most [`MAX_STEP`] seconds.
     pub fn simulate(&self, map: &CityMap, plan: &ScenarioPlan, city: &CityPlan) -> Trajectories {
+        let never = AtomicBool::new(false);
+        self.simulate_until(map, plan, city, &never).expect("a simulation that is never stopped finishes")
+    }
+
+    /// [`CityWorld::simulate`], giving up (`None`) at the first frame at
+    /// which `stop` is set.
+    pub fn simulate_until(
+        &self,
+        map: &CityMap,
+        plan: &ScenarioPlan,
+        city: &CityPlan,
+        stop: &AtomicBool,
+    ) -> Option<Trajectories> {
         let mut sim = Sim::new(map, plan, city, self.model.as_ref());
         if plan.frames == 0 {
-            return Trajectories {
+            return Some(Trajectories {
                 frame_interval: plan.frame_interval,
                 states: vec![],
                 lights: vec![],
                 events: vec![],
                 confounder_changes: vec![],
                 interactions: vec![],
-            };
+            });
         }
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = plan.frame_interval / steps as f64;
@@ -93,6 +107,9 @@ impl CityWorld {
         let mut lights = Vec::with_capacity(plan.frames as usize);
         let mut interactions = Vec::with_capacity(plan.frames as usize);
         for frame in 0..plan.frames as usize {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
             if frame > 0 {
                 for k in 0..steps {
                     let t = (frame - 1) as f64 * plan.frame_interval + k as f64 * dt;
@@ -112,14 +129,14 @@ impl CityWorld {
             .iter()
             .map(|&(t, c)| (((t / plan.frame_interval) - 1e-9).ceil().max(0.0) as usize, c))
             .collect();
-        Trajectories {
+        Some(Trajectories {
             frame_interval: plan.frame_interval,
             states,
             lights,
             events: sim.events,
             confounder_changes,
             interactions,
-        }
+        })
     }
 }
 
