@@ -108,6 +108,40 @@ fn ctrl_c_stops_inside_one_long_poses_only_scenario() {
 }
 
 #[test]
+fn a_spec_at_the_largest_split_sizes_starts_at_once_in_little_memory_and_stops() {
+    // 10,000,000 per split (the documented maximum) in two groups: 60
+    // million scenarios. Before, gen listed every key first (6 GB after
+    // 10 s, then an abort) and Ctrl-C did not stop it; now keys are
+    // computed from their position as the run reaches them.
+    let dir = fresh_dir("batch-largest");
+    let spec = write_spec(&dir, &toy_spec("largest", &[(4, 0.5), (8, 0.5)], (10_000_000, 10_000_000, 10_000_000), 20));
+    let out = dir.join("out");
+    let child =
+        gen_cmd(&spec, &out, &["--no-images", "--no-effects", "-j", "2"]).stderr(Stdio::piped()).spawn().unwrap();
+    let first = out.join("cars04_edges50/train/00000");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !first.exists() {
+        assert!(Instant::now() < deadline, "no scenario was written: the run never got going");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = std::fs::read_to_string(format!("/proc/{}/status", child.id())).unwrap_or_default();
+    let peak_kb: u64 = status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1)?.parse().ok())
+        .unwrap_or(0);
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("of 60000000 scenarios are complete"), "{stderr}");
+    if cfg!(target_os = "linux") {
+        // 60 million keys would take gigabytes; the run itself needs a few megabytes.
+        assert!(peak_kb > 0 && peak_kb < 200_000, "peak memory {peak_kb} kB");
+    }
+}
+
+#[test]
 fn three_shards_merged_equal_one_run() {
     let dir = fresh_dir("batch-shards");
     let spec = small_spec(&dir);

@@ -307,13 +307,25 @@ fn sweep_partials(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
     Ok(())
 }
 
-/// The scenarios of `shard` (all when `None`), in the dataset's fixed order.
-pub fn shard_keys(keys: Vec<ScenarioKey>, shard: Option<Shard>) -> Vec<ScenarioKey> {
-    match shard {
-        None => keys,
-        Some(s) => {
-            keys.into_iter().enumerate().filter(|(i, _)| *i as u32 % s.count == s.index).map(|(_, k)| k).collect()
-        }
+/// Positions in the dataset's fixed order of the scenarios of `shard` (all
+/// when `None`) among `total`: every `count`-th from `index` on, as
+/// numbers, never as a list (memory independent of the split sizes).
+#[derive(Debug, Clone, Copy)]
+struct ShardPositions {
+    first: usize,
+    step: usize,
+    len: usize,
+}
+
+impl ShardPositions {
+    fn new(total: usize, shard: Option<Shard>) -> ShardPositions {
+        let (first, step) = shard.map_or((0, 1), |s| (s.index as usize, s.count as usize));
+        ShardPositions { first, step, len: total.saturating_sub(first).div_ceil(step) }
+    }
+
+    /// The dataset position of this shard's `i`-th scenario.
+    fn position(&self, i: usize) -> usize {
+        self.first + i * self.step
     }
 }
 
@@ -387,9 +399,10 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
     }
     STOP.store(false, Ordering::SeqCst);
 
-    let keys = shard_keys(expansion.keys(options.limit), options.shard);
-    let shard_entry =
-        options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: keys.len() as u64 });
+    let sequence = expansion.key_sequence(options.limit);
+    let positions = ShardPositions::new(sequence.len(), options.shard);
+    let total = positions.len as u64;
+    let shard_entry = options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: total });
     let manifest_file = manifest_path(&out, options.shard);
     if let Some(parent) = manifest_file.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
@@ -401,18 +414,19 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
 
     let writer = scenario_writer(expansion, products, options.fsync);
     let times = StageTimes::default();
-    let progress = Progress::new(keys.len() as u64, options.progress);
+    let progress = Progress::new(total, options.progress);
     let bytes = AtomicU64::new(0);
     let written = AtomicU64::new(0);
     let skipped = AtomicU64::new(0);
     let repaired = AtomicU64::new(0);
     let result = pool.install(|| {
-        keys.par_iter().try_for_each_init(
+        (0..positions.len).into_par_iter().try_for_each_init(
             || writer.buffers(),
-            |buffers, key| {
+            |buffers, i| {
                 if STOP.load(Ordering::Relaxed) {
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
                 }
+                let key = &sequence.key(positions.position(i));
                 let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
                 let intact = target.exists()
                     && verify_scenario(&target)
@@ -437,7 +451,7 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
     let done = written.load(Ordering::Relaxed) + skipped.load(Ordering::Relaxed);
     match result {
         Err(GenError::Interrupted { .. }) => {
-            return Err(GenError::Interrupted { done, total: keys.len() as u64, out });
+            return Err(GenError::Interrupted { done, total, out });
         }
         Err(GenError::Write { error, .. }) => return Err(GenError::Write { error, done }),
         Err(e) => return Err(e),
@@ -448,7 +462,7 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
     let written = written.load(Ordering::Relaxed);
     Ok(Summary {
         out,
-        scenarios: keys.len() as u64,
+        scenarios: total,
         written,
         skipped: skipped.load(Ordering::Relaxed),
         repaired: repaired.load(Ordering::Relaxed),

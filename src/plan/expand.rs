@@ -93,6 +93,47 @@ const PLACEMENT_ATTEMPTS: usize = 2000;
 /// (leader, follower) indices into a scenario's placed cars.
 type LeaderFollowerPairs = Vec<(usize, usize)>;
 
+/// The keys of [`Expansion::keys`], computed from their position: groups
+/// in spec order, then splits in [`Split::ALL`] order, then indices.
+#[derive(Debug, Clone, Copy)]
+pub struct KeySequence<'a> {
+    groups: &'a [GroupSpec],
+    /// Scenarios of each split (of [`Split::ALL`]) per group.
+    per_split: [u64; 3],
+}
+
+impl KeySequence<'_> {
+    /// How many keys there are.
+    pub fn len(&self) -> usize {
+        (self.groups.len() as u64 * self.per_group()) as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn per_group(&self) -> u64 {
+        self.per_split.iter().sum()
+    }
+
+    /// The key at `position` (`position < len()`).
+    pub fn key(&self, position: usize) -> ScenarioKey {
+        let position = position as u64;
+        let group_index = (position / self.per_group()) as usize;
+        let mut within = position % self.per_group();
+        let mut split = Split::ALL[0];
+        for (s, &n) in Split::ALL.into_iter().zip(&self.per_split) {
+            split = s;
+            if within < n {
+                break;
+            }
+            within -= n;
+        }
+        let group = self.groups[group_index].name();
+        ScenarioKey { group, group_index, split, index: within as u32, name: None }
+    }
+}
+
 impl Expansion {
     /// The spec's map (`map` section) and camera, checked as [`Expansion::new`] does.
     pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
@@ -163,16 +204,16 @@ impl Expansion {
     /// Every scenario of the dataset in a fixed order (group, split, index),
     /// with at most `limit` scenarios per split.
     pub fn keys(&self, limit: Option<u32>) -> Vec<ScenarioKey> {
-        let mut keys = Vec::new();
-        for (group_index, g) in self.spec.groups.iter().enumerate() {
-            for split in Split::ALL {
-                let n = self.spec.splits.count(split).min(limit.unwrap_or(u32::MAX));
-                for index in 0..n {
-                    keys.push(ScenarioKey { group: g.name(), group_index, split, index, name: None });
-                }
-            }
-        }
-        keys
+        let sequence = self.key_sequence(limit);
+        (0..sequence.len()).map(|i| sequence.key(i)).collect()
+    }
+
+    /// [`Expansion::keys`] without holding them: any key by its position,
+    /// in memory independent of the split sizes (a spec at the largest
+    /// split sizes has tens of millions of keys).
+    pub fn key_sequence(&self, limit: Option<u32>) -> KeySequence<'_> {
+        let per_split = Split::ALL.map(|s| self.spec.splits.count(s).min(limit.unwrap_or(u32::MAX)) as u64);
+        KeySequence { groups: &self.spec.groups, per_split }
     }
 
     /// Metres every toy car covers per frame.

@@ -18,7 +18,7 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 use std::sync::Arc;
 
-pub use expand::Expansion;
+pub use expand::{Expansion, KeySequence};
 
 /// A car's part in the causal graph.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
