@@ -14,6 +14,8 @@ pub enum Error {
     Failure(String),
     /// Stopped by SIGINT or SIGTERM; what is complete is kept.
     Interrupted(String),
+    /// What was asked for does not fit in memory (Python's `MemoryError`).
+    Memory(String),
 }
 
 impl Error {
@@ -21,7 +23,7 @@ impl Error {
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Input(_) => 2,
-            Error::Failure(_) => 1,
+            Error::Failure(_) | Error::Memory(_) => 1,
             Error::Interrupted(_) => 130,
         }
     }
@@ -40,7 +42,7 @@ impl Error {
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Error::Input(m) | Error::Failure(m) | Error::Interrupted(m) => f.write_str(m),
+            Error::Input(m) | Error::Failure(m) | Error::Interrupted(m) | Error::Memory(m) => f.write_str(m),
         }
     }
 }

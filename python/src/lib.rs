@@ -21,7 +21,7 @@ use causalcity::progress::ProgressMode;
 use causalcity::spec::DatasetSpec;
 use causalcity::world::effects::{EffectRow, InterventionKind};
 use causalcity::world::BoundBy;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use std::path::PathBuf;
@@ -47,6 +47,7 @@ fn py_err(e: impl Into<Error>) -> PyErr {
     match e.into() {
         Error::Input(m) => InputError::new_err(m),
         Error::Failure(m) | Error::Interrupted(m) => GenerationError::new_err(m),
+        Error::Memory(m) => PyMemoryError::new_err(m),
     }
 }
 
@@ -332,7 +333,7 @@ impl Prefetch {
         loop {
             match py.detach(|| self.inner.next_within(SIGNAL_POLL)) {
                 Waited::Done => return Ok(None),
-                Waited::Ready(result) => return scenario_dict(py, result.map_err(py_err)?).map(Some),
+                Waited::Ready(result) => return scenario_dict(py, (*result).map_err(py_err)?).map(Some),
                 // Ctrl-C while waiting raises here; the workers stop when the stream is dropped.
                 Waited::Pending => py.check_signals()?,
             }

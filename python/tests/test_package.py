@@ -529,3 +529,46 @@ def test_ctrl_c_stops_generate_inside_a_long_scenario(tmp_path):
     assert json.loads((out / "manifest.json").read_text())["complete"] is False
     report = cli("validate", str(out), check=False)
     assert report.returncode == 1 and "did not finish" in report.stdout + report.stderr, report.stdout + report.stderr
+
+
+def _under_memory_limit(body, headroom=1 << 30):
+    """Runs ``body`` (Python source) in a child whose address space is
+    capped at its size now plus ``headroom``; returns the child."""
+    script = (
+        "import resource, causalcity, json\n"
+        "size = int([l for l in open('/proc/self/status') if l.startswith('VmSize:')][0].split()[1]) * 1024\n"
+        f"resource.setrlimit(resource.RLIMIT_AS, (size + {headroom}, resource.RLIM_INFINITY))\n" + body
+    )
+    return subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux applies it")
+def test_frames_that_do_not_fit_raise_memory_error_not_an_abort(tmp_path):
+    # 3,000 frames of 1024 x 640 need 7.9 GB; under a 1 GB headroom the
+    # interpreter aborted ("memory allocation failed", SIGABRT). Now:
+    # MemoryError naming the size, and the interpreter goes on.
+    spec = json.loads(CITY_SPEC.read_text())
+    spec.update(frames=3000, image={"width": 1024, "height": 640})
+    scenarios = json.loads(STOP_THE_LEADER.read_text())
+    scenarios[0]["frames"] = 3000
+    body = (
+        f"spec = causalcity.Spec.from_dict(json.loads({json.dumps(json.dumps(spec))}))\n"
+        "for call in (lambda: causalcity.simulate(spec, 'cars08_edges50', 'train', 0, images=True, effects=False),\n"
+        "             lambda: next(iter(causalcity.stream(spec, 'train', images=True, effects=False))),\n"
+        f"             lambda: causalcity.counterfactual(json.loads({json.dumps(json.dumps(scenarios))}), images=True)):\n"
+        "    try:\n"
+        "        call()\n"
+        "        print('no error')\n"
+        "    except MemoryError as e:\n"
+        "        print('MemoryError:', e)\n"
+        "s = causalcity.simulate(spec, 'cars08_edges50', 'train', 0, effects=False)\n"
+        "print('still running', s.frames)\n"
+    )
+    child = _under_memory_limit(body)
+    assert child.returncode == 0, child.stdout + child.stderr
+    lines = child.stdout.splitlines()
+    assert len(lines) == 4, child.stdout + child.stderr
+    for line in lines[:3]:
+        assert line.startswith("MemoryError: not enough memory for the frames"), line
+    assert "7.86 GB are needed (3000 frames of 1024 x 640" in lines[0], lines[0]
+    assert lines[3] == "still running 3000"

@@ -7,7 +7,7 @@ use super::handwritten::{pair_plans, simulate_pair, PairSummary, RunError};
 use super::run::GenError;
 use super::scenario_file::{load_interventions_text, load_text, FileOptions};
 use crate::map::CityMap;
-use crate::output::arrays::{scenario_arrays, ScenarioArrays};
+use crate::output::arrays::{available_memory_bytes, frame_bytes, scenario_arrays, OutOfMemory, ScenarioArrays};
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::render::{FrameCanvas, Renderer};
 use crate::spec::Split;
@@ -112,7 +112,7 @@ impl Generator {
             }
             false => None,
         };
-        Ok(arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c))))
+        arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c)))
     }
 }
 
@@ -131,7 +131,7 @@ pub struct Prefetch {
 /// What [`Prefetch::next_within`] found.
 pub enum Waited {
     /// The next scenario in key order.
-    Ready(Result<ScenarioArrays, GenError>),
+    Ready(Box<Result<ScenarioArrays, GenError>>),
     /// Every key has been handed out.
     Done,
     /// Not ready within the wait: ask again.
@@ -188,7 +188,7 @@ impl Prefetch {
     pub fn next(&self) -> Option<Result<ScenarioArrays, GenError>> {
         loop {
             match self.next_within(Duration::from_secs(3600)) {
-                Waited::Ready(result) => return Some(result),
+                Waited::Ready(result) => return Some(*result),
                 Waited::Done => return None,
                 Waited::Pending => {}
             }
@@ -209,16 +209,16 @@ impl Prefetch {
             if let Some(result) = queue.ready.remove(&index) {
                 queue.next_out += 1;
                 wake.notify_all();
-                return Waited::Ready(result);
+                return Waited::Ready(Box::new(result));
             }
             if queue.broken {
                 let key = &queue.keys[index];
                 let scenario = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
                 queue.next_out = queue.keys.len();
-                return Waited::Ready(Err(GenError::Plan {
+                return Waited::Ready(Box::new(Err(GenError::Plan {
                     scenario,
                     reason: "internal error: a worker thread panicked (please report it with the spec)".into(),
-                }));
+                })));
             }
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
@@ -297,9 +297,10 @@ fn arrays(
     trajectories: &Trajectories,
     effects: Option<crate::world::effects::EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
-) -> ScenarioArrays {
+) -> Result<ScenarioArrays, GenError> {
     let spec = &expansion.spec;
     scenario_arrays(&expansion.map, &expansion.camera, spec.leader_gap_px(), plan, trajectories, effects, renderer)
+        .map_err(GenError::Memory)
 }
 
 /// A scenario file's or an intervention file's text, and the name its
@@ -338,7 +339,23 @@ pub fn counterfactual_arrays(
         None => None,
     };
     let pairs = pair_plans(scenarios.origin, &loaded, extras)?;
-    Ok(pairs
+    if images {
+        // Every pair's frames are held at once: refuse up front what the
+        // machine cannot hold (uncapped, 60 scenarios grew to 24 GB).
+        let needed: u64 =
+            pairs.iter().map(|(s, f, _)| 2 * frame_bytes(f.frames as usize + 1, &s.expansion.camera)).sum();
+        if let Some(available) = available_memory_bytes().filter(|&a| a < needed) {
+            return Err(RunError::Write(GenError::Memory(OutOfMemory {
+                scenario: format!("{} ({} pairs together)", scenarios.origin.display(), pairs.len()),
+                bytes: needed,
+                frames: pairs.iter().map(|(_, f, _)| 2 * f.frames as usize).sum(),
+                width: pairs[0].0.expansion.camera.width,
+                height: pairs[0].0.expansion.camera.height,
+                available: Some(available),
+            })));
+        }
+    }
+    pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let pair = simulate_pair(&s.expansion, &s.name, factual, counterfactual);
@@ -348,13 +365,14 @@ pub fn counterfactual_arrays(
                 let r = renderer.as_ref().zip(canvas.as_mut());
                 arrays(&s.expansion, plan, trajectories, None, r)
             };
-            PairArrays {
+            Ok(PairArrays {
                 name: s.name.clone(),
-                factual: run(factual, &pair.factual),
-                counterfactual: run(counterfactual, &pair.counterfactual),
+                factual: run(factual, &pair.factual)?,
+                counterfactual: run(counterfactual, &pair.counterfactual)?,
                 divergence_m: pair.divergence_m,
                 summary: pair.summary,
-            }
+            })
         })
-        .collect())
+        .collect::<Result<_, GenError>>()
+        .map_err(RunError::Write)
 }

@@ -153,6 +153,9 @@ pub enum GenError {
     Interrupted { done: u64, total: u64, out: PathBuf },
     #[error(transparent)]
     Claim(ClaimError),
+    /// Arrays held in memory (Python) do not fit.
+    #[error(transparent)]
+    Memory(crate::output::arrays::OutOfMemory),
     /// Input that cannot be used (a folder that is no shard, a missing shard).
     #[error("{0}")]
     Input(String),
@@ -167,6 +170,9 @@ impl From<WriteError> for GenError {
 impl From<GenError> for crate::error::Error {
     fn from(e: GenError) -> Self {
         use crate::error::Error;
+        if let GenError::Memory(_) = e {
+            return Error::Memory(e.to_string());
+        }
         match e.exit_code() {
             2 => Error::Input(e.to_string()),
             130 => Error::Interrupted(e.to_string()),

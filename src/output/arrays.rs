@@ -112,8 +112,45 @@ pub struct FrameArrays {
     pub mask: Vec<u8>,
 }
 
+/// A scenario's frames do not fit in memory (Python raises `MemoryError`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "not enough memory for the frames of scenario {scenario}: {} are needed ({frames} frames of {width} x {height}, RGB and mask){}. Use fewer frames or a smaller image, or write the frames to disk with the command line",
+    gigabytes(*bytes),
+    available.map(|a| format!(", {} available", gigabytes(a))).unwrap_or_default()
+)]
+pub struct OutOfMemory {
+    pub scenario: String,
+    pub bytes: u64,
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Memory the OS says is available, where it says.
+    pub available: Option<u64>,
+}
+
+/// Bytes as gigabytes for messages, e.g. `1.57 GB`.
+pub fn gigabytes(bytes: u64) -> String {
+    format!("{:.2} GB", bytes as f64 / 1e9)
+}
+
+/// Memory the OS can give this process now without swapping (Linux's
+/// MemAvailable); `None` where it does not say.
+pub fn available_memory_bytes() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Bytes of one scenario's frames in memory: RGB and mask.
+pub fn frame_bytes(frames: usize, camera: &Camera) -> u64 {
+    frames as u64 * camera.width as u64 * camera.height as u64 * 4
+}
+
 /// Arrays of a simulated scenario, seen by `camera`; with a renderer (whose
-/// camera must be `camera`), the frames too.
+/// camera must be `camera`), the frames too. Frames that do not fit in
+/// memory are an error, never an abort.
 pub fn scenario_arrays(
     map: &CityMap,
     camera: &Camera,
@@ -122,7 +159,7 @@ pub fn scenario_arrays(
     trajectories: &Trajectories,
     effects: Option<EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
-) -> ScenarioArrays {
+) -> Result<ScenarioArrays, OutOfMemory> {
     let (frames, cars) = (trajectories.frames(), plan.cars.len());
     let intersection_names: Vec<String> = map.intersections.iter().map(|i| i.name.clone()).collect();
     let model = crate::world::model_name(&plan.world);
@@ -215,8 +252,17 @@ pub fn scenario_arrays(
     if let Some((renderer, canvas)) = renderer {
         let (width, height) = (renderer.camera.width, renderer.camera.height);
         let pixels = width as usize * height as usize;
-        let mut images =
-            FrameArrays { width, height, rgb: frame_buffer(frames * pixels * 3), mask: frame_buffer(frames * pixels) };
+        let out_of_memory = || OutOfMemory {
+            scenario: plan.key.folder_name(),
+            bytes: frame_bytes(frames, &renderer.camera),
+            frames,
+            width,
+            height,
+            available: available_memory_bytes(),
+        };
+        let rgb = frame_buffer(frames * pixels * 3).ok_or_else(out_of_memory)?;
+        let mask = frame_buffer(frames * pixels).ok_or_else(out_of_memory)?;
+        let mut images = FrameArrays { width, height, rgb, mask };
         let footage = Footage::new(plan, trajectories, &heads);
         let world = (plan.birds_eye == BirdsEyeView::Pinhole).then(|| World3d::new(map));
         let _ = footage.birds_eye(renderer, canvas, world.as_ref(), &StageTimes::default(), |_, rgb, mask| {
@@ -226,7 +272,7 @@ pub fn scenario_arrays(
         });
         a.images = Some(images);
     }
-    a
+    Ok(a)
 }
 
 /// Frame buffers handed back by their last reader ([`recycle_frame_buffer`]),
@@ -278,16 +324,24 @@ pub fn recycle_frame_buffer(buffer: Vec<u8>) {
 /// scenario's frames are hundreds of megabytes, written once, and filling
 /// them 4 KiB page by page cost about as much as drawing them (measured:
 /// 364 ms per 150-frame city scenario before, 188 ms after).
-fn frame_buffer(len: usize) -> Vec<u8> {
+///
+/// `None` when the memory cannot be had: the allocator refuses (a memory
+/// limit), or the buffer is larger than the memory the OS has available,
+/// which Linux would otherwise promise and then end the process over.
+fn frame_buffer(len: usize) -> Option<Vec<u8>> {
     if len >= SPARE_MIN_BYTES {
         let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(i) = spares.iter().position(|b| b.capacity() >= len && b.capacity() <= len + len / 4) {
             let mut buffer = spares.swap_remove(i);
             buffer.clear();
-            return buffer;
+            return Some(buffer);
+        }
+        if available_memory_bytes().is_some_and(|a| a < len as u64) {
+            return None;
         }
     }
-    let buffer = Vec::with_capacity(len);
+    let mut buffer = Vec::new();
+    buffer.try_reserve_exact(len).ok()?;
     #[cfg(target_os = "linux")]
     {
         const HUGE_PAGE: usize = 2 << 20;
@@ -300,5 +354,5 @@ fn frame_buffer(len: usize) -> Vec<u8> {
             unsafe { libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE) };
         }
     }
-    buffer
+    Some(buffer)
 }
