@@ -12,6 +12,23 @@ use serde::Deserialize;
 use serde_json::{Map, Number, Value};
 use std::fmt;
 
+/// A number as messages echo it: as written for everyday values, in
+/// exponent form when plain digits would run long (`1e308`, not 309
+/// digits; `1e-12`, not `0.000000000001`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shown(pub f64);
+
+impl fmt::Display for Shown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let v = self.0;
+        if v.is_finite() && v != 0.0 && !(1e-4..1e16).contains(&v.abs()) {
+            write!(f, "{v:e}")
+        } else {
+            write!(f, "{v}")
+        }
+    }
+}
+
 /// A problem in a JSON document: the path of the field (`a.b[2].c`, empty
 /// for the whole document) and what is wrong.
 #[derive(Debug, Clone, PartialEq)]
@@ -283,9 +300,56 @@ impl<'de> de::Deserializer<'de> for Strict {
         visitor.visit_unit()
     }
 
+    whole_numbers! {
+        deserialize_u8: u8, deserialize_u16: u16, deserialize_u32: u32, deserialize_u64: u64,
+        deserialize_i8: i8, deserialize_i16: i16, deserialize_i32: i32, deserialize_i64: i64
+    }
+
     serde::forward_to_deserialize_any! {
-        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
+        bool i128 u128 f32 f64 char str string
         bytes byte_buf unit unit_struct seq tuple tuple_struct identifier
+    }
+}
+
+/// Integer fields: a number that is not a whole number of the field's
+/// range is refused with the range, echoing the number as written
+/// ([`Shown`]) or, beyond what a float holds exactly, by which end it
+/// passes (never `1.8446744073709552e+19` for the 2^64 a user typed).
+macro_rules! whole_numbers {
+    ($($method:ident: $t:ty),* $(,)?) => {$(
+        fn $method<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Error> {
+            if let Value::Number(n) = &self.0 {
+                let fits = match (n.as_u64(), n.as_i64()) {
+                    (Some(u), _) => <$t>::try_from(u).is_ok(),
+                    (_, Some(i)) => <$t>::try_from(i).is_ok(),
+                    _ => false,
+                };
+                if !fits {
+                    return Err(de::Error::custom(whole_number_message(n, <$t>::MIN as i128, <$t>::MAX as i128)));
+                }
+            }
+            self.deserialize_any(visitor)
+        }
+    )*};
+}
+use whole_numbers;
+
+/// Why `n` is not a whole number from `min` to `max`, and what is allowed.
+fn whole_number_message(n: &Number, min: i128, max: i128) -> String {
+    let allowed = format!("use a whole number from {min} to {max}");
+    let value = n.as_f64().unwrap_or(f64::NAN);
+    if n.is_f64() && value.is_finite() && value.fract() != 0.0 {
+        format!("{} is not a whole number: {allowed}", Shown(value))
+    } else if value > max as f64 || (n.is_f64() && value >= max as f64) {
+        let shown =
+            if n.is_f64() && value >= 1e16 { "a number above ".to_string() + &max.to_string() } else { n.to_string() };
+        format!("{shown} is too large: {allowed}")
+    } else if value < min as f64 {
+        let shown =
+            if n.is_f64() && value <= -1e16 { "a number below ".to_string() + &min.to_string() } else { n.to_string() };
+        format!("{shown} is too small: {allowed}")
+    } else {
+        format!("{} is written as a decimal: {allowed}, without a decimal point or exponent", Shown(value))
     }
 }
 

@@ -2,6 +2,7 @@
 //! checked here with a message that names it, the value and what is allowed.
 
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
+use crate::json::Shown;
 use crate::map::signals::{ScheduleStep, Signal};
 use crate::map::MapLayout;
 use serde::{Deserialize, Serialize};
@@ -385,11 +386,42 @@ fn default_pinhole_fov() -> f64 {
 }
 
 /// A car named by id (specs) or by name (scenario files).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum CarRef {
     Id(u32),
     Name(String),
+}
+
+impl<'de> Deserialize<'de> for CarRef {
+    /// An id (0, 1, ...) or a name; anything else is refused saying so
+    /// (serde's untagged enums say only "did not match any variant").
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<CarRef, D::Error> {
+        struct Visit;
+        const EXPECTED: &str = "a car: its id (a whole number from 0) or its name";
+        impl serde::de::Visitor<'_> for Visit {
+            type Value = CarRef;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(EXPECTED)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<CarRef, E> {
+                u32::try_from(v).map(CarRef::Id).map_err(|_| E::custom(format!("{v} is not {EXPECTED}")))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<CarRef, E> {
+                match u64::try_from(v) {
+                    Ok(v) => self.visit_u64(v),
+                    Err(_) => Err(E::custom(format!("{v} is not {EXPECTED}"))),
+                }
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<CarRef, E> {
+                Err(E::custom(format!("{} is not {EXPECTED}", crate::json::Shown(v))))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<CarRef, E> {
+                Ok(CarRef::Name(v.to_string()))
+            }
+        }
+        deserializer.deserialize_any(Visit)
+    }
 }
 
 fn default_zoom() -> f64 {
@@ -444,10 +476,19 @@ impl CameraSpec {
             if !(view.position.iter().chain([&view.yaw_deg, &view.pitch_deg, &view.roll_deg]).all(|v| v.is_finite())) {
                 return Err(SpecError::new(here, "position, yaw_deg, pitch_deg and roll_deg must be numbers"));
             }
+            if view.position[2] <= 0.0 {
+                return Err(SpecError::new(
+                    format!("{here}.position[2]"),
+                    format!(
+                        "{} is not allowed: the camera's height in metres must be above the ground (z > 0); below it the camera sees through the road",
+                        Shown(view.position[2])
+                    ),
+                ));
+            }
             if !(1.0..=170.0).contains(&view.fov_deg) {
                 return Err(SpecError::new(
                     format!("{here}.fov_deg"),
-                    format!("{} is not allowed: a horizontal field of view from 1 to 170 degrees", view.fov_deg),
+                    format!("{} is not allowed: a horizontal field of view from 1 to 170 degrees", Shown(view.fov_deg)),
                 ));
             }
             CameraKind::Pinhole(Pinhole {
@@ -601,7 +642,7 @@ impl Distribution {
         };
         for v in values {
             if !(v.is_finite() && v >= lo && v <= hi) {
-                return Err(SpecError::new(field, format!("{v} is not allowed: use {lo} to {hi}")));
+                return Err(SpecError::new(field, format!("{} is not allowed: use {lo} to {hi}", Shown(v))));
             }
         }
         Ok(())
@@ -885,7 +926,8 @@ impl CitySpec {
                 "city.driver.max_deceleration",
                 format!(
                     "{} is below comfortable_deceleration {}: the hard limit must be the larger",
-                    d.max_deceleration, d.comfortable_deceleration
+                    Shown(d.max_deceleration),
+                    Shown(d.comfortable_deceleration)
                 ),
             ));
         }
@@ -973,7 +1015,7 @@ impl CitySpec {
 
 fn unit_interval(field: &str, value: f64, hi: f64) -> Result<(), SpecError> {
     if !(value.is_finite() && (0.0..=hi).contains(&value)) {
-        return Err(SpecError::new(field, format!("{value} is not allowed: use 0 to {hi}")));
+        return Err(SpecError::new(field, format!("{} is not allowed: use 0 to {hi}", Shown(value))));
     }
     Ok(())
 }
@@ -988,7 +1030,7 @@ fn default_toy_speed() -> f64 {
     2.0
 }
 /// The paper's toy-world start gap from follower to leader, pixels.
-const DEFAULT_LEADER_GAP_PX: f64 = 30.0;
+pub const DEFAULT_LEADER_GAP_PX: f64 = 30.0;
 fn default_car_length() -> f64 {
     2.2
 }
@@ -1102,7 +1144,7 @@ impl DatasetSpec {
         if !(interval.is_finite() && interval > 0.0 && interval <= 10.0) {
             return Err(SpecError::new(
                 "frame_interval",
-                format!("{interval} is not allowed: seconds between frames, above 0 and at most 10"),
+                format!("{} is not allowed: seconds between frames, above 0 and at most 10", Shown(interval)),
             ));
         }
         range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
@@ -1122,7 +1164,7 @@ impl DatasetSpec {
                     field,
                     format!(
                         "{} is not allowed: the share of cars in leader-follower pairs, from 0 to 1",
-                        g.edge_proportion
+                        Shown(g.edge_proportion)
                     ),
                 ));
             }
@@ -1276,7 +1318,10 @@ fn range(field: &str, value: u32, lo: u32, hi: u32) -> Result<(), SpecError> {
 
 fn positive(field: &str, value: f64, hi: f64, unit: &str) -> Result<(), SpecError> {
     if !(value.is_finite() && value > 0.0 && value <= hi) {
-        return Err(SpecError::new(field, format!("{value} is not allowed: {unit}, above 0 and at most {hi}")));
+        return Err(SpecError::new(
+            field,
+            format!("{} is not allowed: {unit}, above 0 and at most {hi}", Shown(value)),
+        ));
     }
     Ok(())
 }

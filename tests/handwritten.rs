@@ -629,8 +629,10 @@ fn run_lenient_and_strict(file: &Path, scenario: &str, out: &Path) -> (PathBuf, 
     assert!(output.status.success(), "{}: {stderr}", file.display());
     let dir = out.join(scenario);
     let events: Vec<EventRow> = read_csv(&dir.join("events.csv"));
-    let adaptations: Vec<&EventRow> =
-        events.iter().filter(|e| e.kind == "action_adapted" || e.kind == "action_skipped").collect();
+    let adaptations: Vec<&EventRow> = events
+        .iter()
+        .filter(|e| ["action_adapted", "action_skipped", "lane_change"].contains(&e.kind.as_str()))
+        .collect();
     for e in &adaptations {
         assert!(
             stderr.lines().any(|l| l.starts_with("warning: ") && l.ends_with(&e.detail)),

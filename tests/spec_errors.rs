@@ -313,3 +313,32 @@ fn city_starts_are_checked_against_the_driver() {
         city_with("{}").replacen(r#""world": "city","#, r#""world": "city", "leader_gap_px": 30,"#, 1);
     rejected("leader-gap-in-city", &toy_gap_in_the_city, &["leader_gap_px", "toy", "city.start.follower_gap_m"]);
 }
+
+#[test]
+fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
+    // Before: 2^64 came back as `1.8446744073709552e+19`, 1e308 as 309
+    // digits, -1 for a camera's car as "did not match any variant of
+    // untagged enum CarRef", and a 32x32 toy image was blamed on
+    // leader_gap_px, which the spec did not set.
+    let seed = with(|v| v["seed"] = 12345.into()).replace("12345", "18446744073709551616");
+    rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
+    let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
+    rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    let proportion = with(|v| v["groups"][0]["edge_proportion"] = 0.25.into()).replace("0.25", "1e308");
+    rejected("proportion-1e308", &proportion, &["groups[0].edge_proportion", "1e308 is not allowed"]);
+    rejected(
+        "first-person-negative",
+        &with(|v| v["cameras"] = serde_json::json!([{"name": "driver", "first_person": -1}])),
+        &["cameras[0].first_person", "-1 is not a car: its id (a whole number from 0) or its name"],
+    );
+    rejected(
+        "pinhole-below-ground",
+        &with(|v| v["cameras"] = serde_json::json!([{"name": "low", "pinhole": {"position": [0, 0, -5]}}])),
+        &["cameras[0].pinhole.position[2]", "-5 is not allowed", "above the ground"],
+    );
+    rejected(
+        "tiny-toy-image",
+        &with(|v| v["image"] = serde_json::json!({"width": 32, "height": 32})),
+        &["field `image`", "a 32x32 image shows 0.40 px per metre", "Use a larger image"],
+    );
+}

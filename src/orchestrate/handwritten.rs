@@ -110,10 +110,16 @@ fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
     let driven = trajectories
         .events
         .iter()
-        .filter(|e| matches!(e.kind, EventKind::ActionAdapted | EventKind::ActionSkipped))
+        // A lane change is always the driver's own, for a turn written from
+        // a lane that does not allow it: an adaptation like the others.
+        .filter(|e| matches!(e.kind, EventKind::ActionAdapted | EventKind::ActionSkipped | EventKind::LaneChange))
         .map(|e| {
             let car = s.plan.cars.iter().find(|c| Some(c.id) == e.car).map_or("?", |c| c.name.as_str());
-            let what = if e.kind == EventKind::ActionSkipped { "skipped" } else { "adapted" };
+            let what = match e.kind {
+                EventKind::ActionSkipped => "skipped",
+                EventKind::LaneChange => "changed lanes for a turn its lane does not allow",
+                _ => "adapted",
+            };
             format!("scenario {:?}, car {car:?}, at {:.1} s, {what}: {}", s.name, e.t, e.detail)
         });
     read.chain(driven).collect()

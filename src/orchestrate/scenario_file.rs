@@ -19,7 +19,7 @@
 
 use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
-use crate::json::{self, JsonError};
+use crate::json::{self, JsonError, Shown};
 use crate::map::signals::{light_at, light_index, light_label, Colour, ScheduleStep, Signal, APPROACHES};
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::{ConfounderName, Effect, Intervention, Trigger};
@@ -411,7 +411,7 @@ fn resolve(
             return Err(here.err(
                 None,
                 "frame_interval",
-                format!("{t} is not allowed: seconds, above 0 and at most 10"),
+                format!("{} is not allowed: seconds, above 0 and at most 10", Shown(t)),
             ));
         }
     }
@@ -594,7 +594,8 @@ fn resolve_vehicle(
             car,
             "SpawnAtDistance",
             format!(
-                "{spawn_distance} is not allowed: metres along lane {spawn_name}, from 0 to below {lane_length:.2}"
+                "{} is not allowed: metres along lane {spawn_name}, from 0 to below {lane_length:.2}",
+                Shown(spawn_distance)
             ),
         ));
     }
@@ -682,7 +683,7 @@ fn resolve_vehicle(
                 return Err(here.err(
                     car,
                     format!("desired_speeds[{i}]"),
-                    format!("{v} is not allowed: m/s, above 0 and at most 20"),
+                    format!("{} is not allowed: m/s, above 0 and at most 20", Shown(*v)),
                 ));
             }
             Some(list.clone())
@@ -697,7 +698,11 @@ fn resolve_vehicle(
     };
     if let Some(h) = vehicle.time_headway {
         if !(h > 0.0 && h <= 10.0) {
-            return Err(here.err(car, "time_headway", format!("{h} is not allowed: seconds, above 0 and at most 10")));
+            return Err(here.err(
+                car,
+                "time_headway",
+                format!("{} is not allowed: seconds, above 0 and at most 10", Shown(h)),
+            ));
         }
     }
     let colour = match &vehicle.colour {
@@ -823,13 +828,13 @@ fn resolve_intervention(
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {
-            Err((field.to_string(), format!("{v} is not allowed: {what}, above 0")))
+            Err((field.to_string(), format!("{} is not allowed: {what}, above 0", Shown(v))))
         }
     };
     let (trigger, when_text) = match &raw.trigger {
         RawTrigger::At(t) => {
             if !(t.is_finite() && *t >= 0.0) {
-                return Err(("at".into(), format!("{t} is not allowed: seconds from the start, 0 or more")));
+                return Err(("at".into(), format!("{} is not allowed: seconds from the start, 0 or more", Shown(*t))));
             }
             (Trigger::At(*t), format!("at {t} s"))
         }
@@ -876,7 +881,7 @@ fn resolve_intervention(
                     if let Some((k, v)) = d.iter().enumerate().find(|(_, v)| !(v.is_finite() && **v >= 0.0)) {
                         return Err((
                             format!("merge_distances[{k}]"),
-                            format!("{v} is not allowed: metres along the lane, 0 or more"),
+                            format!("{} is not allowed: metres along the lane, 0 or more", Shown(*v)),
                         ));
                     }
                     d.clone()
@@ -910,7 +915,7 @@ fn resolve_intervention(
             })?;
             let limit = if confounder == ConfounderName::Hour { 24.0 } else { 1.0 };
             if !(0.0..=limit).contains(value) {
-                return Err(("value".into(), format!("{value} is not allowed: 0 to {limit}")));
+                return Err(("value".into(), format!("{} is not allowed: 0 to {limit}", Shown(*value))));
             }
             Effect::SetConfounder { confounder, value: *value }
         }

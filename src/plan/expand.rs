@@ -12,7 +12,9 @@ use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
 use crate::map::{Action, AdaptationKind, CityMap, LaneEnd, LaneId, LanePolicy, Route};
-use crate::spec::{ActionDrawing, DatasetSpec, GroupSpec, LightPhase, SpecError, Split, WorldKind};
+use crate::spec::{
+    ActionDrawing, DatasetSpec, GroupSpec, LightPhase, SpecError, Split, WorldKind, DEFAULT_LEADER_GAP_PX,
+};
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -183,16 +185,26 @@ impl Expansion {
             }
             let shortest_pair = expansion.shortest_spacing_m;
             if g.edges() > 0 && !expansion.spans.iter().any(|s| s.hi - s.lo >= shortest_pair) {
-                let field = match expansion.spec.world {
-                    WorldKind::Toy => "leader_gap_px",
-                    WorldKind::City => "city.start.follower_gap_m",
-                };
-                return Err(SpecError::new(
-                    field,
-                    format!(
-                        "a pair {shortest_pair:.2} m long from centre to centre is longer than any visible spawn lane: no pair can start on camera"
+                let spec = &expansion.spec;
+                let too_long = "longer than any visible spawn lane: no pair can start on camera";
+                return Err(match spec.world {
+                    // The toy gap is in pixels: a small image makes each pixel many metres.
+                    WorldKind::Toy => SpecError::new(
+                        // Blame the setting the user moved from its default.
+                        if spec.leader_gap_px() != DEFAULT_LEADER_GAP_PX { "leader_gap_px" } else { "image" },
+                        format!(
+                            "a {}x{} image shows {:.2} px per metre, so leader_gap_px = {} puts leader and follower {shortest_pair:.2} m apart (centre to centre), {too_long}. Use a larger image (the default is 1024x640) or a smaller leader_gap_px",
+                            spec.image.width,
+                            spec.image.height,
+                            expansion.camera.pixels_per_metre,
+                            spec.leader_gap_px()
+                        ),
                     ),
-                ));
+                    WorldKind::City => SpecError::new(
+                        "city.start.follower_gap_m",
+                        format!("a pair {shortest_pair:.2} m long from centre to centre is {too_long}"),
+                    ),
+                });
             }
             // A dry run proves the group can be planned before anything is written.
             let key = ScenarioKey { group: g.name(), group_index: i, split: Split::Train, index: 0, name: None };

@@ -159,8 +159,8 @@ pub struct PerspectiveFrame {
 }
 
 impl PerspectiveFrame {
-    /// Depth for a 16-bit PNG: millimetres, 0 for sky (nothing within 65.5 m
-    /// is clipped to 65535).
+    /// Depth for a 16-bit PNG: millimetres, 0 for sky; 65.535 m and farther
+    /// is clipped to 65535 (README "Cameras" says so).
     pub fn depth_mm(&self, out: &mut Vec<u16>) {
         out.clear();
         out.extend(self.distance.iter().map(|&d| {
