@@ -295,6 +295,8 @@ fn a_full_or_read_only_disk_stops_cleanly_and_a_rerun_completes() {
     assert_ne!(output.status.code(), Some(0));
     assert!(stderr.contains("Read-only file system"), "{stderr}");
     assert_eq!(scenario_dirs(&out).len(), finished, "finished scenarios survive");
+    // It counts what is on disk (before: "0 finished scenarios are kept").
+    assert!(stderr.contains(&format!("\n{finished} finished scenarios are kept")), "{stderr}");
 
     // Room again: the same command completes the dataset.
     disk.remount("rw,size=200m");
@@ -304,6 +306,26 @@ fn a_full_or_read_only_disk_stops_cleanly_and_a_rerun_completes() {
     let reference = dir.join("reference");
     gen_ok(&spec, &reference, &["--quiet"]);
     assert_eq!(hash_tree(&out), hash_tree(&reference));
+}
+
+#[test]
+fn a_disk_that_is_full_from_the_start_leaves_nothing_behind() {
+    // Every write fails (a per-file size limit of 0 bytes: a real EFBIG
+    // from the OS). Before, manifest.json.partial was left in --out.
+    let dir = fresh_dir("batch-full-at-start");
+    let spec = small_spec(&dir);
+    let out = dir.join("out");
+    let script =
+        format!("trap '' XFSZ; ulimit -f 0; exec {} gen --spec {} --out {}", bin(), spec.display(), out.display());
+    let output = Command::new("sh").args(["-c", &script]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("cannot write") && stderr.contains("0 finished scenarios are kept"), "{stderr}");
+    let left: Vec<_> =
+        std::fs::read_dir(&out).map(|d| d.flatten().map(|e| e.file_name()).collect()).unwrap_or_default();
+    assert!(left.is_empty(), "left behind in {}: {left:?}", out.display());
+    gen_ok(&spec, &out, &["--quiet"]);
+    assert_eq!(validate_dir(&out).0, 0);
 }
 
 #[test]

@@ -297,6 +297,24 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     Ok(())
 }
 
+/// Finished scenarios of `spec` already in `out` (folders with their
+/// checksums), counted from the folders, not from the keys: what a failed
+/// run tells the user it keeps.
+fn finished_on_disk(out: &Path, spec: &DatasetSpec) -> u64 {
+    let mut finished = 0;
+    for g in &spec.groups {
+        for split in crate::spec::Split::ALL {
+            let Ok(entries) = std::fs::read_dir(out.join(g.name()).join(split.name())) else { continue };
+            finished += entries
+                .flatten()
+                .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+                .filter(|e| e.path().join(crate::output::CHECKSUMS).is_file())
+                .count() as u64;
+        }
+    }
+    finished
+}
+
 /// Removes hidden leftovers of interrupted scenarios in the spec's folders.
 fn sweep_partials(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
     for g in &spec.groups {
@@ -346,6 +364,22 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 /// [`generate`] of a spec already read and expanded (`options.spec_path` is
 /// not read again); `start` is when the run began, for its summary.
 pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
+    let kept = || {
+        let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
+        finished_on_disk(&out, &expansion.spec)
+    };
+    match generate_into(expansion, options, start) {
+        // Say what is really kept: every finished scenario in the folder,
+        // not only those this run reached (a read-only folder said 0 with 7 there).
+        Err(GenError::Write { error, .. }) => Err(GenError::Write { error, done: kept() }),
+        Err(GenError::Claim(ClaimError::Io { path, source })) => {
+            Err(GenError::Write { error: WriteError { path, source }, done: kept() })
+        }
+        other => other,
+    }
+}
+
+fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
     let products = Products {
         images: options.images,
         annotations: options.annotations && options.images,

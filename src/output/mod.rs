@@ -189,8 +189,13 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
     name.push(".partial");
     let temp = path.with_file_name(name);
-    fs::write(&temp, bytes).map_err(io_err(&temp))?;
-    fs::rename(&temp, path).map_err(io_err(path))
+    // A failed write (a full disk) leaves nothing behind, not a half file.
+    let written =
+        fs::write(&temp, bytes).map_err(io_err(&temp)).and_then(|()| fs::rename(&temp, path).map_err(io_err(path)));
+    if written.is_err() {
+        let _ = fs::remove_file(&temp);
+    }
+    written
 }
 
 /// Checks a finished scenario folder against its `checksums.sha256`: the
