@@ -80,3 +80,63 @@ fn layers_import_only_downwards_and_clap_stays_in_the_binary() {
     assert!(checked > 50, "only {checked} crate:: paths were checked: is the scan reading the sources?");
     assert!(violations.is_empty(), "upward imports:\n{}", violations.join("\n"));
 }
+
+/// The sibling files (of one folder, `mod.rs` aside) that `text` imports:
+/// through `super::NAME` or `crate::<folder path>::NAME`.
+fn sibling_imports(text: &str, folder: &str, siblings: &[String]) -> Vec<String> {
+    let crate_prefix = format!("crate::{}::", folder.replace('/', "::"));
+    let mut found = Vec::new();
+    for line in text.lines().map(str::trim).filter(|l| l.starts_with("use ") || l.starts_with("pub use ")) {
+        for prefix in ["super::", crate_prefix.as_str()] {
+            for (i, _) in line.match_indices(prefix) {
+                let name: String =
+                    line[i + prefix.len()..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+                if siblings.contains(&name) && !found.contains(&name) {
+                    found.push(name);
+                }
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn no_two_files_of_a_folder_import_each_other() {
+    // Mechanics are one file each and data flows one way between them: a
+    // pair that imports each other is one concept split in two (before:
+    // plan/confounders.rs and plan/interventions.rs).
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut folders: std::collections::BTreeMap<PathBuf, Vec<String>> = Default::default();
+    for file in &files {
+        let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
+        if file.parent() != Some(src.as_path()) && stem != "mod" {
+            folders.entry(file.parent().unwrap().to_path_buf()).or_default().push(stem);
+        }
+    }
+    let (mut pairs_checked, mut cycles) = (0, Vec::new());
+    for (folder, siblings) in &folders {
+        let rel = folder.strip_prefix(&src).unwrap().to_string_lossy().into_owned();
+        let imports: Vec<(String, Vec<String>)> = siblings
+            .iter()
+            .map(|s| {
+                (
+                    s.clone(),
+                    sibling_imports(&std::fs::read_to_string(folder.join(format!("{s}.rs"))).unwrap(), &rel, siblings),
+                )
+            })
+            .collect();
+        for (a, theirs) in &imports {
+            for b in theirs {
+                pairs_checked += 1;
+                let back = imports.iter().find(|(n, _)| n == b).is_some_and(|(_, i)| i.contains(a));
+                if back && a < b {
+                    cycles.push(format!("src/{rel}/{a}.rs <-> src/{rel}/{b}.rs"));
+                }
+            }
+        }
+    }
+    assert!(pairs_checked > 10, "only {pairs_checked} sibling imports found: is the scan reading the sources?");
+    assert!(cycles.is_empty(), "files that import each other:\n{}", cycles.join("\n"));
+}

@@ -36,7 +36,6 @@
 //!
 //! `daylight` is 1 from 08:00 to 17:00, 0 from 20:00 to 05:00, linear between.
 
-use super::interventions::ConfounderName;
 use crate::spec::{ConfounderSpec, DriverParams};
 use rand::RngExt;
 use serde::Serialize;
@@ -343,5 +342,43 @@ mod tests {
         let night = Confounders { hour: 23.0, ..Default::default() };
         assert_eq!(night.daylight(), 0.0);
         assert!(Confounders { hour: 18.5, ..Default::default() }.daylight() > 0.0);
+    }
+}
+
+/// The confounders an intervention can change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfounderName {
+    Rain,
+    Fog,
+    Snow,
+    Wetness,
+    Hour,
+}
+
+impl ConfounderName {
+    pub const ALL: [(ConfounderName, &'static str); 5] = [
+        (ConfounderName::Rain, "rain"),
+        (ConfounderName::Fog, "fog"),
+        (ConfounderName::Snow, "snow"),
+        (ConfounderName::Wetness, "wetness"),
+        (ConfounderName::Hour, "hour"),
+    ];
+
+    /// The name scenario files use.
+    pub fn name(self) -> &'static str {
+        ConfounderName::ALL.iter().find(|(c, _)| *c == self).map(|(_, n)| *n).expect("every confounder is listed")
+    }
+
+    /// `confounders` with this one set to `value`.
+    pub fn set(self, confounders: Confounders, value: f64) -> Confounders {
+        let mut c = confounders;
+        match self {
+            ConfounderName::Rain => c.rain = value,
+            ConfounderName::Fog => c.fog = value,
+            ConfounderName::Snow => c.snow = value,
+            ConfounderName::Wetness => c.wetness = value,
+            ConfounderName::Hour => c.hour = value,
+        }
+        c
     }
 }

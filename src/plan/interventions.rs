@@ -4,7 +4,7 @@
 //! `intervention`. Car and light fields are indices into the scenario's cars
 //! (id order) and light plan.
 
-use super::confounders::Confounders;
+use super::confounders::ConfounderName;
 use crate::map::signals::{Colour, ScheduleStep};
 use crate::map::Action;
 
@@ -47,44 +47,6 @@ pub enum Effect {
     /// and every driver change as the causal model says (relative to the
     /// conditions before; red-light runners stay as drawn).
     SetConfounder { confounder: ConfounderName, value: f64 },
-}
-
-/// The confounders an intervention can change.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ConfounderName {
-    Rain,
-    Fog,
-    Snow,
-    Wetness,
-    Hour,
-}
-
-impl ConfounderName {
-    pub const ALL: [(ConfounderName, &'static str); 5] = [
-        (ConfounderName::Rain, "rain"),
-        (ConfounderName::Fog, "fog"),
-        (ConfounderName::Snow, "snow"),
-        (ConfounderName::Wetness, "wetness"),
-        (ConfounderName::Hour, "hour"),
-    ];
-
-    /// The name scenario files use.
-    pub fn name(self) -> &'static str {
-        ConfounderName::ALL.iter().find(|(c, _)| *c == self).map(|(_, n)| *n).expect("every confounder is listed")
-    }
-
-    /// `confounders` with this one set to `value`.
-    pub fn set(self, confounders: Confounders, value: f64) -> Confounders {
-        let mut c = confounders;
-        match self {
-            ConfounderName::Rain => c.rain = value,
-            ConfounderName::Fog => c.fog = value,
-            ConfounderName::Snow => c.snow = value,
-            ConfounderName::Wetness => c.wetness = value,
-            ConfounderName::Hour => c.hour = value,
-        }
-        c
-    }
 }
 
 /// One intervention of a scenario.

@@ -6,7 +6,8 @@ use super::car::PendingQueue;
 use super::Sim;
 use crate::map::signals::Light;
 use crate::map::{Action, LanePolicy, LegKind, Route, RouteError};
-use crate::plan::interventions::{ConfounderName, Effect, Trigger};
+use crate::plan::confounders::ConfounderName;
+use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::OnLeaderLost;
 use crate::world::{BoundBy, Event, EventKind, Interaction};
 
