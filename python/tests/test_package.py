@@ -441,6 +441,18 @@ def _wait_for(path, child, seconds=60):
         time.sleep(0.02)
 
 
+def _generate_in_child(tmp_path, spec, **options):
+    """Starts ``causalcity.generate(spec, <tmp>/out, **options)`` in a child
+    interpreter (to be interrupted); returns the child, the spec file and ``out``."""
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(spec))
+    out = tmp_path / "out"
+    arguments = ", ".join(f"{k}={v!r}" for k, v in options.items())
+    script = f"import causalcity\ncausalcity.generate({str(spec_file)!r}, {str(out)!r}, {arguments})\n"
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return child, spec_file, out
+
+
 def test_ctrl_c_stops_generate_early_and_the_same_call_resumes(tmp_path):
     # Before: KeyboardInterrupt arrived only once the whole dataset was
     # written (the manifest then said complete). Now the run stops at the
@@ -448,14 +460,7 @@ def test_ctrl_c_stops_generate_early_and_the_same_call_resumes(tmp_path):
     spec = json.loads(CITY_SPEC.read_text())
     spec["splits"] = {"train": 40, "val": 0, "test": 0}
     spec["frames"] = 150
-    spec_file = tmp_path / "spec.json"
-    spec_file.write_text(json.dumps(spec))
-    out = tmp_path / "out"
-    script = (
-        "import causalcity, sys\n"
-        f"causalcity.generate({str(spec_file)!r}, {str(out)!r}, images=False, threads=1, progress=False)\n"
-    )
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child, spec_file, out = _generate_in_child(tmp_path, spec, images=False, threads=1, progress=False)
     _wait_for(out / "cars08_edges50" / "train" / "00000", child)
     child.send_signal(signal.SIGINT)
     _, stderr = child.communicate(timeout=60)
@@ -512,14 +517,7 @@ def test_ctrl_c_interrupts_a_long_simulate():
 def test_ctrl_c_stops_generate_inside_a_long_scenario(tmp_path):
     # Before: the poses-only scenario was simulated and written to its end
     # (28 s, 958 MB) before the KeyboardInterrupt arrived.
-    spec_file = tmp_path / "long.json"
-    spec_file.write_text(json.dumps(LONG_SPEC))
-    out = tmp_path / "out"
-    script = (
-        "import causalcity\n"
-        f"causalcity.generate({str(spec_file)!r}, {str(out)!r}, images=False, effects=False, progress=False)\n"
-    )
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child, _, out = _generate_in_child(tmp_path, LONG_SPEC, images=False, effects=False, progress=False)
     _wait_for(out / "manifest.json", child)
     time.sleep(0.3)
     child.send_signal(signal.SIGINT)
