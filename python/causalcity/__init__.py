@@ -510,15 +510,28 @@ class Stream:
         self.threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
         self.ahead = _optional_whole("ahead", ahead, 1, _U32_MAX)
         self.shard = _process_shard(shard)
-        keys = spec.keys(split, limit)
+        limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
+        if split not in spec.splits:
+            spec.keys(split, 1)  # raises InputError naming the splits there are
         if groups is not None:
             unknown = [g for g in groups if g not in spec.groups]
             if unknown:
                 raise InputError(
                     f"groups {unknown} are not in spec {spec.name!r}: its groups are {', '.join(spec.groups)}"
                 )
-            keys = [k for k in keys if k.group in groups]
-        self._all_keys = keys
+        # Keys are computed from their position (group, then index), never
+        # listed: a spec at the largest split sizes has millions of them.
+        self._groups = [g for g in spec.groups if groups is None or g in groups]
+        self._per_group = min(spec.splits[split], _U32_MAX if limit is None else limit)
+        self._positions = range(len(self._groups) * self._per_group)
+
+    def _key(self, position: int) -> Key:
+        return Key(self._groups[position // self._per_group], self.split, position % self._per_group)
+
+    def _worker_positions(self, worker_id: int, workers: int) -> range:
+        rank, processes = self.shard
+        slot, slots = worker_id * processes + rank, processes * workers
+        return self._positions[slot::slots]
 
     def keys(self, worker: Optional[Tuple[int, int]] = None) -> List[Key]:
         """The keys this process (and DataLoader worker) generates: process
@@ -526,29 +539,32 @@ class Stream:
         rank on, and its workers share those in turn, so processes and
         workers never overlap and together cover every key. ``worker``
         overrides the detected (worker id, workers)."""
-        rank, processes = self.shard
-        if worker is None:
-            worker_id, workers = _worker()
-        else:
-            worker_id, workers = _shard_pair(worker, "worker")
-        slot, slots = worker_id * processes + rank, processes * workers
-        return self._all_keys[slot::slots]
+        worker_id, workers = _worker() if worker is None else _shard_pair(worker, "worker")
+        return [self._key(p) for p in self._worker_positions(worker_id, workers)]
 
     def __len__(self) -> int:
         """Scenarios this process yields (over all its DataLoader workers)."""
         rank, processes = self.shard
-        return len(self._all_keys[rank::processes])
+        return len(self._positions[rank::processes])
 
     def __iter__(self) -> Iterator[Scenario]:
         worker_id, workers = _worker()
         # Inside a DataLoader worker each worker is one process: one thread each.
         threads = self.threads if self.threads is not None else (1 if workers > 1 else None)
-        keys = self.keys((worker_id, workers))
-        scenarios = _native.Prefetch(
-            self.spec._native, [tuple(k) for k in keys], self.images, self.effects, threads, self.ahead
-        )
-        for key, raw in zip(keys, scenarios):
-            yield _scenario(raw, key)
+        positions = self._worker_positions(worker_id, workers)
+        # Handed to the generator a chunk at a time, so that memory does not
+        # grow with the split sizes.
+        for start in range(0, len(positions), _STREAM_CHUNK):
+            keys = [self._key(p) for p in positions[start : start + _STREAM_CHUNK]]
+            scenarios = _native.Prefetch(
+                self.spec._native, [tuple(k) for k in keys], self.images, self.effects, threads, self.ahead
+            )
+            for key, raw in zip(keys, scenarios):
+                yield _scenario(raw, key)
+
+
+_STREAM_CHUNK = 4096
+"""Keys a stream hands its generator at once."""
 
 
 def stream(

@@ -570,3 +570,34 @@ def test_frames_that_do_not_fit_raise_memory_error_not_an_abort(tmp_path):
         assert line.startswith("MemoryError: not enough memory for the frames"), line
     assert "7.86 GB are needed (3000 frames of 1024 x 640" in lines[0], lines[0]
     assert lines[3] == "still running 3000"
+
+
+def test_a_stream_at_the_largest_split_sizes_starts_at_once_in_little_memory():
+    # 10,000,000 per split in two groups: before, the stream listed its 20
+    # million keys first (gigabytes); now keys come from their position.
+    script = (
+        "import causalcity, itertools, resource\n"
+        "spec = causalcity.Spec.from_dict({'name': 'largest', 'world': 'toy', 'seed': 5, 'frames': 20,\n"
+        "    'groups': [{'cars': 4, 'edge_proportion': 0.5}, {'cars': 8, 'edge_proportion': 0.5}],\n"
+        "    'splits': {'train': 10000000, 'val': 10000000, 'test': 10000000}})\n"
+        "s = causalcity.stream(spec, 'train', shard=(1, 3), effects=False)\n"
+        "print(len(s))\n"
+        "print([tuple(x.key) for x in itertools.islice(s, 3)])\n"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)\n"
+    )
+    child = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert child.returncode == 0, child.stderr
+    length, first, peak = child.stdout.splitlines()
+    assert int(length) == 20_000_000 // 3 + 1
+    assert first == str([("cars04_edges50", "train", i) for i in (1, 4, 7)])
+    assert int(peak) < 300e6, f"peak memory {int(peak) / 1e6:.0f} MB"
+
+
+def test_a_stream_handed_over_in_chunks_keeps_its_order(monkeypatch):
+    spec = causalcity.Spec.load(TOY_SPEC)
+    whole = [s.key for s in causalcity.stream(spec, "train", effects=False)]
+    monkeypatch.setattr(causalcity, "_STREAM_CHUNK", 3)
+    chunked = list(causalcity.stream(spec, "train", effects=False, threads=2))
+    assert [s.key for s in chunked] == whole == spec.keys("train") and len(whole) > 3
+    for s in chunked:
+        np.testing.assert_array_equal(s.position, causalcity.simulate(spec, *s.key, effects=False).position)
