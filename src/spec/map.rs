@@ -1,0 +1,117 @@
+//! `map`: the city map's dimensions and the bird's-eye camera's height.
+
+use super::*;
+
+/// The city map's dimensions, metres (every field optional; the defaults
+/// are the default layout, [`MapLayout::default`]), and the height of the
+/// bird's-eye camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapSpec {
+    /// Width of every lane; a road is four lanes wide.
+    pub lane_width: f64,
+    /// y of the centre lines of the east-west roads B and A, ascending.
+    pub east_west_roads: [f64; 2],
+    /// x of the centre lines of the north-south roads C and D, ascending.
+    pub north_south_roads: [f64; 2],
+    /// East-west roads run from -extent_x to +extent_x, then loop back.
+    pub extent_x: f64,
+    /// North-south roads run from -extent_y to +extent_y, then loop back.
+    pub extent_y: f64,
+    /// Distance along the lane a lane change takes, metres.
+    pub lane_change_m: f64,
+    /// Height of the bird's-eye camera. Absent: the original's 40 m, or
+    /// higher when the intersections and their stop lines do not fit the
+    /// view from there.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_altitude_m: Option<f64>,
+}
+
+impl Default for MapSpec {
+    fn default() -> Self {
+        let l = MapLayout::default();
+        MapSpec {
+            lane_width: l.lane_width,
+            east_west_roads: [l.east_west_roads[0].1, l.east_west_roads[1].1],
+            north_south_roads: [l.north_south_roads[0].1, l.north_south_roads[1].1],
+            extent_x: l.extent_x,
+            extent_y: l.extent_y,
+            lane_change_m: l.lane_change_length,
+            camera_altitude_m: None,
+        }
+    }
+}
+
+/// Largest map coordinate a spec may give, metres.
+const MAX_MAP_EXTENT: f64 = 5000.0;
+
+impl MapSpec {
+    /// The layout the map is built from.
+    pub fn layout(&self) -> MapLayout {
+        let d = MapLayout::default();
+        MapLayout {
+            lane_width: self.lane_width,
+            east_west_roads: [
+                (d.east_west_roads[0].0, self.east_west_roads[0]),
+                (d.east_west_roads[1].0, self.east_west_roads[1]),
+            ],
+            north_south_roads: [
+                (d.north_south_roads[0].0, self.north_south_roads[0]),
+                (d.north_south_roads[1].0, self.north_south_roads[1]),
+            ],
+            extent_x: self.extent_x,
+            extent_y: self.extent_y,
+            lane_change_length: self.lane_change_m,
+            sidewalk_width: d.sidewalk_width,
+            ..d
+        }
+    }
+
+    /// Checks sizes, and that every lane ending at an intersection is at
+    /// least [`MapLayout::min_approach_length`] long.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        positive("map.lane_width", self.lane_width, 10.0, "metres")?;
+        positive("map.lane_change_m", self.lane_change_m, 200.0, "metres")?;
+        let layout = self.layout();
+        let hw = layout.road_half_width();
+        let need = layout.min_approach_length();
+        let axes = [
+            ("map.north_south_roads", self.north_south_roads, "map.extent_x", self.extent_x, "C", "D", "east-west"),
+            ("map.east_west_roads", self.east_west_roads, "map.extent_y", self.extent_y, "B", "A", "north-south"),
+        ];
+        for (field, roads, extent_field, extent, first, second, crossing) in axes {
+            if !roads.iter().all(|r| r.is_finite() && r.abs() <= MAX_MAP_EXTENT) {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{roads:?} is not allowed: give two finite centre-line positions within +-{MAX_MAP_EXTENT} m"
+                    ),
+                ));
+            }
+            positive(extent_field, extent, MAX_MAP_EXTENT, "metres")?;
+            let segments = [
+                (format!("from -{extent_field} to road {first}"), roads[0] - hw + extent),
+                (format!("between roads {first} and {second}"), roads[1] - roads[0] - 2.0 * hw),
+                (format!("from road {second} to +{extent_field}"), extent - roads[1] - hw),
+            ];
+            for (what, length) in segments {
+                if length < need - 1e-9 {
+                    return Err(SpecError::new(
+                        if what.contains("between") { field } else { extent_field },
+                        format!(
+                            "roads {first} and {second} at {roads:?} m with {extent_field} {extent} m leave {length:.2} m of the {crossing} roads {what}: every lane that ends at an intersection must be at least {need:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
+                            layout.lane_change_length,
+                            layout.stop_line_setback,
+                            crate::map::APPROACH_MARGIN_M,
+                            self.lane_width
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(altitude) = self.camera_altitude_m {
+            positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
+        }
+        Ok(())
+    }
+}

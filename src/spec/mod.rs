@@ -1,0 +1,574 @@
+//! The dataset spec: what a user asks for, read from JSON. Every field is
+//! checked here with a message that names it, the value and what is allowed.
+//!
+//! One file per concept: this one holds the dataset (world, groups,
+//! splits, image) and the checks they share; `map.rs` the map's
+//! dimensions, `camera.rs` the extra cameras, `city.rs` the city world's
+//! drivers, start, lights and confounders.
+
+mod camera;
+mod city;
+mod map;
+
+pub use camera::*;
+pub use city::*;
+pub use map::*;
+
+use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
+use crate::json::Shown;
+use crate::map::signals::{ScheduleStep, Signal};
+use crate::map::MapLayout;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::Path;
+
+/// Which dynamics drive the cars.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WorldKind {
+    /// No agency: constant speed along the route, no lights, no collisions.
+    Toy,
+    /// Agency: car-following, lights, merges, collisions, confounders.
+    City,
+}
+
+impl WorldKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            WorldKind::Toy => "toy",
+            WorldKind::City => "city",
+        }
+    }
+}
+
+/// How the dataset's own bird's-eye frames are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BirdsEyeView {
+    /// A flat drawing seen straight down: every car the same shape wherever
+    /// it is (the default; what the paper's pixel figures describe).
+    #[default]
+    Flat,
+    /// The same camera as a true pinhole, in perspective: walls lean
+    /// outwards and a car's roof sits off its footprint towards the edge,
+    /// as the original's 40 m, 90 degree camera recorded. Ground points
+    /// land on the same pixels, so the pose logs are the same.
+    Pinhole,
+}
+
+impl BirdsEyeView {
+    pub fn is_flat(&self) -> bool {
+        *self == BirdsEyeView::Flat
+    }
+}
+
+/// Image size of the bird's-eye camera, pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImageSize {
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Default for ImageSize {
+    fn default() -> Self {
+        ImageSize { width: 1024, height: 640 }
+    }
+}
+
+/// One experimental group: cars per scenario and the share of them in
+/// leader-follower pairs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupSpec {
+    pub cars: u32,
+    pub edge_proportion: f64,
+}
+
+impl GroupSpec {
+    /// Leader-follower pairs per scenario: `round(proportion * cars / 2)`
+    /// (halves round up), and at least 1 when the proportion is above 0.
+    pub fn edges(&self) -> u32 {
+        let edges = (self.edge_proportion * self.cars as f64 / 2.0).round() as u32;
+        if self.edge_proportion > 0.0 {
+            edges.max(1)
+        } else {
+            edges
+        }
+    }
+
+    /// Folder name, e.g. `cars08_edges50` (edges = the proportion in percent).
+    pub fn name(&self) -> String {
+        format!("cars{:02}_edges{:02}", self.cars, (self.edge_proportion * 100.0).round() as u32)
+    }
+}
+
+/// Scenarios per split, per group.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Splits {
+    pub train: u32,
+    pub val: u32,
+    pub test: u32,
+}
+
+/// A dataset split.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    Train,
+    Val,
+    Test,
+}
+
+impl Split {
+    pub const ALL: [Split; 3] = [Split::Train, Split::Val, Split::Test];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Test => "test",
+        }
+    }
+
+    /// Its place in [`Split::ALL`]: train 0, val 1, test 2.
+    pub fn index(self) -> usize {
+        match self {
+            Split::Train => 0,
+            Split::Val => 1,
+            Split::Test => 2,
+        }
+    }
+}
+
+impl Splits {
+    pub fn count(&self, split: Split) -> u32 {
+        match split {
+            Split::Train => self.train,
+            Split::Val => self.val,
+            Split::Test => self.test,
+        }
+    }
+}
+
+/// A whole dataset request (`configs/*.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetSpec {
+    /// Dataset name; also the default output folder `data/<name>`.
+    pub name: String,
+    pub world: WorldKind,
+    pub seed: u64,
+    /// Frames per scenario.
+    #[serde(default = "default_frames")]
+    pub frames: u32,
+    /// Seconds between frames: 0.1 for the toy world, 0.2 for the city when absent.
+    #[serde(default)]
+    pub frame_interval: Option<f64>,
+    #[serde(default)]
+    pub image: ImageSize,
+    /// How the bird's-eye frames are drawn: `flat` (default) or `pinhole`.
+    #[serde(default, skip_serializing_if = "BirdsEyeView::is_flat")]
+    pub birds_eye: BirdsEyeView,
+    pub groups: Vec<GroupSpec>,
+    pub splits: Splits,
+    /// High-level actions in each car's drive queue.
+    #[serde(default = "default_actions")]
+    pub actions_per_car: u32,
+    /// Toy world: distance every car covers per frame, in pixels of `image`.
+    #[serde(default = "default_toy_speed")]
+    pub toy_speed_px_per_frame: f64,
+    /// Toy world only (the paper's rule): distance along the shared path
+    /// from follower to leader at the start, pixels; 30 when absent. The
+    /// city draws its gaps from `city.start.follower_gap_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub leader_gap_px: Option<f64>,
+    /// Car footprint, metres.
+    #[serde(default = "default_car_length")]
+    pub car_length_m: f64,
+    #[serde(default = "default_car_width")]
+    pub car_width_m: f64,
+    /// City world only: agency, lights and confounders.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub city: Option<CitySpec>,
+    /// Extra cameras beside the bird's-eye view (need images).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cameras: Vec<CameraSpec>,
+    /// The city map's dimensions and the bird's-eye camera's height.
+    #[serde(default)]
+    pub map: MapSpec,
+}
+
+/// 1 to 64 characters from A-Z a-z 0-9 - _ . not starting with a dot.
+pub fn valid_folder_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && !name.starts_with('.')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+fn unit_interval(field: &str, value: f64, hi: f64) -> Result<(), SpecError> {
+    if !(value.is_finite() && (0.0..=hi).contains(&value)) {
+        return Err(SpecError::new(field, format!("{} is not allowed: use 0 to {hi}", Shown(value))));
+    }
+    Ok(())
+}
+
+fn default_frames() -> u32 {
+    150
+}
+fn default_actions() -> u32 {
+    5
+}
+fn default_toy_speed() -> f64 {
+    2.0
+}
+/// The paper's toy-world start gap from follower to leader, pixels.
+pub const DEFAULT_LEADER_GAP_PX: f64 = 30.0;
+fn default_car_length() -> f64 {
+    2.2
+}
+fn default_car_width() -> f64 {
+    1.1
+}
+
+/// A spec problem: which field, and what is wrong with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpecError {
+    /// Dotted path of the field, e.g. `groups[1].cars`; empty for the whole file.
+    pub field: String,
+    pub message: String,
+}
+
+impl SpecError {
+    pub fn new(field: impl Into<String>, message: impl Into<String>) -> SpecError {
+        SpecError { field: field.into(), message: message.into() }
+    }
+}
+
+impl fmt::Display for SpecError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.field.is_empty() {
+            f.write_str(&self.message)
+        } else {
+            write!(f, "field `{}`: {}", self.field, self.message)
+        }
+    }
+}
+
+impl std::error::Error for SpecError {}
+
+/// Largest mask id: masks are 8-bit with 0 for background.
+pub const MAX_CARS: u32 = 255;
+const MAX_IMAGE_SIDE: u32 = 8192;
+const MIN_IMAGE_SIDE: u32 = 32;
+const MAX_FRAMES: u32 = 100_000;
+const MAX_SCENARIOS_PER_SPLIT: u32 = 10_000_000;
+const MAX_ACTIONS: u32 = 100;
+
+impl DatasetSpec {
+    /// Parses and checks a spec from JSON text (strictly: no duplicate
+    /// keys, no trailing data, objects where the spec has objects).
+    pub fn from_json(text: &str) -> Result<DatasetSpec, SpecError> {
+        let spec: DatasetSpec = crate::json::parse_strict(text).map_err(|e| SpecError::new(e.path, e.message))?;
+        spec.validate()?;
+        Ok(spec.resolved())
+    }
+
+    /// Frames per scenario when a file gives none.
+    pub fn default_frames() -> u32 {
+        default_frames()
+    }
+
+    /// A one-scenario spec for cars given by hand (scenario files): every
+    /// setting not named here takes the spec's default.
+    pub fn for_given_cars(
+        name: String,
+        world: WorldKind,
+        seed: u64,
+        frames: u32,
+        frame_interval: Option<f64>,
+        city: Option<CitySpec>,
+    ) -> DatasetSpec {
+        DatasetSpec {
+            name,
+            world,
+            seed,
+            frames,
+            frame_interval,
+            image: ImageSize::default(),
+            birds_eye: BirdsEyeView::Flat,
+            groups: Vec::new(),
+            splits: Splits { train: 1, val: 0, test: 0 },
+            actions_per_car: 0,
+            toy_speed_px_per_frame: default_toy_speed(),
+            leader_gap_px: None,
+            car_length_m: default_car_length(),
+            car_width_m: default_car_width(),
+            // A hand-written scenario is timed by its author: lights start at 0 unless it says otherwise.
+            city: city.map(|mut c| {
+                c.lights.phase.get_or_insert(LightPhase::Fixed);
+                c
+            }),
+            cameras: Vec::new(),
+            map: MapSpec::default(),
+        }
+    }
+
+    /// Reads, parses and checks a spec file.
+    pub fn from_file(path: &Path) -> Result<DatasetSpec, SpecError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SpecError::new("", format!("cannot read spec file {}: {e}", path.display())))?;
+        DatasetSpec::from_json(&text)
+    }
+
+    /// Checks every field's range and the groups' consistency.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if !valid_folder_name(&self.name) {
+            return Err(SpecError::new(
+                "name",
+                format!(
+                    "{:?} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (not starting with a dot); it names the output folder",
+                    self.name
+                ),
+            ));
+        }
+        range("frames", self.frames, 1, MAX_FRAMES)?;
+        let interval = self.frame_interval();
+        if !(interval.is_finite() && interval > 0.0 && interval <= 10.0) {
+            return Err(SpecError::new(
+                "frame_interval",
+                format!("{} is not allowed: seconds between frames, above 0 and at most 10", Shown(interval)),
+            ));
+        }
+        range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        range("image.height", self.image.height, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        if self.groups.is_empty() {
+            return Err(SpecError::new(
+                "groups",
+                "the list is empty: give at least one {\"cars\": N, \"edge_proportion\": P}",
+            ));
+        }
+        let mut names = std::collections::HashSet::new();
+        for (i, g) in self.groups.iter().enumerate() {
+            range(&format!("groups[{i}].cars"), g.cars, 1, MAX_CARS)?;
+            let field = format!("groups[{i}].edge_proportion");
+            if !(g.edge_proportion.is_finite() && (0.0..=1.0).contains(&g.edge_proportion)) {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{} is not allowed: the share of cars in leader-follower pairs, from 0 to 1",
+                        Shown(g.edge_proportion)
+                    ),
+                ));
+            }
+            if 2 * g.edges() > g.cars {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{} with {} cars asks for {} leader-follower pairs (round(proportion x cars / 2)), which need {} cars: lower the proportion or add cars",
+                        g.edge_proportion,
+                        g.cars,
+                        g.edges(),
+                        2 * g.edges()
+                    ),
+                ));
+            }
+            if !names.insert(g.name()) {
+                return Err(SpecError::new(
+                    format!("groups[{i}]"),
+                    format!("duplicates group {}: every (cars, edge_proportion) pair may appear once", g.name()),
+                ));
+            }
+        }
+        for split in Split::ALL {
+            range(&format!("splits.{}", split.name()), self.splits.count(split), 0, MAX_SCENARIOS_PER_SPLIT)?;
+        }
+        if Split::ALL.iter().all(|s| self.splits.count(*s) == 0) {
+            return Err(SpecError::new("splits", "all splits are 0: ask for at least one scenario"));
+        }
+        range("actions_per_car", self.actions_per_car, 0, MAX_ACTIONS)?;
+        positive("toy_speed_px_per_frame", self.toy_speed_px_per_frame, 100.0, "pixels per frame")?;
+        positive("car_length_m", self.car_length_m, 20.0, "metres")?;
+        positive("car_width_m", self.car_width_m, 3.0, "metres")?;
+        match (self.leader_gap_px, self.world) {
+            (Some(gap), WorldKind::Toy) => positive("leader_gap_px", gap, 2000.0, "pixels")?,
+            (Some(gap), WorldKind::City) => {
+                return Err(SpecError::new(
+                    "leader_gap_px",
+                    format!(
+                        "{gap} applies to \"world\": \"toy\" only (the paper's exact start gap); the city draws each follower's gap from city.start.follower_gap_m (metres): remove it"
+                    ),
+                ))
+            }
+            (None, _) => {}
+        }
+        match (&self.city, self.world) {
+            (Some(city), WorldKind::City) => city.validate()?,
+            (Some(_), WorldKind::Toy) => {
+                return Err(SpecError::new("city", "applies to \"world\": \"city\" only: remove it or change world"))
+            }
+            (None, _) => {}
+        }
+        self.map.validate()?;
+        self.birds_eye_camera()?;
+        let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
+        let mut names = std::collections::HashSet::new();
+        for (i, camera) in self.cameras.iter().enumerate() {
+            let field = format!("cameras[{i}]");
+            camera.plan(&field, |car| match car {
+                CarRef::Id(id) if *id < fewest_cars => Ok(*id as usize),
+                CarRef::Id(id) => Err(format!(
+                    "car {id} is not in every scenario: ids run from 0 to {} in the smallest group",
+                    fewest_cars.saturating_sub(1)
+                )),
+                CarRef::Name(name) => Err(format!("{name:?}: in a spec, name the car by its id (0, 1, ...)")),
+            })?;
+            if !names.insert(camera.name.as_str()) {
+                return Err(SpecError::new(
+                    format!("{field}.name"),
+                    format!("{:?} names another camera too", camera.name),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Seconds between frames, with the world's default filled in.
+    pub fn frame_interval(&self) -> f64 {
+        self.frame_interval.unwrap_or(match self.world {
+            WorldKind::Toy => 0.1,
+            WorldKind::City => 0.2,
+        })
+    }
+
+    /// The bird's-eye camera over the map: centred on the four
+    /// intersections, at `map.camera_altitude_m`, or else at the original's
+    /// 40 m ([`Camera::birds_eye`]) unless the intersections and their stop
+    /// lines do not fit the view from there, then just high enough that they
+    /// do. Errs when a given altitude leaves them out of view.
+    pub fn birds_eye_camera(&self) -> Result<Camera, SpecError> {
+        let (lo, hi) = self.map.layout().framed_area();
+        let (width, height) = (self.image.width, self.image.height);
+        let original = Camera::birds_eye(width, height);
+        let fits = Camera::altitude_to_frame(width, height, hi - lo);
+        let altitude = match self.map.camera_altitude_m {
+            Some(a) if a < fits - 1e-9 => {
+                return Err(SpecError::new(
+                    "map.camera_altitude_m",
+                    format!(
+                        "{a} m shows less than the four intersections and their stop lines ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
+                        hi.x - lo.x,
+                        hi.y - lo.y,
+                        fits
+                    ),
+                ))
+            }
+            Some(a) => a,
+            None => original.altitude_m.max(fits),
+        };
+        Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
+    }
+
+    /// Toy world: pixels from follower to leader along their path at the start.
+    pub fn leader_gap_px(&self) -> f64 {
+        self.leader_gap_px.unwrap_or(DEFAULT_LEADER_GAP_PX)
+    }
+
+    /// The city settings (defaults when the spec has none).
+    pub fn city_settings(&self) -> CitySpec {
+        self.city.clone().unwrap_or_default()
+    }
+
+    /// The spec with every default written out, as recorded in manifests.
+    pub fn resolved(&self) -> DatasetSpec {
+        let mut spec = self.clone();
+        spec.frame_interval = Some(self.frame_interval());
+        if self.world == WorldKind::Toy {
+            spec.leader_gap_px = Some(self.leader_gap_px());
+        }
+        if self.world == WorldKind::City {
+            let mut city = self.city_settings();
+            city.lights.phase.get_or_insert(LightPhase::Random);
+            spec.city = Some(city);
+        }
+        spec
+    }
+
+    /// Scenarios in the whole dataset, or with at most `limit` per split.
+    pub fn scenario_count(&self, limit: Option<u32>) -> u64 {
+        let per_group: u64 =
+            Split::ALL.iter().map(|s| self.splits.count(*s).min(limit.unwrap_or(u32::MAX)) as u64).sum();
+        per_group * self.groups.len() as u64
+    }
+}
+
+fn range(field: &str, value: u32, lo: u32, hi: u32) -> Result<(), SpecError> {
+    if value < lo || value > hi {
+        return Err(SpecError::new(field, format!("{value} is not allowed: use {lo} to {hi}")));
+    }
+    Ok(())
+}
+
+fn positive(field: &str, value: f64, hi: f64, unit: &str) -> Result<(), SpecError> {
+    if !(value.is_finite() && value > 0.0 && value <= hi) {
+        return Err(SpecError::new(
+            field,
+            format!("{} is not allowed: {unit}, above 0 and at most {hi}", Shown(value)),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edges_follow_the_documented_rule() {
+        let g = |cars, p| GroupSpec { cars, edge_proportion: p }.edges();
+        assert_eq!(g(8, 0.5), 2);
+        assert_eq!(g(12, 0.5), 3);
+        assert_eq!(g(4, 0.5), 1);
+        assert_eq!(g(8, 0.2), 1);
+        assert_eq!(g(8, 0.8), 3);
+        assert_eq!(g(4, 0.1), 1);
+        assert_eq!(g(4, 0.0), 0);
+        assert_eq!(GroupSpec { cars: 8, edge_proportion: 0.5 }.name(), "cars08_edges50");
+    }
+
+    fn spec_with_map(map: &str) -> DatasetSpec {
+        DatasetSpec::from_json(&format!(
+            r#"{{"name": "m", "world": "city", "seed": 1, "groups": [{{"cars": 4, "edge_proportion": 0.5}}],
+                "splits": {{"train": 1, "val": 0, "test": 0}}, "map": {map}}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_camera_frames_the_intersections_whatever_their_size() {
+        // The default layout: the original's camera, 40 m up, 12.8 px per metre, over the centre.
+        let c = spec_with_map("{}").birds_eye_camera().unwrap();
+        assert_eq!((c.altitude_m, c.centre_x, c.centre_y), (40.0, 0.0, 0.0));
+        assert!((c.pixels_per_metre - 12.8).abs() < 1e-9);
+        // Blocks too big for 40 m: the camera climbs until the intersections and stop lines fit, centred on them.
+        let spec = spec_with_map(
+            r#"{"east_west_roads": [-30, 30], "north_south_roads": [-50, 40], "extent_x": 100, "extent_y": 80}"#,
+        );
+        let c = spec.birds_eye_camera().unwrap();
+        let (lo, hi) = spec.map.layout().framed_area();
+        let (view_lo, view_hi) = c.ground_view();
+        assert!(c.altitude_m > 40.0);
+        assert!(view_lo.x <= lo.x + 1e-9 && view_lo.y <= lo.y + 1e-9, "{view_lo} {lo}");
+        assert!(view_hi.x >= hi.x - 1e-9 && view_hi.y >= hi.y - 1e-9, "{view_hi} {hi}");
+        // Just high enough: the tighter side (here the height, 60 + 2 x 9.6 m) fills the image.
+        assert!(((view_hi.y - view_lo.y) - (hi.y - lo.y)).abs() < 1e-9);
+        assert_eq!((c.centre_x, c.centre_y), (-5.0, 0.0));
+        // A given altitude is used as given.
+        let c = spec_with_map(r#"{"east_west_roads": [-30, 30], "extent_y": 80, "camera_altitude_m": 90}"#)
+            .birds_eye_camera()
+            .unwrap();
+        assert_eq!(c.altitude_m, 90.0);
+    }
+}
