@@ -6,7 +6,7 @@
 mod common;
 
 use common::{bin, city_spec, fresh_dir, gen_ok, hash_tree, run, toy_spec, write_spec};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -195,6 +195,14 @@ fn every_command_refuses_a_folder_it_did_not_write() {
     let stray = dir.join("stray");
     std::fs::create_dir_all(&stray).unwrap();
     std::fs::write(stray.join("notes.txt"), "mine").unwrap();
+    // Shards of the city spec, to be merged into the toy dataset.
+    let city_shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("city-shard{k}"))).collect();
+    for (k, shard) in city_shards.iter().enumerate() {
+        let shard_flag = format!("{k}/2");
+        let args = ["gen", "--spec", city_spec_path.to_str().unwrap(), "--out", shard.to_str().unwrap()];
+        let output = run(&[&args[..], &["--quiet", "--no-images", "--shard", &shard_flag]].concat());
+        assert!(output.status.success(), "{}", stderr(&output));
+    }
 
     let p = |path: &Path| path.to_str().unwrap().to_string();
     let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
@@ -255,6 +263,11 @@ fn every_command_refuses_a_folder_it_did_not_write() {
             "counterfactual sweep",
         ),
         (vec!["merge".into(), "--out".into(), p(&dir.join("merged")), p(&toy)], &toy, "no shard manifest"),
+        (
+            vec!["merge".into(), "--out".into(), p(&toy), p(&city_shards[0]), p(&city_shards[1])],
+            &toy,
+            "already holds another dataset",
+        ),
     ];
     let mut checked = 0;
     for (args, folder, says) in &cases {
