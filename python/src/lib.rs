@@ -353,13 +353,13 @@ fn counterfactual<'py>(
     images: bool,
 ) -> PyResult<Bound<'py, PyList>> {
     let intervention_origin = intervention_origin.unwrap_or_else(|| PathBuf::from("<intervention>"));
-    let pairs = py
-        .detach(|| {
-            let scenarios = Text { origin: &scenario_origin, text: &scenario_text };
-            let interventions = intervention_text.as_deref().map(|text| Text { origin: &intervention_origin, text });
-            counterfactual_arrays(scenarios, interventions, images)
-        })
-        .map_err(py_err)?;
+    let stop = AtomicBool::new(false);
+    let work = || {
+        let scenarios = Text { origin: &scenario_origin, text: &scenario_text };
+        let interventions = intervention_text.as_deref().map(|text| Text { origin: &intervention_origin, text });
+        counterfactual_arrays(scenarios, interventions, images, &stop)
+    };
+    let pairs = interruptible(py, || stop.store(true, Ordering::SeqCst), work)?.map_err(py_err)?;
     let list = PyList::empty(py);
     for pair in pairs {
         list.append(pair_dict(py, pair)?)?;

@@ -601,3 +601,30 @@ def test_a_stream_handed_over_in_chunks_keeps_its_order(monkeypatch):
     assert [s.key for s in chunked] == whole == spec.keys("train") and len(whole) > 3
     for s in chunked:
         np.testing.assert_array_equal(s.position, causalcity.simulate(spec, *s.key, effects=False).position)
+
+
+def test_ctrl_c_interrupts_counterfactual():
+    # 40 long pairs hold over a gigabyte of arrays when finished; before,
+    # Ctrl-C waited for all of them. Stopped early shows in the memory the
+    # process ever held.
+    base = json.loads(STOP_THE_LEADER.read_text())[0]
+    scenarios = [dict(base, Name=f"pair_{i}", frames=30000) for i in range(40)]
+    script = (
+        "import causalcity, json\n"
+        f"scenarios = json.loads({json.dumps(json.dumps(scenarios))})\n"
+        "print('started', flush=True)\n"
+        "try:\n"
+        "    pairs = causalcity.counterfactual(scenarios)\n"
+        "    print('finished', len(pairs))\n"
+        "except KeyboardInterrupt:\n"
+        "    peak = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
+        "    print('interrupted', int(peak) * 1024)\n"
+    )
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert child.stdout.readline().strip() == "started"
+    time.sleep(0.3)
+    child.send_signal(signal.SIGINT)
+    stdout, stderr = child.communicate(timeout=300)
+    word, peak = stdout.split()
+    assert word == "interrupted", stdout + stderr
+    assert int(peak) < 400e6, f"peak memory {int(peak) / 1e6:.0f} MB: the pairs ran on"

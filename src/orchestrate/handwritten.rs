@@ -10,7 +10,7 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::run::{load_spec, scenario_writer, write_simulated, GenError};
+use super::run::{load_spec, scenario_writer, stop_flag, write_simulated, GenError};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
@@ -29,6 +29,7 @@ use crate::world::{EventKind, Trajectories};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 /// Why `run` or `counterfactual` failed.
@@ -142,7 +143,8 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
         .par_iter()
         .map(|s| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
-            let trajectories = crate::world::simulate(&s.expansion.map, &s.plan);
+            let trajectories = crate::world::simulate_until(&s.expansion.map, &s.plan, stop_flag())
+                .ok_or(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() })?;
             let path = out.join(&s.name);
             let times = StageTimes::default();
             let bytes =
@@ -268,21 +270,27 @@ pub struct SimulatedPair {
     pub summary: PairSummary,
 }
 
-/// Simulates both plans of a pair (in parallel) and measures their divergence.
+/// Simulates both plans of a pair (in parallel) and measures their
+/// divergence; `None` once `stop` is set (checked every frame).
 pub fn simulate_pair(
     expansion: &Expansion,
     name: &str,
     factual: &ScenarioPlan,
     counterfactual: &ScenarioPlan,
-) -> SimulatedPair {
+    stop: &AtomicBool,
+) -> Option<SimulatedPair> {
     let map = &expansion.map;
-    let (a, b) = rayon::join(|| crate::world::simulate(map, factual), || crate::world::simulate(map, counterfactual));
+    let (a, b) = rayon::join(
+        || crate::world::simulate_until(map, factual, stop),
+        || crate::world::simulate_until(map, counterfactual, stop),
+    );
+    let (a, b) = (a?, b?);
     let names: Vec<(u32, String)> = factual.cars.iter().map(|c| (c.id, c.name.clone())).collect();
     let labels: Vec<String> =
         counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
     let (divergence_csv, divergence_m, summary) =
         divergence(name, &names, &labels, &a, &b, expansion.camera.pixels_per_metre);
-    SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary }
+    Some(SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary })
 }
 
 /// Simulates a factual / counterfactual pair (the counterfactual's extra
@@ -295,7 +303,11 @@ fn write_pair(
     counterfactual: &ScenarioPlan,
     folder: &Path,
 ) -> Result<PairSummary, GenError> {
-    let pair = simulate_pair(expansion, name, factual, counterfactual);
+    let pair = simulate_pair(expansion, name, factual, counterfactual, stop_flag()).ok_or(GenError::Interrupted {
+        done: 0,
+        total: 0,
+        out: PathBuf::new(),
+    })?;
     let (mut buffers, times) = (writer.buffers(), StageTimes::default());
     write_simulated(writer, factual, &pair.factual, None, folder.join("factual"), &mut buffers, &times)?;
     write_simulated(

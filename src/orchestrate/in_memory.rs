@@ -327,10 +327,12 @@ pub struct PairArrays {
 /// `causalcity counterfactual` into memory: every scenario of `scenarios`
 /// with the interventions of `interventions` added (or, without them, the
 /// scenario's own interventions against a run without), in file order.
+/// Gives up with [`GenError::Interrupted`] once `stop` is set.
 pub fn counterfactual_arrays(
     scenarios: Text,
     interventions: Option<Text>,
     images: bool,
+    stop: &AtomicBool,
 ) -> Result<Vec<PairArrays>, RunError> {
     let map = Arc::new(CityMap::default());
     let loaded = load_text(scenarios.origin, scenarios.text, FileOptions::default(), &map).map_err(RunError::Input)?;
@@ -358,7 +360,8 @@ pub fn counterfactual_arrays(
     pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
-            let pair = simulate_pair(&s.expansion, &s.name, factual, counterfactual);
+            let pair = simulate_pair(&s.expansion, &s.name, factual, counterfactual, stop)
+                .ok_or(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() })?;
             let renderer = images.then(|| Renderer::new(&s.expansion.map, s.expansion.camera));
             let mut canvas = renderer.as_ref().map(Renderer::canvas);
             let mut run = |plan: &ScenarioPlan, trajectories: &Trajectories| {

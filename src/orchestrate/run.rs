@@ -197,6 +197,12 @@ impl GenError {
 static STOP: AtomicBool = AtomicBool::new(false);
 static HANDLER: std::sync::Once = std::sync::Once::new();
 
+/// The process's stop request (SIGINT / SIGTERM where a command handles
+/// them), for the other commands' loops to check.
+pub(crate) fn stop_flag() -> &'static AtomicBool {
+    &STOP
+}
+
 /// Asks a running `gen` to stop as SIGINT does: every worker gives up at
 /// its next frame and what is complete is kept. For callers that catch the
 /// interrupt themselves (Python's KeyboardInterrupt).
