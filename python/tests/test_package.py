@@ -487,18 +487,18 @@ LONG_SPEC = {
 }
 
 
-def test_ctrl_c_interrupts_a_long_simulate():
-    # One scenario of 100,000 frames and 80 cars takes seconds to simulate
-    # and about a gigabyte to hold; Ctrl-C must not wait for it (before:
-    # the call ran to its end, then raised). Stopped early shows in the
-    # memory the process ever held: far less than the whole scenario's.
+def _interrupted(call_source, setup=""):
+    """Runs ``call_source`` (an expression) in a child interpreter, sends it
+    SIGINT 0.3 s after it starts, and returns (what happened, the peak
+    memory the child ever held, in bytes): ``interrupted`` when the call
+    raised KeyboardInterrupt, else ``finished``."""
     script = (
         "import causalcity, json\n"
-        f"spec = causalcity.Spec.from_dict(json.loads({json.dumps(json.dumps(LONG_SPEC))}))\n"
+        f"{setup}"
         "print('started', flush=True)\n"
         "try:\n"
-        "    s = causalcity.simulate(spec, 'cars80_edges50', 'train', 0, effects=False)\n"
-        "    print('finished', s.frames)\n"
+        f"    {call_source}\n"
+        "    print('finished', 0)\n"
         "except KeyboardInterrupt:\n"
         "    peak = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
         "    print('interrupted', int(peak) * 1024)\n"
@@ -507,11 +507,21 @@ def test_ctrl_c_interrupts_a_long_simulate():
     assert child.stdout.readline().strip() == "started"
     time.sleep(0.3)
     child.send_signal(signal.SIGINT)
-    stdout, stderr = child.communicate(timeout=120)
+    stdout, stderr = child.communicate(timeout=300)
     word, peak = stdout.split()
     assert word == "interrupted", stdout + stderr
+    return word, int(peak)
+
+
+def test_ctrl_c_interrupts_a_long_simulate():
+    # One scenario of 100,000 frames and 80 cars takes seconds to simulate
+    # and about a gigabyte to hold; Ctrl-C must not wait for it (before:
+    # the call ran to its end, then raised). Stopped early shows in the
+    # memory the process ever held: far less than the whole scenario's.
+    setup = f"spec = causalcity.Spec.from_dict(json.loads({json.dumps(json.dumps(LONG_SPEC))}))\n"
+    _, peak = _interrupted("causalcity.simulate(spec, 'cars80_edges50', 'train', 0, effects=False)", setup)
     # The whole scenario's arrays alone are 100,000 x 80 x 8 float64 = 512 MB.
-    assert int(peak) < 400e6, f"peak memory {int(peak) / 1e6:.0f} MB: the simulation ran on"
+    assert peak < 400e6, f"peak memory {peak / 1e6:.0f} MB: the simulation ran on"
 
 
 def test_ctrl_c_stops_generate_inside_a_long_scenario(tmp_path):
@@ -604,27 +614,10 @@ def test_a_stream_handed_over_in_chunks_keeps_its_order(monkeypatch):
 
 
 def test_ctrl_c_interrupts_counterfactual():
-    # 40 long pairs hold over a gigabyte of arrays when finished; before,
-    # Ctrl-C waited for all of them. Stopped early shows in the memory the
-    # process ever held.
+    # 40 long pairs hold 1.4 GB of arrays when finished; before, Ctrl-C
+    # waited for all of them. Stopped early shows in the memory held.
     base = json.loads(STOP_THE_LEADER.read_text())[0]
     scenarios = [dict(base, Name=f"pair_{i}", frames=30000) for i in range(40)]
-    script = (
-        "import causalcity, json\n"
-        f"scenarios = json.loads({json.dumps(json.dumps(scenarios))})\n"
-        "print('started', flush=True)\n"
-        "try:\n"
-        "    pairs = causalcity.counterfactual(scenarios)\n"
-        "    print('finished', len(pairs))\n"
-        "except KeyboardInterrupt:\n"
-        "    peak = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
-        "    print('interrupted', int(peak) * 1024)\n"
-    )
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert child.stdout.readline().strip() == "started"
-    time.sleep(0.3)
-    child.send_signal(signal.SIGINT)
-    stdout, stderr = child.communicate(timeout=300)
-    word, peak = stdout.split()
-    assert word == "interrupted", stdout + stderr
-    assert int(peak) < 400e6, f"peak memory {int(peak) / 1e6:.0f} MB: the pairs ran on"
+    setup = f"scenarios = json.loads({json.dumps(json.dumps(scenarios))})\n"
+    _, peak = _interrupted("causalcity.counterfactual(scenarios)", setup)
+    assert peak < 400e6, f"peak memory {peak / 1e6:.0f} MB: the pairs ran on"
