@@ -78,10 +78,13 @@ paper: python-env
 
 ## Throughput, memory and size figures (prints, asserts nothing); then the
 ## Python package's rates beside the command line's; then issue 23's ground
-## truth figures (effects backing the design, the learned leak classifiers).
+## truth figures (effects backing the design, the learned leak classifiers);
+## then poses-only gen beside SUMO (eclipse-sumo from PyPI, ~100 MB, into the venv).
 bench: build python-env
 	$(CARGO) bench --locked $(CARGO_FEATURES) --bench throughput
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/python_throughput.py
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check eclipse-sumo
+	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/sumo_side_by_side.py
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/ground_truth.py
 
 ## Fuzz the spec parser (not part of CI). Needs cargo-fuzz; runs on stable
