@@ -7,6 +7,12 @@ figures and ratios; asserts nothing.
 - with images: frame pairs (RGB + mask) per second, `gen` with its PNG
   encoding time taken out, against `stream(images=True)`.
 
+- the DataLoader recipe README recommends (`causalcity.batches`, shuffled
+  batches of 8 as torch tensors, `num_workers=0`) against the bare stream on
+  the same scenarios, poses only and with images (target >= 80 %); beside
+  them, the same batches through 2 DataLoader workers, and the recipe README
+  gave before (`DataLoader(stream, batch_size=None, num_workers=2)`).
+
 Same spec, same scenarios, same thread counts, without the interventional
 effects on either side. $CAUSALCITY_CLI is the
 command that runs the binary.
@@ -83,6 +89,47 @@ def main():
         print(
             f"  {threads} thread(s): CLI {cli_rate:.0f}/s ({cli_no_encode:.0f}/s without encoding), "
             f"python {rate:.0f}/s, ratio {rate / cli_no_encode:.0%} ({frames} frame pairs)"
+        )
+    if os.environ.get("BENCH_SKIP_DATALOADER") is None:
+        dataloader_side_by_side()
+
+
+def rate_of(items, count):
+    """Scenarios per second while iterating ``items``; ``count`` gives the
+    scenarios in one item."""
+    start = time.perf_counter()
+    n = sum(count(item) for item in items)
+    return n, n / (time.perf_counter() - start)
+
+
+def dataloader_side_by_side():
+    import torch
+
+    print("DataLoader recipe vs the bare stream (scenarios/s, all cores, without effects):")
+    for label, spec_path, limit, images in (
+        ("poses only", POSES_SPEC, POSES_LIMIT, False),
+        ("with images", IMAGES_SPEC, max(IMAGES_LIMIT, 2), True),
+    ):
+        spec = causalcity.Spec.load(spec_path)
+        split = "train"
+        _, bare = rate_of(causalcity.stream(spec, split, limit=limit, images=images, effects=False), lambda s: 1)
+
+        def recipe(workers):
+            batches = causalcity.batches(spec, split, 8, seed=0, limit=limit, images=images, effects=False)
+            loader = torch.utils.data.DataLoader(batches, batch_size=None, num_workers=workers)
+            return rate_of(loader, lambda b: len(b["key"]))
+
+        n, fast = recipe(0)
+        _, workers = recipe(2)
+        old = torch.utils.data.DataLoader(
+            causalcity.stream(spec, split, limit=limit, images=images, effects=False), batch_size=None, num_workers=2
+        )
+        _, before = rate_of(old, lambda s: 1)
+        print(
+            f"  {label} ({spec_path.relative_to(ROOT)}, {n} scenarios): stream {bare:.1f}/s, "
+            f"batches + DataLoader {fast:.1f}/s = {fast / bare:.0%} of the stream (target >= 80%); "
+            f"with 2 workers {workers:.1f}/s ({workers / bare:.0%}); "
+            f"old recipe (Scenario objects through 2 workers) {before:.1f}/s ({before / bare:.0%})"
         )
 
 

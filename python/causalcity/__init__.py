@@ -20,19 +20,20 @@ current one.
 
 from __future__ import annotations
 
-import json
-import numbers
-import os
-import sys
+import json as _json
+import numbers as _numbers
+import os as _os
+import sys as _sys
 from dataclasses import dataclass
 from typing import Any, Dict, Iterator, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
-import numpy as np
+import numpy as _np
 
 from . import _native
 from ._native import GenerationError, InputError
 
 __all__ = [
+    "__version__",
     "Spec",
     "Key",
     "Scenario",
@@ -42,8 +43,11 @@ __all__ = [
     "Event",
     "Counterfactual",
     "Stream",
+    "Batches",
     "simulate",
     "stream",
+    "batches",
+    "collate",
     "counterfactual",
     "generate",
     "evaluate",
@@ -54,7 +58,15 @@ __all__ = [
     "GenerationError",
 ]
 
-PathLike = Union[str, "os.PathLike[str]"]
+try:
+    from importlib.metadata import PackageNotFoundError as _PackageNotFoundError, version as _version
+
+    __version__ = _version("causalcity")
+    """The installed package's version (python/pyproject.toml)."""
+except _PackageNotFoundError:  # run from a source tree without installing
+    __version__ = "unknown"
+
+PathLike = Union[str, "_os.PathLike[str]"]
 
 _U32_MAX = 2**32 - 1
 MAX_THREADS = _native.MAX_THREADS
@@ -66,7 +78,7 @@ def _whole(name: str, value: Any, minimum: int, maximum: int, flag: Optional[str
     naming the argument, the value and the range (and the command line's
     flag, which has the same limits)."""
     as_flag = f" (as {flag})" if flag else ""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+    if isinstance(value, bool) or not isinstance(value, _numbers.Integral):
         raise InputError(f"{name}={value!r} is not a whole number: use {minimum} to {maximum}{as_flag}")
     value = int(value)
     if not minimum <= value <= maximum:
@@ -93,7 +105,7 @@ def _shard_pair(value: Any, name: str = "shard") -> Tuple[int, int]:
         pair = tuple(value)
     else:
         raise InputError(f"{name}={value!r} is not {what}: {usage}")
-    if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in pair):
+    if any(isinstance(v, bool) or not isinstance(v, _numbers.Integral) for v in pair):
         raise InputError(f"{name}={value!r} is not {what}: {usage}")
     k, n = int(pair[0]), int(pair[1])
     if not (0 <= k < n <= _U32_MAX):
@@ -130,12 +142,12 @@ class Spec:
     @classmethod
     def load(cls, path: PathLike) -> "Spec":
         """Reads the spec file at ``path``."""
-        return cls(_native.Spec.load(os.fspath(path)))
+        return cls(_native.Spec.load(_os.fspath(path)))
 
     @classmethod
     def from_dict(cls, spec: Dict[str, Any]) -> "Spec":
         """A spec from a dict with the fields of a spec file."""
-        return cls(_native.Spec.from_json(json.dumps(spec), "<dict>"))
+        return cls(_native.Spec.from_json(_json.dumps(spec), "<dict>"))
 
     @property
     def name(self) -> str:
@@ -182,7 +194,7 @@ class Spec:
 
     def to_dict(self) -> Dict[str, Any]:
         """The spec's JSON as given."""
-        return json.loads(self._native.json)
+        return _json.loads(self._native.json)
 
     def keys(self, split: Optional[str] = None, limit: Optional[int] = None) -> List[Key]:
         """Every scenario of ``split`` (all splits when None), at most ``limit``
@@ -230,13 +242,13 @@ class Lights:
 
     names: List[str]
     """Each light's name, ``AC/W/straight``, as scenario files and events name it."""
-    colour: np.ndarray
+    colour: _np.ndarray
     """``[frames, L]`` uint8: index into :attr:`colour_names`."""
     colour_names: List[str]
     """``["green", "yellow", "red"]``."""
-    since_change: np.ndarray
+    since_change: _np.ndarray
     """``[frames, L]`` float64: seconds since the colour changed."""
-    head_pixels: np.ndarray
+    head_pixels: _np.ndarray
     """``[L, 2]`` float64: the signal head in bird's-eye pixels (NaN without one)."""
 
 
@@ -247,23 +259,23 @@ class Interactions:
 
     kinds: List[str]
     """``["free", "car", "light", "conflict", "merge", "curve", "collision", "intervention"]``."""
-    bound_by: np.ndarray
+    bound_by: _np.ndarray
     """``[frames, cars]`` uint8: index into :attr:`kinds`."""
-    other_car: np.ndarray
+    other_car: _np.ndarray
     """``[frames, cars]`` int16: the car that bound it, -1 for none."""
-    light: np.ndarray
+    light: _np.ndarray
     """``[frames, cars]`` int16: the light that bound it (index into the
     scenario's ``lights.names``), -1 for none."""
 
-    def car_graph(self) -> np.ndarray:
+    def car_graph(self) -> _np.ndarray:
         """``[frames, cars, cars]`` uint8: ``[t, i, j] = 1`` when car j bound
         car i at frame t (``car``, ``conflict`` or ``collision``), as ``export
         nri --dynamic --directed`` writes it."""
         frames, cars = self.bound_by.shape
-        binding = np.isin(self.bound_by, [self.kinds.index(k) for k in ("car", "conflict", "collision")])
+        binding = _np.isin(self.bound_by, [self.kinds.index(k) for k in ("car", "conflict", "collision")])
         binding &= self.other_car >= 0
-        graph = np.zeros((frames, cars, cars), dtype=np.uint8)
-        t, i = np.nonzero(binding)
+        graph = _np.zeros((frames, cars, cars), dtype=_np.uint8)
+        t, i = _np.nonzero(binding)
         graph[t, i, self.other_car[t, i]] = 1
         return graph
 
@@ -277,20 +289,20 @@ class Effects:
 
     interventions: List[str]
     """``["remove", "next_action"]``."""
-    cause: np.ndarray
+    cause: _np.ndarray
     """``[rows]`` uint32: the car intervened on."""
-    effect: np.ndarray
+    effect: _np.ndarray
     """``[rows]`` uint32: the car compared."""
-    intervention: np.ndarray
+    intervention: _np.ndarray
     """``[rows]`` uint8: index into :attr:`interventions`."""
-    max_divergence_m: np.ndarray
+    max_divergence_m: _np.ndarray
     """``[rows]`` float64: largest distance from the factual position, metres."""
-    first_frame: np.ndarray
+    first_frame: _np.ndarray
     """``[rows]`` int32: first frame beyond the threshold, -1 for no effect."""
-    direct: np.ndarray
+    direct: _np.ndarray
     """``[rows]`` bool: the effect car reacted to the cause itself."""
 
-    def graph(self, cars: int, direct: bool = False, intervention: Optional[str] = None) -> np.ndarray:
+    def graph(self, cars: int, direct: bool = False, intervention: Optional[str] = None) -> _np.ndarray:
         """``[cars, cars]`` uint8: ``[i, j] = 1`` when intervening on car i
         moved car j beyond the threshold (only direct effects with
         ``direct=True``; only one kind of intervention when named)."""
@@ -301,7 +313,7 @@ class Effects:
             if intervention not in self.interventions:
                 raise InputError(f"intervention {intervention!r} is not one of {', '.join(self.interventions)}")
             keep &= self.intervention == self.interventions.index(intervention)
-        graph = np.zeros((cars, cars), dtype=np.uint8)
+        graph = _np.zeros((cars, cars), dtype=_np.uint8)
         graph[self.cause[keep], self.effect[keep]] = 1
         return graph
 
@@ -315,24 +327,24 @@ class Scenario:
     """Its key (None for scenario files)."""
     metadata: Dict[str, Any]
     """``scenario.json``: cars, roles, routes, confounders, lights, camera."""
-    car_ids: np.ndarray
+    car_ids: _np.ndarray
     """``[cars]`` uint32."""
     car_names: List[str]
-    t: np.ndarray
+    t: _np.ndarray
     """``[frames]`` float64, seconds."""
-    position: np.ndarray
+    position: _np.ndarray
     """``[frames, cars, 3]`` float64: x, y, z in metres (x east, y north)."""
-    rotation: np.ndarray
+    rotation: _np.ndarray
     """``[frames, cars, 3]`` float64: roll, pitch, yaw in radians (yaw
     counter-clockwise from east)."""
-    pixels: np.ndarray
+    pixels: _np.ndarray
     """``[frames, cars, 2]`` float64: px, py in the bird's-eye image
     (``pixels.npy`` holds the same values as float32)."""
-    speed: np.ndarray
+    speed: _np.ndarray
     """``[frames, cars]`` float64, metres per second."""
-    in_view: np.ndarray
+    in_view: _np.ndarray
     """``[frames, cars]`` bool: the car's centre is in the bird's-eye image."""
-    graph: np.ndarray
+    graph: _np.ndarray
     """``[cars, cars]`` uint8: ``graph[i, j] = 1`` when car i leads car j
     (the causal graph, cause to effect)."""
     edges: List[Tuple[int, int]]
@@ -343,27 +355,36 @@ class Scenario:
     lights: Optional[Lights]
     interactions: Optional[Interactions]
     events: List[Event]
-    rgb: Optional[np.ndarray]
+    rgb: Optional[_np.ndarray]
     """With ``images=True``: ``[frames, height, width, 3]`` uint8."""
-    mask: Optional[np.ndarray]
+    mask: Optional[_np.ndarray]
     """With ``images=True``: ``[frames, height, width]`` uint8, 0 for no
     car, else the car's id + 1."""
 
     @property
-    def causal_graph(self) -> Optional[np.ndarray]:
+    def causal_graph(self) -> Optional[_np.ndarray]:
         """``[cars, cars]`` uint8: ``[i, j] = 1`` when intervening on car i
         moves car j (``scenario.json``'s ``causal_edges``); None without
         effects."""
         return None if self.effects is None else self.effects.graph(self.cars)
 
     @property
-    def direct_graph(self) -> Optional[np.ndarray]:
+    def direct_graph(self) -> Optional[_np.ndarray]:
         """``[cars, cars]`` uint8: the causal graph's direct effects
         (``direct_edges``); None without effects."""
         return None if self.effects is None else self.effects.graph(self.cars, direct=True)
 
+    def __repr__(self) -> str:
+        # Short: a notebook shows this for every scenario it prints.
+        parts = [f"key={self.key!r}" if self.key is not None else f"name={self.metadata.get('name', '?')!r}"]
+        parts += [f"cars={self.cars}", f"frames={self.frames}", f"edges={self.edges!r}"]
+        if self.rgb is not None:
+            parts.append(f"images={self.rgb.shape[2]}x{self.rgb.shape[1]}")
+        parts.append("effects" if self.effects is not None else "no effects")
+        return f"Scenario({', '.join(parts)})"
+
     @property
-    def yaw(self) -> np.ndarray:
+    def yaw(self) -> _np.ndarray:
         """``[frames, cars]``: heading in radians."""
         return self.rotation[..., 2]
 
@@ -382,48 +403,48 @@ def _scenario(raw: Dict[str, Any], key: Optional[Key]) -> Scenario:
     effects = raw.get("effects")
     return Scenario(
         key=key,
-        metadata=json.loads(raw["scenario_json"]),
-        car_ids=np.asarray(raw["car_ids"]),
+        metadata=_json.loads(raw["scenario_json"]),
+        car_ids=_np.asarray(raw["car_ids"]),
         car_names=raw["car_names"],
-        t=np.asarray(raw["t"]),
-        position=np.asarray(raw["position"]),
-        rotation=np.asarray(raw["rotation"]),
-        pixels=np.asarray(raw["pixels"]),
-        speed=np.asarray(raw["speed"]),
-        in_view=np.asarray(raw["in_view"]).view(np.bool_),
-        graph=np.asarray(raw["graph"]),
+        t=_np.asarray(raw["t"]),
+        position=_np.asarray(raw["position"]),
+        rotation=_np.asarray(raw["rotation"]),
+        pixels=_np.asarray(raw["pixels"]),
+        speed=_np.asarray(raw["speed"]),
+        in_view=_np.asarray(raw["in_view"]).view(_np.bool_),
+        graph=_np.asarray(raw["graph"]),
         edges=raw["edges"],
         effects=None
         if effects is None
         else Effects(
             interventions=effects["interventions"],
-            cause=np.asarray(effects["cause"]),
-            effect=np.asarray(effects["effect"]),
-            intervention=np.asarray(effects["intervention"]),
-            max_divergence_m=np.asarray(effects["max_divergence_m"]),
-            first_frame=np.asarray(effects["first_frame"]),
-            direct=np.asarray(effects["direct"]).view(np.bool_),
+            cause=_np.asarray(effects["cause"]),
+            effect=_np.asarray(effects["effect"]),
+            intervention=_np.asarray(effects["intervention"]),
+            max_divergence_m=_np.asarray(effects["max_divergence_m"]),
+            first_frame=_np.asarray(effects["first_frame"]),
+            direct=_np.asarray(effects["direct"]).view(_np.bool_),
         ),
         lights=None
         if lights is None
         else Lights(
             names=lights["names"],
-            colour=np.asarray(lights["colour"]),
+            colour=_np.asarray(lights["colour"]),
             colour_names=lights["colour_names"],
-            since_change=np.asarray(lights["since_change"]),
-            head_pixels=np.asarray(lights["head_pixels"]),
+            since_change=_np.asarray(lights["since_change"]),
+            head_pixels=_np.asarray(lights["head_pixels"]),
         ),
         interactions=None
         if interactions is None
         else Interactions(
             kinds=interactions["kinds"],
-            bound_by=np.asarray(interactions["bound_by"]),
-            other_car=np.asarray(interactions["other_car"]),
-            light=np.asarray(interactions["light"]),
+            bound_by=_np.asarray(interactions["bound_by"]),
+            other_car=_np.asarray(interactions["other_car"]),
+            light=_np.asarray(interactions["light"]),
         ),
         events=[Event(*e) for e in raw["events"]],
-        rgb=np.asarray(raw["rgb"]) if "rgb" in raw else None,
-        mask=np.asarray(raw["mask"]) if "mask" in raw else None,
+        rgb=_np.asarray(raw["rgb"]) if "rgb" in raw else None,
+        mask=_np.asarray(raw["mask"]) if "mask" in raw else None,
     )
 
 
@@ -452,9 +473,9 @@ def simulate(
 def _worker() -> Tuple[int, int]:
     """(worker id, workers) of the DataLoader worker this runs in, else (0, 1).
     torch is asked only when the program has imported it already."""
-    if "torch" in sys.modules:
+    if "torch" in _sys.modules:
         try:
-            info = sys.modules["torch"].utils.data.get_worker_info()
+            info = _sys.modules["torch"].utils.data.get_worker_info()
         except AttributeError:
             info = None
         if info is not None:
@@ -467,7 +488,7 @@ def _process_shard(shard: Optional[Tuple[int, int]]) -> Tuple[int, int]:
     torch.distributed launchers set, else (0, 1)."""
     if shard is not None:
         return _shard_pair(shard)
-    rank, world = os.environ.get("RANK"), os.environ.get("WORLD_SIZE")
+    rank, world = _os.environ.get("RANK"), _os.environ.get("WORLD_SIZE")
     if rank is None or world is None:
         return (0, 1)
     values = []
@@ -604,7 +625,7 @@ def stream(
     """
     spec = _as_spec(spec)
     args = (spec, split, groups, limit, images, shard, threads, ahead, effects)
-    if "torch" in sys.modules:
+    if "torch" in _sys.modules:
         return _torch_stream_class()(*args)
     return Stream(*args)
 
@@ -645,12 +666,18 @@ class Counterfactual:
     name: str
     factual: Scenario
     counterfactual: Scenario
-    divergence: np.ndarray
+    divergence: _np.ndarray
     """``[frames, cars]`` float64: metres between each car's factual and
     counterfactual positions (``divergence.csv``)."""
     summary: Dict[str, Any]
     """``summary.json``: the interventions, when the first fired, and the
     cars it moved (the effect set)."""
+
+    def __repr__(self) -> str:
+        return (
+            f"Counterfactual(name={self.name!r}, cars={self.factual.cars}, frames={self.factual.frames}, "
+            f"affected={self.affected!r})"
+        )
 
     @property
     def affected(self) -> List[str]:
@@ -666,8 +693,8 @@ class Counterfactual:
 def _json_input(value: Union[PathLike, Dict[str, Any], List[Any]], label: str) -> Tuple[str, str]:
     """(text, origin) of a file path or an already parsed JSON value."""
     if isinstance(value, (dict, list)):
-        return json.dumps(value), label
-    path = os.fspath(value)
+        return _json.dumps(value), label
+    path = _os.fspath(value)
     try:
         with open(path, encoding="utf-8") as f:
             return f.read(), path
@@ -699,8 +726,8 @@ def counterfactual(
             name=r["name"],
             factual=_scenario(r["factual"], None),
             counterfactual=_scenario(r["counterfactual"], None),
-            divergence=np.asarray(r["divergence"]),
-            summary=json.loads(r["summary"]),
+            divergence=_np.asarray(r["divergence"]),
+            summary=_json.loads(r["summary"]),
         )
         for r in raws
     ]
@@ -740,7 +767,7 @@ def generate(
         shard = f"{k}/{n}"
     summary = _native.generate(
         spec._native,
-        None if out is None else os.fspath(out),
+        None if out is None else _os.fspath(out),
         limit,
         threads,
         images,
@@ -751,7 +778,7 @@ def generate(
         fsync,
         progress,
     )
-    return json.loads(summary)
+    return _json.loads(summary)
 
 
 HISTORY_FRAMES = 100
@@ -761,13 +788,13 @@ paper (``causalcity evaluate --history``'s default)."""
 
 def save_predictions(
     path: PathLike,
-    edges: Optional[Mapping[str, np.ndarray]] = None,
-    trajectories: Optional[Mapping[str, np.ndarray]] = None,
+    edges: Optional[Mapping[str, _np.ndarray]] = None,
+    trajectories: Optional[Mapping[str, _np.ndarray]] = None,
     *,
-    frames: Optional[Mapping[str, np.ndarray]] = None,
-    counterfactuals: Optional[Mapping[str, np.ndarray]] = None,
+    frames: Optional[Mapping[str, _np.ndarray]] = None,
+    counterfactuals: Optional[Mapping[str, _np.ndarray]] = None,
 ) -> None:
-    """Writes a predictions file for :func:`evaluate` (``np.savez_compressed``).
+    """Writes a predictions file for :func:`evaluate` (``_np.savez_compressed``).
 
     ``edges`` maps a scenario folder (``Key.folder``, e.g.
     ``cars08_edges50/test/00000``) to its ``[cars, cars]`` edge scores,
@@ -783,14 +810,14 @@ def save_predictions(
     folder to ``[steps, cars, 2]`` predicted positions of its counterfactual
     run after the history.
     """
-    arrays: Dict[str, np.ndarray] = {}
+    arrays: Dict[str, _np.ndarray] = {}
     for suffix, given in (("", edges), ("/trajectory", trajectories), ("/frames", frames), ("/counterfactual", counterfactuals)):
         for folder, values in (given or {}).items():
-            arrays[f"{folder}{suffix}"] = np.asarray(values, dtype=np.float64)
+            arrays[f"{folder}{suffix}"] = _np.asarray(values, dtype=_np.float64)
     if not arrays:
         raise InputError("save_predictions: give edge scores, trajectories, per-frame scores or counterfactuals for at least one scenario")
-    with open(os.fspath(path), "wb") as f:
-        np.savez_compressed(f, **arrays)
+    with open(_os.fspath(path), "wb") as f:
+        _np.savez_compressed(f, **arrays)
 
 
 def evaluate(
@@ -817,8 +844,16 @@ def evaluate(
     """
     graphs = [graph] if isinstance(graph, str) else list(graph)
     history = _whole("history", history, 0, 2**63 - 1, "evaluate --history")
-    text, table = _native.evaluate(os.fspath(dataset), os.fspath(predictions), graphs, history, threshold)
+    text, table = _native.evaluate(_os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold)
     if csv is not None:
-        with open(os.fspath(csv), "w", encoding="utf-8") as f:
+        with open(_os.fspath(csv), "w", encoding="utf-8") as f:
             f.write(table)
-    return json.loads(text)
+    return _json.loads(text)
+
+
+from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)
+
+
+def __dir__() -> List[str]:
+    # dir(causalcity) and tab completion list the API, not its imports.
+    return sorted(set(__all__) | {"loader", "reference", "methods", "paper"} & set(globals()))

@@ -15,7 +15,7 @@ use causalcity::orchestrate::in_memory::{Prefetch as Prefetch_, Waited};
 use causalcity::orchestrate::run::{
     clear_stop, generate_expansion, load_spec, request_stop, GenError, GenOptions, Shard, MAX_THREADS,
 };
-use causalcity::output::arrays::{recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
+use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::DatasetSpec;
@@ -513,6 +513,21 @@ fn pair_dict(py: Python<'_>, p: PairArrays) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
+/// `nbytes` zeroed bytes (uint8, 1-D) for a batch of frames, from the
+/// frame buffers streams hand back (fresh memory costs the kernel's zeroing
+/// on every page); handed back in turn when the array is dropped.
+#[pyfunction]
+fn frame_buffer(py: Python<'_>, nbytes: usize) -> PyResult<Bound<'_, Array>> {
+    let buffer = py.detach(|| batch_frame_buffer(nbytes));
+    let buffer = buffer.ok_or_else(|| {
+        PyMemoryError::new_err(format!(
+            "a batch of frames needs {:.1} GB, more than this machine has free: use a smaller batch_size",
+            nbytes as f64 / 1e9
+        ))
+    })?;
+    array(py, Data::U8(buffer), &[nbytes])
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Spec>()?;
@@ -525,5 +540,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_buffer, m)?)?;
     Ok(())
 }

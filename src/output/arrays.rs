@@ -282,8 +282,14 @@ pub fn scenario_arrays(
 static SPARE_FRAME_BUFFERS: Mutex<Vec<Vec<u8>>> = Mutex::new(Vec::new());
 
 /// At most this many bytes of spare frame buffers are kept: a few
-/// scenarios' frames (one 150-frame 1024 x 640 scenario holds 393 MB).
+/// scenarios' frames (one 150-frame 1024 x 640 scenario holds 393 MB), or
+/// three of the largest buffer asked for while the streams run when that is
+/// more (a batch of such scenarios: the batch in use, the one being filled
+/// and its masks must all be reused to stay off fresh pages).
 pub const SPARE_FRAME_BYTES: usize = 1 << 30;
+
+/// The largest frame buffer asked for since the spares were last freed.
+static LARGEST_FRAME_BUFFER: AtomicUsize = AtomicUsize::new(0);
 
 /// Buffers smaller than this are not worth keeping (their pages are few).
 const SPARE_MIN_BYTES: usize = 16 << 20;
@@ -302,6 +308,7 @@ pub fn let_go_of_spare_frame_buffers() {
     let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
     if SPARE_HOLDERS.fetch_sub(1, Ordering::SeqCst) == 1 {
         spares.clear();
+        LARGEST_FRAME_BUFFER.store(0, Ordering::SeqCst);
     }
 }
 
@@ -313,7 +320,8 @@ pub fn recycle_frame_buffer(buffer: Vec<u8>) {
     }
     let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
     let kept: usize = spares.iter().map(Vec::capacity).sum();
-    if SPARE_HOLDERS.load(Ordering::SeqCst) > 0 && kept + buffer.capacity() <= SPARE_FRAME_BYTES {
+    let limit = SPARE_FRAME_BYTES.max(LARGEST_FRAME_BUFFER.load(Ordering::SeqCst).saturating_mul(3));
+    if SPARE_HOLDERS.load(Ordering::SeqCst) > 0 && kept + buffer.capacity() <= limit {
         spares.push(buffer);
     }
 }
@@ -330,6 +338,7 @@ pub fn recycle_frame_buffer(buffer: Vec<u8>) {
 /// which Linux would otherwise promise and then end the process over.
 fn frame_buffer(len: usize) -> Option<Vec<u8>> {
     if len >= SPARE_MIN_BYTES {
+        LARGEST_FRAME_BUFFER.fetch_max(len, Ordering::SeqCst);
         let mut spares = SPARE_FRAME_BUFFERS.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(i) = spares.iter().position(|b| b.capacity() >= len && b.capacity() <= len + len / 4) {
             let mut buffer = spares.swap_remove(i);
@@ -354,5 +363,14 @@ fn frame_buffer(len: usize) -> Option<Vec<u8>> {
             unsafe { libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE) };
         }
     }
+    Some(buffer)
+}
+
+/// `len` zeroed bytes for a batch of frames that Python fills, taken from
+/// the spares as [`frame_buffer`] does (`None` when the memory cannot be
+/// had); handed back with [`recycle_frame_buffer`] when its reader lets go.
+pub fn batch_frame_buffer(len: usize) -> Option<Vec<u8>> {
+    let mut buffer = frame_buffer(len)?;
+    buffer.resize(len, 0);
     Some(buffer)
 }
