@@ -286,3 +286,54 @@ fn every_command_refuses_a_folder_it_did_not_write() {
     }
     assert_valid(&toy);
 }
+
+#[test]
+fn a_smaller_limit_into_an_existing_dataset_is_refused_and_a_larger_one_extends_it() {
+    let dir = fresh_dir("folders-limit");
+    let spec = write_spec(&dir, &toy_spec("limits", &[(4, 0.5)], (4, 1, 1), 10));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-images", "--limit", "2"]);
+    let before = hash_tree(&out);
+    let args = |limit: &'static str| {
+        vec![
+            "gen",
+            "--quiet",
+            "--no-images",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--limit",
+            limit,
+        ]
+    };
+    let smaller = run(&args("1"));
+    assert_eq!(smaller.status.code(), Some(2), "{}", stderr(&smaller));
+    assert!(stderr(&smaller).contains("--limit 2") && stderr(&smaller).contains("--limit 1"), "{}", stderr(&smaller));
+    assert_eq!(hash_tree(&out), before, "a refused --limit changed the dataset");
+    assert_valid(&out);
+
+    // A larger limit keeps the first two scenarios per split and adds the rest.
+    let larger = run(&args("3"));
+    assert!(larger.status.success(), "{}", stderr(&larger));
+    let after = hash_tree(&out);
+    let kept = before.iter().filter(|(path, _)| path.contains("/00000/") || path.contains("/00001/")).count();
+    assert!(kept > 0);
+    for (path, hash) in before.iter().filter(|(path, _)| path.contains("/00000/") || path.contains("/00001/")) {
+        assert_eq!(after.get(path), Some(hash), "{path} changed when the dataset was extended");
+    }
+    assert!(after.keys().any(|p| p.contains("train/00002/")), "no third train scenario");
+    assert_valid(&out);
+    let manifest = common::read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["limit"], 3);
+
+    // No limit at all extends it to the whole spec; then any limit is smaller.
+    let whole =
+        run(&["gen", "--quiet", "--no-images", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(whole.status.success(), "{}", stderr(&whole));
+    assert!(hash_tree(&out).keys().any(|p| p.contains("train/00003/")));
+    assert_valid(&out);
+    let refused = run(&args("3"));
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(stderr(&refused).contains("no --limit"), "{}", stderr(&refused));
+}

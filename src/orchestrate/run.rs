@@ -410,6 +410,26 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();
+    // A different --limit: a larger one (or none) extends the dataset, whose
+    // first scenarios are the same keys; a smaller one would leave scenarios
+    // the new manifest does not list, and shards of one job share theirs.
+    let shown = |limit: Option<u32>| limit.map_or("no --limit".to_string(), |n| format!("--limit {n}"));
+    for (path, record) in &existing {
+        let shrinks = match (record.limit, options.limit) {
+            (_, None) => false,
+            (None, Some(_)) => true,
+            (Some(theirs), Some(ours)) => ours < theirs,
+        };
+        if record.limit != options.limit && (shrinks || options.shard.is_some() || record.shard.is_some()) {
+            differences.push(format!(
+                "limit: {} was written with {}, this run asks for {}{}",
+                path.display(),
+                shown(record.limit),
+                shown(options.limit),
+                if shrinks { " (fewer scenarios: the others would stay behind, unlisted)" } else { "" }
+            ));
+        }
+    }
     if let Some(ours) = options.shard {
         for (path, record) in &existing {
             if let Some(theirs) = record.shard.filter(|theirs| theirs.count != ours.count) {
