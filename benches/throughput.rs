@@ -74,6 +74,7 @@ fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOpti
         progress: ProgressMode::Quiet,
         shard: None,
         force: false,
+        force_space: false,
         fsync: false,
         handle_signals: false,
     }

@@ -443,6 +443,12 @@ pub struct GenArgs {
     #[arg(long)]
     pub force: bool,
 
+    /// Write even when the disk looks too small. Before it starts, gen writes
+    /// one scenario, measures it and refuses (exit 2, with the figures) when
+    /// that many bytes for every scenario still to write exceed the free space.
+    #[arg(long)]
+    pub force_space: bool,
+
     /// fsync every file before a scenario is moved into place, so finished
     /// scenarios survive a power cut (slower; a killed process never needs it).
     #[arg(long)]
@@ -638,6 +644,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
+                force_space: args.force_space,
                 fsync: args.fsync,
                 handle_signals: true,
             };

@@ -108,6 +108,29 @@ fn ctrl_c_stops_inside_one_long_poses_only_scenario() {
 }
 
 #[test]
+fn a_run_larger_than_the_disk_is_refused_with_the_figures_and_nothing_written() {
+    // 60 million scenarios of about 40 kB each: terabytes, more than any
+    // disk this runs on has free.
+    let dir = fresh_dir("batch-space");
+    let spec = write_spec(&dir, &toy_spec("huge", &[(4, 0.5), (8, 0.5)], (10_000_000, 10_000_000, 10_000_000), 20));
+    let out = dir.join("out");
+    let output = gen_cmd(&spec, &out, &["--no-images", "--no-effects"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("60000000 scenarios") && stderr.contains("free"), "{stderr}");
+    assert!(stderr.contains("--force-space") && stderr.contains("--limit"), "{stderr}");
+    assert!(!out.exists(), "a refused run left {} behind", out.display());
+
+    // Into a dataset that exists, the sample goes again and the rest stays.
+    let small = dir.join("small");
+    gen_ok(&spec, &small, &["--quiet", "--no-images", "--no-effects", "--limit", "1"]);
+    let before = hash_tree(&small);
+    let output = gen_cmd(&spec, &small, &["--no-images", "--no-effects", "--limit", "9000000"]).output().unwrap();
+    assert_eq!(output.status.code(), Some(2), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(hash_tree(&small), before, "a refused run changed the dataset");
+}
+
+#[test]
 fn a_spec_at_the_largest_split_sizes_starts_at_once_in_little_memory_and_stops() {
     // 10,000,000 per split (the documented maximum) in two groups: 60
     // million scenarios. Before, gen listed every key first (6 GB after
@@ -116,8 +139,10 @@ fn a_spec_at_the_largest_split_sizes_starts_at_once_in_little_memory_and_stops()
     let dir = fresh_dir("batch-largest");
     let spec = write_spec(&dir, &toy_spec("largest", &[(4, 0.5), (8, 0.5)], (10_000_000, 10_000_000, 10_000_000), 20));
     let out = dir.join("out");
-    let child =
-        gen_cmd(&spec, &out, &["--no-images", "--no-effects", "-j", "2"]).stderr(Stdio::piped()).spawn().unwrap();
+    let child = gen_cmd(&spec, &out, &["--no-images", "--no-effects", "-j", "2", "--force-space"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let first = out.join("cars04_edges50/train/00000");
     let deadline = Instant::now() + Duration::from_secs(60);
     while !first.exists() {

@@ -746,13 +746,16 @@ def generate(
     force: bool = False,
     fsync: bool = False,
     progress: bool = True,
+    force_space: bool = False,
 ) -> Dict[str, Any]:
     """``causalcity gen`` from Python: writes the dataset to ``out`` (default
     ``data/<spec name>``), resuming an interrupted run, and returns the
     run's summary (as ``gen --json`` prints it). The keywords are ``gen``'s
     flags: ``images=False`` is ``--no-images``, ``effects=False`` is
     ``--no-effects``, ``shard=(k, n)`` or ``"k/n"``
-    is ``--shard k/n``, ``progress=False`` is ``--quiet``.
+    is ``--shard k/n``, ``progress=False`` is ``--quiet``,
+    ``force_space=True`` is ``--force-space`` (a disk too small for the
+    run raises :class:`InputError` with the figures).
     """
     spec = _as_spec(spec)
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
@@ -777,6 +780,7 @@ def generate(
         force,
         fsync,
         progress,
+        force_space,
     )
     return _json.loads(summary)
 

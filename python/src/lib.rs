@@ -369,7 +369,7 @@ fn counterfactual<'py>(
 
 /// `causalcity gen` from Python: the run's summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true))]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false))]
 #[allow(clippy::too_many_arguments)]
 fn generate(
     py: Python<'_>,
@@ -384,6 +384,7 @@ fn generate(
     force: bool,
     fsync: bool,
     progress: bool,
+    force_space: bool,
 ) -> PyResult<String> {
     let shard: Option<Shard> =
         shard.map(|s| s.parse()).transpose().map_err(|e: String| InputError::new_err(format!("shard: {e}")))?;
@@ -398,6 +399,7 @@ fn generate(
         progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
         shard,
         force,
+        force_space,
         fsync,
         handle_signals: false,
     };

@@ -37,6 +37,8 @@ pub struct GenOptions {
     pub shard: Option<Shard>,
     /// Replace a dataset made from another spec (removes only what causalcity wrote).
     pub force: bool,
+    /// Write even when the disk looks too small for the whole run.
+    pub force_space: bool,
     /// fsync every file and folder before a scenario is renamed into place.
     pub fsync: bool,
     /// Stop cleanly on SIGINT / SIGTERM (the binary sets this).
@@ -147,6 +149,16 @@ pub enum GenError {
     Threads { threads: usize, reason: String },
     #[error("{out} holds a dataset made differently:\n  {}\nUse another --out, or --force to replace it (removes only what causalcity wrote there).", differences.join("\n  "))]
     Mixed { out: PathBuf, differences: Vec<String> },
+    #[error(
+        "{out} is on a disk with {} free, but this run would write about {} more: {pending} scenarios \
+         of about {} each (measured on the first one, which was removed again).\n\
+         Free some space, write fewer scenarios (--limit N, --no-images), or pass --force-space to write \
+         anyway (the run then stops when the disk is full; rerun to resume).",
+        crate::output::arrays::gigabytes(*available),
+        crate::output::arrays::gigabytes(*needed),
+        megabytes_or_more(*per_scenario)
+    )]
+    Space { out: PathBuf, needed: u64, available: u64, per_scenario: u64, pending: u64 },
     #[error("{0}")]
     Manifest(String),
     #[error("interrupted: {done} of {total} scenarios are complete in {out}. Rerun the same command to resume.")]
@@ -185,7 +197,7 @@ impl GenError {
     /// 2 for bad input, 130 when interrupted, 1 for failures while running.
     pub fn exit_code(&self) -> i32 {
         match self {
-            GenError::Spec { .. } | GenError::Mixed { .. } | GenError::Input(_) => 2,
+            GenError::Spec { .. } | GenError::Mixed { .. } | GenError::Input(_) | GenError::Space { .. } => 2,
             GenError::Claim(e) => e.exit_code(),
             GenError::Interrupted { .. } => 130,
             _ => 1,
@@ -469,6 +481,11 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     let positions = ShardPositions::new(sequence.len(), options.shard);
     let total = positions.len as u64;
     let shard_entry = options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: total });
+    let writer = scenario_writer(expansion, products, options.fsync);
+    let times = StageTimes::default();
+    let sample =
+        if options.force_space { None } else { check_space(expansion, &writer, &out, &sequence, &positions, &times)? };
+
     let manifest_file = manifest_path(&out, options.shard);
     if let Some(parent) = manifest_file.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
@@ -478,11 +495,9 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     };
     write_atomically(&manifest_file, &manifest(false))?;
 
-    let writer = scenario_writer(expansion, products, options.fsync);
-    let times = StageTimes::default();
     let progress = Progress::new(total, options.progress);
-    let bytes = AtomicU64::new(0);
-    let written = AtomicU64::new(0);
+    let bytes = AtomicU64::new(sample.map_or(0, |(_, b)| b));
+    let written = AtomicU64::new(sample.is_some() as u64);
     let skipped = AtomicU64::new(0);
     let repaired = AtomicU64::new(0);
     let result = pool.install(|| {
@@ -491,6 +506,10 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             |buffers, i| {
                 if STOP.load(Ordering::Relaxed) {
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+                }
+                if sample.is_some_and(|(first, _)| first == i) {
+                    progress.inc(); // written (and counted) by the space check
+                    return Ok(());
                 }
                 let key = &sequence.key(positions.position(i));
                 let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
@@ -541,6 +560,73 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         shard: options.shard.map(|s| s.to_string()),
         stage_seconds: times.seconds(),
     })
+}
+
+/// `bytes` as MB below a gigabyte, else as GB (a scenario's size in messages).
+fn megabytes_or_more(bytes: u64) -> String {
+    if bytes < 1_000_000_000 {
+        format!("{:.1} MB", bytes as f64 / 1e6)
+    } else {
+        crate::output::arrays::gigabytes(bytes)
+    }
+}
+
+/// Up to this many scenarios, the space check counts exactly which are
+/// still missing; above it, it assumes all are (stat-ing millions of folders
+/// would delay the start).
+const SPACE_CHECK_EXACT_UP_TO: usize = 200_000;
+
+/// Room for the manifests and the file system's own bookkeeping, beyond
+/// the scenarios' bytes.
+const SPACE_MARGIN_BYTES: u64 = 64 << 20;
+
+/// Whether the disk can hold this run: writes the first missing scenario
+/// (the run keeps it: returns its position and bytes), measures it, and
+/// when that many bytes for every missing scenario would not fit, removes
+/// it again (and the folders made for it) and refuses with the figures.
+fn check_space(
+    expansion: &Expansion,
+    writer: &ScenarioWriter,
+    out: &Path,
+    sequence: &crate::plan::KeySequence<'_>,
+    positions: &ShardPositions,
+    times: &StageTimes,
+) -> Result<Option<(usize, u64)>, GenError> {
+    let Some(available) = crate::output::free_disk_bytes(out) else {
+        return Ok(None);
+    };
+    let target_of = |i: usize| {
+        let key = sequence.key(positions.position(i));
+        scenario_dir(out, &key.group, key.split.name(), &key.folder_name())
+    };
+    let (first, pending) = if positions.len <= SPACE_CHECK_EXACT_UP_TO {
+        let missing: Vec<usize> = (0..positions.len).filter(|&i| !target_of(i).exists()).collect();
+        match missing.first() {
+            Some(&first) => (first, missing.len() as u64),
+            None => return Ok(None),
+        }
+    } else {
+        match (0..positions.len).find(|&i| !target_of(i).exists()) {
+            Some(first) => (first, (positions.len - first) as u64),
+            None => return Ok(None),
+        }
+    };
+    let target = target_of(first);
+    // Folders this check creates, to remove if it refuses.
+    let made: Vec<PathBuf> =
+        target.ancestors().skip(1).take_while(|a| *a != out && !a.exists()).map(Path::to_path_buf).collect();
+    let key = sequence.key(positions.position(first));
+    let bytes = write_scenario(expansion, writer, &key, target.clone(), &mut writer.buffers(), times)?;
+    let needed = bytes.saturating_mul(pending - 1).saturating_add(SPACE_MARGIN_BYTES);
+    let left = crate::output::free_disk_bytes(out).unwrap_or(available);
+    if needed <= left {
+        return Ok(Some((first, bytes)));
+    }
+    let _ = std::fs::remove_dir_all(&target);
+    for folder in made {
+        let _ = std::fs::remove_dir(folder); // only when empty
+    }
+    Err(GenError::Space { out: out.to_path_buf(), needed: needed + bytes, available, per_scenario: bytes, pending })
 }
 
 /// Plans, simulates and writes one scenario; returns the bytes written.

@@ -41,6 +41,31 @@ pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> WriteError +
     move |source| WriteError { path: path.to_path_buf(), source }
 }
 
+/// Bytes free for this user on the file system that holds `path` (an
+/// existing file or folder); `None` where the OS cannot say.
+pub fn free_disk_bytes(path: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let name = std::ffi::CString::new(path.as_os_str().as_bytes()).ok()?;
+        let mut stats = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+        // SAFETY: `name` is a NUL-terminated path and `stats` room for one
+        // statvfs record, which the call fills when it returns 0.
+        let stats = unsafe {
+            if libc::statvfs(name.as_ptr(), stats.as_mut_ptr()) != 0 {
+                return None;
+            }
+            stats.assume_init()
+        };
+        Some((stats.f_bavail as u64).saturating_mul(stats.f_frsize as u64))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        None
+    }
+}
+
 /// The folder of one scenario: `OUT/<group>/<split>/<NNNNN>`.
 pub fn scenario_dir(root: &Path, group: &str, split: &str, folder: &str) -> PathBuf {
     root.join(group).join(split).join(folder)
