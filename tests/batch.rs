@@ -301,7 +301,14 @@ fn a_full_or_read_only_disk_stops_cleanly_and_a_rerun_completes() {
         return;
     };
     let out = mount.join("out");
+    // The space check sees that the dataset does not fit: exit 2, nothing written.
     let output = gen_cmd(&spec, &out, &["-j", "1"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("free") && stderr.contains("--force-space"), "{stderr}");
+    assert!(!out.exists(), "a refused run left {} behind", out.display());
+    // Told to write anyway, it stops when the disk is full.
+    let output = gen_cmd(&spec, &out, &["-j", "1", "--force-space"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("No space left on device") && stderr.contains(out.to_str().unwrap()), "{stderr}");
@@ -315,7 +322,7 @@ fn a_full_or_read_only_disk_stops_cleanly_and_a_rerun_completes() {
 
     // Read-only: a clear message too.
     disk.remount("ro");
-    let output = gen_cmd(&spec, &out, &[]).output().unwrap();
+    let output = gen_cmd(&spec, &out, &["--force-space"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_ne!(output.status.code(), Some(0));
     assert!(stderr.contains("Read-only file system"), "{stderr}");

@@ -481,19 +481,43 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     let positions = ShardPositions::new(sequence.len(), options.shard);
     let total = positions.len as u64;
     let shard_entry = options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: total });
-    let writer = scenario_writer(expansion, products, options.fsync);
-    let times = StageTimes::default();
-    let sample =
-        if options.force_space { None } else { check_space(expansion, &writer, &out, &sequence, &positions, &times)? };
-
     let manifest_file = manifest_path(&out, options.shard);
+    let made_manifest_folder = manifest_file.parent().filter(|p| !p.exists()).map(Path::to_path_buf);
     if let Some(parent) = manifest_file.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
     let manifest = |complete| {
         Manifest::new(&expansion.spec, &expansion.camera, options.limit, products, complete, shard_entry).to_json()
     };
+    // The manifest goes first, so that whatever follows (the space check's
+    // sample included) lands in a folder that says which dataset it is.
+    let previous_manifest = std::fs::read(&manifest_file).ok();
     write_atomically(&manifest_file, &manifest(false))?;
+
+    let writer = scenario_writer(expansion, products, options.fsync);
+    let times = StageTimes::default();
+    let sample = if options.force_space {
+        None
+    } else {
+        match check_space(expansion, &writer, &out, &sequence, &positions, &times) {
+            Ok(sample) => sample,
+            Err(GenError::Interrupted { .. }) => return Err(GenError::Interrupted { done: 0, total, out }),
+            Err(refused @ GenError::Space { .. }) => {
+                // Nothing written: the manifest as it was (or none).
+                match previous_manifest {
+                    Some(bytes) => write_atomically(&manifest_file, &bytes)?,
+                    None => {
+                        let _ = std::fs::remove_file(&manifest_file);
+                        if let Some(folder) = made_manifest_folder {
+                            let _ = std::fs::remove_dir(folder);
+                        }
+                    }
+                }
+                return Err(refused);
+            }
+            Err(e) => return Err(e),
+        }
+    };
 
     let progress = Progress::new(total, options.progress);
     let bytes = AtomicU64::new(sample.map_or(0, |(_, b)| b));
