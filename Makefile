@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env paper bench fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -33,7 +33,7 @@ install: system-deps
 dataset: build
 	$(RUN) gen --spec configs/ci-toy.json --out data/ci-toy
 	$(RUN) gen --spec configs/ci-city.json --out data/ci-city
-	@echo "datasets written to data/ci-toy and data/ci-city (see README: Output layout)"
+	@echo "datasets written to data/ci-toy and data/ci-city (see docs/output-layout.md)"
 
 ## Run every test: Rust (unit, integration on real files) and the Python client tests.
 test: test-rust test-python
@@ -67,6 +67,16 @@ python-env:
 	test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check "./python[methods]"
+
+## A wheel of the Python package into target/wheels: one file for CPython
+## 3.9 and later (the stable ABI, abi3), tagged manylinux where the build
+## allows, which `pip install` takes on a machine without Rust.
+WHEELS := target/wheels
+wheel: python-env
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check "maturin>=1.9,<2"
+	rm -rf $(WHEELS)
+	$(VENV)/bin/maturin build --release --locked --quiet --manifest-path python/Cargo.toml --out $(WHEELS)
+	@ls $(WHEELS)/*.whl
 
 ## The paper's experiments on toy and city: datasets, every reference method
 ## trained and evaluated, results CSV, figures and Markdown table under

@@ -1,6 +1,6 @@
 //! The layers import only downwards: reads every library source file and
 //! fails on a `crate::` path into a higher layer, or on `clap` outside the
-//! binary. README's Architecture section draws the same picture.
+//! binary. docs/architecture.md draws the same picture.
 
 use std::path::{Path, PathBuf};
 

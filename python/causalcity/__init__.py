@@ -713,7 +713,7 @@ def counterfactual(
     order. The counterfactual adds ``intervention`` (an intervention file's
     path, or its JSON: one intervention object or a list); without it, the
     scenario's own ``interventions`` make the counterfactual and the factual
-    runs without them. City world only; see README "Counterfactuals".
+    runs without them. City world only; see docs/handwritten-scenarios.md.
     """
     text, origin = _json_input(scenario, "<dict>")
     if intervention is None:

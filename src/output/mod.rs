@@ -2,7 +2,7 @@
 //! trajectories and rendered pixels as plain data; they know nothing of how
 //! those were produced.
 //!
-//! Layout (documented in README and `data-schema/`): `OUT/manifest.json`,
+//! Layout (documented in docs/output-layout.md and `data-schema/`): `OUT/manifest.json`,
 //! `OUT/<group>/<split>/<scenario>/` as [`layout`] lists it.
 
 pub mod annotations;

@@ -1,6 +1,6 @@
 //! PNG encoding tuned for flat-coloured synthetic frames: fdeflate's fast
 //! mode, with the Paeth filter for RGB frames (same cost whatever the weather)
-//! and adaptive filtering for masks. See README ("PNG settings") for the
+//! and adaptive filtering for masks. See docs/performance.md ("PNG settings") for the
 //! comparison that led here.
 
 use std::io::Write;

@@ -160,7 +160,7 @@ pub struct PerspectiveFrame {
 
 impl PerspectiveFrame {
     /// Depth for a 16-bit PNG: millimetres, 0 for sky; 65.535 m and farther
-    /// is clipped to 65535 (README "Cameras" says so).
+    /// is clipped to 65535 (docs/cameras.md says so).
     pub fn depth_mm(&self, out: &mut Vec<u16>) {
         out.clear();
         out.extend(self.distance.iter().map(|&d| {

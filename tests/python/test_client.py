@@ -86,7 +86,7 @@ SCHEMAS = Path(__file__).resolve().parents[2] / "data-schema"
 def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
     """Plain pandas.read_csv gives int64 for required integers, float64 for
     numbers and strings for text, in the schema's column order; the integer
-    columns that may be empty read as nullable Int64, as README says."""
+    columns that may be empty read as nullable Int64, as docs/output-layout.md says."""
     checked = {}
     for d in scenarios(TOY) + scenarios(CITY):
         for name in ["poses.csv", "lights.csv", "events.csv", "interactions.csv", "effects.csv"]:
