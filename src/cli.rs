@@ -366,6 +366,10 @@ pub struct ExportNriArgs {
     /// direct (measured by intervention; not with gen --no-effects).
     #[arg(long, value_enum, default_value = "designed")]
     pub graph: GraphArg,
+
+    /// No output but errors (the files written are not listed).
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -662,7 +666,9 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 graph: args.graph.into(),
             };
             for line in export_nri(&args.dataset, &args.out, &options)? {
-                say(line)?;
+                if !args.quiet {
+                    say(line)?;
+                }
             }
             Ok(())
         }

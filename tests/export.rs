@@ -153,3 +153,36 @@ fn dynamic_edges_are_the_per_frame_interactions() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("--dynamic needs a city-world dataset"));
     assert!(!out.exists());
 }
+
+#[test]
+fn export_nri_quiet_writes_the_same_files_and_prints_nothing() {
+    let dir = fresh_dir("export-nri-quiet");
+    let spec = write_spec(&dir, &toy_spec("nriq", &[(4, 0.5)], (2, 1, 1), 12));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let loud = dir.join("loud");
+    let quiet = dir.join("quiet");
+    let said = run(&["export", "nri", data.to_str().unwrap(), "--out", loud.to_str().unwrap()]);
+    assert!(said.status.success() && !said.stdout.is_empty(), "{}", String::from_utf8_lossy(&said.stderr));
+    for flag in ["-q", "--quiet"] {
+        let _ = std::fs::remove_dir_all(&quiet);
+        let output = run(&["export", "nri", data.to_str().unwrap(), "--out", quiet.to_str().unwrap(), flag]);
+        assert!(output.status.success(), "{flag}: {}", String::from_utf8_lossy(&output.stderr));
+        assert!(output.stdout.is_empty(), "{flag} printed {}", String::from_utf8_lossy(&output.stdout));
+        assert_eq!(hash_tree(&quiet), hash_tree(&loud), "{flag} wrote other files");
+    }
+}
+
+#[test]
+fn run_given_a_dataset_spec_says_to_use_gen() {
+    let dir = fresh_dir("export-run-dataset-spec");
+    let spec = write_spec(&dir, &toy_spec("notascenario", &[(4, 0.5)], (2, 1, 1), 12));
+    for command in ["run", "counterfactual"] {
+        let out = dir.join(command);
+        let output = run(&[command, "--scenario", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{command}: {stderr}");
+        assert!(stderr.contains("dataset spec") && stderr.contains("causalcity gen --spec"), "{command}: {stderr}");
+        assert!(!out.exists(), "{command} wrote {}", out.display());
+    }
+}

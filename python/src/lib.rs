@@ -29,14 +29,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+// Named causalcity.InputError / causalcity.GenerationError in tracebacks,
+// as users import them (the package re-exports both).
 pyo3::create_exception!(
-    _native,
+    causalcity,
     InputError,
     PyValueError,
     "Bad input (a spec, scenario or intervention file, a key): the message names the file, field and value, as the command line's exit-status-2 errors do."
 );
 pyo3::create_exception!(
-    _native,
+    causalcity,
     GenerationError,
     PyRuntimeError,
     "A failure while working (a full disk, a failed write), as the command line's exit-status-1 errors."

@@ -5,6 +5,7 @@ them. Needs torch (installed by `make test-python`)."""
 import json
 import os
 import pickle
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -150,6 +151,11 @@ def test_the_package_shows_its_api_a_version_and_short_reprs():
     assert "batches" in names and "stream" in names
     assert not {"np", "os", "sys", "json", "_np"} & set(names)
     assert not hasattr(causalcity, "np") and not hasattr(causalcity, "json")
+    with pytest.raises(causalcity.InputError) as error:
+        causalcity.Spec.from_dict({"name": "x"})
+    shown = "".join(traceback.format_exception(error.value))
+    assert "causalcity.InputError: " in shown and "_native" not in shown, shown
+    assert causalcity.GenerationError.__module__ == "causalcity"
     s = causalcity.simulate(toy(1), "cars04_edges50", "train", 0, images=True)
     text = repr(s)
     assert len(text) < 300 and "cars04_edges50" in text and "cars=4" in text

@@ -269,6 +269,21 @@ pub fn load_text(
     map: &Arc<CityMap>,
 ) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
     let fail = |field: &str, message: String| file_error(path, field.into(), message);
+    // A dataset spec given where a scenario file belongs: say so, rather
+    // than list the scenario fields it lacks.
+    if let Ok(Value::Object(top)) = serde_json::from_str::<Value>(text) {
+        if top.contains_key("groups") && top.contains_key("splits") {
+            return Err(fail(
+                "",
+                format!(
+                    "this is a dataset spec (it has groups and splits), not a scenario file: generate it with \
+                     `causalcity gen --spec {}`; run and counterfactual take scenario files \
+                     (see configs/examples/ and docs/handwritten-scenarios.md)",
+                    path.display()
+                ),
+            ));
+        }
+    }
     let json = json::parse(text).map_err(|e| parse_error(path, text, e))?;
     let entries = match json {
         Value::Array(list) => list,
