@@ -711,6 +711,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             report(&evaluated, args.json)
         }
         Command::Run(args) => {
+            causalcity::orchestrate::run::install_signal_handler();
             let options = RunOptions {
                 scenario_file: args.scenario,
                 out: args.out,
@@ -732,6 +733,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             Ok(())
         }
         Command::Counterfactual(args) => {
+            causalcity::orchestrate::run::install_signal_handler();
             let images = !args.no_images;
             if let Some(spec_path) = args.sweep {
                 let options = SweepOptions {

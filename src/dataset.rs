@@ -281,6 +281,18 @@ impl Sweep {
     /// Opens the sweep in `dir`; `Ok(None)` when `dir` has no sweep.json.
     /// Errors name the file and what is wrong.
     pub fn open(dir: &Path) -> Result<Option<Sweep>, String> {
+        match Sweep::open_even_unfinished(dir)? {
+            Some((_, false)) => Err(format!(
+                "{} is not complete: finish it with its counterfactual --sweep command first",
+                dir.display()
+            )),
+            other => Ok(other.map(|(sweep, _)| sweep)),
+        }
+    }
+
+    /// The sweep in `dir` and whether its run finished (`validate` reports
+    /// an unfinished one rather than refusing it).
+    pub fn open_even_unfinished(dir: &Path) -> Result<Option<(Sweep, bool)>, String> {
         let path = dir.join(SWEEP_RECORD);
         let bytes = match std::fs::read(&path) {
             Ok(bytes) => bytes,
@@ -308,14 +320,8 @@ impl Sweep {
                 record.format
             ));
         }
-        if !record.complete {
-            return Err(format!(
-                "{} is not complete: finish it with its counterfactual --sweep command first",
-                dir.display()
-            ));
-        }
         let expansion = expansion_from(record.spec, &path)?;
         let keys = expansion.keys(record.limit);
-        Ok(Some(Sweep { dir: dir.to_path_buf(), expansion, keys }))
+        Ok(Some((Sweep { dir: dir.to_path_buf(), expansion, keys }, record.complete)))
     }
 }

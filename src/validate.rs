@@ -70,6 +70,11 @@ struct Expected<'a> {
 pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, String> {
     let start = Instant::now();
     let manifest_path = dir.join("manifest.json");
+    if !manifest_path.exists() {
+        if let Some((sweep, complete)) = crate::dataset::Sweep::open_even_unfinished(dir)? {
+            return validate_sweep(&sweep, complete, threads, start);
+        }
+    }
     let dataset = Dataset::open(dir)?;
     let (record, keys) = (&dataset.record, &dataset.keys);
     let spec = dataset.spec();
@@ -102,6 +107,108 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
         dir: dir.to_path_buf(),
         scenarios_expected: keys.len(),
         scenarios_checked: keys.len(),
+        files_checked: files,
+        bytes_read: bytes,
+        seconds: start.elapsed().as_secs_f64(),
+        problems,
+    })
+}
+
+/// What a pair folder of a sweep holds besides its two runs.
+const PAIR_FILES: [&str; 2] = ["summary.json", "divergence.csv"];
+
+/// Checks a `counterfactual --sweep` output: sweep.json finished, and every
+/// pair there with its summary, its divergence log and both runs checked as
+/// `gen`'s scenarios are (files, columns, checksums).
+fn validate_sweep(
+    sweep: &crate::dataset::Sweep,
+    complete: bool,
+    threads: Option<usize>,
+    start: Instant,
+) -> Result<ValidationReport, String> {
+    let dir = &sweep.dir;
+    let spec = &sweep.expansion.spec;
+    let mut problems = Vec::new();
+    if !complete {
+        problems.push(Problem {
+            path: dir.join(crate::dataset::SWEEP_RECORD),
+            message: "the sweep that wrote this folder did not finish: rerun its counterfactual --sweep command to \
+                      complete it"
+                .into(),
+        });
+    }
+    let pair_of = |k: &ScenarioKey| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name());
+    // Images or not, as the runs were written (sweep.json does not say).
+    let images = sweep
+        .keys
+        .iter()
+        .map(|k| pair_of(k).join("factual"))
+        .find(|f| f.is_dir())
+        .is_some_and(|f| f.join(crate::output::layout::FrameKind::Rgb.folder()).is_dir());
+    let products = crate::output::manifest::Products { images, annotations: false, effects: false };
+    let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
+    let expected =
+        Expected { spec, layout: ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras) };
+    let check_pair = |key: &ScenarioKey| -> ScenarioCheck {
+        let pair = pair_of(key);
+        if !pair.is_dir() {
+            let message = "missing counterfactual pair: rerun the counterfactual --sweep command to write it".into();
+            return (vec![Problem { path: pair, message }], 0, 0, Vec::new());
+        }
+        let mut problems = Vec::new();
+        // The pair folder's own entries (each run is checked below).
+        let (mut found_files, mut found_folders) = (Vec::new(), Vec::new());
+        for e in std::fs::read_dir(&pair).into_iter().flatten().flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if e.path().is_dir() {
+                found_folders.push(name)
+            } else {
+                found_files.push(name)
+            }
+        }
+        for extra in found_files.iter().filter(|n| !PAIR_FILES.contains(&n.as_str())) {
+            problems.push(Problem { path: pair.join(extra), message: "unexpected file".into() });
+        }
+        for extra in found_folders.iter().filter(|n| !matches!(n.as_str(), "factual" | "counterfactual")) {
+            let message = if extra.starts_with(PARTIAL_PREFIX) {
+                "left by an interrupted sweep: rerun its command (it redoes this pair)"
+            } else {
+                "unexpected folder"
+            };
+            problems.push(Problem { path: pair.join(extra), message: message.into() });
+        }
+        for name in PAIR_FILES {
+            if !found_files.iter().any(|f| f == name) {
+                problems.push(Problem { path: pair.join(name), message: "missing".into() });
+            }
+        }
+        if let Ok(text) = std::fs::read(pair.join("summary.json")) {
+            if let Err(e) = serde_json::from_slice::<crate::orchestrate::handwritten::PairSummary>(&text) {
+                problems.push(Problem { path: pair.join("summary.json"), message: format!("not a pair summary: {e}") });
+            }
+        }
+        let (mut files, mut bytes) = (0, 0);
+        for run in ["factual", "counterfactual"] {
+            let key = ScenarioKey { name: Some(format!("{}/{run}", key.folder_name())), ..key.clone() };
+            let (p, f, b, _) = check_scenario(dir, &key, &expected);
+            problems.extend(p);
+            files += f;
+            bytes += b;
+        }
+        (problems, files, bytes, Vec::new())
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
+    let results: Vec<ScenarioCheck> = pool.install(|| sweep.keys.par_iter().map(check_pair).collect());
+    let (mut files, mut bytes) = (0, 0);
+    for (p, f, b, _) in results {
+        problems.extend(p);
+        files += f;
+        bytes += b;
+    }
+    Ok(ValidationReport {
+        dir: dir.clone(),
+        scenarios_expected: sweep.keys.len(),
+        scenarios_checked: sweep.keys.len(),
         files_checked: files,
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),

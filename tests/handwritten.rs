@@ -729,3 +729,60 @@ fn files_from_the_original_generator_run_with_every_adaptation_logged() {
         "{planned_adaptations} {lane_changes} {turns}"
     );
 }
+
+#[test]
+fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_same_bytes() {
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    let dir = fresh_dir("hw-sweep-resume");
+    // 40 pairs of 150-frame city scenarios without images: a few seconds.
+    let spec = write_spec(&dir, &city_spec("resume", &[(8, 0.5)], (30, 5, 5), 150, "{}"));
+    let sweep_args = |out: &Path| {
+        vec![
+            "counterfactual".to_string(),
+            "--sweep".into(),
+            spec.to_str().unwrap().into(),
+            "--no-images".into(),
+            "--quiet".into(),
+            "-j".into(),
+            "1".into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ]
+    };
+    let reference = dir.join("reference");
+    let whole = run(&sweep_args(&reference).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(whole.status.success(), "{}", String::from_utf8_lossy(&whole.stderr));
+    let validated = run(&["validate", reference.to_str().unwrap()]);
+    assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+
+    let out = dir.join("stopped");
+    let child = Command::new(bin()).args(sweep_args(&out)).stderr(Stdio::piped()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !out.join("cars08_edges50/train/00000/summary.json").exists() {
+        assert!(Instant::now() < deadline, "no pair was written");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("of 40 scenarios are complete") && stderr.contains("Rerun the same command"), "{stderr}");
+    let done = scenario_dirs(&out).len();
+    assert!(done < 40 * 2, "the sweep ran to its end ({done} runs of 80)");
+    let validated = run(&["validate", out.to_str().unwrap()]);
+    assert_eq!(validated.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&validated.stdout).contains("did not finish"));
+
+    // A damaged pair is redone, complete ones are kept, and the result is
+    // the uninterrupted sweep byte for byte.
+    let poses = out.join("cars08_edges50/train/00000/counterfactual/poses.csv");
+    std::fs::write(&poses, "damaged\n").unwrap();
+    let resumed = run(&sweep_args(&out).iter().map(String::as_str).collect::<Vec<_>>());
+    let said = String::from_utf8_lossy(&resumed.stdout);
+    assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
+    assert!(said.contains("kept from an earlier run") && !said.contains(" 0 kept"), "{said}");
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+    let validated = run(&["validate", out.to_str().unwrap()]);
+    assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+}

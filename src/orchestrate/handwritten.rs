@@ -18,7 +18,7 @@ use crate::output::claim::{claim, Writer};
 use crate::output::manifest::Products;
 use crate::output::number::push_fixed;
 use crate::output::writer::ScenarioWriter;
-use crate::output::{scenario_dir, write_atomically};
+use crate::output::{scenario_dir, write_atomically, WriteError};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::Expansion;
 use crate::plan::ScenarioPlan;
@@ -29,7 +29,7 @@ use crate::world::{EventKind, Trajectories};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 
 /// Why `run` or `counterfactual` failed.
@@ -162,7 +162,7 @@ impl std::fmt::Display for Written {
 }
 
 /// One car's part in a counterfactual pair.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct CarDivergence {
     pub id: u32,
     pub name: String,
@@ -173,7 +173,7 @@ pub struct CarDivergence {
 }
 
 /// `summary.json` of a counterfactual pair.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct PairSummary {
     pub scenario: String,
     pub interventions: Vec<String>,
@@ -358,6 +358,8 @@ pub struct SweepOptions {
 pub struct SweepSummary {
     pub out: PathBuf,
     pub pairs: usize,
+    /// Of `pairs`, those already complete from an earlier run (kept, not redone).
+    pub kept: usize,
     /// Pairs whose intervention moved at least one car.
     pub pairs_with_effect: usize,
     /// Mean size of the effect set over the pairs.
@@ -368,9 +370,12 @@ impl std::fmt::Display for SweepSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "wrote {} counterfactual pairs to {}: {} with an effect, {:.2} cars affected on average",
+            "{} counterfactual pairs in {} ({} written now, {} kept from an earlier run): {} with an effect, \
+             {:.2} cars affected on average",
             self.pairs,
             self.out.display(),
+            self.pairs - self.kept,
+            self.kept,
             self.pairs_with_effect,
             self.mean_affected_cars
         )
@@ -436,33 +441,72 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     let keys = expansion.keys(options.limit);
     let writer = scenario_writer(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
-    let summaries: Vec<PairSummary> = pool
-        .install(|| {
-            keys.par_iter()
-                .map(|key| {
-                    let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
-                        scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
-                        reason,
-                    })?;
-                    let mut counterfactual = plan.clone();
-                    counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
-                    let folder = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
-                    let summary = write_pair(&expansion, &writer, &key.folder_name(), &plan, &counterfactual, &folder)?;
+    let (written, kept) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let result = pool.install(|| {
+        keys.par_iter()
+            .map(|key| {
+                if stop_flag().load(Ordering::Relaxed) {
+                    return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+                }
+                let folder = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+                // A rerun keeps every complete pair and redoes the rest.
+                if let Some(summary) = complete_pair(&folder) {
+                    kept.fetch_add(1, Ordering::Relaxed);
                     bar.inc();
-                    Ok(summary)
-                })
-                .collect::<Result<Vec<_>, GenError>>()
-        })
-        .map_err(RunError::Write)?;
+                    return Ok(summary);
+                }
+                if folder.exists() {
+                    std::fs::remove_dir_all(&folder)
+                        .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
+                }
+                let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
+                    scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
+                    reason,
+                })?;
+                let mut counterfactual = plan.clone();
+                counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
+                let summary = write_pair(&expansion, &writer, &key.folder_name(), &plan, &counterfactual, &folder)?;
+                written.fetch_add(1, Ordering::Relaxed);
+                bar.inc();
+                Ok(summary)
+            })
+            .collect::<Result<Vec<_>, GenError>>()
+    });
     bar.finish();
+    let summaries = match result {
+        Ok(summaries) => summaries,
+        Err(GenError::Interrupted { .. }) => {
+            let done = (0..keys.len())
+                .filter(|&i| {
+                    let key = &keys[i];
+                    scenario_dir(&out, &key.group, key.split.name(), &key.folder_name()).join("summary.json").exists()
+                })
+                .count() as u64;
+            return Err(RunError::Write(GenError::Interrupted { done, total: keys.len() as u64, out }));
+        }
+        Err(e) => return Err(RunError::Write(e)),
+    };
     write_atomically(&record_path, &record(Some(summaries.len()))).map_err(GenError::from)?;
     let affected: usize = summaries.iter().map(|s| s.affected.len()).sum();
+    debug_assert_eq!(written.load(Ordering::Relaxed) + kept.load(Ordering::Relaxed), summaries.len());
     Ok(SweepSummary {
         out,
         pairs: summaries.len(),
+        kept: kept.load(Ordering::Relaxed),
         pairs_with_effect: summaries.iter().filter(|s| !s.affected.is_empty()).count(),
         mean_affected_cars: affected as f64 / summaries.len().max(1) as f64,
     })
+}
+
+/// The summary of the pair in `folder` when the pair is complete: its
+/// summary.json (written last) reads, and both runs pass their checksums.
+pub fn complete_pair(folder: &Path) -> Option<PairSummary> {
+    let summary = std::fs::read(folder.join("summary.json")).ok()?;
+    let summary: PairSummary = serde_json::from_slice(&summary).ok()?;
+    for run in ["factual", "counterfactual"] {
+        crate::output::verify_scenario(&folder.join(run)).ok()?;
+    }
+    Some(summary)
 }
 
 /// One random intervention for `plan`, from a stream derived from the

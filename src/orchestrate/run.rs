@@ -227,7 +227,9 @@ pub fn clear_stop() {
     STOP.store(false, Ordering::SeqCst);
 }
 
-fn install_signal_handler() {
+/// Ctrl-C (SIGINT) and SIGTERM ask the running command to stop at its next
+/// frame (a second Ctrl-C quits at once); for the command line only.
+pub fn install_signal_handler() {
     HANDLER.call_once(|| {
         let _ = ctrlc::set_handler(|| {
             if STOP.swap(true, Ordering::SeqCst) {
