@@ -735,8 +735,8 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
     use std::process::{Command, Stdio};
     use std::time::{Duration, Instant};
     let dir = fresh_dir("hw-sweep-resume");
-    // 40 pairs of 150-frame city scenarios without images: a few seconds.
-    let spec = write_spec(&dir, &city_spec("resume", &[(8, 0.5)], (30, 5, 5), 150, "{}"));
+    // 100 pairs of 150-frame city scenarios without images: about a second.
+    let spec = write_spec(&dir, &city_spec("resume", &[(8, 0.5)], (80, 10, 10), 150, "{}"));
     let sweep_args = |out: &Path| {
         vec![
             "counterfactual".to_string(),
@@ -759,7 +759,8 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
     let out = dir.join("stopped");
     let child = Command::new(bin()).args(sweep_args(&out)).stderr(Stdio::piped()).spawn().unwrap();
     let deadline = Instant::now() + Duration::from_secs(60);
-    while !out.join("cars08_edges50/train/00000/summary.json").exists() {
+    // Three pairs first: one to damage, two to keep.
+    while !out.join("cars08_edges50/train/00002/summary.json").exists() {
         assert!(Instant::now() < deadline, "no pair was written");
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -767,9 +768,9 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
     let output = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(130), "{stderr}");
-    assert!(stderr.contains("of 40 scenarios are complete") && stderr.contains("Rerun the same command"), "{stderr}");
+    assert!(stderr.contains("of 100 scenarios are complete") && stderr.contains("Rerun the same command"), "{stderr}");
     let done = scenario_dirs(&out).len();
-    assert!(done < 40 * 2, "the sweep ran to its end ({done} runs of 80)");
+    assert!(done < 100, "the sweep ran to its end ({done} pair folders of 100)");
     let validated = run(&["validate", out.to_str().unwrap()]);
     assert_eq!(validated.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&validated.stdout).contains("did not finish"));
