@@ -190,6 +190,10 @@ fn three_shards_merged_equal_one_run() {
     let output = run(&args);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert_eq!(hash_tree(&merged), expected, "merged shards differ from one run");
+    // Nothing is left of the shards (before: empty group and split folders).
+    for shard in &shard_dirs {
+        assert!(!Path::new(shard).exists(), "merge left {shard} behind: {:?}", hash_tree(Path::new(shard)));
+    }
 
     // Shards written into one shared folder, merged in place.
     let shared = dir.join("shared");
@@ -230,7 +234,10 @@ fn another_spec_is_refused_unless_forced() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("images"));
 
     let output = gen_cmd(&other, &out, &["--no-images", "--force"]).output().unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    // The removal is said and timed (before: silent, up to a minute).
+    assert!(stderr.contains("--force: removing the dataset") && stderr.contains("removed it in"), "{stderr}");
     let manifest = read_json(&out.join("manifest.json"));
     assert_eq!(manifest["spec"]["seed"], 12);
     let reference = dir.join("reference");

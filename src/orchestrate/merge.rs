@@ -210,6 +210,17 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             let _ = fs::remove_dir(dir); // only when empty
         }
     }
+    // The shards' folder trees the scenarios left: empty split and group
+    // folders go, and a shard folder that holds nothing else (once its
+    // lock file has gone with its claim).
+    drop(source_claims);
+    for from in moves.iter().map(|(from, _)| from).chain(&duplicates) {
+        for dir in from.ancestors().skip(1).take(3) {
+            if dir == out || fs::remove_dir(dir).is_err() {
+                break; // not empty (or the merged dataset itself)
+            }
+        }
+    }
     Ok(format!(
         "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
         out.display(),
