@@ -233,7 +233,8 @@ fn another_spec_is_refused_unless_forced() {
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("images"));
 
-    let output = gen_cmd(&other, &out, &["--no-images", "--force"]).output().unwrap();
+    let output =
+        run(&["gen", "--spec", other.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images", "--force"]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stderr}");
     // The removal is said and timed (before: silent, up to a minute).
