@@ -75,9 +75,25 @@ fn check_options(out: &Path, options: &PreviewOptions) -> Result<Kind, String> {
 }
 
 fn render(scenario_dir: &Path, out: &Path, options: &PreviewOptions, kind: Kind) -> Result<PreviewSummary, String> {
-    let scenario = ScenarioSummary::read(scenario_dir)?;
+    // An extra camera's folder (`<scenario>/cameras/<name>`): its frames,
+    // the scenario's cars. Trails and arrows are drawn in bird's-eye pixels,
+    // so only on the bird's-eye view.
+    let scenario_of_camera = scenario_dir
+        .parent()
+        .filter(|p| p.file_name().is_some_and(|n| n == "cameras") && !scenario_dir.join("scenario.json").exists())
+        .and_then(Path::parent)
+        .filter(|s| s.join("scenario.json").exists());
+    let camera = scenario_of_camera.is_some();
+    let meta_dir = scenario_of_camera.unwrap_or(scenario_dir);
+    let scenario = ScenarioSummary::read(meta_dir)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
-    let poses = PoseLog::read(scenario_dir, frames, cars)?;
+    let poses = PoseLog::read(meta_dir, frames, cars)?;
+    let options = &PreviewOptions {
+        trails: options.trails && !camera,
+        arrows: options.arrows && !camera,
+        masks: options.masks && scenario_dir.join("mask").is_dir(),
+        ..options.clone()
+    };
     let digits = frame_digits(scenario.frames);
     let first = scenario_dir.join(format!("rgb/{:0digits$}.png", 0));
     if !first.exists() {

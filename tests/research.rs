@@ -286,3 +286,26 @@ fn vcdn_export_explains_how_to_get_hdf5() {
     assert_eq!(output.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&output.stderr).contains("--features hdf5"));
 }
+
+#[test]
+fn preview_shows_an_extra_cameras_frames() {
+    let dir = fresh_dir("research-preview-camera");
+    let example = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/cameras.json");
+    let out = dir.join("run");
+    let output = run(&["run", "--scenario", example.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let cameras: Vec<_> = std::fs::read_dir(out.join("cameras/cameras")).unwrap().flatten().map(|e| e.path()).collect();
+    assert!(!cameras.is_empty(), "the example has extra cameras");
+    for camera in cameras {
+        let first = image::open(camera.join("rgb/0000.png")).unwrap();
+        let gif = dir.join(format!("{}.gif", camera.file_name().unwrap().to_string_lossy()));
+        let output = run(&["preview", camera.to_str().unwrap(), "--out", gif.to_str().unwrap(), "--scale", "1"]);
+        assert!(output.status.success(), "{}: {}", camera.display(), String::from_utf8_lossy(&output.stderr));
+        let decoder =
+            image::codecs::gif::GifDecoder::new(std::io::BufReader::new(std::fs::File::open(&gif).unwrap())).unwrap();
+        let frames = decoder.into_frames().collect_frames().unwrap();
+        // The camera's own frames at its own size, not the bird's-eye view's.
+        assert_eq!(frames[0].buffer().dimensions(), (first.width(), first.height()), "{}", camera.display());
+        assert!(frames.len() > 1);
+    }
+}

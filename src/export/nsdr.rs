@@ -35,12 +35,36 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
             let json = annotate(source, w, h, digits)?;
             std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
             write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+            link_frames(source, target)?;
             bar.inc();
             Ok::<(), String>(())
         })
         .map_err(Error::Failure)?;
     bar.finish();
     Ok(jobs.len())
+}
+
+/// `rgb/` and `mask/` beside an exported annotations.json, as links to the
+/// dataset's own folders: its `frame_filename` and `mask_filename` are
+/// relative to the scenario folder, so they resolve from the export too,
+/// without copying a frame. (Unix; elsewhere the names stay relative to the
+/// dataset's scenario folder.)
+fn link_frames(source: &Path, target: &Path) -> Result<(), String> {
+    #[cfg(unix)]
+    for folder in ["rgb", "mask"] {
+        let original = source.join(folder);
+        let original = original.canonicalize().map_err(|e| format!("cannot read {}: {e}", original.display()))?;
+        let link = target.join(folder);
+        match std::fs::read_link(&link) {
+            Ok(existing) if existing == original => continue, // a rerun
+            Ok(_) => std::fs::remove_file(&link).map_err(|e| format!("cannot replace {}: {e}", link.display()))?,
+            Err(_) => {}
+        }
+        std::os::unix::fs::symlink(&original, &link).map_err(|e| io_err(&link)(e).to_string())?;
+    }
+    #[cfg(not(unix))]
+    let _ = (source, target);
+    Ok(())
 }
 
 /// annotations.json of the scenario in `dir`.

@@ -266,9 +266,13 @@ def test_city_annotations_cover_every_visible_car():
     from pycocotools import mask as coco_mask
 
     for d in scenarios(CITY):
-        exported = json.loads((ROOT / "nsdr-city" / d.relative_to(CITY) / "annotations.json").read_text())
+        folder = ROOT / "nsdr-city" / d.relative_to(CITY)
+        exported = json.loads((folder / "annotations.json").read_text())
         for frame in exported["frames"][::7]:
             mask = np.asarray(Image.open(d / frame["mask_filename"]))
+            # The file names resolve from the export folder too (rgb/ and mask/ link to the dataset's).
+            assert np.array_equal(np.asarray(Image.open(folder / frame["mask_filename"])), mask)
+            assert (folder / frame["frame_filename"]).read_bytes() == (d / frame["frame_filename"]).read_bytes()
             union = np.zeros(mask.shape, dtype=bool)
             for obj in frame["objects"]:
                 union |= coco_mask.decode({"size": obj["mask"]["size"], "counts": obj["mask"]["counts"].encode()}).astype(bool)
