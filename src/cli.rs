@@ -273,6 +273,11 @@ pub struct StatsArgs {
     /// Print the table as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+
+    /// Every column (about 200 characters wide); by default the main ones
+    /// (about 110).
+    #[arg(long)]
+    pub wide: bool,
 }
 
 #[derive(Debug, Args)]
@@ -767,7 +772,13 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             }
             Ok(())
         }
-        Command::Stats(args) => report(&dataset_stats(&args.dataset).map_err(Error::Failure)?, args.json),
+        Command::Stats(args) => {
+            let stats = dataset_stats(&args.dataset).map_err(Error::Failure)?;
+            if args.wide && !args.json {
+                return say(stats.table(true).trim_end());
+            }
+            report(&stats, args.json)
+        }
         Command::Heatmap(args) => {
             let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
             report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)

@@ -43,6 +43,7 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     // Recompute the train row from the files.
     let (mut speed, mut n, mut cars, mut stopped, mut reds, mut in_view) =
         (0.0, 0usize, 0usize, 0usize, 0usize, 0usize);
+    let mut speed_m_s = 0.0;
     let (mut changers, mut adapted, mut skipped) = (0usize, 0usize, 0usize);
     // Pair-frames in which one car of a pair names the other in
     // interactions.csv, for leader-follower pairs and the rest.
@@ -55,6 +56,7 @@ fn stats_match_the_logs_and_separate_the_worlds() {
             let (mut run, mut stop) = (0, false);
             for p in track {
                 speed += p.speed * to_px;
+                speed_m_s += p.speed;
                 n += 1;
                 in_view += p.in_view as usize;
                 run = if p.speed * to_px < 0.1 { run + 1 } else { 0 };
@@ -97,6 +99,7 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     assert_eq!(train["scenarios"], 6);
     assert_eq!(train["cars"], cars);
     assert!((train["mean_speed_px"].as_f64().unwrap() - speed / n as f64).abs() < 1e-9);
+    assert!((train["mean_speed_m_s"].as_f64().unwrap() - speed_m_s / n as f64).abs() < 1e-9);
     assert!((train["stopped_share"].as_f64().unwrap() - stopped as f64 / cars as f64).abs() < 1e-12);
     assert!((train["in_view_share"].as_f64().unwrap() - in_view as f64 / n as f64).abs() < 1e-12);
     assert_eq!(train["red_light_runs"], reds);
@@ -110,14 +113,22 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     assert!(train["gap_cv_median"].as_f64().unwrap() > 0.05, "city gaps vary");
     assert!(train["p95_speed_px"].as_f64().unwrap() > train["mean_speed_px"].as_f64().unwrap());
 
-    // The plain table names every column.
+    // The plain table fits a terminal (before: ~190 columns and a
+    // 1,000-character legend line), speeds in m/s, each column explained.
     let table = String::from_utf8(run(&["stats", city.to_str().unwrap()]).stdout).unwrap();
+    assert!(table.lines().all(|l| l.len() <= 120), "{table}");
     assert!(
-        table.contains("gapCV")
-            && table.contains("lanechg")
-            && table.contains("e-int")
-            && table.contains("cars12_edges50")
+        table.contains("cars12_edges50") && table.contains("mean speed, m/s") && table.contains("--wide"),
+        "{table}"
     );
+    let shown = format!("{:.2}", train["mean_speed_m_s"].as_f64().unwrap());
+    assert!(table.lines().nth(1).unwrap().split_whitespace().any(|v| v == shown), "{shown} not in {table}");
+    // --wide shows every column, each explained.
+    let wide = String::from_utf8(run(&["stats", city.to_str().unwrap(), "--wide"]).stdout).unwrap();
+    for column in ["gapCV", "lanechg", "e-int", "disch", "n-mst"] {
+        assert!(wide.lines().next().unwrap().contains(column), "{column}: {wide}");
+        assert!(wide.lines().any(|l| l.trim_start().starts_with(column)), "{column} unexplained: {wide}");
+    }
 }
 
 #[test]

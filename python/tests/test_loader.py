@@ -154,7 +154,7 @@ def test_the_package_shows_its_api_a_version_and_short_reprs():
     with pytest.raises(causalcity.InputError) as error:
         causalcity.Spec.from_dict({"name": "x"})
     shown = "".join(traceback.format_exception(error.value))
-    assert "causalcity.InputError: " in shown and "_native" not in shown, shown
+    assert shown.strip().splitlines()[-1].startswith("causalcity.InputError: "), shown
     assert causalcity.GenerationError.__module__ == "causalcity"
     s = causalcity.simulate(toy(1), "cars04_edges50", "train", 0, images=True)
     text = repr(s)

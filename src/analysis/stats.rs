@@ -44,6 +44,9 @@ pub struct SplitStats {
     pub cars: usize,
     pub mean_speed_px: f64,
     pub p95_speed_px: f64,
+    /// The same speeds in metres per second (poses.csv's `speed`).
+    pub mean_speed_m_s: f64,
+    pub p95_speed_m_s: f64,
     pub stopped_share: f64,
     pub light_stop_share: f64,
     pub collision_scenarios: usize,
@@ -166,75 +169,134 @@ pub struct DatasetStats {
     pub rows: Vec<SplitStats>,
 }
 
+/// One column of the `stats` table: its heading, width, what it means and
+/// how a row shows it.
+struct Column {
+    heading: &'static str,
+    width: usize,
+    /// Shown without `--wide`.
+    narrow: bool,
+    meaning: String,
+    value: fn(&SplitStats) -> String,
+}
+
+fn opt(v: Option<f64>, d: usize) -> String {
+    v.map_or("-".to_string(), |v| format!("{v:.d$}"))
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v))
+}
+
+fn columns() -> Vec<Column> {
+    let c = |heading, width, narrow, meaning: &str, value| Column {
+        heading,
+        width,
+        narrow,
+        meaning: meaning.into(),
+        value,
+    };
+    vec![
+        c("scen", 5, true, "scenarios", |r| r.scenarios.to_string()),
+        c("cars", 5, true, "cars in them", |r| r.cars.to_string()),
+        c("speed", 6, true, "mean speed, m/s", |r| format!("{:.2}", r.mean_speed_m_s)),
+        c("p95", 6, true, "95th-percentile speed, m/s", |r| format!("{:.2}", r.p95_speed_m_s)),
+        Column {
+            heading: "stopped",
+            width: 7,
+            narrow: true,
+            meaning: format!("cars that stood (under {STOP_SPEED_PX} px/frame) for {STOP_FRAMES}+ frames"),
+            value: |r| format!("{:.0}%", 100.0 * r.stopped_share),
+        },
+        Column {
+            heading: "lights",
+            width: 7,
+            narrow: true,
+            meaning: format!("cars that stopped within {APPROACH_M} m of an intersection at a red or yellow"),
+            value: |r| format!("{:.0}%", 100.0 * r.light_stop_share),
+        },
+        c("colli", 6, true, "scenarios with a collision", |r| r.collision_scenarios.to_string()),
+        c("reds", 5, true, "red lights run", |r| r.red_light_runs.to_string()),
+        c("gap m", 6, true, "mean leader-follower gap, metres", |r| opt(r.gap_mean_m, 2)),
+        c("gapCV", 6, false, "median variation of a pair's gap (std / mean)", |r| opt(r.gap_cv_median, 2)),
+        c("inview", 6, true, "car-frames inside the bird's-eye image", |r| format!("{:.0}%", 100.0 * r.in_view_share)),
+        c("lanechg", 7, false, "cars that changed lanes for a turn", |r| {
+            format!("{:.0}%", 100.0 * r.lane_change_share)
+        }),
+        c("adapt", 5, false, "actions adapted (events.csv)", |r| r.actions_adapted.to_string()),
+        c("skip", 5, false, "actions skipped (events.csv)", |r| r.actions_skipped.to_string()),
+        c("hdwy", 5, false, "median headway while following, s", |r| opt(r.headway_median_s, 2)),
+        c("tgap", 5, false, "median time gap while following, s", |r| opt(r.time_gap_median_s, 2)),
+        c("disch", 5, false, "queue discharge at green, vehicles/s/lane (- when no queue left at a green)", |r| {
+            opt(r.discharge_per_lane_s, 2)
+        }),
+        c("free", 5, false, "median speed over desired speed on free road", |r| opt(r.free_speed_ratio_median, 2)),
+        c("e-int", 6, false, "leader-follower pair-frames interacting (interactions.csv)", |r| {
+            pct(r.edge_pairs.frame_share)
+        }),
+        Column {
+            heading: "e-mst",
+            width: 6,
+            narrow: false,
+            meaning: format!("leader-follower pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY),
+            value: |r| pct(r.edge_pairs.mostly_share),
+        },
+        c("n-int", 6, false, "other pair-frames interacting", |r| pct(r.non_edge_pairs.frame_share)),
+        Column {
+            heading: "n-mst",
+            width: 6,
+            narrow: false,
+            meaning: format!("other pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY),
+            value: |r| pct(r.non_edge_pairs.mostly_share),
+        },
+        c("backed", 6, true, "designed edges an intervention on the leader backs (effects.csv)", |r| {
+            pct(r.causal.and_then(|c| c.backed_share()))
+        }),
+        c("c/scen", 6, true, "causal edges per scenario", |r| {
+            opt(r.causal.map(|c| c.causal_edges as f64 / r.scenarios.max(1) as f64), 2)
+        }),
+        c("unexpl", 6, true, "causal edges that are no designed edge", |r| {
+            pct(r.causal.and_then(|c| c.unexplained_share()))
+        }),
+    ]
+}
+
+impl DatasetStats {
+    /// The table `stats` prints: about 110 columns wide with the main
+    /// figures, every figure with `wide`; then one line per column saying
+    /// what it means.
+    pub fn table(&self, wide: bool) -> String {
+        use std::fmt::Write;
+        let columns: Vec<Column> = columns().into_iter().filter(|c| wide || c.narrow).collect();
+        let mut out = String::new();
+        let _ = write!(out, "{:<16} {:<5}", "group", "split");
+        for c in &columns {
+            let _ = write!(out, " {:>w$}", c.heading, w = c.width);
+        }
+        out.push('\n');
+        for r in &self.rows {
+            let _ = write!(out, "{:<16} {:<5}", r.group, r.split);
+            for c in &columns {
+                let _ = write!(out, " {:>w$}", (c.value)(r), w = c.width);
+            }
+            out.push('\n');
+        }
+        out.push('\n');
+        for c in &columns {
+            let _ = writeln!(out, "  {:<8} {}", c.heading, c.meaning);
+        }
+        if !wide {
+            out.push_str(
+                "  (--wide adds gap variation, lane changes, adaptations, headways, discharge and pair interactions)\n",
+            );
+        }
+        out
+    }
+}
+
 impl fmt::Display for DatasetStats {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
-            f,
-            "{:<16} {:<5} {:>5} {:>5} {:>6} {:>6} {:>7} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>6} {:>6} {:>6}",
-            "group",
-            "split",
-            "scen",
-            "cars",
-            "speed",
-            "p95",
-            "stopped",
-            "lights",
-            "colli",
-            "reds",
-            "gap m",
-            "gapCV",
-            "inview",
-            "lanechg",
-            "adapt",
-            "skip",
-            "hdwy",
-            "tgap",
-            "disch",
-            "free",
-            "e-int",
-            "e-mst",
-            "n-int",
-            "n-mst",
-            "backed",
-            "c/scen",
-            "unexpl"
-        )?;
-        let opt = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |v| format!("{v:.d$}"));
-        let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
-        for r in &self.rows {
-            writeln!(
-                f,
-                "{:<16} {:<5} {:>5} {:>5} {:>6.2} {:>6.2} {:>6.0}% {:>6.0}% {:>6} {:>6} {:>7} {:>6} {:>5.0}% {:>6.0}% {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>5} {:>6} {:>6} {:>6}",
-                r.group,
-                r.split,
-                r.scenarios,
-                r.cars,
-                r.mean_speed_px,
-                r.p95_speed_px,
-                100.0 * r.stopped_share,
-                100.0 * r.light_stop_share,
-                r.collision_scenarios,
-                r.red_light_runs,
-                opt(r.gap_mean_m, 2),
-                opt(r.gap_cv_median, 2),
-                100.0 * r.in_view_share,
-                100.0 * r.lane_change_share,
-                r.actions_adapted,
-                r.actions_skipped,
-                opt(r.headway_median_s, 2),
-                opt(r.time_gap_median_s, 2),
-                opt(r.discharge_per_lane_s, 2),
-                opt(r.free_speed_ratio_median, 2),
-                pct(r.edge_pairs.frame_share),
-                pct(r.edge_pairs.mostly_share),
-                pct(r.non_edge_pairs.frame_share),
-                pct(r.non_edge_pairs.mostly_share),
-                pct(r.causal.and_then(|c| c.backed_share())),
-                opt(r.causal.map(|c| c.causal_edges as f64 / r.scenarios.max(1) as f64), 2),
-                pct(r.causal.and_then(|c| c.unexplained_share()))
-            )?;
-        }
-        writeln!(f, "speed in px per frame; stopped: under {STOP_SPEED_PX} px/frame for {STOP_FRAMES}+ frames; lights: stopped within {APPROACH_M} m before an intersection while its straight signal showed red or yellow; colli: scenarios with a collision; lanechg: cars that changed lanes for a turn; adapt, skip: actions planning or driving adapted or skipped (events.csv); while following (interactions.csv) and moving: hdwy, median front-to-front headway (s), tgap, median time gap (bumper gap less min gap, over speed, s); disch: queue discharge at green (vehicles per second per lane); free: median speed over desired speed on free road; pairs interacting (interactions.csv: one car's speed bound by the other, as car ahead, conflict or collision), e-: leader-follower pairs, n-: all other pairs, int: share of pair-frames, mst: share of pairs interacting in at least {:.0}% of frames; interventional effects (effects.csv): backed, designed edges that an intervention on the leader moves its follower for; c/scen, causal edges per scenario; unexpl, causal edges that are no designed edge", 100.0 * MOSTLY)
+        f.write_str(self.table(false).trim_end())
     }
 }
 
@@ -244,6 +306,9 @@ struct Tally {
     cars: usize,
     car_frames: usize,
     speed_sum: f64,
+    /// Pixels per frame in one metre per second (the same for every
+    /// scenario of a dataset: one camera, one frame interval).
+    px_per_frame_per_m_s: f64,
     histogram: Vec<u64>,
     stopped: usize,
     light_stops: usize,
@@ -288,6 +353,7 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         all.cars += t.cars;
         all.car_frames += t.car_frames;
         all.speed_sum += t.speed_sum;
+        all.px_per_frame_per_m_s = all.px_per_frame_per_m_s.max(t.px_per_frame_per_m_s);
         for (a, b) in all.histogram.iter_mut().zip(&t.histogram) {
             *a += b;
         }
@@ -328,6 +394,12 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         cars: all.cars,
         mean_speed_px: all.speed_sum / frames,
         p95_speed_px: p95,
+        mean_speed_m_s: if all.px_per_frame_per_m_s > 0.0 {
+            all.speed_sum / frames / all.px_per_frame_per_m_s
+        } else {
+            0.0
+        },
+        p95_speed_m_s: if all.px_per_frame_per_m_s > 0.0 { p95 / all.px_per_frame_per_m_s } else { 0.0 },
         stopped_share: all.stopped as f64 / all.cars.max(1) as f64,
         light_stop_share: all.light_stops as f64 / all.cars.max(1) as f64,
         collision_scenarios,
@@ -387,7 +459,8 @@ fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
     let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
     let red = red_approaches(dir)?;
     let causal = CausalTally::of_scenario(&scenario);
-    let mut t = Tally { cars, histogram: vec![0; HISTOGRAM_BINS], causal, ..Tally::default() };
+    let mut t =
+        Tally { cars, histogram: vec![0; HISTOGRAM_BINS], causal, px_per_frame_per_m_s: to_px, ..Tally::default() };
     for row in reader.records() {
         let row = row.map_err(|e| format!("{}: {e}", poses_path.display()))?;
         let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
