@@ -152,11 +152,26 @@ fn the_toy_heat_map_is_more_uniform_than_the_city_one() {
         let summary: Value = serde_json::from_slice(&output.stdout).unwrap();
         assert_eq!(summary["scenarios"], 5 * 20, "--split train keeps the train scenarios of every group");
         let image = image::open(&png).unwrap().into_rgb8();
-        assert_eq!(image.dimensions(), (1024 + 100, 640), "the view plus a colour bar and its labels");
+        assert_eq!(image.dimensions(), (1024 + 100, 18 + 640), "a title, the view, a colour bar and its labels");
         // The bar's tick labels: light digits right of the bar, top to bottom.
-        let lit = (0..640).flat_map(|y| (1024 + 36..1024 + 100).map(move |x| (x, y)));
+        let lit = (18..658).flat_map(|y| (1024 + 36..1024 + 100).map(move |x| (x, y)));
         let digits = lit.filter(|&(x, y)| image.get_pixel(x, y).0 == [235, 235, 235]).count();
         assert!(digits > 100, "colour bar labels: {digits} digit pixels");
+        // A title in the band above the view.
+        let title = (0..18).flat_map(|y| (0..1024).map(move |x| (x, y)));
+        let letters = title.filter(|&(x, y)| image.get_pixel(x, y).0 == [235, 235, 235]).count();
+        assert!(letters > 500, "title: {letters} text pixels");
+        // The roads show where no car came (grey), the ground stays dark.
+        let view = (18..658).flat_map(|y| (0..1024).map(move |x| (x, y)));
+        let (mut road, mut ground) = (0, 0);
+        for (x, y) in view {
+            match image.get_pixel(x, y).0 {
+                [88, 88, 96] => road += 1,
+                [24, 24, 28] => ground += 1,
+                _ => {}
+            }
+        }
+        assert!(road > 10_000 && ground > 100_000, "{world}: {road} road and {ground} ground pixels");
         cvs.push(summary["visited_cell_cv"].as_f64().unwrap());
     }
     assert!(cvs[0] < 0.6 * cvs[1], "toy dwell CV {} should be well below the city's {}", cvs[0], cvs[1]);

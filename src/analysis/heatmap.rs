@@ -1,8 +1,9 @@
 //! `causalcity heatmap DATASET --out heat.png`: where cars spend their time.
 //! Every car-frame adds one to the cell (4 x 4 pixels) under the car's centre;
 //! the image shows log(1 + count) over the camera view in a perceptual colour
-//! ramp, with a colour bar. Uniform for the toy world, hot in front of the
-//! lights for the city, as in the paper's figure.
+//! ramp, over the map's roads (grey where no car came), with a title and a
+//! colour bar in car-frames per cell. Uniform for the toy world, hot in
+//! front of the lights for the city, as in the paper's figure.
 
 use crate::dataset::Dataset;
 use crate::error::Error;
@@ -21,6 +22,11 @@ pub const BAR_WIDTH: u32 = 40 + LABEL_WIDTH;
 const LABEL_WIDTH: u32 = 60;
 /// Ticks on the colour bar, from top (the maximum) to bottom (1).
 const TICKS: usize = 5;
+/// The title band above the view, pixels.
+pub const TITLE_HEIGHT: u32 = 18;
+/// Where no car came: the road, and everything else.
+const EMPTY_ROAD: [u8; 3] = [88, 88, 96];
+const EMPTY_GROUND: [u8; 3] = [24, 24, 28];
 
 /// What the heat map summarises.
 #[derive(Debug, Clone, Serialize)]
@@ -101,32 +107,62 @@ fn draw(opened: &Dataset, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapS
     let sd = (visited.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / visited.len().max(1) as f64).sqrt();
     let max = counts.iter().copied().max().unwrap_or(0);
 
-    // Image: the heat over the view, a colour bar on the right.
-    let (iw, ih) = (w + BAR_WIDTH, h);
+    // Image: a title band; under it the heat over the view's roads, and a
+    // colour bar on the right.
+    let renderer = crate::render::Renderer::new(&opened.expansion.map, camera);
+    let road = renderer.road_coverage();
+    let (iw, ih) = (w + BAR_WIDTH, h + TITLE_HEIGHT);
     let mut rgb = vec![0u8; (iw * ih * 3) as usize];
+    for pixel in rgb.chunks_exact_mut(3) {
+        pixel.copy_from_slice(&EMPTY_GROUND);
+    }
     let scale = ((1 + max) as f64).ln().max(1e-9);
     for y in 0..h {
+        let row = y + TITLE_HEIGHT;
         for x in 0..w {
             let c = counts[(y / CELL_PX) as usize * cw + (x / CELL_PX) as usize];
-            let colour = if c == 0 { [24, 24, 28] } else { ramp(((1 + c) as f64).ln() / scale) };
-            let i = ((y * iw + x) * 3) as usize;
+            let colour = if c > 0 {
+                ramp(((1 + c) as f64).ln() / scale)
+            } else if road.get((y * w + x) as usize).is_some_and(|&r| r >= 128) {
+                EMPTY_ROAD
+            } else {
+                EMPTY_GROUND
+            };
+            let i = ((row * iw + x) * 3) as usize;
             rgb[i..i + 3].copy_from_slice(&colour);
         }
         let level = 1.0 - y as f64 / (h - 1).max(1) as f64;
         for x in w + 8..w + 32 {
-            let i = ((y * iw + x) * 3) as usize;
+            let i = ((row * iw + x) * 3) as usize;
             rgb[i..i + 3].copy_from_slice(&ramp(level));
         }
     }
-    // Tick labels: the count each height of the bar stands for.
     let mut canvas = Canvas { data: &mut rgb, width: iw, height: ih, channels: 3 };
+    // The title: what is counted, over what.
+    let mut over = vec![format!("{} scenarios", dirs.len())];
+    over.extend(filter.group.clone());
+    over.extend(filter.split.map(|s| format!("split {}", s.name())));
+    let title = format!(
+        "{}: car-frames per {CELL_PX}x{CELL_PX} px cell ({:.2} m), log scale; {}; grey: road no car crossed",
+        spec.name,
+        CELL_PX as f64 / camera.pixels_per_metre,
+        over.join(", ")
+    );
+    draw_label(&mut canvas, 4, 4, &title, 1, [235, 235, 235], EMPTY_GROUND);
+    draw_label(&mut canvas, (w + 8) as i64, 4, "car-frames", 1, [235, 235, 235], EMPTY_GROUND);
+    // Tick labels: the count each height of the bar stands for, each once.
+    let mut shown = Vec::new();
     for k in 0..TICKS {
         let level = 1.0 - k as f64 / (TICKS - 1) as f64;
         let count = ((level * scale).exp() - 1.0).round().max(1.0) as u64;
-        let y = (1.0 - level) * (h - 1) as f64;
+        if shown.contains(&count) {
+            continue;
+        }
+        shown.push(count);
+        let y = (1.0 - level) * (h - 1) as f64 + TITLE_HEIGHT as f64;
         let text = count.to_string();
         let (_, lh) = label_size(&text, 1);
-        let top = (y as i64 - lh as i64 / 2).clamp(0, ih as i64 - lh as i64);
+        let top = (y as i64 - lh as i64 / 2).clamp(TITLE_HEIGHT as i64, ih as i64 - lh as i64);
         draw_label(&mut canvas, (w + 36) as i64, top, &text, 1, [235, 235, 235], [24, 24, 28]);
     }
     let file = std::fs::File::create(out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;

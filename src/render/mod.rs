@@ -178,6 +178,12 @@ impl Renderer {
         }
     }
 
+    /// Asphalt coverage of each pixel of the empty map (0 to 255, row-major),
+    /// for figures drawn over the roads (the heat map).
+    pub fn road_coverage(&self) -> &[u8] {
+        &self.road
+    }
+
     /// Distance from the camera to what each pixel shows, in millimetres
     /// (16-bit, saturating), given the frame's instance mask: cars are
     /// `CAR_HEIGHT_M` tall, buildings `BUILDING_HEIGHT_M`, the ground 0. The
