@@ -183,7 +183,7 @@ fn validate_sweep(
             }
         }
         if let Ok(text) = std::fs::read(pair.join("summary.json")) {
-            if let Err(e) = serde_json::from_slice::<crate::orchestrate::handwritten::PairSummary>(&text) {
+            if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(&text) {
                 problems.push(Problem { path: pair.join("summary.json"), message: format!("not a pair summary: {e}") });
             }
         }

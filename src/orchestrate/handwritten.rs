@@ -161,42 +161,7 @@ impl std::fmt::Display for Written {
     }
 }
 
-/// One car's part in a counterfactual pair.
-#[derive(Debug, Clone, Serialize, serde::Deserialize)]
-pub struct CarDivergence {
-    pub id: u32,
-    pub name: String,
-    /// Moved by the intervention at all (any frame differs).
-    pub affected: bool,
-    pub max_divergence_m: f64,
-    pub first_divergent_frame: Option<usize>,
-}
-
-/// `summary.json` of a counterfactual pair.
-#[derive(Debug, Clone, Serialize, serde::Deserialize)]
-pub struct PairSummary {
-    pub scenario: String,
-    pub interventions: Vec<String>,
-    /// When the first intervention fired in the counterfactual (None if it never did).
-    pub intervention_time_s: Option<f64>,
-    /// The ground-truth effect set: names of the cars whose trajectory changed.
-    pub affected: Vec<String>,
-    pub cars: Vec<CarDivergence>,
-}
-
-impl std::fmt::Display for PairSummary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let affected = if self.affected.is_empty() { "none".to_string() } else { self.affected.join(", ") };
-        write!(
-            f,
-            "{}: {} -> affected {} of {} cars: {affected}",
-            self.scenario,
-            self.interventions.join("; "),
-            self.affected.len(),
-            self.cars.len()
-        )
-    }
-}
+pub use crate::output::pair_summary::{CarDivergence, PairSummary};
 
 /// Writes `<out>/<Name>/factual/`, `counterfactual/`, `divergence.csv` and
 /// `summary.json` for every scenario of the file. The counterfactual adds
