@@ -787,3 +787,30 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
     let validated = run(&["validate", out.to_str().unwrap()]);
     assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
 }
+
+#[test]
+fn the_documented_intervention_file_runs_as_docs_show() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let file = root.join("configs/intervention-files/stop-and-slow.json");
+    assert_valid(&validator("intervention-file.schema.json"), &read_json(&file), &file);
+    // docs/handwritten-scenarios.md shows this file and this command's output.
+    let docs = std::fs::read_to_string(root.join("docs/handwritten-scenarios.md")).unwrap();
+    assert!(docs.contains(std::fs::read_to_string(&file).unwrap().trim()), "the docs show another file");
+    let out = fresh_dir("hw-intervention-file").join("cf");
+    let scenario = root.join("configs/examples/stop-the-leader.json");
+    let output = run(&[
+        "counterfactual",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--intervention",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-images",
+    ]);
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(docs.contains(said.trim()), "docs show another result than {said}");
+    let summary = read_json(&out.join("stop_the_leader/summary.json"));
+    assert_eq!(summary["affected"], serde_json::json!(["Car_2", "Car_3"]));
+}
