@@ -309,8 +309,10 @@ struct Prefetch {
 
 #[pymethods]
 impl Prefetch {
+    /// With `batches` (lengths summing to the keys'), frames come as one
+    /// array per batch (`batch_rgb`, `batch_mask`) with its last scenario.
     #[new]
-    #[pyo3(signature = (spec, keys, images=false, effects=true, threads=None, ahead=None))]
+    #[pyo3(signature = (spec, keys, images=false, effects=true, threads=None, ahead=None, batches=None))]
     fn new(
         spec: &Spec,
         keys: Vec<(String, String, u32)>,
@@ -318,13 +320,20 @@ impl Prefetch {
         effects: bool,
         threads: Option<usize>,
         ahead: Option<usize>,
+        batches: Option<Vec<usize>>,
     ) -> PyResult<Prefetch> {
+        if let Some(lengths) = &batches {
+            if lengths.iter().sum::<usize>() != keys.len() || lengths.contains(&0) {
+                return Err(InputError::new_err("batches: lengths from 1 up that add up to the number of keys"));
+            }
+        }
         let keys: Vec<ScenarioKey> = keys.into_iter().map(|k| key_of(spec, k)).collect::<PyResult<_>>()?;
         let threads = threads
             .filter(|&t| t > 0)
             .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
         let ahead = ahead.unwrap_or(threads + 1);
-        Ok(Prefetch { inner: Prefetch_::start(spec.generator.clone(), keys, images, effects, threads, ahead) })
+        let generator = spec.generator.clone();
+        Ok(Prefetch { inner: Prefetch_::start(generator, keys, images, effects, threads, ahead, batches) })
     }
 
     fn __iter__(slf: Bound<'_, Self>) -> Bound<'_, Self> {
@@ -502,6 +511,12 @@ fn scenario_dict(py: Python<'_>, a: ScenarioArrays) -> PyResult<Bound<'_, PyDict
         let (h, w) = (images.height as usize, images.width as usize);
         d.set_item("rgb", array(py, Data::U8(images.rgb), &[t, h, w, 3])?)?;
         d.set_item("mask", array(py, Data::U8(images.mask), &[t, h, w])?)?;
+    }
+    if let Some(batch) = a.batch {
+        let (h, w) = (batch.height as usize, batch.width as usize);
+        let n = batch.mask.len() / (t * h * w).max(1);
+        d.set_item("batch_rgb", array(py, Data::U8(batch.rgb), &[n, t, h, w, 3])?)?;
+        d.set_item("batch_mask", array(py, Data::U8(batch.mask), &[n, t, h, w])?)?;
     }
     Ok(d)
 }

@@ -79,19 +79,30 @@ def test_batch_tensors_hold_the_scenarios_values():
 
 def test_image_batches_decode_like_the_pngs_gen_wrote():
     spec = causalcity.Spec.load(TOY_SPEC)
-    batches = causalcity.batches(spec, "train", batch_size=2, shuffle=False, images=True, effects=False)
+    # Frames are drawn straight into each batch's arrays by several threads
+    # (no workers) or by one per worker process: the same bytes either way.
     seen = 0
-    for batch in torch.utils.data.DataLoader(batches, batch_size=None, num_workers=2):
+    for workers, threads in ((0, 2), (2, None)):
+        batches = causalcity.batches(
+            spec, "train", batch_size=2, shuffle=False, images=True, effects=False, threads=threads
+        )
+        seen += check_image_batches(spec, torch.utils.data.DataLoader(batches, batch_size=None, num_workers=workers))
+    assert seen == 2 * len(spec.keys("train"))
+
+
+def check_image_batches(spec, loader):
+    seen = 0
+    for batch in loader:
         assert batch["rgb"].dtype == torch.uint8 and batch["rgb"].shape[0] == 2
         for b, key in enumerate(batch["key"]):
             folder = DATA / "toy" / key.group / key.split / f"{key.index:05d}"
-            for frame in (0, spec.frames - 1):
+            for frame in range(spec.frames):
                 rgb = np.asarray(Image.open(folder / "rgb" / f"{frame:04d}.png").convert("RGB"))
                 np.testing.assert_array_equal(batch["rgb"][b, frame].numpy(), rgb)
                 mask = np.asarray(Image.open(folder / "mask" / f"{frame:04d}.png"))
                 np.testing.assert_array_equal(batch["mask"][b, frame].numpy(), mask)
             seen += 1
-    assert seen == len(spec.keys("train"))
+    return seen
 
 
 def test_mixed_groups_pad_to_the_most_cars_and_mask_the_padding():

@@ -7,7 +7,9 @@ use super::handwritten::{pair_plans, simulate_pair, PairSummary, RunError};
 use super::run::GenError;
 use super::scenario_file::{load_interventions_text, load_text, FileOptions};
 use crate::map::CityMap;
-use crate::output::arrays::{available_memory_bytes, frame_bytes, scenario_arrays, OutOfMemory, ScenarioArrays};
+use crate::output::arrays::{
+    available_memory_bytes, frame_bytes, scenario_arrays, BatchFrames, OutOfMemory, ScenarioArrays,
+};
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::render::{FrameCanvas, Renderer};
 use crate::spec::Split;
@@ -89,7 +91,7 @@ impl Generator {
         stop: &AtomicBool,
     ) -> Result<ScenarioArrays, GenError> {
         let mut canvas = images.then(|| self.renderer().canvas());
-        self.scenario_with(key, canvas.as_mut(), effects, stop)
+        self.scenario_with(key, canvas.as_mut(), effects, stop, None)
     }
 
     fn scenario_with(
@@ -98,6 +100,7 @@ impl Generator {
         canvas: Option<&mut FrameCanvas>,
         effects: bool,
         stop: &AtomicBool,
+        into: Option<(&BatchFrames, usize)>,
     ) -> Result<ScenarioArrays, GenError> {
         let plan = self.expansion.plan(key).map_err(|reason| GenError::Plan {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
@@ -112,7 +115,7 @@ impl Generator {
             }
             false => None,
         };
-        arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c)))
+        arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c)), into)
     }
 }
 
@@ -126,6 +129,24 @@ pub struct Prefetch {
     workers: Vec<std::thread::JoinHandle<()>>,
     /// Set when the reader leaves: workers give up mid-scenario.
     halt: Arc<AtomicBool>,
+}
+
+/// Keys drawn into shared batch buffers ([`BatchFrames`]): batch `b` is
+/// the `lengths[b]` keys from `starts[b]` on.
+struct BatchPlan {
+    starts: Vec<usize>,
+    lengths: Vec<usize>,
+    /// Buffers of the batches a worker has begun, made by the first
+    /// (outside the queue's lock: the allocation can take a while).
+    open: BTreeMap<usize, Arc<OnceLock<Option<BatchFrames>>>>,
+}
+
+impl BatchPlan {
+    /// The batch of key `index` and its slot in it.
+    fn place(&self, index: usize) -> (usize, usize) {
+        let batch = self.starts.partition_point(|&s| s <= index) - 1;
+        (batch, index - self.starts[batch])
+    }
 }
 
 /// What [`Prefetch::next_within`] found.
@@ -145,6 +166,9 @@ struct Queue {
     next_out: usize,
     ahead: usize,
     ready: BTreeMap<usize, Result<ScenarioArrays, GenError>>,
+    /// With frames drawn in batches: which keys form each batch, and the
+    /// buffers of the batches being drawn.
+    batches: Option<BatchPlan>,
     stop: bool,
     /// A worker died (a bug): the reader gets an error instead of waiting forever.
     broken: bool,
@@ -152,7 +176,10 @@ struct Queue {
 
 impl Prefetch {
     /// Starts `threads` workers on `keys`, at most `ahead` scenarios (at
-    /// least one per thread) ahead of the reader.
+    /// least one per thread) ahead of the reader. With `batches` (lengths
+    /// summing to the keys'), frames go into one buffer per batch of
+    /// consecutive keys, handed out with each batch's last scenario
+    /// ([`ScenarioArrays::batch`]) instead of each scenario's own.
     pub fn start(
         generator: Arc<Generator>,
         keys: Vec<ScenarioKey>,
@@ -160,10 +187,24 @@ impl Prefetch {
         effects: bool,
         threads: usize,
         ahead: usize,
+        batches: Option<Vec<usize>>,
     ) -> Self {
         let threads = threads.clamp(1, keys.len().max(1));
         let ahead = ahead.max(threads);
-        let queue = Queue { keys, next_key: 0, next_out: 0, ahead, ready: BTreeMap::new(), stop: false, broken: false };
+        let batches = batches.filter(|_| images).map(|lengths| {
+            let starts = lengths.iter().scan(0, |at, &n| Some(std::mem::replace(at, *at + n))).collect();
+            BatchPlan { starts, lengths, open: BTreeMap::new() }
+        });
+        let queue = Queue {
+            keys,
+            next_key: 0,
+            next_out: 0,
+            ahead,
+            ready: BTreeMap::new(),
+            batches,
+            stop: false,
+            broken: false,
+        };
         crate::output::arrays::hold_spare_frame_buffers();
         let shared = Arc::new((Mutex::new(queue), Condvar::new()));
         let halt = Arc::new(AtomicBool::new(false));
@@ -206,8 +247,21 @@ impl Prefetch {
                 return Waited::Done;
             }
             let index = queue.next_out;
-            if let Some(result) = queue.ready.remove(&index) {
+            if let Some(mut result) = queue.ready.remove(&index) {
                 queue.next_out += 1;
+                // A batch's last scenario brings the batch's frames: every
+                // slot is drawn (their workers let go of the buffer before
+                // handing in their results, all read by now).
+                if let Some(plan) = queue.batches.as_mut() {
+                    let (batch, slot) = plan.place(index);
+                    if slot + 1 == plan.lengths[batch] {
+                        let frames = plan.open.remove(&batch).and_then(|b| Arc::try_unwrap(b).ok());
+                        let frames = frames.and_then(OnceLock::into_inner).flatten().map(BatchFrames::into_frames);
+                        if let Ok(arrays) = result.as_mut() {
+                            arrays.batch = frames;
+                        }
+                    }
+                }
                 wake.notify_all();
                 return Waited::Ready(Box::new(result));
             }
@@ -256,7 +310,7 @@ fn prefetch_worker(
     let (lock, wake) = shared;
     let mut canvas = images.then(|| generator.renderer().canvas());
     loop {
-        let (index, key) = {
+        let (index, key, batch) = {
             let mut queue = lock.lock().unwrap_or_else(|e| e.into_inner());
             loop {
                 if queue.stop || queue.next_key >= queue.keys.len() {
@@ -268,9 +322,35 @@ fn prefetch_worker(
                 queue = wake.wait(queue).unwrap_or_else(|e| e.into_inner());
             }
             queue.next_key += 1;
-            (queue.next_key - 1, queue.keys[queue.next_key - 1].clone())
+            let index = queue.next_key - 1;
+            let batch = queue.batches.as_mut().map(|plan| {
+                let (batch, slot) = plan.place(index);
+                let scenarios = plan.lengths[batch];
+                (plan.open.entry(batch).or_default().clone(), slot, scenarios)
+            });
+            (index, queue.keys[index].clone(), batch)
         };
-        let work = std::panic::AssertUnwindSafe(|| generator.scenario_with(&key, canvas.as_mut(), effects, halt));
+        let expansion = generator.expansion();
+        let frames = batch.as_ref().map(|(buffer, slot, scenarios)| {
+            let made =
+                buffer.get_or_init(|| BatchFrames::new(*scenarios, expansion.spec.frames as usize, &expansion.camera));
+            (made.as_ref(), *slot)
+        });
+        let work = std::panic::AssertUnwindSafe(|| match frames {
+            Some((None, _)) => Err(GenError::Memory(OutOfMemory {
+                scenario: key.folder_name(),
+                bytes: frame_bytes(expansion.spec.frames as usize, &expansion.camera)
+                    * batch.as_ref().map_or(1, |b| b.2 as u64),
+                frames: expansion.spec.frames as usize,
+                width: expansion.camera.width,
+                height: expansion.camera.height,
+                available: available_memory_bytes(),
+            })),
+            Some((Some(buffer), slot)) => {
+                generator.scenario_with(&key, canvas.as_mut(), effects, halt, Some((buffer, slot)))
+            }
+            None => generator.scenario_with(&key, canvas.as_mut(), effects, halt, None),
+        });
         let result = std::panic::catch_unwind(work).unwrap_or_else(|_| {
             // A bug, not the user's input: the reader gets an error instead of waiting forever.
             Err(GenError::Plan {
@@ -278,6 +358,7 @@ fn prefetch_worker(
                 reason: "internal error: the simulation panicked (please report it with the spec)".into(),
             })
         });
+        drop(batch); // before the result: the reader takes the batch's buffer with its last one
         lock.lock().unwrap_or_else(|e| e.into_inner()).ready.insert(index, result);
         wake.notify_all();
     }
@@ -297,9 +378,11 @@ fn arrays(
     trajectories: &Trajectories,
     effects: Option<crate::world::effects::EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
+    into: Option<(&BatchFrames, usize)>,
 ) -> Result<ScenarioArrays, GenError> {
     let spec = &expansion.spec;
-    scenario_arrays(&expansion.map, &expansion.camera, spec.leader_gap_px(), plan, trajectories, effects, renderer)
+    let (map, camera) = (&expansion.map, &expansion.camera);
+    scenario_arrays(map, camera, spec.leader_gap_px(), plan, trajectories, effects, renderer, into)
         .map_err(GenError::Memory)
 }
 
@@ -366,7 +449,7 @@ pub fn counterfactual_arrays(
             let mut canvas = renderer.as_ref().map(Renderer::canvas);
             let mut run = |plan: &ScenarioPlan, trajectories: &Trajectories| {
                 let r = renderer.as_ref().zip(canvas.as_mut());
-                arrays(&s.expansion, plan, trajectories, None, r)
+                arrays(&s.expansion, plan, trajectories, None, r, None)
             };
             Ok(PairArrays {
                 name: s.name.clone(),

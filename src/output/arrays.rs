@@ -59,6 +59,9 @@ pub struct ScenarioArrays {
     pub events: Vec<EventRow>,
     /// With images: the bird's-eye frames.
     pub images: Option<FrameArrays>,
+    /// Frames drawn into a batch ([`BatchFrames`]) instead of `images`: the
+    /// whole batch's, on the batch's last scenario (in reading order).
+    pub batch: Option<FrameArrays>,
     /// Where measured: effects.csv's rows, in order, divergences rounded as
     /// the file writes them.
     pub effects: Option<Vec<EffectRow>>,
@@ -149,8 +152,10 @@ pub fn frame_bytes(frames: usize, camera: &Camera) -> u64 {
 }
 
 /// Arrays of a simulated scenario, seen by `camera`; with a renderer (whose
-/// camera must be `camera`), the frames too. Frames that do not fit in
+/// camera must be `camera`), the frames too, or with `into` the frames go
+/// into that slot of a batch's buffers instead. Frames that do not fit in
 /// memory are an error, never an abort.
+#[allow(clippy::too_many_arguments)] // the map, the camera and the scenario's parts, each once
 pub fn scenario_arrays(
     map: &CityMap,
     camera: &Camera,
@@ -159,6 +164,7 @@ pub fn scenario_arrays(
     trajectories: &Trajectories,
     effects: Option<EffectReport>,
     renderer: Option<(&Renderer, &mut FrameCanvas)>,
+    into: Option<(&BatchFrames, usize)>,
 ) -> Result<ScenarioArrays, OutOfMemory> {
     let (frames, cars) = (trajectories.frames(), plan.cars.len());
     let intersection_names: Vec<String> = map.intersections.iter().map(|i| i.name.clone()).collect();
@@ -182,6 +188,7 @@ pub fn scenario_arrays(
         interactions: None,
         events: Vec::new(),
         images: None,
+        batch: None,
         effects: effects.map(|report| {
             let round = |row: EffectRow| EffectRow {
                 max_divergence_m: logged_value(row.max_divergence_m, DIVERGENCE_DECIMALS),
@@ -260,11 +267,19 @@ pub fn scenario_arrays(
             height,
             available: available_memory_bytes(),
         };
+        let footage = Footage::new(plan, trajectories, &heads);
+        let world = (plan.birds_eye == BirdsEyeView::Pinhole).then(|| World3d::new(map));
+        if let Some((batch, slot)) = into {
+            let times = StageTimes::default();
+            let _ = footage.birds_eye(renderer, canvas, world.as_ref(), &times, |frame, rgb, mask| {
+                batch.write(slot, frame as usize, rgb, mask);
+                Ok::<(), std::convert::Infallible>(())
+            });
+            return Ok(a);
+        }
         let rgb = frame_buffer(frames * pixels * 3).ok_or_else(out_of_memory)?;
         let mask = frame_buffer(frames * pixels).ok_or_else(out_of_memory)?;
         let mut images = FrameArrays { width, height, rgb, mask };
-        let footage = Footage::new(plan, trajectories, &heads);
-        let world = (plan.birds_eye == BirdsEyeView::Pinhole).then(|| World3d::new(map));
         let _ = footage.birds_eye(renderer, canvas, world.as_ref(), &StageTimes::default(), |_, rgb, mask| {
             images.rgb.extend_from_slice(rgb);
             images.mask.extend_from_slice(mask);
@@ -273,6 +288,48 @@ pub fn scenario_arrays(
         a.images = Some(images);
     }
     Ok(a)
+}
+
+/// The frames of a batch of scenarios of one camera in two buffers
+/// (`[scenarios, frames, height, width, 3]` and `[..., height, width]`):
+/// each scenario's frames are copied into its slot as they are drawn, by
+/// whichever thread draws it, so the batch needs no copy of its own (the
+/// copy cost a third of the rate of a Python loader with images).
+pub struct BatchFrames {
+    pub scenarios: usize,
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    rgb: Mutex<Vec<u8>>,
+    mask: Mutex<Vec<u8>>,
+}
+
+impl BatchFrames {
+    /// Room for `scenarios` scenarios of `frames` frames of `camera` (from
+    /// the spare frame buffers when there are some); `None` when the
+    /// memory cannot be had.
+    pub fn new(scenarios: usize, frames: usize, camera: &Camera) -> Option<BatchFrames> {
+        let pixels = scenarios * frames * camera.width as usize * camera.height as usize;
+        let rgb = Mutex::new(batch_frame_buffer(pixels.checked_mul(3)?)?);
+        let mask = Mutex::new(batch_frame_buffer(pixels)?);
+        Some(BatchFrames { scenarios, frames, width: camera.width, height: camera.height, rgb, mask })
+    }
+
+    /// Frame `frame` of the scenario in `slot`.
+    fn write(&self, slot: usize, frame: usize, rgb: &[u8], mask: &[u8]) {
+        let at = slot * self.frames + frame;
+        let mut all = self.rgb.lock().unwrap_or_else(|e| e.into_inner());
+        all[at * rgb.len()..(at + 1) * rgb.len()].copy_from_slice(rgb);
+        drop(all);
+        let mut all = self.mask.lock().unwrap_or_else(|e| e.into_inner());
+        all[at * mask.len()..(at + 1) * mask.len()].copy_from_slice(mask);
+    }
+
+    /// The filled buffers.
+    pub fn into_frames(self) -> FrameArrays {
+        let take = |m: Mutex<Vec<u8>>| m.into_inner().unwrap_or_else(|e| e.into_inner());
+        FrameArrays { width: self.width, height: self.height, rgb: take(self.rgb), mask: take(self.mask) }
+    }
 }
 
 /// Frame buffers handed back by their last reader ([`recycle_frame_buffer`]),
