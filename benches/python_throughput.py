@@ -107,7 +107,7 @@ def dataloader_side_by_side():
 
     print("DataLoader recipe vs the bare stream (scenarios/s, all cores, without effects):")
     for label, spec_path, limit, images in (
-        ("poses only", POSES_SPEC, POSES_LIMIT, False),
+        ("poses only", POSES_SPEC, 10 * POSES_LIMIT, False),
         ("with images", IMAGES_SPEC, max(IMAGES_LIMIT, 2), True),
     ):
         spec = causalcity.Spec.load(spec_path)
