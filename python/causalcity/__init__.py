@@ -626,34 +626,37 @@ def stream(
     spec = _as_spec(spec)
     args = (spec, split, groups, limit, images, shard, threads, ahead, effects)
     if "torch" in _sys.modules:
-        return _torch_stream_class()(*args)
+        return _torch_dataset_class(Stream)(*args)
     return Stream(*args)
 
 
-_TORCH_STREAM: Optional[type] = None
+_TORCH_CLASSES: Dict[str, type] = {}
 
 
-def _torch_stream_class() -> type:
-    """``causalcity.TorchStream``, made on first use so that importing
-    causalcity never imports torch."""
-    global _TORCH_STREAM
-    if _TORCH_STREAM is None:
+def _torch_dataset_class(base: type) -> type:
+    """``Torch<base>``: ``base`` as a ``torch.utils.data.IterableDataset``,
+    made on first use so that importing causalcity never imports torch, and
+    picklable by name from ``base``'s module (DataLoader workers started
+    with "spawn" look it up there through the module's ``__getattr__``)."""
+    name = "Torch" + base.__name__
+    key = f"{base.__module__}.{name}"
+    if key not in _TORCH_CLASSES:
         from torch.utils.data import IterableDataset
 
-        class TorchStream(Stream, IterableDataset):  # type: ignore[misc, valid-type]
-            """A :class:`Stream` that is a torch IterableDataset."""
+        class TorchDataset(base, IterableDataset):  # type: ignore[misc, valid-type]
+            pass
 
-        # Picklable by name (DataLoader workers started with "spawn").
-        TorchStream.__module__ = __name__
-        TorchStream.__qualname__ = "TorchStream"
-        _TORCH_STREAM = TorchStream
-    return _TORCH_STREAM
+        TorchDataset.__doc__ = f"A :class:`{base.__name__}` that is a torch IterableDataset."
+        TorchDataset.__name__ = TorchDataset.__qualname__ = name
+        TorchDataset.__module__ = base.__module__
+        _TORCH_CLASSES[key] = TorchDataset
+    return _TORCH_CLASSES[key]
 
 
 def __getattr__(name: str) -> Any:
     # causalcity.TorchStream, for pickle in a fresh worker process.
     if name == "TorchStream":
-        return _torch_stream_class()
+        return _torch_dataset_class(Stream)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

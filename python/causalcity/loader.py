@@ -33,7 +33,20 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 import numpy as _np
 
 from . import _native
-from . import _STREAM_CHUNK, _U32_MAX, Key, Scenario, Spec, Stream, _as_spec, _scenario, _shard_pair, _whole, _worker
+from . import (
+    _STREAM_CHUNK,
+    _U32_MAX,
+    Key,
+    Scenario,
+    Spec,
+    Stream,
+    _as_spec,
+    _scenario,
+    _shard_pair,
+    _torch_dataset_class,
+    _whole,
+    _worker,
+)
 
 __all__ = ["Batches", "batches", "collate"]
 
@@ -242,28 +255,10 @@ class Batches:
         return _as_tensors(out, self.tensors)
 
 
-_TORCH_BATCHES: Optional[type] = None
-
-
-def _torch_batches_class() -> type:
-    """``causalcity.loader.TorchBatches``, made on first use."""
-    global _TORCH_BATCHES
-    if _TORCH_BATCHES is None:
-        from torch.utils.data import IterableDataset
-
-        class TorchBatches(Batches, IterableDataset):  # type: ignore[misc, valid-type]
-            """:class:`Batches` that is a torch IterableDataset."""
-
-        TorchBatches.__module__ = __name__
-        TorchBatches.__qualname__ = "TorchBatches"
-        _TORCH_BATCHES = TorchBatches
-    return _TORCH_BATCHES
-
-
 def __getattr__(name: str) -> Any:
     # causalcity.loader.TorchBatches, for pickle in a fresh worker process.
     if name == "TorchBatches":
-        return _torch_batches_class()
+        return _torch_dataset_class(Batches)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -305,5 +300,5 @@ def batches(
     inner = Stream(_as_spec(spec), split, groups, limit, images, shard, threads, ahead, effects)
     args = (inner, batch_size, shuffle, seed, drop_last, mix_groups, tensors)
     if _torch() is not None:
-        return _torch_batches_class()(*args)
+        return _torch_dataset_class(Batches)(*args)
     return Batches(*args)
