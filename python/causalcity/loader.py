@@ -250,7 +250,9 @@ class Batches:
         raws = [next(scenarios) for _ in keys]
         frames = (raws[-1].pop("batch_rgb", None), raws[-1].pop("batch_mask", None))
         out = collate([_scenario(raw, key) for raw, key in zip(raws, keys)], tensors=False)
-        if frames[0] is not None:
+        if self.stream.images:
+            if frames[0] is None:  # a bug, never the input: say so rather than hand out a batch without frames
+                raise _native.GenerationError("internal error: a batch's frames did not arrive (please report it)")
             out["rgb"], out["mask"] = (_np.asarray(f) for f in frames)
         return _as_tensors(out, self.tensors)
 
