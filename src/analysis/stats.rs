@@ -188,7 +188,13 @@ fn pct(v: Option<f64>) -> String {
     v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v))
 }
 
-fn columns() -> Vec<Column> {
+/// The columns; `px_per_m_s` (pixels per frame in one metre per second,
+/// when known) puts the stop threshold in m/s as well.
+fn columns(px_per_m_s: Option<f64>) -> Vec<Column> {
+    let stood = match px_per_m_s {
+        Some(k) => format!("under {:.2} m/s ({STOP_SPEED_PX} px per frame)", STOP_SPEED_PX / k),
+        None => format!("under {STOP_SPEED_PX} px per frame"),
+    };
     let c = |heading, width, narrow, meaning: &str, value| Column {
         heading,
         width,
@@ -205,7 +211,7 @@ fn columns() -> Vec<Column> {
             heading: "stopped",
             width: 7,
             narrow: true,
-            meaning: format!("cars that stood (under {STOP_SPEED_PX} px/frame) for {STOP_FRAMES}+ frames"),
+            meaning: format!("cars that stood still, {stood}, for {STOP_FRAMES}+ frames"),
             value: |r| format!("{:.0}%", 100.0 * r.stopped_share),
         },
         Column {
@@ -267,7 +273,8 @@ impl DatasetStats {
     /// what it means.
     pub fn table(&self, wide: bool) -> String {
         use std::fmt::Write;
-        let columns: Vec<Column> = columns().into_iter().filter(|c| wide || c.narrow).collect();
+        let px_per_m_s = self.rows.iter().find(|r| r.mean_speed_m_s > 0.0).map(|r| r.mean_speed_px / r.mean_speed_m_s);
+        let columns: Vec<Column> = columns(px_per_m_s).into_iter().filter(|c| wide || c.narrow).collect();
         let mut out = String::new();
         let _ = write!(out, "{:<16} {:<5}", "group", "split");
         for c in &columns {
