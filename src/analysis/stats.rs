@@ -188,6 +188,17 @@ fn pct(v: Option<f64>) -> String {
     v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v))
 }
 
+/// A column of the table.
+fn column(
+    heading: &'static str,
+    width: usize,
+    narrow: bool,
+    meaning: impl Into<String>,
+    value: fn(&SplitStats) -> String,
+) -> Column {
+    Column { heading, width, narrow, meaning: meaning.into(), value }
+}
+
 /// The columns; `px_per_m_s` (pixels per frame in one metre per second,
 /// when known) puts the stop threshold in m/s as well.
 fn columns(px_per_m_s: Option<f64>) -> Vec<Column> {
@@ -195,73 +206,60 @@ fn columns(px_per_m_s: Option<f64>) -> Vec<Column> {
         Some(k) => format!("under {:.2} m/s ({STOP_SPEED_PX} px per frame)", STOP_SPEED_PX / k),
         None => format!("under {STOP_SPEED_PX} px per frame"),
     };
-    let c = |heading, width, narrow, meaning: &str, value| Column {
-        heading,
-        width,
-        narrow,
-        meaning: meaning.into(),
-        value,
-    };
     vec![
-        c("scen", 5, true, "scenarios", |r| r.scenarios.to_string()),
-        c("cars", 5, true, "cars in them", |r| r.cars.to_string()),
-        c("speed", 6, true, "mean speed, m/s", |r| format!("{:.2}", r.mean_speed_m_s)),
-        c("p95", 6, true, "95th-percentile speed, m/s", |r| format!("{:.2}", r.p95_speed_m_s)),
-        Column {
-            heading: "stopped",
-            width: 7,
-            narrow: true,
-            meaning: format!("cars that stood still, {stood}, for {STOP_FRAMES}+ frames"),
-            value: |r| format!("{:.0}%", 100.0 * r.stopped_share),
-        },
-        Column {
-            heading: "lights",
-            width: 7,
-            narrow: true,
-            meaning: format!("cars that stopped within {APPROACH_M} m of an intersection at a red or yellow"),
-            value: |r| format!("{:.0}%", 100.0 * r.light_stop_share),
-        },
-        c("colli", 6, true, "scenarios with a collision", |r| r.collision_scenarios.to_string()),
-        c("reds", 5, true, "red lights run", |r| r.red_light_runs.to_string()),
-        c("gap m", 6, true, "mean leader-follower gap, metres", |r| opt(r.gap_mean_m, 2)),
-        c("gapCV", 6, false, "median variation of a pair's gap (std / mean)", |r| opt(r.gap_cv_median, 2)),
-        c("inview", 6, true, "car-frames inside the bird's-eye image", |r| format!("{:.0}%", 100.0 * r.in_view_share)),
-        c("lanechg", 7, false, "cars that changed lanes for a turn", |r| {
+        column("scen", 5, true, "scenarios", |r| r.scenarios.to_string()),
+        column("cars", 5, true, "cars in them", |r| r.cars.to_string()),
+        column("speed", 6, true, "mean speed, m/s", |r| format!("{:.2}", r.mean_speed_m_s)),
+        column("p95", 6, true, "95th-percentile speed, m/s", |r| format!("{:.2}", r.p95_speed_m_s)),
+        column("stopped", 7, true, format!("cars that stood still, {stood}, for {STOP_FRAMES}+ frames"), |r| {
+            format!("{:.0}%", 100.0 * r.stopped_share)
+        }),
+        column(
+            "lights",
+            7,
+            true,
+            format!("cars that stopped within {APPROACH_M} m of an intersection at a red or yellow"),
+            |r| format!("{:.0}%", 100.0 * r.light_stop_share),
+        ),
+        column("colli", 6, true, "scenarios with a collision", |r| r.collision_scenarios.to_string()),
+        column("reds", 5, true, "red lights run", |r| r.red_light_runs.to_string()),
+        column("gap m", 6, true, "mean leader-follower gap, metres", |r| opt(r.gap_mean_m, 2)),
+        column("gapCV", 6, false, "median variation of a pair's gap (std / mean)", |r| opt(r.gap_cv_median, 2)),
+        column("inview", 6, true, "car-frames inside the bird's-eye image", |r| {
+            format!("{:.0}%", 100.0 * r.in_view_share)
+        }),
+        column("lanechg", 7, false, "cars that changed lanes for a turn", |r| {
             format!("{:.0}%", 100.0 * r.lane_change_share)
         }),
-        c("adapt", 5, false, "actions adapted (events.csv)", |r| r.actions_adapted.to_string()),
-        c("skip", 5, false, "actions skipped (events.csv)", |r| r.actions_skipped.to_string()),
-        c("hdwy", 5, false, "median headway while following, s", |r| opt(r.headway_median_s, 2)),
-        c("tgap", 5, false, "median time gap while following, s", |r| opt(r.time_gap_median_s, 2)),
-        c("disch", 5, false, "queue discharge at green, vehicles/s/lane (- when no queue left at a green)", |r| {
+        column("adapt", 5, false, "actions adapted (events.csv)", |r| r.actions_adapted.to_string()),
+        column("skip", 5, false, "actions skipped (events.csv)", |r| r.actions_skipped.to_string()),
+        column("hdwy", 5, false, "median headway while following, s", |r| opt(r.headway_median_s, 2)),
+        column("tgap", 5, false, "median time gap while following, s", |r| opt(r.time_gap_median_s, 2)),
+        column("disch", 5, false, "queue discharge at green, vehicles/s/lane (- when no queue left at a green)", |r| {
             opt(r.discharge_per_lane_s, 2)
         }),
-        c("free", 5, false, "median speed over desired speed on free road", |r| opt(r.free_speed_ratio_median, 2)),
-        c("e-int", 6, false, "leader-follower pair-frames interacting (interactions.csv)", |r| {
+        column("free", 5, false, "median speed over desired speed on free road", |r| opt(r.free_speed_ratio_median, 2)),
+        column("e-int", 6, false, "leader-follower pair-frames interacting (interactions.csv)", |r| {
             pct(r.edge_pairs.frame_share)
         }),
-        Column {
-            heading: "e-mst",
-            width: 6,
-            narrow: false,
-            meaning: format!("leader-follower pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY),
-            value: |r| pct(r.edge_pairs.mostly_share),
-        },
-        c("n-int", 6, false, "other pair-frames interacting", |r| pct(r.non_edge_pairs.frame_share)),
-        Column {
-            heading: "n-mst",
-            width: 6,
-            narrow: false,
-            meaning: format!("other pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY),
-            value: |r| pct(r.non_edge_pairs.mostly_share),
-        },
-        c("backed", 6, true, "designed edges an intervention on the leader backs (effects.csv)", |r| {
+        column(
+            "e-mst",
+            6,
+            false,
+            format!("leader-follower pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY),
+            |r| pct(r.edge_pairs.mostly_share),
+        ),
+        column("n-int", 6, false, "other pair-frames interacting", |r| pct(r.non_edge_pairs.frame_share)),
+        column("n-mst", 6, false, format!("other pairs interacting in {:.0}%+ of frames", 100.0 * MOSTLY), |r| {
+            pct(r.non_edge_pairs.mostly_share)
+        }),
+        column("backed", 6, true, "designed edges an intervention on the leader backs (effects.csv)", |r| {
             pct(r.causal.and_then(|c| c.backed_share()))
         }),
-        c("c/scen", 6, true, "causal edges per scenario", |r| {
+        column("c/scen", 6, true, "causal edges per scenario", |r| {
             opt(r.causal.map(|c| c.causal_edges as f64 / r.scenarios.max(1) as f64), 2)
         }),
-        c("unexpl", 6, true, "causal edges that are no designed edge", |r| {
+        column("unexpl", 6, true, "causal edges that are no designed edge", |r| {
             pct(r.causal.and_then(|c| c.unexplained_share()))
         }),
     ]
