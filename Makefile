@@ -97,16 +97,20 @@ bench: build python-env
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/sumo_side_by_side.py
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/ground_truth.py
 
-## Fuzz the spec parser (not part of CI). Installs cargo-fuzz if missing
-## (and says so); runs on stable through RUSTC_BOOTSTRAP; refuses to run
-## rather than rewrite the tracked fuzz/Cargo.lock. FUZZ_SECONDS sets how
-## long (default 600).
+## Fuzz the spec parser and the predictions-file reader of `evaluate` (not
+## part of CI), FUZZ_SECONDS each (default 600). Installs cargo-fuzz if
+## missing (and says so); runs on stable through RUSTC_BOOTSTRAP; refuses
+## to run rather than rewrite the tracked fuzz/Cargo.lock. The predictions
+## target fails any single allocation over 512 MB (-malloc_limit_mb), so
+## that a declared size the reader believed would show as a crash.
 FUZZ_SECONDS ?= 600
 fuzz:
 	@command -v cargo-fuzz >/dev/null || { echo "make fuzz: installing cargo-fuzz (cargo install cargo-fuzz --locked, a few minutes)"; $(CARGO) install cargo-fuzz --locked; }
-	@echo "make fuzz: fuzzing the spec parser for $(FUZZ_SECONDS) s (FUZZ_SECONDS=N to change)"
 	cd fuzz && $(CARGO) metadata --locked --format-version 1 >/dev/null || { echo "fuzz/Cargo.lock is out of date with the crate: run 'cd fuzz && cargo update -w' and commit it"; exit 1; }
+	@echo "make fuzz: fuzzing the spec parser for $(FUZZ_SECONDS) s (FUZZ_SECONDS=N to change)"
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run spec corpus/spec -- -max_total_time=$(FUZZ_SECONDS) -max_len=4096
+	@echo "make fuzz: fuzzing the predictions reader (.npz) for $(FUZZ_SECONDS) s"
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run predictions corpus/predictions -- -max_total_time=$(FUZZ_SECONDS) -max_len=65536 -rss_limit_mb=2048 -malloc_limit_mb=512
 
 lint:
 	$(CARGO) fmt --all -- --check

@@ -255,11 +255,29 @@ struct ScenarioPredictions {
     dir: PathBuf,
     /// A sweep pair's counterfactual run.
     counterfactual_dir: Option<PathBuf>,
+    /// (cars, frames), once read for an array of this scenario.
+    size: Option<(usize, usize)>,
     /// Indexed by [`Predicted`] (in `Predicted::ALL` order).
     arrays: [Option<NamedArray>; 4],
 }
 
 impl ScenarioPredictions {
+    /// (cars, frames) from its scenario.json, read once. A dataset file
+    /// that cannot be read is a failure, kept in `failure`; the returned
+    /// message only stops the reader.
+    fn size(&mut self, failure: &mut Option<Error>) -> Result<(usize, usize), String> {
+        if let Some(size) = self.size {
+            return Ok(size);
+        }
+        match ScenarioSummary::read(&self.dir) {
+            Ok(summary) => Ok(*self.size.insert((summary.cars.len(), summary.frames as usize))),
+            Err(e) => {
+                *failure = Some(Error::Failure(e.clone()));
+                Err(e)
+            }
+        }
+    }
+
     fn get(&self, what: Predicted) -> Option<&NamedArray> {
         self.arrays[what as usize].as_ref()
     }
@@ -292,8 +310,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     for &graph in &options.graphs {
         truth.require_graph(graph).map_err(Error::Input)?;
     }
-    let arrays = read_npz(predictions).map_err(Error::Input)?;
-    let scored = match_scenarios(&truth, predictions, arrays, options)?;
+    let scored = match_scenarios(&truth, predictions, options)?;
     let results: Vec<ScenarioResult> = scored
         .par_iter()
         .map(|s| score_scenario(s, &truth, options))
@@ -304,12 +321,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
 
 /// Pairs every array with its scenario and checks names, shapes, values and
 /// coverage.
-fn match_scenarios(
-    truth: &Truth,
-    file: &Path,
-    arrays: Vec<NamedArray>,
-    options: &EvaluateOptions,
-) -> Result<Vec<ScenarioPredictions>, Error> {
+fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Result<Vec<ScenarioPredictions>, Error> {
     let bad = |message: String| Error::Input(format!("{}: {message}", file.display()));
     let mut by_folder: BTreeMap<String, ScenarioPredictions> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
@@ -326,10 +338,38 @@ fn match_scenarios(
                 split: key.split,
                 dir,
                 counterfactual_dir,
+                size: None,
                 arrays: Default::default(),
             },
         );
     }
+    let example = order.first().cloned().unwrap_or_else(|| "<group>/<split>/<index>".to_string());
+    let unknown = |name: &str| {
+        format!(
+            "array {name:?} names no scenario of {}: name arrays by scenario folder, e.g. {example} (edge scores), \
+             {example}{TRAJECTORY_SUFFIX} (a predicted trajectory), {example}{PER_FRAME_SUFFIX} (per-frame edge \
+             scores) or {example}{COUNTERFACTUAL_SUFFIX} (a counterfactual trajectory, for a sweep)",
+            truth.dir.display()
+        )
+    };
+    // Each array may hold no more values than its scenario's cars and
+    // frames allow: the reader is capped by that, whatever the file declares.
+    let mut failure = None;
+    let arrays = read_npz(file, |name| {
+        let (folder, what) = Predicted::of(name);
+        let scenario = by_folder.get_mut(folder).ok_or_else(|| unknown(name))?;
+        let (cars, frames) = scenario.size(&mut failure)?;
+        let (cars, frames) = (cars as u64, frames as u64);
+        Ok(match what {
+            Predicted::Edges => cars * cars,
+            Predicted::PerFrame => frames * cars * cars,
+            Predicted::Trajectory | Predicted::Counterfactual => frames * cars * 2,
+        })
+    });
+    if let Some(failure) = failure {
+        return Err(failure);
+    }
+    let arrays = arrays.map_err(Error::Input)?;
     if arrays.is_empty() {
         return Err(bad("holds no arrays: save one [cars, cars] array of edge scores per scenario, named by its \
                         folder (e.g. cars08_edges50/test/00000)"
@@ -338,15 +378,8 @@ fn match_scenarios(
     let world = truth.expansion.spec.world;
     for array in arrays {
         let (folder, what) = Predicted::of(&array.name);
-        let example = order.first().map(String::as_str).unwrap_or("<group>/<split>/<index>");
         let Some(scenario) = by_folder.get_mut(folder) else {
-            return Err(bad(format!(
-                "array {:?} names no scenario of {}: name arrays by scenario folder, e.g. {example} (edge scores), \
-                 {example}{TRAJECTORY_SUFFIX} (a predicted trajectory), {example}{PER_FRAME_SUFFIX} (per-frame edge \
-                 scores) or {example}{COUNTERFACTUAL_SUFFIX} (a counterfactual trajectory, for a sweep)",
-                array.name,
-                truth.dir.display()
-            )));
+            return Err(bad(unknown(&array.name)));
         };
         if what == Predicted::PerFrame && world != WorldKind::City {
             return Err(bad(format!(
@@ -364,8 +397,7 @@ fn match_scenarios(
                 truth.dir.display()
             )));
         }
-        let summary = ScenarioSummary::read(&scenario.dir).map_err(Error::Failure)?;
-        let (cars, frames) = (summary.cars.len(), summary.frames as usize);
+        let (cars, frames) = scenario.size.expect("read for the reader's cap");
         let shape = &array.shape;
         match what {
             Predicted::Trajectory | Predicted::Counterfactual => {
@@ -377,7 +409,7 @@ fn match_scenarios(
                         array.name
                     )));
                 }
-                if options.history + shape[0] > frames {
+                if options.history.checked_add(shape[0]).is_none_or(|end| end > frames) {
                     return Err(bad(format!(
                         "array {:?} predicts {} steps after {} frames of history, but the scenario has {frames} \
                          frames: predict at most {} steps, or give --history at most {}",
@@ -495,22 +527,29 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
     let mut step_errors = Vec::new();
     if let Some(predicted) = s.get(Predicted::Trajectory) {
         let poses = PoseLog::read(&s.dir, frames, cars)?;
-        step_errors = trajectory_errors(predicted, &poses, options.history, size);
+        step_errors = trajectory_errors(predicted, &poses, options.history, size)?;
     }
     let mut counterfactual_errors = Vec::new();
     if let (Some(predicted), Some(dir)) = (s.get(Predicted::Counterfactual), &s.counterfactual_dir) {
         let poses = PoseLog::read(dir, frames, cars)?;
-        counterfactual_errors = trajectory_errors(predicted, &poses, options.history, size);
+        counterfactual_errors = trajectory_errors(predicted, &poses, options.history, size)?;
     }
     Ok(ScenarioResult { pairs, frame_pairs, step_errors, counterfactual_errors })
 }
 
 /// The normalised squared error of a predicted `[steps, cars, 2]`
 /// trajectory against `poses` at each step after `history`, over the cars
-/// on the map (a removed car is parked off it and not scored).
-fn trajectory_errors(predicted: &NamedArray, poses: &PoseLog, history: usize, (w, h): (f64, f64)) -> Vec<f64> {
+/// on the map (a removed car is parked off it and not scored). A position
+/// so far off that its error overflows is refused, naming the array: an
+/// infinite error would read as "not scored" in the JSON report.
+fn trajectory_errors(
+    predicted: &NamedArray,
+    poses: &PoseLog,
+    history: usize,
+    (w, h): (f64, f64),
+) -> Result<Vec<f64>, String> {
     let (steps, cars) = (predicted.shape[0], predicted.shape[1]);
-    (0..steps)
+    let errors: Vec<f64> = (0..steps)
         .map(|step| {
             let (mut total, mut scored) = (0.0, 0usize);
             for car in 0..cars {
@@ -530,7 +569,25 @@ fn trajectory_errors(predicted: &NamedArray, poses: &PoseLog, history: usize, (w
                 total / scored as f64
             }
         })
-        .collect()
+        .collect();
+    match errors.iter().position(|e| !e.is_finite()) {
+        None => Ok(errors),
+        Some(step) => {
+            let worst = predicted.values[step * cars * 2..(step + 1) * cars * 2].iter().fold(0.0f64, |worst, v| {
+                if v.abs() > worst.abs() {
+                    *v
+                } else {
+                    worst
+                }
+            });
+            Err(format!(
+                "array {:?}: its squared error at step {} overflows (it predicts a position of {worst:e} pixels): \
+                 predict positions of the image's scale",
+                predicted.name,
+                step + 1
+            ))
+        }
+    }
 }
 
 /// Mean and standard error (None for fewer than two values).
