@@ -16,6 +16,7 @@ use causalcity::export::vcdn::export_vcdn;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
+use causalcity::output::claim::claim_file;
 use causalcity::output::manifest::Products;
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
@@ -708,10 +709,13 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 }
             }
             let options = EvaluateOptions { graphs, history: args.history, threshold: args.threshold };
+            // Checked before any scoring: a refused --csv costs nothing.
+            let inputs =
+                [("the dataset it scores", args.dataset.as_path()), ("the predictions file", &args.predictions)];
+            let csv = args.csv.as_deref().map(|path| claim_file(path, &inputs)).transpose()?;
             let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
-            if let Some(path) = &args.csv {
-                std::fs::write(path, evaluated.to_csv())
-                    .map_err(|e| Error::Failure(format!("cannot write {}: {e}", path.display())))?;
+            if let Some(csv) = csv {
+                csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;
             }
             report(&evaluated, args.json)
         }
@@ -727,7 +731,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             };
             let written = run_file(&options)?;
             for warning in written.iter().flat_map(|w| &w.warnings) {
-                eprintln!("warning: {warning}");
+                causalcity::progress::note(format_args!("warning: {warning}"));
             }
             if args.json {
                 return say(serde_json::to_string_pretty(&written).map_err(Error::failure)?);
@@ -773,7 +777,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             Ok(())
         }
         Command::Stats(args) => {
-            let stats = dataset_stats(&args.dataset).map_err(Error::Failure)?;
+            let stats = dataset_stats(&args.dataset)?;
             if args.wide && !args.json {
                 return say(stats.table(true).trim_end());
             }

@@ -7,6 +7,7 @@
 
 use crate::dataset::{PoseLog, ScenarioSummary};
 use crate::error::Error;
+use crate::output::claim::{claim_file, OutputFile};
 use crate::output::frame_digits;
 use crate::output::png::decode_gray8;
 use crate::render::text::{draw_label, Canvas};
@@ -53,7 +54,8 @@ impl std::fmt::Display for PreviewSummary {
 /// Writes the preview of the scenario in `scenario_dir` to `out`.
 pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Result<PreviewSummary, Error> {
     let kind = check_options(out, options).map_err(Error::Input)?;
-    render(scenario_dir, out, options, kind).map_err(Error::Failure)
+    let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)])?;
+    render(scenario_dir, &file, options, kind).map_err(Error::Failure)
 }
 
 /// The options' errors, found before anything is read (exit status 2), and
@@ -74,7 +76,13 @@ fn check_options(out: &Path, options: &PreviewOptions) -> Result<Kind, String> {
     }
 }
 
-fn render(scenario_dir: &Path, out: &Path, options: &PreviewOptions, kind: Kind) -> Result<PreviewSummary, String> {
+fn render(
+    scenario_dir: &Path,
+    file: &OutputFile,
+    options: &PreviewOptions,
+    kind: Kind,
+) -> Result<PreviewSummary, String> {
+    let out = file.path();
     // An extra camera's folder (`<scenario>/cameras/<name>`): its frames,
     // the scenario's cars. Trails and arrows are drawn in bird's-eye pixels,
     // so only on the bird's-eye view.
@@ -169,7 +177,7 @@ fn render(scenario_dir: &Path, out: &Path, options: &PreviewOptions, kind: Kind)
         Ok(image::imageops::resize(&full, sw, sh, image::imageops::FilterType::Triangle))
     };
 
-    let partial = out.with_extension("partial");
+    let partial = file.partial().map_err(|e| e.to_string())?;
     let result = (|| -> Result<(u32, u32), String> {
         let file = std::fs::File::create(&partial).map_err(|e| format!("cannot write {}: {e}", partial.display()))?;
         let writer = std::io::BufWriter::new(file);
@@ -223,7 +231,7 @@ fn render(scenario_dir: &Path, out: &Path, options: &PreviewOptions, kind: Kind)
             return Err(e);
         }
     };
-    std::fs::rename(&partial, out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    file.commit(&partial).map_err(|e| e.to_string())?;
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(PreviewSummary { path: out.to_path_buf(), frames: chosen.len(), width, height, bytes })
 }

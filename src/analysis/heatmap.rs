@@ -7,6 +7,7 @@
 
 use crate::dataset::Dataset;
 use crate::error::Error;
+use crate::output::claim::{claim_file, OutputFile};
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::render::text::{draw_label, label_size, Canvas};
 use crate::spec::Split;
@@ -81,10 +82,12 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             return Err(Error::Input(format!("--group {g} is not in this dataset: use one of {}", names.join(", "))));
         }
     }
-    draw(&opened, out, filter).map_err(Error::Failure)
+    let file = claim_file(out, &[("the dataset it maps", dataset)])?;
+    draw(&opened, &file, filter).map_err(Error::Failure)
 }
 
-fn draw(opened: &Dataset, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
+fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
+    let out = file.path();
     let spec = opened.spec();
     let mut dirs = Vec::new();
     for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
@@ -165,9 +168,10 @@ fn draw(opened: &Dataset, out: &Path, filter: &HeatmapFilter) -> Result<HeatmapS
         let top = (y as i64 - lh as i64 / 2).clamp(TITLE_HEIGHT as i64, ih as i64 - lh as i64);
         draw_label(&mut canvas, (w + 36) as i64, top, &text, 1, [235, 235, 235], [24, 24, 28]);
     }
-    let file = std::fs::File::create(out).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
-    encode_png(std::io::BufWriter::new(file), iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())
+    let mut png = Vec::new();
+    encode_png(&mut png, iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())
         .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+    file.write(&png).map_err(|e| e.to_string())?;
     Ok(HeatmapSummary {
         path: out.to_path_buf(),
         scenarios: dirs.len(),

@@ -72,6 +72,21 @@ pub enum ClaimError {
     Inside { dir: PathBuf, inside: &'static str, ancestor: PathBuf },
     #[error("cannot write {path}: {source}\nFix the folder's permissions, or choose another --out.")]
     Io { path: PathBuf, source: std::io::Error },
+    /// A path to write that is a symbolic link: writing through it could
+    /// land anywhere, so causalcity never does.
+    #[error(
+        "{path} is a symbolic link (to {target}): causalcity never writes through a link, which could reach \
+         outside the folder asked for. Remove the link, or choose another path."
+    )]
+    Link { path: PathBuf, target: String },
+    /// A file to write that the command is reading, or that lies inside
+    /// what it reads.
+    #[error("{path} is {what}: a command never writes onto its own input. Choose another path.")]
+    OwnInput { path: PathBuf, what: String },
+    /// A path that cannot be written as asked (empty, a folder given for a
+    /// file, a path under a file).
+    #[error("{path:?}: {why}")]
+    BadPath { path: PathBuf, why: String },
 }
 
 impl ClaimError {
@@ -134,6 +149,12 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
         let path = path.to_path_buf();
         move |source| ClaimError::Io { path, source }
     };
+    if dir.as_os_str().is_empty() {
+        return Err(ClaimError::BadPath {
+            path: dir.to_path_buf(),
+            why: "an empty path names no folder: give the output folder, e.g. data/toy".into(),
+        });
+    }
     check_ancestors(dir)?;
     check_contents(dir, writer)?;
     let created = (!dir.exists()).then(|| dir.to_path_buf());
@@ -147,7 +168,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
         _ => None,
     };
     let folder_lock = dir.join(LOCK_FILE);
-    match lock(&folder_lock, shard.is_some()).map_err(io(&folder_lock))? {
+    match lock(&folder_lock, shard.is_some())? {
         Lock::Held(file) => {
             if shard.is_none() {
                 record_holder(&file, &holder);
@@ -158,7 +179,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
         Lock::Unsupported => claim.locked = false,
     }
     if let Some(shard_lock) = shard {
-        match lock(&shard_lock, false).map_err(io(&shard_lock))? {
+        match lock(&shard_lock, false)? {
             Lock::Held(file) => {
                 record_holder(&file, &holder);
                 claim.locks.push((shard_lock, file, false));
@@ -182,9 +203,9 @@ enum Lock {
 /// Takes the lock of the file at `path` without waiting. A holder removes
 /// its file when it is done, so a lock taken on a file that is no longer
 /// the one at `path` is let go and taken again on the new one.
-fn lock(path: &Path, shared: bool) -> std::io::Result<Lock> {
+fn lock(path: &Path, shared: bool) -> Result<Lock, ClaimError> {
     loop {
-        let file = fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(path)?;
+        let file = open_lock_file(path)?;
         let taken = if shared { file.try_lock_shared() } else { file.try_lock() };
         match taken {
             Ok(()) if is_at(&file, path) => return Ok(Lock::Held(file)),
@@ -193,9 +214,32 @@ fn lock(path: &Path, shared: bool) -> std::io::Result<Lock> {
             Err(TryLockError::WouldBlock) if !is_at(&file, path) => continue,
             Err(TryLockError::WouldBlock) => return Ok(Lock::Busy),
             Err(TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => return Ok(Lock::Unsupported),
-            Err(TryLockError::Error(e)) => return Err(e),
+            Err(TryLockError::Error(e)) => return Err(ClaimError::Io { path: path.to_path_buf(), source: e }),
         }
     }
+}
+
+/// Opens (creating it if missing) a lock file without following a link:
+/// a link planted at the lock's name (dangling or not) is refused, never
+/// written through.
+fn open_lock_file(path: &Path) -> Result<File, ClaimError> {
+    let mut options = fs::OpenOptions::new();
+    options.read(true).write(true).create(true).truncate(false);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW);
+    }
+    match options.open(path) {
+        Ok(file) => Ok(file),
+        Err(_) if fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) => Err(link_error(path)),
+        Err(source) => Err(ClaimError::Io { path: path.to_path_buf(), source }),
+    }
+}
+
+fn link_error(path: &Path) -> ClaimError {
+    let target = fs::read_link(path).map_or_else(|_| "somewhere".to_string(), |t| t.display().to_string());
+    ClaimError::Link { path: path.to_path_buf(), target }
 }
 
 /// Whether `file` is the file now at `path`.
@@ -370,7 +414,8 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
             let writes = if writer == Writer::Scenarios {
                 "one folder per scenario of the file"
             } else {
-                "an export (.npy arrays, or per-scenario folders of annotations or .h5 files)"
+                "an export (group folders such as cars08_edges50/ of .npy arrays, or of per-scenario annotations \
+                 or .h5 files)"
             };
             if contents.dataset {
                 return foreign("a gen dataset (manifest.json)".into(), writes, "");
@@ -378,8 +423,11 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
             if contents.sweep {
                 return foreign("a counterfactual sweep (sweep.json)".into(), writes, "");
             }
-            let own = |n: &str, is_dir: bool| {
-                is_dir || (writer == Writer::Export && n.ends_with(".npy") && !n.starts_with('.'))
+            // An export writes group folders (cars08_edges50/) and nothing
+            // else: a folder of the user's beside them is refused, not mixed.
+            let own = |n: &str, is_dir: bool| match writer {
+                Writer::Export => is_dir && is_group_folder(n),
+                _ => is_dir,
             };
             let strangers = unknown(&own);
             if !strangers.is_empty() {
@@ -393,7 +441,8 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
 /// Refuses a folder inside a dataset or sweep (an export or scenario run
 /// into `data/toy/exports` would make the dataset fail `validate`).
 fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
-    let absolute = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
+    // On the path with its links resolved: a link into a dataset is inside it.
+    let absolute = resolve(dir);
     let holds = |path: PathBuf, format: &str| {
         path.is_file() && fs::read(&path).is_ok_and(|b| b.windows(format.len()).any(|w| w == format.as_bytes()))
     };
@@ -408,6 +457,116 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
         return Err(ClaimError::Inside { dir: dir.to_path_buf(), inside, ancestor: ancestor.to_path_buf() });
     }
     Ok(())
+}
+
+/// `path` made absolute with every link resolved: its longest existing
+/// part canonicalised, the rest (not yet created) appended, `..` taken
+/// lexically there.
+pub fn resolve(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut missing = Vec::new();
+    let mut existing = absolute.as_path();
+    loop {
+        if let Ok(real) = fs::canonicalize(existing) {
+            let mut resolved = real;
+            for part in missing.iter().rev() {
+                match part {
+                    std::path::Component::ParentDir => {
+                        resolved.pop();
+                    }
+                    std::path::Component::CurDir => {}
+                    other => resolved.push(other.as_os_str()),
+                }
+            }
+            return resolved;
+        }
+        match (existing.parent(), existing.components().next_back()) {
+            (Some(parent), Some(last)) => {
+                missing.push(last);
+                existing = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+/// A single file a command writes beside its main output or instead of
+/// one (a report, an image, a predictions file), checked by the one write
+/// rule: never inside a dataset or sweep (the command owns no file there),
+/// never onto its own input, never through a link. [`OutputFile::write`]
+/// then writes it through a temporary file and a rename, which replaces a
+/// link that appeared since rather than following it.
+#[derive(Debug)]
+pub struct OutputFile {
+    path: PathBuf,
+}
+
+/// Checks that a command may write the file `path`: `inputs` are the files
+/// and folders it reads (a dataset, a predictions file, a scenario), each
+/// described for the message (e.g. `("the dataset", path)`). The folder it
+/// goes into is created by [`OutputFile::write`] if missing.
+pub fn claim_file(path: &Path, inputs: &[(&str, &Path)]) -> Result<OutputFile, ClaimError> {
+    let not_a_file = |why: String| Err(ClaimError::BadPath { path: path.to_path_buf(), why });
+    let named = path.file_name().is_some_and(|n| n != "." && n != "..");
+    if !named {
+        return not_a_file("is not a file name: give a path such as results/report.csv".into());
+    }
+    match fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => return Err(link_error(path)),
+        Ok(m) if m.is_dir() => return not_a_file("is a folder: give the path of a file to write".into()),
+        _ => {}
+    }
+    // A part of the path that exists must be a folder.
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    if let Some(file) = absolute.ancestors().skip(1).find(|a| fs::metadata(a).is_ok_and(|m| !m.is_dir())) {
+        return not_a_file(format!("{} is a file, so nothing can be written under it", file.display()));
+    }
+    let resolved = resolve(path);
+    check_ancestors(&resolved)?;
+    for (what, input) in inputs {
+        let input = resolve(input);
+        if resolved == input {
+            return Err(ClaimError::OwnInput { path: path.to_path_buf(), what: what.to_string() });
+        }
+        if resolved.starts_with(&input) {
+            return Err(ClaimError::OwnInput { path: path.to_path_buf(), what: format!("inside {what}") });
+        }
+    }
+    Ok(OutputFile { path: path.to_path_buf() })
+}
+
+impl OutputFile {
+    /// The path as given.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Writes `bytes` (its folder created if missing) through a temporary
+    /// file beside it and a rename.
+    pub fn write(&self, bytes: &[u8]) -> Result<(), super::WriteError> {
+        if let Some(parent) = self.path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(super::io_err(parent))?;
+        }
+        super::write_atomically(&self.path, bytes)
+    }
+
+    /// The temporary path to stream a large file into before
+    /// [`OutputFile::commit`] (its folder created if missing).
+    pub fn partial(&self) -> Result<PathBuf, super::WriteError> {
+        if let Some(parent) = self.path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(super::io_err(parent))?;
+        }
+        super::fresh_partial(&self.path)
+    }
+
+    /// Moves the finished [`OutputFile::partial`] (`partial`) into place,
+    /// or removes it when the move fails.
+    pub fn commit(&self, partial: &Path) -> Result<(), super::WriteError> {
+        fs::rename(partial, &self.path).map_err(|e| {
+            let _ = fs::remove_file(partial);
+            super::io_err(&self.path)(e)
+        })
+    }
 }
 
 #[cfg(test)]

@@ -205,16 +205,41 @@ impl Drop for ScenarioDir<'_> {
     }
 }
 
+/// Makes a write past the file-size limit (`ulimit -f`) fail with an error
+/// the command reports (exit status 1, naming the file) instead of the
+/// SIGXFSZ that would kill the process without a word. For the binary only:
+/// a library inside another program leaves its signals alone.
+pub fn report_file_size_limit_as_error() {
+    #[cfg(unix)]
+    // SAFETY: setting a signal's disposition to "ignore" has no handler to race.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 /// Lower-case hex of bytes.
 pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+/// The temporary file beside `path` that an atomic write fills first
+/// (`<name>.partial`). Anything already there (a leftover, or a link
+/// planted at that name) is removed, never written through.
+pub fn fresh_partial(path: &Path) -> Result<PathBuf, WriteError> {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
     name.push(".partial");
     let temp = path.with_file_name(name);
+    match fs::symlink_metadata(&temp) {
+        Ok(m) if !m.is_dir() => fs::remove_file(&temp).map_err(io_err(&temp))?,
+        _ => {}
+    }
+    Ok(temp)
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename (which
+/// replaces a link at `path` rather than writing through it).
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    let temp = fresh_partial(path)?;
     // A failed write (a full disk) leaves nothing behind, not a half file.
     let written =
         fs::write(&temp, bytes).map_err(io_err(&temp)).and_then(|()| fs::rename(&temp, path).map_err(io_err(path)));

@@ -1,0 +1,326 @@
+//! The one write rule, from the command line: no command writes into a
+//! dataset it does not own, onto its own input, or through a symbolic link
+//! out of the folder asked for; `--force` removes only what causalcity
+//! wrote. Every refusal exits 2, leaves the dataset valid and the outside
+//! file as it was.
+
+mod common;
+
+use common::{fresh_dir, gen_ok, hash_tree, run, toy_spec, write_spec};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn assert_refused(output: &Output, says: &str) {
+    assert_eq!(output.status.code(), Some(2), "stderr: {}", stderr(output));
+    assert!(stderr(output).contains(says), "expected {says:?} in: {}", stderr(output));
+}
+
+fn assert_valid(dir: &Path) {
+    let output = run(&["validate", dir.to_str().unwrap()]);
+    assert!(output.status.success(), "validate {}: {}", dir.display(), String::from_utf8_lossy(&output.stdout));
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A small toy dataset (one group of 4 cars, splits 2/1/1, no images).
+fn toy_dataset(dir: &Path) -> PathBuf {
+    let spec = write_spec(dir, &toy_spec("rule", &[(4, 0.5)], (2, 1, 1), 30));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    data
+}
+
+/// One `.npy` of float64 values in C order, as numpy writes it.
+fn npy(shape: &[usize], values: &[f64]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let tuple = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {tuple}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    bytes
+}
+
+/// An `.npz` of the given arrays (stored, as `np.savez` writes).
+fn npz(path: &Path, arrays: &[(&str, Vec<u8>)]) {
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, bytes) in arrays {
+        zip.start_file(format!("{name}.npy"), options).unwrap();
+        zip.write_all(bytes).unwrap();
+    }
+    zip.finish().unwrap();
+}
+
+/// Edge scores for the test split of the toy dataset.
+fn predictions(dir: &Path) -> PathBuf {
+    let path = dir.join("pred.npz");
+    let scores: Vec<f64> = (0..16).map(|i| (i % 5) as f64 / 5.0).collect();
+    npz(&path, &[("cars04_edges50/test/00000", npy(&[4, 4], &scores))]);
+    path
+}
+
+#[test]
+fn evaluate_csv_never_lands_in_the_dataset_on_its_input_or_through_a_link() {
+    let dir = fresh_dir("rule-evaluate-csv");
+    let data = toy_dataset(&dir);
+    let pred = predictions(&dir);
+    let outside = dir.join("outside.txt");
+    std::fs::write(&outside, "keep me").unwrap();
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&outside, &link).unwrap();
+    let folder = dir.join("a-folder");
+    std::fs::create_dir(&folder).unwrap();
+    let before = hash_tree(&data);
+    let pred_bytes = std::fs::read(&pred).unwrap();
+    let cases: Vec<(PathBuf, &str)> = vec![
+        (data.join("manifest.json"), "inside a gen dataset"),
+        (data.join("extra.csv"), "inside a gen dataset"),
+        (data.join("cars04_edges50/test/00000/scores.csv"), "inside a gen dataset"),
+        (pred.clone(), "the predictions file"),
+        (link.clone(), "symbolic link"),
+        (folder.clone(), "is a folder"),
+        (outside.join("under.csv"), "is a file, so nothing can be written under it"),
+    ];
+    for (csv, says) in &cases {
+        let output = run(&["evaluate", s(&data), s(&pred), "--history", "20", "--csv", s(csv)]);
+        assert_refused(&output, says);
+        assert!(output.stdout.is_empty(), "nothing is scored before the refusal");
+    }
+    assert_eq!(hash_tree(&data), before, "the dataset is unchanged");
+    assert_eq!(std::fs::read(&pred).unwrap(), pred_bytes);
+    assert_eq!(std::fs::read_to_string(&outside).unwrap(), "keep me");
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    assert_valid(&data);
+
+    // Outside the dataset it writes, into a new folder if need be.
+    let csv = dir.join("results/new/table.csv");
+    let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&csv)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let table = std::fs::read_to_string(&csv).unwrap();
+    assert!(table.lines().count() > 1 && table.contains("cars04_edges50"), "{table}");
+}
+
+#[test]
+fn a_history_that_overflows_is_refused_not_a_panic() {
+    let dir = fresh_dir("rule-history");
+    let data = toy_dataset(&dir);
+    let path = dir.join("traj.npz");
+    npz(&path, &[("cars04_edges50/test/00000/trajectory", npy(&[2, 4, 2], &[1.0; 16]))]);
+    for history in [u64::MAX.to_string(), (u64::MAX - 1).to_string(), "29".to_string()] {
+        let output = run(&["evaluate", s(&data), s(&path), "--history", &history]);
+        assert_refused(&output, "--history at most 28");
+    }
+    let output = run(&["evaluate", s(&data), s(&path), "--history", "28", "--json"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+}
+
+#[test]
+fn a_trajectory_error_that_overflows_is_named_not_reported_as_null() {
+    let dir = fresh_dir("rule-overflow");
+    let data = toy_dataset(&dir);
+    let path = dir.join("far.npz");
+    npz(&path, &[("cars04_edges50/test/00000/trajectory", npy(&[2, 4, 2], &[1e308; 16]))]);
+    let output = run(&["evaluate", s(&data), s(&path), "--history", "20", "--json"]);
+    assert_refused(&output, "overflows");
+    assert!(stderr(&output).contains("cars04_edges50/test/00000/trajectory"), "{}", stderr(&output));
+}
+
+#[test]
+fn a_link_at_the_lock_file_is_refused_never_written_through() {
+    let dir = fresh_dir("rule-lock-link");
+    let spec = write_spec(&dir, &toy_spec("lock", &[(4, 0.5)], (1, 1, 1), 20));
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    let out = dir.join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::os::unix::fs::symlink(&victim, out.join(".causalcity.lock")).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&out)]);
+    assert_refused(&output, "is a symbolic link");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+    assert!(!out.join("manifest.json").exists(), "nothing was written");
+
+    // A dangling link creates nothing where it points.
+    let out = dir.join("out2");
+    std::fs::create_dir(&out).unwrap();
+    let nowhere = dir.join("created-through-the-link");
+    std::os::unix::fs::symlink(&nowhere, out.join(".causalcity.lock")).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&out)]);
+    assert_refused(&output, "is a symbolic link");
+    assert!(!nowhere.exists());
+}
+
+#[test]
+fn force_removes_only_what_causalcity_wrote_and_refuses_whole_otherwise() {
+    let dir = fresh_dir("rule-force");
+    let data = toy_dataset(&dir);
+    let other = write_spec(&dir, &toy_spec("other", &[(4, 0.5)], (1, 1, 1), 20));
+    let mine = [
+        data.join("cars04_edges50/README.txt"),
+        data.join("cars04_edges50/train/00000/notes.txt"),
+        data.join("cars04_edges50/train/myanalysis/plot.txt"),
+    ];
+    for path in &mine {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, "the user's").unwrap();
+    }
+    let before = hash_tree(&data);
+    let output = run(&["gen", "--quiet", "--no-images", "--force", "--spec", s(&other), "--out", s(&data)]);
+    assert_refused(&output, "--force removes only what causalcity wrote");
+    for path in &mine[..2] {
+        assert!(stderr(&output).contains(s(path)), "names {}: {}", path.display(), stderr(&output));
+    }
+    assert!(stderr(&output).contains("myanalysis"), "{}", stderr(&output));
+    assert_eq!(hash_tree(&data), before, "nothing was removed");
+
+    // Once the user's files are out, --force replaces the dataset.
+    for path in &mine {
+        std::fs::remove_file(path).unwrap();
+    }
+    std::fs::remove_dir(data.join("cars04_edges50/train/myanalysis")).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--force", "--spec", s(&other), "--out", s(&data)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_valid(&data);
+    let manifest = std::fs::read_to_string(data.join("manifest.json")).unwrap();
+    assert!(manifest.contains("\"other\""), "{manifest}");
+}
+
+#[test]
+fn a_link_into_a_dataset_does_not_get_an_export_or_a_picture_inside_it() {
+    let dir = fresh_dir("rule-link-inside");
+    let data = toy_dataset(&dir);
+    let link = dir.join("L");
+    std::os::unix::fs::symlink(data.join("cars04_edges50"), &link).unwrap();
+    let before = hash_tree(&data);
+    let scenario = data.join("cars04_edges50/test/00000");
+    let attempts: Vec<Vec<String>> = vec![
+        vec!["export".into(), "nri".into(), s(&data).into(), "--out".into(), s(&link.join("exp")).into()],
+        vec!["heatmap".into(), s(&data).into(), "--out".into(), s(&link.join("heat.png")).into()],
+        vec!["heatmap".into(), s(&data).into(), "--out".into(), s(&data.join("heat.png")).into()],
+        vec!["preview".into(), s(&scenario).into(), "--out".into(), s(&scenario.join("p.png")).into()],
+    ];
+    for args in &attempts {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_refused(&run(&args), "inside a gen dataset");
+    }
+    assert_eq!(hash_tree(&data), before);
+    assert_valid(&data);
+}
+
+#[test]
+fn an_export_refuses_a_folder_holding_the_users_subfolders() {
+    let dir = fresh_dir("rule-export-foreign");
+    let data = toy_dataset(&dir);
+    let out = dir.join("export");
+    std::fs::create_dir_all(out.join("mine")).unwrap();
+    std::fs::write(out.join("mine/loc_train.npy"), "the user's").unwrap();
+    let output = run(&["export", "nri", s(&data), "--out", s(&out)]);
+    assert_refused(&output, "\"mine\"");
+    assert_eq!(std::fs::read_to_string(out.join("mine/loc_train.npy")).unwrap(), "the user's");
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1, "nothing was added");
+}
+
+#[test]
+fn merge_names_a_shard_folder_given_twice() {
+    let dir = fresh_dir("rule-merge-twice");
+    let spec = write_spec(&dir, &toy_spec("twice", &[(4, 0.5)], (2, 1, 1), 20));
+    let shard = dir.join("a0");
+    gen_ok(&spec, &shard, &["--quiet", "--no-images", "--shard", "0/2"]);
+    let before = hash_tree(&shard);
+    let output = run(&["merge", "--out", s(&dir.join("m")), s(&shard), s(&shard)]);
+    assert_refused(&output, "is given twice");
+    assert!(!stderr(&output).contains("another causalcity process"), "{}", stderr(&output));
+    assert_eq!(hash_tree(&shard), before);
+}
+
+#[test]
+fn a_limit_at_or_above_every_split_is_the_same_dataset() {
+    let dir = fresh_dir("rule-limit");
+    let spec = write_spec(&dir, &toy_spec("limits", &[(4, 0.5)], (2, 1, 1), 20));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images", "--limit", "5"]);
+    let before = hash_tree(&data);
+    for limit in [["--limit", "3"], ["--limit", "2"]] {
+        let output = gen_ok(&spec, &data, &["--no-images", "--json", limit[0], limit[1]]);
+        let summary: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+        assert_eq!((summary["written"].as_u64(), summary["skipped"].as_u64()), (Some(0), Some(4)), "{summary}");
+    }
+    // A limit that leaves fewer scenarios in a split is still refused.
+    let output = run(&["gen", "--quiet", "--no-images", "--limit", "1", "--spec", s(&spec), "--out", s(&data)]);
+    assert_refused(&output, "others would stay behind");
+    let after = hash_tree(&data);
+    let scenarios = |tree: &std::collections::BTreeMap<String, String>| {
+        tree.iter()
+            .filter(|(k, _)| !k.ends_with("manifest.json"))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(scenarios(&after), scenarios(&before));
+    assert_valid(&data);
+}
+
+#[test]
+fn stats_and_baseline_exit_2_where_there_is_no_finished_dataset_as_evaluate_does() {
+    let dir = fresh_dir("rule-exit-codes");
+    let missing = dir.join("nonexistent");
+    for command in ["stats", "baseline", "evaluate"] {
+        let mut args = vec![command, s(&missing)];
+        if command == "evaluate" {
+            args.push("pred.npz");
+        }
+        let output = run(&args);
+        assert_refused(&output, "manifest.json");
+    }
+}
+
+#[test]
+fn a_file_size_limit_ends_in_a_failure_not_a_panic() {
+    let dir = fresh_dir("rule-ulimit");
+    let spec = write_spec(&dir, &toy_spec("ulimit", &[(4, 0.5)], (1, 1, 1), 20));
+    let out = dir.join("out");
+    let script = format!(
+        "ulimit -f 0; exec '{}' gen --quiet --no-images --spec '{}' --out '{}'",
+        common::bin(),
+        s(&spec),
+        s(&out)
+    );
+    let output = std::process::Command::new("sh").arg("-c").arg(&script).output().unwrap();
+    assert_eq!(output.status.code(), Some(1), "{}", stderr(&output));
+    assert!(stderr(&output).contains("File too large"), "{}", stderr(&output));
+    // Its stderr a file too (which the limit also stops): still exit 1.
+    let log = dir.join("err.txt");
+    let script = format!("{script} 2>'{}'", s(&log));
+    let output = std::process::Command::new("sh").arg("-c").arg(&script).output().unwrap();
+    assert_eq!(output.status.code(), Some(1));
+}
+
+#[test]
+fn a_sweep_made_without_images_is_not_kept_by_a_run_with_images() {
+    let dir = fresh_dir("rule-sweep-images");
+    let spec = write_spec(&dir, &common::city_spec("sw", &[(4, 0.5)], (1, 1, 1), 30, "{}"));
+    let out = dir.join("sweep");
+    let args = ["counterfactual", "--sweep", s(&spec), "--out", s(&out), "--quiet", "--kinds", "stop"];
+    let first = run(&[&args[..], &["--no-images"]].concat());
+    assert!(first.status.success(), "{}", stderr(&first));
+    let before = hash_tree(&out);
+    assert_refused(&run(&args), "it was made with --no-images");
+    assert_eq!(hash_tree(&out), before);
+    let again = run(&[&args[..], &["--no-images", "--json"]].concat());
+    assert!(again.status.success(), "{}", stderr(&again));
+    let summary: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
+    assert_eq!(summary["kept"], 3, "{summary}");
+}
