@@ -7,9 +7,10 @@ mod cli;
 use clap::Parser;
 
 fn main() {
+    causalcity::output::report_file_size_limit_as_error();
     let result = cli::run(cli::Cli::parse());
     if let Err(e) = result {
-        eprintln!("error: {e}");
+        causalcity::progress::note(format_args!("error: {e}"));
         std::process::exit(e.exit_code());
     }
 }

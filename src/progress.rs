@@ -61,12 +61,12 @@ impl Progress {
             let due = done / step > last.1 / step || last.0.elapsed() > Duration::from_secs(15) || done == self.total;
             if due {
                 let secs = self.start.elapsed().as_secs_f64();
-                eprintln!(
+                note(format_args!(
                     "progress: {done}/{} scenarios ({:.0} %), {}",
                     self.total,
                     100.0 * done as f64 / self.total.max(1) as f64,
                     rate_and_eta(done, self.total, secs)
-                );
+                ));
                 *last = (Instant::now(), done);
             }
         }
@@ -110,4 +110,12 @@ mod tests {
         assert_eq!(rate_and_eta(10, 100_000, 1.0), "10/s, ETA 2h46m");
         assert_eq!(rate_and_eta(30, 30, 3.0), "10/s, ETA 0 s");
     }
+}
+
+/// Writes one line to stderr, as `eprintln!` does, but never panics: a
+/// stderr that cannot be written (a full disk, `ulimit -f`, a closed pipe)
+/// loses the line and the work goes on to its own error or success.
+pub fn note(line: impl std::fmt::Display) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
 }

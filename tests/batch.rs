@@ -119,6 +119,16 @@ fn a_run_larger_than_the_disk_is_refused_with_the_figures_and_nothing_written() 
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("60000000 scenarios") && stderr.contains("free"), "{stderr}");
     assert!(stderr.contains("--force-space") && stderr.contains("--limit"), "{stderr}");
+    // The figures add up: the total is the scenarios times one's size, and
+    // the margin kept besides is said, not hidden in the total.
+    let figure = |after: &str, unit: &str| -> f64 {
+        let rest = &stderr[stderr.find(after).unwrap_or_else(|| panic!("{after:?} in {stderr}")) + after.len()..];
+        rest[..rest.find(unit).unwrap()].trim().parse().unwrap()
+    };
+    let total_gb = figure("would write about ", "GB");
+    let each_kb = figure("scenarios of about ", "kB");
+    assert!((60e6 * each_kb / 1e6 - total_gb).abs() / total_gb < 0.01, "{total_gb} GB vs {each_kb} kB each: {stderr}");
+    assert!(stderr.contains("it keeps 67.1 MB free besides"), "{stderr}");
     assert!(!out.exists(), "a refused run left {} behind", out.display());
 
     // Into a dataset that exists, the sample goes again and the rest stays.

@@ -333,8 +333,10 @@ struct Tally {
 }
 
 /// Computes the statistics of the dataset in `dir`.
-pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, String> {
-    let dataset = Dataset::open_complete(dir)?;
+/// A folder that is no finished dataset is bad input (exit 2, as for
+/// `evaluate`); a scenario file that cannot be read is a failure.
+pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
+    let dataset = Dataset::open_complete(dir).map_err(crate::error::Error::Input)?;
     let map = dataset.expansion.map.clone();
     let mut rows = Vec::new();
     for group in &dataset.spec().groups {
@@ -343,7 +345,11 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, String> {
             if dirs.is_empty() {
                 continue;
             }
-            let tallies: Vec<Tally> = dirs.par_iter().map(|d| tally(d, &map)).collect::<Result<_, _>>()?;
+            let tallies: Vec<Tally> = dirs
+                .par_iter()
+                .map(|d| tally(d, &map))
+                .collect::<Result<_, _>>()
+                .map_err(crate::error::Error::Failure)?;
             rows.push(combine(group.name(), split.name(), tallies));
         }
     }

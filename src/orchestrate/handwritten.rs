@@ -380,6 +380,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             "spec": expansion.spec,
             "limit": options.limit,
             "kinds": options.kinds,
+            "images": options.products.images,
             "complete": pairs.is_some(),
             "pairs": pairs,
         }))
@@ -390,10 +391,25 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     // One sweep per folder: the same spec, limit and kinds, or a new folder.
     let record_path = out.join(SWEEP_RECORD);
     if let Ok(old) = std::fs::read(&record_path) {
-        let old: serde_json::Value = serde_json::from_slice(&old).unwrap_or_default();
+        let mut old: serde_json::Value = serde_json::from_slice(&old).unwrap_or_default();
         let new: serde_json::Value = serde_json::from_slice(&record(None)).expect("our own JSON");
-        let differences: Vec<&str> =
-            ["version", "spec", "limit", "kinds"].into_iter().filter(|field| old[field] != new[field]).collect();
+        // Sweeps from before the record had `images` say it with their pairs.
+        if old["images"].is_null() {
+            if let Some(images) = pairs_have_images(&out) {
+                old["images"] = images.into();
+            }
+        }
+        let differences: Vec<String> = ["version", "spec", "limit", "kinds", "images"]
+            .into_iter()
+            .filter(|field| old[field] != new[field] && !(*field == "images" && old[field].is_null()))
+            .map(|field| match field {
+                "images" if new[field] == true => "images (it was made with --no-images)".to_string(),
+                "images" => {
+                    "images (it was made with images; add nothing, or use another --out for --no-images)".to_string()
+                }
+                _ => field.to_string(),
+            })
+            .collect();
         if !differences.is_empty() {
             return Err(RunError::Usage(format!(
                 "{} holds a sweep made differently (differs: {}): use another --out",
@@ -458,6 +474,21 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         kept: kept.load(Ordering::Relaxed),
         pairs_with_effect: summaries.iter().filter(|s| !s.affected.is_empty()).count(),
         mean_affected_cars: affected as f64 / summaries.len().max(1) as f64,
+    })
+}
+
+/// Whether the first finished pair found in the sweep at `out` has frames
+/// (None when there is none).
+fn pairs_have_images(out: &Path) -> Option<bool> {
+    let folders = |dir: &Path| -> Vec<PathBuf> {
+        let mut found: Vec<PathBuf> =
+            std::fs::read_dir(dir).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.is_dir()).collect();
+        found.sort();
+        found
+    };
+    folders(out).iter().flat_map(|group| folders(group)).flat_map(|split| folders(&split)).find_map(|pair| {
+        let factual = pair.join("factual");
+        factual.join(crate::output::CHECKSUMS).is_file().then(|| factual.join("rgb").is_dir())
     })
 }
 

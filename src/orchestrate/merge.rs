@@ -45,9 +45,18 @@ fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
 
 /// Merges shard outputs in `sources` (and any already in `out`) into `out`.
 pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
-    for source in sources {
+    for (i, source) in sources.iter().enumerate() {
         if !source.is_dir() {
             return Err(GenError::Input(format!("{} is not a folder", source.display())));
+        }
+        let real = crate::output::claim::resolve(source);
+        if let Some(twin) = sources[..i].iter().find(|s| crate::output::claim::resolve(s) == real) {
+            return Err(GenError::Input(format!(
+                "{} is given twice (as {} and {}): name each shard folder once; nothing was moved",
+                real.display(),
+                twin.display(),
+                source.display()
+            )));
         }
     }
     // No shard may still be running, and --out takes nothing but a dataset.

@@ -151,12 +151,14 @@ pub enum GenError {
     Mixed { out: PathBuf, differences: Vec<String> },
     #[error(
         "{out} is on a disk with {} free, but this run would write about {} more: {pending} scenarios \
-         of about {} each (measured on the first one, which was removed again).\n\
+         of about {} each (measured on the first one, which was removed again), and it keeps {} free \
+         besides for manifests and the file system's own bookkeeping.\n\
          Free some space, write fewer scenarios (--limit N, --no-images), or pass --force-space to write \
          anyway (the run then stops when the disk is full; rerun to resume).",
         crate::output::arrays::gigabytes(*available),
         crate::output::arrays::gigabytes(*needed),
-        megabytes_or_more(*per_scenario)
+        size_in_words(*per_scenario),
+        size_in_words(SPACE_MARGIN_BYTES)
     )]
     Space { out: PathBuf, needed: u64, available: u64, per_scenario: u64, pending: u64 },
     #[error("{0}")]
@@ -236,7 +238,7 @@ pub fn install_signal_handler() {
                 // A second Ctrl-C: leave at once (partial folders are hidden and discarded on rerun).
                 std::process::exit(130);
             }
-            eprintln!("\nstopping: finishing no more scenarios (press Ctrl-C again to quit at once)");
+            crate::progress::note("\nstopping: finishing no more scenarios (press Ctrl-C again to quit at once)");
         });
     });
 }
@@ -301,6 +303,27 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     let group_name = |n: &str| {
         n.starts_with("cars") && n.contains("_edges") && n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
     };
+    // Everything is looked at before anything is removed: a user's file
+    // anywhere in the old dataset's folders makes --force refuse, whole.
+    let mut foreign = Vec::new();
+    for (_, record) in records {
+        for g in record.groups.iter().filter(|g| group_name(&g.name)) {
+            foreign_in_group(&out.join(&g.name), &mut foreign).map_err(|e| GenError::Write { error: e, done: 0 })?;
+        }
+    }
+    if !foreign.is_empty() {
+        foreign.sort();
+        let shown: Vec<String> = foreign.iter().take(5).map(|p| format!("  {}", p.display())).collect();
+        let more = foreign.len().saturating_sub(shown.len());
+        return Err(GenError::Input(format!(
+            "--force removes only what causalcity wrote, and {} also holds {} path(s) it did not write:\n{}{}\n\
+             Nothing was removed. Move them out of the dataset's folders, then rerun with --force.",
+            out.display(),
+            foreign.len(),
+            shown.join("\n"),
+            if more > 0 { format!("\n  ... and {more} more") } else { String::new() }
+        )));
+    }
     for (path, record) in records {
         for g in &record.groups {
             let dir = out.join(&g.name);
@@ -313,6 +336,61 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     let shards = out.join("shards");
     if shards.exists() && std::fs::read_dir(&shards).map(|mut d| d.next().is_none()).unwrap_or(false) {
         std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
+    }
+    Ok(())
+}
+
+/// Collects into `foreign` every path under a group folder that no run
+/// wrote: anything but split folders of scenario folders (each file listed
+/// in its checksums, or the listing itself) and hidden leftovers of
+/// interrupted scenarios.
+fn foreign_in_group(group: &Path, foreign: &mut Vec<PathBuf>) -> Result<(), WriteError> {
+    let entries = |dir: &Path| -> Result<Vec<(PathBuf, bool)>, WriteError> {
+        let listing = match std::fs::read_dir(dir) {
+            Ok(listing) => listing,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(io_err(dir)(e)),
+        };
+        listing
+            .map(|e| {
+                let e = e.map_err(io_err(dir))?;
+                Ok((e.path(), e.file_type().is_ok_and(|t| t.is_dir())))
+            })
+            .collect()
+    };
+    for (split_dir, is_dir) in entries(group)? {
+        let is_split = crate::spec::Split::ALL.iter().any(|s| split_dir.file_name() == Some(s.name().as_ref()));
+        if !(is_dir && is_split) {
+            foreign.push(split_dir);
+            continue;
+        }
+        for (scenario, is_dir) in entries(&split_dir)? {
+            let name = scenario.file_name().unwrap_or_default().to_string_lossy().into_owned();
+            let listing = scenario.join(crate::output::CHECKSUMS);
+            if is_dir && name.starts_with(PARTIAL_PREFIX) {
+                continue;
+            }
+            if !(is_dir && name.chars().all(|c| c.is_ascii_digit()) && listing.is_file()) {
+                foreign.push(scenario);
+                continue;
+            }
+            let listed: std::collections::HashSet<PathBuf> = std::fs::read_to_string(&listing)
+                .map_err(io_err(&listing))?
+                .lines()
+                .filter_map(|line| line.split_once("  ").map(|(_, name)| scenario.join(name)))
+                .chain([listing.clone()])
+                .collect();
+            let mut stack = vec![scenario];
+            while let Some(dir) = stack.pop() {
+                for (path, is_dir) in entries(&dir)? {
+                    if is_dir {
+                        stack.push(path);
+                    } else if !listed.contains(&path) {
+                        foreign.push(path);
+                    }
+                }
+            }
+        }
     }
     Ok(())
 }
@@ -428,13 +506,18 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     // first scenarios are the same keys; a smaller one would leave scenarios
     // the new manifest does not list, and shards of one job share theirs.
     let shown = |limit: Option<u32>| limit.map_or("no --limit".to_string(), |n| format!("--limit {n}"));
+    // What a limit means is the scenarios per split it leaves: a limit at
+    // or above every split's size is the same dataset as no limit.
+    let per_split = |limit: Option<u32>| {
+        crate::spec::Split::ALL.map(|split| {
+            let size = expansion.spec.splits.count(split);
+            limit.map_or(size, |l| l.min(size))
+        })
+    };
     for (path, record) in &existing {
-        let shrinks = match (record.limit, options.limit) {
-            (_, None) => false,
-            (None, Some(_)) => true,
-            (Some(theirs), Some(ours)) => ours < theirs,
-        };
-        if record.limit != options.limit && (shrinks || options.shard.is_some() || record.shard.is_some()) {
+        let (theirs, ours) = (per_split(record.limit), per_split(options.limit));
+        let shrinks = ours.iter().zip(&theirs).any(|(o, t)| o < t);
+        if theirs != ours && (shrinks || options.shard.is_some() || record.shard.is_some()) {
             differences.push(format!(
                 "limit: {} was written with {}, this run asks for {}{}",
                 path.display(),
@@ -465,13 +548,16 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         // dataset can take a minute.
         let quiet = options.progress == ProgressMode::Quiet;
         if !quiet {
-            eprintln!("--force: removing the dataset made differently in {} ...", out.display());
+            crate::progress::note(format_args!(
+                "--force: removing the dataset made differently in {} ...",
+                out.display()
+            ));
         }
         let removing = Instant::now();
         remove_dataset(&out, &existing)?;
         removal = removing.elapsed();
         if !quiet {
-            eprintln!("removed it in {:.1} s", removal.as_secs_f64());
+            crate::progress::note(format_args!("removed it in {:.1} s", removal.as_secs_f64()));
         }
     }
     if options.shard.is_none() {
@@ -554,7 +640,10 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
                 let intact = target.exists()
                     && verify_scenario(&target)
                         .map_err(|why| {
-                            eprintln!("warning: {} is damaged ({why}): writing it again", target.display());
+                            crate::progress::note(format_args!(
+                                "warning: {} is damaged ({why}): writing it again",
+                                target.display()
+                            ));
                             repaired.fetch_add(1, Ordering::Relaxed);
                         })
                         .is_ok();
@@ -601,8 +690,10 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
 }
 
 /// `bytes` as MB below a gigabyte, else as GB (a scenario's size in messages).
-fn megabytes_or_more(bytes: u64) -> String {
-    if bytes < 1_000_000_000 {
+fn size_in_words(bytes: u64) -> String {
+    if bytes < 1_000_000 {
+        format!("{:.1} kB", bytes as f64 / 1e3)
+    } else if bytes < 1_000_000_000 {
         format!("{:.1} MB", bytes as f64 / 1e6)
     } else {
         crate::output::arrays::gigabytes(bytes)
@@ -664,7 +755,9 @@ fn check_space(
     for folder in made {
         let _ = std::fs::remove_dir(folder); // only when empty
     }
-    Err(GenError::Space { out: out.to_path_buf(), needed: needed + bytes, available, per_scenario: bytes, pending })
+    // What the message adds up: pending x per scenario, besides the margin.
+    let needed = bytes.saturating_mul(pending);
+    Err(GenError::Space { out: out.to_path_buf(), needed, available, per_scenario: bytes, pending })
 }
 
 /// Plans, simulates and writes one scenario; returns the bytes written.
