@@ -66,6 +66,11 @@ pub const PER_FRAME_SUFFIX: &str = "/frames";
 /// Suffix of a sweep pair's predicted counterfactual trajectory.
 pub const COUNTERFACTUAL_SUFFIX: &str = "/counterfactual";
 
+/// How many times the values its scenario allows an array may hold, plus
+/// [`SHAPE_SLACK_VALUES`], before the reader refuses it unread.
+const SHAPE_SLACK: u64 = 4;
+const SHAPE_SLACK_VALUES: u64 = 4096;
+
 /// The name reports give the per-frame graph (next to [`GraphKind::name`]).
 pub const PER_FRAME_GRAPH: &str = "per-frame";
 
@@ -353,18 +358,21 @@ fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Res
         )
     };
     // Each array may hold no more values than its scenario's cars and
-    // frames allow: the reader is capped by that, whatever the file declares.
+    // frames allow: the reader is capped by that, whatever the file
+    // declares. The cap leaves room (x4, plus 4,096 values) so that a shape
+    // that is merely wrong is read and told its right shape below.
     let mut failure = None;
     let arrays = read_npz(file, |name| {
         let (folder, what) = Predicted::of(name);
         let scenario = by_folder.get_mut(folder).ok_or_else(|| unknown(name))?;
         let (cars, frames) = scenario.size(&mut failure)?;
         let (cars, frames) = (cars as u64, frames as u64);
-        Ok(match what {
+        let expected = match what {
             Predicted::Edges => cars * cars,
             Predicted::PerFrame => frames * cars * cars,
             Predicted::Trajectory | Predicted::Counterfactual => frames * cars * 2,
-        })
+        };
+        Ok(expected.saturating_mul(SHAPE_SLACK).saturating_add(SHAPE_SLACK_VALUES))
     });
     if let Some(failure) = failure {
         return Err(failure);

@@ -12,7 +12,7 @@
 //! more is refused, naming the entry.
 
 use std::collections::HashSet;
-use std::io::{Read, Seek};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// One array of a predictions file.
@@ -43,9 +43,15 @@ pub fn read_npz(path: &Path, max_values: impl FnMut(&str) -> Result<u64, String>
 
 /// [`read_npz`] over any reader (errors without the file's name).
 pub fn read_npz_from(
-    reader: impl Read + Seek,
+    mut reader: impl Read + Seek,
     mut max_values: impl FnMut(&str) -> Result<u64, String>,
 ) -> Result<Vec<NamedArray>, String> {
+    // The zip reader keeps one entry per name (the last): duplicates are
+    // found in the central directory itself.
+    if let Some(name) = duplicate_name(&mut reader)? {
+        return Err(twice(name.strip_suffix(".npy").unwrap_or(&name)));
+    }
+    reader.seek(SeekFrom::Start(0)).map_err(|e| format!("cannot be read: {e}"))?;
     let mut archive =
         zip::ZipArchive::new(reader).map_err(|e| format!("not an .npz file (numpy's np.savez writes one): {e}"))?;
     let mut arrays = Vec::new();
@@ -60,17 +66,23 @@ pub fn read_npz_from(
             return Err(format!("holds {entry_name:?}, which is no .npy array"));
         };
         if !seen.insert(name.clone()) {
-            return Err(format!(
-                "holds the array {name:?} twice: each array name may appear once (np.savez never writes a \
-                 name twice; the file was put together by other means)"
-            ));
+            return Err(twice(&name));
         }
         let allowed = max_values(&name)?;
         let cap = allowed.checked_mul(MAX_ITEM_SIZE).and_then(|b| b.checked_add(MAX_NPY_HEADER)).unwrap_or(u64::MAX);
+        // A declared size is only ever a reason to refuse early, never to
+        // reserve memory: the read below is capped whatever it says.
+        if entry.size() > cap {
+            return Err(format!(
+                "array {name:?} declares {} bytes, more than any array of its kind can be here (at most \
+                 {allowed} values, {cap} bytes with its header); refused without reading it",
+                entry.size()
+            ));
+        }
         let bytes = read_capped(entry, cap).map_err(|e| format!("array {name:?}: {e}"))?;
         let Some(bytes) = bytes else {
             return Err(format!(
-                "array {name:?} is larger than any array of its kind can be here (at most {allowed} values, \
+                "array {name:?} holds more than any array of its kind can be here (at most {allowed} values, \
                  {cap} bytes with its header); refused without reading further"
             ));
         };
@@ -78,6 +90,80 @@ pub fn read_npz_from(
         arrays.push(array);
     }
     Ok(arrays)
+}
+
+fn twice(name: &str) -> String {
+    format!(
+        "holds the array {name:?} twice: each array name may appear once (np.savez never writes a name twice; \
+         the file was put together by other means)"
+    )
+}
+
+/// The longest central directory read to look for duplicate names: 64 MiB
+/// lists about half a million arrays.
+const MAX_CENTRAL_DIRECTORY: u64 = 64 << 20;
+
+/// A little-endian field of `width` bytes at `at`, if `bytes` hold it.
+fn field(bytes: &[u8], at: usize, width: usize) -> Option<u64> {
+    let raw = bytes.get(at..at.checked_add(width)?)?;
+    Some(raw.iter().rev().fold(0u64, |v, &b| (v << 8) | b as u64))
+}
+
+/// The first entry name the zip's central directory lists twice. A file
+/// whose directory cannot be found here is left to the zip reader to refuse.
+fn duplicate_name(reader: &mut (impl Read + Seek)) -> Result<Option<String>, String> {
+    let io = |e: std::io::Error| format!("cannot be read: {e}");
+    let len = reader.seek(SeekFrom::End(0)).map_err(io)?;
+    // The end record (22 bytes) and a comment of at most 65,535.
+    let tail_len = len.min(22 + 65_535);
+    reader.seek(SeekFrom::Start(len - tail_len)).map_err(io)?;
+    let mut tail = vec![0u8; tail_len as usize];
+    reader.read_exact(&mut tail).map_err(io)?;
+    let Some(end) = tail.windows(4).rposition(|w| w == b"PK\x05\x06") else { return Ok(None) };
+    let (Some(mut entries), Some(mut size), Some(mut offset)) =
+        (field(&tail, end + 10, 2), field(&tail, end + 12, 4), field(&tail, end + 16, 4))
+    else {
+        return Ok(None);
+    };
+    // Zip64: a locator just before the end record points at the zip64 end record.
+    let zip64 = entries == 0xffff || size == 0xffff_ffff || offset == 0xffff_ffff;
+    if zip64 && end >= 20 && tail[end - 20..].starts_with(b"PK\x06\x07") {
+        let Some(at) = field(&tail, end - 20 + 8, 8).filter(|at| at.checked_add(56).is_some_and(|e| e <= len)) else {
+            return Ok(None);
+        };
+        reader.seek(SeekFrom::Start(at)).map_err(io)?;
+        let mut record = [0u8; 56];
+        reader.read_exact(&mut record).map_err(io)?;
+        match (record.starts_with(b"PK\x06\x06"), field(&record, 32, 8), field(&record, 40, 8), field(&record, 48, 8)) {
+            (true, Some(e), Some(s), Some(o)) => (entries, size, offset) = (e, s, o),
+            _ => return Ok(None),
+        }
+    }
+    if size > MAX_CENTRAL_DIRECTORY || offset.checked_add(size).is_none_or(|e| e > len) {
+        return Ok(None);
+    }
+    reader.seek(SeekFrom::Start(offset)).map_err(io)?;
+    let mut directory = vec![0u8; size as usize];
+    reader.read_exact(&mut directory).map_err(io)?;
+    let mut names = HashSet::new();
+    let mut at = 0usize;
+    for _ in 0..entries {
+        if directory.get(at..at + 4) != Some(b"PK\x01\x02".as_slice()) {
+            break;
+        }
+        let (Some(name_len), Some(extra_len), Some(comment_len)) =
+            (field(&directory, at + 28, 2), field(&directory, at + 30, 2), field(&directory, at + 32, 2))
+        else {
+            break;
+        };
+        let Some(name) = directory.get(at + 46..at + 46 + name_len as usize) else { break };
+        let name = String::from_utf8_lossy(name).into_owned();
+        if !names.insert(name.clone()) {
+            return Ok(Some(name));
+        }
+        at += 46 + (name_len + extra_len + comment_len) as usize;
+    }
+    Ok(None)
 }
 
 /// Up to `cap` bytes of `entry`, or None when it holds more. Memory grows
