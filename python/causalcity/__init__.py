@@ -20,6 +20,7 @@ current one.
 
 from __future__ import annotations
 
+import io as _io
 import json as _json
 import numbers as _numbers
 import os as _os
@@ -532,9 +533,17 @@ class Stream:
         self.ahead = _optional_whole("ahead", ahead, 1, _U32_MAX)
         self.shard = _process_shard(shard)
         limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
+        if not isinstance(split, str):
+            raise InputError(f"split={split!r} is not a split name: use one of {', '.join(spec.splits)}")
         if split not in spec.splits:
             spec.keys(split, 1)  # raises InputError naming the splits there are
+        if isinstance(groups, (str, bytes)):
+            raise InputError(f"groups={groups!r} is one string: give a list of group names, e.g. groups=[{groups!r}]")
         if groups is not None:
+            try:
+                groups = list(groups)
+            except TypeError:
+                raise InputError(f"groups={groups!r} is not a list of group names, e.g. [{spec.groups[0]!r}]") from None
             unknown = [g for g in groups if g not in spec.groups]
             if unknown:
                 raise InputError(
@@ -818,13 +827,22 @@ def save_predictions(
     run after the history.
     """
     arrays: Dict[str, _np.ndarray] = {}
-    for suffix, given in (("", edges), ("/trajectory", trajectories), ("/frames", frames), ("/counterfactual", counterfactuals)):
+    kinds = (("edges", "", edges), ("trajectories", "/trajectory", trajectories), ("frames", "/frames", frames), ("counterfactuals", "/counterfactual", counterfactuals))
+    for label, suffix, given in kinds:
+        if given is not None and not isinstance(given, Mapping):
+            raise InputError(f"save_predictions: {label} is a {type(given).__name__}: give a dict of scenario folder -> array")
         for folder, values in (given or {}).items():
-            arrays[f"{folder}{suffix}"] = _np.asarray(values, dtype=_np.float64)
+            try:
+                arrays[f"{folder}{suffix}"] = _np.asarray(values, dtype=_np.float64)
+            except (TypeError, ValueError) as e:
+                raise InputError(f"save_predictions: {label}[{folder!r}] is not an array of numbers: {e}") from None
     if not arrays:
         raise InputError("save_predictions: give edge scores, trajectories, per-frame scores or counterfactuals for at least one scenario")
-    with open(_os.fspath(path), "wb") as f:
-        _np.savez_compressed(f, **arrays)
+    # Written by the one write rule (never into a dataset, never through a
+    # link), through a temporary file and a rename.
+    buffer = _io.BytesIO()
+    _np.savez_compressed(buffer, **arrays)
+    _native.write_output(_os.fspath(path), buffer.getbuffer().tobytes())
 
 
 def evaluate(
@@ -851,10 +869,8 @@ def evaluate(
     """
     graphs = [graph] if isinstance(graph, str) else list(graph)
     history = _whole("history", history, 0, 2**63 - 1, "evaluate --history")
-    text, table = _native.evaluate(_os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold)
-    if csv is not None:
-        with open(_os.fspath(csv), "w", encoding="utf-8") as f:
-            f.write(table)
+    csv = None if csv is None else _os.fspath(csv)
+    text, _table = _native.evaluate(_os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold, csv)
     return _json.loads(text)
 
 

@@ -27,13 +27,16 @@ the batch and marks the real ones in ``car_mask``.
 
 from __future__ import annotations
 
+import multiprocessing as _mp
 import sys as _sys
+from multiprocessing.context import get_spawning_popen as _spawning
 from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as _np
 
 from . import _native
 from . import (
+    InputError,
     _STREAM_CHUNK,
     _U32_MAX,
     Key,
@@ -76,11 +79,18 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
     ``[B, frames, H, W]``. Scenarios with fewer cars than the batch's most
     are padded with zeros (``other_car`` with -1).
     """
+    try:
+        scenarios = list(scenarios)
+    except TypeError:
+        raise InputError(f"collate: {type(scenarios).__name__} is not a list of causalcity.Scenario") from None
     if len(scenarios) == 0:
-        raise ValueError("collate needs at least one scenario")
+        raise InputError("collate needs at least one scenario")
+    for i, s in enumerate(scenarios):
+        if not isinstance(s, Scenario):
+            raise InputError(f"collate: item {i} is {s!r}, not a causalcity.Scenario")
     frames = {s.frames for s in scenarios}
     if len(frames) != 1:
-        raise ValueError(f"scenarios of different lengths ({sorted(frames)} frames) cannot share a batch")
+        raise InputError(f"scenarios of different lengths ({sorted(frames)} frames) cannot share a batch")
     size, cars = len(scenarios), max(s.cars for s in scenarios)
     (count,) = frames
     out: Dict[str, Any] = {"key": [s.key for s in scenarios], "t": _np.stack([s.t for s in scenarios])}
@@ -193,12 +203,33 @@ class Batches:
         self.drop_last = bool(drop_last)
         self.mix_groups = bool(mix_groups)
         self.tensors = tensors
-        self.epoch = 0
+        # Shared memory: DataLoader workers, persistent ones included, read
+        # the epoch set here after they started.
+        self._epoch = _mp.RawValue("q", 0)
+
+    @property
+    def epoch(self) -> int:
+        """The epoch whose shuffle the next iteration gives."""
+        return int(self._epoch.value)
 
     def set_epoch(self, epoch: int) -> None:
         """Shuffles for ``epoch`` (as torch's DistributedSampler): call it
-        before each epoch; the same epoch gives the same batches."""
-        self.epoch = _whole("epoch", epoch, 0, 2**63 - 1)
+        before each epoch; the same epoch gives the same batches. It reaches
+        DataLoader workers that are already running
+        (``persistent_workers=True``), forked or spawned."""
+        self._epoch.value = _whole("epoch", epoch, 0, 2**63 - 1)
+
+    def __getstate__(self) -> Dict[str, Any]:
+        state = self.__dict__.copy()
+        # A worker being started shares the epoch's memory; any other pickle
+        # (a copy, a file) carries the value.
+        state["_epoch"] = self._epoch if _spawning() is not None else self.epoch
+        return state
+
+    def __setstate__(self, state: Dict[str, Any]) -> None:
+        if isinstance(state["_epoch"], int):
+            state["_epoch"] = _mp.RawValue("q", state["_epoch"])
+        self.__dict__.update(state)
 
     def _plan(self) -> _Plan:
         s = self.stream

@@ -16,6 +16,7 @@ use causalcity::orchestrate::run::{
     clear_stop, generate_expansion, load_spec, request_stop, GenError, GenOptions, Shard, MAX_THREADS,
 };
 use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
+use causalcity::output::claim::claim_file;
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::DatasetSpec;
@@ -24,7 +25,7 @@ use causalcity::world::BoundBy;
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -424,9 +425,29 @@ fn generate(
     serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
 }
 
-/// `causalcity evaluate` from Python: the report as JSON text and as CSV.
+/// Checks by the one write rule (never inside a dataset or sweep, never
+/// onto an input, never through a link) that a file may be written at
+/// `path`; `inputs` are (what, path) of what the caller reads.
 #[pyfunction]
-#[pyo3(signature = (dataset, predictions, graphs, history, threshold=None))]
+#[pyo3(signature = (path, inputs=Vec::new()))]
+fn claim_output(path: PathBuf, inputs: Vec<(String, PathBuf)>) -> PyResult<()> {
+    let inputs: Vec<(&str, &Path)> = inputs.iter().map(|(what, p)| (what.as_str(), p.as_path())).collect();
+    claim_file(&path, &inputs).map_err(py_err)?;
+    Ok(())
+}
+
+/// Writes `data` to `path` by the one write rule, through a temporary file
+/// and a rename.
+#[pyfunction]
+fn write_output(py: Python<'_>, path: PathBuf, data: Vec<u8>) -> PyResult<()> {
+    let file = claim_file(&path, &[]).map_err(py_err)?;
+    py.detach(|| file.write(&data)).map_err(|e| GenerationError::new_err(e.to_string()))
+}
+
+/// `causalcity evaluate` from Python: the report as JSON text and as CSV
+/// (also written to `csv`, checked before scoring as `--csv` is).
+#[pyfunction]
+#[pyo3(signature = (dataset, predictions, graphs, history, threshold=None, csv=None))]
 fn evaluate(
     py: Python<'_>,
     dataset: PathBuf,
@@ -434,7 +455,10 @@ fn evaluate(
     graphs: Vec<String>,
     history: usize,
     threshold: Option<f64>,
+    csv: Option<PathBuf>,
 ) -> PyResult<(String, String)> {
+    let inputs = [("the dataset it scores", dataset.as_path()), ("the predictions file", predictions.as_path())];
+    let csv = csv.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;
     let mut kinds: Vec<GraphKind> = Vec::new();
     for name in &graphs {
         let Some(kind) = GraphKind::ALL.into_iter().find(|k| k.name() == name) else {
@@ -447,7 +471,11 @@ fn evaluate(
     let options = EvaluateOptions { graphs: kinds, history, threshold };
     let report = py.detach(|| evaluate_(&dataset, &predictions, &options)).map_err(py_err)?;
     let json = serde_json::to_string(&report).map_err(|e| GenerationError::new_err(e.to_string()))?;
-    Ok((json, report.to_csv()))
+    let table = report.to_csv();
+    if let Some(csv) = csv {
+        csv.write(table.as_bytes()).map_err(|e| GenerationError::new_err(e.to_string()))?;
+    }
+    Ok((json, table))
 }
 
 fn array<'py>(py: Python<'py>, data: Data, shape: &[usize]) -> PyResult<Bound<'py, Array>> {
@@ -559,6 +587,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(claim_output, m)?)?;
+    m.add_function(wrap_pyfunction!(write_output, m)?)?;
     m.add_function(wrap_pyfunction!(frame_buffer, m)?)?;
     Ok(())
 }

@@ -7,8 +7,9 @@ import argparse
 import sys
 from typing import Optional, Sequence
 
+from .. import GenerationError, InputError
 from . import METHODS, make
-from .common import run_method
+from .common import DatasetError, run_method
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -22,7 +23,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--out", required=True, help="the predictions .npz to write")
     parser.add_argument("--group", nargs="+", help="only these groups")
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
-    parser.add_argument("--epochs", type=int, help="nri, interaction: training epochs (default 30)")
+    parser.add_argument("--epochs", type=_positive, help="nri, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", default="auto", help="nri, interaction: cpu, cuda or auto (default)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -37,12 +38,31 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     elif args.method == "frame0":
         options["seed"] = args.seed
     try:
+        # Made once up front, so that a bad option is refused before any reading.
+        make(args.method, **options)
         out = run_method(lambda: make(args.method, **options), args.dataset, args.out, args.group, args.split, args.quiet)
-    except (ValueError, FileNotFoundError) as e:
+    except (InputError, ValueError, FileNotFoundError, NotADirectoryError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except (GenerationError, DatasetError, OSError, RuntimeError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted: nothing was written", file=sys.stderr)
+        return 130
     print(f"wrote {out}")
     return 0
+
+
+def _positive(text: str) -> int:
+    """A whole number >= 1, for argparse (which then exits 2 with the message)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
+    return value
 
 
 if __name__ == "__main__":

@@ -14,6 +14,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .. import InputError, _native
+
 HISTORY = 100
 """Frames a method observes before the ones it predicts (the paper's 100)."""
 STEPS = 20
@@ -76,14 +78,51 @@ class Method:
         raise NotImplementedError
 
 
+class DatasetError(RuntimeError):
+    """A file of a dataset that cannot be read as gen writes it (damaged or
+    changed by hand): a failure while working, exit status 1 from the
+    command line, as ``causalcity evaluate`` reports it."""
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise DatasetError(f"{path}: cannot be read as JSON ({e}); causalcity validate tells what else is damaged") from None
+
+
 def _manifest(dataset: Path) -> dict:
     path = dataset / "manifest.json"
     if not path.is_file():
-        raise FileNotFoundError(f"no manifest.json in {dataset}: not a dataset gen wrote")
-    manifest = json.loads(path.read_text())
+        raise InputError(f"no manifest.json in {dataset}: not a dataset gen wrote")
+    manifest = _read_json(path)
     if not manifest.get("complete", False):
-        raise ValueError(f"{dataset} is not complete: finish it with its gen command first")
+        raise InputError(f"{dataset} is not complete: finish it with its gen command first")
     return manifest
+
+
+def _scenario_arrays(folder: Path) -> Tuple[dict, np.ndarray, np.ndarray]:
+    """scenario.json, pixels.npy ``[frames, cars, 2]`` and poses.csv's x, y,
+    yaw, speed ``[frames, cars, 4]`` of one scenario, or a
+    :class:`DatasetError` naming the file that does not fit."""
+    meta = _read_json(folder / "scenario.json")
+    try:
+        n, frames = len(meta["cars"]), int(meta["frames"])
+        edges = [(int(a), int(b)) for a, b in meta["edges"]]
+    except (KeyError, TypeError, ValueError) as e:
+        raise DatasetError(f"{folder / 'scenario.json'}: not a scenario gen wrote (field {e})") from None
+    try:
+        pixels = np.load(folder / "pixels.npy").astype(np.float64).reshape(frames, n, 2)
+    except (OSError, ValueError, EOFError) as e:
+        raise DatasetError(f"{folder / 'pixels.npy'}: not the [{frames}, {n}, 2] array gen writes ({e})") from None
+    try:
+        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+        metres = table[:, [3, 4, 8, 11]].reshape(frames, n, 4)
+    except (OSError, ValueError, IndexError) as e:
+        raise DatasetError(f"{folder / 'poses.csv'}: not the {frames} x {n} rows gen writes ({e})") from None
+    if any(not (0 <= a < n and 0 <= b < n) for a, b in edges):
+        raise DatasetError(f"{folder / 'scenario.json'}: an edge names a car outside 0..{n - 1}")
+    return meta, pixels, metres
 
 
 def groups_of(dataset: "str | Path") -> List[str]:
@@ -97,17 +136,16 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
     manifest = _manifest(root)
     spec = manifest["spec"]
     if group not in groups_of(root):
-        raise ValueError(f"group {group!r} is not in {root}: its groups are {', '.join(groups_of(root))}")
+        raise InputError(f"group {group!r} is not in {root}: its groups are {', '.join(groups_of(root))}")
     folders = sorted(p for p in (root / group / split).glob("*") if (p / "scenario.json").is_file())
     pixels, metres, graphs = [], [], []
     interval = float(spec.get("frame_interval") or 0.1)
     for folder in folders:
-        meta = json.loads((folder / "scenario.json").read_text())
-        n, frames = len(meta["cars"]), meta["frames"]
-        interval = float(meta["frame_interval"])
-        pixels.append(np.load(folder / "pixels.npy").astype(np.float64))
-        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
-        metres.append(table[:, [3, 4, 8, 11]].reshape(frames, n, 4))
+        meta, scenario_pixels, scenario_metres = _scenario_arrays(folder)
+        n = len(meta["cars"])
+        interval = float(meta.get("frame_interval", interval))
+        pixels.append(scenario_pixels)
+        metres.append(scenario_metres)
         g = np.zeros((n, n), dtype=np.uint8)
         for a, b in meta["edges"]:
             g[a, b] = 1
@@ -184,7 +222,6 @@ def write_predictions(path: "str | Path", edges: Dict[str, np.ndarray], trajecto
     bytes."""
     from .. import save_predictions
 
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
     save_predictions(
         path,
         edges={k: edges[k] for k in sorted(edges)},
@@ -203,7 +240,15 @@ def run_method(
     """Fits a fresh method (``make_method()``) per group of ``dataset`` on its
     train split and writes its predictions for ``splits`` to ``out``."""
     root = Path(dataset)
+    # The one write rule, checked before any training: never into a
+    # dataset, never onto the input, never through a link.
+    _native.claim_output(os.fspath(out), [("the dataset it reads", os.fspath(root))])
+    if isinstance(groups, (str, bytes)):
+        raise InputError(f"groups={groups!r} is one string: give a list of group names, e.g. [{groups!r}]")
     names = groups_of(root) if groups is None else list(groups)
+    for split in splits:
+        if split not in SPLITS:
+            raise InputError(f"split {split!r} is not one of {', '.join(SPLITS)}")
     edges: Dict[str, np.ndarray] = {}
     trajectories: Dict[str, np.ndarray] = {}
     for group in names:
@@ -211,7 +256,7 @@ def run_method(
         train = load_split(root, group, "train")
         val = load_split(root, group, "val")
         if len(train) == 0:
-            raise ValueError(f"{root / group}: no train scenarios to fit {method.name} on")
+            raise InputError(f"{root / group}: no train scenarios to fit {method.name} on")
         if not quiet:
             print(f"{method.name}: {group} (train {len(train)}, val {len(val)})", file=sys.stderr)
         method.fit(train, val if len(val) else None)

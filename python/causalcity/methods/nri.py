@@ -43,6 +43,7 @@ from typing import Optional
 
 import numpy as np
 
+from .. import InputError, _whole
 from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress
 
 try:
@@ -57,9 +58,13 @@ def pick_device(device: str) -> torch.device:
     """``auto``: CUDA when available, else the CPU."""
     if device == "auto":
         device = "cuda" if torch.cuda.is_available() else "cpu"
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError(f"device {device!r}: no CUDA device is available (use cpu)")
-    return torch.device(device)
+    try:
+        chosen = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise InputError(f"device={device!r} is not a device: use auto, cpu, cuda or cuda:N") from None
+    if chosen.type == "cuda" and not torch.cuda.is_available():
+        raise InputError(f"device {device!r}: no CUDA device is available (use cpu)")
+    return chosen
 
 
 class _Mlp(nn.Module):
@@ -185,6 +190,10 @@ class Nri(Method):
         self.name = "nri" if discover else "interaction"
         self.discovers = discover
         self.predicts = True
+        epochs = _whole("epochs", epochs, 1, 10**6)
+        batch_size = _whole("batch_size", batch_size, 1, 2**31 - 1)
+        if not (isinstance(lr, (int, float)) and 0 < lr < float("inf")):
+            raise InputError(f"lr={lr!r} is not a learning rate: use a number above 0")
         self.epochs, self.hidden, self.batch_size, self.lr = epochs, hidden, batch_size, lr
         self.prior, self.seed = prior, seed
         self.warm, self.window, self.windows = warm, window, windows
