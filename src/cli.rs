@@ -717,6 +717,12 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             if let Some(csv) = csv {
                 csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;
             }
+            if args.json {
+                // The table shows them first; JSON carries them, and a person reads them here.
+                for warning in &evaluated.warnings {
+                    causalcity::progress::note(format_args!("warning: {warning}"));
+                }
+            }
             report(&evaluated, args.json)
         }
         Command::Run(args) => {

@@ -25,6 +25,7 @@ import json as _json
 import numbers as _numbers
 import os as _os
 import sys as _sys
+import warnings as _warnings
 from dataclasses import dataclass
 from typing import Any, Dict, Iterator, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
@@ -797,6 +798,9 @@ def generate(
     return _json.loads(summary)
 
 
+_DATASET_RECORD = "causalcity-dataset"
+"""The array a predictions file records its dataset in."""
+
 HISTORY_FRAMES = 100
 """Frames observed before a predicted trajectory's first frame, as in the
 paper (``causalcity evaluate --history``'s default)."""
@@ -809,8 +813,16 @@ def save_predictions(
     *,
     frames: Optional[Mapping[str, _np.ndarray]] = None,
     counterfactuals: Optional[Mapping[str, _np.ndarray]] = None,
+    dataset: Optional[PathLike] = None,
 ) -> None:
     """Writes a predictions file for :func:`evaluate` (``_np.savez_compressed``).
+
+    ``dataset``, the folder the predictions were made on (a ``gen``
+    dataset or a sweep), is recorded in the file (array
+    ``causalcity-dataset``: its spec's hash, name, world, seed and split
+    sizes), and :func:`evaluate` then refuses to score the file against
+    any other dataset. Without it, ``evaluate`` warns that nothing checks
+    the match.
 
     ``edges`` maps a scenario folder (``Key.folder``, e.g.
     ``cars08_edges50/test/00000``) to its ``[cars, cars]`` edge scores,
@@ -833,11 +845,16 @@ def save_predictions(
             raise InputError(f"save_predictions: {label} is a {type(given).__name__}: give a dict of scenario folder -> array")
         for folder, values in (given or {}).items():
             try:
-                arrays[f"{folder}{suffix}"] = _np.asarray(values, dtype=_np.float64)
+                values = _np.asarray(values)
+                # float16 and float32 are read as they are: half the bytes or less
+                arrays[f"{folder}{suffix}"] = values if values.dtype in (_np.float16, _np.float32) else values.astype(_np.float64)
             except (TypeError, ValueError) as e:
                 raise InputError(f"save_predictions: {label}[{folder!r}] is not an array of numbers: {e}") from None
     if not arrays:
         raise InputError("save_predictions: give edge scores, trajectories, per-frame scores or counterfactuals for at least one scenario")
+    if dataset is not None:
+        record = _native.dataset_identity(_os.fspath(dataset)).encode()
+        arrays[_DATASET_RECORD] = _np.frombuffer(record, dtype=_np.uint8)
     # Written by the one write rule (never into a dataset, never through a
     # link), through a temporary file and a rename.
     buffer = _io.BytesIO()
@@ -871,7 +888,10 @@ def evaluate(
     history = _whole("history", history, 0, 2**63 - 1, "evaluate --history")
     csv = None if csv is None else _os.fspath(csv)
     text, _table = _native.evaluate(_os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold, csv)
-    return _json.loads(text)
+    report = _json.loads(text)
+    for warning in report.get("warnings", []):
+        _warnings.warn(warning, stacklevel=2)
+    return report
 
 
 from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)

@@ -7,7 +7,8 @@
 //! `counterfactual` on rayon's. The public API (docstrings, types) lives
 //! in `causalcity/__init__.py`.
 
-use causalcity::analysis::evaluate::{evaluate as evaluate_, EvaluateOptions};
+use causalcity::analysis::baseline::pair_following_scores;
+use causalcity::analysis::evaluate::{evaluate as evaluate_, DatasetIdentity, EvaluateOptions};
 use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
 use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
@@ -436,6 +437,14 @@ fn claim_output(path: PathBuf, inputs: Vec<(String, PathBuf)>) -> PyResult<()> {
     Ok(())
 }
 
+/// The record of the dataset (or sweep) in `dir` that a predictions file
+/// carries, as JSON text (see `evaluate`'s `DATASET_RECORD`).
+#[pyfunction]
+fn dataset_identity(dir: PathBuf) -> PyResult<String> {
+    let identity = DatasetIdentity::of(&dir).map_err(InputError::new_err)?;
+    serde_json::to_string(&identity).map_err(|e| GenerationError::new_err(e.to_string()))
+}
+
 /// Writes `data` to `path` by the one write rule, through a temporary file
 /// and a rename.
 #[pyfunction]
@@ -560,6 +569,41 @@ fn pair_dict(py: Python<'_>, p: PairArrays) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
+/// `causalcity baseline`'s following score for every ordered pair of every
+/// scenario, at each of `lags` (frames), in one pass: `positions` is the
+/// bytes of a C-order float64 array `[scenarios, frames, cars, 2]`
+/// (metres); the result `[scenarios, lags, cars, cars]`, `[s, l, a, b]`
+/// the mean distance from b to a's path over the last `lags[l]` frames
+/// (small when b follows a; the diagonal 0). Runs on every core.
+#[pyfunction]
+fn following_scores<'py>(
+    py: Python<'py>,
+    positions: Vec<u8>,
+    shape: (usize, usize, usize),
+    lags: Vec<usize>,
+) -> PyResult<Bound<'py, Array>> {
+    let (scenarios, frames, cars) = shape;
+    let per_scenario = frames.checked_mul(cars).and_then(|n| n.checked_mul(2));
+    if per_scenario.and_then(|n| n.checked_mul(scenarios)).and_then(|n| n.checked_mul(8)) != Some(positions.len()) {
+        return Err(InputError::new_err(format!(
+            "following_scores: {} bytes are not a float64 array of shape [{scenarios}, {frames}, {cars}, 2]",
+            positions.len()
+        )));
+    }
+    if lags.is_empty() || lags.contains(&0) {
+        return Err(InputError::new_err(format!("following_scores: lags {lags:?} must be one or more, each >= 1")));
+    }
+    let xy: Vec<[f64; 2]> = positions
+        .chunks_exact(16)
+        .map(|c| {
+            let v = |at: usize| f64::from_le_bytes(c[at..at + 8].try_into().expect("8 bytes"));
+            [v(0), v(8)]
+        })
+        .collect();
+    let out = py.detach(|| pair_following_scores(&xy, (scenarios, frames, cars), &lags));
+    array(py, Data::F64(out), &[scenarios, lags.len(), cars, cars])
+}
+
 /// `nbytes` zeroed bytes (uint8, 1-D) for a batch of frames, from the
 /// frame buffers streams hand back (fresh memory costs the kernel's zeroing
 /// on every page); handed back in turn when the array is dropped.
@@ -588,6 +632,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(claim_output, m)?)?;
+    m.add_function(wrap_pyfunction!(following_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_identity, m)?)?;
     m.add_function(wrap_pyfunction!(write_output, m)?)?;
     m.add_function(wrap_pyfunction!(frame_buffer, m)?)?;
     Ok(())

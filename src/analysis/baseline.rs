@@ -288,6 +288,34 @@ pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[
     totals.into_iter().map(|total| total / (frames - 1) as f64).collect()
 }
 
+/// [`following_scores`] of every ordered pair of many scenarios at once (on
+/// every core): `xy` holds `[scenarios, frames, cars]` positions (metres,
+/// C order); the result is `[scenarios, lags, cars, cars]`, `[s, l, a, b]`
+/// scoring "a leads b" at `max_lags[l]` (the diagonal 0).
+pub fn pair_following_scores(
+    xy: &[[f64; 2]],
+    (scenarios, frames, cars): (usize, usize, usize),
+    max_lags: &[usize],
+) -> Vec<f64> {
+    let block = max_lags.len() * cars * cars;
+    let mut out = vec![0.0f64; scenarios * block];
+    if block == 0 || frames == 0 {
+        return out;
+    }
+    out.par_chunks_mut(block).zip(xy.par_chunks(frames * cars)).for_each(|(scores, scenario)| {
+        let paths: Vec<Vec<[f64; 2]>> =
+            (0..cars).map(|c| (0..frames).map(|t| scenario[t * cars + c]).collect()).collect();
+        for a in 0..cars {
+            for b in (0..cars).filter(|&b| b != a) {
+                for (l, score) in following_scores(&paths[a], &paths[b], max_lags).into_iter().enumerate() {
+                    scores[(l * cars + a) * cars + b] = score;
+                }
+            }
+        }
+    });
+    out
+}
+
 impl fmt::Display for BaselineReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(

@@ -66,6 +66,9 @@ pub const PER_FRAME_SUFFIX: &str = "/frames";
 /// Suffix of a sweep pair's predicted counterfactual trajectory.
 pub const COUNTERFACTUAL_SUFFIX: &str = "/counterfactual";
 
+/// The most bytes a dataset record may hold.
+const MAX_DATASET_RECORD: u64 = 64 * 1024;
+
 /// How many times the values its scenario allows an array may hold, plus
 /// [`SHAPE_SLACK_VALUES`], before the reader refuses it unread.
 const SHAPE_SLACK: u64 = 4;
@@ -73,6 +76,45 @@ const SHAPE_SLACK_VALUES: u64 = 4096;
 
 /// The name reports give the per-frame graph (next to [`GraphKind::name`]).
 pub const PER_FRAME_GRAPH: &str = "per-frame";
+
+/// The array of a predictions file that records the dataset the
+/// predictions were made on (UTF-8 JSON of a [`DatasetIdentity`], as
+/// uint8): `save_predictions(..., dataset=...)` and the reference methods
+/// write it.
+pub const DATASET_RECORD: &str = "causalcity-dataset";
+
+/// What tells datasets apart for a predictions file: the spec (its hash,
+/// which covers the seed and world), and the scenarios per split scored.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct DatasetIdentity {
+    pub name: String,
+    pub world: String,
+    pub seed: u64,
+    pub spec_sha256: String,
+    /// Scenarios per split over all groups (after any `--limit`).
+    pub splits: BTreeMap<String, usize>,
+}
+
+impl DatasetIdentity {
+    /// The identity of the `gen` dataset or `counterfactual --sweep` output
+    /// in `dir`.
+    pub fn of(dir: &Path) -> Result<DatasetIdentity, String> {
+        Ok(Truth::open(dir)?.identity())
+    }
+
+    fn describe(&self) -> String {
+        let splits: Vec<String> =
+            ["train", "val", "test"].iter().map(|s| self.splits.get(*s).copied().unwrap_or(0).to_string()).collect();
+        format!(
+            "{} ({} world, seed {}, spec sha256 {}, {} train/val/test scenarios)",
+            self.name,
+            self.world,
+            self.seed,
+            self.spec_sha256.get(..12).unwrap_or(&self.spec_sha256),
+            splits.join("/")
+        )
+    }
+}
 
 /// What to score and how.
 #[derive(Debug, Clone)]
@@ -170,6 +212,10 @@ pub struct EvaluationReport {
     /// Predicted counterfactual trajectories against the re-simulated ones
     /// (a sweep only).
     pub counterfactuals: Vec<TrajectoryScores>,
+    /// What the reader must know before trusting a number: predictions
+    /// that do not say which dataset they were made on, rows without val
+    /// predictions whose threshold is a fixed 0.5.
+    pub warnings: Vec<String>,
 }
 
 /// What an array of a predictions file predicts, told by its name's suffix.
@@ -237,6 +283,21 @@ impl Truth {
         }
         let Dataset { dir, record, expansion, keys } = Dataset::open_complete(dir)?;
         Ok(Truth { dir, effects: record.effects, expansion, keys, sweep: false })
+    }
+
+    fn identity(&self) -> DatasetIdentity {
+        let spec = &self.expansion.spec;
+        let mut splits = BTreeMap::new();
+        for key in &self.keys {
+            *splits.entry(key.split.name().to_string()).or_insert(0) += 1;
+        }
+        DatasetIdentity {
+            name: spec.name.clone(),
+            world: spec.world.name().to_string(),
+            seed: spec.seed,
+            spec_sha256: crate::output::manifest::spec_sha256(spec),
+            splits,
+        }
     }
 
     fn require_graph(&self, graph: GraphKind) -> Result<(), String> {
@@ -315,18 +376,46 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     for &graph in &options.graphs {
         truth.require_graph(graph).map_err(Error::Input)?;
     }
-    let scored = match_scenarios(&truth, predictions, options)?;
+    let (scored, record) = match_scenarios(&truth, predictions, options)?;
+    let mut warnings = Vec::new();
+    let ours = truth.identity();
+    match record {
+        Some(theirs) if theirs != ours => {
+            return Err(Error::Input(format!(
+                "{}: these predictions were made on {}, and {} is {}: score them against the dataset they were \
+                 made on",
+                predictions.display(),
+                theirs.describe(),
+                dataset.display(),
+                ours.describe()
+            )));
+        }
+        Some(_) => {}
+        None => warnings.push(format!(
+            "{} does not say which dataset it was made on (no {DATASET_RECORD:?} array), so nothing checks that it \
+             belongs to {}: save it with causalcity.save_predictions(..., dataset=...)",
+            predictions.display(),
+            dataset.display()
+        )),
+    }
     let results: Vec<ScenarioResult> = scored
         .par_iter()
         .map(|s| score_scenario(s, &truth, options))
         .collect::<Result<_, String>>()
         .map_err(Error::Input)?;
-    Ok(summarise(&truth, dataset, predictions, options, &scored, &results))
+    let mut report = summarise(&truth, dataset, predictions, options, &scored, &results);
+    report.warnings.splice(0..0, warnings);
+    Ok(report)
 }
 
 /// Pairs every array with its scenario and checks names, shapes, values and
 /// coverage.
-fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Result<Vec<ScenarioPredictions>, Error> {
+/// Also returns the file's record of the dataset it was made on, if any.
+fn match_scenarios(
+    truth: &Truth,
+    file: &Path,
+    options: &EvaluateOptions,
+) -> Result<(Vec<ScenarioPredictions>, Option<DatasetIdentity>), Error> {
     let bad = |message: String| Error::Input(format!("{}: {message}", file.display()));
     let mut by_folder: BTreeMap<String, ScenarioPredictions> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
@@ -363,6 +452,9 @@ fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Res
     // that is merely wrong is read and told its right shape below.
     let mut failure = None;
     let arrays = read_npz(file, |name| {
+        if name == DATASET_RECORD {
+            return Ok(MAX_DATASET_RECORD);
+        }
         let (folder, what) = Predicted::of(name);
         let scenario = by_folder.get_mut(folder).ok_or_else(|| unknown(name))?;
         let (cars, frames) = scenario.size(&mut failure)?;
@@ -377,7 +469,24 @@ fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Res
     if let Some(failure) = failure {
         return Err(failure);
     }
-    let arrays = arrays.map_err(Error::Input)?;
+    let mut arrays = arrays.map_err(Error::Input)?;
+    let record = match arrays.iter().position(|a| a.name == DATASET_RECORD) {
+        None => None,
+        Some(at) => {
+            let array = arrays.remove(at);
+            let bytes: Option<Vec<u8>> = array
+                .values
+                .iter()
+                .map(|&v| (v.fract() == 0.0 && (0.0..=255.0).contains(&v)).then_some(v as u8))
+                .collect();
+            let parsed = bytes.and_then(|b| serde_json::from_slice::<DatasetIdentity>(&b).ok());
+            Some(parsed.ok_or_else(|| {
+                bad(format!(
+                    "array {DATASET_RECORD:?} is not the dataset record save_predictions writes (UTF-8 JSON as uint8)"
+                ))
+            })?)
+        }
+    };
     if arrays.is_empty() {
         return Err(bad("holds no arrays: save one [cars, cars] array of edge scores per scenario, named by its \
                         folder (e.g. cars08_edges50/test/00000)"
@@ -487,11 +596,12 @@ fn match_scenarios(truth: &Truth, file: &Path, options: &EvaluateOptions) -> Res
             }
         }
     }
-    Ok(order
+    let scored = order
         .into_iter()
         .filter_map(|folder| by_folder.remove(&folder))
         .filter(|s| s.arrays.iter().any(Option::is_some))
-        .collect())
+        .collect();
+    Ok((scored, record))
 }
 
 /// Reads one scenario's truth and scores its predictions.
@@ -748,7 +858,24 @@ fn summarise(
     edges.extend(edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, |r| {
         r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
     }));
+    let untuned: Vec<String> = edges
+        .iter()
+        .filter(|e| e.threshold_from == "default")
+        .map(|e| format!("{} {}", e.group, e.graph))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let mut warnings = Vec::new();
+    if !untuned.is_empty() {
+        warnings.push(format!(
+            "NO VAL PREDICTIONS for {}: their F1, precision, recall and SHD use a fixed threshold of 0.5, which \
+             means something only for probabilities. Read AUROC and AUPRC (threshold-free), save val predictions \
+             (the threshold is then the best F1 on val), or give --threshold",
+            untuned.join(", ")
+        ));
+    }
     EvaluationReport {
+        warnings,
         dataset: dataset.display().to_string(),
         predictions: predictions.display().to_string(),
         world: spec.world.name().to_string(),
@@ -821,53 +948,57 @@ impl fmt::Display for EvaluationReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
         let pm = |v: f64, se: Option<f64>| format!("{v:.3}±{}", se.map_or("-".to_string(), |s| format!("{s:.3}")));
+        for warning in &self.warnings {
+            writeln!(f, "warning: {warning}")?;
+        }
         writeln!(f, "predictions {} on {} ({} world)", self.predictions, self.dataset, self.world)?;
         if !self.edges.is_empty() {
             writeln!(
                 f,
-                "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>6} {:>6} {:>12}",
+                "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
                 "graph",
                 "group",
                 "split",
                 "scen",
                 "pairs",
                 "linked",
+                "AUROC",
+                "AUPRC",
                 "called",
                 "threshold",
                 "from",
                 "P",
                 "R",
                 "F1±se",
-                "AUROC",
-                "AUPRC",
                 "SHD±se"
             )?;
             for e in &self.edges {
                 writeln!(
                     f,
-                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>9.4} {:<7} {:>6} {:>6} {:>12} {:>6} {:>6} {:>12}",
+                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9.4} {:<7} {:>6} {:>6} {:>12} {:>12}",
                     e.graph,
                     e.group,
                     e.split,
                     e.scenarios,
                     e.pairs,
                     e.true_edges,
+                    show(e.auroc),
+                    show(e.auprc),
                     e.predicted_edges,
                     e.threshold,
                     e.threshold_from,
                     show(e.precision),
                     show(e.recall),
                     pm(e.f1, e.f1_se),
-                    show(e.auroc),
-                    show(e.auprc),
                     pm(e.shd, e.shd_se)
                 )?;
             }
             writeln!(
                 f,
-                "edges: a pair is called linked when its score is above the threshold (from: val = best F1 on the val \
-                 split, given, or default 0.5); F1 and SHD are means over scenarios, P, R, AUROC and AUPRC over all \
-                 pairs; per-frame: every frame's pairs against interactions.csv, SHD per frame"
+                "edges: AUROC and AUPRC over all pairs need no threshold; a pair is called linked when its score is \
+                 above the threshold (from: val = best F1 on the val split, given, or default 0.5, see any warning \
+                 above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
+                 against interactions.csv, SHD per frame"
             )?;
         }
         for (rows, title) in [

@@ -216,16 +216,22 @@ class Progress:
             sys.stderr.flush()
 
 
-def write_predictions(path: "str | Path", edges: Dict[str, np.ndarray], trajectories: Dict[str, np.ndarray]) -> None:
+def write_predictions(
+    path: "str | Path",
+    edges: Dict[str, np.ndarray],
+    trajectories: Dict[str, np.ndarray],
+    dataset: "Optional[str | Path]" = None,
+) -> None:
     """Saves the predictions file (see :func:`causalcity.save_predictions`),
     its arrays in sorted order so that the same predictions give the same
-    bytes."""
+    bytes, with the record of ``dataset`` when given."""
     from .. import save_predictions
 
     save_predictions(
         path,
         edges={k: edges[k] for k in sorted(edges)},
         trajectories={k: trajectories[k] for k in sorted(trajectories)},
+        dataset=dataset,
     )
 
 
@@ -270,5 +276,5 @@ def run_method(
                     edges[folder] = predicted.edges[k]
                 if predicted.trajectories is not None:
                     trajectories[folder] = predicted.trajectories[k]
-    write_predictions(out, edges, trajectories)
+    write_predictions(out, edges, trajectories, dataset=root)
     return Path(out)
