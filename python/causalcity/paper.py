@@ -38,14 +38,18 @@ from .methods import make
 from .methods.common import run_method
 
 WORLDS = ("toy", "city")
-METHOD_ORDER = ("constant_velocity", "interaction", "nri", "granger", "pcmci", "frame0")
+# The table's order: the first frame only, the simple rule, classical,
+# neural, and the supervised upper bound; the predictors among them.
+METHOD_ORDER = ("frame0", "path", "granger", "pcmci", "constant_velocity", "interaction", "nri", "supervised")
 LABELS = {
+    "frame0": "frame-0 classifier (leak: the first frame only)",
+    "path": "path rule (simple: b drives where a drove)",
+    "granger": "Granger",
+    "pcmci": "PCMCI",
     "constant_velocity": "constant velocity",
     "interaction": "interaction net (no discovery; NS-DR's role)",
     "nri": "NRI",
-    "granger": "Granger",
-    "pcmci": "PCMCI",
-    "frame0": "frame-0 classifier (leak)",
+    "supervised": "supervised classifier (upper bound: trained on labels)",
 }
 # The paper's groups: number of cars at 50 % linked, share linked at 8 cars.
 BY_CARS = ("cars04_edges50", "cars08_edges50", "cars12_edges50")
@@ -87,6 +91,8 @@ def _method_options(name: str, setting: Setting, device: str, seed: int, quiet: 
         options = dict(quiet=quiet)
     elif name == "frame0":
         options = dict(seed=seed)
+    elif name == "supervised":
+        options = dict(seed=seed, quiet=quiet)
     return {**options, **setting.extra.get(name, {})}
 
 
@@ -197,7 +203,8 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     import matplotlib.pyplot as plt
 
     colours = {"nri": "#1f77b4", "granger": "#ff7f0e", "pcmci": "#2ca02c", "frame0": "#7f7f7f",
-               "constant_velocity": "#7f7f7f", "interaction": "#d62728"}
+               "constant_velocity": "#7f7f7f", "interaction": "#d62728", "path": "#9467bd",
+               "supervised": "#000000"}
     discovering = [m for m in METHOD_ORDER if any(r["method"] == m and r["metric"] == "f1" for r in rows)]
     fig, axes = plt.subplots(len(worlds), 2, figsize=(11, 3.6 * len(worlds)), squeeze=False)
     for wi, world in enumerate(worlds):

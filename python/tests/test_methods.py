@@ -136,5 +136,6 @@ def test_the_paper_pipeline_runs_end_to_end(tmp_path):
         with Image.open(out / figure) as image:
             assert image.size[0] > 800 and image.size[1] > 300
     table = (out / "results.md").read_text()
-    assert "| toy | NRI |" in table and "| city | frame-0 classifier (leak) |" in table
+    assert "| toy | NRI |" in table and "| city | frame-0 classifier (leak: the first frame only) |" in table
+    assert "| city | path rule (simple: b drives where a drove) |" in table and "| toy | supervised classifier" in table
     assert json.loads((out / "timings.json").read_text())

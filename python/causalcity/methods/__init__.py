@@ -13,6 +13,10 @@ method                  discovers   predicts      needs (extras)
 ``interaction``         no          yes           torch: NRI's decoder on the
                                                   complete graph (NS-DR's role)
 ``frame0``              yes         no            scikit-learn: the leak row
+``path``                yes         no            numpy: the simple rule
+                                                  (``baseline``'s following score)
+``supervised``          yes         no            scikit-learn: trained on train
+                                                  labels, the upper bound
 ======================  ==========  ============  =============================
 
 From the command line::
@@ -81,6 +85,18 @@ def _frame0(**options) -> Method:
     return Frame0(**options)
 
 
+def _path(**options) -> Method:
+    from .classical import PathFollowing
+
+    return PathFollowing(**options)
+
+
+def _supervised(**options) -> Method:
+    from .classical import Supervised
+
+    return Supervised(**options)
+
+
 METHODS: Dict[str, Callable[..., Method]] = {
     "constant_velocity": _constant_velocity,
     "granger": _granger,
@@ -88,6 +104,8 @@ METHODS: Dict[str, Callable[..., Method]] = {
     "nri": _nri,
     "interaction": _interaction,
     "frame0": _frame0,
+    "path": _path,
+    "supervised": _supervised,
 }
 """Every reference method by name; each call makes a fresh, untrained one."""
 

@@ -37,6 +37,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         options["quiet"] = args.quiet
     elif args.method == "frame0":
         options["seed"] = args.seed
+    elif args.method == "supervised":
+        options.update(seed=args.seed, quiet=args.quiet)
     try:
         # Made once up front, so that a bad option is refused before any reading.
         make(args.method, **options)

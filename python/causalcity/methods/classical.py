@@ -227,3 +227,102 @@ class Frame0(Method):
         edges = np.zeros((len(episodes), n, n))
         edges[:, off] = p.reshape(len(episodes), -1)
         return Predicted(edges=edges)
+
+
+class PathFollowing(Method):
+    """The simple rule (``causalcity baseline``'s following score as a
+    method): b follows a when b drives where a drove a moment before. The
+    pair (a, b) scores minus the mean, over the observed frames, of the
+    distance (metres) from b to the nearest point of a's path over the last
+    ``lag`` seconds; the lag is the one of :data:`LAGS_S` with the best
+    AUROC on train. Nothing else is learned: this is the row a new method
+    must beat before anything clever counts."""
+
+    name = "path"
+    discovers = True
+    LAGS_S = (2.0, 4.0, 8.0, 15.0, 30.0, 60.0)
+    """``causalcity baseline``'s lag grid (``LAG_GRID_S``), seconds."""
+
+    def __init__(self, lag_s: Optional[float] = None) -> None:
+        self.lag_s = lag_s
+        self.aurocs: dict = {}
+        """Train AUROC per lag tried, seconds."""
+
+    def _lags(self, episodes: Episodes, lags_s: Sequence[float]) -> list:
+        frames = observed(episodes)
+        return [max(1, min(frames - 1, int(round(s / episodes.frame_interval)))) for s in lags_s]
+
+    def _scores(self, episodes: Episodes, lags_s: Sequence[float]) -> np.ndarray:
+        """``[scenarios, lags, cars, cars]`` following distances (metres)."""
+        from .. import _native
+
+        xy = np.ascontiguousarray(episodes.metres[:, : observed(episodes), :, :2], dtype="<f8")
+        s, t, n, _ = xy.shape
+        if s == 0:
+            return np.zeros((0, len(lags_s), n, n))
+        return np.asarray(_native.following_scores(xy.tobytes(), (s, t, n), self._lags(episodes, lags_s)))
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        if self.lag_s is not None:
+            return
+        duration = observed(train) * train.frame_interval
+        covering = next((k for k, s in enumerate(self.LAGS_S) if s >= duration), len(self.LAGS_S) - 1)
+        grid = self.LAGS_S[: covering + 1]
+        scores = self._scores(train, grid)
+        self.aurocs = {s: auroc_of(-scores[:, k], train.graph) for k, s in enumerate(grid)}
+        self.lag_s = max(grid, key=lambda s: self.aurocs[s])
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        lag_s = self.lag_s if self.lag_s is not None else self.LAGS_S[1]
+        return Predicted(edges=-self._scores(episodes, [lag_s])[:, 0])
+
+
+class Supervised(Method):
+    """The supervised upper bound: :mod:`causalcity.reference`'s learned
+    whole-scene classifier (gradient boosting on each pair's features over
+    the observed frames: positions and headings at three frames, the
+    following score, distances over time, heading changes alike) trained on
+    the train split's labels. No discovery method sees labels; this row says
+    how much a method that did could find."""
+
+    name = "supervised"
+    discovers = True
+
+    def __init__(self, seed: int = 0, quiet: bool = False) -> None:
+        self.seed, self.quiet = seed, quiet
+        self.model = None
+
+    def _pairs(self, episodes: Episodes):
+        from ..reference import _trajectory_features
+
+        n = episodes.cars
+        off = ~np.eye(n, dtype=bool)
+        h = observed(episodes)
+        progress = Progress(f"{self.name} {episodes.group} {episodes.split}", len(episodes), self.quiet)
+        feats = []
+        for s in range(len(episodes)):
+            feats.append(_trajectory_features(episodes.metres[s, :h], episodes.frame_interval)[off])
+            progress.step()
+        x = np.concatenate(feats) if feats else np.zeros((0, 1))
+        y = np.concatenate([episodes.graph[s][off] for s in range(len(episodes))]).astype(bool) if feats else None
+        return x, y, off
+
+    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
+        try:
+            from sklearn.ensemble import HistGradientBoostingClassifier
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError('supervised needs scikit-learn: pip install "./python[methods]"') from e
+        x, y, _ = self._pairs(train)
+        if y.all() or not y.any():
+            self.model = float(y.mean())
+            return
+        self.model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=self.seed)
+        self.model.fit(x, y)
+
+    def predict(self, episodes: Episodes) -> Predicted:
+        x, _, off = self._pairs(episodes)
+        n = episodes.cars
+        p = np.full(len(x), self.model) if isinstance(self.model, float) else self.model.predict_proba(x)[:, 1]
+        edges = np.zeros((len(episodes), n, n))
+        edges[:, off] = p.reshape(len(episodes), -1)
+        return Predicted(edges=edges)
