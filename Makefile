@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -96,6 +96,13 @@ bench: build python-env
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check eclipse-sumo
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/sumo_side_by_side.py
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/ground_truth.py
+
+## The reference methods' own figures (prints, asserts nothing): NRI's
+## training throughput today against an earlier revision's, learning at a
+## large batch against a small one, and NRI on NRI's springs benchmark
+## (about 30 min on 2 cores; BENCH_DEVICE=cuda on a GPU). See the script.
+bench-methods: python-env
+	$(VENV)/bin/python benches/nri_methods.py
 
 ## Fuzz the spec parser and the predictions-file reader of `evaluate` (not
 ## part of CI), FUZZ_SECONDS each (default 600). Installs cargo-fuzz if

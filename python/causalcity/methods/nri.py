@@ -107,6 +107,12 @@ class RnnDecoder(nn.Module):
         super().__init__()
         self.send, self.recv, self.skip_first, self.hidden = send, recv, skip_first, hidden
         self.window = window
+        # One-hot [E, N] of each pair's sender and receiver: gathering and
+        # summing by matrix products, whose gradients are products too (an
+        # indexed gather's gradient is a scattered sum, slow on a CPU).
+        cars = int(max(send.max(), recv.max())) + 1 if len(send) else 0
+        self.register_buffer("send_matrix", F.one_hot(send, cars).float(), persistent=False)
+        self.register_buffer("recv_matrix", F.one_hot(recv, cars).float(), persistent=False)
         self.msg1 = nn.ModuleList([nn.Linear(2 * hidden + 4 * window + n_in, hidden) for _ in range(types)])
         self.msg2 = nn.ModuleList([nn.Linear(hidden, hidden) for _ in range(types)])
         self.hidden_r = nn.Linear(hidden, hidden, bias=False)
@@ -122,19 +128,51 @@ class RnnDecoder(nn.Module):
         self.register_buffer("vel_to_pos", torch.ones(2))
         self.register_buffer("vel_offset", torch.zeros(2))
 
-    def step(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor, past: torch.Tensor):
+    def _message_weights(self):
+        """The first message layer of every computed edge type, split by what
+        it reads, so that every term but a sum is computed once per car
+        instead of once per pair: (weights on [h, past] of the sender
+        [K*H, H + 4W], weights and bias on [h, x, x's position] of the
+        receiver [K*H, H + D + 2], [K*H]). Exact: the relative positions the
+        message reads are the sender's past positions minus the receiver's
+        present one, a difference that a linear layer splits."""
+        types = range(1 if self.skip_first else 0, len(self.msg1))
+        w = torch.stack([self.msg1[k].weight for k in types])  # [K, H, 2H + 4W + D]
+        bias = torch.stack([self.msg1[k].bias for k in types]).flatten()
+        hidden, window = self.hidden, self.window
+        seen = w[:, :, 2 * hidden : 2 * hidden + 4 * window].reshape(len(types), hidden, window, 4)
+        scale = self.vel_to_pos * window
+        seen = torch.cat([seen[..., :2] / scale, seen[..., 2:]], dim=-1)
+        correction = -seen[..., :2].sum(dim=2)  # [K, H, 2]: minus the receiver's position, every frame of W
+        send = torch.cat([w[:, :, :hidden], seen.flatten(2)], dim=-1).flatten(0, 1)
+        recv = torch.cat([w[:, :, hidden : 2 * hidden], w[:, :, 2 * hidden + 4 * window :], correction], dim=-1)
+        layer2 = (
+            torch.stack([self.msg2[k].weight for k in types]),
+            torch.stack([self.msg2[k].bias for k in types]),
+        )
+        return list(types), send, recv.flatten(0, 1), bias, layer2
+
+    def step(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor, past: torch.Tensor, weights=None):
         """One frame: x [B, N, D], h [B, N, H], edges [B, E, K], past [B, N, W, D]
-        (the last W inputs, newest first) -> (next x, next h)."""
-        # What the sender did in its last W frames, seen from the receiver:
-        # its positions relative to the receiver's now, and its velocities.
-        rel = (past[:, self.send, :, :2] - x[:, self.recv, None, :2]) / (self.vel_to_pos * self.window)
-        seen = torch.cat([rel, past[:, self.send, :, 2:]], dim=-1).flatten(2)
-        pre = torch.cat([h[:, self.send], h[:, self.recv], seen, x[:, self.recv]], dim=-1)
-        msg = torch.zeros(pre.shape[0], pre.shape[1], self.hidden, device=x.device)
-        for k in range(1 if self.skip_first else 0, len(self.msg1)):
-            m = torch.tanh(self.msg2[k](torch.tanh(self.msg1[k](pre))))
-            msg = msg + m * edges[:, :, k : k + 1]
-        agg = torch.zeros_like(h).index_add_(1, self.recv, msg) / len(self.msg1)
+        (the last W inputs, newest first) -> (next x, next h). Every edge type
+        at once; ``weights`` are :meth:`_message_weights` (made per call when
+        not given)."""
+        types, w_send, w_recv, bias, (w2, b2) = weights if weights is not None else self._message_weights()
+        batch, cars, _ = x.shape
+        k = len(types)
+        node_send = F.linear(torch.cat([h, past.flatten(2)], dim=-1), w_send)  # [B, N, K*H]
+        node_recv = F.linear(torch.cat([h, x, x[..., :2]], dim=-1), w_recv, bias)
+        pre = torch.tanh(self.send_matrix @ node_send + self.recv_matrix @ node_recv)  # [B, E, K*H]
+        if k == 1:
+            msg = torch.tanh(F.linear(pre, w2[0], b2[0])) * edges[:, :, types]
+        else:
+            m = torch.tanh(torch.einsum("bekh,kgh->bekg", pre.view(batch, -1, k, self.hidden), w2) + b2)
+            msg = (m * edges[:, :, types, None]).sum(dim=2)
+        return self._update(x, h, msg)
+
+    def _update(self, x: torch.Tensor, h: torch.Tensor, msg: torch.Tensor):
+        """The receiving cars' GRU update and prediction from the messages [B, E, H]."""
+        agg = (self.recv_matrix.T @ msg) / len(self.msg1)
         r = torch.sigmoid(self.input_r(x) + self.hidden_r(agg))
         i = torch.sigmoid(self.input_i(x) + self.hidden_i(agg))
         n = torch.tanh(self.input_n(x) + r * self.hidden_h(agg))
@@ -145,19 +183,35 @@ class RnnDecoder(nn.Module):
         position = x[..., :2] + velocity * self.vel_to_pos + self.vel_offset
         return torch.cat([position, velocity], dim=-1), h
 
-    def forward(self, seq: torch.Tensor, past: torch.Tensor, edges: torch.Tensor, truth_until: int):
+    def step_reference(self, x: torch.Tensor, h: torch.Tensor, edges: torch.Tensor, past: torch.Tensor):
+        """:meth:`step` as NRI writes it, one edge type after another, each
+        pair's message from its full input: kept as the reference the
+        batched step is tested against."""
+        # What the sender did in its last W frames, seen from the receiver:
+        # its positions relative to the receiver's now, and its velocities.
+        rel = (past[:, self.send, :, :2] - x[:, self.recv, None, :2]) / (self.vel_to_pos * self.window)
+        seen = torch.cat([rel, past[:, self.send, :, 2:]], dim=-1).flatten(2)
+        pre = torch.cat([h[:, self.send], h[:, self.recv], seen, x[:, self.recv]], dim=-1)
+        msg = torch.zeros(pre.shape[0], pre.shape[1], self.hidden, device=x.device)
+        for k in range(1 if self.skip_first else 0, len(self.msg1)):
+            m = torch.tanh(self.msg2[k](torch.tanh(self.msg1[k](pre))))
+            msg = msg + m * edges[:, :, k : k + 1]
+        return self._update(x, h, msg)
+
+    def forward(self, seq: torch.Tensor, past: torch.Tensor, edges: torch.Tensor, truth_until: int, reference: bool = False):
         """Predicts seq[:, 1:] from seq [B, L, N, D], given the W true frames
         before seq[:, 0] (past [B, N, W, D], newest first): the truth is fed
         at frames before ``truth_until``, its own prediction after."""
         batch, frames, cars, _ = seq.shape
         h = torch.zeros(batch, cars, self.hidden, device=seq.device)
+        weights = None if reference else self._message_weights()
         x = seq[:, 0]
         out = []
         for t in range(frames - 1):
             if t < truth_until:
                 x = seq[:, t]
             past = torch.cat([x[:, :, None], past[:, :, :-1]], dim=2)
-            x, h = self.step(x, h, edges, past)
+            x, h = self.step_reference(x, h, edges, past) if reference else self.step(x, h, edges, past, weights)
             out.append(x)
         return torch.stack(out, dim=1)
 
@@ -305,16 +359,19 @@ class Nri(Method):
             # every scenario `windows` times, each from a random frame
             order = np.concatenate([gen.permutation(len(train)) for _ in range(self.windows)])
             starts = gen.integers(low, high + 1, size=len(order))
-            total = 0.0
+            # The loss stays on the device: no host synchronisation per batch.
+            total = torch.zeros((), device=self.device)
+            order_t = torch.as_tensor(order, device=self.device)
+            starts_t = torch.as_tensor(starts, device=self.device)
             for start in range(0, len(order), self.batch_size):
-                batch = x_train[torch.as_tensor(order[start : start + self.batch_size])]
-                first = torch.as_tensor(starts[start : start + self.batch_size], device=self.device)
-                opt.zero_grad()
+                batch = x_train[order_t[start : start + self.batch_size]]
+                first = starts_t[start : start + self.batch_size]
+                opt.zero_grad(set_to_none=True)
                 loss = self._loss(batch, hist, steps, first, sample=True)
                 loss.backward()
                 opt.step()
-                total += float(loss.detach()) * len(batch)
-            train_loss = total / len(order)
+                total += loss.detach() * len(batch)
+            train_loss = float(total) / len(order)
             val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
             self.losses.append((epoch, train_loss, val_loss))
             # (the epochs without edges cannot be the one kept)

@@ -1,0 +1,73 @@
+"""Our NRI against NRI: the batched decoder computes what NRI's per-type,
+per-pair loop computes (outputs, loss and gradients), the springs simulation
+is NRI's, and on a small springs set our NRI finds the springs well above
+chance. The long runs (the paper's figure, epoch times) are benchmarks:
+``make bench-methods``."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch", reason='the reference methods need pip install "./python[methods]"')
+
+from causalcity.methods import make, springs  # noqa: E402
+from causalcity.methods.common import auroc_of  # noqa: E402
+from causalcity.methods.nri import RnnDecoder  # noqa: E402
+
+
+@pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
+def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
+    torch.manual_seed(types)
+    cars = 5
+    pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
+    send, recv = torch.tensor([p[0] for p in pairs]), torch.tensor([p[1] for p in pairs])
+    decoder = RnnDecoder(4, 16, types, skip_first, send, recv, window=6).double()
+    decoder.vel_to_pos = torch.tensor([0.7, 1.3], dtype=torch.float64)
+    decoder.vel_offset = torch.tensor([0.01, -0.02], dtype=torch.float64)
+    seq = torch.randn(3, 12, cars, 4, dtype=torch.float64)
+    past = torch.randn(3, cars, 6, 4, dtype=torch.float64)
+    edges = torch.softmax(torch.randn(3, len(pairs), types, dtype=torch.float64), -1)
+    losses, grads = [], []
+    for reference in (False, True):
+        decoder.zero_grad()
+        out = decoder(seq, past, edges, truth_until=4, reference=reference)
+        loss = ((out - seq[:, 1:]) ** 2).sum()
+        loss.backward()
+        losses.append(loss.item())
+        grads.append(torch.cat([p.grad.flatten() for p in decoder.parameters() if p.grad is not None]))
+    assert losses[0] == pytest.approx(losses[1], rel=1e-12)
+    assert torch.allclose(grads[0], grads[1], rtol=1e-9, atol=1e-12)
+    assert grads[0].abs().sum() > 0
+
+
+def test_springs_follow_nri_s_physics():
+    positions, velocities, edges = springs.simulate(40, particles=5, frames=49, seed=4)
+    assert positions.shape == velocities.shape == (40, 49, 5, 2) and edges.shape == (40, 5, 5)
+    assert np.array_equal(edges, edges.transpose(0, 2, 1)) and not edges[:, range(5), range(5)].any()
+    assert 0.4 < edges[:, ~np.eye(5, dtype=bool)].mean() < 0.6
+    assert np.abs(positions).max() <= springs.BOX
+    # Leapfrog with elastic walls conserves the energy the springs store and release.
+    e = springs.energy(positions, velocities, edges)
+    assert np.abs(e / e[:, :1] - 1).max() < 1e-3
+    potential = e - 0.5 * (velocities**2).sum(axis=(-1, -2))
+    assert potential.std(axis=1).mean() > 1e-3, "the springs do work"
+    # A spring pulls its ends together: joined particles stay nearer than free ones.
+    d = np.linalg.norm(positions[:, :, :, None] - positions[:, :, None, :], axis=-1)[:, 20:].mean(axis=1)
+    off = ~np.eye(5, dtype=bool)
+    assert d[:, off][edges[:, off] == 1].mean() < 0.95 * d[:, off][edges[:, off] == 0].mean()
+
+
+def test_nri_finds_the_springs_well_above_chance():
+    # About a minute on 2 CPU cores; the full figure is make bench-methods.
+    train = springs.episodes(300, frames=69, seed=1)
+    val = springs.episodes(50, frames=69, seed=2, split="val")
+    test = springs.episodes(100, frames=69, seed=3, split="test")
+    nri = make(
+        "nri", epochs=8, batch_size=64, lr=2e-3, device="cpu", quiet=True, history=49, steps=10, warm=10,
+        pair_every=1, window=10, warmup_epochs=2,
+    )  # fmt: skip
+    nri.fit(train, val)
+    scores = nri.predict(test).edges
+    # The encoder never sees a label; "spring" may come out as either edge type.
+    auroc = auroc_of(scores, test.graph)
+    assert max(auroc, 1 - auroc) > 0.75, auroc
+    assert springs.edge_accuracy(scores, test.graph) > 0.65
