@@ -167,3 +167,12 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
     redone = [p for p in predictions if p.stat().st_mtime_ns != stamps[p]]
     assert [p.relative_to(out).as_posix() for p in redone] == ["predictions/toy/frame0/cars08_edges50.npz"]
     assert (out / "results.csv").read_bytes() == table
+
+
+def test_granger_on_every_core_scores_as_on_one(toy):
+    from causalcity.methods.classical import Granger
+
+    train = load_split(toy, "cars06_edges50", "train")
+    one, many = Granger(lags=(4,), workers=1, quiet=True), Granger(lags=(4,), workers=2, quiet=True)
+    assert len(train) > 8  # enough scenarios for the process pool to be used
+    assert np.array_equal(one.predict(train).edges, many.predict(train).edges)
