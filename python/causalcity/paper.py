@@ -31,7 +31,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from . import InputError, Spec, evaluate, generate
 from .methods import make
@@ -122,10 +122,10 @@ SECONDS_PER_SCENARIO = {
 NEURAL = ("nri", "interaction")
 
 
-def _calibrate(setting: Setting, device: str, seed: int) -> float:
+def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
     """Training windows per second of NRI with this setting's batch on
     ``device``, 8 cars, 150 frames, measured on one short epoch of random
-    walks (a few seconds)."""
+    walks (a few seconds), and the device it ran on."""
     import numpy as np
 
     from .methods.common import Episodes
@@ -143,7 +143,7 @@ def _calibrate(setting: Setting, device: str, seed: int) -> float:
     nri = make("nri", **{**options, "epochs": 1, "warmup_epochs": 0})
     start = time.monotonic()
     nri.fit(walks, None)
-    return scenarios * nri.windows / max(time.monotonic() - start, 1e-6)
+    return scenarios * nri.windows / max(time.monotonic() - start, 1e-6), str(nri.device)
 
 
 def _projected_seconds(name: str, setting: Setting, cars: int, windows_per_s: float) -> float:
@@ -194,11 +194,11 @@ def run(
     groups = {world: list(loaded[world].groups) for world in worlds}
     cars = {g: int(g[len("cars") : g.index("_")]) for world in worlds for g in groups[world]}
     units = [(world, name, group) for world in worlds for name in methods for group in groups[world]]
-    rate = _calibrate(setting, device, seed) if any(name in NEURAL for name in methods) else 1.0
+    rate, on = _calibrate(setting, device, seed) if any(name in NEURAL for name in methods) else (1.0, device)
     projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rate) for u in units}
     say(
         f"{len(units)} units (world x method x group), projected {_clock(sum(projected.values()))} besides "
-        f"generating the data (NRI calibrated at {rate:.0f} training windows/s on {device}; the classical methods "
+        f"generating the data (NRI calibrated at {rate:.0f} training windows/s on {on}; the classical methods "
         "from 2-core CPU figures)"
     )
     rows: List[dict] = []
@@ -354,8 +354,10 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
             ax.set_ylim(0, 1.05)
             ax.set_title(f"{world}: edge discovery F1 by {'number of cars' if ci == 0 else 'share linked'}")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    # Three to a row: the labels say what each row of the table is, and a
+    # single row of them was wider than the figure.
+    fig.legend(handles, labels, loc="lower center", ncol=min(3, len(labels)), fontsize=8)
+    fig.tight_layout(rect=(0, 0.03 * ((len(labels) + 2) // 3 + 1), 1, 1))
     fig.savefig(out / "f1.png", dpi=110)
     plt.close(fig)
 
@@ -381,7 +383,8 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
         ax.set_xlabel("steps ahead (frames)")
         ax.set_ylabel("MSE, positions normalised by image size")
         ax.set_title(f"{world}: trajectory prediction, 8 cars, 50 % linked (test)")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "trajectory.png", dpi=110)
     plt.close(fig)
