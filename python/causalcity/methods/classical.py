@@ -193,50 +193,65 @@ class Pcmci(Method):
         return Predicted(edges=np.stack(out) if out else np.zeros((0, episodes.cars, episodes.cars)))
 
 
-class Frame0(Method):
-    """The learned first-frame classifier of :mod:`causalcity.reference`
-    (gradient boosting on where each car stands relative to each other at
-    frame 0): how much of a score the first frame alone explains."""
+class _PairClassifier(Method):
+    """A gradient-boosted classifier of ordered pairs (a, b), "a leads b",
+    trained on the train split's labels: subclasses say which features
+    each scenario's pairs get (:meth:`features`, ``[cars, cars, F]``)."""
 
-    name = "frame0"
     discovers = True
 
-    def __init__(self, seed: int = 0) -> None:
-        self.seed = seed
+    def __init__(self, seed: int = 0, quiet: bool = True) -> None:
+        self.seed, self.quiet = seed, quiet
         self.model = None
 
-    @staticmethod
-    def _pairs(episodes: Episodes):
-        from ..reference import _frame_features
+    def features(self, episodes: Episodes, s: int) -> np.ndarray:
+        raise NotImplementedError
 
+    def _pairs(self, episodes: Episodes):
         n = episodes.cars
         off = ~np.eye(n, dtype=bool)
-        feats = [_frame_features(episodes.metres[s, 0])[off] for s in range(len(episodes))]
+        progress = Progress(f"{self.name} {episodes.group} {episodes.split}", len(episodes), self.quiet)
+        feats = []
+        for s in range(len(episodes)):
+            feats.append(self.features(episodes, s)[off])
+            progress.step()
+        x = np.concatenate(feats) if feats else np.zeros((0, 1))
         labels = [episodes.graph[s][off] for s in range(len(episodes))]
-        return np.concatenate(feats), np.concatenate(labels).astype(bool), off
+        y = np.concatenate(labels).astype(bool) if labels else np.zeros(0, dtype=bool)
+        return x, y, off
 
     def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
         try:
             from sklearn.ensemble import HistGradientBoostingClassifier
         except ImportError as e:  # pragma: no cover - depends on the environment
-            raise ImportError('frame0 needs scikit-learn: pip install "./python[methods]"') from e
+            raise ImportError(f'{self.name} needs scikit-learn: pip install "./python[methods]"') from e
         x, y, _ = self._pairs(train)
-        self.model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=self.seed)
         if y.all() or not y.any():
-            self.model = float(y.mean())
-        else:
-            self.model.fit(x, y)
+            self.model = float(y.mean()) if len(y) else 0.0
+            return
+        self.model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=self.seed)
+        self.model.fit(x, y)
 
     def predict(self, episodes: Episodes) -> Predicted:
         x, _, off = self._pairs(episodes)
         n = episodes.cars
-        if isinstance(self.model, float):
-            p = np.full(len(x), self.model)
-        else:
-            p = self.model.predict_proba(x)[:, 1]
+        p = np.full(len(x), self.model) if isinstance(self.model, float) else self.model.predict_proba(x)[:, 1]
         edges = np.zeros((len(episodes), n, n))
         edges[:, off] = p.reshape(len(episodes), -1)
         return Predicted(edges=edges)
+
+
+class Frame0(_PairClassifier):
+    """The learned first-frame classifier of :mod:`causalcity.reference`
+    (gradient boosting on where each car stands relative to each other at
+    frame 0): how much of a score the first frame alone explains."""
+
+    name = "frame0"
+
+    def features(self, episodes: Episodes, s: int) -> np.ndarray:
+        from ..reference import _frame_features
+
+        return _frame_features(episodes.metres[s, 0])
 
 
 class PathFollowing(Method):
@@ -287,7 +302,7 @@ class PathFollowing(Method):
         return Predicted(edges=-self._scores(episodes, [lag_s])[:, 0])
 
 
-class Supervised(Method):
+class Supervised(_PairClassifier):
     """The supervised upper bound: :mod:`causalcity.reference`'s learned
     whole-scene classifier (gradient boosting on each pair's features over
     the observed frames: positions and headings at three frames, the
@@ -296,43 +311,11 @@ class Supervised(Method):
     how much a method that did could find."""
 
     name = "supervised"
-    discovers = True
 
     def __init__(self, seed: int = 0, quiet: bool = False) -> None:
-        self.seed, self.quiet = seed, quiet
-        self.model = None
+        super().__init__(seed, quiet)
 
-    def _pairs(self, episodes: Episodes):
+    def features(self, episodes: Episodes, s: int) -> np.ndarray:
         from ..reference import _trajectory_features
 
-        n = episodes.cars
-        off = ~np.eye(n, dtype=bool)
-        h = observed(episodes)
-        progress = Progress(f"{self.name} {episodes.group} {episodes.split}", len(episodes), self.quiet)
-        feats = []
-        for s in range(len(episodes)):
-            feats.append(_trajectory_features(episodes.metres[s, :h], episodes.frame_interval)[off])
-            progress.step()
-        x = np.concatenate(feats) if feats else np.zeros((0, 1))
-        y = np.concatenate([episodes.graph[s][off] for s in range(len(episodes))]).astype(bool) if feats else None
-        return x, y, off
-
-    def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
-        try:
-            from sklearn.ensemble import HistGradientBoostingClassifier
-        except ImportError as e:  # pragma: no cover - depends on the environment
-            raise ImportError('supervised needs scikit-learn: pip install "./python[methods]"') from e
-        x, y, _ = self._pairs(train)
-        if y.all() or not y.any():
-            self.model = float(y.mean())
-            return
-        self.model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=self.seed)
-        self.model.fit(x, y)
-
-    def predict(self, episodes: Episodes) -> Predicted:
-        x, _, off = self._pairs(episodes)
-        n = episodes.cars
-        p = np.full(len(x), self.model) if isinstance(self.model, float) else self.model.predict_proba(x)[:, 1]
-        edges = np.zeros((len(episodes), n, n))
-        edges[:, off] = p.reshape(len(episodes), -1)
-        return Predicted(edges=edges)
+        return _trajectory_features(episodes.metres[s, : observed(episodes)], episodes.frame_interval)
