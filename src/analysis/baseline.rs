@@ -405,6 +405,31 @@ mod tests {
     }
 
     #[test]
+    fn many_scenarios_at_once_score_each_pair_as_one_pair_alone() {
+        // Two scenarios of three cars over 30 frames, car-major per frame.
+        let (scenarios, frames, cars) = (2, 30, 3);
+        let at = |s: usize, t: usize, c: usize| [t as f64 * (1.0 + c as f64) + s as f64, (t * c) as f64 * 0.1];
+        let xy: Vec<[f64; 2]> =
+            (0..scenarios).flat_map(|s| (0..frames).flat_map(move |t| (0..cars).map(move |c| at(s, t, c)))).collect();
+        let lags = [2, 9];
+        let all = pair_following_scores(&xy, (scenarios, frames, cars), &lags);
+        assert_eq!(all.len(), scenarios * lags.len() * cars * cars);
+        let mut checked = 0;
+        for s in 0..scenarios {
+            let path = |c: usize| (0..frames).map(|t| at(s, t, c)).collect::<Vec<_>>();
+            for (a, b) in (0..cars).flat_map(|a| (0..cars).map(move |b| (a, b))) {
+                let alone = following_scores(&path(a), &path(b), &lags);
+                for (l, score) in alone.iter().enumerate() {
+                    let got = all[((s * lags.len() + l) * cars + a) * cars + b];
+                    assert_eq!(got, if a == b { 0.0 } else { *score }, "s {s} lag {l} ({a}, {b})");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, scenarios * lags.len() * cars * cars);
+    }
+
+    #[test]
     fn a_follower_on_its_leaders_path_scores_zero_and_the_reverse_does_not() {
         let leader: Vec<[f64; 2]> = (0..50).map(|t| [t as f64, 0.0]).collect();
         let follower: Vec<[f64; 2]> = (0..50).map(|t| [t as f64 - 5.0, 0.0]).collect();
