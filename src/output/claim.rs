@@ -544,10 +544,12 @@ impl OutputFile {
     /// Writes `bytes` (its folder created if missing) through a temporary
     /// file beside it and a rename.
     pub fn write(&self, bytes: &[u8]) -> Result<(), super::WriteError> {
-        if let Some(parent) = self.path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            fs::create_dir_all(parent).map_err(super::io_err(parent))?;
+        let partial = self.partial()?;
+        if let Err(e) = fs::write(&partial, bytes) {
+            let _ = fs::remove_file(&partial);
+            return Err(super::io_err(&partial)(e));
         }
-        super::write_atomically(&self.path, bytes)
+        self.commit(&partial)
     }
 
     /// The temporary path to stream a large file into before
