@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-original-nri fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -103,6 +103,12 @@ bench: build python-env
 ## (about 30 min on 2 cores; BENCH_DEVICE=cuda on a GPU). See the script.
 bench-methods: python-env
 	$(VENV)/bin/python benches/nri_methods.py
+
+## NRI's own public code against ours on the same springs and toy data
+## (prints, asserts nothing; about 30 min on 2 cores). Needs a checkout of
+## it: NRI_CHECKOUT=/path/to/NRI (git clone https://github.com/ethanfetaya/NRI).
+bench-original-nri: build python-env
+	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/original_nri.py
 
 ## Fuzz the spec parser and the predictions-file reader of `evaluate` (not
 ## part of CI), FUZZ_SECONDS each (default 600). Installs cargo-fuzz if
