@@ -98,6 +98,14 @@ pub fn rate_and_eta(done: u64, total: u64, seconds: f64) -> String {
     format!("{rate_text}, ETA {eta_text}")
 }
 
+/// Writes one line to stderr, as `eprintln!` does, but never panics: a
+/// stderr that cannot be written (a full disk, `ulimit -f`, a closed pipe)
+/// loses the line and the work goes on to its own error or success.
+pub fn note(line: impl std::fmt::Display) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -110,12 +118,4 @@ mod tests {
         assert_eq!(rate_and_eta(10, 100_000, 1.0), "10/s, ETA 2h46m");
         assert_eq!(rate_and_eta(30, 30, 3.0), "10/s, ETA 0 s");
     }
-}
-
-/// Writes one line to stderr, as `eprintln!` does, but never panics: a
-/// stderr that cannot be written (a full disk, `ulimit -f`, a closed pipe)
-/// loses the line and the work goes on to its own error or success.
-pub fn note(line: impl std::fmt::Display) {
-    use std::io::Write;
-    let _ = writeln!(std::io::stderr().lock(), "{line}");
 }
