@@ -1,15 +1,47 @@
-//! The city map: continuity, spawn points, and which actions each spawn lane allows.
+//! The city map: continuity, spawn points, and which actions each spawn lane
+//! allows, on the default city and on grids of other sizes.
 
-use causalcity::map::{Action, AdaptationKind, CityMap, LaneEnd, LanePolicy, LegKind, MapLayout, Route, Turn};
+use causalcity::map::{
+    Action, AdaptationKind, CityMap, LaneEnd, LanePolicy, LanePosition, LegKind, MapLayout, Route, Turn,
+};
 
 fn heading_diff(a: f64, b: f64) -> f64 {
     causalcity::map::curve::wrap_angle(a - b).abs()
 }
 
+/// A grid of `rows` east-west and `columns` north-south roads, 30 m apart
+/// around the origin, each running 20 m beyond its last crossing.
+fn grid(rows: usize, columns: usize) -> MapLayout {
+    let spacing = 30.0;
+    let centres = |n: usize| (0..n).map(move |k| (k as f64 - (n - 1) as f64 / 2.0) * spacing);
+    let ends = |n: usize| (n - 1) as f64 / 2.0 * spacing + 20.0;
+    MapLayout {
+        east_west_roads: centres(rows).zip('E'..).map(|(y, name)| (name, y)).collect(),
+        north_south_roads: centres(columns).zip('N'..).map(|(x, name)| (name, x)).collect(),
+        extent_x: ends(columns),
+        extent_y: ends(rows),
+        ..MapLayout::default()
+    }
+}
+
+/// The default city and grids of 1 x 1, 1 x 3, 3 x 2 and 4 x 4 junctions.
+fn every_map() -> Vec<(String, CityMap)> {
+    let mut maps = vec![("default".to_string(), CityMap::default())];
+    for (rows, columns) in [(1, 1), (1, 3), (3, 2), (4, 4)] {
+        maps.push((format!("{rows} x {columns} grid"), CityMap::new(grid(rows, columns))));
+    }
+    maps
+}
+
 #[test]
 fn every_connector_joins_its_lanes_continuously() {
-    let map = CityMap::default();
-    assert!(!map.connectors.is_empty());
+    for (label, map) in every_map() {
+        assert!(!map.connectors.is_empty(), "{label}");
+        connectors_join(&map);
+    }
+}
+
+fn connectors_join(map: &CityMap) {
     for c in &map.connectors {
         let from = &map.lanes[c.from].curve;
         let to = &map.lanes[c.to].curve;
@@ -29,16 +61,59 @@ fn every_connector_joins_its_lanes_continuously() {
 
 #[test]
 fn every_lane_has_a_way_on() {
-    let map = CityMap::default();
-    for (id, lane) in map.lanes.iter().enumerate() {
-        match lane.end {
-            LaneEnd::Loop(c) => assert_eq!(map.connectors[c].from, id),
-            LaneEnd::Intersection { .. } => {
-                assert!(map.exit(id, Turn::Straight).is_some(), "{} has no straight exit", lane.name)
+    for (label, map) in every_map() {
+        for (id, lane) in map.lanes.iter().enumerate() {
+            match lane.end {
+                LaneEnd::Loop(c) => assert_eq!(map.connectors[c].from, id),
+                LaneEnd::Intersection { .. } => {
+                    assert!(map.exit(id, Turn::Straight).is_some(), "{label}: {} has no straight exit", lane.name)
+                }
+            }
+            assert!(map.connectors.iter().any(|c| c.to == id), "{label}: nothing leads into {}", lane.name);
+        }
+    }
+}
+
+#[test]
+fn a_grid_of_any_size_has_every_junction_segment_and_turn_and_routes_drive_through_it() {
+    let mut spawns = 0;
+    for (rows, columns) in [(1, 1), (1, 3), (3, 2), (4, 4)] {
+        let map = CityMap::new(grid(rows, columns));
+        let label = format!("{rows} x {columns}");
+        assert_eq!(map.intersections.len(), rows * columns, "{label}");
+        // Each road has one segment more than the roads it crosses, 4 lanes each.
+        assert_eq!(map.lanes.len(), 4 * (rows * (columns + 1) + columns * (rows + 1)), "{label}");
+        for k in 0..map.intersections.len() {
+            let arriving = map
+                .lanes
+                .iter()
+                .filter(|l| matches!(l.end, LaneEnd::Intersection { intersection, .. } if intersection == k))
+                .count();
+            assert_eq!(arriving, 8, "{label}: junction {k} takes two lanes from each of four sides");
+        }
+        for (id, lane) in map.lanes.iter().enumerate() {
+            if let LaneEnd::Intersection { .. } = lane.end {
+                let turn = if lane.position == LanePosition::Outer { Turn::Right } else { Turn::Left };
+                let mut expected = vec![Turn::Straight, turn];
+                expected.sort_by_key(|t| *t != Turn::Left);
+                assert_eq!(map.allowed_turns(id), expected, "{label}: {}", lane.name);
             }
         }
-        assert!(map.connectors.iter().any(|c| c.to == id), "nothing leads into {}", lane.name);
+        // From every spawn point a route turning at every junction it meets
+        // plans, and its legs join up.
+        for spawn in map.spawn_points() {
+            let actions = [Action::Left, Action::Straight, Action::Right, Action::Straight, Action::Left];
+            let route = Route::plan(&map, spawn, 0.0, &actions, &[0.0; 5], 1000.0, &LanePolicy::Adapt)
+                .unwrap_or_else(|e| panic!("{label}: from {}: {e}", map.lanes[spawn].name));
+            assert!(route.length >= 1000.0);
+            for w in route.legs.windows(2) {
+                let end = w[0].curve.position(w[0].curve_start + w[0].length, 0.0);
+                assert!(end.distance(w[1].curve.position(w[1].curve_start, 0.0)) < 0.01, "{label}");
+            }
+            spawns += 1;
+        }
     }
+    assert_eq!(spawns, 16 + 40 + 68 + 160);
 }
 
 #[test]
@@ -243,7 +318,7 @@ fn impossible_actions_are_adapted_or_skipped_never_silently() {
 fn a_turn_lane_change_with_no_room_moves_to_the_lane_before() {
     // East-west roads 20 m apart: the middle segments of C and D are 8 m,
     // too short for a lane change before their stop lines.
-    let layout = MapLayout { east_west_roads: [('B', -10.0), ('A', 10.0)], ..MapLayout::default() };
+    let layout = MapLayout { east_west_roads: vec![('B', -10.0), ('A', 10.0)], ..MapLayout::default() };
     let map = CityMap::new(layout);
     let c1w = map.lane_by_name("C1w").unwrap();
     assert!(map.lanes[c1w].curve.length() < map.layout.lane_change_length + map.layout.stop_line_setback);

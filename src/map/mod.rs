@@ -1,7 +1,9 @@
-//! The city map shared by every world: four roads (A and B running east-west,
-//! C and D north-south) crossing at four four-way intersections around a
-//! central block. Each road is cut into segments 0, 1, 2 by the intersections
-//! and has four lanes: `w`, `x` travel towards +x (A, B) or +y (C, D), `y`,
+//! The city map shared by every world: a grid of roads running east-west and
+//! north-south, crossing at four-way intersections. The default is the
+//! original's city: four roads (A and B running east-west, C and D
+//! north-south) crossing at four intersections around a central block. Each
+//! road is cut into segments 0, 1, .. by the intersections it crosses (0, 1,
+//! 2 in the default) and has four lanes: `w`, `x` travel towards +x (A, B) or +y (C, D), `y`,
 //! `z` the other way; `w` and `z` are the outer (kerb-side) lanes, `x` and `y`
 //! the inner ones (right-hand traffic). Outer lanes may go straight or turn
 //! right, inner lanes straight or left. Roads continue off camera and loop
@@ -26,14 +28,17 @@ pub type LaneId = usize;
 /// Index of a connector in [`CityMap::connectors`].
 pub type ConnectorId = usize;
 
-/// Dimensions of the generated city.
+/// Dimensions of the generated city: a grid of `east_west_roads` x
+/// `north_south_roads` four-way intersections (2 x 2 by default).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapLayout {
     pub lane_width: f64,
-    /// East-west roads: name and y of the centre line, ascending y.
-    pub east_west_roads: [(char, f64); 2],
-    /// North-south roads: name and x of the centre line, ascending x.
-    pub north_south_roads: [(char, f64); 2],
+    /// East-west roads: name and y of the centre line, ascending y; at least
+    /// one.
+    pub east_west_roads: Vec<(char, f64)>,
+    /// North-south roads: name and x of the centre line, ascending x; at
+    /// least one.
+    pub north_south_roads: Vec<(char, f64)>,
     /// East-west roads run from -extent_x to +extent_x before looping back.
     pub extent_x: f64,
     /// North-south roads run from -extent_y to +extent_y before looping back.
@@ -58,8 +63,8 @@ impl Default for MapLayout {
     fn default() -> Self {
         MapLayout {
             lane_width: 3.0,
-            east_west_roads: [('B', -14.0), ('A', 14.0)],
-            north_south_roads: [('C', -14.0), ('D', 14.0)],
+            east_west_roads: vec![('B', -14.0), ('A', 14.0)],
+            north_south_roads: vec![('C', -14.0), ('D', 14.0)],
             extent_x: 36.0,
             extent_y: 36.0,
             // About three lengths of the default 2.2 m car: a lane change at
@@ -88,14 +93,29 @@ impl MapLayout {
         self.lane_change_length + self.stop_line_setback + APPROACH_MARGIN_M
     }
 
-    /// What the bird's-eye camera must show: the four intersection boxes and
-    /// the stop lines before them, as (min corner, max corner), metres.
+    /// What the bird's-eye camera must show: every intersection box and the
+    /// stop lines before them, as (min corner, max corner), metres.
     pub fn framed_area(&self) -> (DVec2, DVec2) {
         let reach = self.road_half_width() + self.stop_line_setback;
-        let xs = [self.north_south_roads[0].1, self.north_south_roads[1].1];
-        let ys = [self.east_west_roads[0].1, self.east_west_roads[1].1];
-        (DVec2::new(xs[0] - reach, ys[0] - reach), DVec2::new(xs[1] + reach, ys[1] + reach))
+        let (x0, x1) = span(&self.north_south_roads);
+        let (y0, y1) = span(&self.east_west_roads);
+        (DVec2::new(x0 - reach, y0 - reach), DVec2::new(x1 + reach, y1 + reach))
     }
+
+    /// Centre lines of the east-west roads (y, ascending).
+    pub fn east_west_centres(&self) -> Vec<f64> {
+        self.east_west_roads.iter().map(|r| r.1).collect()
+    }
+
+    /// Centre lines of the north-south roads (x, ascending).
+    pub fn north_south_centres(&self) -> Vec<f64> {
+        self.north_south_roads.iter().map(|r| r.1).collect()
+    }
+}
+
+/// Lowest and highest centre line of `roads` (ascending, at least one).
+fn span(roads: &[(char, f64)]) -> (f64, f64) {
+    (roads.first().map_or(0.0, |r| r.1), roads.last().map_or(0.0, |r| r.1))
 }
 
 /// Which lane of its direction a lane is.
@@ -217,24 +237,32 @@ impl CityMap {
                 intersections.push(Intersection { name: format!("{ew}{ns}"), centre: DVec2::new(x, y), half_size: hw });
             }
         }
-        let intersection_at = |ew: usize, ns: usize| ew * 2 + ns;
+        let columns = layout.north_south_roads.len();
+        let intersection_at = |ew: usize, ns: usize| ew * columns + ns;
 
         let mut lanes = Vec::new();
         // (road name, origin, axis direction, crossing coordinates, extent, is east-west, road index)
         let mut roads = Vec::new();
         for (i, &(name, y)) in layout.east_west_roads.iter().enumerate() {
-            let crossings = [layout.north_south_roads[0].1, layout.north_south_roads[1].1];
+            let crossings = layout.north_south_centres();
             roads.push((name, DVec2::new(0.0, y), DVec2::X, crossings, layout.extent_x, true, i));
         }
         for (j, &(name, x)) in layout.north_south_roads.iter().enumerate() {
-            let crossings = [layout.east_west_roads[0].1, layout.east_west_roads[1].1];
+            let crossings = layout.east_west_centres();
             roads.push((name, DVec2::new(x, 0.0), DVec2::Y, crossings, layout.extent_y, false, j));
         }
         let mut pending_loops = Vec::new();
-        for &(name, origin, axis, crossings, extent, east_west, road_index) in &roads {
+        for (name, origin, axis, crossings, extent, east_west, road_index) in roads {
             let right = DVec2::new(axis.y, -axis.x);
-            let bounds =
-                [(-extent, crossings[0] - hw), (crossings[0] + hw, crossings[1] - hw), (crossings[1] + hw, extent)];
+            // Segment k runs from crossing k - 1 (or the road's start) to
+            // crossing k (or its end).
+            let mut bounds = Vec::with_capacity(crossings.len() + 1);
+            let mut from = -extent;
+            for &c in &crossings {
+                bounds.push((from, c - hw));
+                from = c + hw;
+            }
+            bounds.push((from, extent));
             for (segment, &(a0, a1)) in bounds.iter().enumerate() {
                 for letter in LANE_LETTERS {
                     let (offset, forward, position) = match letter {
@@ -246,14 +274,10 @@ impl CityMap {
                     let p0 = origin + axis * a0 + right * offset;
                     let p1 = origin + axis * a1 + right * offset;
                     let (start, end) = if forward { (p0, p1) } else { (p1, p0) };
-                    // Index of the crossing this lane runs into, if any.
-                    let crossing = match (forward, segment) {
-                        (true, 0) => Some(0),
-                        (true, 1) => Some(1),
-                        (false, 1) => Some(0),
-                        (false, 2) => Some(1),
-                        _ => None,
-                    };
+                    // Index of the crossing this lane runs into, if any: the
+                    // one after its segment going forward, before it going back.
+                    let crossing =
+                        if forward { (segment < crossings.len()).then_some(segment) } else { segment.checked_sub(1) };
                     let end_kind = match crossing {
                         Some(k) => {
                             let intersection =
@@ -343,7 +367,8 @@ impl CityMap {
         self.lane_by_name.get(name).copied()
     }
 
-    /// All 48 spawn points (every lane of every road segment), in name order.
+    /// Every spawn point (every lane of every road segment: the original's
+    /// 48 in the default city), in name order.
     pub fn spawn_points(&self) -> Vec<LaneId> {
         let mut ids: Vec<LaneId> = (0..self.lanes.len()).collect();
         ids.sort_by(|a, b| self.lanes[*a].name.cmp(&self.lanes[*b].name));

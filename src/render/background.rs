@@ -76,24 +76,27 @@ pub fn blocks(map: &CityMap, lo: DVec2, hi: DVec2) -> Vec<Block> {
     let layout = &map.layout;
     let hw = layout.road_half_width();
     let far = 1000.0;
-    let xs = [-far, layout.north_south_roads[0].1, layout.north_south_roads[1].1, far];
-    let ys = [-far, layout.east_west_roads[0].1, layout.east_west_roads[1].1, far];
+    // Block edges: beyond the outermost roads, then between each pair.
+    let edges = |centres: Vec<f64>| [vec![-far], centres, vec![far]].concat();
+    let (xs, ys) = (edges(layout.north_south_centres()), edges(layout.east_west_centres()));
+    let (columns, rows) = (xs.len() - 1, ys.len() - 1);
     let mut found = Vec::new();
-    for i in 0..3 {
-        for j in 0..3 {
+    for i in 0..columns {
+        for j in 0..rows {
             let x0 = (xs[i] + if i == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(lo.x);
-            let x1 = (xs[i + 1] - if i == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.x);
+            let x1 = (xs[i + 1] - if i == columns - 1 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.x);
             let y0 = (ys[j] + if j == 0 { 0.0 } else { hw + layout.sidewalk_width }).max(lo.y);
-            let y1 = (ys[j + 1] - if j == 2 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.y);
+            let y1 = (ys[j + 1] - if j == rows - 1 { 0.0 } else { hw + layout.sidewalk_width }).min(hi.y);
             if x1 <= x0 || y1 <= y0 {
                 continue;
             }
-            if i == 1 && j == 1 {
+            // The park: the middle block (the central one of the default city).
+            if i == columns / 2 && j == rows / 2 {
                 found.push(Block::Park([x0, y0, x1, y1]));
                 continue;
             }
             let gap = 1.5;
-            let roof = |k: usize| ROOFS[(i * 3 + j + k) % ROOFS.len()];
+            let roof = |k: usize| ROOFS[(i * rows + j + k) % ROOFS.len()];
             let halves = if x1 - x0 >= y1 - y0 {
                 let mid = (x0 + x1) / 2.0;
                 [[x0, y0, mid - gap / 2.0, y1], [mid + gap / 2.0, y0, x1, y1]]

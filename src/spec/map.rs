@@ -51,14 +51,8 @@ impl MapSpec {
         let d = MapLayout::default();
         MapLayout {
             lane_width: self.lane_width,
-            east_west_roads: [
-                (d.east_west_roads[0].0, self.east_west_roads[0]),
-                (d.east_west_roads[1].0, self.east_west_roads[1]),
-            ],
-            north_south_roads: [
-                (d.north_south_roads[0].0, self.north_south_roads[0]),
-                (d.north_south_roads[1].0, self.north_south_roads[1]),
-            ],
+            east_west_roads: d.east_west_roads.iter().zip(self.east_west_roads).map(|(r, y)| (r.0, y)).collect(),
+            north_south_roads: d.north_south_roads.iter().zip(self.north_south_roads).map(|(r, x)| (r.0, x)).collect(),
             extent_x: self.extent_x,
             extent_y: self.extent_y,
             lane_change_length: self.lane_change_m,

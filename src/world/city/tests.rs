@@ -263,7 +263,7 @@ fn a_merge_waits_until_the_car_beside_has_gone() {
 /// lane changes.
 fn wide_blocks() -> CityMap {
     CityMap::new(crate::map::MapLayout {
-        north_south_roads: [('C', -24.0), ('D', 24.0)],
+        north_south_roads: vec![('C', -24.0), ('D', 24.0)],
         extent_x: 52.0,
         lane_change_length: 8.0,
         ..Default::default()
