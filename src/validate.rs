@@ -401,8 +401,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     }
     if city {
         if let Some(data) = read(LIGHTS_CSV, &mut problems) {
-            check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * 32, &mut problems, |row, i| {
-                (row.get(0)?.parse::<usize>().ok()? == i / 32).then_some(())
+            // Every light of every intersection, every frame.
+            let layout = spec.map.layout();
+            let lights = 8 * layout.east_west_roads.len() * layout.north_south_roads.len();
+            check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * lights, &mut problems, |row, i| {
+                (row.get(0)?.parse::<usize>().ok()? == i / lights).then_some(())
             });
         }
         if let Some(data) = read(EVENTS_CSV, &mut problems) {

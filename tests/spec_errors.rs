@@ -277,6 +277,39 @@ fn a_map_too_small_for_a_lane_change_before_the_stop_line_is_named() {
 }
 
 #[test]
+fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
+    let grid = |g: serde_json::Value| with(|v| v["map"] = serde_json::json!({ "grid": g }));
+    rejected(
+        "grid-rows-0",
+        &grid(serde_json::json!({"rows": 0, "columns": 2})),
+        &["map.grid.rows", "0 is not allowed", "1 to 8"],
+    );
+    rejected(
+        "grid-columns-9",
+        &grid(serde_json::json!({"rows": 2, "columns": 9})),
+        &["map.grid.columns", "9", "1 to 8"],
+    );
+    rejected("grid-missing", &grid(serde_json::json!({"rows": 2})), &["map.grid", "columns"]);
+    rejected("grid-unknown", &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 3})), &["lanes", "block_m"]);
+    // 20 m blocks leave 8 m between the 12 m wide roads: too short for a lane change.
+    rejected(
+        "grid-block",
+        &grid(serde_json::json!({"rows": 2, "columns": 3, "block_m": 20})),
+        &["map.grid.block_m", "leaves 8.00 m", "between neighbouring roads", "at least 13.6 m"],
+    );
+    rejected(
+        "grid-outer",
+        &grid(serde_json::json!({"rows": 1, "columns": 1, "outer_m": 10})),
+        &["map.grid.outer_m", "leaves 4.00 m", "beyond the outermost roads"],
+    );
+    rejected(
+        "grid-and-roads",
+        &with(|v| v["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3}, "east_west_roads": [-20, 20]})),
+        &["map.grid", "places its own roads", "map.east_west_roads"],
+    );
+}
+
+#[test]
 fn city_starts_are_checked_against_the_driver() {
     rejected(
         "gap-below-min-gap",

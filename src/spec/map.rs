@@ -25,6 +25,44 @@ pub struct MapSpec {
     /// view from there.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub camera_altitude_m: Option<f64>,
+    /// A grid town instead of the four roads: `east_west_roads`,
+    /// `north_south_roads` and the extents then come from it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grid: Option<GridSpec>,
+}
+
+/// A town of `rows` east-west roads crossing `columns` north-south ones,
+/// `block_m` apart (centre line to centre line), centred on the origin;
+/// every road runs `outer_m` beyond its outermost crossing before it turns
+/// back. Roads are named as in the default city, which is the 2 x 2 case:
+/// east-west roads `A`, `B`, .. from north to south, then north-south roads
+/// from west to east with the letters that follow.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    /// East-west roads, 1 to [`MAX_GRID_ROADS`].
+    pub rows: usize,
+    /// North-south roads, 1 to [`MAX_GRID_ROADS`].
+    pub columns: usize,
+    /// Distance between neighbouring parallel roads' centre lines, metres.
+    #[serde(default = "default_block_m")]
+    pub block_m: f64,
+    /// How far roads run beyond their outermost crossing, metres.
+    #[serde(default = "default_outer_m")]
+    pub outer_m: f64,
+}
+
+/// Most roads a grid has each way (8 x 8 junctions).
+pub const MAX_GRID_ROADS: usize = 8;
+
+/// The default city's block: roads 28 m apart.
+fn default_block_m() -> f64 {
+    28.0
+}
+
+/// The default city's roads run 22 m beyond their outermost crossing.
+fn default_outer_m() -> f64 {
+    22.0
 }
 
 impl Default for MapSpec {
@@ -38,6 +76,7 @@ impl Default for MapSpec {
             extent_y: l.extent_y,
             lane_change_m: l.lane_change_length,
             camera_altitude_m: None,
+            grid: None,
         }
     }
 }
@@ -49,6 +88,24 @@ impl MapSpec {
     /// The layout the map is built from.
     pub fn layout(&self) -> MapLayout {
         let d = MapLayout::default();
+        if let Some(grid) = self.grid {
+            let centres = |n: usize| (0..n).map(move |k| (k as f64 - n.saturating_sub(1) as f64 / 2.0) * grid.block_m);
+            let reach = |n: usize| n.saturating_sub(1) as f64 / 2.0 * grid.block_m + grid.outer_m;
+            // A, B, .. from north to south (ascending y: reversed), then the
+            // north-south roads west to east.
+            let letter = |k: usize| (b'A' + k as u8) as char;
+            let east_west = centres(grid.rows).enumerate().map(|(k, y)| (letter(grid.rows - 1 - k), y)).collect();
+            let north_south = centres(grid.columns).enumerate().map(|(k, x)| (letter(grid.rows + k), x)).collect();
+            return MapLayout {
+                lane_width: self.lane_width,
+                east_west_roads: east_west,
+                north_south_roads: north_south,
+                extent_x: reach(grid.columns),
+                extent_y: reach(grid.rows),
+                lane_change_length: self.lane_change_m,
+                ..d
+            };
+        }
         MapLayout {
             lane_width: self.lane_width,
             east_west_roads: d.east_west_roads.iter().zip(self.east_west_roads).map(|(r, y)| (r.0, y)).collect(),
@@ -66,6 +123,9 @@ impl MapSpec {
     pub fn validate(&self) -> Result<(), SpecError> {
         positive("map.lane_width", self.lane_width, 10.0, "metres")?;
         positive("map.lane_change_m", self.lane_change_m, 200.0, "metres")?;
+        if let Some(grid) = self.grid {
+            return self.validate_grid(grid);
+        }
         let layout = self.layout();
         let hw = layout.road_half_width();
         let need = layout.min_approach_length();
@@ -105,6 +165,59 @@ impl MapSpec {
         }
         if let Some(altitude) = self.camera_altitude_m {
             positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
+        }
+        Ok(())
+    }
+
+    /// Checks a grid town: its size, and that every lane ending at an
+    /// intersection is long enough to change lanes before it.
+    fn validate_grid(&self, grid: GridSpec) -> Result<(), SpecError> {
+        let default = MapSpec::default();
+        if self.east_west_roads != default.east_west_roads
+            || self.north_south_roads != default.north_south_roads
+            || self.extent_x != default.extent_x
+            || self.extent_y != default.extent_y
+        {
+            return Err(SpecError::new(
+                "map.grid",
+                "a grid places its own roads: leave out map.east_west_roads, map.north_south_roads, map.extent_x and map.extent_y (use grid.block_m and grid.outer_m)",
+            ));
+        }
+        for (field, roads) in [("map.grid.rows", grid.rows), ("map.grid.columns", grid.columns)] {
+            if !(1..=MAX_GRID_ROADS).contains(&roads) {
+                return Err(SpecError::new(
+                    field,
+                    format!("{roads} is not allowed: give a whole number of roads from 1 to {MAX_GRID_ROADS}"),
+                ));
+            }
+        }
+        positive("map.grid.block_m", grid.block_m, MAX_MAP_EXTENT / MAX_GRID_ROADS as f64, "metres")?;
+        positive("map.grid.outer_m", grid.outer_m, MAX_MAP_EXTENT, "metres")?;
+        let layout = self.layout();
+        let hw = layout.road_half_width();
+        let need = layout.min_approach_length();
+        let lanes = [
+            (
+                "map.grid.block_m",
+                grid.block_m - 2.0 * hw,
+                "between neighbouring roads",
+                grid.rows.max(grid.columns) > 1,
+            ),
+            ("map.grid.outer_m", grid.outer_m - hw, "beyond the outermost roads", true),
+        ];
+        for (field, length, what, applies) in lanes {
+            if applies && length < need - 1e-9 {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "leaves {length:.2} m of road {what}: every lane that ends at an intersection must be at least {need:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
+                        layout.lane_change_length,
+                        layout.stop_line_setback,
+                        crate::map::APPROACH_MARGIN_M,
+                        self.lane_width
+                    ),
+                ));
+            }
         }
         Ok(())
     }

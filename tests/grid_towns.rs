@@ -1,0 +1,88 @@
+//! Grid towns (`map.grid`): a spec asks for rows x columns junctions, and
+//! the city world drives, renders, logs its lights and validates on it.
+
+mod common;
+use common::*;
+use std::collections::BTreeSet;
+
+/// Whether most of the 7 x 7 pixels around (px, py) are road surface (the
+/// renderer's asphalt, [66, 68, 72], give or take a tint).
+fn is_road(image: &image::RgbImage, px: f64, py: f64) -> bool {
+    let (cx, cy) = (px.round() as i64, py.round() as i64);
+    let mut road = 0;
+    for dx in -3..=3 {
+        for dy in -3..=3 {
+            let p = image.get_pixel((cx + dx) as u32, (cy + dy) as u32);
+            road += p.0.iter().zip([66i32, 68, 72]).all(|(&c, a)| (c as i32 - a).abs() <= 8) as u32;
+        }
+    }
+    road > 25
+}
+
+fn spec_with_map(name: &str, map: serde_json::Value) -> String {
+    let mut spec: serde_json::Value =
+        serde_json::from_str(&city_spec(name, &[(8, 0.5)], (2, 1, 1), 40, r#"{"confounders": {}}"#)).unwrap();
+    spec["map"] = map;
+    spec.to_string()
+}
+
+#[test]
+fn a_three_by_three_grid_town_generates_with_images_and_effects_and_validates() {
+    let dir = fresh_dir("grid-town-3x3");
+    let grid = write_spec(&dir, &spec_with_map("grid", serde_json::json!({"grid": {"rows": 3, "columns": 3}})));
+    let out = dir.join("grid");
+    gen_ok(&grid, &out, &[]);
+    let validated = run(&["validate", out.to_str().unwrap()]);
+    assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stderr));
+
+    let scenarios = scenario_dirs(&out);
+    assert_eq!(scenarios.len(), 4);
+    let mut spawn_roads = BTreeSet::new();
+    for scenario in &scenarios {
+        // Every light of all nine junctions, every frame.
+        let mut lights = csv::Reader::from_path(scenario.join("lights.csv")).unwrap();
+        let rows: Vec<csv::StringRecord> = lights.records().map(|r| r.unwrap()).collect();
+        assert_eq!(rows.len(), 40 * 9 * 8, "{}", scenario.display());
+        let junctions: BTreeSet<&str> = rows.iter().map(|r| r.get(2).unwrap()).collect();
+        let expected = ["AD", "AE", "AF", "BD", "BE", "BF", "CD", "CE", "CF"];
+        assert_eq!(junctions.into_iter().collect::<Vec<_>>(), expected, "{}", scenario.display());
+        let json = read_json(&scenario.join("scenario.json"));
+        for car in json["cars"].as_array().unwrap() {
+            spawn_roads.insert(car["spawn"].as_str().unwrap().chars().next().unwrap());
+        }
+        // effects.csv holds the interventional truth here too.
+        assert!(std::fs::metadata(scenario.join("effects.csv")).unwrap().len() > 0);
+    }
+    // Cars start on the new roads too, not only on the default city's A-D.
+    assert!(spawn_roads.iter().any(|&r| r > 'D'), "spawn roads {spawn_roads:?}");
+
+    // The bird's-eye camera frames the whole town: every junction's centre
+    // is in view and drawn as road (in the default city, (+-28, +-28) m lie
+    // off its roads).
+    let json = read_json(&scenarios[0].join("scenario.json"));
+    let camera = &json["camera"];
+    let ppm = camera["pixels_per_metre"].as_f64().unwrap();
+    let image = image::open(scenarios[0].join("rgb/0000.png")).unwrap().to_rgb8();
+    let mut seen = 0;
+    for x in [-28.0, 0.0, 28.0] {
+        for y in [-28.0, 0.0, 28.0] {
+            let px = (image.width() as f64 - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm;
+            let py = (image.height() as f64 - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm;
+            assert!(px > 3.0 && py > 3.0 && px < image.width() as f64 - 4.0 && py < image.height() as f64 - 4.0);
+            assert!(is_road(&image, px, py), "junction at ({x}, {y}) m, pixel ({px:.0}, {py:.0}), is not road");
+            seen += 1;
+        }
+    }
+    assert_eq!(seen, 9);
+    assert!(camera["altitude_m"].as_f64().unwrap() > 40.0, "the camera rose to frame the bigger town");
+    // The same check tells towns apart: in the default city (28, 0) m is a block, not a junction.
+    let default = write_spec(&dir, &spec_with_map("default", serde_json::json!({})));
+    let default_out = dir.join("default");
+    gen_ok(&default, &default_out, &["--limit", "1"]);
+    let first = &scenario_dirs(&default_out)[0];
+    let ppm = read_json(&first.join("scenario.json"))["camera"]["pixels_per_metre"].as_f64().unwrap();
+    let city = image::open(first.join("rgb/0000.png")).unwrap().to_rgb8();
+    let centre = ((city.width() as f64 - 1.0) / 2.0, (city.height() as f64 - 1.0) / 2.0);
+    assert!(is_road(&city, centre.0 + 14.0 * ppm, centre.1 - 14.0 * ppm), "the default city's junction AD");
+    assert!(!is_road(&city, centre.0 + 28.0 * ppm, centre.1), "(28, 0) m in the default city");
+}
