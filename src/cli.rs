@@ -13,6 +13,7 @@ use causalcity::error::Error;
 use causalcity::export::nri::{export_nri, NriLayout, NriOptions, Velocity};
 use causalcity::export::nsdr::export_nsdr;
 use causalcity::export::vcdn::export_vcdn;
+use causalcity::map_view::map_view;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
@@ -51,6 +52,9 @@ pub enum Command {
     Stats(StatsArgs),
     /// Dwell-time heat map of all cars over the camera view (PNG with a colour bar).
     Heatmap(HeatmapArgs),
+    /// A spec's road network: its junctions and lane ids (the spawn points
+    /// scenario files name) and, with --out, a picture with every lane's id.
+    Map(MapArgs),
     /// Turn a dataset into the inputs of other projects' loaders.
     #[command(subcommand)]
     Export(ExportCommand),
@@ -279,6 +283,22 @@ pub struct StatsArgs {
     /// (about 110).
     #[arg(long)]
     pub wide: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct MapArgs {
+    /// Dataset spec (JSON), e.g. configs/city.json.
+    #[arg(long, value_name = "FILE")]
+    pub spec: PathBuf,
+
+    /// Also draw the bird's-eye view at the spec's image size, with every
+    /// lane's id and junction's name, to this PNG.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+
+    /// Print the junctions and lanes as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -789,6 +809,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             }
             report(&stats, args.json)
         }
+        Command::Map(args) => report(&map_view(&args.spec, args.out.as_deref())?, args.json),
         Command::Heatmap(args) => {
             let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
             report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)

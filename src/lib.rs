@@ -18,6 +18,7 @@ pub mod export;
 pub mod geometry;
 pub mod json;
 pub mod map;
+pub mod map_view;
 pub mod orchestrate;
 pub mod output;
 pub mod plan;

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 /// Top-level modules by layer: a module may use its own layer and lower ones.
-const LAYERS: [(&str, u32); 19] = [
+const LAYERS: [(&str, u32); 20] = [
     ("error", 0),
     ("timing", 0),
     ("progress", 0),
@@ -23,6 +23,7 @@ const LAYERS: [(&str, u32); 19] = [
     ("analysis", 7),
     ("export", 7),
     ("preview", 7),
+    ("map_view", 7),
     ("orchestrate", 8),
     ("cli", 9),
 ];

@@ -86,3 +86,48 @@ fn a_three_by_three_grid_town_generates_with_images_and_effects_and_validates() 
     assert!(is_road(&city, centre.0 + 14.0 * ppm, centre.1 - 14.0 * ppm), "the default city's junction AD");
     assert!(!is_road(&city, centre.0 + 28.0 * ppm, centre.1), "(28, 0) m in the default city");
 }
+
+#[test]
+fn causalcity_map_lists_every_lane_id_and_draws_them() {
+    let dir = fresh_dir("grid-town-map");
+    let spec = write_spec(&dir, &spec_with_map("grid", serde_json::json!({"grid": {"rows": 3, "columns": 3}})));
+    let picture = dir.join("map.png");
+    let output = run(&["map", "--spec", spec.to_str().unwrap(), "--out", picture.to_str().unwrap(), "--json"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let listed: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(listed["junctions"].as_array().unwrap().len(), 9);
+    let lanes = listed["lanes"].as_array().unwrap();
+    // 6 roads of 4 segments of 4 lanes; names unique, as scenario files use them.
+    assert_eq!(lanes.len(), 96);
+    let names: BTreeSet<&str> = lanes.iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(names.len(), 96);
+    assert!(names.contains("A0w") && names.contains("F3z"), "{names:?}");
+    let a1w = lanes.iter().find(|l| l["name"] == "A1w").unwrap();
+    assert_eq!(a1w["ends_at"], "AE from W");
+    assert_eq!(a1w["turns"], serde_json::json!(["straight", "right"]));
+
+    // The picture: the spec's image size, with yellow lane labels over the roads.
+    let image = image::open(&picture).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (1024, 640));
+    let labels = image.pixels().filter(|p| p.0 == [250, 235, 120]).count();
+    assert!(labels > 96 * 20, "label boxes cover {labels} pixels");
+
+    // Bad input: exit 2, nothing written. (A spec named .png, so that only
+    // the write rule stands between the picture and its own input.)
+    let png_spec = dir.join("spec-named.png");
+    std::fs::copy(&spec, &png_spec).unwrap();
+    let (spec, png_spec) = (spec.to_str().unwrap(), png_spec.to_str().unwrap());
+    for (case, args, needle) in [
+        ("not a png", vec!["map", "--spec", spec, "--out", "x.gif"], "ending in .png"),
+        ("onto its spec", vec!["map", "--spec", png_spec, "--out", png_spec], "the spec it draws"),
+        ("no such spec", vec!["map", "--spec", "/nonexistent/spec.json"], "/nonexistent/spec.json"),
+    ] {
+        let before = std::fs::read(png_spec).unwrap();
+        let output = run(&args);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
+        assert!(stderr.contains(needle), "{case}: {stderr}");
+        assert_eq!(std::fs::read(png_spec).unwrap(), before, "{case}: the spec is untouched");
+    }
+    assert!(!std::path::Path::new("x.gif").exists());
+}

@@ -1,0 +1,129 @@
+//! `causalcity map`: a spec's road network, as the list of lane ids that
+//! scenario files name (spawn points) and, with `--out`, a picture of the
+//! bird's-eye view with every lane's id on it.
+
+use crate::error::Error;
+use crate::map::{CityMap, LaneEnd};
+use crate::plan::expand::Expansion;
+use crate::spec::DatasetSpec;
+use crate::output::claim::claim_file;
+use crate::render::background::draw_background;
+use crate::render::text::{draw_label, label_size, Canvas};
+use serde::Serialize;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// One lane of the network.
+#[derive(Debug, Clone, Serialize)]
+pub struct LaneRow {
+    /// The id scenario files use (`Spawn`), e.g. `A0w`.
+    pub name: String,
+    /// Compass direction of travel: N, E, S or W.
+    pub heading: char,
+    pub length_m: f64,
+    /// Where it ends: a junction's name and the side it arrives from
+    /// (`AC from W`), or `loop` (the U-turn at the road's end).
+    pub ends_at: String,
+    /// Turns allowed at its end (empty before a loop).
+    pub turns: Vec<String>,
+}
+
+/// What `causalcity map` found and wrote.
+#[derive(Debug, Clone, Serialize)]
+pub struct MapSummary {
+    pub junctions: Vec<String>,
+    pub lanes: Vec<LaneRow>,
+    /// The picture written, if `--out` was given.
+    pub picture: Option<PathBuf>,
+}
+
+impl fmt::Display for MapSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{} junctions: {}", self.junctions.len(), self.junctions.join(" "))?;
+        writeln!(f, "{} lanes (spawn points):", self.lanes.len())?;
+        writeln!(f, "{:<6} {:>7} {:>8}  {:<12} turns", "lane", "heading", "length m", "ends at")?;
+        for lane in &self.lanes {
+            writeln!(
+                f,
+                "{:<6} {:>7} {:>8.1}  {:<12} {}",
+                lane.name,
+                lane.heading,
+                lane.length_m,
+                lane.ends_at,
+                lane.turns.join(" ")
+            )?;
+        }
+        if let Some(path) = &self.picture {
+            writeln!(f, "wrote {}", path.display())?;
+        }
+        Ok(())
+    }
+}
+
+/// Lists the lanes of the spec at `spec_path` and, with `out` (a `.png`),
+/// draws its bird's-eye view at the spec's image size with every lane id.
+pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Error> {
+    if let Some(out) = out {
+        if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+            return Err(Error::Input(format!(
+                "--out {}: a map picture is a PNG: give a name ending in .png",
+                out.display()
+            )));
+        }
+    }
+    let invalid = |e| Error::Input(format!("invalid spec {}: {e}", spec_path.display()));
+    let expansion = Expansion::from_spec(DatasetSpec::from_file(spec_path).map_err(invalid)?).map_err(invalid)?;
+    let map = &expansion.map;
+    let summary = MapSummary {
+        junctions: map.intersections.iter().map(|i| i.name.clone()).collect(),
+        lanes: map.spawn_points().into_iter().map(|id| lane_row(map, id)).collect(),
+        picture: out.map(Path::to_path_buf),
+    };
+    if let Some(out) = out {
+        let file = claim_file(out, &[("the spec it draws", spec_path)])?;
+        let camera = expansion.camera;
+        let mut rgba = draw_background(map, &camera).pixmap.take();
+        let mut canvas = Canvas { data: &mut rgba, width: camera.width, height: camera.height, channels: 4 };
+        // Junction names on their centres, lane ids half way along each lane.
+        for junction in &map.intersections {
+            let p = camera.to_pixel(junction.centre);
+            let (w, h) = label_size(&junction.name, 2);
+            let (x, y) = (p.x as i64 - w as i64 / 2, p.y as i64 - h as i64 / 2);
+            draw_label(&mut canvas, x, y, &junction.name, 2, [255, 255, 255], [150, 30, 30]);
+        }
+        for lane in &map.lanes {
+            let p = camera.to_pixel(lane.curve.position(lane.curve.length() / 2.0, 0.0));
+            let (w, h) = label_size(&lane.name, 1);
+            let (x, y) = (p.x as i64 - w as i64 / 2, p.y as i64 - h as i64 / 2);
+            draw_label(&mut canvas, x, y, &lane.name, 1, [20, 20, 20], [250, 235, 120]);
+        }
+        let image = image::RgbaImage::from_raw(camera.width, camera.height, rgba)
+            .ok_or_else(|| Error::Failure("the map picture has the wrong size".into()))?;
+        let mut png = Vec::new();
+        image::DynamicImage::ImageRgba8(image)
+            .to_rgb8()
+            .write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
+            .map_err(|e| Error::Failure(format!("cannot encode {}: {e}", out.display())))?;
+        file.write(&png).map_err(|e| Error::Failure(e.to_string()))?;
+    }
+    Ok(summary)
+}
+
+fn lane_row(map: &CityMap, id: usize) -> LaneRow {
+    let lane = &map.lanes[id];
+    let heading = lane.curve.heading_at(0.0).to_degrees().rem_euclid(360.0);
+    let compass = ['E', 'N', 'W', 'S'][((heading + 45.0) / 90.0) as usize % 4];
+    let ends_at = match lane.end {
+        LaneEnd::Intersection { intersection, approach } => {
+            format!("{} from {approach}", map.intersections[intersection].name)
+        }
+        LaneEnd::Loop(_) => "loop".to_string(),
+    };
+    LaneRow {
+        name: lane.name.clone(),
+        heading: compass,
+        length_m: (lane.curve.length() * 10.0).round() / 10.0,
+        ends_at,
+        turns: map.allowed_turns(id).iter().map(|t| format!("{t:?}").to_lowercase()).collect(),
+    }
+}
