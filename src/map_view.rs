@@ -4,11 +4,11 @@
 
 use crate::error::Error;
 use crate::map::{CityMap, LaneEnd};
-use crate::plan::expand::Expansion;
-use crate::spec::DatasetSpec;
 use crate::output::claim::claim_file;
+use crate::plan::expand::Expansion;
 use crate::render::background::draw_background;
 use crate::render::text::{draw_label, label_size, Canvas};
+use crate::spec::DatasetSpec;
 use serde::Serialize;
 use std::fmt;
 use std::path::{Path, PathBuf};
