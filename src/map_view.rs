@@ -26,12 +26,19 @@ pub struct LaneRow {
     pub ends_at: String,
     /// Turns allowed at its end (empty before a loop).
     pub turns: Vec<String>,
+    /// Where its centre line starts and ends, metres (x east, y north).
+    pub start: [f64; 2],
+    pub end: [f64; 2],
+    /// Index into [`MapSummary::junctions`] of the junction it ends at.
+    pub junction: Option<usize>,
 }
 
 /// What `causalcity map` found and wrote.
 #[derive(Debug, Clone, Serialize)]
 pub struct MapSummary {
     pub junctions: Vec<String>,
+    /// Each junction's centre, metres.
+    pub junction_centres: Vec<[f64; 2]>,
     pub lanes: Vec<LaneRow>,
     /// The picture written, if `--out` was given.
     pub picture: Option<PathBuf>,
@@ -74,11 +81,7 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Erro
     let invalid = |e| Error::Input(format!("invalid spec {}: {e}", spec_path.display()));
     let expansion = Expansion::from_spec(DatasetSpec::from_file(spec_path).map_err(invalid)?).map_err(invalid)?;
     let map = &expansion.map;
-    let summary = MapSummary {
-        junctions: map.intersections.iter().map(|i| i.name.clone()).collect(),
-        lanes: map.spawn_points().into_iter().map(|id| lane_row(map, id)).collect(),
-        picture: out.map(Path::to_path_buf),
-    };
+    let summary = MapSummary { picture: out.map(Path::to_path_buf), ..map_summary(map) };
     if let Some(out) = out {
         let file = claim_file(out, &[("the spec it draws", spec_path)])?;
         let camera = expansion.camera;
@@ -109,6 +112,16 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Erro
     Ok(summary)
 }
 
+/// The junctions and lanes (in lane-id order) of `map`.
+pub fn map_summary(map: &CityMap) -> MapSummary {
+    MapSummary {
+        junctions: map.intersections.iter().map(|i| i.name.clone()).collect(),
+        junction_centres: map.intersections.iter().map(|i| [i.centre.x, i.centre.y]).collect(),
+        lanes: map.spawn_points().into_iter().map(|id| lane_row(map, id)).collect(),
+        picture: None,
+    }
+}
+
 fn lane_row(map: &CityMap, id: usize) -> LaneRow {
     let lane = &map.lanes[id];
     let heading = lane.curve.heading_at(0.0).to_degrees().rem_euclid(360.0);
@@ -125,5 +138,11 @@ fn lane_row(map: &CityMap, id: usize) -> LaneRow {
         length_m: (lane.curve.length() * 10.0).round() / 10.0,
         ends_at,
         turns: map.allowed_turns(id).iter().map(|t| format!("{t:?}").to_lowercase()).collect(),
+        start: [lane.curve.start().x, lane.curve.start().y],
+        end: [lane.curve.end().x, lane.curve.end().y],
+        junction: match lane.end {
+            LaneEnd::Intersection { intersection, .. } => Some(intersection),
+            LaneEnd::Loop(_) => None,
+        },
     }
 }

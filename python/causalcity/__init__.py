@@ -47,6 +47,7 @@ __all__ = [
     "Stream",
     "Batches",
     "simulate",
+    "map",
     "stream",
     "batches",
     "collate",
@@ -470,6 +471,34 @@ def simulate(
     index = _whole("index", index, 0, _U32_MAX)
     raw = _native.simulate(spec._native, group, split, index, images, effects)
     return _scenario(raw, Key(group, split, index))
+
+
+def map(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Dict[str, Any]:  # noqa: A001 (causalcity.map, as the CLI's `map`)
+    """The spec's road network, as ``causalcity map`` lists it, with arrays:
+
+    - ``junctions``: names (``"AC"``, ..) and ``junction_centres`` ``[J, 2]``;
+    - ``lanes``: lane ids in id order (the spawn points scenario files name),
+      ``lane_start`` and ``lane_end`` ``[L, 2]`` (centre line, metres, x east,
+      y north), ``lane_length`` ``[L]``, ``lane_junction`` ``[L]`` (index
+      into ``junctions`` of the junction the lane ends at, -1 before a
+      U-turn loop) and ``lane_turns`` (the turns allowed at its end).
+
+    ``spec`` is a :class:`Spec`, a spec file's path or a dict.
+    """
+    raw = _json.loads(_as_spec(spec)._native.map_json())
+    lanes = raw["lanes"]
+    return {
+        "junctions": raw["junctions"],
+        "junction_centres": _np.array(raw["junction_centres"], dtype=_np.float64).reshape(-1, 2),
+        "lanes": [lane["name"] for lane in lanes],
+        "lane_start": _np.array([lane["start"] for lane in lanes], dtype=_np.float64).reshape(-1, 2),
+        "lane_end": _np.array([lane["end"] for lane in lanes], dtype=_np.float64).reshape(-1, 2),
+        "lane_length": _np.array([lane["length_m"] for lane in lanes], dtype=_np.float64),
+        "lane_junction": _np.array(
+            [-1 if lane["junction"] is None else lane["junction"] for lane in lanes], dtype=_np.int64
+        ),
+        "lane_turns": [lane["turns"] for lane in lanes],
+    }
 
 
 def _worker() -> Tuple[int, int]:

@@ -190,6 +190,12 @@ impl Spec {
 
 #[pymethods]
 impl Spec {
+    /// The road network as JSON: `causalcity map --json`'s junctions and lanes.
+    fn map_json(&self) -> PyResult<String> {
+        let summary = causalcity::map_view::map_summary(&self.expansion().map);
+        serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
+    }
+
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Spec> {
         match std::fs::read_to_string(&path) {

@@ -209,6 +209,32 @@ def test_spec_from_a_dict_gives_the_same_scenarios_as_its_file():
     assert causalcity.Spec.from_dict(as_dict).to_dict() == as_dict
 
 
+def test_map_gives_the_road_network_as_arrays_and_agrees_with_the_command(tmp_path):
+    grid = json.loads(CITY_SPEC.read_text())
+    grid["map"] = {"grid": {"rows": 3, "columns": 3}}
+    town = causalcity.map(grid)
+    assert town["junctions"] == ["CD", "CE", "CF", "BD", "BE", "BF", "AD", "AE", "AF"]
+    # Junctions 28 m apart around the origin, A the northmost road.
+    np.testing.assert_allclose(np.unique(town["junction_centres"][:, 0]), [-28, 0, 28])
+    assert town["junction_centres"][town["junctions"].index("AD")].tolist() == [-28, 28]
+    assert len(town["lanes"]) == len(set(town["lanes"])) == 96
+    assert town["lane_start"].shape == town["lane_end"].shape == (96, 2)
+    # Every lane that ends at a junction ends at its edge (road half width 6 m + a 3.6 m setback at most).
+    ends = town["lane_junction"] >= 0
+    assert ends.sum() == 9 * 8
+    to_centre = np.abs(town["lane_end"][ends] - town["junction_centres"][town["lane_junction"][ends]]).max(axis=1)
+    assert np.all((to_centre > 5.9) & (to_centre < 6.1)), to_centre
+    np.testing.assert_allclose(np.linalg.norm(town["lane_end"] - town["lane_start"], axis=1), town["lane_length"], atol=0.05)
+    assert all(t == [] for t, j in zip(town["lane_turns"], town["lane_junction"]) if j < 0)
+    # The same lanes as `causalcity map`, and the default city's 48 original spawn points.
+    spec_file = tmp_path / "grid.json"
+    spec_file.write_text(json.dumps(grid))
+    listed = json.loads(cli("map", "--spec", str(spec_file), "--json").stdout)
+    assert [lane["name"] for lane in listed["lanes"]] == town["lanes"]
+    default = causalcity.map(CITY_SPEC)
+    assert len(default["lanes"]) == 48 and default["lanes"][0] == "A0w" and default["junctions"] == ["BC", "BD", "AC", "AD"]
+
+
 def test_stream_shards_over_processes_and_workers_without_overlap_or_gap():
     spec = json.loads(TOY_SPEC.read_text())
     spec["splits"]["train"] = 11
