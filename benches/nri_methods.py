@@ -27,12 +27,11 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 import causalcity
 from causalcity.methods import load_split, make, springs
-from causalcity.methods.common import auroc_of
+from causalcity.methods.common import auroc_of, direction_right
 
 ROOT = Path(__file__).resolve().parents[1]
 DEVICE = os.environ.get("BENCH_DEVICE", "cpu")
@@ -128,7 +127,7 @@ def learning(tmp: Path) -> None:
         seconds = time.perf_counter() - start
         scores = nri.predict(test).edges
         curve = " ".join(f"{v:.0f}" for _, _, v in nri.losses)
-        direction = (scores > scores.transpose(0, 2, 1))[test.graph == 1].mean()
+        direction = direction_right(scores, test.graph)
         print(f"batch {batch:>4} lr {lr:g}: test AUROC {auroc_of(scores, test.graph):.3f}, direction right "
               f"{direction:.0%}, {seconds:.0f} s; val loss per epoch: {curve}", flush=True)  # fmt: skip
 

@@ -33,7 +33,6 @@ BENCH_ORIGINAL_EPOCHS ("springs,toy" epochs of the original, default
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shlex
@@ -46,9 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-import causalcity
 from causalcity.methods import load_split, make, springs
-from causalcity.methods.common import auroc_of
+from causalcity.methods.common import auroc_of, direction_right
+from nri_methods import toy_dataset  # benches/nri_methods.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = shlex.split(os.environ.get("CAUSALCITY_CLI", str(ROOT / "target" / "release" / "causalcity")))
@@ -136,7 +135,7 @@ def scores_summary(scores: np.ndarray, graph: np.ndarray) -> tuple:
     auroc = auroc_of(scores, graph)
     if auroc < 0.5:
         scores, auroc = 1 - scores, 1 - auroc
-    direction = (scores > scores.transpose(0, 2, 1))[graph == 1].mean()
+    direction = direction_right(scores, graph)
     return springs.edge_accuracy(scores, graph), auroc, direction
 
 
@@ -186,17 +185,14 @@ def main() -> int:
         row(f"causalcity, {ours_epochs[0]} epochs", *ours, directed=False)
 
         toy = int(os.environ.get("BENCH_TOY_TRAIN", 200))
-        raw = json.loads((ROOT / "configs" / "toy.json").read_text())
-        raw["groups"] = [g for g in raw["groups"] if g["cars"] == 8 and g["edge_proportion"] == 0.5]
-        raw["splits"] = {"train": toy, "val": 50, "test": 100}
-        dataset = Path(tmp) / "toy"
-        causalcity.generate(raw, dataset, images=False, effects=False, progress=False)
+        dataset = toy_dataset(Path(tmp) / "toy", toy, 100)
         export = Path(tmp) / "toy-nri"
         subprocess.run([*CLI, "export", "nri", str(dataset), "--out", str(export), "--layout", "nri", "--directed",
                         "--suffix", "_toy", "--quiet"], check=True)  # fmt: skip
         # 150 frames a scenario: train and valid cut to their first 75, so
         # that the test split holds the 2T the original's test() needs.
-        half = raw["frames"] // 2
+        train, val, test = (load_split(dataset, "cars08_edges50", s) for s in ("train", "val", "test"))
+        half = test.frames // 2
         for path in (export / "cars08_edges50").iterdir():
             array = np.load(path)
             if path.name.startswith(("loc_", "vel_")) and not path.name.startswith(("loc_test", "vel_test")):
@@ -204,7 +200,6 @@ def main() -> int:
             np.save(code / "data" / path.name, array)
         print(f"\n== toy world, 8 cars, 50 % linked, {toy} train scenarios (export nri --layout nri --directed); "
               f"both encoders read the first {half} frames ==")  # fmt: skip
-        train, val, test = (load_split(dataset, "cars08_edges50", s) for s in ("train", "val", "test"))
         # (the export may order cars its own way: the original is scored on the export's edges)
         exported = np.load(code / "data" / "edges_test_toy.npy").transpose(0, 2, 1)
         row(f"original, {original_epochs[1]} epochs", *run_original(code, "_toy", 8, half, original_epochs[1], exported))

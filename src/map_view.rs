@@ -135,7 +135,7 @@ fn lane_row(map: &CityMap, id: usize) -> LaneRow {
     LaneRow {
         name: lane.name.clone(),
         heading: compass,
-        length_m: (lane.curve.length() * 10.0).round() / 10.0,
+        length_m: lane.curve.length(),
         ends_at,
         turns: map.allowed_turns(id).iter().map(|t| format!("{t:?}").to_lowercase()).collect(),
         start: [lane.curve.start().x, lane.curve.start().y],

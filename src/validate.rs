@@ -5,6 +5,7 @@
 //! SHA-256 of every file. Reports every problem with its path.
 
 use crate::dataset::{edge_pairs, Dataset};
+use crate::map::signals::LIGHTS_PER_INTERSECTION;
 use crate::output::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -64,6 +65,15 @@ impl fmt::Display for ValidationReport {
 struct Expected<'a> {
     spec: &'a DatasetSpec,
     layout: ScenarioLayout,
+    /// Rows per frame of lights.csv (city world).
+    lights_per_frame: usize,
+}
+
+impl<'a> Expected<'a> {
+    fn new(spec: &'a DatasetSpec, layout: ScenarioLayout) -> Expected<'a> {
+        let lights_per_frame = spec.map.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
+        Expected { spec, layout, lights_per_frame }
+    }
 }
 
 /// Checks the dataset in `dir`. Errors only when `dir` is not a dataset.
@@ -80,7 +90,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let spec = dataset.spec();
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
     let layout = ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.products(), cameras);
-    let expected = Expected { spec, layout };
+    let expected = Expected::new(spec, layout);
 
     let mut problems = Vec::new();
     if !record.complete {
@@ -148,7 +158,7 @@ fn validate_sweep(
     let products = crate::output::manifest::Products { images, annotations: false, effects: false };
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
     let expected =
-        Expected { spec, layout: ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras) };
+        Expected::new(spec, ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras));
     let check_pair = |key: &ScenarioKey| -> ScenarioCheck {
         let pair = pair_of(key);
         if !pair.is_dir() {
@@ -402,8 +412,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     if city {
         if let Some(data) = read(LIGHTS_CSV, &mut problems) {
             // Every light of every intersection, every frame.
-            let layout = spec.map.layout();
-            let lights = 8 * layout.east_west_roads.len() * layout.north_south_roads.len();
+            let lights = expected.lights_per_frame;
             check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * lights, &mut problems, |row, i| {
                 (row.get(0)?.parse::<usize>().ok()? == i / lights).then_some(())
             });

@@ -4,24 +4,18 @@
 use causalcity::map::{
     Action, AdaptationKind, CityMap, LaneEnd, LanePolicy, LanePosition, LegKind, MapLayout, Route, Turn,
 };
+use causalcity::spec::{GridSpec, MapSpec};
 
 fn heading_diff(a: f64, b: f64) -> f64 {
     causalcity::map::curve::wrap_angle(a - b).abs()
 }
 
-/// A grid of `rows` east-west and `columns` north-south roads, 30 m apart
-/// around the origin, each running 20 m beyond its last crossing.
+/// A grid town as a spec's `map.grid` asks for it: `rows` east-west and
+/// `columns` north-south roads, 30 m apart, each running 20 m beyond its
+/// last crossing.
 fn grid(rows: usize, columns: usize) -> MapLayout {
-    let spacing = 30.0;
-    let centres = |n: usize| (0..n).map(move |k| (k as f64 - (n - 1) as f64 / 2.0) * spacing);
-    let ends = |n: usize| (n - 1) as f64 / 2.0 * spacing + 20.0;
-    MapLayout {
-        east_west_roads: centres(rows).zip('E'..).map(|(y, name)| (name, y)).collect(),
-        north_south_roads: centres(columns).zip('N'..).map(|(x, name)| (name, x)).collect(),
-        extent_x: ends(columns),
-        extent_y: ends(rows),
-        ..MapLayout::default()
-    }
+    let grid = GridSpec { rows, columns, block_m: 30.0, outer_m: 20.0 };
+    MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
 
 /// The default city and grids of 1 x 1, 1 x 3, 3 x 2 and 4 x 4 junctions.

@@ -102,6 +102,12 @@ impl MapLayout {
         (DVec2::new(x0 - reach, y0 - reach), DVec2::new(x1 + reach, y1 + reach))
     }
 
+    /// Four-way intersections: every east-west road crosses every
+    /// north-south one.
+    pub fn intersection_count(&self) -> usize {
+        self.east_west_roads.len() * self.north_south_roads.len()
+    }
+
     /// Centre lines of the east-west roads (y, ascending).
     pub fn east_west_centres(&self) -> Vec<f64> {
         self.east_west_roads.iter().map(|r| r.1).collect()

@@ -128,17 +128,20 @@ pub struct LightPlan {
 /// Approaches in the order lights are listed.
 pub const APPROACHES: [char; 4] = ['N', 'E', 'S', 'W'];
 
+/// Lights of one intersection: a straight and a left signal per approach.
+pub const LIGHTS_PER_INTERSECTION: usize = 2 * APPROACHES.len();
+
 /// Where light (intersection, approach, signal) stands in every light plan:
 /// by intersection, then approach (N, E, S, W), then Straight before Left.
 pub fn light_index(intersection: usize, approach: char, signal: Signal) -> usize {
     let a = APPROACHES.iter().position(|&c| c == approach).expect("approach is N, E, S or W");
-    intersection * 8 + a * 2 + if signal == Signal::Left { 1 } else { 0 }
+    intersection * LIGHTS_PER_INTERSECTION + a * 2 + if signal == Signal::Left { 1 } else { 0 }
 }
 
 /// The light at `index` of a plan: (intersection, approach, signal).
 pub fn light_at(index: usize) -> (usize, char, Signal) {
     let signal = if index % 2 == 1 { Signal::Left } else { Signal::Straight };
-    (index / 8, APPROACHES[(index % 8) / 2], signal)
+    (index / LIGHTS_PER_INTERSECTION, APPROACHES[(index % LIGHTS_PER_INTERSECTION) / 2], signal)
 }
 
 impl LightPlan {

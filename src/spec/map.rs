@@ -153,11 +153,8 @@ impl MapSpec {
                     return Err(SpecError::new(
                         if what.contains("between") { field } else { extent_field },
                         format!(
-                            "roads {first} and {second} at {roads:?} m with {extent_field} {extent} m leave {length:.2} m of the {crossing} roads {what}: every lane that ends at an intersection must be at least {need:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
-                            layout.lane_change_length,
-                            layout.stop_line_setback,
-                            crate::map::APPROACH_MARGIN_M,
-                            self.lane_width
+                            "roads {first} and {second} at {roads:?} m with {extent_field} {extent} m leave {length:.2} m of the {crossing} roads {what}: {}",
+                            approach_rule(&layout)
                         ),
                     ));
                 }
@@ -209,16 +206,23 @@ impl MapSpec {
             if applies && length < need - 1e-9 {
                 return Err(SpecError::new(
                     field,
-                    format!(
-                        "leaves {length:.2} m of road {what}: every lane that ends at an intersection must be at least {need:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
-                        layout.lane_change_length,
-                        layout.stop_line_setback,
-                        crate::map::APPROACH_MARGIN_M,
-                        self.lane_width
-                    ),
+                    format!("leaves {length:.2} m of road {what}: {}", approach_rule(&layout)),
                 ));
             }
         }
         Ok(())
     }
+}
+
+/// Why a lane that ends at an intersection has a least length, for the
+/// errors of both map forms.
+fn approach_rule(layout: &MapLayout) -> String {
+    format!(
+        "every lane that ends at an intersection must be at least {:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
+        layout.min_approach_length(),
+        layout.lane_change_length,
+        layout.stop_line_setback,
+        crate::map::APPROACH_MARGIN_M,
+        layout.lane_width
+    )
 }

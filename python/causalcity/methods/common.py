@@ -185,6 +185,12 @@ def auroc_of(scores: np.ndarray, graph: np.ndarray) -> float:
     return float((ranks[y].sum() - positives * (positives + 1) / 2.0) / (positives * negatives))
 
 
+def direction_right(scores: np.ndarray, graph: np.ndarray) -> float:
+    """Share of the true edges ``graph[s, a, b] = 1`` scored above their
+    reverse (``scores[s, a, b] > scores[s, b, a]``): 0.5 is chance."""
+    return float((scores > scores.transpose(0, 2, 1))[graph == 1].mean())
+
+
 class Progress:
     """A progress line on stderr: redrawn in place on a terminal, every tenth
     of the work otherwise (logs), silent with ``quiet``."""
