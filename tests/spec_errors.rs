@@ -303,6 +303,11 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &["map.grid.outer_m", "leaves 4.00 m", "beyond the outermost roads"],
     );
     rejected(
+        "grid-altitude",
+        &with(|v| v["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3}, "camera_altitude_m": -5})),
+        &["map.camera_altitude_m", "-5 is not allowed", "above 0"],
+    );
+    rejected(
         "grid-and-roads",
         &with(|v| v["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3}, "east_west_roads": [-20, 20]})),
         &["map.grid", "places its own roads", "map.east_west_roads"],

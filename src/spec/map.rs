@@ -123,6 +123,9 @@ impl MapSpec {
     pub fn validate(&self) -> Result<(), SpecError> {
         positive("map.lane_width", self.lane_width, 10.0, "metres")?;
         positive("map.lane_change_m", self.lane_change_m, 200.0, "metres")?;
+        if let Some(altitude) = self.camera_altitude_m {
+            positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
+        }
         if let Some(grid) = self.grid {
             return self.validate_grid(grid);
         }
@@ -159,9 +162,6 @@ impl MapSpec {
                     ));
                 }
             }
-        }
-        if let Some(altitude) = self.camera_altitude_m {
-            positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
         }
         Ok(())
     }
