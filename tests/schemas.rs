@@ -69,6 +69,8 @@ fn spec_schema_and_parser_agree() {
                               "extent_x": 80, "extent_y": 60, "camera_altitude_m": 80})
         }),
     ));
+    good.push(("chains of 4".into(), edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 4}))));
+    good.push(("forks".into(), edited(&base, |v| v["graph"] = json!({"shape": "forks"}))));
     for (what, doc) in &good {
         let errors = schema_errors(&schema, doc);
         assert!(errors.is_empty(), "{what}: schema rejects a good spec: {errors:?}");
@@ -84,6 +86,9 @@ fn spec_schema_and_parser_agree() {
         ("unknown key in lights", edited(&base, |v| v["city"]["lights"]["colour_order"] = json!(1))),
         ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
         ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
+        ("unknown graph shape", edited(&base, |v| v["graph"] = json!({"shape": "rings"}))),
+        ("unknown key in graph", edited(&base, |v| v["graph"] = json!({"shape": "chains", "length": 3}))),
+        ("a chain of 7", edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 7}))),
         ("map roads as an object", edited(&base, |v| v["map"] = json!({"east_west_roads": {"A": 14, "B": -14}}))),
         ("three map roads", edited(&base, |v| v["map"] = json!({"north_south_roads": [-30, 0, 30]}))),
         ("map lane width 0", edited(&base, |v| v["map"] = json!({"lane_width": 0}))),

@@ -184,6 +184,12 @@ fn city_with(city: &str) -> String {
     city_spec("bad", &[(4, 0.5)], (1, 0, 0), 10, city)
 }
 
+fn city_with_graph(city: &str, graph: serde_json::Value) -> String {
+    let mut spec: serde_json::Value = serde_json::from_str(&city_with(city)).unwrap();
+    spec["graph"] = graph;
+    spec.to_string()
+}
+
 #[test]
 fn unknown_or_conflicting_keys_in_a_distribution_are_named() {
     rejected(
@@ -311,6 +317,40 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         "grid-and-roads",
         &with(|v| v["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3}, "east_west_roads": [-20, 20]})),
         &["map.grid", "places its own roads", "map.east_west_roads"],
+    );
+}
+
+#[test]
+fn a_graph_shape_is_checked_for_its_size_and_the_cars_it_needs() {
+    let graph = |g: serde_json::Value| with(|v| v["graph"] = g);
+    rejected(
+        "graph-shape",
+        &graph(serde_json::json!({"shape": "rings"})),
+        &["graph.shape", "rings", "pairs", "chains", "forks"],
+    );
+    rejected(
+        "graph-cars-7",
+        &graph(serde_json::json!({"shape": "chains", "cars": 7})),
+        &["graph.cars", "7 is not allowed", "2 to 6"],
+    );
+    rejected(
+        "graph-pairs-of-3",
+        &graph(serde_json::json!({"shape": "pairs", "cars": 3})),
+        &["graph.cars", "3 is not allowed", "a pair has 2 cars"],
+    );
+    // Chains and forks take fewer cars per edge than pairs, but one car still has no one to follow.
+    rejected(
+        "graph-too-few-cars",
+        &with(|v| {
+            v["graph"] = serde_json::json!({"shape": "forks", "cars": 4});
+            v["groups"] = serde_json::json!([{"cars": 1, "edge_proportion": 1.0}]);
+        }),
+        &["groups[0].edge_proportion", "1 edges in forks of 4 cars", "which need 2 cars"],
+    );
+    rejected(
+        "graph-platoon",
+        &city_with_graph(r#"{"start": {"platoon_cars": 2}}"#, serde_json::json!({"shape": "chains"})),
+        &["graph.cars", "3 is not allowed with city.start.platoon_cars = 2", "one chain start in one platoon"],
     );
 }
 

@@ -13,7 +13,7 @@ use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
 use crate::map::{Action, AdaptationKind, CityMap, LaneEnd, LaneId, LanePolicy, Route};
 use crate::spec::{
-    ActionDrawing, DatasetSpec, GroupSpec, LightPhase, SpecError, Split, WorldKind, DEFAULT_LEADER_GAP_PX,
+    ActionDrawing, DatasetSpec, GraphShape, GroupSpec, LightPhase, SpecError, Split, WorldKind, DEFAULT_LEADER_GAP_PX,
 };
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -246,15 +246,18 @@ impl Expansion {
             return Ok(self.finish(key, stream, rng, cars, &pair_indices));
         }
 
-        // Units to place: pairs first (they need the most room), then singles.
-        let pairs = group.edges() as usize;
-        let singles = group.cars as usize - 2 * pairs;
+        // Units to place: the graph's connected parts first (they need the
+        // most room), then singles. A part is a queue in one lane: its
+        // leader first, then its followers, each a drawn spacing behind.
+        let parts = spec.graph.units(group.edges());
+        let singles = group.cars as usize - parts.iter().sum::<u32>() as usize;
+        let unit_sizes: Vec<usize> = parts.iter().map(|&n| n as usize).chain(std::iter::repeat_n(1, singles)).collect();
         let mut placed: Vec<OrientedBox> = Vec::new();
         let mut cars: Vec<PlacedCar> = Vec::new();
         let mut pair_indices = Vec::new();
         let split = key.split.index();
-        for unit in 0..pairs + singles {
-            let is_pair = unit < pairs;
+        for &size in &unit_sizes {
+            let in_graph = size > 1;
             // City: a car with no leader may start right behind another car
             // (a hard negative), decided once per unit.
             let hard_negative = match &city {
@@ -265,7 +268,9 @@ impl Expansion {
             };
             let mut done = false;
             for attempt in 0..PLACEMENT_ATTEMPTS {
-                let spacing = if is_pair { self.draw_spacing(&mut rng, city.as_ref()) } else { 0.0 };
+                // Centre-to-centre from each car to the one behind it.
+                let spacings: Vec<f64> = (1..size).map(|_| self.draw_spacing(&mut rng, city.as_ref())).collect();
+                let spacing: f64 = spacings.iter().sum();
                 // A hard negative that finds no room in half the attempts starts anywhere.
                 let behind =
                     (hard_negative && attempt < PLACEMENT_ATTEMPTS / 2).then(|| rng.random_range(0..cars.len()));
@@ -288,14 +293,24 @@ impl Expansion {
                         (span, back + spacing, back)
                     }
                 };
+                // Each car's start relative to the last car's, front first.
+                let mut offsets = vec![front - back];
+                let mut ahead = front;
+                for &gap in spacings.iter().take(size.saturating_sub(2)) {
+                    ahead = round_mm(ahead - gap);
+                    offsets.push(ahead - back);
+                }
+                if in_graph {
+                    offsets.push(0.0);
+                }
                 // The nearest start forward (in whole millimetres) that this
-                // split owns, for both cars of a pair.
-                let owned = (0..OWNED_START_SEARCH_MM).map(|mm| round_mm(back + mm as f64 / 1000.0)).find(|&b| {
-                    split_owning_start(span.lane, b + (front - back)) == split
-                        && (!is_pair || split_owning_start(span.lane, b) == split)
-                });
+                // split owns, for every car of the unit.
+                let owned = (0..OWNED_START_SEARCH_MM)
+                    .map(|mm| round_mm(back + mm as f64 / 1000.0))
+                    .find(|&b| offsets.iter().all(|&o| split_owning_start(span.lane, b + o) == split));
                 let Some(owned_back) = owned else { continue };
-                let (front, back) = (owned_back + (front - back), owned_back);
+                let starts: Vec<f64> = offsets.iter().map(|&o| owned_back + o).collect();
+                let front = starts[0];
                 if front > span.hi {
                     continue;
                 }
@@ -309,7 +324,6 @@ impl Expansion {
                     }
                 }
                 // Checked on the spawn lane before the (costlier) route is planned.
-                let starts: Vec<f64> = if is_pair { vec![front, back] } else { vec![front] };
                 let boxes: Vec<OrientedBox> = starts.iter().map(|&s| self.car_box(span.lane, s)).collect();
                 let clear = boxes.iter().all(|b| {
                     let grown = b.inflated(SPAWN_CLEARANCE / 2.0);
@@ -328,7 +342,7 @@ impl Expansion {
                 placed.extend(boxes);
                 let route = Arc::new(self.plan_route(span.lane, front, &actions, &merges, travel)?);
                 let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
-                let role = if is_pair { Role::Leader } else { Role::Independent };
+                let role = if in_graph { Role::Leader } else { Role::Independent };
                 let car = PlacedCar {
                     role,
                     spawn: span.lane,
@@ -341,21 +355,32 @@ impl Expansion {
                     leader: None,
                     on_leader_lost: None,
                 };
-                if is_pair {
-                    pair_indices.push((cars.len(), cars.len() + 1));
+                let first = cars.len();
+                for (j, &start) in starts.iter().enumerate().skip(1) {
+                    // A chain's car follows the car right ahead; a fork's (and
+                    // a pair's) follows the first.
+                    let leader = match spec.graph.shape {
+                        GraphShape::Chains => first + j - 1,
+                        _ => first,
+                    };
+                    pair_indices.push((leader, first + j));
                     // A follower drives what its leader drives, not its own
                     // personality (the toy has no speeds to draw).
                     let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), car.actions.len());
                     let follower = PlacedCar {
                         role: Role::Follower,
-                        distance: back,
+                        distance: start,
                         desired_speeds,
                         behind: None,
-                        leader: Some(cars.len()),
+                        leader: Some(leader),
                         ..car.clone()
                     };
-                    cars.extend([car, follower]);
-                } else {
+                    if j == 1 {
+                        cars.push(car.clone());
+                    }
+                    cars.push(follower);
+                }
+                if !in_graph {
                     cars.push(car);
                 }
                 done = true;
@@ -391,7 +416,8 @@ impl Expansion {
     /// City with platoons (see [`crate::spec::StartSpec`]): places every car
     /// of the group in platoons, blind to roles, then draws the
     /// leader-follower pairs uniformly among each platoon's (ahead, behind)
-    /// pairs. Returns the cars and the (leader, follower) indices.
+    /// pairs (or the chains and forks among its cars). Returns the cars and
+    /// the (leader, follower) indices.
     fn place_platoons(
         &self,
         key: &ScenarioKey,
@@ -435,8 +461,42 @@ impl Expansion {
                 platoon_of.push(platoon);
             }
         }
-        // Every (ahead, behind) pair of a platoon in random order, taken
-        // while both cars are free: each is a pair with the same chance.
+        let pairs = if self.spec.graph.is_pairs() {
+            Self::draw_platoon_pairs(rng, &cars, &platoon_of, group.edges() as usize, size)?
+        } else {
+            self.draw_platoon_parts(rng, &cars, &platoon_of, group.edges())?
+        };
+        // A follower drives what its leader drives, from where it starts
+        // (a chain's edges come front to back, so a car copies its leader's
+        // queue after the leader has copied its own).
+        for &(leader, follower) in &pairs {
+            let (actions, merges) = (cars[leader].actions.clone(), cars[leader].merges.clone());
+            let f = &cars[follower];
+            let route = Arc::new(self.plan_route(f.spawn, f.distance, &actions, &merges, travel)?);
+            // A chain's middle car keeps the follower's role (it has a leader).
+            if cars[leader].role == Role::Independent {
+                cars[leader].role = Role::Leader;
+            }
+            let f = &mut cars[follower];
+            f.role = Role::Follower;
+            f.leader = Some(leader);
+            f.actions = actions;
+            f.merges = merges;
+            f.route = route;
+        }
+        Ok((cars, pairs))
+    }
+
+    /// The leader-follower pairs of platoon starts: every (ahead, behind)
+    /// pair of a platoon in random order, taken while both cars are free,
+    /// so each is a pair with the same chance. Sorted by index.
+    fn draw_platoon_pairs(
+        rng: &mut ChaCha8Rng,
+        cars: &[PlacedCar],
+        platoon_of: &[usize],
+        wanted: usize,
+        size: usize,
+    ) -> Result<LeaderFollowerPairs, String> {
         let mut candidates: Vec<(usize, usize)> = Vec::new();
         for a in 0..cars.len() {
             for b in 0..cars.len() {
@@ -446,7 +506,6 @@ impl Expansion {
             }
         }
         candidates.shuffle(rng);
-        let wanted = group.edges() as usize;
         let mut taken = vec![false; cars.len()];
         let mut pairs = Vec::new();
         for (a, b) in candidates {
@@ -462,20 +521,50 @@ impl Expansion {
             ));
         }
         pairs.sort_unstable();
-        // A follower drives what its leader drives, from where it starts.
-        for &(leader, follower) in &pairs {
-            let (actions, merges) = (cars[leader].actions.clone(), cars[leader].merges.clone());
-            let f = &cars[follower];
-            let route = Arc::new(self.plan_route(f.spawn, f.distance, &actions, &merges, travel)?);
-            cars[leader].role = Role::Leader;
-            let f = &mut cars[follower];
-            f.role = Role::Follower;
-            f.leader = Some(leader);
-            f.actions = actions;
-            f.merges = merges;
-            f.route = route;
+        Ok(pairs)
+    }
+
+    /// The edges of chains or forks among platoon starts: for each part of
+    /// [`crate::spec::GraphSpec::units`], largest first, a set of that many
+    /// free cars of one platoon drawn uniformly, ordered front to back (a
+    /// chain links each to the car behind it, a fork the first to every
+    /// other). Chains' edges come front to back.
+    fn draw_platoon_parts(
+        &self,
+        rng: &mut ChaCha8Rng,
+        cars: &[PlacedCar],
+        platoon_of: &[usize],
+        edges: u32,
+    ) -> Result<LeaderFollowerPairs, String> {
+        let graph = &self.spec.graph;
+        let mut taken = vec![false; cars.len()];
+        let mut links = Vec::new();
+        for size in graph.units(edges) {
+            let size = size as usize;
+            // Every set of `size` free cars of one platoon, front to back.
+            let mut candidates: Vec<Vec<usize>> = Vec::new();
+            for platoon in 0..=platoon_of.iter().copied().max().unwrap_or(0) {
+                let mut members: Vec<usize> =
+                    (0..cars.len()).filter(|&c| platoon_of[c] == platoon && !taken[c]).collect();
+                members.sort_by(|&a, &b| cars[b].distance.total_cmp(&cars[a].distance).then(a.cmp(&b)));
+                subsets(&members, size, &mut Vec::new(), &mut candidates);
+            }
+            let drawn = (!candidates.is_empty()).then(|| rng.random_range(0..candidates.len()));
+            let Some(part) = drawn.map(|k| candidates.swap_remove(k)) else {
+                return Err(format!(
+                    "{edges} edges in {} of {} cars do not fit in these platoons (a car is in one chain or fork at most): use fewer edges or larger city.start.platoon_cars",
+                    graph.shape.name(),
+                    graph.unit_cars()
+                ));
+            };
+            for (j, &follower) in part.iter().enumerate().skip(1) {
+                taken[follower] = true;
+                let leader = if graph.shape == GraphShape::Chains { part[j - 1] } else { part[0] };
+                links.push((leader, follower));
+            }
+            taken[part[0]] = true;
         }
-        Ok((cars, pairs))
+        Ok(links)
     }
 
     /// One try at the starts (lane, metres along it) of a platoon of `count`
@@ -963,6 +1052,23 @@ fn random_actions(
         earliest = 0.0;
     }
     (actions, merges)
+}
+
+/// Appends to `out` every subset of `items` with `size` members, each in
+/// `items`' order.
+fn subsets(items: &[usize], size: usize, chosen: &mut Vec<usize>, out: &mut Vec<Vec<usize>>) {
+    if chosen.len() == size {
+        out.push(chosen.clone());
+        return;
+    }
+    for (k, &item) in items.iter().enumerate() {
+        if items.len() - k < size - chosen.len() {
+            break;
+        }
+        chosen.push(item);
+        subsets(&items[k + 1..], size, chosen, out);
+        chosen.pop();
+    }
 }
 
 /// Spans of each spawn lane where a car lies wholly on camera.

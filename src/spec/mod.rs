@@ -8,10 +8,12 @@
 
 mod camera;
 mod city;
+mod graph;
 mod map;
 
 pub use camera::*;
 pub use city::*;
+pub use graph::*;
 pub use map::*;
 
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
@@ -198,6 +200,9 @@ pub struct DatasetSpec {
     /// The city map's dimensions and the bird's-eye camera's height.
     #[serde(default)]
     pub map: MapSpec,
+    /// The designed leader-follower graph's shape: pairs unless given.
+    #[serde(default, skip_serializing_if = "GraphSpec::is_pairs")]
+    pub graph: GraphSpec,
 }
 
 /// 1 to 64 characters from A-Z a-z 0-9 - _ . not starting with a dot.
@@ -313,6 +318,7 @@ impl DatasetSpec {
             }),
             cameras: Vec::new(),
             map: MapSpec::default(),
+            graph: GraphSpec::default(),
         }
     }
 
@@ -350,6 +356,7 @@ impl DatasetSpec {
                 "the list is empty: give at least one {\"cars\": N, \"edge_proportion\": P}",
             ));
         }
+        self.graph.validate()?;
         let mut names = std::collections::HashSet::new();
         for (i, g) in self.groups.iter().enumerate() {
             range(&format!("groups[{i}].cars"), g.cars, 1, MAX_CARS)?;
@@ -363,15 +370,19 @@ impl DatasetSpec {
                     ),
                 ));
             }
-            if 2 * g.edges() > g.cars {
+            if self.graph.cars_needed(g.edges()) > g.cars {
+                let joined = match self.graph.shape {
+                    GraphShape::Pairs => "leader-follower pairs".to_string(),
+                    shape => format!("edges in {} of {} cars", shape.name(), self.graph.unit_cars()),
+                };
                 return Err(SpecError::new(
                     field,
                     format!(
-                        "{} with {} cars asks for {} leader-follower pairs (round(proportion x cars / 2)), which need {} cars: lower the proportion or add cars",
+                        "{} with {} cars asks for {} {joined} (round(proportion x cars / 2)), which need {} cars: lower the proportion or add cars",
                         g.edge_proportion,
                         g.cars,
                         g.edges(),
-                        2 * g.edges()
+                        self.graph.cars_needed(g.edges())
                     ),
                 ));
             }
@@ -405,7 +416,20 @@ impl DatasetSpec {
             (None, _) => {}
         }
         match (&self.city, self.world) {
-            (Some(city), WorldKind::City) => city.validate()?,
+            (Some(city), WorldKind::City) => {
+                city.validate()?;
+                let platoon = city.start.platoon_cars;
+                if platoon != 0 && self.graph.unit_cars() > platoon {
+                    return Err(SpecError::new(
+                        "graph.cars",
+                        format!(
+                            "{} is not allowed with city.start.platoon_cars = {platoon}: the cars of one {} start in one platoon, so it can have {platoon} cars at most",
+                            self.graph.unit_cars(),
+                            &self.graph.shape.name()[..self.graph.shape.name().len() - 1]
+                        ),
+                    ));
+                }
+            }
             (Some(_), WorldKind::Toy) => {
                 return Err(SpecError::new("city", "applies to \"world\": \"city\" only: remove it or change world"))
             }
