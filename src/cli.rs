@@ -299,6 +299,11 @@ pub struct MapArgs {
     /// Print the junctions and lanes as JSON.
     #[arg(long)]
     pub json: bool,
+
+    /// The town to show when the spec's map draws several (its name, e.g.
+    /// grid-3x4, as the listing says); the first when absent.
+    #[arg(long, value_name = "NAME")]
+    pub town: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -809,7 +814,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             }
             report(&stats, args.json)
         }
-        Command::Map(args) => report(&map_view(&args.spec, args.out.as_deref())?, args.json),
+        Command::Map(args) => report(&map_view(&args.spec, args.out.as_deref(), args.town.as_deref())?, args.json),
         Command::Heatmap(args) => {
             let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
             report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)

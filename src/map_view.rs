@@ -36,6 +36,9 @@ pub struct LaneRow {
 /// What `causalcity map` found and wrote.
 #[derive(Debug, Clone, Serialize)]
 pub struct MapSummary {
+    /// The town shown, and every town the spec's map draws (one for most).
+    pub town: String,
+    pub towns: Vec<String>,
     pub junctions: Vec<String>,
     /// Each junction's centre, metres.
     pub junction_centres: Vec<[f64; 2]>,
@@ -46,6 +49,15 @@ pub struct MapSummary {
 
 impl fmt::Display for MapSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.towns.len() > 1 {
+            writeln!(
+                f,
+                "town {} of the {} the spec draws ({}); show another with --town NAME",
+                self.town,
+                self.towns.len(),
+                self.towns.join(" ")
+            )?;
+        }
         writeln!(f, "{} junctions: {}", self.junctions.len(), self.junctions.join(" "))?;
         writeln!(f, "{} lanes (spawn points):", self.lanes.len())?;
         writeln!(f, "{:<6} {:>7} {:>8}  {:<12} turns", "lane", "heading", "length m", "ends at")?;
@@ -69,7 +81,8 @@ impl fmt::Display for MapSummary {
 
 /// Lists the lanes of the spec at `spec_path` and, with `out` (a `.png`),
 /// draws its bird's-eye view at the spec's image size with every lane id.
-pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Error> {
+/// `town` picks one of the towns the spec's map draws (the first when `None`).
+pub fn map_view(spec_path: &Path, out: Option<&Path>, town: Option<&str>) -> Result<MapSummary, Error> {
     if let Some(out) = out {
         if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
             return Err(Error::Input(format!(
@@ -80,11 +93,19 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Erro
     }
     let invalid = |e| Error::Input(format!("invalid spec {}: {e}", spec_path.display()));
     let expansion = Expansion::from_spec(DatasetSpec::from_file(spec_path).map_err(invalid)?).map_err(invalid)?;
-    let map = &expansion.map;
-    let summary = MapSummary { picture: out.map(Path::to_path_buf), ..map_summary(map) };
+    let towns: Vec<String> = expansion.towns().iter().map(|t| t.name.clone()).collect();
+    let shown = match town {
+        None => &expansion.towns()[0],
+        Some(name) => expansion.towns().iter().find(|t| t.name == name).ok_or_else(|| {
+            Error::Input(format!("--town {name}: the spec draws no such town: use one of {}", towns.join(", ")))
+        })?,
+    };
+    let map = &shown.map;
+    let summary =
+        MapSummary { picture: out.map(Path::to_path_buf), town: shown.name.clone(), towns, ..map_summary(map) };
     if let Some(out) = out {
         let file = claim_file(out, &[("the spec it draws", spec_path)])?;
-        let camera = expansion.camera;
+        let camera = shown.camera;
         let mut rgba = draw_background(map, &camera).pixmap.take();
         let mut canvas = Canvas { data: &mut rgba, width: camera.width, height: camera.height, channels: 4 };
         // Junction names on their centres, lane ids half way along each lane.
@@ -112,9 +133,12 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>) -> Result<MapSummary, Erro
     Ok(summary)
 }
 
-/// The junctions and lanes (in lane-id order) of `map`.
+/// The junctions and lanes (in lane-id order) of `map` (its town's name
+/// and the spec's towns left for the caller to fill in).
 pub fn map_summary(map: &CityMap) -> MapSummary {
     MapSummary {
+        town: String::new(),
+        towns: Vec::new(),
         junctions: map.intersections.iter().map(|i| i.name.clone()).collect(),
         junction_centres: map.intersections.iter().map(|i| [i.centre.x, i.centre.y]).collect(),
         lanes: map.spawn_points().into_iter().map(|id| lane_row(map, id)).collect(),

@@ -350,6 +350,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     let mut mask_ids: BTreeSet<u8> = BTreeSet::new();
     let mut cars = 0usize;
     let mut record = serde_json::Value::Null;
+    let mut lights_per_frame = expected.lights_per_frame;
     if let Some(data) = read(SCENARIO_JSON, &mut problems) {
         let path = dir.join(SCENARIO_JSON);
         match serde_json::from_slice::<serde_json::Value>(&data) {
@@ -367,6 +368,18 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
                     if !ok {
                         problems
                             .push(Problem { path: path.clone(), message: format!("`{field}` is {} here", v[field]) });
+                    }
+                }
+                // A dataset of several towns: the scenario's is one the spec draws.
+                if let Some(town) = v.get("map") {
+                    match serde_json::from_value::<crate::spec::MapSpec>(town.clone()) {
+                        Ok(town) if spec.map.towns().contains(&town) => {
+                            lights_per_frame = town.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
+                        }
+                        _ => problems.push(Problem {
+                            path: path.clone(),
+                            message: format!("`map` {town} is not a town the spec's map section draws"),
+                        }),
                     }
                 }
                 let list = v["cars"].as_array().cloned().unwrap_or_default();
@@ -412,7 +425,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     if city {
         if let Some(data) = read(LIGHTS_CSV, &mut problems) {
             // Every light of every intersection, every frame.
-            let lights = expected.lights_per_frame;
+            let lights = lights_per_frame;
             check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * lights, &mut problems, |row, i| {
                 (row.get(0)?.parse::<usize>().ok()? == i / lights).then_some(())
             });

@@ -14,7 +14,7 @@ fn heading_diff(a: f64, b: f64) -> f64 {
 /// `columns` north-south roads, 30 m apart, each running 20 m beyond its
 /// last crossing.
 fn grid(rows: usize, columns: usize) -> MapLayout {
-    let grid = GridSpec { rows, columns, block_m: 30.0, outer_m: 20.0 };
+    let grid = GridSpec { rows: rows.into(), columns: columns.into(), block_m: 30.0, outer_m: 20.0 };
     MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
 

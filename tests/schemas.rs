@@ -71,6 +71,10 @@ fn spec_schema_and_parser_agree() {
     ));
     good.push(("chains of 4".into(), edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 4}))));
     good.push(("forks".into(), edited(&base, |v| v["graph"] = json!({"shape": "forks"}))));
+    good.push((
+        "drawn towns".into(),
+        edited(&base, |v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": {"choice": [2, 4]}}})),
+    ));
     for (what, doc) in &good {
         let errors = schema_errors(&schema, doc);
         assert!(errors.is_empty(), "{what}: schema rejects a good spec: {errors:?}");
@@ -87,6 +91,15 @@ fn spec_schema_and_parser_agree() {
         ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
         ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
         ("unknown graph shape", edited(&base, |v| v["graph"] = json!({"shape": "rings"}))),
+        ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
+        (
+            "grid rows drawn twice",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3], "choice": [2]}, "columns": 2}})),
+        ),
+        (
+            "grid columns up to 9",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": 2, "columns": {"uniform": [2, 9]}}})),
+        ),
         ("unknown key in graph", edited(&base, |v| v["graph"] = json!({"shape": "chains", "length": 3}))),
         ("a chain of 7", edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 7}))),
         ("map roads as an object", edited(&base, |v| v["map"] = json!({"east_west_roads": {"A": 14, "B": -14}}))),

@@ -278,7 +278,7 @@ fn a_map_too_small_for_a_lane_change_before_the_stop_line_is_named() {
     rejected(
         "map-camera",
         &with(|v| v["map"] = serde_json::json!({"camera_altitude_m": 20})),
-        &["map.camera_altitude_m", "20 m shows less than the four intersections", "use at least"],
+        &["map.camera_altitude_m", "20 m shows less than every intersection", "use at least"],
     );
 }
 
@@ -296,6 +296,35 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &["map.grid.columns", "9", "1 to 8"],
     );
     rejected("grid-missing", &grid(serde_json::json!({"rows": 2})), &["map.grid", "columns"]);
+    rejected(
+        "grid-drawn-range",
+        &grid(serde_json::json!({"rows": {"uniform": [3, 2]}, "columns": 2})),
+        &["map.grid.rows", "[3, 2] has low above high"],
+    );
+    rejected(
+        "grid-drawn-9",
+        &grid(serde_json::json!({"rows": 2, "columns": {"choice": [2, 9]}})),
+        &["map.grid.columns", "9 is not allowed", "1 to 8"],
+    );
+    rejected(
+        "grid-drawn-empty",
+        &grid(serde_json::json!({"rows": {"choice": []}, "columns": 2})),
+        &["map.grid.rows", "empty"],
+    );
+    rejected(
+        "grid-drawn-half",
+        &grid(serde_json::json!({"rows": 2.5, "columns": 2})),
+        &["map.grid.rows", "a whole number", "uniform"],
+    );
+    // A town that a draw can reach but that breaks a rule is named.
+    rejected(
+        "grid-drawn-town",
+        &with(|v| {
+            v["map"] =
+                serde_json::json!({"grid": {"rows": {"uniform": [1, 4]}, "columns": 1}, "camera_altitude_m": 45});
+        }),
+        &["map.camera_altitude_m", "in the grid-3x1 town: 45 m shows less than every intersection"],
+    );
     rejected("grid-unknown", &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 3})), &["lanes", "block_m"]);
     // 20 m blocks leave 8 m between the 12 m wide roads: too short for a lane change.
     rejected(

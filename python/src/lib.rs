@@ -192,7 +192,12 @@ impl Spec {
 impl Spec {
     /// The road network as JSON: `causalcity map --json`'s junctions and lanes.
     fn map_json(&self) -> PyResult<String> {
-        let summary = causalcity::map_view::map_summary(&self.expansion().map);
+        let towns = self.expansion().towns();
+        let summary = causalcity::map_view::MapSummary {
+            town: towns[0].name.clone(),
+            towns: towns.iter().map(|t| t.name.clone()).collect(),
+            ..causalcity::map_view::map_summary(&towns[0].map)
+        };
         serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
     }
 

@@ -82,6 +82,16 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             return Err(Error::Input(format!("--group {g} is not in this dataset: use one of {}", names.join(", "))));
         }
     }
+    let towns = opened.expansion.towns();
+    if towns.len() > 1 {
+        let names: Vec<&str> = towns.iter().map(|t| t.name.as_str()).collect();
+        return Err(Error::Input(format!(
+            "{}: its scenarios happen on {} towns ({}), and a heat map draws one: generate a dataset of one town to map it",
+            dataset.display(),
+            towns.len(),
+            names.join(", ")
+        )));
+    }
     let file = claim_file(out, &[("the dataset it maps", dataset)])?;
     draw(&opened, &file, filter).map_err(Error::Failure)
 }

@@ -337,7 +337,6 @@ struct Tally {
 /// `evaluate`); a scenario file that cannot be read is a failure.
 pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
     let dataset = Dataset::open_complete(dir).map_err(crate::error::Error::Input)?;
-    let map = dataset.expansion.map.clone();
     let mut rows = Vec::new();
     for group in &dataset.spec().groups {
         for split in Split::ALL {
@@ -347,7 +346,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
             }
             let tallies: Vec<Tally> = dirs
                 .par_iter()
-                .map(|d| tally(d, &map))
+                .map(|d| tally(d, dataset.expansion.towns()))
                 .collect::<Result<_, _>>()
                 .map_err(crate::error::Error::Failure)?;
             rows.push(combine(group.name(), split.name(), tallies));
@@ -455,12 +454,23 @@ fn red_approaches(dir: &Path) -> Result<std::collections::HashSet<(usize, String
     Ok(red)
 }
 
-fn tally(dir: &Path, map: &CityMap) -> Result<Tally, String> {
+fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, String> {
     let path = dir.join("scenario.json");
     let scenario: serde_json::Value = std::fs::read(&path)
         .map_err(|e| e.to_string())
         .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
         .map_err(|e| format!("{}: {e}", path.display()))?;
+    // The scenario's town (a dataset of several names it), else the only one.
+    let map: &CityMap = match scenario["town"].as_str() {
+        Some(name) => {
+            &towns
+                .iter()
+                .find(|t| t.name == name)
+                .ok_or_else(|| format!("{}: town {name:?} is not one the dataset's spec draws", path.display()))?
+                .map
+        }
+        None => &towns[0].map,
+    };
     let cars = scenario["cars"].as_array().map_or(0, Vec::len);
     let to_px = scenario["frame_interval"].as_f64().unwrap_or(0.0)
         * scenario["camera"]["pixels_per_metre"].as_f64().unwrap_or(0.0);

@@ -10,7 +10,7 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::run::{load_spec, scenario_writer, stop_flag, write_simulated, GenError};
+use super::run::{load_spec, scenario_writer, stop_flag, write_simulated, GenError, TownWriters};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
@@ -244,7 +244,8 @@ pub fn simulate_pair(
     counterfactual: &ScenarioPlan,
     stop: &AtomicBool,
 ) -> Option<SimulatedPair> {
-    let map = &expansion.map;
+    let town = expansion.town_of(factual);
+    let map = &town.map;
     let (a, b) = rayon::join(
         || crate::world::simulate_until(map, factual, stop),
         || crate::world::simulate_until(map, counterfactual, stop),
@@ -254,7 +255,7 @@ pub fn simulate_pair(
     let labels: Vec<String> =
         counterfactual.interventions[factual.interventions.len()..].iter().map(|i| i.label.clone()).collect();
     let (divergence_csv, divergence_m, summary) =
-        divergence(name, &names, &labels, &a, &b, expansion.camera.pixels_per_metre);
+        divergence(name, &names, &labels, &a, &b, town.camera.pixels_per_metre);
     Some(SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary })
 }
 
@@ -420,7 +421,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     }
     write_atomically(&record_path, &record(None)).map_err(GenError::from)?;
     let keys = expansion.keys(options.limit);
-    let writer = scenario_writer(&expansion, options.products, false);
+    let writers = TownWriters::new(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
     let kept = AtomicUsize::new(0);
     let result = pool.install(|| {
@@ -446,7 +447,8 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                 })?;
                 let mut counterfactual = plan.clone();
                 counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
-                let summary = write_pair(&expansion, &writer, &key.folder_name(), &plan, &counterfactual, &folder)?;
+                let summary =
+                    write_pair(&expansion, writers.of(&plan), &key.folder_name(), &plan, &counterfactual, &folder)?;
                 bar.inc();
                 Ok(summary)
             })

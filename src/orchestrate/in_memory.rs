@@ -25,7 +25,8 @@ use std::time::{Duration, Instant};
 /// threads. The bird's-eye background is drawn once, on first use.
 pub struct Generator {
     expansion: Expansion,
-    renderer: OnceLock<Renderer>,
+    /// One renderer per town, built on first use.
+    renderers: Vec<OnceLock<Renderer>>,
 }
 
 /// A scenario key that names no scenario of the spec.
@@ -35,7 +36,8 @@ pub struct KeyError(pub String);
 
 impl Generator {
     pub fn new(expansion: Expansion) -> Self {
-        Generator { expansion, renderer: OnceLock::new() }
+        let renderers = expansion.towns().iter().map(|_| OnceLock::new()).collect();
+        Generator { expansion, renderers }
     }
 
     pub fn expansion(&self) -> &Expansion {
@@ -69,8 +71,11 @@ impl Generator {
         self.expansion.keys(limit).into_iter().filter(|k| split.is_none_or(|s| k.split == s)).collect()
     }
 
-    fn renderer(&self) -> &Renderer {
-        self.renderer.get_or_init(|| Renderer::new(&self.expansion.map, self.expansion.camera))
+    /// The renderer of town `index` (of [`Expansion::towns`]); every
+    /// town's canvas has the spec's image size, so any serves to make one.
+    fn renderer(&self, index: usize) -> &Renderer {
+        let town = &self.expansion.towns()[index];
+        self.renderers[index].get_or_init(|| Renderer::new(&town.map, town.camera))
     }
 
     /// Plans and simulates one scenario; with `images`, renders its frames;
@@ -90,7 +95,7 @@ impl Generator {
         effects: bool,
         stop: &AtomicBool,
     ) -> Result<ScenarioArrays, GenError> {
-        let mut canvas = images.then(|| self.renderer().canvas());
+        let mut canvas = images.then(|| self.renderer(0).canvas());
         self.scenario_with(key, canvas.as_mut(), effects, stop, None)
     }
 
@@ -106,7 +111,8 @@ impl Generator {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
-        let map = &self.expansion.map;
+        let town = plan.town.as_ref().map_or(0, |t| t.index);
+        let map = &self.expansion.towns()[town].map;
         let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
         let trajectories = crate::world::simulate_until(map, &plan, stop).ok_or_else(interrupted)?;
         let effects = match effects {
@@ -115,7 +121,7 @@ impl Generator {
             }
             false => None,
         };
-        arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(), c)), into)
+        arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(town), c)), into)
     }
 }
 
@@ -308,7 +314,7 @@ fn prefetch_worker(
     halt: &AtomicBool,
 ) {
     let (lock, wake) = shared;
-    let mut canvas = images.then(|| generator.renderer().canvas());
+    let mut canvas = images.then(|| generator.renderer(0).canvas());
     loop {
         let (index, key, batch) = {
             let mut queue = lock.lock().unwrap_or_else(|e| e.into_inner());
@@ -381,7 +387,8 @@ fn arrays(
     into: Option<(&BatchFrames, usize)>,
 ) -> Result<ScenarioArrays, GenError> {
     let spec = &expansion.spec;
-    let (map, camera) = (&expansion.map, &expansion.camera);
+    let town = expansion.town_of(plan);
+    let (map, camera) = (&town.map, &town.camera);
     scenario_arrays(map, camera, spec.leader_gap_px(), plan, trajectories, effects, renderer, into)
         .map_err(GenError::Memory)
 }

@@ -243,9 +243,36 @@ pub fn install_signal_handler() {
     });
 }
 
-/// The writer of a run over `expansion`'s map, camera and spec.
+/// The writer of a run over `expansion`'s (first) town, camera and spec.
 pub(crate) fn scenario_writer(expansion: &Expansion, products: Products, fsync: bool) -> ScenarioWriter {
     ScenarioWriter::new(expansion.map.clone(), expansion.camera, expansion.spec.leader_gap_px(), products, fsync)
+}
+
+/// One writer per town of `expansion` (a town's map and camera), in
+/// [`Expansion::towns`] order; buffers of one serve them all (every town's
+/// frames have the spec's image size).
+pub(crate) struct TownWriters(Vec<ScenarioWriter>);
+
+impl TownWriters {
+    pub(crate) fn new(expansion: &Expansion, products: Products, fsync: bool) -> TownWriters {
+        let gap = expansion.spec.leader_gap_px();
+        TownWriters(
+            expansion
+                .towns()
+                .iter()
+                .map(|town| ScenarioWriter::new(town.map.clone(), town.camera, gap, products, fsync))
+                .collect(),
+        )
+    }
+
+    /// The writer of the town `plan` happens on.
+    pub(crate) fn of(&self, plan: &ScenarioPlan) -> &ScenarioWriter {
+        &self.0[plan.town.as_ref().map_or(0, |t| t.index)]
+    }
+
+    pub(crate) fn buffers(&self) -> WriterBuffers {
+        self.0[0].buffers()
+    }
 }
 
 /// Writes a simulated scenario into `target` through `writer`, stopping
@@ -594,7 +621,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     let previous_manifest = std::fs::read(&manifest_file).ok();
     write_atomically(&manifest_file, &manifest(false))?;
 
-    let writer = scenario_writer(expansion, products, options.fsync);
+    let writer = TownWriters::new(expansion, products, options.fsync);
     let times = StageTimes::default();
     let sample = if options.force_space {
         None
@@ -715,7 +742,7 @@ const SPACE_MARGIN_BYTES: u64 = 64 << 20;
 /// it again (and the folders made for it) and refuses with the figures.
 fn check_space(
     expansion: &Expansion,
-    writer: &ScenarioWriter,
+    writer: &TownWriters,
     out: &Path,
     sequence: &crate::plan::KeySequence<'_>,
     positions: &ShardPositions,
@@ -763,7 +790,7 @@ fn check_space(
 /// Plans, simulates and writes one scenario; returns the bytes written.
 fn write_scenario(
     expansion: &Expansion,
-    writer: &ScenarioWriter,
+    writers: &TownWriters,
     key: &ScenarioKey,
     target: PathBuf,
     buffers: &mut WriterBuffers,
@@ -774,9 +801,10 @@ fn write_scenario(
         reason,
     })?;
     let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
-    let map = &expansion.map;
+    let map = &expansion.town_of(&plan).map;
     let trajectories =
         times.time(Stage::Simulate, || crate::world::simulate_until(map, &plan, &STOP)).ok_or_else(interrupted)?;
+    let writer = writers.of(&plan);
     let effects = match writer.products().effects {
         true => Some(
             times

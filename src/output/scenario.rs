@@ -116,6 +116,13 @@ struct ScenarioRecord<'a> {
     stream_key: &'a str,
     frames: u32,
     frame_interval: f64,
+    /// Datasets of several towns: the scenario's town's name.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    town: Option<&'a str>,
+    /// Datasets of several towns: the town's map section, enough to
+    /// rebuild it (a spec's `map`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    map: Option<&'a crate::spec::MapSpec>,
     camera: &'a Camera,
     #[serde(skip_serializing_if = "Option::is_none")]
     toy: Option<ToyRecord>,
@@ -189,6 +196,8 @@ pub fn scenario_json(
         stream_key: &plan.stream_key,
         frames: plan.frames,
         frame_interval: plan.frame_interval,
+        town: plan.town.as_ref().map(|t| t.name.as_str()),
+        map: plan.town.as_ref().map(|t| &t.map),
         camera,
         toy,
         city,

@@ -5,15 +5,16 @@
 
 use super::confounders::ConfounderModel;
 use super::{
-    stream_key, CarAgency, CarPlan, CityPlan, Fallback, GivenCar, OnLeaderLost, Role, ScenarioKey, ScenarioPlan,
-    WorldPlan,
+    stream_key, CarAgency, CarPlan, CityPlan, Fallback, GivenCar, OnLeaderLost, PlannedTown, Role, ScenarioKey,
+    ScenarioPlan, WorldPlan,
 };
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
 use crate::map::{Action, AdaptationKind, CityMap, LaneEnd, LaneId, LanePolicy, Route};
 use crate::spec::{
-    ActionDrawing, DatasetSpec, GraphShape, GroupSpec, LightPhase, SpecError, Split, WorldKind, DEFAULT_LEADER_GAP_PX,
+    ActionDrawing, DatasetSpec, GraphShape, GroupSpec, LightPhase, MapSpec, SpecError, Split, WorldKind,
+    DEFAULT_LEADER_GAP_PX,
 };
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -47,10 +48,37 @@ struct SpawnSpan {
     hi: f64,
 }
 
-/// The spec checked against the map and camera, able to plan any scenario.
+/// The spec checked against every town it can draw, able to plan any
+/// scenario: one [`Planner`] per town, and each split's map section to
+/// draw its scenarios' towns from.
 #[derive(Debug)]
 pub struct Expansion {
     pub spec: DatasetSpec,
+    /// The first town's map and bird's-eye camera: the only town of a spec
+    /// whose map draws nothing.
+    pub map: Arc<CityMap>,
+    pub camera: Camera,
+    planners: Vec<Planner>,
+    /// Per split of [`Split::ALL`]: the map section its towns are drawn
+    /// from, and each town it can draw with its planner's index.
+    split_towns: [SplitTowns; 3],
+}
+
+/// The towns one split draws from.
+#[derive(Debug, Clone)]
+struct SplitTowns {
+    map: MapSpec,
+    towns: Vec<(MapSpec, usize)>,
+}
+
+/// One town's planning: the spec with the town's map section, its map,
+/// the bird's-eye camera that frames it, and where cars start on camera.
+#[derive(Debug)]
+pub struct Planner {
+    /// The dataset spec, its `map` the town's own (no draws left).
+    pub spec: DatasetSpec,
+    /// The town's name ([`MapSpec::town_name`]).
+    pub name: String,
     pub map: Arc<CityMap>,
     pub camera: Camera,
     spans: Vec<SpawnSpan>,
@@ -136,16 +164,125 @@ impl KeySequence<'_> {
     }
 }
 
+/// Keys the stream a scenario's town is drawn from (its own, so drawing
+/// it moves no other random number).
+const TOWN_TAG: &[u8] = b"causalcity/town/v1";
+
 impl Expansion {
-    /// The spec's map (`map` section) and camera, checked as [`Expansion::new`] does.
+    /// The spec's towns (`map` section), each with its map and camera,
+    /// checked as [`Planner::new`] does.
     pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
         spec.map.validate()?;
-        let map = Arc::new(CityMap::new(spec.map.layout()));
-        Expansion::new(spec, map)
+        let mut planners: Vec<Planner> = Vec::new();
+        let mut split_towns = Vec::new();
+        for _split in Split::ALL {
+            let section = spec.map.clone();
+            let mut towns = Vec::new();
+            for town in section.towns() {
+                let index = match planners.iter().position(|p| p.spec.map == town) {
+                    Some(index) => index,
+                    None => {
+                        let map = Arc::new(CityMap::new(town.layout()));
+                        let planner = Planner::new(DatasetSpec { map: town.clone(), ..spec.clone() }, map)
+                            .map_err(|e| in_town(e, &town, section.towns().len()))?;
+                        planners.push(planner);
+                        planners.len() - 1
+                    }
+                };
+                towns.push((town, index));
+            }
+            split_towns.push(SplitTowns { map: section, towns });
+        }
+        let split_towns: [SplitTowns; 3] = split_towns.try_into().expect("one per split");
+        let (map, camera) = (planners[0].map.clone(), planners[0].camera);
+        Ok(Expansion { spec, map, camera, planners, split_towns })
     }
 
-    /// Checks that every group can be planned on this map and camera.
+    /// One town, `map`, checked as [`Planner::new`] does (hand-written
+    /// scenarios bring their own map).
     pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
+        let planner = Planner::new(spec.clone(), map)?;
+        let towns = SplitTowns { map: spec.map.clone(), towns: vec![(spec.map.clone(), 0)] };
+        let (map, camera) = (planner.map.clone(), planner.camera);
+        Ok(Expansion { spec, map, camera, planners: vec![planner], split_towns: [towns.clone(), towns.clone(), towns] })
+    }
+
+    /// Every town a scenario can happen on, in a fixed order: the first
+    /// one's map and camera are [`Expansion::map`] and [`Expansion::camera`].
+    pub fn towns(&self) -> &[Planner] {
+        &self.planners
+    }
+
+    /// The town a plan happens on.
+    pub fn town_of(&self, plan: &ScenarioPlan) -> &Planner {
+        &self.planners[plan.town.as_ref().map_or(0, |t| t.index)]
+    }
+
+    /// Plans one scenario on the town its split draws for it. Errors only
+    /// when cars cannot be placed.
+    pub fn plan(&self, key: &ScenarioKey) -> Result<ScenarioPlan, String> {
+        let split = &self.split_towns[key.split.index()];
+        let index = match split.towns.as_slice() {
+            [(_, index)] => *index,
+            towns => {
+                let stream = stream_key(self.spec.seed, &key.group, key.split, key.index);
+                let mut rng = ChaCha8Rng::from_seed(Sha256::digest([TOWN_TAG, &stream[..]].concat()).into());
+                let drawn = split.map.draw_town(&mut rng);
+                towns.iter().find(|(town, _)| *town == drawn).map(|(_, index)| *index).unwrap_or(towns[0].1)
+            }
+        };
+        let planner = &self.planners[index];
+        let mut plan = planner.plan(key)?;
+        if self.planners.len() > 1 {
+            plan.town = Some(PlannedTown { index, name: planner.name.clone(), map: planner.spec.map.clone() });
+        }
+        Ok(plan)
+    }
+
+    /// Plans a scenario of given cars on the first town (see [`Planner::plan_given`]).
+    pub fn plan_given(
+        &self,
+        key: &ScenarioKey,
+        stream: [u8; 32],
+        given: &[GivenCar],
+        pairs: &[(usize, usize)],
+    ) -> ScenarioPlan {
+        self.planners[0].plan_given(key, stream, given, pairs)
+    }
+
+    /// The farthest any car can travel in a scenario of the first town, metres.
+    pub fn max_travel(&self) -> f64 {
+        self.planners[0].max_travel()
+    }
+
+    /// Every scenario of the dataset in a fixed order (group, split, index),
+    /// with at most `limit` scenarios per split.
+    pub fn keys(&self, limit: Option<u32>) -> Vec<ScenarioKey> {
+        let sequence = self.key_sequence(limit);
+        (0..sequence.len()).map(|i| sequence.key(i)).collect()
+    }
+
+    /// [`Expansion::keys`] without holding them: any key by its position,
+    /// in memory independent of the split sizes (a spec at the largest
+    /// split sizes has tens of millions of keys).
+    pub fn key_sequence(&self, limit: Option<u32>) -> KeySequence<'_> {
+        let per_split = Split::ALL.map(|s| self.spec.splits.count(s).min(limit.unwrap_or(u32::MAX)) as u64);
+        KeySequence { groups: &self.spec.groups, per_split }
+    }
+}
+
+/// A town's spec error, said to be the town's when the map draws several.
+fn in_town(e: SpecError, town: &MapSpec, towns: usize) -> SpecError {
+    if towns > 1 {
+        SpecError::new(e.field, format!("in the {} town: {}", town.town_name(), e.message))
+    } else {
+        e
+    }
+}
+
+impl Planner {
+    /// Checks that every group can be planned on this map and camera.
+    pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Planner, SpecError> {
         let camera = spec.birds_eye_camera()?;
         let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px());
         if spec.world == WorldKind::Toy && leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
@@ -168,7 +305,8 @@ impl Expansion {
             WorldKind::Toy => leader_gap_m,
             WorldKind::City => spec.car_length_m + spec.city_settings().start.follower_gap_m.lowest(),
         };
-        let expansion = Expansion { spec, map, camera, spans, leader_gap_m, shortest_spacing_m, toy_step_m };
+        let name = spec.map.town_name();
+        let expansion = Planner { spec, name, map, camera, spans, leader_gap_m, shortest_spacing_m, toy_step_m };
         for (i, g) in expansion.spec.groups.iter().enumerate() {
             // Random placement needs room to spare: allow half the packed capacity.
             if g.cars > capacity / 2 {
@@ -213,27 +351,12 @@ impl Expansion {
         Ok(expansion)
     }
 
-    /// Every scenario of the dataset in a fixed order (group, split, index),
-    /// with at most `limit` scenarios per split.
-    pub fn keys(&self, limit: Option<u32>) -> Vec<ScenarioKey> {
-        let sequence = self.key_sequence(limit);
-        (0..sequence.len()).map(|i| sequence.key(i)).collect()
-    }
-
-    /// [`Expansion::keys`] without holding them: any key by its position,
-    /// in memory independent of the split sizes (a spec at the largest
-    /// split sizes has tens of millions of keys).
-    pub fn key_sequence(&self, limit: Option<u32>) -> KeySequence<'_> {
-        let per_split = Split::ALL.map(|s| self.spec.splits.count(s).min(limit.unwrap_or(u32::MAX)) as u64);
-        KeySequence { groups: &self.spec.groups, per_split }
-    }
-
     /// Metres every toy car covers per frame.
     pub fn toy_step_m(&self) -> f64 {
         self.toy_step_m
     }
 
-    /// Plans one scenario. Errors only when cars cannot be placed.
+    /// Plans one scenario on this town. Errors only when cars cannot be placed.
     pub fn plan(&self, key: &ScenarioKey) -> Result<ScenarioPlan, String> {
         let spec = &self.spec;
         let group: &GroupSpec = &spec.groups[key.group_index];
@@ -872,6 +995,7 @@ impl Expansion {
             cars: planned,
             edges,
             interventions: Vec::new(),
+            town: None,
             birds_eye: spec.birds_eye,
             // Checked with the spec; chased cars are named by id, and cars are in id order.
             cameras: spec

@@ -192,6 +192,20 @@ pub struct ScenarioPlan {
     pub cameras: Vec<CameraPlan>,
     /// How the bird's-eye frames are drawn.
     pub birds_eye: crate::spec::BirdsEyeView,
+    /// The town it happens on, when the dataset has several (`None`: the
+    /// dataset's only town).
+    pub town: Option<PlannedTown>,
+}
+
+/// The town a scenario of a many-town dataset happens on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedTown {
+    /// Its place in [`expand::Expansion::towns`].
+    pub index: usize,
+    /// Its name ([`crate::spec::MapSpec::town_name`]).
+    pub name: String,
+    /// Its map section, with nothing left to draw: enough to rebuild it.
+    pub map: crate::spec::MapSpec,
 }
 
 /// A car of a hand-written scenario: where it starts, what it does, and

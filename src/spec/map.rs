@@ -37,13 +37,15 @@ pub struct MapSpec {
 /// back. Roads are named as in the default city, which is the 2 x 2 case:
 /// east-west roads `A`, `B`, .. from north to south, then north-south roads
 /// from west to east with the letters that follow.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridSpec {
-    /// East-west roads, 1 to [`MAX_GRID_ROADS`].
-    pub rows: usize,
-    /// North-south roads, 1 to [`MAX_GRID_ROADS`].
-    pub columns: usize,
+    /// East-west roads, 1 to [`MAX_GRID_ROADS`]: a number, or drawn per
+    /// scenario.
+    pub rows: RoadCount,
+    /// North-south roads, 1 to [`MAX_GRID_ROADS`]: a number, or drawn per
+    /// scenario.
+    pub columns: RoadCount,
     /// Distance between neighbouring parallel roads' centre lines, metres.
     #[serde(default = "default_block_m")]
     pub block_m: f64,
@@ -52,8 +54,113 @@ pub struct GridSpec {
     pub outer_m: f64,
 }
 
+/// One grid town's concrete size (a [`GridSpec`] with its counts drawn).
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    rows: usize,
+    columns: usize,
+    block_m: f64,
+    outer_m: f64,
+}
+
 /// Most roads a grid has each way (8 x 8 junctions).
 pub const MAX_GRID_ROADS: usize = 8;
+
+/// A number of roads: fixed (`3`), or drawn per scenario from the seed,
+/// uniformly from a whole range (`{"uniform": [2, 5]}`, both ends included)
+/// or from a list (`{"choice": [2, 4]}`, each entry equally likely).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(untagged)]
+pub enum RoadCount {
+    Fixed(usize),
+    Uniform { uniform: [usize; 2] },
+    Choice { choice: Vec<usize> },
+}
+
+impl From<usize> for RoadCount {
+    fn from(n: usize) -> Self {
+        RoadCount::Fixed(n)
+    }
+}
+
+/// The object form of a [`RoadCount`], as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRoadCount {
+    uniform: Option<[usize; 2]>,
+    choice: Option<Vec<usize>>,
+}
+
+impl<'de> Deserialize<'de> for RoadCount {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = RoadCount;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a whole number, {\"uniform\": [low, high]} or {\"choice\": [a, b, ...]}")
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<RoadCount, E> {
+                Ok(RoadCount::Fixed(v.min(usize::MAX as u64) as usize))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<RoadCount, A::Error> {
+                let raw = RawRoadCount::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+                match (raw.uniform, raw.choice) {
+                    (Some(uniform), None) => Ok(RoadCount::Uniform { uniform }),
+                    (None, Some(choice)) => Ok(RoadCount::Choice { choice }),
+                    _ => Err(serde::de::Error::custom(
+                        "give exactly one of {\"uniform\": [low, high]} or {\"choice\": [a, b, ...]}",
+                    )),
+                }
+            }
+        }
+        deserializer.deserialize_any(Visit)
+    }
+}
+
+impl RoadCount {
+    /// Every count it can draw, ascending, each once.
+    pub fn values(&self) -> Vec<usize> {
+        let mut values = match self {
+            RoadCount::Fixed(n) => vec![*n],
+            RoadCount::Uniform { uniform: [lo, hi] } => (*lo..=*hi).collect(),
+            RoadCount::Choice { choice } => choice.clone(),
+        };
+        values.sort_unstable();
+        values.dedup();
+        values
+    }
+
+    /// One count, drawn from `rng` (a fixed count draws nothing).
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> usize {
+        use rand::RngExt;
+        match self {
+            RoadCount::Fixed(n) => *n,
+            RoadCount::Uniform { uniform: [lo, hi] } => rng.random_range(*lo..=*hi),
+            RoadCount::Choice { choice } => choice[rng.random_range(0..choice.len())],
+        }
+    }
+
+    fn check(&self, field: &str) -> Result<(), SpecError> {
+        match self {
+            RoadCount::Uniform { uniform: [lo, hi] } if lo > hi => {
+                return Err(SpecError::new(field, format!("uniform range [{lo}, {hi}] has low above high")))
+            }
+            RoadCount::Choice { choice } if choice.is_empty() => {
+                return Err(SpecError::new(field, "choice list is empty"))
+            }
+            _ => {}
+        }
+        for roads in self.values() {
+            if !(1..=MAX_GRID_ROADS).contains(&roads) {
+                return Err(SpecError::new(
+                    field,
+                    format!("{roads} is not allowed: give a whole number of roads from 1 to {MAX_GRID_ROADS}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
 
 /// The default city's block: roads 28 m apart.
 fn default_block_m() -> f64 {
@@ -85,10 +192,63 @@ impl Default for MapSpec {
 const MAX_MAP_EXTENT: f64 = 5000.0;
 
 impl MapSpec {
-    /// The layout the map is built from.
+    /// Every town this map section can draw, as a map section of its own
+    /// with fixed counts: grids by rows, then columns, ascending; one town
+    /// (this section) when nothing is drawn.
+    pub fn towns(&self) -> Vec<MapSpec> {
+        let Some(grid) = &self.grid else { return vec![self.clone()] };
+        let mut towns = Vec::new();
+        for rows in grid.rows.values() {
+            for columns in grid.columns.values() {
+                let grid = GridSpec { rows: rows.into(), columns: columns.into(), ..grid.clone() };
+                towns.push(MapSpec { grid: Some(grid), ..self.clone() });
+            }
+        }
+        towns
+    }
+
+    /// Draws the town of one scenario from `rng`: rows, then columns.
+    /// Returns it as [`MapSpec::towns`] lists it.
+    pub fn draw_town(&self, rng: &mut impl rand::Rng) -> MapSpec {
+        match &self.grid {
+            Some(grid) if self.towns().len() > 1 => {
+                let (rows, columns) = (grid.rows.draw(rng), grid.columns.draw(rng));
+                let grid = GridSpec { rows: rows.into(), columns: columns.into(), ..grid.clone() };
+                MapSpec { grid: Some(grid), ..self.clone() }
+            }
+            _ => self.clone(),
+        }
+    }
+
+    /// A short name of a town: `default`, `custom` (four roads moved) or
+    /// `grid-3x4` (rows x columns; `-b30-o20` when blocks or outer roads
+    /// differ from the defaults).
+    pub fn town_name(&self) -> String {
+        match &self.grid {
+            None if *self == MapSpec::default() => "default".into(),
+            None => "custom".into(),
+            Some(grid) => {
+                let count = |c: &RoadCount| c.values().iter().map(|n| n.to_string()).collect::<Vec<_>>().join("-");
+                let mut name = format!("grid-{}x{}", count(&grid.rows), count(&grid.columns));
+                if grid.block_m != default_block_m() || grid.outer_m != default_outer_m() {
+                    name += &format!("-b{}-o{}", grid.block_m, grid.outer_m);
+                }
+                name
+            }
+        }
+    }
+
+    /// The layout the map is built from (a section that draws its town:
+    /// the first of [`MapSpec::towns`]).
     pub fn layout(&self) -> MapLayout {
         let d = MapLayout::default();
-        if let Some(grid) = self.grid {
+        if let Some(grid) = self.grid.as_ref() {
+            let grid = Grid {
+                rows: grid.rows.values()[0],
+                columns: grid.columns.values()[0],
+                block_m: grid.block_m,
+                outer_m: grid.outer_m,
+            };
             let centres = |n: usize| (0..n).map(move |k| (k as f64 - n.saturating_sub(1) as f64 / 2.0) * grid.block_m);
             let reach = |n: usize| n.saturating_sub(1) as f64 / 2.0 * grid.block_m + grid.outer_m;
             // A, B, .. from north to south (ascending y: reversed), then the
@@ -126,8 +286,13 @@ impl MapSpec {
         if let Some(altitude) = self.camera_altitude_m {
             positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
         }
-        if let Some(grid) = self.grid {
-            return self.validate_grid(grid);
+        if let Some(grid) = &self.grid {
+            grid.rows.check("map.grid.rows")?;
+            grid.columns.check("map.grid.columns")?;
+            for town in self.towns() {
+                town.validate_grid()?;
+            }
+            return Ok(());
         }
         let layout = self.layout();
         let hw = layout.road_half_width();
@@ -168,7 +333,14 @@ impl MapSpec {
 
     /// Checks a grid town: its size, and that every lane ending at an
     /// intersection is long enough to change lanes before it.
-    fn validate_grid(&self, grid: GridSpec) -> Result<(), SpecError> {
+    fn validate_grid(&self) -> Result<(), SpecError> {
+        let Some(spec) = &self.grid else { return Ok(()) };
+        let grid = Grid {
+            rows: spec.rows.values()[0],
+            columns: spec.columns.values()[0],
+            block_m: spec.block_m,
+            outer_m: spec.outer_m,
+        };
         let default = MapSpec::default();
         if self.east_west_roads != default.east_west_roads
             || self.north_south_roads != default.north_south_roads
@@ -179,14 +351,6 @@ impl MapSpec {
                 "map.grid",
                 "a grid places its own roads: leave out map.east_west_roads, map.north_south_roads, map.extent_x and map.extent_y (use grid.block_m and grid.outer_m)",
             ));
-        }
-        for (field, roads) in [("map.grid.rows", grid.rows), ("map.grid.columns", grid.columns)] {
-            if !(1..=MAX_GRID_ROADS).contains(&roads) {
-                return Err(SpecError::new(
-                    field,
-                    format!("{roads} is not allowed: give a whole number of roads from 1 to {MAX_GRID_ROADS}"),
-                ));
-            }
         }
         positive("map.grid.block_m", grid.block_m, MAX_MAP_EXTENT / MAX_GRID_ROADS as f64, "metres")?;
         positive("map.grid.outer_m", grid.outer_m, MAX_MAP_EXTENT, "metres")?;

@@ -482,7 +482,7 @@ impl DatasetSpec {
                 return Err(SpecError::new(
                     "map.camera_altitude_m",
                     format!(
-                        "{a} m shows less than the four intersections and their stop lines ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
+                        "{a} m shows less than every intersection and its stop lines ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
                         hi.x - lo.x,
                         hi.y - lo.y,
                         fits

@@ -113,6 +113,7 @@ fn plan(
         edges: vec![],
         interventions,
         cameras: vec![],
+        town: None,
         birds_eye: crate::spec::BirdsEyeView::Flat,
     }
 }
