@@ -387,6 +387,14 @@ class Scenario:
         return f"Scenario({', '.join(parts)})"
 
     @property
+    def town(self) -> Optional[str]:
+        """The town it happens on when its spec draws several (``map.grid``
+        rows or columns drawn per scenario), e.g. ``"grid-3x4"``;
+        ``scenario.json``'s ``map`` rebuilds it. None when the dataset has
+        one town."""
+        return self.metadata.get("town")
+
+    @property
     def yaw(self) -> _np.ndarray:
         """``[frames, cars]``: heading in radians."""
         return self.rotation[..., 2]
@@ -473,8 +481,15 @@ def simulate(
     return _scenario(raw, Key(group, split, index))
 
 
-def map(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Dict[str, Any]:  # noqa: A001 (causalcity.map, as the CLI's `map`)
+def map(  # noqa: A001 (causalcity.map, as the CLI's `map`)
+    spec: Union[Spec, PathLike, Dict[str, Any]], town: Optional[str] = None
+) -> Dict[str, Any]:
     """The spec's road network, as ``causalcity map`` lists it, with arrays:
+
+    - ``town``: the town shown (``"default"``, ``"grid-3x4"``, ..) and
+      ``towns``, every town the spec draws (one unless ``map.grid`` draws
+      rows or columns per scenario); ``town=`` picks one (the first when
+      None), as ``Scenario.town`` names it;
 
     - ``junctions``: names (``"AC"``, ..) and ``junction_centres`` ``[J, 2]``;
     - ``lanes``: lane ids in id order (the spawn points scenario files name),
@@ -485,9 +500,11 @@ def map(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Dict[str, Any]:  # noqa:
 
     ``spec`` is a :class:`Spec`, a spec file's path or a dict.
     """
-    raw = _json.loads(_as_spec(spec)._native.map_json())
+    raw = _json.loads(_as_spec(spec)._native.map_json(town))
     lanes = raw["lanes"]
     return {
+        "town": raw["town"],
+        "towns": raw["towns"],
         "junctions": raw["junctions"],
         "junction_centres": _np.array(raw["junction_centres"], dtype=_np.float64).reshape(-1, 2),
         "lanes": [lane["name"] for lane in lanes],

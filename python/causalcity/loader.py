@@ -68,7 +68,10 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
     first. ``tensors`` (default: whether torch is imported) gives torch
     tensors instead of numpy arrays. Usable as a DataLoader ``collate_fn``.
 
-    Keys: ``key`` (list of :class:`~causalcity.Key`), ``t`` ``[B, frames]``,
+    Keys: ``key`` (list of :class:`~causalcity.Key`), ``town`` (list of
+    each scenario's town name, None where the dataset has one town; a
+    spec that draws towns gives each scenario its own camera, so pixels
+    mean different places in different towns), ``t`` ``[B, frames]``,
     ``position``/``rotation`` ``[B, frames, cars, 3]``, ``pixels``
     ``[B, frames, cars, 2]``, ``speed``/``in_view`` ``[B, frames, cars]``,
     ``car_mask`` ``[B, cars]`` (False on padding), ``graph`` ``[B, cars,
@@ -93,7 +96,11 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
         raise InputError(f"scenarios of different lengths ({sorted(frames)} frames) cannot share a batch")
     size, cars = len(scenarios), max(s.cars for s in scenarios)
     (count,) = frames
-    out: Dict[str, Any] = {"key": [s.key for s in scenarios], "t": _np.stack([s.t for s in scenarios])}
+    out: Dict[str, Any] = {
+        "key": [s.key for s in scenarios],
+        "town": [s.town for s in scenarios],
+        "t": _np.stack([s.t for s in scenarios]),
+    }
     mask = _np.zeros((size, cars), dtype=bool)
     for b, s in enumerate(scenarios):
         mask[b, : s.cars] = True

@@ -190,13 +190,25 @@ impl Spec {
 
 #[pymethods]
 impl Spec {
-    /// The road network as JSON: `causalcity map --json`'s junctions and lanes.
-    fn map_json(&self) -> PyResult<String> {
+    /// The road network of one town (the first when `town` is None) as
+    /// JSON: `causalcity map --json`'s town, towns, junctions and lanes.
+    #[pyo3(signature = (town=None))]
+    fn map_json(&self, town: Option<String>) -> PyResult<String> {
         let towns = self.expansion().towns();
+        let names: Vec<String> = towns.iter().map(|t| t.name.clone()).collect();
+        let shown = match &town {
+            None => &towns[0],
+            Some(name) => towns.iter().find(|t| &t.name == name).ok_or_else(|| {
+                InputError::new_err(format!(
+                    "town {name:?}: the spec draws no such town: use one of {}",
+                    names.join(", ")
+                ))
+            })?,
+        };
         let summary = causalcity::map_view::MapSummary {
-            town: towns[0].name.clone(),
-            towns: towns.iter().map(|t| t.name.clone()).collect(),
-            ..causalcity::map_view::map_summary(&towns[0].map)
+            town: shown.name.clone(),
+            towns: names,
+            ..causalcity::map_view::map_summary(&shown.map)
         };
         serde_json::to_string(&summary).map_err(|e| GenerationError::new_err(e.to_string()))
     }

@@ -235,6 +235,39 @@ def test_map_gives_the_road_network_as_arrays_and_agrees_with_the_command(tmp_pa
     assert len(default["lanes"]) == 48 and default["lanes"][0] == "A0w" and default["junctions"] == ["BC", "BD", "AC", "AD"]
 
 
+def test_a_spec_that_draws_towns_names_each_scenarios_town_as_gen_records_it(tmp_path):
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["name"] = "towns"
+    spec["groups"] = [{"cars": 6, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 8, "val": 0, "test": 0}
+    spec["frames"] = 10
+    spec["map"] = {"grid": {"rows": {"uniform": [1, 3]}, "columns": {"choice": [2, 4]}}}
+    spec_file = tmp_path / "towns.json"
+    spec_file.write_text(json.dumps(spec))
+    out = tmp_path / "towns"
+    cli("gen", "--spec", str(spec_file), "--out", str(out), "--no-images", "--no-effects", "--quiet")
+    batch = next(iter(causalcity.batches(spec, "train", batch_size=8, shuffle=False, effects=False, tensors=False)))
+    written = [
+        json.loads((out / "cars06_edges50" / "train" / f"{key.index:05d}" / "scenario.json").read_text())
+        for key in batch["key"]
+    ]
+    assert batch["town"] == [w["town"] for w in written]
+    assert len(set(batch["town"])) >= 3, batch["town"]
+    # Each town's pixels come from its own camera, as gen's.
+    for b, w in enumerate(written):
+        pixels = np.load(out / "cars06_edges50" / "train" / w["name"] / "pixels.npy")
+        np.testing.assert_allclose(batch["pixels"][b], pixels, atol=1e-3)
+    # causalcity.map lists the towns and shows the one asked for.
+    shown = causalcity.map(spec, town=batch["town"][0])
+    assert shown["town"] == batch["town"][0] and len(shown["towns"]) == 6
+    rows, columns = written[0]["map"]["grid"]["rows"], written[0]["map"]["grid"]["columns"]
+    assert len(shown["junctions"]) == rows * columns
+    with pytest.raises(causalcity.InputError, match="no such town"):
+        causalcity.map(spec, town="grid-9x9")
+    # A spec with one town gives None.
+    assert causalcity.simulate(CITY_SPEC, "cars08_edges50", "val", 0, effects=False).town is None
+
+
 def test_stream_shards_over_processes_and_workers_without_overlap_or_gap():
     spec = json.loads(TOY_SPEC.read_text())
     spec["splits"]["train"] = 11
