@@ -93,7 +93,7 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>, town: Option<&str>) -> Res
     }
     let invalid = |e| Error::Input(format!("invalid spec {}: {e}", spec_path.display()));
     let expansion = Expansion::from_spec(DatasetSpec::from_file(spec_path).map_err(invalid)?).map_err(invalid)?;
-    let towns: Vec<String> = expansion.towns().iter().map(|t| t.name.clone()).collect();
+    let towns: Vec<String> = expansion.all_town_names().into_iter().map(String::from).collect();
     let shown = match town {
         None => &expansion.towns()[0],
         Some(name) => expansion.towns().iter().find(|t| t.name == name).ok_or_else(|| {

@@ -40,12 +40,95 @@ pub struct ValidationReport {
     pub bytes_read: u64,
     pub seconds: f64,
     pub problems: Vec<Problem>,
+    /// What each split draws, when a split holds something out (`held_out`)
+    /// or the towns are drawn per scenario: towns and graph shape, and what
+    /// train and test share.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub design: Option<SplitDesign>,
+}
+
+/// The towns and graph shape of each split (train, val, test) and what
+/// test shares with train.
+#[derive(Debug, Clone, Serialize)]
+pub struct SplitDesign {
+    pub splits: Vec<SplitDraws>,
+    /// Towns both train and test draw.
+    pub shared_towns: Vec<String>,
+    /// Whether train and test plan the same graph shape.
+    pub shared_graph: bool,
+}
+
+/// What one split draws.
+#[derive(Debug, Clone, Serialize)]
+pub struct SplitDraws {
+    pub split: &'static str,
+    pub towns: Vec<String>,
+    /// `pairs`, `chains of 3`, `forks of 4`.
+    pub graph: String,
+    /// The sections it holds out from train (`map`, `graph`).
+    pub held_out: Vec<&'static str>,
+}
+
+impl SplitDesign {
+    /// The design of `expansion`'s dataset; `None` for a dataset of one
+    /// town and one graph shape.
+    pub fn of(expansion: &crate::plan::expand::Expansion) -> Option<SplitDesign> {
+        let spec = &expansion.spec;
+        if spec.held_out.is_empty() && expansion.all_town_names().len() < 2 {
+            return None;
+        }
+        let graph = |split: Split| {
+            let g = spec.graph_of(split);
+            match g.shape {
+                crate::spec::GraphShape::Pairs => "pairs".to_string(),
+                shape => format!("{} of {}", shape.name(), g.unit_cars()),
+            }
+        };
+        let splits: Vec<SplitDraws> = Split::ALL
+            .into_iter()
+            .map(|split| {
+                let held = spec.held_out.of(split);
+                let mut held_out = Vec::new();
+                if held.is_some_and(|h| h.map.is_some()) {
+                    held_out.push("map");
+                }
+                if held.is_some_and(|h| h.graph.is_some()) {
+                    held_out.push("graph");
+                }
+                SplitDraws {
+                    split: split.name(),
+                    towns: expansion.town_names(split).into_iter().map(String::from).collect(),
+                    graph: graph(split),
+                    held_out,
+                }
+            })
+            .collect();
+        let shared_towns = splits[0].towns.iter().filter(|t| splits[2].towns.contains(t)).cloned().collect();
+        let shared_graph = splits[0].graph == splits[2].graph;
+        Some(SplitDesign { splits, shared_towns, shared_graph })
+    }
+}
+
+impl fmt::Display for SplitDesign {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for s in &self.splits {
+            let held =
+                if s.held_out.is_empty() { String::new() } else { format!(" (held out: {})", s.held_out.join(", ")) };
+            writeln!(f, "{:<5} towns {}; graph {}{held}", s.split, s.towns.join(" "), s.graph)?;
+        }
+        let towns = if self.shared_towns.is_empty() { "no town".to_string() } else { self.shared_towns.join(" ") };
+        let graph = if self.shared_graph { "the graph shape" } else { "no graph shape" };
+        writeln!(f, "train and test share: {towns}; {graph}")
+    }
 }
 
 impl fmt::Display for ValidationReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for p in &self.problems {
             writeln!(f, "{}: {}", p.path.display(), p.message)?;
+        }
+        if let Some(design) = &self.design {
+            write!(f, "{design}")?;
         }
         writeln!(
             f,
@@ -121,6 +204,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),
         problems,
+        design: SplitDesign::of(&dataset.expansion),
     })
 }
 
@@ -223,6 +307,7 @@ fn validate_sweep(
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),
         problems,
+        design: None,
     })
 }
 
@@ -373,12 +458,12 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
                 // A dataset of several towns: the scenario's is one the spec draws.
                 if let Some(town) = v.get("map") {
                     match serde_json::from_value::<crate::spec::MapSpec>(town.clone()) {
-                        Ok(town) if spec.map.towns().contains(&town) => {
+                        Ok(town) if spec.map_of(key.split).towns().contains(&town) => {
                             lights_per_frame = town.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
                         }
                         _ => problems.push(Problem {
                             path: path.clone(),
-                            message: format!("`map` {town} is not a town the spec's map section draws"),
+                            message: format!("`map` {town} is not a town the spec draws for {}", key.split.name()),
                         }),
                     }
                 }

@@ -229,3 +229,66 @@ fn rebuilt_text(spec: &std::path::Path, map: &serde_json::Value) -> String {
     value["map"] = map.clone();
     value.to_string()
 }
+
+#[test]
+fn a_split_can_hold_out_towns_and_graph_shapes_and_validate_says_what_train_and_test_share() {
+    let dir = fresh_dir("grid-town-held-out");
+    let mut spec: serde_json::Value =
+        serde_json::from_str(&city_spec("ood", &[(8, 0.5)], (6, 2, 3), 20, r#"{"confounders": {}}"#)).unwrap();
+    spec["map"] = serde_json::json!({"grid": {"rows": {"choice": [2, 3]}, "columns": 2}});
+    spec["held_out"] =
+        serde_json::json!({"test": {"map": {"grid": {"rows": 4, "columns": 3}}, "graph": {"shape": "chains"}}});
+    let spec_path = write_spec(&dir, &spec.to_string());
+    let out = dir.join("ood");
+    gen_ok(&spec_path, &out, &["--no-images"]);
+
+    let mut seen: std::collections::BTreeMap<String, BTreeSet<String>> = Default::default();
+    let mut chains = 0;
+    for scenario in scenario_dirs(&out) {
+        let json = read_json(&scenario.join("scenario.json"));
+        let split = json["split"].as_str().unwrap().to_string();
+        seen.entry(split.clone()).or_default().insert(json["town"].as_str().unwrap().to_string());
+        let edges: Vec<(u64, u64)> = json["edges"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| (e[0].as_u64().unwrap(), e[1].as_u64().unwrap()))
+            .collect();
+        let linked = edges.iter().filter(|(a, _)| edges.iter().any(|(_, b)| b == a)).count();
+        if split == "test" {
+            assert_eq!(linked, 1, "a test scenario's 2 edges form a chain: {edges:?}");
+            chains += 1;
+        } else {
+            assert_eq!(linked, 0, "train and val keep disjoint pairs: {edges:?}");
+        }
+    }
+    assert_eq!(chains, 3);
+    assert_eq!(seen["test"], BTreeSet::from(["grid-4x3".to_string()]));
+    for split in ["train", "val"] {
+        assert!(seen[split].iter().all(|t| t == "grid-2x2" || t == "grid-3x2"), "{split}: {:?}", seen[split]);
+    }
+    assert!(seen["train"].len() == 2, "train drew {:?}", seen["train"]);
+
+    // validate checks every scenario against its split's towns and says what train and test share.
+    let report = run(&["validate", out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert!(report.status.success(), "{text}");
+    assert!(text.contains("test  towns grid-4x3; graph chains of 3 (held out: map, graph)"), "{text}");
+    assert!(text.contains("train and test share: no town; no graph shape"), "{text}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&run(&["validate", out.to_str().unwrap(), "--json"]).stdout).unwrap();
+    assert_eq!(json["design"]["shared_towns"], serde_json::json!([]));
+    assert_eq!(json["design"]["splits"][2]["held_out"], serde_json::json!(["map", "graph"]));
+
+    // A test scenario moved into train is caught: its town is not one train draws.
+    let test = out.join("cars08_edges50/test/00000/scenario.json");
+    let train = out.join("cars08_edges50/train/00000/scenario.json");
+    let (test_json, mut train_json) = (read_json(&test), read_json(&train));
+    train_json["map"] = test_json["map"].clone();
+    let bytes = serde_json::to_vec_pretty(&train_json).unwrap();
+    std::fs::write(&train, &bytes).unwrap();
+    let report = run(&["validate", out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert_eq!(report.status.code(), Some(1), "{text}");
+    assert!(text.contains("is not a town the spec draws for train"), "{text}");
+}

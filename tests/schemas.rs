@@ -72,6 +72,12 @@ fn spec_schema_and_parser_agree() {
     good.push(("chains of 4".into(), edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 4}))));
     good.push(("forks".into(), edited(&base, |v| v["graph"] = json!({"shape": "forks"}))));
     good.push((
+        "held-out test".into(),
+        edited(&base, |v| {
+            v["held_out"] = json!({"test": {"map": {"grid": {"rows": 4, "columns": 4}}, "graph": {"shape": "forks"}}})
+        }),
+    ));
+    good.push((
         "drawn towns".into(),
         edited(&base, |v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": {"choice": [2, 4]}}})),
     ));
@@ -91,6 +97,8 @@ fn spec_schema_and_parser_agree() {
         ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
         ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
         ("unknown graph shape", edited(&base, |v| v["graph"] = json!({"shape": "rings"}))),
+        ("held-out train", edited(&base, |v| v["held_out"] = json!({"train": {"graph": {"shape": "chains"}}}))),
+        ("held-out cars", edited(&base, |v| v["held_out"] = json!({"test": {"cars": 12}}))),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
         (
             "grid rows drawn twice",

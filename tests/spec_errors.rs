@@ -384,6 +384,41 @@ fn a_graph_shape_is_checked_for_its_size_and_the_cars_it_needs() {
 }
 
 #[test]
+fn a_held_out_split_is_checked_and_named_as_the_spec_names_it() {
+    rejected(
+        "held-out-train",
+        &with(|v| v["held_out"] = serde_json::json!({"train": {"graph": {"shape": "chains"}}})),
+        &["held_out", "train", "val", "test"],
+    );
+    rejected(
+        "held-out-graph",
+        &with(|v| v["held_out"] = serde_json::json!({"test": {"graph": {"shape": "chains", "cars": 9}}})),
+        &["held_out.test.graph.cars", "9 is not allowed"],
+    );
+    rejected(
+        "held-out-map",
+        &with(|v| v["held_out"] = serde_json::json!({"val": {"map": {"grid": {"rows": 9, "columns": 2}}}})),
+        &["held_out.val.map.grid.rows", "9 is not allowed"],
+    );
+    rejected(
+        "held-out-cars",
+        &with(|v| {
+            v["groups"] = serde_json::json!([{"cars": 1, "edge_proportion": 1.0}]);
+            v["graph"] = serde_json::json!({"shape": "chains"});
+        }),
+        &["groups[0].edge_proportion", "which need 2 cars"],
+    );
+    rejected(
+        "held-out-altitude",
+        &with(|v| {
+            v["held_out"] =
+                serde_json::json!({"test": {"map": {"grid": {"rows": 4, "columns": 1}, "camera_altitude_m": 45}}});
+        }),
+        &["held_out.test.map.camera_altitude_m", "in the grid-4x1 town test holds out"],
+    );
+}
+
+#[test]
 fn city_starts_are_checked_against_the_driver() {
     rejected(
         "gap-below-min-gap",

@@ -195,7 +195,7 @@ impl Spec {
     #[pyo3(signature = (town=None))]
     fn map_json(&self, town: Option<String>) -> PyResult<String> {
         let towns = self.expansion().towns();
-        let names: Vec<String> = towns.iter().map(|t| t.name.clone()).collect();
+        let names: Vec<String> = self.expansion().all_town_names().into_iter().map(String::from).collect();
         let shown = match &town {
             None => &towns[0],
             Some(name) => towns.iter().find(|t| &t.name == name).ok_or_else(|| {

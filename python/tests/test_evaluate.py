@@ -8,6 +8,7 @@ import json
 import os
 import shlex
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -314,3 +315,30 @@ def test_counterfactual_trajectories_are_scored_against_the_resimulated_run(tmp_
     np.savez(tmp_path / "wrong.npz", **{k + "/counterfactual": v for k, v in predicted.items()})
     run = cli("evaluate", CITY, tmp_path / "wrong.npz", "--history", history)
     assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr
+
+
+def test_a_held_out_test_split_is_marked_out_of_distribution_beside_the_in_distribution_rows(tmp_path):
+    spec = json.loads((Path(__file__).resolve().parents[2] / "configs" / "ood-towns.json").read_text())
+    spec["splits"] = {"train": 2, "val": 3, "test": 3}
+    spec["frames"] = 20
+    spec_file = tmp_path / "ood.json"
+    spec_file.write_text(json.dumps(spec))
+    data = tmp_path / "ood"
+    generated = cli("gen", "--spec", str(spec_file), "--out", str(data), "--no-images", "--quiet")
+    assert generated.returncode == 0, generated.stderr
+    # The path rule's scores, written as any method's.
+    methods = subprocess.run(
+        [sys.executable, "-m", "causalcity.methods", "path", str(data), "--out", str(tmp_path / "p.npz"), "--quiet"],
+        capture_output=True,
+        text=True,
+    )
+    assert methods.returncode == 0, methods.stderr
+    report = causalcity.evaluate(data, tmp_path / "p.npz")
+    rows = {(r["graph"], r["split"]): r for r in report["edges"]}
+    assert rows[("designed", "test")]["held_out"] is True
+    assert "held_out" not in rows[("designed", "val")]
+    text = cli("evaluate", str(data), str(tmp_path / "p.npz")).stdout
+    assert "test* " in text and "held out from train" in text, text
+    assert "val* " not in text
+    towns = {json.loads(p.read_text())["town"] for p in data.glob("*/test/*/scenario.json")}
+    assert towns == {"grid-4x4"}

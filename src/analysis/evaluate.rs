@@ -144,6 +144,10 @@ pub struct EdgeScores {
     pub cars: u32,
     pub edge_proportion: f64,
     pub split: &'static str,
+    /// The split holds something out from train (the spec's `held_out`):
+    /// an out-of-distribution row. Absent (false) for in-distribution rows.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub held_out: bool,
     pub scenarios: usize,
     /// Ordered pairs scored (cars x (cars - 1) per scenario, and per frame
     /// for the per-frame graph).
@@ -780,6 +784,7 @@ fn edge_rows<'a>(
                 cars: group.cars,
                 edge_proportion: group.edge_proportion,
                 split: split.name(),
+                held_out: truth.expansion.spec.held_out.of(split).is_some(),
                 scenarios: scenarios.len(),
                 pairs: all.len(),
                 true_edges: counts.true_positives + counts.false_negatives,
@@ -978,7 +983,7 @@ impl fmt::Display for EvaluationReport {
                     "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9.4} {:<7} {:>6} {:>6} {:>12} {:>12}",
                     e.graph,
                     e.group,
-                    e.split,
+                    if e.held_out { format!("{}*", e.split) } else { e.split.to_string() },
                     e.scenarios,
                     e.pairs,
                     e.true_edges,
@@ -1000,6 +1005,12 @@ impl fmt::Display for EvaluationReport {
                  above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
                  against interactions.csv, SHD per frame"
             )?;
+            if self.edges.iter().any(|e| e.held_out) {
+                writeln!(
+                    f,
+                    "* held out from train (the spec's held_out): out-of-distribution rows, beside the in-distribution                      ones of the other splits; the threshold is tuned on val, so compare AUROC when val is the                      in-distribution row"
+                )?;
+            }
         }
         for (rows, title) in [
             (&self.trajectories, "trajectories"),

@@ -82,13 +82,12 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             return Err(Error::Input(format!("--group {g} is not in this dataset: use one of {}", names.join(", "))));
         }
     }
-    let towns = opened.expansion.towns();
-    if towns.len() > 1 {
-        let names: Vec<&str> = towns.iter().map(|t| t.name.as_str()).collect();
+    let names = opened.expansion.all_town_names();
+    if names.len() > 1 {
         return Err(Error::Input(format!(
             "{}: its scenarios happen on {} towns ({}), and a heat map draws one: generate a dataset of one town to map it",
             dataset.display(),
-            towns.len(),
+            names.len(),
             names.join(", ")
         )));
     }

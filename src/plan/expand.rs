@@ -175,16 +175,32 @@ impl Expansion {
         spec.map.validate()?;
         let mut planners: Vec<Planner> = Vec::new();
         let mut split_towns = Vec::new();
-        for _split in Split::ALL {
-            let section = spec.map.clone();
+        for split in Split::ALL {
+            let (section, graph) = (spec.map_of(split).clone(), *spec.graph_of(split));
+            let held_out = spec.held_out.of(split).is_some_and(|h| h.map.is_some());
             let mut towns = Vec::new();
             for town in section.towns() {
-                let index = match planners.iter().position(|p| p.spec.map == town) {
+                let index = match planners.iter().position(|p| p.spec.map == town && p.spec.graph == graph) {
                     Some(index) => index,
                     None => {
-                        let map = Arc::new(CityMap::new(town.layout()));
-                        let planner = Planner::new(DatasetSpec { map: town.clone(), ..spec.clone() }, map)
-                            .map_err(|e| in_town(e, &town, section.towns().len()))?;
+                        // The town's map is built once, whatever graphs plan on it.
+                        let map = match planners.iter().find(|p| p.spec.map == town) {
+                            Some(p) => p.map.clone(),
+                            None => Arc::new(CityMap::new(town.layout())),
+                        };
+                        let town_spec = DatasetSpec { map: town.clone(), graph, ..spec.clone() };
+                        let mut planner = Planner::new(town_spec, map)
+                            .map_err(|e| in_town(e, &town, section.towns().len(), held_out.then_some(split)))?;
+                        // Names are unique per map: a second town of the same name is numbered.
+                        let same_name = |p: &&Planner| p.name == planner.name && p.spec.map != town;
+                        if planners.iter().any(|p| same_name(&p)) {
+                            let base = planner.name.clone();
+                            let free =
+                                (2..).map(|k| format!("{base}-{k}")).find(|n| planners.iter().all(|p| &p.name != n));
+                            planner.name = free.unwrap_or(base);
+                        } else if let Some(p) = planners.iter().find(|p| p.spec.map == town) {
+                            planner.name = p.name.clone();
+                        }
                         planners.push(planner);
                         planners.len() - 1
                     }
@@ -207,10 +223,35 @@ impl Expansion {
         Ok(Expansion { spec, map, camera, planners: vec![planner], split_towns: [towns.clone(), towns.clone(), towns] })
     }
 
-    /// Every town a scenario can happen on, in a fixed order: the first
-    /// one's map and camera are [`Expansion::map`] and [`Expansion::camera`].
+    /// Every town a scenario can happen on, with the graph shape planned
+    /// on it, in a fixed order: the first one's map and camera are
+    /// [`Expansion::map`] and [`Expansion::camera`]. A town whose splits
+    /// plan different graph shapes is listed once per shape, under one name.
     pub fn towns(&self) -> &[Planner] {
         &self.planners
+    }
+
+    /// The names of every town, each once, in order.
+    pub fn all_town_names(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = Vec::new();
+        for planner in &self.planners {
+            if !names.contains(&planner.name.as_str()) {
+                names.push(&planner.name);
+            }
+        }
+        names
+    }
+
+    /// The names of the towns `split` draws from, each once, in order.
+    pub fn town_names(&self, split: Split) -> Vec<&str> {
+        let mut names: Vec<&str> = Vec::new();
+        for (_, index) in &self.split_towns[split.index()].towns {
+            let name = self.planners[*index].name.as_str();
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+        names
     }
 
     /// The town a plan happens on.
@@ -233,7 +274,7 @@ impl Expansion {
         };
         let planner = &self.planners[index];
         let mut plan = planner.plan(key)?;
-        if self.planners.len() > 1 {
+        if self.planners.iter().any(|p| p.name != self.planners[0].name) {
             plan.town = Some(PlannedTown { index, name: planner.name.clone(), map: planner.spec.map.clone() });
         }
         Ok(plan)
@@ -271,12 +312,19 @@ impl Expansion {
     }
 }
 
-/// A town's spec error, said to be the town's when the map draws several.
-fn in_town(e: SpecError, town: &MapSpec, towns: usize) -> SpecError {
-    if towns > 1 {
-        SpecError::new(e.field, format!("in the {} town: {}", town.town_name(), e.message))
-    } else {
-        e
+/// A town's spec error, said to be the town's when the map draws several
+/// or when a split holds it out (`held_out`).
+fn in_town(e: SpecError, town: &MapSpec, towns: usize, held_out: Option<Split>) -> SpecError {
+    let field = match held_out {
+        Some(split) if e.field.starts_with("map.") => format!("held_out.{}.{}", split.name(), e.field),
+        _ => e.field.clone(),
+    };
+    match (towns > 1, held_out) {
+        (_, Some(split)) => {
+            SpecError::new(field, format!("in the {} town {} holds out: {}", town.town_name(), split.name(), e.message))
+        }
+        (true, None) => SpecError::new(field, format!("in the {} town: {}", town.town_name(), e.message)),
+        (false, None) => e,
     }
 }
 

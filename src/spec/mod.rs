@@ -9,11 +9,13 @@
 mod camera;
 mod city;
 mod graph;
+mod held_out;
 mod map;
 
 pub use camera::*;
 pub use city::*;
 pub use graph::*;
+pub use held_out::*;
 pub use map::*;
 
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
@@ -203,6 +205,9 @@ pub struct DatasetSpec {
     /// The designed leader-follower graph's shape: pairs unless given.
     #[serde(default, skip_serializing_if = "GraphSpec::is_pairs")]
     pub graph: GraphSpec,
+    /// What val and test draw differently from train.
+    #[serde(default, skip_serializing_if = "HeldOutSplits::is_empty")]
+    pub held_out: HeldOutSplits,
 }
 
 /// 1 to 64 characters from A-Z a-z 0-9 - _ . not starting with a dot.
@@ -319,6 +324,7 @@ impl DatasetSpec {
             cameras: Vec::new(),
             map: MapSpec::default(),
             graph: GraphSpec::default(),
+            held_out: HeldOutSplits::default(),
         }
     }
 
@@ -357,6 +363,11 @@ impl DatasetSpec {
             ));
         }
         self.graph.validate()?;
+        for split in [Split::Val, Split::Test] {
+            if let Some(graph) = self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
+                graph.validate().map_err(|e| held_out_field(split, e))?;
+            }
+        }
         let mut names = std::collections::HashSet::new();
         for (i, g) in self.groups.iter().enumerate() {
             range(&format!("groups[{i}].cars"), g.cars, 1, MAX_CARS)?;
@@ -370,21 +381,28 @@ impl DatasetSpec {
                     ),
                 ));
             }
-            if self.graph.cars_needed(g.edges()) > g.cars {
-                let joined = match self.graph.shape {
-                    GraphShape::Pairs => "leader-follower pairs".to_string(),
-                    shape => format!("edges in {} of {} cars", shape.name(), self.graph.unit_cars()),
-                };
-                return Err(SpecError::new(
-                    field,
-                    format!(
-                        "{} with {} cars asks for {} {joined} (round(proportion x cars / 2)), which need {} cars: lower the proportion or add cars",
-                        g.edge_proportion,
-                        g.cars,
-                        g.edges(),
-                        self.graph.cars_needed(g.edges())
-                    ),
-                ));
+            for split in Split::ALL {
+                let graph = self.graph_of(split);
+                if graph.cars_needed(g.edges()) > g.cars {
+                    let joined = match graph.shape {
+                        GraphShape::Pairs => "leader-follower pairs".to_string(),
+                        shape => format!("edges in {} of {} cars", shape.name(), graph.unit_cars()),
+                    };
+                    let whose = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
+                        Some(_) => format!(" in {} (held_out.{}.graph)", split.name(), split.name()),
+                        None => String::new(),
+                    };
+                    return Err(SpecError::new(
+                        field,
+                        format!(
+                            "{} with {} cars asks for {} {joined}{whose} (round(proportion x cars / 2)), which need {} cars: lower the proportion or add cars",
+                            g.edge_proportion,
+                            g.cars,
+                            g.edges(),
+                            graph.cars_needed(g.edges())
+                        ),
+                    ));
+                }
             }
             if !names.insert(g.name()) {
                 return Err(SpecError::new(
@@ -419,15 +437,22 @@ impl DatasetSpec {
             (Some(city), WorldKind::City) => {
                 city.validate()?;
                 let platoon = city.start.platoon_cars;
-                if platoon != 0 && self.graph.unit_cars() > platoon {
-                    return Err(SpecError::new(
-                        "graph.cars",
-                        format!(
-                            "{} is not allowed with city.start.platoon_cars = {platoon}: the cars of one {} start in one platoon, so it can have {platoon} cars at most",
-                            self.graph.unit_cars(),
-                            &self.graph.shape.name()[..self.graph.shape.name().len() - 1]
-                        ),
-                    ));
+                for split in Split::ALL {
+                    let graph = self.graph_of(split);
+                    if platoon != 0 && graph.unit_cars() > platoon {
+                        let field = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
+                            Some(_) => format!("held_out.{}.graph.cars", split.name()),
+                            None => "graph.cars".to_string(),
+                        };
+                        return Err(SpecError::new(
+                            field,
+                            format!(
+                                "{} is not allowed with city.start.platoon_cars = {platoon}: the cars of one {} start in one platoon, so it can have {platoon} cars at most",
+                                graph.unit_cars(),
+                                &graph.shape.name()[..graph.shape.name().len() - 1]
+                            ),
+                        ));
+                    }
                 }
             }
             (Some(_), WorldKind::Toy) => {
@@ -436,6 +461,11 @@ impl DatasetSpec {
             (None, _) => {}
         }
         self.map.validate()?;
+        for split in [Split::Val, Split::Test] {
+            if let Some(map) = self.held_out.of(split).and_then(|h| h.map.as_ref()) {
+                map.validate().map_err(|e| held_out_field(split, e))?;
+            }
+        }
         self.birds_eye_camera()?;
         let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
         let mut names = std::collections::HashSet::new();
@@ -493,6 +523,16 @@ impl DatasetSpec {
             None => original.altitude_m.max(fits),
         };
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
+    }
+
+    /// The map section `split` draws its towns from: its held-out one, else the dataset's.
+    pub fn map_of(&self, split: Split) -> &MapSpec {
+        self.held_out.of(split).and_then(|h| h.map.as_ref()).unwrap_or(&self.map)
+    }
+
+    /// The graph shape of `split`'s scenarios: its held-out one, else the dataset's.
+    pub fn graph_of(&self, split: Split) -> &GraphSpec {
+        self.held_out.of(split).and_then(|h| h.graph.as_ref()).unwrap_or(&self.graph)
     }
 
     /// Toy world: pixels from follower to leader along their path at the start.

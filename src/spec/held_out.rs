@@ -1,0 +1,46 @@
+//! `held_out`: what val and test draw differently from train (their own
+//! map or graph shape), so that a split tests generalisation.
+
+use super::*;
+
+/// A split's own sections, in place of the dataset's: a map (towns train
+/// never sees) and a graph shape.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeldOut {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map: Option<MapSpec>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<GraphSpec>,
+}
+
+/// The held-out sections of val and test (train is what they are held out
+/// from, so it has none).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeldOutSplits {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub val: Option<HeldOut>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test: Option<HeldOut>,
+}
+
+impl HeldOutSplits {
+    pub fn is_empty(&self) -> bool {
+        self.val.is_none() && self.test.is_none()
+    }
+
+    /// The sections `split` holds out, if any.
+    pub fn of(&self, split: Split) -> Option<&HeldOut> {
+        match split {
+            Split::Train => None,
+            Split::Val => self.val.as_ref(),
+            Split::Test => self.test.as_ref(),
+        }
+    }
+}
+
+/// `error` about a field of `held_out.<split>`, named as the spec names it.
+pub(super) fn held_out_field(split: Split, error: SpecError) -> SpecError {
+    SpecError::new(format!("held_out.{}.{}", split.name(), error.field), error.message)
+}
