@@ -381,6 +381,45 @@ fn png_settings_comparison() {
     }
 }
 
+/// City simulation cost against the map's size: grid towns of 1 x 1 to
+/// 8 x 8 junctions, two cars per junction (at least 4), 150 frames of 1 s,
+/// no effects, one thread. Prints the cost per simulated vehicle-second
+/// and its ratio to the 1 x 1 town's (flat, or growing at most with the
+/// junctions, is the target).
+fn map_size_cost() {
+    println!("\n== City simulation cost per simulated vehicle-second against map size, 1 thread ==");
+    println!("{:<8} {:>9} {:>6} {:>10} {:>12} {:>8}", "town", "junctions", "cars", "scenarios", "us/veh-s", "ratio");
+    let mut first = None;
+    for side in [1usize, 2, 3, 4, 6, 8] {
+        let junctions = side * side;
+        let cars = (2 * junctions).max(4) as u32;
+        let scenarios = (400 / cars).clamp(3, 40);
+        let json = format!(
+            r#"{{"name": "size", "world": "city", "seed": 1, "frames": 150, "frame_interval": 1.0,
+                "groups": [{{"cars": {cars}, "edge_proportion": 0.5}}],
+                "splits": {{"train": {scenarios}, "val": 0, "test": 0}},
+                "map": {{"grid": {{"rows": {side}, "columns": {side}}}}},
+                "city": {{"confounders": {{}}}}}}"#
+        );
+        let expansion = Expansion::from_spec(DatasetSpec::from_json(&json).unwrap()).unwrap();
+        let plans: Vec<_> = expansion.keys(None).iter().map(|k| expansion.plan(k).unwrap()).collect();
+        let t = Instant::now();
+        for plan in &plans {
+            std::hint::black_box(causalcity::world::simulate(&expansion.town_of(plan).map, plan));
+        }
+        let seconds = t.elapsed().as_secs_f64();
+        let vehicle_seconds = plans.len() as f64 * cars as f64 * 150.0;
+        let per = seconds * 1e6 / vehicle_seconds;
+        let base = *first.get_or_insert(per);
+        println!(
+            "{:<8} {junctions:>9} {cars:>6} {:>10} {per:>12.2} {:>7.2}x",
+            format!("{side}x{side}"),
+            plans.len(),
+            per / base
+        );
+    }
+}
+
 fn main() {
     // `cargo bench` passes --bench; ignore arguments.
     let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
@@ -388,6 +427,11 @@ fn main() {
     // BENCH_ONLY=perspective: only the perspective cameras' figures.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "perspective") {
         perspective_rates();
+        return;
+    }
+    // BENCH_ONLY=map_size: only the cost against map size.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "map_size") {
+        map_size_cost();
         return;
     }
     // BENCH_ONLY=effects: only the interventional effects' figures.
@@ -489,6 +533,7 @@ fn main() {
         );
     }
     effects_cost(&root);
+    map_size_cost();
     for world in ["toy", "city"] {
         println!("\n== {world} world, poses only, 12 cars x 150 frames (CSV included) ==");
         let poses_spec = write_world_spec(&root, &format!("poses-{world}"), world, 12, 2000);
