@@ -633,7 +633,7 @@ impl Planner {
             }
         }
         let pairs = if self.spec.graph.is_pairs() {
-            Self::draw_platoon_pairs(rng, &cars, &platoon_of, group.edges() as usize, size)?
+            self.draw_platoon_pairs(rng, &cars, &platoon_of, group.edges() as usize, size)?
         } else {
             self.draw_platoon_parts(rng, &cars, &platoon_of, group.edges())?
         };
@@ -662,6 +662,7 @@ impl Planner {
     /// pair of a platoon in random order, taken while both cars are free,
     /// so each is a pair with the same chance. Sorted by index.
     fn draw_platoon_pairs(
+        &self,
         rng: &mut ChaCha8Rng,
         cars: &[PlacedCar],
         platoon_of: &[usize],
@@ -671,7 +672,8 @@ impl Planner {
         let mut candidates: Vec<(usize, usize)> = Vec::new();
         for a in 0..cars.len() {
             for b in 0..cars.len() {
-                if platoon_of[a] == platoon_of[b] && cars[a].distance > cars[b].distance {
+                if platoon_of[a] == platoon_of[b] && cars[a].distance > cars[b].distance && self.can_follow(cars, a, b)
+                {
                     candidates.push((a, b));
                 }
             }
@@ -695,6 +697,24 @@ impl Planner {
         Ok(pairs)
     }
 
+    /// Whether car `follower` can take the turns of car `leader`'s queue
+    /// from where it starts (no turn skipped for want of room to change
+    /// lanes before it). Grid towns only: the four-road city keeps its
+    /// draw, so that existing datasets stay byte for byte the same.
+    fn can_follow(&self, cars: &[PlacedCar], leader: usize, follower: usize) -> bool {
+        if self.spec.map.grid.is_none() {
+            return true;
+        }
+        let (l, f) = (&cars[leader], &cars[follower]);
+        let Ok(route) = self.plan_route(f.spawn, f.distance, &l.actions, &l.merges, self.max_travel()) else {
+            return false;
+        };
+        !route
+            .adaptations
+            .iter()
+            .any(|a| a.kind == AdaptationKind::Skipped && !a.action.is_merge() && a.action != Action::Straight)
+    }
+
     /// The edges of chains or forks among platoon starts: for each part of
     /// [`crate::spec::GraphSpec::units`], largest first, a set of that many
     /// free cars of one platoon drawn uniformly, ordered front to back (a
@@ -712,7 +732,8 @@ impl Planner {
         let mut links = Vec::new();
         for size in graph.units(edges) {
             let size = size as usize;
-            // Every set of `size` free cars of one platoon, front to back.
+            // Every set of `size` free cars of one platoon, front to back,
+            // whose followers can each drive the part's queue.
             let mut candidates: Vec<Vec<usize>> = Vec::new();
             for platoon in 0..=platoon_of.iter().copied().max().unwrap_or(0) {
                 let mut members: Vec<usize> =
@@ -720,6 +741,7 @@ impl Planner {
                 members.sort_by(|&a, &b| cars[b].distance.total_cmp(&cars[a].distance).then(a.cmp(&b)));
                 subsets(&members, size, &mut Vec::new(), &mut candidates);
             }
+            candidates.retain(|part| part[1..].iter().all(|&f| self.can_follow(cars, part[0], f)));
             let drawn = (!candidates.is_empty()).then(|| rng.random_range(0..candidates.len()));
             let Some(part) = drawn.map(|k| candidates.swap_remove(k)) else {
                 return Err(format!(
