@@ -23,7 +23,8 @@ pub struct PreviewOptions {
     pub scale: f64,
     /// Use every Nth frame.
     pub every: u32,
-    /// GIF frames per second; the scenario's real time when None.
+    /// GIF frames per second; when None, the scenario's real speed, sped up
+    /// so that the animation lasts at most [`LONGEST_DEFAULT_GIF_S`].
     pub fps: Option<f64>,
     pub masks: bool,
     pub trails: bool,
@@ -32,6 +33,11 @@ pub struct PreviewOptions {
     pub sheet_frames: u32,
     pub columns: u32,
 }
+
+/// The longest a GIF plays by default, seconds: a 150-frame city scenario
+/// at the paper's 1 s per frame would otherwise take 2.5 minutes and look
+/// frozen (2 s per shown frame).
+pub const LONGEST_DEFAULT_GIF_S: f64 = 15.0;
 
 /// What was written.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -42,12 +48,22 @@ pub struct PreviewSummary {
     pub width: u32,
     pub height: u32,
     pub bytes: u64,
+    /// A GIF's frames per second and how many times the scenario's real
+    /// speed that is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub speed_up: Option<f64>,
 }
 
 impl std::fmt::Display for PreviewSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let (path, w, h) = (self.path.display(), self.width, self.height);
-        write!(f, "wrote {path} ({w}x{h}, {} frames, {:.0} KB)", self.frames, self.bytes as f64 / 1e3)
+        write!(f, "wrote {path} ({w}x{h}, {} frames, {:.0} KB", self.frames, self.bytes as f64 / 1e3)?;
+        if let (Some(fps), Some(speed_up)) = (self.fps, self.speed_up) {
+            write!(f, ", {fps:.1} frames/s, {speed_up:.1}x real time")?;
+        }
+        write!(f, ")")
     }
 }
 
@@ -177,15 +193,19 @@ fn render(
         Ok(image::imageops::resize(&full, sw, sh, image::imageops::FilterType::Triangle))
     };
 
+    // Real time at --every, sped up to last at most LONGEST_DEFAULT_GIF_S.
+    let real_fps = 1.0 / (scenario.frame_interval * options.every as f64);
+    let fps = options.fps.unwrap_or(real_fps.max(chosen.len() as f64 / LONGEST_DEFAULT_GIF_S)).clamp(0.5, 50.0);
+    // GIF delays are whole hundredths of a second (players round finer ones).
+    let delay_cs = (100.0 / fps).round().max(2.0);
+    let fps = 100.0 / delay_cs;
     let partial = file.partial().map_err(|e| e.to_string())?;
     let result = (|| -> Result<(u32, u32), String> {
         let file = std::fs::File::create(&partial).map_err(|e| format!("cannot write {}: {e}", partial.display()))?;
         let writer = std::io::BufWriter::new(file);
         match kind {
             Kind::Gif => {
-                let fps =
-                    options.fps.unwrap_or(1.0 / (scenario.frame_interval * options.every as f64)).clamp(0.5, 50.0);
-                let delay = Delay::from_numer_denom_ms((1000.0 / fps).round() as u32, 1);
+                let delay = Delay::from_numer_denom_ms(delay_cs as u32 * 10, 1);
                 let mut encoder = GifEncoder::new_with_speed(writer, 10);
                 encoder.set_repeat(Repeat::Infinite).map_err(|e| e.to_string())?;
                 let mut size = (0, 0);
@@ -233,7 +253,16 @@ fn render(
     };
     file.commit(&partial).map_err(|e| e.to_string())?;
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
-    Ok(PreviewSummary { path: out.to_path_buf(), frames: chosen.len(), width, height, bytes })
+    let gif = matches!(kind, Kind::Gif);
+    Ok(PreviewSummary {
+        path: out.to_path_buf(),
+        frames: chosen.len(),
+        width,
+        height,
+        bytes,
+        fps: gif.then_some(fps),
+        speed_up: gif.then_some(fps / real_fps),
+    })
 }
 
 enum Kind {

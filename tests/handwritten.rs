@@ -186,6 +186,16 @@ fn a_counterfactual_is_identical_before_the_intervention_and_moves_only_what_it_
     assert!(rows.iter().filter(|r| r.1 == 2).all(|r| r.2 == 0.0), "divergence 0 for the unrelated car");
     assert!(rows.iter().filter(|r| r.0 as usize <= first).all(|r| r.2 == 0.0));
     assert!(rows.iter().any(|r| r.1 == 1 && r.2 > 3.0));
+    // summary.json's first divergent frame is the first frame whose poses.csv rows differ.
+    let mut checked = 0;
+    for car in summary["cars"].as_array().unwrap() {
+        let id = car["id"].as_u64().unwrap() as usize;
+        let differs = (0..la.len() - 1).filter(|i| i % 3 == id).find(|&i| la[i + 1] != lb[i + 1]).map(|i| i / 3);
+        assert_eq!(car["first_divergent_frame"].as_u64().map(|f| f as usize), differs, "{car}");
+        assert_eq!(car["affected"], differs.is_some(), "{car}");
+        checked += differs.is_some() as usize;
+    }
+    assert_eq!(checked, 2, "two cars moved");
     // The intervention is in the counterfactual's events, not the factual's.
     assert!(text(&counterfactual.join("events.csv")).contains(",intervention,0,,,stop Car_1 for 6 s"));
     assert!(!text(&factual.join("events.csv")).contains("intervention"));

@@ -108,6 +108,50 @@ fn annotations_need_images_and_a_dataset_keeps_its_setting() {
 }
 
 #[test]
+fn a_gif_of_a_slow_scenario_plays_in_at_most_15_seconds_and_a_fast_one_in_real_time() {
+    let dir = fresh_dir("research-preview-speed");
+    // The paper's city: one frame a second, 150 frames (75 shown at --every 2).
+    let mut spec: serde_json::Value =
+        serde_json::from_str(&city_spec("slow", &[(4, 0.5)], (1, 0, 0), 150, r#"{"confounders": {}}"#)).unwrap();
+    spec["frame_interval"] = 1.0.into();
+    spec["image"] = serde_json::json!({"width": 160, "height": 100});
+    let spec = write_spec(&dir, &spec.to_string());
+    let data = dir.join("slow");
+    gen_ok(&spec, &data, &["--quiet", "--no-effects"]);
+    let scenario = &scenario_dirs(&data)[0];
+    let play = |args: &[&str], name: &str| -> (usize, f64, String) {
+        let gif = dir.join(name);
+        let mut all = vec!["preview", scenario.to_str().unwrap(), "--out", gif.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let output = run(&all);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let file = std::io::BufReader::new(std::fs::File::open(&gif).unwrap());
+        let frames = image::codecs::gif::GifDecoder::new(file).unwrap().into_frames().collect_frames().unwrap();
+        let seconds: f64 = frames
+            .iter()
+            .map(|f| {
+                let (n, d) = f.delay().numer_denom_ms();
+                n as f64 / d as f64 / 1000.0
+            })
+            .sum();
+        (frames.len(), seconds, String::from_utf8_lossy(&output.stdout).to_string())
+    };
+    let (frames, seconds, said) = play(&[], "default.gif");
+    assert_eq!(frames, 75);
+    assert!((14.0..=15.0).contains(&seconds), "plays {seconds} s (real time would be 150 s)");
+    assert!(said.contains("10.0x real time"), "{said}");
+    // --fps still gives exactly what it asks for.
+    let (_, seconds, _) = play(&["--fps", "1"], "slow.gif");
+    assert!((seconds - 75.0).abs() < 1e-6, "{seconds}");
+    // A scenario that plays in 15 s or less at its real speed keeps it: the toy's 0.1 s
+    // frames, 150 of them, every 2nd shown, 0.2 s apart.
+    let toy = scenario_dirs(&shared_image_dataset())[0].clone();
+    let gif = dir.join("toy.gif");
+    let output = run(&["preview", toy.to_str().unwrap(), "--out", gif.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&output.stdout).contains("5.0 frames/s, 1.0x real time"), "{output:?}");
+}
+
+#[test]
 fn preview_writes_a_downscaled_gif_and_a_contact_sheet() {
     let data = shared_image_dataset();
     let scenario = scenario_dirs(&data).into_iter().find(|d| d.to_string_lossy().contains("cars12")).unwrap();

@@ -17,6 +17,7 @@ use crate::map::CityMap;
 use crate::output::claim::{claim, Writer};
 use crate::output::manifest::Products;
 use crate::output::number::push_fixed;
+use crate::output::poses::logged_pose;
 use crate::output::writer::ScenarioWriter;
 use crate::output::{scenario_dir, write_atomically, WriteError};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
@@ -558,7 +559,8 @@ fn divergence(
     for (frame, (a, b)) in factual.states.iter().zip(&counterfactual.states).enumerate() {
         for ((x, y), car) in a.iter().zip(b).zip(per_car.iter_mut()) {
             let distance = x.position.distance(y.position);
-            if x != y {
+            // As the files show it: the first frame whose poses.csv rows differ.
+            if logged_pose(x) != logged_pose(y) {
                 car.affected = true;
                 car.first_divergent_frame.get_or_insert(frame);
             }

@@ -8,9 +8,10 @@ use serde::Serialize;
 pub struct CarDivergence {
     pub id: u32,
     pub name: String,
-    /// Moved by the intervention at all (any frame differs).
+    /// Moved by the intervention at all: some frame of its poses.csv differs.
     pub affected: bool,
     pub max_divergence_m: f64,
+    /// The first frame whose poses.csv row differs between the two runs.
     pub first_divergent_frame: Option<usize>,
 }
 

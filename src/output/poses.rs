@@ -79,6 +79,21 @@ pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectorie
     Ok(())
 }
 
+/// A car state as poses.csv writes it (x, y, z, roll, pitch, yaw, speed,
+/// each rounded to its column's decimals): two states whose logged poses
+/// are equal write the same row.
+pub fn logged_pose(state: &crate::world::CarState) -> [f64; 7] {
+    [
+        logged_value(state.position.x, 4),
+        logged_value(state.position.y, 4),
+        logged_value(state.z, 4),
+        logged_value(state.roll, 6),
+        logged_value(state.pitch, 6),
+        logged_value(state.yaw, 6),
+        logged_value(state.speed, 4),
+    ]
+}
+
 /// A scratch buffer for formatting one field at a time.
 #[derive(Default)]
 pub struct Fields(Vec<u8>);
