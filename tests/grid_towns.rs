@@ -292,3 +292,38 @@ fn a_split_can_hold_out_towns_and_graph_shapes_and_validate_says_what_train_and_
     assert_eq!(report.status.code(), Some(1), "{text}");
     assert!(text.contains("is not a town the spec draws for train"), "{text}");
 }
+
+#[test]
+fn perspective_cameras_and_masks_work_on_drawn_towns() {
+    let dir = fresh_dir("grid-town-cameras");
+    let mut spec: serde_json::Value =
+        serde_json::from_str(&city_spec("cams", &[(6, 0.5)], (4, 0, 0), 16, r#"{"confounders": {}}"#)).unwrap();
+    spec["map"] = serde_json::json!({"grid": {"rows": {"choice": [2, 4]}, "columns": 3}});
+    spec["birds_eye"] = "pinhole".into();
+    spec["cameras"] = serde_json::json!([
+        {"name": "chase0", "third_person": 0, "width": 160, "height": 100, "depth": true},
+        {"name": "driver1", "first_person": 1, "width": 160, "height": 100}
+    ]);
+    let spec = write_spec(&dir, &spec.to_string());
+    let out = dir.join("cams");
+    gen_ok(&spec, &out, &[]);
+    let validated = run(&["validate", out.to_str().unwrap()]);
+    assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+    let mut towns = BTreeSet::new();
+    for scenario in scenario_dirs(&out) {
+        towns.insert(read_json(&scenario.join("scenario.json"))["town"].as_str().unwrap().to_string());
+        // The chased car fills part of the third-person view: its mask id (id + 1 = 1) is there.
+        let mask = image::open(scenario.join("cameras/chase0/mask/0008.png")).unwrap().to_luma8();
+        assert!(
+            mask.pixels().filter(|p| p.0[0] == 1).count() > 50,
+            "{}: car 0 not seen from behind",
+            scenario.display()
+        );
+        // The bird's-eye masks name every car seen, each with its own id.
+        let birds_eye = image::open(scenario.join("mask/0008.png")).unwrap().to_luma8();
+        let ids: BTreeSet<u8> = birds_eye.pixels().map(|p| p.0[0]).filter(|&v| v > 0).collect();
+        assert!(ids.len() >= 3 && ids.iter().all(|&v| v <= 6), "{}: mask ids {ids:?}", scenario.display());
+        assert!(scenario.join("cameras/chase0/depth/0008.png").exists());
+    }
+    assert_eq!(towns.len(), 2, "both towns drawn in 4 scenarios: {towns:?}");
+}
