@@ -327,3 +327,58 @@ fn perspective_cameras_and_masks_work_on_drawn_towns() {
     }
     assert_eq!(towns.len(), 2, "both towns drawn in 4 scenarios: {towns:?}");
 }
+
+#[test]
+fn the_birds_eye_camera_frames_the_whole_network_or_an_area_the_spec_gives() {
+    let dir = fresh_dir("grid-town-camera-area");
+    for (name, area) in
+        [("network", serde_json::json!("network")), ("area", serde_json::json!({"x": [-20, 20], "y": [-10, 10]}))]
+    {
+        let mut spec: serde_json::Value =
+            serde_json::from_str(&city_spec(name, &[(4, 0.5)], (1, 0, 0), 4, r#"{"confounders": {}}"#)).unwrap();
+        spec["map"] = serde_json::json!({"grid": {"rows": 2, "columns": 3}, "camera_area": area});
+        let spec_path = dir.join(format!("{name}.json"));
+        std::fs::write(&spec_path, spec.to_string()).unwrap();
+        let out = dir.join(name);
+        gen_ok(&spec_path, &out, &[]);
+        let scenario = &scenario_dirs(&out)[0];
+        let camera = read_json(&scenario.join("scenario.json"))["camera"].clone();
+        let ppm = camera["pixels_per_metre"].as_f64().unwrap();
+        let (cx, cy) = (camera["centre_x"].as_f64().unwrap(), camera["centre_y"].as_f64().unwrap());
+        let to_pixel = |x: f64, y: f64| (511.5 + (x - cx) * ppm, 319.5 - (y - cy) * ppm);
+        if name == "network" {
+            // Every lane, out to the U-turn loops, is in the picture, and the view is no larger than
+            // the network needs: along one axis the lanes span most of the image.
+            let listed = run(&["map", "--spec", spec_path.to_str().unwrap(), "--json"]);
+            let listed: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+            let (mut xs, mut ys) = (Vec::new(), Vec::new());
+            for lane in listed["lanes"].as_array().unwrap() {
+                for end in ["start", "end"] {
+                    let (px, py) = to_pixel(lane[end][0].as_f64().unwrap(), lane[end][1].as_f64().unwrap());
+                    assert!(
+                        (0.0..1024.0).contains(&px) && (0.0..640.0).contains(&py),
+                        "{} {end} at ({px}, {py})",
+                        lane["name"]
+                    );
+                    xs.push(px);
+                    ys.push(py);
+                }
+            }
+            let span =
+                |v: &[f64]| v.iter().fold(f64::MIN, |a, &b| a.max(b)) - v.iter().fold(f64::MAX, |a, &b| a.min(b));
+            assert_eq!(xs.len(), 2 * 68, "2 x 4 + 3 x 3 segments of 4 lanes, both ends");
+            assert!(
+                span(&xs) > 0.7 * 1024.0 || span(&ys) > 0.7 * 640.0,
+                "lanes span {:.0} x {:.0} px",
+                span(&xs),
+                span(&ys)
+            );
+        } else {
+            // 40 m x 20 m at 1024 x 640: 40 m across, centred on the area.
+            assert_eq!((cx, cy), (0.0, 0.0));
+            assert!((ppm - 1024.0 / 40.0).abs() < 0.05, "{ppm} px per metre");
+        }
+        let validated = run(&["validate", out.to_str().unwrap()]);
+        assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+    }
+}

@@ -77,6 +77,11 @@ fn spec_schema_and_parser_agree() {
             v["held_out"] = json!({"test": {"map": {"grid": {"rows": 4, "columns": 4}}, "graph": {"shape": "forks"}}})
         }),
     ));
+    good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
+    good.push((
+        "camera area".into(),
+        edited(&base, |v| v["map"] = json!({"camera_area": {"x": [-30, 30], "y": [-20, 20]}})),
+    ));
     good.push((
         "drawn towns".into(),
         edited(&base, |v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": {"choice": [2, 4]}}})),
@@ -97,6 +102,8 @@ fn spec_schema_and_parser_agree() {
         ("unknown light phase", edited(&base, |v| v["city"]["lights"]["phase"] = json!("sometimes"))),
         ("unknown key in map", edited(&base, |v| v["map"] = json!({"blocks": 3}))),
         ("unknown graph shape", edited(&base, |v| v["graph"] = json!({"shape": "rings"}))),
+        ("camera area everything", edited(&base, |v| v["map"] = json!({"camera_area": "everything"}))),
+        ("camera area without y", edited(&base, |v| v["map"] = json!({"camera_area": {"x": [-30, 30]}}))),
         ("held-out train", edited(&base, |v| v["held_out"] = json!({"train": {"graph": {"shape": "chains"}}}))),
         ("held-out cars", edited(&base, |v| v["held_out"] = json!({"test": {"cars": 12}}))),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),

@@ -343,6 +343,16 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &["map.camera_altitude_m", "-5 is not allowed", "above 0"],
     );
     rejected(
+        "camera-area-name",
+        &with(|v| v["map"] = serde_json::json!({"camera_area": "everything"})),
+        &["map.camera_area", "\"everything\" is not allowed", "network"],
+    );
+    rejected(
+        "camera-area-reversed",
+        &with(|v| v["map"] = serde_json::json!({"camera_area": {"x": [5, -5], "y": [0, 10]}})),
+        &["map.camera_area", "x = [5, -5] is not allowed", "the lower first"],
+    );
+    rejected(
         "grid-and-roads",
         &with(|v| v["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3}, "east_west_roads": [-20, 20]})),
         &["map.grid", "places its own roads", "map.east_west_roads"],

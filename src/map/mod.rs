@@ -102,6 +102,16 @@ impl MapLayout {
         (DVec2::new(x0 - reach, y0 - reach), DVec2::new(x1 + reach, y1 + reach))
     }
 
+    /// The whole network: every road out to its U-turn loop, with its
+    /// sidewalks, as (min corner, max corner), metres.
+    pub fn network_area(&self) -> (DVec2, DVec2) {
+        let reach = self.road_half_width() + self.sidewalk_width;
+        (
+            DVec2::new(-self.extent_x - reach, -self.extent_y - reach),
+            DVec2::new(self.extent_x + reach, self.extent_y + reach),
+        )
+    }
+
     /// Four-way intersections: every east-west road crosses every
     /// north-south one.
     pub fn intersection_count(&self) -> usize {

@@ -25,6 +25,10 @@ pub struct MapSpec {
     /// view from there.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub camera_altitude_m: Option<f64>,
+    /// What the bird's-eye camera frames: the junctions (absent), the
+    /// whole network, or an area.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_area: Option<CameraArea>,
     /// A grid town instead of the four roads: `east_west_roads`,
     /// `north_south_roads` and the extents then come from it.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -52,6 +56,93 @@ pub struct GridSpec {
     /// How far roads run beyond their outermost crossing, metres.
     #[serde(default = "default_outer_m")]
     pub outer_m: f64,
+}
+
+/// What the bird's-eye camera frames: `"junctions"` (every junction box
+/// and its stop lines, the default), `"network"` (every road to its U-turn
+/// loop) or `{"x": [west, east], "y": [south, north]}` metres.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum CameraArea {
+    Named(CameraAreaName),
+    Area { x: [f64; 2], y: [f64; 2] },
+}
+
+/// The named areas of [`CameraArea`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraAreaName {
+    Junctions,
+    Network,
+}
+
+/// The object form of a [`CameraArea`], as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCameraArea {
+    x: [f64; 2],
+    y: [f64; 2],
+}
+
+impl<'de> Deserialize<'de> for CameraArea {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = CameraArea;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("\"junctions\", \"network\" or {\"x\": [west, east], \"y\": [south, north]} (metres)")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<CameraArea, E> {
+                match v {
+                    "junctions" => Ok(CameraArea::Named(CameraAreaName::Junctions)),
+                    "network" => Ok(CameraArea::Named(CameraAreaName::Network)),
+                    other => Err(E::custom(format!(
+                        "{other:?} is not allowed: use \"junctions\", \"network\" or {{\"x\": [west, east], \"y\": [south, north]}}"
+                    ))),
+                }
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<CameraArea, A::Error> {
+                let raw = RawCameraArea::deserialize(serde::de::value::MapAccessDeserializer::new(map))?;
+                Ok(CameraArea::Area { x: raw.x, y: raw.y })
+            }
+        }
+        deserializer.deserialize_any(Visit)
+    }
+}
+
+impl MapSpec {
+    /// The area the bird's-eye camera frames (min corner, max corner), metres.
+    pub fn camera_frame(&self) -> (glam::DVec2, glam::DVec2) {
+        let layout = self.layout();
+        match &self.camera_area {
+            None | Some(CameraArea::Named(CameraAreaName::Junctions)) => layout.framed_area(),
+            Some(CameraArea::Named(CameraAreaName::Network)) => layout.network_area(),
+            Some(CameraArea::Area { x, y }) => (glam::DVec2::new(x[0], y[0]), glam::DVec2::new(x[1], y[1])),
+        }
+    }
+
+    fn validate_camera_area(&self) -> Result<(), SpecError> {
+        if let Some(CameraArea::Area { x, y }) = &self.camera_area {
+            for (axis, [lo, hi]) in [("x", x), ("y", y)] {
+                if !(lo.is_finite()
+                    && hi.is_finite()
+                    && lo.abs() <= MAX_MAP_EXTENT
+                    && hi.abs() <= MAX_MAP_EXTENT
+                    && lo < hi)
+                {
+                    return Err(SpecError::new(
+                        "map.camera_area",
+                        format!(
+                            "{axis} = [{}, {}] is not allowed: give two finite coordinates within +-{MAX_MAP_EXTENT} m, the lower first",
+                            crate::json::Shown(*lo),
+                            crate::json::Shown(*hi)
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One grid town's concrete size (a [`GridSpec`] with its counts drawn).
@@ -183,6 +274,7 @@ impl Default for MapSpec {
             extent_y: l.extent_y,
             lane_change_m: l.lane_change_length,
             camera_altitude_m: None,
+            camera_area: None,
             grid: None,
         }
     }
@@ -286,6 +378,7 @@ impl MapSpec {
         if let Some(altitude) = self.camera_altitude_m {
             positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
         }
+        self.validate_camera_area()?;
         if let Some(grid) = &self.grid {
             grid.rows.check("map.grid.rows")?;
             grid.columns.check("map.grid.columns")?;

@@ -503,7 +503,7 @@ impl DatasetSpec {
     /// lines do not fit the view from there, then just high enough that they
     /// do. Errs when a given altitude leaves them out of view.
     pub fn birds_eye_camera(&self) -> Result<Camera, SpecError> {
-        let (lo, hi) = self.map.layout().framed_area();
+        let (lo, hi) = self.map.camera_frame();
         let (width, height) = (self.image.width, self.image.height);
         let original = Camera::birds_eye(width, height);
         let fits = Camera::altitude_to_frame(width, height, hi - lo);
@@ -512,7 +512,12 @@ impl DatasetSpec {
                 return Err(SpecError::new(
                     "map.camera_altitude_m",
                     format!(
-                        "{a} m shows less than every intersection and its stop lines ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
+                        "{a} m shows less than {} ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
+                        match self.map.camera_area {
+                            None | Some(CameraArea::Named(CameraAreaName::Junctions)) => "every intersection and its stop lines",
+                            Some(CameraArea::Named(CameraAreaName::Network)) => "the whole network",
+                            Some(CameraArea::Area { .. }) => "map.camera_area",
+                        },
                         hi.x - lo.x,
                         hi.y - lo.y,
                         fits
@@ -520,7 +525,12 @@ impl DatasetSpec {
                 ))
             }
             Some(a) => a,
-            None => original.altitude_m.max(fits),
+            // The junctions: the original's 40 m unless they need more; a
+            // named area or the network: just what frames it.
+            None => match self.map.camera_area {
+                None | Some(CameraArea::Named(CameraAreaName::Junctions)) => original.altitude_m.max(fits),
+                Some(_) => fits,
+            },
         };
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
     }
