@@ -824,3 +824,59 @@ fn the_documented_intervention_file_runs_as_docs_show() {
     let summary = read_json(&out.join("stop_the_leader/summary.json"));
     assert_eq!(summary["affected"], serde_json::json!(["Car_2", "Car_3"]));
 }
+
+#[test]
+fn a_scenario_file_can_happen_on_a_grid_town_naming_its_lanes_as_causalcity_map_lists_them() {
+    let dir = fresh_dir("hw-grid-town");
+    let file = dir.join("grid.json");
+    let scenario = |spawn: &str, map: serde_json::Value| {
+        serde_json::json!([{"Name": "grid_scene", "frames": 30, "map": map, "Vehicles": [
+            {"Id": "Car_1", "Spawn": spawn, "SpawnAtDistance": 8, "DriveQueue": ["straight"], "MergeAtDistances": [0]},
+            {"Id": "Car_2", "Spawn": "C3z", "SpawnAtDistance": 4, "DriveQueue": ["straight"], "MergeAtDistances": [0]}
+        ]}])
+        .to_string()
+    };
+    let grid = serde_json::json!({"grid": {"rows": 3, "columns": 3}});
+    // E1w is a lane of the 3 x 3 town only (roads A-F); causalcity map lists it.
+    let spec = dir.join("spec.json");
+    std::fs::write(&spec, format!(r#"{{"name": "g", "world": "city", "seed": 1, "groups": [{{"cars": 2, "edge_proportion": 0}}], "splits": {{"train": 1, "val": 0, "test": 0}}, "map": {grid}}}"#)).unwrap();
+    let listed: serde_json::Value =
+        serde_json::from_slice(&run(&["map", "--spec", spec.to_str().unwrap(), "--json"]).stdout).unwrap();
+    let e1w = listed["lanes"].as_array().unwrap().iter().find(|l| l["name"] == "E1w").expect("E1w listed").clone();
+    std::fs::write(&file, scenario("E1w", grid.clone())).unwrap();
+    let out = dir.join("out");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let json = read_json(&out.join("grid_scene/scenario.json"));
+    assert_eq!(json["town"], "grid-3x3");
+    assert_eq!(json["map"]["grid"]["rows"], 3);
+    // Car_1 starts 8 m along E1w, as the map lists the lane.
+    let poses = read_poses(&out.join("grid_scene/poses.csv"));
+    let first = poses.iter().find(|p| p.frame == 0 && p.car == 0).unwrap();
+    let (start, end) = (&e1w["start"], &e1w["end"]);
+    let (sx, sy, ex, ey) =
+        (start[0].as_f64().unwrap(), start[1].as_f64().unwrap(), end[0].as_f64().unwrap(), end[1].as_f64().unwrap());
+    let length = ((ex - sx).powi(2) + (ey - sy).powi(2)).sqrt();
+    let along = ((first.x - sx) * (ex - sx) + (first.y - sy) * (ey - sy)) / length;
+    assert!((along - 8.0).abs() < 0.5, "Car_1 starts {along:.2} m along E1w");
+
+    // On the default city E1w does not exist; on the grid a wrong id names the grid's roads.
+    for (case, text, needle) in [
+        ("default city", scenario("E1w", serde_json::Value::Null), "road A-D, segment 0-2"),
+        ("unknown lane", scenario("Z9w", grid.clone()), "road A-F, segment 0-3"),
+        (
+            "a drawn town",
+            scenario("E1w", serde_json::json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": 3}})),
+            "one town",
+        ),
+    ] {
+        let text = text.replace(r#""map":null,"#, "");
+        std::fs::write(&file, text).unwrap();
+        let out = dir.join(format!("bad-{}", case.replace(' ', "-")));
+        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
+        assert!(stderr.contains(needle), "{case}: {stderr}");
+        assert!(!out.exists(), "{case}: nothing written");
+    }
+}

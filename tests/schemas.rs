@@ -230,6 +230,10 @@ fn scenario_file_schema_and_parser_agree() {
     good.push(("base".into(), base.clone()));
     good.push(("one object".into(), base[0].clone()));
     good.push(("toy world".into(), json!({"Name": "t", "world": "toy", "Vehicles": [{"Id": "a", "Spawn": "C0w"}]})));
+    good.push((
+        "a grid town".into(),
+        json!({"Name": "g", "map": {"grid": {"rows": 3, "columns": 3}}, "Vehicles": [{"Id": "a", "Spawn": "E1w"}]}),
+    ));
     for (k, (what, doc)) in good.iter().enumerate() {
         let errors = schema_errors(&schema, doc);
         assert!(errors.is_empty(), "{what}: schema rejects a good scenario file: {errors:?}");
@@ -255,6 +259,7 @@ fn scenario_file_schema_and_parser_agree() {
         ("drive queue as text", s(|v| v["Vehicles"][1]["DriveQueue"] = json!("straight"))),
         ("unknown action", s(|v| v["Vehicles"][1]["DriveQueue"] = json!(["fly"]))),
         ("bad spawn", s(|v| v["Vehicles"][1]["Spawn"] = json!("Q9q"))),
+        ("a map that draws", s(|v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": 2, "x": 1}}))),
         ("missing Id", s(|v| v["Vehicles"][1].as_object_mut().unwrap().remove("Id").map(|_| ()).unwrap())),
         ("bad colour", s(|v| v["Vehicles"][0]["colour"] = json!("orange"))),
         ("no frames", s(|v| v["frames"] = json!(0))),

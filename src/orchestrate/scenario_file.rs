@@ -24,8 +24,10 @@ use crate::map::signals::{light_at, light_index, light_label, Colour, ScheduleSt
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::confounders::ConfounderName;
 use crate::plan::interventions::{Effect, Intervention, Trigger};
-use crate::plan::{stream_key, Expansion, GivenCar, ScenarioKey, ScenarioPlan};
-use crate::spec::{valid_folder_name, BirdsEyeView, CameraSpec, CarRef, CitySpec, DatasetSpec, Split, WorldKind};
+use crate::plan::{stream_key, Expansion, GivenCar, PlannedTown, ScenarioKey, ScenarioPlan};
+use crate::spec::{
+    valid_folder_name, BirdsEyeView, CameraSpec, CarRef, CitySpec, DatasetSpec, MapSpec, Split, WorldKind,
+};
 use serde::Deserialize;
 use serde_json::{Map, Value};
 use std::fmt;
@@ -107,6 +109,9 @@ struct RawScenario {
     cameras: Option<Vec<CameraSpec>>,
     /// How the bird's-eye frames are drawn (`flat` or `pinhole`).
     birds_eye: Option<BirdsEyeView>,
+    /// The scenario's own map (a spec's `map` section, drawing nothing):
+    /// the default city when absent.
+    map: Option<MapSpec>,
     #[allow(dead_code)]
     comment: Option<String>,
 }
@@ -443,6 +448,26 @@ fn resolve(
     };
     let mut spec = DatasetSpec::for_given_cars(name.clone(), world, seed, frames, raw.frame_interval, city);
     spec.birds_eye = raw.birds_eye.unwrap_or_default();
+    // A map of its own: checked as a spec's, one town, its lanes named as
+    // `causalcity map` lists them.
+    let own_map;
+    let raw_map = raw.map.clone();
+    let map = match &raw.map {
+        None => map,
+        Some(section) => {
+            section.validate().map_err(|e| here.err(None, e.field, e.message))?;
+            if section.towns().len() > 1 {
+                return Err(here.err(
+                    None,
+                    "map.grid",
+                    "a scenario happens on one town: give rows and columns as numbers, not distributions",
+                ));
+            }
+            spec.map = section.clone();
+            own_map = Arc::new(CityMap::new(section.layout()));
+            &own_map
+        }
+    };
     let expansion = Expansion::new(spec, map.clone()).map_err(|e| here.err(None, e.field, e.message))?;
 
     if raw.vehicles.is_empty() {
@@ -517,6 +542,10 @@ fn resolve(
     };
     let stream = stream_key(seed, &format!("scenario-file/{name}"), Split::Train, 0);
     let mut plan = expansion.plan_given(&key, stream, &cars, &pairs);
+    // A map of its own is recorded, so that the scenario can be rebuilt.
+    if let Some(section) = &raw_map {
+        plan.town = Some(PlannedTown { index: 0, name: section.town_name(), map: section.clone() });
+    }
     plan.interventions = match interventions {
         None => Vec::new(),
         Some(_) if world == WorldKind::Toy => {
@@ -597,10 +626,19 @@ fn resolve_vehicle(
     }
     let spawn_name = vehicle.spawn.as_str();
     let spawn = map.lane_by_name(spawn_name).ok_or_else(|| {
+        let layout = &map.layout;
+        let mut roads: Vec<char> =
+            layout.east_west_roads.iter().chain(&layout.north_south_roads).map(|(name, _)| *name).collect();
+        roads.sort_unstable();
+        let segments = layout.east_west_roads.len().max(layout.north_south_roads.len());
+        let (first, last) = (roads.first().copied().unwrap_or('A'), roads.last().copied().unwrap_or('A'));
         here.err(
             car,
             "Spawn",
-            format!("{spawn_name:?} is not a spawn point: road A-D, segment 0-2, lane w-z, e.g. \"C0w\""),
+            format!(
+                "{spawn_name:?} is not a spawn point: road {first}-{last}, segment 0-{segments}, lane w-z, e.g. \"{}0w\" (causalcity map lists them)",
+                layout.north_south_roads.first().map_or('C', |r| r.0)
+            ),
         )
     })?;
     let lane_length = map.lanes[spawn].curve.length();
