@@ -1,0 +1,73 @@
+//! The drive queues drawn for a car: the original generator's, or only
+//! what each lane allows.
+
+use crate::map::{Action, CityMap, LaneEnd, LaneId};
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+
+/// Chance that a lane-valid drawn action is a merge, where one fits.
+const MERGE_SHARE: f64 = 0.25;
+
+/// A random drive queue drawn as the original's `scenarioGenerator.py`
+/// draws it, whatever lane the car will be in: each action `left`, `right`
+/// or `straight` with equal chance. (The original writes merge names only
+/// into `MergeAtDistances`, where its engine never carried them out, so no
+/// merges are drawn.) Drivers plan the lane changes their turns need.
+pub(super) fn original_actions(rng: &mut ChaCha8Rng, count: u32) -> (Vec<Action>, Vec<f64>) {
+    (0..count).map(|_| ([Action::Left, Action::Right, Action::Straight][rng.random_range(0..3)], 0.0)).unzip()
+}
+
+/// A valid random drive queue from `lane`, where the first car on the route
+/// starts `entry` metres along it. Merges are drawn only where they fit.
+pub(super) fn random_actions(
+    rng: &mut ChaCha8Rng,
+    map: &CityMap,
+    spawn: LaneId,
+    entry: f64,
+    count: u32,
+) -> (Vec<Action>, Vec<f64>) {
+    let mut lane = spawn;
+    let mut earliest = entry;
+    let run = map.layout.lane_change_length;
+    let mut actions = Vec::new();
+    let mut merges = Vec::new();
+    for _ in 0..count {
+        let len = map.lanes[lane].curve.length();
+        // Merge distances on a 0.1 m grid that fits before the lane ends.
+        // At least 1 m after the car, so a car can check the gap before it starts.
+        let lo = ((earliest + 1.0) * 10.0).ceil() / 10.0;
+        let hi = ((len - run) * 10.0).floor() / 10.0;
+        let merge_side = map
+            .adjacent_lane(lane, true)
+            .map(|l| (Action::MergeL, l))
+            .or_else(|| map.adjacent_lane(lane, false).map(|l| (Action::MergeR, l)));
+        if let (Some((action, target)), true) = (merge_side, lo <= hi) {
+            if rng.random_bool(MERGE_SHARE) {
+                let at = ((rng.random_range(lo..=hi) * 10.0).round() / 10.0).clamp(lo, hi);
+                actions.push(action);
+                merges.push(at);
+                lane = target;
+                earliest = at + run;
+                continue;
+            }
+        }
+        // A turn applies at the next intersection, after any off-camera loop.
+        let mut approach = lane;
+        if let LaneEnd::Loop(c) = map.lanes[lane].end {
+            approach = map.connectors[c].to;
+        }
+        let turns = map.allowed_turns(approach);
+        let turn = turns[rng.random_range(0..turns.len())];
+        let action = match turn {
+            crate::map::Turn::Left => Action::Left,
+            crate::map::Turn::Right => Action::Right,
+            _ => Action::Straight,
+        };
+        actions.push(action);
+        merges.push(0.0);
+        let connector = map.exit(approach, turn).expect("allowed turn has a connector");
+        lane = map.connectors[connector].to;
+        earliest = 0.0;
+    }
+    (actions, merges)
+}
