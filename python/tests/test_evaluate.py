@@ -97,6 +97,45 @@ def test_edge_metrics_agree_with_scikit_learn(predictions):
     assert checked == 2 * 2 * 2  # graphs x groups x (val, test)
 
 
+def test_the_overall_row_counts_every_scenario_of_every_group_once(predictions):
+    path, edges, _ = predictions
+    report = causalcity.evaluate(TOY, path, graph=["designed"], history=HISTORY)
+    rows = [r for r in report["edges"] if r["graph"] == "designed"]
+    checked = 0
+    for overall in report["overall"]:
+        if overall["graph"] != "designed":
+            continue
+        split = overall["split"]
+        groups = [r for r in rows if r["split"] == split]
+        assert overall["groups"] == len(groups) == 2
+        ys, ss, f1s, shds = [], [], [], []
+        for row in groups:
+            for rel, meta in scenarios(split):
+                if not rel.startswith(row["group"] + "/"):
+                    continue
+                n = len(meta["cars"])
+                off = ~np.eye(n, dtype=bool)
+                y, sc = truth(meta)[off], edges[rel][off]
+                called = sc > row["threshold"]  # each scenario at its own group's threshold
+                f1s.append(f1_score(y, called, zero_division=1.0))
+                shds.append(int((called != y).sum()))
+                ys.append(y)
+                ss.append(sc)
+        y, sc = np.concatenate(ys), np.concatenate(ss)
+        assert overall["scenarios"] == len(f1s) == sum(r["scenarios"] for r in groups)
+        assert overall["pairs"] == len(y) and overall["true_edges"] == int(y.sum())
+        assert overall["f1"] == pytest.approx(np.mean(f1s), abs=1e-9)
+        # Scenario-weighted: the groups' F1s weighed by their scenarios.
+        weighted = sum(r["f1"] * r["scenarios"] for r in groups) / sum(r["scenarios"] for r in groups)
+        assert overall["f1"] == pytest.approx(weighted, abs=1e-9)
+        assert overall["shd"] == pytest.approx(np.mean(shds), abs=1e-9)
+        assert overall["auroc"] == pytest.approx(roc_auc_score(y, sc), abs=1e-9)
+        checked += 1
+    assert checked == 2  # val and test
+    text = cli("evaluate", TOY, path, "--history", HISTORY).stdout
+    assert "all 2 groups" in text, text
+
+
 def test_the_threshold_is_the_best_f1_on_val(predictions):
     path, edges, _ = predictions
     report = causalcity.evaluate(TOY, path, history=HISTORY)

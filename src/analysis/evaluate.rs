@@ -179,6 +179,32 @@ pub struct EdgeScores {
     pub shd_se: Option<f64>,
 }
 
+/// Edge-discovery scores of one graph and split over every group: each
+/// scenario counts once (scored at its own group's threshold), so groups
+/// weigh by their scenarios. Given when two or more groups are scored.
+#[derive(Debug, Clone, Serialize)]
+pub struct OverallScores {
+    pub graph: &'static str,
+    pub split: &'static str,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub held_out: bool,
+    pub groups: usize,
+    pub scenarios: usize,
+    pub pairs: usize,
+    pub true_edges: usize,
+    pub predicted_edges: usize,
+    pub precision: Option<f64>,
+    pub recall: Option<f64>,
+    /// Mean over every scenario of its F1.
+    pub f1: f64,
+    pub f1_se: Option<f64>,
+    /// Over every pair of every group (scores compared across groups).
+    pub auroc: Option<f64>,
+    pub auprc: Option<f64>,
+    pub shd: f64,
+    pub shd_se: Option<f64>,
+}
+
 /// Trajectory-prediction error of one group and split at each step ahead.
 #[derive(Debug, Clone, Serialize)]
 pub struct TrajectoryScores {
@@ -212,6 +238,9 @@ pub struct EvaluationReport {
     pub image_size: [u32; 2],
     pub history_frames: usize,
     pub edges: Vec<EdgeScores>,
+    /// Every group together, per graph and split (with two or more groups).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub overall: Vec<OverallScores>,
     pub trajectories: Vec<TrajectoryScores>,
     /// Predicted counterfactual trajectories against the re-simulated ones
     /// (a sweep only).
@@ -748,8 +777,10 @@ fn edge_rows<'a>(
     scored: &[ScenarioPredictions],
     results: &'a [ScenarioResult],
     pairs_of: impl Fn(&'a ScenarioResult) -> Option<GraphPairs<'a>>,
-) -> Vec<EdgeScores> {
+) -> (Vec<EdgeScores>, Vec<OverallScores>) {
     let mut rows = Vec::new();
+    // Per split: every group's pairs, per-scenario F1 and SHD, counts at each group's threshold.
+    let mut pooled: [(Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize); 3] = Default::default();
     for group in &truth.expansion.spec.groups {
         let name = group.name();
         let in_split = |split: Split| -> Vec<GraphPairs<'a>> {
@@ -776,6 +807,14 @@ fn edge_rows<'a>(
                 .map(|(c, graphs)| (c.false_positives + c.false_negatives) as f64 / *graphs as f64)
                 .collect();
             let counts = Counts::at(&all, -threshold);
+            let pool = &mut pooled[split.index()];
+            pool.0.extend_from_slice(&all);
+            pool.1.extend_from_slice(&f1s);
+            pool.2.extend_from_slice(&shds);
+            pool.3.true_positives += counts.true_positives;
+            pool.3.false_positives += counts.false_positives;
+            pool.3.false_negatives += counts.false_negatives;
+            pool.4 += 1;
             let (f1, f1_se) = mean_se(&f1s);
             let (shd, shd_se) = mean_se(&shds);
             rows.push(EdgeScores {
@@ -802,7 +841,33 @@ fn edge_rows<'a>(
             });
         }
     }
-    rows
+    let mut overall = Vec::new();
+    for (split, (all, f1s, shds, counts, groups)) in Split::ALL.into_iter().zip(pooled) {
+        if groups < 2 {
+            continue;
+        }
+        let (f1, f1_se) = mean_se(&f1s);
+        let (shd, shd_se) = mean_se(&shds);
+        overall.push(OverallScores {
+            graph,
+            split: split.name(),
+            held_out: truth.expansion.spec.held_out.of(split).is_some(),
+            groups,
+            scenarios: f1s.len(),
+            pairs: all.len(),
+            true_edges: counts.true_positives + counts.false_negatives,
+            predicted_edges: counts.true_positives + counts.false_positives,
+            precision: counts.precision(),
+            recall: counts.recall(),
+            f1,
+            f1_se,
+            auroc: auroc(&all),
+            auprc: average_precision(&all),
+            shd,
+            shd_se,
+        });
+    }
+    (rows, overall)
 }
 
 /// Error rows per group and split from each scenario's per-step errors.
@@ -854,15 +919,18 @@ fn summarise(
     results: &[ScenarioResult],
 ) -> EvaluationReport {
     let spec = &truth.expansion.spec;
-    let mut edges = Vec::new();
+    let (mut edges, mut overall) = (Vec::new(), Vec::new());
     for (g, &graph) in options.graphs.iter().enumerate() {
-        edges.extend(edge_rows(graph.name(), truth, options, scored, results, |r| {
-            r.pairs.get(g).map(|p| (p.as_slice(), 1))
-        }));
+        let (rows, all) =
+            edge_rows(graph.name(), truth, options, scored, results, |r| r.pairs.get(g).map(|p| (p.as_slice(), 1)));
+        edges.extend(rows);
+        overall.extend(all);
     }
-    edges.extend(edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, |r| {
+    let (rows, all) = edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, |r| {
         r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
-    }));
+    });
+    edges.extend(rows);
+    overall.extend(all);
     let untuned: Vec<String> = edges
         .iter()
         .filter(|e| e.threshold_from == "default")
@@ -887,6 +955,7 @@ fn summarise(
         image_size: [spec.image.width, spec.image.height],
         history_frames: options.history,
         edges,
+        overall,
         trajectories: trajectory_rows(truth, scored, results, |r| &r.step_errors),
         counterfactuals: trajectory_rows(truth, scored, results, |r| &r.counterfactual_errors),
     }
@@ -998,6 +1067,28 @@ impl fmt::Display for EvaluationReport {
                     pm(e.shd, e.shd_se)
                 )?;
             }
+            for o in &self.overall {
+                let split = if o.held_out { format!("{}*", o.split) } else { o.split.to_string() };
+                writeln!(
+                    f,
+                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
+                    o.graph,
+                    format!("all {} groups", o.groups),
+                    split,
+                    o.scenarios,
+                    o.pairs,
+                    o.true_edges,
+                    show(o.auroc),
+                    show(o.auprc),
+                    o.predicted_edges,
+                    "-",
+                    "group",
+                    show(o.precision),
+                    show(o.recall),
+                    pm(o.f1, o.f1_se),
+                    pm(o.shd, o.shd_se)
+                )?;
+            }
             writeln!(
                 f,
                 "edges: AUROC and AUPRC over all pairs need no threshold; a pair is called linked when its score is \
@@ -1005,6 +1096,13 @@ impl fmt::Display for EvaluationReport {
                  above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
                  against interactions.csv, SHD per frame"
             )?;
+            if !self.overall.is_empty() {
+                writeln!(
+                    f,
+                    "all N groups: every scenario of every group counts once, each called at its own group's \
+                     threshold; AUROC and AUPRC over every pair of every group"
+                )?;
+            }
             if self.edges.iter().any(|e| e.held_out) {
                 writeln!(
                     f,
