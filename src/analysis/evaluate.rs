@@ -769,6 +769,10 @@ fn threshold_for(options: &EvaluateOptions, val_pairs: &[ScoredPair]) -> (f64, &
 /// (1, or the frames of a per-frame graph), for SHD per graph.
 type GraphPairs<'a> = (&'a [ScoredPair], usize);
 
+/// One split's scores over every group: every pair, each scenario's F1
+/// and SHD, the counts at each group's threshold, and the groups scored.
+type Pooled = (Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize);
+
 /// Edge rows of one graph for every group and split that has its scores.
 fn edge_rows<'a>(
     graph: &'static str,
@@ -779,8 +783,7 @@ fn edge_rows<'a>(
     pairs_of: impl Fn(&'a ScenarioResult) -> Option<GraphPairs<'a>>,
 ) -> (Vec<EdgeScores>, Vec<OverallScores>) {
     let mut rows = Vec::new();
-    // Per split: every group's pairs, per-scenario F1 and SHD, counts at each group's threshold.
-    let mut pooled: [(Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize); 3] = Default::default();
+    let mut pooled: [Pooled; 3] = Default::default();
     for group in &truth.expansion.spec.groups {
         let name = group.name();
         let in_split = |split: Split| -> Vec<GraphPairs<'a>> {
