@@ -148,14 +148,19 @@ impl fmt::Display for ValidationReport {
 struct Expected<'a> {
     spec: &'a DatasetSpec,
     layout: ScenarioLayout,
-    /// Rows per frame of lights.csv (city world).
+    /// Rows per frame of lights.csv (city world) of a dataset of one town.
     lights_per_frame: usize,
+    /// Per split of [`Split::ALL`]: every town it draws, with its lights.csv
+    /// rows per frame (a scenario of a many-town dataset names its town).
+    towns: [Vec<(crate::spec::MapSpec, usize)>; 3],
 }
 
 impl<'a> Expected<'a> {
     fn new(spec: &'a DatasetSpec, layout: ScenarioLayout) -> Expected<'a> {
-        let lights_per_frame = spec.map.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
-        Expected { spec, layout, lights_per_frame }
+        let lights = |map: &crate::spec::MapSpec| map.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
+        let towns =
+            Split::ALL.map(|split| spec.map_of(split).towns().into_iter().map(|t| (t.clone(), lights(&t))).collect());
+        Expected { spec, layout, lights_per_frame: lights(&spec.map), towns }
     }
 }
 
@@ -457,11 +462,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
                 }
                 // A dataset of several towns: the scenario's is one the spec draws.
                 if let Some(town) = v.get("map") {
-                    match serde_json::from_value::<crate::spec::MapSpec>(town.clone()) {
-                        Ok(town) if spec.map_of(key.split).towns().contains(&town) => {
-                            lights_per_frame = town.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
-                        }
-                        _ => problems.push(Problem {
+                    let parsed = serde_json::from_value::<crate::spec::MapSpec>(town.clone()).ok();
+                    let known = parsed.and_then(|t| expected.towns[key.split.index()].iter().find(|(k, _)| *k == t));
+                    match known {
+                        Some((_, lights)) => lights_per_frame = *lights,
+                        None => problems.push(Problem {
                             path: path.clone(),
                             message: format!("`map` {town} is not a town the spec draws for {}", key.split.name()),
                         }),

@@ -111,7 +111,7 @@ impl Generator {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
-        let town = plan.town.as_ref().map_or(0, |t| t.index);
+        let town = plan.town_index();
         let map = &self.expansion.towns()[town].map;
         let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
         let trajectories = crate::world::simulate_until(map, &plan, stop).ok_or_else(interrupted)?;

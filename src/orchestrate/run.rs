@@ -267,7 +267,7 @@ impl TownWriters {
 
     /// The writer of the town `plan` happens on.
     pub(crate) fn of(&self, plan: &ScenarioPlan) -> &ScenarioWriter {
-        &self.0[plan.town.as_ref().map_or(0, |t| t.index)]
+        &self.0[plan.town_index()]
     }
 
     pub(crate) fn buffers(&self) -> WriterBuffers {

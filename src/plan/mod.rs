@@ -197,6 +197,13 @@ pub struct ScenarioPlan {
     pub town: Option<PlannedTown>,
 }
 
+impl ScenarioPlan {
+    /// Its town's place in [`expand::Expansion::towns`] (0: the only one).
+    pub fn town_index(&self) -> usize {
+        self.town.as_ref().map_or(0, |t| t.index)
+    }
+}
+
 /// The town a scenario of a many-town dataset happens on.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannedTown {

@@ -37,6 +37,8 @@ pub struct Expansion {
     pub map: Arc<CityMap>,
     pub camera: Camera,
     planners: Vec<Planner>,
+    /// More than one town name among the planners: plans then say theirs.
+    several_towns: bool,
     /// Per split of [`Split::ALL`]: the map section its towns are drawn
     /// from, and each town it can draw with its planner's index.
     split_towns: [SplitTowns; 3],
@@ -137,7 +139,8 @@ impl Expansion {
         }
         let split_towns: [SplitTowns; 3] = split_towns.try_into().expect("one per split");
         let (map, camera) = (planners[0].map.clone(), planners[0].camera);
-        Ok(Expansion { spec, map, camera, planners, split_towns })
+        let several_towns = unique_names(planners.iter()).len() > 1;
+        Ok(Expansion { spec, map, camera, planners, several_towns, split_towns })
     }
 
     /// One town, `map`, checked as [`Planner::new`] does (hand-written
@@ -146,7 +149,14 @@ impl Expansion {
         let planner = Planner::new(spec.clone(), map)?;
         let towns = SplitTowns { map: spec.map.clone(), towns: vec![(spec.map.clone(), 0)] };
         let (map, camera) = (planner.map.clone(), planner.camera);
-        Ok(Expansion { spec, map, camera, planners: vec![planner], split_towns: [towns.clone(), towns.clone(), towns] })
+        Ok(Expansion {
+            spec,
+            map,
+            camera,
+            planners: vec![planner],
+            several_towns: false,
+            split_towns: [towns.clone(), towns.clone(), towns],
+        })
     }
 
     /// Every town a scenario can happen on, with the graph shape planned
@@ -159,30 +169,17 @@ impl Expansion {
 
     /// The names of every town, each once, in order.
     pub fn all_town_names(&self) -> Vec<&str> {
-        let mut names: Vec<&str> = Vec::new();
-        for planner in &self.planners {
-            if !names.contains(&planner.name.as_str()) {
-                names.push(&planner.name);
-            }
-        }
-        names
+        unique_names(self.planners.iter())
     }
 
     /// The names of the towns `split` draws from, each once, in order.
     pub fn town_names(&self, split: Split) -> Vec<&str> {
-        let mut names: Vec<&str> = Vec::new();
-        for (_, index) in &self.split_towns[split.index()].towns {
-            let name = self.planners[*index].name.as_str();
-            if !names.contains(&name) {
-                names.push(name);
-            }
-        }
-        names
+        unique_names(self.split_towns[split.index()].towns.iter().map(|(_, index)| &self.planners[*index]))
     }
 
     /// The town a plan happens on.
     pub fn town_of(&self, plan: &ScenarioPlan) -> &Planner {
-        &self.planners[plan.town.as_ref().map_or(0, |t| t.index)]
+        &self.planners[plan.town_index()]
     }
 
     /// Plans one scenario on the town its split draws for it. Errors only
@@ -200,7 +197,7 @@ impl Expansion {
         };
         let planner = &self.planners[index];
         let mut plan = planner.plan(key)?;
-        if self.planners.iter().any(|p| p.name != self.planners[0].name) {
+        if self.several_towns {
             plan.town = Some(PlannedTown { index, name: planner.name.clone(), map: planner.spec.map.clone() });
         }
         Ok(plan)
@@ -236,6 +233,17 @@ impl Expansion {
         let per_split = Split::ALL.map(|s| self.spec.splits.count(s).min(limit.unwrap_or(u32::MAX)) as u64);
         KeySequence { groups: &self.spec.groups, per_split }
     }
+}
+
+/// The planners' names, each once, in order.
+fn unique_names<'a>(planners: impl Iterator<Item = &'a Planner>) -> Vec<&'a str> {
+    let mut names: Vec<&str> = Vec::new();
+    for planner in planners {
+        if !names.contains(&planner.name.as_str()) {
+            names.push(&planner.name);
+        }
+    }
+    names
 }
 
 /// A town's spec error, said to be the town's when the map draws several
