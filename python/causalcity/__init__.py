@@ -4,7 +4,8 @@ counterfactual reasoning, generated on the fly into numpy arrays.
 The same Rust library as the ``causalcity`` command runs underneath, so a
 scenario from :func:`simulate` holds exactly what ``causalcity gen`` writes
 for the same spec and key: every number as its CSV log gives it, every frame
-as its PNG decodes. Nothing goes through the disk.
+as its PNG decodes. Nothing goes through the disk; :func:`open_dataset` and
+:func:`load` read what ``gen`` wrote back into the same objects.
 
 >>> import causalcity
 >>> spec = causalcity.Spec.load("configs/ci-city.json")
@@ -47,6 +48,10 @@ __all__ = [
     "Stream",
     "Batches",
     "simulate",
+    "load",
+    "open_dataset",
+    "Dataset",
+    "Frames",
     "map",
     "stream",
     "batches",
@@ -359,10 +364,11 @@ class Scenario:
     interactions: Optional[Interactions]
     events: List[Event]
     rgb: Optional[_np.ndarray]
-    """With ``images=True``: ``[frames, height, width, 3]`` uint8."""
+    """With ``images=True``: ``[frames, height, width, 3]`` uint8 (from
+    :func:`load`, a :class:`Frames` that decodes the PNGs when indexed)."""
     mask: Optional[_np.ndarray]
     """With ``images=True``: ``[frames, height, width]`` uint8, 0 for no
-    car, else the car's id + 1."""
+    car, else the car's id + 1 (from :func:`load`, a :class:`Frames`)."""
 
     @property
     def causal_graph(self) -> Optional[_np.ndarray]:
@@ -941,6 +947,7 @@ def evaluate(
 
 
 from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)
+from .disk import Dataset, Frames, load, open_dataset  # noqa: E402 (needs the definitions above)
 
 
 def __dir__() -> List[str]:

@@ -9,6 +9,7 @@
 
 use causalcity::analysis::baseline::pair_following_scores;
 use causalcity::analysis::evaluate::{evaluate as evaluate_, DatasetIdentity, EvaluateOptions};
+use causalcity::dataset::readback::{read_frames as read_frames_, read_scenario as read_scenario_};
 use causalcity::dataset::GraphKind;
 use causalcity::error::Error;
 use causalcity::orchestrate::in_memory::{counterfactual_arrays, parse_split, Generator, PairArrays, Text};
@@ -18,6 +19,7 @@ use causalcity::orchestrate::run::{
 };
 use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
 use causalcity::output::claim::claim_file;
+use causalcity::output::layout::FrameKind;
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::DatasetSpec;
@@ -323,6 +325,43 @@ fn simulate<'py>(
     let work = || generator.scenario_until(&key, images, effects, &stop);
     let arrays = interruptible(py, || stop.store(true, Ordering::SeqCst), work)?.map_err(py_err)?;
     scenario_dict(py, arrays)
+}
+
+/// A scenario folder `gen` or `counterfactual` wrote, read back as the
+/// dict [`simulate`] gives (without frames: see [`read_frames`]).
+#[pyfunction]
+fn read_scenario(py: Python<'_>, dir: PathBuf) -> PyResult<Bound<'_, PyDict>> {
+    let arrays = py.detach(|| read_scenario_(&dir)).map_err(InputError::new_err)?;
+    scenario_dict(py, arrays)
+}
+
+/// Frames `start..end` of a scenario folder of `frames` frames of
+/// `width` x `height`, decoded from its PNGs: `kind` "rgb" gives
+/// `[n, height, width, 3]` uint8, "mask" `[n, height, width]`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)] // the folder, the kind and the frames' range and size, each once
+fn read_frames<'py>(
+    py: Python<'py>,
+    dir: PathBuf,
+    kind: &str,
+    frames: u32,
+    start: u32,
+    end: u32,
+    width: u32,
+    height: u32,
+) -> PyResult<Bound<'py, Array>> {
+    let (kind, channels) = match kind {
+        "rgb" => (FrameKind::Rgb, 3),
+        "mask" => (FrameKind::Mask, 1),
+        other => return Err(InputError::new_err(format!("frame kind {other:?} is not rgb or mask"))),
+    };
+    let bytes =
+        py.detach(|| read_frames_(&dir, kind, frames, (start, end), (width, height))).map_err(InputError::new_err)?;
+    let mut shape = vec![end.saturating_sub(start) as usize, height as usize, width as usize];
+    if channels == 3 {
+        shape.push(3);
+    }
+    array(py, Data::U8(bytes), &shape)
 }
 
 /// Scenarios of `spec` generated ahead on `threads` worker threads, yielded
@@ -650,6 +689,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GenerationError", m.py().get_type::<GenerationError>())?;
     m.add("MAX_THREADS", MAX_THREADS)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(read_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(read_frames, m)?)?;
     m.add_class::<Prefetch>()?;
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;

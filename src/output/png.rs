@@ -66,15 +66,21 @@ pub fn encode_png<W: Write>(
 
 /// Decodes an 8-bit greyscale PNG (an instance mask) of the expected size.
 pub fn decode_gray8(data: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    decode_8bit(data, width, height, png::ColorType::Grayscale)
+}
+
+/// Decodes an 8-bit PNG of colour type `colour` (RGB frames, grey masks)
+/// and the expected size; anything else is an error saying what it is.
+pub fn decode_8bit(data: &[u8], width: u32, height: u32, colour: png::ColorType) -> Result<Vec<u8>, String> {
     let decoder = png::Decoder::new(std::io::Cursor::new(data));
     let mut reader = decoder.read_info().map_err(|e| format!("cannot decode: {e}"))?;
     let info = reader.info();
     if (info.width, info.height) != (width, height)
-        || info.color_type != png::ColorType::Grayscale
+        || info.color_type != colour
         || info.bit_depth != png::BitDepth::Eight
     {
         return Err(format!(
-            "{}x{} {:?} {:?}; expected {width}x{height} 8-bit grey",
+            "{}x{} {:?} {:?}; expected {width}x{height} 8-bit {colour:?}",
             info.width, info.height, info.color_type, info.bit_depth
         ));
     }

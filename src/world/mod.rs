@@ -80,6 +80,19 @@ pub enum EventKind {
 }
 
 impl EventKind {
+    /// Every kind (`data-schema/events.schema.json` lists the same names).
+    pub const ALL: [EventKind; 9] = [
+        EventKind::Collision,
+        EventKind::RedLightRun,
+        EventKind::MergeDone,
+        EventKind::TurnDone,
+        EventKind::ActionsFinished,
+        EventKind::Intervention,
+        EventKind::LaneChange,
+        EventKind::ActionAdapted,
+        EventKind::ActionSkipped,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             EventKind::Collision => "collision",

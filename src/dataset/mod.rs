@@ -1,6 +1,9 @@
 //! A written dataset opened for reading: its manifest, the spec it was made
 //! from, and where each of its scenarios lives. Used by every command that
-//! reads datasets (stats, heatmap, exports).
+//! reads datasets (stats, heatmap, exports), and a scenario folder read
+//! back into arrays ([`readback`]).
+
+pub mod readback;
 
 use crate::output::manifest::ManifestRecord;
 use crate::output::scenario_dir;

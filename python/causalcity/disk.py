@@ -1,0 +1,203 @@
+"""Datasets read back from disk: what ``causalcity gen`` wrote, as the same
+:class:`~causalcity.Scenario` objects :func:`~causalcity.simulate` gives.
+
+>>> import causalcity
+>>> data = causalcity.open_dataset("data/ci-city")
+>>> data.keys("test")[:2]
+>>> s = data.load(data.keys("test")[0])           # or causalcity.load(folder)
+>>> s.position.shape, s.graph.shape
+>>> s.rgb[10]                                      # frame 10, decoded from rgb/0010.png
+
+Every number is the one the files hold, which is the one ``simulate`` gives
+for the same key. Frames stay on disk until used: ``rgb`` and ``mask`` are
+:class:`Frames`, which decode PNGs when indexed (``s.rgb[3]``,
+``s.rgb[:10]``) and turn into a whole array with ``numpy.asarray(s.rgb)``.
+"""
+
+from __future__ import annotations
+
+import json as _json
+import os as _os
+import warnings as _warnings
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Dict, Iterator, List, Optional, Tuple, Union
+
+import numpy as _np
+
+from . import _native
+from ._native import InputError
+
+if TYPE_CHECKING:
+    from . import Key, Scenario
+
+PathLike = Union[str, "_os.PathLike[str]"]
+
+
+class Frames:
+    """A scenario's bird's-eye frames (``rgb``) or masks (``mask``) on disk,
+    decoded from their PNGs when indexed: ``frames[i]`` is one frame,
+    ``frames[a:b]`` several, ``numpy.asarray(frames)`` all of them
+    (``[frames, height, width, 3]`` or ``[frames, height, width]`` uint8, as
+    :func:`~causalcity.simulate` gives them)."""
+
+    dtype = _np.dtype(_np.uint8)
+
+    def __init__(self, folder: Path, kind: str, frames: int, width: int, height: int) -> None:
+        self.folder = folder
+        self.kind = kind
+        self._frames, self._width, self._height = frames, width, height
+
+    @property
+    def shape(self) -> Tuple[int, ...]:
+        base = (self._frames, self._height, self._width)
+        return base + (3,) if self.kind == "rgb" else base
+
+    @property
+    def ndim(self) -> int:
+        return len(self.shape)
+
+    def __len__(self) -> int:
+        return self._frames
+
+    def _read(self, start: int, end: int) -> _np.ndarray:
+        raw = _native.read_frames(
+            _os.fspath(self.folder), self.kind, self._frames, start, end, self._width, self._height
+        )
+        return _np.asarray(raw)
+
+    def __getitem__(self, index: Any) -> _np.ndarray:
+        rest: Tuple[Any, ...] = ()
+        if isinstance(index, tuple):
+            index, rest = (index[0], index[1:]) if index else (slice(None), ())
+        if isinstance(index, slice):
+            start, stop, step = index.indices(self._frames)
+            if step == 1:
+                out = self._read(start, max(start, stop))
+            else:
+                out = _np.stack([self._read(i, i + 1)[0] for i in range(start, stop, step)] or [self._read(0, 0)])
+        elif isinstance(index, (int, _np.integer)):
+            i = int(index) + (self._frames if index < 0 else 0)
+            if not 0 <= i < self._frames:
+                raise IndexError(f"frame {int(index)} is outside the scenario's {self._frames} frames")
+            out = self._read(i, i + 1)[0]
+        else:
+            chosen = _np.arange(self._frames)[index]
+            out = _np.stack([self._read(int(i), int(i) + 1)[0] for i in _np.atleast_1d(chosen)])
+        return out[rest] if rest else out
+
+    def __iter__(self) -> Iterator[_np.ndarray]:
+        for i in range(self._frames):
+            yield self._read(i, i + 1)[0]
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> _np.ndarray:
+        out = self._read(0, self._frames)
+        return out if dtype is None else out.astype(dtype)
+
+    def __repr__(self) -> str:
+        return f"Frames({self.kind!r}, shape={self.shape}, folder={_os.fspath(self.folder)!r})"
+
+
+def load(folder: PathLike, images: bool = True) -> "Scenario":
+    """The scenario in ``folder``, as ``gen`` (or ``counterfactual``, for its
+    ``factual`` and ``counterfactual`` folders) wrote it: the same
+    :class:`~causalcity.Scenario` that :func:`~causalcity.simulate` gives for
+    its key (``key`` is None for the runs of a scenario file or a
+    counterfactual pair, as there), with ``rgb`` and ``mask`` as :class:`Frames` that decode the
+    PNGs when used (None without images, or with ``images=False``).
+
+    Raises ``FileNotFoundError`` for a folder without ``scenario.json``,
+    and :class:`~causalcity.InputError` for a file that is not as ``gen``
+    writes it (the message names the file, line and field)."""
+    from . import Key, _scenario
+
+    path = Path(folder)
+    if not (path / "scenario.json").is_file():
+        raise FileNotFoundError(
+            f"{_os.fspath(path)}: no scenario.json; a scenario folder is one that gen wrote, "
+            "e.g. data/ci-city/cars08_edges50/test/00000 (open_dataset reads a whole dataset)"
+        )
+    raw = _native.read_scenario(_os.fspath(path))
+    meta = _json.loads(raw["scenario_json"])
+    # A dataset's scenario has a key (its folder is group/split/name); the
+    # runs of a scenario file or of a counterfactual pair have none, as in
+    # simulate and counterfactual.
+    key = None
+    place = tuple(path.resolve().parts[-3:])
+    if all(k in meta for k in ("group", "split", "index", "name")) and place == (meta["group"], meta["split"], meta["name"]):
+        key = Key(meta["group"], meta["split"], int(meta["index"]))
+    scenario = _scenario(raw, key)
+    if images and (path / "rgb").is_dir():
+        camera = meta.get("camera", {})
+        frames, width, height = int(meta["frames"]), int(camera["width"]), int(camera["height"])
+        object.__setattr__(scenario, "rgb", Frames(path, "rgb", frames, width, height))
+        object.__setattr__(scenario, "mask", Frames(path, "mask", frames, width, height))
+    return scenario
+
+
+class Dataset:
+    """A dataset folder ``gen`` wrote, opened for reading: its manifest, the
+    spec it was made from (:attr:`spec`, a :class:`~causalcity.Spec`), its
+    keys and its scenarios, read lazily one at a time. ``dataset[key]`` and
+    iteration give :class:`~causalcity.Scenario` objects."""
+
+    def __init__(self, root: PathLike) -> None:
+        from . import Spec
+
+        self.root = Path(root)
+        manifest = self.root / "manifest.json"
+        if not manifest.is_file():
+            sweep = " (it is a counterfactual sweep: use causalcity.open_sweep)" if (self.root / "sweep.json").is_file() else ""
+            raise FileNotFoundError(f"{_os.fspath(self.root)}: no manifest.json, so not a dataset gen wrote{sweep}")
+        try:
+            self.manifest: Dict[str, Any] = _json.loads(manifest.read_text())
+        except ValueError as e:
+            raise InputError(f"{_os.fspath(manifest)}: not JSON: {e}") from None
+        if not self.manifest.get("complete", False):
+            _warnings.warn(
+                f"{_os.fspath(self.root)} is unfinished (manifest.json's complete is false): "
+                "only the scenarios written so far are listed",
+                stacklevel=2,
+            )
+        self.spec = Spec.from_dict(self.manifest["spec"])
+        self.images = bool(self.manifest.get("images", False))
+
+    def keys(self, split: Optional[str] = None) -> List["Key"]:
+        """The keys of the scenarios on disk, in ``gen``'s order (groups,
+        then train, val, test, then index); ``split`` keeps one split. A
+        sharded or unfinished dataset lists only the folders it has."""
+        return [k for k in self.spec.keys(split, self.manifest.get("limit")) if (self.root / k.folder / "scenario.json").is_file()]
+
+    def load(self, key: "Key", images: bool = True) -> "Scenario":
+        """The scenario of ``key`` (a :class:`~causalcity.Key` or a
+        ``(group, split, index)`` tuple), as :func:`load` reads it."""
+        from . import Key
+
+        key = Key(*key)
+        folder = self.root / key.folder
+        if not (folder / "scenario.json").is_file():
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/scenario.json)")
+        return load(folder, images=images)
+
+    def scenarios(self, split: Optional[str] = None, images: bool = True) -> Iterator["Scenario"]:
+        """Every scenario of ``split`` (or all), read one at a time."""
+        for key in self.keys(split):
+            yield self.load(key, images=images)
+
+    def __getitem__(self, key: "Key") -> "Scenario":
+        return self.load(key)
+
+    def __iter__(self) -> Iterator["Scenario"]:
+        return self.scenarios()
+
+    def __len__(self) -> int:
+        return len(self.keys())
+
+    def __repr__(self) -> str:
+        return f"Dataset({_os.fspath(self.root)!r}, spec={self.spec.name!r}, scenarios={len(self)})"
+
+
+def open_dataset(root: PathLike) -> Dataset:
+    """The dataset ``gen`` wrote in ``root``, opened for reading (see
+    :class:`Dataset`)."""
+    return Dataset(root)
+

@@ -1,0 +1,152 @@
+"""Datasets read back from disk (`causalcity.open_dataset`, `causalcity.load`)
+equal what `simulate` gives for the same keys: every array, every log, every
+frame, read from the folders `make test-python` wrote with `causalcity gen`.
+"""
+
+import dataclasses
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import causalcity
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = Path(os.environ.get("CAUSALCITY_DATA", ROOT / "target" / "python-data"))
+STOP_THE_LEADER = ROOT / "configs" / "examples" / "stop-the-leader.json"
+
+
+def assert_same_scenario(loaded, simulated):
+    """Every field of two Scenario objects equal, frames decoded in full."""
+    compared = 0
+    for field in dataclasses.fields(causalcity.Scenario):
+        a, b = getattr(loaded, field.name), getattr(simulated, field.name)
+        if field.name in ("rgb", "mask"):
+            assert (a is None) == (b is None), field.name
+            if b is not None:
+                assert a.shape == b.shape and a.dtype == b.dtype
+                np.testing.assert_array_equal(np.asarray(a), b, err_msg=field.name)
+        elif dataclasses.is_dataclass(b):
+            for part in dataclasses.fields(b):
+                x, y = getattr(a, part.name), getattr(b, part.name)
+                if isinstance(y, np.ndarray):
+                    assert x.dtype == y.dtype and x.shape == y.shape, f"{field.name}.{part.name}"
+                    np.testing.assert_array_equal(x, y, err_msg=f"{field.name}.{part.name}")
+                else:
+                    assert x == y, f"{field.name}.{part.name}"
+        elif isinstance(b, np.ndarray):
+            assert a.dtype == b.dtype and a.shape == b.shape, field.name
+            np.testing.assert_array_equal(a, b, err_msg=field.name)
+        else:
+            assert a == b, field.name
+        compared += 1
+    assert compared == len(dataclasses.fields(causalcity.Scenario))
+
+
+def test_a_city_dataset_read_from_disk_equals_simulate_frames_included():
+    data = causalcity.open_dataset(DATA / "city")
+    keys = data.keys()
+    assert len(keys) == len(data) == 3 and data.images
+    assert data.keys("test") == [k for k in keys if k.split == "test"]
+    events = 0
+    for key, loaded in zip(keys, data):
+        assert loaded.key == key
+        assert isinstance(loaded.rgb, causalcity.Frames) and isinstance(loaded.mask, causalcity.Frames)
+        simulated = causalcity.simulate(data.spec, *key, images=True)
+        assert_same_scenario(loaded, simulated)
+        events += len(loaded.events)
+        assert loaded.lights is not None and loaded.interactions is not None and loaded.effects is not None
+    assert events > 0
+
+
+def test_a_toy_dataset_read_from_disk_equals_simulate():
+    data = causalcity.open_dataset(DATA / "toy")
+    keys = data.keys()
+    assert len(keys) == 8
+    for key in keys:
+        loaded = causalcity.load(DATA / "toy" / key.folder)
+        assert loaded.key == key and loaded.lights is None and loaded.interactions is None
+        assert_same_scenario(loaded, causalcity.simulate(data.spec, *key, images=True))
+        np.testing.assert_array_equal(loaded.causal_graph, loaded.graph)
+
+
+def test_counterfactual_folders_read_back_as_the_pair_simulates():
+    (pair,) = causalcity.counterfactual(STOP_THE_LEADER)
+    folder = DATA / "counterfactual" / pair.name
+    factual = causalcity.load(folder / "factual", images=False)
+    counterfactual = causalcity.load(folder / "counterfactual", images=False)
+    assert factual.key is None and factual.rgb is None
+    for loaded, simulated in ((factual, pair.factual), (counterfactual, pair.counterfactual)):
+        assert_same_scenario(loaded, simulated)
+
+
+def test_frames_are_decoded_when_used_and_index_like_the_array():
+    key = causalcity.open_dataset(DATA / "city").keys("val")[0]
+    whole = causalcity.simulate(causalcity.open_dataset(DATA / "city").spec, *key, images=True)
+    loaded = causalcity.load(DATA / "city" / key.folder)
+    frames = loaded.rgb
+    assert len(frames) == whole.frames and frames.shape == whole.rgb.shape and frames.ndim == 4
+    np.testing.assert_array_equal(frames[3], whole.rgb[3])
+    np.testing.assert_array_equal(frames[-1], whole.rgb[-1])
+    np.testing.assert_array_equal(frames[5:9], whole.rgb[5:9])
+    np.testing.assert_array_equal(frames[::7], whole.rgb[::7])
+    np.testing.assert_array_equal(frames[[0, 4]], whole.rgb[[0, 4]])
+    np.testing.assert_array_equal(frames[2, 100:110, 5], whole.rgb[2, 100:110, 5])
+    np.testing.assert_array_equal(loaded.mask[1:3], whole.mask[1:3])
+    assert sum(1 for _ in loaded.mask) == whole.frames
+    with pytest.raises(IndexError, match="frame 30 is outside"):
+        frames[whole.frames]
+
+
+def test_frames_stay_on_disk_until_used(tmp_path):
+    key = causalcity.open_dataset(DATA / "city").keys("train")[0]
+    folder = tmp_path / "scenario"
+    shutil.copytree(DATA / "city" / key.folder, folder)
+    loaded = causalcity.load(folder)
+    (folder / "rgb" / "0004.png").unlink()
+    np.testing.assert_array_equal(loaded.rgb[3], np.asarray(causalcity.load(DATA / "city" / key.folder).rgb[3]))
+    with pytest.raises(causalcity.InputError, match=r"rgb/0004\.png"):
+        loaded.rgb[4]
+
+
+def test_bad_folders_are_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no scenario.json"):
+        causalcity.load(tmp_path)
+    with pytest.raises(FileNotFoundError, match="no manifest.json"):
+        causalcity.open_dataset(tmp_path)
+    with pytest.raises(FileNotFoundError, match="open_sweep"):
+        causalcity.open_dataset(DATA / "sweep")
+    key = causalcity.open_dataset(DATA / "city").keys("test")[0]
+    folder = tmp_path / "broken"
+    shutil.copytree(DATA / "city" / key.folder, folder)
+    poses = (folder / "poses.csv").read_text().splitlines()
+    cells = poses[5].split(",")
+    cells[4] = "north"
+    poses[5] = ",".join(cells)
+    (folder / "poses.csv").write_text("\n".join(poses) + "\n")
+    with pytest.raises(causalcity.InputError, match=r"poses\.csv line 6: y \"north\""):
+        causalcity.load(folder)
+    with pytest.raises(KeyError, match="not in"):
+        causalcity.open_dataset(DATA / "city").load(("cars08_edges50", "test", 7))
+    lights = folder / "lights.csv"
+    shutil.copy(DATA / "city" / key.folder / "poses.csv", folder / "poses.csv")
+    rows = lights.read_text().splitlines()
+    lights.write_text("\n".join(rows[:1] + [rows[1].replace(",red,", ",blue,").replace(",green,", ",blue,").replace(",yellow,", ",blue,")] + rows[2:]) + "\n")
+    with pytest.raises(causalcity.InputError, match=r"lights\.csv line 2: colour \"blue\""):
+        causalcity.load(folder)
+
+
+def test_an_unfinished_dataset_warns_and_lists_what_it_has(tmp_path):
+    root = tmp_path / "partial"
+    shutil.copytree(DATA / "city", root)
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["complete"] = False
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    key = causalcity.open_dataset(DATA / "city").keys("val")[0]
+    shutil.rmtree(root / key.folder)
+    with pytest.warns(UserWarning, match="unfinished"):
+        data = causalcity.open_dataset(root)
+    assert len(data.keys()) == 2 and key not in data.keys()

@@ -1,0 +1,302 @@
+//! A scenario folder read back from disk into the [`ScenarioArrays`] that
+//! simulating it gives: every log parsed, every number as its file writes
+//! it (which is exactly the in-memory value, see [`super::arrays`]), and
+//! the bird's-eye frames decoded on demand from their PNGs. Errors name
+//! the file, the line and the field.
+
+use super::ScenarioSummary;
+use crate::map::signals::light_label;
+use crate::output::arrays::{EventRow, InteractionArrays, LightArrays, ScenarioArrays, LIGHT_COLOURS};
+use crate::output::layout::{frame_digits, FrameKind};
+use crate::output::logs::{read_effects, read_interactions as read_interaction_records};
+use crate::output::png::decode_8bit;
+use crate::output::poses::POSE_COLUMNS;
+use crate::world::{BoundBy, EventKind};
+use std::path::Path;
+
+/// Reads the scenario folder `dir` (as `gen` or `counterfactual` wrote it):
+/// `scenario.json`, `poses.csv` and, where the folder has them,
+/// `lights.csv`, `interactions.csv`, `events.csv` and `effects.csv`. The
+/// frames stay on disk ([`read_frames`] decodes them).
+pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
+    let summary = ScenarioSummary::read(dir)?;
+    let json_path = dir.join("scenario.json");
+    let scenario_json = std::fs::read(&json_path).map_err(|e| format!("cannot read {}: {e}", json_path.display()))?;
+    let value: serde_json::Value =
+        serde_json::from_slice(&scenario_json).map_err(|e| format!("{}: {e}", json_path.display()))?;
+    let (frames, cars) = (summary.frames as usize, summary.cars.len());
+    if let Some(car) = summary.cars.iter().enumerate().find(|(i, c)| c.id as usize != *i) {
+        return Err(format!(
+            "{}: cars[{}] has id {}; ids must be 0, 1, ... in order",
+            json_path.display(),
+            car.0,
+            car.1.id
+        ));
+    }
+    let mut a = ScenarioArrays {
+        scenario_json,
+        frames,
+        cars,
+        car_ids: summary.cars.iter().map(|c| c.id).collect(),
+        car_names: summary.cars.iter().map(|c| c.name.clone()).collect(),
+        t: vec![0.0; frames],
+        position: vec![0.0; frames * cars * 3],
+        rotation: vec![0.0; frames * cars * 3],
+        pixels: vec![0.0; frames * cars * 2],
+        speed: vec![0.0; frames * cars],
+        in_view: vec![0; frames * cars],
+        graph: vec![0; cars * cars],
+        edges: summary.edges.clone(),
+        lights: None,
+        interactions: None,
+        events: Vec::new(),
+        images: None,
+        batch: None,
+        effects: None,
+    };
+    for &[leader, follower] in &summary.edges {
+        if leader as usize >= cars || follower as usize >= cars {
+            return Err(format!("{}: edge [{leader}, {follower}] names a car beyond {cars}", json_path.display()));
+        }
+        a.graph[leader as usize * cars + follower as usize] = 1;
+    }
+    read_poses(&dir.join("poses.csv"), &mut a)?;
+    let effects = dir.join("effects.csv");
+    if effects.exists() {
+        let threshold = value["effect_threshold_m"].as_f64().ok_or_else(|| {
+            format!("{}: effect_threshold_m is missing, but the folder has effects.csv", json_path.display())
+        })?;
+        a.effects = Some(read_effects(&effects, cars, frames, threshold)?);
+    }
+    let lights = dir.join("lights.csv");
+    if lights.exists() {
+        let read = read_lights(&lights, frames)?;
+        a.interactions = Some(read_interactions(&dir.join("interactions.csv"), frames, cars, &read.names)?);
+        a.events = read_events(&dir.join("events.csv"), frames, cars, &read.names)?;
+        a.lights = Some(read);
+    }
+    Ok(a)
+}
+
+fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>, String> {
+    csv::Reader::from_path(path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+}
+
+/// A parsed field or an error naming the file, line, column and value.
+fn field<T: std::str::FromStr>(
+    path: &Path,
+    line: usize,
+    row: &csv::StringRecord,
+    columns: &[&str],
+    k: usize,
+) -> Result<T, String> {
+    let text = row.get(k).unwrap_or("");
+    text.parse::<T>()
+        .map_err(|_| format!("{} line {line}: {} {text:?} is not a valid value", path.display(), columns[k]))
+}
+
+fn check_header(path: &Path, reader: &mut csv::Reader<std::fs::File>, columns: &[&str]) -> Result<(), String> {
+    let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
+    if header.iter().ne(columns.iter().copied()) {
+        return Err(format!(
+            "{}: columns {:?}, expected {columns:?}",
+            path.display(),
+            header.iter().collect::<Vec<_>>()
+        ));
+    }
+    Ok(())
+}
+
+fn read_poses(path: &Path, a: &mut ScenarioArrays) -> Result<(), String> {
+    let (frames, cars) = (a.frames, a.cars);
+    let mut reader = open_csv(path)?;
+    check_header(path, &mut reader, &POSE_COLUMNS)?;
+    let mut filled = vec![false; frames * cars];
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let get = |k: usize| field::<f64>(path, line, &row, &POSE_COLUMNS, k);
+        let (frame, car) =
+            (field::<usize>(path, line, &row, &POSE_COLUMNS, 0)?, field::<usize>(path, line, &row, &POSE_COLUMNS, 2)?);
+        if frame >= frames || car >= cars || filled[frame * cars + car] {
+            return Err(format!(
+                "{} line {line}: frame {frame}, car {car} is outside {frames} frames x {cars} cars or given twice",
+                path.display()
+            ));
+        }
+        let at = frame * cars + car;
+        filled[at] = true;
+        a.t[frame] = get(1)?;
+        for k in 0..3 {
+            a.position[at * 3 + k] = get(3 + k)?;
+            a.rotation[at * 3 + k] = get(6 + k)?;
+        }
+        a.pixels[at * 2] = get(9)?;
+        a.pixels[at * 2 + 1] = get(10)?;
+        a.speed[at] = get(11)?;
+        a.in_view[at] = match row.get(12) {
+            Some("1") => 1,
+            Some("0") => 0,
+            other => return Err(format!("{} line {line}: in_view {other:?} is not 0 or 1", path.display())),
+        };
+    }
+    if let Some(missing) = filled.iter().position(|f| !f) {
+        return Err(format!(
+            "{}: no pose for frame {} car {} ({frames} frames x {cars} cars expected)",
+            path.display(),
+            missing / cars,
+            missing % cars
+        ));
+    }
+    Ok(())
+}
+
+const LIGHT_COLUMNS: [&str; 9] =
+    ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
+
+fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
+    let mut reader = open_csv(path)?;
+    check_header(path, &mut reader, &LIGHT_COLUMNS)?;
+    let mut lights =
+        LightArrays { names: Vec::new(), colour: Vec::new(), since_change: Vec::new(), head_pixels: Vec::new() };
+    let mut rows = 0usize;
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let frame: usize = field(path, line, &row, &LIGHT_COLUMNS, 0)?;
+        let name = light_label(&row[2], &row[3], &row[4]);
+        if frame == 0 {
+            lights.names.push(name.clone());
+            for k in [7, 8] {
+                lights.head_pixels.push(match &row[k] {
+                    "" => f64::NAN,
+                    _ => field(path, line, &row, &LIGHT_COLUMNS, k)?,
+                });
+            }
+        }
+        let count = lights.names.len().max(1);
+        if frame != rows / count || lights.names.get(rows % count) != Some(&name) {
+            return Err(format!(
+                "{} line {line}: light {name} at frame {frame} is out of order (one row per frame and light, lights in frame 0's order)",
+                path.display()
+            ));
+        }
+        let colour = LIGHT_COLOURS.iter().position(|c| c.name() == &row[5]).ok_or_else(|| {
+            format!("{} line {line}: colour {:?} is not one of green, yellow, red", path.display(), &row[5])
+        })?;
+        lights.colour.push(colour as u8);
+        lights.since_change.push(field(path, line, &row, &LIGHT_COLUMNS, 6)?);
+        rows += 1;
+    }
+    if rows != frames * lights.names.len() {
+        return Err(format!(
+            "{}: {rows} rows, expected {frames} frames x {} lights",
+            path.display(),
+            lights.names.len()
+        ));
+    }
+    Ok(lights)
+}
+
+/// The index of light `name` among `names` (-1 for none); `place` says
+/// where it was read, for the error.
+fn light_index(place: &dyn Fn() -> String, names: &[String], name: &str) -> Result<i16, String> {
+    match name {
+        "" => Ok(-1),
+        _ => names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| i as i16)
+            .ok_or_else(|| format!("{}: light {name:?} is not one of lights.csv's lights", place())),
+    }
+}
+
+fn read_interactions(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Result<InteractionArrays, String> {
+    let records = read_interaction_records(path, frames, cars)?;
+    let mut out = InteractionArrays { bound_by: Vec::new(), other_car: Vec::new(), light: Vec::new() };
+    for (at, r) in records.iter().enumerate() {
+        out.bound_by.push(BoundBy::ALL.iter().position(|&b| b == r.bound_by).unwrap_or(0) as u8);
+        out.other_car.push(r.other_car.map_or(-1, |c| c as i16));
+        let place = || format!("{} (frame {}, car {})", path.display(), at / cars, at % cars);
+        out.light.push(light_index(&place, lights, r.light.as_deref().unwrap_or(""))?);
+    }
+    Ok(out)
+}
+
+const EVENT_COLUMNS: [&str; 7] = ["frame", "t", "kind", "car", "other_car", "light", "detail"];
+
+fn read_events(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Result<Vec<EventRow>, String> {
+    let mut reader = open_csv(path)?;
+    check_header(path, &mut reader, &EVENT_COLUMNS)?;
+    let mut events = Vec::new();
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let frame: u64 = field(path, line, &row, &EVENT_COLUMNS, 0)?;
+        if frame as usize > frames {
+            return Err(format!(
+                "{} line {line}: frame {frame} is beyond the scenario's {frames} frames",
+                path.display()
+            ));
+        }
+        let kind = EventKind::ALL.iter().find(|k| k.name() == &row[2]).ok_or_else(|| {
+            format!("{} line {line}: kind {:?} is not an event kind of events.schema.json", path.display(), &row[2])
+        })?;
+        let car = |k: usize| -> Result<Option<u32>, String> {
+            match &row[k] {
+                "" => Ok(None),
+                _ => {
+                    let id: u32 = field(path, line, &row, &EVENT_COLUMNS, k)?;
+                    if id as usize >= cars {
+                        return Err(format!(
+                            "{} line {line}: {} {id} is not a car below {cars}",
+                            path.display(),
+                            EVENT_COLUMNS[k]
+                        ));
+                    }
+                    Ok(Some(id))
+                }
+            }
+        };
+        light_index(&|| format!("{} line {line}", path.display()), lights, &row[5])?;
+        events.push(EventRow {
+            frame,
+            t: field(path, line, &row, &EVENT_COLUMNS, 1)?,
+            kind: kind.name(),
+            car: car(3)?,
+            other_car: car(4)?,
+            light: (!row[5].is_empty()).then(|| row[5].to_string()),
+            detail: row[6].to_string(),
+        });
+    }
+    Ok(events)
+}
+
+/// Decodes frames `start..end` of the scenario folder `dir` (`frames`
+/// frames of `width` x `height`) from `rgb/NNNN.png` or `mask/NNNN.png`:
+/// `[n, height, width, 3]` or `[n, height, width]` bytes, as
+/// [`ScenarioArrays::images`] holds them.
+pub fn read_frames(
+    dir: &Path,
+    kind: FrameKind,
+    frames: u32,
+    (start, end): (u32, u32),
+    (width, height): (u32, u32),
+) -> Result<Vec<u8>, String> {
+    let colour = match kind {
+        FrameKind::Rgb => png::ColorType::Rgb,
+        FrameKind::Mask => png::ColorType::Grayscale,
+        FrameKind::Depth => return Err("depth frames are read by the camera that wrote them, not here".into()),
+    };
+    if end > frames {
+        return Err(format!("{}: frames {start}..{end} asked for, the scenario has {frames}", dir.display()));
+    }
+    let digits = frame_digits(frames);
+    let mut out = Vec::new();
+    for frame in start..end {
+        let path = dir.join(kind.folder()).join(format!("{frame:0digits$}.png"));
+        let data = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        out.extend(decode_8bit(&data, width, height, colour).map_err(|e| format!("{}: {e}", path.display()))?);
+    }
+    Ok(out)
+}
