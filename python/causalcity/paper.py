@@ -18,6 +18,10 @@ Written under ``--out`` (default ``results/paper`` or ``results/paper-quick``):
 metric, step, value, se), ``f1.png`` (figure 5: F1 by number of cars and by
 share of linked cars), ``trajectory.png`` (figure 4: error 1..20 steps
 ahead), ``results.md`` (the tables), and the datasets and predictions.
+
+Your own method joins the table next to the references: ``--method path nri
+mypkg.models:MyMethod`` runs any class with ``causalcity.methods.Method``'s
+interface (see ``causalcity.methods``), trained and scored the same way.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from . import InputError, Spec, evaluate, generate
-from .methods import make
+from .methods import is_user_method, make
 from .methods.common import run_method
 
 WORLDS = ("toy", "city")
@@ -51,6 +55,20 @@ LABELS = {
     "nri": "NRI",
     "supervised": "supervised classifier (upper bound: trained on labels)",
 }
+
+
+def _label(method: str) -> str:
+    """A method's name in tables and figures (a user's class as named)."""
+    return LABELS.get(method, method)
+
+
+def _ordered(rows: List[dict]) -> List[str]:
+    """The methods of ``rows``: the references in the table's order, then
+    the users' in the order they ran."""
+    present = dict.fromkeys(r["method"] for r in rows)
+    return [m for m in METHOD_ORDER if m in present] + [m for m in present if m not in METHOD_ORDER]
+
+
 # The paper's groups: number of cars at 50 % linked, share linked at 8 cars.
 BY_CARS = ("cars04_edges50", "cars08_edges50", "cars12_edges50")
 BY_SHARE = ("cars08_edges20", "cars08_edges50", "cars08_edges80")
@@ -103,8 +121,10 @@ def _method_options(name: str, setting: Setting, device: str, seed: int, quiet: 
         options = dict(quiet=quiet)
     elif name == "frame0":
         options = dict(seed=seed)
-    elif name == "supervised":
+    elif name == "supervised" or is_user_method(name):
         options = dict(seed=seed, quiet=quiet)
+        if is_user_method(name):
+            options["device"] = device
     return {**options, **setting.extra.get(name, {})}
 
 
@@ -186,8 +206,13 @@ def run(
     result rows. Work is done in units of (world, method, group), each kept
     under ``out/units/`` when finished: a rerun of the same command skips
     them, so a run that was cut off continues where it stopped."""
-    out.mkdir(parents=True, exist_ok=True)
     methods = list(methods or setting.methods)
+    for name in methods:
+        if name not in METHOD_ORDER and not is_user_method(name):
+            raise InputError(f"--method {name} is not one of {', '.join(METHOD_ORDER)}, nor package.module:Class")
+        if is_user_method(name):
+            make(name, **_method_options(name, setting, device, seed, quiet))  # refused now, not after hours
+    out.mkdir(parents=True, exist_ok=True)
     specs = specs or {w: Path("configs") / f"{w}.json" for w in WORLDS}
     loaded = {world: _spec(Path(specs[world]), world, setting, splits) for world in worlds}
     say = (lambda *a: None) if quiet else (lambda text: print(f"[paper] {text}", file=sys.stderr, flush=True))
@@ -238,7 +263,7 @@ def run(
                 timings[f"{world}/{name}"] += kept["seconds"]
                 left = sum(projected[u] for u in units[finished:])
                 pace = done_measured / done_projected if done_projected > 0 else 1.0
-                say(f"{finished}/{len(units)} {world} {LABELS[name]} {group}: {verb}; "
+                say(f"{finished}/{len(units)} {world} {_label(name)} {group}: {verb}; "
                     f"elapsed {_clock(time.monotonic() - started)}, ETA {_clock(left * pace)}")  # fmt: skip
     _write_csv(out / "results.csv", rows)
     (out / "timings.json").write_text(json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
@@ -330,7 +355,10 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     colours = {"nri": "#1f77b4", "granger": "#ff7f0e", "pcmci": "#2ca02c", "frame0": "#7f7f7f",
                "constant_velocity": "#7f7f7f", "interaction": "#d62728", "path": "#9467bd",
                "supervised": "#000000"}
-    discovering = [m for m in METHOD_ORDER if any(r["method"] == m and r["metric"] == "f1" for r in rows)]
+    spare = iter(["#8c564b", "#e377c2", "#bcbd22", "#17becf", "#aec7e8", "#ffbb78"] * 4)
+    for method in _ordered(rows):
+        colours.setdefault(method, next(spare))
+    discovering = [m for m in _ordered(rows) if any(r["method"] == m and r["metric"] == "f1" for r in rows)]
     fig, axes = plt.subplots(len(worlds), 2, figsize=(11, 3.6 * len(worlds)), squeeze=False)
     for wi, world in enumerate(worlds):
         for ci, (groups, xlabel, ticks) in enumerate(
@@ -346,7 +374,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
                     errors.append((r["se"] or 0.0) if r else 0.0)
                 xs = [k + (mi - (len(discovering) - 1) / 2) * width for k in range(len(groups))]
                 hatch = "//" if method == "frame0" else None
-                ax.bar(xs, values, width, yerr=errors, capsize=3, label=LABELS[method], color=colours[method],
+                ax.bar(xs, values, width, yerr=errors, capsize=3, label=_label(method), color=colours[method],
                        hatch=hatch, alpha=0.9)
             ax.set_xticks(range(len(groups)), ticks)
             ax.set_xlabel(xlabel)
@@ -361,7 +389,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     fig.savefig(out / "f1.png", dpi=110)
     plt.close(fig)
 
-    predicting = [m for m in METHOD_ORDER if any(r["method"] == m and r["metric"] == "trajectory_mse" for r in rows)]
+    predicting = [m for m in _ordered(rows) if any(r["method"] == m and r["metric"] == "trajectory_mse" for r in rows)]
     fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 3.8), squeeze=False)
     for wi, world in enumerate(worlds):
         ax = axes[0][wi]
@@ -376,7 +404,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
                 continue
             steps, values, ses = zip(*pts)
             style = "--" if method == "constant_velocity" else "-"
-            ax.plot(steps, values, style, label=LABELS[method], color=colours[method])
+            ax.plot(steps, values, style, label=_label(method), color=colours[method])
             ax.fill_between(steps, [v - s for v, s in zip(values, ses)], [v + s for v, s in zip(values, ses)],
                             color=colours[method], alpha=0.2)
         ax.set_yscale("log")
@@ -401,7 +429,7 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
     lines.append("| world | method | " + " | ".join(f"F1 {g}" for g in groups) + " | AUROC 8 cars 50 % |")
     lines.append("|---" * (len(groups) + 3) + "|")
     for world in worlds:
-        for method in METHOD_ORDER:
+        for method in _ordered(rows):
             cells = []
             for g in groups:
                 r = _get(rows, world=world, method=method, group=g, split="test", graph="designed", metric="f1")
@@ -410,19 +438,19 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
                 continue
             a = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test", graph="designed",
                      metric="auroc")
-            lines.append(f"| {world} | {LABELS[method]} | " + " | ".join(cells) + f" | {a['value']:.2f} |")
+            lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {a['value']:.2f} |")
     lines += ["", "Trajectory error (MSE of positions normalised by image size; 8 cars, 50 % linked; test):", ""]
     lines.append("| world | method | 1 step | 10 steps | 20 steps |")
     lines.append("|---|---|---|---|---|")
     for world in worlds:
-        for method in METHOD_ORDER:
+        for method in _ordered(rows):
             cells = []
             for step in (1, 10, 20):
                 r = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test",
                          metric="trajectory_mse", step=step)
                 cells.append("" if r is None else f"{r['value']:.2e}")
             if any(cells):
-                lines.append(f"| {world} | {LABELS[method]} | " + " | ".join(cells) + " |")
+                lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -431,7 +459,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: <= 30 min on 2 CPU cores")
     parser.add_argument("--out", type=Path, help="output folder [results/paper or results/paper-quick]")
     parser.add_argument("--world", nargs="+", choices=WORLDS, default=list(WORLDS))
-    parser.add_argument("--method", nargs="+", choices=METHOD_ORDER, help="only these methods")
+    parser.add_argument("--method", nargs="+", metavar="METHOD",
+                        help=f"only these methods: {', '.join(METHOD_ORDER)}, or your own as package.module:Class")
     parser.add_argument("--device", default="auto", help="cpu, cuda or auto (default: cuda when available)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--toy-spec", type=Path, default=Path("configs/toy.json"))

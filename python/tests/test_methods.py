@@ -176,3 +176,84 @@ def test_granger_on_every_core_scores_as_on_one(toy):
     one, many = Granger(lags=(4,), workers=1, quiet=True), Granger(lags=(4,), workers=2, quiet=True)
     assert len(train) > 8  # enough scenarios for the process pool to be used
     assert np.array_equal(one.predict(train).edges, many.predict(train).edges)
+
+
+USER_METHODS = '''
+import numpy as np
+from causalcity.methods import Method, Predicted
+
+
+class Closest(Method):
+    """A user's rule: a pair scores minus its distance in the first frame."""
+
+    discovers = True
+
+    def __init__(self, seed=0):
+        self.seed = seed
+        self.fitted = False
+
+    def fit(self, train, val):
+        self.fitted = True
+
+    def predict(self, episodes):
+        assert self.fitted, "fit runs before predict"
+        xy = episodes.metres[:, 0, :, :2]
+        return Predicted(edges=-np.linalg.norm(xy[:, :, None] - xy[:, None, :], axis=-1))
+
+
+class Silent(Method):
+    """Neither discovers nor predicts."""
+'''
+
+
+@pytest.fixture
+def user_module(tmp_path, monkeypatch):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "user_methods.py").write_text(USER_METHODS)
+    monkeypatch.syspath_prepend(str(tmp_path / "mine"))
+    return "user_methods"
+
+
+def test_a_users_own_method_runs_through_the_paper_pipeline(tmp_path, user_module, capsys):
+    from causalcity import paper
+
+    setting = paper.dataclasses.replace(paper.QUICK, splits={"train": 3, "val": 2, "test": 2})
+    specs = {w: ROOT / "configs" / f"{w}.json" for w in paper.WORLDS}
+    out = tmp_path / "paper"
+    mine = f"{user_module}:Closest"
+    rows = paper.run(out, setting, ["toy"], ["path", mine], "cpu", 0, specs, quiet=True)
+    theirs = [r for r in rows if r["method"] == mine and r["metric"] == "f1" and r["split"] == "test"]
+    assert {r["group"] for r in theirs} == set(paper.BY_CARS + paper.BY_SHARE)
+    assert all(0.0 <= r["value"] <= 1.0 for r in theirs)
+    assert f"| toy | {mine} |" in (out / "results.md").read_text()
+    assert mine in {r["method"] for r in paper.read_results(out / "results.csv")}
+    # The same class scores the same through the methods command and evaluate.
+    data = out / "data" / "toy"
+    predictions = tmp_path / "closest.npz"
+    from causalcity.methods.__main__ import main
+
+    assert main([mine, str(data), "--out", str(predictions), "--group", "cars08_edges50", "--quiet"]) == 0
+    report = causalcity.evaluate(data, predictions)
+    (test,) = [e for e in report["edges"] if e["split"] == "test" and e["graph"] == "designed"]
+    paper_f1 = next(r for r in theirs if r["group"] == "cars08_edges50")["value"]
+    assert test["group"] == "cars08_edges50" and test["f1"] == pytest.approx(paper_f1)
+
+
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("no_such_module_here:Method", "cannot import no_such_module_here"),
+        ("user_methods:Missing", "user_methods has no Missing"),
+        ("user_methods:Silent", "set discovers = True"),
+        ("nrri", "is not one of"),
+    ],
+)
+def test_a_bad_method_name_is_refused_before_any_work(tmp_path, user_module, capsys, name, message):
+    from causalcity import paper
+    from causalcity.methods.__main__ import main
+
+    assert main([name, str(tmp_path), "--out", str(tmp_path / "p.npz")]) == 2
+    assert message in capsys.readouterr().err
+    assert paper.main(["--method", "path", name, "--out", str(tmp_path / "paper"), "--quiet"]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "paper").exists() and not (tmp_path / "p.npz").exists()

@@ -24,6 +24,13 @@ From the command line::
     python -m causalcity.methods nri data/toy --out predictions/nri.npz
     causalcity evaluate data/toy predictions/nri.npz
 
+Your own method: any class with :class:`Method`'s interface (``discovers``
+and/or ``predicts``, ``fit(train, val)``, ``predict(episodes)``), named
+``package.module:Class``, runs wherever a reference method's name does
+(``python -m causalcity.methods mypkg.models:MyMethod data/toy --out ...``,
+``python -m causalcity.paper --method path mypkg.models:MyMethod``). Its
+constructor gets those of ``seed``, ``device`` and ``quiet`` it takes.
+
 Trajectories: every predicting method observes frames ``0 .. history`` (100,
 the paper's) and predicts the next ``steps`` (20) frames' bird's-eye pixel
 positions.
@@ -31,6 +38,8 @@ positions.
 
 from __future__ import annotations
 
+import importlib
+import inspect
 from typing import Callable, Dict
 
 from .common import HISTORY, STEPS, Episodes, Method, Predicted, load_split, run_method, write_predictions
@@ -43,6 +52,7 @@ __all__ = [
     "Predicted",
     "METHODS",
     "make",
+    "is_user_method",
     "load_split",
     "run_method",
     "write_predictions",
@@ -110,8 +120,53 @@ METHODS: Dict[str, Callable[..., Method]] = {
 """Every reference method by name; each call makes a fresh, untrained one."""
 
 
+def is_user_method(name: str) -> bool:
+    """Whether ``name`` names a user's class (``package.module:Class``)
+    rather than a reference method."""
+    return ":" in name
+
+
+def _user_method(name: str, options: dict) -> Method:
+    """A fresh instance of the class ``package.module:Class``, given those of
+    ``options`` its constructor takes; every failure is a ``ValueError``
+    naming ``name`` and what is wrong."""
+    module_name, _, attribute = name.partition(":")
+    if not module_name or not attribute:
+        raise ValueError(f"method {name!r}: give a reference method ({', '.join(METHODS)}) or package.module:Class")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise ValueError(f"method {name!r}: cannot import {module_name} ({e}); is it on PYTHONPATH?") from None
+    target = module
+    for part in attribute.split("."):
+        if not hasattr(target, part):
+            raise ValueError(f"method {name!r}: {module_name} has no {attribute}")
+        target = getattr(target, part)
+    if not callable(target):
+        raise ValueError(f"method {name!r}: {attribute} is not a class")
+    try:
+        parameters = inspect.signature(target).parameters
+    except (TypeError, ValueError):
+        parameters = {}
+    takes_any = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+    given = {k: v for k, v in options.items() if takes_any or k in parameters}
+    method = target(**given)
+    missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
+    if missing:
+        raise ValueError(f"method {name!r}: an instance has no {' or '.join(missing)}() (see causalcity.methods.Method)")
+    if not (getattr(method, "discovers", False) or getattr(method, "predicts", False)):
+        raise ValueError(
+            f"method {name!r}: set discovers = True (it scores edges) and/or predicts = True (it predicts trajectories)"
+        )
+    return method
+
+
 def make(name: str, **options) -> Method:
-    """A fresh method by name (see :data:`METHODS`), with its options."""
+    """A fresh method by name (see :data:`METHODS`) with its options, or a
+    user's class named ``package.module:Class`` (given those of ``seed``,
+    ``device`` and ``quiet`` its constructor takes)."""
+    if is_user_method(name):
+        return _user_method(name, options)
     if name not in METHODS:
-        raise ValueError(f"method {name!r} is not one of {', '.join(METHODS)}")
+        raise ValueError(f"method {name!r} is not one of {', '.join(METHODS)}, nor package.module:Class")
     return METHODS[name](**options)

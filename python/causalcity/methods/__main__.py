@@ -8,7 +8,7 @@ import sys
 from typing import Optional, Sequence
 
 from .. import GenerationError, InputError
-from . import METHODS, make
+from . import METHODS, is_user_method, make
 from .common import DatasetError, run_method
 
 
@@ -18,7 +18,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         description="Fit a reference method per group on the train split of a dataset gen wrote, and write its "
         "predictions (edge scores and/or trajectories for val and test) as an .npz for causalcity evaluate.",
     )
-    parser.add_argument("method", choices=list(METHODS))
+    parser.add_argument(
+        "method",
+        metavar="method",
+        help=f"a reference method ({', '.join(METHODS)}) or your own class as package.module:Class",
+    )
     parser.add_argument("dataset", help="a dataset folder gen wrote (the one holding manifest.json)")
     parser.add_argument("--out", required=True, help="the predictions .npz to write")
     parser.add_argument("--group", nargs="+", help="only these groups")
@@ -29,7 +33,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
     options = {}
-    if args.method in ("nri", "interaction"):
+    if is_user_method(args.method):
+        options.update(device=args.device, seed=args.seed, quiet=args.quiet)
+    elif args.method in ("nri", "interaction"):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
         if args.epochs is not None:
             options["epochs"] = args.epochs

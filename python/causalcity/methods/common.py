@@ -265,12 +265,13 @@ def run_method(
     trajectories: Dict[str, np.ndarray] = {}
     for group in names:
         method = make_method()
+        label = getattr(method, "name", type(method).__name__)
         train = load_split(root, group, "train")
         val = load_split(root, group, "val")
         if len(train) == 0:
-            raise InputError(f"{root / group}: no train scenarios to fit {method.name} on")
+            raise InputError(f"{root / group}: no train scenarios to fit {label} on")
         if not quiet:
-            print(f"{method.name}: {group} (train {len(train)}, val {len(val)})", file=sys.stderr)
+            print(f"{label}: {group} (train {len(train)}, val {len(val)})", file=sys.stderr)
         method.fit(train, val if len(val) else None)
         for split in splits:
             episodes = val if split == "val" else load_split(root, group, split)
