@@ -265,6 +265,13 @@ pub struct EvaluateArgs {
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
 
+    /// Also write one row per scenario and graph to FILE (CSV): its
+    /// counts, precision, recall, F1, SHD and AUROC at its group's
+    /// threshold, and its mean trajectory error, to find the scenarios a
+    /// method gets wrong.
+    #[arg(long, value_name = "FILE")]
+    pub per_scenario: Option<PathBuf>,
+
     /// Print the results as JSON on stdout.
     #[arg(long)]
     pub json: bool,
@@ -738,10 +745,22 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             // Checked before any scoring: a refused --csv costs nothing.
             let inputs =
                 [("the dataset it scores", args.dataset.as_path()), ("the predictions file", &args.predictions)];
+            if let (Some(a), Some(b)) = (&args.csv, &args.per_scenario) {
+                if a == b {
+                    return Err(Error::Input(format!(
+                        "--csv and --per-scenario both name {}: give each table its own file",
+                        a.display()
+                    )));
+                }
+            }
             let csv = args.csv.as_deref().map(|path| claim_file(path, &inputs)).transpose()?;
+            let per_scenario = args.per_scenario.as_deref().map(|path| claim_file(path, &inputs)).transpose()?;
             let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
             if let Some(csv) = csv {
                 csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;
+            }
+            if let Some(file) = per_scenario {
+                file.write(evaluated.per_scenario_csv().as_bytes()).map_err(Error::failure)?;
             }
             if args.json {
                 // The table shows them first; JSON carries them, and a person reads them here.

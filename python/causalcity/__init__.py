@@ -21,6 +21,7 @@ current one.
 
 from __future__ import annotations
 
+import csv as _csv_module
 import io as _io
 import json as _json
 import numbers as _numbers
@@ -922,6 +923,7 @@ def evaluate(
     history: int = HISTORY_FRAMES,
     threshold: Optional[float] = None,
     csv: Optional[PathLike] = None,
+    per_scenario: Optional[PathLike] = None,
 ) -> Dict[str, Any]:
     """``causalcity evaluate`` from Python: scores the predictions file
     ``predictions`` (see :func:`save_predictions`) against the dataset
@@ -933,17 +935,33 @@ def evaluate(
     ``counterfactuals`` (per group and split: normalised squared error at
     each step ahead). ``graph`` is one of
     ``designed``, ``causal``, ``direct`` or a list of them; ``csv`` also
-    writes the table as ``--csv`` does. Bad predictions (a wrong shape, a
+    writes the table as ``--csv`` does. ``report["scenarios"]`` holds one
+    dict per scenario and graph (its counts, precision, recall, F1, SHD and
+    AUROC at its group's threshold, its mean trajectory error), as
+    ``--per-scenario`` writes them to ``per_scenario``. Bad predictions (a wrong shape, a
     NaN, a partly scored split) raise :class:`InputError`.
     """
     graphs = [graph] if isinstance(graph, str) else list(graph)
     history = _whole("history", history, 0, 2**63 - 1, "evaluate --history")
     csv = None if csv is None else _os.fspath(csv)
-    text, _table = _native.evaluate(_os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold, csv)
+    per_scenario = None if per_scenario is None else _os.fspath(per_scenario)
+    text, _table, scenarios = _native.evaluate(
+        _os.fspath(dataset), _os.fspath(predictions), graphs, history, threshold, csv, per_scenario
+    )
     report = _json.loads(text)
+    report["scenarios"] = [_per_scenario_row(row) for row in _csv_module.DictReader(_io.StringIO(scenarios))]
     for warning in report.get("warnings", []):
         _warnings.warn(warning, stacklevel=2)
     return report
+
+
+def _per_scenario_row(row: Dict[str, str]) -> Dict[str, Any]:
+    """A ``--per-scenario`` CSV row with numbers as numbers (None for empty cells)."""
+    text = {"scenario", "group", "split", "graph"}
+    whole = {"cars", "true_edges", "predicted_edges", "true_positives"}
+    return {
+        k: v if k in text else None if v == "" else int(v) if k in whole else float(v) for k, v in row.items()
+    }
 
 
 from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)

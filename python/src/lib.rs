@@ -518,7 +518,8 @@ fn write_output(py: Python<'_>, path: PathBuf, data: Vec<u8>) -> PyResult<()> {
 /// `causalcity evaluate` from Python: the report as JSON text and as CSV
 /// (also written to `csv`, checked before scoring as `--csv` is).
 #[pyfunction]
-#[pyo3(signature = (dataset, predictions, graphs, history, threshold=None, csv=None))]
+#[pyo3(signature = (dataset, predictions, graphs, history, threshold=None, csv=None, per_scenario=None))]
+#[allow(clippy::too_many_arguments)] // evaluate's flags, each once
 fn evaluate(
     py: Python<'_>,
     dataset: PathBuf,
@@ -527,9 +528,14 @@ fn evaluate(
     history: usize,
     threshold: Option<f64>,
     csv: Option<PathBuf>,
-) -> PyResult<(String, String)> {
+    per_scenario: Option<PathBuf>,
+) -> PyResult<(String, String, String)> {
     let inputs = [("the dataset it scores", dataset.as_path()), ("the predictions file", predictions.as_path())];
+    if csv.is_some() && csv == per_scenario {
+        return Err(InputError::new_err("csv and per_scenario name the same file: give each table its own file"));
+    }
     let csv = csv.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;
+    let per_scenario = per_scenario.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;
     let mut kinds: Vec<GraphKind> = Vec::new();
     for name in &graphs {
         let Some(kind) = GraphKind::ALL.into_iter().find(|k| k.name() == name) else {
@@ -546,7 +552,11 @@ fn evaluate(
     if let Some(csv) = csv {
         csv.write(table.as_bytes()).map_err(|e| GenerationError::new_err(e.to_string()))?;
     }
-    Ok((json, table))
+    let scenarios = report.per_scenario_csv();
+    if let Some(file) = per_scenario {
+        file.write(scenarios.as_bytes()).map_err(|e| GenerationError::new_err(e.to_string()))?;
+    }
+    Ok((json, table, scenarios))
 }
 
 fn array<'py>(py: Python<'py>, data: Data, shape: &[usize]) -> PyResult<Bound<'py, Array>> {

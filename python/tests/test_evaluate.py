@@ -167,6 +167,46 @@ def test_trajectory_error_is_the_normalised_squared_error_per_step(predictions):
         assert [s["mse"] for s in row["steps"]] == pytest.approx(list(per.mean(axis=0)), rel=1e-9)
 
 
+def test_per_scenario_rows_agree_with_scikit_learn_and_average_to_the_group_rows(predictions, tmp_path):
+    path, edges, trajectories = predictions
+    out = tmp_path / "scenarios.csv"
+    report = causalcity.evaluate(TOY, path, graph=["designed", "causal"], history=HISTORY, per_scenario=out)
+    rows = report["scenarios"]
+    expected = [(rel, g) for rel, _ in scenarios() if "/train/" not in rel for g in ("causal", "designed")]
+    assert [(r["scenario"], r["graph"]) for r in rows] == sorted(expected) and len(rows) == 8
+    metas = dict(scenarios())
+    for r in rows:
+        meta = metas[r["scenario"]]
+        n = len(meta["cars"])
+        off = ~np.eye(n, dtype=bool)
+        y = truth(meta, {"designed": "edges", "causal": "causal_edges"}[r["graph"]])[off]
+        s = edges[r["scenario"]][off]
+        called = s > r["threshold"]
+        assert (r["cars"], r["true_edges"], r["predicted_edges"]) == (n, y.sum(), called.sum())
+        assert r["f1"] == pytest.approx(f1_score(y, called, zero_division=1.0), abs=1e-6)
+        assert r["shd"] == (y != called).sum()
+        assert r["auroc"] == (pytest.approx(roc_auc_score(y, s), abs=1e-6) if 0 < y.sum() < len(y) else None)
+        steps = (trajectories[r["scenario"]] - pixels(r["scenario"], meta)[HISTORY : HISTORY + STEPS]) / [1024, 640]
+        assert r["trajectory_mse"] == pytest.approx(float((steps**2).mean()), rel=1e-5)
+    # A group row's F1 is the mean of its scenarios' F1.
+    for group_row in report["edges"]:
+        mine = [r["f1"] for r in rows if r["graph"] == group_row["graph"] and r["split"] == group_row["split"]
+                and r["group"] == group_row["group"]]  # fmt: skip
+        assert mine and group_row["f1"] == pytest.approx(np.mean(mine), abs=1e-6)
+    # The command line writes the same file.
+    again = tmp_path / "again.csv"
+    run = cli("evaluate", TOY, path, "--graph", "designed,causal", "--history", HISTORY, "--per-scenario", again)
+    assert run.returncode == 0, run.stderr
+    assert again.read_bytes() == out.read_bytes()
+    header = out.read_text().splitlines()[0]
+    assert header.startswith("scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,true_positives")
+    # Never onto the dataset or the same file as --csv.
+    run = cli("evaluate", TOY, path, "--per-scenario", TOY / "scenarios.csv")
+    assert run.returncode == 2 and not (TOY / "scenarios.csv").exists()
+    run = cli("evaluate", TOY, path, "--per-scenario", tmp_path / "x.csv", "--csv", tmp_path / "x.csv")
+    assert run.returncode == 2 and "own file" in run.stderr and not (tmp_path / "x.csv").exists()
+
+
 def test_dtypes_and_memory_order_numpy_saves_are_read_the_same(predictions, tmp_path):
     path, edges, _ = predictions
     base = causalcity.evaluate(TOY, path, history=HISTORY)

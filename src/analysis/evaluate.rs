@@ -249,6 +249,40 @@ pub struct EvaluationReport {
     /// that do not say which dataset they were made on, rows without val
     /// predictions whose threshold is a fixed 0.5.
     pub warnings: Vec<String>,
+    /// One row per scored scenario and graph (`--per-scenario`); not in
+    /// the JSON report, whose size it would multiply.
+    #[serde(skip)]
+    pub per_scenario: Vec<ScenarioScores>,
+}
+
+/// One scenario's scores against one graph, at its group's threshold
+/// (`--per-scenario`): what a researcher needs to find the scenarios a
+/// method gets wrong. `graph` is empty on the row of a scenario with
+/// trajectories but no edge scores.
+#[derive(Debug, Clone)]
+pub struct ScenarioScores {
+    /// The scenario's folder in the dataset, e.g. `cars08_edges50/test/00003`.
+    pub scenario: String,
+    pub group: String,
+    pub split: &'static str,
+    pub graph: &'static str,
+    pub cars: usize,
+    pub threshold: Option<f64>,
+    /// Linked pairs (for the per-frame graph: over every frame).
+    pub true_edges: usize,
+    pub predicted_edges: usize,
+    pub true_positives: usize,
+    pub precision: Option<f64>,
+    pub recall: Option<f64>,
+    /// As in the group rows: 1 when nothing is linked and nothing called.
+    pub f1: Option<f64>,
+    pub shd: Option<f64>,
+    /// None when the scenario's pairs are all linked or all unlinked.
+    pub auroc: Option<f64>,
+    /// Mean over the predicted steps of the normalised squared position
+    /// error, where trajectories were predicted.
+    pub trajectory_mse: Option<f64>,
+    pub counterfactual_mse: Option<f64>,
 }
 
 /// What an array of a predictions file predicts, told by its name's suffix.
@@ -922,18 +956,37 @@ fn summarise(
     results: &[ScenarioResult],
 ) -> EvaluationReport {
     let spec = &truth.expansion.spec;
-    let (mut edges, mut overall) = (Vec::new(), Vec::new());
+    let (mut edges, mut overall, mut per_scenario) = (Vec::new(), Vec::new(), Vec::new());
     for (g, &graph) in options.graphs.iter().enumerate() {
-        let (rows, all) =
-            edge_rows(graph.name(), truth, options, scored, results, |r| r.pairs.get(g).map(|p| (p.as_slice(), 1)));
+        let (rows, all) = edge_rows(graph.name(), truth, options, scored, results, |r| graph_pairs(r, g));
+        per_scenario.extend(scenario_rows(graph.name(), dataset, &rows, scored, results, |r| graph_pairs(r, g)));
         edges.extend(rows);
         overall.extend(all);
     }
-    let (rows, all) = edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, |r| {
-        r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
-    });
+    let (rows, all) = edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, frame_pairs);
+    per_scenario.extend(scenario_rows(PER_FRAME_GRAPH, dataset, &rows, scored, results, frame_pairs));
     edges.extend(rows);
     overall.extend(all);
+    // Scenarios with trajectories and no edge scores still get a row.
+    let trajectory_only = scored.iter().zip(results).filter(|(_, r)| r.pairs.is_empty() && r.frame_pairs.is_none());
+    per_scenario.extend(
+        trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty()).map(
+            |(s, r)| ScenarioScores {
+                graph: "",
+                threshold: None,
+                true_edges: 0,
+                predicted_edges: 0,
+                true_positives: 0,
+                precision: None,
+                recall: None,
+                f1: None,
+                shd: None,
+                auroc: None,
+                ..scenario_base(dataset, s, r)
+            },
+        ),
+    );
+    per_scenario.sort_by(|a, b| (a.scenario.as_str(), a.graph).cmp(&(b.scenario.as_str(), b.graph)));
     let untuned: Vec<String> = edges
         .iter()
         .filter(|e| e.threshold_from == "default")
@@ -961,15 +1014,120 @@ fn summarise(
         overall,
         trajectories: trajectory_rows(truth, scored, results, |r| &r.step_errors),
         counterfactuals: trajectory_rows(truth, scored, results, |r| &r.counterfactual_errors),
+        per_scenario,
     }
 }
 
-/// A number for a table or CSV cell ("" / "-" for none).
+/// A scenario's scored pairs of graph `g` (one graph counted).
+fn graph_pairs(r: &ScenarioResult, g: usize) -> Option<GraphPairs<'_>> {
+    r.pairs.get(g).map(|p| (p.as_slice(), 1))
+}
+
+/// A scenario's scored pairs of every frame, with the frames counted as graphs.
+fn frame_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
+    r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
+}
+
+/// A scenario's row with its name, group, split and trajectory errors
+/// filled in and no edge scores.
+fn scenario_base(dataset: &Path, s: &ScenarioPredictions, r: &ScenarioResult) -> ScenarioScores {
+    let mean = |errors: &[f64]| (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64);
+    let name = s.dir.strip_prefix(dataset).unwrap_or(&s.dir);
+    // A sweep pair's factual run sits one folder below the pair.
+    let name = if s.counterfactual_dir.is_some() { name.parent().unwrap_or(name) } else { name };
+    ScenarioScores {
+        scenario: name.to_string_lossy().replace('\\', "/"),
+        group: s.group.clone(),
+        split: s.split.name(),
+        graph: "",
+        cars: s.size.map_or(0, |(cars, _)| cars),
+        threshold: None,
+        true_edges: 0,
+        predicted_edges: 0,
+        true_positives: 0,
+        precision: None,
+        recall: None,
+        f1: None,
+        shd: None,
+        auroc: None,
+        trajectory_mse: mean(&r.step_errors),
+        counterfactual_mse: mean(&r.counterfactual_errors),
+    }
+}
+
+/// Per-scenario rows of one graph, each at its group's threshold (from the
+/// group rows `rows`).
+fn scenario_rows<'a>(
+    graph: &'static str,
+    dataset: &Path,
+    rows: &[EdgeScores],
+    scored: &[ScenarioPredictions],
+    results: &'a [ScenarioResult],
+    pairs_of: impl Fn(&'a ScenarioResult) -> Option<GraphPairs<'a>>,
+) -> Vec<ScenarioScores> {
+    let mut out = Vec::new();
+    for (s, r) in scored.iter().zip(results) {
+        let (Some((pairs, graphs)), Some(row)) = (pairs_of(r), rows.iter().find(|e| e.group == s.group)) else {
+            continue;
+        };
+        let counts = Counts::at(pairs, -row.threshold);
+        out.push(ScenarioScores {
+            graph,
+            threshold: Some(row.threshold),
+            true_edges: counts.true_positives + counts.false_negatives,
+            predicted_edges: counts.true_positives + counts.false_positives,
+            true_positives: counts.true_positives,
+            precision: counts.precision(),
+            recall: counts.recall(),
+            f1: Some(counts.f1().unwrap_or(1.0)),
+            shd: Some((counts.false_positives + counts.false_negatives) as f64 / graphs as f64),
+            auroc: auroc(pairs),
+            ..scenario_base(dataset, s, r)
+        });
+    }
+    out
+}
+
+/// A number for a table or CSV cell ("" / "-" for none): six decimals, or
+/// seven significant digits in exponent form below 0.001 (normalised
+/// trajectory errors are about 1e-5, which six decimals would cut to one
+/// or two digits).
 fn cell(value: Option<f64>, none: &str) -> String {
-    value.map_or(none.to_string(), |v| format!("{v:.6}"))
+    value.map_or(none.to_string(), |v| if v != 0.0 && v.abs() < 1e-3 { format!("{v:.6e}") } else { format!("{v:.6}") })
 }
 
 impl EvaluationReport {
+    /// The per-scenario rows as a CSV table (`--per-scenario`), one row per
+    /// scenario and graph, in folder order; empty cells where a value does
+    /// not apply.
+    pub fn per_scenario_csv(&self) -> String {
+        let mut out = String::from(
+            "scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,true_positives,precision,recall,f1,shd,auroc,trajectory_mse,counterfactual_mse\n",
+        );
+        for r in &self.per_scenario {
+            out += &format!(
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                r.scenario,
+                r.group,
+                r.split,
+                r.graph,
+                r.cars,
+                cell(r.threshold, ""),
+                r.true_edges,
+                r.predicted_edges,
+                r.true_positives,
+                cell(r.precision, ""),
+                cell(r.recall, ""),
+                cell(r.f1, ""),
+                cell(r.shd, ""),
+                cell(r.auroc, ""),
+                cell(r.trajectory_mse, ""),
+                cell(r.counterfactual_mse, ""),
+            );
+        }
+        out
+    }
+
     /// The report as a long CSV table, one measured value per row: `group,
     /// cars, edge_proportion, split, graph, metric, step, value, se,
     /// scenarios` (graph empty for trajectory errors, `trajectory_mse` and
