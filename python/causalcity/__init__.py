@@ -51,7 +51,9 @@ __all__ = [
     "simulate",
     "load",
     "open_dataset",
+    "open_sweep",
     "Dataset",
+    "Sweep",
     "Frames",
     "map",
     "stream",
@@ -866,6 +868,7 @@ def save_predictions(
     *,
     frames: Optional[Mapping[str, _np.ndarray]] = None,
     counterfactuals: Optional[Mapping[str, _np.ndarray]] = None,
+    affected: Optional[Mapping[str, _np.ndarray]] = None,
     dataset: Optional[PathLike] = None,
 ) -> None:
     """Writes a predictions file for :func:`evaluate` (``_np.savez_compressed``).
@@ -887,12 +890,16 @@ def save_predictions(
     per-frame edge scores, ``[t, i, j]`` scoring "car i bound car j's speed
     at frame t" (scored against ``interactions.csv``; note that
     :meth:`Interactions.car_graph` is ``[t, j, i]``, receiver first).
-    ``counterfactuals`` (a ``counterfactual --sweep`` output) maps a pair's
-    folder to ``[steps, cars, 2]`` predicted positions of its counterfactual
-    run after the history.
+    ``counterfactuals`` (a ``counterfactual --sweep`` output, the
+    counterfactual task of docs/evaluation.md) maps a pair's folder to
+    ``[steps, cars, 2]`` predicted bird's-eye positions of its
+    counterfactual run from the intervention's frame on (step 1 is frame
+    ``summary.json``'s ``intervention.frame``); ``affected`` maps it to
+    ``[cars]`` scores that the intervention moves each car (the intervened
+    car's own score is not counted).
     """
     arrays: Dict[str, _np.ndarray] = {}
-    kinds = (("edges", "", edges), ("trajectories", "/trajectory", trajectories), ("frames", "/frames", frames), ("counterfactuals", "/counterfactual", counterfactuals))
+    kinds = (("edges", "", edges), ("trajectories", "/trajectory", trajectories), ("frames", "/frames", frames), ("counterfactuals", "/counterfactual", counterfactuals), ("affected", "/affected", affected))
     for label, suffix, given in kinds:
         if given is not None and not isinstance(given, Mapping):
             raise InputError(f"save_predictions: {label} is a {type(given).__name__}: give a dict of scenario folder -> array")
@@ -904,7 +911,7 @@ def save_predictions(
             except (TypeError, ValueError) as e:
                 raise InputError(f"save_predictions: {label}[{folder!r}] is not an array of numbers: {e}") from None
     if not arrays:
-        raise InputError("save_predictions: give edge scores, trajectories, per-frame scores or counterfactuals for at least one scenario")
+        raise InputError("save_predictions: give edge scores, trajectories, per-frame scores, counterfactuals or affected-car scores for at least one scenario")
     if dataset is not None:
         record = _native.dataset_identity(_os.fspath(dataset)).encode()
         arrays[_DATASET_RECORD] = _np.frombuffer(record, dtype=_np.uint8)
@@ -965,7 +972,7 @@ def _per_scenario_row(row: Dict[str, str]) -> Dict[str, Any]:
 
 
 from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)
-from .disk import Dataset, Frames, load, open_dataset  # noqa: E402 (needs the definitions above)
+from .disk import Dataset, Frames, Sweep, load, open_dataset, open_sweep  # noqa: E402 (needs the definitions above)
 
 
 def __dir__() -> List[str]:

@@ -355,45 +355,79 @@ def test_per_frame_scores_are_scored_against_interactions(tmp_path):
     assert [r for r in worse["edges"] if r["split"] == "test"][0]["auroc"] < test["auroc"]
 
 
-def test_counterfactual_trajectories_are_scored_against_the_resimulated_run(tmp_path):
-    if not (SWEEP / "sweep.json").is_file():
-        pytest.skip("needs the test sweep (make test-python runs counterfactual --sweep)")
-    history, steps = 15, 10
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """A sweep long enough for interventions to move other cars."""
+    spec = json.loads((Path(__file__).resolve().parents[2] / "tests" / "python" / "city.json").read_text())
+    spec.update(frames=120, splits={"train": 2, "val": 4, "test": 6})
+    folder = tmp_path_factory.mktemp("sweep")
+    (folder / "spec.json").write_text(json.dumps(spec))
+    run = cli("counterfactual", "--sweep", folder / "spec.json", "--no-images", "--quiet", "--kinds", "stop,remove",
+              "--out", folder / "sweep")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    return folder / "sweep"
+
+
+def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_affected_cars(sweep, tmp_path):
+    steps = 12
     rng = np.random.default_rng(3)
-    predicted, expected, factual_guess, removed_cars = {}, {}, {}, 0
-    for summary_path in sorted(SWEEP.glob("*/*/*/summary.json")):
-        rel = summary_path.parent.relative_to(SWEEP).as_posix()
+    predicted, affected, expected, expected_affected, removed_cars = {}, {}, {}, {}, 0
+    truth_of = {}
+    for summary_path in sorted(sweep.glob("*/*/*/summary.json")):
+        rel = summary_path.parent.relative_to(sweep).as_posix()
+        summary = json.loads(summary_path.read_text())
+        start, car = summary["intervention"]["frame"], summary["intervention"]["car"]
         meta = json.loads((summary_path.parent / "factual" / "scenario.json").read_text())
         n = len(meta["cars"])
         table = np.loadtxt(summary_path.parent / "counterfactual" / "poses.csv", delimiter=",", skiprows=1)
-        xy = table[:, [3, 4]].reshape(meta["frames"], n, 2)[history : history + steps]
-        truth = table[:, [9, 10]].reshape(meta["frames"], n, 2)[history : history + steps]
+        xy = table[:, [3, 4]].reshape(meta["frames"], n, 2)[start : start + steps]
+        truth = table[:, [9, 10]].reshape(meta["frames"], n, 2)[start : start + steps]
         guess = truth + rng.normal(0, 3.0, truth.shape)
         on_map = xy[..., 0] < 5000  # removed cars are parked 10 km away
         removed_cars += int((~on_map).any(axis=0).sum())
-        guess[~on_map] = 0.0  # a method cannot know where a removed car is parked
+        guess[~on_map] = 0.0
         predicted[rel] = guess
         err = (((guess - truth) / [1024, 640]) ** 2).mean(axis=2)
         expected[rel] = np.array([err[k][on_map[k]].mean() for k in range(steps)])
-        fpx = np.loadtxt(summary_path.parent / "factual" / "poses.csv", delimiter=",", skiprows=1)[:, [9, 10]]
-        factual_guess[rel] = fpx.reshape(meta["frames"], n, 2)[history : history + steps]
-    assert removed_cars > 0, "the test sweep should remove a car before frame 15"
-    causalcity.save_predictions(tmp_path / "cf.npz", counterfactuals=predicted, trajectories=factual_guess)
-    report = causalcity.evaluate(SWEEP, tmp_path / "cf.npz", history=history)
-    rows = report["counterfactuals"]
-    assert len(rows) == 3
-    for row in rows:
-        rels = [r for r in predicted if r.split("/")[1] == row["split"]]
-        want = np.mean([expected[r] for r in rels], axis=0)
-        assert [s["mse"] for s in row["steps"]] == pytest.approx(list(want), rel=1e-9)
-    # The factual guess is exact against the factual run.
-    assert all(s["mse"] < 1e-10 for row in report["trajectories"] for s in row["steps"])
-    run = cli("evaluate", SWEEP, tmp_path / "cf.npz", "--history", history)
-    assert run.returncode == 0 and "counterfactual trajectories" in run.stdout, run.stderr
-    # On a gen dataset (no re-simulated runs), a counterfactual array is refused.
-    np.savez(tmp_path / "wrong.npz", **{k + "/counterfactual": v for k, v in predicted.items()})
-    run = cli("evaluate", CITY, tmp_path / "wrong.npz", "--history", history)
-    assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr
+        moved = np.array([c["max_divergence_m"] > 0.5 for c in summary["cars"]])
+        if moved.any():
+            expected_affected[rel] = np.array([err[k][on_map[k] & moved].mean() if (on_map[k] & moved).any() else 0.0
+                                               for k in range(steps)])  # fmt: skip
+        affected[rel] = moved * 1.0 + rng.normal(0, 0.6, n)
+        truth_of[rel] = (moved, car)
+    assert removed_cars > 0
+    others = [m[np.arange(len(m)) != c] for rel, (m, c) in truth_of.items() if "/test/" in rel]
+    assert sum(o.sum() for o in others) > 0, "some test intervention should move another car"
+    causalcity.save_predictions(tmp_path / "cf.npz", counterfactuals=predicted, affected=affected)
+    report = causalcity.evaluate(sweep, tmp_path / "cf.npz", per_scenario=tmp_path / "pairs.csv")
+    for key, want_of in (("counterfactuals", expected), ("counterfactuals_affected", expected_affected)):
+        rows = report[key]
+        assert {r["split"] for r in rows} == {"train", "val", "test"} or key == "counterfactuals_affected"
+        assert rows
+        for row in rows:
+            rels = [r for r in want_of if r.split("/")[1] == row["split"]]
+            assert [s["mse"] for s in row["steps"]] == pytest.approx(list(np.mean([want_of[r] for r in rels], axis=0)), rel=1e-9)
+    (test_row,) = [e for e in report["edges"] if e["graph"] == "affected" and e["split"] == "test"]
+    y = np.concatenate(others)
+    s = np.concatenate([affected[rel][np.arange(len(m)) != c] for rel, (m, c) in truth_of.items() if "/test/" in rel])
+    assert test_row["auroc"] == pytest.approx(roc_auc_score(y, s), abs=1e-9)
+    assert test_row["pairs"] == len(y) and test_row["true_edges"] == y.sum()
+    rows = list(csv.DictReader(open(tmp_path / "pairs.csv")))
+    assert {r["graph"] for r in rows} == {"affected"} and len(rows) == len(predicted)
+    run = cli("evaluate", sweep, tmp_path / "cf.npz")
+    assert run.returncode == 0 and "counterfactual trajectories of the affected cars" in run.stdout, run.stderr
+    # A counterfactual that runs past the pair's last frame is refused, naming the frame it starts at.
+    rel = next(iter(predicted))
+    too_long = dict(predicted)
+    too_long[rel] = np.zeros((120, predicted[rel].shape[1], 2))
+    causalcity.save_predictions(tmp_path / "long.npz", counterfactuals=too_long)
+    run = cli("evaluate", sweep, tmp_path / "long.npz")
+    assert run.returncode == 2 and "from the intervention's frame" in run.stderr, run.stderr
+    # On a gen dataset (no re-simulated runs), counterfactual and affected arrays are refused.
+    for suffix in ("/counterfactual", "/affected"):
+        np.savez(tmp_path / "wrong.npz", **{"cars08_edges50/test/00000" + suffix: np.zeros((3, 8, 2))})
+        run = cli("evaluate", CITY, tmp_path / "wrong.npz")
+        assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr
 
 
 def test_a_held_out_test_split_is_marked_out_of_distribution_beside_the_in_distribution_rows(tmp_path):

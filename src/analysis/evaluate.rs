@@ -45,9 +45,11 @@ use super::predictions::{read_npz, NamedArray};
 use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary, Sweep};
 use crate::error::Error;
 use crate::output::layout::INTERACTIONS_CSV;
-use crate::output::logs::read_interactions;
+use crate::output::logs::{event_frame, read_interactions};
+use crate::output::pair_summary::PairSummary;
 use crate::plan::{Expansion, ScenarioKey};
 use crate::spec::{Split, WorldKind};
+use crate::world::effects::EFFECT_THRESHOLD_M;
 use crate::world::CarState;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -63,8 +65,14 @@ pub const DEFAULT_HISTORY_FRAMES: usize = 100;
 pub const TRAJECTORY_SUFFIX: &str = "/trajectory";
 /// Suffix of a scenario's per-frame edge scores.
 pub const PER_FRAME_SUFFIX: &str = "/frames";
-/// Suffix of a sweep pair's predicted counterfactual trajectory.
+/// Suffix of a sweep pair's predicted counterfactual trajectory (from the
+/// intervention's frame on).
 pub const COUNTERFACTUAL_SUFFIX: &str = "/counterfactual";
+/// Suffix of a sweep pair's scores that each car is affected by the
+/// intervention.
+pub const AFFECTED_SUFFIX: &str = "/affected";
+/// The row name of the affected-car scores among the edge rows.
+pub const AFFECTED_GRAPH: &str = "affected";
 
 /// The most bytes a dataset record may hold.
 const MAX_DATASET_RECORD: u64 = 64 * 1024;
@@ -243,8 +251,13 @@ pub struct EvaluationReport {
     pub overall: Vec<OverallScores>,
     pub trajectories: Vec<TrajectoryScores>,
     /// Predicted counterfactual trajectories against the re-simulated ones
-    /// (a sweep only).
+    /// from the intervention's frame on (a sweep only), over every car on
+    /// the map.
     pub counterfactuals: Vec<TrajectoryScores>,
+    /// The same over the cars the intervention moved (by more than the
+    /// effect threshold), where a pair has any.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub counterfactuals_affected: Vec<TrajectoryScores>,
     /// What the reader must know before trusting a number: predictions
     /// that do not say which dataset they were made on, rows without val
     /// predictions whose threshold is a fixed 0.5.
@@ -292,11 +305,12 @@ enum Predicted {
     Trajectory,
     PerFrame,
     Counterfactual,
+    Affected,
 }
 
 impl Predicted {
-    const ALL: [Predicted; 4] =
-        [Predicted::Edges, Predicted::Trajectory, Predicted::PerFrame, Predicted::Counterfactual];
+    const ALL: [Predicted; 5] =
+        [Predicted::Edges, Predicted::Trajectory, Predicted::PerFrame, Predicted::Counterfactual, Predicted::Affected];
 
     fn suffix(self) -> &'static str {
         match self {
@@ -304,6 +318,7 @@ impl Predicted {
             Predicted::Trajectory => TRAJECTORY_SUFFIX,
             Predicted::PerFrame => PER_FRAME_SUFFIX,
             Predicted::Counterfactual => COUNTERFACTUAL_SUFFIX,
+            Predicted::Affected => AFFECTED_SUFFIX,
         }
     }
 
@@ -313,6 +328,7 @@ impl Predicted {
             Predicted::Trajectory => "trajectories",
             Predicted::PerFrame => "per-frame edge scores",
             Predicted::Counterfactual => "counterfactual trajectories",
+            Predicted::Affected => "affected-car scores",
         }
     }
 
@@ -390,8 +406,50 @@ struct ScenarioPredictions {
     counterfactual_dir: Option<PathBuf>,
     /// (cars, frames), once read for an array of this scenario.
     size: Option<(usize, usize)>,
+    /// A sweep pair's intervention and its effects, once read.
+    pair: Option<PairTruth>,
     /// Indexed by [`Predicted`] (in `Predicted::ALL` order).
-    arrays: [Option<NamedArray>; 4],
+    arrays: [Option<NamedArray>; 5],
+}
+
+/// What a sweep pair's summary.json says the task is scored against.
+#[derive(Debug, Clone)]
+struct PairTruth {
+    /// The first frame that can show the intervention: a predicted
+    /// counterfactual starts there.
+    frame: usize,
+    /// The intervened car (not scored among the affected).
+    car: usize,
+    /// Per car: its counterfactual moved more than [`EFFECT_THRESHOLD_M`]
+    /// from its factual run at some frame (as effects.csv decides).
+    affected: Vec<bool>,
+}
+
+impl PairTruth {
+    /// Reads the summary.json of the pair around `factual_dir`.
+    fn read(factual_dir: &Path, frame_interval: f64) -> Result<PairTruth, String> {
+        let path = factual_dir.parent().unwrap_or(factual_dir).join("summary.json");
+        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let summary: PairSummary = serde_json::from_slice(&bytes)
+            .map_err(|e| format!("{}: not a counterfactual pair's summary: {e}", path.display()))?;
+        let (frame, car) = match &summary.intervention {
+            Some(record) => (record.frame as usize, record.car as usize),
+            None => {
+                let t = summary.intervention_time_s.ok_or_else(|| {
+                    format!(
+                        "{}: the intervention never fired, so there is no counterfactual to predict",
+                        path.display()
+                    )
+                })?;
+                // Sweeps from before summary.json named the car: the one
+                // that diverged first.
+                let first = summary.cars.iter().filter_map(|c| c.first_divergent_frame.map(|f| (f, c.id))).min();
+                (event_frame(t, frame_interval) as usize, first.map_or(0, |(_, id)| id as usize))
+            }
+        };
+        let affected = summary.cars.iter().map(|c| c.max_divergence_m > EFFECT_THRESHOLD_M).collect();
+        Ok(PairTruth { frame, car, affected })
+    }
 }
 
 impl ScenarioPredictions {
@@ -414,6 +472,21 @@ impl ScenarioPredictions {
     fn get(&self, what: Predicted) -> Option<&NamedArray> {
         self.arrays[what as usize].as_ref()
     }
+
+    /// The pair's truth (a sweep only), read once; failures as in [`Self::size`].
+    fn pair(&mut self, failure: &mut Option<Error>) -> Result<&PairTruth, String> {
+        if self.pair.is_none() {
+            let read = ScenarioSummary::read(&self.dir).and_then(|s| PairTruth::read(&self.dir, s.frame_interval));
+            match read {
+                Ok(pair) => self.pair = Some(pair),
+                Err(e) => {
+                    *failure = Some(Error::Failure(e.clone()));
+                    return Err(e);
+                }
+            }
+        }
+        self.pair.as_ref().ok_or_else(|| "no pair".to_string())
+    }
 }
 
 /// What one scenario contributes: per graph, its scored pairs (negated
@@ -425,6 +498,10 @@ struct ScenarioResult {
     frame_pairs: Option<(Vec<ScoredPair>, usize)>,
     step_errors: Vec<f64>,
     counterfactual_errors: Vec<f64>,
+    /// The same over the affected cars only (empty when none is affected).
+    counterfactual_affected_errors: Vec<f64>,
+    /// A sweep pair's cars but the intervened one: (negated score, affected).
+    affected_pairs: Option<Vec<ScoredPair>>,
 }
 
 /// Scores the predictions file `predictions` against the dataset (or
@@ -500,6 +577,7 @@ fn match_scenarios(
                 dir,
                 counterfactual_dir,
                 size: None,
+                pair: None,
                 arrays: Default::default(),
             },
         );
@@ -509,7 +587,8 @@ fn match_scenarios(
         format!(
             "array {name:?} names no scenario of {}: name arrays by scenario folder, e.g. {example} (edge scores), \
              {example}{TRAJECTORY_SUFFIX} (a predicted trajectory), {example}{PER_FRAME_SUFFIX} (per-frame edge \
-             scores) or {example}{COUNTERFACTUAL_SUFFIX} (a counterfactual trajectory, for a sweep)",
+             scores), or for a sweep {example}{COUNTERFACTUAL_SUFFIX} (a counterfactual trajectory) and \
+             {example}{AFFECTED_SUFFIX} (affected-car scores)",
             truth.dir.display()
         )
     };
@@ -530,6 +609,7 @@ fn match_scenarios(
             Predicted::Edges => cars * cars,
             Predicted::PerFrame => frames * cars * cars,
             Predicted::Trajectory | Predicted::Counterfactual => frames * cars * 2,
+            Predicted::Affected => cars,
         };
         Ok(expected.saturating_mul(SHAPE_SLACK).saturating_add(SHAPE_SLACK_VALUES))
     });
@@ -573,18 +653,46 @@ fn match_scenarios(
                 world.name()
             )));
         }
-        if what == Predicted::Counterfactual && !truth.sweep {
+        if matches!(what, Predicted::Counterfactual | Predicted::Affected) && !truth.sweep {
             return Err(bad(format!(
-                "array {:?}: counterfactual trajectories are scored against a counterfactual --sweep output, and {} \
-                 is a gen dataset",
+                "array {:?}: {} are scored against a counterfactual --sweep output, and {} is a gen dataset",
                 array.name,
+                what.what(),
                 truth.dir.display()
             )));
         }
         let (cars, frames) = scenario.size.expect("read for the reader's cap");
         let shape = &array.shape;
         match what {
-            Predicted::Trajectory | Predicted::Counterfactual => {
+            Predicted::Affected if shape.as_slice() != [cars] => {
+                return Err(bad(format!(
+                    "array {:?} has shape {shape:?}; affected-car scores of this pair are [{cars}] (a score per car \
+                     that the intervention moves it)",
+                    array.name
+                )));
+            }
+            Predicted::Counterfactual => {
+                let fits = shape.len() == 3 && shape[1] == cars && shape[2] == 2 && shape[0] >= 1;
+                if !fits {
+                    return Err(bad(format!(
+                        "array {:?} has shape {shape:?}; a predicted counterfactual of this pair is [steps, {cars}, \
+                         2] (steps >= 1; px, py in bird's-eye pixels from the intervention's frame on)",
+                        array.name
+                    )));
+                }
+                let mut failure = None;
+                let start = scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?.frame;
+                if start + shape[0] > frames {
+                    return Err(bad(format!(
+                        "array {:?} predicts {} steps from the intervention's frame {start}, but the pair has \
+                         {frames} frames: predict at most {}",
+                        array.name,
+                        shape[0],
+                        frames.saturating_sub(start)
+                    )));
+                }
+            }
+            Predicted::Trajectory => {
                 let fits = shape.len() == 3 && shape[1] == cars && shape[2] == 2 && shape[0] >= 1;
                 if !fits {
                     return Err(bad(format!(
@@ -618,6 +726,10 @@ fn match_scenarios(
                      i leads car j)",
                     array.name
                 )));
+            }
+            Predicted::Affected => {
+                let mut failure = None;
+                scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?;
             }
             Predicted::Edges | Predicted::PerFrame => {}
         }
@@ -712,14 +824,30 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
     let mut step_errors = Vec::new();
     if let Some(predicted) = s.get(Predicted::Trajectory) {
         let poses = PoseLog::read(&s.dir, frames, cars)?;
-        step_errors = trajectory_errors(predicted, &poses, options.history, size)?;
+        step_errors = trajectory_errors(predicted, &poses, options.history, size, None)?;
     }
-    let mut counterfactual_errors = Vec::new();
-    if let (Some(predicted), Some(dir)) = (s.get(Predicted::Counterfactual), &s.counterfactual_dir) {
-        let poses = PoseLog::read(dir, frames, cars)?;
-        counterfactual_errors = trajectory_errors(predicted, &poses, options.history, size)?;
+    let (mut counterfactual_errors, mut counterfactual_affected_errors) = (Vec::new(), Vec::new());
+    let mut affected_pairs = None;
+    if let (Some(pair), Some(dir)) = (&s.pair, &s.counterfactual_dir) {
+        if let Some(predicted) = s.get(Predicted::Counterfactual) {
+            let poses = PoseLog::read(dir, frames, cars)?;
+            counterfactual_errors = trajectory_errors(predicted, &poses, pair.frame, size, None)?;
+            counterfactual_affected_errors =
+                trajectory_errors(predicted, &poses, pair.frame, size, Some(&pair.affected))?;
+        }
+        if let Some(scores) = s.get(Predicted::Affected) {
+            let others = (0..cars).filter(|&c| c != pair.car);
+            affected_pairs = Some(others.map(|c| (-scores.values[c], pair.affected[c])).collect());
+        }
     }
-    Ok(ScenarioResult { pairs, frame_pairs, step_errors, counterfactual_errors })
+    Ok(ScenarioResult {
+        pairs,
+        frame_pairs,
+        step_errors,
+        counterfactual_errors,
+        counterfactual_affected_errors,
+        affected_pairs,
+    })
 }
 
 /// The normalised squared error of a predicted `[steps, cars, 2]`
@@ -732,12 +860,17 @@ fn trajectory_errors(
     poses: &PoseLog,
     history: usize,
     (w, h): (f64, f64),
+    only: Option<&[bool]>,
 ) -> Result<Vec<f64>, String> {
     let (steps, cars) = (predicted.shape[0], predicted.shape[1]);
+    let counted = |car: usize| only.is_none_or(|only| only[car]);
+    if !(0..cars).any(counted) {
+        return Ok(Vec::new());
+    }
     let errors: Vec<f64> = (0..steps)
         .map(|step| {
             let (mut total, mut scored) = (0.0, 0usize);
-            for car in 0..cars {
+            for car in (0..cars).filter(|&c| counted(c)) {
                 let truth = poses.at(history + step, car);
                 if CarState::is_parked_at(truth.x, truth.y) {
                     continue;
@@ -967,8 +1100,15 @@ fn summarise(
     per_scenario.extend(scenario_rows(PER_FRAME_GRAPH, dataset, &rows, scored, results, frame_pairs));
     edges.extend(rows);
     overall.extend(all);
+    let (rows, all) = edge_rows(AFFECTED_GRAPH, truth, options, scored, results, affected_pairs);
+    per_scenario.extend(scenario_rows(AFFECTED_GRAPH, dataset, &rows, scored, results, affected_pairs));
+    edges.extend(rows);
+    overall.extend(all);
     // Scenarios with trajectories and no edge scores still get a row.
-    let trajectory_only = scored.iter().zip(results).filter(|(_, r)| r.pairs.is_empty() && r.frame_pairs.is_none());
+    let trajectory_only = scored
+        .iter()
+        .zip(results)
+        .filter(|(_, r)| r.pairs.is_empty() && r.frame_pairs.is_none() && r.affected_pairs.is_none());
     per_scenario.extend(
         trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty()).map(
             |(s, r)| ScenarioScores {
@@ -1014,6 +1154,7 @@ fn summarise(
         overall,
         trajectories: trajectory_rows(truth, scored, results, |r| &r.step_errors),
         counterfactuals: trajectory_rows(truth, scored, results, |r| &r.counterfactual_errors),
+        counterfactuals_affected: trajectory_rows(truth, scored, results, |r| &r.counterfactual_affected_errors),
         per_scenario,
     }
 }
@@ -1021,6 +1162,11 @@ fn summarise(
 /// A scenario's scored pairs of graph `g` (one graph counted).
 fn graph_pairs(r: &ScenarioResult, g: usize) -> Option<GraphPairs<'_>> {
     r.pairs.get(g).map(|p| (p.as_slice(), 1))
+}
+
+/// A sweep pair's affected-car scores (one "graph" of cars).
+fn affected_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
+    r.affected_pairs.as_ref().map(|p| (p.as_slice(), 1))
 }
 
 /// A scenario's scored pairs of every frame, with the frames counted as graphs.
@@ -1160,7 +1306,9 @@ impl EvaluationReport {
             }
         }
         let trajectories = self.trajectories.iter().map(|t| ("trajectory_mse", t));
-        for (metric, t) in trajectories.chain(self.counterfactuals.iter().map(|t| ("counterfactual_mse", t))) {
+        let counterfactuals = self.counterfactuals.iter().map(|t| ("counterfactual_mse", t));
+        let affected = self.counterfactuals_affected.iter().map(|t| ("counterfactual_mse_affected", t));
+        for (metric, t) in trajectories.chain(counterfactuals).chain(affected) {
             for s in &t.steps {
                 out += &format!(
                     "{},{},{},{},,{metric},{},{},{},{}\n",
@@ -1267,16 +1415,21 @@ impl fmt::Display for EvaluationReport {
             if self.edges.iter().any(|e| e.held_out) {
                 writeln!(
                     f,
-                    "* held out from train (the spec's held_out): out-of-distribution rows, beside the in-distribution                      ones of the other splits; the threshold is tuned on val, so compare AUROC when val is the                      in-distribution row"
+                    "* held out from train (the spec's held_out): out-of-distribution rows, beside the in-distribution \
+                     ones of the other splits; the threshold is tuned on val, so compare AUROC when val is the \
+                     in-distribution row"
                 )?;
             }
         }
-        for (rows, title) in [
-            (&self.trajectories, "trajectories"),
-            (
-                &self.counterfactuals,
-                "counterfactual trajectories (against the re-simulated runs; removed cars not scored)",
-            ),
+        let factual_steps = format!("steps ahead of frame {}", self.history_frames);
+        let from_intervention = "steps from the intervention's frame (step 1), every car on the map (a removed car \
+                                 not once it has left)";
+        let affected_only = "steps from the intervention's frame, the cars it moved only (pairs without one not \
+                             counted)";
+        for (rows, title, steps) in [
+            (&self.trajectories, "trajectories", factual_steps.as_str()),
+            (&self.counterfactuals, "counterfactual trajectories", from_intervention),
+            (&self.counterfactuals_affected, "counterfactual trajectories of the affected cars", affected_only),
         ] {
             if rows.is_empty() {
                 continue;
@@ -1300,8 +1453,8 @@ impl fmt::Display for EvaluationReport {
             writeln!(
                 f,
                 "{title}: mean squared error of bird's-eye positions normalised by the image size ({} x {} px) at \
-                 steps ahead of frame {}, mean over scenarios ± standard error",
-                self.image_size[0], self.image_size[1], self.history_frames
+                 {steps}, mean over scenarios ± standard error",
+                self.image_size[0], self.image_size[1]
             )?;
         }
         Ok(())

@@ -162,7 +162,7 @@ impl std::fmt::Display for Written {
     }
 }
 
-pub use crate::output::pair_summary::{CarDivergence, PairSummary};
+pub use crate::output::pair_summary::{CarDivergence, InterventionRecord, PairSummary};
 
 /// Writes `<out>/<Name>/factual/`, `counterfactual/`, `divergence.csv` and
 /// `summary.json` for every scenario of the file. The counterfactual adds
@@ -183,7 +183,7 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
-            write_pair(&s.expansion, &writer, &s.name, factual, counterfactual, &out.join(&s.name))
+            write_pair(&s.expansion, &writer, &s.name, (factual, counterfactual), None, &out.join(&s.name))
         })
         .collect::<Result<Vec<_>, GenError>>()
         .map_err(RunError::Write)
@@ -266,15 +266,13 @@ fn write_pair(
     expansion: &Expansion,
     writer: &ScenarioWriter,
     name: &str,
-    factual: &ScenarioPlan,
-    counterfactual: &ScenarioPlan,
+    (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan),
+    record: Option<InterventionRecord>,
     folder: &Path,
 ) -> Result<PairSummary, GenError> {
-    let pair = simulate_pair(expansion, name, factual, counterfactual, stop_flag()).ok_or(GenError::Interrupted {
-        done: 0,
-        total: 0,
-        out: PathBuf::new(),
-    })?;
+    let mut pair = simulate_pair(expansion, name, factual, counterfactual, stop_flag())
+        .ok_or(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() })?;
+    pair.summary.intervention = record;
     let (mut buffers, times) = (writer.buffers(), StageTimes::default());
     write_simulated(writer, factual, &pair.factual, None, folder.join("factual"), &mut buffers, &times)?;
     write_simulated(
@@ -447,9 +445,11 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                     reason,
                 })?;
                 let mut counterfactual = plan.clone();
-                counterfactual.interventions.push(random_intervention(&plan, &options.kinds));
+                let (intervention, record) = random_intervention(&plan, &options.kinds);
+                counterfactual.interventions.push(intervention);
+                let pair = (&plan, &counterfactual);
                 let summary =
-                    write_pair(&expansion, writers.of(&plan), &key.folder_name(), &plan, &counterfactual, &folder)?;
+                    write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), &folder)?;
                 bar.inc();
                 Ok(summary)
             })
@@ -507,8 +507,8 @@ pub fn complete_pair(folder: &Path) -> Option<PairSummary> {
 }
 
 /// One random intervention for `plan`, from a stream derived from the
-/// scenario's own key.
-fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention {
+/// scenario's own key, and its record for summary.json.
+fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> (Intervention, InterventionRecord) {
     use rand::{RngExt, SeedableRng};
     use sha2::Digest;
     let mut seed = sha2::Sha256::new();
@@ -521,17 +521,30 @@ fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> Intervention
     // On a frame, in the first half of the scenario after a moment to get going.
     let frame = ((rng.random_range(0.1..0.5) * duration) / plan.frame_interval).round();
     let at = frame * plan.frame_interval;
-    let effect = match kind {
-        SweepKind::Stop => Effect::Stop { car, seconds: (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0 },
+    let (effect, name, seconds, speed) = match kind {
+        SweepKind::Stop => {
+            let seconds = (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0;
+            (Effect::Stop { car, seconds }, "stop", Some(seconds), None)
+        }
         SweepKind::SetDesiredSpeed => {
             let base = plan.world.city().and_then(|c| c.agency[car].desired_speeds.first().copied()).unwrap_or(1.8);
-            Effect::SetDesiredSpeed { car, speed: (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0 }
+            let speed = (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0;
+            (Effect::SetDesiredSpeed { car, speed }, "set_desired_speed", None, Some(speed))
         }
-        SweepKind::RunRedLight => Effect::RunRedLights { car },
-        SweepKind::Remove => Effect::Remove { car },
+        SweepKind::RunRedLight => (Effect::RunRedLights { car }, "run_red_light", None, None),
+        SweepKind::Remove => (Effect::Remove { car }, "remove", None, None),
     };
     let what = effect.describe(|c| plan.cars[c].name.clone(), |l| format!("light {l}"));
-    Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }
+    let record = InterventionRecord {
+        car: plan.cars[car].id,
+        car_name: plan.cars[car].name.clone(),
+        kind: name.to_string(),
+        at_s: crate::output::number::logged_value(at, 6),
+        frame: frame as u64,
+        seconds,
+        speed,
+    };
+    (Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }, record)
 }
 
 /// divergence.csv (`frame,t,car,distance_m,distance_px`), its distances in
@@ -584,6 +597,7 @@ fn divergence(
     let summary = PairSummary {
         scenario: scenario.to_string(),
         interventions: labels.to_vec(),
+        intervention: None,
         intervention_time_s,
         affected: per_car.iter().filter(|c| c.affected).map(|c| c.name.clone()).collect(),
         cars: per_car,

@@ -15,11 +15,37 @@ pub struct CarDivergence {
     pub first_divergent_frame: Option<usize>,
 }
 
+/// A sweep's one intervention as data, for the counterfactual task: which
+/// car, what, and when.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct InterventionRecord {
+    /// The car's id (its index on every car axis) and name.
+    pub car: u32,
+    pub car_name: String,
+    /// `stop`, `set_desired_speed`, `run_red_light` or `remove`, as a
+    /// scenario file's `"do"` spells it.
+    #[serde(rename = "do")]
+    pub kind: String,
+    /// When it fires, seconds, and the first frame that can show it.
+    pub at_s: f64,
+    pub frame: u64,
+    /// `stop`: how long the car stays stopped, seconds.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub seconds: Option<f64>,
+    /// `set_desired_speed`: the new desired speed, m/s.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub speed: Option<f64>,
+}
+
 /// `summary.json` of a counterfactual pair.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct PairSummary {
     pub scenario: String,
     pub interventions: Vec<String>,
+    /// A sweep's intervention as data (a scenario file's pairs have theirs
+    /// in the file).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub intervention: Option<InterventionRecord>,
     /// When the first intervention fired in the counterfactual (None if it never did).
     pub intervention_time_s: Option<f64>,
     /// The ground-truth effect set: names of the cars whose trajectory changed.
