@@ -28,7 +28,7 @@ from . import _native
 from ._native import InputError
 
 if TYPE_CHECKING:
-    from . import Key, Scenario
+    from . import Counterfactual, Key, Scenario
 
 PathLike = Union[str, "_os.PathLike[str]"]
 
@@ -201,3 +201,64 @@ def open_dataset(root: PathLike) -> Dataset:
     :class:`Dataset`)."""
     return Dataset(root)
 
+
+
+class Sweep:
+    """A ``counterfactual --sweep`` output opened for reading: its record
+    (``sweep.json``), the spec it was made from, and its pairs, each a
+    :class:`~causalcity.Counterfactual` read from disk (the factual and
+    counterfactual runs as :func:`load` reads them, ``divergence.csv``,
+    ``summary.json`` with its ``intervention``)."""
+
+    def __init__(self, root: PathLike) -> None:
+        from . import Spec
+
+        self.root = Path(root)
+        record = self.root / "sweep.json"
+        if not record.is_file():
+            dataset = " (it is a dataset: use causalcity.open_dataset)" if (self.root / "manifest.json").is_file() else ""
+            raise FileNotFoundError(f"{_os.fspath(self.root)}: no sweep.json, so not a counterfactual --sweep output{dataset}")
+        try:
+            self.record: Dict[str, Any] = _json.loads(record.read_text())
+        except ValueError as e:
+            raise InputError(f"{_os.fspath(record)}: not JSON: {e}") from None
+        if not self.record.get("complete", False):
+            _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
+        self.spec = Spec.from_dict(self.record["spec"])
+
+    def keys(self, split: Optional[str] = None) -> List["Key"]:
+        """The keys of the pairs on disk, in the sweep's order."""
+        return [k for k in self.spec.keys(split, self.record.get("limit")) if (self.root / k.folder / "summary.json").is_file()]
+
+    def load(self, key: "Key", images: bool = True) -> "Counterfactual":
+        """The pair of ``key``: its two runs, divergence and summary."""
+        from . import Counterfactual, Key
+
+        key = Key(*key)
+        folder = self.root / key.folder
+        if not (folder / "summary.json").is_file():
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
+        factual = load(folder / "factual", images=images)
+        counterfactual = load(folder / "counterfactual", images=images)
+        table = _np.loadtxt(folder / "divergence.csv", delimiter=",", skiprows=1, ndmin=2)
+        divergence = _np.zeros((factual.frames, factual.cars))
+        divergence[table[:, 0].astype(int), table[:, 2].astype(int)] = table[:, 3]
+        summary = _json.loads((folder / "summary.json").read_text())
+        return Counterfactual(name=summary["scenario"], factual=factual, counterfactual=counterfactual,
+                              divergence=divergence, summary=summary)  # fmt: skip
+
+    def __iter__(self) -> Iterator["Counterfactual"]:
+        for key in self.keys():
+            yield self.load(key)
+
+    def __len__(self) -> int:
+        return len(self.keys())
+
+    def __repr__(self) -> str:
+        return f"Sweep({_os.fspath(self.root)!r}, spec={self.spec.name!r}, pairs={len(self)})"
+
+
+def open_sweep(root: PathLike) -> Sweep:
+    """The ``counterfactual --sweep`` output in ``root``, opened for reading
+    (see :class:`Sweep`)."""
+    return Sweep(root)

@@ -257,3 +257,88 @@ def test_a_bad_method_name_is_refused_before_any_work(tmp_path, user_module, cap
     assert paper.main(["--method", "path", name, "--out", str(tmp_path / "paper"), "--quiet"]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "paper").exists() and not (tmp_path / "p.npz").exists()
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """A counterfactual sweep of the city, 8 cars, stops and removals."""
+    import subprocess
+    import shlex
+    import os
+
+    spec = json.loads((ROOT / "configs" / "city.json").read_text())
+    spec.update(name="methods-sweep", groups=[{"cars": 8, "edge_proportion": 0.5}],
+                splits={"train": 12, "val": 30, "test": 30})  # fmt: skip
+    folder = tmp_path_factory.mktemp("cf")
+    (folder / "spec.json").write_text(json.dumps(spec))
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", "target/release/causalcity"))
+    args = ["counterfactual", "--sweep", folder / "spec.json", "--no-images", "--quiet", "--kinds", "stop,remove"]
+    run = subprocess.run(command + [str(a) for a in args + ["--out", folder / "sweep"]], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    return folder / "sweep"
+
+
+def test_the_counterfactual_reference_methods_run_on_a_sweep_and_are_scored(sweep, tmp_path):
+    from causalcity.methods.__main__ import main
+
+    reports = {}
+    for name in ("cf_copy", "cf_constant_velocity"):
+        out = tmp_path / f"{name}.npz"
+        assert main([name, str(sweep), "--out", str(out), "--quiet"]) == 0
+        reports[name] = causalcity.evaluate(sweep, out)
+    affected = {n: {e["split"]: e for e in r["edges"] if e["graph"] == "affected"} for n, r in reports.items()}
+    # Nothing changes: no car is called affected apart, so the ranking is chance.
+    assert affected["cf_copy"]["test"]["auroc"] == pytest.approx(0.5)
+    # The path rule finds the cars that drive where the intervened car drove.
+    pooled = np.mean([affected["cf_constant_velocity"][s]["auroc"] for s in ("val", "test")])
+    assert pooled > 0.65, affected["cf_constant_velocity"]
+    # Copying the factual run is exact until the intervention's effects arrive,
+    # and worse on the cars it moved than on all cars.
+    copy = reports["cf_copy"]
+    (everyone,) = [r for r in copy["counterfactuals"] if r["split"] == "test"]
+    (moved,) = [r for r in copy["counterfactuals_affected"] if r["split"] == "test"]
+    assert everyone["steps"][0]["mse"] < 1e-6
+    assert moved["steps"][-1]["mse"] > everyone["steps"][-1]["mse"] > 0
+
+
+def test_the_nri_rollout_holds_a_stopped_car_and_scores_cars_by_its_own_rollout(sweep):
+    from causalcity.methods.counterfactual import NriRollout, load_pairs
+
+    train, test = load_pairs(sweep, "cars08_edges50", "train"), load_pairs(sweep, "cars08_edges50", "test")
+    assert train.truth is not None and test.truth is None and len(test) == 30
+    method = NriRollout(epochs=2, device="cpu", quiet=True, warmup_epochs=1)
+    method.fit(train, None)
+    predicted = method.predict(test)
+    stops = 0
+    for k, iv in enumerate(test.interventions):
+        f, car = iv["frame"], iv["car"]
+        steps = predicted.positions[k]
+        assert steps.shape == (test.steps(k), test.cars, 2) and np.isfinite(steps).all()
+        assert (predicted.affected[k] >= 0).all()
+        if iv["do"] == "stop":
+            stops += 1
+            held = int(round(iv["seconds"] / test.frame_interval))
+            # standing where it was the frame before, to float32 rounding
+            np.testing.assert_allclose(steps[: min(held, len(steps)), car], np.repeat(test.pixels[k, f - 1, car][None], min(held, len(steps)), 0), atol=1e-2)
+            assert predicted.affected[k][car] > 0 or np.allclose(test.pixels[k, f - 1 : f + 1, car], test.pixels[k, f - 1, car])
+    assert stops > 0
+
+
+def test_a_sweep_reads_back_as_its_pairs_and_refuses_the_discovery_methods(sweep, tmp_path, capsys):
+    from causalcity.methods.__main__ import main
+
+    pairs = causalcity.open_sweep(sweep)
+    keys = pairs.keys("test")
+    assert len(keys) == 30 and len(pairs) == 72
+    pair = pairs.load(keys[0])
+    simulated = causalcity.simulate(pairs.spec, *keys[0], effects=False)
+    np.testing.assert_array_equal(pair.factual.position, simulated.position)
+    moved = np.linalg.norm(pair.factual.position[..., :2] - pair.counterfactual.position[..., :2], axis=-1)
+    np.testing.assert_allclose(pair.divergence, moved, atol=2e-4)  # both rounded to 0.1 mm
+    assert pair.summary["intervention"]["do"] in ("stop", "remove")
+    # A discovery method on a sweep, or a counterfactual one on a dataset: exit 2, said plainly.
+    assert main(["granger", str(sweep), "--out", str(tmp_path / "g.npz")]) == 2
+    assert "not a method of the counterfactual task" in capsys.readouterr().err
+    assert main(["cf_copy", str(tmp_path), "--out", str(tmp_path / "c.npz")]) == 2
+    assert "give a counterfactual --sweep output" in capsys.readouterr().err
+    assert not (tmp_path / "g.npz").exists() and not (tmp_path / "c.npz").exists()

@@ -126,7 +126,7 @@ def is_user_method(name: str) -> bool:
     return ":" in name
 
 
-def _user_method(name: str, options: dict) -> Method:
+def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
     """A fresh instance of the class ``package.module:Class``, given those of
     ``options`` its constructor takes; every failure is a ``ValueError``
     naming ``name`` and what is wrong."""
@@ -154,6 +154,8 @@ def _user_method(name: str, options: dict) -> Method:
     missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
     if missing:
         raise ValueError(f"method {name!r}: an instance has no {' or '.join(missing)}() (see causalcity.methods.Method)")
+    if task == "counterfactual":
+        return method
     if not (getattr(method, "discovers", False) or getattr(method, "predicts", False)):
         raise ValueError(
             f"method {name!r}: set discovers = True (it scores edges) and/or predicts = True (it predicts trajectories)"
@@ -161,12 +163,12 @@ def _user_method(name: str, options: dict) -> Method:
     return method
 
 
-def make(name: str, **options) -> Method:
+def make(name: str, _task: str = "discovery", **options) -> Method:
     """A fresh method by name (see :data:`METHODS`) with its options, or a
     user's class named ``package.module:Class`` (given those of ``seed``,
     ``device`` and ``quiet`` its constructor takes)."""
     if is_user_method(name):
-        return _user_method(name, options)
+        return _user_method(name, options, _task)
     if name not in METHODS:
         raise ValueError(f"method {name!r} is not one of {', '.join(METHODS)}, nor package.module:Class")
     return METHODS[name](**options)

@@ -9,6 +9,7 @@ from typing import Optional, Sequence
 
 from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make
+from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .common import DatasetError, run_method
 
 
@@ -21,9 +22,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument(
         "method",
         metavar="method",
-        help=f"a reference method ({', '.join(METHODS)}) or your own class as package.module:Class",
+        help=f"a reference method ({', '.join(METHODS)}; on a sweep {', '.join(COUNTERFACTUAL_METHODS)}) or your own "
+        "class as package.module:Class",
     )
-    parser.add_argument("dataset", help="a dataset folder gen wrote (the one holding manifest.json)")
+    parser.add_argument(
+        "dataset",
+        help="a dataset folder gen wrote (the one holding manifest.json), or a counterfactual --sweep output (sweep.json) "
+        "for the counterfactual task",
+    )
     parser.add_argument("--out", required=True, help="the predictions .npz to write")
     parser.add_argument("--group", nargs="+", help="only these groups")
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
@@ -46,9 +52,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     elif args.method == "supervised":
         options.update(seed=args.seed, quiet=args.quiet)
     try:
-        # Made once up front, so that a bad option is refused before any reading.
-        make(args.method, **options)
-        out = run_method(lambda: make(args.method, **options), args.dataset, args.out, args.group, args.split, args.quiet)
+        if is_sweep(args.dataset) or args.method in COUNTERFACTUAL_METHODS:
+            out = _counterfactual(args)
+        else:
+            # Made once up front, so that a bad option is refused before any reading.
+            make(args.method, **options)
+            out = run_method(lambda: make(args.method, **options), args.dataset, args.out, args.group, args.split, args.quiet)
     except (InputError, ValueError, FileNotFoundError, NotADirectoryError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -60,6 +69,38 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 130
     print(f"wrote {out}")
     return 0
+
+
+def _counterfactual(args: argparse.Namespace):
+    """The counterfactual task on a sweep: a reference method of
+    :data:`COUNTERFACTUAL_METHODS` or a user's class."""
+    if not is_sweep(args.dataset):
+        raise ValueError(
+            f"{args.method} predicts counterfactuals: give a counterfactual --sweep output (holding sweep.json), "
+            f"and {args.dataset} is none"
+        )
+    options = dict(seed=args.seed, device=args.device, quiet=args.quiet)
+    if args.method in COUNTERFACTUAL_METHODS:
+        if args.method != "cf_nri":
+            options = {}
+        elif args.epochs is not None:
+            options["epochs"] = args.epochs
+
+        def fresh():
+            return COUNTERFACTUAL_METHODS[args.method](**options)
+
+    elif is_user_method(args.method):
+
+        def fresh():
+            return make(args.method, _task="counterfactual", **options)
+
+    else:
+        raise ValueError(
+            f"{args.method} is not a method of the counterfactual task: {', '.join(COUNTERFACTUAL_METHODS)}, or "
+            "package.module:Class"
+        )
+    fresh()  # refused before any reading
+    return run_counterfactual_method(fresh, args.dataset, args.out, args.group, args.split, args.quiet)
 
 
 def _positive(text: str) -> int:
