@@ -1109,23 +1109,9 @@ fn summarise(
         .iter()
         .zip(results)
         .filter(|(_, r)| r.pairs.is_empty() && r.frame_pairs.is_none() && r.affected_pairs.is_none());
-    per_scenario.extend(
-        trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty()).map(
-            |(s, r)| ScenarioScores {
-                graph: "",
-                threshold: None,
-                true_edges: 0,
-                predicted_edges: 0,
-                true_positives: 0,
-                precision: None,
-                recall: None,
-                f1: None,
-                shd: None,
-                auroc: None,
-                ..scenario_base(dataset, s, r)
-            },
-        ),
-    );
+    let trajectory_only =
+        trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty());
+    per_scenario.extend(trajectory_only.map(|(s, r)| scenario_base(dataset, s, r)));
     per_scenario.sort_by(|a, b| (a.scenario.as_str(), a.graph).cmp(&(b.scenario.as_str(), b.graph)));
     let untuned: Vec<String> = edges
         .iter()

@@ -255,33 +255,41 @@ def run_method(
     # The one write rule, checked before any training: never into a
     # dataset, never onto the input, never through a link.
     _native.claim_output(os.fspath(out), [("the dataset it reads", os.fspath(root))])
+    names = groups_of(root) if groups is None else groups
+    edges: Dict[str, np.ndarray] = {}
+    trajectories: Dict[str, np.ndarray] = {}
+    for episodes, predicted in fit_per_group(make_method, root, names, load_split, splits, quiet):
+        for k, folder in enumerate(episodes.folders):
+            if predicted.edges is not None:
+                edges[folder] = predicted.edges[k]
+            if predicted.trajectories is not None:
+                trajectories[folder] = predicted.trajectories[k]
+    write_predictions(out, edges, trajectories, dataset=root)
+    return Path(out)
+
+
+def fit_per_group(make_method, root: Path, groups, load, splits: Iterable[str], quiet: bool, unit: str = "scenarios"):
+    """For each group: a fresh method (``make_method()``) fitted on
+    ``load(root, group, "train")`` (and val), then ``(data, predicted)``
+    for each split of ``splits`` that has data. Bad groups or splits are
+    refused before any reading."""
     if isinstance(groups, (str, bytes)):
         raise InputError(f"groups={groups!r} is one string: give a list of group names, e.g. [{groups!r}]")
-    names = groups_of(root) if groups is None else list(groups)
+    splits = list(splits)
     for split in splits:
         if split not in SPLITS:
             raise InputError(f"split {split!r} is not one of {', '.join(SPLITS)}")
-    edges: Dict[str, np.ndarray] = {}
-    trajectories: Dict[str, np.ndarray] = {}
-    for group in names:
+    for group in list(groups):
         method = make_method()
         label = getattr(method, "name", type(method).__name__)
-        train = load_split(root, group, "train")
-        val = load_split(root, group, "val")
+        train = load(root, group, "train")
+        val = load(root, group, "val")
         if len(train) == 0:
-            raise InputError(f"{root / group}: no train scenarios to fit {label} on")
+            raise InputError(f"{root / group}: no train {unit} to fit {label} on")
         if not quiet:
-            print(f"{label}: {group} (train {len(train)}, val {len(val)})", file=sys.stderr)
+            print(f"{label}: {group} (train {len(train)} {unit}, val {len(val)})", file=sys.stderr)
         method.fit(train, val if len(val) else None)
         for split in splits:
-            episodes = val if split == "val" else load_split(root, group, split)
-            if len(episodes) == 0:
-                continue
-            predicted = method.predict(episodes)
-            for k, folder in enumerate(episodes.folders):
-                if predicted.edges is not None:
-                    edges[folder] = predicted.edges[k]
-                if predicted.trajectories is not None:
-                    trajectories[folder] = predicted.trajectories[k]
-    write_predictions(out, edges, trajectories, dataset=root)
-    return Path(out)
+            data = val if split == "val" else load(root, group, split)
+            if len(data) > 0:
+                yield data, method.predict(data)

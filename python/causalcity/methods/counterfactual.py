@@ -38,7 +38,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import InputError, _native
-from .common import STEPS, DatasetError, Episodes
+from .common import STEPS, DatasetError, Episodes, fit_per_group
 
 CF_STEPS = STEPS
 """Frames predicted from the intervention's frame on (fewer where the run ends)."""
@@ -358,27 +358,13 @@ def run_counterfactual_method(
 
     root = Path(sweep)
     _native.claim_output(os.fspath(out), [("the sweep it reads", os.fspath(root))])
-    names = sweep_groups(root) if groups is None else list(groups)
+    names = sweep_groups(root) if groups is None else groups
     counterfactuals: Dict[str, np.ndarray] = {}
     affected: Dict[str, np.ndarray] = {}
-    for group in names:
-        method = make_method()
-        label = getattr(method, "name", type(method).__name__)
-        train = load_pairs(root, group, "train")
-        val = load_pairs(root, group, "val")
-        if len(train) == 0:
-            raise InputError(f"{root / group}: no train pairs to fit {label} on")
-        if not quiet:
-            print(f"{label}: {group} (train {len(train)} pairs, val {len(val)})", file=sys.stderr)
-        method.fit(train, val if len(val) else None)
-        for split in splits:
-            pairs = val if split == "val" else load_pairs(root, group, split)
-            if len(pairs) == 0:
-                continue
-            predicted = method.predict(pairs)
-            for k, folder in enumerate(pairs.folders):
-                counterfactuals[folder] = predicted.positions[k]
-                affected[folder] = predicted.affected[k]
+    for pairs, predicted in fit_per_group(make_method, root, names, load_pairs, splits, quiet, unit="pairs"):
+        for k, folder in enumerate(pairs.folders):
+            counterfactuals[folder] = predicted.positions[k]
+            affected[folder] = predicted.affected[k]
     if not counterfactuals:
         raise InputError(f"{root}: no pairs in {', '.join(splits)} to predict")
     save_predictions(
