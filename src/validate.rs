@@ -56,6 +56,9 @@ pub struct SplitDesign {
     pub shared_towns: Vec<String>,
     /// Whether train and test plan the same graph shape.
     pub shared_graph: bool,
+    /// Whether train and test draw confounders from the same ranges (city world).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shared_confounders: Option<bool>,
 }
 
 /// What one split draws.
@@ -65,7 +68,7 @@ pub struct SplitDraws {
     pub towns: Vec<String>,
     /// `pairs`, `chains of 3`, `forks of 4`.
     pub graph: String,
-    /// The sections it holds out from train (`map`, `graph`).
+    /// The sections it holds out from train (`map`, `graph`, `confounders`).
     pub held_out: Vec<&'static str>,
 }
 
@@ -87,14 +90,7 @@ impl SplitDesign {
         let splits: Vec<SplitDraws> = Split::ALL
             .into_iter()
             .map(|split| {
-                let held = spec.held_out.of(split);
-                let mut held_out = Vec::new();
-                if held.is_some_and(|h| h.map.is_some()) {
-                    held_out.push("map");
-                }
-                if held.is_some_and(|h| h.graph.is_some()) {
-                    held_out.push("graph");
-                }
+                let held_out = spec.held_out.of(split).map(|h| h.sections()).unwrap_or_default();
                 SplitDraws {
                     split: split.name(),
                     towns: expansion.town_names(split).into_iter().map(String::from).collect(),
@@ -105,7 +101,9 @@ impl SplitDesign {
             .collect();
         let shared_towns = splits[0].towns.iter().filter(|t| splits[2].towns.contains(t)).cloned().collect();
         let shared_graph = splits[0].graph == splits[2].graph;
-        Some(SplitDesign { splits, shared_towns, shared_graph })
+        let shared_confounders = (spec.world == crate::spec::WorldKind::City)
+            .then(|| spec.confounders_of(Split::Train) == spec.confounders_of(Split::Test));
+        Some(SplitDesign { splits, shared_towns, shared_graph, shared_confounders })
     }
 }
 
@@ -118,7 +116,12 @@ impl fmt::Display for SplitDesign {
         }
         let towns = if self.shared_towns.is_empty() { "no town".to_string() } else { self.shared_towns.join(" ") };
         let graph = if self.shared_graph { "the graph shape" } else { "no graph shape" };
-        writeln!(f, "train and test share: {towns}; {graph}")
+        let confounders = match self.shared_confounders {
+            Some(true) => "; the confounder ranges",
+            Some(false) => "; not the confounder ranges",
+            None => "",
+        };
+        writeln!(f, "train and test share: {towns}; {graph}{confounders}")
     }
 }
 

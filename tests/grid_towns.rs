@@ -274,7 +274,7 @@ fn a_split_can_hold_out_towns_and_graph_shapes_and_validate_says_what_train_and_
     let text = String::from_utf8_lossy(&report.stdout);
     assert!(report.status.success(), "{text}");
     assert!(text.contains("test  towns grid-4x3; graph chains of 3 (held out: map, graph)"), "{text}");
-    assert!(text.contains("train and test share: no town; no graph shape"), "{text}");
+    assert!(text.contains("train and test share: no town; no graph shape; the confounder ranges"), "{text}");
     let json: serde_json::Value =
         serde_json::from_slice(&run(&["validate", out.to_str().unwrap(), "--json"]).stdout).unwrap();
     assert_eq!(json["design"]["shared_towns"], serde_json::json!([]));
@@ -291,6 +291,62 @@ fn a_split_can_hold_out_towns_and_graph_shapes_and_validate_says_what_train_and_
     let text = String::from_utf8_lossy(&report.stdout);
     assert_eq!(report.status.code(), Some(1), "{text}");
     assert!(text.contains("is not a town the spec draws for train"), "{text}");
+}
+
+#[test]
+fn a_split_can_hold_out_confounder_ranges_drawing_the_same_numbers_through_them() {
+    let dir = fresh_dir("held-out-confounders");
+    for sub in ["a", "b", "c"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    let city = r#"{"confounders": {"hour": {"uniform": [8, 16]}, "rain": 0.0}}"#;
+    let twin: serde_json::Value = serde_json::from_str(&city_spec("twin", &[(6, 0.5)], (3, 2, 4), 12, city)).unwrap();
+    let mut held = twin.clone();
+    held["held_out"] = serde_json::json!({"test": {"confounders": {"hour": {"uniform": [20, 24]}, "rain": 1.0}}});
+    let (twin_out, held_out) = (dir.join("twin"), dir.join("held"));
+    gen_ok(&write_spec(&dir.join("a"), &twin.to_string()), &twin_out, &["--no-images", "--no-effects"]);
+    gen_ok(&write_spec(&dir.join("b"), &held.to_string()), &held_out, &["--no-images", "--no-effects"]);
+    let mut tested = 0;
+    for scenario in scenario_dirs(&twin_out) {
+        let rel = scenario.strip_prefix(&twin_out).unwrap();
+        let (a, b) = (read_json(&scenario.join("scenario.json")), read_json(&held_out.join(rel).join("scenario.json")));
+        if a["split"] != "test" {
+            // Train and val are those of the spec without held_out, byte for byte.
+            for file in ["scenario.json", "poses.csv", "lights.csv"] {
+                assert_eq!(
+                    std::fs::read(scenario.join(file)).unwrap(),
+                    std::fs::read(held_out.join(rel).join(file)).unwrap()
+                );
+            }
+            continue;
+        }
+        let (ca, cb) = (&a["city"]["confounders"], &b["city"]["confounders"]);
+        let (hour_a, hour_b) = (ca["hour"].as_f64().unwrap(), cb["hour"].as_f64().unwrap());
+        assert!((8.0..=16.0).contains(&hour_a) && (20.0..=24.0).contains(&hour_b), "{hour_a} {hour_b}");
+        // The same exogenous number read through the held-out range.
+        assert!(((hour_a - 8.0) / 8.0 - (hour_b - 20.0) / 4.0).abs() < 1e-9, "{hour_a} {hour_b}");
+        assert_eq!((ca["rain"].as_f64(), cb["rain"].as_f64()), (Some(0.0), Some(1.0)));
+        assert_eq!(a["city"]["confounder_model"]["exogenous"], b["city"]["confounder_model"]["exogenous"]);
+        tested += 1;
+    }
+    assert_eq!(tested, 4);
+    let report = run(&["validate", held_out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert!(report.status.success(), "{text}");
+    assert!(text.contains("(held out: confounders)") && text.contains("not the confounder ranges"), "{text}");
+    // Out of range, or in the toy world: refused, naming the field.
+    let mut bad = twin.clone();
+    bad["held_out"] = serde_json::json!({"test": {"confounders": {"hour": 25.0}}});
+    let refused = run(&[
+        "gen",
+        "--spec",
+        write_spec(&dir.join("c"), &bad.to_string()).to_str().unwrap(),
+        "--out",
+        dir.join("c/out").to_str().unwrap(),
+    ]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("held_out.test.confounders.hour"), "{:?}", refused);
+    assert!(!dir.join("c/out").exists());
 }
 
 #[test]

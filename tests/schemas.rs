@@ -77,6 +77,12 @@ fn spec_schema_and_parser_agree() {
             v["held_out"] = json!({"test": {"map": {"grid": {"rows": 4, "columns": 4}}, "graph": {"shape": "forks"}}})
         }),
     ));
+    good.push((
+        "held-out confounders".into(),
+        edited(&base, |v| {
+            v["held_out"] = json!({"test": {"confounders": {"hour": {"uniform": [20, 24]}, "rain": 1.0}}})
+        }),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),
@@ -106,6 +112,10 @@ fn spec_schema_and_parser_agree() {
         ("camera area without y", edited(&base, |v| v["map"] = json!({"camera_area": {"x": [-30, 30]}}))),
         ("held-out train", edited(&base, |v| v["held_out"] = json!({"train": {"graph": {"shape": "chains"}}}))),
         ("held-out cars", edited(&base, |v| v["held_out"] = json!({"test": {"cars": 12}}))),
+        (
+            "held-out unknown confounder",
+            edited(&base, |v| v["held_out"] = json!({"test": {"confounders": {"hail": 1.0}}})),
+        ),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
         (
             "grid rows drawn twice",

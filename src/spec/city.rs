@@ -476,16 +476,22 @@ impl CitySpec {
                 return Err(SpecError::new(format!("{field}.offset"), "must be a finite number of seconds"));
             }
         }
-        let c = &self.confounders;
-        c.rain.check("city.confounders.rain", 0.0, 1.0)?;
-        if let Some(fog) = &c.fog {
-            fog.check("city.confounders.fog", 0.0, 1.0)?;
+        self.confounders.validate("city.confounders")
+    }
+}
+
+impl ConfounderSpec {
+    /// Every distribution within its variable's range; errors name
+    /// `<field>.<variable>`.
+    pub fn validate(&self, field: &str) -> Result<(), SpecError> {
+        self.rain.check(&format!("{field}.rain"), 0.0, 1.0)?;
+        if let Some(fog) = &self.fog {
+            fog.check(&format!("{field}.fog"), 0.0, 1.0)?;
         }
-        c.snow.check("city.confounders.snow", 0.0, 1.0)?;
-        if let Some(wetness) = &c.wetness {
-            wetness.check("city.confounders.wetness", 0.0, 1.0)?;
+        self.snow.check(&format!("{field}.snow"), 0.0, 1.0)?;
+        if let Some(wetness) = &self.wetness {
+            wetness.check(&format!("{field}.wetness"), 0.0, 1.0)?;
         }
-        c.hour.check("city.confounders.hour", 0.0, 24.0)?;
-        Ok(())
+        self.hour.check(&format!("{field}.hour"), 0.0, 24.0)
     }
 }

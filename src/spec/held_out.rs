@@ -1,10 +1,11 @@
 //! `held_out`: what val and test draw differently from train (their own
-//! map or graph shape), so that a split tests generalisation.
+//! map, graph shape or confounder ranges), so that a split tests
+//! generalisation.
 
 use super::*;
 
 /// A split's own sections, in place of the dataset's: a map (towns train
-/// never sees) and a graph shape.
+/// never sees), a graph shape, and (city world) confounder ranges.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HeldOut {
@@ -12,6 +13,27 @@ pub struct HeldOut {
     pub map: Option<MapSpec>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub graph: Option<GraphSpec>,
+    /// In place of `city.confounders`: each scenario draws the same
+    /// exogenous numbers as without it, read through these distributions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confounders: Option<ConfounderSpec>,
+}
+
+impl HeldOut {
+    /// The names of the sections it holds out (`map`, `graph`, `confounders`).
+    pub fn sections(&self) -> Vec<&'static str> {
+        let mut names = Vec::new();
+        if self.map.is_some() {
+            names.push("map");
+        }
+        if self.graph.is_some() {
+            names.push("graph");
+        }
+        if self.confounders.is_some() {
+            names.push("confounders");
+        }
+        names
+    }
 }
 
 /// The held-out sections of val and test (train is what they are held out

@@ -465,6 +465,15 @@ impl DatasetSpec {
             if let Some(map) = self.held_out.of(split).and_then(|h| h.map.as_ref()) {
                 map.validate().map_err(|e| held_out_field(split, e))?;
             }
+            if let Some(confounders) = self.held_out.of(split).and_then(|h| h.confounders.as_ref()) {
+                if self.world != WorldKind::City {
+                    return Err(SpecError::new(
+                        format!("held_out.{}.confounders", split.name()),
+                        "applies to \"world\": \"city\" only (the toy world has no confounders): remove it",
+                    ));
+                }
+                confounders.validate(&format!("held_out.{}.confounders", split.name()))?;
+            }
         }
         self.birds_eye_camera()?;
         let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
@@ -541,6 +550,15 @@ impl DatasetSpec {
     }
 
     /// The graph shape of `split`'s scenarios: its held-out one, else the dataset's.
+    /// The confounder ranges `split` draws from (city world): its held-out
+    /// ones, or the city section's.
+    pub fn confounders_of(&self, split: Split) -> ConfounderSpec {
+        match self.held_out.of(split).and_then(|h| h.confounders.as_ref()) {
+            Some(held) => held.clone(),
+            None => self.city_settings().confounders.clone(),
+        }
+    }
+
     pub fn graph_of(&self, split: Split) -> &GraphSpec {
         self.held_out.of(split).and_then(|h| h.graph.as_ref()).unwrap_or(&self.graph)
     }

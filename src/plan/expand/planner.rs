@@ -513,7 +513,7 @@ impl Planner {
         let spec = &self.spec;
         let world = match spec.world {
             WorldKind::Toy => WorldPlan::Toy { step_m: self.toy_step_m },
-            WorldKind::City => WorldPlan::City(self.city_plan(stream, &mut rng, &cars, ids)),
+            WorldKind::City => WorldPlan::City(self.city_plan(key.split, stream, &mut rng, &cars, ids)),
         };
         let mut planned: Vec<CarPlan> = cars
             .into_iter()
@@ -584,10 +584,16 @@ impl Planner {
 
     /// City world: confounders, lights and each car's driving (`ids[i]` for
     /// `cars[i]`), drawn after placement, in placement order.
-    fn city_plan(&self, stream: [u8; 32], rng: &mut ChaCha8Rng, cars: &[PlacedCar], ids: &[u32]) -> CityPlan {
+    fn city_plan(
+        &self,
+        split: Split,
+        stream: [u8; 32],
+        rng: &mut ChaCha8Rng,
+        cars: &[PlacedCar],
+        ids: &[u32],
+    ) -> CityPlan {
         let c = self.spec.city_settings();
-        let cs = &c.confounders;
-        let (confounders, confounder_model) = ConfounderModel::draw(cs, rng);
+        let (confounders, confounder_model) = ConfounderModel::draw(&self.spec.confounders_of(split), rng);
         let effects = confounders.effects();
         let mut sim_stream = stream;
         sim_stream[31] ^= 0x5a;
