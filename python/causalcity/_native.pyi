@@ -47,6 +47,8 @@ class Spec:
 def simulate(
     spec: Spec, group: str, split: str, index: int, images: bool = False, effects: bool = True
 ) -> Dict[str, Any]: ...
+def read_scenario(dir: str) -> Dict[str, Any]: ...
+def read_frames(dir: str, kind: str, frames: int, start: int, end: int, width: int, height: int) -> Array: ...
 class Prefetch:
     def __init__(
         self,
@@ -86,4 +88,6 @@ def evaluate(
     graphs: List[str],
     history: int,
     threshold: Optional[float] = None,
-) -> Tuple[str, str]: ...
+    csv: Optional[str] = None,
+    per_scenario: Optional[str] = None,
+) -> Tuple[str, str, str]: ...
