@@ -746,7 +746,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             let inputs =
                 [("the dataset it scores", args.dataset.as_path()), ("the predictions file", &args.predictions)];
             if let (Some(a), Some(b)) = (&args.csv, &args.per_scenario) {
-                if a == b {
+                if causalcity::output::claim::resolve(a) == causalcity::output::claim::resolve(b) {
                     return Err(Error::Input(format!(
                         "--csv and --per-scenario both name {}: give each table its own file",
                         a.display()

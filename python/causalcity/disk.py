@@ -66,24 +66,28 @@ class Frames:
         return _np.asarray(raw)
 
     def __getitem__(self, index: Any) -> _np.ndarray:
-        rest: Tuple[Any, ...] = ()
-        if isinstance(index, tuple):
-            index, rest = (index[0], index[1:]) if index else (slice(None), ())
-        if isinstance(index, slice):
-            start, stop, step = index.indices(self._frames)
-            if step == 1:
-                out = self._read(start, max(start, stop))
-            else:
-                out = _np.stack([self._read(i, i + 1)[0] for i in range(start, stop, step)] or [self._read(0, 0)])
-        elif isinstance(index, (int, _np.integer)):
-            i = int(index) + (self._frames if index < 0 else 0)
+        index = index if isinstance(index, tuple) else (index,)
+        if not index or any(i is Ellipsis or i is None for i in index):
+            return _np.asarray(self)[index]  # the general case: decode every frame
+        first, rest = index[0], index[1:]
+        if isinstance(first, (int, _np.integer)) and not isinstance(first, bool):
+            i = int(first) + (self._frames if first < 0 else 0)
             if not 0 <= i < self._frames:
-                raise IndexError(f"frame {int(index)} is outside the scenario's {self._frames} frames")
+                raise IndexError(f"frame {int(first)} is outside the scenario's {self._frames} frames")
             out = self._read(i, i + 1)[0]
+            return out[rest] if rest else out
+        chosen = _np.arange(self._frames)[first]
+        if chosen.ndim == 0:
+            out = self._read(int(chosen), int(chosen) + 1)[0]
+            return out[rest] if rest else out
+        chosen = chosen.ravel()
+        if len(chosen) == 0:
+            out = self._read(0, 0)
+        elif (_np.diff(chosen) == 1).all():
+            out = self._read(int(chosen[0]), int(chosen[-1]) + 1)
         else:
-            chosen = _np.arange(self._frames)[index]
-            out = _np.stack([self._read(int(i), int(i) + 1)[0] for i in _np.atleast_1d(chosen)])
-        return out[rest] if rest else out
+            out = _np.stack([self._read(int(i), int(i) + 1)[0] for i in chosen])
+        return out[(slice(None),) + rest] if rest else out
 
     def __iter__(self) -> Iterator[_np.ndarray]:
         for i in range(self._frames):

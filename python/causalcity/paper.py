@@ -242,12 +242,13 @@ def run(
             timings[f"{world}/{name}"] = 0.0
             for group in groups[world]:
                 unit = (world, name, group)
-                record = out / "units" / world / name / f"{group}.json"
+                folder = name.replace(":", "-")  # a user's package.module:Class, as a folder name
+                record = out / "units" / world / folder / f"{group}.json"
                 key = _unit_key(world, name, group, setting, device, seed, spec)
                 kept = _read_unit(record, key)
                 if kept is None:
                     start = time.monotonic()
-                    predictions = out / "predictions" / world / name / f"{group}.npz"
+                    predictions = out / "predictions" / world / folder / f"{group}.npz"
                     run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
                     report = evaluate(data, predictions, graph=graphs, csv=None)
                     seconds = time.monotonic() - start

@@ -18,7 +18,7 @@ use causalcity::orchestrate::run::{
     clear_stop, generate_expansion, load_spec, request_stop, GenError, GenOptions, Shard, MAX_THREADS,
 };
 use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
-use causalcity::output::claim::claim_file;
+use causalcity::output::claim::{claim_file, resolve};
 use causalcity::output::layout::FrameKind;
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
@@ -531,7 +531,7 @@ fn evaluate(
     per_scenario: Option<PathBuf>,
 ) -> PyResult<(String, String, String)> {
     let inputs = [("the dataset it scores", dataset.as_path()), ("the predictions file", predictions.as_path())];
-    if csv.is_some() && csv == per_scenario {
+    if csv.is_some() && csv.as_deref().map(resolve) == per_scenario.as_deref().map(resolve) {
         return Err(InputError::new_err("csv and per_scenario name the same file: give each table its own file"));
     }
     let csv = csv.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;

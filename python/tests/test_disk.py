@@ -95,6 +95,12 @@ def test_frames_are_decoded_when_used_and_index_like_the_array():
     np.testing.assert_array_equal(frames[::7], whole.rgb[::7])
     np.testing.assert_array_equal(frames[[0, 4]], whole.rgb[[0, 4]])
     np.testing.assert_array_equal(frames[2, 100:110, 5], whole.rgb[2, 100:110, 5])
+    np.testing.assert_array_equal(frames[:3, 10:20], whole.rgb[:3, 10:20])
+    np.testing.assert_array_equal(frames[[0, 2], 5], whole.rgb[[0, 2], 5])
+    np.testing.assert_array_equal(frames[..., 0], whole.rgb[..., 0])
+    np.testing.assert_array_equal(frames[np.int64(4)], whole.rgb[4])
+    for empty in (slice(5, 2, 2), slice(3, 3), []):
+        assert frames[empty].shape == whole.rgb[empty].shape
     np.testing.assert_array_equal(loaded.mask[1:3], whole.mask[1:3])
     assert sum(1 for _ in loaded.mask) == whole.frames
     with pytest.raises(IndexError, match="frame 30 is outside"):
@@ -136,6 +142,19 @@ def test_bad_folders_are_named(tmp_path):
     rows = lights.read_text().splitlines()
     lights.write_text("\n".join(rows[:1] + [rows[1].replace(",red,", ",blue,").replace(",green,", ",blue,").replace(",yellow,", ",blue,")] + rows[2:]) + "\n")
     with pytest.raises(causalcity.InputError, match=r"lights\.csv line 2: colour \"blue\""):
+        causalcity.load(folder)
+    # A city folder must hold its logs, and effects where scenario.json lists causal edges.
+    for name in ("lights.csv", "effects.csv"):
+        shutil.copy(DATA / "city" / key.folder / "lights.csv", lights)
+        (folder / name).rename(folder / (name + ".away"))
+        with pytest.raises(causalcity.InputError, match=f"{name}.*No such file"):
+            causalcity.load(folder)
+        (folder / (name + ".away")).rename(folder / name)
+    # A scenario.json claiming more poses than poses.csv holds is refused before any memory is taken.
+    meta = json.loads((folder / "scenario.json").read_text())
+    meta["frames"] = 4_000_000_000
+    (folder / "scenario.json").write_text(json.dumps(meta))
+    with pytest.raises(causalcity.InputError, match="more rows than .*poses.csv"):
         causalcity.load(folder)
 
 

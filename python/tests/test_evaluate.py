@@ -423,6 +423,17 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
     causalcity.save_predictions(tmp_path / "long.npz", counterfactuals=too_long)
     run = cli("evaluate", sweep, tmp_path / "long.npz")
     assert run.returncode == 2 and "from the intervention's frame" in run.stderr, run.stderr
+    # A damaged summary.json (fewer cars than its runs) is a failure naming it, not a crash.
+    import shutil
+
+    damaged = tmp_path / "damaged"
+    shutil.copytree(sweep, damaged)
+    summary_path = damaged / rel / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    summary["cars"] = summary["cars"][:2]
+    summary_path.write_text(json.dumps(summary))
+    run = cli("evaluate", damaged, tmp_path / "cf.npz")
+    assert run.returncode == 1 and "summary.json: names 2 cars" in run.stderr, run.stderr
     # On a gen dataset (no re-simulated runs), counterfactual and affected arrays are refused.
     for suffix in ("/counterfactual", "/affected"):
         np.savez(tmp_path / "wrong.npz", **{"cars08_edges50/test/00000" + suffix: np.zeros((3, 8, 2))})

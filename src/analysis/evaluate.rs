@@ -426,8 +426,9 @@ struct PairTruth {
 }
 
 impl PairTruth {
-    /// Reads the summary.json of the pair around `factual_dir`.
-    fn read(factual_dir: &Path, frame_interval: f64) -> Result<PairTruth, String> {
+    /// Reads the summary.json of the pair around `factual_dir`, whose runs
+    /// have `cars` cars and `frames` frames.
+    fn read(factual_dir: &Path, frame_interval: f64, (cars, frames): (usize, usize)) -> Result<PairTruth, String> {
         let path = factual_dir.parent().unwrap_or(factual_dir).join("summary.json");
         let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let summary: PairSummary = serde_json::from_slice(&bytes)
@@ -447,7 +448,14 @@ impl PairTruth {
                 (event_frame(t, frame_interval) as usize, first.map_or(0, |(_, id)| id as usize))
             }
         };
-        let affected = summary.cars.iter().map(|c| c.max_divergence_m > EFFECT_THRESHOLD_M).collect();
+        let affected: Vec<bool> = summary.cars.iter().map(|c| c.max_divergence_m > EFFECT_THRESHOLD_M).collect();
+        if affected.len() != cars || car >= cars || frame >= frames {
+            return Err(format!(
+                "{}: names {} cars, car {car} and frame {frame}, but its runs have {cars} cars and {frames} frames",
+                path.display(),
+                affected.len()
+            ));
+        }
         Ok(PairTruth { frame, car, affected })
     }
 }
@@ -476,7 +484,8 @@ impl ScenarioPredictions {
     /// The pair's truth (a sweep only), read once; failures as in [`Self::size`].
     fn pair(&mut self, failure: &mut Option<Error>) -> Result<&PairTruth, String> {
         if self.pair.is_none() {
-            let read = ScenarioSummary::read(&self.dir).and_then(|s| PairTruth::read(&self.dir, s.frame_interval));
+            let read = ScenarioSummary::read(&self.dir)
+                .and_then(|s| PairTruth::read(&self.dir, s.frame_interval, (s.cars.len(), s.frames as usize)));
             match read {
                 Ok(pair) => self.pair = Some(pair),
                 Err(e) => {
@@ -682,7 +691,7 @@ fn match_scenarios(
                 }
                 let mut failure = None;
                 let start = scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?.frame;
-                if start + shape[0] > frames {
+                if start.saturating_add(shape[0]) > frames {
                     return Err(bad(format!(
                         "array {:?} predicts {} steps from the intervention's frame {start}, but the pair has \
                          {frames} frames: predict at most {}",

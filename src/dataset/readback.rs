@@ -25,6 +25,20 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
     let value: serde_json::Value =
         serde_json::from_slice(&scenario_json).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let (frames, cars) = (summary.frames as usize, summary.cars.len());
+    // Every pose row takes at least this many bytes: a scenario.json that
+    // claims more rows than poses.csv can hold is refused before any
+    // memory is set aside for them.
+    const MIN_POSE_ROW_BYTES: u64 = 26;
+    let poses_path = dir.join("poses.csv");
+    let poses_bytes =
+        std::fs::metadata(&poses_path).map_err(|e| format!("cannot read {}: {e}", poses_path.display()))?.len();
+    if (frames as u64).saturating_mul(cars as u64).saturating_mul(MIN_POSE_ROW_BYTES) > poses_bytes {
+        return Err(format!(
+            "{}: says {frames} frames x {cars} cars, more rows than {} ({poses_bytes} bytes) can hold",
+            json_path.display(),
+            poses_path.display()
+        ));
+    }
     if let Some(car) = summary.cars.iter().enumerate().find(|(i, c)| c.id as usize != *i) {
         return Err(format!(
             "{}: cars[{}] has id {}; ids must be 0, 1, ... in order",
@@ -60,16 +74,18 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
         }
         a.graph[leader as usize * cars + follower as usize] = 1;
     }
-    read_poses(&dir.join("poses.csv"), &mut a)?;
+    read_poses(&poses_path, &mut a)?;
+    // What the folder must hold follows from scenario.json: effects where
+    // it lists causal edges, the city's logs in the city world.
     let effects = dir.join("effects.csv");
-    if effects.exists() {
+    if value.get("causal_edges").is_some() {
         let threshold = value["effect_threshold_m"].as_f64().ok_or_else(|| {
             format!("{}: effect_threshold_m is missing, but the folder has effects.csv", json_path.display())
         })?;
         a.effects = Some(read_effects(&effects, cars, frames, threshold)?);
     }
     let lights = dir.join("lights.csv");
-    if lights.exists() {
+    if value["world"] == "city" {
         let read = read_lights(&lights, frames)?;
         a.interactions = Some(read_interactions(&dir.join("interactions.csv"), frames, cars, &read.names)?);
         a.events = read_events(&dir.join("events.csv"), frames, cars, &read.names)?;

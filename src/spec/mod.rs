@@ -549,7 +549,6 @@ impl DatasetSpec {
         self.held_out.of(split).and_then(|h| h.map.as_ref()).unwrap_or(&self.map)
     }
 
-    /// The graph shape of `split`'s scenarios: its held-out one, else the dataset's.
     /// The confounder ranges `split` draws from (city world): its held-out
     /// ones, or the city section's.
     pub fn confounders_of(&self, split: Split) -> ConfounderSpec {
@@ -559,6 +558,7 @@ impl DatasetSpec {
         }
     }
 
+    /// The graph shape of `split`'s scenarios: its held-out one, else the dataset's.
     pub fn graph_of(&self, split: Split) -> &GraphSpec {
         self.held_out.of(split).and_then(|h| h.graph.as_ref()).unwrap_or(&self.graph)
     }

@@ -178,7 +178,10 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
     for folder in folders:
         summary = json.loads((folder / "summary.json").read_text())
         if "intervention" not in summary:
-            raise DatasetError(f"{folder / 'summary.json'}: no intervention record; rerun the sweep with this version")
+            raise DatasetError(
+                f"{folder / 'summary.json'}: no intervention record: the sweep was made before summary.json recorded "
+                "it; make it again into a new --out"
+            )
         px, m, meta = _run_arrays(folder / "factual")
         interval = float(meta.get("frame_interval", interval))
         pixels.append(px)
@@ -233,10 +236,11 @@ class FactualCopy(CounterfactualMethod):
 
 
 class ConstantVelocity(CounterfactualMethod):
-    """Every car drives on at its velocity of the frame before the
-    intervention; a stopped car stands still for its ``seconds`` and then
-    drives on, a removed car is not predicted (it has left). Affected cars
-    by :func:`path_rule_affected`."""
+    """Every car drives on at its velocity at the intervention's frame
+    (which the factual run shows: an intervention changes motion only after
+    it); a stopped car stands still for its ``seconds`` and then drives on,
+    a removed car is not predicted (it has left). Affected cars by
+    :func:`path_rule_affected`."""
 
     name = "cf_constant_velocity"
 
@@ -245,13 +249,13 @@ class ConstantVelocity(CounterfactualMethod):
         for k in range(len(pairs)):
             iv = pairs.interventions[k]
             f, car, steps = int(iv["frame"]), int(iv["car"]), pairs.steps(k)
-            last = pairs.pixels[k, f - 1]
-            velocity = pairs.pixels[k, f - 1] - pairs.pixels[k, max(f - 2, 0)]
-            ahead = np.arange(1, steps + 1)[:, None, None]
+            last = pairs.pixels[k, f]
+            velocity = pairs.pixels[k, f] - pairs.pixels[k, max(f - 1, 0)]
+            ahead = np.arange(steps)[:, None, None]
             out = last[None] + ahead * velocity[None]
             if iv["do"] == "stop":
                 stopped = int(round(float(iv.get("seconds", 0.0)) / pairs.frame_interval))
-                moving = np.clip(np.arange(1, steps + 1) - stopped, 0, None)
+                moving = np.clip(np.arange(steps) - stopped, 0, None)
                 out[:, car] = last[car][None] + moving[:, None] * velocity[car][None]
             positions.append(out)
             affected[k] = path_rule_affected(pairs, k, steps)
@@ -261,8 +265,9 @@ class ConstantVelocity(CounterfactualMethod):
 class NriRollout(CounterfactualMethod):
     """NRI (:class:`~causalcity.methods.nri.Nri`) trained on the train pairs'
     factual runs, its edges from the factual history, its decoder rolled out
-    from the intervention's frame with the intervened car held still
-    (``stop``, for its seconds) or sending no messages (``remove``);
+    from the intervention's frame (which it takes from the factual run: an
+    intervention changes motion only after it) with the intervened car held
+    still (``stop``, for its seconds) or sending no messages (``remove``);
     ``set_desired_speed`` and ``run_red_light`` are rolled out unchanged. A
     car's affected score is how far (pixels) its rollout with the
     intervention moves from the same rollout without it."""
@@ -295,37 +300,41 @@ class NriRollout(CounterfactualMethod):
             for k in range(len(pairs)):
                 iv = pairs.interventions[k]
                 f, car, steps = int(iv["frame"]), int(iv["car"]), pairs.steps(k)
-                warm = max(1, min(nri.warm, f))
+                # Truth up to frame f (the factual run's), predictions after it.
+                warm = max(1, min(nri.warm, f + 1))
                 x = x_all[k : k + 1]
                 edges, _, _ = nri._edges(x, hist, sample=False)
-                start = torch.tensor([f - warm], device=nri.device)
-                seq, past = nri._window(x, start, warm + steps)
-                held = x[0, f - 1, car].clone()
+                start = torch.tensor([f - warm + 1], device=nri.device)
+                seq, past = nri._window(x, start, warm + steps - 1)
+                held = x[0, f, car].clone()
                 stop_frames = int(round(float(iv.get("seconds", 0.0)) / pairs.frame_interval))
 
                 def rollout(intervene: bool) -> torch.Tensor:
                     e = edges.clone()
-                    if intervene and iv["do"] == "remove" and e.shape[-1] > 1:
+                    if intervene and iv["do"] == "remove":
                         for index, (i, _j) in enumerate(nri.pairs):
                             if i == car:
+                                # no message: the "none" type, or no weight with one type
                                 e[:, index] = 0.0
-                                e[:, index, 0] = 1.0
+                                if e.shape[-1] > 1:
+                                    e[:, index, 0] = 1.0
                     weights = nri.decoder._message_weights()
                     hidden = torch.zeros(1, pairs.cars, nri.decoder.hidden, device=nri.device)
-                    state, memory, out = seq[:, 0], past, []
-                    for t in range(warm + steps - 1):
+                    state, memory, out = seq[:, 0], past, [seq[0, warm - 1]]
+                    for t in range(warm + steps - 2):
                         if t < warm:
                             state = seq[:, t]
                         memory = torch.cat([state[:, :, None], memory[:, :, :-1]], dim=2)
                         state, hidden = nri.decoder.step(state, hidden, e, memory, weights)
-                        frame = f - warm + t + 1
-                        if intervene and iv["do"] == "stop" and f <= frame < f + stop_frames:
+                        frame = f - warm + t + 2
+                        if intervene and iv["do"] == "stop" and f < frame <= f + stop_frames:
                             state = state.clone()
                             state[:, car, :2] = held[:2]
                             state[:, car, 2:] = still_velocity
-                        out.append(state)
-                    # frames f .. f + steps - 1
-                    return torch.stack(out[warm - 1 :], dim=1)[0]
+                        if frame > f:
+                            out.append(state[0])
+                    # frames f (the factual one) .. f + steps - 1
+                    return torch.stack(out)
 
                 with_it, without = rollout(True), rollout(False)
                 px = (with_it * std + mean)[..., :2].cpu().double().numpy() * np.array([w, h])
