@@ -343,3 +343,14 @@ def test_a_sweep_reads_back_as_its_pairs_and_refuses_the_discovery_methods(sweep
     assert main(["cf_copy", str(tmp_path), "--out", str(tmp_path / "c.npz")]) == 2
     assert "give a counterfactual --sweep output" in capsys.readouterr().err
     assert not (tmp_path / "g.npz").exists() and not (tmp_path / "c.npz").exists()
+
+
+def test_progress_prints_tenths_when_piped_not_a_line_per_step(capsys):
+    from causalcity.methods.common import Progress
+
+    progress = Progress("nri cars08_edges50", 600)
+    for _ in range(600):
+        progress.step(note="train 1.0 val 1.0")
+    lines = capsys.readouterr().err.splitlines()
+    assert 10 <= len(lines) <= 11, lines
+    assert lines[-1].startswith("nri cars08_edges50 [########################] 600/600")
