@@ -141,10 +141,13 @@ def load(folder: PathLike, images: bool = True) -> "Scenario":
 class Dataset:
     """A dataset folder ``gen`` wrote, opened for reading: its manifest, the
     spec it was made from (:attr:`spec`, a :class:`~causalcity.Spec`), its
-    keys and its scenarios, read lazily one at a time. ``dataset[key]`` and
-    iteration give :class:`~causalcity.Scenario` objects."""
+    keys and its scenarios, read lazily one at a time. ``dataset[key]``,
+    ``dataset[i]`` (the i-th of :meth:`keys`) and iteration give
+    :class:`~causalcity.Scenario` objects, so that with ``split`` it is a
+    map-style PyTorch dataset: ``DataLoader(open_dataset(root, "train"),
+    collate_fn=causalcity.collate)``."""
 
-    def __init__(self, root: PathLike) -> None:
+    def __init__(self, root: PathLike, split: Optional[str] = None, images: bool = True) -> None:
         from . import Spec
 
         self.root = Path(root)
@@ -164,14 +167,21 @@ class Dataset:
             )
         self.spec = Spec.from_dict(self.manifest["spec"])
         self.images = bool(self.manifest.get("images", False))
+        self.split = split
+        """The split it holds (all when None)."""
+        self._images = images
+        # Listed once: a dataset gen finished does not change under its readers.
+        self._keys = [
+            k for k in self.spec.keys(split, self.manifest.get("limit")) if (self.root / k.folder / "scenario.json").is_file()
+        ]
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the scenarios on disk, in ``gen``'s order (groups,
         then train, val, test, then index); ``split`` keeps one split. A
         sharded or unfinished dataset lists only the folders it has."""
-        return [k for k in self.spec.keys(split, self.manifest.get("limit")) if (self.root / k.folder / "scenario.json").is_file()]
+        return [k for k in self._keys if split is None or k.split == split]
 
-    def load(self, key: "Key", images: bool = True) -> "Scenario":
+    def load(self, key: "Key", images: Optional[bool] = None) -> "Scenario":
         """The scenario of ``key`` (a :class:`~causalcity.Key` or a
         ``(group, split, index)`` tuple), as :func:`load` reads it."""
         from . import Key
@@ -180,14 +190,16 @@ class Dataset:
         folder = self.root / key.folder
         if not (folder / "scenario.json").is_file():
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/scenario.json)")
-        return load(folder, images=images)
+        return load(folder, images=self._images if images is None else images)
 
-    def scenarios(self, split: Optional[str] = None, images: bool = True) -> Iterator["Scenario"]:
+    def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
         """Every scenario of ``split`` (or all), read one at a time."""
         for key in self.keys(split):
             yield self.load(key, images=images)
 
-    def __getitem__(self, key: "Key") -> "Scenario":
+    def __getitem__(self, key: Any) -> "Scenario":
+        if isinstance(key, (int, _np.integer)) and not isinstance(key, bool):
+            return self.load(self._keys[int(key)])
         return self.load(key)
 
     def __iter__(self) -> Iterator["Scenario"]:
@@ -200,10 +212,13 @@ class Dataset:
         return f"Dataset({_os.fspath(self.root)!r}, spec={self.spec.name!r}, scenarios={len(self)})"
 
 
-def open_dataset(root: PathLike) -> Dataset:
+def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = True) -> Dataset:
     """The dataset ``gen`` wrote in ``root``, opened for reading (see
-    :class:`Dataset`)."""
-    return Dataset(root)
+    :class:`Dataset`); ``split`` keeps one split, ``images=False`` reads
+    no frames."""
+    if split is not None and split not in ("train", "val", "test"):
+        raise InputError(f"split {split!r} is not one of train, val, test")
+    return Dataset(root, split, images)
 
 
 

@@ -169,3 +169,17 @@ def test_an_unfinished_dataset_warns_and_lists_what_it_has(tmp_path):
     with pytest.warns(UserWarning, match="unfinished"):
         data = causalcity.open_dataset(root)
     assert len(data.keys()) == 2 and key not in data.keys()
+
+
+def test_a_split_opened_from_disk_is_a_map_style_dataset_for_a_dataloader():
+    torch = pytest.importorskip("torch")
+    data = causalcity.open_dataset(DATA / "city", "test", images=False)
+    assert len(data) == 1 and data.keys() == causalcity.open_dataset(DATA / "city").keys("test")
+    loader = torch.utils.data.DataLoader(data, batch_size=1, collate_fn=causalcity.collate)
+    (batch,) = list(loader)
+    simulated = causalcity.simulate(data.spec, *data.keys()[0])
+    assert batch["key"] == [simulated.key] and "rgb" not in batch
+    np.testing.assert_array_equal(batch["position"][0].numpy(), simulated.position)
+    np.testing.assert_array_equal(batch["graph"][0].numpy(), simulated.graph)
+    with pytest.raises(causalcity.InputError, match="split 'dev'"):
+        causalcity.open_dataset(DATA / "city", "dev")
