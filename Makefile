@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-original-nri fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-original-nri counterfactual-table fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -103,6 +103,12 @@ bench: build python-env
 ## (about 30 min on 2 cores; BENCH_DEVICE=cuda on a GPU). See the script.
 bench-methods: python-env
 	$(VENV)/bin/python benches/nri_methods.py
+
+## The counterfactual task's reference table (docs/evaluation.md): its
+## sweep, the three reference methods, their scores and times (prints,
+## asserts nothing; about 2 minutes on 2 cores).
+counterfactual-table: build python-env
+	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/counterfactual_task.py
 
 ## NRI's own public code against ours on the same springs and toy data
 ## (prints, asserts nothing; about 30 min on 2 cores). Needs a checkout of
