@@ -420,6 +420,50 @@ fn map_size_cost() {
     }
 }
 
+/// Simulation cost per simulated vehicle-second against the number of cars,
+/// on one 6 x 6 grid town (room for 80), 1 thread, poses only, no effects:
+/// the scale issue's target is a flat cost from 4 to 80 cars.
+fn car_count_cost() {
+    println!("\n== City simulation cost per simulated vehicle-second against car count, 6x6 town, 1 thread ==");
+    println!("{:>6} {:>10} {:>12} {:>8}", "cars", "scenarios", "us/veh-s", "ratio");
+    let mut first = None;
+    for cars in [4u32, 8, 16, 32, 48, 64, 80] {
+        let scenarios = (480 / cars).clamp(4, 60);
+        let json = format!(
+            r#"{{"name": "count", "world": "city", "seed": 1, "frames": 150, "frame_interval": 1.0,
+                "groups": [{{"cars": {cars}, "edge_proportion": 0.5}}],
+                "splits": {{"train": {scenarios}, "val": 0, "test": 0}},
+                "map": {{"grid": {{"rows": 6, "columns": 6}}}},
+                "city": {{"confounders": {{}}}}}}"#
+        );
+        let expansion = match DatasetSpec::from_json(&json)
+            .map_err(|e| e.to_string())
+            .and_then(|s| Expansion::from_spec(s).map_err(|e| e.to_string()))
+        {
+            Ok(expansion) => expansion,
+            Err(e) => {
+                println!("{cars:>6} not planned: {e}");
+                continue;
+            }
+        };
+        let plans: Vec<_> = match expansion.keys(None).iter().map(|k| expansion.plan(k)).collect::<Result<Vec<_>, _>>()
+        {
+            Ok(plans) => plans,
+            Err(e) => {
+                println!("{cars:>6} not planned: {e}");
+                continue;
+            }
+        };
+        let t = Instant::now();
+        for plan in &plans {
+            std::hint::black_box(causalcity::world::simulate(&expansion.town_of(plan).map, plan));
+        }
+        let per = t.elapsed().as_secs_f64() * 1e6 / (plans.len() as f64 * cars as f64 * 150.0);
+        let base = *first.get_or_insert(per);
+        println!("{cars:>6} {:>10} {per:>12.2} {:>7.2}x", plans.len(), per / base);
+    }
+}
+
 fn main() {
     // `cargo bench` passes --bench; ignore arguments.
     let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
@@ -427,6 +471,11 @@ fn main() {
     // BENCH_ONLY=perspective: only the perspective cameras' figures.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "perspective") {
         perspective_rates();
+        return;
+    }
+    // BENCH_ONLY=car_count: only the cost against car count.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "car_count") {
+        car_count_cost();
         return;
     }
     // BENCH_ONLY=map_size: only the cost against map size.
@@ -534,6 +583,7 @@ fn main() {
     }
     effects_cost(&root);
     map_size_cost();
+    car_count_cost();
     for world in ["toy", "city"] {
         println!("\n== {world} world, poses only, 12 cars x 150 frames (CSV included) ==");
         let poses_spec = write_world_spec(&root, &format!("poses-{world}"), world, 12, 2000);
