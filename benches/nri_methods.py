@@ -14,8 +14,20 @@ speed, measured side by side in one run (prints figures, asserts nothing).
    epoch and test AUROC, so that a faster batch is not bought with worse
    learning.
 
-Environment: BENCH_SPRINGS_TRAIN (default "500,2000"), BENCH_SPRINGS_EPOCHS
-(default "10,30"), BENCH_DEVICE (default cpu), BENCH_NRI_BEFORE.
+4. (``epoch``) One epoch at the paper's full size: 4,000 toy training
+   scenarios of 8 cars (and 500 val, the val loss included in the epoch),
+   at the paper setting's batch of 128 and at 512; target <= 5 s on one
+   H100-class GPU at 128.
+5. (``toy``) NRI at the toy's full size (4,000 / 500 / 500, 8 cars, 50 %):
+   test AUROC, F1 at val's best threshold and the share of edges whose
+   direction is right, beside Granger on the same data.
+
+Environment: BENCH_ONLY (sections, default "throughput,learning,springs";
+also "epoch" and "toy"), BENCH_SPRINGS_TRAIN (default "500,2000"),
+BENCH_SPRINGS_EPOCHS (default "10,30"), BENCH_SPRINGS_SECONDS (a time limit
+per fit), BENCH_DEVICE (default cpu), BENCH_NRI_BEFORE, BENCH_TOY_TRAIN
+(default 4000), BENCH_TOY_SECONDS (time limit per NRI fit, default none),
+BENCH_TOY_EPOCHS (default 100), BENCH_TOY_METHODS (default "granger,nri").
 """
 
 import importlib.util
@@ -26,6 +38,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Optional
 
 import torch
 
@@ -35,39 +48,52 @@ from causalcity.methods.common import auroc_of, direction_right
 
 ROOT = Path(__file__).resolve().parents[1]
 DEVICE = os.environ.get("BENCH_DEVICE", "cpu")
-SPRINGS_OPTIONS = dict(history=49, steps=10, warm=10, pair_every=1, window=10, warmup_epochs=2)
+# NRI's springs setting: the encoder reads each particle's 49 frames (NRI's
+# node input), the Markovian MLP decoder predicts 10 frames from its own
+# outputs, 256 hidden units, a uniform prior, no warm-up; every simulation
+# once per epoch.
+SPRINGS_OPTIONS = dict(
+    history=49, steps=10, warm=10, pair_every=1, decoder="mlp", encoder_input="nodes", hidden=256, prior=0.5,
+    warmup_epochs=0, windows=1,
+)
 
 
 def springs_figure() -> None:
     sizes = [int(v) for v in os.environ.get("BENCH_SPRINGS_TRAIN", "500,2000").split(",")]
     epochs_grid = [int(v) for v in os.environ.get("BENCH_SPRINGS_EPOCHS", "10,30").split(",")]
-    val = springs.episodes(200, frames=69, seed=2, split="val")
-    test = springs.episodes(500, frames=69, seed=3, split="test")
+    limit = float(os.environ["BENCH_SPRINGS_SECONDS"]) if os.environ.get("BENCH_SPRINGS_SECONDS") else None
+    batch, lr = int(os.environ.get("BENCH_SPRINGS_BATCH", "128")), float(os.environ.get("BENCH_SPRINGS_LR", "1e-3"))
+    sim_device = DEVICE if DEVICE != "cpu" else None
+    val = springs.episodes(500, frames=69, seed=2, split="val", device=sim_device)
+    test = springs.episodes(1000, frames=69, seed=3, split="test", device=sim_device)
     print("== springs, 5 particles (NRI paper: 99.9 % edge accuracy, 50,000 train simulations, 500 epochs) ==")
-    print(f"{'train sims':>10} {'epochs':>6} {'batch':>5} {'edge acc':>8} {'AUROC':>6} {'fit s':>6}")
+    print(f"{'train sims':>10} {'epochs':>6} {'batch':>5} {'edge acc':>8} {'AUROC':>6} {'fit s':>6}  val loss by epoch")
     for size in sizes:
-        train = springs.episodes(size, frames=69, seed=1)
+        train = springs.episodes(size, frames=69, seed=1, device=sim_device)
         for epochs in epochs_grid:
-            batch = 64
-            nri = make("nri", epochs=epochs, batch_size=batch, lr=2e-3, device=DEVICE, quiet=True, **SPRINGS_OPTIONS)
+            nri = make("nri", epochs=epochs, batch_size=batch, lr=lr, device=DEVICE, quiet=True, time_limit_s=limit,
+                       **SPRINGS_OPTIONS)  # fmt: skip
             start = time.perf_counter()
             nri.fit(train, val)
             seconds = time.perf_counter() - start
             scores = nri.predict(test).edges
             auroc = auroc_of(scores, test.graph)
+            curve = " ".join(f"{v:.0f}" for _, _, v in nri.losses[:: max(len(nri.losses) // 10, 1)])
             print(
-                f"{size:>10} {epochs:>6} {batch:>5} {springs.edge_accuracy(scores, test.graph):8.3f} "
-                f"{max(auroc, 1 - auroc):6.3f} {seconds:6.0f}",
+                f"{size:>10} {len(nri.losses):>6} {batch:>5} {springs.edge_accuracy(scores, test.graph):8.3f} "
+                f"{max(auroc, 1 - auroc):6.3f} {seconds:6.0f}  {curve}",
                 flush=True,
             )
     print("target: edge accuracy >= 0.95 with no more data and epochs than the paper")
 
 
-def toy_dataset(folder: Path, train: int, test: int = 0) -> Path:
+def toy_dataset(folder: Path, train: int, test: int = 0, val: Optional[int] = None) -> Path:
     raw = json.loads((ROOT / "configs" / "toy.json").read_text())
     raw["groups"] = [g for g in raw["groups"] if g["cars"] == 8 and g["edge_proportion"] == 0.5]
-    raw["splits"] = {"train": train, "val": max(test // 2, 1), "test": max(test, 1)}
+    raw["splits"] = {"train": train, "val": max(test // 2 if val is None else val, 1), "test": max(test, 1)}
     raw["name"] = f"bench-nri-{train}-{test}"
+    if (folder / "manifest.json").is_file():
+        return folder  # made by an earlier section of this run
     causalcity.generate(raw, folder, images=False, effects=False, progress=False)
     return folder
 
@@ -132,12 +158,85 @@ def learning(tmp: Path) -> None:
               f"{direction:.0%}, {seconds:.0f} s; val loss per epoch: {curve}", flush=True)  # fmt: skip
 
 
+def epoch_time(tmp: Path) -> None:
+    size = int(os.environ.get("BENCH_TOY_TRAIN", "4000"))
+    folder = toy_dataset(tmp / "epoch", size, 500, val=500)
+    train, val = (load_split(folder, "cars08_edges50", s) for s in ("train", "val"))
+    print(f"\n== one NRI epoch, toy 8 cars, {len(train)} train + {len(val)} val scenarios, {device_name()} ==")
+    runs = ((128, 3e-3, False), (128, 3e-3, True), (512, 6e-3, True))
+    if not DEVICE.startswith("cuda"):
+        runs = runs[1:]  # (CUDA graphs are for CUDA only)
+    for batch, lr, graphs in runs:
+        # two epochs: the first pays for the device's warm-up and the capture
+        nri = make("nri", epochs=2, batch_size=batch, lr=lr, device=DEVICE, quiet=True, warmup_epochs=0,
+                   cuda_graphs=graphs)  # fmt: skip
+        nri.fit(train, val)
+        seconds = nri.epoch_seconds[-1]
+        rate = len(train) * nri.windows / seconds
+        how = "CUDA graphs" if graphs and DEVICE.startswith("cuda") else "eager"
+        print(f"batch {batch:>4}, {how:<11}: {seconds:6.2f} s per epoch ({rate:,.0f} windows/s; first epoch "
+              f"{nri.epoch_seconds[0]:.1f} s); val loss by epoch {' '.join(f'{v:.0f}' for _, _, v in nri.losses)}",
+              flush=True)  # fmt: skip
+    print("target: <= 5 s per epoch at batch 128 on one H100-class GPU")
+
+
+def toy_full(tmp: Path) -> None:
+    """NRI and Granger on the toy at full size, scored by `evaluate`."""
+    from causalcity.methods.common import run_method
+
+    size = int(os.environ.get("BENCH_TOY_TRAIN", "4000"))
+    limit = float(os.environ["BENCH_TOY_SECONDS"]) if os.environ.get("BENCH_TOY_SECONDS") else None
+    epochs = int(os.environ.get("BENCH_TOY_EPOCHS", "100"))
+    folder = toy_dataset(tmp / "epoch", size, 500, val=500)
+    group = "cars08_edges50"
+    test = load_split(folder, group, "test")
+    print(f"\n== toy at full size: 8 cars, 50 %, {size}/500/500, {device_name()} ==")
+    wanted = os.environ.get("BENCH_TOY_METHODS", "granger,nri").split(",")
+    runs = [
+        ("granger", dict(quiet=True)),
+        ("nri", dict(epochs=epochs, batch_size=128, lr=3e-3, time_limit_s=limit, device=DEVICE, quiet=True)),
+    ]  # fmt: skip
+    for k, (name, options) in enumerate(r for r in runs if r[0] in wanted):
+        predictions = tmp / f"toy-{k}.npz"
+        start = time.perf_counter()
+        kept = {}
+
+        def build(name=name, options=options):
+            kept["method"] = make(name, **options)
+            return kept["method"]
+
+        run_method(build, folder, predictions, groups=[group], quiet=True)
+        seconds = time.perf_counter() - start
+        report = causalcity.evaluate(folder, predictions, graph="designed")
+        row = next(e for e in report["edges"] if e["split"] == "test")
+        scores = kept["method"].predict(test).edges
+        label = name + "".join(f" {k}={v}" for k, v in options.items() if k in ("decoder", "encoder_input"))
+        epochs_run = len(getattr(kept["method"], "losses", [])) or "-"
+        print(f"{label:<18} test F1 {row['f1']:.3f} AUROC {row['auroc']:.3f} direction right "
+              f"{direction_right(scores, test.graph):.0%}  epochs {epochs_run}, {seconds:.0f} s", flush=True)  # fmt: skip
+
+
+def device_name() -> str:
+    if DEVICE.startswith("cuda") and torch.cuda.is_available():
+        return torch.cuda.get_device_name()
+    return f"cpu, {torch.get_num_threads()} threads"
+
+
+SECTIONS = {"throughput": throughput, "learning": learning, "springs": springs_figure, "epoch": epoch_time,
+            "toy": toy_full}  # fmt: skip
+
+
 def main() -> int:
     torch.manual_seed(0)
+    chosen = os.environ.get("BENCH_ONLY", "throughput,learning,springs").split(",")
+    unknown = [c for c in chosen if c not in SECTIONS]
+    if unknown:
+        print(f"BENCH_ONLY: {', '.join(unknown)} is not a section: use {', '.join(SECTIONS)}", file=sys.stderr)
+        return 2
     with tempfile.TemporaryDirectory(prefix="causalcity-bench-nri-") as tmp:
-        throughput(Path(tmp))
-        learning(Path(tmp))
-        springs_figure()
+        for name in chosen:
+            section = SECTIONS[name]
+            section() if name == "springs" else section(Path(tmp))
     return 0
 
 

@@ -11,7 +11,8 @@ torch = pytest.importorskip("torch", reason='the reference methods need pip inst
 
 from causalcity.methods import make, springs  # noqa: E402
 from causalcity.methods.common import auroc_of  # noqa: E402
-from causalcity.methods.nri import RnnDecoder  # noqa: E402
+from causalcity import InputError  # noqa: E402
+from causalcity.methods.nri import MlpDecoder, RnnDecoder  # noqa: E402
 
 
 @pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
@@ -37,6 +38,60 @@ def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
     assert losses[0] == pytest.approx(losses[1], rel=1e-12)
     assert torch.allclose(grads[0], grads[1], rtol=1e-9, atol=1e-12)
     assert grads[0].abs().sum() > 0
+
+
+@pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
+def test_the_batched_mlp_decoder_is_nri_s_loop(types, skip_first):
+    torch.manual_seed(10 + types)
+    cars = 5
+    pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
+    send, recv = torch.tensor([p[0] for p in pairs]), torch.tensor([p[1] for p in pairs])
+    decoder = MlpDecoder(4, 16, types, skip_first, send, recv).double()
+    seq = torch.randn(3, 12, cars, 4, dtype=torch.float64)
+    edges = torch.softmax(torch.randn(3, len(pairs), types, dtype=torch.float64), -1)
+    losses, grads = [], []
+    for reference in (False, True):
+        decoder.zero_grad()
+        out = decoder(seq, None, edges, truth_until=4, reference=reference)
+        loss = ((out - seq[:, 1:]) ** 2).sum()
+        loss.backward()
+        losses.append(loss.item())
+        grads.append(torch.cat([p.grad.flatten() for p in decoder.parameters() if p.grad is not None]))
+    assert losses[0] == pytest.approx(losses[1], rel=1e-12)
+    assert torch.allclose(grads[0], grads[1], rtol=1e-9, atol=1e-12)
+    assert grads[0].abs().sum() > 0
+    # No memory: a frame's prediction reads only the frame before it.
+    changed = seq.clone()
+    changed[:, 1] += 1.0
+    a, b = decoder(seq, None, edges, truth_until=11), decoder(changed, None, edges, truth_until=11)
+    assert torch.equal(a[:, 2:], b[:, 2:]) and not torch.equal(a[:, 1], b[:, 1])
+
+
+def test_springs_integrate_alike_in_numpy_and_pytorch():
+    numpy_run = springs.simulate(30, frames=20, seed=5)
+    torch_run = springs.simulate(30, frames=20, seed=5, device="cpu")
+    assert np.array_equal(numpy_run[2], torch_run[2])
+    for a, b in zip(numpy_run[:2], torch_run[:2]):
+        assert a.shape == b.shape and np.abs(a - b).max() < 1e-9
+
+
+@pytest.mark.parametrize(
+    "option, value, says",
+    [("decoder", "gru", "use rnn or mlp"), ("encoder_input", "cars", "use pairs, nodes or both"),
+     ("time_limit_s", 0, "seconds above 0")],
+)  # fmt: skip
+def test_nri_refuses_an_unknown_option_value(option, value, says):
+    with pytest.raises(InputError, match=says):
+        make("nri", device="cpu", **{option: value})
+
+
+def test_a_time_limit_keeps_the_epochs_done():
+    train = springs.episodes(20, frames=40, seed=1)
+    nri = make("nri", epochs=50, batch_size=8, device="cpu", quiet=True, history=20, steps=5, warm=5, pair_every=2,
+               window=4, warmup_epochs=0, time_limit_s=1e-6)  # fmt: skip
+    nri.fit(train, None)
+    assert len(nri.losses) == len(nri.epoch_seconds) == 1
+    assert nri.predict(train).edges.shape == (20, 5, 5)
 
 
 def test_springs_follow_nri_s_physics():

@@ -19,7 +19,7 @@ the NRI paper does.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -36,17 +36,21 @@ SAMPLE_EVERY = 100
 
 
 def simulate(
-    sims: int, particles: int = 5, frames: int = 49, seed: int = 0
+    sims: int, particles: int = 5, frames: int = 49, seed: int = 0, device: Optional[str] = None
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``sims`` simulations at once: positions ``[sims, frames, particles, 2]``,
     velocities alike, and the springs ``[sims, particles, particles]``
-    (symmetric 0/1, empty diagonal)."""
+    (symmetric 0/1, empty diagonal). ``device`` (a PyTorch device, e.g.
+    ``cuda``) integrates there in float64, from the same draws: NRI's
+    50,000 simulations take minutes in NumPy, seconds on a GPU."""
     rng = np.random.default_rng(seed)
     upper = np.triu(rng.random((sims, particles, particles)) < 0.5, k=1)
     edges = (upper | upper.transpose(0, 2, 1)).astype(np.float64)
     loc = rng.normal(0.0, LOC_STD, (sims, particles, 2))
     vel = rng.normal(size=(sims, particles, 2))
     vel *= VEL_NORM / np.linalg.norm(vel, axis=-1, keepdims=True)
+    if device is not None:
+        return _simulate_torch(loc, vel, edges, frames, device) + (edges.astype(np.uint8),)
     positions = np.empty((sims, frames, particles, 2))
     velocities = np.empty_like(positions)
 
@@ -76,9 +80,40 @@ def simulate(
     return positions, velocities, edges.astype(np.uint8)
 
 
-def episodes(sims: int, particles: int = 5, frames: int = 49, seed: int = 0, split: str = "train") -> Episodes:
-    """Simulations as :class:`Episodes` a method can fit or predict."""
-    positions, velocities, edges = simulate(sims, particles, frames, seed)
+def _simulate_torch(loc: np.ndarray, vel: np.ndarray, edges: np.ndarray, frames: int, device: str):
+    """:func:`simulate`'s leapfrog loop in PyTorch on ``device``."""
+    import torch
+
+    loc_t, vel_t = (torch.as_tensor(a, dtype=torch.float64, device=device) for a in (loc, vel))
+    e = torch.as_tensor(edges, dtype=torch.float64, device=device)
+    degree = e.sum(dim=-1, keepdim=True)
+
+    def force(x):
+        # sum over j of -k e_ij (x_i - x_j) = -k (degree_i x_i - (E x)_i)
+        return -SPRING * (degree * x - e @ x)
+
+    positions = torch.empty((loc.shape[0], frames) + loc.shape[1:], dtype=torch.float64, device=device)
+    velocities = torch.empty_like(positions)
+    acc = force(loc_t)
+    for frame in range(frames):
+        positions[:, frame], velocities[:, frame] = loc_t, vel_t
+        for _ in range(SAMPLE_EVERY):
+            vel_t = vel_t + 0.5 * DT * acc
+            loc_t = loc_t + DT * vel_t
+            over, under = loc_t > BOX, loc_t < -BOX
+            loc_t = torch.where(over, 2 * BOX - loc_t, torch.where(under, -2 * BOX - loc_t, loc_t))
+            vel_t = torch.where(over, -vel_t.abs(), torch.where(under, vel_t.abs(), vel_t))
+            acc = force(loc_t)
+            vel_t = vel_t + 0.5 * DT * acc
+    return positions.cpu().numpy(), velocities.cpu().numpy()
+
+
+def episodes(
+    sims: int, particles: int = 5, frames: int = 49, seed: int = 0, split: str = "train", device: Optional[str] = None
+) -> Episodes:
+    """Simulations as :class:`Episodes` a method can fit or predict
+    (``device``: see :func:`simulate`)."""
+    positions, velocities, edges = simulate(sims, particles, frames, seed, device)
     speed = np.linalg.norm(velocities, axis=-1)
     metres = np.concatenate([positions, np.zeros_like(speed)[..., None], speed[..., None]], axis=-1)
     return Episodes(
