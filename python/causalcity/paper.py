@@ -31,6 +31,7 @@ import csv
 import dataclasses
 import io
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -140,6 +141,8 @@ SECONDS_PER_SCENARIO = {
     "pcmci": 0.45,
 }
 NEURAL = ("nri", "interaction")
+PARALLEL = ("granger", "pcmci")
+"""The methods that run one process per core."""
 
 
 def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
@@ -160,10 +163,10 @@ def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
         image_size=(1024, 640), frame_interval=0.1,
     )  # fmt: skip
     options = _method_options("nri", setting, device, seed, quiet=True)
-    nri = make("nri", **{**options, "epochs": 1, "warmup_epochs": 0})
-    start = time.monotonic()
+    nri = make("nri", **{**options, "epochs": 2, "warmup_epochs": 0})
     nri.fit(walks, None)
-    return scenarios * nri.windows / max(time.monotonic() - start, 1e-6), str(nri.device)
+    # the second epoch: the first pays for a GPU's warm-up
+    return scenarios * nri.windows / max(nri.epoch_seconds[-1], 1e-6), str(nri.device)
 
 
 def _projected_seconds(name: str, setting: Setting, cars: int, windows_per_s: float) -> float:
@@ -176,7 +179,10 @@ def _projected_seconds(name: str, setting: Setting, cars: int, windows_per_s: fl
         windows = 4 * splits["train"] * epochs + splits["val"] * epochs + scenarios
         # A window costs about what its pairs cost: cars x (cars - 1), 56 at 8 cars.
         return windows / windows_per_s * cars * (cars - 1) / 56
-    return SECONDS_PER_SCENARIO.get(name, 0.05) * scenarios * max(cars, 4) / 8
+    seconds = SECONDS_PER_SCENARIO.get(name, 0.05) * scenarios * max(cars, 4) / 8
+    if name in PARALLEL:
+        seconds *= 2 / max(os.cpu_count() or 1, 2)  # measured on 2 cores; they use every core
+    return seconds
 
 
 def _unit_key(world: str, name: str, group: str, setting: Setting, device: str, seed: int, spec: Spec) -> dict:
@@ -201,18 +207,20 @@ def run(
     specs: Optional[Dict[str, Path]] = None,
     splits: Optional[Dict[str, int]] = None,
     quiet: bool = False,
+    plan_only: bool = False,
 ) -> List[dict]:
     """Runs the experiments and writes everything under ``out``; returns the
     result rows. Work is done in units of (world, method, group), each kept
     under ``out/units/`` when finished: a rerun of the same command skips
-    them, so a run that was cut off continues where it stopped."""
+    them, so a run that was cut off continues where it stopped.
+    ``plan_only`` prints the projected time per world and method and stops
+    there, writing nothing."""
     methods = list(methods or setting.methods)
     for name in methods:
         if name not in METHOD_ORDER and not is_user_method(name):
             raise InputError(f"--method {name} is not one of {', '.join(METHOD_ORDER)}, nor package.module:Class")
         if is_user_method(name):
             make(name, **_method_options(name, setting, device, seed, quiet))  # refused now, not after hours
-    out.mkdir(parents=True, exist_ok=True)
     specs = specs or {w: Path("configs") / f"{w}.json" for w in WORLDS}
     loaded = {world: _spec(Path(specs[world]), world, setting, splits) for world in worlds}
     say = (lambda *a: None) if quiet else (lambda text: print(f"[paper] {text}", file=sys.stderr, flush=True))
@@ -224,8 +232,15 @@ def run(
     say(
         f"{len(units)} units (world x method x group), projected {_clock(sum(projected.values()))} besides "
         f"generating the data (NRI calibrated at {rate:.0f} training windows/s on {on}; the classical methods "
-        "from 2-core CPU figures)"
+        f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"
     )
+    if plan_only:
+        for world in worlds:
+            for name in methods:
+                seconds = sum(v for (w, m, _), v in projected.items() if (w, m) == (world, name))
+                say(f"  {world} {_label(name)}: {_clock(seconds)}")
+        return []
+    out.mkdir(parents=True, exist_ok=True)
     rows: List[dict] = []
     timings: Dict[str, float] = {}
     started, done_projected, done_measured, finished = time.monotonic(), 0.0, 0.0, 0
@@ -469,6 +484,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--splits", help="override scenarios per split, e.g. 40/10/10 (train/val/test)")
     parser.add_argument("--epochs", type=int, help="override the neural methods' epochs")
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--plan", action="store_true", help="print the projected time per world and method, then stop")
     args = parser.parse_args(argv)
     setting = QUICK if args.quick else FULL
     splits = None
@@ -487,10 +503,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     start = time.monotonic()
     try:
         run(out, setting, args.world, args.method, args.device, args.seed,
-            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet)
+            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet, plan_only=args.plan)
     except (InputError, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    if args.plan:
+        return 0
     print((out / "results.md").read_text())
     print(f"wrote {out / 'results.csv'}, {out / 'f1.png'}, {out / 'trajectory.png'} and {out / 'results.md'} "
           f"in {time.monotonic() - start:.0f} s")

@@ -141,6 +141,21 @@ def test_the_paper_pipeline_runs_end_to_end(tmp_path):
     assert json.loads((out / "timings.json").read_text())
 
 
+def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "plan"
+    assert paper.main(["--plan", "--splits", "20/5/5", "--epochs", "2", "--device", "cpu", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "80 units" in err and "projected" in err and "training windows/s on cpu" in err, err
+    for world in paper.WORLDS:
+        for method in paper.METHOD_ORDER:
+            line = next(x for x in err.splitlines() if x.startswith(f"[paper]   {world} {paper._label(method)}:"))
+            assert line.rsplit(" ", 1)[-1][0].isdigit(), line
+    assert not out.exists()
+
+
 def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, capsys):
     from causalcity import paper
 
