@@ -163,10 +163,18 @@ def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
         image_size=(1024, 640), frame_interval=0.1,
     )  # fmt: skip
     options = _method_options("nri", setting, device, seed, quiet=True)
-    nri = make("nri", **{**options, "epochs": 2, "warmup_epochs": 0})
+    # The last epoch is timed: on a GPU the first pays for the warm-up and
+    # the second for capturing the CUDA graphs.
+    on_gpu = options.get("device", "auto") != "cpu" and _torch_cuda()
+    nri = make("nri", **{**options, "epochs": 3 if on_gpu else 2, "warmup_epochs": 0})
     nri.fit(walks, None)
-    # the second epoch: the first pays for a GPU's warm-up
     return scenarios * nri.windows / max(nri.epoch_seconds[-1], 1e-6), str(nri.device)
+
+
+def _torch_cuda() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
 
 
 def _projected_seconds(name: str, setting: Setting, cars: int, windows_per_s: float) -> float:
