@@ -15,18 +15,14 @@ from causalcity import InputError  # noqa: E402
 from causalcity.methods.nri import MlpDecoder, RnnDecoder  # noqa: E402
 
 
-@pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
-def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
-    torch.manual_seed(types)
-    cars = 5
-    pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
-    send, recv = torch.tensor([p[0] for p in pairs]), torch.tensor([p[1] for p in pairs])
-    decoder = RnnDecoder(4, 16, types, skip_first, send, recv, window=6).double()
-    decoder.vel_to_pos = torch.tensor([0.7, 1.3], dtype=torch.float64)
-    decoder.vel_offset = torch.tensor([0.01, -0.02], dtype=torch.float64)
-    seq = torch.randn(3, 12, cars, 4, dtype=torch.float64)
-    past = torch.randn(3, cars, 6, 4, dtype=torch.float64)
-    edges = torch.softmax(torch.randn(3, len(pairs), types, dtype=torch.float64), -1)
+CARS = 5
+PAIRS = [(i, j) for i in range(CARS) for j in range(CARS) if i != j]
+SEND, RECV = torch.tensor([p[0] for p in PAIRS]), torch.tensor([p[1] for p in PAIRS])
+
+
+def assert_batched_is_the_loop(decoder, seq, past, edges):
+    """The batched step and NRI's per-type, per-pair loop give the same
+    outputs, loss and gradients (float64)."""
     losses, grads = [], []
     for reference in (False, True):
         decoder.zero_grad()
@@ -40,26 +36,28 @@ def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
     assert grads[0].abs().sum() > 0
 
 
+def inputs(types: int, seed: int):
+    torch.manual_seed(seed)
+    seq = torch.randn(3, 12, CARS, 4, dtype=torch.float64)
+    edges = torch.softmax(torch.randn(3, len(PAIRS), types, dtype=torch.float64), -1)
+    return seq, edges
+
+
+@pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
+def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
+    seq, edges = inputs(types, types)
+    decoder = RnnDecoder(4, 16, types, skip_first, SEND, RECV, window=6).double()
+    decoder.vel_to_pos = torch.tensor([0.7, 1.3], dtype=torch.float64)
+    decoder.vel_offset = torch.tensor([0.01, -0.02], dtype=torch.float64)
+    past = torch.randn(3, CARS, 6, 4, dtype=torch.float64)
+    assert_batched_is_the_loop(decoder, seq, past, edges)
+
+
 @pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
 def test_the_batched_mlp_decoder_is_nri_s_loop(types, skip_first):
-    torch.manual_seed(10 + types)
-    cars = 5
-    pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
-    send, recv = torch.tensor([p[0] for p in pairs]), torch.tensor([p[1] for p in pairs])
-    decoder = MlpDecoder(4, 16, types, skip_first, send, recv).double()
-    seq = torch.randn(3, 12, cars, 4, dtype=torch.float64)
-    edges = torch.softmax(torch.randn(3, len(pairs), types, dtype=torch.float64), -1)
-    losses, grads = [], []
-    for reference in (False, True):
-        decoder.zero_grad()
-        out = decoder(seq, None, edges, truth_until=4, reference=reference)
-        loss = ((out - seq[:, 1:]) ** 2).sum()
-        loss.backward()
-        losses.append(loss.item())
-        grads.append(torch.cat([p.grad.flatten() for p in decoder.parameters() if p.grad is not None]))
-    assert losses[0] == pytest.approx(losses[1], rel=1e-12)
-    assert torch.allclose(grads[0], grads[1], rtol=1e-9, atol=1e-12)
-    assert grads[0].abs().sum() > 0
+    seq, edges = inputs(types, 10 + types)
+    decoder = MlpDecoder(4, 16, types, skip_first, SEND, RECV).double()
+    assert_batched_is_the_loop(decoder, seq, None, edges)
     # No memory: a frame's prediction reads only the frame before it.
     changed = seq.clone()
     changed[:, 1] += 1.0
