@@ -33,7 +33,9 @@ import io
 import json
 import os
 import sys
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -200,6 +202,17 @@ def _unit_key(world: str, name: str, group: str, setting: Setting, device: str, 
                 seed=seed)  # fmt: skip
 
 
+def _overlapped(units, projected: dict, overlap: bool) -> float:
+    """Projected seconds of ``units``: per world, the neural and the other
+    methods one after the other, or (``overlap``) side by side."""
+    total = 0.0
+    for world in {u[0] for u in units}:
+        neural = sum(projected[u] for u in units if u[0] == world and u[1] in NEURAL)
+        other = sum(projected[u] for u in units if u[0] == world and u[1] not in NEURAL)
+        total += max(neural, other) if overlap else neural + other
+    return total
+
+
 def _clock(seconds: float) -> str:
     seconds = max(0, int(seconds))
     return f"{seconds // 3600}h{seconds // 60 % 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
@@ -216,13 +229,16 @@ def run(
     splits: Optional[Dict[str, int]] = None,
     quiet: bool = False,
     plan_only: bool = False,
+    overlap: Optional[bool] = None,
 ) -> List[dict]:
     """Runs the experiments and writes everything under ``out``; returns the
     result rows. Work is done in units of (world, method, group), each kept
     under ``out/units/`` when finished: a rerun of the same command skips
     them, so a run that was cut off continues where it stopped.
     ``plan_only`` prints the projected time per world and method and stops
-    there, writing nothing."""
+    there, writing nothing. ``overlap`` runs the methods without a network
+    on a thread of their own beside the neural ones (default: when those
+    train on a GPU); the results are the same either way."""
     methods = list(methods or setting.methods)
     for name in methods:
         if name not in METHOD_ORDER and not is_user_method(name):
@@ -237,8 +253,12 @@ def run(
     units = [(world, name, group) for world in worlds for name in methods for group in groups[world]]
     rate, on = _calibrate(setting, device, seed) if any(name in NEURAL for name in methods) else (1.0, device)
     projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rate) for u in units}
+    if overlap is None:
+        overlap = on.startswith("cuda") and any(u[1] in NEURAL for u in units)
+    beside = " with the CPU methods beside the GPU's" if overlap else ""
     say(
-        f"{len(units)} units (world x method x group), projected {_clock(sum(projected.values()))} besides "
+        f"{len(units)} units (world x method x group), projected {_clock(_overlapped(units, projected, overlap))}"
+        f"{beside} besides "
         f"generating the data (NRI calibrated at {rate:.0f} training windows/s on {on}; the classical methods "
         f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"
     )
@@ -249,9 +269,42 @@ def run(
                 say(f"  {world} {_label(name)}: {_clock(seconds)}")
         return []
     out.mkdir(parents=True, exist_ok=True)
-    rows: List[dict] = []
+    records: Dict[Tuple[str, str, str], dict] = {}
     timings: Dict[str, float] = {}
-    started, done_projected, done_measured, finished = time.monotonic(), 0.0, 0.0, 0
+    lock = threading.Lock()
+    clock = dict(started=time.monotonic(), projected=0.0, measured=0.0)
+
+    def finish(world: str, name: str, group: str, data: Path, spec: Spec) -> None:
+        """Runs one unit, or keeps it from an earlier run, and says so."""
+        unit = (world, name, group)
+        folder = name.replace(":", "-")  # a user's package.module:Class, as a folder name
+        record = out / "units" / world / folder / f"{group}.json"
+        key = _unit_key(world, name, group, setting, device, seed, spec)
+        kept = _read_unit(record, key)
+        if kept is None:
+            start = time.monotonic()
+            predictions = out / "predictions" / world / folder / f"{group}.npz"
+            options = _method_options(name, setting, device, seed, quiet)
+            run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
+            report = evaluate(data, predictions, graph=["designed", "causal"], csv=None)
+            seconds = time.monotonic() - start
+            kept = dict(key=key, seconds=seconds, rows=_rows(world, name, report))
+            _write_unit(record, kept)
+            verb = f"done in {_clock(seconds)}"
+        else:
+            seconds, verb = 0.0, "kept from an earlier run"
+        with lock:
+            if seconds:
+                clock["projected"] += projected[unit]
+                clock["measured"] += seconds
+            records[unit] = kept
+            timings[f"{world}/{name}"] = timings.get(f"{world}/{name}", 0.0) + kept["seconds"]
+            left = [u for u in units if u not in records]
+            pace = clock["measured"] / clock["projected"] if clock["projected"] > 0 else 1.0
+            eta = _overlapped(left, projected, overlap) * pace
+            say(f"{len(records)}/{len(units)} {world} {_label(name)} {group}: {verb}; "
+                f"elapsed {_clock(time.monotonic() - clock['started'])}, ETA {_clock(eta)}")  # fmt: skip
+
     for world in worlds:
         spec = loaded[world]
         data = out / "data" / world
@@ -259,36 +312,30 @@ def run(
         say(f"generating {world}: {spec.splits} per group into {data}")
         generate(spec, data, images=False, progress=not quiet)
         timings[f"{world}/generate"] = time.monotonic() - start
-        graphs = ["designed", "causal"]
-        for name in methods:
-            options = _method_options(name, setting, device, seed, quiet)
-            timings[f"{world}/{name}"] = 0.0
-            for group in groups[world]:
-                unit = (world, name, group)
-                folder = name.replace(":", "-")  # a user's package.module:Class, as a folder name
-                record = out / "units" / world / folder / f"{group}.json"
-                key = _unit_key(world, name, group, setting, device, seed, spec)
-                kept = _read_unit(record, key)
-                if kept is None:
-                    start = time.monotonic()
-                    predictions = out / "predictions" / world / folder / f"{group}.npz"
-                    run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
-                    report = evaluate(data, predictions, graph=graphs, csv=None)
-                    seconds = time.monotonic() - start
-                    kept = dict(key=key, seconds=seconds, rows=_rows(world, name, report))
-                    _write_unit(record, kept)
-                    done_projected += projected[unit]
-                    done_measured += seconds
-                    verb = f"done in {_clock(seconds)}"
-                else:
-                    verb = "kept from an earlier run"
-                finished += 1
-                rows += kept["rows"]
-                timings[f"{world}/{name}"] += kept["seconds"]
-                left = sum(projected[u] for u in units[finished:])
-                pace = done_measured / done_projected if done_projected > 0 else 1.0
-                say(f"{finished}/{len(units)} {world} {_label(name)} {group}: {verb}; "
-                    f"elapsed {_clock(time.monotonic() - started)}, ETA {_clock(left * pace)}")  # fmt: skip
+        mine = [u for u in units if u[0] == world]
+        host = [u for u in mine if u[1] not in NEURAL] if overlap else []
+        # The methods without a network run on the CPU's cores while the
+        # neural ones train on the GPU.
+        stop = threading.Event()
+
+        def run_host() -> None:
+            for u in host:
+                if stop.is_set():
+                    return  # the main thread failed or was interrupted
+                finish(*u, data, spec)
+
+        with ThreadPoolExecutor(1) as beside:
+            pending = beside.submit(run_host)
+            try:
+                for u in mine:
+                    if u not in host:
+                        finish(*u, data, spec)
+            except BaseException:
+                stop.set()
+                raise
+            finally:
+                pending.result()
+    rows = [row for u in units for row in records[u]["rows"]]
     _write_csv(out / "results.csv", rows)
     (out / "timings.json").write_text(json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
     _figures(out, rows, worlds)

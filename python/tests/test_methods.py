@@ -141,6 +141,27 @@ def test_the_paper_pipeline_runs_end_to_end(tmp_path):
     assert json.loads((out / "timings.json").read_text())
 
 
+def test_the_cpu_methods_beside_the_neural_ones_give_the_same_results(tmp_path, capsys):
+    # On a GPU the paper runs the methods without a network on a thread of
+    # their own (Granger's processes from a fork server) while NRI trains.
+    from causalcity import paper
+
+    setting = paper.dataclasses.replace(paper.QUICK, splits={"train": 12, "val": 10, "test": 10}, epochs=1, extra={})
+    specs = {w: ROOT / "configs" / f"{w}.json" for w in paper.WORLDS}
+    methods = ["path", "granger", "nri"]
+    runs = {}
+    for overlap in (False, True):
+        out = tmp_path / f"overlap-{overlap}"
+        capsys.readouterr()
+        paper.run(out, setting, ["toy"], methods, "cpu", 0, specs, overlap=overlap)
+        err = capsys.readouterr().err
+        assert ("beside the GPU's" in err) == overlap, err
+        assert err.count("done in") == 15, err
+        runs[overlap] = (out / "results.csv").read_bytes()
+    assert runs[True] == runs[False]
+    assert {r["method"] for r in paper.read_results(tmp_path / "overlap-True" / "results.csv")} == set(methods)
+
+
 def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsys, monkeypatch):
     from causalcity import paper
 

@@ -14,6 +14,20 @@ import numpy as np
 from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress, auroc_of
 
 
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """Worker processes started from a fork server (where the platform has
+    one), with this module loaded once in it: safe while other threads of
+    this process run, such as the paper's NRI training on a GPU beside
+    Granger and PCMCI, which a plain fork of a threaded process is not."""
+    import multiprocessing
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return ProcessPoolExecutor(workers)
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([__name__])
+    return ProcessPoolExecutor(workers, mp_context=context)
+
+
 def observed(episodes: Episodes) -> int:
     """Frames a method may look at: the history, or all when there are fewer."""
     return min(HISTORY, episodes.frames)
@@ -108,7 +122,7 @@ class Granger(Method):
         if self.workers > 1 and len(series) > 8:
             # On every core, results in scenario order: the same scores
             # whatever the number of workers.
-            with ProcessPoolExecutor(self.workers) as pool:
+            with process_pool(self.workers) as pool:
                 for scores in pool.map(granger_scores, series, [lags] * len(series), chunksize=8):
                     out.append(scores)
                     progress.step()
@@ -182,7 +196,7 @@ class Pcmci(Method):
         if self.workers > 1 and len(series) > 1:
             # One scenario per process, results in scenario order: the same
             # scores whatever the number of workers.
-            with ProcessPoolExecutor(self.workers) as pool:
+            with process_pool(self.workers) as pool:
                 for scores in pool.map(self.scores, series):
                     out.append(scores)
                     progress.step()
