@@ -560,6 +560,11 @@ fn scenario_files_are_read_strictly() {
             vec!["interventions[0]", "exactly one trigger"],
         ),
         (
+            "unknown-light",
+            one(r#"{"at": 1, "do": "set_light", "light": "AX/W/straight", "colour": "red", "seconds": 2}"#),
+            vec!["interventions[0].light", "\"AX/W/straight\" is not a light", "(AC AD BC BD; N E S W; straight left)"],
+        ),
+        (
             "vehicle-as-a-list",
             r#"[{"Name": "Strict", "Vehicles": [["Car_1", "A1w"]]}]"#.into(),
             vec!["scenario \"Strict\"", "Vehicles[0]", "invalid type: sequence, expected an object"],

@@ -227,6 +227,43 @@ const LANE_LETTERS: [char; 4] = ['w', 'x', 'y', 'z'];
 pub const SIGNAL_HEAD_SPACING_M: f64 = 1.1;
 
 impl CityMap {
+    /// A light as scenario files and logs name it, e.g. `AC/W/straight`.
+    pub fn light_name(&self, index: usize) -> String {
+        let (intersection, approach, signal) = signals::light_at(index);
+        signals::light_label(&self.intersections[intersection].name, approach, signal.name())
+    }
+
+    /// The index of the light called `text` (`AC/W/straight`), or a message
+    /// naming this map's intersections.
+    pub fn light_by_name(&self, text: &str) -> Result<usize, String> {
+        let parts: Vec<&str> = text.split('/').collect();
+        let found = match parts.as_slice() {
+            [intersection, approach, signal] => {
+                let k = self.intersections.iter().position(|x| x.name == *intersection);
+                let a = approach.chars().next().filter(|c| approach.len() == 1 && signals::APPROACHES.contains(c));
+                let s = match *signal {
+                    "straight" => Some(signals::Signal::Straight),
+                    "left" => Some(signals::Signal::Left),
+                    _ => None,
+                };
+                match (k, a, s) {
+                    (Some(k), Some(a), Some(s)) => Some(signals::light_index(k, a, s)),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        found.ok_or_else(|| {
+            let mut names: Vec<&str> = self.intersections.iter().map(|x| x.name.as_str()).collect();
+            names.sort_unstable();
+            let example = names.first().copied().unwrap_or("AC");
+            format!(
+                "{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"{example}/W/straight\" ({}; N E S W; straight left)",
+                names.join(" ")
+            )
+        })
+    }
+
     /// Where the head of light (`intersection`, `approach`, `signal`) stands,
     /// metres: on the pavement beside the kerb of the approach's outer lane,
     /// level with its stop line (the left head [`SIGNAL_HEAD_SPACING_M`]
