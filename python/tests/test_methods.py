@@ -390,3 +390,27 @@ def test_progress_prints_tenths_when_piped_not_a_line_per_step(capsys):
     lines = capsys.readouterr().err.splitlines()
     assert 10 <= len(lines) <= 11, lines
     assert lines[-1].startswith("nri cars08_edges50 [########################] 600/600")
+
+
+def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys):
+    from causalcity.methods.__main__ import main
+
+    out = tmp_path / "nri.npz"
+    args = ["nri", str(toy), "--out", str(out), "--group", "cars06_edges50", "--device", "cpu", "--epochs", "50",
+            "--batch-size", "64", "--lr", "2e-3", "--decoder", "mlp", "--encoder-input", "both", "--time-limit", "1e-6"]  # fmt: skip
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    # the time limit stopped it after one epoch of fifty
+    assert "1/50" in err and "2/50" not in err, err
+    with np.load(out) as arrays:
+        scores = [arrays[k] for k in arrays.files if k.startswith("cars06_edges50/test/") and k.count("/") == 2]
+    assert scores and all(s.shape == (6, 6) for s in scores)
+    def exit_code(args):
+        try:
+            return main(args)
+        except SystemExit as e:  # argparse refuses its own
+            return e.code
+
+    for bad in (["--lr", "-1"], ["--time-limit", "0"], ["--batch-size", "0"], ["--decoder", "gru"]):
+        assert exit_code(["nri", str(toy), "--out", str(tmp_path / "bad.npz"), "--device", "cpu", *bad]) == 2, bad
+        assert not (tmp_path / "bad.npz").exists()

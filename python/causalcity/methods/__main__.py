@@ -35,6 +35,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
     parser.add_argument("--epochs", type=_positive, help="nri, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", default="auto", help="nri, interaction: cpu, cuda or auto (default)")
+    parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; 128 on a GPU)")
+    parser.add_argument("--lr", type=float, help="nri, interaction: Adam's learning rate (default 1e-3)")
+    parser.add_argument("--decoder", choices=["rnn", "mlp"],
+                        help="nri, interaction: rnn (default, with memory) or mlp (NRI's Markovian springs decoder)")
+    parser.add_argument("--encoder-input", choices=["pairs", "nodes", "both"],
+                        help="nri: pairs (default), nodes (NRI's: each car's own states) or both")
+    parser.add_argument("--time-limit", type=float, metavar="SECONDS",
+                        help="nri, interaction: stop training after the epoch that reaches this many seconds")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
@@ -43,8 +51,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
     elif args.method in ("nri", "interaction"):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
-        if args.epochs is not None:
-            options["epochs"] = args.epochs
+        given = dict(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, decoder=args.decoder,
+                     time_limit_s=args.time_limit)  # fmt: skip
+        if args.method == "nri":
+            given["encoder_input"] = args.encoder_input
+        options.update({k: v for k, v in given.items() if v is not None})
     elif args.method in ("granger", "pcmci"):
         options["quiet"] = args.quiet
     elif args.method == "frame0":
