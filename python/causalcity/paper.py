@@ -149,8 +149,9 @@ PARALLEL = ("granger", "pcmci")
 
 def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
     """Training windows per second of NRI with this setting's batch on
-    ``device``, 8 cars, 150 frames, measured on one short epoch of random
-    walks (a few seconds), and the device it ran on."""
+    ``device``, 8 cars, 150 frames, measured on the last of two short
+    epochs of random walks (three on a GPU), its val pass included (a few
+    seconds), and the device it ran on."""
     import numpy as np
 
     from .methods.common import Episodes
@@ -313,7 +314,8 @@ def run(
         generate(spec, data, images=False, progress=not quiet)
         timings[f"{world}/generate"] = time.monotonic() - start
         mine = [u for u in units if u[0] == world]
-        host = [u for u in mine if u[1] not in NEURAL] if overlap else []
+        # (built-in methods only: a user's method may use torch and the GPU)
+        host = [u for u in mine if u[1] in METHOD_ORDER and u[1] not in NEURAL] if overlap else []
         # The methods without a network run on the CPU's cores while the
         # neural ones train on the GPU.
         stop = threading.Event()
@@ -329,12 +331,15 @@ def run(
             try:
                 for u in mine:
                     if u not in host:
+                        if pending.done():
+                            pending.result()  # a failed CPU unit stops the run now, not after the GPU's
                         finish(*u, data, spec)
+                pending.result()
             except BaseException:
+                # The CPU thread ends after the unit it is in; this error, not
+                # the thread's, is the one raised.
                 stop.set()
                 raise
-            finally:
-                pending.result()
     rows = [row for u in units for row in records[u]["rows"]]
     _write_csv(out / "results.csv", rows)
     (out / "timings.json").write_text(json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
@@ -558,7 +563,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     start = time.monotonic()
     try:
         run(out, setting, args.world, args.method, args.device, args.seed,
-            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet, plan_only=args.plan)
+            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet and not args.plan, plan_only=args.plan)
     except (InputError, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -162,6 +162,26 @@ def test_the_cpu_methods_beside_the_neural_ones_give_the_same_results(tmp_path, 
     assert {r["method"] for r in paper.read_results(tmp_path / "overlap-True" / "results.csv")} == set(methods)
 
 
+def test_a_cpu_method_that_fails_beside_the_neural_ones_stops_the_run_with_its_error(tmp_path, monkeypatch):
+    from causalcity import paper
+
+    real = paper.make
+
+    def broken(name, **options):
+        if name == "path":
+            raise RuntimeError("the path rule broke")
+        return real(name, **options)
+
+    monkeypatch.setattr(paper, "make", broken)
+    setting = paper.dataclasses.replace(paper.QUICK, splits={"train": 3, "val": 2, "test": 2}, epochs=1, extra={})
+    specs = {w: ROOT / "configs" / f"{w}.json" for w in paper.WORLDS}
+    out = tmp_path / "paper"
+    with pytest.raises(RuntimeError, match="the path rule broke"):
+        paper.run(out, setting, ["toy"], ["path", "nri"], "cpu", 0, specs, quiet=True, overlap=True)
+    assert not list((out / "units" / "toy" / "path").glob("*.json"))
+    assert not (out / "results.csv").exists()
+
+
 def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsys, monkeypatch):
     from causalcity import paper
 
@@ -396,12 +416,12 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
     from causalcity.methods.__main__ import main
 
     out = tmp_path / "nri.npz"
-    args = ["nri", str(toy), "--out", str(out), "--group", "cars06_edges50", "--device", "cpu", "--epochs", "50",
+    args = ["nri", str(toy), "--out", str(out), "--group", "cars06_edges50", "--device", "cpu", "--epochs", "12",
             "--batch-size", "64", "--lr", "2e-3", "--decoder", "mlp", "--encoder-input", "both", "--time-limit", "1e-6"]  # fmt: skip
     assert main(args) == 0
     err = capsys.readouterr().err
-    # the time limit stopped it after one epoch of fifty
-    assert "1/50" in err and "2/50" not in err, err
+    # the time limit stopped it after the five warm-up epochs and one with edges
+    assert "6/12" in err and "7/12" not in err and "12/12" not in err, err
     with np.load(out) as arrays:
         scores = [arrays[k] for k in arrays.files if k.startswith("cars06_edges50/test/") and k.count("/") == 2]
     assert scores and all(s.shape == (6, 6) for s in scores)

@@ -35,7 +35,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
     parser.add_argument("--epochs", type=_positive, help="nri, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", default="auto", help="nri, interaction: cpu, cuda or auto (default)")
-    parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; 128 on a GPU)")
+    parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; use 128 or more on a GPU)")
     parser.add_argument("--lr", type=float, help="nri, interaction: Adam's learning rate (default 1e-3)")
     parser.add_argument("--decoder", choices=["rnn", "mlp"],
                         help="nri, interaction: rnn (default, with memory) or mlp (NRI's Markovian springs decoder)")

@@ -15,13 +15,16 @@ from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress, auroc
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
-    """Worker processes started from a fork server (where the platform has
-    one), with this module loaded once in it: safe while other threads of
-    this process run, such as the paper's NRI training on a GPU beside
-    Granger and PCMCI, which a plain fork of a threaded process is not."""
+    """Worker processes. While other threads of this process run (the
+    paper's NRI training on a GPU beside Granger and PCMCI), they start
+    from a fork server with this module loaded once in it, where the
+    platform has one: a plain fork of a threaded process is not safe.
+    Otherwise the platform's default, so that a user's script without an
+    ``if __name__ == "__main__"`` guard keeps working."""
     import multiprocessing
+    import threading
 
-    if "forkserver" not in multiprocessing.get_all_start_methods():
+    if threading.active_count() == 1 or "forkserver" not in multiprocessing.get_all_start_methods():
         return ProcessPoolExecutor(workers)
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload([__name__])
