@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-original-nri counterfactual-table fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-gpu bench-original-nri counterfactual-table fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -103,6 +103,13 @@ bench: build python-env
 ## (about 30 min on 2 cores; BENCH_DEVICE=cuda on a GPU). See the script.
 bench-methods: python-env
 	$(VENV)/bin/python benches/nri_methods.py
+
+## Issue 35's GPU figures in one run of about 9 minutes on one H100-class
+## GPU: the full setting's projection, one NRI epoch at the paper's size
+## (eager against CUDA graphs), NRI against Granger on the full-size toy,
+## and NRI on NRI's springs at NRI's size. See the script.
+bench-gpu: python-env
+	PYTHON=$(VENV)/bin/python bash benches/gpu_check.sh
 
 ## The counterfactual task's reference table (docs/evaluation.md): its
 ## sweep, the three reference methods, their scores and times (prints,
