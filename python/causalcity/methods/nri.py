@@ -138,6 +138,7 @@ class MlpDecoder(nn.Module):
     def __init__(self, n_in: int, hidden: int, types: int, skip_first: bool, send, recv) -> None:
         super().__init__()
         self.skip_first, self.hidden = skip_first, hidden
+        self.send, self.recv = send, recv
         cars = int(max(send.max(), recv.max())) + 1 if len(send) else 0
         self.register_buffer("send_matrix", F.one_hot(send, cars).float(), persistent=False)
         self.register_buffer("recv_matrix", F.one_hot(recv, cars).float(), persistent=False)
@@ -173,9 +174,7 @@ class MlpDecoder(nn.Module):
     def step_reference(self, x: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
         """:meth:`step` as NRI writes it, one edge type after another on each
         pair's full input: the reference the batched step is tested against."""
-        send = self.send_matrix.argmax(dim=1)
-        recv = self.recv_matrix.argmax(dim=1)
-        pre = torch.cat([x[:, send], x[:, recv]], dim=-1)
+        pre = torch.cat([x[:, self.send], x[:, self.recv]], dim=-1)
         msg = torch.zeros(x.shape[0], pre.shape[1], self.hidden, device=x.device)
         for k in self._types():
             msg = msg + F.relu(self.msg2[k](F.relu(self.msg1[k](pre)))) * edges[:, :, k : k + 1]
@@ -335,8 +334,9 @@ class _GraphedStep:
     runs eagerly. If a capture fails, training goes on eagerly with a
     warning."""
 
-    def __init__(self, loss_fn, opt, eager_first: int = 3) -> None:
+    def __init__(self, loss_fn, opt, graphs: bool, eager_first: int = 3) -> None:
         self.loss_fn, self.opt, self.eager_first = loss_fn, opt, eager_first
+        self.graphs_on = graphs
         self.graphs: dict = {}
         self.eager_steps: dict = {}
         self.failed: Optional[str] = None
@@ -344,7 +344,8 @@ class _GraphedStep:
     def __call__(self, phase, batch: torch.Tensor, first: torch.Tensor, full: bool) -> torch.Tensor:
         """The batch's loss (on the device) after one optimiser step."""
         graphed = self.graphs.get(phase)
-        if graphed is None and full and self.failed is None and self.eager_steps.get(phase, 0) >= self.eager_first:
+        ready = self.graphs_on and self.failed is None and self.eager_steps.get(phase, 0) >= self.eager_first
+        if graphed is None and full and ready:
             graphed = self._capture(phase, batch, first)
         if graphed is not None and full:
             graph, static_batch, static_first, static_loss = graphed
@@ -552,7 +553,7 @@ class Nri(Method):
         opt = torch.optim.Adam(params, lr=self.lr, capturable=graphs)
         x_train = self._tensor(states)
         step = _GraphedStep(
-            lambda b, f: self._loss(b, hist, steps, f, sample=True), opt, eager_first=3 if graphs else 10**18
+            lambda b, f: self._loss(b, hist, steps, f, sample=True), opt, graphs
         )
         # Training windows start where the test window does or later, so the
         # frames the decoder predicts are never ones the encoder saw: edges
