@@ -203,14 +203,21 @@ def _unit_key(world: str, name: str, group: str, setting: Setting, device: str, 
                 seed=seed)  # fmt: skip
 
 
+def _runs_beside(name: str) -> bool:
+    """Whether ``name`` runs on the CPU thread beside the neural methods
+    (built-in methods only: a user's may use torch and the GPU)."""
+    return name in METHOD_ORDER and name not in NEURAL
+
+
 def _overlapped(units, projected: dict, overlap: bool) -> float:
-    """Projected seconds of ``units``: per world, the neural and the other
-    methods one after the other, or (``overlap``) side by side."""
+    """Projected seconds of ``units``: per world, the methods that run beside
+    the neural ones and all the others, one after the other or
+    (``overlap``) side by side."""
     total = 0.0
     for world in {u[0] for u in units}:
-        neural = sum(projected[u] for u in units if u[0] == world and u[1] in NEURAL)
-        other = sum(projected[u] for u in units if u[0] == world and u[1] not in NEURAL)
-        total += max(neural, other) if overlap else neural + other
+        beside = sum(projected[u] for u in units if u[0] == world and _runs_beside(u[1]))
+        main = sum(projected[u] for u in units if u[0] == world and not _runs_beside(u[1]))
+        total += max(beside, main) if overlap else beside + main
     return total
 
 
@@ -314,8 +321,7 @@ def run(
         generate(spec, data, images=False, progress=not quiet)
         timings[f"{world}/generate"] = time.monotonic() - start
         mine = [u for u in units if u[0] == world]
-        # (built-in methods only: a user's method may use torch and the GPU)
-        host = [u for u in mine if u[1] in METHOD_ORDER and u[1] not in NEURAL] if overlap else []
+        host = [u for u in mine if _runs_beside(u[1])] if overlap else []
         # The methods without a network run on the CPU's cores while the
         # neural ones train on the GPU.
         stop = threading.Event()
