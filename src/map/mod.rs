@@ -154,6 +154,18 @@ pub enum Turn {
     UTurn,
 }
 
+impl Turn {
+    /// Index of the turn in a per-lane table of exits.
+    fn slot(self) -> usize {
+        match self {
+            Turn::Left => 0,
+            Turn::Right => 1,
+            Turn::Straight => 2,
+            Turn::UTurn => 3,
+        }
+    }
+}
+
 /// What a lane runs into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LaneEnd {
@@ -207,8 +219,9 @@ pub struct CityMap {
     pub connectors: Vec<Connector>,
     pub intersections: Vec<Intersection>,
     lane_by_name: HashMap<String, LaneId>,
-    /// (lane, turn) -> connector leaving that lane.
-    exits: HashMap<(LaneId, Turn), ConnectorId>,
+    /// Per lane, the connector leaving it for each turn (indexed by
+    /// [`Turn::slot`]): looked up at every decision, so a table, not a hash.
+    exits: Vec<[Option<ConnectorId>; 4]>,
     /// For each connector, the connectors of the same intersection whose
     /// paths cross or meet it (cars on them could collide).
     conflicts: Vec<Vec<ConnectorId>>,
@@ -410,7 +423,10 @@ impl CityMap {
         debug_assert!(pending_loops.iter().all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
 
         let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
-        let exits = connectors.iter().enumerate().map(|(i, c)| ((c.from, c.turn), i)).collect();
+        let mut exits = vec![[None; 4]; lanes.len()];
+        for (i, c) in connectors.iter().enumerate() {
+            exits[c.from][c.turn.slot()] = Some(i);
+        }
         let conflicts = find_conflicts(&connectors);
         CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts }
     }
@@ -430,7 +446,7 @@ impl CityMap {
 
     /// The connector that performs `turn` at the end of `lane`, if allowed.
     pub fn exit(&self, lane: LaneId, turn: Turn) -> Option<ConnectorId> {
-        self.exits.get(&(lane, turn)).copied()
+        self.exits.get(lane).and_then(|slots| slots[turn.slot()])
     }
 
     /// Every connector leaving the end of `lane`.

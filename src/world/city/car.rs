@@ -77,7 +77,31 @@ pub(super) struct SimCar<'p> {
     pub(super) speed_factor: f64,
     /// Followers: the index of the car it follows (cars are in id order).
     pub(super) leader: Option<usize>,
+    /// A centre-line point near the car, for the cheap distance bound of
+    /// [`SimCar::near_point`]; `None` after the route changed.
+    pub(super) anchor: Option<Anchor>,
 }
+
+/// Where the car's centre was at route arc length `s` and sideways offset
+/// `wander` on route leg `leg`. While the car stays on that leg (one curve
+/// parameterised by arc length), its centre is within
+/// `ARC_SLACK·|Δs| + |Δwander| + |wander|·min(2, |Δs|)` of `point`: the
+/// centre line moves at most the arc length, and the offset's direction
+/// turns by at most the curvature (below 1 per metre on every road) times it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Anchor {
+    point: DVec2,
+    s: f64,
+    wander: f64,
+    leg: usize,
+}
+
+/// Bound on metres of path per metre of route arc length: 1 on lines and
+/// arcs; a lane change's arc length is a cubic Hermite fit, off by far less
+/// than this allows.
+const ARC_SLACK: f64 = 1.1;
+/// How far (metres) the bound may grow before the anchor moves to the car.
+const ANCHOR_REACH: f64 = 0.5;
 
 /// A drive queue waiting to replace the rest of a car's own.
 pub(super) struct PendingQueue {
@@ -157,6 +181,7 @@ impl<'p> SimCar<'p> {
             driver: agency.driver,
             speed_factor: 1.0,
             leader: plan.leader.map(|id| id as usize),
+            anchor: None,
         }
     }
 }
@@ -182,6 +207,30 @@ impl SimCar<'_> {
         self.route.pose_at(self.s, self.wander)
     }
 
+    /// A point and a radius (metres) such that the car's centre is within
+    /// the radius of the point, without the trigonometry of [`SimCar::pose`]
+    /// most of the time: collision checks skip pairs that are clearly apart.
+    pub(super) fn near_point(&mut self) -> (DVec2, f64) {
+        let radius = |a: &Anchor, car: &SimCar| {
+            let ds = (car.s - a.s).abs();
+            ARC_SLACK * ds + (car.wander - a.wander).abs() + a.wander.abs() * ds.min(2.0)
+        };
+        let fresh = self.anchor.is_some_and(|a| a.leg == self.leg && radius(&a, self) <= ANCHOR_REACH);
+        if !fresh {
+            let point = self.pose().0;
+            self.anchor = Some(Anchor { point, s: self.s, wander: self.wander, leg: self.leg });
+        }
+        let a = self.anchor.expect("set above");
+        let r = radius(&a, self);
+        debug_assert!(
+            self.pose().0.distance(a.point) <= r + 1e-9,
+            "car {} is {} m from its anchor, beyond the bound {r}",
+            self.plan.id,
+            self.pose().0.distance(a.point)
+        );
+        (a.point, r)
+    }
+
     /// The car's rectangle on the ground.
     pub(super) fn footprint(&self) -> OrientedBox {
         let (centre, heading) = self.pose();
@@ -202,6 +251,7 @@ impl SimCar<'_> {
     /// action is drive-queue action `action_base`.
     pub(super) fn follow_route(&mut self, route: Route, lane_s: f64, action_base: usize) {
         self.route = route;
+        self.anchor = None;
         self.s = lane_s;
         self.leg = self.route.leg_index_at(lane_s);
         self.action_base = action_base;

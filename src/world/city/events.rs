@@ -3,11 +3,13 @@
 //! turn, the end of the drive queue), actions planning adapted or skipped,
 //! and collisions, after which both cars stand still for a few seconds.
 
+use super::car::SimCar;
 use super::Sim;
 use crate::geometry::OrientedBox;
 use crate::map::signals::Colour;
 use crate::map::{Action, AdaptationKind, LegKind};
 use crate::world::{Event, EventKind};
+use glam::DVec2;
 use rand::RngExt;
 
 /// Gap at which two cars that collided count as apart again, metres.
@@ -170,34 +172,49 @@ impl Sim<'_> {
     }
 
     /// Finds pairs of cars whose footprints newly overlap at time `now`
-    /// (seconds): logs each collision and holds both cars still.
+    /// (seconds): logs each collision and holds both cars still. Pairs
+    /// clearly apart by [`SimCar::near_point`] are settled without their
+    /// footprints (the same outcome: not near); a footprint is computed
+    /// once, when a pair first needs it.
     pub(super) fn detect_collisions(&mut self, now: f64) {
-        let boxes: Vec<OrientedBox> = self.cars.iter().map(|car| car.footprint()).collect();
-        for i in 0..boxes.len() {
-            for j in i + 1..boxes.len() {
-                if self.new_contact(i, j, &boxes) {
+        let near_points: Vec<(DVec2, f64)> = self.cars.iter_mut().map(SimCar::near_point).collect();
+        let mut boxes: Vec<Option<OrientedBox>> = vec![None; self.cars.len()];
+        for i in 0..self.cars.len() {
+            for j in i + 1..self.cars.len() {
+                if self.cars[i].removed || self.cars[j].removed {
+                    continue;
+                }
+                let reach = self.cars[i].reach + self.cars[j].reach;
+                let ((pi, ri), (pj, rj)) = (near_points[i], near_points[j]);
+                // A lower bound on the centres' distance, with room for round-off.
+                if pi.distance(pj) - ri - rj >= reach + CONTACT_RELEASE + 1e-6 {
+                    if !self.contacts.is_empty() {
+                        self.contacts.remove(&(i, j));
+                    }
+                    continue;
+                }
+                let bi = *boxes[i].get_or_insert_with(|| self.cars[i].footprint());
+                let bj = *boxes[j].get_or_insert_with(|| self.cars[j].footprint());
+                if self.new_contact(i, j, reach, &bi, &bj) {
                     self.collide(i, j, now);
                 }
             }
         }
     }
 
-    /// Whether cars `i < j` (footprints `boxes`) have just touched. A contact
-    /// ends only once the cars are clearly apart ([`CONTACT_RELEASE`]), so
-    /// sideways wander does not log one crash many times.
-    fn new_contact(&mut self, i: usize, j: usize, boxes: &[OrientedBox]) -> bool {
-        if self.cars[i].removed || self.cars[j].removed {
-            return false;
-        }
-        let reach = self.cars[i].reach + self.cars[j].reach;
-        let near = boxes[i].centre.distance(boxes[j].centre) < reach + CONTACT_RELEASE;
+    /// Whether cars `i < j` (footprints `a` and `b`, `reach` the sum of
+    /// their half diagonals) have just touched. A contact ends only once the
+    /// cars are clearly apart ([`CONTACT_RELEASE`]), so sideways wander does
+    /// not log one crash many times.
+    fn new_contact(&mut self, i: usize, j: usize, reach: f64, a: &OrientedBox, b: &OrientedBox) -> bool {
+        let near = a.centre.distance(b.centre) < reach + CONTACT_RELEASE;
         if self.contacts.contains(&(i, j)) {
-            if !near || !boxes[i].inflated(CONTACT_RELEASE).overlaps(&boxes[j]) {
+            if !near || !a.inflated(CONTACT_RELEASE).overlaps(b) {
                 self.contacts.remove(&(i, j));
             }
             return false;
         }
-        if !near || !boxes[i].overlaps(&boxes[j]) {
+        if !near || !a.overlaps(b) {
             return false;
         }
         self.contacts.insert((i, j));

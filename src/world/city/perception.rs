@@ -298,6 +298,7 @@ impl Sim<'_> {
             let later = ((at + (v * rt + 0.5).max(1.0)) * 10.0).ceil() / 10.0;
             let last = last_change_start(self.map, from, for_turn);
             if later <= last + 1e-6 && self.cars[i].route.move_lane_change(self.map, next, later) {
+                self.cars[i].anchor = None;
                 return None;
             }
         }
