@@ -3,7 +3,6 @@
 //! turn, the end of the drive queue), actions planning adapted or skipped,
 //! and collisions, after which both cars stand still for a few seconds.
 
-use super::car::SimCar;
 use super::Sim;
 use crate::geometry::OrientedBox;
 use crate::map::signals::Colour;
@@ -173,32 +172,71 @@ impl Sim<'_> {
 
     /// Finds pairs of cars whose footprints newly overlap at time `now`
     /// (seconds): logs each collision and holds both cars still. Pairs
-    /// clearly apart by [`SimCar::near_point`] are settled without their
+    /// clearly apart by [`super::car::SimCar::near_point`] are settled without their
     /// footprints (the same outcome: not near); a footprint is computed
     /// once, when a pair first needs it.
     pub(super) fn detect_collisions(&mut self, now: f64) {
-        let near_points: Vec<(DVec2, f64)> = self.cars.iter_mut().map(SimCar::near_point).collect();
+        let candidates = self.candidate_pairs();
+        #[cfg(debug_assertions)]
+        self.check_candidates(&candidates);
+        // Contacts of pairs now clearly apart end ("not near").
+        if !self.contacts.is_empty() {
+            self.contacts.retain(|pair| candidates.binary_search(pair).is_ok());
+        }
         let mut boxes: Vec<Option<OrientedBox>> = vec![None; self.cars.len()];
-        for i in 0..self.cars.len() {
-            for j in i + 1..self.cars.len() {
-                if self.cars[i].removed || self.cars[j].removed {
-                    continue;
+        for (i, j) in candidates {
+            let reach = self.cars[i].reach + self.cars[j].reach;
+            let bi = *boxes[i].get_or_insert_with(|| self.cars[i].footprint());
+            let bj = *boxes[j].get_or_insert_with(|| self.cars[j].footprint());
+            if self.new_contact(i, j, reach, &bi, &bj) {
+                self.collide(i, j, now);
+            }
+        }
+    }
+
+    /// Pairs `(i, j)`, `i < j`, of cars on the map whose centres may be near
+    /// enough to touch by [`super::car::SimCar::near_point`], in order: a sweep along x
+    /// over each car's reach, so the cost grows with the cars, not their
+    /// pairs.
+    fn candidate_pairs(&mut self) -> Vec<(usize, usize)> {
+        // Per car: its point and how far from it another car's point may be
+        // and still count (half the pair's bound, with room for round-off).
+        let mut extents: Vec<(usize, DVec2, f64)> = Vec::with_capacity(self.cars.len());
+        for (i, car) in self.cars.iter_mut().enumerate() {
+            if car.removed {
+                continue;
+            }
+            let (point, radius) = car.near_point();
+            extents.push((i, point, radius + car.reach + CONTACT_RELEASE / 2.0 + 1e-6));
+        }
+        extents.sort_by(|a, b| (a.1.x - a.2).total_cmp(&(b.1.x - b.2)));
+        let mut pairs = Vec::new();
+        for (k, &(i, pi, ei)) in extents.iter().enumerate() {
+            for &(j, pj, ej) in &extents[k + 1..] {
+                if pj.x - ej >= pi.x + ei {
+                    break;
                 }
-                let reach = self.cars[i].reach + self.cars[j].reach;
-                let ((pi, ri), (pj, rj)) = (near_points[i], near_points[j]);
-                // A lower bound on the centres' distance, with room for round-off.
-                if pi.distance(pj) - ri - rj >= reach + CONTACT_RELEASE + 1e-6 {
-                    if !self.contacts.is_empty() {
-                        self.contacts.remove(&(i, j));
-                    }
-                    continue;
-                }
-                let bi = *boxes[i].get_or_insert_with(|| self.cars[i].footprint());
-                let bj = *boxes[j].get_or_insert_with(|| self.cars[j].footprint());
-                if self.new_contact(i, j, reach, &bi, &bj) {
-                    self.collide(i, j, now);
+                if pi.distance(pj) < ei + ej {
+                    pairs.push((i.min(j), i.max(j)));
                 }
             }
+        }
+        pairs.sort_unstable();
+        pairs
+    }
+
+    /// Debug builds (every test): no pair left out of `candidates` is near
+    /// by its exact footprints.
+    #[cfg(debug_assertions)]
+    fn check_candidates(&self, candidates: &[(usize, usize)]) {
+        let n = self.cars.len();
+        for (i, j) in (0..n).flat_map(|i| (i + 1..n).map(move |j| (i, j))) {
+            if self.cars[i].removed || self.cars[j].removed || candidates.contains(&(i, j)) {
+                continue;
+            }
+            let d = self.cars[i].pose().0.distance(self.cars[j].pose().0);
+            let reach = self.cars[i].reach + self.cars[j].reach;
+            assert!(d >= reach + CONTACT_RELEASE, "cars {i} and {j} are {d} m apart, but not a candidate pair");
         }
     }
 

@@ -162,6 +162,9 @@ struct Sim<'a> {
     confounder_model: ConfounderModel,
     /// Per track (lane or connector): (car, arc length on the track, metres).
     occupancy: Vec<Vec<(usize, f64)>>,
+    /// The tracks of `occupancy` that hold a car (each once), so filling it
+    /// again clears only those: a big town has thousands of tracks.
+    occupied: Vec<usize>,
     /// Pairs of cars (i < j) in contact since a collision.
     contacts: BTreeSet<(usize, usize)>,
     /// Time of the last frame, seconds: re-planned routes must last until then.
@@ -186,6 +189,7 @@ impl<'a> Sim<'a> {
             confounder_changes: Vec::new(),
             confounder_model: city.confounder_model,
             occupancy: vec![Vec::new(); map.track_count()],
+            occupied: Vec::new(),
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
         };

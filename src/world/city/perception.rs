@@ -39,30 +39,39 @@ impl Sim<'_> {
     /// Records, per track, every car on it and how far along it is. Cars past
     /// their stop line, or committed to go, also claim the connector ahead.
     pub(super) fn fill_occupancy(&mut self) {
-        for track in &mut self.occupancy {
-            track.clear();
+        for &track in &self.occupied {
+            self.occupancy[track].clear();
         }
+        self.occupied.clear();
         for i in 0..self.cars.len() {
             if self.cars[i].removed {
                 continue;
             }
             if let Some((track, pos)) = self.claimed_connector(i) {
-                self.occupancy[track].push((i, pos));
+                self.occupy(track, i, pos);
             }
             let car = &self.cars[i];
             let leg = &car.route.legs[car.leg];
             let along = car.s - leg.route_start;
             match leg.kind {
-                LegKind::Lane(lane) => self.occupancy[lane].push((i, leg.curve_start + along)),
-                LegKind::Connector(c) => self.occupancy[self.map.connector_track(c)].push((i, along)),
+                LegKind::Lane(lane) => self.occupy(lane, i, leg.curve_start + along),
+                LegKind::Connector(c) => self.occupy(self.map.connector_track(c), i, along),
                 LegKind::LaneChange { from, to, at } => {
                     // Mid-merge a car occupies both lanes.
                     let lane_s = at + along * self.map.layout.lane_change_length / leg.length;
-                    self.occupancy[from].push((i, lane_s));
-                    self.occupancy[to].push((i, lane_s));
+                    self.occupy(from, i, lane_s);
+                    self.occupy(to, i, lane_s);
                 }
             }
         }
+    }
+
+    /// Records car `i` on `track`, `pos` metres along it.
+    fn occupy(&mut self, track: usize, i: usize, pos: f64) {
+        if self.occupancy[track].is_empty() {
+            self.occupied.push(track);
+        }
+        self.occupancy[track].push((i, pos));
     }
 
     /// A car past its stop line, or committed to go, already claims the
