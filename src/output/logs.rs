@@ -3,6 +3,7 @@
 //! `data-schema/lights.schema.json`, `data-schema/events.schema.json`,
 //! `data-schema/interactions.schema.json` and `data-schema/effects.schema.json`.
 
+use super::number::{push_fixed, push_int};
 use super::poses::{Fields, PIXEL_DECIMALS};
 use crate::map::signals::{light_label, LightPlan};
 use crate::world::effects::{EffectReport, EffectRow, InterventionKind};
@@ -26,42 +27,71 @@ fn round(x: f64, decimals: i32) -> f64 {
 
 /// One row per frame and light, lights in plan order; `head_pixels` is each
 /// light's signal head in the bird's-eye view (empty cells without one).
+/// Lights are most of what a poses-only scenario writes, so each light's
+/// constant cells are formatted once (quoted as the csv writer quotes them)
+/// and each row adds only its frame, colour and time since the change.
 pub fn write_lights<W: Write>(
-    out: W,
+    mut out: W,
     plan: &LightPlan,
     intersection_names: &[String],
     head_pixels: &[Option<glam::DVec2>],
     trajectories: &Trajectories,
 ) -> csv::Result<()> {
-    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
-    w.write_record(LIGHT_COLUMNS)?;
-    let mut fields = Fields::default();
     let mut approach = [0u8; 4];
+    let mut constant = Vec::with_capacity(plan.lights.len());
+    for (light, head) in plan.lights.iter().zip(head_pixels) {
+        let name: &str = light.approach.encode_utf8(&mut approach);
+        let mut middle = csv_cells(&[intersection_names[light.intersection].as_str(), name, light.signal.name()])?;
+        middle.push(b',');
+        let mut tail = Vec::new();
+        if let Some(p) = head {
+            push_fixed(&mut tail, p.x, PIXEL_DECIMALS);
+            tail.push(b',');
+            push_fixed(&mut tail, p.y, PIXEL_DECIMALS);
+        } else {
+            tail.push(b',');
+        }
+        tail.push(b'\n');
+        constant.push((middle, tail));
+    }
+    let mut buf = csv_cells(&LIGHT_COLUMNS)?;
+    buf.push(b'\n');
+    let mut prefix = Vec::new();
     for (frame, states) in trajectories.lights.iter().enumerate() {
-        let t = frame as f64 * trajectories.frame_interval;
-        for ((light, state), head) in plan.lights.iter().zip(states).zip(head_pixels) {
-            fields.int(&mut w, frame as u64)?;
-            fields.fixed(&mut w, t, 6)?;
-            w.write_field(&intersection_names[light.intersection])?;
-            w.write_field(light.approach.encode_utf8(&mut approach))?;
-            w.write_field(light.signal.name())?;
-            w.write_field(state.colour.name())?;
-            fields.fixed(&mut w, state.since_change, 3)?;
-            match head {
-                Some(p) => {
-                    fields.fixed(&mut w, p.x, PIXEL_DECIMALS)?;
-                    fields.fixed(&mut w, p.y, PIXEL_DECIMALS)?;
-                }
-                None => {
-                    w.write_field("")?;
-                    w.write_field("")?;
-                }
-            }
-            w.write_record(None::<&[u8]>)?;
+        prefix.clear();
+        push_int(&mut prefix, frame as u64);
+        prefix.push(b',');
+        push_fixed(&mut prefix, frame as f64 * trajectories.frame_interval, 6);
+        prefix.push(b',');
+        for (state, (middle, tail)) in states.iter().zip(&constant) {
+            buf.extend_from_slice(&prefix);
+            buf.extend_from_slice(middle);
+            buf.extend_from_slice(state.colour.name().as_bytes());
+            buf.push(b',');
+            push_fixed(&mut buf, state.since_change, 3);
+            buf.push(b',');
+            buf.extend_from_slice(tail);
+        }
+        if buf.len() >= 1 << 16 {
+            out.write_all(&buf)?;
+            buf.clear();
         }
     }
-    w.flush()?;
+    out.write_all(&buf)?;
+    out.flush()?;
     Ok(())
+}
+
+/// `fields` as one csv record without its line end, quoted where the csv
+/// writer would quote them.
+fn csv_cells<T: AsRef<[u8]>>(fields: &[T]) -> csv::Result<Vec<u8>> {
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+    w.write_record(fields)?;
+    let mut bytes = w.into_inner().map_err(|e| csv::Error::from(e.into_error()))?;
+    if bytes.last() == Some(&b'\n') {
+        bytes.pop();
+    }
+    Ok(bytes)
 }
 
 #[derive(Serialize)]
