@@ -85,15 +85,72 @@ fn gen(spec: &Path, out: &Path, threads: usize, images: bool) -> f64 {
     generate(&gen_options(spec, out, threads, images)).unwrap().elapsed.as_secs_f64()
 }
 
+/// Incremental against full effects re-runs on the paper's city spec
+/// (`configs/city.json`, denser than the bench's default town), per group,
+/// 1 thread.
+fn paper_city_effects() {
+    use causalcity::world::effects::{measure_with, Rerun, RerunCost};
+    println!("\n== Interventional effects on configs/city.json, 8 scenarios per group and split, 1 thread ==");
+    println!(
+        "{:<16} {:>10} {:>12} {:>14} {:>8} {:>10}",
+        "group", "sim ms", "full x sim", "incremental x", "faster", "replayed"
+    );
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/city.json")).unwrap();
+    let expansion = Expansion::new(DatasetSpec::from_json(&text).unwrap(), Arc::new(CityMap::default())).unwrap();
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let mut groups: Vec<(String, [f64; 4], RerunCost)> = Vec::new();
+    for key in expansion.keys(Some(8)) {
+        let plan = expansion.plan(&key).unwrap();
+        let map = &expansion.town_of(&plan).map;
+        let t = Instant::now();
+        let factual = causalcity::world::simulate(map, &plan);
+        let sim = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let (_, cost) = measure_with(map, &plan, &factual, Rerun::Incremental, &never).unwrap();
+        let incremental = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        std::hint::black_box(measure_with(map, &plan, &factual, Rerun::Full, &never));
+        let full = t.elapsed().as_secs_f64();
+        let name = key.group.clone();
+        if groups.last().is_none_or(|g| g.0 != name) {
+            groups.push((name, [0.0; 4], RerunCost::default()));
+        }
+        let g = groups.last_mut().unwrap();
+        g.1[0] += sim;
+        g.1[1] += incremental;
+        g.1[2] += full;
+        g.1[3] += 1.0;
+        g.2.reruns += cost.reruns;
+        g.2.incremental += cost.incremental;
+        g.2.replayed_car_steps += cost.replayed_car_steps;
+        g.2.car_steps += cost.car_steps;
+    }
+    for (name, [sim, incremental, full, scenarios], cost) in groups {
+        let replayed = if cost.incremental == 0 {
+            "in full".to_string()
+        } else {
+            format!("{:.0} %", 100.0 * cost.replayed_car_steps as f64 / cost.car_steps.max(1) as f64)
+        };
+        println!(
+            "{name:<16} {:>10.2} {:>11.1}x {:>13.1}x {:>7.2}x {replayed:>10}",
+            sim * 1e3 / scenarios,
+            full / sim,
+            incremental / sim,
+            full / incremental
+        );
+    }
+}
+
 /// The interventional ground truth against the re-runs it needs: measuring a
 /// scenario's effects (24 re-runs for 12 cars, then comparing every car)
 /// beside simulating the same intervened plans alone, and `gen` with and
 /// without effects, poses only, 1 thread.
 fn effects_cost(root: &Path) {
-    use causalcity::world::effects::{intervened, measure, InterventionKind};
-    for world in ["toy", "city"] {
-        println!("\n== Interventional effects, {world} world, 12 cars x 150 frames, 1 thread ==");
-        let spec = DatasetSpec::from_json(&world_spec_json(&format!("fx-{world}"), world, 12, 200)).unwrap();
+    use causalcity::world::effects::{intervened, measure, measure_with, InterventionKind, Rerun, RerunCost};
+    paper_city_effects();
+    for (world, cars) in [("toy", 12), ("city", 8), ("city", 12)] {
+        println!("\n== Interventional effects, {world} world, {cars} cars x 150 frames, 1 thread ==");
+        let spec = DatasetSpec::from_json(&world_spec_json(&format!("fx-{world}"), world, cars, 200)).unwrap();
         let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
         let map = &expansion.map;
         let plans: Vec<_> = expansion.keys(None).iter().map(|k| expansion.plan(k).unwrap()).collect();
@@ -114,9 +171,40 @@ fn effects_cost(root: &Path) {
             std::hint::black_box(measure(map, plan, traj));
         }
         let measured = t.elapsed().as_secs_f64() * 1e3 / plans.len() as f64;
-        let spec_path = write_world_spec(root, &format!("fx-gen-{world}"), world, 12, 200);
+        // The reference (every car re-simulated) beside the incremental re-runs.
+        let never = std::sync::atomic::AtomicBool::new(false);
+        let t = Instant::now();
+        for (plan, traj) in plans.iter().zip(&factual) {
+            std::hint::black_box(measure_with(map, plan, traj, Rerun::Full, &never));
+        }
+        let full = t.elapsed().as_secs_f64() * 1e3 / plans.len() as f64;
+        let mut cost = RerunCost::default();
+        for (plan, traj) in plans.iter().zip(&factual) {
+            let (_, c) = measure_with(map, plan, traj, Rerun::Incremental, &never).unwrap();
+            cost.reruns += c.reruns;
+            cost.incremental += c.incremental;
+            cost.replayed_car_steps += c.replayed_car_steps;
+            cost.car_steps += c.car_steps;
+        }
+        let t = Instant::now();
+        for plan in &plans {
+            std::hint::black_box(causalcity::world::simulate(map, plan));
+        }
+        let one = t.elapsed().as_secs_f64() * 1e3 / plans.len() as f64;
+        println!(
+            "effects per scenario: every car re-simulated {full:.2} ms ({:.1}x the factual simulation, {one:.2} ms), \
+             incremental {measured:.2} ms ({:.1}x; {:.2}x faster); {} of {} re-runs incremental, \
+             {:.0} % of their car steps replayed",
+            full / one,
+            measured / one,
+            full / measured,
+            cost.incremental,
+            cost.reruns,
+            100.0 * cost.replayed_car_steps as f64 / cost.car_steps.max(1) as f64
+        );
+        let spec_path = write_world_spec(root, &format!("fx-gen-{world}-{cars}"), world, cars, 200);
         let time = |effects: bool| {
-            let out = root.join(format!("fx-{world}-{effects}"));
+            let out = root.join(format!("fx-{world}-{cars}-{effects}"));
             let _ = std::fs::remove_dir_all(&out);
             let options = GenOptions { effects, ..gen_options(&spec_path, &out, 1, false) };
             generate(&options).unwrap().elapsed.as_secs_f64()

@@ -8,12 +8,20 @@
 //! reacted to `a` itself (it follows `a`, or `a` bound its speed at the frame
 //! where it first moved), not through another car or a light.
 //!
+//! In the city world a re-run simulates only the cars the intervention has
+//! reached and replays the others from a recording of the factual run
+//! (`world/city/replay.rs`): the same result bit for bit, at a fraction of
+//! the cost. [`Rerun::Full`] keeps the reference path.
+//!
 //! Units: metres; frames are the scenario's frame indices.
 
+use super::city::replay::Recording;
+use super::city::CityWorld;
+use super::driver::model_by_name;
 use super::{simulate_until, Interaction, Trajectories};
 use crate::map::{Action, CityMap, LegKind, Turn};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
-use crate::plan::ScenarioPlan;
+use crate::plan::{ScenarioPlan, WorldPlan};
 use std::sync::atomic::AtomicBool;
 
 /// How far (metres, at one frame) a car must move from its factual
@@ -168,17 +176,73 @@ pub fn measure_until(
     factual: &Trajectories,
     stop: &AtomicBool,
 ) -> Option<EffectReport> {
+    measure_with(map, plan, factual, Rerun::Incremental, stop).map(|(report, _)| report)
+}
+
+/// How the effects' re-runs simulate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rerun {
+    /// Every car, every step: the reference.
+    Full,
+    /// City world: only the cars the intervention reached, the others
+    /// replayed from the factual run (`world/city/replay.rs`), with the same
+    /// result bit for bit; in full where replaying does not apply or pay
+    /// (`Recording::pays_for`).
+    Incremental,
+}
+
+/// What the re-runs of one scenario simulated.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RerunCost {
+    /// Re-runs made, and how many of them replayed cars.
+    pub reruns: usize,
+    pub incremental: usize,
+    /// Car steps replayed from the factual run, of all car steps of the
+    /// incremental re-runs.
+    pub replayed_car_steps: usize,
+    pub car_steps: usize,
+}
+
+/// [`measure_until`] with re-runs made as `how` says, and what they cost.
+pub fn measure_with(
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    factual: &Trajectories,
+    how: Rerun,
+    stop: &AtomicBool,
+) -> Option<(EffectReport, RerunCost)> {
+    let world;
+    let recording = match (&plan.world, how) {
+        (WorldPlan::City(city), Rerun::Incremental) if Recording::pays_for(plan) => {
+            world = CityWorld::with_model(model_by_name(city.driver_model));
+            let recording = Recording::record(&world, map, plan, city, stop)?;
+            debug_assert!(recording.factual().states == factual.states, "the recorded run is the factual one");
+            recording.replayable().then_some(recording)
+        }
+        _ => None,
+    };
     let mut rows = Vec::new();
+    let mut cost = RerunCost::default();
     for (a, cause) in plan.cars.iter().enumerate() {
         for kind in InterventionKind::ALL {
             let Some(changed) = intervened(map, plan, a, kind) else { continue };
-            let rerun = simulate_until(map, &changed, stop)?;
+            cost.reruns += 1;
+            let rerun = match &recording {
+                Some(recording) => {
+                    let (rerun, replayed, car_steps) = recording.rerun(&changed, a, stop)?;
+                    cost.incremental += 1;
+                    cost.replayed_car_steps += replayed;
+                    cost.car_steps += car_steps;
+                    rerun
+                }
+                None => simulate_until(map, &changed, stop)?,
+            };
             for (b, effect) in plan.cars.iter().enumerate().filter(|&(b, _)| b != a) {
                 rows.push(compare(plan, factual, &rerun, b, cause.id, effect.id, kind));
             }
         }
     }
-    Some(EffectReport { threshold_m: EFFECT_THRESHOLD_M, rows })
+    Some((EffectReport { threshold_m: EFFECT_THRESHOLD_M, rows }, cost))
 }
 
 /// How car `b` (index; id `effect`) differs between the factual run and the

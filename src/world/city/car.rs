@@ -10,13 +10,17 @@ use crate::world::{CarState, Interaction};
 use glam::DVec2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
 
-/// One car while the scenario runs.
+/// One car while the scenario runs. Cloning it is cheap (the route is
+/// shared until the car changes it): effects re-runs keep snapshots.
+#[derive(Clone)]
 pub(super) struct SimCar<'p> {
     pub(super) plan: &'p CarPlan,
     pub(super) agency: &'p CarAgency,
-    /// The car's own copy: merges it defers and replaced actions re-plan it.
-    pub(super) route: Route,
+    /// The car's own route, shared with the plan (and snapshots) until the
+    /// car changes it: merges it defers and replaced actions re-plan it.
+    pub(super) route: Arc<Route>,
     /// Drive-queue index of the route's first action.
     pub(super) action_base: usize,
     /// Merge distance per drive-queue action, metres along its lane.
@@ -104,6 +108,7 @@ const ARC_SLACK: f64 = 1.1;
 const ANCHOR_REACH: f64 = 0.5;
 
 /// A drive queue waiting to replace the rest of a car's own.
+#[derive(Clone, PartialEq)]
 pub(super) struct PendingQueue {
     pub(super) actions: Vec<Action>,
     /// Merge distance per action, metres along its lane.
@@ -145,7 +150,7 @@ impl<'p> SimCar<'p> {
     pub(super) fn new(plan: &'p CarPlan, agency: &'p CarAgency, sim_stream: [u8; 32]) -> SimCar<'p> {
         let mut rng = ChaCha8Rng::from_seed(sim_stream);
         rng.set_stream(plan.id as u64 + 1);
-        let route: Route = (*plan.route).clone();
+        let route = Arc::clone(&plan.route);
         let leg = route.leg_index_at(plan.spawn_distance);
         SimCar {
             plan,
@@ -231,6 +236,42 @@ impl SimCar<'_> {
         (a.point, r)
     }
 
+    /// Whether `other` is this car in the same state: every field but the
+    /// collision check's anchor (a cache), the route compared by identity
+    /// (a re-planned or changed route is a new one).
+    pub(super) fn same_state(&self, other: &SimCar) -> bool {
+        std::ptr::eq(self.plan, other.plan)
+            && Arc::ptr_eq(&self.route, &other.route)
+            && self.action_base == other.action_base
+            && self.merges == other.merges
+            && self.s == other.s
+            && self.v == other.v
+            && self.accel == other.accel
+            && self.leg == other.leg
+            && self.next_decision == other.next_decision
+            && self.hold_until == other.hold_until
+            && self.actions_done == other.actions_done
+            && self.committed == other.committed
+            && self.wander == other.wander
+            && self.wander_target == other.wander_target
+            && self.noise == other.noise
+            && self.rng == other.rng
+            && self.runs_red_lights == other.runs_red_lights
+            && self.stopped_until == other.stopped_until
+            && self.desired_override == other.desired_override
+            && self.removed == other.removed
+            && self.actions == other.actions
+            && self.pending_actions == other.pending_actions
+            && self.given_up == other.given_up
+            && self.logged_adaptations == other.logged_adaptations
+            && self.waiting_since == other.waiting_since
+            && self.binding == other.binding
+            && self.collided_with == other.collided_with
+            && self.driver == other.driver
+            && self.speed_factor == other.speed_factor
+            && self.leader == other.leader
+    }
+
     /// The car's rectangle on the ground.
     pub(super) fn footprint(&self) -> OrientedBox {
         let (centre, heading) = self.pose();
@@ -250,7 +291,7 @@ impl SimCar<'_> {
     /// where the car stands `lane_s` metres along it; the route's first
     /// action is drive-queue action `action_base`.
     pub(super) fn follow_route(&mut self, route: Route, lane_s: f64, action_base: usize) {
-        self.route = route;
+        self.route = Arc::new(route);
         self.anchor = None;
         self.s = lane_s;
         self.leg = self.route.leg_index_at(lane_s);

@@ -12,7 +12,7 @@ use glam::DVec2;
 use rand::RngExt;
 
 /// Gap at which two cars that collided count as apart again, metres.
-const CONTACT_RELEASE: f64 = 0.3;
+pub(super) const CONTACT_RELEASE: f64 = 0.3;
 
 impl Sim<'_> {
     /// Logs every stop line car `i` crossed on red while its front moved
@@ -176,7 +176,12 @@ impl Sim<'_> {
     /// footprints (the same outcome: not near); a footprint is computed
     /// once, when a pair first needs it.
     pub(super) fn detect_collisions(&mut self, now: f64) {
-        let candidates = self.candidate_pairs();
+        let points: Vec<Option<(DVec2, f64)>> =
+            self.cars.iter_mut().map(|car| (!car.removed).then(|| car.near_point())).collect();
+        if let Some(tape) = &mut self.tape {
+            tape.note_near_points(&points);
+        }
+        let candidates = self.candidate_pairs(&points);
         #[cfg(debug_assertions)]
         self.check_candidates(&candidates);
         // Contacts of pairs now clearly apart end ("not near").
@@ -194,21 +199,20 @@ impl Sim<'_> {
         }
     }
 
-    /// Pairs `(i, j)`, `i < j`, of cars on the map whose centres may be near
-    /// enough to touch by [`super::car::SimCar::near_point`], in order: a sweep along x
-    /// over each car's reach, so the cost grows with the cars, not their
-    /// pairs.
-    fn candidate_pairs(&mut self) -> Vec<(usize, usize)> {
+    /// Pairs `(i, j)`, `i < j`, of cars whose centres may be near enough to
+    /// touch, given for each car on the map a point and a radius its centre
+    /// is within (`None`: off the map), in order: a sweep along x over each
+    /// car's reach, so the cost grows with the cars, not their pairs.
+    pub(super) fn candidate_pairs(&self, points: &[Option<(DVec2, f64)>]) -> Vec<(usize, usize)> {
         // Per car: its point and how far from it another car's point may be
         // and still count (half the pair's bound, with room for round-off).
-        let mut extents: Vec<(usize, DVec2, f64)> = Vec::with_capacity(self.cars.len());
-        for (i, car) in self.cars.iter_mut().enumerate() {
-            if car.removed {
-                continue;
-            }
-            let (point, radius) = car.near_point();
-            extents.push((i, point, radius + car.reach + CONTACT_RELEASE / 2.0 + 1e-6));
-        }
+        let mut extents: Vec<(usize, DVec2, f64)> = points
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| {
+                p.map(|(point, radius)| (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6))
+            })
+            .collect();
         extents.sort_by(|a, b| (a.1.x - a.2).total_cmp(&(b.1.x - b.2)));
         let mut pairs = Vec::new();
         for (k, &(i, pi, ei)) in extents.iter().enumerate() {
@@ -244,7 +248,7 @@ impl Sim<'_> {
     /// their half diagonals) have just touched. A contact ends only once the
     /// cars are clearly apart ([`CONTACT_RELEASE`]), so sideways wander does
     /// not log one crash many times.
-    fn new_contact(&mut self, i: usize, j: usize, reach: f64, a: &OrientedBox, b: &OrientedBox) -> bool {
+    pub(super) fn new_contact(&mut self, i: usize, j: usize, reach: f64, a: &OrientedBox, b: &OrientedBox) -> bool {
         let near = a.centre.distance(b.centre) < reach + CONTACT_RELEASE;
         if self.contacts.contains(&(i, j)) {
             if !near || !a.inflated(CONTACT_RELEASE).overlaps(b) {
@@ -261,7 +265,10 @@ impl Sim<'_> {
 
     /// Logs the collision of cars `i` and `j` at time `now` and stops both
     /// for 2 to 5 seconds each (drawn from each car's own stream).
-    fn collide(&mut self, i: usize, j: usize, now: f64) {
+    pub(super) fn collide(&mut self, i: usize, j: usize, now: f64) {
+        if let Some(tape) = &mut self.tape {
+            tape.collided = true;
+        }
         let (a, b) = (&self.cars[i], &self.cars[j]);
         self.events.push(Event {
             t: now,

@@ -214,7 +214,7 @@ impl Sim<'_> {
     /// they have done, re-planning once they are on a lane. A turn the
     /// leader gave up is one it drives straight through, so they do too.
     pub(super) fn show_followers(&mut self, i: usize) {
-        if self.cars[i].removed {
+        if self.cars[i].removed || self.quiet_followers {
             return;
         }
         let leader = &self.cars[i];
@@ -228,6 +228,9 @@ impl Sim<'_> {
         for follower in self.followers_of(i) {
             let done = self.cars[follower].actions_done;
             self.cars[follower].pending_actions = Some(PendingQueue::slice(&seen, &merges, done));
+            if let Some(tape) = &mut self.tape {
+                tape.touch(follower);
+            }
         }
     }
 

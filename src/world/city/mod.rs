@@ -22,7 +22,9 @@
 //! - `start.rs`: start speeds, lowered to what each driver sees at time 0;
 //! - `interventions.rs`: triggers, effects and the one re-planning routine;
 //! - `events.rs`: red-light runs, completed actions, lane changes and
-//!   adaptations of the drive queue, and collisions.
+//!   adaptations of the drive queue, and collisions;
+//! - `replay.rs`: effects re-runs that simulate only the cars an
+//!   intervention reached, replaying the others from the factual run.
 //!
 //! Units: metres, seconds, metres per second.
 
@@ -31,6 +33,7 @@ mod driving;
 mod events;
 mod interventions;
 mod perception;
+pub mod replay;
 mod start;
 #[cfg(test)]
 mod tests;
@@ -43,6 +46,8 @@ use crate::plan::confounders::{ConfounderModel, Confounders};
 use crate::plan::interventions::Intervention;
 use crate::plan::{CityPlan, ScenarioPlan};
 use car::SimCar;
+use glam::DVec2;
+use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -90,7 +95,20 @@ impl CityWorld {
         city: &CityPlan,
         stop: &AtomicBool,
     ) -> Option<Trajectories> {
-        let mut sim = Sim::new(map, plan, city, self.model.as_ref());
+        Sim::new(map, plan, city, self.model.as_ref()).run(stop)
+    }
+
+    /// The car-following model its drivers use.
+    fn model(&self) -> &dyn CarFollowing {
+        self.model.as_ref()
+    }
+}
+
+impl Sim<'_> {
+    /// Runs the simulation frame by frame (see [`CityWorld::simulate`]).
+    fn run(&mut self, stop: &AtomicBool) -> Option<Trajectories> {
+        let (plan, city) = (self.plan, self.city);
+        let sim = self;
         if plan.frames == 0 {
             return Some(Trajectories {
                 frame_interval: plan.frame_interval,
@@ -112,8 +130,7 @@ impl CityWorld {
             }
             if frame > 0 {
                 for k in 0..steps {
-                    let t = (frame - 1) as f64 * plan.frame_interval + k as f64 * dt;
-                    sim.step(t, dt);
+                    sim.step(Sim::step_time((frame - 1) * steps + k, steps, plan.frame_interval, dt), dt);
                 }
             }
             let t = frame as f64 * plan.frame_interval;
@@ -133,7 +150,7 @@ impl CityWorld {
             frame_interval: plan.frame_interval,
             states,
             lights,
-            events: sim.events,
+            events: std::mem::take(&mut sim.events),
             confounder_changes,
             interactions,
         })
@@ -144,6 +161,7 @@ impl CityWorld {
 /// confounders), who occupies which track, and the events logged.
 struct Sim<'a> {
     map: &'a CityMap,
+    plan: &'a ScenarioPlan,
     city: &'a CityPlan,
     model: &'a dyn CarFollowing,
     /// In plan (id) order.
@@ -169,6 +187,18 @@ struct Sim<'a> {
     contacts: BTreeSet<(usize, usize)>,
     /// Time of the last frame, seconds: re-planned routes must last until then.
     horizon: f64,
+    /// While set, the tracks each decision reads (see `perception::occupants`).
+    reads: Option<RefCell<Vec<usize>>>,
+    /// A factual run for effects re-runs records here (`replay.rs`).
+    tape: Option<Box<replay::Tape<'a>>>,
+    /// A re-run's cars replayed from the tape rather than simulated.
+    frozen: Vec<bool>,
+    /// While a re-run brings a replayed car up to date: its leader's
+    /// changes reach its followers through their own snapshots instead.
+    quiet_followers: bool,
+    /// Buffers a re-run's collision checks reuse from step to step.
+    scratch_points: Vec<Option<(DVec2, f64)>>,
+    scratch_pairs: Vec<(usize, usize)>,
 }
 
 impl<'a> Sim<'a> {
@@ -178,6 +208,7 @@ impl<'a> Sim<'a> {
             plan.cars.iter().zip(&city.agency).map(|(c, agency)| SimCar::new(c, agency, city.sim_stream)).collect();
         let mut sim = Sim {
             map,
+            plan,
             city,
             model,
             cars,
@@ -192,6 +223,12 @@ impl<'a> Sim<'a> {
             occupied: Vec::new(),
             contacts: BTreeSet::new(),
             horizon: plan.frames.saturating_sub(1) as f64 * plan.frame_interval,
+            reads: None,
+            tape: None,
+            frozen: vec![false; plan.cars.len()],
+            quiet_followers: false,
+            scratch_points: Vec::new(),
+            scratch_pairs: Vec::new(),
         };
         // What planning adapted shows at the start.
         for i in 0..sim.cars.len() {
@@ -211,13 +248,18 @@ impl<'a> Sim<'a> {
             }
         }
         self.fill_occupancy();
+        self.note_fill();
         for i in 0..self.cars.len() {
             if self.cars[i].removed {
                 continue;
             }
             if t + 1e-9 >= self.cars[i].next_decision {
+                if let Some(reads) = &self.reads {
+                    reads.borrow_mut().clear();
+                }
                 self.decide(i, t, dt);
                 self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
+                self.note_decision(i);
             }
         }
         for i in 0..self.cars.len() {
@@ -226,5 +268,12 @@ impl<'a> Sim<'a> {
             }
         }
         self.detect_collisions(t + dt);
+        self.note_step_end();
+    }
+
+    /// The time at which global step `k` starts (steps of `dt` seconds,
+    /// `steps` per frame), as the frame loop computes it.
+    fn step_time(k: usize, steps: usize, frame_interval: f64, dt: f64) -> f64 {
+        (k / steps) as f64 * frame_interval + (k % steps) as f64 * dt
     }
 }

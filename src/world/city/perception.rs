@@ -8,6 +8,7 @@ use crate::map::curve::Curve;
 use crate::map::route::last_change_start;
 use crate::map::signals::{Colour, LightState, Signal};
 use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
+use std::sync::Arc;
 
 /// How long a driver waits at the last point of its lane for a lane-change
 /// gap before it gives the action up, seconds.
@@ -27,6 +28,24 @@ pub(super) enum Stop {
     Crossing(usize),
 }
 
+/// Where one car is in the occupancy: up to three (track, metres along it).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Places {
+    entries: [(usize, f64); 3],
+    len: usize,
+}
+
+impl Places {
+    fn push(&mut self, entry: (usize, f64)) {
+        self.entries[self.len] = entry;
+        self.len += 1;
+    }
+
+    pub(super) fn iter(&self) -> std::slice::Iter<'_, (usize, f64)> {
+        self.entries[..self.len].iter()
+    }
+}
+
 /// A candidate car ahead: (distance along the route to its centre, car).
 type Candidate = (f64, usize);
 
@@ -39,35 +58,64 @@ impl Sim<'_> {
     /// Records, per track, every car on it and how far along it is. Cars past
     /// their stop line, or committed to go, also claim the connector ahead.
     pub(super) fn fill_occupancy(&mut self) {
-        for &track in &self.occupied {
-            self.occupancy[track].clear();
-        }
-        self.occupied.clear();
+        self.clear_occupancy();
         for i in 0..self.cars.len() {
             if self.cars[i].removed {
                 continue;
             }
-            if let Some((track, pos)) = self.claimed_connector(i) {
-                self.occupy(track, i, pos);
+            let places = self.places(i);
+            if let Some(tape) = &mut self.tape {
+                tape.note_places(i, &places);
             }
-            let car = &self.cars[i];
-            let leg = &car.route.legs[car.leg];
-            let along = car.s - leg.route_start;
-            match leg.kind {
-                LegKind::Lane(lane) => self.occupy(lane, i, leg.curve_start + along),
-                LegKind::Connector(c) => self.occupy(self.map.connector_track(c), i, along),
-                LegKind::LaneChange { from, to, at } => {
-                    // Mid-merge a car occupies both lanes.
-                    let lane_s = at + along * self.map.layout.lane_change_length / leg.length;
-                    self.occupy(from, i, lane_s);
-                    self.occupy(to, i, lane_s);
-                }
+            for &(track, pos) in places.iter() {
+                self.occupy(track, i, pos);
             }
         }
     }
 
+    /// Empties the occupancy (only the tracks that held a car).
+    pub(super) fn clear_occupancy(&mut self) {
+        for &track in &self.occupied {
+            self.occupancy[track].clear();
+        }
+        self.occupied.clear();
+    }
+
+    /// Where car `i` is in the occupancy: (track, metres along it) for the
+    /// connector it claims, then its leg's track (both lanes mid-merge).
+    pub(super) fn places(&self, i: usize) -> Places {
+        let mut places = Places::default();
+        if let Some(claim) = self.claimed_connector(i) {
+            places.push(claim);
+        }
+        let car = &self.cars[i];
+        let leg = &car.route.legs[car.leg];
+        let along = car.s - leg.route_start;
+        match leg.kind {
+            LegKind::Lane(lane) => places.push((lane, leg.curve_start + along)),
+            LegKind::Connector(c) => places.push((self.map.connector_track(c), along)),
+            LegKind::LaneChange { from, to, at } => {
+                // Mid-merge a car occupies both lanes.
+                let lane_s = at + along * self.map.layout.lane_change_length / leg.length;
+                places.push((from, lane_s));
+                places.push((to, lane_s));
+            }
+        }
+        places
+    }
+
+    /// The cars on `track` and how far along each is (metres), in car
+    /// order: the one way perception reads the occupancy, so that a run
+    /// recording what decisions depend on notes every track read.
+    fn occupants(&self, track: usize) -> &[(usize, f64)] {
+        if let Some(reads) = &self.reads {
+            reads.borrow_mut().push(track);
+        }
+        &self.occupancy[track]
+    }
+
     /// Records car `i` on `track`, `pos` metres along it.
-    fn occupy(&mut self, track: usize, i: usize, pos: f64) {
+    pub(super) fn occupy(&mut self, track: usize, i: usize, pos: f64) {
         if self.occupancy[track].is_empty() {
             self.occupied.push(track);
         }
@@ -126,7 +174,7 @@ impl Sim<'_> {
             .map
             .exits_from(from)
             .filter(|&o| o != c)
-            .flat_map(|sibling| self.occupancy[self.map.connector_track(sibling)].iter());
+            .flat_map(|sibling| self.occupants(self.map.connector_track(sibling)).iter());
         nearest(
             occupants
                 .map(|&(j, pos)| (leg.route_start + pos.max(0.0) - car.s, j, pos))
@@ -149,7 +197,7 @@ impl Sim<'_> {
             tracks
                 .into_iter()
                 .flatten()
-                .flat_map(|track| self.occupancy[track].iter())
+                .flat_map(|track| self.occupants(track).iter())
                 .filter(|&&(j, pos)| j != i && pos >= start - 0.01 && pos <= end + 0.01)
                 .map(|&(j, pos)| (leg.route_start + (pos - start) - car.s, j))
                 .filter(|&(d, _)| d > 0.0),
@@ -250,7 +298,7 @@ impl Sim<'_> {
         self.map
             .conflicts(connector)
             .iter()
-            .find_map(|&other| self.occupancy[self.map.connector_track(other)].first().map(|&(j, _)| j))
+            .find_map(|&other| self.occupants(self.map.connector_track(other)).first().map(|&(j, _)| j))
     }
 
     /// Highest speed (m/s) that still lets car `i` slow to the curve speed of
@@ -306,7 +354,7 @@ impl Sim<'_> {
             // onto the 0.1 m grid of merge distances, while the lane is long enough.
             let later = ((at + (v * rt + 0.5).max(1.0)) * 10.0).ceil() / 10.0;
             let last = last_change_start(self.map, from, for_turn);
-            if later <= last + 1e-6 && self.cars[i].route.move_lane_change(self.map, next, later) {
+            if later <= last + 1e-6 && Arc::make_mut(&mut self.cars[i].route).move_lane_change(self.map, next, later) {
                 self.cars[i].anchor = None;
                 return None;
             }
@@ -334,7 +382,7 @@ impl Sim<'_> {
     fn merge_gap_ok(&self, i: usize, to: usize, at: f64) -> bool {
         let car = &self.cars[i];
         let run = self.map.layout.lane_change_length;
-        let clear = self.occupancy[to].iter().all(|&(j, pos)| {
+        let clear = self.occupants(to).iter().all(|&(j, pos)| {
             if j == i {
                 return true;
             }
@@ -343,7 +391,7 @@ impl Sim<'_> {
             pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
         });
         let new_follower =
-            nearest(self.occupancy[to].iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)));
+            nearest(self.occupants(to).iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)));
         clear
             && new_follower.is_none_or(|(d, j)| {
                 let other = &self.cars[j];

@@ -1,0 +1,527 @@
+//! Effects re-runs that simulate only the cars an intervention has reached.
+//!
+//! The factual run records a [`Tape`]: at every step, where each car stood
+//! in the occupancy and its speed and actions done when the drivers decided,
+//! its pose after moving, and the tracks each decision read; and a snapshot
+//! of a car at the end of every step in which something besides its own
+//! motion changed it (it decided, or its leader showed it new actions).
+//!
+//! A re-run simulates the intervened car and its leader-follower group and
+//! replays every other car from the tape. A replayed car is brought up to
+//! date (its latest snapshot, moved on step by step) and simulated from then
+//! on, with its group, as soon as
+//! - a decision it takes would read a track on which a simulated car stands
+//!   elsewhere, or at another speed, than the tape says (what it sees may
+//!   differ), or
+//! - a simulated car touches it (a collision).
+//!
+//! Until then it does what the factual run did, so a re-run's positions and
+//! interactions are those of simulating every car, bit for bit (tests run
+//! both side by side). Scenarios whose factual run has interventions of its
+//! own or a collision are re-run in full.
+
+use super::car::SimCar;
+use super::events::CONTACT_RELEASE;
+use super::perception::Places;
+use super::{CityWorld, Sim, MAX_STEP};
+use crate::geometry::OrientedBox;
+use crate::map::CityMap;
+use crate::map::Route;
+use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
+use crate::world::Trajectories;
+use glam::DVec2;
+use std::cell::RefCell;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Fewest cars for which replaying pays. Measured on `configs/city.json`
+/// (one core, 24 scenarios per group): 4 cars replay 31 % of car steps and
+/// take 1.2x the full re-runs' time; 8 cars replay 50-58 % and take
+/// 0.8-0.9x; 12 cars 63 % and 0.76x.
+pub const MIN_CARS_TO_REPLAY: usize = 6;
+
+/// What the factual run records for re-runs, step by step (`step * cars + car`).
+pub(super) struct Tape<'a> {
+    cars: usize,
+    /// Where each car stood in the occupancy when the drivers decided.
+    places: Vec<Places>,
+    /// Speed (m/s) and drive-queue actions done when the drivers decided.
+    speed: Vec<f64>,
+    actions_done: Vec<usize>,
+    /// After moving: route arc length and sideways wander (metres), and a
+    /// point and radius the centre is within (`None`: off the map).
+    s_wander: Vec<(f64, f64)>,
+    near: Vec<Option<(DVec2, f64)>>,
+    /// Per car, `(step, route)` from the end of that step on, in step order.
+    routes: Vec<Vec<(i64, Arc<Route>)>>,
+    /// The tracks each decision read (`reads[start..end]`); `None` when the
+    /// car did not decide at that step.
+    decision: Vec<Option<(usize, usize)>>,
+    reads: Vec<usize>,
+    /// Per car, `(step, state at the end of that step)` in step order; step
+    /// -1 is the start.
+    snapshots: Vec<Vec<(i64, SimCar<'a>)>>,
+    /// This step: where each car stood, and which cars something changed.
+    current_places: Vec<Places>,
+    touched: Vec<bool>,
+    /// Whether any cars collided.
+    pub(super) collided: bool,
+}
+
+impl<'a> Tape<'a> {
+    /// An empty tape for `cars` (as they start) and `steps` steps.
+    fn new(cars: &[SimCar<'a>], steps: usize) -> Tape<'a> {
+        let n = cars.len();
+        let size = n * steps;
+        Tape {
+            cars: n,
+            places: Vec::with_capacity(size),
+            speed: Vec::with_capacity(size),
+            actions_done: Vec::with_capacity(size),
+            s_wander: Vec::with_capacity(size),
+            near: Vec::with_capacity(size),
+            routes: cars.iter().map(|c| vec![(-1, Arc::clone(&c.route))]).collect(),
+            decision: Vec::with_capacity(size),
+            reads: Vec::new(),
+            snapshots: cars.iter().map(|c| vec![(-1, c.clone())]).collect(),
+            current_places: vec![Places::default(); n],
+            touched: vec![false; n],
+            collided: false,
+        }
+    }
+
+    /// Car `i` stands at `places` in this step's occupancy.
+    pub(super) fn note_places(&mut self, i: usize, places: &Places) {
+        self.current_places[i] = *places;
+    }
+
+    /// The collision check's points and radii this step.
+    pub(super) fn note_near_points(&mut self, points: &[Option<(DVec2, f64)>]) {
+        self.near.extend_from_slice(points);
+    }
+
+    /// Car `car`'s footprint after moving in step `step`, as the factual
+    /// run had it.
+    fn footprint(&self, step: usize, car: usize, plan: &CarPlan) -> OrientedBox {
+        let routes = &self.routes[car];
+        let route = &routes[routes.partition_point(|(k, _)| *k <= step as i64) - 1].1;
+        let (s, wander) = self.s_wander[self.index(step, car)];
+        let (centre, heading) = route.pose_at(s, wander);
+        OrientedBox { centre, heading, length: plan.length, width: plan.width }
+    }
+
+    /// Something besides its own motion changed car `i` in this step.
+    pub(super) fn touch(&mut self, i: usize) {
+        self.touched[i] = true;
+    }
+
+    fn index(&self, step: usize, car: usize) -> usize {
+        step * self.cars + car
+    }
+
+    /// The tracks car `car`'s decision at `step` read, if it decided then.
+    fn reads_of(&self, step: usize, car: usize) -> Option<&[usize]> {
+        self.decision[self.index(step, car)].map(|(start, end)| &self.reads[start..end])
+    }
+}
+
+impl Sim<'_> {
+    /// Taping: the occupancy just filled, with each car's speed and actions done.
+    pub(super) fn note_fill(&mut self) {
+        let Some(tape) = &mut self.tape else { return };
+        tape.places.extend_from_slice(&tape.current_places);
+        tape.current_places.fill(Places::default());
+        for car in &self.cars {
+            tape.speed.push(car.v);
+            tape.actions_done.push(car.actions_done);
+        }
+        tape.decision.extend(std::iter::repeat_n(None, tape.cars));
+    }
+
+    /// Taping: car `i` just decided, reading the tracks noted since it began.
+    pub(super) fn note_decision(&mut self, i: usize) {
+        let (Some(tape), Some(reads)) = (&mut self.tape, &self.reads) else { return };
+        let start = tape.reads.len();
+        tape.reads.extend(reads.borrow().iter().copied());
+        let step = tape.places.len() / tape.cars - 1;
+        let index = tape.index(step, i);
+        tape.decision[index] = Some((start, tape.reads.len()));
+        tape.touched[i] = true;
+    }
+
+    /// Taping: the end of a step: every car's pose, and a snapshot of each
+    /// car something besides its motion changed.
+    pub(super) fn note_step_end(&mut self) {
+        let Some(tape) = &mut self.tape else { return };
+        let step = (tape.places.len() / tape.cars) as i64 - 1;
+        for (i, car) in self.cars.iter().enumerate() {
+            tape.s_wander.push((car.s, car.wander));
+            let routes = &mut tape.routes[i];
+            if !Arc::ptr_eq(&routes[routes.len() - 1].1, &car.route) {
+                routes.push((step, Arc::clone(&car.route)));
+            }
+            if std::mem::take(&mut tape.touched[i]) {
+                tape.snapshots[i].push((step, car.clone()));
+            }
+        }
+    }
+}
+
+/// A scenario's factual run recorded for its effects re-runs.
+pub struct Recording<'a> {
+    world: &'a CityWorld,
+    map: &'a CityMap,
+    plan: &'a ScenarioPlan,
+    factual: Trajectories,
+    tape: Tape<'a>,
+    /// Each car's leader-follower group (the index of its first car).
+    group: Vec<usize>,
+}
+
+impl<'a> Recording<'a> {
+    /// Simulates `plan` (its city parts `city`) recording the tape; `None`
+    /// when `stop` was set.
+    pub fn record(
+        world: &'a CityWorld,
+        map: &'a CityMap,
+        plan: &'a ScenarioPlan,
+        city: &'a CityPlan,
+        stop: &AtomicBool,
+    ) -> Option<Recording<'a>> {
+        let mut sim = Sim::new(map, plan, city, world.model());
+        sim.reads = Some(RefCell::new(Vec::new()));
+        let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
+        sim.tape = Some(Box::new(Tape::new(&sim.cars, steps * (plan.frames as usize).saturating_sub(1))));
+        let factual = sim.run(stop)?;
+        let tape = *sim.tape.take().expect("set above");
+        let group = groups(&sim.cars);
+        Some(Recording { world, map, plan, factual, tape, group })
+    }
+
+    /// The factual run's trajectories.
+    pub fn factual(&self) -> &Trajectories {
+        &self.factual
+    }
+
+    /// Whether re-runs can replay cars from this recording: the plan has no
+    /// interventions of its own and no cars collided.
+    pub fn replayable(&self) -> bool {
+        self.plan.interventions.is_empty() && !self.tape.collided && !self.factual.states.is_empty()
+    }
+
+    /// Whether recording `plan` for its re-runs can pay: it has no
+    /// interventions of its own and at least [`MIN_CARS_TO_REPLAY`] cars
+    /// (with fewer, recording and bookkeeping cost more than they save).
+    pub fn pays_for(plan: &ScenarioPlan) -> bool {
+        plan.interventions.is_empty() && plan.cars.len() >= MIN_CARS_TO_REPLAY
+    }
+
+    /// Re-simulates `changed` (the recorded plan with interventions on car
+    /// `cause` only), replaying the cars it has not reached; the positions
+    /// and interactions are those of simulating every car (no lights or
+    /// events). `None` when `stop` was set; also how many car steps were
+    /// replayed, and how many there were.
+    pub fn rerun(
+        &self,
+        changed: &ScenarioPlan,
+        cause: usize,
+        stop: &AtomicBool,
+    ) -> Option<(Trajectories, usize, usize)> {
+        debug_assert!(self.replayable());
+        let WorldPlan::City(city) = &changed.world else { return None };
+        let mut sim = Sim::new(self.map, changed, city, self.world.model());
+        let n = sim.cars.len();
+        // The start is the factual one: every car as planned.
+        sim.frozen = (0..n).map(|i| self.group[i] != self.group[cause]).collect();
+        let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
+        let dt = changed.frame_interval / steps as f64;
+        let mut dirty = vec![false; self.map.track_count()];
+        let (mut states, mut interactions) = (Vec::new(), Vec::new());
+        let mut replayed = 0;
+        for frame in 0..changed.frames as usize {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            if frame > 0 {
+                for k in (frame - 1) * steps..frame * steps {
+                    let t = Sim::step_time(k, steps, changed.frame_interval, dt);
+                    sim.replay_step(self, k, t, dt, steps, &mut dirty);
+                    replayed += sim.frozen.iter().filter(|&&f| f).count();
+                }
+            }
+            let t = frame as f64 * changed.frame_interval;
+            sim.fire_interventions(t, dt);
+            let (factual_states, factual_interactions) =
+                (&self.factual.states[frame], &self.factual.interactions[frame]);
+            states.push((0..n).map(|i| if sim.frozen[i] { factual_states[i] } else { sim.cars[i].state() }).collect());
+            interactions.push(
+                (0..n).map(|i| if sim.frozen[i] { factual_interactions[i] } else { sim.cars[i].binding }).collect(),
+            );
+        }
+        let trajectories = Trajectories {
+            frame_interval: changed.frame_interval,
+            states,
+            lights: Vec::new(),
+            events: Vec::new(),
+            confounder_changes: Vec::new(),
+            interactions,
+        };
+        let car_steps = n * steps * (changed.frames as usize).saturating_sub(1);
+        Some((trajectories, replayed, car_steps))
+    }
+}
+
+/// Each car's leader-follower group, as the index of the group's first car:
+/// a leader's re-planning reaches its followers, so a group is simulated or
+/// replayed as one.
+fn groups(cars: &[SimCar]) -> Vec<usize> {
+    let mut group: Vec<usize> = (0..cars.len()).collect();
+    fn root(group: &mut [usize], mut i: usize) -> usize {
+        while group[i] != i {
+            group[i] = group[group[i]];
+            i = group[i];
+        }
+        i
+    }
+    for (i, car) in cars.iter().enumerate() {
+        if let Some(leader) = car.leader.filter(|&l| l < cars.len()) {
+            let (a, b) = (root(&mut group, i), root(&mut group, leader));
+            group[a.max(b)] = a.min(b);
+        }
+    }
+    (0..cars.len()).map(|i| root(&mut group, i)).collect()
+}
+
+impl<'s> Sim<'s> {
+    /// One step of a re-run (global step `k`, from `t` to `t + dt` seconds):
+    /// [`Sim::step`] for the simulated cars, the tape for the replayed ones.
+    fn replay_step(&mut self, rec: &Recording<'s>, k: usize, t: f64, dt: f64, steps: usize, dirty: &mut [bool]) {
+        let n = self.cars.len();
+        self.fire_interventions(t, dt);
+        for i in 0..n {
+            if !self.frozen[i] && self.cars[i].pending_actions.is_some() {
+                self.replace_actions(i, t);
+            }
+        }
+        // Replayed cars about to decide on what may differ from the factual
+        // run try the decision; those who decide otherwise wake up.
+        let marked = self.mark_dirty(rec, k, dirty);
+        let trying: Vec<usize> = (0..n)
+            .filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])))
+            .collect();
+        for &track in &marked {
+            dirty[track] = false;
+        }
+        let mut waking = Vec::new();
+        if !trying.is_empty() {
+            self.fill_replayed(rec, k);
+            self.show_replayed(rec, k);
+            for c in trying {
+                if !self.decides_as_taped(rec, c, k, t, dt, steps) {
+                    waking.push(c);
+                }
+            }
+        }
+        if !waking.is_empty() {
+            let mut woken = Vec::new();
+            for c in waking {
+                woken.extend(self.wake_group(rec, c, k as i64 - 1, steps, dt));
+            }
+            woken.sort_unstable();
+            for i in woken {
+                if self.cars[i].pending_actions.is_some() {
+                    self.replace_actions(i, t);
+                }
+            }
+        }
+        // What the simulated drivers deciding now see, replayed cars as taped.
+        let deciding =
+            (0..n).any(|i| !self.frozen[i] && !self.cars[i].removed && t + 1e-9 >= self.cars[i].next_decision);
+        if deciding {
+            self.fill_replayed(rec, k);
+            self.show_replayed(rec, k);
+        }
+        for i in 0..n {
+            if self.frozen[i] || self.cars[i].removed {
+                continue;
+            }
+            if t + 1e-9 >= self.cars[i].next_decision {
+                self.decide(i, t, dt);
+                self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
+            }
+        }
+        for i in 0..n {
+            if !self.frozen[i] && !self.cars[i].removed {
+                self.advance(i, t, dt);
+            }
+        }
+        self.replayed_collisions(rec, k, t + dt, steps, dt);
+    }
+
+    /// What simulated drivers read of the replayed cars at step `k`: their
+    /// speed and actions done as taped.
+    fn show_replayed(&mut self, rec: &Recording<'s>, k: usize) {
+        for c in (0..self.cars.len()).filter(|&c| self.frozen[c]) {
+            let index = rec.tape.index(k, c);
+            self.cars[c].v = rec.tape.speed[index];
+            self.cars[c].actions_done = rec.tape.actions_done[index];
+        }
+    }
+
+    /// Whether replayed car `c`, deciding at step `k` (time `t`) on this
+    /// step's occupancy, ends the step as the factual run had it: brought up
+    /// to date, it re-plans, decides and moves (its followers told nothing),
+    /// and is compared with its snapshot. Either way it stays replayed.
+    fn decides_as_taped(&mut self, rec: &Recording<'s>, c: usize, k: usize, t: f64, dt: f64, steps: usize) -> bool {
+        self.catch_up(rec, c, k as i64 - 1, steps, dt);
+        self.quiet_followers = true;
+        if self.cars[c].pending_actions.is_some() {
+            self.replace_actions(c, t);
+        }
+        self.decide(c, t, dt);
+        self.cars[c].next_decision = t + self.cars[c].driver.reaction_time;
+        self.advance(c, t, dt);
+        self.quiet_followers = false;
+        let snapshots = &rec.tape.snapshots[c];
+        let (step, taped) = &snapshots[snapshots.partition_point(|(step, _)| *step <= k as i64) - 1];
+        let same = *step == k as i64 && self.cars[c].same_state(taped);
+        // Replayed again: what others read of it is the tape's.
+        let index = rec.tape.index(k, c);
+        self.cars[c].v = rec.tape.speed[index];
+        self.cars[c].actions_done = rec.tape.actions_done[index];
+        same
+    }
+
+    /// The occupancy at step `k`: simulated cars where they are, replayed
+    /// ones where the tape has them.
+    fn fill_replayed(&mut self, rec: &Recording<'s>, k: usize) {
+        self.clear_occupancy();
+        for i in 0..self.cars.len() {
+            let places = if self.frozen[i] {
+                rec.tape.places[rec.tape.index(k, i)]
+            } else if self.cars[i].removed {
+                continue;
+            } else {
+                self.places(i)
+            };
+            for &(track, pos) in places.iter() {
+                self.occupy(track, i, pos);
+            }
+        }
+    }
+
+    /// Marks in `dirty` every track on which a simulated car stands, or stood
+    /// in the factual run, when it is not where and as fast as the tape says
+    /// at step `k`; returns the tracks marked.
+    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [bool]) -> Vec<usize> {
+        let mut marked = Vec::new();
+        for i in (0..self.cars.len()).filter(|&i| !self.frozen[i]) {
+            let index = rec.tape.index(k, i);
+            let taped = rec.tape.places[index];
+            let car = &self.cars[i];
+            let now = if car.removed { Places::default() } else { self.places(i) };
+            let same = !car.removed
+                && now == taped
+                && car.v == rec.tape.speed[index]
+                && car.actions_done == rec.tape.actions_done[index];
+            if !same {
+                for &(track, _) in now.iter().chain(taped.iter()) {
+                    if !dirty[track] {
+                        dirty[track] = true;
+                        marked.push(track);
+                    }
+                }
+            }
+        }
+        marked
+    }
+
+    /// Brings car `c`'s group up to the end of step `to` (-1: the start)
+    /// from the tape and simulates it from then on; returns the cars woken.
+    fn wake_group(&mut self, rec: &Recording<'s>, c: usize, to: i64, steps: usize, dt: f64) -> Vec<usize> {
+        let woken: Vec<usize> =
+            (0..self.cars.len()).filter(|&m| self.frozen[m] && rec.group[m] == rec.group[c]).collect();
+        for &m in &woken {
+            self.catch_up(rec, m, to, steps, dt);
+            self.frozen[m] = false;
+        }
+        woken
+    }
+
+    /// Car `m` as the factual run had it at the end of step `to`: its latest
+    /// snapshot, moved on by the steps since (re-planning and motion only:
+    /// nothing else changed it in between, or there would be a later
+    /// snapshot).
+    fn catch_up(&mut self, rec: &Recording<'s>, m: usize, to: i64, steps: usize, dt: f64) {
+        let snapshots = &rec.tape.snapshots[m];
+        let (from, snapshot) = &snapshots[snapshots.partition_point(|(step, _)| *step <= to) - 1];
+        self.cars[m] = snapshot.clone();
+        self.quiet_followers = true;
+        for k in (from + 1)..=to {
+            let t = Sim::step_time(k as usize, steps, self.plan.frame_interval, dt);
+            if self.cars[m].pending_actions.is_some() {
+                self.replace_actions(m, t);
+            }
+            self.advance(m, t, dt);
+        }
+        self.quiet_followers = false;
+    }
+
+    /// [`Sim::detect_collisions`] at the end of step `k` (time `now`), a
+    /// replayed car's footprint from the tape; a replayed car that a
+    /// simulated one touches wakes up (with its group) before the collision.
+    fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
+        let n = self.cars.len();
+        let mut points = std::mem::take(&mut self.scratch_points);
+        points.clear();
+        for i in 0..n {
+            points.push(match (self.frozen[i], self.cars[i].removed) {
+                (true, _) => rec.tape.near[rec.tape.index(k, i)],
+                (false, true) => None,
+                (false, false) => Some(self.cars[i].near_point()),
+            });
+        }
+        // Pairs of replayed cars did what they did in the factual run (no
+        // collision): only pairs with a simulated car are looked at.
+        let mut candidates = std::mem::take(&mut self.scratch_pairs);
+        candidates.clear();
+        for i in (0..n).filter(|&i| !self.frozen[i]) {
+            let Some((pi, ri)) = points[i] else { continue };
+            for j in (0..n).filter(|&j| j != i && (self.frozen[j] || j > i)) {
+                let Some((pj, rj)) = points[j] else { continue };
+                let reach = self.cars[i].reach + self.cars[j].reach;
+                if pi.distance(pj) - ri - rj < reach + CONTACT_RELEASE + 1e-6 {
+                    candidates.push((i.min(j), i.max(j)));
+                }
+            }
+        }
+        candidates.sort_unstable();
+        if !self.contacts.is_empty() {
+            self.contacts.retain(|pair| candidates.binary_search(pair).is_ok());
+        }
+        let mut boxes: Vec<Option<OrientedBox>> = vec![None; if candidates.is_empty() { 0 } else { n }];
+        for &(i, j) in &candidates {
+            let reach = self.cars[i].reach + self.cars[j].reach;
+            let mut footprint = |sim: &Sim, x: usize| {
+                *boxes[x].get_or_insert_with(|| {
+                    if sim.frozen[x] {
+                        rec.tape.footprint(k, x, sim.cars[x].plan)
+                    } else {
+                        sim.cars[x].footprint()
+                    }
+                })
+            };
+            let (bi, bj) = (footprint(self, i), footprint(self, j));
+            if self.new_contact(i, j, reach, &bi, &bj) {
+                for x in [i, j] {
+                    if self.frozen[x] {
+                        self.wake_group(rec, x, k as i64, steps, dt);
+                    }
+                }
+                self.collide(i, j, now);
+            }
+        }
+        self.scratch_points = points;
+        self.scratch_pairs = candidates;
+    }
+}

@@ -1,0 +1,114 @@
+//! Effects re-runs that replay the cars an intervention has not reached
+//! (`world/city/replay.rs`) give the positions and interactions of
+//! re-simulating every car, bit for bit: every car of every re-run of every
+//! scenario, on every group of the paper's city spec, chains and forks, a
+//! grid town, and with red-light runners. And they do replay: most
+//! scenarios take the incremental path, and a good share of car steps is
+//! replayed rather than simulated.
+
+use causalcity::map::CityMap;
+use causalcity::plan::{Expansion, WorldPlan};
+use causalcity::spec::DatasetSpec;
+use causalcity::world::city::replay::Recording;
+use causalcity::world::city::CityWorld;
+use causalcity::world::driver::model_by_name;
+use causalcity::world::effects::{intervened, measure_with, InterventionKind, Rerun};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// A city spec of `groups` (cars, edge proportion), `train` scenarios each,
+/// 150 s in frames of a second as the paper's city spec has them, with
+/// `extra` top-level fields.
+fn spec(name: &str, groups: &[(u32, f64)], train: u32, extra: &str) -> DatasetSpec {
+    let groups: Vec<String> =
+        groups.iter().map(|(c, p)| format!(r#"{{"cars": {c}, "edge_proportion": {p}}}"#)).collect();
+    let text = format!(
+        r#"{{"name": "{name}", "world": "city", "seed": 5, "frames": 100, "frame_interval": 1.0,
+            "groups": [{}], "splits": {{"train": {train}, "val": 0, "test": 0}}{extra}}}"#,
+        groups.join(", ")
+    );
+    DatasetSpec::from_json(&text).unwrap()
+}
+
+/// Replays every re-run of every scenario of `spec` beside the full one;
+/// returns (scenarios, scenarios replayed, car steps replayed, car steps of
+/// the replayed re-runs).
+fn compare_all(spec: DatasetSpec) -> (usize, usize, usize, usize) {
+    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
+    let never = AtomicBool::new(false);
+    let (mut scenarios, mut replayed_scenarios, mut replayed, mut car_steps) = (0, 0, 0, 0);
+    for key in expansion.keys(None) {
+        let plan = expansion.plan(&key).unwrap();
+        let map = &expansion.town_of(&plan).map;
+        let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
+        let world = CityWorld::with_model(model_by_name(city.driver_model));
+        let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+        let factual = causalcity::world::simulate(map, &plan);
+        assert_eq!(recording.factual().states, factual.states, "{key:?}: the recorded run is the factual one");
+        scenarios += 1;
+        // effects.csv's rows, through the public entry point, both ways.
+        let (incremental, cost) = measure_with(map, &plan, &factual, Rerun::Incremental, &never).unwrap();
+        let (reference, _) = measure_with(map, &plan, &factual, Rerun::Full, &never).unwrap();
+        assert_eq!(incremental, reference, "{key:?}: effects differ");
+        let expected = if Recording::pays_for(&plan) && recording.replayable() { cost.reruns } else { 0 };
+        assert_eq!(cost.incremental, expected, "{key:?}: replayed where it applies and pays, else in full");
+        if !recording.replayable() {
+            continue;
+        }
+        replayed_scenarios += 1;
+        for car in 0..plan.cars.len() {
+            for kind in InterventionKind::ALL {
+                let Some(changed) = intervened(map, &plan, car, kind) else { continue };
+                let full = causalcity::world::simulate(map, &changed);
+                let (rerun, r, s) = recording.rerun(&changed, car, &never).unwrap();
+                (replayed, car_steps) = (replayed + r, car_steps + s);
+                for frame in 0..full.states.len() {
+                    assert_eq!(
+                        rerun.states[frame], full.states[frame],
+                        "{key:?}, {kind:?} on car {car}: positions differ at frame {frame}"
+                    );
+                    assert_eq!(
+                        rerun.interactions[frame], full.interactions[frame],
+                        "{key:?}, {kind:?} on car {car}: interactions differ at frame {frame}"
+                    );
+                }
+                assert_eq!(rerun.states.len(), full.states.len());
+            }
+        }
+    }
+    eprintln!(
+        "{scenarios} scenarios, {replayed_scenarios} replayed; {:.1} % of their car steps replayed",
+        100.0 * replayed as f64 / car_steps.max(1) as f64
+    );
+    (scenarios, replayed_scenarios, replayed, car_steps)
+}
+
+#[test]
+fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
+    let groups = [(4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)];
+    let (scenarios, replayed_scenarios, replayed, car_steps) = compare_all(spec("paper-groups", &groups, 4, ""));
+    assert_eq!(scenarios, 20);
+    assert!(replayed_scenarios >= 16, "only {replayed_scenarios} of {scenarios} scenarios replayed");
+    let share = replayed as f64 / car_steps as f64;
+    assert!(share > 0.25, "only {:.0} % of car steps replayed", 100.0 * share);
+}
+
+#[test]
+fn replayed_reruns_match_on_chains_forks_and_a_grid_town() {
+    for (name, extra) in [
+        ("chains", r#", "graph": {"shape": "chains", "cars": 3}"#),
+        ("forks", r#", "graph": {"shape": "forks", "cars": 3}"#),
+        ("grid", r#", "map": {"grid": {"rows": 3, "columns": 3}}"#),
+    ] {
+        let (scenarios, replayed_scenarios, _, _) = compare_all(spec(name, &[(8, 0.8)], 4, extra));
+        assert!(replayed_scenarios * 4 >= scenarios * 3, "{name}: {replayed_scenarios} of {scenarios} replayed");
+    }
+}
+
+#[test]
+fn scenarios_with_collisions_fall_back_to_full_reruns_with_the_same_effects() {
+    // Red-light runners make collisions; those scenarios re-run every car.
+    let extra = r#", "city": {"red_light_runner_probability": 0.6}"#;
+    let (scenarios, replayed_scenarios, _, _) = compare_all(spec("crashes", &[(12, 0.5)], 6, extra));
+    assert!(replayed_scenarios < scenarios, "a collision should send some scenario to the full path");
+}
