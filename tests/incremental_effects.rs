@@ -63,8 +63,10 @@ fn compare_all(spec: DatasetSpec) -> (usize, usize, usize, usize) {
                 let (rerun, r, s) = recording.rerun(&changed, car, &never).unwrap();
                 (replayed, car_steps) = (replayed + r, car_steps + s);
                 for frame in 0..full.states.len() {
+                    // Debug prints every f64 exactly (and -0.0 apart from 0.0).
                     assert_eq!(
-                        rerun.states[frame], full.states[frame],
+                        format!("{:?}", rerun.states[frame]),
+                        format!("{:?}", full.states[frame]),
                         "{key:?}, {kind:?} on car {car}: positions differ at frame {frame}"
                     );
                     assert_eq!(
@@ -111,4 +113,32 @@ fn scenarios_with_collisions_fall_back_to_full_reruns_with_the_same_effects() {
     let extra = r#", "city": {"red_light_runner_probability": 0.6}"#;
     let (scenarios, replayed_scenarios, _, _) = compare_all(spec("crashes", &[(12, 0.5)], 6, extra));
     assert!(replayed_scenarios < scenarios, "a collision should send some scenario to the full path");
+}
+
+#[test]
+fn other_interventions_are_rerun_in_full() {
+    use causalcity::plan::interventions::{Effect, Intervention, Trigger};
+    let expansion = Expansion::new(spec("other", &[(8, 0.5)], 2, ""), Arc::new(CityMap::default())).unwrap();
+    let never = AtomicBool::new(false);
+    let mut checked = 0;
+    for key in expansion.keys(None) {
+        let plan = expansion.plan(&key).unwrap();
+        let map = &expansion.town_of(&plan).map;
+        let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
+        let world = CityWorld::with_model(model_by_name(city.driver_model));
+        let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+        // A stop that other drivers would see only through the car's desired speed.
+        let mut changed = plan.clone();
+        changed.interventions.push(Intervention {
+            trigger: Trigger::At(20.0),
+            effect: Effect::Stop { car: 0, seconds: 10.0 },
+            label: "stop car 0".into(),
+        });
+        let (rerun, replayed, _) = recording.rerun(&changed, 0, &never).unwrap();
+        assert_eq!(replayed, 0, "{key:?}: a stop at 20 s is not replayed around");
+        let full = causalcity::world::simulate(map, &changed);
+        assert_eq!(format!("{:?}", rerun.states), format!("{:?}", full.states));
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
 }

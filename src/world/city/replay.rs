@@ -27,6 +27,7 @@ use super::{CityWorld, Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
 use crate::map::CityMap;
 use crate::map::Route;
+use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
 use crate::world::Trajectories;
 use glam::DVec2;
@@ -221,15 +222,19 @@ impl<'a> Recording<'a> {
     /// and interactions are those of simulating every car (no lights or
     /// events). `None` when `stop` was set; also how many car steps were
     /// replayed, and how many there were.
+    /// Anything else (a recording that is not [`Recording::replayable`],
+    /// other interventions) is simulated in full, with no car step replayed.
     pub fn rerun(
         &self,
         changed: &ScenarioPlan,
         cause: usize,
         stop: &AtomicBool,
     ) -> Option<(Trajectories, usize, usize)> {
-        debug_assert!(self.replayable());
         let WorldPlan::City(city) = &changed.world else { return None };
         let mut sim = Sim::new(self.map, changed, city, self.world.model());
+        if !self.replayable() || !replays(changed, cause) {
+            return Some((sim.run(stop)?, 0, 0));
+        }
         let n = sim.cars.len();
         // The start is the factual one: every car as planned.
         sim.frozen = (0..n).map(|i| self.group[i] != self.group[cause]).collect();
@@ -268,6 +273,20 @@ impl<'a> Recording<'a> {
         };
         let car_steps = n * steps * (changed.frames as usize).saturating_sub(1);
         Some((trajectories, replayed, car_steps))
+    }
+}
+
+/// Whether `changed`'s interventions are ones a re-run replays around:
+/// one, from time 0, removing car `cause` or replacing its actions (what
+/// the other cars read of it stays in the occupancy, its speed and its
+/// actions done).
+fn replays(changed: &ScenarioPlan, cause: usize) -> bool {
+    match changed.interventions.as_slice() {
+        [only] => {
+            only.trigger == Trigger::At(0.0)
+                && matches!(only.effect, Effect::Remove { car } | Effect::ReplaceActions { car, .. } if car == cause)
+        }
+        _ => false,
     }
 }
 
@@ -377,6 +396,12 @@ impl<'s> Sim<'s> {
         self.quiet_followers = true;
         if self.cars[c].pending_actions.is_some() {
             self.replace_actions(c, t);
+            // As in catch_up; if the decision changed the route instead, the
+            // comparison below fails and the car simply wakes.
+            let routes = &rec.tape.routes[c];
+            if let Ok(at) = routes.binary_search_by_key(&(k as i64), |(step, _)| *step) {
+                self.cars[c].route = Arc::clone(&routes[at].1);
+            }
         }
         self.decide(c, t, dt);
         self.cars[c].next_decision = t + self.cars[c].driver.reaction_time;
@@ -457,10 +482,17 @@ impl<'s> Sim<'s> {
         let (from, snapshot) = &snapshots[snapshots.partition_point(|(step, _)| *step <= to) - 1];
         self.cars[m] = snapshot.clone();
         self.quiet_followers = true;
+        let routes = &rec.tape.routes[m];
         for k in (from + 1)..=to {
             let t = Sim::step_time(k as usize, steps, self.plan.frame_interval, dt);
             if self.cars[m].pending_actions.is_some() {
                 self.replace_actions(m, t);
+                // The factual run's route (the same one, re-planned alike),
+                // so that the car compares equal to its later snapshots.
+                if let Ok(at) = routes.binary_search_by_key(&k, |(step, _)| *step) {
+                    debug_assert!(self.cars[m].route.legs.len() == routes[at].1.legs.len());
+                    self.cars[m].route = Arc::clone(&routes[at].1);
+                }
             }
             self.advance(m, t, dt);
         }
