@@ -7,7 +7,7 @@
 //! replayed rather than simulated.
 
 use causalcity::map::CityMap;
-use causalcity::plan::{Expansion, WorldPlan};
+use causalcity::plan::{Expansion, ScenarioKey, ScenarioPlan, WorldPlan};
 use causalcity::spec::DatasetSpec;
 use causalcity::world::city::replay::Recording;
 use causalcity::world::city::CityWorld;
@@ -33,32 +33,41 @@ fn spec(name: &str, groups: &[(u32, f64)], train: u32, extra: &str) -> DatasetSp
 /// Replays every re-run of every scenario of `spec` beside the full one;
 /// returns (scenarios, scenarios replayed, car steps replayed, car steps of
 /// the replayed re-runs).
-fn compare_all(spec: DatasetSpec) -> (usize, usize, usize, usize) {
+/// Calls `f` with every scenario of `spec`: its key, plan, map and the
+/// recording of its factual run.
+fn for_each_recording(spec: DatasetSpec, mut f: impl FnMut(&ScenarioKey, &ScenarioPlan, &CityMap, &Recording)) {
     let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
     let never = AtomicBool::new(false);
-    let (mut scenarios, mut replayed_scenarios, mut replayed, mut car_steps) = (0, 0, 0, 0);
     for key in expansion.keys(None) {
         let plan = expansion.plan(&key).unwrap();
         let map = &expansion.town_of(&plan).map;
         let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
         let world = CityWorld::with_model(model_by_name(city.driver_model));
         let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
-        let factual = causalcity::world::simulate(map, &plan);
+        f(&key, &plan, map, &recording);
+    }
+}
+
+fn compare_all(spec: DatasetSpec) -> (usize, usize, usize, usize) {
+    let never = AtomicBool::new(false);
+    let (mut scenarios, mut replayed_scenarios, mut replayed, mut car_steps) = (0, 0, 0, 0);
+    for_each_recording(spec, |key, plan, map, recording| {
+        let factual = causalcity::world::simulate(map, plan);
         assert_eq!(recording.factual().states, factual.states, "{key:?}: the recorded run is the factual one");
         scenarios += 1;
         // effects.csv's rows, through the public entry point, both ways.
-        let (incremental, cost) = measure_with(map, &plan, &factual, Rerun::Incremental, &never).unwrap();
-        let (reference, _) = measure_with(map, &plan, &factual, Rerun::Full, &never).unwrap();
+        let (incremental, cost) = measure_with(map, plan, &factual, Rerun::Incremental, &never).unwrap();
+        let (reference, _) = measure_with(map, plan, &factual, Rerun::Full, &never).unwrap();
         assert_eq!(incremental, reference, "{key:?}: effects differ");
-        let expected = if Recording::pays_for(&plan) && recording.replayable() { cost.reruns } else { 0 };
+        let expected = if Recording::pays_for(plan) && recording.replayable() { cost.reruns } else { 0 };
         assert_eq!(cost.incremental, expected, "{key:?}: replayed where it applies and pays, else in full");
         if !recording.replayable() {
-            continue;
+            return;
         }
         replayed_scenarios += 1;
         for car in 0..plan.cars.len() {
             for kind in InterventionKind::ALL {
-                let Some(changed) = intervened(map, &plan, car, kind) else { continue };
+                let Some(changed) = intervened(map, plan, car, kind) else { continue };
                 let full = causalcity::world::simulate(map, &changed);
                 let (rerun, r, s) = recording.rerun(&changed, car, &never).unwrap();
                 (replayed, car_steps) = (replayed + r, car_steps + s);
@@ -77,7 +86,7 @@ fn compare_all(spec: DatasetSpec) -> (usize, usize, usize, usize) {
                 assert_eq!(rerun.states.len(), full.states.len());
             }
         }
-    }
+    });
     eprintln!(
         "{scenarios} scenarios, {replayed_scenarios} replayed; {:.1} % of their car steps replayed",
         100.0 * replayed as f64 / car_steps.max(1) as f64
@@ -118,15 +127,9 @@ fn scenarios_with_collisions_fall_back_to_full_reruns_with_the_same_effects() {
 #[test]
 fn other_interventions_are_rerun_in_full() {
     use causalcity::plan::interventions::{Effect, Intervention, Trigger};
-    let expansion = Expansion::new(spec("other", &[(8, 0.5)], 2, ""), Arc::new(CityMap::default())).unwrap();
     let never = AtomicBool::new(false);
     let mut checked = 0;
-    for key in expansion.keys(None) {
-        let plan = expansion.plan(&key).unwrap();
-        let map = &expansion.town_of(&plan).map;
-        let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
-        let world = CityWorld::with_model(model_by_name(city.driver_model));
-        let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+    for_each_recording(spec("other", &[(8, 0.5)], 2, ""), |key, plan, map, recording| {
         // A stop that other drivers would see only through the car's desired speed.
         let mut changed = plan.clone();
         changed.interventions.push(Intervention {
@@ -139,6 +142,6 @@ fn other_interventions_are_rerun_in_full() {
         let full = causalcity::world::simulate(map, &changed);
         assert_eq!(format!("{:?}", rerun.states), format!("{:?}", full.states));
         checked += 1;
-    }
+    });
     assert_eq!(checked, 2);
 }
