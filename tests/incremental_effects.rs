@@ -145,3 +145,15 @@ fn other_interventions_are_rerun_in_full() {
     });
     assert_eq!(checked, 2);
 }
+
+#[test]
+fn a_scenario_too_long_for_a_tape_is_not_recorded() {
+    // 20,000 s of 8 cars would need a tape of gigabytes: its effects come
+    // from full re-runs (measure_with records only what pays_for allows).
+    let text = r#"{"name": "long", "world": "city", "seed": 5, "frames": 20000, "frame_interval": 1.0,
+        "groups": [{"cars": 8, "edge_proportion": 0.5}], "splits": {"train": 1, "val": 0, "test": 0}}"#;
+    let long = Expansion::new(DatasetSpec::from_json(text).unwrap(), Arc::new(CityMap::default())).unwrap();
+    assert!(!Recording::pays_for(&long.plan(&long.keys(None)[0]).unwrap()));
+    let short = Expansion::new(spec("short", &[(8, 0.5)], 1, ""), Arc::new(CityMap::default())).unwrap();
+    assert!(Recording::pays_for(&short.plan(&short.keys(None)[0]).unwrap()));
+}

@@ -41,6 +41,18 @@ use std::sync::Arc;
 /// 0.8-0.9x; 12 cars 63 % and 0.76x.
 pub const MIN_CARS_TO_REPLAY: usize = 6;
 
+/// Largest tape a scenario records for its re-runs, bytes (one per worker
+/// thread at a time): the paper's 12-car city scenario needs about 11 MB.
+pub const MAX_TAPE_BYTES: usize = 64 << 20;
+
+/// What the tape holds per car and step, bytes, with room: occupancy places
+/// (56), speed and actions done (16), route position and wander (16),
+/// collision bound (32), decision and its reads (about 35), and a share of
+/// the snapshots (an 840-byte car at every decision, about every 6 steps).
+/// Measured on `configs/city.json`'s 12-car scenarios: 250-310 (a test
+/// keeps it within this).
+const TAPE_BYTES_PER_CAR_STEP: usize = 384;
+
 /// What the factual run records for re-runs, step by step (`step * cars + car`).
 pub(super) struct Tape<'a> {
     cars: usize,
@@ -211,10 +223,14 @@ impl<'a> Recording<'a> {
     }
 
     /// Whether recording `plan` for its re-runs can pay: it has no
-    /// interventions of its own and at least [`MIN_CARS_TO_REPLAY`] cars
-    /// (with fewer, recording and bookkeeping cost more than they save).
+    /// interventions of its own, at least [`MIN_CARS_TO_REPLAY`] cars (with
+    /// fewer, recording and bookkeeping cost more than they save), and a
+    /// tape within [`MAX_TAPE_BYTES`] (a very long scenario re-runs in full
+    /// rather than hold gigabytes).
     pub fn pays_for(plan: &ScenarioPlan) -> bool {
-        plan.interventions.is_empty() && plan.cars.len() >= MIN_CARS_TO_REPLAY
+        let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize * plan.frames as usize;
+        let tape_bytes = plan.cars.len().saturating_mul(steps).saturating_mul(TAPE_BYTES_PER_CAR_STEP);
+        plan.interventions.is_empty() && plan.cars.len() >= MIN_CARS_TO_REPLAY && tape_bytes <= MAX_TAPE_BYTES
     }
 
     /// Re-simulates `changed` (the recorded plan with interventions on car
@@ -555,5 +571,57 @@ impl<'s> Sim<'s> {
         }
         self.scratch_points = points;
         self.scratch_pairs = candidates;
+    }
+}
+
+#[cfg(test)]
+impl Tape<'_> {
+    /// Bytes the tape holds, its vectors' capacities and each snapshot's
+    /// car with the vectors it owns (routes are shared with the plan).
+    fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        let snapshot = |car: &SimCar| {
+            size_of::<(i64, SimCar)>()
+                + car.actions.capacity() * size_of::<crate::map::Action>()
+                + (car.merges.capacity() + car.given_up.capacity() + car.logged_adaptations.capacity()) * 8
+        };
+        self.places.capacity() * size_of::<Places>()
+            + self.speed.capacity() * 8
+            + self.actions_done.capacity() * 8
+            + self.s_wander.capacity() * 16
+            + self.near.capacity() * size_of::<Option<(DVec2, f64)>>()
+            + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
+            + self.reads.capacity() * 8
+            + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::Expansion;
+    use crate::spec::DatasetSpec;
+
+    #[test]
+    fn a_tape_stays_within_its_estimate_per_car_step() {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/city.json")).unwrap();
+        let expansion = Expansion::new(DatasetSpec::from_json(&text).unwrap(), Arc::new(CityMap::default())).unwrap();
+        let never = AtomicBool::new(false);
+        let mut checked = 0;
+        for key in expansion.keys(Some(2)).into_iter().filter(|k| k.group.starts_with("cars12")) {
+            let plan = expansion.plan(&key).unwrap();
+            let map = &expansion.town_of(&plan).map;
+            let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
+            let world = CityWorld::with_model(crate::world::driver::model_by_name(city.driver_model));
+            let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+            let steps = (plan.frame_interval / MAX_STEP).ceil() as usize * (plan.frames as usize - 1);
+            let per_car_step = recording.tape.bytes() as f64 / (plan.cars.len() * steps) as f64;
+            assert!(
+                per_car_step <= TAPE_BYTES_PER_CAR_STEP as f64,
+                "{key:?}: {per_car_step:.0} bytes per car step, estimated {TAPE_BYTES_PER_CAR_STEP}"
+            );
+            checked += 1;
+        }
+        assert!(checked >= 2);
     }
 }
