@@ -1,24 +1,27 @@
 //! Effects re-runs that simulate only the cars an intervention has reached.
 //!
-//! The factual run records a [`Tape`]: at every step, where each car stood
+//! The factual run records a tape (`Tape`): at every step, where each car stood
 //! in the occupancy and its speed and actions done when the drivers decided,
-//! its pose after moving, and the tracks each decision read; and a snapshot
-//! of a car at the end of every step in which something besides its own
-//! motion changed it (it decided, or its leader showed it new actions).
+//! where it was on its route after moving, and the tracks each decision
+//! read; and a snapshot of a car at the end of every step in which something
+//! besides its own motion changed it (it decided, or its leader showed it
+//! new actions).
 //!
-//! A re-run simulates the intervened car and its leader-follower group and
-//! replays every other car from the tape. A replayed car is brought up to
-//! date (its latest snapshot, moved on step by step) and simulated from then
-//! on, with its group, as soon as
+//! A re-run simulates the intervened car's leader-follower group and replays
+//! every other car from the tape. A replayed car is brought up to date (its
+//! latest snapshot, moved on step by step) and simulated from then on, with
+//! its group, as soon as
 //! - a decision it takes would read a track on which a simulated car stands
-//!   elsewhere, or at another speed, than the tape says (what it sees may
-//!   differ), or
+//!   elsewhere, or at another speed, than the tape says, and the decision,
+//!   tried, ends the step otherwise than the tape's snapshot, or
 //! - a simulated car touches it (a collision).
 //!
 //! Until then it does what the factual run did, so a re-run's positions and
-//! interactions are those of simulating every car, bit for bit (tests run
-//! both side by side). Scenarios whose factual run has interventions of its
-//! own or a collision are re-run in full.
+//! interactions are those of simulating every car, bit for bit
+//! (`tests/incremental_effects.rs` runs both side by side). Scenarios with
+//! interventions of their own, a collision in the factual run, few cars or
+//! a tape too long to hold are re-run in full, as is any re-run other than
+//! one removal or action change of its cause at time 0.
 
 use super::car::SimCar;
 use super::events::CONTACT_RELEASE;
@@ -36,9 +39,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Fewest cars for which replaying pays. Measured on `configs/city.json`
-/// (one core, 24 scenarios per group): 4 cars replay 31 % of car steps and
-/// take 1.2x the full re-runs' time; 8 cars replay 50-58 % and take
-/// 0.8-0.9x; 12 cars 63 % and 0.76x.
+/// (`BENCH_ONLY=effects make bench`, one core): 4 cars replay 31 % of car
+/// steps and gain nothing once the recording is paid for (0.84x the full
+/// re-runs' speed); 8 cars replay 50-58 % and are 1.12-1.27x faster, 12
+/// cars 63 % and 1.42x.
 pub const MIN_CARS_TO_REPLAY: usize = 6;
 
 /// Largest tape a scenario records for its re-runs, bytes (one per worker
