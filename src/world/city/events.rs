@@ -184,16 +184,34 @@ impl Sim<'_> {
         let candidates = self.candidate_pairs(&points);
         #[cfg(debug_assertions)]
         self.check_candidates(&candidates);
-        // Contacts of pairs now clearly apart end ("not near").
+        self.settle_pairs(&candidates, now, |sim, x| sim.cars[x].footprint(), |_, _, _| {});
+    }
+
+    /// Settles the candidate pairs (sorted; every other pair is clearly
+    /// apart) at time `now`: contacts of pairs no longer candidates end ("not
+    /// near"), and each pair that newly touches collides, `before_collide`
+    /// called first. `footprint` gives a car's rectangle, asked at most once
+    /// per car.
+    pub(super) fn settle_pairs(
+        &mut self,
+        candidates: &[(usize, usize)],
+        now: f64,
+        footprint: impl Fn(&Self, usize) -> OrientedBox,
+        mut before_collide: impl FnMut(&mut Self, usize, usize),
+    ) {
         if !self.contacts.is_empty() {
             self.contacts.retain(|pair| candidates.binary_search(pair).is_ok());
         }
+        if candidates.is_empty() {
+            return;
+        }
         let mut boxes: Vec<Option<OrientedBox>> = vec![None; self.cars.len()];
-        for (i, j) in candidates {
+        for &(i, j) in candidates {
             let reach = self.cars[i].reach + self.cars[j].reach;
-            let bi = *boxes[i].get_or_insert_with(|| self.cars[i].footprint());
-            let bj = *boxes[j].get_or_insert_with(|| self.cars[j].footprint());
+            let bi = *boxes[i].get_or_insert_with(|| footprint(self, i));
+            let bj = *boxes[j].get_or_insert_with(|| footprint(self, j));
             if self.new_contact(i, j, reach, &bi, &bj) {
+                before_collide(self, i, j);
                 self.collide(i, j, now);
             }
         }
@@ -248,7 +266,7 @@ impl Sim<'_> {
     /// their half diagonals) have just touched. A contact ends only once the
     /// cars are clearly apart ([`CONTACT_RELEASE`]), so sideways wander does
     /// not log one crash many times.
-    pub(super) fn new_contact(&mut self, i: usize, j: usize, reach: f64, a: &OrientedBox, b: &OrientedBox) -> bool {
+    fn new_contact(&mut self, i: usize, j: usize, reach: f64, a: &OrientedBox, b: &OrientedBox) -> bool {
         let near = a.centre.distance(b.centre) < reach + CONTACT_RELEASE;
         if self.contacts.contains(&(i, j)) {
             if !near || !a.inflated(CONTACT_RELEASE).overlaps(b) {
@@ -265,7 +283,7 @@ impl Sim<'_> {
 
     /// Logs the collision of cars `i` and `j` at time `now` and stops both
     /// for 2 to 5 seconds each (drawn from each car's own stream).
-    pub(super) fn collide(&mut self, i: usize, j: usize, now: f64) {
+    fn collide(&mut self, i: usize, j: usize, now: f64) {
         if let Some(tape) = &mut self.tape {
             tape.collided = true;
         }

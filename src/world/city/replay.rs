@@ -416,12 +416,9 @@ impl<'s> Sim<'s> {
         self.quiet_followers = true;
         if self.cars[c].pending_actions.is_some() {
             self.replace_actions(c, t);
-            // As in catch_up; if the decision changed the route instead, the
-            // comparison below fails and the car simply wakes.
-            let routes = &rec.tape.routes[c];
-            if let Ok(at) = routes.binary_search_by_key(&(k as i64), |(step, _)| *step) {
-                self.cars[c].route = Arc::clone(&routes[at].1);
-            }
+            // If the decision changed the route instead, the comparison
+            // below fails and the car simply wakes.
+            self.take_taped_route(rec, c, k as i64);
         }
         self.decide(c, t, dt);
         self.cars[c].next_decision = t + self.cars[c].driver.reaction_time;
@@ -502,21 +499,25 @@ impl<'s> Sim<'s> {
         let (from, snapshot) = &snapshots[snapshots.partition_point(|(step, _)| *step <= to) - 1];
         self.cars[m] = snapshot.clone();
         self.quiet_followers = true;
-        let routes = &rec.tape.routes[m];
         for k in (from + 1)..=to {
             let t = Sim::step_time(k as usize, steps, self.plan.frame_interval, dt);
             if self.cars[m].pending_actions.is_some() {
                 self.replace_actions(m, t);
-                // The factual run's route (the same one, re-planned alike),
-                // so that the car compares equal to its later snapshots.
-                if let Ok(at) = routes.binary_search_by_key(&k, |(step, _)| *step) {
-                    debug_assert!(self.cars[m].route.legs.len() == routes[at].1.legs.len());
-                    self.cars[m].route = Arc::clone(&routes[at].1);
-                }
+                self.take_taped_route(rec, m, k);
             }
             self.advance(m, t, dt);
         }
         self.quiet_followers = false;
+    }
+
+    /// After car `m` re-planned at step `k`: the factual run's route from
+    /// that step, if it has one (the same route, re-planned alike), so that
+    /// the car compares equal to its later snapshots.
+    fn take_taped_route(&mut self, rec: &Recording<'s>, m: usize, k: i64) {
+        let routes = &rec.tape.routes[m];
+        if let Ok(at) = routes.binary_search_by_key(&k, |(step, _)| *step) {
+            self.cars[m].route = Arc::clone(&routes[at].1);
+        }
     }
 
     /// [`Sim::detect_collisions`] at the end of step `k` (time `now`), a
@@ -548,31 +549,22 @@ impl<'s> Sim<'s> {
             }
         }
         candidates.sort_unstable();
-        if !self.contacts.is_empty() {
-            self.contacts.retain(|pair| candidates.binary_search(pair).is_ok());
-        }
-        let mut boxes: Vec<Option<OrientedBox>> = vec![None; if candidates.is_empty() { 0 } else { n }];
-        for &(i, j) in &candidates {
-            let reach = self.cars[i].reach + self.cars[j].reach;
-            let mut footprint = |sim: &Sim, x: usize| {
-                *boxes[x].get_or_insert_with(|| {
-                    if sim.frozen[x] {
-                        rec.tape.footprint(k, x, sim.cars[x].plan)
-                    } else {
-                        sim.cars[x].footprint()
-                    }
-                })
-            };
-            let (bi, bj) = (footprint(self, i), footprint(self, j));
-            if self.new_contact(i, j, reach, &bi, &bj) {
-                for x in [i, j] {
-                    if self.frozen[x] {
-                        self.wake_group(rec, x, k as i64, steps, dt);
-                    }
-                }
-                self.collide(i, j, now);
+        let footprint = |sim: &Sim, x: usize| {
+            if sim.frozen[x] {
+                rec.tape.footprint(k, x, sim.cars[x].plan)
+            } else {
+                sim.cars[x].footprint()
             }
-        }
+        };
+        // A replayed car a simulated one touches wakes (with its group) first.
+        let wake = |sim: &mut Sim<'s>, i: usize, j: usize| {
+            for x in [i, j] {
+                if sim.frozen[x] {
+                    sim.wake_group(rec, x, k as i64, steps, dt);
+                }
+            }
+        };
+        self.settle_pairs(&candidates, now, footprint, wake);
         self.scratch_points = points;
         self.scratch_pairs = candidates;
     }
