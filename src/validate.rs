@@ -56,6 +56,8 @@ pub struct SplitDesign {
     pub shared_towns: Vec<String>,
     /// Whether train and test plan the same graph shape.
     pub shared_graph: bool,
+    /// Whether train and test have the same cars per scenario in every group.
+    pub shared_cars: bool,
     /// Whether train and test draw confounders from the same ranges (city world).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shared_confounders: Option<bool>,
@@ -68,7 +70,9 @@ pub struct SplitDraws {
     pub towns: Vec<String>,
     /// `pairs`, `chains of 3`, `forks of 4`.
     pub graph: String,
-    /// The sections it holds out from train (`map`, `graph`, `confounders`).
+    /// Cars per scenario in each group, in spec order.
+    pub cars: Vec<u32>,
+    /// The sections it holds out from train (`map`, `graph`, `cars`, `confounders`).
     pub held_out: Vec<&'static str>,
 }
 
@@ -95,15 +99,17 @@ impl SplitDesign {
                     split: split.name(),
                     towns: expansion.town_names(split).into_iter().map(String::from).collect(),
                     graph: graph(split),
+                    cars: spec.groups_of(split).iter().map(|g| g.cars).collect(),
                     held_out,
                 }
             })
             .collect();
         let shared_towns = splits[0].towns.iter().filter(|t| splits[2].towns.contains(t)).cloned().collect();
         let shared_graph = splits[0].graph == splits[2].graph;
+        let shared_cars = splits[0].cars == splits[2].cars;
         let shared_confounders = (spec.world == crate::spec::WorldKind::City)
             .then(|| spec.confounders_of(Split::Train) == spec.confounders_of(Split::Test));
-        Some(SplitDesign { splits, shared_towns, shared_graph, shared_confounders })
+        Some(SplitDesign { splits, shared_towns, shared_graph, shared_cars, shared_confounders })
     }
 }
 
@@ -112,16 +118,25 @@ impl fmt::Display for SplitDesign {
         for s in &self.splits {
             let held =
                 if s.held_out.is_empty() { String::new() } else { format!(" (held out: {})", s.held_out.join(", ")) };
-            writeln!(f, "{:<5} towns {}; graph {}{held}", s.split, s.towns.join(" "), s.graph)?;
+            let cars: Vec<String> = s.cars.iter().map(u32::to_string).collect();
+            writeln!(
+                f,
+                "{:<5} towns {}; graph {}; cars {}{held}",
+                s.split,
+                s.towns.join(" "),
+                s.graph,
+                cars.join(" ")
+            )?;
         }
         let towns = if self.shared_towns.is_empty() { "no town".to_string() } else { self.shared_towns.join(" ") };
         let graph = if self.shared_graph { "the graph shape" } else { "no graph shape" };
+        let cars = if self.shared_cars { "the car counts" } else { "not the car counts" };
         let confounders = match self.shared_confounders {
             Some(true) => "; the confounder ranges",
             Some(false) => "; not the confounder ranges",
             None => "",
         };
-        writeln!(f, "train and test share: {towns}; {graph}{confounders}")
+        writeln!(f, "train and test share: {towns}; {graph}; {cars}{confounders}")
     }
 }
 
@@ -487,11 +502,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
                     mask_ids.insert((i + 1) as u8);
                 }
                 let group = spec.groups.iter().find(|g| g.name() == key.group);
-                if let Some(g) = group {
+                if let Some(g) = group.map(|g| spec.group_of(key.split, g)) {
                     if cars != g.cars as usize {
                         problems.push(Problem {
                             path: path.clone(),
-                            message: format!("{cars} cars, the spec asks for {}", g.cars),
+                            message: format!("{cars} cars, the spec asks for {} in {}", g.cars, key.split.name()),
                         });
                     }
                 }

@@ -273,8 +273,11 @@ fn a_split_can_hold_out_towns_and_graph_shapes_and_validate_says_what_train_and_
     let report = run(&["validate", out.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&report.stdout);
     assert!(report.status.success(), "{text}");
-    assert!(text.contains("test  towns grid-4x3; graph chains of 3 (held out: map, graph)"), "{text}");
-    assert!(text.contains("train and test share: no town; no graph shape; the confounder ranges"), "{text}");
+    assert!(text.contains("test  towns grid-4x3; graph chains of 3; cars 8 (held out: map, graph)"), "{text}");
+    assert!(
+        text.contains("train and test share: no town; no graph shape; the car counts; the confounder ranges"),
+        "{text}"
+    );
     let json: serde_json::Value =
         serde_json::from_slice(&run(&["validate", out.to_str().unwrap(), "--json"]).stdout).unwrap();
     assert_eq!(json["design"]["shared_towns"], serde_json::json!([]));
@@ -436,5 +439,105 @@ fn the_birds_eye_camera_frames_the_whole_network_or_an_area_the_spec_gives() {
         }
         let validated = run(&["validate", out.to_str().unwrap()]);
         assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+    }
+}
+
+#[test]
+fn a_split_can_hold_out_the_car_count_keeping_train_and_val_and_every_reader_agrees() {
+    let dir = fresh_dir("held-out-cars");
+    for sub in ["a", "b", "c", "d"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    let twin: serde_json::Value =
+        serde_json::from_str(&city_spec("twin", &[(6, 0.5), (8, 0.8)], (3, 2, 2), 12, r#"{"confounders": {}}"#))
+            .unwrap();
+    let mut held = twin.clone();
+    held["held_out"] = serde_json::json!({"test": {"cars": 10}});
+    let (twin_out, held_out) = (dir.join("twin"), dir.join("held"));
+    gen_ok(&write_spec(&dir.join("a"), &twin.to_string()), &twin_out, &["--no-images"]);
+    gen_ok(&write_spec(&dir.join("b"), &held.to_string()), &held_out, &["--no-images"]);
+
+    // Train and val are the twin's byte for byte; test scenarios have 10
+    // cars and each group's edge proportion of them (0.5: 3 edges; 0.8: 4).
+    let mut tested = 0;
+    for scenario in scenario_dirs(&twin_out) {
+        let rel = scenario.strip_prefix(&twin_out).unwrap();
+        let json = read_json(&held_out.join(rel).join("scenario.json"));
+        if json["split"] != "test" {
+            for file in ["scenario.json", "poses.csv", "lights.csv", "effects.csv"] {
+                assert_eq!(
+                    std::fs::read(scenario.join(file)).unwrap(),
+                    std::fs::read(held_out.join(rel).join(file)).unwrap(),
+                    "{rel:?} {file}"
+                );
+            }
+            continue;
+        }
+        assert_eq!(json["cars"].as_array().unwrap().len(), 10, "{rel:?}");
+        let edges = json["edges"].as_array().unwrap().len();
+        let want = if rel.starts_with("cars06_edges50") { 3 } else { 4 };
+        assert_eq!(edges, want, "{rel:?}");
+        let poses = read_poses(&held_out.join(rel).join("poses.csv"));
+        assert_eq!(poses_by_car(&poses).len(), 10);
+        // Effects back the test scenarios too: a row per ordered pair of cars.
+        let effects = std::fs::read_to_string(held_out.join(rel).join("effects.csv")).unwrap();
+        assert!(effects.lines().count() > 90, "{rel:?}: {} rows", effects.lines().count());
+        tested += 1;
+    }
+    assert_eq!(tested, 4);
+
+    // The manifest records the split's own count; validate checks it and says what is shared.
+    let manifest = read_json(&held_out.join("manifest.json"));
+    assert_eq!(manifest["groups"][0]["held_out"], serde_json::json!({"test": {"cars": 10, "edges": 3}}));
+    assert_eq!(manifest["groups"][1]["cars"], 8);
+    assert_valid(&validator("manifest.schema.json"), &manifest, &held_out.join("manifest.json"));
+    let report = run(&["validate", held_out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert!(report.status.success(), "{text}");
+    assert!(text.contains("train towns default; graph pairs; cars 6 8\n"), "{text}");
+    assert!(text.contains("test  towns default; graph pairs; cars 10 10 (held out: cars)"), "{text}");
+    assert!(text.contains("train and test share: default; the graph shape; not the car counts"), "{text}");
+
+    // export nri gives test its own car count.
+    let export = dir.join("nri");
+    let exported = run(&["export", "nri", held_out.to_str().unwrap(), "--out", export.to_str().unwrap()]);
+    assert!(exported.status.success(), "{}", String::from_utf8_lossy(&exported.stderr));
+    let header = |name: &str| {
+        let bytes = std::fs::read(export.join("cars06_edges50").join(name)).unwrap();
+        String::from_utf8_lossy(&bytes[..128]).to_string()
+    };
+    assert!(header("loc_train.npy").contains("(3, 12, 6, 2, )"), "{}", header("loc_train.npy"));
+    assert!(header("loc_test.npy").contains("(2, 12, 10, 2, )"), "{}", header("loc_test.npy"));
+
+    // A test scenario with a train-sized car list is caught.
+    let test = held_out.join("cars06_edges50/test/00000/scenario.json");
+    let mut json = read_json(&test);
+    json["cars"].as_array_mut().unwrap().truncate(6);
+    std::fs::write(&test, serde_json::to_vec_pretty(&json).unwrap()).unwrap();
+    let report = run(&["validate", held_out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&report.stdout);
+    assert_eq!(report.status.code(), Some(1), "{text}");
+    assert!(text.contains("6 cars, the spec asks for 10 in test"), "{text}");
+
+    // Refused with exit 2, naming the field, nothing written: no cars, or
+    // more than the map holds, or too few for the group's edges.
+    for (sub, value, field) in [
+        ("c", serde_json::json!({"test": {"cars": 0}}), "held_out.test.cars"),
+        ("d", serde_json::json!({"val": {"cars": 200}}), "held_out.val.cars"),
+    ] {
+        let mut bad = twin.clone();
+        bad["held_out"] = value;
+        let out = dir.join(sub).join("out");
+        let refused = run(&[
+            "gen",
+            "--spec",
+            write_spec(&dir.join(sub), &bad.to_string()).to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(field), "{stderr}");
+        assert!(!out.exists());
     }
 }

@@ -83,6 +83,10 @@ fn spec_schema_and_parser_agree() {
             v["held_out"] = json!({"test": {"confounders": {"hour": {"uniform": [20, 24]}, "rain": 1.0}}})
         }),
     ));
+    good.push((
+        "held-out cars".into(),
+        edited(&base, |v| v["held_out"] = json!({"val": {"cars": 6}, "test": {"cars": 12}})),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),
@@ -111,7 +115,8 @@ fn spec_schema_and_parser_agree() {
         ("camera area everything", edited(&base, |v| v["map"] = json!({"camera_area": "everything"}))),
         ("camera area without y", edited(&base, |v| v["map"] = json!({"camera_area": {"x": [-30, 30]}}))),
         ("held-out train", edited(&base, |v| v["held_out"] = json!({"train": {"graph": {"shape": "chains"}}}))),
-        ("held-out cars", edited(&base, |v| v["held_out"] = json!({"test": {"cars": 12}}))),
+        ("held-out cars of 0", edited(&base, |v| v["held_out"] = json!({"test": {"cars": 0}}))),
+        ("held-out cars of 2.5", edited(&base, |v| v["held_out"] = json!({"val": {"cars": 2.5}}))),
         (
             "held-out unknown confounder",
             edited(&base, |v| v["held_out"] = json!({"test": {"confounders": {"hail": 1.0}}})),

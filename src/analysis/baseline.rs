@@ -184,7 +184,8 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
                 max_lag_s: lag_of(g).map(|k| lags[k]),
                 lag_from: lag_of(g).map(|_| if lags.len() > 1 { "train" } else { "given" }),
                 group: group.name(),
-                cars: group.cars,
+                // The rows score the test split, which may hold the car count out.
+                cars: spec.group_of(Split::Test, group).cars,
                 edge_proportion: group.edge_proportion,
                 threshold_m: threshold,
                 threshold_from: from,

@@ -999,7 +999,7 @@ fn edge_rows<'a>(
             rows.push(EdgeScores {
                 graph,
                 group: name.clone(),
-                cars: group.cars,
+                cars: truth.expansion.spec.group_of(split, group).cars,
                 edge_proportion: group.edge_proportion,
                 split: split.name(),
                 held_out: truth.expansion.spec.held_out.of(split).is_some(),
@@ -1077,7 +1077,7 @@ fn trajectory_rows(
             if !steps.is_empty() {
                 rows.push(TrajectoryScores {
                     group: name.clone(),
-                    cars: group.cars,
+                    cars: truth.expansion.spec.group_of(split, group).cars,
                     edge_proportion: group.edge_proportion,
                     split: split.name(),
                     scenarios: errors.len(),

@@ -250,10 +250,11 @@ fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Resu
     let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
     let mut report = Vec::new();
     for group in &opened.spec().groups {
-        let cars = group.cars as usize;
         let group_dir: PathBuf = out.join(group.name());
         std::fs::create_dir_all(&group_dir).map_err(|e| io_err(&group_dir)(e).to_string())?;
         for split in Split::ALL {
+            // A split that holds the car count out has its own.
+            let cars = opened.spec().group_of(split, group).cars as usize;
             let dirs = opened.scenario_dirs(&group.name(), split);
             if dirs.is_empty() {
                 continue;

@@ -20,6 +20,17 @@ pub struct GroupEntry {
     pub edge_proportion: f64,
     pub edges: u32,
     pub splits: BTreeMap<&'static str, u32>,
+    /// The splits that hold the car count out (`held_out.<split>.cars`):
+    /// their cars and edges per scenario, in place of `cars` and `edges`.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub held_out: BTreeMap<&'static str, HeldOutCars>,
+}
+
+/// A split's own car count in a group ([`GroupEntry::held_out`]).
+#[derive(Debug, Serialize)]
+pub struct HeldOutCars {
+    pub cars: u32,
+    pub edges: u32,
 }
 
 /// The manifest record.
@@ -192,6 +203,14 @@ impl<'a> Manifest<'a> {
                 splits: Split::ALL
                     .iter()
                     .map(|s| (s.name(), spec.splits.count(*s).min(limit.unwrap_or(u32::MAX))))
+                    .collect(),
+                held_out: Split::ALL
+                    .iter()
+                    .filter(|s| spec.held_out.of(**s).is_some_and(|h| h.cars.is_some()))
+                    .map(|&s| {
+                        let own = spec.group_of(s, g);
+                        (s.name(), HeldOutCars { cars: own.cars, edges: own.edges() })
+                    })
                     .collect(),
             })
             .collect();

@@ -1,11 +1,12 @@
 //! `held_out`: what val and test draw differently from train (their own
-//! map, graph shape or confounder ranges), so that a split tests
+//! map, graph shape, car count or confounder ranges), so that a split tests
 //! generalisation.
 
 use super::*;
 
 /// A split's own sections, in place of the dataset's: a map (towns train
-/// never sees), a graph shape, and (city world) confounder ranges.
+/// never sees), a graph shape, a car count, and (city world) confounder
+/// ranges.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HeldOut {
@@ -13,6 +14,11 @@ pub struct HeldOut {
     pub map: Option<MapSpec>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub graph: Option<GraphSpec>,
+    /// Cars per scenario in every group, in place of the group's own count;
+    /// each group keeps its edge proportion (edges = round(proportion x
+    /// cars / 2)) and its folder name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cars: Option<u32>,
     /// In place of `city.confounders`: each scenario draws the same
     /// exogenous numbers as without it, read through these distributions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -20,7 +26,7 @@ pub struct HeldOut {
 }
 
 impl HeldOut {
-    /// The names of the sections it holds out (`map`, `graph`, `confounders`).
+    /// The names of the sections it holds out (`map`, `graph`, `cars`, `confounders`).
     pub fn sections(&self) -> Vec<&'static str> {
         let mut names = Vec::new();
         if self.map.is_some() {
@@ -28,6 +34,9 @@ impl HeldOut {
         }
         if self.graph.is_some() {
             names.push("graph");
+        }
+        if self.cars.is_some() {
+            names.push("cars");
         }
         if self.confounders.is_some() {
             names.push("confounders");

@@ -368,6 +368,11 @@ impl DatasetSpec {
                 graph.validate().map_err(|e| held_out_field(split, e))?;
             }
         }
+        for split in [Split::Val, Split::Test] {
+            if let Some(cars) = self.held_out.of(split).and_then(|h| h.cars) {
+                range(&format!("held_out.{}.cars", split.name()), cars, 1, MAX_CARS)?;
+            }
+        }
         let mut names = std::collections::HashSet::new();
         for (i, g) in self.groups.iter().enumerate() {
             range(&format!("groups[{i}].cars"), g.cars, 1, MAX_CARS)?;
@@ -383,14 +388,17 @@ impl DatasetSpec {
             }
             for split in Split::ALL {
                 let graph = self.graph_of(split);
+                let g = &self.group_of(split, g);
                 if graph.cars_needed(g.edges()) > g.cars {
                     let joined = match graph.shape {
                         GraphShape::Pairs => "leader-follower pairs".to_string(),
                         shape => format!("edges in {} of {} cars", shape.name(), graph.unit_cars()),
                     };
-                    let whose = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
-                        Some(_) => format!(" in {} (held_out.{}.graph)", split.name(), split.name()),
-                        None => String::new(),
+                    let held = self.held_out.of(split);
+                    let whose = match (held.and_then(|h| h.graph.as_ref()), held.and_then(|h| h.cars)) {
+                        (Some(_), _) => format!(" in {} (held_out.{}.graph)", split.name(), split.name()),
+                        (None, Some(_)) => format!(" in {} (held_out.{}.cars)", split.name(), split.name()),
+                        (None, None) => String::new(),
                     };
                     return Err(SpecError::new(
                         field,
@@ -476,7 +484,7 @@ impl DatasetSpec {
             }
         }
         self.birds_eye_camera()?;
-        let fewest_cars = self.groups.iter().map(|g| g.cars).min().unwrap_or(0);
+        let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
         let mut names = std::collections::HashSet::new();
         for (i, camera) in self.cameras.iter().enumerate() {
             let field = format!("cameras[{i}]");
@@ -561,6 +569,30 @@ impl DatasetSpec {
     /// The graph shape of `split`'s scenarios: its held-out one, else the dataset's.
     pub fn graph_of(&self, split: Split) -> &GraphSpec {
         self.held_out.of(split).and_then(|h| h.graph.as_ref()).unwrap_or(&self.graph)
+    }
+
+    /// Group `group` as `split` draws it: with the split's held-out car
+    /// count (`held_out.<split>.cars`), else as the spec gives it. Its
+    /// folder name stays [`GroupSpec::name`] of the spec's group.
+    pub fn group_of(&self, split: Split, group: &GroupSpec) -> GroupSpec {
+        match self.held_out.of(split).and_then(|h| h.cars) {
+            Some(cars) => GroupSpec { cars, ..*group },
+            None => *group,
+        }
+    }
+
+    /// Every group as `split` draws it ([`DatasetSpec::group_of`]), in spec order.
+    pub fn groups_of(&self, split: Split) -> Vec<GroupSpec> {
+        self.groups.iter().map(|g| self.group_of(split, g)).collect()
+    }
+
+    /// The field that sets group `i`'s car count in `split`:
+    /// `held_out.<split>.cars` when the split holds it out, else `groups[i].cars`.
+    pub fn cars_field(&self, split: Split, i: usize) -> String {
+        match self.held_out.of(split).and_then(|h| h.cars) {
+            Some(_) => format!("held_out.{}.cars", split.name()),
+            None => format!("groups[{i}].cars"),
+        }
     }
 
     /// Toy world: pixels from follower to leader along their path at the start.

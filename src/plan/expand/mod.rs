@@ -104,11 +104,13 @@ impl Expansion {
         let mut planners: Vec<Planner> = Vec::new();
         let mut split_towns = Vec::new();
         for split in Split::ALL {
-            let (section, graph) = (spec.map_of(split).clone(), *spec.graph_of(split));
+            let (section, graph, groups) = (spec.map_of(split).clone(), *spec.graph_of(split), spec.groups_of(split));
             let held_out = spec.held_out.of(split).is_some_and(|h| h.map.is_some());
+            let held_cars = spec.held_out.of(split).is_some_and(|h| h.cars.is_some());
             let mut towns = Vec::new();
             for town in section.towns() {
-                let index = match planners.iter().position(|p| p.spec.map == town && p.spec.graph == graph) {
+                let same_plans = |p: &Planner| p.spec.map == town && p.spec.graph == graph && p.spec.groups == groups;
+                let index = match planners.iter().position(same_plans) {
                     Some(index) => index,
                     None => {
                         // The town's map is built once, whatever graphs plan on it.
@@ -116,9 +118,12 @@ impl Expansion {
                             Some(p) => p.map.clone(),
                             None => Arc::new(CityMap::new(town.layout())),
                         };
-                        let town_spec = DatasetSpec { map: town.clone(), graph, ..spec.clone() };
-                        let mut planner = Planner::new(town_spec, map)
-                            .map_err(|e| in_town(e, &town, section.towns().len(), held_out.then_some(split)))?;
+                        let town_spec =
+                            DatasetSpec { map: town.clone(), graph, groups: groups.clone(), ..spec.clone() };
+                        let mut planner = Planner::new(town_spec, map).map_err(|e| {
+                            let e = if held_cars { held_cars_field(e, split) } else { e };
+                            in_town(e, &town, section.towns().len(), held_out.then_some(split))
+                        })?;
                         // Names are unique per map: a second town of the same name is numbered.
                         let same_name = |p: &&Planner| p.name == planner.name && p.spec.map != town;
                         if planners.iter().any(|p| same_name(&p)) {
@@ -244,6 +249,17 @@ fn unique_names<'a>(planners: impl Iterator<Item = &'a Planner>) -> Vec<&'a str>
         }
     }
     names
+}
+
+/// A planner's error about `groups[i].cars`, said to be about
+/// `held_out.<split>.cars` when `split` holds the car count out.
+fn held_cars_field(e: SpecError, split: Split) -> SpecError {
+    if e.field.starts_with("groups[") && (e.field.ends_with("].cars") || e.field.ends_with(']')) {
+        let message = format!("in {}: {}", split.name(), e.message);
+        SpecError::new(format!("held_out.{}.cars", split.name()), message)
+    } else {
+        e
+    }
 }
 
 /// A town's spec error, said to be the town's when the map draws several
