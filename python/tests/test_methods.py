@@ -82,6 +82,34 @@ def test_nri_predicts_worse_further_ahead_and_is_the_same_for_the_same_seed(toy,
     assert error[19] > error[9] > error[0], error
 
 
+def test_nri_fitted_on_one_car_count_scores_splits_that_hold_other_counts_out(tmp_path):
+    # Train on 6 cars; val holds out 5 and test 9 (held_out.<split>.cars).
+    spec = dict(TOY, name="held-cars", splits={"train": 12, "val": 3, "test": 4})
+    spec["held_out"] = {"val": {"cars": 5}, "test": {"cars": 9}}
+    causalcity.generate(spec, tmp_path / "toy", images=False, effects=False, progress=False)
+    train, val, test = (load_split(tmp_path / "toy", "cars06_edges50", s) for s in ("train", "val", "test"))
+    assert (train.cars, val.cars, test.cars) == (6, 5, 9)
+    assert test.graph.sum() == 4 * 2  # round(0.5 x 9 / 2) = 2 edges per scenario
+    method = make("nri", epochs=6, device="cpu", quiet=True, seed=1)
+    method.fit(train, val)  # the val loss is taken on 5 cars
+    assert len(method.losses) == 6 and all(np.isfinite(v) for _, _, v in method.losses)
+    before = method.predict(train)
+    on_test = method.predict(test)
+    assert on_test.edges.shape == (4, 9, 9) and on_test.trajectories.shape == (4, 20, 9, 2)
+    assert np.all((on_test.edges >= 0) & (on_test.edges <= 1)) and np.all(np.isfinite(on_test.trajectories))
+    # Scoring another count leaves the model as it was on its own.
+    after = method.predict(train)
+    assert np.array_equal(before.edges, after.edges)
+    assert np.array_equal(before.trajectories, after.trajectories)
+    # The predictions file is read with each split's own count.
+    from causalcity.methods.common import run_method
+
+    out = run_method(lambda: make("granger", quiet=True), tmp_path / "toy", tmp_path / "g.npz", quiet=True)
+    rows = {r["split"]: r for r in causalcity.evaluate(tmp_path / "toy", out)["edges"] if r["graph"] == "designed"}
+    assert (rows["val"]["cars"], rows["test"]["cars"]) == (5, 9)
+    assert rows["test"]["held_out"] is True and rows["test"]["pairs"] == 4 * 9 * 8
+
+
 def test_nri_finds_the_toy_edges_from_trajectories_alone(tmp_path):
     # The quick setting's recipe (25 epochs, batch 8) on 60 training
     # scenarios: about a minute on 2 CPU cores. The encoder never sees a

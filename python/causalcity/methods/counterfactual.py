@@ -290,6 +290,7 @@ class NriRollout(CounterfactualMethod):
         nri.epoch = nri.epochs
         episodes = pairs.as_episodes()
         hist, _ = nri._frames(episodes)
+        nri._wire(episodes.cars)
         w, h = pairs.image_size
         std = torch.as_tensor(nri.std, dtype=torch.float32, device=nri.device)
         mean = torch.as_tensor(nri.mean, dtype=torch.float32, device=nri.device)

@@ -100,6 +100,26 @@ class _Mlp(nn.Module):
         return self.norm(y.reshape(-1, y.shape[-1])).reshape(y.shape)
 
 
+def _wiring(cars: int, device) -> tuple:
+    """Every ordered pair (i, j), i != j, of ``cars`` cars, and as tensors:
+    the senders and receivers [E], and their one-hot [E, N] matrices
+    (gathering and summing by matrix products, whose gradients are products
+    too: an indexed gather's gradient is a scattered sum, slow on a CPU)."""
+    pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
+    send = torch.tensor([p[0] for p in pairs], dtype=torch.long, device=device)
+    recv = torch.tensor([p[1] for p in pairs], dtype=torch.long, device=device)
+    return pairs, send, recv, F.one_hot(send, cars).float(), F.one_hot(recv, cars).float()
+
+
+class _Wired(nn.Module):
+    """A decoder whose weights do not depend on the car count: only its
+    pair index tensors do, which :meth:`wire` replaces."""
+
+    def wire(self, send, recv, send_matrix, recv_matrix) -> None:
+        self.send, self.recv = send, recv
+        self.send_matrix, self.recv_matrix = send_matrix, recv_matrix
+
+
 class Encoder(nn.Module):
     """NRI's MLP encoder (edge -> node -> edge with a skip) -> edge-type
     logits [B, E, K]. Each ordered pair starts from its relative history
@@ -128,7 +148,7 @@ class Encoder(nn.Module):
         return self.out(self.edge_mlp(torch.cat([h[:, self.send], h[:, self.recv], e], dim=-1)))
 
 
-class MlpDecoder(nn.Module):
+class MlpDecoder(_Wired):
     """NRI's Markovian MLP decoder (the one its springs results use): a car's
     next state is its state plus an MLP of that state and the summed
     messages of the pairs acting on it, each message an MLP of both cars'
@@ -194,7 +214,7 @@ class MlpDecoder(nn.Module):
         return torch.stack(out, dim=1)
 
 
-class RnnDecoder(nn.Module):
+class RnnDecoder(_Wired):
     """NRI's recurrent decoder: one GRU state per car, messages per edge type."""
 
     def __init__(
@@ -203,9 +223,7 @@ class RnnDecoder(nn.Module):
         super().__init__()
         self.send, self.recv, self.skip_first, self.hidden = send, recv, skip_first, hidden
         self.window = window
-        # One-hot [E, N] of each pair's sender and receiver: gathering and
-        # summing by matrix products, whose gradients are products too (an
-        # indexed gather's gradient is a scattered sum, slow on a CPU).
+        # One-hot [E, N] of each pair's sender and receiver (see _wiring).
         cars = int(max(send.max(), recv.max())) + 1 if len(send) else 0
         self.register_buffer("send_matrix", F.one_hot(send, cars).float(), persistent=False)
         self.register_buffer("recv_matrix", F.one_hot(recv, cars).float(), persistent=False)
@@ -470,10 +488,23 @@ class Nri(Method):
         return torch.as_tensor((states - self.mean) / self.std, dtype=torch.float32, device=self.device)
 
     # -- model ---------------------------------------------------------------
+    def _wire(self, cars: int) -> None:
+        """Points the model at scenarios of ``cars`` cars. Its weights do not
+        depend on the count, so a model fitted on one count scores another
+        (a split that holds the car count out). Each count's index tensors
+        are made once and kept, so a captured CUDA graph keeps reading the
+        training count's own tensors when the model comes back to it."""
+        if cars not in self._wirings:
+            self._wirings[cars] = _wiring(cars, self.device)
+        pairs, send, recv, send_matrix, recv_matrix = self._wirings[cars]
+        self.cars, self.pairs = cars, pairs
+        if self.encoder is not None:
+            self.encoder.send, self.encoder.recv = send, recv
+        self.decoder.wire(send, recv, send_matrix, recv_matrix)
+
     def _build(self, cars: int, hist: int) -> None:
-        pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
-        send = torch.tensor([p[0] for p in pairs], device=self.device)
-        recv = torch.tensor([p[1] for p in pairs], device=self.device)
+        self._wirings = {cars: _wiring(cars, self.device)}
+        pairs, send, recv, _, _ = self._wirings[cars]
         self.cars, self.pairs = cars, pairs
         types = 2 if self.discover else 1
         frames = len(range(0, hist, self.pair_every))
@@ -483,6 +514,7 @@ class Nri(Method):
         if self.decoder_kind == "mlp":
             self.decoder = MlpDecoder(4, self.hidden, types, self.discover, send, recv).to(self.device)
             self.log_prior = torch.log(torch.tensor([1 - self.prior, self.prior], device=self.device))
+            self._wire(cars)
             return
         self.decoder = RnnDecoder(4, self.hidden, types, self.discover, send, recv, self.window, self.own_past)
         # position(t + 1) = position(t) + velocity(t + 1), in standardised units
@@ -490,6 +522,7 @@ class Nri(Method):
         self.decoder.vel_offset = torch.as_tensor(self.mean[2:] / self.std[:2], dtype=torch.float32)
         self.decoder = self.decoder.to(self.device)
         self.log_prior = torch.log(torch.tensor([1 - self.prior, self.prior], device=self.device))
+        self._wire(cars)
 
     def _edges(self, x: torch.Tensor, hist: int, sample: bool):
         """(edge weights [B, E, K], edge probabilities or None, logits or None)."""
@@ -561,6 +594,7 @@ class Nri(Method):
         low = hist - self.warm
         high = max(train.frames - self.warm - steps, low)
         x_val = self._tensor(self._states(val)) if val is not None and len(val) else None
+        val_cars = val.cars if x_val is not None else train.cars
         best, best_loss = None, float("inf")
         progress = Progress(f"{self.name} {train.group}", self.epochs, self.quiet)
         for epoch in range(self.epochs):
@@ -581,7 +615,10 @@ class Nri(Method):
                 loss = step(phase, batch, first, full=len(batch) == self.batch_size)
                 total += loss * len(batch)
             train_loss = float(total) / len(order)
+            # (val may hold the car count out: scored on its own, then back)
+            self._wire(val_cars)
             val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
+            self._wire(train.cars)
             self.losses.append((epoch, train_loss, val_loss))
             self.epoch_seconds.append(time.perf_counter() - epoch_start)
             # (the epochs without edges cannot be the one kept)
@@ -621,6 +658,7 @@ class Nri(Method):
         self.epoch = self.epochs
         hist, steps = self._frames(episodes)
         x = self._tensor(self._states(episodes))
+        self._wire(episodes.cars)
         w, h = episodes.image_size
         edges_out, traj_out = [], []
         for start in range(0, len(x), self.batch_size):
