@@ -541,3 +541,69 @@ fn a_split_can_hold_out_the_car_count_keeping_train_and_val_and_every_reader_agr
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn a_town_with_t_junctions_generates_draws_and_validates_and_no_car_drives_a_missing_road() {
+    let dir = fresh_dir("grid-town-tees");
+    let map = serde_json::json!({"grid": {"rows": 3, "columns": 3, "missing": ["D0", "B2", "E3"]}});
+    let spec = write_spec(&dir, &spec_with_map("tees", map.clone()));
+    let out = dir.join("tees");
+    gen_ok(&spec, &out, &[]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+
+    let scenarios = scenario_dirs(&out);
+    assert_eq!(scenarios.len(), 4);
+    let json = read_json(&scenarios[0].join("scenario.json"));
+    let camera = &json["camera"];
+    let ppm = camera["pixels_per_metre"].as_f64().unwrap();
+    let image = image::open(scenarios[0].join("rgb/0000.png")).unwrap().to_rgb8();
+    let pixel = |x: f64, y: f64| {
+        (
+            (image.width() as f64 - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm,
+            (image.height() as f64 - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm,
+        )
+    };
+    // Road B runs from D to E (B1) but not on to F (B2); every junction box
+    // is road. (Along the inner lane, clear of markings; a car may hide one point.)
+    let road_along = |x: f64| {
+        [-4.0, 0.0, 4.0].iter().filter(|&&dx| is_road(&image, pixel(x + dx, 1.5).0, pixel(x + dx, 1.5).1)).count()
+    };
+    assert!(road_along(-14.0) >= 2, "B1");
+    assert_eq!(road_along(14.0), 0, "B2 is left out");
+    for (x, y) in [(-28.0, -28.0), (0.0, 0.0), (28.0, 0.0), (0.0, 28.0)] {
+        let (px, py) = pixel(x, y);
+        assert!(is_road(&image, px, py), "the T-junction at ({x}, {y}) m");
+    }
+    // No car ever stands on B2's ground (x 6..22 m, |y| < 6 m), in any frame of any scenario.
+    let mut poses = 0;
+    for scenario in &scenarios {
+        for pose in read_poses(&scenario.join("poses.csv")) {
+            assert!(!(pose.x > 6.0 && pose.x < 22.0 && pose.y.abs() < 6.0), "{pose:?} in {}", scenario.display());
+            poses += 1;
+        }
+        assert!(std::fs::metadata(scenario.join("effects.csv")).unwrap().len() > 0);
+    }
+    assert_eq!(poses, 4 * 40 * 8);
+    // The manifest's spec records the town, missing segments included, so that it can be rebuilt.
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["spec"]["map"]["grid"]["missing"], serde_json::json!(["D0", "B2", "E3"]));
+
+    // Refused with exit 2, naming the field, nothing written.
+    for (sub, missing, needle) in [
+        ("unknown", serde_json::json!(["Z9"]), "map.grid.missing[0]`: \"Z9\" is not a road segment"),
+        ("twice", serde_json::json!(["B2", "B2"]), "\"B2\" is named twice"),
+        ("corner", serde_json::json!(["C0", "D0"]), "junction CD would keep 2 roads"),
+    ] {
+        let dir = dir.join(sub);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut bad = map.clone();
+        bad["grid"]["missing"] = missing;
+        let spec = write_spec(&dir, &spec_with_map("bad", bad));
+        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
+        assert!(stderr.contains(needle), "{sub}: {stderr}");
+        assert!(!dir.join("out").exists());
+    }
+}

@@ -14,7 +14,8 @@ fn heading_diff(a: f64, b: f64) -> f64 {
 /// `columns` north-south roads, 30 m apart, each running 20 m beyond its
 /// last crossing.
 fn grid(rows: usize, columns: usize) -> MapLayout {
-    let grid = GridSpec { rows: rows.into(), columns: columns.into(), block_m: 30.0, outer_m: 20.0 };
+    let grid =
+        GridSpec { rows: rows.into(), columns: columns.into(), block_m: 30.0, outer_m: 20.0, missing: Vec::new() };
     MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
 
@@ -336,4 +337,98 @@ fn a_turn_lane_change_with_no_room_moves_to_the_lane_before() {
     assert_eq!((change.prepares, change.action), (Some(1), None));
     let left = r.legs.iter().find(|l| l.action == Some(1)).unwrap();
     assert!(matches!(left.kind, LegKind::Connector(c) if map.connectors[c].turn == Turn::Left));
+}
+
+/// A 3 x 3 grid without D0 (south of CD), B2 (between BE and BF) and E3
+/// (north of AE): four T-junctions.
+fn t_junction_town() -> CityMap {
+    CityMap::new(MapLayout { missing_segments: vec![('D', 0), ('B', 2), ('E', 3)], ..grid(3, 3) })
+}
+
+#[test]
+fn a_town_without_some_segments_has_t_junctions_whose_every_lane_leads_on() {
+    let map = t_junction_town();
+    assert_eq!(map.network_problem(), None);
+    connectors_join(&map);
+    // 6 roads of 4 segments of 4 lanes, less 3 segments.
+    assert_eq!(map.lanes.len(), 96 - 3 * 4);
+    assert!(map.lanes.iter().all(|l| !["D0", "B2", "E3"].contains(&&l.name[..2])));
+    let name = |k: usize| map.intersections[k].name.as_str();
+    let mut tees = Vec::new();
+    for k in 0..map.intersections.len() {
+        let sides: std::collections::BTreeSet<char> = map
+            .lanes
+            .iter()
+            .filter_map(|l| match l.end {
+                LaneEnd::Intersection { intersection, approach } if intersection == k => Some(approach),
+                _ => None,
+            })
+            .collect();
+        if sides.len() == 3 {
+            tees.push(name(k));
+        } else {
+            assert_eq!(sides.len(), 4, "{}", name(k));
+        }
+    }
+    tees.sort_unstable();
+    assert_eq!(tees, ["AE", "BE", "BF", "CD"]);
+    for (id, lane) in map.lanes.iter().enumerate() {
+        // Every lane leads on, and something leads into it.
+        assert!(map.exits_from(id).next().is_some(), "{} leads nowhere", lane.name);
+        assert!(map.connectors.iter().any(|c| c.to == id), "nothing leads into {}", lane.name);
+    }
+    // The stem of CD (D1 southbound): no straight on; the outer lane turns right, the inner left.
+    let lane = |n: &str| map.lane_by_name(n).unwrap();
+    assert_eq!(map.allowed_turns(lane("D1z")), vec![Turn::Right]);
+    assert_eq!(map.allowed_turns(lane("D1y")), vec![Turn::Left]);
+    assert_eq!(map.default_turn(lane("D1z")), Turn::Right);
+    // The bar of AE from the west: the inner lane's left (into E3) is gone.
+    assert_eq!(map.allowed_turns(lane("A1x")), vec![Turn::Straight]);
+    assert_eq!(map.allowed_turns(lane("A1w")), vec![Turn::Straight, Turn::Right]);
+}
+
+#[test]
+fn routes_through_t_junctions_never_run_out_and_say_what_they_could_not_do() {
+    let map = t_junction_town();
+    let queues: [&[Action]; 4] = [
+        &[],
+        &[Action::Straight, Action::Straight, Action::Straight, Action::Straight, Action::Straight],
+        &[Action::Left, Action::Straight, Action::Right, Action::Straight, Action::Left],
+        &[Action::Right, Action::Right, Action::Right, Action::Right, Action::Right],
+    ];
+    let mut planned = 0;
+    for spawn in map.spawn_points() {
+        for queue in queues {
+            let route = Route::plan(&map, spawn, 0.0, queue, &vec![0.0; queue.len()], 1500.0, &LanePolicy::Adapt)
+                .unwrap_or_else(|e| panic!("from {}: {e}", map.lanes[spawn].name));
+            assert!(route.length >= 1500.0);
+            for w in route.legs.windows(2) {
+                let end = w[0].curve.position(w[0].curve_start + w[0].length, 0.0);
+                assert!(end.distance(w[1].curve.position(w[1].curve_start, 0.0)) < 0.01);
+            }
+            planned += 1;
+        }
+    }
+    assert_eq!(planned, 84 * 4);
+    // Straight on from the stem cannot be done: adapted with a reason, or refused when strict.
+    let stem = map.lane_by_name("D1z").unwrap();
+    let route = Route::plan(&map, stem, 0.0, &[Action::Straight], &[0.0], 200.0, &LanePolicy::Adapt).unwrap();
+    assert!(route.adaptations.iter().any(|a| a.kind == AdaptationKind::Skipped), "{:?}", route.adaptations);
+    assert!(Route::plan(&map, stem, 0.0, &[Action::Straight], &[0.0], 200.0, &LanePolicy::Strict).is_err());
+}
+
+#[test]
+fn a_network_left_with_a_two_road_junction_or_in_two_parts_is_named_as_such() {
+    // Without B0 and C0, junction BC keeps only B1 and C1.
+    let corner = CityMap::new(MapLayout { missing_segments: vec![('B', 0), ('C', 0)], ..grid(2, 2) });
+    let problem = corner.network_problem().expect("a two-road junction");
+    assert!(problem.contains("junction BC would keep 2 roads"), "{problem}");
+    // One road crossing two: without A1 between them the town is two towns.
+    let split = CityMap::new(MapLayout { missing_segments: vec![('A', 1)], ..grid(1, 2) });
+    let problem = split.network_problem().expect("two parts");
+    assert!(problem.contains("falls apart"), "{problem}");
+    // The full grids are whole.
+    for (label, map) in every_map() {
+        assert_eq!(map.network_problem(), None, "{label}");
+    }
 }

@@ -87,6 +87,10 @@ fn spec_schema_and_parser_agree() {
         "held-out cars".into(),
         edited(&base, |v| v["held_out"] = json!({"val": {"cars": 6}, "test": {"cars": 12}})),
     ));
+    good.push((
+        "T-junctions".into(),
+        edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["D0", "B2"]}})),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),
@@ -120,6 +124,14 @@ fn spec_schema_and_parser_agree() {
         (
             "held-out unknown confounder",
             edited(&base, |v| v["held_out"] = json!({"test": {"confounders": {"hail": 1.0}}})),
+        ),
+        (
+            "missing segment not a name",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": 2, "columns": 2, "missing": ["c0"]}})),
+        ),
+        (
+            "missing segment twice",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["B2", "B2"]}})),
         ),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
         (

@@ -51,6 +51,10 @@ pub struct MapLayout {
     pub stop_line_setback: f64,
     /// Pavement between a road's kerb and the buildings, metres.
     pub sidewalk_width: f64,
+    /// Road segments the town leaves out, as lanes name them (`C0`: road C
+    /// up to its first crossing): the junctions at their ends become
+    /// T-junctions. Empty: every road crosses every other.
+    pub missing_segments: Vec<(char, u8)>,
 }
 
 impl Default for MapLayout {
@@ -72,6 +76,7 @@ impl Default for MapLayout {
             lane_change_length: 6.0,
             stop_line_setback: 3.6,
             sidewalk_width: 2.0,
+            missing_segments: Vec::new(),
         }
     }
 }
@@ -112,10 +117,15 @@ impl MapLayout {
         )
     }
 
-    /// Four-way intersections: every east-west road crosses every
-    /// north-south one.
+    /// Intersections: every east-west road crosses every north-south one
+    /// (four-way, or three-way where a segment is missing).
     pub fn intersection_count(&self) -> usize {
         self.east_west_roads.len() * self.north_south_roads.len()
+    }
+
+    /// Whether segment `segment` of road `road` is part of the town.
+    pub fn has_segment(&self, road: char, segment: u8) -> bool {
+        !self.missing_segments.contains(&(road, segment))
     }
 
     /// Centre lines of the east-west roads (y, ascending).
@@ -330,6 +340,9 @@ impl CityMap {
             }
             bounds.push((from, extent));
             for (segment, &(a0, a1)) in bounds.iter().enumerate() {
+                if !layout.has_segment(name, segment as u8) {
+                    continue;
+                }
                 for letter in LANE_LETTERS {
                     let (offset, forward, position) = match letter {
                         'w' => (1.5 * lw, true, LanePosition::Outer),
@@ -374,14 +387,11 @@ impl CityMap {
             }
         }
 
-        let lane_starting_at = |lanes: &[Lane], p: DVec2, heading: f64| -> LaneId {
-            lanes
-                .iter()
-                .position(|l| {
-                    l.curve.start().distance(p) < 1e-6
-                        && curve::wrap_angle(l.curve.heading_at(0.0) - heading).abs() < 1e-6
-                })
-                .unwrap_or_else(|| panic!("map layout is not closed: no lane starts at {p:?}"))
+        // The lane a connector ends on; none where its segment is missing.
+        let lane_starting_at = |lanes: &[Lane], p: DVec2, heading: f64| -> Option<LaneId> {
+            lanes.iter().position(|l| {
+                l.curve.start().distance(p) < 1e-6 && curve::wrap_angle(l.curve.heading_at(0.0) - heading).abs() < 1e-6
+            })
         };
 
         let mut connectors = Vec::new();
@@ -391,7 +401,16 @@ impl CityMap {
             let heading = lane.curve.heading_at(lane.curve.length());
             let mut add = |curve: Curve, turn: Turn, intersection: Option<usize>| {
                 let to = lane_starting_at(&lanes, curve.end(), curve.heading_at(curve.length()));
-                connectors.push(Connector { from, to, turn, intersection, curve });
+                // A U-turn always ends on its own segment; a movement into a
+                // missing segment does not exist.
+                debug_assert!(
+                    to.is_some() || !layout.missing_segments.is_empty(),
+                    "no lane starts at {:?}",
+                    curve.end()
+                );
+                if let Some(to) = to {
+                    connectors.push(Connector { from, to, turn, intersection, curve });
+                }
             };
             match lane.end {
                 LaneEnd::Intersection { intersection, .. } => {
@@ -480,6 +499,71 @@ impl CityMap {
             _ => return None,
         };
         self.lane_by_name(&format!("{}{}{}", l.road, l.segment, target))
+    }
+
+    /// Why this network cannot be driven, if it cannot: a junction left
+    /// with fewer than three roads, or a lane from which some other lane
+    /// cannot be reached (following connectors and lane changes).
+    pub fn network_problem(&self) -> Option<String> {
+        for (k, x) in self.intersections.iter().enumerate() {
+            let arms: std::collections::BTreeSet<char> = self
+                .lanes
+                .iter()
+                .filter_map(|l| match l.end {
+                    LaneEnd::Intersection { intersection, approach } if intersection == k => Some(approach),
+                    _ => None,
+                })
+                .collect();
+            if arms.len() < 3 {
+                return Some(format!(
+                    "junction {} would keep {} roads ({}): a junction needs at least 3",
+                    x.name,
+                    arms.len(),
+                    arms.iter().map(char::to_string).collect::<Vec<_>>().join(" ")
+                ));
+            }
+        }
+        let next = |lane: LaneId| {
+            let mut out: Vec<LaneId> = self.exits_from(lane).map(|c| self.connectors[c].to).collect();
+            out.extend([true, false].into_iter().filter_map(|left| self.adjacent_lane(lane, left)));
+            out
+        };
+        let mut ahead = vec![Vec::new(); self.lanes.len()];
+        let mut behind = vec![Vec::new(); self.lanes.len()];
+        for (lane, out) in ahead.iter_mut().enumerate() {
+            for to in next(lane) {
+                out.push(to);
+                behind[to].push(lane);
+            }
+        }
+        let reach = |edges: &[Vec<LaneId>]| {
+            let mut seen = vec![false; self.lanes.len()];
+            let mut stack = vec![0];
+            while let Some(lane) = stack.pop() {
+                if !std::mem::replace(&mut seen[lane], true) {
+                    stack.extend(edges[lane].iter().copied().filter(|&l| !seen[l]));
+                }
+            }
+            seen
+        };
+        if self.lanes.is_empty() {
+            return Some("the network has no lanes".into());
+        }
+        let (forward, backward) = (reach(&ahead), reach(&behind));
+        let cut = (0..self.lanes.len()).find(|&l| !forward[l] || !backward[l])?;
+        Some(format!(
+            "the network falls apart: lane {} cannot be reached from lane {}, or cannot reach it",
+            self.lanes[cut].name, self.lanes[0].name
+        ))
+    }
+
+    /// The movement a driver with no action left makes at the end of
+    /// `lane`: straight on, or at a T-junction's stem the lane's only turn.
+    pub fn default_turn(&self, lane: LaneId) -> Turn {
+        [Turn::Straight, Turn::Right, Turn::Left, Turn::UTurn]
+            .into_iter()
+            .find(|&t| self.exit(lane, t).is_some())
+            .unwrap_or(Turn::Straight)
     }
 
     /// Turns allowed at the end of `lane` (none for lanes that end in a loop).

@@ -251,18 +251,24 @@ impl Route {
                         debug_assert_ne!(from, lane);
                         continue;
                     }
-                    let turn = head.and_then(Action::turn).unwrap_or(Turn::Straight);
+                    // With no action left a car goes straight on, or where a
+                    // T-junction has no straight on, takes its lane's turn.
+                    let turn = head.and_then(Action::turn).unwrap_or_else(|| map.default_turn(lane));
                     let at_intersection = matches!(map.lanes[lane].end, LaneEnd::Intersection { .. });
                     let mut carried_out = at_intersection && head.is_some();
                     if at_intersection && map.exit(lane, turn).is_none() {
-                        let action = head.expect("straight on is allowed from every lane");
+                        let action = head.expect("with no action, the turn is one the lane has");
                         if strict {
                             return Err(error(wrong_lane(map, lane, action)));
                         }
                         // As early as it fits: on the lane before, if the car came
                         // straight on (or round a loop) from it, else on this one.
                         let to_left = turn == Turn::Left;
-                        let back = previous.take().filter(|p| !given_up(next) && p.has_room(map, to_left));
+                        // (At a T-junction's stem no lane may go straight on.)
+                        let beside_turns =
+                            map.adjacent_lane(lane, to_left).is_some_and(|t| map.exit(t, turn).is_some());
+                        let back =
+                            previous.take().filter(|p| beside_turns && !given_up(next) && p.has_room(map, to_left));
                         if let Some(p) = back {
                             let before = map.adjacent_lane(p.lane, to_left).expect("room means a lane beside");
                             forced = Some((p.lane, before, next));
@@ -300,9 +306,10 @@ impl Route {
                     route.push(LegKind::Lane(lane), curve.clone(), lane_entry, lane_len - lane_entry, None);
                     let connector = match map.lanes[lane].end {
                         LaneEnd::Loop(c) => c,
-                        LaneEnd::Intersection { .. } => {
-                            map.exit(lane, turn).or_else(|| map.exit(lane, Turn::Straight)).expect("straight exit")
-                        }
+                        LaneEnd::Intersection { .. } => map
+                            .exit(lane, turn)
+                            .or_else(|| map.exit(lane, map.default_turn(lane)))
+                            .expect("a lane's own turn"),
                     };
                     let c = &map.connectors[connector];
                     previous = matches!(c.turn, Turn::Straight | Turn::UTurn).then_some(snapshot);
@@ -549,7 +556,7 @@ fn plan_turn_lane(
     given_up: bool,
 ) -> Result<(LaneId, f64), String> {
     let name = &map.lanes[lane].name;
-    let Some(target) = map.adjacent_lane(lane, turn == Turn::Left) else {
+    let Some(target) = map.adjacent_lane(lane, turn == Turn::Left).filter(|&t| map.exit(t, turn).is_some()) else {
         return Err(format!("no lane beside {name} allows the turn"));
     };
     let target_name = &map.lanes[target].name;

@@ -3,7 +3,7 @@
 //! only, so frames compress well.
 
 use crate::camera::Camera;
-use crate::map::CityMap;
+use crate::map::{CityMap, MapLayout};
 use glam::DVec2;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
 
@@ -140,16 +140,23 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     }
 
     // Asphalt, including the turning circles at the far ends.
+    // A road runs its whole length unless the town leaves a segment out.
     for target in [&mut pixmap, &mut road] {
-        for &(_, y) in &layout.east_west_roads {
-            rect(target, t, -layout.extent_x, y - hw, layout.extent_x, y + hw, ASPHALT);
-            for x in [-layout.extent_x, layout.extent_x] {
+        for &(name, y) in &layout.east_west_roads {
+            let (runs, loops) = road_runs(layout, name, &layout.north_south_centres(), layout.extent_x);
+            for (x0, x1) in runs {
+                rect(target, t, x0, y - hw, x1, y + hw, ASPHALT);
+            }
+            for x in loops {
                 circle(target, t, x, y, hw, ASPHALT);
             }
         }
-        for &(_, x) in &layout.north_south_roads {
-            rect(target, t, x - hw, -layout.extent_y, x + hw, layout.extent_y, ASPHALT);
-            for y in [-layout.extent_y, layout.extent_y] {
+        for &(name, x) in &layout.north_south_roads {
+            let (runs, loops) = road_runs(layout, name, &layout.east_west_centres(), layout.extent_y);
+            for (y0, y1) in runs {
+                rect(target, t, x - hw, y0, x + hw, y1, ASPHALT);
+            }
+            for y in loops {
                 circle(target, t, x, y, hw, ASPHALT);
             }
         }
@@ -184,6 +191,30 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     }
     let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();
     Background { road: alpha(&road), buildings: alpha(&buildings), pixmap }
+}
+
+/// The stretches of road `name` (crossing others at `crossings`, running
+/// from -`extent` to `extent`) that the town has, each covering the
+/// junction boxes at its ends, merged where segments meet; and the ends
+/// that turn back in a loop. A whole road is one stretch with two loops.
+fn road_runs(layout: &MapLayout, name: char, crossings: &[f64], extent: f64) -> (Vec<(f64, f64)>, Vec<f64>) {
+    let hw = layout.road_half_width();
+    let last = crossings.len();
+    let mut runs: Vec<(f64, f64)> = Vec::new();
+    for k in (0..=last).filter(|&k| layout.has_segment(name, k as u8)) {
+        let from = if k == 0 { -extent } else { crossings[k - 1] - hw };
+        let to = if k == last { extent } else { crossings[k] + hw };
+        match runs.last_mut() {
+            Some(run) if run.1 >= from => run.1 = to,
+            _ => runs.push((from, to)),
+        }
+    }
+    let loops = [(0, -extent), (last, extent)]
+        .into_iter()
+        .filter(|&(k, _)| layout.has_segment(name, k as u8))
+        .map(|(_, at)| at)
+        .collect();
+    (runs, loops)
 }
 
 fn circle(pixmap: &mut Pixmap, t: Transform, x: f64, y: f64, r: f64, rgb: [u8; 3]) {

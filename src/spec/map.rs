@@ -56,6 +56,13 @@ pub struct GridSpec {
     /// How far roads run beyond their outermost crossing, metres.
     #[serde(default = "default_outer_m")]
     pub outer_m: f64,
+    /// Road segments the town leaves out, named as lanes name them: road
+    /// letter, then the segment's number counted from the west or south
+    /// end (`C0`: road C up to its first crossing; `A1`: road A between
+    /// its first and second crossings). The junctions at their ends become
+    /// T-junctions.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub missing: Vec<String>,
 }
 
 /// What the bird's-eye camera frames: `"junctions"` (every junction box
@@ -325,6 +332,9 @@ impl MapSpec {
                 if grid.block_m != default_block_m() || grid.outer_m != default_outer_m() {
                     name += &format!("-b{}-o{}", grid.block_m, grid.outer_m);
                 }
+                if !grid.missing.is_empty() {
+                    name += &format!("-no-{}", grid.missing.join("-"));
+                }
                 name
             }
         }
@@ -334,12 +344,12 @@ impl MapSpec {
     /// the first of [`MapSpec::towns`]).
     pub fn layout(&self) -> MapLayout {
         let d = MapLayout::default();
-        if let Some(grid) = self.grid.as_ref() {
+        if let Some(spec) = self.grid.as_ref() {
             let grid = Grid {
-                rows: grid.rows.values()[0],
-                columns: grid.columns.values()[0],
-                block_m: grid.block_m,
-                outer_m: grid.outer_m,
+                rows: spec.rows.values()[0],
+                columns: spec.columns.values()[0],
+                block_m: spec.block_m,
+                outer_m: spec.outer_m,
             };
             let centres = |n: usize| (0..n).map(move |k| (k as f64 - n.saturating_sub(1) as f64 / 2.0) * grid.block_m);
             let reach = |n: usize| n.saturating_sub(1) as f64 / 2.0 * grid.block_m + grid.outer_m;
@@ -355,6 +365,7 @@ impl MapSpec {
                 extent_x: reach(grid.columns),
                 extent_y: reach(grid.rows),
                 lane_change_length: self.lane_change_m,
+                missing_segments: spec.missing.iter().filter_map(|name| parse_segment(name)).collect(),
                 ..d
             };
         }
@@ -467,8 +478,54 @@ impl MapSpec {
                 ));
             }
         }
+        self.validate_missing(&layout)
+    }
+
+    /// Checks `grid.missing`: each names a segment of this town, once, and
+    /// what is left is a network a car can drive all of.
+    fn validate_missing(&self, layout: &MapLayout) -> Result<(), SpecError> {
+        let Some(spec) = &self.grid else { return Ok(()) };
+        if spec.missing.is_empty() {
+            return Ok(());
+        }
+        let roads: Vec<(char, usize)> = (layout.east_west_roads.iter().map(|r| (r.0, layout.north_south_roads.len())))
+            .chain(layout.north_south_roads.iter().map(|r| (r.0, layout.east_west_roads.len())))
+            .collect();
+        let town = self.town_name();
+        for (i, name) in spec.missing.iter().enumerate() {
+            let field = format!("map.grid.missing[{i}]");
+            let known = parse_segment(name)
+                .and_then(|(road, segment)| roads.iter().find(|r| r.0 == road).filter(|r| segment as usize <= r.1));
+            if known.is_none() {
+                let example: Vec<String> = roads.iter().take(2).map(|(r, n)| format!("{r}0 .. {r}{n}")).collect();
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{name:?} is not a road segment of the {town} town: a road letter and a segment number, e.g. {} (`causalcity map` lists the lanes)",
+                        example.join(", ")
+                    ),
+                ));
+            }
+            if spec.missing[..i].contains(name) {
+                return Err(SpecError::new(field, format!("{name:?} is named twice")));
+            }
+        }
+        if let Some(problem) = crate::map::CityMap::new(layout.clone()).network_problem() {
+            return Err(SpecError::new("map.grid.missing", format!("without {}: {problem}", spec.missing.join(", "))));
+        }
         Ok(())
     }
+}
+
+/// `"C0"` as (road, segment): one capital letter, then a number.
+fn parse_segment(name: &str) -> Option<(char, u8)> {
+    let mut chars = name.chars();
+    let road = chars.next().filter(char::is_ascii_uppercase)?;
+    let digits = chars.as_str();
+    if digits.is_empty() || !digits.chars().all(|c| c.is_ascii_digit()) || digits.len() > 2 {
+        return None;
+    }
+    Some((road, digits.parse().ok()?))
 }
 
 /// Why a lane that ends at an intersection has a least length, for the
