@@ -607,3 +607,53 @@ fn a_town_with_t_junctions_generates_draws_and_validates_and_no_car_drives_a_mis
         assert!(!dir.join("out").exists());
     }
 }
+
+#[test]
+fn a_town_of_one_lane_roads_generates_draws_and_validates() {
+    let dir = fresh_dir("grid-town-one-lane");
+    let map = serde_json::json!({"grid": {"rows": 3, "columns": 3, "lanes": 1, "missing": ["B2"]}});
+    let spec = write_spec(&dir, &spec_with_map("one", map.clone()));
+    let out = dir.join("one");
+    gen_ok(&spec, &out, &[]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+    let scenarios = scenario_dirs(&out);
+    let json = read_json(&scenarios[0].join("scenario.json"));
+    let camera = &json["camera"];
+    let ppm = camera["pixels_per_metre"].as_f64().unwrap();
+    let image = image::open(scenarios[0].join("rgb/0000.png")).unwrap().to_rgb8();
+    let pixel = |x: f64, y: f64| {
+        (
+            (image.width() as f64 - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm,
+            (image.height() as f64 - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm,
+        )
+    };
+    // Road B is 6 m wide: road 1.5 m off its centre line, none 4.5 m off
+    // (where a two-lane road's outer lanes run). A car may hide one point.
+    let road_at =
+        |y: f64| [-18.0, -14.0, -10.0].iter().filter(|&&x| is_road(&image, pixel(x, y).0, pixel(x, y).1)).count();
+    assert!(road_at(1.5) >= 2 && road_at(-1.5) >= 2);
+    assert_eq!(road_at(5.0) + road_at(-5.0), 0);
+    // Every car keeps to a lane: within 1.5 m of a road's centre line
+    // (y or x a multiple of 28 m) or on a junction's curves or loops.
+    let mut poses = 0;
+    for scenario in &scenarios {
+        for p in read_poses(&scenario.join("poses.csv")) {
+            let off = |v: f64| (v - (v / 28.0).round() * 28.0).abs();
+            assert!(off(p.x).min(off(p.y)) < 3.0 + 1e-6 || p.x.abs() > 40.0 || p.y.abs() > 40.0, "{p:?}");
+            poses += 1;
+        }
+    }
+    assert_eq!(poses, 4 * 40 * 8);
+    // 1 or 2 lanes each way: 3 is refused naming the field, nothing written.
+    let mut bad = map.clone();
+    bad["grid"]["lanes"] = serde_json::json!(3);
+    let bad_dir = dir.join("bad");
+    std::fs::create_dir_all(&bad_dir).unwrap();
+    let spec = write_spec(&bad_dir, &spec_with_map("bad", bad));
+    let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", bad_dir.join("out").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("map.grid.lanes`: 3 is not allowed"), "{stderr}");
+    assert!(!bad_dir.join("out").exists());
+}

@@ -14,8 +14,14 @@ fn heading_diff(a: f64, b: f64) -> f64 {
 /// `columns` north-south roads, 30 m apart, each running 20 m beyond its
 /// last crossing.
 fn grid(rows: usize, columns: usize) -> MapLayout {
-    let grid =
-        GridSpec { rows: rows.into(), columns: columns.into(), block_m: 30.0, outer_m: 20.0, missing: Vec::new() };
+    let grid = GridSpec {
+        rows: rows.into(),
+        columns: columns.into(),
+        block_m: 30.0,
+        outer_m: 20.0,
+        missing: Vec::new(),
+        lanes: 2,
+    };
     MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
 
@@ -25,6 +31,10 @@ fn every_map() -> Vec<(String, CityMap)> {
     for (rows, columns) in [(1, 1), (1, 3), (3, 2), (4, 4)] {
         maps.push((format!("{rows} x {columns} grid"), CityMap::new(grid(rows, columns))));
     }
+    maps.push((
+        "3 x 3 grid, one lane each way".into(),
+        CityMap::new(MapLayout { lanes_per_direction: 1, ..grid(3, 3) }),
+    ));
     maps
 }
 
@@ -430,5 +440,50 @@ fn a_network_left_with_a_two_road_junction_or_in_two_parts_is_named_as_such() {
     // The full grids are whole.
     for (label, map) in every_map() {
         assert_eq!(map.network_problem(), None, "{label}");
+    }
+}
+
+#[test]
+fn one_lane_roads_turn_every_way_from_their_one_lane_and_routes_drive_through_them() {
+    for missing in [vec![], vec![('D', 0), ('B', 2), ('E', 3)]] {
+        let tees = !missing.is_empty();
+        let map = CityMap::new(MapLayout { lanes_per_direction: 1, missing_segments: missing, ..grid(3, 3) });
+        assert_eq!(map.network_problem(), None);
+        connectors_join(&map);
+        assert_eq!(map.lanes.len(), if tees { 48 - 6 } else { 48 }, "2 lanes per segment");
+        assert!(map.lanes.iter().all(|l| (l.letter == 'w' || l.letter == 'z') && l.position == LanePosition::Single));
+        // A road 6 m wide: its lanes' centres 1.5 m either side of the centre line.
+        let lane = |n: &str| map.lane_by_name(n).unwrap();
+        assert!((map.lanes[lane("B1w")].curve.start().y - -1.5).abs() < 1e-9);
+        assert!((map.lanes[lane("B1z")].curve.start().y - 1.5).abs() < 1e-9);
+        for (id, l) in map.lanes.iter().enumerate() {
+            assert!(map.adjacent_lane(id, true).is_none() && map.adjacent_lane(id, false).is_none());
+            if let LaneEnd::Intersection { .. } = l.end {
+                if !tees {
+                    assert_eq!(map.allowed_turns(id), vec![Turn::Left, Turn::Straight, Turn::Right], "{}", l.name);
+                }
+                assert!(!map.allowed_turns(id).is_empty(), "{}", l.name);
+            }
+        }
+        let queues: [&[Action]; 3] = [
+            &[],
+            &[Action::Left, Action::Straight, Action::Right, Action::Left, Action::Left],
+            &[Action::Right, Action::Right, Action::Straight, Action::Right, Action::Right],
+        ];
+        for spawn in map.spawn_points() {
+            for queue in queues {
+                let route = Route::plan(&map, spawn, 0.0, queue, &vec![0.0; queue.len()], 1500.0, &LanePolicy::Adapt)
+                    .unwrap_or_else(|e| panic!("from {}: {e}", map.lanes[spawn].name));
+                assert!(route.length >= 1500.0);
+                // No lane changes on a one-lane road; every turn is done (on the full grid).
+                assert!(!route.kinds().any(|k| matches!(k, LegKind::LaneChange { .. })));
+                if !tees {
+                    assert!(route.adaptations.is_empty(), "{:?}", route.adaptations);
+                }
+            }
+            // A merge has no lane to go to: refused with the reason.
+            let err = Route::plan(&map, spawn, 0.0, &[Action::MergeL], &[2.0], 100.0, &LanePolicy::Strict).unwrap_err();
+            assert!(err.reason.contains("only lane of its direction"), "{err}");
+        }
     }
 }

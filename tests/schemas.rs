@@ -89,7 +89,7 @@ fn spec_schema_and_parser_agree() {
     ));
     good.push((
         "T-junctions".into(),
-        edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["D0", "B2"]}})),
+        edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["D0", "B2"], "lanes": 1}})),
     ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((

@@ -325,7 +325,16 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         }),
         &["map.camera_altitude_m", "in the grid-3x1 town: 45 m shows less than every intersection"],
     );
-    rejected("grid-unknown", &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 3})), &["lanes", "block_m"]);
+    rejected(
+        "grid-unknown",
+        &grid(serde_json::json!({"rows": 2, "columns": 2, "lane_count": 3})),
+        &["lane_count", "block_m", "lanes"],
+    );
+    rejected(
+        "grid-lanes",
+        &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 3})),
+        &["map.grid.lanes", "3 is not allowed", "1 or 2"],
+    );
     // 20 m blocks leave 8 m between the 12 m wide roads: too short for a lane change.
     rejected(
         "grid-block",

@@ -55,6 +55,9 @@ pub struct MapLayout {
     /// up to its first crossing): the junctions at their ends become
     /// T-junctions. Empty: every road crosses every other.
     pub missing_segments: Vec<(char, u8)>,
+    /// Lanes each way on every road: 2 (`w`, `x` one way, `y`, `z` the
+    /// other, the original's) or 1 (`w` and `z`, each turning any way).
+    pub lanes_per_direction: u8,
 }
 
 impl Default for MapLayout {
@@ -77,6 +80,7 @@ impl Default for MapLayout {
             stop_line_setback: 3.6,
             sidewalk_width: 2.0,
             missing_segments: Vec::new(),
+            lanes_per_direction: 2,
         }
     }
 }
@@ -87,9 +91,25 @@ impl Default for MapLayout {
 pub const APPROACH_MARGIN_M: f64 = 4.0;
 
 impl MapLayout {
-    /// Half the width of a road (two lanes each way).
+    /// Half the width of a road: its lanes of one direction.
     pub fn road_half_width(&self) -> f64 {
-        2.0 * self.lane_width
+        self.lanes_per_direction as f64 * self.lane_width
+    }
+
+    /// How far the centre of a direction's outer (kerb-side) lane lies from
+    /// the road's centre line, metres.
+    pub fn outer_lane_offset(&self) -> f64 {
+        (self.lanes_per_direction as f64 - 0.5) * self.lane_width
+    }
+
+    /// The lane letters of one road segment: forward (outer, inner), then
+    /// backward (inner, outer); `w` and `z` alone with one lane each way.
+    pub fn lane_letters(&self) -> &'static [char] {
+        if self.lanes_per_direction == 1 {
+            &['w', 'z']
+        } else {
+            &['w', 'x', 'y', 'z']
+        }
     }
 
     /// Shortest allowed lane ending at an intersection, metres:
@@ -151,6 +171,9 @@ pub enum LanePosition {
     Outer,
     /// Centre side: straight or left at intersections.
     Inner,
+    /// The only lane of its direction (one-lane roads): straight, right
+    /// or left.
+    Single,
 }
 
 /// A movement through an intersection (or the U-turn at a road's far end).
@@ -243,8 +266,6 @@ impl Default for CityMap {
     }
 }
 
-const LANE_LETTERS: [char; 4] = ['w', 'x', 'y', 'z'];
-
 /// Distance between the straight and the left signal head of one approach,
 /// metres: the left head stands this far before the straight one.
 pub const SIGNAL_HEAD_SPACING_M: f64 = 1.1;
@@ -294,7 +315,7 @@ impl CityMap {
     /// the map does not have.
     pub fn signal_head(&self, intersection: usize, approach: char, signal: signals::Signal) -> Option<DVec2> {
         let lane = self.lanes.iter().find(|l| {
-            l.position == LanePosition::Outer
+            l.position != LanePosition::Inner
                 && matches!(l.end, LaneEnd::Intersection { intersection: i, approach: a } if i == intersection && a == approach)
         })?;
         let back =
@@ -343,12 +364,16 @@ impl CityMap {
                 if !layout.has_segment(name, segment as u8) {
                     continue;
                 }
-                for letter in LANE_LETTERS {
+                let (outer, kerb_side) = match layout.lanes_per_direction {
+                    1 => (layout.outer_lane_offset(), LanePosition::Single),
+                    _ => (layout.outer_lane_offset(), LanePosition::Outer),
+                };
+                for &letter in layout.lane_letters() {
                     let (offset, forward, position) = match letter {
-                        'w' => (1.5 * lw, true, LanePosition::Outer),
+                        'w' => (outer, true, kerb_side),
                         'x' => (0.5 * lw, true, LanePosition::Inner),
                         'y' => (-0.5 * lw, false, LanePosition::Inner),
-                        _ => (-1.5 * lw, false, LanePosition::Outer),
+                        _ => (-outer, false, kerb_side),
                     };
                     let p0 = origin + axis * a0 + right * offset;
                     let p1 = origin + axis * a1 + right * offset;
@@ -416,18 +441,20 @@ impl CityMap {
                 LaneEnd::Intersection { intersection, .. } => {
                     let travel = DVec2::new(heading.cos(), heading.sin());
                     add(Curve::line(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
+                    let right = Curve::arc(end, heading, hw - layout.outer_lane_offset(), -PI / 2.0);
+                    let left = Curve::arc(end, heading, hw + 0.5 * lw, PI / 2.0);
                     match lane.position {
-                        LanePosition::Outer => {
-                            add(Curve::arc(end, heading, hw - 1.5 * lw, -PI / 2.0), Turn::Right, Some(intersection))
-                        }
-                        LanePosition::Inner => {
-                            add(Curve::arc(end, heading, hw + 0.5 * lw, PI / 2.0), Turn::Left, Some(intersection))
+                        LanePosition::Outer => add(right, Turn::Right, Some(intersection)),
+                        LanePosition::Inner => add(left, Turn::Left, Some(intersection)),
+                        LanePosition::Single => {
+                            add(right, Turn::Right, Some(intersection));
+                            add(left, Turn::Left, Some(intersection));
                         }
                     }
                 }
                 LaneEnd::Loop(_) => {
                     let radius = match lane.position {
-                        LanePosition::Outer => 1.5 * lw,
+                        LanePosition::Outer | LanePosition::Single => layout.outer_lane_offset(),
                         LanePosition::Inner => 0.5 * lw,
                     };
                     add(Curve::arc(end, heading, radius, PI), Turn::UTurn, None);

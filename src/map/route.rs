@@ -471,6 +471,7 @@ fn place_merge(
         let kind = match map.lanes[lane].position {
             LanePosition::Outer => "outer",
             LanePosition::Inner => "inner",
+            LanePosition::Single => "only",
         };
         return Err(format!("lane {name} is the {kind} lane of its direction: there is no lane to its {side}"));
     };
@@ -503,9 +504,15 @@ fn place_merge(
 /// Why `action` cannot be driven from `lane` as it stands.
 fn wrong_lane(map: &CityMap, lane: LaneId, action: Action) -> String {
     let name = &map.lanes[lane].name;
+    let turn = action.turn().unwrap_or(Turn::Straight);
+    let beside = [true, false].into_iter().filter_map(|left| map.adjacent_lane(lane, left));
+    if !beside.into_iter().any(|other| map.exit(other, turn).is_some()) {
+        return format!("cannot go {action} from lane {name}: no lane of its road goes that way at the junction ahead");
+    }
     let allowed = match map.lanes[lane].position {
         LanePosition::Outer => "the outer lanes (w, z) go straight or turn right",
         LanePosition::Inner => "the inner lanes (x, y) go straight or turn left",
+        LanePosition::Single => "its road has one lane each way",
     };
     format!("cannot turn {action} from lane {name}: {allowed}; merge first")
 }

@@ -170,23 +170,25 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
         let curve = &lane.curve;
         let len = curve.length();
         let lw = layout.lane_width;
+        // The road's centre line, to the left of this kerb-side lane.
+        let centre = layout.outer_lane_offset();
         // Divider between this lane and its inner neighbour: dashed white.
         let mut s = 1.0;
-        while s + 3.0 <= len - 1.0 {
+        while layout.lanes_per_direction > 1 && s + 3.0 <= len - 1.0 {
             quad_along(&mut pixmap, t, curve, s, s + 3.0, 0.5 * lw - 0.07, 0.5 * lw + 0.07, WHITE);
             s += 6.0;
         }
         // Half of the double yellow centre line, on this direction's side.
-        quad_along(&mut pixmap, t, curve, 0.0, len, 1.5 * lw - 0.25, 1.5 * lw - 0.1, CENTRE_LINE);
+        quad_along(&mut pixmap, t, curve, 0.0, len, centre - 0.25, centre - 0.1, CENTRE_LINE);
         if let crate::map::LaneEnd::Intersection { .. } = lane.end {
             // Crosswalk across the whole road just before the box, stop line behind it.
             let mut k = -hw + 0.25;
             while k + 0.5 <= hw {
-                let lateral = k + 1.5 * lw;
+                let lateral = k + centre;
                 quad_along(&mut pixmap, t, curve, len - 2.8, len - 0.3, lateral, lateral + 0.5, WHITE);
                 k += 1.0;
             }
-            quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, 1.5 * lw - 0.3, WHITE);
+            quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, centre - 0.3, WHITE);
         }
     }
     let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();

@@ -8,7 +8,7 @@ use super::*;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MapSpec {
-    /// Width of every lane; a road is four lanes wide.
+    /// Width of every lane; a road is four lanes wide (a grid's may be two).
     pub lane_width: f64,
     /// y of the centre lines of the east-west roads B and A, ascending.
     pub east_west_roads: [f64; 2],
@@ -63,6 +63,18 @@ pub struct GridSpec {
     /// T-junctions.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing: Vec<String>,
+    /// Lanes each way on every road: 2 (the original's) or 1.
+    #[serde(default = "default_lanes", skip_serializing_if = "is_default_lanes")]
+    pub lanes: u8,
+}
+
+/// The original's roads: two lanes each way.
+fn default_lanes() -> u8 {
+    2
+}
+
+fn is_default_lanes(lanes: &u8) -> bool {
+    *lanes == default_lanes()
 }
 
 /// What the bird's-eye camera frames: `"junctions"` (every junction box
@@ -332,6 +344,9 @@ impl MapSpec {
                 if grid.block_m != default_block_m() || grid.outer_m != default_outer_m() {
                     name += &format!("-b{}-o{}", grid.block_m, grid.outer_m);
                 }
+                if grid.lanes != default_lanes() {
+                    name += &format!("-l{}", grid.lanes);
+                }
                 if !grid.missing.is_empty() {
                     name += &format!("-no-{}", grid.missing.join("-"));
                 }
@@ -366,6 +381,7 @@ impl MapSpec {
                 extent_y: reach(grid.rows),
                 lane_change_length: self.lane_change_m,
                 missing_segments: spec.missing.iter().filter_map(|name| parse_segment(name)).collect(),
+                lanes_per_direction: spec.lanes,
                 ..d
             };
         }
@@ -456,6 +472,12 @@ impl MapSpec {
                 "a grid places its own roads: leave out map.east_west_roads, map.north_south_roads, map.extent_x and map.extent_y (use grid.block_m and grid.outer_m)",
             ));
         }
+        if !(1..=2).contains(&spec.lanes) {
+            return Err(SpecError::new(
+                "map.grid.lanes",
+                format!("{} is not allowed: lanes each way on every road, 1 or 2", spec.lanes),
+            ));
+        }
         positive("map.grid.block_m", grid.block_m, MAX_MAP_EXTENT / MAX_GRID_ROADS as f64, "metres")?;
         positive("map.grid.outer_m", grid.outer_m, MAX_MAP_EXTENT, "metres")?;
         let layout = self.layout();
@@ -532,11 +554,12 @@ fn parse_segment(name: &str) -> Option<(char, u8)> {
 /// errors of both map forms.
 fn approach_rule(layout: &MapLayout) -> String {
     format!(
-        "every lane that ends at an intersection must be at least {:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are 4 lanes of {} m",
+        "every lane that ends at an intersection must be at least {:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are {} lanes of {} m",
         layout.min_approach_length(),
         layout.lane_change_length,
         layout.stop_line_setback,
         crate::map::APPROACH_MARGIN_M,
+        2 * layout.lanes_per_direction,
         layout.lane_width
     )
 }
