@@ -19,6 +19,22 @@ fn is_road(image: &image::RgbImage, px: f64, py: f64) -> bool {
     road > 25
 }
 
+/// A scenario's first bird's-eye frame, and where a point (x, y) m lies in
+/// it (pixels), from the camera its scenario.json records.
+fn first_frame(scenario: &std::path::Path) -> (image::RgbImage, impl Fn(f64, f64) -> (f64, f64)) {
+    let camera = read_json(&scenario.join("scenario.json"))["camera"].clone();
+    let image = image::open(scenario.join("rgb/0000.png")).unwrap().to_rgb8();
+    let (width, height) = (image.width() as f64, image.height() as f64);
+    let pixel = move |x: f64, y: f64| {
+        let ppm = camera["pixels_per_metre"].as_f64().unwrap();
+        (
+            (width - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm,
+            (height - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm,
+        )
+    };
+    (image, pixel)
+}
+
 fn spec_with_map(name: &str, map: serde_json::Value) -> String {
     let mut spec: serde_json::Value =
         serde_json::from_str(&city_spec(name, &[(8, 0.5)], (2, 1, 1), 40, r#"{"confounders": {}}"#)).unwrap();
@@ -554,16 +570,7 @@ fn a_town_with_t_junctions_generates_draws_and_validates_and_no_car_drives_a_mis
 
     let scenarios = scenario_dirs(&out);
     assert_eq!(scenarios.len(), 4);
-    let json = read_json(&scenarios[0].join("scenario.json"));
-    let camera = &json["camera"];
-    let ppm = camera["pixels_per_metre"].as_f64().unwrap();
-    let image = image::open(scenarios[0].join("rgb/0000.png")).unwrap().to_rgb8();
-    let pixel = |x: f64, y: f64| {
-        (
-            (image.width() as f64 - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm,
-            (image.height() as f64 - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm,
-        )
-    };
+    let (image, pixel) = first_frame(&scenarios[0]);
     // Road B runs from D to E (B1) but not on to F (B2); every junction box
     // is road. (Along the inner lane, clear of markings; a car may hide one point.)
     let road_along = |x: f64| {
@@ -618,16 +625,7 @@ fn a_town_of_one_lane_roads_generates_draws_and_validates() {
     let report = run(&["validate", out.to_str().unwrap()]);
     assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
     let scenarios = scenario_dirs(&out);
-    let json = read_json(&scenarios[0].join("scenario.json"));
-    let camera = &json["camera"];
-    let ppm = camera["pixels_per_metre"].as_f64().unwrap();
-    let image = image::open(scenarios[0].join("rgb/0000.png")).unwrap().to_rgb8();
-    let pixel = |x: f64, y: f64| {
-        (
-            (image.width() as f64 - 1.0) / 2.0 + (x - camera["centre_x"].as_f64().unwrap()) * ppm,
-            (image.height() as f64 - 1.0) / 2.0 - (y - camera["centre_y"].as_f64().unwrap()) * ppm,
-        )
-    };
+    let (image, pixel) = first_frame(&scenarios[0]);
     // Road B is 6 m wide: road 1.5 m off its centre line, none 4.5 m off
     // (where a two-lane road's outer lanes run). A car may hide one point.
     let road_at =

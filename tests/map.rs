@@ -366,14 +366,7 @@ fn a_town_without_some_segments_has_t_junctions_whose_every_lane_leads_on() {
     let name = |k: usize| map.intersections[k].name.as_str();
     let mut tees = Vec::new();
     for k in 0..map.intersections.len() {
-        let sides: std::collections::BTreeSet<char> = map
-            .lanes
-            .iter()
-            .filter_map(|l| match l.end {
-                LaneEnd::Intersection { intersection, approach } if intersection == k => Some(approach),
-                _ => None,
-            })
-            .collect();
+        let sides = map.approaches(k);
         if sides.len() == 3 {
             tees.push(name(k));
         } else {

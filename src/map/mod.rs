@@ -528,19 +528,24 @@ impl CityMap {
         self.lane_by_name(&format!("{}{}{}", l.road, l.segment, target))
     }
 
+    /// The sides traffic arrives at `intersection` from ('E', 'N', 'S',
+    /// 'W', sorted): four at a crossing, three at a T-junction.
+    pub fn approaches(&self, intersection: usize) -> std::collections::BTreeSet<char> {
+        self.lanes
+            .iter()
+            .filter_map(|l| match l.end {
+                LaneEnd::Intersection { intersection: k, approach } if k == intersection => Some(approach),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Why this network cannot be driven, if it cannot: a junction left
     /// with fewer than three roads, or a lane from which some other lane
     /// cannot be reached (following connectors and lane changes).
     pub fn network_problem(&self) -> Option<String> {
         for (k, x) in self.intersections.iter().enumerate() {
-            let arms: std::collections::BTreeSet<char> = self
-                .lanes
-                .iter()
-                .filter_map(|l| match l.end {
-                    LaneEnd::Intersection { intersection, approach } if intersection == k => Some(approach),
-                    _ => None,
-                })
-                .collect();
+            let arms = self.approaches(k);
             if arms.len() < 3 {
                 return Some(format!(
                     "junction {} would keep {} roads ({}): a junction needs at least 3",
