@@ -235,6 +235,30 @@ def test_map_gives_the_road_network_as_arrays_and_agrees_with_the_command(tmp_pa
     assert len(default["lanes"]) == 48 and default["lanes"][0] == "A0w" and default["junctions"] == ["BC", "BD", "AC", "AD"]
 
 
+def test_map_gives_a_town_of_one_lane_roads_and_t_junctions_as_arrays(tmp_path):
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["map"] = {"grid": {"rows": 3, "columns": 3, "lanes": 1, "missing": ["D0", "B2", "E3"]}}
+    town = causalcity.map(spec)
+    # 6 roads of 4 segments of 2 lanes, less 3 segments; none on a missing one.
+    assert len(town["lanes"]) == 48 - 6
+    assert not any(name[:2] in ("D0", "B2", "E3") for name in town["lanes"])
+    # One lane each way: every lane ending at a junction ends at its edge, 3 m from the centre.
+    ends = town["lane_junction"] >= 0
+    to_centre = np.abs(town["lane_end"][ends] - town["junction_centres"][town["lane_junction"][ends]]).max(axis=1)
+    assert np.all((to_centre > 2.9) & (to_centre < 3.1)), to_centre
+    # Four T-junctions take lanes from 3 sides, the other five from 4.
+    per_junction = np.bincount(town["lane_junction"][ends], minlength=9)
+    assert sorted(per_junction.tolist()) == [3] * 4 + [4] * 5
+    # A full junction's lane turns every way; the stem of CD (D1 southbound) cannot go straight.
+    turns = dict(zip(town["lanes"], town["lane_turns"]))
+    assert sorted(turns["C1w"]) == ["left", "right", "straight"]
+    assert "straight" not in turns["D1z"] and turns["D1z"]
+    # A segment that is no segment of the town is refused, naming the field.
+    spec["map"]["grid"]["missing"] = ["Q7"]
+    with pytest.raises(causalcity.InputError, match=r"map\.grid\.missing\[0\]"):
+        causalcity.map(spec)
+
+
 def test_a_spec_that_draws_towns_names_each_scenarios_town_as_gen_records_it(tmp_path):
     spec = json.loads(CITY_SPEC.read_text())
     spec["name"] = "towns"
