@@ -643,15 +643,45 @@ fn a_town_of_one_lane_roads_generates_draws_and_validates() {
         }
     }
     assert_eq!(poses, 4 * 40 * 8);
-    // 1 or 2 lanes each way: 3 is refused naming the field, nothing written.
+    // 1 to 3 lanes each way: 4 is refused naming the field, nothing written.
     let mut bad = map.clone();
-    bad["grid"]["lanes"] = serde_json::json!(3);
+    bad["grid"]["lanes"] = serde_json::json!(4);
     let bad_dir = dir.join("bad");
     std::fs::create_dir_all(&bad_dir).unwrap();
     let spec = write_spec(&bad_dir, &spec_with_map("bad", bad));
     let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", bad_dir.join("out").to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("map.grid.lanes`: 3 is not allowed"), "{stderr}");
+    assert!(stderr.contains("map.grid.lanes`: 4 is not allowed"), "{stderr}");
     assert!(!bad_dir.join("out").exists());
+}
+
+#[test]
+fn a_town_of_three_lane_roads_generates_draws_and_validates() {
+    let dir = fresh_dir("grid-town-three-lanes");
+    let map = serde_json::json!({"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 44, "outer_m": 34, "missing": ["C0"]}});
+    let spec = write_spec(&dir, &spec_with_map("three", map));
+    let out = dir.join("three");
+    gen_ok(&spec, &out, &[]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+    let scenarios = scenario_dirs(&out);
+    let (image, pixel) = first_frame(&scenarios[0]);
+    // Road B (y = -22 m) is 18 m wide: road 7.5 m off its centre line, none 10.5 m off.
+    let road_at = |y: f64| [-4.0, 0.0, 4.0].iter().filter(|&&x| is_road(&image, pixel(x, y).0, pixel(x, y).1)).count();
+    assert!(road_at(-22.0 + 7.5) >= 2 && road_at(-22.0 - 7.5) >= 2);
+    assert_eq!(road_at(-22.0 + 10.5) + road_at(-22.0 - 10.5), 0);
+    // Cars start on middle lanes too, and every scenario is backed by effects.
+    let mut middle = 0;
+    for scenario in &scenarios {
+        let json = read_json(&scenario.join("scenario.json"));
+        middle += json["cars"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["spawn"].as_str().unwrap().ends_with(['m', 'n']))
+            .count();
+        assert!(std::fs::metadata(scenario.join("effects.csv")).unwrap().len() > 0);
+    }
+    assert!(middle > 0, "no car started on a middle lane");
 }

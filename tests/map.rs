@@ -35,6 +35,7 @@ fn every_map() -> Vec<(String, CityMap)> {
         "3 x 3 grid, one lane each way".into(),
         CityMap::new(MapLayout { lanes_per_direction: 1, ..grid(3, 3) }),
     ));
+    maps.push(("2 x 3 grid, three lanes each way".into(), three_lane_town(2, 3, vec![])));
     maps
 }
 
@@ -477,6 +478,66 @@ fn one_lane_roads_turn_every_way_from_their_one_lane_and_routes_drive_through_th
             // A merge has no lane to go to: refused with the reason.
             let err = Route::plan(&map, spawn, 0.0, &[Action::MergeL], &[2.0], 100.0, &LanePolicy::Strict).unwrap_err();
             assert!(err.reason.contains("only lane of its direction"), "{err}");
+        }
+    }
+}
+
+/// A grid of three-lane roads 44 m apart (room for two lane changes before a turn).
+fn three_lane_town(rows: usize, columns: usize, missing: Vec<(char, u8)>) -> CityMap {
+    let spec = GridSpec {
+        rows: rows.into(),
+        columns: columns.into(),
+        block_m: 44.0,
+        outer_m: 34.0,
+        missing: Vec::new(),
+        lanes: 3,
+    };
+    let layout = MapSpec { grid: Some(spec), ..MapSpec::default() }.layout();
+    CityMap::new(MapLayout { missing_segments: missing, ..layout })
+}
+
+#[test]
+fn three_lane_roads_keep_their_middle_lane_straight_and_turns_take_two_lane_changes() {
+    for missing in [vec![], vec![('C', 0), ('A', 1)]] {
+        let tees = !missing.is_empty();
+        let map = three_lane_town(2, 3, missing);
+        assert_eq!(map.network_problem(), None);
+        connectors_join(&map);
+        let lane = |n: &str| map.lane_by_name(n).unwrap();
+        // Kerb to kerb: w m x | y n z, 3 m apart (B, the southern road, at y = -22 m).
+        let ys: Vec<f64> = ["B1w", "B1m", "B1x", "B1y", "B1n", "B1z"]
+            .iter()
+            .map(|n| map.lanes[lane(n)].curve.start().y + 22.0)
+            .collect();
+        for (y, want) in ys.iter().zip([-7.5, -4.5, -1.5, 1.5, 4.5, 7.5]) {
+            assert!((y - want).abs() < 1e-9, "{ys:?}");
+        }
+        assert_eq!(map.adjacent_lane(lane("B1w"), true), Some(lane("B1m")));
+        assert_eq!(map.adjacent_lane(lane("B1m"), true), Some(lane("B1x")));
+        assert_eq!(map.adjacent_lane(lane("B1z"), true), Some(lane("B1n")));
+        if tees {
+            // Without C0, C1's lanes arriving at BC from the north are a T's stem;
+            // without A1, so are A0's at AC. Their middle lanes turn either way.
+            assert_eq!(map.allowed_turns(lane("C1n")), vec![Turn::Left, Turn::Right]);
+            assert_eq!(map.allowed_turns(lane("A0m")), vec![Turn::Left, Turn::Right]);
+            assert_eq!(map.allowed_turns(lane("C1z")), vec![Turn::Right]);
+        } else {
+            assert_eq!(map.allowed_turns(lane("B1m")), vec![Turn::Straight]);
+            assert_eq!(map.allowed_turns(lane("B1w")), vec![Turn::Straight, Turn::Right]);
+            assert_eq!(map.allowed_turns(lane("B1x")), vec![Turn::Left, Turn::Straight]);
+            // Left from the kerb lane: two lane changes (w to m to x), then the turn.
+            let route =
+                Route::plan(&map, lane("B1w"), 0.0, &[Action::Left], &[0.0], 300.0, &LanePolicy::Adapt).unwrap();
+            let changes = route.kinds().filter(|k| matches!(k, LegKind::LaneChange { .. })).count();
+            assert_eq!(changes, 2, "{:?}", route.adaptations);
+            assert!(route.adaptations.is_empty(), "{:?}", route.adaptations);
+        }
+        for spawn in map.spawn_points() {
+            for queue in [&[][..], &[Action::Left, Action::Right, Action::Left, Action::Straight][..]] {
+                let route = Route::plan(&map, spawn, 0.0, queue, &vec![0.0; queue.len()], 1500.0, &LanePolicy::Adapt)
+                    .unwrap_or_else(|e| panic!("from {}: {e}", map.lanes[spawn].name));
+                assert!(route.length >= 1500.0);
+            }
         }
     }
 }

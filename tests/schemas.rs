@@ -91,6 +91,12 @@ fn spec_schema_and_parser_agree() {
         "T-junctions".into(),
         edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["D0", "B2"], "lanes": 1}})),
     ));
+    good.push((
+        "three lanes".into(),
+        edited(&base, |v| {
+            v["map"] = json!({"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 40, "outer_m": 30}})
+        }),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),

@@ -332,8 +332,8 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
     );
     rejected(
         "grid-lanes",
-        &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 3})),
-        &["map.grid.lanes", "3 is not allowed", "1 or 2"],
+        &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 4})),
+        &["map.grid.lanes", "4 is not allowed", "1 to 3"],
     );
     // 20 m blocks leave 8 m between the 12 m wide roads: too short for a lane change.
     rejected(

@@ -56,7 +56,8 @@ pub struct MapLayout {
     /// T-junctions. Empty: every road crosses every other.
     pub missing_segments: Vec<(char, u8)>,
     /// Lanes each way on every road: 2 (`w`, `x` one way, `y`, `z` the
-    /// other, the original's) or 1 (`w` and `z`, each turning any way).
+    /// other, the original's), 1 (`w` and `z`, each turning any way) or 3
+    /// (`w`, `m`, `x` and `y`, `n`, `z`: a middle lane that goes straight).
     pub lanes_per_direction: u8,
 }
 
@@ -102,20 +103,28 @@ impl MapLayout {
         (self.lanes_per_direction as f64 - 0.5) * self.lane_width
     }
 
-    /// The lane letters of one road segment: forward (outer, inner), then
-    /// backward (inner, outer); `w` and `z` alone with one lane each way.
+    /// The lane letters of one road segment, kerb to kerb: forward
+    /// (outer, middle, inner), then backward (inner, middle, outer); `w`
+    /// and `z` alone with one lane each way, no middle lanes with two.
     pub fn lane_letters(&self) -> &'static [char] {
-        if self.lanes_per_direction == 1 {
-            &['w', 'z']
-        } else {
-            &['w', 'x', 'y', 'z']
+        match self.lanes_per_direction {
+            1 => &['w', 'z'],
+            3 => &['w', 'm', 'x', 'y', 'n', 'z'],
+            _ => &['w', 'x', 'y', 'z'],
         }
     }
 
     /// Shortest allowed lane ending at an intersection, metres:
-    /// `lane_change_length + stop_line_setback + APPROACH_MARGIN_M`.
+    /// `lane_change_length` for each lane change a turn may need, plus
+    /// `stop_line_setback + APPROACH_MARGIN_M`.
     pub fn min_approach_length(&self) -> f64 {
-        self.lane_change_length + self.stop_line_setback + APPROACH_MARGIN_M
+        self.lane_change_length * self.lane_changes_to_turn() as f64 + self.stop_line_setback + APPROACH_MARGIN_M
+    }
+
+    /// Lane changes a driver may need before a turn: from the outer lane
+    /// to the inner one (at least one, as the original's roads need).
+    pub fn lane_changes_to_turn(&self) -> u8 {
+        self.lanes_per_direction.saturating_sub(1).max(1)
     }
 
     /// What the bird's-eye camera must show: every intersection box and the
@@ -174,6 +183,8 @@ pub enum LanePosition {
     /// The only lane of its direction (one-lane roads): straight, right
     /// or left.
     Single,
+    /// Between the outer and the inner lane (three-lane roads): straight.
+    Middle,
 }
 
 /// A movement through an intersection (or the U-turn at a road's far end).
@@ -372,6 +383,8 @@ impl CityMap {
                     let (offset, forward, position) = match letter {
                         'w' => (outer, true, kerb_side),
                         'x' => (0.5 * lw, true, LanePosition::Inner),
+                        'm' => (1.5 * lw, true, LanePosition::Middle),
+                        'n' => (-1.5 * lw, false, LanePosition::Middle),
                         'y' => (-0.5 * lw, false, LanePosition::Inner),
                         _ => (-outer, false, kerb_side),
                     };
@@ -436,26 +449,42 @@ impl CityMap {
                 if let Some(to) = to {
                     connectors.push(Connector { from, to, turn, intersection, curve });
                 }
+                to.is_some()
             };
             match lane.end {
                 LaneEnd::Intersection { intersection, .. } => {
                     let travel = DVec2::new(heading.cos(), heading.sin());
-                    add(Curve::line(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
-                    let right = Curve::arc(end, heading, hw - layout.outer_lane_offset(), -PI / 2.0);
+                    let straight = add(Curve::line(end, end + travel * 2.0 * hw), Turn::Straight, Some(intersection));
+                    // A turn ends on the crossing road's lane as far from its
+                    // centre line as this one is from its own.
+                    let offset = layout.outer_lane_offset();
+                    let right = Curve::arc(end, heading, hw - offset, -PI / 2.0);
                     let left = Curve::arc(end, heading, hw + 0.5 * lw, PI / 2.0);
                     match lane.position {
-                        LanePosition::Outer => add(right, Turn::Right, Some(intersection)),
-                        LanePosition::Inner => add(left, Turn::Left, Some(intersection)),
+                        LanePosition::Outer => {
+                            add(right, Turn::Right, Some(intersection));
+                        }
+                        LanePosition::Inner => {
+                            add(left, Turn::Left, Some(intersection));
+                        }
                         LanePosition::Single => {
                             add(right, Turn::Right, Some(intersection));
                             add(left, Turn::Left, Some(intersection));
                         }
+                        // Straight on; on a T-junction's stem, where there is
+                        // none, either way into the bar's middle lanes.
+                        LanePosition::Middle if !straight => {
+                            add(Curve::arc(end, heading, hw - 1.5 * lw, -PI / 2.0), Turn::Right, Some(intersection));
+                            add(Curve::arc(end, heading, hw + 1.5 * lw, PI / 2.0), Turn::Left, Some(intersection));
+                        }
+                        LanePosition::Middle => {}
                     }
                 }
                 LaneEnd::Loop(_) => {
                     let radius = match lane.position {
                         LanePosition::Outer | LanePosition::Single => layout.outer_lane_offset(),
                         LanePosition::Inner => 0.5 * lw,
+                        LanePosition::Middle => 1.5 * lw,
                     };
                     add(Curve::arc(end, heading, radius, PI), Turn::UTurn, None);
                 }
@@ -518,7 +547,16 @@ impl CityMap {
     /// The parallel lane of the same direction on the left (`to_left`) or right.
     pub fn adjacent_lane(&self, lane: LaneId, to_left: bool) -> Option<LaneId> {
         let l = &self.lanes[lane];
+        let middle = self.layout.lanes_per_direction == 3;
         let target = match (l.letter, to_left) {
+            ('w', true) if middle => 'm',
+            ('m', true) => 'x',
+            ('x', false) if middle => 'm',
+            ('m', false) => 'w',
+            ('z', true) if middle => 'n',
+            ('n', true) => 'y',
+            ('y', false) if middle => 'n',
+            ('n', false) => 'z',
             ('w', true) => 'x',
             ('x', false) => 'w',
             ('z', true) => 'y',
@@ -526,6 +564,23 @@ impl CityMap {
             _ => return None,
         };
         self.lane_by_name(&format!("{}{}{}", l.road, l.segment, target))
+    }
+
+    /// The lane beside `lane` towards the one that makes `turn` at the end
+    /// of its segment (left for a left turn, right otherwise), when that
+    /// lane or one further that way does: the next lane change a driver
+    /// makes for the turn.
+    pub fn lane_towards(&self, lane: LaneId, turn: Turn) -> Option<LaneId> {
+        let to_left = turn == Turn::Left;
+        let next = self.adjacent_lane(lane, to_left)?;
+        let mut probe = Some(next);
+        while let Some(l) = probe {
+            if self.exit(l, turn).is_some() {
+                return Some(next);
+            }
+            probe = self.adjacent_lane(l, to_left);
+        }
+        None
     }
 
     /// The sides traffic arrives at `intersection` from ('E', 'N', 'S',
@@ -580,6 +635,9 @@ impl CityMap {
         };
         if self.lanes.is_empty() {
             return Some("the network has no lanes".into());
+        }
+        if let Some(stuck) = (0..self.lanes.len()).find(|&l| self.exits_from(l).next().is_none()) {
+            return Some(format!("lane {} leads nowhere", self.lanes[stuck].name));
         }
         let (forward, backward) = (reach(&ahead), reach(&behind));
         let cut = (0..self.lanes.len()).find(|&l| !forward[l] || !backward[l])?;

@@ -265,8 +265,7 @@ impl Route {
                         // straight on (or round a loop) from it, else on this one.
                         let to_left = turn == Turn::Left;
                         // (At a T-junction's stem no lane may go straight on.)
-                        let beside_turns =
-                            map.adjacent_lane(lane, to_left).is_some_and(|t| map.exit(t, turn).is_some());
+                        let beside_turns = map.lane_towards(lane, turn).is_some();
                         let back =
                             previous.take().filter(|p| beside_turns && !given_up(next) && p.has_room(map, to_left));
                         if let Some(p) = back {
@@ -472,6 +471,7 @@ fn place_merge(
             LanePosition::Outer => "outer",
             LanePosition::Inner => "inner",
             LanePosition::Single => "only",
+            LanePosition::Middle => "middle",
         };
         return Err(format!("lane {name} is the {kind} lane of its direction: there is no lane to its {side}"));
     };
@@ -505,14 +505,14 @@ fn place_merge(
 fn wrong_lane(map: &CityMap, lane: LaneId, action: Action) -> String {
     let name = &map.lanes[lane].name;
     let turn = action.turn().unwrap_or(Turn::Straight);
-    let beside = [true, false].into_iter().filter_map(|left| map.adjacent_lane(lane, left));
-    if !beside.into_iter().any(|other| map.exit(other, turn).is_some()) {
+    if map.lane_towards(lane, turn).is_none() {
         return format!("cannot go {action} from lane {name}: no lane of its road goes that way at the junction ahead");
     }
     let allowed = match map.lanes[lane].position {
         LanePosition::Outer => "the outer lanes (w, z) go straight or turn right",
         LanePosition::Inner => "the inner lanes (x, y) go straight or turn left",
         LanePosition::Single => "its road has one lane each way",
+        LanePosition::Middle => "the middle lanes (m, n) go straight",
     };
     format!("cannot turn {action} from lane {name}: {allowed}; merge first")
 }
@@ -563,7 +563,7 @@ fn plan_turn_lane(
     given_up: bool,
 ) -> Result<(LaneId, f64), String> {
     let name = &map.lanes[lane].name;
-    let Some(target) = map.adjacent_lane(lane, turn == Turn::Left).filter(|&t| map.exit(t, turn).is_some()) else {
+    let Some(target) = map.lane_towards(lane, turn) else {
         return Err(format!("no lane beside {name} allows the turn"));
     };
     let target_name = &map.lanes[target].name;

@@ -172,11 +172,14 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
         let lw = layout.lane_width;
         // The road's centre line, to the left of this kerb-side lane.
         let centre = layout.outer_lane_offset();
-        // Divider between this lane and its inner neighbour: dashed white.
-        let mut s = 1.0;
-        while layout.lanes_per_direction > 1 && s + 3.0 <= len - 1.0 {
-            quad_along(&mut pixmap, t, curve, s, s + 3.0, 0.5 * lw - 0.07, 0.5 * lw + 0.07, WHITE);
-            s += 6.0;
+        // Dividers between the lanes of this direction: dashed white.
+        for k in 1..layout.lanes_per_direction {
+            let lateral = (k as f64 - 0.5) * lw;
+            let mut s = 1.0;
+            while s + 3.0 <= len - 1.0 {
+                quad_along(&mut pixmap, t, curve, s, s + 3.0, lateral - 0.07, lateral + 0.07, WHITE);
+                s += 6.0;
+            }
         }
         // Half of the double yellow centre line, on this direction's side.
         quad_along(&mut pixmap, t, curve, 0.0, len, centre - 0.25, centre - 0.1, CENTRE_LINE);

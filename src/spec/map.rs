@@ -63,7 +63,7 @@ pub struct GridSpec {
     /// T-junctions.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing: Vec<String>,
-    /// Lanes each way on every road: 2 (the original's) or 1.
+    /// Lanes each way on every road: 2 (the original's), 1 or 3.
     #[serde(default = "default_lanes", skip_serializing_if = "is_default_lanes")]
     pub lanes: u8,
 }
@@ -472,10 +472,10 @@ impl MapSpec {
                 "a grid places its own roads: leave out map.east_west_roads, map.north_south_roads, map.extent_x and map.extent_y (use grid.block_m and grid.outer_m)",
             ));
         }
-        if !(1..=2).contains(&spec.lanes) {
+        if !(1..=3).contains(&spec.lanes) {
             return Err(SpecError::new(
                 "map.grid.lanes",
-                format!("{} is not allowed: lanes each way on every road, 1 or 2", spec.lanes),
+                format!("{} is not allowed: lanes each way on every road, 1 to 3", spec.lanes),
             ));
         }
         positive("map.grid.block_m", grid.block_m, MAX_MAP_EXTENT / MAX_GRID_ROADS as f64, "metres")?;
@@ -554,8 +554,10 @@ fn parse_segment(name: &str) -> Option<(char, u8)> {
 /// errors of both map forms.
 fn approach_rule(layout: &MapLayout) -> String {
     format!(
-        "every lane that ends at an intersection must be at least {:.1} m long (lane change {} m + stop-line setback {} m + {} m) and roads are {} lanes of {} m",
+        "every lane that ends at an intersection must be at least {:.1} m long ({} lane change{} of {} m + stop-line setback {} m + {} m) and roads are {} lanes of {} m",
         layout.min_approach_length(),
+        layout.lane_changes_to_turn(),
+        if layout.lane_changes_to_turn() == 1 { "" } else { "s" },
         layout.lane_change_length,
         layout.stop_line_setback,
         crate::map::APPROACH_MARGIN_M,
