@@ -105,11 +105,16 @@ fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
 }
 
 #[test]
-fn replayed_reruns_match_on_chains_forks_and_a_grid_town() {
+fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_with_t_junctions() {
     for (name, extra) in [
         ("chains", r#", "graph": {"shape": "chains", "cars": 3}"#),
         ("forks", r#", "graph": {"shape": "forks", "cars": 3}"#),
         ("grid", r#", "map": {"grid": {"rows": 3, "columns": 3}}"#),
+        ("one-lane", r#", "map": {"grid": {"rows": 3, "columns": 3, "lanes": 1, "missing": ["D0", "B2", "E3"]}}"#),
+        (
+            "three-lane",
+            r#", "map": {"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 44, "outer_m": 34, "missing": ["C0"]}}"#,
+        ),
     ] {
         let (scenarios, replayed_scenarios, _, _) = compare_all(spec(name, &[(8, 0.8)], 4, extra));
         assert!(replayed_scenarios * 4 >= scenarios * 3, "{name}: {replayed_scenarios} of {scenarios} replayed");
