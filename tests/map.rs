@@ -541,3 +541,36 @@ fn three_lane_roads_keep_their_middle_lane_straight_and_turns_take_two_lane_chan
         }
     }
 }
+
+#[test]
+fn on_t_junction_towns_no_planned_action_is_one_the_road_cannot_do() {
+    use causalcity::plan::Expansion;
+    let mut cars = 0;
+    for lanes in [1, 2, 3] {
+        let grid = if lanes == 3 {
+            r#""block_m": 44, "outer_m": 34, "lanes": 3"#.to_string()
+        } else {
+            format!(r#""lanes": {lanes}"#)
+        };
+        let text = format!(
+            r#"{{"name": "tees", "world": "city", "seed": 9, "frames": 150,
+                "groups": [{{"cars": 8, "edge_proportion": 0.5}}, {{"cars": 12, "edge_proportion": 0.5}}],
+                "splits": {{"train": 60, "val": 0, "test": 0}},
+                "map": {{"grid": {{"rows": 3, "columns": 3, "missing": ["D0", "B2", "E3"], {grid}}}}},
+                "city": {{"start": {{"platoon_cars": 4}}}}}}"#
+        );
+        let expansion = Expansion::from_spec(causalcity::spec::DatasetSpec::from_json(&text).unwrap()).unwrap();
+        for key in expansion.keys(None) {
+            let plan = expansion.plan(&key).unwrap();
+            for car in &plan.cars {
+                // Drawn again where the junction lacks the movement, or planned
+                // as the movement the car makes: never skipped before it starts.
+                let skipped: Vec<_> =
+                    car.route.adaptations.iter().filter(|a| a.kind == AdaptationKind::Skipped).collect();
+                assert!(skipped.is_empty(), "{lanes} lanes, {}: {skipped:?}", car.name);
+                cars += 1;
+            }
+        }
+    }
+    assert_eq!(cars, 3 * 60 * 20);
+}

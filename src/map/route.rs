@@ -60,7 +60,8 @@ impl Action {
         matches!(self, Action::MergeL | Action::MergeR)
     }
 
-    fn turn(self) -> Option<Turn> {
+    /// The movement a turn action makes at a junction; none for a merge.
+    pub fn turn(self) -> Option<Turn> {
         match self {
             Action::Left => Some(Turn::Left),
             Action::Right => Some(Turn::Right),
@@ -564,7 +565,8 @@ fn plan_turn_lane(
 ) -> Result<(LaneId, f64), String> {
     let name = &map.lanes[lane].name;
     let Some(target) = map.lane_towards(lane, turn) else {
-        return Err(format!("no lane beside {name} allows the turn"));
+        let road = &name[..name.len() - 1];
+        return Err(format!("no lane of {road} goes {} at the junction ahead", turn_name(turn)));
     };
     let target_name = &map.lanes[target].name;
     if given_up {
@@ -579,6 +581,16 @@ fn plan_turn_lane(
         ));
     }
     Ok((target, first))
+}
+
+/// How an error names a movement: `left`, `right`, `straight on`.
+fn turn_name(turn: Turn) -> &'static str {
+    match turn {
+        Turn::Left => "left",
+        Turn::Right => "right",
+        Turn::Straight => "straight on",
+        Turn::UTurn => "round",
+    }
 }
 
 #[cfg(test)]

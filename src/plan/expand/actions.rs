@@ -13,8 +13,53 @@ const MERGE_SHARE: f64 = 0.25;
 /// or `straight` with equal chance. (The original writes merge names only
 /// into `MergeAtDistances`, where its engine never carried them out, so no
 /// merges are drawn.) Drivers plan the lane changes their turns need.
-pub(super) fn original_actions(rng: &mut ChaCha8Rng, count: u32) -> (Vec<Action>, Vec<f64>) {
-    (0..count).map(|_| ([Action::Left, Action::Right, Action::Straight][rng.random_range(0..3)], 0.0)).unzip()
+///
+/// On a town with T-junctions, a movement that no lane of the road has at
+/// the junction the action applies to is drawn again among those it has
+/// (on a full grid every junction has every movement, so nothing is drawn
+/// again and the queue is the original's draw).
+pub(super) fn original_actions(
+    rng: &mut ChaCha8Rng,
+    map: &CityMap,
+    spawn: LaneId,
+    count: u32,
+) -> (Vec<Action>, Vec<f64>) {
+    const DRAWN: [Action; 3] = [Action::Left, Action::Right, Action::Straight];
+    let mut lane = spawn;
+    let mut queue = Vec::with_capacity(count as usize);
+    for _ in 0..count {
+        let approach = past_loop(map, lane);
+        let exit = |a: Action| a.turn().and_then(|turn| road_exit(map, approach, turn));
+        let mut action = DRAWN[rng.random_range(0..3)];
+        if exit(action).is_none() {
+            let possible: Vec<Action> = DRAWN.into_iter().filter(|&a| exit(a).is_some()).collect();
+            if !possible.is_empty() {
+                action = possible[rng.random_range(0..possible.len())];
+            }
+        }
+        if let Some(connector) = exit(action) {
+            lane = map.connectors[connector].to;
+        }
+        queue.push(action);
+    }
+    let merges = vec![0.0; queue.len()];
+    (queue, merges)
+}
+
+/// The lane a car on `lane` next reaches a junction on: `lane` itself, or
+/// the one its off-camera loop leads to.
+fn past_loop(map: &CityMap, lane: LaneId) -> LaneId {
+    match map.lanes[lane].end {
+        LaneEnd::Loop(c) => map.connectors[c].to,
+        LaneEnd::Intersection { .. } => lane,
+    }
+}
+
+/// The connector making `turn` at the end of `lane` or of a lane beside it
+/// (the same road, the same direction): the movement a driver on that road
+/// can make, changing lanes first if it must.
+fn road_exit(map: &CityMap, lane: LaneId, turn: crate::map::Turn) -> Option<usize> {
+    map.exit(lane, turn).or_else(|| map.lane_towards(lane, turn).and_then(|l| road_exit(map, l, turn)))
 }
 
 /// A valid random drive queue from `lane`, where the first car on the route

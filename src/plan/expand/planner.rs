@@ -7,7 +7,7 @@ use super::spawn::{spawn_spans, split_owning_start, SpawnSpan, OWNED_START_SEARC
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
-use crate::map::{Action, AdaptationKind, CityMap, LaneId, LanePolicy, Route};
+use crate::map::{Action, AdaptationKind, CityMap, LaneId, LanePolicy, LegKind, Route, Turn};
 use crate::plan::confounders::ConfounderModel;
 use crate::plan::{
     stream_key, CarAgency, CarPlan, CityPlan, Fallback, GivenCar, OnLeaderLost, Role, ScenarioKey, ScenarioPlan,
@@ -371,19 +371,30 @@ impl Planner {
         travel: f64,
     ) -> Result<Route, String> {
         let mut route = self.plan_route(lane, front, actions, merges, travel)?;
-        // Each pass can only turn skipped turns into straights: it ends.
+        // A skipped turn becomes the movement the car makes there instead:
+        // straight on, or at a T-junction's stem its lane's turn. Each pass
+        // only turns skipped actions into ones their lanes make: it ends.
         for _ in 0..actions.len() {
             let skipped: Vec<usize> = route
                 .adaptations
                 .iter()
-                .filter(|a| a.kind == AdaptationKind::Skipped && !a.action.is_merge() && a.action != Action::Straight)
+                .filter(|a| a.kind == AdaptationKind::Skipped && !a.action.is_merge())
                 .map(|a| a.action_index)
                 .collect();
-            if skipped.is_empty() {
-                break;
-            }
+            let before = actions.to_vec();
             for k in skipped {
-                actions[k] = Action::Straight;
+                let made = route.legs.iter().find(|l| l.action == Some(k)).and_then(|l| match l.kind {
+                    LegKind::Connector(c) => Some(self.map.connectors[c].turn),
+                    _ => None,
+                });
+                actions[k] = match made {
+                    Some(Turn::Left) => Action::Left,
+                    Some(Turn::Right) => Action::Right,
+                    _ => Action::Straight,
+                };
+            }
+            if actions == before.as_slice() {
+                break;
             }
             route = self.plan_route(lane, front, actions, merges, travel)?;
         }
@@ -412,7 +423,7 @@ impl Planner {
     ) -> (Vec<Action>, Vec<f64>) {
         let count = self.spec.actions_per_car;
         match drawing {
-            ActionDrawing::Original => original_actions(rng, count),
+            ActionDrawing::Original => original_actions(rng, &self.map, lane, count),
             _ => random_actions(rng, &self.map, lane, s, count),
         }
     }
