@@ -375,10 +375,9 @@ impl CityMap {
                 if !layout.has_segment(name, segment as u8) {
                     continue;
                 }
-                let (outer, kerb_side) = match layout.lanes_per_direction {
-                    1 => (layout.outer_lane_offset(), LanePosition::Single),
-                    _ => (layout.outer_lane_offset(), LanePosition::Outer),
-                };
+                let outer = layout.outer_lane_offset();
+                let kerb_side =
+                    if layout.lanes_per_direction == 1 { LanePosition::Single } else { LanePosition::Outer };
                 for &letter in layout.lane_letters() {
                     let (offset, forward, position) = match letter {
                         'w' => (outer, true, kerb_side),
