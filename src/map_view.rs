@@ -40,6 +40,9 @@ pub struct MapSummary {
     pub town: String,
     pub towns: Vec<String>,
     pub junctions: Vec<String>,
+    /// How each junction decides who goes: `signals`, `priority` or
+    /// `all_way_stop` (`map.grid.control`).
+    pub junction_controls: Vec<String>,
     /// Each junction's centre, metres.
     pub junction_centres: Vec<[f64; 2]>,
     pub lanes: Vec<LaneRow>,
@@ -58,7 +61,13 @@ impl fmt::Display for MapSummary {
                 self.towns.join(" ")
             )?;
         }
-        writeln!(f, "{} junctions: {}", self.junctions.len(), self.junctions.join(" "))?;
+        let junctions: Vec<String> = self
+            .junctions
+            .iter()
+            .zip(&self.junction_controls)
+            .map(|(name, control)| if control == "signals" { name.clone() } else { format!("{name} ({control})") })
+            .collect();
+        writeln!(f, "{} junctions: {}", junctions.len(), junctions.join(" "))?;
         writeln!(f, "{} lanes (spawn points):", self.lanes.len())?;
         writeln!(f, "{:<6} {:>7} {:>8}  {:<12} turns", "lane", "heading", "length m", "ends at")?;
         for lane in &self.lanes {
@@ -140,6 +149,7 @@ pub fn map_summary(map: &CityMap) -> MapSummary {
         town: String::new(),
         towns: Vec::new(),
         junctions: map.intersections.iter().map(|i| i.name.clone()).collect(),
+        junction_controls: map.intersections.iter().map(|i| i.control.name().to_string()).collect(),
         junction_centres: map.intersections.iter().map(|i| [i.centre.x, i.centre.y]).collect(),
         lanes: map.spawn_points().into_iter().map(|id| lane_row(map, id)).collect(),
         picture: None,

@@ -5,7 +5,6 @@
 //! SHA-256 of every file. Reports every problem with its path.
 
 use crate::dataset::{edge_pairs, Dataset};
-use crate::map::signals::LIGHTS_PER_INTERSECTION;
 use crate::output::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
 };
@@ -175,7 +174,7 @@ struct Expected<'a> {
 
 impl<'a> Expected<'a> {
     fn new(spec: &'a DatasetSpec, layout: ScenarioLayout) -> Expected<'a> {
-        let lights = |map: &crate::spec::MapSpec| map.layout().intersection_count() * LIGHTS_PER_INTERSECTION;
+        let lights = |map: &crate::spec::MapSpec| crate::map::CityMap::new(map.layout()).light_count();
         let towns =
             Split::ALL.map(|split| spec.map_of(split).towns().into_iter().map(|t| (t.clone(), lights(&t))).collect());
         Expected { spec, layout, lights_per_frame: lights(&spec.map), towns }

@@ -476,7 +476,9 @@ fn interactions_name_a_car_ahead_on_the_path_within_the_look_ahead() {
             assert_eq!((row.frame as usize, row.car as usize), (k / s.cars.len(), k % s.cars.len()));
             kinds.insert(row.bound_by.clone());
             match row.bound_by.as_str() {
-                "car" | "conflict" | "collision" => assert!(row.other_car.is_some() && row.light.is_none(), "{row:?}"),
+                "car" | "conflict" | "collision" | "give_way" => {
+                    assert!(row.other_car.is_some() && row.light.is_none(), "{row:?}")
+                }
                 "light" => assert!(row.light.is_some() && row.other_car.is_none(), "{row:?}"),
                 _ => assert!(row.light.is_none() && row.other_car.is_none(), "{row:?}"),
             }

@@ -125,7 +125,7 @@ fn dynamic_edges_are_the_per_frame_interactions() {
                 }
                 for row in read_csv::<InteractionRow>(&scenario_dir.join("interactions.csv")) {
                     let (t, i) = (row.frame as usize, row.car as usize);
-                    let named = ["car", "conflict", "collision"].contains(&row.bound_by.as_str());
+                    let named = ["car", "conflict", "collision", "give_way"].contains(&row.bound_by.as_str());
                     assert_eq!(named, row.other_car.is_some(), "{row:?}");
                     if let Some(j) = row.other_car {
                         let j = j as usize;

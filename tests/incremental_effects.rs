@@ -105,7 +105,7 @@ fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
 }
 
 #[test]
-fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_with_t_junctions() {
+fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_t_junctions_and_no_lights() {
     for (name, extra) in [
         ("chains", r#", "graph": {"shape": "chains", "cars": 3}"#),
         ("forks", r#", "graph": {"shape": "forks", "cars": 3}"#),
@@ -114,6 +114,12 @@ fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_wi
         (
             "three-lane",
             r#", "map": {"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 44, "outer_m": 34, "missing": ["C0"]}}"#,
+        ),
+        ("priority", r#", "map": {"grid": {"rows": 3, "columns": 3, "missing": ["D0"], "control": "priority"}}"#),
+        ("all-way-stop", r#", "map": {"grid": {"rows": 3, "columns": 3, "lanes": 1, "control": "all_way_stop"}}"#),
+        (
+            "mixed-control",
+            r#", "map": {"grid": {"rows": 2, "columns": 3, "control": {"AC": "priority", "BE": "all_way_stop"}}}"#,
         ),
     ] {
         let (scenarios, replayed_scenarios, _, _) = compare_all(spec(name, &[(8, 0.8)], 4, extra));

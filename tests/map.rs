@@ -21,6 +21,7 @@ fn grid(rows: usize, columns: usize) -> MapLayout {
         outer_m: 20.0,
         missing: Vec::new(),
         lanes: 2,
+        control: Default::default(),
     };
     MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
@@ -491,6 +492,7 @@ fn three_lane_town(rows: usize, columns: usize, missing: Vec<(char, u8)>) -> Cit
         outer_m: 34.0,
         missing: Vec::new(),
         lanes: 3,
+        control: Default::default(),
     };
     let layout = MapSpec { grid: Some(spec), ..MapSpec::default() }.layout();
     CityMap::new(MapLayout { missing_segments: missing, ..layout })
@@ -573,4 +575,56 @@ fn on_t_junction_towns_no_planned_action_is_one_the_road_cannot_do() {
         }
     }
     assert_eq!(cars, 3 * 60 * 20);
+}
+
+#[test]
+fn junctions_without_lights_have_no_lights_and_rank_their_movements() {
+    use causalcity::map::control::{Axis, JunctionControl};
+    use causalcity::map::signals::{Signal, LIGHTS_PER_INTERSECTION};
+    let full = CityMap::new(grid(3, 3));
+    // AD without lights, and BE a priority T-junction (road B's segment 1,
+    // west of E, left out: the bar is road E, north-south).
+    let layout = MapLayout {
+        junction_controls: vec![("AD".into(), JunctionControl::AllWayStop), ("BE".into(), JunctionControl::Priority)],
+        missing_segments: vec![('B', 1)],
+        ..grid(3, 3)
+    };
+    let map = CityMap::new(layout);
+    assert_eq!(map.light_count(), full.light_count() - 2 * LIGHTS_PER_INTERSECTION);
+    let k = |name: &str| map.intersections.iter().position(|x| x.name == name).unwrap();
+    assert_eq!(map.intersections[k("AD")].control, JunctionControl::AllWayStop);
+    assert_eq!(map.intersections[k("BE")].major, Axis::NorthSouth, "a T's bar is its priority road");
+    assert_eq!(map.intersections[k("AE")].control, JunctionControl::Signals);
+    assert!(map.light_index(k("AD"), 'N', Signal::Straight).is_none());
+    assert!(map.light_by_name("AD/N/straight").unwrap_err().contains("has no traffic lights"));
+    // Every light's name leads back to it, and the lights of the junctions
+    // that have them keep their order.
+    let mut checked = 0;
+    for index in 0..map.light_count() {
+        assert_eq!(map.light_by_name(&map.light_name(index)), Ok(index));
+        checked += 1;
+    }
+    assert_eq!(checked, 7 * LIGHTS_PER_INTERSECTION);
+    // At the priority junction the bar's straight movements come before the
+    // stem's turns, and nobody on the bar going straight gives way.
+    let mut ranked = 0;
+    for (c, connector) in map.connectors.iter().enumerate().filter(|(_, x)| x.intersection == Some(k("BE"))) {
+        let major = Axis::NorthSouth.holds(map.approach_of(c).unwrap());
+        assert_eq!(map.gives_way(c), !(major && connector.turn != Turn::Left), "{connector:?}");
+        for &other in map.conflicts(c) {
+            let other_major = Axis::NorthSouth.holds(map.approach_of(other).unwrap());
+            if major && !other_major {
+                assert!(map.right_of_way(c) < map.right_of_way(other));
+                ranked += 1;
+            }
+        }
+    }
+    assert!(ranked > 0, "no conflict between the bar and the stem");
+    // Every movement of an all-way stop gives way.
+    assert!(map
+        .connectors
+        .iter()
+        .enumerate()
+        .filter(|(_, x)| x.intersection == Some(k("AD")))
+        .all(|(c, _)| map.gives_way(c)));
 }

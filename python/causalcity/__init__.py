@@ -269,7 +269,8 @@ class Interactions:
     speed choice at each frame, as the driver model used it."""
 
     kinds: List[str]
-    """``["free", "car", "light", "conflict", "merge", "curve", "collision", "intervention"]``."""
+    """``["free", "car", "light", "conflict", "merge", "curve", "collision",
+    "intervention", "give_way", "stop_line"]``."""
     bound_by: _np.ndarray
     """``[frames, cars]`` uint8: index into :attr:`kinds`."""
     other_car: _np.ndarray
@@ -280,10 +281,10 @@ class Interactions:
 
     def car_graph(self) -> _np.ndarray:
         """``[frames, cars, cars]`` uint8: ``[t, i, j] = 1`` when car j bound
-        car i at frame t (``car``, ``conflict`` or ``collision``), as ``export
+        car i at frame t (``car``, ``conflict``, ``collision`` or ``give_way``), as ``export
         nri --dynamic --directed`` writes it."""
         frames, cars = self.bound_by.shape
-        binding = _np.isin(self.bound_by, [self.kinds.index(k) for k in ("car", "conflict", "collision")])
+        binding = _np.isin(self.bound_by, [self.kinds.index(k) for k in ("car", "conflict", "collision", "give_way")])
         binding &= self.other_car >= 0
         graph = _np.zeros((frames, cars, cars), dtype=_np.uint8)
         t, i = _np.nonzero(binding)
@@ -500,7 +501,9 @@ def map(  # noqa: A001 (causalcity.map, as the CLI's `map`)
       rows or columns per scenario); ``town=`` picks one (the first when
       None), as ``Scenario.town`` names it;
 
-    - ``junctions``: names (``"AC"``, ..) and ``junction_centres`` ``[J, 2]``;
+    - ``junctions``: names (``"AC"``, ..), ``junction_controls`` (``"signals"``,
+      ``"priority"`` or ``"all_way_stop"``, as ``map.grid.control`` gives them)
+      and ``junction_centres`` ``[J, 2]``;
     - ``lanes``: lane ids in id order (the spawn points scenario files name),
       ``lane_start`` and ``lane_end`` ``[L, 2]`` (centre line, metres, x east,
       y north), ``lane_length`` ``[L]``, ``lane_junction`` ``[L]`` (index
@@ -515,6 +518,7 @@ def map(  # noqa: A001 (causalcity.map, as the CLI's `map`)
         "town": raw["town"],
         "towns": raw["towns"],
         "junctions": raw["junctions"],
+        "junction_controls": raw["junction_controls"],
         "junction_centres": _np.array(raw["junction_centres"], dtype=_np.float64).reshape(-1, 2),
         "lanes": [lane["name"] for lane in lanes],
         "lane_start": _np.array([lane["start"] for lane in lanes], dtype=_np.float64).reshape(-1, 2),

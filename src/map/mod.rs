@@ -12,10 +12,12 @@
 //! Units: metres and radians, x east, y north, origin at the centre of the
 //! central block.
 
+pub mod control;
 pub mod curve;
 pub mod route;
 pub mod signals;
 
+use control::{Axis, JunctionControl};
 use curve::Curve;
 use glam::DVec2;
 use std::collections::HashMap;
@@ -59,6 +61,9 @@ pub struct MapLayout {
     /// other, the original's), 1 (`w` and `z`, each turning any way) or 3
     /// (`w`, `m`, `x` and `y`, `n`, `z`: a middle lane that goes straight).
     pub lanes_per_direction: u8,
+    /// Junctions without lights, by name (`AC`), and how they decide who
+    /// goes; every other junction has traffic lights.
+    pub junction_controls: Vec<(String, JunctionControl)>,
 }
 
 impl Default for MapLayout {
@@ -82,6 +87,7 @@ impl Default for MapLayout {
             sidewalk_width: 2.0,
             missing_segments: Vec::new(),
             lanes_per_direction: 2,
+            junction_controls: Vec::new(),
         }
     }
 }
@@ -253,6 +259,10 @@ pub struct Intersection {
     pub centre: DVec2,
     /// Half the side of the square box the connectors cross.
     pub half_size: f64,
+    /// Lights, a priority road or stop lines.
+    pub control: JunctionControl,
+    /// The priority road's approaches (where `control` is `Priority`).
+    pub major: Axis,
 }
 
 /// The whole road network: lanes, connectors and intersections.
@@ -269,6 +279,9 @@ pub struct CityMap {
     /// For each connector, the connectors of the same intersection whose
     /// paths cross or meet it (cars on them could collide).
     conflicts: Vec<Vec<ConnectorId>>,
+    /// The signalised intersections, in index order: a light plan lists
+    /// their lights only, [`signals::LIGHTS_PER_INTERSECTION`] each.
+    signalised: Vec<usize>,
 }
 
 impl Default for CityMap {
@@ -284,8 +297,32 @@ pub const SIGNAL_HEAD_SPACING_M: f64 = 1.1;
 impl CityMap {
     /// A light as scenario files and logs name it, e.g. `AC/W/straight`.
     pub fn light_name(&self, index: usize) -> String {
-        let (intersection, approach, signal) = signals::light_at(index);
+        let (intersection, approach, signal) = self.light_at(index);
         signals::light_label(&self.intersections[intersection].name, approach, signal.name())
+    }
+
+    /// The signalised intersections, in index order.
+    pub fn signalised(&self) -> &[usize] {
+        &self.signalised
+    }
+
+    /// How many lights a light plan of this map holds.
+    pub fn light_count(&self) -> usize {
+        self.signalised.len() * signals::LIGHTS_PER_INTERSECTION
+    }
+
+    /// Where light (`intersection`, `approach`, `signal`) stands in this
+    /// map's light plans: by signalised intersection, then approach (N, E,
+    /// S, W), then straight before left. `None` at a junction without lights.
+    pub fn light_index(&self, intersection: usize, approach: char, signal: signals::Signal) -> Option<usize> {
+        let k = self.signalised.binary_search(&intersection).ok()?;
+        Some(k * signals::LIGHTS_PER_INTERSECTION + signals::light_offset(approach, signal))
+    }
+
+    /// The light at `index` of a plan: (intersection, approach, signal).
+    pub fn light_at(&self, index: usize) -> (usize, char, signals::Signal) {
+        let (k, approach, signal) = signals::light_at(index);
+        (self.signalised[k], approach, signal)
     }
 
     /// The index of the light called `text` (`AC/W/straight`), or a message
@@ -302,14 +339,25 @@ impl CityMap {
                     _ => None,
                 };
                 match (k, a, s) {
-                    (Some(k), Some(a), Some(s)) => Some(signals::light_index(k, a, s)),
+                    (Some(k), Some(a), Some(s)) => match self.light_index(k, a, s) {
+                        Some(index) => Some(index),
+                        None => {
+                            let x = &self.intersections[k];
+                            return Err(format!(
+                                "{text:?} is not a light: junction {} has no traffic lights (its control is {})",
+                                x.name,
+                                x.control.name()
+                            ));
+                        }
+                    },
                     _ => None,
                 }
             }
             _ => None,
         };
         found.ok_or_else(|| {
-            let mut names: Vec<&str> = self.intersections.iter().map(|x| x.name.as_str()).collect();
+            let mut names: Vec<&str> =
+                self.signalised.iter().map(|&k| self.intersections[k].name.as_str()).collect();
             names.sort_unstable();
             let example = names.first().copied().unwrap_or("AC");
             format!(
@@ -317,6 +365,51 @@ impl CityMap {
                 names.join(" ")
             )
         })
+    }
+
+    /// The control of the junction `connector` crosses (`None`: a U-turn loop).
+    pub fn control_of(&self, connector: ConnectorId) -> Option<JunctionControl> {
+        self.connectors[connector].intersection.map(|k| self.intersections[k].control)
+    }
+
+    /// The side `connector`'s traffic arrives from ('N', 'E', 'S', 'W'),
+    /// where it crosses a junction.
+    pub fn approach_of(&self, connector: ConnectorId) -> Option<char> {
+        match self.lanes[self.connectors[connector].from].end {
+            LaneEnd::Intersection { approach, .. } => Some(approach),
+            LaneEnd::Loop(_) => None,
+        }
+    }
+
+    /// Right of way at a junction without lights, as a key: of two
+    /// conflicting movements the one with the lower key goes first. At a
+    /// priority junction the priority road's straight and right turns
+    /// come first, then its left turns, then the other road's straight
+    /// and right turns, then its left turns; at an all-way stop every
+    /// movement ranks alike. Ties go to the lower connector index.
+    pub fn right_of_way(&self, connector: ConnectorId) -> (u8, ConnectorId) {
+        let c = &self.connectors[connector];
+        let Some(k) = c.intersection else { return (0, connector) };
+        let x = &self.intersections[k];
+        let class = match x.control {
+            JunctionControl::Priority => {
+                let major = self.approach_of(connector).is_some_and(|a| x.major.holds(a));
+                2 * u8::from(!major) + u8::from(c.turn == Turn::Left)
+            }
+            JunctionControl::Signals | JunctionControl::AllWayStop => 0,
+        };
+        (class, connector)
+    }
+
+    /// Whether a driver entering `connector` must give way to others at its
+    /// line: every movement of an all-way stop, and at a priority junction
+    /// all but the priority road's straight and right turns.
+    pub fn gives_way(&self, connector: ConnectorId) -> bool {
+        match self.control_of(connector) {
+            Some(JunctionControl::AllWayStop) => true,
+            Some(JunctionControl::Priority) => self.right_of_way(connector).0 > 0,
+            _ => false,
+        }
     }
 
     /// Where the head of light (`intersection`, `approach`, `signal`) stands,
@@ -342,7 +435,11 @@ impl CityMap {
         let mut intersections = Vec::new();
         for &(ew, y) in &layout.east_west_roads {
             for &(ns, x) in &layout.north_south_roads {
-                intersections.push(Intersection { name: format!("{ew}{ns}"), centre: DVec2::new(x, y), half_size: hw });
+                let name = format!("{ew}{ns}");
+                let control =
+                    layout.junction_controls.iter().find(|(n, _)| *n == name).map_or(JunctionControl::Signals, |c| c.1);
+                let centre = DVec2::new(x, y);
+                intersections.push(Intersection { name, centre, half_size: hw, control, major: Axis::EastWest });
             }
         }
         let columns = layout.north_south_roads.len();
@@ -502,7 +599,13 @@ impl CityMap {
             exits[c.from][c.turn.slot()] = Some(i);
         }
         let conflicts = find_conflicts(&connectors);
-        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts }
+        let signalised =
+            (0..intersections.len()).filter(|&k| intersections[k].control == JunctionControl::Signals).collect();
+        let mut map = CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts, signalised };
+        for k in 0..map.intersections.len() {
+            map.intersections[k].major = Axis::major(&map.approaches(k));
+        }
+        map
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.

@@ -131,25 +131,30 @@ pub const APPROACHES: [char; 4] = ['N', 'E', 'S', 'W'];
 /// Lights of one intersection: a straight and a left signal per approach.
 pub const LIGHTS_PER_INTERSECTION: usize = 2 * APPROACHES.len();
 
-/// Where light (intersection, approach, signal) stands in every light plan:
-/// by intersection, then approach (N, E, S, W), then Straight before Left.
-pub fn light_index(intersection: usize, approach: char, signal: Signal) -> usize {
+/// Where a light stands among its intersection's
+/// [`LIGHTS_PER_INTERSECTION`]: by approach (N, E, S, W), then Straight
+/// before Left. A plan lists its signalised intersections' lights in turn
+/// (`CityMap::light_index`).
+pub fn light_offset(approach: char, signal: Signal) -> usize {
     let a = APPROACHES.iter().position(|&c| c == approach).expect("approach is N, E, S or W");
-    intersection * LIGHTS_PER_INTERSECTION + a * 2 + if signal == Signal::Left { 1 } else { 0 }
+    a * 2 + if signal == Signal::Left { 1 } else { 0 }
 }
 
-/// The light at `index` of a plan: (intersection, approach, signal).
+/// The light at `index` of a plan: (signalised intersection's place among
+/// the signalised ones, approach, signal).
 pub fn light_at(index: usize) -> (usize, char, Signal) {
     let signal = if index % 2 == 1 { Signal::Left } else { Signal::Straight };
     (index / LIGHTS_PER_INTERSECTION, APPROACHES[(index % LIGHTS_PER_INTERSECTION) / 2], signal)
 }
 
 impl LightPlan {
-    /// The original cycle with every duration multiplied by `scale`, each
-    /// intersection shifted by its `offsets` entry (seconds).
-    pub fn cycle(intersections: usize, scale: f64, offsets: &[f64]) -> LightPlan {
+    /// The original cycle at the `signalised` intersections (indices,
+    /// ascending) with every duration multiplied by `scale`, each
+    /// intersection shifted by its `offsets` entry (seconds, by
+    /// intersection index).
+    pub fn cycle(signalised: &[usize], scale: f64, offsets: &[f64]) -> LightPlan {
         let mut lights = Vec::new();
-        for intersection in 0..intersections {
+        for &intersection in signalised {
             for approach in APPROACHES {
                 let axis = if approach == 'E' || approach == 'W' { "EW" } else { "NS" };
                 for signal in [Signal::Straight, Signal::Left] {
@@ -177,9 +182,10 @@ impl LightPlan {
         LightPlan { lights }
     }
 
-    /// Index of the light for (intersection, approach, signal).
-    pub fn index(&self, intersection: usize, approach: char, signal: Signal) -> usize {
-        light_index(intersection, approach, signal)
+    /// Index of the light for (intersection, approach, signal), if the
+    /// plan has it.
+    pub fn index(&self, intersection: usize, approach: char, signal: Signal) -> Option<usize> {
+        self.lights.iter().position(|l| l.intersection == intersection && l.approach == approach && l.signal == signal)
     }
 
     /// States of every light at time `t`.
@@ -194,35 +200,35 @@ mod tests {
 
     #[test]
     fn default_cycle_runs_the_original_phases() {
-        let plan = LightPlan::cycle(4, 1.0, &[0.0; 4]);
+        let plan = LightPlan::cycle(&[0, 1, 2, 3], 1.0, &[0.0; 4]);
         assert_eq!(plan.lights.len(), 32);
-        let ew = &plan.lights[plan.index(0, 'W', Signal::Straight)];
+        let ew = &plan.lights[plan.index(0, 'W', Signal::Straight).unwrap()];
         assert_eq!(ew.state_at(0.0).colour, Colour::Green);
         assert_eq!(ew.state_at(15.5).colour, Colour::Yellow);
         assert_eq!(ew.state_at(19.5).colour, Colour::Red);
         assert!((ew.state_at(30.0).since_change - 11.0).abs() < 1e-9);
         assert_eq!(ew.state_at(60.1).colour, Colour::Green);
-        let ns_left = &plan.lights[plan.index(2, 'N', Signal::Left)];
+        let ns_left = &plan.lights[plan.index(2, 'N', Signal::Left).unwrap()];
         assert_eq!(ns_left.state_at(20.0).colour, Colour::Green);
         assert_eq!(ns_left.state_at(27.0).colour, Colour::Yellow);
-        let ew_left = &plan.lights[plan.index(1, 'E', Signal::Left)];
+        let ew_left = &plan.lights[plan.index(1, 'E', Signal::Left).unwrap()];
         assert_eq!(ew_left.state_at(50.0).colour, Colour::Green);
         // Never two conflicting greens: EW straight and NS straight.
         for k in 0..600 {
             let t = k as f64 * 0.1;
-            let a = plan.lights[plan.index(0, 'E', Signal::Straight)].state_at(t).colour;
-            let b = plan.lights[plan.index(0, 'N', Signal::Straight)].state_at(t).colour;
+            let a = plan.lights[plan.index(0, 'E', Signal::Straight).unwrap()].state_at(t).colour;
+            let b = plan.lights[plan.index(0, 'N', Signal::Straight).unwrap()].state_at(t).colour;
             assert!(!(a != Colour::Red && b != Colour::Red), "t={t}");
         }
     }
 
     #[test]
     fn scale_and_offset_shift_the_schedule() {
-        let plan = LightPlan::cycle(4, 0.5, &[0.0, 5.0, 0.0, 0.0]);
-        let a = &plan.lights[plan.index(0, 'W', Signal::Straight)];
+        let plan = LightPlan::cycle(&[0, 1, 2, 3], 0.5, &[0.0, 5.0, 0.0, 0.0]);
+        let a = &plan.lights[plan.index(0, 'W', Signal::Straight).unwrap()];
         assert_eq!(a.state_at(7.0).colour, Colour::Green);
         assert_eq!(a.state_at(8.0).colour, Colour::Yellow);
-        let b = &plan.lights[plan.index(1, 'W', Signal::Straight)];
+        let b = &plan.lights[plan.index(1, 'W', Signal::Straight).unwrap()];
         assert_eq!(b.state_at(3.0).colour, Colour::Yellow);
     }
 }

@@ -3,6 +3,7 @@
 //! only, so frames compress well.
 
 use crate::camera::Camera;
+use crate::map::control::JunctionControl;
 use crate::map::{CityMap, MapLayout};
 use glam::DVec2;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Rect, Transform};
@@ -14,6 +15,8 @@ const PARK: [u8; 3] = [122, 168, 98];
 const PARK_PATH: [u8; 3] = [214, 204, 170];
 const CENTRE_LINE: [u8; 3] = [232, 190, 40];
 const WHITE: [u8; 3] = [240, 240, 240];
+/// Stop and give-way signs at junctions without lights.
+const STOP_SIGN: [u8; 3] = [196, 32, 36];
 const ROOFS: [[u8; 3]; 4] = [[150, 110, 96], [128, 134, 150], [176, 160, 132], [104, 112, 118]];
 
 /// The transform from world metres to tiny-skia pixel space (whose pixel `i`
@@ -183,7 +186,7 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
         }
         // Half of the double yellow centre line, on this direction's side.
         quad_along(&mut pixmap, t, curve, 0.0, len, centre - 0.25, centre - 0.1, CENTRE_LINE);
-        if let crate::map::LaneEnd::Intersection { .. } = lane.end {
+        if let crate::map::LaneEnd::Intersection { intersection, approach } = lane.end {
             // Crosswalk across the whole road just before the box, stop line behind it.
             let mut k = -hw + 0.25;
             while k + 0.5 <= hw {
@@ -191,7 +194,35 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
                 quad_along(&mut pixmap, t, curve, len - 2.8, len - 0.3, lateral, lateral + 0.5, WHITE);
                 k += 1.0;
             }
-            quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, centre - 0.3, WHITE);
+            let junction = &map.intersections[intersection];
+            let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight);
+            match junction.control {
+                JunctionControl::Signals => {
+                    quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, centre - 0.3, WHITE);
+                }
+                JunctionControl::AllWayStop => {
+                    quad_along(&mut pixmap, t, curve, len - 3.7, len - 3.1, -0.5 * lw, centre - 0.3, WHITE);
+                    if let Some(p) = sign {
+                        circle(&mut pixmap, t, p.x, p.y, 0.55, WHITE);
+                        circle(&mut pixmap, t, p.x, p.y, 0.45, STOP_SIGN);
+                    }
+                }
+                // The priority road runs through unmarked; the other gives
+                // way at a dashed line, under a triangle.
+                JunctionControl::Priority if junction.major.holds(approach) => {}
+                JunctionControl::Priority => {
+                    let mut k = -0.5 * lw;
+                    while k < centre - 0.3 {
+                        let end = (k + 0.6).min(centre - 0.3);
+                        quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, k, end, WHITE);
+                        k += 1.0;
+                    }
+                    if let Some(p) = sign {
+                        let ahead = curve.position(len, 0.0) - curve.position(len - 1.0, 0.0);
+                        give_way_triangle(&mut pixmap, t, p, ahead.normalize_or_zero());
+                    }
+                }
+            }
         }
     }
     let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();
@@ -225,6 +256,29 @@ fn road_runs(layout: &MapLayout, name: char, crossings: &[f64], extent: f64) -> 
 fn circle(pixmap: &mut Pixmap, t: Transform, x: f64, y: f64, r: f64, rgb: [u8; 3]) {
     if let Some(path) = PathBuilder::from_circle(x as f32, y as f32, r as f32) {
         pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
+    }
+}
+
+/// A give-way sign seen from above: a white triangle with a red rim,
+/// pointing back at the traffic it faces (`ahead`: that traffic's
+/// direction of travel).
+fn give_way_triangle(pixmap: &mut Pixmap, t: Transform, centre: DVec2, ahead: DVec2) {
+    let side = DVec2::new(-ahead.y, ahead.x);
+    for (size, rgb) in [(0.6, STOP_SIGN), (0.38, WHITE)] {
+        let pts = [
+            centre - ahead * size,
+            centre + ahead * size * 0.6 + side * size,
+            centre + ahead * size * 0.6 - side * size,
+        ];
+        let mut pb = PathBuilder::new();
+        pb.move_to(pts[0].x as f32, pts[0].y as f32);
+        for p in &pts[1..] {
+            pb.line_to(p.x as f32, p.y as f32);
+        }
+        pb.close();
+        if let Some(path) = pb.finish() {
+            pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
+        }
     }
 }
 

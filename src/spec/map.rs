@@ -66,6 +66,81 @@ pub struct GridSpec {
     /// Lanes each way on every road: 2 (the original's), 1 or 3.
     #[serde(default = "default_lanes", skip_serializing_if = "is_default_lanes")]
     pub lanes: u8,
+    /// How junctions decide who goes: traffic lights everywhere (absent),
+    /// one control for every junction (`"priority"`), or some junctions by
+    /// name (`{"AC": "all_way_stop"}`, the rest with lights).
+    #[serde(default, skip_serializing_if = "ControlSpec::is_signals")]
+    pub control: ControlSpec,
+}
+
+/// `map.grid.control`: one [`JunctionControl`] for every junction, or one
+/// per named junction (the others keep their lights).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(untagged)]
+pub enum ControlSpec {
+    Every(JunctionControl),
+    ByJunction(std::collections::BTreeMap<String, JunctionControl>),
+}
+
+impl Default for ControlSpec {
+    fn default() -> Self {
+        ControlSpec::Every(JunctionControl::Signals)
+    }
+}
+
+impl ControlSpec {
+    fn is_signals(&self) -> bool {
+        match self {
+            ControlSpec::Every(c) => *c == JunctionControl::Signals,
+            ControlSpec::ByJunction(by) => by.values().all(|c| *c == JunctionControl::Signals),
+        }
+    }
+
+    /// The control of junction `name`.
+    pub fn of(&self, name: &str) -> JunctionControl {
+        match self {
+            ControlSpec::Every(c) => *c,
+            ControlSpec::ByJunction(by) => by.get(name).copied().unwrap_or_default(),
+        }
+    }
+}
+
+/// What [`ControlSpec`] accepts, for errors.
+const CONTROL_FORMS: &str =
+    "\"signals\", \"priority\", \"all_way_stop\", or {\"JUNCTION\": one of those, ...} (e.g. {\"AC\": \"priority\"})";
+
+fn control_named<E: serde::de::Error>(v: &str) -> Result<JunctionControl, E> {
+    JunctionControl::ALL
+        .into_iter()
+        .find(|c| c.name() == v)
+        .ok_or_else(|| E::custom(format!("{v:?} is not allowed: use {CONTROL_FORMS}")))
+}
+
+impl<'de> Deserialize<'de> for ControlSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = ControlSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str(CONTROL_FORMS)
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ControlSpec, E> {
+                control_named(v).map(ControlSpec::Every)
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<ControlSpec, A::Error> {
+                let mut by = std::collections::BTreeMap::new();
+                while let Some((junction, kind)) = map.next_entry::<String, String>()? {
+                    let control = control_named(&kind)
+                        .map_err(|e: A::Error| serde::de::Error::custom(format!("junction {junction}: {e}")))?;
+                    if by.insert(junction.clone(), control).is_some() {
+                        return Err(serde::de::Error::custom(format!("junction {junction} is named twice")));
+                    }
+                }
+                Ok(ControlSpec::ByJunction(by))
+            }
+        }
+        deserializer.deserialize_any(Visit)
+    }
 }
 
 /// The original's roads: two lanes each way.
@@ -350,6 +425,15 @@ impl MapSpec {
                 if !grid.missing.is_empty() {
                     name += &format!("-no-{}", grid.missing.join("-"));
                 }
+                match &grid.control {
+                    ControlSpec::Every(c) if *c != JunctionControl::Signals => name += &format!("-{}", c.name()),
+                    ControlSpec::ByJunction(by) => {
+                        for (junction, c) in by.iter().filter(|(_, c)| **c != JunctionControl::Signals) {
+                            name += &format!("-{junction}-{}", c.name());
+                        }
+                    }
+                    ControlSpec::Every(_) => {}
+                }
                 name
             }
         }
@@ -372,7 +456,14 @@ impl MapSpec {
             // north-south roads west to east.
             let letter = |k: usize| (b'A' + k as u8) as char;
             let east_west = centres(grid.rows).enumerate().map(|(k, y)| (letter(grid.rows - 1 - k), y)).collect();
-            let north_south = centres(grid.columns).enumerate().map(|(k, x)| (letter(grid.rows + k), x)).collect();
+            let north_south: Vec<(char, f64)> =
+                centres(grid.columns).enumerate().map(|(k, x)| (letter(grid.rows + k), x)).collect();
+            let junction_controls = (0..grid.rows)
+                .flat_map(|r| north_south.iter().map(move |ns| format!("{}{}", letter(r), ns.0)))
+                .map(|name| (spec.control.of(&name), name))
+                .filter(|(c, _)| *c != JunctionControl::Signals)
+                .map(|(c, name)| (name, c))
+                .collect();
             return MapLayout {
                 lane_width: self.lane_width,
                 east_west_roads: east_west,
@@ -382,6 +473,7 @@ impl MapSpec {
                 lane_change_length: self.lane_change_m,
                 missing_segments: spec.missing.iter().filter_map(|name| parse_segment(name)).collect(),
                 lanes_per_direction: spec.lanes,
+                junction_controls,
                 ..d
             };
         }
@@ -500,7 +592,31 @@ impl MapSpec {
                 ));
             }
         }
-        self.validate_missing(&layout)
+        self.validate_missing(&layout)?;
+        self.validate_control(&layout)
+    }
+
+    /// Checks that `grid.control` names junctions of this town.
+    fn validate_control(&self, layout: &MapLayout) -> Result<(), SpecError> {
+        let Some(ControlSpec::ByJunction(by)) = self.grid.as_ref().map(|g| &g.control) else { return Ok(()) };
+        let names: Vec<String> = layout
+            .east_west_roads
+            .iter()
+            .flat_map(|ew| layout.north_south_roads.iter().map(move |ns| format!("{}{}", ew.0, ns.0)))
+            .collect();
+        for junction in by.keys() {
+            if !names.contains(junction) {
+                return Err(SpecError::new(
+                    format!("map.grid.control.{junction}"),
+                    format!(
+                        "{junction:?} is not a junction of the {} town: its junctions are {} (east-west road, then north-south road)",
+                        self.town_name(),
+                        names.join(" ")
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Checks `grid.missing`: each names a segment of this town, once, and

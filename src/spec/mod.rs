@@ -20,6 +20,7 @@ pub use map::*;
 
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
 use crate::json::Shown;
+use crate::map::control::JunctionControl;
 use crate::map::signals::{ScheduleStep, Signal};
 use crate::map::MapLayout;
 use serde::{Deserialize, Serialize};
@@ -483,6 +484,7 @@ impl DatasetSpec {
                 confounders.validate(&format!("held_out.{}.confounders", split.name()))?;
             }
         }
+        self.check_overridden_lights()?;
         self.birds_eye_camera()?;
         let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
         let mut names = std::collections::HashSet::new();
@@ -550,6 +552,32 @@ impl DatasetSpec {
             },
         };
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
+    }
+
+    /// `city.lights.overrides` may only name junctions with lights in
+    /// every town the spec draws.
+    fn check_overridden_lights(&self) -> Result<(), SpecError> {
+        let Some(city) = &self.city else { return Ok(()) };
+        for (i, o) in city.lights.overrides.iter().enumerate() {
+            for split in Split::ALL {
+                for town in self.map_of(split).towns() {
+                    let Some(grid) = &town.grid else { continue };
+                    let control = grid.control.of(&o.intersection);
+                    if control != JunctionControl::Signals {
+                        return Err(SpecError::new(
+                            format!("city.lights.overrides[{i}].intersection"),
+                            format!(
+                                "{:?} has no traffic lights in the {} town (map.grid.control makes it {}): override a junction with lights, or give it \"signals\"",
+                                o.intersection,
+                                town.town_name(),
+                                control.name()
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The map section `split` draws its towns from: its held-out one, else the dataset's.

@@ -128,6 +128,11 @@ pub enum BoundBy {
     Collision,
     /// Held by an intervention (stopped, or removed).
     Intervention,
+    /// Giving way, at a junction without lights, to a car with the right
+    /// of way.
+    GiveWay,
+    /// Stopping at an all-way stop's line.
+    StopLine,
 }
 
 impl BoundBy {
@@ -141,11 +146,13 @@ impl BoundBy {
             BoundBy::Curve => "curve",
             BoundBy::Collision => "collision",
             BoundBy::Intervention => "intervention",
+            BoundBy::GiveWay => "give_way",
+            BoundBy::StopLine => "stop_line",
         }
     }
 
     /// Every kind, in the order of `data-schema/interactions.schema.json`.
-    pub const ALL: [BoundBy; 8] = [
+    pub const ALL: [BoundBy; 10] = [
         BoundBy::Free,
         BoundBy::Car,
         BoundBy::Light,
@@ -154,6 +161,8 @@ impl BoundBy {
         BoundBy::Curve,
         BoundBy::Collision,
         BoundBy::Intervention,
+        BoundBy::GiveWay,
+        BoundBy::StopLine,
     ];
 
     /// The kind `interactions.csv` spells `name`.

@@ -653,12 +653,14 @@ impl Planner {
             LightPhase::RandomPerIntersection => (0..n).map(|_| draw()).collect(),
         };
         let offsets: Vec<f64> = (0..n).map(|i| lights.offsets.get(i).copied().unwrap_or(0.0) + phases[i]).collect();
-        let mut plan = LightPlan::cycle(n, lights.cycle_scale, &offsets);
+        let mut plan = LightPlan::cycle(self.map.signalised(), lights.cycle_scale, &offsets);
         for o in &lights.overrides {
             let Some(intersection) = self.map.intersections.iter().position(|i| i.name == o.intersection) else {
                 continue; // names were checked with the spec
             };
-            let index = plan.index(intersection, o.approach, o.signal);
+            let Some(index) = plan.index(intersection, o.approach, o.signal) else {
+                continue; // so was that the junction has lights
+            };
             plan.lights[index].offset = o.offset + phases[intersection];
             plan.lights[index].schedule = o.schedule.clone();
         }

@@ -53,6 +53,10 @@ impl Sim<'_> {
                 Stop::Crossing(j) => {
                     Interaction { bound_by: BoundBy::Conflict, other_car: Some(self.cars[j].plan.id), light: None }
                 }
+                Stop::GiveWay(j) => {
+                    Interaction { bound_by: BoundBy::GiveWay, other_car: Some(self.cars[j].plan.id), light: None }
+                }
+                Stop::AllWayLine => Interaction { bound_by: BoundBy::StopLine, other_car: None, light: None },
             };
             bind(model.stop_speed(&p, v, desired, distance, dt), by);
         }

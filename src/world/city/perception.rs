@@ -4,6 +4,7 @@
 //! distances are metres along the car's route or a track.
 
 use super::Sim;
+use crate::map::control::JunctionControl;
 use crate::map::curve::Curve;
 use crate::map::route::last_change_start;
 use crate::map::signals::{Colour, LightState, Signal};
@@ -19,6 +20,16 @@ const LOOKAHEAD: f64 = 30.0;
 /// cars behind it until it is this far into its turn, metres.
 const SIBLING_CLEARANCE: f64 = 3.0;
 
+/// A driver at a junction without lights counts as waiting at its line
+/// when its front is this close to it, metres (a stop brings it within
+/// [`crate::world::driver::STOP_LINE_MARGIN`] plus a little)...
+const HALT_REACH: f64 = 1.5;
+/// ...and it is this slow, m/s.
+const HALT_SPEED: f64 = 0.2;
+/// Seconds a driver giving way leaves, beyond the time it needs to clear
+/// the junction box, before a car with priority reaches its line.
+const GIVE_WAY_MARGIN_S: f64 = 1.0;
+
 /// Why a driver must stop before an intersection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Stop {
@@ -26,6 +37,11 @@ pub(super) enum Stop {
     Light(usize),
     /// This car is still crossing the box on a conflicting movement.
     Crossing(usize),
+    /// This car has the right of way: it will reach its line too soon, or
+    /// waits at an all-way stop's line with precedence.
+    GiveWay(usize),
+    /// An all-way stop's line, which every car stops at.
+    AllWayLine,
 }
 
 /// Where one car is in the occupancy: up to three (track, metres along it).
@@ -129,11 +145,25 @@ impl Sim<'_> {
         let car = &self.cars[i];
         let leg = &car.route.legs[car.leg];
         let next = car.route.legs.get(car.leg + 1)?;
-        let (LegKind::Lane(_), LegKind::Connector(c)) = (leg.kind, next.kind) else { return None };
-        let to_box = next.route_start - car.front();
         let setback = self.map.layout.stop_line_setback;
-        let claims = self.map.connectors[c].intersection.is_some() && (to_box < setback || car.committed == Some(c));
-        claims.then(|| (self.map.connector_track(c), -to_box.max(0.0) - 1.0))
+        let claim = |c: usize, start: f64| (self.map.connector_track(c), -(start - car.front()).max(0.0) - 1.0);
+        match (leg.kind, next.kind) {
+            (LegKind::Lane(_), LegKind::Connector(c)) => {
+                let to_box = next.route_start - car.front();
+                let claims =
+                    self.map.connectors[c].intersection.is_some() && (to_box < setback || car.committed == Some(c));
+                claims.then(|| claim(c, next.route_start))
+            }
+            // At a junction without lights a driver committed to its
+            // movement claims it even while it finishes a lane change
+            // before the line.
+            _ => {
+                let c = car.committed?;
+                let ahead = car.route.legs[car.leg + 1..].iter().take(2).find(|l| l.kind == LegKind::Connector(c))?;
+                let unsignalised = self.map.control_of(c).is_some_and(|k| k != JunctionControl::Signals);
+                unsignalised.then(|| claim(c, ahead.route_start))
+            }
+        }
     }
 
     /// The nearest car ahead on car `i`'s path whose centre is within
@@ -170,6 +200,10 @@ impl Sim<'_> {
     fn nearest_on_siblings(&self, i: usize, leg: &RouteLeg, c: usize) -> Option<Candidate> {
         let car = &self.cars[i];
         let from = self.map.connectors[c].from;
+        // A car still before the box only claims its movement; it is not in
+        // front. (Junctions with lights keep the original rule, under which
+        // it is: see the note on `tests/unsignalised.rs`.)
+        let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals);
         let occupants = self
             .map
             .exits_from(from)
@@ -178,7 +212,7 @@ impl Sim<'_> {
         nearest(
             occupants
                 .map(|&(j, pos)| (leg.route_start + pos.max(0.0) - car.s, j, pos))
-                .filter(|&(d, j, pos)| j != i && pos < SIBLING_CLEARANCE && d > 0.0)
+                .filter(|&(d, j, pos)| j != i && pos < SIBLING_CLEARANCE && d > 0.0 && (pos >= 0.0 || claims_count))
                 .map(|(d, j, _)| (d, j)),
         )
     }
@@ -231,24 +265,32 @@ impl Sim<'_> {
             }
             let LegKind::Connector(c) = leg.kind else { continue };
             let dist = leg.route_start - setback - front;
-            // Past the stop line, or forced through: nothing stops the car here.
-            if dist < -0.05 || car.runs_red_lights {
+            // Past the stop line, or forced through its lights: nothing stops
+            // the car here. (A red-light runner keeps the rules of junctions
+            // without lights.)
+            if dist < -0.05 || (car.runs_red_lights && self.map.control_of(c) == Some(JunctionControl::Signals)) {
                 continue;
             }
-            let Some(light) = self.light_for(c) else { continue };
             // Once committed (moving, too close to stop comfortably) the light
             // no longer matters, but cars still crossing the box always do. A
             // car that has come to rest before its line is committed no more.
             let committed = car.committed == Some(c) && car.v > 0.1;
-            let must_stop = !committed && self.stops_for(light, t, braking, dist);
-            let crossing = if dist < braking + 2.0 { self.conflict_occupant(c) } else { None };
-            let why = match (must_stop, crossing) {
-                (true, _) => Some(Stop::Light(light)),
-                (false, Some(j)) => Some(Stop::Crossing(j)),
-                (false, None) => None,
+            let halted = car.v < HALT_SPEED && dist < HALT_REACH;
+            let rule = match self.light_for(c) {
+                Some(light) => (!committed && self.stops_for(light, t, braking, dist)).then_some(Stop::Light(light)),
+                // A driver cleared to go at a line without lights goes.
+                None if self.map.gives_way(c) && car.committed != Some(c) => self.give_way(i, c, dist, halted),
+                None if self.map.connectors[c].intersection.is_some() => None,
+                None => continue,
             };
+            let crossing = if dist < braking + 2.0 { self.conflict_occupant(c) } else { None };
+            let why = rule.or(crossing.map(Stop::Crossing));
             if let Some(why) = why {
                 return (Some((dist.max(0.0), why)), commit);
+            }
+            // Waiting at a line without lights and clear to go: claim the box.
+            if halted && self.map.gives_way(c) {
+                commit = Some(c);
             }
             if car.v > 0.1 && dist < braking {
                 commit = Some(c);
@@ -275,7 +317,7 @@ impl Sim<'_> {
         let intersection = c.intersection?;
         let LaneEnd::Intersection { approach, .. } = self.map.lanes[c.from].end else { return None };
         let signal = if c.turn == Turn::Left { Signal::Left } else { Signal::Straight };
-        Some(self.city.lights.index(intersection, approach, signal))
+        self.map.light_index(intersection, approach, signal)
     }
 
     /// Light `index` at time `t` (seconds): its plan, unless an intervention
@@ -290,6 +332,57 @@ impl Sim<'_> {
             Some((_, light, _)) => light.state_at(t),
             None => self.city.lights.lights[index].state_at(t),
         }
+    }
+
+    /// Whom car `i`, `dist` metres before the line of `connector` at a
+    /// junction without lights (`halted` there or not), must stop for: at an
+    /// all-way stop the line itself until it has halted there, then a car
+    /// waiting at the line of a movement with precedence that crosses its
+    /// path; at a priority junction a car on a movement with precedence
+    /// that will reach its line before this car could clear the box.
+    fn give_way(&self, i: usize, connector: usize, dist: f64, halted: bool) -> Option<Stop> {
+        let all_way = self.map.control_of(connector) == Some(JunctionControl::AllWayStop);
+        if all_way && !halted {
+            return Some(Stop::AllWayLine);
+        }
+        let car = &self.cars[i];
+        let mine = self.map.right_of_way(connector);
+        let x = &self.map.intersections[self.map.connectors[connector].intersection?];
+        // Time this car needs to cross the box from where it is, seconds.
+        let clear = car.driver.reaction_time
+            + (dist + 2.0 * x.half_size + car.plan.length) / car.desired().max(0.1)
+            + GIVE_WAY_MARGIN_S;
+        let setback = self.map.layout.stop_line_setback;
+        let mut first: Option<(f64, usize)> = None;
+        for &other in self.map.conflicts(connector) {
+            if self.map.right_of_way(other) >= mine {
+                continue;
+            }
+            let lane = self.map.connectors[other].from;
+            let line = self.map.lanes[lane].curve.length() - setback;
+            for &(j, pos) in self.occupants(lane) {
+                if j == i {
+                    continue;
+                }
+                let theirs = &self.cars[j];
+                let to_line = line - pos - theirs.plan.length / 2.0;
+                if to_line < -0.05 {
+                    continue; // past its line: it claims its movement
+                }
+                let arrives = if all_way {
+                    (to_line < HALT_REACH && theirs.v < HALT_SPEED).then_some(0.0)
+                } else {
+                    let eta = if theirs.v > 0.05 { to_line / theirs.v } else { f64::INFINITY };
+                    (eta < clear).then_some(eta)
+                };
+                if let Some(eta) = arrives {
+                    if first.is_none_or(|(e, _)| eta < e) {
+                        first = Some((eta, j));
+                    }
+                }
+            }
+        }
+        first.map(|(_, j)| Stop::GiveWay(j))
     }
 
     /// A car on (or claiming) a connector crossing `connector`, if any: the

@@ -125,13 +125,13 @@ fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
 /// The default light plan with the lights governing the end of `lanes`
 /// (straight and left) running `schedule` from time 0.
 fn lights_with(map: &CityMap, lanes: &[&str], schedule: &[(Colour, f64)]) -> LightPlan {
-    let mut lights = LightPlan::cycle(map.intersections.len(), 1.0, &[]);
+    let mut lights = LightPlan::cycle(map.signalised(), 1.0, &[]);
     for name in lanes {
         let LaneEnd::Intersection { intersection, approach } = map.lanes[lane(map, name)].end else {
             panic!("{name} does not end at an intersection")
         };
         for signal in [Signal::Straight, Signal::Left] {
-            let index = lights.index(intersection, approach, signal);
+            let index = lights.index(intersection, approach, signal).expect("a signalised junction");
             let light = &mut lights.lights[index];
             light.offset = 0.0;
             light.schedule = schedule.iter().map(|&(colour, duration)| ScheduleStep { colour, duration }).collect();
@@ -150,7 +150,7 @@ fn a_car_stops_behind_a_standing_car_without_touching_it() {
     let map = CityMap::default();
     // A1w is 36 m long: the standing car's back is 16 m ahead of the other's front.
     let cars = [straight("A1w", 25.0, 0.0), straight("A1w", 5.0, 3.0)];
-    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(4, 1.0, &[]), vec![], 30.0));
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 30.0));
     let min_gap = driver().min_gap;
     let gaps: Vec<f64> =
         traj.states.iter().map(|frame| frame[0].position.distance(frame[1].position) - LENGTH).collect();
@@ -490,4 +490,83 @@ fn a_follower_takes_the_turn_its_leader_takes_and_its_own_once_the_leader_is_gon
         Intervention { trigger: Trigger::At(0.0), effect: Effect::Remove { car: 0 }, label: "remove leader".into() };
     let lost = follow_scene(&map, vec![remove]);
     assert!(passes_after(&map, &lost, 1, Turn::Right), "the follower did not fall back on its own queue");
+}
+
+/// The default map with junction AC run by `control` instead of lights.
+fn map_with_ac(control: crate::map::control::JunctionControl) -> CityMap {
+    CityMap::new(crate::map::MapLayout { junction_controls: vec![("AC".into(), control)], ..Default::default() })
+}
+
+/// The first frame at which car `car`'s centre has entered AC's box
+/// (centre (-14, 14), 6 m either way).
+fn enters_ac_box(traj: &Trajectories, car: usize) -> Option<usize> {
+    traj.states.iter().position(|f| {
+        let p = f[car].position;
+        (p.x + 14.0).abs() < 6.0 && (p.y - 14.0).abs() < 6.0
+    })
+}
+
+#[test]
+fn at_a_priority_junction_the_side_road_gives_way_to_the_through_road() {
+    use crate::map::control::JunctionControl;
+    use crate::world::BoundBy;
+    let map = map_with_ac(JunctionControl::Priority);
+    // Car 0 on road A from the west (the through road), car 1 on road C
+    // from the north, nearer its line: it would enter first without rules.
+    let cars = [Given { start: 3.0, ..straight("A0w", 4.0, 3.0) }, Given { start: 3.0, ..straight("C2z", 6.0, 3.0) }];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 30.0));
+    let (major, minor) =
+        (enters_ac_box(&traj, 0).expect("car 0 crosses"), enters_ac_box(&traj, 1).expect("car 1 crosses"));
+    assert!(major < minor, "the through car entered at frame {major}, the side-road car at {minor}");
+    let gave_way = traj.interactions.iter().filter(|f| f[1].bound_by == BoundBy::GiveWay && f[1].other_car == Some(0));
+    assert!(gave_way.count() > 0, "car 1 never gave way to car 0");
+    assert!(traj.interactions.iter().all(|f| f[0].bound_by != BoundBy::GiveWay), "the through car gave way");
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+    // Alone, the side-road car would have gone first.
+    let alone = simulate(&map, &plan(&map, &cars[1..], LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 30.0));
+    assert!(enters_ac_box(&alone, 0).expect("crosses alone") < major, "the test does not force a conflict");
+}
+
+#[test]
+fn at_an_all_way_stop_a_lone_car_halts_at_its_line_then_crosses() {
+    use crate::map::control::JunctionControl;
+    use crate::world::BoundBy;
+    let map = map_with_ac(JunctionControl::AllWayStop);
+    let cars = [Given { start: 3.0, ..straight("A0w", 2.0, 3.0) }];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 30.0));
+    // A0w is 16 m long; its stop line stands 3.6 m before its end.
+    let line = 16.0 - map.layout.stop_line_setback;
+    let halted = (0..traj.frames()).find(|&f| {
+        let (s, _) = on_lane(&map, &traj, "A0w", f, 0);
+        let front = s + LENGTH / 2.0;
+        traj.states[f][0].speed < 0.2 && front > line - 1.5 && front <= line
+    });
+    let halted = halted.expect("the car never came to rest at its line");
+    let entered = enters_ac_box(&traj, 0).expect("the car never crossed");
+    assert!(halted < entered, "halted at frame {halted}, entered the box at {entered}");
+    assert!(traj.interactions.iter().any(|f| f[0].bound_by == BoundBy::StopLine));
+    // At a junction with lights on green it would not have stopped.
+    let map = CityMap::default();
+    let lights = lights_with(&map, &["A0w"], &[(Colour::Green, 100.0)]);
+    let traj = simulate(&map, &plan(&map, &cars, lights, vec![], 30.0));
+    assert!(traj.states.iter().all(|f| f[0].speed > 1.0 || f[0].position.x > -8.0), "stopped on green");
+}
+
+#[test]
+fn at_an_all_way_stop_two_cars_waiting_go_one_after_the_other_in_order_of_precedence() {
+    use crate::map::control::JunctionControl;
+    use crate::map::Turn;
+    use crate::world::BoundBy;
+    let map = map_with_ac(JunctionControl::AllWayStop);
+    let cars = [Given { start: 3.0, ..straight("A0w", 4.0, 3.0) }, Given { start: 3.0, ..straight("C2z", 4.0, 3.0) }];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 40.0));
+    let first_entered: Vec<usize> = (0..2).map(|c| enters_ac_box(&traj, c).expect("both cross")).collect();
+    let key = |name: &str| map.right_of_way(map.exit(lane(&map, name), Turn::Straight).expect("straight on"));
+    let (first, second) = if key("A0w") < key("C2z") { (0, 1) } else { (1, 0) };
+    assert!(first_entered[first] < first_entered[second], "entered at frames {first_entered:?}");
+    assert!(
+        traj.interactions.iter().any(|f| matches!(f[second].bound_by, BoundBy::GiveWay | BoundBy::Conflict)),
+        "car {second} never waited for car {first}"
+    );
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
 }
