@@ -685,3 +685,80 @@ fn a_town_of_three_lane_roads_generates_draws_and_validates() {
     }
     assert!(middle > 0, "no car started on a middle lane");
 }
+
+#[test]
+fn a_town_with_priority_junctions_and_all_way_stops_generates_draws_and_validates() {
+    let dir = fresh_dir("grid-town-control");
+    let control = serde_json::json!({"AC": "priority", "AD": "all_way_stop", "BC": "all_way_stop"});
+    let map = serde_json::json!({"grid": {"rows": 2, "columns": 2, "control": control}});
+    let spec = write_spec(&dir, &spec_with_map("control", map.clone()));
+    let out = dir.join("control");
+    gen_ok(&spec, &out, &[]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["spec"]["map"]["grid"]["control"], control, "recorded so that it can be rebuilt");
+
+    let scenarios = scenario_dirs(&out);
+    assert_eq!(scenarios.len(), 4);
+    let mut kinds = BTreeSet::new();
+    for scenario in &scenarios {
+        // Only BD has lights: 8 of them, every frame.
+        let lights = std::fs::read_to_string(scenario.join("lights.csv")).unwrap();
+        let junctions: BTreeSet<&str> = lights.lines().skip(1).map(|l| l.split(',').nth(2).unwrap()).collect();
+        assert_eq!(junctions, BTreeSet::from(["BD"]), "{}", scenario.display());
+        assert_eq!(lights.lines().count(), 1 + 40 * 8);
+        for row in read_csv::<InteractionRow>(&scenario.join("interactions.csv")) {
+            if row.bound_by == "give_way" {
+                assert!(row.other_car.is_some_and(|j| j != row.car), "{row:?}");
+            }
+            kinds.insert(row.bound_by);
+        }
+        assert!(std::fs::metadata(scenario.join("effects.csv")).unwrap().len() > 0);
+    }
+    assert!(kinds.contains("stop_line") && kinds.contains("give_way"), "{kinds:?}");
+
+    // Stop signs stand at AD (14, 14) and BC (-14, -14), none at BD (14, -14),
+    // which shows its signal heads instead.
+    let (image, pixel) = first_frame(&scenarios[0]);
+    let signs_near = |x: f64, y: f64| {
+        let (px, py) = pixel(x, y);
+        let reach = 12.0 * (pixel(1.0, 0.0).0 - pixel(0.0, 0.0).0);
+        image
+            .enumerate_pixels()
+            .filter(|(ix, iy, p)| {
+                (*ix as f64 - px).abs() < reach && (*iy as f64 - py).abs() < reach && p.0 == [196, 32, 36]
+            })
+            .count()
+    };
+    assert!(signs_near(14.0, 14.0) > 0 && signs_near(-14.0, -14.0) > 0, "no stop signs drawn");
+    assert_eq!(signs_near(14.0, -14.0), 0, "a stop sign at a junction with lights");
+
+    // Refused with exit 2, naming the field, nothing written.
+    let overridden = r#"{"confounders": {}, "lights": {"overrides": [{"intersection": "AD", "approach": "N", "signal": "straight", "schedule": [{"colour": "green", "duration": 5}]}]}}"#;
+    for (sub, control, city, needle) in [
+        ("kind", serde_json::json!("roundabout"), None, "\"roundabout\" is not allowed: use \"signals\", \"priority\""),
+        ("junction", serde_json::json!({"XY": "priority"}), None, "map.grid.control.XY`: \"XY\" is not a junction"),
+        (
+            "override",
+            control.clone(),
+            Some(overridden),
+            "city.lights.overrides[0].intersection`: \"AD\" has no traffic lights",
+        ),
+    ] {
+        let dir = dir.join(sub);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut bad = map.clone();
+        bad["grid"]["control"] = control;
+        let mut text: serde_json::Value = serde_json::from_str(&spec_with_map("bad", bad)).unwrap();
+        if let Some(city) = city {
+            text["city"] = serde_json::from_str(city).unwrap();
+        }
+        let spec = write_spec(&dir, &text.to_string());
+        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
+        assert!(stderr.contains(needle), "{sub}: {stderr}");
+        assert!(!dir.join("out").exists());
+    }
+}

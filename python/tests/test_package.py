@@ -253,10 +253,40 @@ def test_map_gives_a_town_of_one_lane_roads_and_t_junctions_as_arrays(tmp_path):
     turns = dict(zip(town["lanes"], town["lane_turns"]))
     assert sorted(turns["C1w"]) == ["left", "right", "straight"]
     assert "straight" not in turns["D1z"] and turns["D1z"]
+    # Every junction keeps its lights unless map.grid.control says otherwise.
+    assert town["junction_controls"] == ["signals"] * 9
+    spec["map"]["grid"]["control"] = {"AE": "priority", "CF": "all_way_stop"}
+    controls = dict(zip(causalcity.map(spec)["junctions"], causalcity.map(spec)["junction_controls"]))
+    assert controls["AE"] == "priority" and controls["CF"] == "all_way_stop"
+    assert sum(c == "signals" for c in controls.values()) == 7
     # A segment that is no segment of the town is refused, naming the field.
     spec["map"]["grid"]["missing"] = ["Q7"]
     with pytest.raises(causalcity.InputError, match=r"map\.grid\.missing\[0\]"):
         causalcity.map(spec)
+
+
+def test_a_town_of_all_way_stops_streams_without_lights_and_its_give_way_edges_bind(tmp_path):
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["name"] = "stops"
+    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 6, "val": 0, "test": 0}
+    spec["frames"] = 60
+    spec["map"] = {"grid": {"rows": 2, "columns": 2, "control": "all_way_stop"}}
+    kinds = set()
+    scenarios = 0
+    for scenario in causalcity.stream(spec, split="train", images=False):
+        scenarios += 1
+        assert scenario.lights.colour.shape == (60, 0) and scenario.lights.names == []
+        inter = scenario.interactions
+        kinds |= {inter.kinds[k] for k in np.unique(inter.bound_by)}
+        give_way = inter.bound_by == inter.kinds.index("give_way")
+        t, i = np.nonzero(give_way)
+        # A car giving way names the car it waits for, and car_graph has that edge.
+        assert np.all(inter.other_car[t, i] >= 0) and np.all(inter.other_car[t, i] != i)
+        assert np.all(inter.car_graph()[t, i, inter.other_car[t, i]] == 1)
+    assert scenarios == 6
+    assert {"stop_line", "give_way"} <= kinds, kinds
+    assert "light" not in kinds
 
 
 def test_a_spec_that_draws_towns_names_each_scenarios_town_as_gen_records_it(tmp_path):
