@@ -762,3 +762,31 @@ fn a_town_with_priority_junctions_and_all_way_stops_generates_draws_and_validate
         assert!(!dir.join("out").exists());
     }
 }
+
+#[test]
+fn the_shipped_ood_control_spec_tests_on_a_town_without_lights_after_training_with_them() {
+    let dir = fresh_dir("ood-control");
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/ood-control.json");
+    let mut spec: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+    spec["splits"] = serde_json::json!({"train": 2, "val": 1, "test": 2});
+    spec["frames"] = serde_json::json!(30);
+    let spec = write_spec(&dir, &spec.to_string());
+    let out = dir.join("ood");
+    gen_ok(&spec, &out, &["--no-images"]);
+    let mut splits = BTreeSet::new();
+    for scenario in scenario_dirs(&out) {
+        let split = scenario.parent().unwrap().file_name().unwrap().to_str().unwrap().to_string();
+        let rows = std::fs::read_to_string(scenario.join("lights.csv")).unwrap().lines().count() - 1;
+        let town = read_json(&scenario.join("scenario.json"))["town"].as_str().unwrap_or("").to_string();
+        if split == "test" {
+            assert_eq!(rows, 0, "{}: lights in the held-out town", scenario.display());
+            assert!(town.contains("priority") && town.contains("all_way_stop"), "{town}");
+        } else {
+            assert!(rows > 0, "{}: no lights in a training town", scenario.display());
+        }
+        splits.insert(split);
+    }
+    assert_eq!(splits.len(), 3);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+}

@@ -69,7 +69,7 @@ pub struct SplitStats {
     /// City: median speed over desired speed on free road, moving.
     pub free_speed_ratio_median: Option<f64>,
     /// City: true pairs (a leader and its follower), as one of them binding
-    /// the other's speed in interactions.csv (car, conflict, collision).
+    /// the other's speed in interactions.csv (car, conflict, give way, collision).
     pub edge_pairs: PairInteraction,
     /// City: every other pair of cars, in the same sense.
     pub non_edge_pairs: PairInteraction,

@@ -24,7 +24,7 @@
 //! [scenarios, frames, cars, cars]: the per-frame car-to-car graph for
 //! methods that discover time-varying graphs (such as dNRI), read from
 //! `interactions.csv`. `dynamic_edges[s, t, i, j] = 1` when car j bound car
-//! i's speed choice at frame t (`bound_by` car, conflict or collision with
+//! i's speed choice at frame t (`bound_by` car, conflict, give way or collision with
 //! `other_car` j); the same receiver/sender, `--directed` and identity
 //! conventions as `edges`.
 
