@@ -97,6 +97,19 @@ fn spec_schema_and_parser_agree() {
             v["map"] = json!({"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 40, "outer_m": 30}})
         }),
     ));
+    good.push((
+        "junctions without lights".into(),
+        edited(&base, |v| {
+            v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": "priority"}});
+            v["city"]["lights"].as_object_mut().unwrap().remove("overrides");
+        }),
+    ));
+    good.push((
+        "some junctions without lights".into(),
+        edited(&base, |v| {
+            v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": {"AD": "all_way_stop", "BD": "signals"}}})
+        }),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),
@@ -138,6 +151,14 @@ fn spec_schema_and_parser_agree() {
         (
             "missing segment twice",
             edited(&base, |v| v["map"] = json!({"grid": {"rows": 3, "columns": 3, "missing": ["B2", "B2"]}})),
+        ),
+        (
+            "unknown junction control",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": "roundabout"}})),
+        ),
+        (
+            "unknown control of one junction",
+            edited(&base, |v| v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": {"AC": "stop"}}})),
         ),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
         (
