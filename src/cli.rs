@@ -13,7 +13,10 @@ use causalcity::error::Error;
 use causalcity::export::nri::{export_nri, NriLayout, NriOptions, Velocity};
 use causalcity::export::nsdr::export_nsdr;
 use causalcity::export::vcdn::export_vcdn;
-use causalcity::map_view::map_view;
+use causalcity::map_view::{map_view, net_view};
+
+/// Longer side of `causalcity map --net`'s picture, pixels.
+const NET_PICTURE_PX: u32 = 1200;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
@@ -296,8 +299,15 @@ pub struct StatsArgs {
 #[derive(Debug, Args)]
 pub struct MapArgs {
     /// Dataset spec (JSON), e.g. configs/city.json.
+    #[arg(long, value_name = "FILE", required_unless_present = "net", conflicts_with = "net")]
+    pub spec: Option<PathBuf>,
+
+    /// A SUMO road network (.net.xml, as netconvert writes it from
+    /// OpenStreetMap or OpenDRIVE) instead of a spec: list its junctions
+    /// and the lanes cars may drive, and with --out draw it. Generating on
+    /// it is not supported yet (docs/sumo.md).
     #[arg(long, value_name = "FILE")]
-    pub spec: PathBuf,
+    pub net: Option<PathBuf>,
 
     /// Also draw the bird's-eye view at the spec's image size, with every
     /// lane's id and junction's name, to this PNG.
@@ -310,7 +320,7 @@ pub struct MapArgs {
 
     /// The town to show when the spec's map draws several (its name, e.g.
     /// grid-3x4, as the listing says); the first when absent.
-    #[arg(long, value_name = "NAME")]
+    #[arg(long, value_name = "NAME", conflicts_with = "net")]
     pub town: Option<String>,
 }
 
@@ -834,7 +844,11 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             }
             report(&stats, args.json)
         }
-        Command::Map(args) => report(&map_view(&args.spec, args.out.as_deref(), args.town.as_deref())?, args.json),
+        Command::Map(args) => match (&args.spec, &args.net) {
+            (_, Some(net)) => report(&net_view(net, args.out.as_deref(), NET_PICTURE_PX)?, args.json),
+            (Some(spec), None) => report(&map_view(spec, args.out.as_deref(), args.town.as_deref())?, args.json),
+            (None, None) => Err(Error::Input("map: give --spec FILE or --net FILE".into())),
+        },
         Command::Heatmap(args) => {
             let filter = HeatmapFilter { group: args.group, split: args.split.map(Into::into) };
             report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)

@@ -180,3 +180,189 @@ fn lane_row(map: &CityMap, id: usize) -> LaneRow {
         },
     }
 }
+
+/// One imported junction, as `causalcity map --net` lists it.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetJunctionRow {
+    pub id: String,
+    /// `traffic_light`, `priority`, `right_before_left`, `all_way_stop`,
+    /// `dead_end` or `unregulated`.
+    pub kind: &'static str,
+    /// Metres, in the network's coordinates.
+    pub centre: [f64; 2],
+}
+
+/// One imported lane cars may drive.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetLaneRow {
+    /// SUMO's lane id.
+    pub id: String,
+    /// Compass direction of travel at its end: N, E, S or W.
+    pub heading: char,
+    pub length_m: f64,
+    pub speed_limit_ms: f64,
+    /// Index into `junctions` of the junction it ends at.
+    pub junction: usize,
+    /// Movements from its end (`straight`, `left`, `right`, `uturn`);
+    /// empty for a dead end.
+    pub turns: Vec<String>,
+}
+
+/// What `causalcity map --net` read and wrote.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetSummary {
+    pub net: PathBuf,
+    pub junctions: Vec<NetJunctionRow>,
+    pub lanes: Vec<NetLaneRow>,
+    pub connections: usize,
+    /// Traffic-light programmes.
+    pub programmes: usize,
+    /// What the file has that cars do not drive on: (what, how many).
+    pub left_out: Vec<(String, usize)>,
+    /// Lower and upper corners of the network, metres.
+    pub bounds: [[f64; 2]; 2],
+    /// The picture written, if `--out` was given.
+    pub picture: Option<PathBuf>,
+}
+
+impl fmt::Display for NetSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut kinds: Vec<(&str, usize)> = Vec::new();
+        for j in &self.junctions {
+            match kinds.iter_mut().find(|(k, _)| *k == j.kind) {
+                Some(entry) => entry.1 += 1,
+                None => kinds.push((j.kind, 1)),
+            }
+        }
+        let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
+        let [lo, hi] = self.bounds;
+        writeln!(
+            f,
+            "{}: {} junctions ({}), {:.0} x {:.0} m",
+            self.net.display(),
+            self.junctions.len(),
+            kinds.join(", "),
+            hi[0] - lo[0],
+            hi[1] - lo[1]
+        )?;
+        writeln!(
+            f,
+            "{} lanes cars drive, {} connections, {} traffic-light programmes",
+            self.lanes.len(),
+            self.connections,
+            self.programmes
+        )?;
+        if !self.left_out.is_empty() {
+            let what: Vec<String> = self.left_out.iter().map(|(w, n)| format!("{n} {w}")).collect();
+            writeln!(f, "left out: {}", what.join(", "))?;
+        }
+        let dead: Vec<&str> = self.lanes.iter().filter(|l| l.turns.is_empty()).map(|l| l.id.as_str()).collect();
+        if !dead.is_empty() {
+            writeln!(f, "{} lanes lead nowhere (dead ends): {}", dead.len(), dead.join(" "))?;
+        }
+        writeln!(f, "{:<24} {:>7} {:>8} {:>6}  {:<24} turns", "lane", "heading", "length m", "m/s", "ends at")?;
+        for lane in &self.lanes {
+            let junction = &self.junctions[lane.junction];
+            writeln!(
+                f,
+                "{:<24} {:>7} {:>8.1} {:>6.1}  {:<24} {}",
+                lane.id,
+                lane.heading,
+                lane.length_m,
+                lane.speed_limit_ms,
+                format!("{} ({})", junction.id, junction.kind),
+                lane.turns.join(" ")
+            )?;
+        }
+        if let Some(path) = &self.picture {
+            writeln!(f, "wrote {}", path.display())?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads the SUMO network at `net_path` (`.net.xml`), lists its junctions
+/// and the lanes cars may drive, and with `out` (a `.png`) draws it from
+/// above, `longest` pixels along its longer side.
+pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<NetSummary, Error> {
+    if let Some(out) = out {
+        if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+            return Err(Error::Input(format!(
+                "--out {}: a map picture is a PNG: give a name ending in .png",
+                out.display()
+            )));
+        }
+    }
+    let text = std::fs::read_to_string(net_path)
+        .map_err(|e| Error::Input(format!("cannot read SUMO network {}: {e}", net_path.display())))?;
+    let net = crate::map::sumo::SumoNetwork::from_xml(&text)
+        .map_err(|e| Error::Input(format!("{}: {e}", net_path.display())))?;
+    let mut turns = vec![Vec::new(); net.lanes.len()];
+    for c in &net.connections {
+        turns[c.from].push(format!("{:?}", c.turn).to_lowercase());
+    }
+    let lanes = net
+        .lanes
+        .iter()
+        .zip(turns)
+        .map(|(lane, turns)| {
+            let n = lane.shape.len();
+            let d = lane.shape[n - 1] - lane.shape[n - 2];
+            let heading = d.y.atan2(d.x).to_degrees().rem_euclid(360.0);
+            NetLaneRow {
+                id: lane.id.clone(),
+                heading: ['E', 'N', 'W', 'S'][((heading + 45.0) / 90.0) as usize % 4],
+                length_m: lane.length,
+                speed_limit_ms: lane.speed,
+                junction: lane.to,
+                turns,
+            }
+        })
+        .collect();
+    let (lo, hi) = net.bounds();
+    let summary = NetSummary {
+        net: net_path.to_path_buf(),
+        junctions: net
+            .junctions
+            .iter()
+            .map(|j| NetJunctionRow { id: j.id.clone(), kind: j.kind.name(), centre: [j.centre.x, j.centre.y] })
+            .collect(),
+        lanes,
+        connections: net.connections.len(),
+        programmes: net.programmes.len(),
+        left_out: net.left_out.iter().map(|(w, n)| (w.to_string(), *n)).collect(),
+        bounds: [[lo.x, lo.y], [hi.x, hi.y]],
+        picture: out.map(Path::to_path_buf),
+    };
+    if let Some(out) = out {
+        let file = claim_file(out, &[("the network it draws", net_path)])?;
+        let view = crate::render::network::NetworkView::fitting(&net, longest);
+        let mut rgba = crate::render::network::draw_network(&net, &view).take();
+        let mut canvas = Canvas { data: &mut rgba, width: view.width, height: view.height, channels: 4 };
+        // Junction ids where they fit: a small network's every junction.
+        if net.junctions.len() <= 40 {
+            for junction in net.junctions.iter().filter(|j| j.kind != crate::map::sumo::SumoJunctionKind::DeadEnd) {
+                let p = view.to_pixel(junction.centre);
+                let (w, _) = label_size(&junction.id, 1);
+                draw_label(
+                    &mut canvas,
+                    p.x as i64 - w as i64 / 2,
+                    p.y as i64 + 6,
+                    &junction.id,
+                    1,
+                    [255, 255, 255],
+                    [150, 30, 30],
+                );
+            }
+        }
+        let image = image::RgbaImage::from_raw(view.width, view.height, rgba)
+            .ok_or_else(|| Error::Failure("the map picture has the wrong size".into()))?;
+        let mut png = Vec::new();
+        image::DynamicImage::ImageRgba8(image)
+            .to_rgb8()
+            .write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
+            .map_err(|e| Error::Failure(format!("cannot encode {}: {e}", out.display())))?;
+        file.write(&png).map_err(|e| Error::Failure(e.to_string()))?;
+    }
+    Ok(summary)
+}

@@ -16,6 +16,7 @@ pub mod control;
 pub mod curve;
 pub mod route;
 pub mod signals;
+pub mod sumo;
 
 use control::{Axis, JunctionControl};
 use curve::Curve;

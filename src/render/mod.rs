@@ -4,6 +4,7 @@
 //! signal heads and brake lights are never in the mask).
 
 pub mod background;
+pub mod network;
 pub mod palette;
 pub mod perspective;
 pub mod text;

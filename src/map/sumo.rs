@@ -1,0 +1,549 @@
+//! SUMO road networks (`.net.xml`, as `netconvert` writes them from
+//! OpenStreetMap or OpenDRIVE): read with serde into raw types, then
+//! resolved and checked in one pass into a [`SumoNetwork`]: the lanes a
+//! passenger car may drive (centre-line polylines, metres), the junctions
+//! with their control, the connections between lanes with their turn and
+//! their path through the junction, and the traffic-light programmes.
+//!
+//! What is kept: normal edges and the lanes of them that allow passenger
+//! cars; connections between kept lanes. Pedestrian crossings, walking
+//! areas and lanes closed to cars are left out and counted. What is
+//! refused, naming the element and its id: junction kinds with no
+//! counterpart here (rail crossings, zippers, ...), malformed shapes and
+//! references to elements the file does not have.
+
+use super::Turn;
+use glam::DVec2;
+use serde::Deserialize;
+use std::collections::HashMap;
+
+/// The `<net>` element, as written (attributes `@`-prefixed).
+#[derive(Debug, Deserialize)]
+struct RawNet {
+    #[serde(rename = "@version")]
+    version: Option<String>,
+    #[serde(rename = "edge", default)]
+    edges: Vec<RawEdge>,
+    #[serde(rename = "tlLogic", default)]
+    programmes: Vec<RawProgramme>,
+    #[serde(rename = "junction", default)]
+    junctions: Vec<RawJunction>,
+    #[serde(rename = "connection", default)]
+    connections: Vec<RawConnection>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawEdge {
+    #[serde(rename = "@id")]
+    id: String,
+    #[serde(rename = "@function")]
+    function: Option<String>,
+    #[serde(rename = "@from")]
+    from: Option<String>,
+    #[serde(rename = "@to")]
+    to: Option<String>,
+    #[serde(rename = "@priority")]
+    priority: Option<i32>,
+    #[serde(rename = "lane", default)]
+    lanes: Vec<RawLane>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawLane {
+    #[serde(rename = "@id")]
+    id: String,
+    #[serde(rename = "@index")]
+    index: u32,
+    #[serde(rename = "@speed")]
+    speed: f64,
+    #[serde(rename = "@length")]
+    length: f64,
+    #[serde(rename = "@width")]
+    width: Option<f64>,
+    #[serde(rename = "@shape")]
+    shape: String,
+    #[serde(rename = "@allow")]
+    allow: Option<String>,
+    #[serde(rename = "@disallow")]
+    disallow: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawJunction {
+    #[serde(rename = "@id")]
+    id: String,
+    #[serde(rename = "@type")]
+    kind: String,
+    #[serde(rename = "@x")]
+    x: f64,
+    #[serde(rename = "@y")]
+    y: f64,
+    #[serde(rename = "@shape")]
+    shape: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawConnection {
+    #[serde(rename = "@from")]
+    from: String,
+    #[serde(rename = "@to")]
+    to: String,
+    #[serde(rename = "@fromLane")]
+    from_lane: u32,
+    #[serde(rename = "@toLane")]
+    to_lane: u32,
+    #[serde(rename = "@via")]
+    via: Option<String>,
+    #[serde(rename = "@tl")]
+    tl: Option<String>,
+    /// -1 for a link the lights do not govern.
+    #[serde(rename = "@linkIndex")]
+    link_index: Option<i64>,
+    #[serde(rename = "@dir")]
+    dir: String,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawProgramme {
+    #[serde(rename = "@id")]
+    id: String,
+    #[serde(rename = "@offset", default)]
+    offset: f64,
+    #[serde(rename = "phase", default)]
+    phases: Vec<RawPhase>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawPhase {
+    #[serde(rename = "@duration")]
+    duration: f64,
+    #[serde(rename = "@state")]
+    state: String,
+}
+
+/// How an imported junction decides who goes, as SUMO's `type` says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SumoJunctionKind {
+    /// `traffic_light`, `traffic_light_unregulated`, `traffic_light_right_on_red`.
+    TrafficLight,
+    /// `priority`, `priority_stop`: a priority road, the others give way.
+    Priority,
+    /// `right_before_left`, `left_before_right`: the car from the right goes first.
+    RightBeforeLeft,
+    /// `allway_stop`.
+    AllWayStop,
+    /// `dead_end`: where a road stops.
+    DeadEnd,
+    /// `unregulated`: no rule at all.
+    Unregulated,
+}
+
+impl SumoJunctionKind {
+    fn of(kind: &str) -> Option<SumoJunctionKind> {
+        Some(match kind {
+            "traffic_light" | "traffic_light_unregulated" | "traffic_light_right_on_red" => {
+                SumoJunctionKind::TrafficLight
+            }
+            "priority" | "priority_stop" => SumoJunctionKind::Priority,
+            "right_before_left" | "left_before_right" => SumoJunctionKind::RightBeforeLeft,
+            "allway_stop" => SumoJunctionKind::AllWayStop,
+            "dead_end" => SumoJunctionKind::DeadEnd,
+            "unregulated" => SumoJunctionKind::Unregulated,
+            _ => return None,
+        })
+    }
+
+    /// The word the listing and JSON use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SumoJunctionKind::TrafficLight => "traffic_light",
+            SumoJunctionKind::Priority => "priority",
+            SumoJunctionKind::RightBeforeLeft => "right_before_left",
+            SumoJunctionKind::AllWayStop => "all_way_stop",
+            SumoJunctionKind::DeadEnd => "dead_end",
+            SumoJunctionKind::Unregulated => "unregulated",
+        }
+    }
+}
+
+/// SUMO junction types this reader refuses, and why.
+const UNSUPPORTED_JUNCTIONS: [(&str, &str); 4] = [
+    ("rail_crossing", "rail crossings"),
+    ("rail_signal", "rail signals"),
+    ("zipper", "zipper merges"),
+    ("district", "districts"),
+];
+
+/// One imported junction.
+#[derive(Debug, Clone)]
+pub struct SumoJunction {
+    pub id: String,
+    pub kind: SumoJunctionKind,
+    /// Metres, in the network's own coordinates.
+    pub centre: DVec2,
+    /// Its outline (empty when the file gives none).
+    pub shape: Vec<DVec2>,
+}
+
+/// One lane a passenger car may drive.
+#[derive(Debug, Clone)]
+pub struct SumoLane {
+    /// SUMO's id, `EDGE_INDEX`.
+    pub id: String,
+    pub edge: String,
+    /// 0 is the rightmost lane of its edge.
+    pub index: u32,
+    /// Speed limit, m/s.
+    pub speed: f64,
+    /// Length along its shape, metres.
+    pub length: f64,
+    /// Width, metres (SUMO's default 3.2 when the file gives none).
+    pub width: f64,
+    /// Centre line, metres, at least two points.
+    pub shape: Vec<DVec2>,
+    /// Junctions (indices into [`SumoNetwork::junctions`]) at its start and end.
+    pub from: usize,
+    pub to: usize,
+    /// Its edge's priority (higher: the priority road), as netconvert set it.
+    pub priority: i32,
+}
+
+/// A movement from the end of one kept lane to the start of another.
+#[derive(Debug, Clone)]
+pub struct SumoConnection {
+    /// Indices into [`SumoNetwork::lanes`].
+    pub from: usize,
+    pub to: usize,
+    pub turn: Turn,
+    /// Its path through the junction (the internal lane's shape), metres;
+    /// empty when the file has none (a straight join).
+    pub path: Vec<DVec2>,
+    /// The traffic light governing it: (index into
+    /// [`SumoNetwork::programmes`], index into each phase's state).
+    pub signal: Option<(usize, usize)>,
+}
+
+/// A traffic-light programme: phases of (seconds, one state letter per link).
+#[derive(Debug, Clone)]
+pub struct SumoProgramme {
+    pub id: String,
+    /// Seconds.
+    pub offset: f64,
+    pub phases: Vec<(f64, String)>,
+}
+
+/// A road network read from a SUMO `.net.xml`, checked.
+#[derive(Debug, Clone)]
+pub struct SumoNetwork {
+    pub junctions: Vec<SumoJunction>,
+    pub lanes: Vec<SumoLane>,
+    pub connections: Vec<SumoConnection>,
+    pub programmes: Vec<SumoProgramme>,
+    /// What the file has that cars do not drive on and was left out:
+    /// (what, how many).
+    pub left_out: Vec<(&'static str, usize)>,
+}
+
+/// Width SUMO gives a lane whose file says none, metres (SUMO's
+/// `default.lanewidth`).
+pub const SUMO_DEFAULT_LANE_WIDTH_M: f64 = 3.2;
+
+/// Parses `"x1,y1 x2,y2 ..."`.
+fn polyline(text: &str) -> Option<Vec<DVec2>> {
+    text.split_whitespace()
+        .map(|pair| {
+            let mut parts = pair.split(',');
+            let x: f64 = parts.next()?.parse().ok()?;
+            let y: f64 = parts.next()?.parse().ok()?;
+            // A third value (z) is allowed and ignored.
+            (x.is_finite() && y.is_finite()).then_some(DVec2::new(x, y))
+        })
+        .collect()
+}
+
+/// Whether a lane with these `allow` / `disallow` lists lets passenger cars on.
+fn allows_cars(allow: Option<&str>, disallow: Option<&str>) -> bool {
+    let has = |list: Option<&str>, word: &str| list.is_some_and(|l| l.split_whitespace().any(|w| w == word));
+    match allow {
+        Some(list) => has(Some(list), "passenger") || has(Some(list), "all"),
+        None => !has(disallow, "passenger") && !has(disallow, "all"),
+    }
+}
+
+/// SUMO's `dir` as a turn.
+fn turn_of(dir: &str) -> Option<Turn> {
+    Some(match dir {
+        "s" => Turn::Straight,
+        "l" | "L" => Turn::Left,
+        "r" | "R" => Turn::Right,
+        "t" => Turn::UTurn,
+        _ => return None,
+    })
+}
+
+impl SumoNetwork {
+    /// Reads the text of a `.net.xml`; errors name the element, its id and
+    /// what is wrong (the file's name is the caller's to add).
+    pub fn from_xml(text: &str) -> Result<SumoNetwork, String> {
+        let raw: RawNet = quick_xml::de::from_str(text).map_err(|e| format!("not a SUMO network (.net.xml): {e}"))?;
+        if raw.version.is_none() {
+            return Err("<net> has no version attribute: not a network netconvert wrote".into());
+        }
+        let mut left_out: HashMap<&'static str, usize> = HashMap::new();
+
+        // Every junction but the internal ones; a kind with no counterpart
+        // here is refused once a lane cars drive reaches it.
+        let mut junctions = Vec::new();
+        let mut junction_index = HashMap::new();
+        let mut unsupported: HashMap<&str, &str> = HashMap::new();
+        for j in &raw.junctions {
+            if j.kind == "internal" {
+                continue;
+            }
+            let Some(kind) = SumoJunctionKind::of(&j.kind) else {
+                unsupported.insert(j.id.as_str(), j.kind.as_str());
+                continue;
+            };
+            if !(j.x.is_finite() && j.y.is_finite()) {
+                return Err(format!("<junction id=\"{}\">: x, y are not finite", j.id));
+            }
+            let shape = match &j.shape {
+                Some(text) => polyline(text)
+                    .ok_or_else(|| format!("<junction id=\"{}\">: shape {text:?} is not x,y points", j.id))?,
+                None => Vec::new(),
+            };
+            junction_index.insert(j.id.as_str(), junctions.len());
+            junctions.push(SumoJunction { id: j.id.clone(), kind, centre: DVec2::new(j.x, j.y), shape });
+        }
+
+        let mut lanes = Vec::new();
+        let mut lane_index: HashMap<(&str, u32), usize> = HashMap::new();
+        let mut internal_shapes: HashMap<&str, &str> = HashMap::new();
+        for e in &raw.edges {
+            match e.function.as_deref() {
+                None | Some("normal") => {}
+                Some("internal") => {
+                    for l in &e.lanes {
+                        internal_shapes.insert(l.id.as_str(), l.shape.as_str());
+                    }
+                    continue;
+                }
+                Some("crossing") => {
+                    *left_out.entry("pedestrian crossings").or_default() += 1;
+                    continue;
+                }
+                Some("walkingarea") => {
+                    *left_out.entry("walking areas").or_default() += 1;
+                    continue;
+                }
+                Some(other) => {
+                    return Err(format!(
+                        "<edge id=\"{}\" function=\"{other}\">: this kind of edge cannot be imported",
+                        e.id
+                    ))
+                }
+            }
+            if !e.lanes.iter().any(|l| allows_cars(l.allow.as_deref(), l.disallow.as_deref())) {
+                *left_out.entry("edges closed to cars").or_default() += 1;
+                continue;
+            }
+            let end = |name: &str, value: &Option<String>| -> Result<usize, String> {
+                let id = value.as_deref().ok_or_else(|| format!("<edge id=\"{}\">: no {name} junction", e.id))?;
+                if let Some(kind) = unsupported.get(id) {
+                    let why = UNSUPPORTED_JUNCTIONS.iter().find(|(k, _)| k == kind).map_or("this kind", |(_, w)| w);
+                    return Err(format!(
+                        "<junction id=\"{id}\" type=\"{kind}\"> (reached by <edge id=\"{}\">, which cars drive): {why} cannot be imported; supported: traffic_light, priority, priority_stop, right_before_left, allway_stop, dead_end, unregulated",
+                        e.id
+                    ));
+                }
+                junction_index
+                    .get(id)
+                    .copied()
+                    .ok_or_else(|| format!("<edge id=\"{}\">: {name}=\"{id}\" is no junction of the file", e.id))
+            };
+            let (from, to) = (end("from", &e.from)?, end("to", &e.to)?);
+            for l in &e.lanes {
+                if !allows_cars(l.allow.as_deref(), l.disallow.as_deref()) {
+                    *left_out.entry("lanes closed to cars").or_default() += 1;
+                    continue;
+                }
+                let shape = polyline(&l.shape).filter(|s| s.len() >= 2).ok_or_else(|| {
+                    format!("<lane id=\"{}\">: shape {:?} is not two or more x,y points", l.id, l.shape)
+                })?;
+                if !(l.length.is_finite() && l.length > 0.0 && l.speed.is_finite() && l.speed > 0.0) {
+                    return Err(format!(
+                        "<lane id=\"{}\">: length {} m and speed {} m/s must be positive",
+                        l.id, l.length, l.speed
+                    ));
+                }
+                let width = l.width.unwrap_or(SUMO_DEFAULT_LANE_WIDTH_M);
+                if !(width.is_finite() && width > 0.0) {
+                    return Err(format!("<lane id=\"{}\">: width {width} m must be positive", l.id));
+                }
+                lane_index.insert((e.id.as_str(), l.index), lanes.len());
+                lanes.push(SumoLane {
+                    id: l.id.clone(),
+                    edge: e.id.clone(),
+                    index: l.index,
+                    speed: l.speed,
+                    length: l.length,
+                    width,
+                    shape,
+                    from,
+                    to,
+                    priority: e.priority.unwrap_or(-1),
+                });
+            }
+        }
+
+        let mut programmes = Vec::new();
+        let mut programme_index = HashMap::new();
+        for p in &raw.programmes {
+            if programme_index.contains_key(p.id.as_str()) {
+                continue; // another programme of the same lights: the first one runs
+            }
+            let mut phases = Vec::new();
+            for ph in &p.phases {
+                if !(ph.duration.is_finite() && ph.duration > 0.0) {
+                    return Err(format!("<tlLogic id=\"{}\">: a phase lasts {} s", p.id, ph.duration));
+                }
+                if let Some(bad) = ph.state.chars().find(|c| !"rRyYgGsuoO".contains(*c)) {
+                    return Err(format!(
+                        "<tlLogic id=\"{}\">: phase state {:?} has {bad:?}; allowed: r R y Y g G s u o O",
+                        p.id, ph.state
+                    ));
+                }
+                phases.push((ph.duration, ph.state.clone()));
+            }
+            if phases.is_empty() {
+                return Err(format!("<tlLogic id=\"{}\">: no phases", p.id));
+            }
+            programme_index.insert(p.id.as_str(), programmes.len());
+            programmes.push(SumoProgramme { id: p.id.clone(), offset: p.offset, phases });
+        }
+
+        let mut connections = Vec::new();
+        for c in &raw.connections {
+            let (Some(&from), Some(&to)) =
+                (lane_index.get(&(c.from.as_str(), c.from_lane)), lane_index.get(&(c.to.as_str(), c.to_lane)))
+            else {
+                continue; // to or from a lane left out (or an internal lane)
+            };
+            let name = || format!("<connection from=\"{}_{}\" to=\"{}_{}\">", c.from, c.from_lane, c.to, c.to_lane);
+            let turn = turn_of(&c.dir)
+                .ok_or_else(|| format!("{}: dir=\"{}\" is not allowed: s, l, L, r, R or t", name(), c.dir))?;
+            let path = match c.via.as_deref().and_then(|v| internal_shapes.get(v)) {
+                Some(text) => {
+                    polyline(text).ok_or_else(|| format!("{}: its internal lane's shape is not x,y points", name()))?
+                }
+                None => Vec::new(),
+            };
+            let signal = match (&c.tl, c.link_index.and_then(|l| usize::try_from(l).ok())) {
+                (Some(tl), Some(link)) => {
+                    let p = *programme_index
+                        .get(tl.as_str())
+                        .ok_or_else(|| format!("{}: tl=\"{tl}\" is no <tlLogic> of the file", name()))?;
+                    if let Some((_, state)) = programmes[p].phases.iter().find(|(_, s)| link >= s.len()) {
+                        return Err(format!(
+                            "{}: linkIndex {link} is beyond the {} links of <tlLogic id=\"{tl}\">'s phase {state:?}",
+                            name(),
+                            state.len()
+                        ));
+                    }
+                    Some((p, link))
+                }
+                _ => None,
+            };
+            connections.push(SumoConnection { from, to, turn, path, signal });
+        }
+        if lanes.is_empty() {
+            return Err("the network has no lane a passenger car may drive".into());
+        }
+        if !unsupported.is_empty() {
+            *left_out.entry("junctions of edges closed to cars").or_default() += unsupported.len();
+        }
+        let mut left_out: Vec<(&'static str, usize)> = left_out.into_iter().collect();
+        left_out.sort();
+        Ok(SumoNetwork { junctions, lanes, connections, programmes, left_out })
+    }
+
+    /// Lower and upper corners of everything drawn (lanes and junction
+    /// outlines), metres.
+    pub fn bounds(&self) -> (DVec2, DVec2) {
+        let points = self.lanes.iter().flat_map(|l| l.shape.iter()).chain(self.junctions.iter().flat_map(|j| &j.shape));
+        points.fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        })
+    }
+
+    /// Lanes from which no connection leads on (they end at a dead end, or
+    /// every movement from them was left out).
+    pub fn dead_end_lanes(&self) -> Vec<usize> {
+        let mut leads = vec![false; self.lanes.len()];
+        for c in &self.connections {
+            leads[c.from] = true;
+        }
+        (0..self.lanes.len()).filter(|&l| !leads[l]).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TINY: &str = r#"<net version="1.9">
+        <edge id=":J1_0" function="internal"><lane id=":J1_0_0" index="0" speed="10" length="5" shape="10,0 15,0"/></edge>
+        <edge id="a" from="J0" to="J1" priority="1">
+            <lane id="a_0" index="0" speed="13.9" length="10" shape="0,0 10,0"/>
+            <lane id="a_1" index="1" speed="13.9" length="10" disallow="passenger" shape="0,3 10,3"/>
+        </edge>
+        <edge id="b" from="J1" to="J2" priority="1"><lane id="b_0" index="0" speed="13.9" length="10" shape="15,0 25,0"/></edge>
+        <edge id=":c" function="crossing"><lane id=":c_0" index="0" speed="1" length="5" shape="0,0 1,1"/></edge>
+        <tlLogic id="J1" type="static" programID="0" offset="2"><phase duration="30" state="G"/><phase duration="3" state="y"/></tlLogic>
+        <junction id="J0" type="dead_end" x="0" y="0"/>
+        <junction id="J1" type="traffic_light" x="12" y="0" shape="10,-2 15,-2 15,2 10,2"/>
+        <junction id=":J1_0_0" type="internal" x="12" y="0"/>
+        <junction id="J2" type="priority" x="25" y="0"/>
+        <connection from="a" to="b" fromLane="0" toLane="0" via=":J1_0_0" tl="J1" linkIndex="0" dir="s" state="O"/>
+        <connection from=":J1_0" to="b" fromLane="0" toLane="0" dir="s" state="M"/>
+    </net>"#;
+
+    #[test]
+    fn a_tiny_network_keeps_the_car_lanes_their_connection_and_its_light() {
+        let net = SumoNetwork::from_xml(TINY).unwrap();
+        assert_eq!(net.lanes.iter().map(|l| l.id.as_str()).collect::<Vec<_>>(), ["a_0", "b_0"]);
+        assert_eq!(net.junctions.len(), 3, "internal junctions are not junctions");
+        assert_eq!(net.junctions[1].kind, SumoJunctionKind::TrafficLight);
+        assert_eq!(net.connections.len(), 1);
+        let c = &net.connections[0];
+        assert_eq!((c.from, c.to, c.turn, c.signal), (0, 1, Turn::Straight, Some((0, 0))));
+        assert_eq!(c.path, vec![DVec2::new(10.0, 0.0), DVec2::new(15.0, 0.0)]);
+        assert_eq!(net.programmes[0].offset, 2.0);
+        assert_eq!(net.left_out, vec![("lanes closed to cars", 1), ("pedestrian crossings", 1)]);
+        assert_eq!(net.dead_end_lanes(), vec![1]);
+        assert_eq!(net.bounds(), (DVec2::new(0.0, -2.0), DVec2::new(25.0, 2.0)));
+    }
+
+    #[test]
+    fn what_cannot_be_imported_is_refused_naming_the_element_and_its_id() {
+        for (from, to, needle) in [
+            (
+                r#"type="priority" x="25""#,
+                r#"type="rail_crossing" x="25""#,
+                r#"<junction id="J2" type="rail_crossing"> (reached by <edge id="b">, which cars drive): rail crossings"#,
+            ),
+            (r#"shape="15,0 25,0""#, r#"shape="15,0""#, r#"<lane id="b_0">: shape"#),
+            (r#"dir="s" state="O""#, r#"dir="x" state="O""#, r#"dir="x" is not allowed"#),
+            (r#"linkIndex="0""#, r#"linkIndex="4""#, "linkIndex 4 is beyond the 1 links"),
+            (r#"to="J2" priority"#, r#"to="J9" priority"#, r#"<edge id="b">: to="J9" is no junction"#),
+            (r#"state="G"/>"#, r#"state="Gx"/>"#, r#"phase state "Gx" has 'x'"#),
+            ("<net version=\"1.9\">", "<net>", "no version attribute"),
+        ] {
+            assert!(TINY.contains(from), "{from}");
+            let err = SumoNetwork::from_xml(&TINY.replacen(from, to, 1)).unwrap_err();
+            assert!(err.contains(needle), "{needle}: {err}");
+        }
+        assert!(SumoNetwork::from_xml("<html/>").is_err());
+    }
+}

@@ -1,0 +1,90 @@
+//! Reading a real SUMO network (`causalcity map --net`): what it keeps, the
+//! picture it draws, and what it refuses.
+
+mod common;
+use common::*;
+
+fn berlin() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/berlin-small.net.xml")
+}
+
+#[test]
+fn a_real_network_is_listed_with_its_junctions_and_the_lanes_cars_drive_and_drawn() {
+    let dir = fresh_dir("sumo-berlin");
+    let picture = dir.join("berlin.png");
+    let listed = run(&["map", "--net", berlin().to_str().unwrap(), "--out", picture.to_str().unwrap(), "--json"]);
+    assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    let junctions = summary["junctions"].as_array().unwrap();
+    let kinds = |kind: &str| junctions.iter().filter(|j| j["kind"] == kind).count();
+    assert_eq!((junctions.len(), kinds("traffic_light"), kinds("priority"), kinds("dead_end")), (17, 2, 14, 1));
+    // Only lanes that allow cars; the crossings and walking areas are counted as left out.
+    let lanes = summary["lanes"].as_array().unwrap();
+    assert_eq!(lanes.len(), 48);
+    assert!(lanes.iter().all(|l| !l["id"].as_str().unwrap().starts_with(':')), "an internal or pedestrian lane");
+    let left_out: Vec<(String, u64)> = serde_json::from_value(summary["left_out"].clone()).unwrap();
+    assert!(left_out.contains(&("pedestrian crossings".into(), 27)), "{left_out:?}");
+    // Every lane ends at a listed junction; most lead on.
+    let leading = lanes.iter().filter(|l| !l["turns"].as_array().unwrap().is_empty()).count();
+    assert!(leading >= 44, "only {leading} lanes lead on");
+    assert!(lanes.iter().all(|l| (l["junction"].as_u64().unwrap() as usize) < junctions.len()));
+
+    // The picture: asphalt along the lanes, a green mark on each junction with lights.
+    let image = image::open(&picture).unwrap().to_rgb8();
+    assert_eq!(image.width().max(image.height()), 1200);
+    let count = |rgb: [u8; 3]| image.pixels().filter(|p| p.0 == rgb).count();
+    let asphalt = count([66, 68, 72]);
+    assert!(asphalt > 20_000, "{asphalt} asphalt pixels");
+    assert!(count([40, 170, 70]) > 10, "no traffic-light mark");
+    // The text listing says the same.
+    let text = run(&["map", "--net", berlin().to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&text.stdout);
+    assert!(stdout.contains("17 junctions (14 priority, 1 dead_end, 2 traffic_light)"), "{stdout}");
+    assert!(stdout.contains("48 lanes cars drive, 79 connections, 2 traffic-light programmes"), "{stdout}");
+}
+
+#[test]
+fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_is_written() {
+    let dir = fresh_dir("sumo-refused");
+    let text = std::fs::read_to_string(berlin()).unwrap();
+    // A rail crossing where cars drive; a lane with a broken shape.
+    let junction = r#"<junction id="1560592097" type="priority""#;
+    let lane = r#"<lane id="-172014854#1_1" index="1""#;
+    assert!(text.contains(junction) && text.contains(lane));
+    let broken_shape = {
+        let start = text.find(lane).unwrap();
+        let shape = start + text[start..].find("shape=\"").unwrap() + 7;
+        format!("{}12,x{}", &text[..shape], &text[shape..])
+    };
+    for (name, bad, needle) in [
+        (
+            "rail",
+            text.replacen(junction, r#"<junction id="1560592097" type="rail_crossing""#, 1),
+            r#"<junction id="1560592097" type="rail_crossing">"#,
+        ),
+        ("shape", broken_shape, r#"<lane id="-172014854#1_1">: shape"#),
+        ("not-xml", "<html><body>hello".to_string(), "not a SUMO network"),
+    ] {
+        let net = dir.join(format!("{name}.net.xml"));
+        std::fs::write(&net, bad).unwrap();
+        let out = dir.join(format!("{name}.png"));
+        let refused = run(&["map", "--net", net.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(needle), "{name}: {stderr}");
+        assert!(!out.exists(), "{name}: wrote a picture");
+    }
+    // A missing file, a picture that is no PNG, the network as its own
+    // picture, and --spec with --net: exit 2, the input untouched.
+    let before = std::fs::read(berlin()).unwrap();
+    for args in [
+        vec!["map", "--net", "/no/such.net.xml"],
+        vec!["map", "--net", berlin().to_str().unwrap(), "--out", dir.join("x.jpg").to_str().unwrap()],
+        vec!["map", "--net", berlin().to_str().unwrap(), "--out", berlin().to_str().unwrap()],
+        vec!["map", "--net", berlin().to_str().unwrap(), "--spec", "configs/city.json"],
+    ] {
+        let refused = run(&args);
+        assert_eq!(refused.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&refused.stderr));
+    }
+    assert_eq!(std::fs::read(berlin()).unwrap(), before);
+}
