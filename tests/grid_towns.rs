@@ -790,3 +790,67 @@ fn the_shipped_ood_control_spec_tests_on_a_town_without_lights_after_training_wi
     let report = run(&["validate", out.to_str().unwrap()]);
     assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
 }
+
+#[test]
+fn a_town_with_dead_ends_generates_draws_and_validates_and_cars_turn_back_before_the_cut() {
+    let dir = fresh_dir("grid-town-dead-ends");
+    // 40 m blocks: B2 (x 6..34 m at y 0) stays joined to BE and turns back
+    // 8 m short of BF; D1 (x -40) stays joined to CD, short of BD.
+    let map =
+        serde_json::json!({"grid": {"rows": 3, "columns": 3, "block_m": 40, "dead_ends": {"B2": "BE", "D1": "CD"}}});
+    let spec = write_spec(&dir, &spec_with_map("dead", map.clone()));
+    let out = dir.join("dead");
+    gen_ok(&spec, &out, &[]);
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["spec"]["map"]["grid"]["dead_ends"], map["grid"]["dead_ends"]);
+
+    let scenarios = scenario_dirs(&out);
+    let (image, pixel) = first_frame(&scenarios[0]);
+    // Road B is road up to its loop and ground in the gap before BF's box.
+    let (px, py) = pixel(20.0, 1.5);
+    assert!(is_road(&image, px, py), "B2 before its loop");
+    let (px, py) = pixel(31.5, 4.5);
+    assert!(!is_road(&image, px, py), "the gap between the loop and BF");
+    // No car is ever in the gap, and every pose stays on the network.
+    let mut poses = 0;
+    for scenario in &scenarios {
+        for p in read_poses(&scenario.join("poses.csv")) {
+            assert!(!(p.x > 31.0 && p.x < 34.0 && p.y.abs() < 6.0), "{p:?} in {}", scenario.display());
+            assert!(!(p.y > -14.0 + 0.5 && p.y < -6.0 && (p.x + 40.0).abs() < 6.0), "{p:?} past D1's loop");
+            poses += 1;
+        }
+        assert!(std::fs::metadata(scenario.join("effects.csv")).unwrap().len() > 0);
+    }
+    assert_eq!(poses, 4 * 40 * 8);
+
+    // Refused with exit 2, naming the field, nothing written.
+    for (sub, dead_ends, needle) in [
+        (
+            "outer",
+            serde_json::json!({"B0": "BD"}),
+            "map.grid.dead_ends.B0`: \"B0\" is not a road segment between two junctions",
+        ),
+        ("junction", serde_json::json!({"B2": "AE"}), "\"AE\" is not a junction at an end of B2: give BE or BF"),
+        (
+            "short",
+            serde_json::json!({"B2": "BE"}),
+            "leaves 8.00 m of road before BE once its loop (8.0 m) is taken off",
+        ),
+    ] {
+        let dir = dir.join(sub);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut bad = map.clone();
+        bad["grid"]["dead_ends"] = dead_ends;
+        if sub == "short" {
+            bad["grid"]["block_m"] = serde_json::json!(28);
+        }
+        let spec = write_spec(&dir, &spec_with_map("bad", bad));
+        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
+        assert!(stderr.contains(needle), "{sub}: {stderr}");
+        assert!(!dir.join("out").exists());
+    }
+}

@@ -118,6 +118,10 @@ fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_t_
         ("priority", r#", "map": {"grid": {"rows": 3, "columns": 3, "missing": ["D0"], "control": "priority"}}"#),
         ("all-way-stop", r#", "map": {"grid": {"rows": 3, "columns": 3, "lanes": 1, "control": "all_way_stop"}}"#),
         (
+            "dead-ends",
+            r#", "map": {"grid": {"rows": 3, "columns": 3, "block_m": 40, "dead_ends": {"B2": "BE", "D1": "CD"}}}"#,
+        ),
+        (
             "mixed-control",
             r#", "map": {"grid": {"rows": 2, "columns": 3, "control": {"AC": "priority", "BE": "all_way_stop"}}}"#,
         ),

@@ -22,6 +22,7 @@ fn grid(rows: usize, columns: usize) -> MapLayout {
         missing: Vec::new(),
         lanes: 2,
         control: Default::default(),
+        dead_ends: Default::default(),
     };
     MapSpec { grid: Some(grid), ..MapSpec::default() }.layout()
 }
@@ -493,6 +494,7 @@ fn three_lane_town(rows: usize, columns: usize, missing: Vec<(char, u8)>) -> Cit
         missing: Vec::new(),
         lanes: 3,
         control: Default::default(),
+        dead_ends: Default::default(),
     };
     let layout = MapSpec { grid: Some(spec), ..MapSpec::default() }.layout();
     CityMap::new(MapLayout { missing_segments: missing, ..layout })
@@ -627,4 +629,44 @@ fn junctions_without_lights_have_no_lights_and_rank_their_movements() {
         .enumerate()
         .filter(|(_, x)| x.intersection == Some(k("AD")))
         .all(|(c, _)| map.gives_way(c)));
+}
+
+#[test]
+fn a_dead_end_turns_back_in_a_loop_short_of_the_junction_it_leaves() {
+    // 3 x 3, 40 m blocks: B2 stays joined to BE and ends before BF.
+    let spec = GridSpec {
+        rows: 3.into(),
+        columns: 3.into(),
+        block_m: 40.0,
+        outer_m: 22.0,
+        missing: Vec::new(),
+        lanes: 2,
+        control: Default::default(),
+        dead_ends: [("B2".to_string(), "BE".to_string())].into(),
+    };
+    let map = CityMap::new(MapSpec { grid: Some(spec), ..MapSpec::default() }.layout());
+    assert_eq!(map.network_problem(), None);
+    let k = |name: &str| map.intersections.iter().position(|x| x.name == name).unwrap();
+    assert_eq!(map.approaches(k("BF")).len(), 3, "BF loses its west arm");
+    assert_eq!(map.approaches(k("BE")).len(), 4, "BE keeps all four");
+    // Eastbound B2 lanes turn back in a loop onto the westbound ones, which run to BE.
+    let mut looped = 0;
+    for letter in ['w', 'x'] {
+        let lane = map.lane_by_name(&format!("B2{letter}")).unwrap();
+        let LaneEnd::Loop(c) = map.lanes[lane].end else { panic!("B2{letter} does not end in a loop") };
+        let back = &map.lanes[map.connectors[c].to];
+        assert_eq!(back.name[..2], *"B2");
+        assert!(matches!(back.end, LaneEnd::Intersection { intersection, approach: 'E' } if intersection == k("BE")));
+        // The loop turns back before BF's box (x = 40 - 6) and its pavement.
+        let reach = map.connectors[c].curve.position(map.connectors[c].curve.length() / 2.0, 0.0).x;
+        assert!(reach < 40.0 - 6.0 - 2.0 + 1e-9, "the loop reaches x = {reach}");
+        looped += 1;
+    }
+    assert_eq!(looped, 2);
+    // No movement at BF leads into B2.
+    for (c, connector) in map.connectors.iter().enumerate() {
+        if connector.intersection == Some(k("BF")) {
+            assert_ne!(&map.lanes[connector.to].name[..2], "B2", "connector {c} enters the dead end from BF");
+        }
+    }
 }

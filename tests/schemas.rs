@@ -110,6 +110,12 @@ fn spec_schema_and_parser_agree() {
             v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": {"AD": "all_way_stop", "BD": "signals"}}})
         }),
     ));
+    good.push((
+        "dead ends".into(),
+        edited(&base, |v| {
+            v["map"] = json!({"grid": {"rows": 3, "columns": 3, "block_m": 40, "dead_ends": {"B2": "BE"}}})
+        }),
+    ));
     good.push(("network camera".into(), edited(&base, |v| v["map"] = json!({"camera_area": "network"}))));
     good.push((
         "camera area".into(),
@@ -159,6 +165,12 @@ fn spec_schema_and_parser_agree() {
         (
             "unknown control of one junction",
             edited(&base, |v| v["map"] = json!({"grid": {"rows": 2, "columns": 2, "control": {"AC": "stop"}}})),
+        ),
+        (
+            "dead end kept by a list",
+            edited(&base, |v| {
+                v["map"] = json!({"grid": {"rows": 3, "columns": 3, "block_m": 40, "dead_ends": {"B2": ["BE"]}}})
+            }),
         ),
         ("grid rows of 2.5", edited(&base, |v| v["map"] = json!({"grid": {"rows": 2.5, "columns": 2}}))),
         (

@@ -65,6 +65,11 @@ pub struct MapLayout {
     /// Junctions without lights, by name (`AC`), and how they decide who
     /// goes; every other junction has traffic lights.
     pub junction_controls: Vec<(String, JunctionControl)>,
+    /// Road segments cut short of one of their junctions, where they turn
+    /// back in a U-turn loop (a cul-de-sac): (road, segment, whether the
+    /// cut is at the segment's far end, east or north). The junction at
+    /// the cut becomes a T-junction.
+    pub dead_ends: Vec<(char, u8, bool)>,
 }
 
 impl Default for MapLayout {
@@ -89,6 +94,7 @@ impl Default for MapLayout {
             missing_segments: Vec::new(),
             lanes_per_direction: 2,
             junction_controls: Vec::new(),
+            dead_ends: Vec::new(),
         }
     }
 }
@@ -162,6 +168,18 @@ impl MapLayout {
     /// Whether segment `segment` of road `road` is part of the town.
     pub fn has_segment(&self, road: char, segment: u8) -> bool {
         !self.missing_segments.contains(&(road, segment))
+    }
+
+    /// Where segment `segment` of road `road` is cut short, if it is a dead
+    /// end: at its far end (east or north, `true`) or its near end.
+    pub fn dead_end(&self, road: char, segment: u8) -> Option<bool> {
+        self.dead_ends.iter().find(|d| d.0 == road && d.1 == segment).map(|d| d.2)
+    }
+
+    /// How far short of a junction's box a dead end turns back, metres:
+    /// room for its U-turn loop (the road's half width) and the pavement.
+    pub fn dead_end_setback(&self) -> f64 {
+        self.road_half_width() + self.sidewalk_width
     }
 
     /// Centre lines of the east-west roads (y, ascending).
@@ -473,6 +491,13 @@ impl CityMap {
                 if !layout.has_segment(name, segment as u8) {
                     continue;
                 }
+                // A dead end stops short of the junction at its cut and turns back there.
+                let cut = layout.dead_end(name, segment as u8);
+                let (a0, a1) = match cut {
+                    Some(true) => (a0, a1 - layout.dead_end_setback()),
+                    Some(false) => (a0 + layout.dead_end_setback(), a1),
+                    None => (a0, a1),
+                };
                 let outer = layout.outer_lane_offset();
                 let kerb_side =
                     if layout.lanes_per_direction == 1 { LanePosition::Single } else { LanePosition::Outer };
@@ -492,6 +517,7 @@ impl CityMap {
                     // one after its segment going forward, before it going back.
                     let crossing =
                         if forward { (segment < crossings.len()).then_some(segment) } else { segment.checked_sub(1) };
+                    let crossing = crossing.filter(|_| cut != Some(forward));
                     let end_kind = match crossing {
                         Some(k) => {
                             let intersection =
@@ -539,7 +565,7 @@ impl CityMap {
                 // A U-turn always ends on its own segment; a movement into a
                 // missing segment does not exist.
                 debug_assert!(
-                    to.is_some() || !layout.missing_segments.is_empty(),
+                    to.is_some() || !layout.missing_segments.is_empty() || !layout.dead_ends.is_empty(),
                     "no lane starts at {:?}",
                     curve.end()
                 );

@@ -237,19 +237,33 @@ fn road_runs(layout: &MapLayout, name: char, crossings: &[f64], extent: f64) -> 
     let hw = layout.road_half_width();
     let last = crossings.len();
     let mut runs: Vec<(f64, f64)> = Vec::new();
+    let mut loops = Vec::new();
     for k in (0..=last).filter(|&k| layout.has_segment(name, k as u8)) {
-        let from = if k == 0 { -extent } else { crossings[k - 1] - hw };
-        let to = if k == last { extent } else { crossings[k] + hw };
+        let mut from = if k == 0 { -extent } else { crossings[k - 1] - hw };
+        let mut to = if k == last { extent } else { crossings[k] + hw };
+        // A dead end stops short of the junction at its cut, in a loop.
+        match layout.dead_end(name, k as u8).filter(|_| k > 0 && k < last) {
+            Some(true) => {
+                to = crossings[k] - hw - layout.dead_end_setback();
+                loops.push(to);
+            }
+            Some(false) => {
+                from = crossings[k - 1] + hw + layout.dead_end_setback();
+                loops.push(from);
+            }
+            None => {}
+        }
         match runs.last_mut() {
             Some(run) if run.1 >= from => run.1 = to,
             _ => runs.push((from, to)),
         }
     }
-    let loops = [(0, -extent), (last, extent)]
-        .into_iter()
-        .filter(|&(k, _)| layout.has_segment(name, k as u8))
-        .map(|(_, at)| at)
-        .collect();
+    loops.extend(
+        [(0, -extent), (last, extent)]
+            .into_iter()
+            .filter(|&(k, _)| layout.has_segment(name, k as u8))
+            .map(|(_, at)| at),
+    );
     (runs, loops)
 }
 

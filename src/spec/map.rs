@@ -71,6 +71,12 @@ pub struct GridSpec {
     /// name (`{"AC": "all_way_stop"}`, the rest with lights).
     #[serde(default, skip_serializing_if = "ControlSpec::is_signals")]
     pub control: ControlSpec,
+    /// Road segments between two junctions that stay joined to one of them
+    /// only and end in a U-turn loop short of the other (a cul-de-sac):
+    /// segment name (as in `missing`) to the junction it keeps, e.g.
+    /// `{"B2": "BE"}`. The junction it leaves becomes a T-junction.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub dead_ends: std::collections::BTreeMap<String, String>,
 }
 
 /// `map.grid.control`: one [`JunctionControl`] for every junction, or one
@@ -425,6 +431,10 @@ impl MapSpec {
                 if !grid.missing.is_empty() {
                     name += &format!("-no-{}", grid.missing.join("-"));
                 }
+                if !grid.dead_ends.is_empty() {
+                    let cut: Vec<&str> = grid.dead_ends.keys().map(String::as_str).collect();
+                    name += &format!("-dead-{}", cut.join("-"));
+                }
                 match &grid.control {
                     ControlSpec::Every(c) if *c != JunctionControl::Signals => name += &format!("-{}", c.name()),
                     ControlSpec::ByJunction(by) => {
@@ -455,7 +465,8 @@ impl MapSpec {
             // A, B, .. from north to south (ascending y: reversed), then the
             // north-south roads west to east.
             let letter = |k: usize| (b'A' + k as u8) as char;
-            let east_west = centres(grid.rows).enumerate().map(|(k, y)| (letter(grid.rows - 1 - k), y)).collect();
+            let east_west: Vec<(char, f64)> =
+                centres(grid.rows).enumerate().map(|(k, y)| (letter(grid.rows - 1 - k), y)).collect();
             let north_south: Vec<(char, f64)> =
                 centres(grid.columns).enumerate().map(|(k, x)| (letter(grid.rows + k), x)).collect();
             let junction_controls = (0..grid.rows)
@@ -463,6 +474,16 @@ impl MapSpec {
                 .map(|name| (spec.control.of(&name), name))
                 .filter(|(c, _)| *c != JunctionControl::Signals)
                 .map(|(c, name)| (name, c))
+                .collect();
+            let dead_ends = spec
+                .dead_ends
+                .iter()
+                .filter_map(|(segment, kept)| {
+                    let (road, k) = parse_segment(segment)?;
+                    let [near, _] = segment_junctions(&east_west, &north_south, road, k)?;
+                    // Kept at its near end: cut at the far one.
+                    Some((road, k, *kept == near))
+                })
                 .collect();
             return MapLayout {
                 lane_width: self.lane_width,
@@ -474,6 +495,7 @@ impl MapSpec {
                 missing_segments: spec.missing.iter().filter_map(|name| parse_segment(name)).collect(),
                 lanes_per_direction: spec.lanes,
                 junction_controls,
+                dead_ends,
                 ..d
             };
         }
@@ -593,7 +615,57 @@ impl MapSpec {
             }
         }
         self.validate_missing(&layout)?;
+        self.validate_dead_ends(&layout)?;
         self.validate_control(&layout)
+    }
+
+    /// Checks `grid.dead_ends`: each names a segment between two junctions
+    /// of this town and one of those two, leaves a long enough approach,
+    /// and what is left is a network a car can drive all of.
+    fn validate_dead_ends(&self, layout: &MapLayout) -> Result<(), SpecError> {
+        let Some(spec) = &self.grid else { return Ok(()) };
+        if spec.dead_ends.is_empty() {
+            return Ok(());
+        }
+        let town = self.town_name();
+        for (segment, kept) in &spec.dead_ends {
+            let field = format!("map.grid.dead_ends.{segment}");
+            let ends = parse_segment(segment)
+                .and_then(|(road, k)| segment_junctions(&layout.east_west_roads, &layout.north_south_roads, road, k));
+            let Some([near, far]) = ends else {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{segment:?} is not a road segment between two junctions of the {town} town: a road letter and a segment number from 1 to one less than the road's junctions (`causalcity map` lists the lanes); outer segments already end in a loop"
+                    ),
+                ));
+            };
+            if spec.missing.contains(segment) {
+                return Err(SpecError::new(field, format!("{segment:?} is also in map.grid.missing: give it once")));
+            }
+            if *kept != near && *kept != far {
+                return Err(SpecError::new(
+                    field,
+                    format!("{kept:?} is not a junction at an end of {segment}: give {near} or {far}, the junction it stays joined to"),
+                ));
+            }
+            let length = spec.block_m - 2.0 * layout.road_half_width() - layout.dead_end_setback();
+            if length < layout.min_approach_length() - 1e-9 {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "leaves {length:.2} m of road before {kept} once its loop ({:.1} m) is taken off: {} (raise map.grid.block_m)",
+                        layout.dead_end_setback(),
+                        approach_rule(layout)
+                    ),
+                ));
+            }
+        }
+        if let Some(problem) = crate::map::CityMap::new(layout.clone()).network_problem() {
+            let cut: Vec<&str> = spec.dead_ends.keys().map(String::as_str).collect();
+            return Err(SpecError::new("map.grid.dead_ends", format!("with dead ends {}: {problem}", cut.join(", "))));
+        }
+        Ok(())
     }
 
     /// Checks that `grid.control` names junctions of this town.
@@ -652,6 +724,22 @@ impl MapSpec {
             return Err(SpecError::new("map.grid.missing", format!("without {}: {problem}", spec.missing.join(", "))));
         }
         Ok(())
+    }
+}
+
+/// The junctions at the near (west or south) and far ends of segment `k`
+/// of road `road`, by name, when it runs between two junctions.
+fn segment_junctions(east_west: &[(char, f64)], north_south: &[(char, f64)], road: char, k: u8) -> Option<[String; 2]> {
+    let k = k as usize;
+    if east_west.iter().any(|r| r.0 == road) {
+        (k >= 1 && k < north_south.len())
+            .then(|| [format!("{road}{}", north_south[k - 1].0), format!("{road}{}", north_south[k].0)])
+    } else if north_south.iter().any(|r| r.0 == road) {
+        // East-west roads ascend in y: the near (south) junction first.
+        (k >= 1 && k < east_west.len())
+            .then(|| [format!("{}{road}", east_west[k - 1].0), format!("{}{road}", east_west[k].0)])
+    } else {
+        None
     }
 }
 
