@@ -508,6 +508,40 @@ fn map_size_cost() {
     }
 }
 
+/// City simulation cost by junction control: one 3 x 3 town with lights,
+/// priority junctions or all-way stops, 12 cars, 150 frames of 1 s, no
+/// effects, one thread; and with effects, their cost over the factual run's.
+/// Giving way reads the occupancy of the approaches with precedence, so it
+/// should cost about what the lights do.
+fn junction_control_cost() {
+    println!("\n== City simulation cost by junction control, 3x3 town, 12 cars, 1 thread ==");
+    println!("{:<14} {:>10} {:>12} {:>8} {:>14}", "control", "scenarios", "us/veh-s", "ratio", "effects/factual");
+    let mut first = None;
+    for control in ["signals", "priority", "all_way_stop"] {
+        let json = format!(
+            r#"{{"name": "control", "world": "city", "seed": 1, "frames": 150, "frame_interval": 1.0,
+                "groups": [{{"cars": 12, "edge_proportion": 0.5}}],
+                "splits": {{"train": 30, "val": 0, "test": 0}},
+                "map": {{"grid": {{"rows": 3, "columns": 3, "control": "{control}"}}}},
+                "city": {{"confounders": {{}}}}}}"#
+        );
+        let expansion = Expansion::from_spec(DatasetSpec::from_json(&json).unwrap()).unwrap();
+        let plans: Vec<_> = expansion.keys(None).iter().map(|k| expansion.plan(k).unwrap()).collect();
+        let t = Instant::now();
+        let factual: Vec<_> =
+            plans.iter().map(|plan| causalcity::world::simulate(&expansion.town_of(plan).map, plan)).collect();
+        let seconds = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        for (plan, run) in plans.iter().zip(&factual) {
+            std::hint::black_box(causalcity::world::effects::measure(&expansion.town_of(plan).map, plan, run));
+        }
+        let effects = t.elapsed().as_secs_f64();
+        let per = seconds * 1e6 / (plans.len() as f64 * 12.0 * 150.0);
+        let base = *first.get_or_insert(per);
+        println!("{control:<14} {:>10} {per:>12.2} {:>7.2}x {:>13.1}x", plans.len(), per / base, effects / seconds);
+    }
+}
+
 /// Simulation cost per simulated vehicle-second against the number of cars,
 /// on one 6 x 6 grid town (room for 80), 1 thread, poses only, no effects:
 /// the scale issue's target is a flat cost from 4 to 80 cars.
@@ -566,9 +600,15 @@ fn main() {
         car_count_cost();
         return;
     }
+    // BENCH_ONLY=control: only the cost by junction control.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "control") {
+        junction_control_cost();
+        return;
+    }
     // BENCH_ONLY=map_size: only the cost against map size.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "map_size") {
         map_size_cost();
+        junction_control_cost();
         return;
     }
     // BENCH_ONLY=effects: only the interventional effects' figures.
