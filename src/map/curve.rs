@@ -12,6 +12,8 @@ pub enum Curve {
     Line(Line),
     Arc(Arc),
     LaneChange(LaneChange),
+    /// Straight pieces joined end to end, as imported networks give lanes.
+    Polyline(Polyline),
 }
 
 impl Curve {
@@ -36,12 +38,32 @@ impl Curve {
         Curve::LaneChange(LaneChange::build(start, direction, run, shift))
     }
 
+    /// The straight pieces through `points` in turn (repeated points
+    /// dropped); `None` with fewer than two distinct points.
+    pub fn polyline(points: &[DVec2]) -> Option<Curve> {
+        let mut kept: Vec<DVec2> = Vec::with_capacity(points.len());
+        for &p in points {
+            if kept.last().is_none_or(|q| q.distance(p) > 1e-9) {
+                kept.push(p);
+            }
+        }
+        if kept.len() < 2 {
+            return None;
+        }
+        let mut cumulative = vec![0.0];
+        for w in kept.windows(2) {
+            cumulative.push(cumulative.last().copied().unwrap_or(0.0) + w[0].distance(w[1]));
+        }
+        Some(Curve::Polyline(Polyline { points: kept, cumulative }))
+    }
+
     /// Length of the curve in metres.
     pub fn length(&self) -> f64 {
         match self {
             Curve::Line(c) => c.length,
             Curve::Arc(c) => c.radius * c.sweep.abs(),
             Curve::LaneChange(c) => c.length,
+            Curve::Polyline(c) => c.cumulative[c.cumulative.len() - 1],
         }
     }
 
@@ -53,6 +75,10 @@ impl Curve {
             Curve::Line(c) => c.start + c.direction * s,
             Curve::Arc(c) => c.point_at_angle(c.angle_at(s)),
             Curve::LaneChange(c) => c.point_at(c.longitudinal_at_arc_length(s)),
+            Curve::Polyline(c) => {
+                let k = c.piece_at(s);
+                c.points[k] + (c.points[k + 1] - c.points[k]).normalize() * (s - c.cumulative[k])
+            }
         };
         if lateral == 0.0 {
             return centre;
@@ -76,6 +102,11 @@ impl Curve {
                 wrap_angle(a + c.sweep.signum() * PI / 2.0)
             }
             Curve::LaneChange(c) => c.heading_at_longitudinal(c.longitudinal_at_arc_length(s)),
+            Curve::Polyline(c) => {
+                let k = c.piece_at(s);
+                let d = c.points[k + 1] - c.points[k];
+                d.y.atan2(d.x)
+            }
         }
     }
 
@@ -96,6 +127,29 @@ impl Curve {
                 // Left of travel is towards the centre for a left (ccw) turn.
                 let lateral = (c.radius - d.length()) * c.sweep.signum();
                 (s, lateral)
+            }
+            Curve::Polyline(c) => {
+                // The nearest point of the nearest piece.
+                let mut best = (f64::INFINITY, 0.0, 0.0);
+                for k in 0..c.points.len() - 1 {
+                    let (a, b) = (c.points[k], c.points[k + 1]);
+                    let length = c.cumulative[k + 1] - c.cumulative[k];
+                    let direction = (b - a) / length;
+                    let d = point - a;
+                    let along = d.dot(direction);
+                    // Beyond the ends only on the first and last piece.
+                    let t = match (k == 0, k + 2 == c.points.len()) {
+                        (true, true) => along,
+                        (true, false) => along.min(length),
+                        (false, true) => along.max(0.0),
+                        (false, false) => along.clamp(0.0, length),
+                    };
+                    let distance = (d - direction * t).length_squared();
+                    if distance < best.0 {
+                        best = (distance, c.cumulative[k] + t, direction.perp_dot(d));
+                    }
+                }
+                (best.1, best.2)
             }
             Curve::LaneChange(c) => {
                 // Nearest sample, then refine on the tangent: lane changes are
@@ -132,6 +186,21 @@ impl Curve {
     /// Last point of the curve.
     pub fn end(&self) -> DVec2 {
         self.lane_center_at(self.length())
+    }
+}
+
+/// Straight pieces joined end to end: the points and the arc length at
+/// each (from 0).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Polyline {
+    points: Vec<DVec2>,
+    cumulative: Vec<f64>,
+}
+
+impl Polyline {
+    /// The piece arc length `s` lies on (the last one at its end).
+    fn piece_at(&self, s: f64) -> usize {
+        self.cumulative.partition_point(|&c| c <= s).clamp(1, self.points.len() - 1) - 1
     }
 }
 
@@ -306,5 +375,33 @@ mod tests {
                 assert!((s2 - s).abs() < 1e-3 && (lat2 - lat).abs() < 1e-3, "{c:?} {s} {lat} -> {s2} {lat2}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod polyline_tests {
+    use super::*;
+
+    #[test]
+    fn a_polyline_is_parameterised_by_arc_length_and_inverts() {
+        // East 10 m, then north 5 m; a repeated point is dropped.
+        let pts = [DVec2::new(0.0, 0.0), DVec2::new(10.0, 0.0), DVec2::new(10.0, 0.0), DVec2::new(10.0, 5.0)];
+        let c = Curve::polyline(&pts).unwrap();
+        assert!((c.length() - 15.0).abs() < 1e-12);
+        assert!(c.position(4.0, 1.0).distance(DVec2::new(4.0, 1.0)) < 1e-12, "1 m to the left of travel");
+        assert!(c.position(12.0, 1.0).distance(DVec2::new(9.0, 2.0)) < 1e-12);
+        assert!((c.heading_at(3.0) - 0.0).abs() < 1e-12);
+        assert!((c.heading_at(12.0) - PI / 2.0).abs() < 1e-12);
+        assert_eq!((c.start(), c.end()), (DVec2::new(0.0, 0.0), DVec2::new(10.0, 5.0)));
+        let mut checked = 0;
+        for (s, lateral) in [(1.0, 0.5), (7.5, -0.8), (12.5, 0.3), (14.0, -0.5)] {
+            let (s2, l2) = c.local_coordinates(c.position(s, lateral));
+            assert!((s2 - s).abs() < 1e-9 && (l2 - lateral).abs() < 1e-9, "({s}, {lateral}) came back as ({s2}, {l2})");
+            checked += 1;
+        }
+        assert_eq!(checked, 4);
+        // Beyond its ends, along the first and last pieces.
+        assert!((c.local_coordinates(DVec2::new(-2.0, 0.0)).0 + 2.0).abs() < 1e-12);
+        assert!(Curve::polyline(&[DVec2::ZERO, DVec2::ZERO]).is_none());
     }
 }
