@@ -29,6 +29,9 @@ const HALT_SPEED: f64 = 0.2;
 /// Seconds a driver giving way leaves, beyond the time it needs to clear
 /// the junction box, before a car with priority reaches its line.
 const GIVE_WAY_MARGIN_S: f64 = 1.0;
+/// How far beyond its braking distance before the line a driver who must
+/// give way starts to look for traffic with precedence, metres.
+const GIVE_WAY_LOOK_M: f64 = 6.0;
 
 /// Why a driver must stop before an intersection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -279,7 +282,7 @@ impl Sim<'_> {
             let rule = match self.light_for(c) {
                 Some(light) => (!committed && self.stops_for(light, t, braking, dist)).then_some(Stop::Light(light)),
                 // A driver cleared to go at a line without lights goes.
-                None if self.map.gives_way(c) && car.committed != Some(c) => self.give_way(i, c, dist, halted),
+                None if self.map.gives_way(c) && car.committed != Some(c) => self.give_way(i, c, dist, braking, halted),
                 None if self.map.connectors[c].intersection.is_some() => None,
                 None => continue,
             };
@@ -340,10 +343,15 @@ impl Sim<'_> {
     /// waiting at the line of a movement with precedence that crosses its
     /// path; at a priority junction a car on a movement with precedence
     /// that will reach its line before this car could clear the box.
-    fn give_way(&self, i: usize, connector: usize, dist: f64, halted: bool) -> Option<Stop> {
+    fn give_way(&self, i: usize, connector: usize, dist: f64, braking: f64, halted: bool) -> Option<Stop> {
         let all_way = self.map.control_of(connector) == Some(JunctionControl::AllWayStop);
         if all_way && !halted {
             return Some(Stop::AllWayLine);
+        }
+        // A driver looks for traffic with precedence once it could still
+        // stop for it comfortably with a little room to spare, not before.
+        if dist > braking + GIVE_WAY_LOOK_M {
+            return None;
         }
         let car = &self.cars[i];
         let mine = self.map.right_of_way(connector);
