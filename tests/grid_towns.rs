@@ -854,3 +854,47 @@ fn a_town_with_dead_ends_generates_draws_and_validates_and_cars_turn_back_before
         assert!(!dir.join("out").exists());
     }
 }
+
+#[test]
+fn at_junctions_without_lights_no_two_drivers_wait_for_each_other_for_good() {
+    // The settings under which two drivers each claiming the box once
+    // waited for each other for the rest of the scenario (scenario 3 here).
+    let dir = fresh_dir("grid-town-no-deadlock");
+    let spec = r#"{"name": "p", "world": "city", "seed": 36, "frames": 150, "frame_interval": 1.0,
+        "image": {"width": 640, "height": 640}, "groups": [{"cars": 8, "edge_proportion": 0.5}], "splits": {"train": 8, "val": 0, "test": 0},
+        "actions_per_car": 5, "map": {"grid": {"rows": 3, "columns": 3, "control": "priority"}},
+        "city": {"start": {"follower_gap_m": {"uniform": [1.0, 12.0]}, "platoon_cars": 4, "speed_fraction": {"uniform": [0.5, 1.0]}},
+                 "desired_speed": 1.8, "desired_speed_spread": 0.25, "red_light_runner_probability": 0.02,
+                 "lights": {"cycle_scale": 0.5, "phase": "random_per_intersection"}}}"#;
+    let spec = write_spec(&dir, spec);
+    let out = dir.join("p");
+    gen_ok(&spec, &out, &["--no-images", "--no-effects"]);
+    let mut checked = 0;
+    for scenario in scenario_dirs(&out) {
+        let rows = read_csv::<InteractionRow>(&scenario.join("interactions.csv"));
+        let cars = rows.iter().map(|r| r.car).max().unwrap() as usize + 1;
+        let frames = rows.len() / cars;
+        // Consecutive frames each pair of cars spends bound by each other.
+        let mut together = vec![0usize; cars * cars];
+        for frame in 0..frames {
+            let at = &rows[frame * cars..(frame + 1) * cars];
+            for (i, row) in at.iter().enumerate() {
+                let mutual = row.other_car.is_some_and(|j| at[j as usize].other_car == Some(i as u32));
+                for j in 0..cars {
+                    let k = i * cars + j;
+                    together[k] = if mutual && row.other_car == Some(j as u32) { together[k] + 1 } else { 0 };
+                    assert!(
+                        together[k] < 30,
+                        "{}: cars {i} and {j} wait for each other from frame {}",
+                        scenario.display(),
+                        frame + 1 - together[k]
+                    );
+                }
+            }
+        }
+        let events = std::fs::read_to_string(scenario.join("events.csv")).unwrap();
+        assert!(!events.contains(",collision,"), "{}: {events}", scenario.display());
+        checked += 1;
+    }
+    assert_eq!(checked, 8);
+}

@@ -47,6 +47,17 @@ pub(super) enum Stop {
     AllWayLine,
 }
 
+/// What a decision does to the movement a driver is committed to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Commit {
+    /// Leaves it as it is.
+    Keep,
+    /// Commits to this connector (it claims the box from now on).
+    To(usize),
+    /// Gives the claim up (a waiting driver outranked at a line without lights).
+    Withdraw,
+}
+
 /// Where one car is in the occupancy: up to three (track, metres along it).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(super) struct Places {
@@ -247,21 +258,23 @@ impl Sim<'_> {
     /// comfortably.
     pub(super) fn stop_ahead(&mut self, i: usize, t: f64) -> Option<(f64, Stop)> {
         let (stop, commit) = self.stop_seen(i, t);
-        if commit.is_some() {
-            self.cars[i].committed = commit;
+        match commit {
+            Commit::Keep => {}
+            Commit::To(c) => self.cars[i].committed = Some(c),
+            Commit::Withdraw => self.cars[i].committed = None,
         }
         stop
     }
 
     /// What [`Sim::stop_ahead`] finds, without recording anything: the stop,
     /// and the connector the car would commit to.
-    pub(super) fn stop_seen(&self, i: usize, t: f64) -> (Option<(f64, Stop)>, Option<usize>) {
+    pub(super) fn stop_seen(&self, i: usize, t: f64) -> (Option<(f64, Stop)>, Commit) {
         let car = &self.cars[i];
         let front = car.front();
         let p = &car.driver;
         let braking = car.v * car.v / (2.0 * p.comfortable_deceleration);
         let setback = self.map.layout.stop_line_setback;
-        let mut commit = None;
+        let mut commit = Commit::Keep;
         for leg in &car.route.legs[car.leg..] {
             if leg.route_start - car.s > LOOKAHEAD {
                 break;
@@ -287,16 +300,25 @@ impl Sim<'_> {
                 None => continue,
             };
             let crossing = if dist < braking + 2.0 { self.conflict_occupant(c) } else { None };
-            let why = rule.or(crossing.map(Stop::Crossing));
+            let why = rule.or(crossing.map(|(j, _)| Stop::Crossing(j)));
             if let Some(why) = why {
+                // At a line without lights, a driver at rest that has claimed
+                // the box but must wait for a car claiming a movement with
+                // precedence gives its claim up: otherwise each could wait
+                // for the other for good.
+                let outranked =
+                    crossing.is_some_and(|(_, other)| self.map.right_of_way(other) < self.map.right_of_way(c));
+                if rule.is_none() && outranked && halted && car.committed == Some(c) && self.map.gives_way(c) {
+                    return (Some((dist.max(0.0), why)), Commit::Withdraw);
+                }
                 return (Some((dist.max(0.0), why)), commit);
             }
             // Waiting at a line without lights and clear to go: claim the box.
             if halted && self.map.gives_way(c) {
-                commit = Some(c);
+                commit = Commit::To(c);
             }
             if car.v > 0.1 && dist < braking {
-                commit = Some(c);
+                commit = Commit::To(c);
             }
         }
         (None, commit)
@@ -394,12 +416,12 @@ impl Sim<'_> {
     }
 
     /// A car on (or claiming) a connector crossing `connector`, if any: the
-    /// first found.
-    fn conflict_occupant(&self, connector: usize) -> Option<usize> {
+    /// first found, and the connector it is on.
+    fn conflict_occupant(&self, connector: usize) -> Option<(usize, usize)> {
         self.map
             .conflicts(connector)
             .iter()
-            .find_map(|&other| self.occupants(self.map.connector_track(other)).first().map(|&(j, _)| j))
+            .find_map(|&other| self.occupants(self.map.connector_track(other)).first().map(|&(j, _)| (j, other)))
     }
 
     /// Highest speed (m/s) that still lets car `i` slow to the curve speed of
