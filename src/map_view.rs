@@ -130,16 +130,27 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>, town: Option<&str>) -> Res
             let (x, y) = (p.x as i64 - w as i64 / 2, p.y as i64 - h as i64 / 2);
             draw_label(&mut canvas, x, y, &lane.name, 1, [20, 20, 20], [250, 235, 120]);
         }
-        let image = image::RgbaImage::from_raw(camera.width, camera.height, rgba)
-            .ok_or_else(|| Error::Failure("the map picture has the wrong size".into()))?;
-        let mut png = Vec::new();
-        image::DynamicImage::ImageRgba8(image)
-            .to_rgb8()
-            .write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
-            .map_err(|e| Error::Failure(format!("cannot encode {}: {e}", out.display())))?;
-        file.write(&png).map_err(|e| Error::Failure(e.to_string()))?;
+        write_picture(&file, out, camera.width, camera.height, rgba)?;
     }
     Ok(summary)
+}
+
+/// Encodes an RGBA picture as an RGB PNG into the claimed `file` (`out`, for errors).
+fn write_picture(
+    file: &crate::output::claim::OutputFile,
+    out: &Path,
+    width: u32,
+    height: u32,
+    rgba: Vec<u8>,
+) -> Result<(), Error> {
+    let image = image::RgbaImage::from_raw(width, height, rgba)
+        .ok_or_else(|| Error::Failure("the map picture has the wrong size".into()))?;
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgba8(image)
+        .to_rgb8()
+        .write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
+        .map_err(|e| Error::Failure(format!("cannot encode {}: {e}", out.display())))?;
+    file.write(&png).map_err(|e| Error::Failure(e.to_string()))
 }
 
 /// The junctions and lanes (in lane-id order) of `map` (its town's name
@@ -355,14 +366,7 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
                 );
             }
         }
-        let image = image::RgbaImage::from_raw(view.width, view.height, rgba)
-            .ok_or_else(|| Error::Failure("the map picture has the wrong size".into()))?;
-        let mut png = Vec::new();
-        image::DynamicImage::ImageRgba8(image)
-            .to_rgb8()
-            .write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
-            .map_err(|e| Error::Failure(format!("cannot encode {}: {e}", out.display())))?;
-        file.write(&png).map_err(|e| Error::Failure(e.to_string()))?;
+        write_picture(&file, out, view.width, view.height, rgba)?;
     }
     Ok(summary)
 }

@@ -42,6 +42,19 @@ fn spec_with_map(name: &str, map: serde_json::Value) -> String {
     spec.to_string()
 }
 
+/// Writes `spec` into `dir/sub`, runs gen on it and checks that it is
+/// refused with exit 2, a message holding `needle`, and nothing written.
+fn assert_refused(dir: &std::path::Path, sub: &str, spec: &str, needle: &str) {
+    let dir = dir.join(sub);
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec = write_spec(&dir, spec);
+    let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
+    assert!(stderr.contains(needle), "{sub}: {stderr}");
+    assert!(!dir.join("out").exists(), "{sub}: wrote output");
+}
+
 #[test]
 fn a_three_by_three_grid_town_generates_with_images_and_effects_and_validates() {
     let dir = fresh_dir("grid-town-3x3");
@@ -602,16 +615,9 @@ fn a_town_with_t_junctions_generates_draws_and_validates_and_no_car_drives_a_mis
         ("twice", serde_json::json!(["B2", "B2"]), "\"B2\" is named twice"),
         ("corner", serde_json::json!(["C0", "D0"]), "junction CD would keep 2 roads"),
     ] {
-        let dir = dir.join(sub);
-        std::fs::create_dir_all(&dir).unwrap();
         let mut bad = map.clone();
         bad["grid"]["missing"] = missing;
-        let spec = write_spec(&dir, &spec_with_map("bad", bad));
-        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
-        let stderr = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
-        assert!(stderr.contains(needle), "{sub}: {stderr}");
-        assert!(!dir.join("out").exists());
+        assert_refused(&dir, sub, &spec_with_map("bad", bad), needle);
     }
 }
 
@@ -646,14 +652,7 @@ fn a_town_of_one_lane_roads_generates_draws_and_validates() {
     // 1 to 3 lanes each way: 4 is refused naming the field, nothing written.
     let mut bad = map.clone();
     bad["grid"]["lanes"] = serde_json::json!(4);
-    let bad_dir = dir.join("bad");
-    std::fs::create_dir_all(&bad_dir).unwrap();
-    let spec = write_spec(&bad_dir, &spec_with_map("bad", bad));
-    let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", bad_dir.join("out").to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert_eq!(refused.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("map.grid.lanes`: 4 is not allowed"), "{stderr}");
-    assert!(!bad_dir.join("out").exists());
+    assert_refused(&dir, "bad", &spec_with_map("bad", bad), "map.grid.lanes`: 4 is not allowed");
 }
 
 #[test]
@@ -746,20 +745,13 @@ fn a_town_with_priority_junctions_and_all_way_stops_generates_draws_and_validate
             "city.lights.overrides[0].intersection`: \"AD\" has no traffic lights",
         ),
     ] {
-        let dir = dir.join(sub);
-        std::fs::create_dir_all(&dir).unwrap();
         let mut bad = map.clone();
         bad["grid"]["control"] = control;
         let mut text: serde_json::Value = serde_json::from_str(&spec_with_map("bad", bad)).unwrap();
         if let Some(city) = city {
             text["city"] = serde_json::from_str(city).unwrap();
         }
-        let spec = write_spec(&dir, &text.to_string());
-        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
-        let stderr = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
-        assert!(stderr.contains(needle), "{sub}: {stderr}");
-        assert!(!dir.join("out").exists());
+        assert_refused(&dir, sub, &text.to_string(), needle);
     }
 }
 
@@ -839,19 +831,12 @@ fn a_town_with_dead_ends_generates_draws_and_validates_and_cars_turn_back_before
             "leaves 8.00 m of road before BE once its loop (8.0 m) is taken off",
         ),
     ] {
-        let dir = dir.join(sub);
-        std::fs::create_dir_all(&dir).unwrap();
         let mut bad = map.clone();
         bad["grid"]["dead_ends"] = dead_ends;
         if sub == "short" {
             bad["grid"]["block_m"] = serde_json::json!(28);
         }
-        let spec = write_spec(&dir, &spec_with_map("bad", bad));
-        let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
-        let stderr = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{sub}: {stderr}");
-        assert!(stderr.contains(needle), "{sub}: {stderr}");
-        assert!(!dir.join("out").exists());
+        assert_refused(&dir, sub, &spec_with_map("bad", bad), needle);
     }
 }
 

@@ -284,15 +284,20 @@ fn give_way_triangle(pixmap: &mut Pixmap, t: Transform, centre: DVec2, ahead: DV
             centre + ahead * size * 0.6 + side * size,
             centre + ahead * size * 0.6 - side * size,
         ];
-        let mut pb = PathBuilder::new();
-        pb.move_to(pts[0].x as f32, pts[0].y as f32);
-        for p in &pts[1..] {
-            pb.line_to(p.x as f32, p.y as f32);
-        }
-        pb.close();
-        if let Some(path) = pb.finish() {
-            pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
-        }
+        fill_polygon(pixmap, t, &pts, rgb);
+    }
+}
+
+/// Fills the polygon through `pts` (world metres under `t`).
+fn fill_polygon(pixmap: &mut Pixmap, t: Transform, pts: &[DVec2], rgb: [u8; 3]) {
+    let mut pb = PathBuilder::new();
+    pb.move_to(pts[0].x as f32, pts[0].y as f32);
+    for p in &pts[1..] {
+        pb.line_to(p.x as f32, p.y as f32);
+    }
+    pb.close();
+    if let Some(path) = pb.finish() {
+        pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
     }
 }
 
@@ -310,13 +315,5 @@ fn quad_along(
     rgb: [u8; 3],
 ) {
     let pts = [curve.position(s0, lat0), curve.position(s1, lat0), curve.position(s1, lat1), curve.position(s0, lat1)];
-    let mut pb = PathBuilder::new();
-    pb.move_to(pts[0].x as f32, pts[0].y as f32);
-    for p in &pts[1..] {
-        pb.line_to(p.x as f32, p.y as f32);
-    }
-    pb.close();
-    if let Some(path) = pb.finish() {
-        pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, t, None);
-    }
+    fill_polygon(pixmap, t, &pts, rgb);
 }
