@@ -215,8 +215,9 @@ impl Sim<'_> {
         let car = &self.cars[i];
         let from = self.map.connectors[c].from;
         // A car still before the box only claims its movement; it is not in
-        // front. (Junctions with lights keep the original rule, under which
-        // it is: see the note on `tests/unsignalised.rs`.)
+        // front. Junctions with lights keep the original rule, under which it
+        // is, for byte identity; it can leave two cars waiting on each other
+        // for good (docs/spec.md#junctions-without-lights).
         let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals);
         let occupants = self
             .map
