@@ -174,7 +174,7 @@ struct Expected<'a> {
 
 impl<'a> Expected<'a> {
     fn new(spec: &'a DatasetSpec, layout: ScenarioLayout) -> Expected<'a> {
-        let lights = |map: &crate::spec::MapSpec| crate::map::CityMap::new(map.layout()).light_count();
+        let lights = |map: &crate::spec::MapSpec| map.city_map().map_or(0, |m| m.light_count());
         let towns =
             Split::ALL.map(|split| spec.map_of(split).towns().into_iter().map(|t| (t.clone(), lights(&t))).collect());
         Expected { spec, layout, lights_per_frame: lights(&spec.map), towns }
@@ -350,8 +350,17 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
     allowed.insert(dir.join(crate::output::layout::JOB_LOGS_DIR));
     let mut parents: Vec<(PathBuf, &str)> = vec![(
         dir.to_path_buf(),
-        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec and logs/ only",
+        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec, networks/ (when its spec names SUMO networks) and logs/ only",
     )];
+    // The SUMO networks the spec names, kept by file name (and checked
+    // byte for byte: the dataset's maps were read from them).
+    let networks = spec.networks();
+    if !networks.is_empty() {
+        let folder = dir.join(crate::spec::NETWORKS_FOLDER);
+        allowed.insert(folder.clone());
+        allowed.extend(networks.iter().map(|(name, _)| folder.join(name)));
+        parents.push((folder, "not part of this dataset: networks/ holds the SUMO networks its spec names only"));
+    }
     for group in &groups {
         allowed.extend(Split::ALL.iter().map(|s| group.join(s.name())).filter(|p| splits.contains(p)));
         parents

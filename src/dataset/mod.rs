@@ -86,8 +86,14 @@ pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, S
 
 /// The expansion of a spec recorded (as JSON) in the file at `path`.
 fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, String> {
-    let spec: DatasetSpec =
+    let mut spec: DatasetSpec =
         serde_json::from_value(spec).map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
+    // The dataset's root: the manifest's folder, or the one above `shards/`.
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let root =
+        if folder.file_name().is_some_and(|n| n == "shards") { folder.parent().unwrap_or(folder) } else { folder };
+    spec.read_networks_in_dataset(root)
+        .map_err(|e| format!("{}: the network its spec names is missing or unreadable: {e}", path.display()))?;
     Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 

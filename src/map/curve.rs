@@ -38,6 +38,22 @@ impl Curve {
         Curve::LaneChange(LaneChange::build(start, direction, run, shift))
     }
 
+    /// A smooth change of `shift` metres sideways (positive = left) that
+    /// follows `base` from `at` metres along it for `run` metres, as the
+    /// straight [`Curve::lane_change`] does along a line, ending at `end`
+    /// (the point of the target lane there): pieces of at most 0.25 m.
+    pub fn lane_change_along(base: &Curve, at: f64, run: f64, shift: f64, end: DVec2) -> Curve {
+        let n = ((run / 0.25).ceil() as usize).max(2);
+        let mut points: Vec<DVec2> = (0..n)
+            .map(|k| {
+                let u = run * k as f64 / n as f64;
+                base.position(at + u, shift * smootherstep(u / run))
+            })
+            .collect();
+        points.push(end);
+        Curve::polyline(&points).unwrap_or_else(|| Curve::line(base.position(at, 0.0), end))
+    }
+
     /// The straight pieces through `points` in turn (repeated points
     /// dropped); `None` with fewer than two distinct points.
     pub fn polyline(points: &[DVec2]) -> Option<Curve> {

@@ -14,6 +14,7 @@
 
 pub mod control;
 pub mod curve;
+pub mod import;
 pub mod route;
 pub mod signals;
 pub mod sumo;
@@ -213,7 +214,7 @@ pub enum LanePosition {
 }
 
 /// A movement through an intersection (or the U-turn at a road's far end).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Turn {
     Left,
@@ -282,6 +283,9 @@ pub struct Intersection {
     pub control: JunctionControl,
     /// The priority road's approaches (where `control` is `Priority`).
     pub major: Axis,
+    /// The junction's outline, metres, as an imported network draws it
+    /// (empty in a grid town, whose boxes are squares of `half_size`).
+    pub outline: Vec<DVec2>,
 }
 
 /// The whole road network: lanes, connectors and intersections.
@@ -301,6 +305,9 @@ pub struct CityMap {
     /// The signalised intersections, in index order: a light plan lists
     /// their lights only, [`signals::LIGHTS_PER_INTERSECTION`] each.
     signalised: Vec<usize>,
+    /// Per lane, the parallel lane of the same direction on its left and on
+    /// its right, where there is one (lane changes and merges go there).
+    beside: Vec<[Option<LaneId>; 2]>,
 }
 
 impl Default for CityMap {
@@ -413,7 +420,7 @@ impl CityMap {
         let class = match x.control {
             JunctionControl::Priority => {
                 let major = self.approach_of(connector).is_some_and(|a| x.major.holds(a));
-                2 * u8::from(!major) + u8::from(c.turn == Turn::Left)
+                2 * u8::from(!major) + u8::from(matches!(c.turn, Turn::Left | Turn::UTurn))
             }
             JunctionControl::Signals | JunctionControl::AllWayStop => 0,
         };
@@ -458,7 +465,8 @@ impl CityMap {
                 let control =
                     layout.junction_controls.iter().find(|(n, _)| *n == name).map_or(JunctionControl::Signals, |c| c.1);
                 let centre = DVec2::new(x, y);
-                intersections.push(Intersection { name, centre, half_size: hw, control, major: Axis::EastWest });
+                let major = Axis::EastWest;
+                intersections.push(Intersection { name, centre, half_size: hw, control, major, outline: Vec::new() });
             }
         }
         let columns = layout.north_south_roads.len();
@@ -620,6 +628,31 @@ impl CityMap {
         }
         debug_assert!(pending_loops.iter().all(|&l| matches!(lanes[l].end, LaneEnd::Loop(c) if c != usize::MAX)));
 
+        let by_name: HashMap<String, LaneId> = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
+        let beside = lanes
+            .iter()
+            .map(|l| {
+                [true, false].map(|to_left| grid_neighbour(&layout, l, to_left).and_then(|n| by_name.get(&n).copied()))
+            })
+            .collect();
+        let mut map = CityMap::assemble(layout, lanes, connectors, intersections, beside);
+        for k in 0..map.intersections.len() {
+            map.intersections[k].major = Axis::major(&map.approaches(k));
+        }
+        map
+    }
+
+    /// The map of these parts: lanes, the connectors between them (at most
+    /// one per lane and turn: a later one replaces an earlier), the
+    /// junctions and, per lane, its neighbours on the left and right. Finds
+    /// the connectors' conflicts and the signalised junctions.
+    pub(crate) fn assemble(
+        layout: MapLayout,
+        lanes: Vec<Lane>,
+        connectors: Vec<Connector>,
+        intersections: Vec<Intersection>,
+        beside: Vec<[Option<LaneId>; 2]>,
+    ) -> CityMap {
         let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
         let mut exits = vec![[None; 4]; lanes.len()];
         for (i, c) in connectors.iter().enumerate() {
@@ -628,16 +661,17 @@ impl CityMap {
         let conflicts = find_conflicts(&connectors);
         let signalised =
             (0..intersections.len()).filter(|&k| intersections[k].control == JunctionControl::Signals).collect();
-        let mut map = CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts, signalised };
-        for k in 0..map.intersections.len() {
-            map.intersections[k].major = Axis::major(&map.approaches(k));
-        }
-        map
+        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts, signalised, beside }
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.
     pub fn lane_by_name(&self, name: &str) -> Option<LaneId> {
         self.lane_by_name.get(name).copied()
+    }
+
+    /// Whether the map is an imported network (not a grid town).
+    pub fn is_imported(&self) -> bool {
+        self.layout.east_west_roads.is_empty()
     }
 
     /// Every spawn point (every lane of every road segment: the original's
@@ -675,24 +709,7 @@ impl CityMap {
 
     /// The parallel lane of the same direction on the left (`to_left`) or right.
     pub fn adjacent_lane(&self, lane: LaneId, to_left: bool) -> Option<LaneId> {
-        let l = &self.lanes[lane];
-        let middle = self.layout.lanes_per_direction == 3;
-        let target = match (l.letter, to_left) {
-            ('w', true) if middle => 'm',
-            ('m', true) => 'x',
-            ('x', false) if middle => 'm',
-            ('m', false) => 'w',
-            ('z', true) if middle => 'n',
-            ('n', true) => 'y',
-            ('y', false) if middle => 'n',
-            ('n', false) => 'z',
-            ('w', true) => 'x',
-            ('x', false) => 'w',
-            ('z', true) => 'y',
-            ('y', false) => 'z',
-            _ => return None,
-        };
-        self.lane_by_name(&format!("{}{}{}", l.road, l.segment, target))
+        self.beside[lane][usize::from(!to_left)]
     }
 
     /// The lane beside `lane` towards the one that makes `turn` at the end
@@ -785,10 +802,49 @@ impl CityMap {
             .unwrap_or(Turn::Straight)
     }
 
+    /// Whether the junction at the end of `lane` offers its road a choice:
+    /// two or more of left, straight and right from it or the lanes beside
+    /// it. Every junction of a grid town does; where an imported road only
+    /// goes on (a bend, a change of lane count), an action waits for the
+    /// next junction.
+    pub fn has_choice(&self, lane: LaneId) -> bool {
+        let mut turns = std::collections::BTreeSet::new();
+        for to_left in [true, false] {
+            let mut probe = Some(lane);
+            while let Some(l) = probe {
+                turns.extend(self.allowed_turns(l));
+                probe = self.adjacent_lane(l, to_left);
+            }
+        }
+        turns.len() >= 2
+    }
+
     /// Turns allowed at the end of `lane` (none for lanes that end in a loop).
     pub fn allowed_turns(&self, lane: LaneId) -> Vec<Turn> {
         [Turn::Left, Turn::Straight, Turn::Right].into_iter().filter(|&t| self.exit(lane, t).is_some()).collect()
     }
+}
+
+/// The name of a grid lane's parallel neighbour on the left (`to_left`) or
+/// right: same road and segment, the next letter kerb to centre.
+fn grid_neighbour(layout: &MapLayout, l: &Lane, to_left: bool) -> Option<String> {
+    let middle = layout.lanes_per_direction == 3;
+    let target = match (l.letter, to_left) {
+        ('w', true) if middle => 'm',
+        ('m', true) => 'x',
+        ('x', false) if middle => 'm',
+        ('m', false) => 'w',
+        ('z', true) if middle => 'n',
+        ('n', true) => 'y',
+        ('y', false) if middle => 'n',
+        ('n', false) => 'z',
+        ('w', true) => 'x',
+        ('x', false) => 'w',
+        ('z', true) => 'y',
+        ('y', false) => 'z',
+        _ => return None,
+    };
+    Some(format!("{}{}{}", l.road, l.segment, target))
 }
 
 /// Pairs of connectors in one intersection that come from different lanes and

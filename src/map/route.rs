@@ -206,6 +206,13 @@ impl Route {
         let mut previous: Option<Snapshot> = None;
         // A lane change that look-back decided on: (lane, into, queue index served).
         let mut forced: Option<(LaneId, LaneId, usize)> = None;
+        // The queue action look-back last went back for: once per action, as
+        // on an imported network the lane beside the one before need not lead
+        // to the lane that turns.
+        let mut looked_back: Option<usize> = None;
+        // Loops and junctions without a choice passed in a row while an
+        // action waits.
+        let mut loops_in_a_row = 0;
         loop {
             if next >= actions.len() && route.length >= min_length {
                 return Ok(route);
@@ -255,7 +262,36 @@ impl Route {
                     // With no action left a car goes straight on, or where a
                     // T-junction has no straight on, takes its lane's turn.
                     let turn = head.and_then(Action::turn).unwrap_or_else(|| map.default_turn(lane));
-                    let at_intersection = matches!(map.lanes[lane].end, LaneEnd::Intersection { .. });
+                    let at_intersection = matches!(map.lanes[lane].end, LaneEnd::Intersection { .. })
+                        && (head.is_none() || map.has_choice(lane));
+                    if let Some(action) = head.filter(|_| !at_intersection) {
+                        // A lane that loops back, or meets a junction with no choice,
+                        // while the lane beside it turns (imported networks: a
+                        // turnaround lane): change into it. On a road that never
+                        // reaches a choice, give up.
+                        if map.lane_towards(lane, turn).is_some() {
+                            if let Ok((target, at)) =
+                                plan_turn_lane(map, lane, turn, earliest + STRATEGIC_CHANGE_LEAD, given_up(next))
+                            {
+                                route.push_lane_change(map, lane, target, lane_entry, at, None, Some(next));
+                                lane = target;
+                                lane_entry = at + change_run;
+                                earliest = lane_entry;
+                                continue;
+                            }
+                        }
+                        loops_in_a_row += 1;
+                        if loops_in_a_row > map.lanes.len() {
+                            let reason =
+                                "no junction with a choice ahead: the road only goes on or loops back".to_string();
+                            route.adapt(next, action, AdaptationKind::Skipped, reason);
+                            next += 1;
+                            loops_in_a_row = 0;
+                            continue;
+                        }
+                    } else {
+                        loops_in_a_row = 0;
+                    }
                     let mut carried_out = at_intersection && head.is_some();
                     if at_intersection && map.exit(lane, turn).is_none() {
                         let action = head.expect("with no action, the turn is one the lane has");
@@ -267,9 +303,11 @@ impl Route {
                         let to_left = turn == Turn::Left;
                         // (At a T-junction's stem no lane may go straight on.)
                         let beside_turns = map.lane_towards(lane, turn).is_some();
-                        let back =
-                            previous.take().filter(|p| beside_turns && !given_up(next) && p.has_room(map, to_left));
+                        let back = previous.take().filter(|p| {
+                            beside_turns && !given_up(next) && looked_back != Some(next) && p.has_room(map, to_left)
+                        });
                         if let Some(p) = back {
+                            looked_back = Some(next);
                             let before = map.adjacent_lane(p.lane, to_left).expect("room means a lane beside");
                             forced = Some((p.lane, before, next));
                             (lane, lane_entry, earliest, next) = (p.lane, p.lane_entry, p.earliest, p.next);
@@ -428,6 +466,13 @@ impl Route {
 /// `at` metres along `lane`.
 fn lane_change_curve(map: &CityMap, lane: LaneId, target: LaneId, at: f64) -> Curve {
     let curve = &map.lanes[lane].curve;
+    if !matches!(curve, Curve::Line(_)) {
+        // Along a bent lane (imported networks): follow it sideways onto the target.
+        let run = map.layout.lane_change_length;
+        let end = map.lanes[target].curve.position(at + run, 0.0);
+        let shift = curve.local_coordinates(end).1;
+        return Curve::lane_change_along(curve, at, run, shift, end);
+    }
     let heading = curve.heading_at(at);
     let to_left = map.adjacent_lane(lane, true) == Some(target);
     let shift = if to_left { 1.0 } else { -1.0 } * map.layout.lane_width;

@@ -216,8 +216,9 @@ pub struct SumoConnection {
     pub from: usize,
     pub to: usize,
     pub turn: Turn,
-    /// Its path through the junction (the internal lane's shape), metres;
-    /// empty when the file has none (a straight join).
+    /// Its path through the junction (the shapes of the internal lanes it
+    /// crosses, in turn), metres; empty when the file has none (a straight
+    /// join).
     pub path: Vec<DVec2>,
     /// The traffic light governing it: (index into
     /// [`SumoNetwork::programmes`], index into each phase's state).
@@ -423,6 +424,14 @@ impl SumoNetwork {
             programmes.push(SumoProgramme { id: p.id.clone(), offset: p.offset, phases });
         }
 
+        // Where a movement goes on from an internal lane: a movement that
+        // waits inside a junction (a left turn) crosses two or more.
+        let onward: HashMap<(&str, u32, &str, u32), &str> = raw
+            .connections
+            .iter()
+            .filter(|c| c.from.starts_with(':'))
+            .filter_map(|c| Some(((c.from.as_str(), c.from_lane, c.to.as_str(), c.to_lane), c.via.as_deref()?)))
+            .collect();
         let mut connections = Vec::new();
         for c in &raw.connections {
             let (Some(&from), Some(&to)) =
@@ -433,12 +442,22 @@ impl SumoNetwork {
             let name = || format!("<connection from=\"{}_{}\" to=\"{}_{}\">", c.from, c.from_lane, c.to, c.to_lane);
             let turn = turn_of(&c.dir)
                 .ok_or_else(|| format!("{}: dir=\"{}\" is not allowed: s, l, L, r, R or t", name(), c.dir))?;
-            let path = match c.via.as_deref().and_then(|v| internal_shapes.get(v)) {
-                Some(text) => {
-                    polyline(text).ok_or_else(|| format!("{}: its internal lane's shape is not x,y points", name()))?
+            let mut path = Vec::new();
+            let mut via = c.via.as_deref();
+            while let Some(lane) = via {
+                let Some(text) = internal_shapes.get(lane) else { break };
+                path.extend(
+                    polyline(text)
+                        .ok_or_else(|| format!("{}: internal lane {lane}'s shape is not x,y points", name()))?,
+                );
+                // `:J_9_0` is lane 0 of internal edge `:J_9`.
+                let (edge, index) = lane.rsplit_once('_').unwrap_or((lane, ""));
+                let index: u32 = index.parse().unwrap_or(0);
+                via = onward.get(&(edge, index, c.to.as_str(), c.to_lane)).copied();
+                if path.len() > 10_000 {
+                    return Err(format!("{}: its internal lanes lead round in a circle", name()));
                 }
-                None => Vec::new(),
-            };
+            }
             let signal = match (&c.tl, c.link_index.and_then(|l| usize::try_from(l).ok())) {
                 (Some(tl), Some(link)) => {
                     let p = *programme_index

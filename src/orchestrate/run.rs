@@ -360,6 +360,21 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
         }
         std::fs::remove_file(path).map_err(io_err(path))?;
     }
+    // The networks the old specs named.
+    let networks = out.join(crate::spec::NETWORKS_FOLDER);
+    for (_, record) in records {
+        let sections =
+            [&record.spec["map"], &record.spec["held_out"]["val"]["map"], &record.spec["held_out"]["test"]["map"]];
+        for sumo in sections.iter().filter_map(|m| m["sumo"].as_str()) {
+            let path = networks.join(crate::spec::network_file_name(sumo));
+            if path.is_file() {
+                std::fs::remove_file(&path).map_err(io_err(&path))?;
+            }
+        }
+    }
+    if networks.exists() && std::fs::read_dir(&networks).map(|mut d| d.next().is_none()).unwrap_or(false) {
+        std::fs::remove_dir(&networks).map_err(io_err(&networks))?;
+    }
     let shards = out.join("shards");
     if shards.exists() && std::fs::read_dir(&shards).map(|mut d| d.next().is_none()).unwrap_or(false) {
         std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
@@ -645,6 +660,20 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             Err(e) => return Err(e),
         }
     };
+
+    // The SUMO networks the spec names, kept beside the manifest so that
+    // every reader rebuilds the same map from the dataset alone.
+    let networks = expansion.spec.networks();
+    if !networks.is_empty() {
+        let folder = out.join(crate::spec::NETWORKS_FOLDER);
+        std::fs::create_dir_all(&folder).map_err(io_err(&folder))?;
+        for (name, network) in networks {
+            let path = folder.join(name);
+            if std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
+                write_atomically(&path, &network.bytes)?;
+            }
+        }
+    }
 
     let progress = Progress::new(total, options.progress);
     let bytes = AtomicU64::new(sample.map_or(0, |(_, b)| b));

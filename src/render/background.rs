@@ -76,6 +76,9 @@ pub enum Block {
 /// buildings per block, split along the longer side, and a park in the
 /// middle. Shared by the flat drawing and the perspective solids.
 pub fn blocks(map: &CityMap, lo: DVec2, hi: DVec2) -> Vec<Block> {
+    if map.is_imported() {
+        return Vec::new(); // an imported network has no blocks to fill
+    }
     let layout = &map.layout;
     let hw = layout.road_half_width();
     let far = 1000.0;
@@ -122,6 +125,11 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     let mut buildings = Pixmap::new(camera.width, camera.height).expect("image size was validated");
     pixmap.fill(Color::from_rgba8(GROUND[0], GROUND[1], GROUND[2], 255));
     let t = world_to_canvas(camera);
+    if map.is_imported() {
+        draw_network_roads(map, &mut pixmap, &mut road, t);
+        let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();
+        return Background { road: alpha(&road), buildings: alpha(&buildings), pixmap };
+    }
     let layout = &map.layout;
     let hw = layout.road_half_width();
     let (view_lo, view_hi) = camera.ground_view();
@@ -227,6 +235,86 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
     }
     let alpha = |p: &Pixmap| p.data().chunks_exact(4).map(|px| px[3]).collect();
     Background { road: alpha(&road), buildings: alpha(&buildings), pixmap }
+}
+
+/// An imported network's roads: asphalt along every lane and movement and
+/// over every junction's outline; dashed white lines between lanes of one
+/// direction, a yellow line on the left of each direction, and at each
+/// junction the marks of its control (a stop line at lights and all-way
+/// stops with a stop sign, a dashed give-way line with a triangle on the
+/// minor approaches of a priority junction).
+fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: Transform) {
+    let half = map.layout.lane_width / 2.0;
+    for target in [&mut *pixmap, &mut *road] {
+        for x in map.intersections.iter().filter(|x| x.outline.len() >= 3) {
+            fill_polygon(target, t, &x.outline, ASPHALT);
+        }
+        let curves = map.lanes.iter().map(|l| &l.curve).chain(map.connectors.iter().map(|c| &c.curve));
+        for curve in curves {
+            band_along(target, t, curve, 0.0, curve.length(), -half - 0.05, half + 0.05, ASPHALT);
+        }
+    }
+    for (id, lane) in map.lanes.iter().enumerate() {
+        let curve = &lane.curve;
+        let len = curve.length();
+        if map.adjacent_lane(id, true).is_some() {
+            let mut s = 1.0;
+            while s + 3.0 <= len - 1.0 {
+                band_along(pixmap, t, curve, s, s + 3.0, half - 0.07, half + 0.07, WHITE);
+                s += 6.0;
+            }
+        } else {
+            band_along(pixmap, t, curve, 0.0, len, half - 0.2, half - 0.05, CENTRE_LINE);
+        }
+        let crate::map::LaneEnd::Intersection { intersection, approach } = lane.end else { continue };
+        let line = len - map.layout.stop_line_setback;
+        let junction = &map.intersections[intersection];
+        let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight);
+        let kerb_side = map.adjacent_lane(id, false).is_none();
+        match junction.control {
+            JunctionControl::Signals => band_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),
+            JunctionControl::AllWayStop => {
+                band_along(pixmap, t, curve, line - 0.1, line + 0.5, -half, half, WHITE);
+                if let Some(p) = sign.filter(|_| kerb_side) {
+                    circle(pixmap, t, p.x, p.y, 0.55, WHITE);
+                    circle(pixmap, t, p.x, p.y, 0.45, STOP_SIGN);
+                }
+            }
+            JunctionControl::Priority if junction.major.holds(approach) => {}
+            JunctionControl::Priority => {
+                let mut k = -half;
+                while k < half {
+                    band_along(pixmap, t, curve, line, line + 0.4, k, (k + 0.6).min(half), WHITE);
+                    k += 1.0;
+                }
+                if let Some(p) = sign.filter(|_| kerb_side) {
+                    let ahead = curve.position(len, 0.0) - curve.position(len - 1.0, 0.0);
+                    give_way_triangle(pixmap, t, p, ahead.normalize_or_zero());
+                }
+            }
+        }
+    }
+}
+
+/// A band along `curve` from `s0` to `s1` between two lateral offsets, in
+/// pieces of at most a metre, so that it bends with the curve.
+#[allow(clippy::too_many_arguments)]
+fn band_along(
+    pixmap: &mut Pixmap,
+    t: Transform,
+    curve: &crate::map::curve::Curve,
+    s0: f64,
+    s1: f64,
+    lat0: f64,
+    lat1: f64,
+    rgb: [u8; 3],
+) {
+    // One polygon (no seams between pieces): one side forward, the other back.
+    let pieces = ((s1 - s0) / 1.0).ceil().max(1.0) as usize;
+    let at = |k: usize| s0 + (s1 - s0) * k as f64 / pieces as f64;
+    let mut pts: Vec<DVec2> = (0..=pieces).map(|k| curve.position(at(k), lat0)).collect();
+    pts.extend((0..=pieces).rev().map(|k| curve.position(at(k), lat1)));
+    fill_polygon(pixmap, t, &pts, rgb);
 }
 
 /// The stretches of road `name` (crossing others at `crossings`, running

@@ -33,6 +33,14 @@ pub struct MapSpec {
     /// `north_south_roads` and the extents then come from it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub grid: Option<GridSpec>,
+    /// A real road network instead: a SUMO `.net.xml` (as `netconvert`
+    /// writes from OpenStreetMap or OpenDRIVE), relative to the spec file.
+    /// `gen` keeps a copy in the dataset's `networks/` folder.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sumo: Option<String>,
+    /// The network `sumo` names, once read ([`DatasetSpec::read_networks`]).
+    #[serde(skip)]
+    pub network: LoadedNetwork,
 }
 
 /// A town of `rows` east-west roads crossing `columns` north-south ones,
@@ -214,6 +222,10 @@ impl MapSpec {
     /// The area the bird's-eye camera frames (min corner, max corner), metres.
     pub fn camera_frame(&self) -> (glam::DVec2, glam::DVec2) {
         let layout = self.layout();
+        if let (Some(network), None | Some(CameraArea::Named(_))) = (&self.network.0, &self.camera_area) {
+            // An imported network is framed whole.
+            return network.bounds;
+        }
         match &self.camera_area {
             None | Some(CameraArea::Named(CameraAreaName::Junctions)) => layout.framed_area(),
             Some(CameraArea::Named(CameraAreaName::Network)) => layout.network_area(),
@@ -376,6 +388,8 @@ impl Default for MapSpec {
             camera_altitude_m: None,
             camera_area: None,
             grid: None,
+            sumo: None,
+            network: LoadedNetwork::default(),
         }
     }
 }
@@ -416,6 +430,10 @@ impl MapSpec {
     /// `grid-3x4` (rows x columns; `-b30-o20` when blocks or outer roads
     /// differ from the defaults).
     pub fn town_name(&self) -> String {
+        if let Some(sumo) = &self.sumo {
+            let file = network_file_name(sumo);
+            return format!("sumo-{}", file.strip_suffix(".net.xml").unwrap_or(file));
+        }
         match &self.grid {
             None if *self == MapSpec::default() => "default".into(),
             None => "custom".into(),
@@ -449,9 +467,25 @@ impl MapSpec {
         }
     }
 
+    /// The map of this section's town: the imported network, or the town
+    /// built from [`MapSpec::layout`].
+    pub fn city_map(&self) -> Result<std::sync::Arc<crate::map::CityMap>, SpecError> {
+        match (&self.sumo, &self.network.0) {
+            (None, _) => Ok(std::sync::Arc::new(crate::map::CityMap::new(self.layout()))),
+            (Some(_), Some(network)) => Ok(network.map.clone()),
+            (Some(sumo), None) => Err(SpecError::new(
+                "map.sumo",
+                format!("the network {sumo:?} was not read: a spec naming a SUMO network is read from its file (its path is relative to the spec)"),
+            )),
+        }
+    }
+
     /// The layout the map is built from (a section that draws its town:
     /// the first of [`MapSpec::towns`]).
     pub fn layout(&self) -> MapLayout {
+        if let Some(network) = &self.network.0 {
+            return network.map.layout.clone();
+        }
         let d = MapLayout::default();
         if let Some(spec) = self.grid.as_ref() {
             let grid = Grid {
@@ -520,6 +554,30 @@ impl MapSpec {
             positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
         }
         self.validate_camera_area()?;
+        if let Some(sumo) = &self.sumo {
+            let default = MapSpec::default();
+            let moved = [
+                ("map.grid", self.grid.is_some()),
+                ("map.lane_width", self.lane_width != default.lane_width),
+                ("map.east_west_roads", self.east_west_roads != default.east_west_roads),
+                ("map.north_south_roads", self.north_south_roads != default.north_south_roads),
+                ("map.extent_x", self.extent_x != default.extent_x),
+                ("map.extent_y", self.extent_y != default.extent_y),
+            ];
+            if let Some((field, _)) = moved.iter().find(|m| m.1) {
+                return Err(SpecError::new(
+                    *field,
+                    format!("the SUMO network {sumo:?} brings its own roads and lanes: leave {field} out (map.lane_change_m, map.camera_area and map.camera_altitude_m still apply)"),
+                ));
+            }
+            if !sumo.ends_with(".xml") || sumo.trim().is_empty() {
+                return Err(SpecError::new(
+                    "map.sumo",
+                    format!("{sumo:?} is not allowed: give the path of a SUMO network file, e.g. \"nets/town.net.xml\" (relative to the spec file)"),
+                ));
+            }
+            return Ok(());
+        }
         if let Some(grid) = &self.grid {
             grid.rows.check("map.grid.rows")?;
             grid.columns.check("map.grid.columns")?;

@@ -11,12 +11,14 @@ mod city;
 mod graph;
 mod held_out;
 mod map;
+mod network;
 
 pub use camera::*;
 pub use city::*;
 pub use graph::*;
 pub use held_out::*;
 pub use map::*;
+pub use network::*;
 
 use crate::camera::{Camera, CameraKind, CameraPlan, Pinhole};
 use crate::json::Shown;
@@ -333,7 +335,9 @@ impl DatasetSpec {
     pub fn from_file(path: &Path) -> Result<DatasetSpec, SpecError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| SpecError::new("", format!("cannot read spec file {}: {e}", path.display())))?;
-        DatasetSpec::from_json(&text)
+        let mut spec = DatasetSpec::from_json(&text)?;
+        spec.read_networks_beside(path)?;
+        Ok(spec)
     }
 
     /// Checks every field's range and the groups' consistency.

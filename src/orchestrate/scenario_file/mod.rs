@@ -312,7 +312,7 @@ fn resolve(
                 ));
             }
             spec.map = section.clone();
-            own_map = Arc::new(CityMap::new(section.layout()));
+            own_map = section.city_map().map_err(|e| here.err(None, e.field, e.message))?;
             &own_map
         }
     };

@@ -28,7 +28,7 @@ pub(super) fn original_actions(
     let mut lane = spawn;
     let mut queue = Vec::with_capacity(count as usize);
     for _ in 0..count {
-        let approach = past_loop(map, lane);
+        let Some(approach) = past_loop(map, lane) else { break };
         let exit = |a: Action| a.turn().and_then(|turn| road_exit(map, approach, turn));
         let mut action = DRAWN[rng.random_range(0..3)];
         if exit(action).is_none() {
@@ -46,13 +46,21 @@ pub(super) fn original_actions(
     (queue, merges)
 }
 
-/// The lane a car on `lane` next reaches a junction on: `lane` itself, or
-/// the one its off-camera loop leads to.
-fn past_loop(map: &CityMap, lane: LaneId) -> LaneId {
-    match map.lanes[lane].end {
-        LaneEnd::Loop(c) => map.connectors[c].to,
-        LaneEnd::Intersection { .. } => lane,
+/// The lane a car on `lane` next reaches a junction with a choice on:
+/// `lane` itself, or the one its off-camera loop leads to (on an imported
+/// network, after any loops and junctions where its road only goes on);
+/// `None` on a road that never reaches a choice.
+fn past_loop(map: &CityMap, lane: LaneId) -> Option<LaneId> {
+    let mut lane = lane;
+    for _ in 0..=map.lanes.len() {
+        let next = match map.lanes[lane].end {
+            LaneEnd::Loop(c) => c,
+            LaneEnd::Intersection { .. } if map.has_choice(lane) => return Some(lane),
+            LaneEnd::Intersection { .. } => map.exit(lane, map.default_turn(lane))?,
+        };
+        lane = map.connectors[next].to;
     }
+    None
 }
 
 /// The connector making `turn` at the end of `lane` or of a lane beside it
@@ -96,12 +104,13 @@ pub(super) fn random_actions(
                 continue;
             }
         }
-        // A turn applies at the next intersection, after any off-camera loop.
-        let mut approach = lane;
-        if let LaneEnd::Loop(c) = map.lanes[lane].end {
-            approach = map.connectors[c].to;
-        }
+        // A turn applies at the next intersection with a choice, after any
+        // off-camera loop.
+        let Some(approach) = past_loop(map, lane) else { break };
         let turns = map.allowed_turns(approach);
+        if turns.is_empty() {
+            break;
+        }
         let turn = turns[rng.random_range(0..turns.len())];
         let action = match turn {
             crate::map::Turn::Left => Action::Left,

@@ -116,7 +116,7 @@ impl Expansion {
                         // The town's map is built once, whatever graphs plan on it.
                         let map = match planners.iter().find(|p| p.spec.map == town) {
                             Some(p) => p.map.clone(),
-                            None => Arc::new(CityMap::new(town.layout())),
+                            None => town.city_map()?,
                         };
                         let town_spec =
                             DatasetSpec { map: town.clone(), graph, groups: groups.clone(), ..spec.clone() };

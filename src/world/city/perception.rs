@@ -342,7 +342,8 @@ impl Sim<'_> {
         let c = &self.map.connectors[connector];
         let intersection = c.intersection?;
         let LaneEnd::Intersection { approach, .. } = self.map.lanes[c.from].end else { return None };
-        let signal = if c.turn == Turn::Left { Signal::Left } else { Signal::Straight };
+        // A U-turn through a junction (imported networks) goes with the left turns.
+        let signal = if matches!(c.turn, Turn::Left | Turn::UTurn) { Signal::Left } else { Signal::Straight };
         self.map.light_index(intersection, approach, signal)
     }
 

@@ -57,7 +57,8 @@ fn plan(
         .enumerate()
         .map(|(i, g)| {
             let spawn = lane(map, g.lane);
-            let route = Route::plan(map, spawn, g.at, &g.actions, &g.merges, g.at + 200.0, &LanePolicy::Adapt)
+            let reach = g.at + (g.desired * seconds * 1.5).max(200.0);
+            let route = Route::plan(map, spawn, g.at, &g.actions, &g.merges, reach, &LanePolicy::Adapt)
                 .expect("drivable test route");
             CarPlan {
                 id: i as u32,
@@ -569,4 +570,47 @@ fn at_an_all_way_stop_two_cars_waiting_go_one_after_the_other_in_order_of_preced
         "car {second} never waited for car {first}"
     );
     assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+}
+
+/// The small real network the SUMO import tests use (OpenStreetMap, ODbL).
+fn berlin() -> CityMap {
+    let text = include_str!("../../../tests/data/sumo/berlin-small.net.xml");
+    let net = crate::map::sumo::SumoNetwork::from_xml(text).expect("the test network reads");
+    CityMap::from_sumo(&net, 6.0).expect("the test network drives").0
+}
+
+#[test]
+fn cars_drive_on_and_on_through_an_imported_sumo_network() {
+    let map = berlin();
+    let turns = [Action::Left, Action::Right, Action::Straight, Action::Right, Action::Left];
+    // A car on every lane long enough, each with its own queue of turns.
+    let mut cars = Vec::new();
+    for (k, id) in map.spawn_points().into_iter().enumerate() {
+        if map.lanes[id].curve.length() < 20.0 {
+            continue;
+        }
+        let name: &'static str = Box::leak(map.lanes[id].name.clone().into_boxed_str());
+        let actions: Vec<Action> = (0..4).map(|a| turns[(k + a) % turns.len()]).collect();
+        cars.push(Given { lane: name, at: 6.0, actions, merges: vec![], desired: 8.0, start: 0.0 });
+    }
+    assert!(cars.len() >= 30, "only {} cars placed", cars.len());
+    let seconds = 180.0;
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], seconds));
+    let collisions: Vec<_> = traj.events.iter().filter(|e| e.kind == EventKind::Collision).collect();
+    assert!(collisions.is_empty(), "{collisions:?}");
+    let last = traj.frames() - 1;
+    for (car, given) in cars.iter().enumerate() {
+        let driven: f64 =
+            (1..=last).map(|f| traj.states[f][car].position.distance(traj.states[f - 1][car].position)).sum();
+        // The longest time at rest, seconds: a red light or a queue, never for good.
+        let mut longest = 0;
+        let mut run = 0;
+        for f in 0..=last {
+            run = if traj.states[f][car].speed < 0.1 { run + 1 } else { 0 };
+            longest = longest.max(run);
+        }
+        let rest = longest as f64 * FRAME;
+        assert!(driven > 300.0, "car {car} from {} drove {driven:.0} m in {seconds} s", given.lane);
+        assert!(rest < 90.0, "car {car} from {} stood still for {rest:.0} s", given.lane);
+    }
 }

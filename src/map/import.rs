@@ -1,0 +1,388 @@
+//! A driveable [`CityMap`] from an imported SUMO network: the lanes cars can
+//! keep driving on forever, the movements between them, the junctions with
+//! their control, and U-turn loops where a road ends and its other direction
+//! goes back.
+//!
+//! What drives like what:
+//! - SUMO's lanes keep their ids and centre lines (polylines); the lanes of
+//!   one edge are neighbours for lane changes (index 0 is the kerb side).
+//! - Connections keep their turn and their path through the junction (every
+//!   internal lane it crosses); of several from one lane with the same turn
+//!   the first in the file is used, and a turnaround (`t`) is used only
+//!   when it is the lane's only movement: it then crosses the junction as a
+//!   left turn does.
+//! - A lane that ends where no connection goes on (a `dead_end` junction)
+//!   loops round onto the lane of the same index (or the nearest) of the
+//!   edge that goes back, when there is one.
+//! - Junctions: `traffic_light` junctions get causalcity's light cycle (per
+//!   approach side, as in the grid towns; the file's own programme is not
+//!   run yet); `priority` and `priority_stop` junctions give priority to the
+//!   approaches of their highest-priority edge's axis; `allway_stop`,
+//!   `right_before_left`, `left_before_right` and `unregulated` junctions
+//!   drive as all-way stops. A lane's approach side (N, E, S, W) is the
+//!   compass side behind its direction of travel at its end.
+//! - Only the largest set of lanes from which every other can be reached is
+//!   kept, so every route goes on forever; what is dropped is reported.
+
+use super::control::{Axis, JunctionControl};
+use super::curve::Curve;
+use super::sumo::{SumoJunctionKind, SumoNetwork};
+use super::{CityMap, Connector, Intersection, Lane, LaneEnd, LaneId, LanePosition, MapLayout, Turn};
+use glam::DVec2;
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+/// Where an imported map's stop lines stand before the end of their lane,
+/// metres. SUMO's lanes already end at the junction's outline (crossings lie
+/// inside it), so the line is at the lane's end, less a car's nose.
+pub const IMPORTED_STOP_LINE_SETBACK_M: f64 = 1.0;
+
+/// What importing kept and dropped.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ImportReport {
+    /// SUMO lanes cars drive on in the map.
+    pub lanes: usize,
+    /// U-turn loops added where a road ends.
+    pub loops: usize,
+    /// SUMO lanes left out, each with why, in file order.
+    pub dropped: Vec<(String, &'static str)>,
+}
+
+/// Side of a junction that a lane ending with `heading` arrives from: 'N',
+/// 'E', 'S' or 'W', the side behind its direction of travel (so every lane
+/// of an edge arrives from the same side).
+fn approach_side(heading: f64) -> char {
+    let v = -DVec2::new(heading.cos(), heading.sin());
+    if v.x.abs() >= v.y.abs() {
+        if v.x < 0.0 {
+            'W'
+        } else {
+            'E'
+        }
+    } else if v.y < 0.0 {
+        'S'
+    } else {
+        'N'
+    }
+}
+
+/// A half circle to the left from `a` (heading `heading`) round to `b`: the
+/// loop at a road's end. Points every 0.5 m or closer.
+fn u_turn(a: DVec2, heading: f64, b: DVec2) -> Option<Curve> {
+    let centre = (a + b) / 2.0;
+    let radius = a.distance(b) / 2.0;
+    if radius < 0.05 {
+        return None;
+    }
+    let forward = DVec2::new(heading.cos(), heading.sin());
+    let u = (a - centre) / radius;
+    // Turn the way that first heads forward.
+    let sign = if u.perp().dot(forward) >= 0.0 { 1.0 } else { -1.0 };
+    let n = ((PI * radius / 0.5).ceil() as usize).max(8);
+    let points: Vec<DVec2> = (0..=n)
+        .map(|k| {
+            let t = sign * PI * k as f64 / n as f64;
+            centre + DVec2::new(u.x * t.cos() - u.y * t.sin(), u.x * t.sin() + u.y * t.cos()) * radius
+        })
+        .collect();
+    Curve::polyline(&points)
+}
+
+/// The path of a movement: from the end of one lane through `via` (the
+/// junction's internal lane, possibly empty) to the start of the next.
+fn movement_path(from: &Curve, via: &[DVec2], to: &Curve) -> Curve {
+    let mut points = vec![from.end()];
+    points.extend_from_slice(via);
+    points.push(to.start());
+    Curve::polyline(&points).unwrap_or_else(|| {
+        // The lanes meet end to start: a step of a centimetre keeps the
+        // movement a curve with a length.
+        let h = from.heading_at(from.length());
+        Curve::line(from.end(), from.end() + DVec2::new(h.cos(), h.sin()) * 0.01)
+    })
+}
+
+/// Strongly connected sets of `0..n` under `next`, as a component number
+/// per node (iterative Kosaraju).
+fn components(n: usize, next: &[Vec<usize>]) -> Vec<usize> {
+    let mut order = Vec::with_capacity(n);
+    let mut seen = vec![false; n];
+    for root in 0..n {
+        if seen[root] {
+            continue;
+        }
+        seen[root] = true;
+        let mut stack = vec![(root, 0usize)];
+        while let Some(&mut (node, ref mut k)) = stack.last_mut() {
+            if let Some(&m) = next[node].get(*k) {
+                *k += 1;
+                if !seen[m] {
+                    seen[m] = true;
+                    stack.push((m, 0));
+                }
+            } else {
+                order.push(node);
+                stack.pop();
+            }
+        }
+    }
+    let mut back = vec![Vec::new(); n];
+    for (a, outs) in next.iter().enumerate() {
+        for &b in outs {
+            back[b].push(a);
+        }
+    }
+    let mut component = vec![usize::MAX; n];
+    let mut count = 0;
+    for &root in order.iter().rev() {
+        if component[root] != usize::MAX {
+            continue;
+        }
+        let mut stack = vec![root];
+        component[root] = count;
+        while let Some(node) = stack.pop() {
+            for &m in &back[node] {
+                if component[m] == usize::MAX {
+                    component[m] = count;
+                    stack.push(m);
+                }
+            }
+        }
+        count += 1;
+    }
+    component
+}
+
+impl CityMap {
+    /// The driveable map of `net`, with lane changes `lane_change_m` long.
+    /// Refused when no two lanes reach each other.
+    pub fn from_sumo(net: &SumoNetwork, lane_change_m: f64) -> Result<(CityMap, ImportReport), String> {
+        let n = net.lanes.len();
+        // Lanes of each edge by index, kerb side first.
+        let mut by_edge: HashMap<&str, Vec<usize>> = HashMap::new();
+        for (i, l) in net.lanes.iter().enumerate() {
+            by_edge.entry(l.edge.as_str()).or_default().push(i);
+        }
+        for lanes in by_edge.values_mut() {
+            lanes.sort_by_key(|&i| net.lanes[i].index);
+        }
+        let neighbour = |lane: usize, to_left: bool| -> Option<usize> {
+            let l = &net.lanes[lane];
+            let want = if to_left { l.index.checked_add(1)? } else { l.index.checked_sub(1)? };
+            by_edge[l.edge.as_str()].iter().copied().find(|&j| net.lanes[j].index == want)
+        };
+
+        // Movements out of each lane: the file's connections (a turnaround
+        // only where it is the lane's only one), else a loop onto the road
+        // back.
+        let mut moves: Vec<Vec<(usize, Turn, Option<usize>)>> = vec![Vec::new(); n];
+        for (k, c) in net.connections.iter().enumerate() {
+            let slot = &mut moves[c.from];
+            if !slot.iter().any(|m| m.1 == c.turn) {
+                slot.push((c.to, c.turn, Some(k)));
+            }
+        }
+        for slot in moves.iter_mut() {
+            if slot.len() > 1 {
+                slot.retain(|m| m.1 != Turn::UTurn);
+            }
+        }
+        for (slot, l) in moves.iter_mut().zip(&net.lanes) {
+            if !slot.is_empty() {
+                continue;
+            }
+            let back = net
+                .lanes
+                .iter()
+                .enumerate()
+                .filter(|(_, b)| b.from == l.to && b.to == l.from && b.edge != l.edge)
+                .min_by_key(|(_, b)| (b.index.abs_diff(l.index), b.index));
+            if let Some((b, _)) = back {
+                slot.push((b, Turn::UTurn, None));
+            }
+        }
+
+        // Keep the largest set of lanes that all reach each other, then drop
+        // lanes left with no movement inside it, until nothing changes.
+        let mut kept = vec![true; n];
+        let mut dropped: Vec<(usize, &'static str)> = Vec::new();
+        loop {
+            let next: Vec<Vec<usize>> = (0..n)
+                .map(|lane| {
+                    if !kept[lane] {
+                        return Vec::new();
+                    }
+                    let mut out: Vec<usize> = moves[lane].iter().map(|m| m.0).filter(|&t| kept[t]).collect();
+                    out.extend([true, false].into_iter().filter_map(|left| neighbour(lane, left)).filter(|&t| kept[t]));
+                    out
+                })
+                .collect();
+            let component = components(n, &next);
+            let mut size: HashMap<usize, usize> = HashMap::new();
+            for lane in (0..n).filter(|&l| kept[l]) {
+                *size.entry(component[lane]).or_default() += 1;
+            }
+            let Some((&largest, _)) = size.iter().max_by_key(|(c, s)| (**s, std::cmp::Reverse(**c))) else {
+                return Err("no lane cars drive is left".into());
+            };
+            let mut changed = false;
+            for lane in 0..n {
+                if !kept[lane] {
+                    continue;
+                }
+                let why = if component[lane] != largest {
+                    Some("cut off: cars cannot drive from it to the rest of the network and back")
+                } else if !moves[lane].iter().any(|m| kept[m.0] && component[m.0] == largest) {
+                    Some("leads nowhere: no movement from its end stays in the network")
+                } else {
+                    None
+                };
+                if let Some(why) = why {
+                    kept[lane] = false;
+                    dropped.push((lane, why));
+                    changed = true;
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+        let ids: Vec<usize> = (0..n).filter(|&l| kept[l]).collect();
+        if ids.len() < 2 {
+            return Err(format!(
+                "no two lanes cars drive reach each other (of {n} lanes, {} lead nowhere or are cut off)",
+                dropped.len()
+            ));
+        }
+        let new_id: HashMap<usize, LaneId> = ids.iter().enumerate().map(|(k, &l)| (l, k)).collect();
+
+        // Junctions that movements cross, in file order.
+        let crosses = |l: usize| moves[l].iter().any(|m| m.2.is_some() && kept[m.0]);
+        let mut crossed: Vec<usize> = ids.iter().filter(|&&l| crosses(l)).map(|&l| net.lanes[l].to).collect();
+        crossed.sort_unstable();
+        crossed.dedup();
+        let junction_of: HashMap<usize, usize> = crossed.iter().enumerate().map(|(k, &j)| (j, k)).collect();
+        let intersections: Vec<Intersection> = crossed
+            .iter()
+            .map(|&j| {
+                let x = &net.junctions[j];
+                let control = match x.kind {
+                    SumoJunctionKind::TrafficLight => JunctionControl::Signals,
+                    SumoJunctionKind::Priority | SumoJunctionKind::DeadEnd => JunctionControl::Priority,
+                    SumoJunctionKind::AllWayStop
+                    | SumoJunctionKind::RightBeforeLeft
+                    | SumoJunctionKind::Unregulated => JunctionControl::AllWayStop,
+                };
+                let (lo, hi) = x.shape.iter().fold((x.centre, x.centre), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+                let half_size = ((hi.x - lo.x) + (hi.y - lo.y)) / 4.0;
+                Intersection {
+                    name: x.id.clone(),
+                    centre: x.centre,
+                    half_size: half_size.max(1.0),
+                    control,
+                    major: Axis::EastWest,
+                    outline: x.shape.clone(),
+                }
+            })
+            .collect();
+
+        // Lanes.
+        let mut widths = Vec::new();
+        let mut lanes = Vec::with_capacity(ids.len());
+        for &l in &ids {
+            let s = &net.lanes[l];
+            widths.push(s.width);
+            let curve =
+                Curve::polyline(&s.shape).ok_or_else(|| format!("<lane id=\"{}\">: its shape has no length", s.id))?;
+            let on_edge: Vec<usize> = by_edge[s.edge.as_str()].iter().copied().filter(|j| kept[*j]).collect();
+            let position = match on_edge.iter().position(|&j| j == l) {
+                _ if on_edge.len() == 1 => LanePosition::Single,
+                Some(0) => LanePosition::Outer,
+                Some(k) if k + 1 == on_edge.len() => LanePosition::Inner,
+                _ => LanePosition::Middle,
+            };
+            let letter = match position {
+                LanePosition::Outer | LanePosition::Single => 'w',
+                LanePosition::Inner => 'x',
+                LanePosition::Middle => 'm',
+            };
+            let end = match junction_of.get(&s.to) {
+                Some(&k) if crosses(l) => {
+                    let h = curve.heading_at(curve.length());
+                    LaneEnd::Intersection { intersection: k, approach: approach_side(h) }
+                }
+                _ => LaneEnd::Loop(usize::MAX),
+            };
+            lanes.push(Lane { name: s.id.clone(), road: '~', segment: 0, letter, position, curve, end });
+        }
+
+        // Movements.
+        let mut connectors = Vec::new();
+        for (k, &l) in ids.iter().enumerate() {
+            for &(to, turn, connection) in &moves[l] {
+                let Some(&to_id) = new_id.get(&to) else { continue };
+                let (from_curve, to_curve) = (&lanes[k].curve, &lanes[to_id].curve);
+                let (curve, intersection) = match (lanes[k].end, connection) {
+                    (LaneEnd::Intersection { intersection, .. }, Some(c)) => {
+                        (movement_path(from_curve, &net.connections[c].path, to_curve), Some(intersection))
+                    }
+                    (LaneEnd::Loop(_), None) => {
+                        let h = from_curve.heading_at(from_curve.length());
+                        let curve = u_turn(from_curve.end(), h, to_curve.start())
+                            .unwrap_or_else(|| movement_path(from_curve, &[], to_curve));
+                        (curve, None)
+                    }
+                    _ => continue,
+                };
+                connectors.push(Connector { from: k, to: to_id, turn, intersection, curve });
+            }
+        }
+        for (id, c) in connectors.iter().enumerate() {
+            if c.intersection.is_none() {
+                lanes[c.from].end = LaneEnd::Loop(id);
+            }
+        }
+        if let Some(l) = lanes.iter().find(|l| matches!(l.end, LaneEnd::Loop(usize::MAX))) {
+            return Err(format!("<lane id=\"{}\">: no movement leads on from it", l.name));
+        }
+
+        let beside = ids
+            .iter()
+            .map(|&l| [true, false].map(|left| neighbour(l, left).and_then(|j| new_id.get(&j).copied())))
+            .collect();
+        widths.sort_by(f64::total_cmp);
+        let layout = MapLayout {
+            lane_width: widths[widths.len() / 2],
+            east_west_roads: Vec::new(),
+            north_south_roads: Vec::new(),
+            lane_change_length: lane_change_m,
+            stop_line_setback: IMPORTED_STOP_LINE_SETBACK_M,
+            ..MapLayout::default()
+        };
+        let mut map = CityMap::assemble(layout, lanes, connectors, intersections, beside);
+        // The priority road: the axis of the highest-priority edge arriving.
+        for k in 0..map.intersections.len() {
+            let top = ids
+                .iter()
+                .enumerate()
+                .filter_map(|(i, &l)| match map.lanes[i].end {
+                    LaneEnd::Intersection { intersection, approach } if intersection == k => {
+                        Some((net.lanes[l].priority, approach))
+                    }
+                    _ => None,
+                })
+                .max_by_key(|(p, a)| (*p, std::cmp::Reverse(*a)));
+            map.intersections[k].major = match top {
+                Some((_, 'N' | 'S')) => Axis::NorthSouth,
+                _ => Axis::EastWest,
+            };
+        }
+        let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();
+        let report = ImportReport {
+            lanes: ids.len(),
+            loops,
+            dropped: dropped.into_iter().map(|(l, why)| (net.lanes[l].id.clone(), why)).collect(),
+        };
+        Ok((map, report))
+    }
+}
