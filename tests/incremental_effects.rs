@@ -36,7 +36,8 @@ fn spec(name: &str, groups: &[(u32, f64)], train: u32, extra: &str) -> DatasetSp
 /// Calls `f` with every scenario of `spec`: its key, plan, map and the
 /// recording of its factual run.
 fn for_each_recording(spec: DatasetSpec, mut f: impl FnMut(&ScenarioKey, &ScenarioPlan, &CityMap, &Recording)) {
-    let expansion = Expansion::new(spec, Arc::new(CityMap::default())).unwrap();
+    // Each scenario on its own town (the spec's grid, or its SUMO network).
+    let expansion = Expansion::from_spec(spec).unwrap();
     let never = AtomicBool::new(false);
     for key in expansion.keys(None) {
         let plan = expansion.plan(&key).unwrap();
@@ -129,6 +130,16 @@ fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_t_
         let (scenarios, replayed_scenarios, _, _) = compare_all(spec(name, &[(8, 0.8)], 4, extra));
         assert!(replayed_scenarios * 4 >= scenarios * 3, "{name}: {replayed_scenarios} of {scenarios} replayed");
     }
+}
+
+#[test]
+fn replayed_reruns_match_on_a_real_network_imported_from_sumo() {
+    let mut spec = spec("berlin", &[(8, 0.5), (12, 0.5)], 4, r#", "map": {"sumo": "berlin-small.net.xml"}"#);
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo");
+    spec.read_networks(|sumo| data.join(sumo)).unwrap();
+    let (scenarios, replayed_scenarios, replayed, _) = compare_all(spec);
+    assert_eq!(scenarios, 8);
+    assert!(replayed_scenarios * 4 >= scenarios * 3 && replayed > 0, "{replayed_scenarios} of {scenarios} replayed");
 }
 
 #[test]

@@ -156,9 +156,12 @@ class Spec:
         return cls(_native.Spec.load(_os.fspath(path)))
 
     @classmethod
-    def from_dict(cls, spec: Dict[str, Any]) -> "Spec":
-        """A spec from a dict with the fields of a spec file."""
-        return cls(_native.Spec.from_json(_json.dumps(spec), "<dict>"))
+    def from_dict(cls, spec: Dict[str, Any], networks: Optional[PathLike] = None) -> "Spec":
+        """A spec from a dict with the fields of a spec file. A SUMO network
+        it names (``map.sumo``) is read from the folder ``networks`` by file
+        name (a dataset's ``networks/``), else from the working folder."""
+        folder = None if networks is None else _os.fspath(networks)
+        return cls(_native.Spec.from_json(_json.dumps(spec), "<dict>", None, folder))
 
     @property
     def name(self) -> str:
@@ -216,14 +219,14 @@ class Spec:
     def __reduce__(self):
         # Picklable (DataLoader workers started with "spawn" receive a copy):
         # the JSON as read, not the file again.
-        return (_spec_from_state, (self._native.json, self.path))
+        return (_spec_from_state, (self._native.json, self.path, self._native.networks))
 
     def __repr__(self) -> str:
         return f"Spec(name={self.name!r}, world={self.world!r}, groups={self.groups}, splits={self.splits})"
 
 
-def _spec_from_state(text: str, path: Optional[str]) -> Spec:
-    return Spec(_native.Spec.from_json(text, path if path is not None else "<dict>", path))
+def _spec_from_state(text: str, path: Optional[str], networks: Optional[str] = None) -> Spec:
+    return Spec(_native.Spec.from_json(text, path if path is not None else "<dict>", path, networks))
 
 
 def _as_spec(spec: Union[Spec, PathLike, Dict[str, Any]]) -> Spec:

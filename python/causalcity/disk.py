@@ -165,7 +165,7 @@ class Dataset:
                 "only the scenarios written so far are listed",
                 stacklevel=2,
             )
-        self.spec = Spec.from_dict(self.manifest["spec"])
+        self.spec = Spec.from_dict(self.manifest["spec"], networks=self.root / "networks")
         self.images = bool(self.manifest.get("images", False))
         self.split = split
         """The split it holds (all when None)."""
@@ -243,7 +243,7 @@ class Sweep:
             raise InputError(f"{_os.fspath(record)}: not JSON: {e}") from None
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
-        self.spec = Spec.from_dict(self.record["spec"])
+        self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the pairs on disk, in the sweep's order."""

@@ -22,7 +22,7 @@ use causalcity::output::claim::{claim_file, resolve};
 use causalcity::output::layout::FrameKind;
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
-use causalcity::spec::DatasetSpec;
+use causalcity::spec::{network_file_name, DatasetSpec};
 use causalcity::world::effects::{EffectRow, InterventionKind};
 use causalcity::world::BoundBy;
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
@@ -182,6 +182,9 @@ struct Spec {
     json: String,
     /// The file it came from, if any.
     path: Option<PathBuf>,
+    /// The folder its SUMO networks were read from by file name (a
+    /// dataset's `networks/`), if not beside `path`.
+    networks: Option<PathBuf>,
 }
 
 impl Spec {
@@ -218,7 +221,7 @@ impl Spec {
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Spec> {
         match std::fs::read_to_string(&path) {
-            Ok(text) => Spec::from_json(py, text, path.clone(), Some(path)),
+            Ok(text) => Spec::from_json(py, text, path.clone(), Some(path), None),
             // The command line's message for a file it cannot read.
             Err(_) => Err(py_err(
                 py.detach(|| load_spec(&path))
@@ -229,18 +232,33 @@ impl Spec {
     }
 
     /// A spec from its JSON; errors name `origin`; `path` is the file it
-    /// came from, if any.
+    /// came from, if any; `networks` the folder that keeps the SUMO
+    /// networks it names by file name (a dataset's `networks/`).
     #[staticmethod]
-    #[pyo3(signature = (text, origin, path=None))]
-    fn from_json(py: Python<'_>, text: String, origin: PathBuf, path: Option<PathBuf>) -> PyResult<Spec> {
+    #[pyo3(signature = (text, origin, path=None, networks=None))]
+    fn from_json(
+        py: Python<'_>,
+        text: String,
+        origin: PathBuf,
+        path: Option<PathBuf>,
+        networks: Option<PathBuf>,
+    ) -> PyResult<Spec> {
         let expansion = py
             .detach(|| {
                 let spec_err = |error| GenError::Spec { path: origin.clone(), error };
-                let spec = DatasetSpec::from_json(&text).map_err(spec_err)?;
+                let mut spec = DatasetSpec::from_json(&text).map_err(spec_err)?;
+                // A SUMO network the spec names: in a dataset's folder, beside
+                // the spec's file, or from the working folder.
+                match (&networks, &path) {
+                    (Some(folder), _) => spec.read_networks(|sumo| folder.join(network_file_name(sumo))),
+                    (None, Some(file)) => spec.read_networks_beside(file),
+                    (None, None) => spec.read_networks(|sumo| PathBuf::from(sumo)),
+                }
+                .map_err(spec_err)?;
                 Expansion::from_spec(spec).map_err(spec_err)
             })
             .map_err(py_err)?;
-        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path })
+        Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path, networks })
     }
 
     #[getter]
@@ -292,6 +310,11 @@ impl Spec {
     #[getter]
     fn path(&self) -> Option<String> {
         self.path.as_ref().map(|p| p.to_string_lossy().into_owned())
+    }
+
+    #[getter]
+    fn networks(&self) -> Option<String> {
+        self.networks.as_ref().map(|p| p.to_string_lossy().into_owned())
     }
 
     /// (group, split, index) of every scenario of `split` (all when None), at

@@ -736,3 +736,40 @@ def test_ctrl_c_interrupts_counterfactual():
     setup = f"scenarios = json.loads({json.dumps(json.dumps(scenarios))})\n"
     _, peak = _interrupted("causalcity.counterfactual(scenarios)", setup)
     assert peak < 400e6, f"peak memory {peak / 1e6:.0f} MB: the pairs ran on"
+
+
+def test_a_real_network_from_sumo_maps_streams_and_reads_back_from_its_dataset(tmp_path):
+    network = ROOT / "tests" / "data" / "sumo" / "berlin-small.net.xml"
+    (tmp_path / "berlin-small.net.xml").write_bytes(network.read_bytes())
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["name"] = "berlin"
+    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 3, "val": 0, "test": 0}
+    spec["frames"] = 40
+    spec["map"] = {"sumo": "berlin-small.net.xml"}
+    spec_file = tmp_path / "berlin.json"
+    spec_file.write_text(json.dumps(spec))
+    # The network as arrays: SUMO's lane and junction ids, its lights.
+    town = causalcity.map(spec_file)
+    sumo_lanes = set(l.split('"')[0] for l in network.read_text().split('<lane id="')[1:])
+    assert len(town["lanes"]) == 48 and set(town["lanes"]) <= sumo_lanes
+    controls = dict(zip(town["junctions"], town["junction_controls"]))
+    assert controls["cluster_1560223404_2335739502_3273797701"] == "signals"
+    assert town["town"] == "sumo-berlin-small"
+    # Streamed scenarios drive on it.
+    streamed = list(causalcity.stream(spec_file, split="train", images=False))
+    assert len(streamed) == 3
+    for scenario in streamed:
+        assert np.all((scenario.position[..., 0] > 850) & (scenario.position[..., 0] < 1410))
+        assert np.abs(np.diff(scenario.position[..., :2], axis=0)).sum() > 100
+    # gen keeps the network in the dataset: it reads back without the spec's copy,
+    # equal to the stream, and its spec survives pickling (DataLoader workers).
+    out = tmp_path / "out"
+    cli("gen", "--spec", str(spec_file), "--out", str(out), "--no-images")
+    (tmp_path / "berlin-small.net.xml").unlink()
+    data = causalcity.open_dataset(out)
+    assert len(data) == 3
+    copy = pickle.loads(pickle.dumps(data.spec))
+    for loaded, scenario in zip(data, streamed):
+        np.testing.assert_array_equal(loaded.position, scenario.position)
+        np.testing.assert_array_equal(causalcity.simulate(copy, *loaded.key).position, scenario.position)

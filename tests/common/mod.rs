@@ -112,7 +112,8 @@ pub fn read_json(path: &Path) -> Value {
 pub fn scenario_dirs(root: &Path) -> Vec<PathBuf> {
     let mut dirs = Vec::new();
     for group in sorted_entries(root) {
-        if !group.is_dir() {
+        // Group folders only (not `networks/`, `shards/` or `logs/`).
+        if !group.is_dir() || !group.file_name().is_some_and(|n| n.to_string_lossy().starts_with("cars")) {
             continue;
         }
         for split in sorted_entries(&group) {

@@ -1,0 +1,141 @@
+//! Datasets on a real road network imported from SUMO (`map.sumo`): gen
+//! drives, draws and measures effects on it, keeps the network with the
+//! dataset so that every reader rebuilds the same map, and refuses what
+//! it cannot use with exit 2 and nothing written.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+
+fn berlin() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/berlin-small.net.xml")
+}
+
+/// A folder with a copy of the network and a spec naming it beside it.
+fn spec_beside_network(name: &str, map: &str, splits: (u32, u32, u32)) -> (PathBuf, PathBuf) {
+    let dir = fresh_dir(name);
+    std::fs::copy(berlin(), dir.join("berlin-small.net.xml")).unwrap();
+    let text = format!(
+        r#"{{"name": "{name}", "world": "city", "seed": 3, "frames": 120, "frame_interval": 0.5,
+            "groups": [{{"cars": 8, "edge_proportion": 0.5}}, {{"cars": 12, "edge_proportion": 0.5}}],
+            "splits": {{"train": {}, "val": {}, "test": {}}}, "actions_per_car": 4, "map": {map}}}"#,
+        splits.0, splits.1, splits.2
+    );
+    let spec = write_spec(&dir, &text);
+    (dir, spec)
+}
+
+/// The SUMO lane ids of the network file.
+fn lane_ids() -> std::collections::BTreeSet<String> {
+    let text = std::fs::read_to_string(berlin()).unwrap();
+    text.split("<lane id=\"").skip(1).map(|rest| rest[..rest.find('"').unwrap()].to_string()).collect()
+}
+
+#[test]
+fn a_dataset_on_a_real_network_is_driven_measured_kept_whole_and_valid() {
+    let (dir, spec) = spec_beside_network("sumo-gen", r#"{"sumo": "berlin-small.net.xml"}"#, (4, 2, 2));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images"]);
+    // The network travels with the dataset, byte for byte.
+    let kept = out.join("networks/berlin-small.net.xml");
+    assert_eq!(std::fs::read(&kept).unwrap(), std::fs::read(berlin()).unwrap());
+
+    let lanes = lane_ids();
+    let scenarios = scenario_dirs(&out);
+    assert_eq!(scenarios.len(), 16);
+    let (mut pairs, mut following) = (0, 0);
+    for scenario in &scenarios {
+        let meta = read_json(&scenario.join("scenario.json"));
+        // Cars spawn on the network's own lanes, by SUMO id.
+        for car in meta["cars"].as_array().unwrap() {
+            let spawn = car["spawn"].as_str().unwrap();
+            assert!(lanes.contains(spawn), "{}: spawn {spawn} is no lane of the network", scenario.display());
+        }
+        let by_car = poses_by_car(&read_poses(&scenario.join("poses.csv")));
+        for poses in by_car.values() {
+            // On the network (netconvert's convBoundary: x 863-1396, y 134-512 m) and driving.
+            assert!(poses.iter().all(|p| (850.0..1410.0).contains(&p.x) && (120.0..530.0).contains(&p.y)));
+            let moved: f64 = poses.windows(2).map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y)).sum();
+            assert!(moved > 20.0, "{}: a car drove only {moved:.1} m in 60 s", scenario.display());
+        }
+        // A follower keeps near where its leader drove.
+        for edge in meta["edges"].as_array().unwrap() {
+            let (leader, follower) =
+                (&by_car[&(edge[0].as_u64().unwrap() as u32)], &by_car[&(edge[1].as_u64().unwrap() as u32)]);
+            let near = follower
+                .iter()
+                .enumerate()
+                .filter(|(t, f)| leader[..=*t].iter().any(|l| (l.x - f.x).hypot(l.y - f.y) <= 4.5));
+            pairs += 1;
+            following += usize::from(near.count() * 10 >= follower.len() * 8);
+        }
+        // Interventional ground truth, as on the grid towns.
+        assert!(scenario.join("effects.csv").is_file());
+        assert!(meta["causal_edges"].is_array());
+    }
+    assert!(pairs >= 30, "only {pairs} designed pairs");
+    assert!(following * 10 >= pairs * 9, "{following} of {pairs} designed followers follow");
+
+    // validate reads the network from the dataset: it passes after the
+    // spec's copy is gone and the dataset has moved.
+    std::fs::remove_file(dir.join("berlin-small.net.xml")).unwrap();
+    let moved = dir.join("moved");
+    std::fs::rename(&out, &moved).unwrap();
+    let checked = run(&["validate", moved.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stderr));
+    // ... and sees a network that is not the one the dataset was made on.
+    std::fs::write(moved.join("networks/stray.net.xml"), "<net/>").unwrap();
+    let stray = run(&["validate", moved.to_str().unwrap()]);
+    assert_eq!(stray.status.code(), Some(1), "{}", String::from_utf8_lossy(&stray.stdout));
+    assert!(String::from_utf8_lossy(&stray.stdout).contains("networks/stray.net.xml"));
+}
+
+#[test]
+fn frames_of_a_real_network_show_its_roads_and_the_cars_on_them() {
+    let area = r#"{"sumo": "berlin-small.net.xml", "camera_area": {"x": [990, 1110], "y": [395, 530]}}"#;
+    let (dir, spec) = spec_beside_network("sumo-frames", area, (1, 0, 0));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--limit", "1"]);
+    let scenario = &scenario_dirs(&out)[0];
+    let frame = image::open(scenario.join("rgb/0020.png")).unwrap().to_rgb8();
+    let share = |rgb: [u8; 3]| frame.pixels().filter(|p| p.0 == rgb).count() as f64 / frame.len() as f64 * 3.0;
+    // Asphalt along the lanes and over the junctions, bare ground elsewhere (no grid town's blocks).
+    let (asphalt, ground) = (share([66, 68, 72]), share([200, 198, 190]));
+    assert!(asphalt > 0.05 && ground > 0.3, "asphalt {asphalt:.3}, ground {ground:.3}");
+    assert!(frame.pixels().all(|p| p.0 != [122, 168, 98]), "a grid town's park on a real network");
+    // Every car in view is in its mask.
+    let mask = image::open(scenario.join("mask/0020.png")).unwrap().to_luma8();
+    let poses = read_poses(&scenario.join("poses.csv"));
+    let in_view: Vec<&Pose> = poses.iter().filter(|p| p.frame == 20 && p.in_view == 1).collect();
+    assert!(!in_view.is_empty(), "no car in view");
+    let meta = read_json(&scenario.join("scenario.json"));
+    for pose in in_view {
+        let id = meta["cars"][pose.car as usize]["mask_id"].as_u64().unwrap() as u8;
+        let covered = mask.pixels().filter(|p| p.0[0] == id).count();
+        assert!(covered > 10, "car {} covers {covered} mask pixels", pose.car);
+    }
+}
+
+#[test]
+fn what_a_real_network_spec_cannot_use_is_refused_with_nothing_written() {
+    let cases = [
+        (r#"{"sumo": "nowhere.net.xml"}"#, "map.sumo", "nowhere.net.xml"),
+        (r#"{"sumo": "berlin-small.net.xml", "grid": {"rows": 2, "columns": 2}}"#, "map.grid", "brings its own roads"),
+        (r#"{"sumo": "berlin-small.net.xml", "lane_width": 3.5}"#, "map.lane_width", "leave map.lane_width out"),
+        (r#"{"sumo": "berlin-small.png"}"#, "map.sumo", "a SUMO network file"),
+        (r#"{"sumo": "not-a-net.xml"}"#, "map.sumo", "not-a-net.xml: <net> has no version"),
+    ];
+    let mut checked = 0;
+    for (k, (map, field, needle)) in cases.into_iter().enumerate() {
+        let (dir, spec) = spec_beside_network(&format!("sumo-refused-{k}"), map, (1, 0, 0));
+        std::fs::write(dir.join("not-a-net.xml"), "<html><body>hello</body></html>").unwrap();
+        let out = dir.join("out");
+        let result = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert_eq!(result.status.code(), Some(2), "{map}: {stderr}");
+        assert!(stderr.contains(field) && stderr.contains(needle), "{map}: {stderr}");
+        assert!(!out.exists(), "{map}: something was written");
+        checked += 1;
+    }
+    assert_eq!(checked, 5);
+}
