@@ -117,14 +117,20 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>, town: Option<&str>) -> Res
         let camera = shown.camera;
         let mut rgba = draw_background(map, &camera).pixmap.take();
         let mut canvas = Canvas { data: &mut rgba, width: camera.width, height: camera.height, channels: 4 };
-        // Junction names on their centres, lane ids half way along each lane.
+        // Junction names on their centres, lane ids half way along each lane
+        // (on an imported network, small, and lane ids only where a lane
+        // is long enough in the picture to carry one).
+        let scale = if map.is_imported() { 1 } else { 2 };
         for junction in &map.intersections {
             let p = camera.to_pixel(junction.centre);
-            let (w, h) = label_size(&junction.name, 2);
+            let (w, h) = label_size(&junction.name, scale);
             let (x, y) = (p.x as i64 - w as i64 / 2, p.y as i64 - h as i64 / 2);
-            draw_label(&mut canvas, x, y, &junction.name, 2, [255, 255, 255], [150, 30, 30]);
+            draw_label(&mut canvas, x, y, &junction.name, scale, [255, 255, 255], [150, 30, 30]);
         }
-        for lane in &map.lanes {
+        let fits = |lane: &&crate::map::Lane| {
+            !map.is_imported() || lane.curve.length() * camera.pixels_per_metre >= label_size(&lane.name, 1).0 as f64
+        };
+        for lane in map.lanes.iter().filter(fits) {
             let p = camera.to_pixel(lane.curve.position(lane.curve.length() / 2.0, 0.0));
             let (w, h) = label_size(&lane.name, 1);
             let (x, y) = (p.x as i64 - w as i64 / 2, p.y as i64 - h as i64 / 2);

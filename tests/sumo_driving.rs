@@ -139,3 +139,41 @@ fn what_a_real_network_spec_cannot_use_is_refused_with_nothing_written() {
     }
     assert_eq!(checked, 5);
 }
+
+#[test]
+fn the_shipped_ood_real_network_spec_trains_on_grid_towns_and_tests_on_the_imported_network() {
+    let dir = fresh_dir("ood-real-network");
+    let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut spec: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(configs.join("ood-real-network.json")).unwrap()).unwrap();
+    spec["splits"] = serde_json::json!({"train": 2, "val": 1, "test": 2});
+    spec["frames"] = serde_json::json!(30);
+    // The shipped spec names the network relative to configs/; the copy, by its absolute path.
+    let sumo = spec["held_out"]["test"]["map"]["sumo"].as_str().unwrap().to_string();
+    let network = configs.join(&sumo).canonicalize().unwrap();
+    assert_eq!(network, berlin().canonicalize().unwrap());
+    spec["held_out"]["test"]["map"]["sumo"] = serde_json::json!(network.to_str().unwrap());
+    let out = dir.join("ood");
+    gen_ok(&write_spec(&dir, &spec.to_string()), &out, &["--no-images"]);
+    let lanes = lane_ids();
+    let mut splits = std::collections::BTreeSet::new();
+    for scenario in scenario_dirs(&out) {
+        let split = scenario.parent().unwrap().file_name().unwrap().to_str().unwrap().to_string();
+        let meta = read_json(&scenario.join("scenario.json"));
+        let spawn = meta["cars"][0]["spawn"].as_str().unwrap().to_string();
+        // Test happens on the network, train and val on grid towns.
+        assert_eq!(split == "test", lanes.contains(&spawn), "{}: spawn {spawn}", scenario.display());
+        assert_eq!(
+            split == "test",
+            meta["town"] == "sumo-berlin-small",
+            "{}: town {}",
+            scenario.display(),
+            meta["town"]
+        );
+        splits.insert(split);
+    }
+    assert_eq!(splits.len(), 3);
+    assert!(out.join("networks/berlin-small.net.xml").is_file());
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+}
