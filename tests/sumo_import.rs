@@ -88,3 +88,52 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
     }
     assert_eq!(std::fs::read(berlin()).unwrap(), before);
 }
+
+#[test]
+fn imported_traffic_lights_run_the_files_programmes_without_crossing_greens() {
+    use causalcity::map::signals::{Colour, Signal};
+    let text = std::fs::read_to_string(berlin()).unwrap();
+    let net = causalcity::map::sumo::SumoNetwork::from_xml(&text).unwrap();
+    let (map, report) = causalcity::map::CityMap::from_sumo(&net, 6.0).unwrap();
+    assert_eq!((report.lanes, report.dropped.len()), (48, 0));
+    let signalised: Vec<&str> = map.signalised().iter().map(|&k| map.intersections[k].name.as_str()).collect();
+    assert_eq!(signalised.len(), 2, "{signalised:?}");
+    let (mut checked, mut programmed) = (0, 0);
+    for &k in map.signalised() {
+        let name = &map.intersections[k].name;
+        // The programme the junction's connections name.
+        let junction = net.junctions.iter().position(|j| &j.id == name).unwrap();
+        let programme = net
+            .connections
+            .iter()
+            .filter(|c| net.lanes[c.from].to == junction)
+            .find_map(|c| c.signal)
+            .map(|(p, _)| &net.programmes[p])
+            .expect("a programme per light junction");
+        let cycle: f64 = programme.phases.iter().map(|p| p.0).sum();
+        let lights: Vec<_> = map.programmed.iter().filter(|l| l.intersection == k).collect();
+        assert!(!lights.is_empty(), "{name}: no programmed light");
+        programmed += lights.len();
+        for light in &lights {
+            let period: f64 = light.schedule.iter().map(|s| s.duration).sum();
+            assert!((period - cycle).abs() < 1e-9, "{name}: a light's period {period} s, the programme's {cycle} s");
+            // Each shows a real programme: green and red in turn.
+            assert!(light.schedule.iter().any(|s| s.colour == Colour::Green));
+            assert!(light.schedule.iter().any(|s| s.colour == Colour::Red));
+        }
+        // Straight-on traffic from crossing sides is never green at once.
+        let straight = |a: char| lights.iter().find(|l| l.approach == a && l.signal == Signal::Straight);
+        for (a, b) in [('N', 'E'), ('N', 'W'), ('S', 'E'), ('S', 'W')] {
+            let (Some(x), Some(y)) = (straight(a), straight(b)) else { continue };
+            for step in 0..(cycle * 4.0) as usize {
+                let t = step as f64 / 4.0;
+                let both = x.state_at(t).colour == Colour::Green && y.state_at(t).colour == Colour::Green;
+                assert!(!both, "{name}: {a} and {b} straight both green at {t} s");
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked >= 2, "only {checked} pairs of crossing approaches compared");
+    assert_eq!(programmed, map.programmed.len());
+    assert!(programmed >= 5, "{programmed} lights run a programme");
+}

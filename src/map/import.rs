@@ -14,9 +14,9 @@
 //! - A lane that ends where no connection goes on (a `dead_end` junction)
 //!   loops round onto the lane of the same index (or the nearest) of the
 //!   edge that goes back, when there is one.
-//! - Junctions: `traffic_light` junctions get causalcity's light cycle (per
-//!   approach side, as in the grid towns; the file's own programme is not
-//!   run yet); `priority` and `priority_stop` junctions give priority to the
+//! - Junctions: `traffic_light` junctions run the file's programme, one
+//!   light per approach side and signal (straight, left) as in the grid
+//!   towns, showing the state of the first link it governs; `priority` and `priority_stop` junctions give priority to the
 //!   approaches of their highest-priority edge's axis; `allway_stop`,
 //!   `right_before_left`, `left_before_right` and `unregulated` junctions
 //!   drive as all-way stops. A lane's approach side (N, E, S, W) is the
@@ -26,6 +26,7 @@
 
 use super::control::{Axis, JunctionControl};
 use super::curve::Curve;
+use super::signals::{Colour, Light, ScheduleStep, Signal, APPROACHES};
 use super::sumo::{SumoJunctionKind, SumoNetwork};
 use super::{CityMap, Connector, Intersection, Lane, LaneEnd, LaneId, LanePosition, MapLayout, Turn};
 use glam::DVec2;
@@ -151,6 +152,62 @@ fn components(n: usize, next: &[Vec<usize>]) -> Vec<usize> {
         count += 1;
     }
     component
+}
+
+/// A SUMO link state as a light's colour: green (`G`, `g`, and `o`, `O`:
+/// no signal, the junction's own rules), yellow (`y`, `Y`), else red (`r`,
+/// `R`, `s`, `u`).
+fn colour_of(state: char) -> Colour {
+    match state {
+        'G' | 'g' | 'o' | 'O' => Colour::Green,
+        'y' | 'Y' => Colour::Yellow,
+        _ => Colour::Red,
+    }
+}
+
+/// The lights of `map`'s signalised junctions that the file's programmes
+/// run: per junction, approach side and signal, the link of the first of
+/// its movements (straight before right for the straight signal, left
+/// before U-turn for the left one) that a programme governs, its colour in
+/// each phase, runs of one colour merged.
+fn programmed_lights(
+    net: &SumoNetwork,
+    map: &CityMap,
+    ids: &[usize],
+    moves: &[Vec<(usize, Turn, Option<usize>)>],
+) -> Vec<Light> {
+    let mut lights = Vec::new();
+    for &k in map.signalised() {
+        for approach in APPROACHES {
+            for signal in [Signal::Straight, Signal::Left] {
+                let order: [Turn; 2] = match signal {
+                    Signal::Straight => [Turn::Straight, Turn::Right],
+                    Signal::Left => [Turn::Left, Turn::UTurn],
+                };
+                let link = order.iter().find_map(|&turn| {
+                    ids.iter().enumerate().find_map(|(id, &l)| match map.lanes[id].end {
+                        LaneEnd::Intersection { intersection, approach: a } if intersection == k && a == approach => {
+                            let c = moves[l].iter().find(|m| m.1 == turn)?.2?;
+                            net.connections[c].signal
+                        }
+                        _ => None,
+                    })
+                });
+                let Some((programme, index)) = link else { continue };
+                let p = &net.programmes[programme];
+                let mut schedule: Vec<ScheduleStep> = Vec::new();
+                for (duration, state) in &p.phases {
+                    let colour = colour_of(state.chars().nth(index).unwrap_or('r'));
+                    match schedule.last_mut() {
+                        Some(last) if last.colour == colour => last.duration += duration,
+                        _ => schedule.push(ScheduleStep { colour, duration: *duration }),
+                    }
+                }
+                lights.push(Light { intersection: k, approach, signal, offset: p.offset, schedule });
+            }
+        }
+    }
+    lights
 }
 
 impl CityMap {
@@ -377,6 +434,7 @@ impl CityMap {
                 _ => Axis::EastWest,
             };
         }
+        map.programmed = programmed_lights(net, &map, &ids, &moves);
         let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();
         let report = ImportReport {
             lanes: ids.len(),

@@ -308,6 +308,11 @@ pub struct CityMap {
     /// Per lane, the parallel lane of the same direction on its left and on
     /// its right, where there is one (lane changes and merges go there).
     beside: Vec<[Option<LaneId>; 2]>,
+    /// Lights that run a programme of their own instead of the cycle (an
+    /// imported network's traffic-light programmes): each replaces the
+    /// cycle's light of its junction, approach and signal. Empty in a grid
+    /// town.
+    pub programmed: Vec<signals::Light>,
 }
 
 impl Default for CityMap {
@@ -661,7 +666,19 @@ impl CityMap {
         let conflicts = find_conflicts(&connectors);
         let signalised =
             (0..intersections.len()).filter(|&k| intersections[k].control == JunctionControl::Signals).collect();
-        CityMap { layout, lanes, connectors, intersections, lane_by_name, exits, conflicts, signalised, beside }
+        let programmed = Vec::new();
+        CityMap {
+            layout,
+            lanes,
+            connectors,
+            intersections,
+            lane_by_name,
+            exits,
+            conflicts,
+            signalised,
+            beside,
+            programmed,
+        }
     }
 
     /// The lane named like the original's spawn points, e.g. `C0w`.
