@@ -154,11 +154,16 @@ fn components(n: usize, next: &[Vec<usize>]) -> Vec<usize> {
     component
 }
 
-/// A SUMO link state as a light's colour: green (`G`, `g`, and `o`, `O`:
-/// no signal, the junction's own rules), yellow (`y`, `Y`), else red (`r`,
-/// `R`, `s`, `u`).
-fn colour_of(state: char) -> Colour {
+/// A SUMO link state as the colour of a `signal` light: green (`G`, and
+/// `o`, `O`: no signal, the junction's own rules), yellow (`y`, `Y`), else
+/// red (`r`, `R`, `s`, `u`). A permissive green (`g`: go, yielding to
+/// oncoming traffic) is green for straight on and right turns and red for
+/// left turns and U-turns: under lights drivers here do not yield to
+/// oncoming traffic, so they turn left on the protected phase only (where
+/// the programme has one).
+fn colour_of(state: char, signal: Signal) -> Colour {
     match state {
+        'g' if signal == Signal::Left => Colour::Red,
         'G' | 'g' | 'o' | 'O' => Colour::Green,
         'y' | 'Y' => Colour::Yellow,
         _ => Colour::Red,
@@ -195,9 +200,13 @@ fn programmed_lights(
                 });
                 let Some((programme, index)) = link else { continue };
                 let p = &net.programmes[programme];
+                let states: Vec<char> = p.phases.iter().map(|(_, s)| s.chars().nth(index).unwrap_or('r')).collect();
+                // A left turn with no protected phase at all turns on the permissive one.
+                let protected = signal == Signal::Left && states.iter().any(|&c| colour_of(c, signal) == Colour::Green);
+                let read_as = if protected || signal == Signal::Straight { signal } else { Signal::Straight };
                 let mut schedule: Vec<ScheduleStep> = Vec::new();
-                for (duration, state) in &p.phases {
-                    let colour = colour_of(state.chars().nth(index).unwrap_or('r'));
+                for ((duration, _), &state) in p.phases.iter().zip(&states) {
+                    let colour = colour_of(state, read_as);
                     match schedule.last_mut() {
                         Some(last) if last.colour == colour => last.duration += duration,
                         _ => schedule.push(ScheduleStep { colour, duration: *duration }),
@@ -208,6 +217,77 @@ fn programmed_lights(
         }
     }
     lights
+}
+
+/// Metres two movements into one lane must run together before their end
+/// (within [`MERGED_WITHIN_M`] of each other at equal distances from it)
+/// to count as one path.
+const MERGED_FOR_M: f64 = 3.0;
+/// Two movements' paths count as one where their centre lines run closer
+/// than this, metres: cars on them would touch side by side (a car is 1.8 m
+/// wide by default, `car_width_m`).
+const MERGED_WITHIN_M: f64 = 2.0;
+
+/// For each movement, the movements of its junction into the same lane that
+/// share their last [`MERGED_FOR_M`] or more with it.
+fn merging_movements(connectors: &[Connector]) -> Vec<Vec<usize>> {
+    let shared = |a: &Connector, b: &Connector| {
+        let (la, lb) = (a.curve.length(), b.curve.length());
+        let steps = (MERGED_FOR_M / 0.25) as usize;
+        (0..=steps).all(|k| {
+            let back = k as f64 * 0.25;
+            back <= la.min(lb)
+                && a.curve.position(la - back, 0.0).distance(b.curve.position(lb - back, 0.0)) <= MERGED_WITHIN_M
+        })
+    };
+    connectors
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            connectors
+                .iter()
+                .enumerate()
+                .filter(|&(j, b)| {
+                    j != i
+                        && a.intersection.is_some()
+                        && a.intersection == b.intersection
+                        && a.to == b.to
+                        && a.from != b.from
+                })
+                .filter(|(_, b)| shared(a, b))
+                .map(|(j, _)| j)
+                .collect()
+        })
+        .collect()
+}
+
+/// For each movement, the other movements from its lane that run with it
+/// from the start (within [`MERGED_WITHIN_M`] at equal distances along
+/// both) for a metre or more, and for how long, metres.
+fn splitting_movements(connectors: &[Connector]) -> Vec<Vec<(usize, f64)>> {
+    let shared = |a: &Connector, b: &Connector| {
+        let longest = a.curve.length().min(b.curve.length());
+        let mut s = 0.0;
+        while s + 0.25 <= longest
+            && a.curve.position(s + 0.25, 0.0).distance(b.curve.position(s + 0.25, 0.0)) <= MERGED_WITHIN_M
+        {
+            s += 0.25;
+        }
+        s
+    };
+    connectors
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            connectors
+                .iter()
+                .enumerate()
+                .filter(|&(j, b)| j != i && a.from == b.from)
+                .map(|(j, b)| (j, shared(a, b)))
+                .filter(|&(_, s)| s >= 1.0)
+                .collect()
+        })
+        .collect()
 }
 
 impl CityMap {
@@ -435,6 +515,8 @@ impl CityMap {
             };
         }
         map.programmed = programmed_lights(net, &map, &ids, &moves);
+        map.merging = merging_movements(&map.connectors);
+        map.splitting = splitting_movements(&map.connectors);
         let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();
         let report = ImportReport {
             lanes: ids.len(),

@@ -313,6 +313,16 @@ pub struct CityMap {
     /// cycle's light of its junction, approach and signal. Empty in a grid
     /// town.
     pub programmed: Vec<signals::Light>,
+    /// Per connector, the connectors of its junction whose paths run into
+    /// one with it before they end, on the same lane (an imported network's
+    /// movements that share internal lanes): cars on them are in line.
+    /// Empty in a grid town, whose movements meet only where they end.
+    pub(crate) merging: Vec<Vec<ConnectorId>>,
+    /// Per connector, the other movements from its lane whose paths run
+    /// with it from the start, and for how long, metres (an imported
+    /// network's movements that share internal lanes before they split).
+    /// Empty in a grid town.
+    pub(crate) splitting: Vec<Vec<(ConnectorId, f64)>>,
 }
 
 impl Default for CityMap {
@@ -666,7 +676,7 @@ impl CityMap {
         let conflicts = find_conflicts(&connectors);
         let signalised =
             (0..intersections.len()).filter(|&k| intersections[k].control == JunctionControl::Signals).collect();
-        let programmed = Vec::new();
+        let (programmed, merging, splitting) = (Vec::new(), Vec::new(), Vec::new());
         CityMap {
             layout,
             lanes,
@@ -678,6 +688,8 @@ impl CityMap {
             signalised,
             beside,
             programmed,
+            merging,
+            splitting,
         }
     }
 
@@ -707,6 +719,19 @@ impl CityMap {
     /// Every connector leaving the end of `lane`.
     pub fn exits_from(&self, lane: LaneId) -> impl Iterator<Item = ConnectorId> + '_ {
         [Turn::Left, Turn::Straight, Turn::Right, Turn::UTurn].into_iter().filter_map(move |t| self.exit(lane, t))
+    }
+
+    /// Connectors that run into one path with `connector`'s before its end
+    /// (imported networks only; see [`CityMap::merging`]).
+    pub fn merging(&self, connector: ConnectorId) -> &[ConnectorId] {
+        self.merging.get(connector).map_or(&[], Vec::as_slice)
+    }
+
+    /// How far `sibling`, another movement from `connector`'s lane, runs
+    /// on one path with it from the start, metres: 0 in a grid town, where
+    /// movements part at once.
+    pub fn shared_start(&self, connector: ConnectorId, sibling: ConnectorId) -> f64 {
+        self.splitting.get(connector).and_then(|s| s.iter().find(|x| x.0 == sibling)).map_or(0.0, |x| x.1)
     }
 
     /// Connectors whose paths cross or merge with `connector`'s.

@@ -199,7 +199,11 @@ impl Sim<'_> {
     /// movement from the same lane.
     fn nearest_on_leg(&self, i: usize, leg: &RouteLeg) -> Option<Candidate> {
         let sibling = match leg.kind {
-            LegKind::Connector(c) => self.nearest_on_siblings(i, leg, c),
+            LegKind::Connector(c) => {
+                let a = self.nearest_on_siblings(i, leg, c);
+                let b = self.nearest_on_merging(i, leg, c);
+                nearest(a.into_iter().chain(b))
+            }
             _ => None,
         };
         let on_track = self.nearest_on_tracks(i, leg);
@@ -219,16 +223,38 @@ impl Sim<'_> {
         // is, for byte identity; it can leave two cars waiting on each other
         // for good (docs/spec.md#junctions-without-lights).
         let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals);
-        let occupants = self
-            .map
-            .exits_from(from)
-            .filter(|&o| o != c)
-            .flat_map(|sibling| self.occupants(self.map.connector_track(sibling)).iter());
+        // On an imported network movements may run together well into the
+        // junction before they part: in front until its back is past that.
+        let occupants = self.map.exits_from(from).filter(|&o| o != c).flat_map(|sibling| {
+            let shared = self.map.shared_start(c, sibling);
+            self.occupants(self.map.connector_track(sibling)).iter().map(move |&(j, pos)| {
+                let clearance = if shared > 0.0 { shared + self.cars[j].plan.length } else { SIBLING_CLEARANCE };
+                (j, pos, clearance)
+            })
+        });
         nearest(
             occupants
-                .map(|&(j, pos)| (leg.route_start + pos.max(0.0) - car.s, j, pos))
-                .filter(|&(d, j, pos)| j != i && pos < SIBLING_CLEARANCE && d > 0.0 && (pos >= 0.0 || claims_count))
-                .map(|(d, j, _)| (d, j)),
+                .map(|(j, pos, clearance)| (leg.route_start + pos.max(0.0) - car.s, j, pos, clearance))
+                .filter(|&(d, j, pos, clearance)| j != i && pos < clearance && d > 0.0 && (pos >= 0.0 || claims_count))
+                .map(|(d, j, _, _)| (d, j)),
+        )
+    }
+
+    /// Cars on movements that run into one path with connector `c` before
+    /// it ends (imported networks): ahead when nearer that end than car `i`
+    /// will be there, measured back from the end.
+    fn nearest_on_merging(&self, i: usize, leg: &RouteLeg, c: usize) -> Option<Candidate> {
+        let car = &self.cars[i];
+        let end = leg.route_start + leg.length;
+        let occupants = self.map.merging(c).iter().flat_map(|&m| {
+            let length = self.map.connectors[m].curve.length();
+            self.occupants(self.map.connector_track(m)).iter().map(move |&(j, pos)| (j, pos, length))
+        });
+        nearest(
+            occupants
+                .filter(|&(j, pos, _)| j != i && pos >= 0.0)
+                .map(|(j, pos, length)| (end - (length - pos) - car.s, j))
+                .filter(|&(d, _)| d > 0.0),
         )
     }
 

@@ -5,7 +5,7 @@
 
 use super::CityWorld;
 use crate::map::signals::{Colour, LightPlan, ScheduleStep, Signal};
-use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route};
+use crate::map::{Action, CityMap, LaneEnd, LaneId, LanePolicy, Route, Turn};
 use crate::plan::confounders::ConfounderModel;
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::{CarAgency, CarPlan, CityPlan, Role, ScenarioKey, ScenarioPlan, WorldPlan};
@@ -613,4 +613,47 @@ fn cars_drive_on_and_on_through_an_imported_sumo_network() {
         assert!(driven > 300.0, "car {car} from {} drove {driven:.0} m in {seconds} s", given.lane);
         assert!(rest < 90.0, "car {car} from {} stood still for {rest:.0} s", given.lane);
     }
+}
+
+#[test]
+fn on_an_imported_network_a_car_keeps_behind_one_that_shares_its_path_into_the_junction_before_turning_away() {
+    // From 143308587#0_1 the straight and the right turn run together for
+    // some 20 m through the large joined junction before they part.
+    let map = berlin();
+    let from = lane(&map, "143308587#0_1");
+    let (right, straight) = (map.exit(from, Turn::Right).unwrap(), map.exit(from, Turn::Straight).unwrap());
+    let shared = map.shared_start(straight, right);
+    assert!(shared > 10.0 && shared < 40.0, "{shared}");
+    let line = map.lanes[from].curve.length() - map.layout.stop_line_setback;
+    // A slow car turning right just before the line, a fast one going straight 15 m behind.
+    let cars = [
+        Given {
+            lane: "143308587#0_1",
+            at: line - 3.0,
+            actions: vec![Action::Right],
+            merges: vec![],
+            desired: 1.0,
+            start: 1.0,
+        },
+        Given {
+            lane: "143308587#0_1",
+            at: line - 18.0,
+            actions: vec![Action::Straight],
+            merges: vec![],
+            desired: 6.0,
+            start: 6.0,
+        },
+    ];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 60.0));
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+    let closest = traj.states.iter().map(|f| f[0].position.distance(f[1].position)).fold(f64::INFINITY, f64::min);
+    assert!(closest > LENGTH, "the cars came within {closest:.2} m centre to centre");
+    // And the fast car did get past the junction once the slow one turned away.
+    let last = &traj.states[traj.frames() - 1];
+    let moved = last[1].position.distance(traj.states[0][1].position);
+    assert!(
+        moved > 100.0,
+        "moved {moved:.1} m; speeds {:?}",
+        traj.states.iter().step_by(25).map(|f| (f[0].speed, f[1].speed)).collect::<Vec<_>>()
+    );
 }
