@@ -177,3 +177,36 @@ fn the_shipped_ood_real_network_spec_trains_on_grid_towns_and_tests_on_the_impor
     let report = run(&["validate", out.to_str().unwrap()]);
     assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
 }
+
+#[test]
+fn a_hand_written_scenario_drives_on_a_network_beside_it_by_sumo_lane_ids() {
+    let dir = fresh_dir("sumo-handwritten");
+    std::fs::copy(berlin(), dir.join("berlin-small.net.xml")).unwrap();
+    let scenario = |spawn: &str| {
+        format!(
+            r#"[{{"Name": "Berlin_1", "map": {{"sumo": "berlin-small.net.xml"}}, "Vehicles": [
+                {{"Id": "Car_1", "Spawn": "318210363#0_1", "SpawnAtDistance": 5, "DriveQueue": ["right", "straight"], "MergeAtDistances": [0, 0]}},
+                {{"Id": "Car_2", "Spawn": "{spawn}", "SpawnAtDistance": 20, "DriveQueue": ["straight"], "MergeAtDistances": [0]}}]}}]"#
+        )
+    };
+    let file = dir.join("berlin.json");
+    std::fs::write(&file, scenario("318210363#0_2")).unwrap();
+    let out = dir.join("out");
+    let ran = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let meta = read_json(&out.join("Berlin_1/scenario.json"));
+    let spawns: Vec<&str> = meta["cars"].as_array().unwrap().iter().map(|c| c["spawn"].as_str().unwrap()).collect();
+    assert_eq!(spawns, ["318210363#0_1", "318210363#0_2"]);
+    let by_car = poses_by_car(&read_poses(&out.join("Berlin_1/poses.csv")));
+    for poses in by_car.values() {
+        let (first, last) = (&poses[0], &poses[poses.len() - 1]);
+        assert!((last.x - first.x).hypot(last.y - first.y) > 30.0, "a car stayed where it started");
+    }
+    // A lane the network does not have is named, with an example of one it has.
+    std::fs::write(&file, scenario("nope")).unwrap();
+    let refused = run(&["run", "--scenario", file.to_str().unwrap(), "--out", dir.join("out2").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("\"nope\" is not a lane of the network") && stderr.contains("Spawn"), "{stderr}");
+    assert!(!dir.join("out2").exists());
+}

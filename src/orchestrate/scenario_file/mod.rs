@@ -311,6 +311,15 @@ fn resolve(
                     "a scenario happens on one town: give rows and columns as numbers, not distributions",
                 ));
             }
+            let mut section = section.clone();
+            if let Some(sumo) = section.sumo.clone() {
+                // A real network, beside the scenario file.
+                let folder = here.file.parent().unwrap_or(Path::new("."));
+                let network =
+                    crate::spec::ImportedNetwork::read(&folder.join(&sumo), section.lane_change_m, "map.sumo")
+                        .map_err(|e| here.err(None, e.field, e.message))?;
+                section.network = crate::spec::LoadedNetwork(Some(Arc::new(network)));
+            }
             spec.map = section.clone();
             own_map = section.city_map().map_err(|e| here.err(None, e.field, e.message))?;
             &own_map

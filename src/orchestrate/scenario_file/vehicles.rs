@@ -53,6 +53,16 @@ pub(super) fn resolve_vehicle(
     }
     let spawn_name = vehicle.spawn.as_str();
     let spawn = map.lane_by_name(spawn_name).ok_or_else(|| {
+        if map.is_imported() {
+            let example = map.spawn_points().first().map(|&l| map.lanes[l].name.clone()).unwrap_or_default();
+            return here.err(
+                car,
+                "Spawn",
+                format!(
+                    "{spawn_name:?} is not a lane of the network: give a SUMO lane id cars drive, e.g. {example:?} (causalcity map --net lists them)"
+                ),
+            );
+        }
         let layout = &map.layout;
         let mut roads: Vec<char> =
             layout.east_west_roads.iter().chain(&layout.north_south_roads).map(|(name, _)| *name).collect();
