@@ -348,13 +348,16 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
     allowed.insert(dir.join("manifest.json"));
     allowed.insert(dir.join("shards"));
     allowed.insert(dir.join(crate::output::layout::JOB_LOGS_DIR));
-    let mut parents: Vec<(PathBuf, &str)> = vec![(
-        dir.to_path_buf(),
-        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec, networks/ (when its spec names SUMO networks) and logs/ only",
-    )];
-    // The SUMO networks the spec names, kept by file name (and checked
-    // byte for byte: the dataset's maps were read from them).
     let networks = spec.networks();
+    let root_message = if networks.is_empty() {
+        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec and logs/ only"
+    } else {
+        "not part of this dataset: the dataset root holds manifest.json, the group folders of its spec, networks/ and logs/ only"
+    };
+    let mut parents: Vec<(PathBuf, &str)> = vec![(dir.to_path_buf(), root_message)];
+    // The SUMO networks the spec names, kept by file name (their bytes
+    // were checked against the spec's map.sumo_sha256 when the dataset
+    // was opened: its maps were read from them).
     if !networks.is_empty() {
         let folder = dir.join(crate::spec::NETWORKS_FOLDER);
         allowed.insert(folder.clone());

@@ -210,3 +210,70 @@ fn a_hand_written_scenario_drives_on_a_network_beside_it_by_sumo_lane_ids() {
     assert!(stderr.contains("\"nope\" is not a lane of the network") && stderr.contains("Spawn"), "{stderr}");
     assert!(!dir.join("out2").exists());
 }
+
+#[test]
+fn a_real_network_dataset_resumes_merges_sweeps_and_refuses_a_changed_network() {
+    let (dir, spec) = spec_beside_network("sumo-lifecycle", r#"{"sumo": "berlin-small.net.xml"}"#, (2, 1, 1));
+    let out = dir.join("out");
+    // A first run of one scenario per split, then the rest: the second run resumes.
+    gen_ok(&spec, &out, &["--no-images", "--limit", "1"]);
+    let resumed = gen_ok(&spec, &out, &["--no-images"]);
+    let said = format!("{}{}", String::from_utf8_lossy(&resumed.stdout), String::from_utf8_lossy(&resumed.stderr));
+    assert!(said.contains("skipped 6 already complete"), "{said}");
+    assert_eq!(scenario_dirs(&out).len(), 8);
+    // The manifest pins the network's bytes.
+    let manifest = read_json(&out.join("manifest.json"));
+    let pinned = manifest["spec"]["map"]["sumo_sha256"].as_str().unwrap().to_string();
+    assert_eq!(pinned.len(), 64);
+    // A changed network is another dataset: refused, nothing touched.
+    let network = dir.join("berlin-small.net.xml");
+    let original = std::fs::read(&network).unwrap();
+    std::fs::write(&network, [&original[..], b"<!-- edited -->\n"].concat()).unwrap();
+    let before = hash_tree(&out);
+    let changed = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    assert_eq!(changed.status.code(), Some(2), "{}", String::from_utf8_lossy(&changed.stderr));
+    assert!(String::from_utf8_lossy(&changed.stderr).contains("sumo_sha256"));
+    assert_eq!(hash_tree(&out), before, "a refused run changed the dataset");
+    // --force replaces it, network copy included.
+    gen_ok(&spec, &out, &["--no-images", "--force"]);
+    assert_ne!(read_json(&out.join("manifest.json"))["spec"]["map"]["sumo_sha256"].as_str().unwrap(), pinned);
+    assert_eq!(std::fs::read(out.join("networks/berlin-small.net.xml")).unwrap().len(), original.len() + 16);
+    std::fs::write(&network, &original).unwrap();
+    // A dataset whose copy of the network was edited no longer opens.
+    let copy = out.join("networks/berlin-small.net.xml");
+    std::fs::write(&copy, &original).unwrap();
+    let tampered = run(&["validate", out.to_str().unwrap()]);
+    assert!(!tampered.status.success());
+    assert!(
+        String::from_utf8_lossy(&tampered.stderr).contains("SHA-256"),
+        "{}",
+        String::from_utf8_lossy(&tampered.stderr)
+    );
+
+    // Shards in folders of their own merge into one dataset that keeps the network.
+    let (s0, s1, merged) = (dir.join("s0"), dir.join("s1"), dir.join("merged"));
+    gen_ok(&spec, &s0, &["--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &s1, &["--no-images", "--shard", "1/2"]);
+    let m = run(&["merge", "--out", merged.to_str().unwrap(), s0.to_str().unwrap(), s1.to_str().unwrap()]);
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    assert_eq!(std::fs::read(merged.join("networks/berlin-small.net.xml")).unwrap(), original);
+    let checked = run(&["validate", merged.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+
+    // A counterfactual sweep keeps it too, and validates.
+    let sweep = dir.join("sweep");
+    let swept = run(&[
+        "counterfactual",
+        "--sweep",
+        spec.to_str().unwrap(),
+        "--out",
+        sweep.to_str().unwrap(),
+        "--limit",
+        "1",
+        "--no-images",
+    ]);
+    assert!(swept.status.success(), "{}", String::from_utf8_lossy(&swept.stderr));
+    assert!(sweep.join("networks/berlin-small.net.xml").is_file());
+    let checked = run(&["validate", sweep.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+}

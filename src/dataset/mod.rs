@@ -90,8 +90,11 @@ fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, Str
         serde_json::from_value(spec).map_err(|e| format!("{}: the spec in it is unreadable: {e}", path.display()))?;
     // The dataset's root: the manifest's folder, or the one above `shards/`.
     let folder = path.parent().unwrap_or(Path::new("."));
-    let root =
-        if folder.file_name().is_some_and(|n| n == "shards") { folder.parent().unwrap_or(folder) } else { folder };
+    // (A shard's manifest is shards/K-of-N.json; manifest.json and
+    // sweep.json sit at the root, whatever the root is called.)
+    let at_root = path.file_name().is_some_and(|n| n == "manifest.json" || n == "sweep.json");
+    let in_shards = !at_root && folder.file_name().is_some_and(|n| n == "shards");
+    let root = if in_shards { folder.parent().unwrap_or(folder) } else { folder };
     spec.read_networks_in_dataset(root)
         .map_err(|e| format!("{}: the network its spec names is missing or unreadable: {e}", path.display()))?;
     Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))

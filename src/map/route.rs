@@ -206,9 +206,9 @@ impl Route {
         let mut previous: Option<Snapshot> = None;
         // A lane change that look-back decided on: (lane, into, queue index served).
         let mut forced: Option<(LaneId, LaneId, usize)> = None;
-        // The queue action look-back last went back for: once per action, as
-        // on an imported network the lane beside the one before need not lead
-        // to the lane that turns.
+        // The queue action look-back last went back for: on an imported
+        // network once per action, as the lane beside the one before need not
+        // lead to the lane that turns.
         let mut looked_back: Option<usize> = None;
         // Loops and junctions without a choice passed in a row while an
         // action waits.
@@ -284,6 +284,9 @@ impl Route {
                         if loops_in_a_row > map.lanes.len() {
                             let reason =
                                 "no junction with a choice ahead: the road only goes on or loops back".to_string();
+                            if strict {
+                                return Err(error(reason));
+                            }
                             route.adapt(next, action, AdaptationKind::Skipped, reason);
                             next += 1;
                             loops_in_a_row = 0;
@@ -303,9 +306,11 @@ impl Route {
                         let to_left = turn == Turn::Left;
                         // (At a T-junction's stem no lane may go straight on.)
                         let beside_turns = map.lane_towards(lane, turn).is_some();
-                        let back = previous.take().filter(|p| {
-                            beside_turns && !given_up(next) && looked_back != Some(next) && p.has_room(map, to_left)
-                        });
+                        // (Grid towns go back once per lane change a turn needs.)
+                        let again = map.is_imported() && looked_back == Some(next);
+                        let back = previous
+                            .take()
+                            .filter(|p| beside_turns && !given_up(next) && !again && p.has_room(map, to_left));
                         if let Some(p) = back {
                             looked_back = Some(next);
                             let before = map.adjacent_lane(p.lane, to_left).expect("room means a lane beside");

@@ -10,7 +10,7 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::run::{load_spec, scenario_writer, stop_flag, write_simulated, GenError, TownWriters};
+use super::run::{keep_networks, load_spec, scenario_writer, stop_flag, write_simulated, GenError, TownWriters};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
@@ -419,6 +419,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         }
     }
     write_atomically(&record_path, &record(None)).map_err(GenError::from)?;
+    keep_networks(&expansion.spec, &out)?;
     let keys = expansion.keys(options.limit);
     let writers = TownWriters::new(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);

@@ -210,6 +210,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         fs::remove_dir_all(from).map_err(io_err(from))?;
     }
     let (moved, already) = (moves.len(), duplicates.len());
+    // The networks the spec names (read from the first shard's folder).
+    super::run::keep_networks(&expansion.spec, out)?;
     let manifest =
         Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), true, None).to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
@@ -228,6 +230,23 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             if dir == out || fs::remove_dir(dir).is_err() {
                 break; // not empty (or the merged dataset itself)
             }
+        }
+    }
+    // A shard folder's copies of the networks, now kept in --out: its
+    // networks/ goes when it holds those alone, then the folder if empty.
+    for source in sources {
+        let folder = source.join(crate::spec::NETWORKS_FOLDER);
+        if !fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
+            continue;
+        }
+        for (name, network) in expansion.spec.networks() {
+            let copy = folder.join(name);
+            if fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
+                fs::remove_file(&copy).map_err(io_err(&copy))?;
+            }
+        }
+        if fs::remove_dir(&folder).is_ok() {
+            let _ = fs::remove_dir(source);
         }
     }
     Ok(format!(

@@ -324,6 +324,42 @@ fn existing_manifests(out: &Path) -> Result<Vec<(PathBuf, ManifestRecord)>, GenE
     Ok(found)
 }
 
+/// Keeps a copy of every SUMO network `spec` names in `out/networks/`, by
+/// file name, so that readers rebuild the same maps from the output alone.
+/// Never through a link; a copy with other bytes is replaced (the spec as
+/// run pins each network's SHA-256).
+pub(crate) fn keep_networks(spec: &DatasetSpec, out: &Path) -> Result<(), GenError> {
+    let networks = spec.networks();
+    if networks.is_empty() {
+        return Ok(());
+    }
+    let folder = out.join(crate::spec::NETWORKS_FOLDER);
+    if std::fs::symlink_metadata(&folder).is_ok_and(|m| !m.is_dir()) {
+        return Err(GenError::Input(format!(
+            "{}: a link or a file where the output keeps its networks; nothing is written through it. Remove it",
+            folder.display()
+        )));
+    }
+    if let Err(e) = std::fs::create_dir(&folder) {
+        if e.kind() != std::io::ErrorKind::AlreadyExists {
+            return Err(io_err(&folder)(e).into());
+        }
+    }
+    for (name, network) in networks {
+        let path = folder.join(&name);
+        if std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
+            // A temporary name of this process's own: shards started
+            // together write the same bytes side by side.
+            let temp = folder.join(format!(".{name}.{}.partial", std::process::id()));
+            std::fs::write(&temp, &network.bytes).and_then(|()| std::fs::rename(&temp, &path)).map_err(|e| {
+                let _ = std::fs::remove_file(&temp);
+                GenError::from(io_err(&path)(e))
+            })?;
+        }
+    }
+    Ok(())
+}
+
 /// Removes what causalcity wrote into `out` according to `record`: the
 /// manifests and the group folders it lists, nothing else.
 fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(), GenError> {
@@ -362,17 +398,19 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     }
     // The networks the old specs named.
     let networks = out.join(crate::spec::NETWORKS_FOLDER);
-    for (_, record) in records {
+    // Never through a link: a linked networks/ is left alone.
+    let real_folder = std::fs::symlink_metadata(&networks).is_ok_and(|m| m.is_dir());
+    for (_, record) in records.iter().filter(|_| real_folder) {
         let sections =
             [&record.spec["map"], &record.spec["held_out"]["val"]["map"], &record.spec["held_out"]["test"]["map"]];
         for sumo in sections.iter().filter_map(|m| m["sumo"].as_str()) {
             let path = networks.join(crate::spec::network_file_name(sumo));
-            if path.is_file() {
+            if std::fs::symlink_metadata(&path).is_ok_and(|m| !m.is_dir()) {
                 std::fs::remove_file(&path).map_err(io_err(&path))?;
             }
         }
     }
-    if networks.exists() && std::fs::read_dir(&networks).map(|mut d| d.next().is_none()).unwrap_or(false) {
+    if real_folder && std::fs::read_dir(&networks).map(|mut d| d.next().is_none()).unwrap_or(false) {
         std::fs::remove_dir(&networks).map_err(io_err(&networks))?;
     }
     let shards = out.join("shards");
@@ -663,17 +701,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
 
     // The SUMO networks the spec names, kept beside the manifest so that
     // every reader rebuilds the same map from the dataset alone.
-    let networks = expansion.spec.networks();
-    if !networks.is_empty() {
-        let folder = out.join(crate::spec::NETWORKS_FOLDER);
-        std::fs::create_dir_all(&folder).map_err(io_err(&folder))?;
-        for (name, network) in networks {
-            let path = folder.join(name);
-            if std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
-                write_atomically(&path, &network.bytes)?;
-            }
-        }
-    }
+    keep_networks(&expansion.spec, &out)?;
 
     let progress = Progress::new(total, options.progress);
     let bytes = AtomicU64::new(sample.map_or(0, |(_, b)| b));

@@ -364,13 +364,18 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
     };
     match writer {
         Writer::Gen { .. } | Writer::Merge => {
-            const WRITES: &str = "a dataset (manifest.json, shards/, group folders such as cars08_edges50/)";
+            const WRITES: &str = "a dataset (manifest.json, shards/, networks/, group folders such as cars08_edges50/)";
             if contents.sweep {
                 return foreign("a counterfactual sweep (sweep.json)".into(), WRITES, "");
             }
+            // (A link is no folder here: a linked networks/ is refused.)
             let dataset_entry = |n: &str, is_dir: bool| {
                 matches!(n, "manifest.json" | "manifest.json.partial")
-                    || (is_dir && (n == "shards" || n == super::layout::JOB_LOGS_DIR || is_group_folder(n)))
+                    || (is_dir
+                        && (n == "shards"
+                            || n == super::layout::JOB_LOGS_DIR
+                            || n == crate::spec::NETWORKS_FOLDER
+                            || is_group_folder(n)))
             };
             let strangers = unknown(&dataset_entry);
             if !strangers.is_empty() {
@@ -395,7 +400,8 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
                 return foreign("a gen dataset (manifest.json)".into(), WRITES, "");
             }
             let sweep_entry = |n: &str, is_dir: bool| {
-                matches!(n, "sweep.json" | "sweep.json.partial") || (is_dir && is_group_folder(n))
+                matches!(n, "sweep.json" | "sweep.json.partial")
+                    || (is_dir && (n == crate::spec::NETWORKS_FOLDER || is_group_folder(n)))
             };
             let strangers = unknown(&sweep_entry);
             if !strangers.is_empty() {

@@ -38,6 +38,12 @@ pub struct MapSpec {
     /// `gen` keeps a copy in the dataset's `networks/` folder.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sumo: Option<String>,
+    /// SHA-256 (hex) of the `sumo` file. Filled in when the file is read,
+    /// so that the spec as run (in `manifest.json`) pins the network: a
+    /// changed file is a different dataset. Given in a spec, the file must
+    /// match it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sumo_sha256: Option<String>,
     /// The network `sumo` names, once read ([`DatasetSpec::read_networks`]).
     #[serde(skip)]
     pub network: LoadedNetwork,
@@ -389,6 +395,7 @@ impl Default for MapSpec {
             camera_area: None,
             grid: None,
             sumo: None,
+            sumo_sha256: None,
             network: LoadedNetwork::default(),
         }
     }
@@ -554,6 +561,17 @@ impl MapSpec {
             positive("map.camera_altitude_m", altitude, 10_000.0, "metres")?;
         }
         self.validate_camera_area()?;
+        if let Some(sha) = &self.sumo_sha256 {
+            if self.sumo.is_none() {
+                return Err(SpecError::new("map.sumo_sha256", "pins a SUMO network, but map.sumo names none"));
+            }
+            if sha.len() != 64 || !sha.chars().all(|c| c.is_ascii_digit() || ('a'..='f').contains(&c)) {
+                return Err(SpecError::new(
+                    "map.sumo_sha256",
+                    format!("{sha:?} is not allowed: 64 lower-case hex digits (sha256sum of the file)"),
+                ));
+            }
+        }
         if let Some(sumo) = &self.sumo {
             let default = MapSpec::default();
             let moved = [

@@ -5,6 +5,7 @@
 use super::*;
 use crate::map::sumo::SumoNetwork;
 use crate::map::CityMap;
+use sha2::{Digest, Sha256};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -97,6 +98,18 @@ impl DatasetSpec {
                     ),
                 ));
             }
+            // The spec as run pins the file's bytes.
+            let sha: String = Sha256::digest(&network.bytes).iter().map(|b| format!("{b:02x}")).collect();
+            if let Some(pinned) = map.sumo_sha256.as_ref().filter(|p| **p != sha) {
+                return Err(SpecError::new(
+                    format!("{field}_sha256"),
+                    format!(
+                        "{} has SHA-256 {sha}, not {pinned}: the network changed since the spec (or the dataset) was made on it",
+                        network.path.display()
+                    ),
+                ));
+            }
+            map.sumo_sha256 = Some(sha);
             read.push((name, network.clone()));
             map.network = LoadedNetwork(Some(network));
         }

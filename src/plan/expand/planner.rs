@@ -90,6 +90,19 @@ impl Planner {
                 ),
             ));
         }
+        // Overrides name the grid's junctions (AC .. BD); an imported
+        // network has none of them.
+        if map.is_imported() {
+            if let Some(o) = spec.city.iter().flat_map(|c| c.lights.overrides.first()).next() {
+                return Err(SpecError::new(
+                    "city.lights.overrides[0].intersection",
+                    format!(
+                        "{:?}: overrides apply to a grid town's junctions, and this town is the imported network {}, whose lights run its own programmes: leave city.lights.overrides out",
+                        o.intersection, name_of_network(&spec)
+                    ),
+                ));
+            }
+        }
         let spans = spawn_spans(&map, &camera, spec.car_length_m);
         let slot = spec.car_length_m + SPAWN_CLEARANCE;
         let capacity: u32 = spans.iter().map(|s| ((s.hi - s.lo) / slot) as u32 + 1).sum();
@@ -692,6 +705,11 @@ impl Planner {
         };
         distance + 10.0
     }
+}
+
+/// The file name of the SUMO network a town's spec names.
+fn name_of_network(spec: &DatasetSpec) -> &str {
+    spec.map.sumo.as_deref().map_or("", crate::spec::network_file_name)
 }
 
 /// City world: a desired speed per leg (before the first of `actions`
