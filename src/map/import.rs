@@ -228,18 +228,30 @@ const MERGED_FOR_M: f64 = 3.0;
 /// wide by default, `car_width_m`).
 const MERGED_WITHIN_M: f64 = 2.0;
 
-/// For each movement, the movements of its junction into the same lane that
-/// share their last [`MERGED_FOR_M`] or more with it.
-fn merging_movements(connectors: &[Connector]) -> Vec<Vec<usize>> {
-    let shared = |a: &Connector, b: &Connector| {
-        let (la, lb) = (a.curve.length(), b.curve.length());
-        let steps = (MERGED_FOR_M / 0.25) as usize;
-        (0..=steps).all(|k| {
-            let back = k as f64 * 0.25;
-            back <= la.min(lb)
-                && a.curve.position(la - back, 0.0).distance(b.curve.position(lb - back, 0.0)) <= MERGED_WITHIN_M
-        })
-    };
+/// How far two movements' paths run together, metres, from their starts
+/// (`from_end` false) or back from their ends: within [`MERGED_WITHIN_M`]
+/// of each other at equal distances along both, in steps of 0.25 m.
+fn run_together(a: &Connector, b: &Connector, from_end: bool) -> f64 {
+    let (la, lb) = (a.curve.length(), b.curve.length());
+    let at = |len: f64, s: f64| if from_end { len - s } else { s };
+    let mut s = 0.0;
+    while s + 0.25 <= la.min(lb)
+        && a.curve.position(at(la, s + 0.25), 0.0).distance(b.curve.position(at(lb, s + 0.25), 0.0)) <= MERGED_WITHIN_M
+    {
+        s += 0.25;
+    }
+    s
+}
+
+/// For each movement, the movements `related` to it that run together
+/// with it (from the start, or back from the end) for `least` metres or
+/// more, and for how long.
+fn running_together(
+    connectors: &[Connector],
+    related: impl Fn(&Connector, &Connector) -> bool,
+    from_end: bool,
+    least: f64,
+) -> Vec<Vec<(usize, f64)>> {
     connectors
         .iter()
         .enumerate()
@@ -247,47 +259,28 @@ fn merging_movements(connectors: &[Connector]) -> Vec<Vec<usize>> {
             connectors
                 .iter()
                 .enumerate()
-                .filter(|&(j, b)| {
-                    j != i
-                        && a.intersection.is_some()
-                        && a.intersection == b.intersection
-                        && a.to == b.to
-                        && a.from != b.from
-                })
-                .filter(|(_, b)| shared(a, b))
-                .map(|(j, _)| j)
+                .filter(|&(j, b)| j != i && related(a, b))
+                .map(|(j, b)| (j, run_together(a, b, from_end)))
+                .filter(|&(_, s)| s >= least)
                 .collect()
         })
         .collect()
 }
 
-/// For each movement, the other movements from its lane that run with it
-/// from the start (within [`MERGED_WITHIN_M`] at equal distances along
-/// both) for a metre or more, and for how long, metres.
-fn splitting_movements(connectors: &[Connector]) -> Vec<Vec<(usize, f64)>> {
-    let shared = |a: &Connector, b: &Connector| {
-        let longest = a.curve.length().min(b.curve.length());
-        let mut s = 0.0;
-        while s + 0.25 <= longest
-            && a.curve.position(s + 0.25, 0.0).distance(b.curve.position(s + 0.25, 0.0)) <= MERGED_WITHIN_M
-        {
-            s += 0.25;
-        }
-        s
+/// For each movement, the movements of its junction from other lanes into
+/// the same lane that share their last [`MERGED_FOR_M`] or more with it.
+fn merging_movements(connectors: &[Connector]) -> Vec<Vec<usize>> {
+    let into_one = |a: &Connector, b: &Connector| {
+        a.intersection.is_some() && a.intersection == b.intersection && a.to == b.to && a.from != b.from
     };
-    connectors
-        .iter()
-        .enumerate()
-        .map(|(i, a)| {
-            connectors
-                .iter()
-                .enumerate()
-                .filter(|&(j, b)| j != i && a.from == b.from)
-                .map(|(j, b)| (j, shared(a, b)))
-                .filter(|&(_, s)| s >= 1.0)
-                .collect()
-        })
-        .collect()
+    let found = running_together(connectors, into_one, true, MERGED_FOR_M);
+    found.into_iter().map(|list| list.into_iter().map(|(j, _)| j).collect()).collect()
+}
+
+/// For each movement, the other movements from its lane that run with it
+/// from the start for a metre or more, and for how long, metres.
+fn splitting_movements(connectors: &[Connector]) -> Vec<Vec<(usize, f64)>> {
+    running_together(connectors, |a, b| a.from == b.from, false, 1.0)
 }
 
 impl CityMap {

@@ -309,11 +309,25 @@ fn band_along(
     lat1: f64,
     rgb: [u8; 3],
 ) {
-    // One polygon (no seams between pieces): one side forward, the other back.
     let pieces = ((s1 - s0) / 1.0).ceil().max(1.0) as usize;
-    let at = |k: usize| s0 + (s1 - s0) * k as f64 / pieces as f64;
-    let mut pts: Vec<DVec2> = (0..=pieces).map(|k| curve.position(at(k), lat0)).collect();
-    pts.extend((0..=pieces).rev().map(|k| curve.position(at(k), lat1)));
+    band(pixmap, t, curve, [s0, s1], [lat0, lat1], pieces, rgb);
+}
+
+/// One polygon along `curve` over `s` between the lateral offsets `lat`
+/// (positive = left of travel), in `pieces` straight pieces: one side
+/// forward, the other back (no seams between pieces).
+fn band(
+    pixmap: &mut Pixmap,
+    t: Transform,
+    curve: &crate::map::curve::Curve,
+    s: [f64; 2],
+    lat: [f64; 2],
+    pieces: usize,
+    rgb: [u8; 3],
+) {
+    let at = |k: usize| if k == pieces { s[1] } else { s[0] + (s[1] - s[0]) * k as f64 / pieces as f64 };
+    let mut pts: Vec<DVec2> = (0..=pieces).map(|k| curve.position(at(k), lat[0])).collect();
+    pts.extend((0..=pieces).rev().map(|k| curve.position(at(k), lat[1])));
     fill_polygon(pixmap, t, &pts, rgb);
 }
 
@@ -390,7 +404,8 @@ fn fill_polygon(pixmap: &mut Pixmap, t: Transform, pts: &[DVec2], rgb: [u8; 3]) 
 }
 
 /// A band along `curve` from `s0` to `s1`, between two lateral offsets
-/// (positive = left of travel). Used for straight lane pieces.
+/// (positive = left of travel), as one quadrilateral: for straight lane
+/// pieces.
 #[allow(clippy::too_many_arguments)]
 fn quad_along(
     pixmap: &mut Pixmap,
@@ -402,6 +417,5 @@ fn quad_along(
     lat1: f64,
     rgb: [u8; 3],
 ) {
-    let pts = [curve.position(s0, lat0), curve.position(s1, lat0), curve.position(s1, lat1), curve.position(s0, lat1)];
-    fill_polygon(pixmap, t, &pts, rgb);
+    band(pixmap, t, curve, [s0, s1], [lat0, lat1], 1, rgb);
 }
