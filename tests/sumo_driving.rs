@@ -277,3 +277,35 @@ fn a_real_network_dataset_resumes_merges_sweeps_and_refuses_a_changed_network() 
     let checked = run(&["validate", sweep.to_str().unwrap()]);
     assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
 }
+
+#[test]
+fn a_generated_spider_web_of_right_before_left_junctions_drives_without_collisions() {
+    // Junctions of up to 7 arms, several from one compass side, all driven as all-way stops.
+    let dir = fresh_dir("sumo-spider");
+    let network = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/spider7.net.xml");
+    std::fs::copy(&network, dir.join("spider7.net.xml")).unwrap();
+    let text = r#"{"name": "spider", "world": "city", "seed": 5, "frames": 120, "frame_interval": 0.5,
+        "groups": [{"cars": 12, "edge_proportion": 0.5}], "splits": {"train": 12, "val": 0, "test": 0},
+        "actions_per_car": 4, "map": {"sumo": "spider7.net.xml"}}"#;
+    let spec = write_spec(&dir, text);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images"]);
+    let mut scenarios = 0;
+    for scenario in scenario_dirs(&out) {
+        let events = std::fs::read_to_string(scenario.join("events.csv")).unwrap();
+        assert!(!events.contains(",collision,"), "{}: {events}", scenario.display());
+        let by_car = poses_by_car(&read_poses(&scenario.join("poses.csv")));
+        for poses in by_car.values() {
+            let moved: f64 = poses.windows(2).map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y)).sum();
+            assert!(moved > 20.0, "{}: a car drove only {moved:.1} m in 60 s", scenario.display());
+        }
+        scenarios += 1;
+    }
+    assert_eq!(scenarios, 12);
+    // The all-way rule binds cars: some wait at a stop line.
+    let lines: usize = scenario_dirs(&out)
+        .iter()
+        .map(|s| std::fs::read_to_string(s.join("interactions.csv")).unwrap().matches(",stop_line,").count())
+        .sum();
+    assert!(lines > 0, "no car ever waited at a stop line");
+}
