@@ -238,8 +238,21 @@ pub struct NetSummary {
     pub left_out: Vec<(String, usize)>,
     /// Lower and upper corners of the network, metres.
     pub bounds: [[f64; 2]; 2],
+    /// What a spec's `map.sumo` would drive of it (with the default
+    /// lane change): the lanes kept, the U-turn loops added where roads
+    /// end, the lanes dropped and why; or why it cannot be driven.
+    pub driving: Result<NetDriving, String>,
     /// The picture written, if `--out` was given.
     pub picture: Option<PathBuf>,
+}
+
+/// What driving keeps of an imported network ([`crate::map::CityMap::from_sumo`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct NetDriving {
+    pub lanes: usize,
+    pub loops: usize,
+    /// (lane id, why) for every lane left out.
+    pub dropped: Vec<(String, String)>,
 }
 
 impl fmt::Display for NetSummary {
@@ -276,6 +289,24 @@ impl fmt::Display for NetSummary {
         let dead: Vec<&str> = self.lanes.iter().filter(|l| l.turns.is_empty()).map(|l| l.id.as_str()).collect();
         if !dead.is_empty() {
             writeln!(f, "{} lanes lead nowhere (dead ends): {}", dead.len(), dead.join(" "))?;
+        }
+        match &self.driving {
+            Ok(d) => {
+                writeln!(
+                    f,
+                    "as map.sumo: {} lanes driven, {} U-turn loops added where roads end, {} lanes left out",
+                    d.lanes,
+                    d.loops,
+                    d.dropped.len()
+                )?;
+                for (lane, why) in d.dropped.iter().take(10) {
+                    writeln!(f, "  {lane}: {why}")?;
+                }
+                if d.dropped.len() > 10 {
+                    writeln!(f, "  ... and {} more (--json lists all)", d.dropped.len() - 10)?;
+                }
+            }
+            Err(why) => writeln!(f, "as map.sumo: cannot be driven: {why}")?,
         }
         writeln!(f, "{:<24} {:>7} {:>8} {:>6}  {:<24} turns", "lane", "heading", "length m", "m/s", "ends at")?;
         for lane in &self.lanes {
@@ -337,7 +368,16 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         })
         .collect();
     let (lo, hi) = net.bounds();
+    let driving =
+        crate::map::CityMap::from_sumo(&net, crate::map::MapLayout::default().lane_change_length).map(|(_, report)| {
+            NetDriving {
+                lanes: report.lanes,
+                loops: report.loops,
+                dropped: report.dropped.into_iter().map(|(lane, why)| (lane, why.to_string())).collect(),
+            }
+        });
     let summary = NetSummary {
+        driving,
         net: net_path.to_path_buf(),
         junctions: net
             .junctions

@@ -41,6 +41,12 @@ fn a_real_network_is_listed_with_its_junctions_and_the_lanes_cars_drive_and_draw
     let stdout = String::from_utf8_lossy(&text.stdout);
     assert!(stdout.contains("17 junctions (14 priority, 1 dead_end, 2 traffic_light)"), "{stdout}");
     assert!(stdout.contains("48 lanes cars drive, 79 connections, 2 traffic-light programmes"), "{stdout}");
+    // What a spec's map.sumo would drive of it: every lane, with loops where its 4 dead-end lanes end.
+    assert!(
+        stdout.contains("as map.sumo: 48 lanes driven, 4 U-turn loops added where roads end, 0 lanes left out"),
+        "{stdout}"
+    );
+    assert_eq!(summary["driving"]["Ok"]["lanes"], 48);
 }
 
 #[test]

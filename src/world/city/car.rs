@@ -220,7 +220,11 @@ impl SimCar<'_> {
             let ds = (car.s - a.s).abs();
             ARC_SLACK * ds + (car.wander - a.wander).abs() + a.wander.abs() * ds.min(2.0)
         };
-        let fresh = self.anchor.is_some_and(|a| a.leg == self.leg && radius(&a, self) <= ANCHOR_REACH);
+        // A polyline (an imported network's lanes and movements) turns at its
+        // points: a car off its centre line steps sideways there, beyond
+        // what the radius allows, so its pose is computed every time.
+        let bent = matches!(self.route.legs[self.leg].curve, crate::map::curve::Curve::Polyline(_));
+        let fresh = !bent && self.anchor.is_some_and(|a| a.leg == self.leg && radius(&a, self) <= ANCHOR_REACH);
         if !fresh {
             let point = self.pose().0;
             self.anchor = Some(Anchor { point, s: self.s, wander: self.wander, leg: self.leg });
