@@ -309,3 +309,27 @@ fn a_generated_spider_web_of_right_before_left_junctions_drives_without_collisio
         .sum();
     assert!(lines > 0, "no car ever waited at a stop line");
 }
+
+#[test]
+fn a_chase_camera_sees_the_real_networks_roads() {
+    let dir = fresh_dir("sumo-chase");
+    std::fs::copy(berlin(), dir.join("berlin-small.net.xml")).unwrap();
+    let text = r#"{"name": "chase", "world": "city", "seed": 3, "frames": 20, "frame_interval": 0.5,
+        "image": {"width": 320, "height": 200},
+        "groups": [{"cars": 4, "edge_proportion": 0.5}], "splits": {"train": 1, "val": 0, "test": 0},
+        "map": {"sumo": "berlin-small.net.xml"}, "cameras": [{"name": "chase", "third_person": 0}]}"#;
+    let spec = write_spec(&dir, text);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &[]);
+    let scenario = &scenario_dirs(&out)[0];
+    let frame = image::open(scenario.join("cameras/chase/rgb/0010.png")).unwrap().to_rgb8();
+    // Below the horizon: the road under the car, dark asphalt, not bare ground only.
+    let lower = frame.height() / 2..frame.height();
+    let dark = lower
+        .flat_map(|y| (0..frame.width()).map(move |x| (x, y)))
+        .filter(|&(x, y)| frame.get_pixel(x, y).0.iter().all(|&c| c < 110))
+        .count();
+    assert!(dark > (frame.width() * frame.height() / 20) as usize, "only {dark} dark pixels below the horizon");
+    let report = run(&["validate", out.to_str().unwrap()]);
+    assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
+}

@@ -698,6 +698,21 @@ impl CityMap {
         self.lane_by_name.get(name).copied()
     }
 
+    /// Lower and upper corners of every lane and movement's centre line,
+    /// metres (sampled every 2 m and at their ends).
+    pub fn drawn_bounds(&self) -> (DVec2, DVec2) {
+        let curves = self.lanes.iter().map(|l| &l.curve).chain(self.connectors.iter().map(|c| &c.curve));
+        let mut bounds = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+        for curve in curves {
+            let n = (curve.length() / 2.0).ceil().max(1.0) as usize;
+            for k in 0..=n {
+                let p = curve.position(curve.length() * k as f64 / n as f64, 0.0);
+                bounds = (bounds.0.min(p), bounds.1.max(p));
+            }
+        }
+        bounds
+    }
+
     /// Whether the map is an imported network (not a grid town).
     pub fn is_imported(&self) -> bool {
         self.layout.east_west_roads.is_empty()

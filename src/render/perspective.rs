@@ -43,6 +43,9 @@ const CABIN_LENGTH_SHARE: f64 = 0.5;
 const CABIN_WIDTH_SHARE: f64 = 0.85;
 /// Pixels of the ground texture per metre.
 const TEXTURE_PX_PER_M: f64 = 10.0;
+/// Most pixels along a side of an imported network's ground texture (a
+/// larger network is drawn coarser).
+const MAX_TEXTURE_SIDE: f64 = 4096.0;
 /// Direction towards the sun (unnormalised), for shading faces.
 const SUN: [f64; 3] = [0.35, 0.55, 0.75];
 
@@ -100,6 +103,20 @@ impl World3d {
     /// The solids of `map` (the ground drawn once, flat, at
     /// [`TEXTURE_PX_PER_M`]).
     pub fn new(map: &CityMap) -> World3d {
+        if map.is_imported() {
+            // The network's own area (no blocks to raise), at most
+            // MAX_TEXTURE_SIDE pixels a side.
+            let (lo, hi) = map.drawn_bounds();
+            let (lo, hi) = (lo - DVec2::splat(10.0), hi + DVec2::splat(10.0));
+            let size = hi - lo;
+            let ppm = TEXTURE_PX_PER_M.min(MAX_TEXTURE_SIDE / size.max_element());
+            let (w, h) = (((size.x * ppm) as u32).max(1), ((size.y * ppm) as u32).max(1));
+            let altitude = Camera::altitude_to_frame(w, h, size);
+            let texture = Camera::birds_eye_over(w, h, (lo + hi) / 2.0, altitude);
+            let pixmap = draw_background(map, &texture).pixmap;
+            let ground = pixmap.data().chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+            return World3d { texture, ground, buildings: Vec::new() };
+        }
         let (half_x, half_y) = (map.layout.extent_x + 10.0, map.layout.extent_y + 10.0);
         let (w, h) = ((2.0 * half_x * TEXTURE_PX_PER_M) as u32, (2.0 * half_y * TEXTURE_PX_PER_M) as u32);
         let altitude = Camera::altitude_to_frame(w, h, DVec2::new(2.0 * half_x, 2.0 * half_y));
