@@ -251,7 +251,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         }
         let curves = map.lanes.iter().map(|l| &l.curve).chain(map.connectors.iter().map(|c| &c.curve));
         for curve in curves {
-            band_along(target, t, curve, 0.0, curve.length(), -half - 0.05, half + 0.05, ASPHALT);
+            quad_along(target, t, curve, 0.0, curve.length(), -half - 0.05, half + 0.05, ASPHALT);
         }
     }
     for (id, lane) in map.lanes.iter().enumerate() {
@@ -260,11 +260,11 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         if map.adjacent_lane(id, true).is_some() {
             let mut s = 1.0;
             while s + 3.0 <= len - 1.0 {
-                band_along(pixmap, t, curve, s, s + 3.0, half - 0.07, half + 0.07, WHITE);
+                quad_along(pixmap, t, curve, s, s + 3.0, half - 0.07, half + 0.07, WHITE);
                 s += 6.0;
             }
         } else {
-            band_along(pixmap, t, curve, 0.0, len, half - 0.2, half - 0.05, CENTRE_LINE);
+            quad_along(pixmap, t, curve, 0.0, len, half - 0.2, half - 0.05, CENTRE_LINE);
         }
         let crate::map::LaneEnd::Intersection { intersection, approach } = lane.end else { continue };
         let line = len - map.layout.stop_line_setback;
@@ -272,9 +272,9 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight);
         let kerb_side = map.adjacent_lane(id, false).is_none();
         match junction.control {
-            JunctionControl::Signals => band_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),
+            JunctionControl::Signals => quad_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),
             JunctionControl::AllWayStop => {
-                band_along(pixmap, t, curve, line - 0.1, line + 0.5, -half, half, WHITE);
+                quad_along(pixmap, t, curve, line - 0.1, line + 0.5, -half, half, WHITE);
                 if let Some(p) = sign.filter(|_| kerb_side) {
                     circle(pixmap, t, p.x, p.y, 0.55, WHITE);
                     circle(pixmap, t, p.x, p.y, 0.45, STOP_SIGN);
@@ -284,7 +284,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
             JunctionControl::Priority => {
                 let mut k = -half;
                 while k < half {
-                    band_along(pixmap, t, curve, line, line + 0.4, k, (k + 0.6).min(half), WHITE);
+                    quad_along(pixmap, t, curve, line, line + 0.4, k, (k + 0.6).min(half), WHITE);
                     k += 1.0;
                 }
                 if let Some(p) = sign.filter(|_| kerb_side) {
@@ -294,23 +294,6 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
             }
         }
     }
-}
-
-/// A band along `curve` from `s0` to `s1` between two lateral offsets, in
-/// pieces of at most a metre, so that it bends with the curve.
-#[allow(clippy::too_many_arguments)]
-fn band_along(
-    pixmap: &mut Pixmap,
-    t: Transform,
-    curve: &crate::map::curve::Curve,
-    s0: f64,
-    s1: f64,
-    lat0: f64,
-    lat1: f64,
-    rgb: [u8; 3],
-) {
-    let pieces = ((s1 - s0) / 1.0).ceil().max(1.0) as usize;
-    band(pixmap, t, curve, [s0, s1], [lat0, lat1], pieces, rgb);
 }
 
 /// One polygon along `curve` over `s` between the lateral offsets `lat`
@@ -404,8 +387,9 @@ fn fill_polygon(pixmap: &mut Pixmap, t: Transform, pts: &[DVec2], rgb: [u8; 3]) 
 }
 
 /// A band along `curve` from `s0` to `s1`, between two lateral offsets
-/// (positive = left of travel), as one quadrilateral: for straight lane
-/// pieces.
+/// (positive = left of travel): one quadrilateral on a grid town's straight
+/// or round pieces, and on a polyline (an imported network's) pieces of at
+/// most a metre, so that it bends with it.
 #[allow(clippy::too_many_arguments)]
 fn quad_along(
     pixmap: &mut Pixmap,
@@ -417,5 +401,9 @@ fn quad_along(
     lat1: f64,
     rgb: [u8; 3],
 ) {
-    band(pixmap, t, curve, [s0, s1], [lat0, lat1], 1, rgb);
+    let pieces = match curve {
+        crate::map::curve::Curve::Polyline(_) => ((s1 - s0) / 1.0).ceil().max(1.0) as usize,
+        _ => 1,
+    };
+    band(pixmap, t, curve, [s0, s1], [lat0, lat1], pieces, rgb);
 }
