@@ -206,11 +206,7 @@ fn programmed_lights(
                 let read_as = if protected || signal == Signal::Straight { signal } else { Signal::Straight };
                 let mut schedule: Vec<ScheduleStep> = Vec::new();
                 for ((duration, _), &state) in p.phases.iter().zip(&states) {
-                    let colour = colour_of(state, read_as);
-                    match schedule.last_mut() {
-                        Some(last) if last.colour == colour => last.duration += duration,
-                        _ => schedule.push(ScheduleStep { colour, duration: *duration }),
-                    }
+                    ScheduleStep::extend(&mut schedule, colour_of(state, read_as), *duration);
                 }
                 lights.push(Light { intersection: k, approach, signal, offset: p.offset, schedule });
             }

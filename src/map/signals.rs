@@ -60,6 +60,17 @@ pub struct ScheduleStep {
     pub duration: f64,
 }
 
+impl ScheduleStep {
+    /// Appends `duration` seconds of `colour` to `schedule`: to its last
+    /// step when that shows the same colour, else as a step of its own.
+    pub fn extend(schedule: &mut Vec<ScheduleStep>, colour: Colour, duration: f64) {
+        match schedule.last_mut() {
+            Some(last) if last.colour == colour => last.duration += duration,
+            _ => schedule.push(ScheduleStep { colour, duration }),
+        }
+    }
+}
+
 /// One light: where it stands and what it shows when.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Light {
@@ -168,10 +179,7 @@ impl LightPlan {
                             vec![(Colour::Red, green + yellow)]
                         };
                         for (colour, d) in steps {
-                            match schedule.last_mut() {
-                                Some(last) if last.colour == colour => last.duration += d * scale,
-                                _ => schedule.push(ScheduleStep { colour, duration: d * scale }),
-                            }
+                            ScheduleStep::extend(&mut schedule, colour, d * scale);
                         }
                     }
                     let offset = offsets.get(intersection).copied().unwrap_or(0.0);
