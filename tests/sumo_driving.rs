@@ -333,3 +333,30 @@ fn a_chase_camera_sees_the_real_networks_roads() {
     let report = run(&["validate", out.to_str().unwrap()]);
     assert!(report.status.success(), "{}", String::from_utf8_lossy(&report.stdout));
 }
+
+#[test]
+fn gen_writes_no_network_through_a_linked_networks_folder() {
+    let (dir, spec) = spec_beside_network("sumo-linked", r#"{"sumo": "berlin-small.net.xml"}"#, (1, 0, 0));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images", "--limit", "1"]);
+    // networks/ replaced by a link to a folder outside the dataset.
+    let elsewhere = dir.join("elsewhere");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    std::fs::remove_dir_all(out.join("networks")).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, out.join("networks")).unwrap();
+    let before = hash_tree(&out);
+    let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("networks"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    assert_eq!(std::fs::read_dir(&elsewhere).unwrap().count(), 0, "a file was written through the link");
+    assert_eq!(hash_tree(&out), before);
+    // --force leaves the linked folder's target alone too.
+    std::fs::write(elsewhere.join("keep.txt"), "mine").unwrap();
+    let _ = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images", "--force"]);
+    assert_eq!(std::fs::read_to_string(elsewhere.join("keep.txt")).unwrap(), "mine");
+    assert!(!elsewhere.join("berlin-small.net.xml").exists());
+}
