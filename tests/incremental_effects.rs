@@ -106,7 +106,8 @@ fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
 }
 
 #[test]
-fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_t_junctions_and_no_lights() {
+fn replayed_reruns_match_on_chains_forks_grid_towns_of_one_to_three_lanes_t_junctions_no_lights_and_cooperative_rules()
+{
     for (name, extra) in [
         ("chains", r#", "graph": {"shape": "chains", "cars": 3}"#),
         ("forks", r#", "graph": {"shape": "forks", "cars": 3}"#),
@@ -125,6 +126,17 @@ fn replayed_reruns_match_on_chains_forks_and_grid_towns_of_one_to_three_lanes_t_
         (
             "mixed-control",
             r#", "map": {"grid": {"rows": 2, "columns": 3, "control": {"AC": "priority", "BE": "all_way_stop"}}}"#,
+        ),
+        // The cooperative rules read other cars' lane-change claims and a
+        // leader on the lane beside: replay must see them as a full re-run does.
+        ("cooperative", r#", "city": {"rules": "cooperative", "start": {"platoon_cars": 4}}"#),
+        (
+            "cooperative-grid",
+            r#", "map": {"grid": {"rows": 4, "columns": 4}}, "city": {"rules": "cooperative", "start": {"platoon_cars": 4}}"#,
+        ),
+        (
+            "cooperative-three-lane",
+            r#", "map": {"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 44, "outer_m": 34}}, "city": {"rules": "cooperative"}"#,
         ),
     ] {
         let (scenarios, replayed_scenarios, _, _) = compare_all(spec(name, &[(8, 0.8)], 4, extra));

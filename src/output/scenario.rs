@@ -94,6 +94,9 @@ struct CityRecord<'a> {
     base_driver: &'a DriverParams,
     lights: Vec<LightRecord<'a>>,
     signal_heads: crate::spec::SignalHeads,
+    /// Written only where a spec chose other than the original's rules.
+    #[serde(skip_serializing_if = "crate::spec::DrivingRules::is_original")]
+    rules: crate::spec::DrivingRules,
 }
 
 #[derive(Serialize)]
@@ -165,6 +168,7 @@ pub fn scenario_json(
         effects: &c.effects,
         base_driver: &c.base_driver,
         signal_heads: c.signal_heads,
+        rules: c.rules,
         lights: c
             .lights
             .lights

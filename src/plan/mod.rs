@@ -11,7 +11,7 @@ pub mod interventions;
 use crate::camera::CameraPlan;
 use crate::map::signals::LightPlan;
 use crate::map::{Action, LaneId, Route};
-use crate::spec::{DriverModel, DriverParams, SignalHeads, Split, WorldKind};
+use crate::spec::{DriverModel, DriverParams, DrivingRules, SignalHeads, Split, WorldKind};
 use confounders::{ConfounderModel, Confounders, Effects};
 use interventions::Intervention;
 use serde::Serialize;
@@ -141,6 +141,8 @@ pub struct CityPlan {
     pub agency: Vec<CarAgency>,
     /// Whether frames draw the signal heads.
     pub signal_heads: SignalHeads,
+    /// The original's driving rules, or the cooperative ones.
+    pub rules: DrivingRules,
 }
 
 /// The world a scenario runs in, with what only that world needs.

@@ -298,6 +298,41 @@ pub struct CitySpec {
     /// Whether frames show the signal heads (the lights, a confounder of
     /// every car) or hide them.
     pub signal_heads: SignalHeads,
+    /// The original's driving rules, or the cooperative ones. Written into
+    /// a resolved spec only when not the original's, so existing specs keep
+    /// their bytes.
+    #[serde(skip_serializing_if = "DrivingRules::is_original")]
+    pub rules: DrivingRules,
+}
+
+/// Which reading of the city's driving rules the drivers follow. The
+/// original's is the default, so existing specs keep their bytes; the
+/// cooperative one removes the two ways in which the original's leaves
+/// cars waiting for good or giving their turns up (docs/city.md#driving-rules).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DrivingRules {
+    /// A driver who must change lanes waits at the last point of its lane
+    /// for a gap to come by itself and gives the action up after 20 s;
+    /// nobody lets it in, so beside a queue at a red light none comes. At a
+    /// junction with lights a car behind that has claimed another movement
+    /// from the same lane counts as in front of the cars ahead of it.
+    #[default]
+    Original,
+    /// A driver waiting at the last point of its lane asks the car behind
+    /// that point in the lane it wants to hold back, and that car does when
+    /// it can still stop comfortably (SUMO's cooperative lane changing,
+    /// MOBIL's politeness); its 20 s of patience run only while the lane it
+    /// wants moves. A car still before the box counts as in front of no
+    /// car of its lane, at every junction.
+    Cooperative,
+}
+
+impl DrivingRules {
+    /// Whether these are the original's rules (the default).
+    pub fn is_original(&self) -> bool {
+        *self == DrivingRules::Original
+    }
 }
 
 /// Whether the frames show the traffic lights' signal heads.
@@ -383,6 +418,7 @@ impl Default for CitySpec {
             lights: LightsSpec::default(),
             confounders: ConfounderSpec::default(),
             signal_heads: SignalHeads::Visible,
+            rules: DrivingRules::Original,
         }
     }
 }

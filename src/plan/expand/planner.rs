@@ -644,6 +644,7 @@ impl Planner {
             base_driver: c.driver,
             driver_model: c.driver_model,
             signal_heads: c.signal_heads,
+            rules: c.rules,
             sim_stream: Sha256::digest(sim_stream).into(),
             agency: agency.into_iter().map(|(_, a)| a).collect(),
         }

@@ -71,6 +71,10 @@ pub(super) struct SimCar<'p> {
     /// Since when the car has waited for a lane-change gap at the last
     /// point of its lane, seconds.
     pub(super) waiting_since: Option<f64>,
+    /// Under cooperative lane changes, while it waits there: the lane it
+    /// wants and the point on it (metres) that the car behind is asked to
+    /// stop short of.
+    pub(super) merge_claim: Option<(usize, f64)>,
     /// What bound the latest decision (for interactions.csv).
     pub(super) binding: Interaction,
     /// The car it last collided with.
@@ -181,6 +185,7 @@ impl<'p> SimCar<'p> {
             given_up: Vec::new(),
             logged_adaptations: Vec::new(),
             waiting_since: None,
+            merge_claim: None,
             binding: Interaction::FREE,
             collided_with: None,
             driver: agency.driver,
@@ -269,6 +274,7 @@ impl SimCar<'_> {
             && self.given_up == other.given_up
             && self.logged_adaptations == other.logged_adaptations
             && self.waiting_since == other.waiting_since
+            && self.merge_claim == other.merge_claim
             && self.binding == other.binding
             && self.collided_with == other.collided_with
             && self.driver == other.driver
@@ -297,6 +303,7 @@ impl SimCar<'_> {
     pub(super) fn follow_route(&mut self, route: Route, lane_s: f64, action_base: usize) {
         self.route = Arc::new(route);
         self.anchor = None;
+        self.merge_claim = None;
         self.s = lane_s;
         self.leg = self.route.leg_index_at(lane_s);
         self.action_base = action_base;

@@ -9,11 +9,17 @@ use crate::map::curve::Curve;
 use crate::map::route::last_change_start;
 use crate::map::signals::{Colour, LightState, Signal};
 use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
+use crate::spec::DrivingRules;
 use std::sync::Arc;
 
 /// How long a driver waits at the last point of its lane for a lane-change
 /// gap before it gives the action up, seconds.
 pub(super) const LANE_CHANGE_PATIENCE: f64 = 20.0;
+/// Room a waiting lane changer leaves, beyond its own min gap, between the
+/// point of its lane change and the point it asks the car behind in the
+/// other lane to stop short of (cooperative lane changes), metres: covers
+/// that car's perception error in stopping.
+const CLAIM_MARGIN: f64 = 0.5;
 /// How far ahead along its route a driver looks, metres.
 const LOOKAHEAD: f64 = 30.0;
 /// A car on a sibling movement (same lane, other turn) counts as ahead of
@@ -121,6 +127,9 @@ impl Sim<'_> {
         let car = &self.cars[i];
         let leg = &car.route.legs[car.leg];
         let along = car.s - leg.route_start;
+        if let Some(claim) = self.merge_claim(i) {
+            places.push(claim);
+        }
         match leg.kind {
             LegKind::Lane(lane) => places.push((lane, leg.curve_start + along)),
             LegKind::Connector(c) => places.push((self.map.connector_track(c), along)),
@@ -132,6 +141,20 @@ impl Sim<'_> {
             }
         }
         places
+    }
+
+    /// The point a car waiting to change lanes (cooperative lane changes)
+    /// asks the car behind in the lane it wants to stop short of: (that
+    /// lane, metres along it), while it still waits on its lane for that
+    /// change. A car mid-change stands in both lanes and claims nothing.
+    fn merge_claim(&self, i: usize) -> Option<(usize, f64)> {
+        let car = &self.cars[i];
+        let (track, pos) = car.merge_claim?;
+        let waits = match (car.route.legs[car.leg].kind, car.route.legs.get(car.leg + 1).map(|l| l.kind)) {
+            (LegKind::Lane(lane), Some(LegKind::LaneChange { from, to, .. })) => lane == from && to == track,
+            _ => false,
+        };
+        waits.then_some((track, pos))
     }
 
     /// The cars on `track` and how far along each is (metres), in car
@@ -185,13 +208,34 @@ impl Sim<'_> {
     /// speed in m/s, the car).
     pub(super) fn leader_ahead(&self, i: usize) -> Option<(f64, f64, usize)> {
         let car = &self.cars[i];
-        let (d, j) = car.route.legs[car.leg..]
+        let on_path = car.route.legs[car.leg..]
             .iter()
             .take_while(|leg| leg.route_start - car.s <= LOOKAHEAD)
-            .find_map(|leg| self.nearest_on_leg(i, leg))
-            .filter(|&(d, _)| d <= LOOKAHEAD)?;
+            .find_map(|leg| self.nearest_on_leg(i, leg));
+        let beside = if self.city.rules == DrivingRules::Cooperative { self.leader_beside(i) } else { None };
+        let (d, j) = nearest(on_path.into_iter().chain(beside)).filter(|&(d, _)| d <= LOOKAHEAD)?;
         let other = &self.cars[j];
         Some((d - (car.plan.length + other.plan.length) / 2.0, other.v, j))
+    }
+
+    /// Car `i`'s own leader when it drives ahead on a lane beside car `i`'s
+    /// (cooperative rules): a follower does not pass its leader, so it
+    /// keeps behind it as behind a car in its own lane.
+    fn leader_beside(&self, i: usize) -> Option<Candidate> {
+        let car = &self.cars[i];
+        let leader = car.leader?;
+        let leg = &car.route.legs[car.leg];
+        let LegKind::Lane(lane) = leg.kind else { return None };
+        let own = leg.curve_start + (car.s - leg.route_start);
+        // A leader changing, or asking to change, into this car's lane is
+        // seen there, where this car stops for it or drives on past.
+        if self.occupants(lane).iter().any(|&(j, _)| j == leader) {
+            return None;
+        }
+        [true, false].into_iter().filter_map(|left| self.map.adjacent_lane(lane, left)).find_map(|beside| {
+            let &(_, pos) = self.occupants(beside).iter().find(|&&(j, _)| j == leader)?;
+            (pos > own).then_some((pos - own, leader))
+        })
     }
 
     /// The nearest other car ahead of car `i` on `leg` of its route: on the
@@ -220,9 +264,10 @@ impl Sim<'_> {
         let from = self.map.connectors[c].from;
         // A car still before the box only claims its movement; it is not in
         // front. Junctions with lights keep the original rule, under which it
-        // is, for byte identity; it can leave two cars waiting on each other
-        // for good (docs/spec.md#junctions-without-lights).
-        let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals);
+        // is, unless the spec asks for the cooperative rules: it can leave two
+        // cars waiting on each other for good (docs/city.md#driving-rules).
+        let claims_count =
+            self.map.control_of(c) == Some(JunctionControl::Signals) && self.city.rules == DrivingRules::Original;
         // On an imported network movements may run together well into the
         // junction before they part: in front until its back is past that.
         let occupants = self.map.exits_from(from).filter(|&o| o != c).flat_map(|sibling| {
@@ -490,12 +535,14 @@ impl Sim<'_> {
         };
         let Some((change, from, to, at)) = upcoming else {
             self.cars[i].waiting_since = None;
+            self.cars[i].merge_claim = None;
             return None;
         };
         let (d, for_turn) = (change.route_start - car.s, change.prepares.is_some());
         let (v, rt) = (car.v, car.driver.reaction_time);
         if self.merge_gap_ok(i, to, at) {
             self.cars[i].waiting_since = None;
+            self.cars[i].merge_claim = None;
             return None;
         }
         // Looked at only within a reaction time (plus half a second) and 1.5 m.
@@ -507,12 +554,20 @@ impl Sim<'_> {
             let last = last_change_start(self.map, from, for_turn);
             if later <= last + 1e-6 && Arc::make_mut(&mut self.cars[i].route).move_lane_change(self.map, next, later) {
                 self.cars[i].anchor = None;
+                self.cars[i].merge_claim = None;
                 return None;
             }
         }
         // Held up by the change: waiting at its start, or at rest before it
         // (behind a car already in the lane it wants).
+        let cooperative = self.city.rules == DrivingRules::Cooperative;
         if near || v < 0.1 {
+            // A cooperative driver's patience runs only while the lane it
+            // wants moves: a queue standing in the way (at a red light) will
+            // move on and leave the gap.
+            if cooperative && self.queue_in_the_way(i, from, to, at) {
+                self.cars[i].waiting_since = Some(t);
+            }
             let since = *self.cars[i].waiting_since.get_or_insert(t);
             if t - since >= LANE_CHANGE_PATIENCE {
                 self.give_up_lane_change(i, t);
@@ -521,7 +576,54 @@ impl Sim<'_> {
         } else {
             self.cars[i].waiting_since = None;
         }
+        self.cars[i].merge_claim = if near && cooperative { self.claim_for(i, to, at) } else { None };
         near.then_some(d.max(0.0))
+    }
+
+    /// Where car `i`, waiting to change into lane `to` at `at` metres along
+    /// it, asks the car behind there to stop: short of `at` by its own min
+    /// gap and [`CLAIM_MARGIN`], so that car stops where
+    /// [`Sim::merge_gap_ok`] finds the gap behind free. `None` when the
+    /// nearest car behind that point could not stop short of it, with its
+    /// min gap, at its comfortable deceleration: it is let by, and the car
+    /// after it is asked.
+    fn claim_for(&self, i: usize, to: usize, at: f64) -> Option<(usize, f64)> {
+        let car = &self.cars[i];
+        let point = at - car.driver.min_gap - CLAIM_MARGIN;
+        let behind = nearest(
+            self.occupants(to).iter().filter(|&&(j, pos)| j != i && pos < point).map(|&(j, pos)| (point - pos, j)),
+        );
+        let stops = behind.is_none_or(|(d, j)| {
+            let other = &self.cars[j];
+            let gap = d - (car.plan.length + other.plan.length) / 2.0;
+            let braking = other.v * other.v / (2.0 * other.driver.comfortable_deceleration);
+            gap >= other.driver.min_gap + braking
+        });
+        stops.then_some((to, point))
+    }
+
+    /// Whether what keeps car `i` out of lane `to` at `at`, coming from lane
+    /// `from`, is a queue standing there: every car in the way of the change
+    /// is at rest, and none is itself changing or asking to change into
+    /// `from` (two cars that want each other's lanes would wait for good),
+    /// nor is its own follower.
+    fn queue_in_the_way(&self, i: usize, from: usize, to: usize, at: f64) -> bool {
+        let swapping = |j: usize| self.occupants(from).iter().any(|&(k, _)| k == j);
+        let mut in_the_way =
+            self.occupants(to).iter().filter(|&&(j, pos)| j != i && !self.clear_of(i, j, pos, at)).peekable();
+        // Its own follower waits for it, not for the queue.
+        let follower = |j: usize| self.cars[j].leader == Some(i);
+        in_the_way.peek().is_some() && in_the_way.all(|&(j, _)| self.cars[j].v < 0.1 && !swapping(j) && !follower(j))
+    }
+
+    /// Whether car `j`, `pos` metres along the lane car `i` wants, is clear
+    /// of a change into it over `[at, at + run]`: by half both lengths plus
+    /// the min gap, a car behind also by a second of its own speed.
+    fn clear_of(&self, i: usize, j: usize, pos: f64, at: f64) -> bool {
+        let (car, other) = (&self.cars[i], &self.cars[j]);
+        let run = self.map.layout.lane_change_length;
+        let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
+        pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
     }
 
     /// Whether lane `to` has room for car `i` changing into it over
@@ -532,15 +634,7 @@ impl Sim<'_> {
     /// comfortable deceleration.
     fn merge_gap_ok(&self, i: usize, to: usize, at: f64) -> bool {
         let car = &self.cars[i];
-        let run = self.map.layout.lane_change_length;
-        let clear = self.occupants(to).iter().all(|&(j, pos)| {
-            if j == i {
-                return true;
-            }
-            let other = &self.cars[j];
-            let lengths = (car.plan.length + other.plan.length) / 2.0 + car.driver.min_gap;
-            pos <= at - lengths - other.v * 1.0 || pos >= at + run + lengths
-        });
+        let clear = self.occupants(to).iter().all(|&(j, pos)| j == i || self.clear_of(i, j, pos, at));
         let new_follower =
             nearest(self.occupants(to).iter().filter(|&&(j, pos)| j != i && pos < at).map(|&(j, pos)| (at - pos, j)));
         clear

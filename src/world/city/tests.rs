@@ -102,6 +102,7 @@ fn plan(
         sim_stream: [7; 32],
         agency,
         signal_heads: crate::spec::SignalHeads::Visible,
+        rules: crate::spec::DrivingRules::Original,
     };
     ScenarioPlan {
         key: ScenarioKey { group: "test".into(), group_index: 0, split: Split::Test, index: 0, name: None },
