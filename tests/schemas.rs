@@ -121,6 +121,12 @@ fn spec_schema_and_parser_agree() {
         "camera area".into(),
         edited(&base, |v| v["map"] = json!({"camera_area": {"x": [-30, 30], "y": [-20, 20]}})),
     ));
+    good.push(("cooperative rules".into(), edited(&base, |v| v["city"]["rules"] = json!("cooperative"))));
+    // A big imported network's coordinates run to tens of kilometres.
+    good.push((
+        "camera area far out".into(),
+        edited(&base, |v| v["map"] = json!({"camera_area": {"x": [21000, 21600], "y": [14000, 14400]}})),
+    ));
     good.push((
         "drawn towns".into(),
         edited(&base, |v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": {"choice": [2, 4]}}})),
@@ -134,6 +140,7 @@ fn spec_schema_and_parser_agree() {
     let bad: Vec<(&str, Value)> = vec![
         ("unknown top-level key", edited(&base, |v| v["colour_mode"] = json!(1))),
         ("unknown key in a group", edited(&base, |v| v["groups"][0]["edges"] = json!(2))),
+        ("unknown driving rules", edited(&base, |v| v["city"]["rules"] = json!("polite"))),
         ("unknown key in splits", edited(&base, |v| v["splits"]["dev"] = json!(1))),
         ("unknown key in city", edited(&base, |v| v["city"]["speed"] = json!(1))),
         ("unknown key in driver", edited(&base, |v| v["city"]["driver"]["patience"] = json!(1))),

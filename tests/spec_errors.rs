@@ -356,6 +356,13 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &with(|v| v["map"] = serde_json::json!({"camera_area": "everything"})),
         &["map.camera_area", "\"everything\" is not allowed", "network"],
     );
+    // An imported network's coordinates run to its size: 20 km is a place,
+    // 150 km none that a camera frames.
+    rejected(
+        "camera-area-too-far",
+        &with(|v| v["map"] = serde_json::json!({"camera_area": {"x": [0, 150000], "y": [0, 10]}})),
+        &["map.camera_area", "x = [0, 150000] is not allowed", "within +-100000 m"],
+    );
     rejected(
         "camera-area-reversed",
         &with(|v| v["map"] = serde_json::json!({"camera_area": {"x": [5, -5], "y": [0, 10]}})),

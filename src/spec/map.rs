@@ -244,14 +244,14 @@ impl MapSpec {
             for (axis, [lo, hi]) in [("x", x), ("y", y)] {
                 if !(lo.is_finite()
                     && hi.is_finite()
-                    && lo.abs() <= MAX_MAP_EXTENT
-                    && hi.abs() <= MAX_MAP_EXTENT
+                    && lo.abs() <= MAX_CAMERA_COORDINATE
+                    && hi.abs() <= MAX_CAMERA_COORDINATE
                     && lo < hi)
                 {
                     return Err(SpecError::new(
                         "map.camera_area",
                         format!(
-                            "{axis} = [{}, {}] is not allowed: give two finite coordinates within +-{MAX_MAP_EXTENT} m, the lower first",
+                            "{axis} = [{}, {}] is not allowed: give two finite coordinates within +-{MAX_CAMERA_COORDINATE} m, the lower first",
                             crate::json::Shown(*lo),
                             crate::json::Shown(*hi)
                         ),
@@ -401,8 +401,15 @@ impl Default for MapSpec {
     }
 }
 
-/// Largest map coordinate a spec may give, metres.
+/// Largest map coordinate a spec may give for a grid's roads and extents,
+/// metres.
 const MAX_MAP_EXTENT: f64 = 5000.0;
+
+/// Largest coordinate `map.camera_area` may give, metres. An imported
+/// network's coordinates run from 0 to its size (netconvert moves its origin
+/// to the south-west corner), so this admits a 100 km cut, a region larger
+/// than any city.
+const MAX_CAMERA_COORDINATE: f64 = 100_000.0;
 
 impl MapSpec {
     /// Every town this map section can draw, as a map section of its own
