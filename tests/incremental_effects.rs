@@ -119,6 +119,7 @@ fn replayed_reruns_match_on_chains_forks_grid_towns_of_one_to_three_lanes_t_junc
         ),
         ("priority", r#", "map": {"grid": {"rows": 3, "columns": 3, "missing": ["D0"], "control": "priority"}}"#),
         ("all-way-stop", r#", "map": {"grid": {"rows": 3, "columns": 3, "lanes": 1, "control": "all_way_stop"}}"#),
+        ("right-before-left", r#", "map": {"grid": {"rows": 3, "columns": 3, "control": "right_before_left"}}"#),
         (
             "dead-ends",
             r#", "map": {"grid": {"rows": 3, "columns": 3, "block_m": 40, "dead_ends": {"B2": "BE", "D1": "CD"}}}"#,

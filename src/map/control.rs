@@ -20,6 +20,10 @@ pub enum JunctionControl {
     /// No lights: every driver stops at its line, then goes when no car
     /// waiting at a line it must give way to, and none crossing its path.
     AllWayStop,
+    /// No lights and no priority road: every driver gives way to traffic
+    /// coming from its right, and a driver turning left also to oncoming
+    /// traffic (German *rechts vor links*, SUMO's `right_before_left`).
+    RightBeforeLeft,
 }
 
 impl JunctionControl {
@@ -29,12 +33,17 @@ impl JunctionControl {
             JunctionControl::Signals => "signals",
             JunctionControl::Priority => "priority",
             JunctionControl::AllWayStop => "all_way_stop",
+            JunctionControl::RightBeforeLeft => "right_before_left",
         }
     }
 
     /// Every control, in the order the spec's errors list them.
-    pub const ALL: [JunctionControl; 3] =
-        [JunctionControl::Signals, JunctionControl::Priority, JunctionControl::AllWayStop];
+    pub const ALL: [JunctionControl; 4] = [
+        JunctionControl::Signals,
+        JunctionControl::Priority,
+        JunctionControl::AllWayStop,
+        JunctionControl::RightBeforeLeft,
+    ];
 }
 
 /// Which pair of opposite approaches a junction's priority road uses.

@@ -17,9 +17,11 @@
 //! - Junctions: `traffic_light` junctions run the file's programme, one
 //!   light per approach side and signal (straight, left) as in the grid
 //!   towns, showing the state of the first link it governs; `priority` and `priority_stop` junctions give priority to the
-//!   approaches of their highest-priority edge's axis; `allway_stop`,
-//!   `right_before_left`, `left_before_right` and `unregulated` junctions
-//!   drive as all-way stops. A lane's approach side (N, E, S, W) is the
+//!   approaches of their highest-priority edge's axis; at
+//!   `right_before_left` junctions traffic from the right goes first;
+//!   `allway_stop`, `left_before_right` (left-hand traffic, which the
+//!   city's lanes do not drive) and `unregulated` junctions drive as
+//!   all-way stops. A lane's approach side (N, E, S, W) is the
 //!   compass side behind its direction of travel at its end.
 //! - Only the largest set of lanes from which every other can be reached is
 //!   kept, so every route goes on forever; what is dropped is reported.
@@ -395,8 +397,9 @@ impl CityMap {
                 let control = match x.kind {
                     SumoJunctionKind::TrafficLight => JunctionControl::Signals,
                     SumoJunctionKind::Priority | SumoJunctionKind::DeadEnd => JunctionControl::Priority,
+                    SumoJunctionKind::RightBeforeLeft => JunctionControl::RightBeforeLeft,
                     SumoJunctionKind::AllWayStop
-                    | SumoJunctionKind::RightBeforeLeft
+                    | SumoJunctionKind::LeftBeforeRight
                     | SumoJunctionKind::Unregulated => JunctionControl::AllWayStop,
                 };
                 let (lo, hi) = x.shape.iter().fold((x.centre, x.centre), |(lo, hi), p| (lo.min(*p), hi.max(*p)));

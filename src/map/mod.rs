@@ -437,9 +437,36 @@ impl CityMap {
                 let major = self.approach_of(connector).is_some_and(|a| x.major.holds(a));
                 2 * u8::from(!major) + u8::from(matches!(c.turn, Turn::Left | Turn::UTurn))
             }
-            JunctionControl::Signals | JunctionControl::AllWayStop => 0,
+            JunctionControl::Signals | JunctionControl::AllWayStop | JunctionControl::RightBeforeLeft => 0,
         };
         (class, connector)
+    }
+
+    /// Whether, of two conflicting movements at a junction without lights,
+    /// traffic on `first` goes before traffic on `then`. By
+    /// [`CityMap::right_of_way`], except at a right-before-left junction:
+    /// there traffic from the right goes first, and of two oncoming
+    /// movements the one not turning left. Movements that are neither give
+    /// way to each other: whoever reaches the box first goes.
+    pub fn goes_before(&self, first: ConnectorId, then: ConnectorId) -> bool {
+        if self.control_of(then) != Some(JunctionControl::RightBeforeLeft) {
+            return self.right_of_way(first) < self.right_of_way(then);
+        }
+        let heading = |c: ConnectorId| {
+            let lane = &self.lanes[self.connectors[c].from].curve;
+            lane.heading_at(lane.length())
+        };
+        // How far `first`'s heading is turned from `then`'s, counter-clockwise, in (-pi, pi].
+        let turned = std::f64::consts::PI
+            - (std::f64::consts::PI - (heading(first) - heading(then))).rem_euclid(std::f64::consts::TAU);
+        let left = |c: ConnectorId| matches!(self.connectors[c].turn, Turn::Left | Turn::UTurn);
+        if (std::f64::consts::FRAC_PI_4..3.0 * std::f64::consts::FRAC_PI_4).contains(&turned) {
+            true // `first` comes from the right of `then`
+        } else if turned.abs() > 3.0 * std::f64::consts::FRAC_PI_4 {
+            left(then) && !left(first) // oncoming
+        } else {
+            false
+        }
     }
 
     /// Whether a driver entering `connector` must give way to others at its
@@ -447,7 +474,7 @@ impl CityMap {
     /// all but the priority road's straight and right turns.
     pub fn gives_way(&self, connector: ConnectorId) -> bool {
         match self.control_of(connector) {
-            Some(JunctionControl::AllWayStop) => true,
+            Some(JunctionControl::AllWayStop | JunctionControl::RightBeforeLeft) => true,
             Some(JunctionControl::Priority) => self.right_of_way(connector).0 > 0,
             _ => false,
         }

@@ -129,8 +129,10 @@ pub enum SumoJunctionKind {
     TrafficLight,
     /// `priority`, `priority_stop`: a priority road, the others give way.
     Priority,
-    /// `right_before_left`, `left_before_right`: the car from the right goes first.
+    /// `right_before_left`: the car from the right goes first.
     RightBeforeLeft,
+    /// `left_before_right`: the car from the left goes first (left-hand traffic).
+    LeftBeforeRight,
     /// `allway_stop`.
     AllWayStop,
     /// `dead_end`: where a road stops.
@@ -146,7 +148,8 @@ impl SumoJunctionKind {
                 SumoJunctionKind::TrafficLight
             }
             "priority" | "priority_stop" => SumoJunctionKind::Priority,
-            "right_before_left" | "left_before_right" => SumoJunctionKind::RightBeforeLeft,
+            "right_before_left" => SumoJunctionKind::RightBeforeLeft,
+            "left_before_right" => SumoJunctionKind::LeftBeforeRight,
             "allway_stop" => SumoJunctionKind::AllWayStop,
             "dead_end" => SumoJunctionKind::DeadEnd,
             "unregulated" => SumoJunctionKind::Unregulated,
@@ -160,6 +163,7 @@ impl SumoJunctionKind {
             SumoJunctionKind::TrafficLight => "traffic_light",
             SumoJunctionKind::Priority => "priority",
             SumoJunctionKind::RightBeforeLeft => "right_before_left",
+            SumoJunctionKind::LeftBeforeRight => "left_before_right",
             SumoJunctionKind::AllWayStop => "all_way_stop",
             SumoJunctionKind::DeadEnd => "dead_end",
             SumoJunctionKind::Unregulated => "unregulated",

@@ -217,6 +217,8 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
                 }
                 // The priority road runs through unmarked; the other gives
                 // way at a dashed line, under a triangle.
+                // Right before left: no markings, as in residential streets.
+                JunctionControl::RightBeforeLeft => {}
                 JunctionControl::Priority if junction.major.holds(approach) => {}
                 JunctionControl::Priority => {
                     let mut k = -0.5 * lw;
@@ -280,6 +282,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
                     circle(pixmap, t, p.x, p.y, 0.45, STOP_SIGN);
                 }
             }
+            JunctionControl::RightBeforeLeft => {}
             JunctionControl::Priority if junction.major.holds(approach) => {}
             JunctionControl::Priority => {
                 let mut k = -half;

@@ -15,7 +15,9 @@ fn mark(kind: SumoJunctionKind) -> Option<[u8; 3]> {
         SumoJunctionKind::TrafficLight => Some([40, 170, 70]),
         SumoJunctionKind::Priority => Some([232, 190, 40]),
         SumoJunctionKind::AllWayStop => Some([196, 32, 36]),
-        SumoJunctionKind::RightBeforeLeft | SumoJunctionKind::Unregulated => Some([120, 120, 200]),
+        SumoJunctionKind::RightBeforeLeft | SumoJunctionKind::LeftBeforeRight | SumoJunctionKind::Unregulated => {
+            Some([120, 120, 200])
+        }
         SumoJunctionKind::DeadEnd => None,
     }
 }

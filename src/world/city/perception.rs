@@ -449,7 +449,6 @@ impl Sim<'_> {
             return None;
         }
         let car = &self.cars[i];
-        let mine = self.map.right_of_way(connector);
         let x = &self.map.intersections[self.map.connectors[connector].intersection?];
         // Time this car needs to cross the box from where it is, seconds.
         let clear = car.driver.reaction_time
@@ -458,7 +457,7 @@ impl Sim<'_> {
         let setback = self.map.layout.stop_line_setback;
         let mut first: Option<(f64, usize)> = None;
         for &other in self.map.conflicts(connector) {
-            if self.map.right_of_way(other) >= mine {
+            if !self.map.goes_before(other, connector) {
                 continue;
             }
             let lane = self.map.connectors[other].from;

@@ -530,6 +530,53 @@ fn at_a_priority_junction_the_side_road_gives_way_to_the_through_road() {
 }
 
 #[test]
+fn right_before_left_the_car_from_the_right_goes_first_even_from_the_side_road() {
+    use crate::map::control::JunctionControl;
+    use crate::world::BoundBy;
+    // Car 0 comes along road A from the east, nearer its line; car 1 down
+    // road C from the north, on car 0's right. A priority junction lets
+    // car 0 (on A, the through road) go first; right before left, car 1.
+    let cars = [Given { start: 3.0, ..straight("A1z", 6.0, 3.0) }, Given { start: 3.0, ..straight("C2z", 4.0, 3.0) }];
+    let entries = |control| {
+        let map = map_with_ac(control);
+        let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 30.0));
+        assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+        let entered =
+            (enters_ac_box(&traj, 0).expect("car 0 crosses"), enters_ac_box(&traj, 1).expect("car 1 crosses"));
+        (entered, traj)
+    };
+    let ((from_east, from_north), traj) = entries(JunctionControl::RightBeforeLeft);
+    assert!(from_north < from_east, "from the north entered at frame {from_north}, from the east at {from_east}");
+    let gave_way = traj.interactions.iter().filter(|f| f[0].bound_by == BoundBy::GiveWay && f[0].other_car == Some(1));
+    assert!(gave_way.count() > 0, "car 0 never gave way to car 1");
+    assert!(traj.interactions.iter().all(|f| f[1].bound_by != BoundBy::GiveWay), "the car from the right gave way");
+    // The same cars at a priority junction: the through road goes first.
+    let ((from_east, from_north), _) = entries(JunctionControl::Priority);
+    assert!(
+        from_east < from_north,
+        "priority: from the east entered at frame {from_east}, from the north at {from_north}"
+    );
+}
+
+#[test]
+fn right_before_left_four_cars_arriving_together_all_cross_without_collision() {
+    use crate::map::control::JunctionControl;
+    // Each has another on its right: the rule alone would leave all four waiting.
+    let map = map_with_ac(JunctionControl::RightBeforeLeft);
+    let cars = [
+        Given { start: 3.0, ..straight("A0w", 4.0, 3.0) },
+        Given { start: 3.0, ..straight("A1z", 4.0, 3.0) },
+        Given { start: 3.0, ..straight("C2z", 4.0, 3.0) },
+        Given { start: 3.0, ..straight("C1w", 4.0, 3.0) },
+    ];
+    let traj = simulate(&map, &plan(&map, &cars, LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 60.0));
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+    for car in 0..4 {
+        assert!(enters_ac_box(&traj, car).is_some(), "car {car} never crossed");
+    }
+}
+
+#[test]
 fn at_an_all_way_stop_a_lone_car_halts_at_its_line_then_crosses() {
     use crate::map::control::JunctionControl;
     use crate::world::BoundBy;
