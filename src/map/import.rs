@@ -160,9 +160,10 @@ fn components(n: usize, next: &[Vec<usize>]) -> Vec<usize> {
 /// `o`, `O`: no signal, the junction's own rules), yellow (`y`, `Y`), else
 /// red (`r`, `R`, `s`, `u`). A permissive green (`g`: go, yielding to
 /// oncoming traffic) is green for straight on and right turns and red for
-/// left turns and U-turns: under lights drivers here do not yield to
-/// oncoming traffic, so they turn left on the protected phase only (where
-/// the programme has one).
+/// left turns and U-turns: where the programme has a protected left phase,
+/// drivers turn left on it only; where it has none, they turn on the
+/// permissive green and give way to oncoming traffic
+/// ([`CityMap::permissive_left`]).
 fn colour_of(state: char, signal: Signal) -> Colour {
     match state {
         'g' if signal == Signal::Left => Colour::Red,
@@ -176,14 +177,16 @@ fn colour_of(state: char, signal: Signal) -> Colour {
 /// run: per junction, approach side and signal, the link of the first of
 /// its movements (straight before right for the straight signal, left
 /// before U-turn for the left one) that a programme governs, its colour in
-/// each phase, runs of one colour merged.
+/// each phase, runs of one colour merged; and the approaches (junction,
+/// side) whose left light has no protected phase, whose drivers turn on
+/// the permissive green yielding to oncoming traffic.
 fn programmed_lights(
     net: &SumoNetwork,
     map: &CityMap,
     ids: &[usize],
     moves: &[Vec<(usize, Turn, Option<usize>)>],
-) -> Vec<Light> {
-    let mut lights = Vec::new();
+) -> (Vec<Light>, Vec<(usize, char)>) {
+    let (mut lights, mut permissive) = (Vec::new(), Vec::new());
     for &k in map.signalised() {
         for approach in APPROACHES {
             for signal in [Signal::Straight, Signal::Left] {
@@ -206,6 +209,9 @@ fn programmed_lights(
                 // A left turn with no protected phase at all turns on the permissive one.
                 let protected = signal == Signal::Left && states.iter().any(|&c| colour_of(c, signal) == Colour::Green);
                 let read_as = if protected || signal == Signal::Straight { signal } else { Signal::Straight };
+                if read_as != signal {
+                    permissive.push((k, approach));
+                }
                 let mut schedule: Vec<ScheduleStep> = Vec::new();
                 for ((duration, _), &state) in p.phases.iter().zip(&states) {
                     ScheduleStep::extend(&mut schedule, colour_of(state, read_as), *duration);
@@ -214,7 +220,7 @@ fn programmed_lights(
             }
         }
     }
-    lights
+    (lights, permissive)
 }
 
 /// Metres two movements into one lane must run together before their end
@@ -506,7 +512,7 @@ impl CityMap {
                 _ => Axis::EastWest,
             };
         }
-        map.programmed = programmed_lights(net, &map, &ids, &moves);
+        (map.programmed, map.permissive_lefts) = programmed_lights(net, &map, &ids, &moves);
         map.merging = merging_movements(&map.connectors);
         map.splitting = splitting_movements(&map.connectors);
         let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();

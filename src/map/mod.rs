@@ -313,6 +313,9 @@ pub struct CityMap {
     /// cycle's light of its junction, approach and signal. Empty in a grid
     /// town.
     pub programmed: Vec<signals::Light>,
+    /// Approaches (junction, side) of imported networks whose left turns go
+    /// on a permissive green: the programme has no protected left phase.
+    pub permissive_lefts: Vec<(usize, char)>,
     /// Per connector, the connectors of its junction whose paths run into
     /// one with it before they end, on the same lane (an imported network's
     /// movements that share internal lanes): cars on them are in line.
@@ -442,31 +445,38 @@ impl CityMap {
         (class, connector)
     }
 
-    /// Whether, of two conflicting movements at a junction without lights,
-    /// traffic on `first` goes before traffic on `then`. By
-    /// [`CityMap::right_of_way`], except at a right-before-left junction:
-    /// there traffic from the right goes first, and of two oncoming
-    /// movements the one not turning left. Movements that are neither give
+    /// Whether, of two conflicting movements, traffic on `first` goes before
+    /// traffic on `then`. At a junction without lights by
+    /// [`CityMap::right_of_way`], except right before left: there traffic
+    /// from the right goes first, and of two oncoming movements the one not
+    /// turning left. At lights (where it matters for a left turn on a
+    /// permissive green, [`CityMap::permissive_left`]) oncoming traffic not
+    /// turning left goes before a left turn. Movements that are neither give
     /// way to each other: whoever reaches the box first goes.
     pub fn goes_before(&self, first: ConnectorId, then: ConnectorId) -> bool {
-        if self.control_of(then) != Some(JunctionControl::RightBeforeLeft) {
-            return self.right_of_way(first) < self.right_of_way(then);
-        }
+        use std::f64::consts::{FRAC_PI_4, PI, TAU};
         let heading = |c: ConnectorId| {
             let lane = &self.lanes[self.connectors[c].from].curve;
             lane.heading_at(lane.length())
         };
         // How far `first`'s heading is turned from `then`'s, counter-clockwise, in (-pi, pi].
-        let turned = std::f64::consts::PI
-            - (std::f64::consts::PI - (heading(first) - heading(then))).rem_euclid(std::f64::consts::TAU);
+        let turned = PI - (PI - (heading(first) - heading(then))).rem_euclid(TAU);
         let left = |c: ConnectorId| matches!(self.connectors[c].turn, Turn::Left | Turn::UTurn);
-        if (std::f64::consts::FRAC_PI_4..3.0 * std::f64::consts::FRAC_PI_4).contains(&turned) {
-            true // `first` comes from the right of `then`
-        } else if turned.abs() > 3.0 * std::f64::consts::FRAC_PI_4 {
-            left(then) && !left(first) // oncoming
-        } else {
-            false
+        let oncoming_first = turned.abs() > 3.0 * FRAC_PI_4 && left(then) && !left(first);
+        match self.control_of(then) {
+            Some(JunctionControl::RightBeforeLeft) => (FRAC_PI_4..3.0 * FRAC_PI_4).contains(&turned) || oncoming_first,
+            Some(JunctionControl::Signals) => oncoming_first,
+            _ => self.right_of_way(first) < self.right_of_way(then),
         }
+    }
+
+    /// Whether `connector` is a left turn (or U-turn) that goes on a
+    /// permissive green, yielding to oncoming traffic: on imported networks,
+    /// where the programme gives its approach no protected left phase.
+    pub fn permissive_left(&self, connector: ConnectorId) -> bool {
+        let c = &self.connectors[connector];
+        let (Some(k), Some(approach)) = (c.intersection, self.approach_of(connector)) else { return false };
+        matches!(c.turn, Turn::Left | Turn::UTurn) && self.permissive_lefts.contains(&(k, approach))
     }
 
     /// Whether a driver entering `connector` must give way to others at its
@@ -715,6 +725,7 @@ impl CityMap {
             signalised,
             beside,
             programmed,
+            permissive_lefts: Vec::new(),
             merging,
             splitting,
         }

@@ -365,7 +365,12 @@ impl Sim<'_> {
             let committed = car.committed == Some(c) && car.v > 0.1;
             let halted = car.v < HALT_SPEED && dist < HALT_REACH;
             let rule = match self.light_for(c) {
-                Some(light) => (!committed && self.stops_for(light, t, braking, dist)).then_some(Stop::Light(light)),
+                Some(light) if !committed && self.stops_for(light, t, braking, dist) => Some(Stop::Light(light)),
+                // A left turn on a permissive green gives way to oncoming traffic.
+                Some(_) if self.map.permissive_left(c) && car.committed != Some(c) => {
+                    self.give_way(i, c, dist, braking, halted)
+                }
+                Some(_) => None,
                 // A driver cleared to go at a line without lights goes.
                 None if self.map.gives_way(c) && car.committed != Some(c) => self.give_way(i, c, dist, braking, halted),
                 None if self.map.connectors[c].intersection.is_some() => None,
@@ -436,8 +441,10 @@ impl Sim<'_> {
     /// junction without lights (`halted` there or not), must stop for: at an
     /// all-way stop the line itself until it has halted there, then a car
     /// waiting at the line of a movement with precedence that crosses its
-    /// path; at a priority junction a car on a movement with precedence
-    /// that will reach its line before this car could clear the box.
+    /// path; at a priority or right-before-left junction, or turning left on
+    /// a permissive green, a car on a movement with precedence
+    /// ([`CityMap::goes_before`]) that will reach its line before this car
+    /// could clear the box.
     fn give_way(&self, i: usize, connector: usize, dist: f64, braking: f64, halted: bool) -> Option<Stop> {
         let all_way = self.map.control_of(connector) == Some(JunctionControl::AllWayStop);
         if all_way && !halted {

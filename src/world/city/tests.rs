@@ -628,6 +628,49 @@ fn berlin() -> CityMap {
 }
 
 #[test]
+fn a_left_turn_on_a_permissive_green_gives_way_to_oncoming_traffic() {
+    use crate::map::Turn;
+    use crate::world::BoundBy;
+    let map = berlin();
+    // An approach whose programme has no protected left phase, and the
+    // oncoming straight movement that goes before its left turn.
+    let (left, oncoming) = (0..map.connectors.len())
+        .filter(|&c| map.permissive_left(c) && map.connectors[c].turn == Turn::Left)
+        .find_map(|c| {
+            let o = map
+                .conflicts(c)
+                .iter()
+                .copied()
+                .find(|&o| map.connectors[o].turn == Turn::Straight && map.goes_before(o, c))?;
+            Some((c, o))
+        })
+        .expect("Berlin has a left turn on a permissive green with oncoming traffic");
+    let name =
+        |c: usize| -> &'static str { Box::leak(map.lanes[map.connectors[c].from].name.clone().into_boxed_str()) };
+    let (turner, through) = (name(left), name(oncoming));
+    let length = |n: &str| map.lanes[lane(&map, n)].curve.length();
+    // Both 12 m before their line, on green for as long as the test runs.
+    let at = |n: &str| length(n) - map.layout.stop_line_setback - 12.0;
+    let cars = [
+        Given { lane: turner, at: at(turner), actions: vec![Action::Left], merges: vec![], desired: 6.0, start: 6.0 },
+        Given {
+            lane: through,
+            at: at(through),
+            actions: vec![Action::Straight],
+            merges: vec![],
+            desired: 6.0,
+            start: 6.0,
+        },
+    ];
+    let lights = lights_with(&map, &[turner, through], &[(Colour::Green, 100.0)]);
+    let traj = simulate(&map, &plan(&map, &cars, lights, vec![], 20.0));
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+    let gave_way = traj.interactions.iter().any(|f| f[0].bound_by == BoundBy::GiveWay && f[0].other_car == Some(1));
+    assert!(gave_way, "the left turn never gave way to the oncoming car");
+    assert!(traj.interactions.iter().all(|f| f[1].bound_by != BoundBy::GiveWay), "the oncoming car gave way");
+}
+
+#[test]
 fn cars_drive_on_and_on_through_an_imported_sumo_network() {
     let map = berlin();
     let turns = [Action::Left, Action::Right, Action::Straight, Action::Right, Action::Left];
