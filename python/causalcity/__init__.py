@@ -505,7 +505,8 @@ def map(  # noqa: A001 (causalcity.map, as the CLI's `map`)
       None), as ``Scenario.town`` names it;
 
     - ``junctions``: names (``"AC"``, ..), ``junction_controls`` (``"signals"``,
-      ``"priority"`` or ``"all_way_stop"``, as ``map.grid.control`` gives them)
+      ``"priority"``, ``"all_way_stop"`` or ``"right_before_left"``, as
+      ``map.grid.control`` gives them)
       and ``junction_centres`` ``[J, 2]``;
     - ``lanes``: lane ids in id order (the spawn points scenario files name),
       ``lane_start`` and ``lane_end`` ``[L, 2]`` (centre line, metres, x east,
