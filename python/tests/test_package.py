@@ -289,6 +289,35 @@ def test_a_town_of_all_way_stops_streams_without_lights_and_its_give_way_edges_b
     assert "light" not in kinds
 
 
+def test_cooperative_rules_on_a_right_before_left_town_simulate_as_gen_writes(tmp_path):
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["name"] = "cooperative"
+    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 3, "val": 0, "test": 0}
+    spec["frames"] = 40
+    spec["map"] = {"grid": {"rows": 2, "columns": 3, "control": {"AC": "right_before_left"}}}
+    spec.setdefault("city", {})["rules"] = "cooperative"
+    spec_file = tmp_path / "cooperative.json"
+    spec_file.write_text(json.dumps(spec))
+    out = tmp_path / "cooperative"
+    cli("gen", "--spec", str(spec_file), "--out", str(out), "--no-images", "--quiet")
+    controls = dict(zip(causalcity.map(spec)["junctions"], causalcity.map(spec)["junction_controls"]))
+    assert controls["AC"] == "right_before_left"
+    checked = 0
+    for key in causalcity.Spec.from_dict(spec).keys():
+        folder = out / key.folder
+        assert json.loads((folder / "scenario.json").read_text())["city"]["rules"] == "cooperative"
+        scenario = causalcity.simulate(spec, *key, effects=True)
+        assert_poses_match(scenario, folder)
+        assert_city_logs_match(scenario, folder)
+        checked += 1
+    assert checked == 3
+    # A rule that does not exist is refused, naming the field.
+    spec["city"]["rules"] = "polite"
+    with pytest.raises(causalcity.InputError, match="rules"):
+        causalcity.simulate(spec, "cars08_edges50", "train", 0)
+
+
 def test_a_spec_that_draws_towns_names_each_scenarios_town_as_gen_records_it(tmp_path):
     spec = json.loads(CITY_SPEC.read_text())
     spec["name"] = "towns"

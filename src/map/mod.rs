@@ -449,23 +449,32 @@ impl CityMap {
     /// traffic on `then`. At a junction without lights by
     /// [`CityMap::right_of_way`], except right before left: there traffic
     /// from the right goes first, and of two oncoming movements the one not
-    /// turning left. At lights (where it matters for a left turn on a
-    /// permissive green, [`CityMap::permissive_left`]) oncoming traffic not
-    /// turning left goes before a left turn. Movements that are neither give
-    /// way to each other: whoever reaches the box first goes.
+    /// turning left; where neither rule decides (two oncoming left turns,
+    /// skewed arms), [`CityMap::right_of_way`]'s fixed order does. At lights
+    /// (where it matters for a left turn on a permissive green,
+    /// [`CityMap::permissive_left`]) oncoming traffic not turning left goes
+    /// before a left turn.
     pub fn goes_before(&self, first: ConnectorId, then: ConnectorId) -> bool {
         use std::f64::consts::{FRAC_PI_4, PI, TAU};
         let heading = |c: ConnectorId| {
             let lane = &self.lanes[self.connectors[c].from].curve;
             lane.heading_at(lane.length())
         };
-        // How far `first`'s heading is turned from `then`'s, counter-clockwise, in (-pi, pi].
-        let turned = PI - (PI - (heading(first) - heading(then))).rem_euclid(TAU);
         let left = |c: ConnectorId| matches!(self.connectors[c].turn, Turn::Left | Turn::UTurn);
-        let oncoming_first = turned.abs() > 3.0 * FRAC_PI_4 && left(then) && !left(first);
+        // Whether `a` goes first by the rules of the road alone: from `b`'s
+        // right (its heading turned a quarter counter-clockwise from `b`'s),
+        // or oncoming while `b` turns left and `a` does not.
+        let by_rule = |a: ConnectorId, b: ConnectorId, right_before_left: bool| {
+            let turned = PI - (PI - (heading(a) - heading(b))).rem_euclid(TAU);
+            let oncoming = turned.abs() > 3.0 * FRAC_PI_4 && left(b) && !left(a);
+            oncoming || (right_before_left && (FRAC_PI_4..3.0 * FRAC_PI_4).contains(&turned))
+        };
         match self.control_of(then) {
-            Some(JunctionControl::RightBeforeLeft) => (FRAC_PI_4..3.0 * FRAC_PI_4).contains(&turned) || oncoming_first,
-            Some(JunctionControl::Signals) => oncoming_first,
+            Some(JunctionControl::RightBeforeLeft) => {
+                by_rule(first, then, true)
+                    || (!by_rule(then, first, true) && self.right_of_way(first) < self.right_of_way(then))
+            }
+            Some(JunctionControl::Signals) => by_rule(first, then, false),
             _ => self.right_of_way(first) < self.right_of_way(then),
         }
     }

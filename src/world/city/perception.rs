@@ -366,16 +366,22 @@ impl Sim<'_> {
             let halted = car.v < HALT_SPEED && dist < HALT_REACH;
             let rule = match self.light_for(c) {
                 Some(light) if !committed && self.stops_for(light, t, braking, dist) => Some(Stop::Light(light)),
-                // A left turn on a permissive green gives way to oncoming traffic.
-                Some(_) if self.map.permissive_left(c) && car.committed != Some(c) => {
-                    self.give_way(i, c, dist, braking, halted)
-                }
+                // A left turn on a permissive green gives way to oncoming
+                // traffic, until it is moving too close to stop.
+                Some(_) if self.map.permissive_left(c) && !committed => self.give_way(i, c, dist, braking, halted),
                 Some(_) => None,
                 // A driver cleared to go at a line without lights goes.
                 None if self.map.gives_way(c) && car.committed != Some(c) => self.give_way(i, c, dist, braking, halted),
                 None if self.map.connectors[c].intersection.is_some() => None,
                 None => continue,
             };
+            // One that committed and then came to rest before its line gives
+            // its claim up while it gives way, so oncoming cars do not stop for it.
+            if let Some(stop @ Stop::GiveWay(_)) = rule {
+                if halted && car.committed == Some(c) && self.map.permissive_left(c) {
+                    return (Some((dist.max(0.0), stop)), Commit::Withdraw);
+                }
+            }
             let crossing = if dist < braking + 2.0 { self.conflict_occupant(c) } else { None };
             let why = rule.or(crossing.map(|(j, _)| Stop::Crossing(j)));
             if let Some(why) = why {
@@ -576,6 +582,7 @@ impl Sim<'_> {
             }
             let since = *self.cars[i].waiting_since.get_or_insert(t);
             if t - since >= LANE_CHANGE_PATIENCE {
+                self.cars[i].merge_claim = None;
                 self.give_up_lane_change(i, t);
                 return None;
             }
@@ -597,7 +604,7 @@ impl Sim<'_> {
         let car = &self.cars[i];
         let point = at - car.driver.min_gap - CLAIM_MARGIN;
         let behind = nearest(
-            self.occupants(to).iter().filter(|&&(j, pos)| j != i && pos < point).map(|&(j, pos)| (point - pos, j)),
+            self.occupants(to).iter().filter(|&&(j, pos)| j != i && pos <= point).map(|&(j, pos)| (point - pos, j)),
         );
         let stops = behind.is_none_or(|(d, j)| {
             let other = &self.cars[j];
@@ -610,11 +617,14 @@ impl Sim<'_> {
 
     /// Whether what keeps car `i` out of lane `to` at `at`, coming from lane
     /// `from`, is a queue standing there: every car in the way of the change
-    /// is at rest, and none is itself changing or asking to change into
-    /// `from` (two cars that want each other's lanes would wait for good),
-    /// nor is its own follower.
+    /// is at rest, and none is itself a lane changer (in, or asking for, a
+    /// lane beside `to` as well: two cars that want each other's lanes, or
+    /// one lane from both sides, would wait for good), nor its own follower.
     fn queue_in_the_way(&self, i: usize, from: usize, to: usize, at: f64) -> bool {
-        let swapping = |j: usize| self.occupants(from).iter().any(|&(k, _)| k == j);
+        // A car also in (or claiming) `from`, or the lane on `to`'s other side.
+        let beside: Vec<usize> =
+            [true, false].into_iter().filter_map(|left| self.map.adjacent_lane(to, left)).chain([from]).collect();
+        let swapping = |j: usize| beside.iter().any(|&lane| self.occupants(lane).iter().any(|&(k, _)| k == j));
         let mut in_the_way =
             self.occupants(to).iter().filter(|&&(j, pos)| j != i && !self.clear_of(i, j, pos, at)).peekable();
         // Its own follower waits for it, not for the queue.
