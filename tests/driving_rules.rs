@@ -29,16 +29,8 @@ fn driving(out: &Path) -> (usize, usize, usize, usize) {
     for scenario in scenario_dirs(out) {
         let meta = read_json(&scenario.join("scenario.json"));
         let by_car = poses_by_car(&read_poses(&scenario.join("poses.csv")));
-        for edge in meta["edges"].as_array().unwrap() {
-            let (leader, follower) =
-                (&by_car[&(edge[0].as_u64().unwrap() as u32)], &by_car[&(edge[1].as_u64().unwrap() as u32)]);
-            let near = follower
-                .iter()
-                .enumerate()
-                .filter(|(t, f)| leader[..=*t].iter().any(|l| (l.x - f.x).hypot(l.y - f.y) <= 4.5));
-            pairs += 1;
-            following += usize::from(near.count() * 10 >= follower.len() * 8);
-        }
+        let (p, f) = designed_pairs_following(&meta, &by_car);
+        (pairs, following) = (pairs + p, following + f);
         for poses in by_car.values() {
             let (last, before) = (&poses[poses.len() - 1], &poses[poses.len() - 61]);
             standing += usize::from((last.x - before.x).hypot(last.y - before.y) < 0.1);

@@ -59,16 +59,8 @@ fn a_dataset_on_a_real_network_is_driven_measured_kept_whole_and_valid() {
             assert!(moved > 20.0, "{}: a car drove only {moved:.1} m in 60 s", scenario.display());
         }
         // A follower keeps near where its leader drove.
-        for edge in meta["edges"].as_array().unwrap() {
-            let (leader, follower) =
-                (&by_car[&(edge[0].as_u64().unwrap() as u32)], &by_car[&(edge[1].as_u64().unwrap() as u32)]);
-            let near = follower
-                .iter()
-                .enumerate()
-                .filter(|(t, f)| leader[..=*t].iter().any(|l| (l.x - f.x).hypot(l.y - f.y) <= 4.5));
-            pairs += 1;
-            following += usize::from(near.count() * 10 >= follower.len() * 8);
-        }
+        let (p, f) = designed_pairs_following(&meta, &by_car);
+        (pairs, following) = (pairs + p, following + f);
         // Interventional ground truth, as on the grid towns.
         assert!(scenario.join("effects.csv").is_file());
         assert!(meta["causal_edges"].is_array());

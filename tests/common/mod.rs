@@ -104,6 +104,24 @@ pub fn poses_by_car(poses: &[Pose]) -> BTreeMap<u32, Vec<Pose>> {
     by_car
 }
 
+/// Of a scenario's designed edges (`meta`'s `edges`, poses `by_car`):
+/// (pairs, pairs whose follower keeps within 4.5 m of where its leader has
+/// driven so far in at least 80 % of frames), issue 36's measure.
+pub fn designed_pairs_following(meta: &Value, by_car: &BTreeMap<u32, Vec<Pose>>) -> (usize, usize) {
+    let (mut pairs, mut following) = (0, 0);
+    for edge in meta["edges"].as_array().unwrap() {
+        let (leader, follower) =
+            (&by_car[&(edge[0].as_u64().unwrap() as u32)], &by_car[&(edge[1].as_u64().unwrap() as u32)]);
+        let near = follower
+            .iter()
+            .enumerate()
+            .filter(|(t, f)| leader[..=*t].iter().any(|l| (l.x - f.x).hypot(l.y - f.y) <= 4.5));
+        pairs += 1;
+        following += usize::from(near.count() * 10 >= follower.len() * 8);
+    }
+    (pairs, following)
+}
+
 pub fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
