@@ -72,6 +72,39 @@ fn cooperative_drivers_let_lane_changers_in_and_followers_follow_on_a_town_with_
     assert!(std::fs::read_to_string(cooperative.join("manifest.json")).unwrap().contains("\"rules\": \"cooperative\""));
 }
 
+/// Collision events in every scenario's events.csv under `out`.
+fn collisions(out: &Path) -> usize {
+    scenario_dirs(out)
+        .iter()
+        .map(|s| {
+            std::fs::read_to_string(s.join("events.csv")).unwrap().lines().filter(|l| l.contains(",collision,")).count()
+        })
+        .sum()
+}
+
+#[test]
+fn cooperative_drivers_do_not_meet_in_the_box_on_one_lane_roads() {
+    // configs/ood-network.json's held-out town: one-lane roads, where
+    // opposite left turns cross and set off together on their shared arrow.
+    let town = r#"{"grid": {"rows": 4, "columns": 4, "lanes": 1, "missing": ["E0", "H4", "B2", "C3"]}}"#;
+    let dir = fresh_dir("rules-one-lane");
+    let (mut before, mut after) = (0, 0);
+    for (rules, count) in [(None, &mut before), (Some("cooperative"), &mut after)] {
+        let name = format!("one-lane-{}", rules.unwrap_or("original"));
+        let text = town_spec(&name, rules)
+            .replace(r#"{"grid": {"rows": 4, "columns": 4}}"#, town)
+            .replace(r#"[{"cars": 8, "edge_proportion": 0.5}]"#, r#"[{"cars": 12, "edge_proportion": 0.5}]"#);
+        assert!(text.contains("\"lanes\": 1") && text.contains("\"cars\": 12"), "{text}");
+        let spec = dir.join(format!("{name}.json"));
+        std::fs::write(&spec, text).unwrap();
+        let out = dir.join(&name);
+        gen_ok(&spec, &out, &["--no-images", "--no-effects"]);
+        *count = collisions(&out);
+    }
+    assert!(before >= 3, "only {before} collisions under the original rules: the test no longer provokes them");
+    assert_eq!(after, 0, "{after} collisions under the cooperative rules ({before} under the original)");
+}
+
 #[test]
 fn an_unknown_rule_is_refused_naming_the_field_and_what_is_allowed() {
     let dir = fresh_dir("rules-bad");

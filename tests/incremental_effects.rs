@@ -136,6 +136,10 @@ fn replayed_reruns_match_on_chains_forks_grid_towns_of_one_to_three_lanes_t_junc
             r#", "map": {"grid": {"rows": 4, "columns": 4}}, "city": {"rules": "cooperative", "start": {"platoon_cars": 4}}"#,
         ),
         (
+            "cooperative-one-lane",
+            r#", "map": {"grid": {"rows": 4, "columns": 4, "lanes": 1, "missing": ["E0", "H4", "B2", "C3"]}}, "city": {"rules": "cooperative"}"#,
+        ),
+        (
             "cooperative-three-lane",
             r#", "map": {"grid": {"rows": 2, "columns": 2, "lanes": 3, "block_m": 44, "outer_m": 34}}, "city": {"rules": "cooperative"}"#,
         ),

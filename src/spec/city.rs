@@ -307,8 +307,9 @@ pub struct CitySpec {
 
 /// Which reading of the city's driving rules the drivers follow. The
 /// original's is the default, so existing specs keep their bytes; the
-/// cooperative one removes the two ways in which the original's leaves
-/// cars waiting for good or giving their turns up (docs/city.md#driving-rules).
+/// cooperative one removes the ways in which the original's leaves cars
+/// waiting for good, giving their turns up or meeting in a junction box
+/// (docs/city.md#driving-rules).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DrivingRules {
@@ -324,7 +325,8 @@ pub enum DrivingRules {
     /// it can still stop comfortably (SUMO's cooperative lane changing,
     /// MOBIL's politeness); its 20 s of patience run only while the lane it
     /// wants moves. A car still before the box counts as in front of no
-    /// car of its lane, at every junction.
+    /// car of its lane, at every junction, and between its line and the
+    /// box it still stops for a car crossing its path.
     Cooperative,
 }
 

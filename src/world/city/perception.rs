@@ -353,6 +353,19 @@ impl Sim<'_> {
             }
             let LegKind::Connector(c) = leg.kind else { continue };
             let dist = leg.route_start - setback - front;
+            // Cooperative rules: between its line and the box a car still
+            // stops for one crossing its path, or claiming a crossing
+            // movement that goes first, where it can stop comfortably. Two
+            // cars that set off together on one green (opposite left turns
+            // on one-lane roads) would otherwise meet in the box.
+            if dist < -0.05 && self.city.rules == DrivingRules::Cooperative {
+                let to_box = dist + setback;
+                if to_box > 0.0 && braking <= to_box {
+                    if let Some(j) = self.crossing_before(i, c) {
+                        return (Some((to_box, Stop::Crossing(j))), commit);
+                    }
+                }
+            }
             // Past the stop line, or forced through its lights: nothing stops
             // the car here. (A red-light runner keeps the rules of junctions
             // without lights.)
@@ -498,6 +511,18 @@ impl Sim<'_> {
             }
         }
         first.map(|(_, j)| Stop::GiveWay(j))
+    }
+
+    /// A car other than `i` in the box on a movement crossing `connector`,
+    /// or claiming one that goes first by [`CityMap::right_of_way`]'s fixed
+    /// order: the first found.
+    fn crossing_before(&self, i: usize, connector: usize) -> Option<usize> {
+        let mine = self.map.right_of_way(connector);
+        self.map.conflicts(connector).iter().find_map(|&other| {
+            let first = self.map.right_of_way(other) < mine;
+            let track = self.map.connector_track(other);
+            self.occupants(track).iter().find(|&&(j, pos)| j != i && (pos >= 0.0 || first)).map(|&(j, _)| j)
+        })
     }
 
     /// A car on (or claiming) a connector crossing `connector`, if any: the
