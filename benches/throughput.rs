@@ -509,21 +509,29 @@ fn map_size_cost() {
 }
 
 /// City simulation cost by junction control: one 3 x 3 town with lights,
-/// priority junctions or all-way stops, 12 cars, 150 frames of 1 s, no
-/// effects, one thread; and with effects, their cost over the factual run's.
-/// Giving way reads the occupancy of the approaches with precedence, so it
-/// should cost about what the lights do.
+/// priority junctions, all-way stops or right before left, 12 cars, 150
+/// frames of 1 s, no effects, one thread; and with effects, their cost over
+/// the factual run's. Giving way reads the occupancy of the approaches with
+/// precedence, so it should cost about what the lights do. Last, the town
+/// with lights under the cooperative driving rules (`city.rules`), whose
+/// claims and looks beside should cost little more than the original's.
 fn junction_control_cost() {
-    println!("\n== City simulation cost by junction control, 3x3 town, 12 cars, 1 thread ==");
-    println!("{:<14} {:>10} {:>12} {:>8} {:>14}", "control", "scenarios", "us/veh-s", "ratio", "effects/factual");
+    println!("\n== City simulation cost by junction control and rules, 3x3 town, 12 cars, 1 thread ==");
+    println!("{:<22} {:>10} {:>12} {:>8} {:>14}", "control", "scenarios", "us/veh-s", "ratio", "effects/factual");
     let mut first = None;
-    for control in ["signals", "priority", "all_way_stop"] {
+    for (control, rules) in [
+        ("signals", "original"),
+        ("priority", "original"),
+        ("all_way_stop", "original"),
+        ("right_before_left", "original"),
+        ("signals", "cooperative"),
+    ] {
         let json = format!(
             r#"{{"name": "control", "world": "city", "seed": 1, "frames": 150, "frame_interval": 1.0,
                 "groups": [{{"cars": 12, "edge_proportion": 0.5}}],
                 "splits": {{"train": 30, "val": 0, "test": 0}},
                 "map": {{"grid": {{"rows": 3, "columns": 3, "control": "{control}"}}}},
-                "city": {{"confounders": {{}}}}}}"#
+                "city": {{"confounders": {{}}, "rules": "{rules}"}}}}"#
         );
         let expansion = Expansion::from_spec(DatasetSpec::from_json(&json).unwrap()).unwrap();
         let plans: Vec<_> = expansion.keys(None).iter().map(|k| expansion.plan(k).unwrap()).collect();
@@ -538,7 +546,8 @@ fn junction_control_cost() {
         let effects = t.elapsed().as_secs_f64();
         let per = seconds * 1e6 / (plans.len() as f64 * 12.0 * 150.0);
         let base = *first.get_or_insert(per);
-        println!("{control:<14} {:>10} {per:>12.2} {:>7.2}x {:>13.1}x", plans.len(), per / base, effects / seconds);
+        let label = if rules == "original" { control.to_string() } else { format!("{control}, {rules}") };
+        println!("{label:<22} {:>10} {per:>12.2} {:>7.2}x {:>13.1}x", plans.len(), per / base, effects / seconds);
     }
 }
 
