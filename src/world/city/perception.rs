@@ -143,6 +143,11 @@ impl Sim<'_> {
         places
     }
 
+    /// Whether the spec asks for the cooperative driving rules (`city.rules`).
+    fn cooperative(&self) -> bool {
+        self.city.rules == DrivingRules::Cooperative
+    }
+
     /// The point a car waiting to change lanes (cooperative lane changes)
     /// asks the car behind in the lane it wants to stop short of: (that
     /// lane, metres along it), while it still waits on its lane for that
@@ -212,7 +217,7 @@ impl Sim<'_> {
             .iter()
             .take_while(|leg| leg.route_start - car.s <= LOOKAHEAD)
             .find_map(|leg| self.nearest_on_leg(i, leg));
-        let beside = if self.city.rules == DrivingRules::Cooperative { self.leader_beside(i) } else { None };
+        let beside = if self.cooperative() { self.leader_beside(i) } else { None };
         let (d, j) = nearest(on_path.into_iter().chain(beside)).filter(|&(d, _)| d <= LOOKAHEAD)?;
         let other = &self.cars[j];
         Some((d - (car.plan.length + other.plan.length) / 2.0, other.v, j))
@@ -266,8 +271,7 @@ impl Sim<'_> {
         // front. Junctions with lights keep the original rule, under which it
         // is, unless the spec asks for the cooperative rules: it can leave two
         // cars waiting on each other for good (docs/city.md#driving-rules).
-        let claims_count =
-            self.map.control_of(c) == Some(JunctionControl::Signals) && self.city.rules == DrivingRules::Original;
+        let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals) && !self.cooperative();
         // On an imported network movements may run together well into the
         // junction before they part: in front until its back is past that.
         let occupants = self.map.exits_from(from).filter(|&o| o != c).flat_map(|sibling| {
@@ -358,7 +362,7 @@ impl Sim<'_> {
             // movement that goes first, where it can stop comfortably. Two
             // cars that set off together on one green (opposite left turns
             // on one-lane roads) would otherwise meet in the box.
-            if dist < -0.05 && self.city.rules == DrivingRules::Cooperative {
+            if dist < -0.05 && self.cooperative() {
                 let to_box = dist + setback;
                 if to_box > 0.0 && braking <= to_box {
                     if let Some(j) = self.crossing_before(i, c) {
@@ -559,6 +563,8 @@ impl Sim<'_> {
     /// change's start where it has to wait, metres. A car that has waited
     /// [`LANE_CHANGE_PATIENCE`] at the last feasible point gives the action up.
     pub(super) fn merge_wait(&mut self, i: usize, t: f64) -> Option<f64> {
+        // A claim lasts one decision: made again below while the car waits.
+        self.cars[i].merge_claim = None;
         let car = &self.cars[i];
         let next = car.leg + 1;
         let upcoming = match (car.route.legs.get(car.leg), car.route.legs.get(next)) {
@@ -572,14 +578,12 @@ impl Sim<'_> {
         };
         let Some((change, from, to, at)) = upcoming else {
             self.cars[i].waiting_since = None;
-            self.cars[i].merge_claim = None;
             return None;
         };
         let (d, for_turn) = (change.route_start - car.s, change.prepares.is_some());
         let (v, rt) = (car.v, car.driver.reaction_time);
         if self.merge_gap_ok(i, to, at) {
             self.cars[i].waiting_since = None;
-            self.cars[i].merge_claim = None;
             return None;
         }
         // Looked at only within a reaction time (plus half a second) and 1.5 m.
@@ -591,13 +595,12 @@ impl Sim<'_> {
             let last = last_change_start(self.map, from, for_turn);
             if later <= last + 1e-6 && Arc::make_mut(&mut self.cars[i].route).move_lane_change(self.map, next, later) {
                 self.cars[i].anchor = None;
-                self.cars[i].merge_claim = None;
                 return None;
             }
         }
         // Held up by the change: waiting at its start, or at rest before it
         // (behind a car already in the lane it wants).
-        let cooperative = self.city.rules == DrivingRules::Cooperative;
+        let cooperative = self.cooperative();
         if near || v < 0.1 {
             // A cooperative driver's patience runs only while the lane it
             // wants moves: a queue standing in the way (at a red light) will
@@ -607,7 +610,6 @@ impl Sim<'_> {
             }
             let since = *self.cars[i].waiting_since.get_or_insert(t);
             if t - since >= LANE_CHANGE_PATIENCE {
-                self.cars[i].merge_claim = None;
                 self.give_up_lane_change(i, t);
                 return None;
             }
@@ -647,9 +649,9 @@ impl Sim<'_> {
     /// one lane from both sides, would wait for good), nor its own follower.
     fn queue_in_the_way(&self, i: usize, from: usize, to: usize, at: f64) -> bool {
         // A car also in (or claiming) `from`, or the lane on `to`'s other side.
-        let beside: Vec<usize> =
-            [true, false].into_iter().filter_map(|left| self.map.adjacent_lane(to, left)).chain([from]).collect();
-        let swapping = |j: usize| beside.iter().any(|&lane| self.occupants(lane).iter().any(|&(k, _)| k == j));
+        let beside = [self.map.adjacent_lane(to, true), self.map.adjacent_lane(to, false), Some(from)];
+        let swapping =
+            |j: usize| beside.iter().flatten().any(|&lane| self.occupants(lane).iter().any(|&(k, _)| k == j));
         let mut in_the_way =
             self.occupants(to).iter().filter(|&&(j, pos)| j != i && !self.clear_of(i, j, pos, at)).peekable();
         // Its own follower waits for it, not for the queue.
