@@ -154,3 +154,71 @@ fn city_chains_and_forks_are_backed_by_effects_with_and_without_platoons() {
         assert_eq!(report.status.code(), Some(0), "{name}: {}", String::from_utf8_lossy(&report.stdout));
     }
 }
+
+/// A collider's designed edges read back from scenario.json: (leader,
+/// follower, car with priority), each checked for the roles and fields
+/// that say so.
+fn colliders_of(scenario: &Value, dir: &Path) -> Vec<(u32, u32, u32)> {
+    let designed = edges(scenario, "edges");
+    let cars = scenario["cars"].as_array().unwrap();
+    let mut found = Vec::new();
+    for car in cars {
+        let Some(priority) = car["gives_way_to"].as_u64() else { continue };
+        let (follower, priority) = (car["id"].as_u64().unwrap() as u32, priority as u32);
+        let leader = car["follows"].as_u64().unwrap_or_else(|| panic!("{}: a collider follows", dir.display())) as u32;
+        assert_eq!(car["role"], "follower", "{}", dir.display());
+        assert_eq!(cars[priority as usize]["role"], "priority", "{}", dir.display());
+        assert!(cars[priority as usize].get("follows").is_none(), "{}: the car with priority drives its own queue", dir.display());
+        assert!(designed.contains(&(leader, follower)) && designed.contains(&(priority, follower)), "{}", dir.display());
+        found.push((leader, follower, priority));
+    }
+    // Every designed edge is a collider's, or the one pair left over.
+    assert!(designed.len() <= 2 * found.len() + 1, "{}: {designed:?}", dir.display());
+    found
+}
+
+#[test]
+fn city_colliders_give_way_to_the_car_with_priority_and_are_backed_by_effects() {
+    let dir = fresh_dir("graph-shapes-colliders");
+    let colliders = serde_json::json!({"shape": "colliders"});
+    // (name, town, platoon cars, least share of colliders whose follower the
+    // car with priority moves, least share where it does so directly).
+    // Measured on 60-80 scenarios: all-way stops 97-100 % / 72-88 %,
+    // priority junctions 80-87 % / 15-23 %, where the leader, held up
+    // too, often holds the follower up first.
+    for (name, control, platoon, causal, direct) in
+        [("all-way-stop", "all_way_stop", 0, 0.85, 0.6), ("priority-platoons", "priority", 4, 0.6, 0.03)]
+    {
+        let city = format!(r#"{{"start": {{"platoon_cars": {platoon}}}, "rules": "cooperative"}}"#);
+        let mut spec: Value = serde_json::from_str(&city_spec(name, &[(8, 0.5)], (40, 1, 0), 60, &city)).unwrap();
+        spec["frame_interval"] = serde_json::json!(1.0);
+        spec["graph"] = colliders.clone();
+        spec["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3, "control": control}});
+        let spec = write_spec(&dir, &spec.to_string());
+        let out = dir.join(name);
+        gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+        let (mut checked, mut moved, mut direct_hits) = (0, 0, 0);
+        let schema = validator("scenario.schema.json");
+        for d in scenario_dirs(&out) {
+            let scenario = read_json(&d.join("scenario.json"));
+            assert_valid(&schema, &scenario, &d.join("scenario.json"));
+            let (causal_edges, direct_edges) = (edges(&scenario, "causal_edges"), edges(&scenario, "direct_edges"));
+            let found = colliders_of(&scenario, &d);
+            // 8 cars at 50 %: two edges, one collider.
+            assert_eq!(found.len(), 1, "{}", d.display());
+            for (leader, follower, priority) in found {
+                checked += 1;
+                assert!(direct_edges.contains(&(leader, follower)), "{}: the follower follows", d.display());
+                moved += usize::from(causal_edges.contains(&(priority, follower)));
+                direct_hits += usize::from(direct_edges.contains(&(priority, follower)));
+            }
+        }
+        assert_eq!(checked, 41, "{name}");
+        let (moved, direct_hits) = (moved as f64 / checked as f64, direct_hits as f64 / checked as f64);
+        eprintln!("{name}: {checked} colliders, moved {:.0} %, directly {:.0} %", 100.0 * moved, 100.0 * direct_hits);
+        assert!(moved >= causal, "{name}: the car with priority moves {:.0} % of its followers", 100.0 * moved);
+        assert!(direct_hits >= direct, "{name}: directly {:.0} %", 100.0 * direct_hits);
+        let report = run(&["validate", out.to_str().unwrap()]);
+        assert_eq!(report.status.code(), Some(0), "{name}: {}", String::from_utf8_lossy(&report.stdout));
+    }
+}

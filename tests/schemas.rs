@@ -71,6 +71,7 @@ fn spec_schema_and_parser_agree() {
     ));
     good.push(("chains of 4".into(), edited(&base, |v| v["graph"] = json!({"shape": "chains", "cars": 4}))));
     good.push(("forks".into(), edited(&base, |v| v["graph"] = json!({"shape": "forks"}))));
+    good.push(("colliders".into(), edited(&base, |v| v["graph"] = json!({"shape": "colliders"}))));
     good.push((
         "held-out test".into(),
         edited(&base, |v| {

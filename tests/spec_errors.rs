@@ -381,7 +381,7 @@ fn a_graph_shape_is_checked_for_its_size_and_the_cars_it_needs() {
     rejected(
         "graph-shape",
         &graph(serde_json::json!({"shape": "rings"})),
-        &["graph.shape", "rings", "pairs", "chains", "forks"],
+        &["graph.shape", "rings", "pairs", "chains", "forks", "colliders"],
     );
     rejected(
         "graph-cars-7",
@@ -406,6 +406,23 @@ fn a_graph_shape_is_checked_for_its_size_and_the_cars_it_needs() {
         "graph-platoon",
         &city_with_graph(r#"{"start": {"platoon_cars": 2}}"#, serde_json::json!({"shape": "chains"})),
         &["graph.cars", "3 is not allowed with city.start.platoon_cars = 2", "one chain start in one platoon"],
+    );
+    // Colliders need a driver who gives way: not in the toy world, not
+    // where every junction has lights with protected turns.
+    rejected(
+        "colliders-toy",
+        &graph(serde_json::json!({"shape": "colliders"})),
+        &["graph.shape", "\"colliders\" needs \"world\": \"city\"", "pairs, chains or forks"],
+    );
+    rejected(
+        "colliders-lights",
+        &city_spec("bad", &[(8, 0.5)], (1, 0, 0), 10, "{}").replacen('{', r#"{"graph": {"shape": "colliders"}, "#, 1),
+        &["graph.shape", "junctions where a driver gives way", "\"priority\", \"all_way_stop\" or \"right_before_left\""],
+    );
+    rejected(
+        "colliders-cars",
+        &city_with_graph("{}", serde_json::json!({"shape": "colliders", "cars": 4})),
+        &["graph.cars", "4 is not allowed with graph.shape \"colliders\"", "a collider has 3 cars"],
     );
 }
 

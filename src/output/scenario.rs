@@ -38,6 +38,9 @@ struct CarRecord<'a> {
     /// Followers: the car it follows.
     #[serde(skip_serializing_if = "Option::is_none")]
     follows: Option<u32>,
+    /// Colliders' followers: the car with priority it gives way to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gives_way_to: Option<u32>,
     /// Followers: `"stop"`, or `{"drive": {actions, merge_distances}}`.
     #[serde(skip_serializing_if = "Option::is_none")]
     on_leader_lost: Option<LeaderLostRecord<'a>>,
@@ -225,6 +228,7 @@ pub fn scenario_json(
                 runs_red_lights: agency(c).map(|a| a.runs_red_lights),
                 hard_negative_behind: c.hard_negative_behind,
                 follows: c.leader,
+                gives_way_to: c.gives_way_to,
                 on_leader_lost: c.on_leader_lost.as_ref().map(LeaderLostRecord::of),
             })
             .collect(),

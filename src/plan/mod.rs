@@ -27,6 +27,9 @@ pub enum Role {
     Leader,
     Follower,
     Independent,
+    /// Colliders: a car a follower must give way to at its first junction
+    /// (a designed edge to that follower), driving a queue of its own.
+    Priority,
 }
 
 /// Where one scenario sits in the dataset.
@@ -80,6 +83,9 @@ pub struct CarPlan {
     /// Followers: the id of the car it follows, taking the turns and merges
     /// its leader takes (see [`Fallback`] for when it loses it).
     pub leader: Option<u32>,
+    /// Colliders' followers: the id of the car with priority it must give
+    /// way to at its first junction (the world's rules make it do so).
+    pub gives_way_to: Option<u32>,
     /// Followers: what the car does if its leader leaves the scene.
     pub on_leader_lost: Option<OnLeaderLost>,
 }

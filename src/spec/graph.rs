@@ -1,5 +1,5 @@
 //! The shape of each scenario's designed leader-follower graph (`graph`):
-//! disjoint pairs (the paper's, the default), chains or forks.
+//! disjoint pairs (the paper's, the default), chains, forks or colliders.
 
 use super::SpecError;
 use serde::{Deserialize, Serialize};
@@ -17,6 +17,11 @@ pub enum GraphShape {
     /// One leader with several followers queued behind it, each following
     /// the leader: A -> B, A -> C.
     Forks,
+    /// A follower that must also give way to a third car: A -> C, B -> C.
+    /// A leads C; B is placed on a movement that crosses C's at C's first
+    /// junction and goes before it, timed to reach the junction about when
+    /// C does. City towns with junctions where a driver gives way only.
+    Colliders,
 }
 
 impl GraphShape {
@@ -25,9 +30,13 @@ impl GraphShape {
             GraphShape::Pairs => "pairs",
             GraphShape::Chains => "chains",
             GraphShape::Forks => "forks",
+            GraphShape::Colliders => "colliders",
         }
     }
 }
+
+/// Cars in one collider: the leader, its follower and the car with priority.
+pub const COLLIDER_CARS: u32 = 3;
 
 /// Most cars in one chain or fork (its leader included).
 pub const MAX_GRAPH_UNIT_CARS: u32 = 6;
@@ -51,11 +60,22 @@ impl GraphSpec {
         self.shape == GraphShape::Pairs
     }
 
-    /// Cars in one full chain or fork, its leader included.
+    /// Cars in one full chain, fork or collider, its leader included.
     pub fn unit_cars(&self) -> u32 {
         match self.shape {
             GraphShape::Pairs => 2,
+            GraphShape::Colliders => COLLIDER_CARS,
             _ => self.cars.unwrap_or(3),
+        }
+    }
+
+    /// Cars of one full unit that start queued in one lane: all of a chain
+    /// or fork, a collider's leader and follower (its third car comes from
+    /// the crossing road).
+    pub fn queued_cars(&self) -> u32 {
+        match self.shape {
+            GraphShape::Colliders => 2,
+            _ => self.unit_cars(),
         }
     }
 
@@ -81,6 +101,10 @@ impl GraphSpec {
             (GraphShape::Pairs, Some(cars)) if cars != 2 => Err(SpecError::new(
                 "graph.cars",
                 format!("{cars} is not allowed with graph.shape \"pairs\": a pair has 2 cars; use \"chains\" or \"forks\" for more"),
+            )),
+            (GraphShape::Colliders, Some(cars)) if cars != COLLIDER_CARS => Err(SpecError::new(
+                "graph.cars",
+                format!("{cars} is not allowed with graph.shape \"colliders\": a collider has {COLLIDER_CARS} cars (a leader, its follower and the car the follower gives way to); leave graph.cars out"),
             )),
             (_, Some(cars)) if !(2..=MAX_GRAPH_UNIT_CARS).contains(&cars) => Err(SpecError::new(
                 "graph.cars",

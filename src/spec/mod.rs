@@ -452,7 +452,7 @@ impl DatasetSpec {
                 let platoon = city.start.platoon_cars;
                 for split in Split::ALL {
                     let graph = self.graph_of(split);
-                    if platoon != 0 && graph.unit_cars() > platoon {
+                    if platoon != 0 && graph.queued_cars() > platoon {
                         let field = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
                             Some(_) => format!("held_out.{}.graph.cars", split.name()),
                             None => "graph.cars".to_string(),
@@ -461,7 +461,7 @@ impl DatasetSpec {
                             field,
                             format!(
                                 "{} is not allowed with city.start.platoon_cars = {platoon}: the cars of one {} start in one platoon, so it can have {platoon} cars at most",
-                                graph.unit_cars(),
+                                graph.queued_cars(),
                                 &graph.shape.name()[..graph.shape.name().len() - 1]
                             ),
                         ));
@@ -471,7 +471,21 @@ impl DatasetSpec {
             (Some(_), WorldKind::Toy) => {
                 return Err(SpecError::new("city", "applies to \"world\": \"city\" only: remove it or change world"))
             }
-            (None, _) => {}
+            (None, WorldKind::Toy) => {
+                for split in Split::ALL {
+                    if self.graph_of(split).shape == GraphShape::Colliders {
+                        let field = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
+                            Some(_) => format!("held_out.{}.graph.shape", split.name()),
+                            None => "graph.shape".to_string(),
+                        };
+                        return Err(SpecError::new(
+                            field,
+                            "\"colliders\" needs \"world\": \"city\": a toy car gives way to no one; use pairs, chains or forks",
+                        ));
+                    }
+                }
+            }
+            (None, WorldKind::City) => {}
         }
         self.map.validate()?;
         for split in [Split::Val, Split::Test] {

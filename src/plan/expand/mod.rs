@@ -10,6 +10,7 @@
 //! `actions.rs` the drive queues drawn.
 
 mod actions;
+mod colliders;
 mod planner;
 mod platoons;
 mod spawn;

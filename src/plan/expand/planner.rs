@@ -36,6 +36,8 @@ pub(super) struct PlacedCar {
     pub(super) behind: Option<usize>,
     /// A follower: the index of its leader.
     pub(super) leader: Option<usize>,
+    /// A collider's follower: the index of the car it gives way to.
+    pub(super) gives_way_to: Option<usize>,
     /// A follower: what it does once it loses its leader.
     pub(super) on_leader_lost: Option<OnLeaderLost>,
 }
@@ -113,6 +115,18 @@ impl Planner {
         };
         let name = spec.map.town_name();
         let expansion = Planner { spec, name, map, camera, spans, leader_gap_m, shortest_spacing_m, toy_step_m };
+        let colliders = expansion.spec.graph.unit_cars();
+        let wants_colliders = expansion.spec.graph.shape == GraphShape::Colliders
+            && expansion.spec.groups.iter().any(|g| expansion.spec.graph.units(g.edges()).contains(&colliders));
+        if wants_colliders && !expansion.has_give_way_junctions() {
+            return Err(SpecError::new(
+                "graph.shape",
+                format!(
+                    "\"colliders\" needs junctions where a driver gives way, and every junction of this town ({}) has lights with protected turns: use map.grid.control \"priority\", \"all_way_stop\" or \"right_before_left\", or an imported network with such junctions",
+                    expansion.name
+                ),
+            ));
+        }
         for (i, g) in expansion.spec.groups.iter().enumerate() {
             // Random placement needs room to spare: allow half the packed capacity.
             if g.cars > capacity / 2 {
@@ -185,7 +199,12 @@ impl Planner {
         let mut cars: Vec<PlacedCar> = Vec::new();
         let mut pair_indices = Vec::new();
         let split = key.split.index();
-        for &size in &unit_sizes {
+        let colliders = spec.graph.shape == GraphShape::Colliders;
+        for &unit in &unit_sizes {
+            // A collider's third car comes from the crossing road: its queue
+            // is the leader and the follower.
+            let collider = colliders && unit == spec.graph.unit_cars() as usize;
+            let size = if collider { spec.graph.queued_cars() as usize } else { unit };
             let in_graph = size > 1;
             // City: a car with no leader may start right behind another car
             // (a hard negative), decided once per unit.
@@ -268,6 +287,7 @@ impl Planner {
                 if !clear || !spaced {
                     continue;
                 }
+                let (placed_before, cars_before, pairs_before) = (placed.len(), cars.len(), pair_indices.len());
                 placed.extend(boxes);
                 let route = Arc::new(self.plan_route(span.lane, front, &actions, &merges, travel)?);
                 let desired_speeds = draw_desired_speeds(&mut rng, city.as_ref(), actions.len());
@@ -282,6 +302,7 @@ impl Planner {
                     desired_speeds,
                     behind,
                     leader: None,
+                    gives_way_to: None,
                     on_leader_lost: None,
                 };
                 let first = cars.len();
@@ -312,8 +333,31 @@ impl Planner {
                 if !in_graph {
                     cars.push(car);
                 }
+                if collider {
+                    let (leader, follower) = (cars_before, cars_before + 1);
+                    let c = city.as_ref().expect("colliders are a city shape (checked with the spec)");
+                    match self.place_priority_car(&mut rng, c, split, (leader, follower), &cars, &placed) {
+                        Some(priority) => {
+                            placed.push(self.car_box(priority.spawn, priority.distance));
+                            pair_indices.push((cars.len(), follower));
+                            cars[follower].gives_way_to = Some(cars.len());
+                            cars.push(priority);
+                        }
+                        None => {
+                            placed.truncate(placed_before);
+                            cars.truncate(cars_before);
+                            pair_indices.truncate(pairs_before);
+                            continue;
+                        }
+                    }
+                }
                 done = true;
                 break;
+            }
+            if !done && collider {
+                return Err(format!(
+                    "could not place a collider (a leader, its follower and a car with priority timed to meet the follower at its first junction) after {PLACEMENT_ATTEMPTS} tries: colliders need junctions where drivers give way with approaches long enough to start the car with priority on (longer blocks, map.grid.block_m, help), or fewer cars"
+                ));
             }
             if !done {
                 return Err(format!(
@@ -482,6 +526,7 @@ impl Planner {
                     desired_speeds,
                     behind: None,
                     leader: None,
+                    gives_way_to: None,
                     on_leader_lost: None,
                 }
             })
@@ -552,6 +597,7 @@ impl Planner {
                     route,
                     behind,
                     leader,
+                    gives_way_to,
                     on_leader_lost,
                     ..
                 } = placed;
@@ -572,6 +618,7 @@ impl Planner {
                     route,
                     hard_negative_behind: behind.map(|k| ids[k]),
                     leader: leader.map(|k| ids[k]),
+                    gives_way_to: gives_way_to.map(|k| ids[k]),
                     on_leader_lost,
                 }
             })

@@ -10,6 +10,9 @@ use crate::geometry::OrientedBox;
 use crate::map::{Action, AdaptationKind, LaneId};
 use crate::plan::{Role, ScenarioKey};
 use crate::spec::{GraphShape, GroupSpec};
+
+/// Tries at a colliders scenario's platoons before planning gives up.
+const COLLIDER_PLATOON_TRIES: usize = 1000;
 use rand::seq::SliceRandom;
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
@@ -28,8 +31,63 @@ impl Planner {
         city: &crate::spec::CitySpec,
         group: &GroupSpec,
     ) -> Result<(Vec<PlacedCar>, LeaderFollowerPairs), String> {
+        if self.spec.graph.shape != GraphShape::Colliders {
+            return self.place_platoons_once(key, rng, city, group, 0);
+        }
+        // Colliders: the platoons hold every car but those with priority,
+        // which come after; a try whose followers cannot all be given one
+        // (a junction where they have the right of way) starts again.
+        let units = self.spec.graph.units(group.edges());
+        let colliders = units.iter().filter(|&&n| n == self.spec.graph.unit_cars()).count();
+        let mut failed = None;
+        for _ in 0..COLLIDER_PLATOON_TRIES {
+            // Pairs that do not fit these platoons (a follower that cannot
+            // take its leader's turns) are drawn again too.
+            let (mut cars, mut pairs) = match self.place_platoons_once(key, rng, city, group, colliders) {
+                Ok(placed) => placed,
+                Err(e) => {
+                    failed = Some(e);
+                    continue;
+                }
+            };
+            let mut boxes: Vec<OrientedBox> = cars.iter().map(|c| self.car_box(c.spawn, c.distance)).collect();
+            let mut given = 0;
+            for k in 0..pairs.len() {
+                if given == colliders {
+                    break;
+                }
+                let (leader, follower) = pairs[k];
+                let split = key.split.index();
+                if let Some(priority) = self.place_priority_car(rng, city, split, (leader, follower), &cars, &boxes) {
+                    boxes.push(self.car_box(priority.spawn, priority.distance));
+                    pairs.push((cars.len(), follower));
+                    cars[follower].gives_way_to = Some(cars.len());
+                    cars.push(priority);
+                    given += 1;
+                }
+            }
+            if given == colliders {
+                return Ok((cars, pairs));
+            }
+        }
+        Err(failed.unwrap_or_else(|| format!(
+            "could not give {colliders} followers a car with priority at their first junction after {COLLIDER_PLATOON_TRIES} tries: colliders need junctions where drivers give way (no lights, or left turns on a permissive green) with approaches long enough to start the car with priority on (longer blocks, map.grid.block_m, help), or fewer cars"
+        )))
+    }
+
+    /// [`Self::place_platoons`]'s cars, less `colliders` cars with priority
+    /// placed afterwards, whose (leader, follower) pairs the pairs drawn
+    /// here include (a collider's queue is a pair).
+    fn place_platoons_once(
+        &self,
+        key: &ScenarioKey,
+        rng: &mut ChaCha8Rng,
+        city: &crate::spec::CitySpec,
+        group: &GroupSpec,
+        colliders: usize,
+    ) -> Result<(Vec<PlacedCar>, LeaderFollowerPairs), String> {
         let size = city.start.platoon_cars as usize;
-        let total = group.cars as usize;
+        let total = group.cars as usize - colliders;
         let split = key.split.index();
         let travel = self.max_travel();
         let mut boxes: Vec<OrientedBox> = Vec::new();
@@ -59,6 +117,7 @@ impl Planner {
                     desired_speeds,
                     behind: None,
                     leader: None,
+                    gives_way_to: None,
                     on_leader_lost: None,
                 });
                 platoon_of.push(platoon);
@@ -66,6 +125,10 @@ impl Planner {
         }
         let pairs = if self.spec.graph.is_pairs() {
             self.draw_platoon_pairs(rng, &cars, &platoon_of, group.edges() as usize, size)?
+        } else if colliders > 0 || self.spec.graph.shape == GraphShape::Colliders {
+            // One pair per collider, and one for an odd edge left over.
+            let wanted = self.spec.graph.units(group.edges()).len();
+            self.draw_platoon_pairs(rng, &cars, &platoon_of, wanted, size)?
         } else {
             self.draw_platoon_parts(rng, &cars, &platoon_of, group.edges())?
         };

@@ -75,6 +75,7 @@ fn plan(
                 width: WIDTH,
                 route: Arc::new(route),
                 hard_negative_behind: None,
+                gives_way_to: None,
                 leader: None,
                 on_leader_lost: None,
             }
