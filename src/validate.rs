@@ -191,7 +191,10 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
         }
     }
     let dataset = Dataset::open(dir)?;
-    let (record, keys) = (&dataset.record, &dataset.keys);
+    // Validation keeps every car's fingerprint to find twins across
+    // splits, so it holds one entry per scenario whatever it does.
+    let keys: Vec<ScenarioKey> = dataset.keys().collect();
+    let (record, keys) = (&dataset.record, &keys);
     let spec = dataset.spec();
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
     let layout = ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.products(), cameras);
@@ -254,9 +257,9 @@ fn validate_sweep(
         });
     }
     let pair_of = |k: &ScenarioKey| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name());
+    let keys: Vec<ScenarioKey> = sweep.key_sequence().iter().collect();
     // Images or not, as the runs were written (sweep.json does not say).
-    let images = sweep
-        .keys
+    let images = keys
         .iter()
         .map(|k| pair_of(k).join("factual"))
         .find(|f| f.is_dir())
@@ -314,7 +317,7 @@ fn validate_sweep(
         (problems, files, bytes, Vec::new())
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
-    let results: Vec<ScenarioCheck> = pool.install(|| sweep.keys.par_iter().map(check_pair).collect());
+    let results: Vec<ScenarioCheck> = pool.install(|| keys.par_iter().map(check_pair).collect());
     let (mut files, mut bytes) = (0, 0);
     for (p, f, b, _) in results {
         problems.extend(p);
@@ -323,8 +326,8 @@ fn validate_sweep(
     }
     Ok(ValidationReport {
         dir: dir.clone(),
-        scenarios_expected: sweep.keys.len(),
-        scenarios_checked: sweep.keys.len(),
+        scenarios_expected: keys.len(),
+        scenarios_checked: keys.len(),
         files_checked: files,
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),

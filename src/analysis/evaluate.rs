@@ -355,16 +355,21 @@ impl Truth {
     fn open(dir: &Path) -> Result<Truth, String> {
         if !dir.join("manifest.json").exists() {
             if let Some(sweep) = Sweep::open(dir)? {
+                // Every scenario is scored against its files: evaluate holds
+                // one entry per scenario whatever it does.
+                let keys = sweep.key_sequence().iter().collect();
                 return Ok(Truth {
                     dir: sweep.dir,
                     expansion: sweep.expansion,
-                    keys: sweep.keys,
+                    keys,
                     effects: false,
                     sweep: true,
                 });
             }
         }
-        let Dataset { dir, record, expansion, keys } = Dataset::open_complete(dir)?;
+        let dataset = Dataset::open_complete(dir)?;
+        let keys = dataset.keys().collect();
+        let Dataset { dir, record, expansion } = dataset;
         Ok(Truth { dir, effects: record.effects, expansion, keys, sweep: false })
     }
 

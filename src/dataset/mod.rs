@@ -7,16 +7,17 @@ pub mod readback;
 
 use crate::output::manifest::ManifestRecord;
 use crate::output::scenario_dir;
-use crate::plan::{Expansion, ScenarioKey};
+use crate::plan::{Expansion, KeySequence, ScenarioKey};
 use crate::spec::{DatasetSpec, Split};
 use std::path::{Path, PathBuf};
 
-/// A dataset folder and what its manifest says it holds.
+/// A dataset folder and what its manifest says it holds. Its scenario keys
+/// are walked from the spec ([`Dataset::keys`]), never listed: opening a
+/// dataset takes the same memory for ten scenarios as for ten million.
 pub struct Dataset {
     pub dir: PathBuf,
     pub record: ManifestRecord,
     pub expansion: Expansion,
-    pub keys: Vec<ScenarioKey>,
 }
 
 impl Dataset {
@@ -26,8 +27,17 @@ impl Dataset {
         let record = ManifestRecord::read(&manifest)?
             .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
         let expansion = expansion_of(&record, &manifest)?;
-        let keys = expansion.keys(record.limit);
-        Ok(Dataset { dir: dir.to_path_buf(), record, expansion, keys })
+        Ok(Dataset { dir: dir.to_path_buf(), record, expansion })
+    }
+
+    /// The keys of the scenarios the dataset holds, in its order.
+    pub fn key_sequence(&self) -> KeySequence<'_> {
+        self.expansion.key_sequence(self.record.limit)
+    }
+
+    /// [`Dataset::key_sequence`]'s keys, each made when it is reached.
+    pub fn keys(&self) -> impl ExactSizeIterator<Item = ScenarioKey> + '_ {
+        (0..self.key_sequence().len()).map(move |i| self.key_sequence().key(i))
     }
 
     /// Opens a dataset whose run has finished.
@@ -59,20 +69,16 @@ impl Dataset {
 
     /// Every scenario folder, in the dataset's order, with its path relative
     /// to the dataset (`<group>/<split>/<scenario>`), which exports mirror.
-    pub fn scenario_paths(&self) -> Vec<(PathBuf, PathBuf)> {
-        self.keys
-            .iter()
-            .map(|k| {
-                let relative = Path::new(&k.group).join(k.split.name()).join(k.folder_name());
-                (self.dir.join(&relative), relative)
-            })
-            .collect()
+    pub fn scenario_paths(&self) -> impl Iterator<Item = (PathBuf, PathBuf)> + '_ {
+        self.keys().map(|k| {
+            let relative = Path::new(&k.group).join(k.split.name()).join(k.folder_name());
+            (self.dir.join(&relative), relative)
+        })
     }
 
     /// Scenario folders of one group and split, in index order.
     pub fn scenario_dirs(&self, group: &str, split: Split) -> Vec<PathBuf> {
-        self.keys
-            .iter()
+        self.keys()
             .filter(|k| k.group == group && k.split == split)
             .map(|k| scenario_dir(&self.dir, &k.group, split.name(), &k.folder_name()))
             .collect()
@@ -286,7 +292,8 @@ pub const SWEEP_RECORD: &str = "sweep.json";
 pub struct Sweep {
     pub dir: PathBuf,
     pub expansion: Expansion,
-    pub keys: Vec<ScenarioKey>,
+    /// `--limit` of the sweep's run: its keys are walked from the spec.
+    pub limit: Option<u32>,
 }
 
 impl Sweep {
@@ -333,7 +340,11 @@ impl Sweep {
             ));
         }
         let expansion = expansion_from(record.spec, &path)?;
-        let keys = expansion.keys(record.limit);
-        Ok(Some((Sweep { dir: dir.to_path_buf(), expansion, keys }, record.complete)))
+        Ok(Some((Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit }, record.complete)))
+    }
+
+    /// The keys of the sweep's pairs, in order.
+    pub fn key_sequence(&self) -> KeySequence<'_> {
+        self.expansion.key_sequence(self.limit)
     }
 }

@@ -12,7 +12,7 @@ use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
 use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Writes annotations for every scenario of `dataset` under `out`; returns
 /// how many scenarios were written.
@@ -27,11 +27,12 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     let _claim = claim(out, Writer::Export, &format!("export nsdr {}", dataset.display()))?;
     let (w, h) = (opened.spec().image.width, opened.spec().image.height);
     let digits = frame_digits(opened.spec().frames);
-    let jobs: Vec<(PathBuf, PathBuf)> =
-        opened.scenario_paths().into_iter().map(|(dir, relative)| (dir, out.join(relative))).collect();
-    let bar = Progress::new(jobs.len() as u64, progress);
-    jobs.par_iter()
+    // Walked, not listed: memory independent of the dataset's size.
+    let jobs = opened.scenario_paths().map(|(dir, relative)| (dir, out.join(relative)));
+    let bar = Progress::new(opened.key_sequence().len() as u64, progress);
+    jobs.par_bridge()
         .try_for_each(|(source, target)| {
+            let (source, target) = (source.as_path(), target.as_path());
             let json = annotate(source, w, h, digits)?;
             std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
             write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
@@ -41,7 +42,7 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
         })
         .map_err(Error::Failure)?;
     bar.finish();
-    Ok(jobs.len())
+    Ok(opened.key_sequence().len())
 }
 
 /// `rgb/` and `mask/` beside an exported annotations.json, as links to the

@@ -18,7 +18,7 @@ use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary};
 use crate::error::Error;
 use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The arrays of one scenario's V-CDN file, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -107,14 +107,12 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
         crate::output::claim::Writer::Export,
         &format!("export vcdn {}", dataset.display()),
     )?;
-    let jobs: Vec<(PathBuf, PathBuf)> = opened
-        .scenario_paths()
-        .into_iter()
-        .map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")))
-        .collect();
-    let bar = Progress::new(jobs.len() as u64, progress);
-    jobs.par_iter()
+    // Walked, not listed: memory independent of the dataset's size.
+    let jobs = opened.scenario_paths().map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")));
+    let bar = Progress::new(opened.key_sequence().len() as u64, progress);
+    jobs.par_bridge()
         .try_for_each(|(source, target)| {
+            let (source, target) = (source.as_path(), target.as_path());
             let arrays = vcdn_arrays(source, graph)?;
             let parent = target.parent().expect("files have a folder");
             std::fs::create_dir_all(parent).map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
@@ -126,7 +124,7 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
         })
         .map_err(Error::Failure)?;
     bar.finish();
-    Ok(jobs.len())
+    Ok(opened.key_sequence().len())
 }
 
 const NO_HDF5: &str = "this causalcity was built without HDF5, which V-CDN export needs: \

@@ -130,22 +130,20 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     }
 
     let expansion = crate::dataset::expansion_of(&first, &manifests[0].0).map_err(GenError::Manifest)?;
-    let keys = expansion.keys(first.limit);
-
-    // Check every scenario before anything moves: each is in --out or in a
-    // shard folder, and copies of one scenario agree.
-    let mut moves: Vec<(PathBuf, PathBuf)> = Vec::new();
-    let mut duplicates: Vec<PathBuf> = Vec::new();
-    let mut absent: Vec<String> = Vec::new();
-    for key in &keys {
+    // Keys are walked, never listed, and every pass below holds one chunk
+    // of scenarios at a time: merging takes the same memory for ten
+    // scenarios as for ten million.
+    let sequence = expansion.key_sequence(first.limit);
+    let locate = |position: usize| -> Result<Located, GenError> {
+        let key = sequence.key(position);
         let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
-        let mut found = to.is_dir().then(|| to.clone());
+        let mut located = Located { found: to.is_dir().then(|| to.clone()), to, moved: false, duplicates: Vec::new() };
         for source in &others {
             let from = scenario_dir(source, &key.group, key.split.name(), &key.folder_name());
             if !from.is_dir() {
                 continue;
             }
-            match &found {
+            match &located.found {
                 Some(first) => {
                     let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(first.join(CHECKSUMS)).ok());
                     if a.is_none() || a != b {
@@ -155,61 +153,83 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
                             first.display()
                         )));
                     }
-                    duplicates.push(from);
+                    located.duplicates.push(from);
                 }
                 None => {
-                    found = Some(from.clone());
-                    moves.push((from, to.clone()));
+                    located.found = Some(from);
+                    located.moved = true;
                 }
             }
         }
-        if found.is_none() {
-            absent.push(format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()));
+        Ok(located)
+    };
+
+    // Check every scenario before anything moves: each is in --out or in a
+    // shard folder, copies of one scenario agree, and its files are there
+    // and match its checksums.
+    let (mut absent, mut first_absent) = (0usize, Vec::new());
+    let (mut damaged, mut first_damaged) = (0usize, None);
+    for start in (0..sequence.len()).step_by(MERGE_CHUNK) {
+        let chunk = start..(start + MERGE_CHUNK).min(sequence.len());
+        let checked: Vec<(Located, Option<String>)> = chunk
+            .clone()
+            .into_par_iter()
+            .map(|position| {
+                let located = locate(position)?;
+                let broken = located.found.as_deref().and_then(|dir| verify_scenario(dir).err());
+                Ok((located, broken))
+            })
+            .collect::<Result<_, GenError>>()?;
+        for (position, (located, broken)) in chunk.zip(checked) {
+            if located.found.is_none() {
+                absent += 1;
+                if first_absent.len() < 3 {
+                    let key = sequence.key(position);
+                    first_absent.push(format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()));
+                }
+            }
+            if let Some(broken) = broken {
+                damaged += 1;
+                first_damaged.get_or_insert(broken);
+            }
         }
     }
-    if !absent.is_empty() {
+    if absent > 0 {
         return Err(GenError::Input(format!(
-            "{} scenarios are in no shard (first: {}): were all shard folders given? Nothing was moved",
-            absent.len(),
-            absent[..absent.len().min(3)].join(", ")
+            "{absent} scenarios are in no shard (first: {}): were all shard folders given? Nothing was moved",
+            first_absent.join(", ")
+        )));
+    }
+    if let Some(first_damaged) = first_damaged {
+        return Err(GenError::Input(format!(
+            "{damaged} scenarios are damaged (first: {first_damaged}): rerun their shards' gen commands, which rewrite damaged \
+             scenarios; nothing was moved"
         )));
     }
 
-    // Every scenario is whole: its files are there and match its checksums.
-    let in_place: Vec<PathBuf> = keys
-        .iter()
-        .map(|k| scenario_dir(out, &k.group, k.split.name(), &k.folder_name()))
-        .filter(|to| to.is_dir())
-        .collect();
-    let to_check: Vec<&Path> =
-        moves.iter().map(|(from, _)| from.as_path()).chain(in_place.iter().map(PathBuf::as_path)).collect();
-    let damaged: Vec<String> = to_check.par_iter().filter_map(|dir| verify_scenario(dir).err()).collect();
-    if !damaged.is_empty() {
-        return Err(GenError::Input(format!(
-            "{} scenarios are damaged (first: {}): rerun their shards' gen commands, which rewrite damaged \
-             scenarios; nothing was moved",
-            damaged.len(),
-            damaged[0]
-        )));
-    }
-
-    // Move every scenario into place.
-    for (from, to) in &moves {
-        let parent = to.parent().expect("scenario folders have parents");
-        fs::create_dir_all(parent).map_err(io_err(parent))?;
-        if fs::rename(from, to).is_err() {
-            // Another filesystem: copy, then remove the source.
-            let name = to.file_name().unwrap_or_default().to_string_lossy();
-            let partial = parent.join(format!("{PARTIAL_PREFIX}{name}"));
-            copy_tree(from, &partial).map_err(io_err(&partial))?;
-            fs::rename(&partial, to).map_err(io_err(to))?;
+    // Move every scenario into place, and drop the copies of those already there.
+    let (mut moved, mut already) = (0, 0);
+    for position in 0..sequence.len() {
+        let located = locate(position)?;
+        if let (true, Some(from)) = (located.moved, &located.found) {
+            let to = &located.to;
+            let parent = to.parent().expect("scenario folders have parents");
+            fs::create_dir_all(parent).map_err(io_err(parent))?;
+            if fs::rename(from, to).is_err() {
+                // Another filesystem: copy, then remove the source.
+                let name = to.file_name().unwrap_or_default().to_string_lossy();
+                let partial = parent.join(format!("{PARTIAL_PREFIX}{name}"));
+                copy_tree(from, &partial).map_err(io_err(&partial))?;
+                fs::rename(&partial, to).map_err(io_err(to))?;
+                fs::remove_dir_all(from).map_err(io_err(from))?;
+            }
+            moved += 1;
+        }
+        for from in &located.duplicates {
             fs::remove_dir_all(from).map_err(io_err(from))?;
+            already += 1;
         }
     }
-    for from in &duplicates {
-        fs::remove_dir_all(from).map_err(io_err(from))?;
-    }
-    let (moved, already) = (moves.len(), duplicates.len());
     // The networks the spec names (read from the first shard's folder).
     super::run::keep_networks(&expansion.spec, out)?;
     let manifest =
@@ -225,12 +245,15 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // folders go, and a shard folder that holds nothing else (once its
     // lock file has gone with its claim).
     drop(source_claims);
-    for from in moves.iter().map(|(from, _)| from).chain(&duplicates) {
-        for dir in from.ancestors().skip(1).take(3) {
-            if dir == out || fs::remove_dir(dir).is_err() {
-                break; // not empty (or the merged dataset itself)
+    for source in &others {
+        for group in &expansion.spec.groups {
+            let group = source.join(group.name());
+            for split in crate::spec::Split::ALL {
+                let _ = fs::remove_dir(group.join(split.name())); // only when empty
             }
+            let _ = fs::remove_dir(&group);
         }
+        let _ = fs::remove_dir(source);
     }
     // A shard folder's copies of the networks, now kept in --out: its
     // networks/ goes when it holds those alone, then the folder if empty.
@@ -252,6 +275,20 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     Ok(format!(
         "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
         out.display(),
-        keys.len()
+        sequence.len()
     ))
 }
+
+/// Where one scenario is before a merge: its place in `--out`, the folder
+/// holding it (that place, or a shard folder's it moves from), and copies
+/// in other shard folders to drop.
+struct Located {
+    to: PathBuf,
+    found: Option<PathBuf>,
+    /// `found` is a shard folder's copy, to move to `to`.
+    moved: bool,
+    duplicates: Vec<PathBuf>,
+}
+
+/// Scenarios checked at a time (in parallel) before anything moves.
+const MERGE_CHUNK: usize = 256;

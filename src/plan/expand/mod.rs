@@ -75,6 +75,11 @@ impl KeySequence<'_> {
         self.per_split.iter().sum()
     }
 
+    /// Every key in order, each made when it is reached.
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = ScenarioKey> + '_ {
+        (0..self.len()).map(|i| self.key(i))
+    }
+
     /// The key at `position` (`position < len()`).
     pub fn key(&self, position: usize) -> ScenarioKey {
         let position = position as u64;
