@@ -318,6 +318,39 @@ def test_cooperative_rules_on_a_right_before_left_town_simulate_as_gen_writes(tm
         causalcity.simulate(spec, "cars08_edges50", "train", 0)
 
 
+def test_colliders_simulate_as_gen_writes_with_two_designed_causes_per_follower(tmp_path):
+    spec = json.loads(CITY_SPEC.read_text())
+    spec["name"] = "colliders"
+    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 3, "val": 0, "test": 0}
+    spec["frames"] = 40
+    spec["map"] = {"grid": {"rows": 3, "columns": 3, "control": "all_way_stop"}}
+    spec["graph"] = {"shape": "colliders"}
+    spec_file = tmp_path / "colliders.json"
+    spec_file.write_text(json.dumps(spec))
+    out = tmp_path / "colliders"
+    cli("gen", "--spec", str(spec_file), "--out", str(out), "--no-images", "--quiet")
+    checked = 0
+    for key in causalcity.Spec.from_dict(spec).keys():
+        folder = out / key.folder
+        scenario = causalcity.simulate(spec, *key, effects=True)
+        assert_poses_match(scenario, folder)
+        # One collider: a follower with two designed causes, its leader and
+        # the car with priority it gives way to.
+        (follower,) = np.flatnonzero(scenario.graph.sum(axis=0) == 2)
+        car = scenario.metadata["cars"][follower]
+        causes = set(np.flatnonzero(scenario.graph[:, follower]))
+        assert causes == {car["follows"], car["gives_way_to"]}
+        assert scenario.metadata["cars"][car["gives_way_to"]]["role"] == "priority"
+        checked += 1
+    assert checked == 3
+    # The toy world has no one to give way to.
+    toy = json.loads(TOY_SPEC.read_text())
+    toy["graph"] = {"shape": "colliders"}
+    with pytest.raises(causalcity.InputError, match="graph.shape"):
+        causalcity.simulate(toy, "cars08_edges80", "train", 0)
+
+
 def test_a_spec_that_draws_towns_names_each_scenarios_town_as_gen_records_it(tmp_path):
     spec = json.loads(CITY_SPEC.read_text())
     spec["name"] = "towns"
