@@ -168,8 +168,16 @@ fn colliders_of(scenario: &Value, dir: &Path) -> Vec<(u32, u32, u32)> {
         let leader = car["follows"].as_u64().unwrap_or_else(|| panic!("{}: a collider follows", dir.display())) as u32;
         assert_eq!(car["role"], "follower", "{}", dir.display());
         assert_eq!(cars[priority as usize]["role"], "priority", "{}", dir.display());
-        assert!(cars[priority as usize].get("follows").is_none(), "{}: the car with priority drives its own queue", dir.display());
-        assert!(designed.contains(&(leader, follower)) && designed.contains(&(priority, follower)), "{}", dir.display());
+        assert!(
+            cars[priority as usize].get("follows").is_none(),
+            "{}: the car with priority drives its own queue",
+            dir.display()
+        );
+        assert!(
+            designed.contains(&(leader, follower)) && designed.contains(&(priority, follower)),
+            "{}",
+            dir.display()
+        );
         found.push((leader, follower, priority));
     }
     // Every designed edge is a collider's, or the one pair left over.

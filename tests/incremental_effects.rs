@@ -106,8 +106,8 @@ fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
 }
 
 #[test]
-fn replayed_reruns_match_on_chains_forks_colliders_grid_towns_of_one_to_three_lanes_t_junctions_no_lights_and_cooperative_rules()
-{
+fn replayed_reruns_match_on_chains_forks_colliders_grid_towns_of_one_to_three_lanes_t_junctions_no_lights_and_cooperative_rules(
+) {
     for (name, extra) in [
         ("chains", r#", "graph": {"shape": "chains", "cars": 3}"#),
         ("forks", r#", "graph": {"shape": "forks", "cars": 3}"#),

@@ -417,7 +417,11 @@ fn a_graph_shape_is_checked_for_its_size_and_the_cars_it_needs() {
     rejected(
         "colliders-lights",
         &city_spec("bad", &[(8, 0.5)], (1, 0, 0), 10, "{}").replacen('{', r#"{"graph": {"shape": "colliders"}, "#, 1),
-        &["graph.shape", "junctions where a driver gives way", "\"priority\", \"all_way_stop\" or \"right_before_left\""],
+        &[
+            "graph.shape",
+            "junctions where a driver gives way",
+            "\"priority\", \"all_way_stop\" or \"right_before_left\"",
+        ],
     );
     rejected(
         "colliders-cars",

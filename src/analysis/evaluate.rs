@@ -358,13 +358,7 @@ impl Truth {
                 // Every scenario is scored against its files: evaluate holds
                 // one entry per scenario whatever it does.
                 let keys = sweep.key_sequence().iter().collect();
-                return Ok(Truth {
-                    dir: sweep.dir,
-                    expansion: sweep.expansion,
-                    keys,
-                    effects: false,
-                    sweep: true,
-                });
+                return Ok(Truth { dir: sweep.dir, expansion: sweep.expansion, keys, effects: false, sweep: true });
             }
         }
         let dataset = Dataset::open_complete(dir)?;

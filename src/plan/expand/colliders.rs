@@ -210,9 +210,6 @@ impl Planner {
     fn start_is_free(&self, lane: LaneId, s: f64, cars: &[PlacedCar], boxes: &[OrientedBox]) -> bool {
         let b = self.car_box(lane, s).inflated(SPAWN_CLEARANCE / 2.0);
         boxes.iter().all(|p| !b.overlaps(&p.inflated(SPAWN_CLEARANCE / 2.0)))
-            && cars
-                .iter()
-                .filter(|c| c.spawn == lane)
-                .all(|c| (c.distance - s).abs() >= self.shortest_spacing_m - 1e-6)
+            && cars.iter().filter(|c| c.spawn == lane).all(|c| (c.distance - s).abs() >= self.shortest_spacing_m - 1e-6)
     }
 }
