@@ -229,4 +229,15 @@ fn city_colliders_give_way_to_the_car_with_priority_and_are_backed_by_effects() 
         let report = run(&["validate", out.to_str().unwrap()]);
         assert_eq!(report.status.code(), Some(0), "{name}: {}", String::from_utf8_lossy(&report.stdout));
     }
+    // Cars without drawn actions: the car with priority gets the one or two
+    // it needs to cross the follower's path.
+    let mut spec: Value = serde_json::from_str(&city_spec("no-actions", &[(8, 0.5)], (5, 0, 0), 20, "{}")).unwrap();
+    spec["graph"] = colliders;
+    spec["actions_per_car"] = serde_json::json!(0);
+    spec["map"] = serde_json::json!({"grid": {"rows": 3, "columns": 3, "control": "priority"}});
+    let out = dir.join("no-actions");
+    gen_ok(&write_spec(&dir, &spec.to_string()), &out, &["--quiet", "--no-images"]);
+    let found: usize =
+        scenario_dirs(&out).iter().map(|d| colliders_of(&read_json(&d.join("scenario.json")), d).len()).sum();
+    assert_eq!(found, 5);
 }

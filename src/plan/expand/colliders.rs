@@ -141,7 +141,9 @@ impl Planner {
             let drawn = match before {
                 None => to_line - desired_speeds[0] * arrives,
                 Some(k) => {
-                    let to_approach = (arrives - to_line / desired_speeds[1]) * desired_speeds[0];
+                    // (One speed only where the spec draws no actions.)
+                    let next = desired_speeds.get(1).copied().unwrap_or(desired_speeds[0]);
+                    let to_approach = (arrives - to_line / next) * desired_speeds[0];
                     self.map.lanes[lane].curve.length() + self.map.connectors[k].curve.length() - to_approach
                 }
             };
