@@ -265,13 +265,18 @@ def test_map_gives_a_town_of_one_lane_roads_and_t_junctions_as_arrays(tmp_path):
         causalcity.map(spec)
 
 
-def test_a_town_of_all_way_stops_streams_without_lights_and_its_give_way_edges_bind(tmp_path):
+def small_city_spec(name, train, frames, grid):
+    """The test city spec: one group of 8 cars at 50 %, `train` scenarios of
+    `frames` frames on a grid town."""
     spec = json.loads(CITY_SPEC.read_text())
-    spec["name"] = "stops"
+    spec.update(name=name, frames=frames, map={"grid": grid})
     spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
-    spec["splits"] = {"train": 6, "val": 0, "test": 0}
-    spec["frames"] = 60
-    spec["map"] = {"grid": {"rows": 2, "columns": 2, "control": "all_way_stop"}}
+    spec["splits"] = {"train": train, "val": 0, "test": 0}
+    return spec
+
+
+def test_a_town_of_all_way_stops_streams_without_lights_and_its_give_way_edges_bind(tmp_path):
+    spec = small_city_spec("stops", 6, 60, {"rows": 2, "columns": 2, "control": "all_way_stop"})
     kinds = set()
     scenarios = 0
     for scenario in causalcity.stream(spec, split="train", images=False):
@@ -290,12 +295,7 @@ def test_a_town_of_all_way_stops_streams_without_lights_and_its_give_way_edges_b
 
 
 def test_cooperative_rules_on_a_right_before_left_town_simulate_as_gen_writes(tmp_path):
-    spec = json.loads(CITY_SPEC.read_text())
-    spec["name"] = "cooperative"
-    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
-    spec["splits"] = {"train": 3, "val": 0, "test": 0}
-    spec["frames"] = 40
-    spec["map"] = {"grid": {"rows": 2, "columns": 3, "control": {"AC": "right_before_left"}}}
+    spec = small_city_spec("cooperative", 3, 40, {"rows": 2, "columns": 3, "control": {"AC": "right_before_left"}})
     spec.setdefault("city", {})["rules"] = "cooperative"
     spec_file = tmp_path / "cooperative.json"
     spec_file.write_text(json.dumps(spec))
@@ -319,12 +319,7 @@ def test_cooperative_rules_on_a_right_before_left_town_simulate_as_gen_writes(tm
 
 
 def test_colliders_simulate_as_gen_writes_with_two_designed_causes_per_follower(tmp_path):
-    spec = json.loads(CITY_SPEC.read_text())
-    spec["name"] = "colliders"
-    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
-    spec["splits"] = {"train": 3, "val": 0, "test": 0}
-    spec["frames"] = 40
-    spec["map"] = {"grid": {"rows": 3, "columns": 3, "control": "all_way_stop"}}
+    spec = small_city_spec("colliders", 3, 40, {"rows": 3, "columns": 3, "control": "all_way_stop"})
     spec["graph"] = {"shape": "colliders"}
     spec_file = tmp_path / "colliders.json"
     spec_file.write_text(json.dumps(spec))
