@@ -251,6 +251,16 @@ fn a_real_network_dataset_resumes_merges_sweeps_and_refuses_a_changed_network() 
     assert_eq!(std::fs::read(merged.join("networks/berlin-small.net.xml")).unwrap(), original);
     let checked = run(&["validate", merged.to_str().unwrap()]);
     assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    // Merged into one shard's own folder, named as a source too: the
+    // network kept there is not taken for a shard's leftover copy.
+    let (s2, s3) = (dir.join("s2"), dir.join("s3"));
+    gen_ok(&spec, &s2, &["--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &s3, &["--no-images", "--shard", "1/2"]);
+    let m = run(&["merge", "--out", s2.to_str().unwrap(), s2.to_str().unwrap(), s3.to_str().unwrap()]);
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    assert_eq!(std::fs::read(s2.join("networks/berlin-small.net.xml")).unwrap(), original);
+    let checked = run(&["validate", s2.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
 
     // A counterfactual sweep keeps it too, and validates.
     let sweep = dir.join("sweep");

@@ -78,8 +78,11 @@ impl Dataset {
 
     /// Scenario folders of one group and split, in index order.
     pub fn scenario_dirs(&self, group: &str, split: Split) -> Vec<PathBuf> {
-        self.keys()
-            .filter(|k| k.group == group && k.split == split)
+        let Some(index) = self.spec().groups.iter().position(|g| g.name() == group) else { return Vec::new() };
+        let sequence = self.key_sequence();
+        sequence
+            .positions_of(index, split)
+            .map(|p| sequence.key(p))
             .map(|k| scenario_dir(&self.dir, &k.group, split.name(), &k.folder_name()))
             .collect()
     }

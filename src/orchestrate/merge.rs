@@ -134,7 +134,9 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // of scenarios at a time: merging takes the same memory for ten
     // scenarios as for ten million.
     let sequence = expansion.key_sequence(first.limit);
-    let locate = |position: usize| -> Result<Located, GenError> {
+    // Where the scenario at `position` is; with `compare`, copies of it in
+    // two folders must hold the same checksums.
+    let locate = |position: usize, compare: bool| -> Result<Located, GenError> {
         let key = sequence.key(position);
         let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
         let mut located = Located { found: to.is_dir().then(|| to.clone()), to, moved: false, duplicates: Vec::new() };
@@ -146,7 +148,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             match &located.found {
                 Some(first) => {
                     let (a, b) = (fs::read(from.join(CHECKSUMS)).ok(), fs::read(first.join(CHECKSUMS)).ok());
-                    if a.is_none() || a != b {
+                    if compare && (a.is_none() || a != b) {
                         return Err(GenError::Input(format!(
                             "{} and {} hold the same scenario with different contents; nothing was moved",
                             from.display(),
@@ -164,33 +166,24 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         Ok(located)
     };
 
-    // Check every scenario before anything moves: each is in --out or in a
-    // shard folder, copies of one scenario agree, and its files are there
-    // and match its checksums.
+    // Check every scenario before anything moves, a chunk at a time, each
+    // chunk's results read in key order (so the first problem named is the
+    // same on any thread count): first that each is in --out or in a shard
+    // folder and that copies of one scenario agree (cheap), then that its
+    // files are there and match its checksums (every byte read).
+    let chunks =
+        || (0..sequence.len()).step_by(MERGE_CHUNK).map(|start| start..(start + MERGE_CHUNK).min(sequence.len()));
     let (mut absent, mut first_absent) = (0usize, Vec::new());
-    let (mut damaged, mut first_damaged) = (0usize, None);
-    for start in (0..sequence.len()).step_by(MERGE_CHUNK) {
-        let chunk = start..(start + MERGE_CHUNK).min(sequence.len());
-        let checked: Vec<(Located, Option<String>)> = chunk
-            .clone()
-            .into_par_iter()
-            .map(|position| {
-                let located = locate(position)?;
-                let broken = located.found.as_deref().and_then(|dir| verify_scenario(dir).err());
-                Ok((located, broken))
-            })
-            .collect::<Result<_, GenError>>()?;
-        for (position, (located, broken)) in chunk.zip(checked) {
-            if located.found.is_none() {
+    for chunk in chunks() {
+        let located: Vec<Result<Located, GenError>> =
+            chunk.clone().into_par_iter().map(|position| locate(position, true)).collect();
+        for (position, located) in chunk.zip(located) {
+            if located?.found.is_none() {
                 absent += 1;
                 if first_absent.len() < 3 {
                     let key = sequence.key(position);
                     first_absent.push(format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()));
                 }
-            }
-            if let Some(broken) = broken {
-                damaged += 1;
-                first_damaged.get_or_insert(broken);
             }
         }
     }
@@ -200,6 +193,20 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             first_absent.join(", ")
         )));
     }
+    let (mut damaged, mut first_damaged) = (0usize, None);
+    for chunk in chunks() {
+        let broken: Vec<Option<String>> = chunk
+            .into_par_iter()
+            .map(|position| {
+                let located = locate(position, false).ok()?;
+                located.found.as_deref().and_then(|dir| verify_scenario(dir).err())
+            })
+            .collect();
+        for broken in broken.into_iter().flatten() {
+            damaged += 1;
+            first_damaged.get_or_insert(broken);
+        }
+    }
     if let Some(first_damaged) = first_damaged {
         return Err(GenError::Input(format!(
             "{damaged} scenarios are damaged (first: {first_damaged}): rerun their shards' gen commands, which rewrite damaged \
@@ -207,10 +214,11 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         )));
     }
 
-    // Move every scenario into place, and drop the copies of those already there.
+    // Move every scenario into place, and drop the copies of those already
+    // there (checked above: the copy kept is whole), scenario by scenario.
     let (mut moved, mut already) = (0, 0);
     for position in 0..sequence.len() {
-        let located = locate(position)?;
+        let located = locate(position, false)?;
         if let (true, Some(from)) = (located.moved, &located.found) {
             let to = &located.to;
             let parent = to.parent().expect("scenario folders have parents");
@@ -257,7 +265,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     }
     // A shard folder's copies of the networks, now kept in --out: its
     // networks/ goes when it holds those alone, then the folder if empty.
-    for source in sources {
+    // (Not --out's own, when it is given as a source too.)
+    for source in &others {
         let folder = source.join(crate::spec::NETWORKS_FOLDER);
         if !fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
             continue;

@@ -454,6 +454,8 @@ impl DatasetSpec {
                     let graph = self.graph_of(split);
                     if platoon != 0 && graph.queued_cars() > platoon {
                         let field = match self.held_out.of(split).and_then(|h| h.graph.as_ref()) {
+                            // A collider's queue is a pair: the platoon is too small.
+                            _ if graph.shape == GraphShape::Colliders => "city.start.platoon_cars".to_string(),
                             Some(_) => format!("held_out.{}.graph.cars", split.name()),
                             None => "graph.cars".to_string(),
                         };

@@ -95,8 +95,11 @@ impl Planner {
         // the start: at an all-way stop just before the follower halts at
         // its own (it then goes first); elsewhere once the leader has
         // crossed, and while the follower is still in its way.
+        // (In a platoon the leader may start on the lane beside: its own
+        // first junction's line.)
         let l = &cars[leader];
-        let leader_to_line = junction_start - setback - (l.distance + half);
+        let leader_junction = l.route.legs.iter().find(|leg| matches!(leg.kind, LegKind::Connector(_)));
+        let leader_to_line = leader_junction.map_or(0.0, |leg| leg.route_start) - setback - (l.distance + half);
         let x = &self.map.intersections[self.map.connectors[connector].intersection?];
         let cross = (2.0 * x.half_size + self.spec.car_length_m) / speed - PRIORITY_LEAD_S;
         let window = if self.map.control_of(connector) == Some(JunctionControl::AllWayStop) {

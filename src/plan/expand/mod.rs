@@ -80,6 +80,14 @@ impl KeySequence<'_> {
         (0..self.len()).map(|i| self.key(i))
     }
 
+    /// The positions of group `group_index`'s keys of `split`.
+    pub fn positions_of(&self, group_index: usize, split: Split) -> std::ops::Range<usize> {
+        let before: u64 =
+            Split::ALL.iter().zip(&self.per_split).take_while(|(s, _)| **s != split).map(|(_, n)| n).sum();
+        let start = (group_index as u64 * self.per_group() + before) as usize;
+        start..start + self.per_split[Split::ALL.iter().position(|s| *s == split).unwrap_or(0)] as usize
+    }
+
     /// The key at `position` (`position < len()`).
     pub fn key(&self, position: usize) -> ScenarioKey {
         let position = position as u64;

@@ -335,7 +335,10 @@ impl Planner {
                 }
                 if collider {
                     let (leader, follower) = (cars_before, cars_before + 1);
-                    let c = city.as_ref().expect("colliders are a city shape (checked with the spec)");
+                    // A city shape (checked with the spec; a manifest's spec is not).
+                    let Some(c) = city.as_ref() else {
+                        return Err("graph.shape \"colliders\" needs \"world\": \"city\"".to_string());
+                    };
                     match self.place_priority_car(&mut rng, c, split, (leader, follower), &cars, &placed) {
                         Some(priority) => {
                             placed.push(self.car_box(priority.spawn, priority.distance));

@@ -39,7 +39,7 @@ impl Planner {
         // (a junction where they have the right of way) starts again.
         let units = self.spec.graph.units(group.edges());
         let colliders = units.iter().filter(|&&n| n == self.spec.graph.unit_cars()).count();
-        let mut failed = None;
+        let (mut failed, mut reached_priority) = (None, false);
         for _ in 0..COLLIDER_PLATOON_TRIES {
             // Pairs that do not fit these platoons (a follower that cannot
             // take its leader's turns) are drawn again too.
@@ -69,7 +69,11 @@ impl Planner {
             if given == colliders {
                 return Ok((cars, pairs));
             }
+            reached_priority = true;
         }
+        // The platoons' own error only where no try got as far as the cars
+        // with priority.
+        let failed = failed.filter(|_| !reached_priority);
         Err(failed.unwrap_or_else(|| format!(
             "could not give {colliders} followers a car with priority at their first junction after {COLLIDER_PLATOON_TRIES} tries: colliders need junctions where drivers give way (no lights, or left turns on a permissive green) with approaches long enough to start the car with priority on (longer blocks, map.grid.block_m, help), or fewer cars"
         )))
