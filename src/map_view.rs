@@ -234,6 +234,9 @@ pub struct NetSummary {
     pub connections: usize,
     /// Traffic-light programmes.
     pub programmes: usize,
+    /// Of those, the traffic-actuated ones with a phase that traffic
+    /// extends (`city.lights.actuated` runs them so).
+    pub actuated_programmes: usize,
     /// What the file has that cars do not drive on: (what, how many).
     pub left_out: Vec<(String, usize)>,
     /// Lower and upper corners of the network, metres.
@@ -275,13 +278,17 @@ impl fmt::Display for NetSummary {
             hi[0] - lo[0],
             hi[1] - lo[1]
         )?;
-        writeln!(
+        write!(
             f,
             "{} lanes cars drive, {} connections, {} traffic-light programmes",
             self.lanes.len(),
             self.connections,
             self.programmes
         )?;
+        match self.actuated_programmes {
+            0 => writeln!(f)?,
+            n => writeln!(f, " ({n} actuated: with city.lights.actuated, traffic extends their phases)")?,
+        }
         if !self.left_out.is_empty() {
             let what: Vec<String> = self.left_out.iter().map(|(w, n)| format!("{n} {w}")).collect();
             writeln!(f, "left out: {}", what.join(", "))?;
@@ -387,6 +394,7 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         lanes,
         connections: net.connections.len(),
         programmes: net.programmes.len(),
+        actuated_programmes: net.programmes.iter().filter(|p| p.actuated.iter().any(Option::is_some)).count(),
         left_out: net.left_out.iter().map(|(w, n)| (w.to_string(), *n)).collect(),
         bounds: [[lo.x, lo.y], [hi.x, hi.y]],
         picture: out.map(Path::to_path_buf),

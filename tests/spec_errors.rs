@@ -531,3 +531,14 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
         &["field `image`", "a 32x32 image shows 0.40 px per metre", "Use a larger image"],
     );
 }
+
+#[test]
+fn actuated_lights_need_an_imported_network() {
+    // A grid town's lights run the fixed cycle: nothing to actuate.
+    rejected(
+        "actuated-grid",
+        &city_with(r#"{"lights": {"actuated": true}}"#),
+        &["city.lights.actuated", "no split drives a SUMO network", "map.sumo"],
+    );
+    rejected("actuated-type", &city_with(r#"{"lights": {"actuated": "yes"}}"#), &["city.lights.actuated", "boolean"]);
+}

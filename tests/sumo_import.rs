@@ -22,6 +22,7 @@ fn a_real_network_is_listed_with_its_junctions_and_the_lanes_cars_drive_and_draw
     let lanes = summary["lanes"].as_array().unwrap();
     assert_eq!(lanes.len(), 48);
     assert!(lanes.iter().all(|l| !l["id"].as_str().unwrap().starts_with(':')), "an internal or pedestrian lane");
+    assert_eq!(summary["actuated_programmes"], 1);
     let left_out: Vec<(String, u64)> = serde_json::from_value(summary["left_out"].clone()).unwrap();
     assert!(left_out.contains(&("pedestrian crossings".into(), 27)), "{left_out:?}");
     // Every lane ends at a listed junction; most lead on.
@@ -40,7 +41,8 @@ fn a_real_network_is_listed_with_its_junctions_and_the_lanes_cars_drive_and_draw
     let text = run(&["map", "--net", berlin().to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&text.stdout);
     assert!(stdout.contains("17 junctions (14 priority, 1 dead_end, 2 traffic_light)"), "{stdout}");
-    assert!(stdout.contains("48 lanes cars drive, 79 connections, 2 traffic-light programmes"), "{stdout}");
+    // Both programmes are type="actuated"; one has a phase with minDur < maxDur.
+    assert!(stdout.contains("48 lanes cars drive, 79 connections, 2 traffic-light programmes (1 actuated"), "{stdout}");
     // What a spec's map.sumo would drive of it: every lane, with loops where its 4 dead-end lanes end.
     assert!(
         stdout.contains("as map.sumo: 48 lanes driven, 4 U-turn loops added where roads end, 0 lanes left out"),

@@ -28,7 +28,9 @@
 
 use super::control::{Axis, JunctionControl};
 use super::curve::Curve;
-use super::signals::{Colour, Light, ScheduleStep, Signal, APPROACHES};
+use super::signals::{
+    ActuatedPhase, ActuatedProgramme, Colour, Light, ScheduleStep, Signal, APPROACHES, DETECTOR_GAP_S,
+};
 use super::sumo::{SumoJunctionKind, SumoNetwork};
 use super::{CityMap, Connector, Intersection, Lane, LaneEnd, LaneId, LanePosition, MapLayout, Turn};
 use glam::DVec2;
@@ -185,8 +187,9 @@ fn programmed_lights(
     map: &CityMap,
     ids: &[usize],
     moves: &[Vec<(usize, Turn, Option<usize>)>],
-) -> (Vec<Light>, Vec<(usize, char)>) {
+) -> (Vec<Light>, Vec<(usize, char)>, Vec<ActuatedProgramme>) {
     let (mut lights, mut permissive) = (Vec::new(), Vec::new());
+    let mut actuated = actuated_programmes(net, map, ids, moves);
     for &k in map.signalised() {
         for approach in APPROACHES {
             for signal in [Signal::Straight, Signal::Left] {
@@ -217,10 +220,59 @@ fn programmed_lights(
                     ScheduleStep::extend(&mut schedule, colour_of(state, read_as), *duration);
                 }
                 lights.push(Light { intersection: k, approach, signal, offset: p.offset, schedule });
+                if let Some(a) = actuated.iter_mut().find(|a| a.id == p.id) {
+                    a.lights.push((k, approach, signal, states.iter().map(|&c| colour_of(c, read_as)).collect()));
+                }
             }
         }
     }
-    (lights, permissive)
+    actuated.retain(|a| !a.lights.is_empty());
+    (lights, permissive, actuated)
+}
+
+/// The file's traffic-actuated programmes with a phase that traffic can
+/// extend, their lights still to add: per phase, a detector on each kept
+/// lane with a green link (`G` or `g`) in it, [`DETECTOR_GAP_S`] at the
+/// lane's speed limit before its stop line (or at the lane's start, if
+/// shorter).
+fn actuated_programmes(
+    net: &SumoNetwork,
+    map: &CityMap,
+    ids: &[usize],
+    moves: &[Vec<(usize, Turn, Option<usize>)>],
+) -> Vec<ActuatedProgramme> {
+    let mut programmes = Vec::new();
+    for (index, p) in net.programmes.iter().enumerate() {
+        if !p.actuated.iter().any(Option::is_some) {
+            continue;
+        }
+        let phases = p
+            .phases
+            .iter()
+            .zip(&p.actuated)
+            .map(|((duration, state), &bounds)| {
+                let state = state.as_bytes();
+                let detectors = ids
+                    .iter()
+                    .enumerate()
+                    .filter(|&(_, &l)| {
+                        moves[l].iter().any(|m| {
+                            m.2.and_then(|c| net.connections[c].signal).is_some_and(|(programme, link)| {
+                                programme == index && matches!(state.get(link), Some(b'G' | b'g'))
+                            })
+                        })
+                    })
+                    .map(|(id, &l)| {
+                        let line = map.lanes[id].curve.length() - map.layout.stop_line_setback;
+                        (id, (line - DETECTOR_GAP_S * net.lanes[l].speed).max(0.0))
+                    })
+                    .collect();
+                ActuatedPhase { duration: *duration, bounds, detectors }
+            })
+            .collect();
+        programmes.push(ActuatedProgramme { id: p.id.clone(), offset: p.offset, phases, lights: Vec::new() });
+    }
+    programmes
 }
 
 /// Metres two movements into one lane must run together before their end
@@ -512,7 +564,7 @@ impl CityMap {
                 _ => Axis::EastWest,
             };
         }
-        (map.programmed, map.permissive_lefts) = programmed_lights(net, &map, &ids, &moves);
+        (map.programmed, map.permissive_lefts, map.actuated) = programmed_lights(net, &map, &ids, &moves);
         map.merging = merging_movements(&map.connectors);
         map.splitting = splitting_movements(&map.connectors);
         let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();

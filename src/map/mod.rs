@@ -313,6 +313,10 @@ pub struct CityMap {
     /// cycle's light of its junction, approach and signal. Empty in a grid
     /// town.
     pub programmed: Vec<signals::Light>,
+    /// The imported network's traffic-actuated programmes (their lights are
+    /// in `programmed` too, at their written durations). Empty in a grid
+    /// town.
+    pub actuated: Vec<signals::ActuatedProgramme>,
     /// Approaches (junction, side) of imported networks whose left turns go
     /// on a permissive green: the programme has no protected left phase.
     pub permissive_lefts: Vec<(usize, char)>,
@@ -734,6 +738,7 @@ impl CityMap {
             signalised,
             beside,
             programmed,
+            actuated: Vec::new(),
             permissive_lefts: Vec::new(),
             merging,
             splitting,

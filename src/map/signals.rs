@@ -85,6 +85,86 @@ pub struct Light {
     pub schedule: Vec<ScheduleStep>,
 }
 
+/// Seconds of travel at the lane's speed limit between an actuated
+/// programme's detector and its stop line: SUMO's default `detector-gap`
+/// (`--tls.actuated.detector-gap`, sumo.dlr.de/docs/Simulation/Traffic_Lights.html).
+pub const DETECTOR_GAP_S: f64 = 2.0;
+
+/// Longest time gap, seconds, between cars over an actuated phase's
+/// detectors that still extends it: SUMO's default `max-gap`
+/// (`--tls.actuated.max-gap`, same page).
+pub const MAX_GAP_S: f64 = 3.0;
+
+/// A traffic-actuated programme (an imported network's `tlLogic
+/// type="actuated"`), as the map knows it: its phases in order, the lights
+/// it drives with their colour in each phase, and where its detectors lie.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ActuatedProgramme {
+    /// SUMO's id of the programme.
+    pub id: String,
+    /// Seconds added to the scenario clock, as written.
+    pub offset: f64,
+    pub phases: Vec<ActuatedPhase>,
+    /// (intersection, approach, signal) of each light it drives, and its
+    /// colour in each phase.
+    pub lights: Vec<(usize, char, Signal, Vec<Colour>)>,
+}
+
+/// One phase of an [`ActuatedProgramme`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ActuatedPhase {
+    /// Seconds, as written: the length of a phase without bounds, and where
+    /// a scenario's clock starts in the programme.
+    pub duration: f64,
+    /// Shortest and longest length, seconds, of a phase that detected
+    /// traffic extends; `None` for one of fixed length.
+    pub bounds: Option<(f64, f64)>,
+    /// Its detectors: (lane, metres along the lane's centre line), one on
+    /// each lane with a green link in this phase, [`DETECTOR_GAP_S`] at the
+    /// lane's speed limit before its stop line.
+    pub detectors: Vec<(usize, f64)>,
+}
+
+/// An [`ActuatedProgramme`] as one scenario runs it: durations scaled by
+/// `city.lights.cycle_scale`, its clock shifted by the scenario's phase,
+/// and its lights as indices into the scenario's [`LightPlan`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ActuatedRun {
+    pub offset: f64,
+    pub phases: Vec<ActuatedPhase>,
+    /// Each light's index in the plan and its colour in each phase.
+    pub lights: Vec<(usize, Vec<Colour>)>,
+}
+
+impl ActuatedRun {
+    /// `programme` as one scenario runs it: its lights as indices into
+    /// `plan`, its durations scaled by `scale`, its clock shifted as its
+    /// junction's (`offsets`, by intersection; none: 0). `None` if `plan`
+    /// has none of its lights.
+    pub fn new(programme: &ActuatedProgramme, plan: &LightPlan, offsets: &[f64], scale: f64) -> Option<ActuatedRun> {
+        let lights: Vec<(usize, Vec<Colour>)> = programme
+            .lights
+            .iter()
+            .filter_map(|(k, approach, signal, colours)| Some((plan.index(*k, *approach, *signal)?, colours.clone())))
+            .collect();
+        let &(first, ..) = programme.lights.first()?;
+        let phases = programme
+            .phases
+            .iter()
+            .map(|p| ActuatedPhase {
+                duration: p.duration * scale,
+                bounds: p.bounds.map(|(lo, hi)| (lo * scale, hi * scale)),
+                detectors: p.detectors.clone(),
+            })
+            .collect();
+        (!lights.is_empty()).then(|| ActuatedRun {
+            offset: programme.offset + offsets.get(first).copied().unwrap_or(0.0),
+            phases,
+            lights,
+        })
+    }
+}
+
 /// A light's state at one moment.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightState {
@@ -134,6 +214,39 @@ pub const DEFAULT_CYCLE: [(&str, Signal, f64, f64); 4] = [
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LightPlan {
     pub lights: Vec<Light>,
+    /// Programmes whose phases detected traffic extends
+    /// (`city.lights.actuated`): their lights' schedules are only where
+    /// their clocks start; the simulation runs them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub actuated: Vec<ActuatedRun>,
+}
+
+impl super::CityMap {
+    /// The lights of one scenario on this map: the cycle at every
+    /// signalised junction, an imported network's programmes where it has
+    /// them, every duration scaled by `scale` (not a programme's `offset`)
+    /// and each junction's clock shifted by its `offsets` entry (seconds,
+    /// by intersection); with `actuated`, the network's traffic-actuated
+    /// programmes run as such.
+    pub fn light_plan(&self, scale: f64, offsets: &[f64], actuated: bool) -> LightPlan {
+        let mut plan = LightPlan::cycle(self.signalised(), scale, offsets);
+        for programmed in &self.programmed {
+            let Some(index) = plan.index(programmed.intersection, programmed.approach, programmed.signal) else {
+                continue;
+            };
+            let light = &mut plan.lights[index];
+            light.offset = programmed.offset + offsets.get(programmed.intersection).copied().unwrap_or(0.0);
+            light.schedule = programmed
+                .schedule
+                .iter()
+                .map(|s| ScheduleStep { colour: s.colour, duration: s.duration * scale })
+                .collect();
+        }
+        if actuated {
+            plan.actuated = self.actuated.iter().filter_map(|p| ActuatedRun::new(p, &plan, offsets, scale)).collect();
+        }
+        plan
+    }
 }
 
 /// Approaches in the order lights are listed.
@@ -187,7 +300,7 @@ impl LightPlan {
                 }
             }
         }
-        LightPlan { lights }
+        LightPlan { lights, actuated: Vec::new() }
     }
 
     /// Index of the light for (intersection, approach, signal), if the

@@ -107,6 +107,9 @@ struct RawConnection {
 struct RawProgramme {
     #[serde(rename = "@id")]
     id: String,
+    /// `static` (the default), `actuated`, ...
+    #[serde(rename = "@type")]
+    kind: Option<String>,
     #[serde(rename = "@offset", default)]
     offset: f64,
     #[serde(rename = "phase", default)]
@@ -117,6 +120,10 @@ struct RawProgramme {
 struct RawPhase {
     #[serde(rename = "@duration")]
     duration: f64,
+    #[serde(rename = "@minDur")]
+    min_duration: Option<f64>,
+    #[serde(rename = "@maxDur")]
+    max_duration: Option<f64>,
     #[serde(rename = "@state")]
     state: String,
 }
@@ -169,6 +176,23 @@ impl SumoJunctionKind {
             SumoJunctionKind::Unregulated => "unregulated",
         }
     }
+}
+
+/// An actuated phase's bounds: `Some((minDur, maxDur))` where both are
+/// given and differ (SUMO extends such a phase), `None` for a phase of
+/// fixed length; an error naming the programme for bounds that are not
+/// `0 < minDur <= maxDur`.
+fn phase_bounds(programme: &str, phase: &RawPhase) -> Result<Option<(f64, f64)>, String> {
+    let (min, max) = match (phase.min_duration, phase.max_duration) {
+        (None, None) => return Ok(None),
+        (min, max) => (min.unwrap_or(phase.duration), max.unwrap_or(phase.duration)),
+    };
+    if !(min.is_finite() && max.is_finite() && min > 0.0 && min <= max) {
+        return Err(format!(
+            "<tlLogic id=\"{programme}\">: a phase has minDur {min} and maxDur {max}; allowed: 0 < minDur <= maxDur"
+        ));
+    }
+    Ok((min < max).then_some((min, max)))
 }
 
 /// SUMO junction types this reader refuses, and why.
@@ -236,6 +260,11 @@ pub struct SumoProgramme {
     /// Seconds.
     pub offset: f64,
     pub phases: Vec<(f64, String)>,
+    /// Per phase of a traffic-actuated programme (`type="actuated"`), the
+    /// bounds (`minDur`, `maxDur`, seconds) between which detected traffic
+    /// sets its length; `None` for a phase of fixed length. Empty for any
+    /// other programme.
+    pub actuated: Vec<Option<(f64, f64)>>,
 }
 
 /// A road network read from a SUMO `.net.xml`, checked.
@@ -408,7 +437,7 @@ impl SumoNetwork {
             if programme_index.contains_key(p.id.as_str()) {
                 continue; // another programme of the same lights: the first one runs
             }
-            let mut phases = Vec::new();
+            let (mut phases, mut actuated) = (Vec::new(), Vec::new());
             for ph in &p.phases {
                 if !(ph.duration.is_finite() && ph.duration > 0.0) {
                     return Err(format!("<tlLogic id=\"{}\">: a phase lasts {} s", p.id, ph.duration));
@@ -420,12 +449,15 @@ impl SumoNetwork {
                     ));
                 }
                 phases.push((ph.duration, ph.state.clone()));
+                if p.kind.as_deref() == Some("actuated") {
+                    actuated.push(phase_bounds(&p.id, ph)?);
+                }
             }
             if phases.is_empty() {
                 return Err(format!("<tlLogic id=\"{}\">: no phases", p.id));
             }
             programme_index.insert(p.id.as_str(), programmes.len());
-            programmes.push(SumoProgramme { id: p.id.clone(), offset: p.offset, phases });
+            programmes.push(SumoProgramme { id: p.id.clone(), offset: p.offset, phases, actuated });
         }
 
         // Where a movement goes on from an internal lane: a movement that
@@ -562,6 +594,11 @@ mod tests {
             (r#"to="J2" priority"#, r#"to="J9" priority"#, r#"<edge id="b">: to="J9" is no junction"#),
             (r#"state="G"/>"#, r#"state="Gx"/>"#, r#"phase state "Gx" has 'x'"#),
             ("<net version=\"1.9\">", "<net>", "no version attribute"),
+            (
+                r#"type="static" programID="0" offset="2"><phase duration="30" state="G"/>"#,
+                r#"type="actuated" programID="0" offset="2"><phase duration="30" state="G" minDur="40" maxDur="20"/>"#,
+                r#"<tlLogic id="J1">: a phase has minDur 40 and maxDur 20; allowed: 0 < minDur <= maxDur"#,
+            ),
         ] {
             assert!(TINY.contains(from), "{from}");
             let err = SumoNetwork::from_xml(&TINY.replacen(from, to, 1)).unwrap_err();

@@ -86,6 +86,10 @@ struct LightRecord<'a> {
     signal: &'a str,
     offset: f64,
     schedule: &'a [crate::map::signals::ScheduleStep],
+    /// Run by a traffic-actuated programme (`city.lights.actuated`): the
+    /// schedule, at written lengths, is only where its clock starts.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    actuated: bool,
 }
 
 #[derive(Serialize)]
@@ -176,9 +180,12 @@ pub fn scenario_json(
             .lights
             .lights
             .iter()
-            .map(|l| {
+            .enumerate()
+            .map(|(index, l)| {
                 let (i, approach, signal, offset) = light_record(l);
-                LightRecord { intersection: &intersection_names[i], approach, signal, offset, schedule: &l.schedule }
+                let actuated = c.lights.actuated.iter().any(|run| run.lights.iter().any(|(light, _)| *light == index));
+                let intersection = &intersection_names[i];
+                LightRecord { intersection, approach, signal, offset, schedule: &l.schedule, actuated }
             })
             .collect(),
     });

@@ -228,6 +228,11 @@ pub struct LightsSpec {
     /// by hand, timed by its author).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phase: Option<LightPhase>,
+    /// Run an imported network's traffic-actuated programmes as SUMO does:
+    /// detected traffic extends a phase between its `minDur` and `maxDur`.
+    /// Off: every phase lasts its written `duration`.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub actuated: bool,
 }
 
 /// Where each scenario's lights start in their cycle.
@@ -247,7 +252,7 @@ pub enum LightPhase {
 
 impl Default for LightsSpec {
     fn default() -> Self {
-        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new(), phase: None }
+        LightsSpec { cycle_scale: 0.5, offsets: vec![0.0; 4], overrides: Vec::new(), phase: None, actuated: false }
     }
 }
 

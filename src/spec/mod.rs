@@ -505,6 +505,7 @@ impl DatasetSpec {
             }
         }
         self.check_overridden_lights()?;
+        self.check_actuated_lights()?;
         self.birds_eye_camera()?;
         let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
         let mut names = std::collections::HashSet::new();
@@ -572,6 +573,19 @@ impl DatasetSpec {
             },
         };
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
+    }
+
+    /// `city.lights.actuated` needs an imported network in some split: a
+    /// grid town's lights run the fixed cycle.
+    fn check_actuated_lights(&self) -> Result<(), SpecError> {
+        let Some(city) = &self.city else { return Ok(()) };
+        if city.lights.actuated && Split::ALL.iter().all(|&split| self.map_of(split).sumo.is_none()) {
+            return Err(SpecError::new(
+                "city.lights.actuated",
+                "true, but no split drives a SUMO network (map.sumo): only an imported network's traffic-actuated programmes (tlLogic type=\"actuated\") are actuated; a grid town's lights run the fixed cycle. Leave it out, or give map.sumo",
+            ));
+        }
+        Ok(())
     }
 
     /// `city.lights.overrides` may only name junctions with lights in

@@ -6,7 +6,7 @@ use super::actions::{original_actions, random_actions};
 use super::spawn::{spawn_spans, split_owning_start, SpawnSpan, OWNED_START_SEARCH_MM};
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
-use crate::map::signals::{LightPlan, ScheduleStep, DEFAULT_CYCLE};
+use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
 use crate::map::{Action, AdaptationKind, CityMap, LaneId, LanePolicy, LegKind, Route, Turn};
 use crate::plan::confounders::ConfounderModel;
 use crate::plan::{
@@ -717,20 +717,7 @@ impl Planner {
             LightPhase::RandomPerIntersection => (0..n).map(|_| draw()).collect(),
         };
         let offsets: Vec<f64> = (0..n).map(|i| lights.offsets.get(i).copied().unwrap_or(0.0) + phases[i]).collect();
-        let mut plan = LightPlan::cycle(self.map.signalised(), lights.cycle_scale, &offsets);
-        // An imported network's programmes, scaled and shifted as the cycle is.
-        for programmed in &self.map.programmed {
-            let Some(index) = plan.index(programmed.intersection, programmed.approach, programmed.signal) else {
-                continue;
-            };
-            let light = &mut plan.lights[index];
-            light.offset = programmed.offset + offsets[programmed.intersection];
-            light.schedule = programmed
-                .schedule
-                .iter()
-                .map(|s| ScheduleStep { colour: s.colour, duration: s.duration * lights.cycle_scale })
-                .collect();
-        }
+        let mut plan = self.map.light_plan(lights.cycle_scale, &offsets, lights.actuated);
         for o in &lights.overrides {
             let Some(intersection) = self.map.intersections.iter().position(|i| i.name == o.intersection) else {
                 continue; // names were checked with the spec

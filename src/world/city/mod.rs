@@ -21,6 +21,8 @@
 //!   between decisions;
 //! - `start.rs`: start speeds, lowered to what each driver sees at time 0;
 //! - `interventions.rs`: triggers, effects and the one re-planning routine;
+//! - `actuation.rs`: traffic-actuated programmes, whose phases detected
+//!   cars extend;
 //! - `events.rs`: red-light runs, completed actions, lane changes and
 //!   adaptations of the drive queue, and collisions;
 //! - `replay.rs`: effects re-runs that simulate only the cars an
@@ -28,6 +30,7 @@
 //!
 //! Units: metres, seconds, metres per second.
 
+mod actuation;
 mod car;
 mod driving;
 mod events;
@@ -134,6 +137,7 @@ impl Sim<'_> {
                 }
             }
             let t = frame as f64 * plan.frame_interval;
+            sim.advance_actuated(t);
             // Interventions due now show in this frame's record (lights).
             sim.fire_interventions(t, dt);
             states.push(sim.cars.iter().map(SimCar::state).collect());
@@ -173,6 +177,8 @@ struct Sim<'a> {
     light_overrides: Vec<(usize, Colour, f64, f64)>,
     /// Lights given a new plan by interventions: (light, plan, from), seconds.
     light_plans: Vec<(usize, Light, f64)>,
+    /// The programmes whose phases detected cars extend.
+    actuation: actuation::Actuation<'a>,
     /// The confounders now, and the changes interventions made (time, values).
     confounders: Confounders,
     confounder_changes: Vec<(f64, Confounders)>,
@@ -216,6 +222,12 @@ impl<'a> Sim<'a> {
             pending: plan.interventions.iter().collect(),
             light_overrides: Vec::new(),
             light_plans: Vec::new(),
+            actuation: actuation::Actuation::new(
+                &city.lights.actuated,
+                city.lights.lights.len(),
+                map.lanes.len(),
+                |l| city.lights.lights[l].state_at(0.0),
+            ),
             confounders: city.confounders,
             confounder_changes: Vec::new(),
             confounder_model: city.confounder_model,
@@ -241,6 +253,7 @@ impl<'a> Sim<'a> {
     /// One step from `t` to `t + dt` seconds: interventions, re-plans, who is
     /// where, the decisions due, motion, then collisions.
     fn step(&mut self, t: f64, dt: f64) {
+        self.advance_actuated(t);
         self.fire_interventions(t, dt);
         for i in 0..self.cars.len() {
             if self.cars[i].pending_actions.is_some() {
@@ -269,6 +282,15 @@ impl<'a> Sim<'a> {
         }
         self.detect_collisions(t + dt);
         self.note_step_end();
+    }
+
+    /// Brings the actuated programmes to time `t`, the cars where they are now.
+    fn advance_actuated(&mut self, t: f64) {
+        let cars = self.cars.iter().filter(|c| !c.removed).map(|c| {
+            let leg = &c.route.legs[c.leg];
+            (&leg.kind, leg.curve_start + c.s - leg.route_start, c.plan.length)
+        });
+        self.actuation.advance(t, cars);
     }
 
     /// The time at which global step `k` starts (steps of `dt` seconds,

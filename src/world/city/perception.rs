@@ -456,7 +456,10 @@ impl Sim<'_> {
         }
         match self.light_plans.iter().rev().find(|(l, _, from)| *l == index && t >= *from) {
             Some((_, light, _)) => light.state_at(t),
-            None => self.city.lights.lights[index].state_at(t),
+            None => match self.actuation.state(index, t) {
+                Some(state) => state,
+                None => self.city.lights.lights[index].state_at(t),
+            },
         }
     }
 

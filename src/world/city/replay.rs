@@ -230,11 +230,17 @@ impl<'a> Recording<'a> {
     /// interventions of its own, at least [`MIN_CARS_TO_REPLAY`] cars (with
     /// fewer, recording and bookkeeping cost more than they save), and a
     /// tape within [`MAX_TAPE_BYTES`] (a very long scenario re-runs in full
-    /// rather than hold gigabytes).
+    /// rather than hold gigabytes), and no actuated lights.
     pub fn pays_for(plan: &ScenarioPlan) -> bool {
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize * plan.frames as usize;
         let tape_bytes = plan.cars.len().saturating_mul(steps).saturating_mul(TAPE_BYTES_PER_CAR_STEP);
-        plan.interventions.is_empty() && plan.cars.len() >= MIN_CARS_TO_REPLAY && tape_bytes <= MAX_TAPE_BYTES
+        // Actuated lights answer to every car, so a re-run's lights can
+        // differ from the recording's: no car could be replayed on trust.
+        let fixed_lights = plan.world.city().is_none_or(|c| c.lights.actuated.is_empty());
+        plan.interventions.is_empty()
+            && plan.cars.len() >= MIN_CARS_TO_REPLAY
+            && tape_bytes <= MAX_TAPE_BYTES
+            && fixed_lights
     }
 
     /// Re-simulates `changed` (the recorded plan with interventions on car

@@ -749,3 +749,56 @@ fn on_an_imported_network_a_car_keeps_behind_one_that_shares_its_path_into_the_j
         traj.states.iter().step_by(25).map(|f| (f[0].speed, f[1].speed)).collect::<Vec<_>>()
     );
 }
+
+/// A 3 x 3 grid of one-lane roads whose junctions all run SUMO's
+/// traffic-actuated programme (netgenerate; no map data).
+fn actuated_grid() -> CityMap {
+    let text = include_str!("../../../tests/data/sumo/grid3-actuated.net.xml");
+    let net = crate::map::sumo::SumoNetwork::from_xml(text).expect("the test network reads");
+    CityMap::from_sumo(&net, 6.0).expect("the test network drives").0
+}
+
+#[test]
+fn a_car_passing_an_actuated_phases_detector_holds_its_green_and_its_absence_ends_it() {
+    let map = actuated_grid();
+    // Junction B1's first phase gives the road from the south (B0B1) green
+    // for 5 to 50 s; a detector 2 s at 13.89 m/s (27.8 m) before its line.
+    let programme = map.actuated.iter().find(|p| p.id == "B1").expect("B1 runs an actuated programme");
+    let approach = lane(&map, "B0B1_0");
+    let (shortest, longest) = programme.phases[0].bounds.expect("its first phase extends");
+    assert_eq!((shortest, longest), (5.0, 50.0));
+    let &(_, detector) =
+        programme.phases[0].detectors.iter().find(|d| d.0 == approach).expect("a detector on the approach");
+    let line = map.lanes[approach].curve.length() - map.layout.stop_line_setback;
+    assert!((line - detector - 2.0 * 13.89).abs() < 0.01, "detector {detector:.1} m, line {line:.1} m");
+    let LaneEnd::Intersection { intersection, approach: side } = map.lanes[approach].end else {
+        panic!("B0B1 ends at B1")
+    };
+    // A car at 12 m/s whose centre passes the detector 4.5 s in (over it
+    // for a third of a second), or the same car on a road far from B1.
+    let on_approach = Given { start: 12.0, ..straight("B0B1_0", detector - 54.0, 12.0) };
+    let elsewhere = Given { start: 12.0, ..straight("A0A1_0", 10.0, 12.0) };
+    let green_for = |car: &Given, actuated: bool| -> (f64, Trajectories) {
+        let lights = map.light_plan(1.0, &[], actuated);
+        let light = lights.index(intersection, side, Signal::Straight).expect("B1 has lights");
+        let traj = simulate(&map, &plan(&map, std::slice::from_ref(car), lights, vec![], 20.0));
+        let green = traj.lights.iter().take_while(|frame| frame[light].colour == Colour::Green).count();
+        (green as f64 * FRAME, traj)
+    };
+    // Nobody over the detector: the phase ends at its shortest.
+    let (alone, _) = green_for(&elsewhere, true);
+    assert!((alone - shortest).abs() <= FRAME + 1e-9, "green for {alone:.1} s with no car near");
+    // The car holds it until 3 s (max-gap) after it left the detector, and
+    // drives through on that green.
+    let (held, traj) = green_for(&on_approach, true);
+    assert!((7.0..=8.6).contains(&held), "green for {held:.1} s with a car passing at 4.5 s");
+    let crossed = traj.states.iter().position(|f| map.lanes[approach].curve.local_coordinates(f[0].position).0 > line);
+    let crossed = crossed.expect("the car reached its line");
+    let at = crossed as f64 * FRAME;
+    assert!(at < held, "the car crossed at {at:.1} s, after its green ended at {held:.1} s");
+    let slowest = traj.states[..crossed].iter().map(|f| f[0].speed).fold(f64::INFINITY, f64::min);
+    assert!(slowest > 10.0, "the car slowed to {slowest:.1} m/s before its line");
+    // Run as fixed, the phase lasts its written 42 s whatever drives.
+    let (fixed, _) = green_for(&on_approach, false);
+    assert!(fixed >= 20.0 - 1e-9, "a fixed programme's green ended after {fixed:.1} s");
+}
