@@ -623,7 +623,11 @@ fn at_an_all_way_stop_two_cars_waiting_go_one_after_the_other_in_order_of_preced
 
 /// The small real network the SUMO import tests use (OpenStreetMap, ODbL).
 fn berlin() -> CityMap {
-    let text = include_str!("../../../tests/data/sumo/berlin-small.net.xml");
+    imported(include_str!("../../../tests/data/sumo/berlin-small.net.xml"))
+}
+
+/// The map of a SUMO network's text, lane changes over 6 m.
+fn imported(text: &str) -> CityMap {
     let net = crate::map::sumo::SumoNetwork::from_xml(text).expect("the test network reads");
     CityMap::from_sumo(&net, 6.0).expect("the test network drives").0
 }
@@ -753,9 +757,7 @@ fn on_an_imported_network_a_car_keeps_behind_one_that_shares_its_path_into_the_j
 /// A 3 x 3 grid of one-lane roads whose junctions all run SUMO's
 /// traffic-actuated programme (netgenerate; no map data).
 fn actuated_grid() -> CityMap {
-    let text = include_str!("../../../tests/data/sumo/grid3-actuated.net.xml");
-    let net = crate::map::sumo::SumoNetwork::from_xml(text).expect("the test network reads");
-    CityMap::from_sumo(&net, 6.0).expect("the test network drives").0
+    imported(include_str!("../../../tests/data/sumo/grid3-actuated.net.xml"))
 }
 
 #[test]
