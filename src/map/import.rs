@@ -28,9 +28,7 @@
 
 use super::control::{Axis, JunctionControl};
 use super::curve::Curve;
-use super::signals::{
-    ActuatedPhase, ActuatedProgramme, Colour, Light, ScheduleStep, Signal, APPROACHES, DETECTOR_GAP_S,
-};
+use super::signals::{ActuatedPhase, ActuatedProgramme, Colour, Light, ScheduleStep, Signal, APPROACHES};
 use super::sumo::{SumoJunctionKind, SumoNetwork};
 use super::{CityMap, Connector, Intersection, Lane, LaneEnd, LaneId, LanePosition, MapLayout, Turn};
 use glam::DVec2;
@@ -189,7 +187,7 @@ fn programmed_lights(
     moves: &[Vec<(usize, Turn, Option<usize>)>],
 ) -> (Vec<Light>, Vec<(usize, char)>, Vec<ActuatedProgramme>) {
     let (mut lights, mut permissive) = (Vec::new(), Vec::new());
-    let mut actuated = actuated_programmes(net, map, ids, moves);
+    let mut actuated = actuated_programmes(net, map, ids);
     for &k in map.signalised() {
         for approach in APPROACHES {
             for signal in [Signal::Straight, Signal::Left] {
@@ -230,22 +228,46 @@ fn programmed_lights(
     (lights, permissive, actuated)
 }
 
+/// Whether a lane with `links` (its links' indices in the programme) has
+/// a detector in the phase of `state`: every link green, `G`, or `g` where
+/// the lane is its edge's only one (`single_lane`) or the link is never
+/// `G` (`ever_green`), as SUMO's actuated logic picks its detectors.
+fn detects(state: &[u8], links: &[usize], single_lane: bool, ever_green: impl Fn(usize) -> bool) -> bool {
+    !links.is_empty()
+        && links.iter().all(|&link| match state.get(link) {
+            Some(b'G') => true,
+            Some(b'g') => single_lane || !ever_green(link),
+            _ => false,
+        })
+}
+
 /// The file's traffic-actuated programmes with a phase that traffic can
-/// extend, their lights still to add: per phase, a detector on each kept
-/// lane with a green link (`G` or `g`) in it, [`DETECTOR_GAP_S`] at the
-/// lane's speed limit before its stop line (or at the lane's start, if
-/// shorter).
-fn actuated_programmes(
-    net: &SumoNetwork,
-    map: &CityMap,
-    ids: &[usize],
-    moves: &[Vec<(usize, Turn, Option<usize>)>],
-) -> Vec<ActuatedProgramme> {
+/// extend, their lights still to add. Per phase, a detector on each kept
+/// lane whose every link of the programme is green in it, as SUMO picks
+/// them: `G`, or `g` where that link is never `G` or its edge has one lane
+/// (a turn pocket's permissive green waits for its protected phase). It
+/// lies `detector-gap` at the lane's speed limit before the stop line, or
+/// at the lane's start if that is shorter.
+fn actuated_programmes(net: &SumoNetwork, map: &CityMap, ids: &[usize]) -> Vec<ActuatedProgramme> {
+    let mut lanes_of_edge: HashMap<&str, usize> = HashMap::new();
+    for lane in &net.lanes {
+        *lanes_of_edge.entry(lane.edge.as_str()).or_default() += 1;
+    }
     let mut programmes = Vec::new();
     for (index, p) in net.programmes.iter().enumerate() {
         if !p.actuated.iter().any(Option::is_some) {
             continue;
         }
+        // Each lane's links of this programme, and which links are ever `G`.
+        let mut links: HashMap<usize, Vec<usize>> = HashMap::new();
+        for c in &net.connections {
+            if let Some((programme, link)) = c.signal {
+                if programme == index {
+                    links.entry(c.from).or_default().push(link);
+                }
+            }
+        }
+        let ever_g = |link: usize| p.phases.iter().any(|(_, s)| s.as_bytes().get(link) == Some(&b'G'));
         let phases = p
             .phases
             .iter()
@@ -255,22 +277,20 @@ fn actuated_programmes(
                 let detectors = ids
                     .iter()
                     .enumerate()
-                    .filter(|&(_, &l)| {
-                        moves[l].iter().any(|m| {
-                            m.2.and_then(|c| net.connections[c].signal).is_some_and(|(programme, link)| {
-                                programme == index && matches!(state.get(link), Some(b'G' | b'g'))
-                            })
-                        })
+                    .filter(|&(_, l)| {
+                        let single = lanes_of_edge.get(net.lanes[*l].edge.as_str()) == Some(&1);
+                        links.get(l).is_some_and(|links| detects(state, links, single, ever_g))
                     })
                     .map(|(id, &l)| {
                         let line = map.lanes[id].curve.length() - map.layout.stop_line_setback;
-                        (id, (line - DETECTOR_GAP_S * net.lanes[l].speed).max(0.0))
+                        (id, (line - p.detector_gap * net.lanes[l].speed).max(0.0))
                     })
                     .collect();
                 ActuatedPhase { duration: *duration, bounds, detectors }
             })
             .collect();
-        programmes.push(ActuatedProgramme { id: p.id.clone(), offset: p.offset, phases, lights: Vec::new() });
+        let (id, offset, max_gap) = (p.id.clone(), p.offset, p.max_gap);
+        programmes.push(ActuatedProgramme { id, offset, max_gap, phases, lights: Vec::new() });
     }
     programmes
 }
@@ -574,5 +594,45 @@ impl CityMap {
             dropped: dropped.into_iter().map(|(l, why)| (net.lanes[l].id.clone(), why)).collect(),
         };
         Ok((map, report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_actuated_phase_detects_on_lanes_whose_every_link_it_gives_green() {
+        let never = |_| false;
+        let link_1_protected_elsewhere = |link: usize| link == 1;
+        // A lane with a straight (link 0) and a left (link 1).
+        assert!(detects(b"GG", &[0, 1], false, never));
+        assert!(!detects(b"Gr", &[0, 1], false, never), "the left waits");
+        // A permissive left that is never protected counts ...
+        assert!(detects(b"Gg", &[0, 1], false, never));
+        // ... one that waits for its own protected phase does not, unless
+        // the lane is its road's only one.
+        assert!(!detects(b"Gg", &[0, 1], false, link_1_protected_elsewhere));
+        assert!(detects(b"Gg", &[0, 1], true, link_1_protected_elsewhere));
+        // Yellow, red, a lane without links of the programme: none.
+        assert!(!detects(b"yy", &[0, 1], false, never));
+        assert!(!detects(b"GG", &[], false, never));
+    }
+
+    #[test]
+    fn berlins_actuated_programme_detects_on_the_lane_of_its_one_movement() {
+        let text = include_str!("../../tests/data/sumo/berlin-small.net.xml");
+        let net = SumoNetwork::from_xml(text).unwrap();
+        let (map, _) = CityMap::from_sumo(&net, 6.0).unwrap();
+        // Only GS_cluster_... has phases traffic extends; its one movement
+        // for cars is the U-turn from 143308590#0's left lane, `g` but
+        // never `G`.
+        assert_eq!(map.actuated.len(), 1);
+        let programme = &map.actuated[0];
+        assert!(programme.id.starts_with("GS_cluster_1560223815"), "{}", programme.id);
+        assert_eq!((programme.max_gap, programme.phases[0].bounds), (3.0, Some((5.0, 50.0))));
+        let lanes: Vec<&str> = programme.phases[0].detectors.iter().map(|&(l, _)| map.lanes[l].name.as_str()).collect();
+        assert_eq!(lanes, ["143308590#0_2"]);
+        assert!(programme.phases[3].detectors.is_empty(), "red for it");
     }
 }

@@ -104,6 +104,9 @@ pub struct ActuatedProgramme {
     pub id: String,
     /// Seconds added to the scenario clock, as written.
     pub offset: f64,
+    /// Longest time gap, seconds, between cars over a phase's detectors
+    /// that still extends it (`max-gap`, default [`MAX_GAP_S`]).
+    pub max_gap: f64,
     pub phases: Vec<ActuatedPhase>,
     /// (intersection, approach, signal) of each light it drives, and its
     /// colour in each phase.
@@ -120,8 +123,9 @@ pub struct ActuatedPhase {
     /// traffic extends; `None` for one of fixed length.
     pub bounds: Option<(f64, f64)>,
     /// Its detectors: (lane, metres along the lane's centre line), one on
-    /// each lane with a green link in this phase, [`DETECTOR_GAP_S`] at the
-    /// lane's speed limit before its stop line.
+    /// each lane whose every link is green in this phase (as SUMO chooses
+    /// them), `detector-gap` (default [`DETECTOR_GAP_S`]) at the lane's
+    /// speed limit before its stop line.
     pub detectors: Vec<(usize, f64)>,
 }
 
@@ -131,6 +135,8 @@ pub struct ActuatedPhase {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ActuatedRun {
     pub offset: f64,
+    /// Seconds, as [`ActuatedProgramme::max_gap`] (not scaled).
+    pub max_gap: f64,
     pub phases: Vec<ActuatedPhase>,
     /// Each light's index in the plan and its colour in each phase.
     pub lights: Vec<(usize, Vec<Colour>)>,
@@ -159,6 +165,7 @@ impl ActuatedRun {
             .collect();
         (!lights.is_empty()).then(|| ActuatedRun {
             offset: programme.offset + offsets.get(first).copied().unwrap_or(0.0),
+            max_gap: programme.max_gap,
             phases,
             lights,
         })

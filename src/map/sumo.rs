@@ -12,6 +12,7 @@
 //! counterpart here (rail crossings, zippers, ...), malformed shapes and
 //! references to elements the file does not have.
 
+use super::signals::{DETECTOR_GAP_S, MAX_GAP_S};
 use super::Turn;
 use glam::DVec2;
 use serde::Deserialize;
@@ -112,8 +113,20 @@ struct RawProgramme {
     kind: Option<String>,
     #[serde(rename = "@offset", default)]
     offset: f64,
+    /// `<param key=".." value=".."/>`: an actuated programme's `max-gap`
+    /// and `detector-gap` are read.
+    #[serde(rename = "param", default)]
+    params: Vec<RawParam>,
     #[serde(rename = "phase", default)]
     phases: Vec<RawPhase>,
+}
+
+#[derive(Debug, Deserialize)]
+struct RawParam {
+    #[serde(rename = "@key", default)]
+    key: String,
+    #[serde(rename = "@value", default)]
+    value: String,
 }
 
 #[derive(Debug, Deserialize)]
@@ -178,21 +191,38 @@ impl SumoJunctionKind {
     }
 }
 
-/// An actuated phase's bounds: `Some((minDur, maxDur))` where both are
-/// given and differ (SUMO extends such a phase), `None` for a phase of
-/// fixed length; an error naming the programme for bounds that are not
-/// `0 < minDur <= maxDur`.
+/// An actuated phase's bounds: `Some((minDur, maxDur))` where they differ
+/// (SUMO extends such a phase), `None` for a phase of fixed length. A
+/// missing one is the written `duration` (kept on the right side of the
+/// other); an error naming the programme for bounds that are not
+/// `0 <= minDur <= maxDur`.
 fn phase_bounds(programme: &str, phase: &RawPhase) -> Result<Option<(f64, f64)>, String> {
     let (min, max) = match (phase.min_duration, phase.max_duration) {
         (None, None) => return Ok(None),
-        (min, max) => (min.unwrap_or(phase.duration), max.unwrap_or(phase.duration)),
+        (Some(min), None) => (min, phase.duration.max(min)),
+        (None, Some(max)) => (phase.duration.min(max), max),
+        (Some(min), Some(max)) => (min, max),
     };
-    if !(min.is_finite() && max.is_finite() && min > 0.0 && min <= max) {
+    if !(min.is_finite() && max.is_finite() && min >= 0.0 && min <= max) {
         return Err(format!(
-            "<tlLogic id=\"{programme}\">: a phase has minDur {min} and maxDur {max}; allowed: 0 < minDur <= maxDur"
+            "<tlLogic id=\"{programme}\">: a phase has minDur {min} and maxDur {max}; allowed: 0 <= minDur <= maxDur"
         ));
     }
     Ok((min < max).then_some((min, max)))
+}
+
+/// An actuated programme's `<param key="KEY">` in seconds, `default` when
+/// absent; an error naming the programme for one that is not a positive
+/// number.
+fn seconds_param(programme: &RawProgramme, key: &str, default: f64) -> Result<f64, String> {
+    let Some(p) = programme.params.iter().find(|p| p.key == key) else { return Ok(default) };
+    match p.value.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!(
+            "<tlLogic id=\"{}\">: <param key=\"{key}\" value=\"{}\"/>; allowed: seconds above 0",
+            programme.id, p.value
+        )),
+    }
 }
 
 /// SUMO junction types this reader refuses, and why.
@@ -265,6 +295,12 @@ pub struct SumoProgramme {
     /// sets its length; `None` for a phase of fixed length. Empty for any
     /// other programme.
     pub actuated: Vec<Option<(f64, f64)>>,
+    /// An actuated programme's longest time gap between cars that extends
+    /// a phase (`max-gap`) and its detectors' distance before the stop
+    /// line in seconds at the lane's speed limit (`detector-gap`): its
+    /// params, else SUMO's defaults.
+    pub max_gap: f64,
+    pub detector_gap: f64,
 }
 
 /// A road network read from a SUMO `.net.xml`, checked.
@@ -457,7 +493,19 @@ impl SumoNetwork {
                 return Err(format!("<tlLogic id=\"{}\">: no phases", p.id));
             }
             programme_index.insert(p.id.as_str(), programmes.len());
-            programmes.push(SumoProgramme { id: p.id.clone(), offset: p.offset, phases, actuated });
+            let (max_gap, detector_gap) = if p.kind.as_deref() == Some("actuated") {
+                (seconds_param(p, "max-gap", MAX_GAP_S)?, seconds_param(p, "detector-gap", DETECTOR_GAP_S)?)
+            } else {
+                (MAX_GAP_S, DETECTOR_GAP_S)
+            };
+            programmes.push(SumoProgramme {
+                id: p.id.clone(),
+                offset: p.offset,
+                phases,
+                actuated,
+                max_gap,
+                detector_gap,
+            });
         }
 
         // Where a movement goes on from an internal lane: a movement that
@@ -581,6 +629,27 @@ mod tests {
     }
 
     #[test]
+    fn an_actuated_programme_keeps_its_bounds_and_gap_params() {
+        let actuated = TINY.replace(
+            r#"type="static" programID="0" offset="2"><phase duration="30" state="G"/>"#,
+            r#"type="actuated" programID="0" offset="2"><param key="max-gap" value="2.5"/><phase duration="30" state="G" minDur="5"/>"#,
+        );
+        let net = SumoNetwork::from_xml(&actuated).unwrap();
+        let p = &net.programmes[0];
+        // maxDur missing: the written duration; the yellow has no bounds.
+        assert_eq!(p.actuated, vec![Some((5.0, 30.0)), None]);
+        assert_eq!((p.max_gap, p.detector_gap), (2.5, DETECTOR_GAP_S));
+        // Params between phases are read as well (netedit writes them anywhere).
+        let interleaved = TINY.replace(
+            r#"type="static" programID="0" offset="2"><phase duration="30" state="G"/>"#,
+            r#"type="actuated" programID="0" offset="2"><phase duration="30" state="G" minDur="5"/><param key="detector-gap" value="1.5"/>"#,
+        );
+        assert_eq!(SumoNetwork::from_xml(&interleaved).unwrap().programmes[0].detector_gap, 1.5);
+        // A static programme's bounds are not read.
+        assert!(SumoNetwork::from_xml(TINY).unwrap().programmes[0].actuated.is_empty());
+    }
+
+    #[test]
     fn what_cannot_be_imported_is_refused_naming_the_element_and_its_id() {
         for (from, to, needle) in [
             (
@@ -597,7 +666,12 @@ mod tests {
             (
                 r#"type="static" programID="0" offset="2"><phase duration="30" state="G"/>"#,
                 r#"type="actuated" programID="0" offset="2"><phase duration="30" state="G" minDur="40" maxDur="20"/>"#,
-                r#"<tlLogic id="J1">: a phase has minDur 40 and maxDur 20; allowed: 0 < minDur <= maxDur"#,
+                r#"<tlLogic id="J1">: a phase has minDur 40 and maxDur 20; allowed: 0 <= minDur <= maxDur"#,
+            ),
+            (
+                r#"type="static" programID="0" offset="2">"#,
+                r#"type="actuated" programID="0" offset="2"><param key="max-gap" value="soon"/>"#,
+                r#"<tlLogic id="J1">: <param key="max-gap" value="soon"/>; allowed: seconds above 0"#,
             ),
         ] {
             assert!(TINY.contains(from), "{from}");

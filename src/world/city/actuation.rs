@@ -1,14 +1,17 @@
 //! Traffic-actuated programmes (SUMO's `type="actuated"`, time-gap based):
 //! a phase with bounds lasts at least its shortest length, and after that
-//! goes on while cars keep passing its detectors no more than
-//! [`MAX_GAP_S`] apart, up to its longest; a phase without bounds lasts its
-//! written length. A car is over a detector while the detector lies within
-//! its length. The programme's lights show each phase's colours, so the
+//! goes on while cars keep passing its detectors no more than the
+//! programme's `max-gap` apart ([`MAX_GAP_S`] by default), up to its
+//! longest; a phase without bounds lasts its written length. A car is over
+//! a detector while the detector lies within its length (on either lane
+//! while it changes lanes). At the start every detector counts as just
+//! passed: the lights ran before the scenario, with traffic it does not
+//! know, so a phase already past its shortest gets one gap of grace
+//! rather than ending at once. The programme's lights show each phase's colours, so the
 //! cars' positions now decide when a light changes: a car can hold a green
 //! for those behind it, or end one early by its absence.
 
-use crate::map::route::LegKind;
-use crate::map::signals::{ActuatedRun, Colour, LightState, MAX_GAP_S};
+use crate::map::signals::{ActuatedRun, Colour, LightState};
 
 /// Slack on phase ends, seconds: steps of a frame add up to its time only
 /// within rounding.
@@ -76,7 +79,7 @@ impl<'a> Actuation<'a> {
                 run,
                 phase,
                 started: -clock,
-                last_seen: run.phases.iter().map(|ph| vec![f64::NEG_INFINITY; ph.detectors.len()]).collect(),
+                last_seen: run.phases.iter().map(|ph| vec![0.0; ph.detectors.len()]).collect(),
                 before: shown.clone(),
                 shown,
             });
@@ -93,16 +96,20 @@ impl<'a> Actuation<'a> {
         Some(LightState { colour, since_change: t - since })
     }
 
+    /// Whether [`Actuation::advance`] has anything to run.
+    pub(super) fn is_empty(&self) -> bool {
+        self.programmes.is_empty()
+    }
+
     /// Brings every programme to time `t`: notes the detectors cars are
-    /// over (`cars`: each car's leg and metres along its lane, and its
-    /// length), then ends each phase that is over, as often as needed.
-    /// A second call at the same time does nothing.
-    pub(super) fn advance<'c>(&mut self, t: f64, cars: impl Iterator<Item = (&'c LegKind, f64, f64)>) {
+    /// over (`cars`: a lane, a car's centre in metres along it and the
+    /// car's length), then ends each phase that is over, as often as
+    /// needed. A second call at the same time does nothing.
+    pub(super) fn advance(&mut self, t: f64, cars: impl Iterator<Item = (usize, f64, f64)>) {
         if self.programmes.is_empty() || t <= self.now + EPS {
             return;
         }
-        for (kind, along, length) in cars {
-            let LegKind::Lane(lane) = *kind else { continue };
+        for (lane, along, length) in cars {
             for &(p, k, d, at) in &self.on_lane[lane] {
                 if (along - at).abs() <= length / 2.0 {
                     self.programmes[p].last_seen[k][d] = t;
@@ -130,7 +137,7 @@ impl Programme<'_> {
     /// When the current phase ends, if it has by time `t`: at its written
     /// length without bounds; with bounds, at the longest, or now once it
     /// has lasted the shortest and no car has been over its detectors for
-    /// more than [`MAX_GAP_S`].
+    /// more than the programme's `max_gap`.
     fn phase_end(&self, t: f64) -> Option<f64> {
         let phase = &self.run.phases[self.phase];
         let lasted = t - self.started;
@@ -139,7 +146,7 @@ impl Programme<'_> {
             Some((_, longest)) if lasted + EPS >= longest => Some(self.started + longest),
             Some((shortest, _)) => {
                 let gap = self.last_seen[self.phase].iter().map(|&seen| t - seen).fold(f64::INFINITY, f64::min);
-                (lasted + EPS >= shortest && gap > MAX_GAP_S).then_some(t)
+                (lasted + EPS >= shortest && gap > self.run.max_gap).then_some(t)
             }
         }
     }
@@ -155,6 +162,7 @@ mod tests {
     fn run() -> ActuatedRun {
         ActuatedRun {
             offset: 0.0,
+            max_gap: 3.0,
             phases: vec![
                 ActuatedPhase { duration: 12.0, bounds: Some((5.0, 20.0)), detectors: vec![(0, 10.0)] },
                 ActuatedPhase { duration: 4.0, bounds: None, detectors: vec![] },
@@ -169,12 +177,11 @@ mod tests {
     fn reds(run: &ActuatedRun, seconds: f64, position: impl Fn(f64) -> Option<f64>) -> Vec<f64> {
         let state0 = LightState { colour: Colour::Green, since_change: 0.0 };
         let mut a = Actuation::new(std::slice::from_ref(run), 1, 1, |_| state0);
-        let lane = LegKind::Lane(0);
         let mut turned = Vec::new();
         let mut last = Colour::Green;
         for k in 0..=(seconds / 0.05).round() as usize {
             let t = k as f64 * 0.05;
-            a.advance(t, position(t).map(|s| (&lane, s, 4.0)).into_iter());
+            a.advance(t, position(t).map(|s| (0, s, 4.0)).into_iter());
             let state = a.state(0, t).unwrap();
             if state.colour == Colour::Red && last != Colour::Red {
                 turned.push(t - state.since_change);

@@ -43,6 +43,7 @@ mod tests;
 
 use super::driver::{CarFollowing, Iidm};
 use super::{Event, Trajectories};
+use crate::map::route::LegKind;
 use crate::map::signals::{Colour, Light};
 use crate::map::CityMap;
 use crate::plan::confounders::{ConfounderModel, Confounders};
@@ -285,10 +286,24 @@ impl<'a> Sim<'a> {
     }
 
     /// Brings the actuated programmes to time `t`, the cars where they are now.
+    /// A car changing lanes is on both.
     fn advance_actuated(&mut self, t: f64) {
-        let cars = self.cars.iter().filter(|c| !c.removed).map(|c| {
+        if self.actuation.is_empty() {
+            return;
+        }
+        let cars = self.cars.iter().filter(|c| !c.removed).flat_map(|c| {
             let leg = &c.route.legs[c.leg];
-            (&leg.kind, leg.curve_start + c.s - leg.route_start, c.plan.length)
+            let along = c.s - leg.route_start;
+            let length = c.plan.length;
+            match leg.kind {
+                LegKind::Lane(lane) => [Some((lane, leg.curve_start + along, length)), None],
+                LegKind::LaneChange { from, to, at } => {
+                    [Some((from, at + along, length)), Some((to, at + along, length))]
+                }
+                LegKind::Connector(_) => [None, None],
+            }
+            .into_iter()
+            .flatten()
         });
         self.actuation.advance(t, cars);
     }

@@ -221,9 +221,10 @@ impl<'a> Recording<'a> {
     }
 
     /// Whether re-runs can replay cars from this recording: the plan has no
-    /// interventions of its own and no cars collided.
+    /// interventions of its own or actuated lights, and no cars collided.
     pub fn replayable(&self) -> bool {
-        self.plan.interventions.is_empty() && !self.tape.collided && !self.factual.states.is_empty()
+        let fixed_lights = self.plan.world.city().is_none_or(|c| c.lights.actuated.is_empty());
+        self.plan.interventions.is_empty() && !self.tape.collided && !self.factual.states.is_empty() && fixed_lights
     }
 
     /// Whether recording `plan` for its re-runs can pay: it has no
