@@ -619,7 +619,7 @@ def _generate_in_child(tmp_path, spec, **options):
     out = tmp_path / "out"
     arguments = ", ".join(f"{k}={v!r}" for k, v in options.items())
     script = f"import causalcity\ncausalcity.generate({str(spec_file)!r}, {str(out)!r}, {arguments})\n"
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     return child, spec_file, out
 
 
@@ -657,6 +657,14 @@ LONG_SPEC = {
 }
 
 
+def _default_sigint():
+    """In the child before it starts: Ctrl-C as a terminal sends it. A
+    runner that starts the tests in the background (``cmd &`` in a script)
+    hands them SIGINT ignored, and Python installs no KeyboardInterrupt
+    handler for a signal it inherits ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupted(call_source, setup=""):
     """Runs ``call_source`` (an expression) in a child interpreter, sends it
     SIGINT 0.3 s after it starts, and returns (what happened, the peak
@@ -673,7 +681,7 @@ def _interrupted(call_source, setup=""):
         "    peak = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
         "    print('interrupted', int(peak) * 1024)\n"
     )
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     assert child.stdout.readline().strip() == "started"
     time.sleep(0.3)
     child.send_signal(signal.SIGINT)
