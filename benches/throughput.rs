@@ -700,7 +700,7 @@ fn main() {
                 .map(|l| {
                     expansion
                         .map
-                        .signal_head(l.intersection, l.approach, l.signal)
+                        .signal_head(l.intersection, l.approach, l.signal, l.variant)
                         .map(|p| expansion.camera.to_pixel(p))
                 })
                 .collect();

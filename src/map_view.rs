@@ -256,6 +256,10 @@ pub struct NetDriving {
     pub loops: usize,
     /// (lane id, why) for every lane left out.
     pub dropped: Vec<(String, String)>,
+    /// Lights of their own for movements whose links run on another
+    /// schedule than the first of their approach's signal (a right-turn
+    /// arrow): (light name, `lane turn` of each movement it governs).
+    pub variant_lights: Vec<(String, Vec<String>)>,
 }
 
 impl fmt::Display for NetSummary {
@@ -311,6 +315,16 @@ impl fmt::Display for NetSummary {
                 }
                 if d.dropped.len() > 10 {
                     writeln!(f, "  ... and {} more (--json lists all)", d.dropped.len() - 10)?;
+                }
+                if !d.variant_lights.is_empty() {
+                    let count = match d.variant_lights.len() {
+                        1 => "1 light of its own".to_string(),
+                        n => format!("{n} lights of their own"),
+                    };
+                    writeln!(f, "{count}, for movements whose links run on another schedule than their signal's:")?;
+                    for (light, movements) in &d.variant_lights {
+                        writeln!(f, "  {light}: {}", movements.join(", "))?;
+                    }
                 }
             }
             Err(why) => writeln!(f, "as map.sumo: cannot be driven: {why}")?,
@@ -375,14 +389,14 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         })
         .collect();
     let (lo, hi) = net.bounds();
-    let driving =
-        crate::map::CityMap::from_sumo(&net, crate::map::MapLayout::default().lane_change_length).map(|(_, report)| {
-            NetDriving {
-                lanes: report.lanes,
-                loops: report.loops,
-                dropped: report.dropped.into_iter().map(|(lane, why)| (lane, why.to_string())).collect(),
-            }
-        });
+    let driving = crate::map::CityMap::from_sumo(&net, crate::map::MapLayout::default().lane_change_length).map(
+        |(map, report)| NetDriving {
+            lanes: report.lanes,
+            loops: report.loops,
+            dropped: report.dropped.into_iter().map(|(lane, why)| (lane, why.to_string())).collect(),
+            variant_lights: variant_lights(&map),
+        },
+    );
     let summary = NetSummary {
         driving,
         net: net_path.to_path_buf(),
@@ -423,4 +437,23 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         write_picture(&file, out, view.width, view.height, rgba)?;
     }
     Ok(summary)
+}
+
+/// `map`'s lights of variant 1 and up, by name, with the movements (`lane
+/// turn`) each governs.
+fn variant_lights(map: &crate::map::CityMap) -> Vec<(String, Vec<String>)> {
+    let mut lights: Vec<(usize, Vec<String>)> = Vec::new();
+    for (c, connector) in map.connectors.iter().enumerate() {
+        let Some(light) = map.light_of(c) else { continue };
+        if map.light_at(light).3 == 0 {
+            continue;
+        }
+        let movement = format!("{} {}", map.lanes[connector.from].name, format!("{:?}", connector.turn).to_lowercase());
+        match lights.iter_mut().find(|(l, _)| *l == light) {
+            Some((_, movements)) => movements.push(movement),
+            None => lights.push((light, vec![movement])),
+        }
+    }
+    lights.sort_by_key(|(l, _)| *l);
+    lights.into_iter().map(|(l, movements)| (map.light_name(l), movements)).collect()
 }

@@ -451,3 +451,118 @@ fn actuated_lights_answer_to_traffic_within_their_bounds_and_their_effects_are_m
     gen_ok(&spec(true), &one, &["--no-images", "-j", "1"]);
     assert_eq!(hash_tree(&one), hash_tree(&actuated));
 }
+
+/// Each light's colour per frame, by (intersection, approach, signal), and
+/// its signal head (bird's-eye pixels), from `lights.csv`.
+type LightsCsv = std::collections::BTreeMap<(String, String, String), (Vec<String>, String)>;
+
+fn lights_by_name(lights_csv: &Path) -> LightsCsv {
+    let mut lights = LightsCsv::new();
+    let mut reader = csv::Reader::from_path(lights_csv).unwrap();
+    for row in reader.records() {
+        let row = row.unwrap();
+        let entry = lights.entry((row[2].to_string(), row[3].to_string(), row[4].to_string())).or_default();
+        entry.0.push(row[5].to_string());
+        entry.1 = format!("{},{}", &row[7], &row[8]);
+    }
+    lights
+}
+
+#[test]
+fn a_right_turn_arrow_is_a_light_of_its_own_in_every_file_and_interventions_name_it() {
+    // tests/data/sumo/grid2-arrows.net.xml: junction B1's right turn from
+    // the south has an arrow, green with the west's protected left while
+    // straight on from the south is red (README there).
+    let dir = fresh_dir("sumo-arrows");
+    let network = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/grid2-arrows.net.xml");
+    std::fs::copy(&network, dir.join("grid2-arrows.net.xml")).unwrap();
+    let described = run(&["map", "--net", network.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&described.stdout);
+    assert!(text.contains("1 light of its own") && text.contains("B1/S/straight-2: B0B1_0 right"), "{text}");
+    let spec = write_spec(
+        &dir,
+        r#"{"name": "arrows", "world": "city", "seed": 4, "frames": 200, "frame_interval": 0.5,
+            "groups": [{"cars": 8, "edge_proportion": 0.5}], "splits": {"train": 2, "val": 1, "test": 1},
+            "actions_per_car": 4, "map": {"sumo": "grid2-arrows.net.xml"}, "city": {"lights": {"cycle_scale": 1.0}}}"#,
+    );
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--no-images"]);
+    let schema = validator("scenario.schema.json");
+    let key = |signal: &str| ("B1".to_string(), "S".to_string(), signal.to_string());
+    let mut arrow_frames = 0;
+    for scenario in scenario_dirs(&out) {
+        let meta = read_json(&scenario.join("scenario.json"));
+        assert_valid(&schema, &meta, &scenario);
+        let listed: Vec<String> = meta["city"]["lights"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| {
+                format!(
+                    "{}/{}/{}",
+                    l["intersection"].as_str().unwrap(),
+                    l["approach"].as_str().unwrap(),
+                    l["signal"].as_str().unwrap()
+                )
+            })
+            .collect();
+        assert_eq!(listed.len(), 4 * 8 + 1);
+        assert_eq!(
+            listed.last().map(String::as_str),
+            Some("B1/S/straight-2"),
+            "the variant follows the cycle's lights"
+        );
+        let lights = lights_by_name(&scenario.join("lights.csv"));
+        assert_eq!(lights.len(), 33, "{:?}", lights.keys());
+        let (straight, straight_head) = &lights[&key("straight")];
+        let (arrow, arrow_head) = &lights[&key("straight-2")];
+        assert_eq!(arrow.len(), 200);
+        assert_ne!(straight_head, arrow_head, "each light has a head of its own");
+        // 100 s hold a whole 87 s cycle: the arrow shows green alone for
+        // 6 s (12 frames, to a frame) each time the window holds it whole,
+        // and never red while straight on from the south is green.
+        let alone: Vec<bool> = straight.iter().zip(arrow).map(|(s, a)| s == "red" && a == "green").collect();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for (k, &on) in alone.iter().enumerate() {
+            match runs.last_mut() {
+                Some((start, len)) if on && *start + *len == k => *len += 1,
+                _ if on => runs.push((k, 1)),
+                _ => {}
+            }
+        }
+        let whole: Vec<usize> =
+            runs.iter().filter(|&&(start, len)| start > 0 && start + len < alone.len()).map(|r| r.1).collect();
+        assert!(!whole.is_empty() && whole.iter().all(|n| (11..=13).contains(n)), "{}: {runs:?}", scenario.display());
+        assert!(straight.iter().zip(arrow).all(|(s, a)| !(s == "green" && a == "red")));
+        arrow_frames += whole.len();
+    }
+    assert!(arrow_frames >= 4);
+    let checked = run(&["validate", out.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+
+    // A hand-written scenario names it: held red for 50 s, straight on's
+    // light keeps its programme.
+    let file = dir.join("hold.json");
+    std::fs::write(
+        &file,
+        r#"[{"Name": "Hold", "map": {"sumo": "grid2-arrows.net.xml"}, "frames": 100,
+             "city": {"lights": {"phase": "fixed"}},
+             "Vehicles": [{"Id": "Car_1", "Spawn": "B0B1_0", "SpawnAtDistance": 20, "DriveQueue": ["right"], "MergeAtDistances": [0]}],
+             "interventions": [{"at": 0.0, "do": "set_light", "light": "B1/S/straight-2", "colour": "red", "seconds": 50}]}]"#,
+    )
+    .unwrap();
+    let held = dir.join("held");
+    let ran = run(&["run", "--scenario", file.to_str().unwrap(), "--out", held.to_str().unwrap()]);
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let lights = lights_by_name(&held.join("Hold/lights.csv"));
+    assert!(lights[&key("straight-2")].0.iter().all(|c| c == "red"));
+    assert!(lights[&key("straight")].0.iter().any(|c| c == "green"));
+    // One it does not have is refused, naming the ones it has.
+    let text = std::fs::read_to_string(&file).unwrap().replace("straight-2", "straight-3");
+    std::fs::write(&file, text).unwrap();
+    let refused = run(&["run", "--scenario", file.to_str().unwrap(), "--out", dir.join("held2").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("B1/S/straight-3") && stderr.contains("straight, straight-2"), "{stderr}");
+    assert!(!dir.join("held2").exists());
+}

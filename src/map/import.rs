@@ -16,7 +16,9 @@
 //!   edge that goes back, when there is one.
 //! - Junctions: `traffic_light` junctions run the file's programme, one
 //!   light per approach side and signal (straight, left) as in the grid
-//!   towns, showing the state of the first link it governs; `priority` and `priority_stop` junctions give priority to the
+//!   towns, showing the state of the first link it governs, and a light of
+//!   its own (a variant) for each other schedule its links run on;
+//!   `priority` and `priority_stop` junctions give priority to the
 //!   approaches of their highest-priority edge's axis; at
 //!   `right_before_left` junctions traffic from the right goes first;
 //!   `allway_stop`, `left_before_right` (left-hand traffic, which the
@@ -173,21 +175,39 @@ fn colour_of(state: char, signal: Signal) -> Colour {
     }
 }
 
+/// What an imported network's programmes make of its lights.
+struct ProgrammedLights {
+    /// As [`CityMap::programmed`].
+    lights: Vec<Light>,
+    /// As [`CityMap::link_variants`].
+    link_variants: Vec<u8>,
+    /// As [`CityMap::permissive_lefts`].
+    permissive_lefts: Vec<usize>,
+    actuated: Vec<ActuatedProgramme>,
+}
+
 /// The lights of `map`'s signalised junctions that the file's programmes
-/// run: per junction, approach side and signal, the link of the first of
-/// its movements (straight before right for the straight signal, left
-/// before U-turn for the left one) that a programme governs, its colour in
-/// each phase, runs of one colour merged; and the approaches (junction,
-/// side) whose left light has no protected phase, whose drivers turn on
-/// the permissive green yielding to oncoming traffic.
+/// run (`ids`: the file's index of each of `map`'s lanes; `connection_of`:
+/// each connector's connection in the file). Per
+/// junction, approach side and signal, the links of its movements
+/// (straight before right for the straight signal, left before U-turn for
+/// the left one, each by lane): the first link's colours in each phase,
+/// runs of one colour merged, make the light; a link whose colours differ
+/// from every light's so far makes a light of its own, the next variant.
+/// A left turn or U-turn whose link has no protected phase turns on the
+/// permissive green, yielding to oncoming traffic.
 fn programmed_lights(
     net: &SumoNetwork,
     map: &CityMap,
     ids: &[usize],
-    moves: &[Vec<(usize, Turn, Option<usize>)>],
-) -> (Vec<Light>, Vec<(usize, char)>, Vec<ActuatedProgramme>) {
-    let (mut lights, mut permissive) = (Vec::new(), Vec::new());
-    let mut actuated = actuated_programmes(net, map, ids);
+    connection_of: &[Option<usize>],
+) -> Result<ProgrammedLights, String> {
+    let mut out = ProgrammedLights {
+        lights: Vec::new(),
+        link_variants: vec![0; map.connectors.len()],
+        permissive_lefts: Vec::new(),
+        actuated: actuated_programmes(net, map, ids),
+    };
     for &k in map.signalised() {
         for approach in APPROACHES {
             for signal in [Signal::Straight, Signal::Left] {
@@ -195,37 +215,57 @@ fn programmed_lights(
                     Signal::Straight => [Turn::Straight, Turn::Right],
                     Signal::Left => [Turn::Left, Turn::UTurn],
                 };
-                let link = order.iter().find_map(|&turn| {
-                    ids.iter().enumerate().find_map(|(id, &l)| match map.lanes[id].end {
-                        LaneEnd::Intersection { intersection, approach: a } if intersection == k && a == approach => {
-                            let c = moves[l].iter().find(|m| m.1 == turn)?.2?;
-                            net.connections[c].signal
+                // (programme, colours in its phases) of each light so far.
+                let mut variants: Vec<(usize, Vec<Colour>)> = Vec::new();
+                for turn in order {
+                    for (id, c) in map.connectors.iter().enumerate() {
+                        if c.intersection != Some(k) || c.turn != turn || map.approach_of(id) != Some(approach) {
+                            continue;
                         }
-                        _ => None,
-                    })
-                });
-                let Some((programme, index)) = link else { continue };
-                let p = &net.programmes[programme];
-                let states: Vec<char> = p.phases.iter().map(|(_, s)| s.chars().nth(index).unwrap_or('r')).collect();
-                // A left turn with no protected phase at all turns on the permissive one.
-                let protected = signal == Signal::Left && states.iter().any(|&c| colour_of(c, signal) == Colour::Green);
-                let read_as = if protected || signal == Signal::Straight { signal } else { Signal::Straight };
-                if read_as != signal {
-                    permissive.push((k, approach));
+                        let Some((programme, link)) = connection_of[id].and_then(|x| net.connections[x].signal) else {
+                            continue;
+                        };
+                        let p = &net.programmes[programme];
+                        let states: Vec<char> =
+                            p.phases.iter().map(|(_, s)| s.chars().nth(link).unwrap_or('r')).collect();
+                        let protected =
+                            signal == Signal::Left && states.iter().any(|&c| colour_of(c, signal) == Colour::Green);
+                        let read_as = if protected || signal == Signal::Straight { signal } else { Signal::Straight };
+                        if read_as != signal {
+                            out.permissive_lefts.push(id);
+                        }
+                        let colours: Vec<Colour> = states.iter().map(|&c| colour_of(c, read_as)).collect();
+                        let variant = match variants.iter().position(|v| v.0 == programme && v.1 == colours) {
+                            Some(v) => v,
+                            None => {
+                                variants.push((programme, colours));
+                                variants.len() - 1
+                            }
+                        };
+                        out.link_variants[id] = u8::try_from(variant).map_err(|_| {
+                            let x = &map.intersections[k].name;
+                            format!("<junction id=\"{x}\">: the {} movements from {approach} run on more than 256 schedules", signal.name())
+                        })?;
+                    }
                 }
-                let mut schedule: Vec<ScheduleStep> = Vec::new();
-                for ((duration, _), &state) in p.phases.iter().zip(&states) {
-                    ScheduleStep::extend(&mut schedule, colour_of(state, read_as), *duration);
-                }
-                lights.push(Light { intersection: k, approach, signal, offset: p.offset, schedule });
-                if let Some(a) = actuated.iter_mut().find(|a| a.id == p.id) {
-                    a.lights.push((k, approach, signal, states.iter().map(|&c| colour_of(c, read_as)).collect()));
+                for (variant, (programme, colours)) in variants.into_iter().enumerate() {
+                    let p = &net.programmes[programme];
+                    let mut schedule: Vec<ScheduleStep> = Vec::new();
+                    for ((duration, _), &colour) in p.phases.iter().zip(&colours) {
+                        ScheduleStep::extend(&mut schedule, colour, *duration);
+                    }
+                    let variant = variant as u8; // checked above
+                    out.lights.push(Light { intersection: k, approach, signal, variant, offset: p.offset, schedule });
+                    if let Some(a) = out.actuated.iter_mut().find(|a| a.id == p.id) {
+                        a.lights.push((k, approach, signal, variant, colours));
+                    }
                 }
             }
         }
     }
-    actuated.retain(|a| !a.lights.is_empty());
-    (lights, permissive, actuated)
+    out.actuated.retain(|a| !a.lights.is_empty());
+    out.permissive_lefts.sort_unstable();
+    Ok(out)
 }
 
 /// Whether a lane with `links` (its links' indices in the programme) has
@@ -524,7 +564,7 @@ impl CityMap {
         }
 
         // Movements.
-        let mut connectors = Vec::new();
+        let (mut connectors, mut connection_of) = (Vec::new(), Vec::new());
         for (k, &l) in ids.iter().enumerate() {
             for &(to, turn, connection) in &moves[l] {
                 let Some(&to_id) = new_id.get(&to) else { continue };
@@ -542,6 +582,7 @@ impl CityMap {
                     _ => continue,
                 };
                 connectors.push(Connector { from: k, to: to_id, turn, intersection, curve });
+                connection_of.push(connection);
             }
         }
         for (id, c) in connectors.iter().enumerate() {
@@ -584,7 +625,9 @@ impl CityMap {
                 _ => Axis::EastWest,
             };
         }
-        (map.programmed, map.permissive_lefts, map.actuated) = programmed_lights(net, &map, &ids, &moves);
+        let lights = programmed_lights(net, &map, &ids, &connection_of)?;
+        (map.programmed, map.link_variants, map.permissive_lefts, map.actuated) =
+            (lights.lights, lights.link_variants, lights.permissive_lefts, lights.actuated);
         map.merging = merging_movements(&map.connectors);
         map.splitting = splitting_movements(&map.connectors);
         let loops = map.connectors.iter().filter(|c| c.intersection.is_none()).count();
@@ -634,5 +677,44 @@ mod tests {
         let lanes: Vec<&str> = programme.phases[0].detectors.iter().map(|&(l, _)| map.lanes[l].name.as_str()).collect();
         assert_eq!(lanes, ["143308590#0_2"]);
         assert!(programme.phases[3].detectors.is_empty(), "red for it");
+    }
+
+    #[test]
+    fn a_movement_whose_link_runs_another_schedule_gets_a_light_of_its_own() {
+        let text = include_str!("../../tests/data/sumo/grid2-arrows.net.xml");
+        let (map, _) = CityMap::from_sumo(&SumoNetwork::from_xml(text).unwrap(), 6.0).unwrap();
+        let b1 = map.intersections.iter().position(|x| x.name == "B1").unwrap();
+        let from = |lane: &str, turn: Turn| {
+            let l = map.lanes.iter().position(|x| x.name == lane).unwrap();
+            map.connectors.iter().position(|c| c.from == l && c.turn == turn).unwrap()
+        };
+        // From the south, the right turn's link is green in the arrow phase
+        // too; the straight links are not.
+        let (right, ahead) = (from("B0B1_0", Turn::Right), from("B0B1_0", Turn::Straight));
+        let arrow = map.light_of(right).unwrap();
+        assert_eq!(map.light_of(ahead), map.light_index(b1, 'S', Signal::Straight));
+        assert_eq!(map.light_of(from("B0B1_1", Turn::Straight)), map.light_of(ahead));
+        assert_eq!(
+            (map.light_at(arrow), map.light_name(arrow)),
+            ((b1, 'S', Signal::Straight, 1), "B1/S/straight-2".into())
+        );
+        assert_eq!(arrow, 4 * 8, "after the cycle's 8 lights of each of 4 junctions");
+        assert_eq!(map.light_count(), 4 * 8 + 1);
+        let light = map.programmed.iter().find(|l| l.variant == 1).unwrap();
+        let steps: Vec<(Colour, f64)> = light.schedule.iter().map(|s| (s.colour, s.duration)).collect();
+        use Colour::{Green, Red, Yellow};
+        assert_eq!(steps, [(Green, 36.0), (Yellow, 3.0), (Green, 6.0), (Yellow, 3.0), (Red, 39.0)]);
+        // Scenario files name it; a variant B1/S does not have is refused
+        // naming the ones it has.
+        assert_eq!(map.light_by_name("B1/S/straight-2"), Ok(arrow));
+        let wrong = map.light_by_name("B1/S/straight-3").unwrap_err();
+        assert!(wrong.contains("straight, straight-2"), "{wrong}");
+        assert!(map.light_by_name("B1/S/straight-1").is_err());
+        assert!(map.light_by_name("B1/S/straight-02").is_err());
+        // Lefts without a protected phase go on the permissive green; the
+        // west's, protected in the arrow phase, does not.
+        assert!(!map.permissive_left(from("A1B1_1", Turn::Left)));
+        assert!(map.permissive_left(from("top1B1_1", Turn::Left)));
+        assert!(!map.permissive_left(ahead));
     }
 }

@@ -309,17 +309,23 @@ pub struct CityMap {
     /// its right, where there is one (lane changes and merges go there).
     beside: Vec<[Option<LaneId>; 2]>,
     /// Lights that run a programme of their own instead of the cycle (an
-    /// imported network's traffic-light programmes): each replaces the
-    /// cycle's light of its junction, approach and signal. Empty in a grid
-    /// town.
+    /// imported network's traffic-light programmes): each of variant 0
+    /// replaces the cycle's light of its junction, approach and signal;
+    /// the others are lights of their own, after the cycle's in a plan, in
+    /// this order. Empty in a grid town.
     pub programmed: Vec<signals::Light>,
+    /// Per connector, the variant of its approach's signal that governs it
+    /// ([`signals::Light::variant`]). Empty where every movement follows
+    /// its approach's own light (a grid town).
+    pub(crate) link_variants: Vec<u8>,
     /// The imported network's traffic-actuated programmes (their lights are
     /// in `programmed` too, at their written durations). Empty in a grid
     /// town.
     pub actuated: Vec<signals::ActuatedProgramme>,
-    /// Approaches (junction, side) of imported networks whose left turns go
-    /// on a permissive green: the programme has no protected left phase.
-    pub permissive_lefts: Vec<(usize, char)>,
+    /// The left turns and U-turns of imported networks, ascending, that go
+    /// on a permissive green: their links' programme gives them no
+    /// protected phase.
+    pub(crate) permissive_lefts: Vec<ConnectorId>,
     /// Per connector, the connectors of its junction whose paths run into
     /// one with it before they end, on the same lane (an imported network's
     /// movements that share internal lanes): cars on them are in line.
@@ -343,10 +349,12 @@ impl Default for CityMap {
 pub const SIGNAL_HEAD_SPACING_M: f64 = 1.1;
 
 impl CityMap {
-    /// A light as scenario files and logs name it, e.g. `AC/W/straight`.
+    /// A light as scenario files and logs name it, e.g. `AC/W/straight`
+    /// (or `J1/S/straight-2`, a variant).
     pub fn light_name(&self, index: usize) -> String {
-        let (intersection, approach, signal) = self.light_at(index);
-        signals::light_label(&self.intersections[intersection].name, approach, signal.name())
+        let (intersection, approach, signal, variant) = self.light_at(index);
+        let label = signals::signal_label(signal, variant);
+        signals::light_label(&self.intersections[intersection].name, approach, &label)
     }
 
     /// The signalised intersections, in index order.
@@ -356,7 +364,12 @@ impl CityMap {
 
     /// How many lights a light plan of this map holds.
     pub fn light_count(&self) -> usize {
-        self.signalised.len() * signals::LIGHTS_PER_INTERSECTION
+        self.signalised.len() * signals::LIGHTS_PER_INTERSECTION + self.variant_lights().count()
+    }
+
+    /// The lights of variant 1 and up, in plan order, after the cycle's.
+    fn variant_lights(&self) -> impl Iterator<Item = &signals::Light> {
+        self.programmed.iter().filter(|l| l.variant > 0)
     }
 
     /// Where light (`intersection`, `approach`, `signal`) stands in this
@@ -367,10 +380,50 @@ impl CityMap {
         Some(k * signals::LIGHTS_PER_INTERSECTION + signals::light_offset(approach, signal))
     }
 
-    /// The light at `index` of a plan: (intersection, approach, signal).
-    pub fn light_at(&self, index: usize) -> (usize, char, signals::Signal) {
+    /// Where variant `variant` of light (`intersection`, `approach`,
+    /// `signal`) stands in this map's light plans: variant 0 as
+    /// [`CityMap::light_index`], the others after the cycle's lights.
+    pub fn variant_index(
+        &self,
+        intersection: usize,
+        approach: char,
+        signal: signals::Signal,
+        variant: u8,
+    ) -> Option<usize> {
+        if variant == 0 {
+            return self.light_index(intersection, approach, signal);
+        }
+        let found = self.variant_lights().position(|l| {
+            (l.intersection, l.approach, l.signal, l.variant) == (intersection, approach, signal, variant)
+        })?;
+        Some(self.signalised.len() * signals::LIGHTS_PER_INTERSECTION + found)
+    }
+
+    /// The light at `index` of a plan: (intersection, approach, signal,
+    /// variant).
+    pub fn light_at(&self, index: usize) -> (usize, char, signals::Signal, u8) {
+        let cycle = self.signalised.len() * signals::LIGHTS_PER_INTERSECTION;
+        if let Some(l) = index.checked_sub(cycle).and_then(|v| self.variant_lights().nth(v)) {
+            return (l.intersection, l.approach, l.signal, l.variant);
+        }
         let (k, approach, signal) = signals::light_at(index);
-        (self.signalised[k], approach, signal)
+        (self.signalised[k], approach, signal, 0)
+    }
+
+    /// The light (index in a plan) that governs entering `connector`: its
+    /// approach's left signal for left turns and U-turns, its straight
+    /// signal otherwise, or the variant of it that runs the movement's own
+    /// schedule. `None` at a junction without lights.
+    pub fn light_of(&self, connector: ConnectorId) -> Option<usize> {
+        let c = &self.connectors[connector];
+        let intersection = c.intersection?;
+        let approach = self.approach_of(connector)?;
+        let signal =
+            if matches!(c.turn, Turn::Left | Turn::UTurn) { signals::Signal::Left } else { signals::Signal::Straight };
+        match self.link_variants.get(connector).copied().unwrap_or(0) {
+            0 => self.light_index(intersection, approach, signal),
+            variant => self.variant_index(intersection, approach, signal, variant),
+        }
     }
 
     /// The index of the light called `text` (`AC/W/straight`), or a message
@@ -381,13 +434,40 @@ impl CityMap {
             [intersection, approach, signal] => {
                 let k = self.intersections.iter().position(|x| x.name == *intersection);
                 let a = approach.chars().next().filter(|c| approach.len() == 1 && signals::APPROACHES.contains(c));
-                let s = match *signal {
+                // `left`, or a variant: `left-2`, ...
+                let (base, variant) = match signal.split_once('-') {
+                    Some((base, n)) if !n.starts_with('0') => {
+                        (base, n.parse::<u8>().ok().filter(|&v| v >= 2).map(|v| v - 1))
+                    }
+                    Some((base, _)) => (base, None),
+                    None => (*signal, Some(0)),
+                };
+                let s = match base {
                     "straight" => Some(signals::Signal::Straight),
                     "left" => Some(signals::Signal::Left),
                     _ => None,
                 };
-                match (k, a, s) {
-                    (Some(k), Some(a), Some(s)) => match self.light_index(k, a, s) {
+                match (k, a, s, variant) {
+                    (Some(k), Some(a), Some(s), Some(v)) if v > 0 => match self.variant_index(k, a, s, v) {
+                        Some(index) => Some(index),
+                        None if self.light_index(k, a, s).is_some() => {
+                            let mut labels = vec![s.name().to_string()];
+                            labels.extend(
+                                self.variant_lights()
+                                    .filter(|l| (l.intersection, l.approach, l.signal) == (k, a, s))
+                                    .map(|l| l.signal_label()),
+                            );
+                            return Err(format!(
+                                "{text:?} is not a light: the {} movements from {}/{a} run on {} ({})",
+                                s.name(),
+                                self.intersections[k].name,
+                                if labels.len() == 1 { "one light" } else { "these lights" },
+                                labels.join(", ")
+                            ));
+                        }
+                        None => None,
+                    },
+                    (Some(k), Some(a), Some(s), Some(_)) => match self.light_index(k, a, s) {
                         Some(index) => Some(index),
                         None => {
                             let x = &self.intersections[k];
@@ -485,11 +565,9 @@ impl CityMap {
 
     /// Whether `connector` is a left turn (or U-turn) that goes on a
     /// permissive green, yielding to oncoming traffic: on imported networks,
-    /// where the programme gives its approach no protected left phase.
+    /// where its link's programme gives it no protected phase.
     pub fn permissive_left(&self, connector: ConnectorId) -> bool {
-        let c = &self.connectors[connector];
-        let (Some(k), Some(approach)) = (c.intersection, self.approach_of(connector)) else { return false };
-        matches!(c.turn, Turn::Left | Turn::UTurn) && self.permissive_lefts.contains(&(k, approach))
+        self.permissive_lefts.binary_search(&connector).is_ok()
     }
 
     /// Whether a driver entering `connector` must give way to others at its
@@ -503,18 +581,25 @@ impl CityMap {
         }
     }
 
-    /// Where the head of light (`intersection`, `approach`, `signal`) stands,
-    /// metres: on the pavement beside the kerb of the approach's outer lane,
-    /// level with its stop line (the left head [`SIGNAL_HEAD_SPACING_M`]
-    /// further back), where no car drives over it. `None` for an approach
-    /// the map does not have.
-    pub fn signal_head(&self, intersection: usize, approach: char, signal: signals::Signal) -> Option<DVec2> {
+    /// Where the head of light (`intersection`, `approach`, `signal`,
+    /// `variant`) stands, metres: on the pavement beside the kerb of the
+    /// approach's outer lane, level with its stop line (the left head
+    /// [`SIGNAL_HEAD_SPACING_M`] further back, each variant's two spacings
+    /// behind its signal's), where no car drives over it. `None` for an
+    /// approach the map does not have.
+    pub fn signal_head(
+        &self,
+        intersection: usize,
+        approach: char,
+        signal: signals::Signal,
+        variant: u8,
+    ) -> Option<DVec2> {
         let lane = self.lanes.iter().find(|l| {
             l.position != LanePosition::Inner
                 && matches!(l.end, LaneEnd::Intersection { intersection: i, approach: a } if i == intersection && a == approach)
         })?;
-        let back =
-            self.layout.stop_line_setback + if signal == signals::Signal::Left { SIGNAL_HEAD_SPACING_M } else { 0.0 };
+        let spacings = f64::from(variant) * 2.0 + if signal == signals::Signal::Left { 1.0 } else { 0.0 };
+        let back = self.layout.stop_line_setback + spacings * SIGNAL_HEAD_SPACING_M;
         let kerb = self.layout.lane_width / 2.0;
         Some(lane.curve.position(lane.curve.length() - back, -(kerb + self.layout.sidewalk_width / 2.0)))
     }
@@ -738,6 +823,7 @@ impl CityMap {
             signalised,
             beside,
             programmed,
+            link_variants: Vec::new(),
             actuated: Vec::new(),
             permissive_lefts: Vec::new(),
             merging,

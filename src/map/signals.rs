@@ -71,6 +71,16 @@ impl ScheduleStep {
     }
 }
 
+/// A signal's label in files: `straight`, `left`, and for a light of the
+/// same approach and signal whose movements run on another schedule
+/// ([`Light::variant`] 1, 2, ..) `straight-2`, `left-2`, ..
+pub fn signal_label(signal: Signal, variant: u8) -> String {
+    match variant {
+        0 => signal.name().to_string(),
+        v => format!("{}-{}", signal.name(), u32::from(v) + 1),
+    }
+}
+
 /// One light: where it stands and what it shows when.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Light {
@@ -79,10 +89,22 @@ pub struct Light {
     /// Side the controlled traffic arrives from: 'N', 'E', 'S' or 'W'.
     pub approach: char,
     pub signal: Signal,
+    /// 0 for the approach's own `signal` light; 1, 2, .. for further
+    /// lights of the same approach and signal, where an imported network's
+    /// programme runs some of its movements on another schedule (a
+    /// right-turn arrow, a U-turn on the permissive green only).
+    pub variant: u8,
     /// Seconds added to the scenario clock before looking up the schedule.
     pub offset: f64,
     /// Repeats for ever.
     pub schedule: Vec<ScheduleStep>,
+}
+
+impl Light {
+    /// Its signal's label in files ([`signal_label`]).
+    pub fn signal_label(&self) -> String {
+        signal_label(self.signal, self.variant)
+    }
 }
 
 /// Seconds of travel at the lane's speed limit between an actuated
@@ -108,9 +130,9 @@ pub struct ActuatedProgramme {
     /// that still extends it (`max-gap`, default [`MAX_GAP_S`]).
     pub max_gap: f64,
     pub phases: Vec<ActuatedPhase>,
-    /// (intersection, approach, signal) of each light it drives, and its
-    /// colour in each phase.
-    pub lights: Vec<(usize, char, Signal, Vec<Colour>)>,
+    /// (intersection, approach, signal, variant) of each light it drives,
+    /// and its colour in each phase.
+    pub lights: Vec<(usize, char, Signal, u8, Vec<Colour>)>,
 }
 
 /// One phase of an [`ActuatedProgramme`].
@@ -151,7 +173,9 @@ impl ActuatedRun {
         let lights: Vec<(usize, Vec<Colour>)> = programme
             .lights
             .iter()
-            .filter_map(|(k, approach, signal, colours)| Some((plan.index(*k, *approach, *signal)?, colours.clone())))
+            .filter_map(|(k, approach, signal, variant, colours)| {
+                Some((plan.index(*k, *approach, *signal, *variant)?, colours.clone()))
+            })
             .collect();
         let &(first, ..) = programme.lights.first()?;
         let phases = programme
@@ -234,20 +258,29 @@ impl super::CityMap {
     /// them, every duration scaled by `scale` (not a programme's `offset`)
     /// and each junction's clock shifted by its `offsets` entry (seconds,
     /// by intersection); with `actuated`, the network's traffic-actuated
-    /// programmes run as such.
+    /// programmes run as such. The lights of movements on schedules of
+    /// their own (variants) follow the cycle's lights, in the map's order.
     pub fn light_plan(&self, scale: f64, offsets: &[f64], actuated: bool) -> LightPlan {
         let mut plan = LightPlan::cycle(self.signalised(), scale, offsets);
         for programmed in &self.programmed {
-            let Some(index) = plan.index(programmed.intersection, programmed.approach, programmed.signal) else {
-                continue;
+            let light = Light {
+                offset: programmed.offset + offsets.get(programmed.intersection).copied().unwrap_or(0.0),
+                schedule: programmed
+                    .schedule
+                    .iter()
+                    .map(|s| ScheduleStep { colour: s.colour, duration: s.duration * scale })
+                    .collect(),
+                ..programmed.clone()
             };
-            let light = &mut plan.lights[index];
-            light.offset = programmed.offset + offsets.get(programmed.intersection).copied().unwrap_or(0.0);
-            light.schedule = programmed
-                .schedule
-                .iter()
-                .map(|s| ScheduleStep { colour: s.colour, duration: s.duration * scale })
-                .collect();
+            match programmed.variant {
+                0 => {
+                    let at = plan.index(light.intersection, light.approach, light.signal, 0);
+                    if let Some(index) = at {
+                        plan.lights[index] = light;
+                    }
+                }
+                _ => plan.lights.push(light),
+            }
         }
         if actuated {
             plan.actuated = self.actuated.iter().filter_map(|p| ActuatedRun::new(p, &plan, offsets, scale)).collect();
@@ -303,17 +336,19 @@ impl LightPlan {
                         }
                     }
                     let offset = offsets.get(intersection).copied().unwrap_or(0.0);
-                    lights.push(Light { intersection, approach, signal, offset, schedule });
+                    lights.push(Light { intersection, approach, signal, variant: 0, offset, schedule });
                 }
             }
         }
         LightPlan { lights, actuated: Vec::new() }
     }
 
-    /// Index of the light for (intersection, approach, signal), if the
-    /// plan has it.
-    pub fn index(&self, intersection: usize, approach: char, signal: Signal) -> Option<usize> {
-        self.lights.iter().position(|l| l.intersection == intersection && l.approach == approach && l.signal == signal)
+    /// Index of the light for (intersection, approach, signal, variant),
+    /// if the plan has it.
+    pub fn index(&self, intersection: usize, approach: char, signal: Signal, variant: u8) -> Option<usize> {
+        self.lights.iter().position(|l| {
+            l.intersection == intersection && l.approach == approach && l.signal == signal && l.variant == variant
+        })
     }
 
     /// States of every light at time `t`.
@@ -330,22 +365,22 @@ mod tests {
     fn default_cycle_runs_the_original_phases() {
         let plan = LightPlan::cycle(&[0, 1, 2, 3], 1.0, &[0.0; 4]);
         assert_eq!(plan.lights.len(), 32);
-        let ew = &plan.lights[plan.index(0, 'W', Signal::Straight).unwrap()];
+        let ew = &plan.lights[plan.index(0, 'W', Signal::Straight, 0).unwrap()];
         assert_eq!(ew.state_at(0.0).colour, Colour::Green);
         assert_eq!(ew.state_at(15.5).colour, Colour::Yellow);
         assert_eq!(ew.state_at(19.5).colour, Colour::Red);
         assert!((ew.state_at(30.0).since_change - 11.0).abs() < 1e-9);
         assert_eq!(ew.state_at(60.1).colour, Colour::Green);
-        let ns_left = &plan.lights[plan.index(2, 'N', Signal::Left).unwrap()];
+        let ns_left = &plan.lights[plan.index(2, 'N', Signal::Left, 0).unwrap()];
         assert_eq!(ns_left.state_at(20.0).colour, Colour::Green);
         assert_eq!(ns_left.state_at(27.0).colour, Colour::Yellow);
-        let ew_left = &plan.lights[plan.index(1, 'E', Signal::Left).unwrap()];
+        let ew_left = &plan.lights[plan.index(1, 'E', Signal::Left, 0).unwrap()];
         assert_eq!(ew_left.state_at(50.0).colour, Colour::Green);
         // Never two conflicting greens: EW straight and NS straight.
         for k in 0..600 {
             let t = k as f64 * 0.1;
-            let a = plan.lights[plan.index(0, 'E', Signal::Straight).unwrap()].state_at(t).colour;
-            let b = plan.lights[plan.index(0, 'N', Signal::Straight).unwrap()].state_at(t).colour;
+            let a = plan.lights[plan.index(0, 'E', Signal::Straight, 0).unwrap()].state_at(t).colour;
+            let b = plan.lights[plan.index(0, 'N', Signal::Straight, 0).unwrap()].state_at(t).colour;
             assert!(!(a != Colour::Red && b != Colour::Red), "t={t}");
         }
     }
@@ -353,10 +388,10 @@ mod tests {
     #[test]
     fn scale_and_offset_shift_the_schedule() {
         let plan = LightPlan::cycle(&[0, 1, 2, 3], 0.5, &[0.0, 5.0, 0.0, 0.0]);
-        let a = &plan.lights[plan.index(0, 'W', Signal::Straight).unwrap()];
+        let a = &plan.lights[plan.index(0, 'W', Signal::Straight, 0).unwrap()];
         assert_eq!(a.state_at(7.0).colour, Colour::Green);
         assert_eq!(a.state_at(8.0).colour, Colour::Yellow);
-        let b = &plan.lights[plan.index(1, 'W', Signal::Straight).unwrap()];
+        let b = &plan.lights[plan.index(1, 'W', Signal::Straight, 0).unwrap()];
         assert_eq!(b.state_at(3.0).colour, Colour::Yellow);
     }
 }

@@ -18,7 +18,7 @@ use glam::DVec2;
 /// order), metres; empty for the toy world.
 pub fn signal_heads(map: &CityMap, plan: &ScenarioPlan) -> Vec<Option<DVec2>> {
     plan.world.city().map_or_else(Vec::new, |city| {
-        city.lights.lights.iter().map(|l| map.signal_head(l.intersection, l.approach, l.signal)).collect()
+        city.lights.lights.iter().map(|l| map.signal_head(l.intersection, l.approach, l.signal, l.variant)).collect()
     })
 }
 

@@ -41,7 +41,8 @@ pub fn write_lights<W: Write>(
     let mut constant = Vec::with_capacity(plan.lights.len());
     for (light, head) in plan.lights.iter().zip(head_pixels) {
         let name: &str = light.approach.encode_utf8(&mut approach);
-        let mut middle = csv_cells(&[intersection_names[light.intersection].as_str(), name, light.signal.name()])?;
+        let mut middle =
+            csv_cells(&[intersection_names[light.intersection].as_str(), name, light.signal_label().as_str()])?;
         middle.push(b',');
         let mut tail = Vec::new();
         if let Some(p) = head {
@@ -108,7 +109,10 @@ struct EventRow<'a> {
 /// Every light's name (`AC/W/straight`, as scenario files name lights), in
 /// plan order.
 pub fn light_names(plan: &LightPlan, intersection_names: &[String]) -> Vec<String> {
-    plan.lights.iter().map(|l| light_label(&intersection_names[l.intersection], l.approach, l.signal.name())).collect()
+    plan.lights
+        .iter()
+        .map(|l| light_label(&intersection_names[l.intersection], l.approach, &l.signal_label()))
+        .collect()
 }
 
 /// The first frame that shows the outcome of an event at `t` seconds.

@@ -83,7 +83,8 @@ struct EffectsRecord {
 struct LightRecord<'a> {
     intersection: &'a str,
     approach: char,
-    signal: &'a str,
+    /// `straight`, `left`, or a variant's `straight-2`, ..
+    signal: String,
     offset: f64,
     schedule: &'a [crate::map::signals::ScheduleStep],
     /// Run by a traffic-actuated programme (`city.lights.actuated`): the
@@ -167,7 +168,7 @@ pub fn scenario_json(
         edges_without_effect: pairs(&report.edges_without_effect(&plan.edges)),
     });
     let light_record =
-        |l: &'_ Light| -> (usize, char, &'static str, f64) { (l.intersection, l.approach, l.signal.name(), l.offset) };
+        |l: &'_ Light| -> (usize, char, String, f64) { (l.intersection, l.approach, l.signal_label(), l.offset) };
     let city = plan.world.city().map(|c| CityRecord {
         model,
         confounders: &c.confounders,

@@ -203,7 +203,7 @@ pub fn draw_background(map: &CityMap, camera: &Camera) -> Background {
                 k += 1.0;
             }
             let junction = &map.intersections[intersection];
-            let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight);
+            let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight, 0);
             match junction.control {
                 JunctionControl::Signals => {
                     quad_along(&mut pixmap, t, curve, len - 3.6, len - 3.2, -0.5 * lw, centre - 0.3, WHITE);
@@ -271,7 +271,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         let crate::map::LaneEnd::Intersection { intersection, approach } = lane.end else { continue };
         let line = len - map.layout.stop_line_setback;
         let junction = &map.intersections[intersection];
-        let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight);
+        let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight, 0);
         let kerb_side = map.adjacent_lane(id, false).is_none();
         match junction.control {
             JunctionControl::Signals => quad_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),

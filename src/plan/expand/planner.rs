@@ -722,11 +722,14 @@ impl Planner {
             let Some(intersection) = self.map.intersections.iter().position(|i| i.name == o.intersection) else {
                 continue; // names were checked with the spec
             };
-            let Some(index) = plan.index(intersection, o.approach, o.signal) else {
-                continue; // so was that the junction has lights
-            };
-            plan.lights[index].offset = o.offset + phases[intersection];
-            plan.lights[index].schedule = o.schedule.clone();
+            // Every light of the approach's signal, its variants included
+            // (the junction's having lights was checked with the spec too).
+            for light in plan.lights.iter_mut() {
+                if light.intersection == intersection && light.approach == o.approach && light.signal == o.signal {
+                    light.offset = o.offset + phases[intersection];
+                    light.schedule = o.schedule.clone();
+                }
+            }
         }
         plan
     }

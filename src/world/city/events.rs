@@ -56,7 +56,7 @@ impl Sim<'_> {
                 "{} {} {} ({forced})",
                 self.map.intersections[intersection].name,
                 light.approach,
-                light.signal.name()
+                light.signal_label()
             ),
         })
     }

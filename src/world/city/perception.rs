@@ -7,8 +7,8 @@ use super::Sim;
 use crate::map::control::JunctionControl;
 use crate::map::curve::Curve;
 use crate::map::route::last_change_start;
-use crate::map::signals::{Colour, LightState, Signal};
-use crate::map::{LaneEnd, LegKind, RouteLeg, Turn};
+use crate::map::signals::{Colour, LightState};
+use crate::map::{LegKind, RouteLeg};
 use crate::spec::DrivingRules;
 use std::sync::Arc;
 
@@ -435,15 +435,10 @@ impl Sim<'_> {
         }
     }
 
-    /// The light (index in the plan) that governs entering `connector`: its
-    /// approach's Left signal for left turns, its Straight signal otherwise.
+    /// The light (index in the plan) that governs entering `connector`
+    /// ([`CityMap::light_of`]).
     pub(super) fn light_for(&self, connector: usize) -> Option<usize> {
-        let c = &self.map.connectors[connector];
-        let intersection = c.intersection?;
-        let LaneEnd::Intersection { approach, .. } = self.map.lanes[c.from].end else { return None };
-        // A U-turn through a junction (imported networks) goes with the left turns.
-        let signal = if matches!(c.turn, Turn::Left | Turn::UTurn) { Signal::Left } else { Signal::Straight };
-        self.map.light_index(intersection, approach, signal)
+        self.map.light_of(connector)
     }
 
     /// Light `index` at time `t` (seconds): its plan, unless an intervention

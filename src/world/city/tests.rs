@@ -134,7 +134,7 @@ fn lights_with(map: &CityMap, lanes: &[&str], schedule: &[(Colour, f64)]) -> Lig
             panic!("{name} does not end at an intersection")
         };
         for signal in [Signal::Straight, Signal::Left] {
-            let index = lights.index(intersection, approach, signal).expect("a signalised junction");
+            let index = lights.index(intersection, approach, signal, 0).expect("a signalised junction");
             let light = &mut lights.lights[index];
             light.offset = 0.0;
             light.schedule = schedule.iter().map(|&(colour, duration)| ScheduleStep { colour, duration }).collect();
@@ -782,7 +782,7 @@ fn a_car_passing_an_actuated_phases_detector_holds_its_green_and_its_absence_end
     let elsewhere = Given { start: 12.0, ..straight("A0A1_0", 10.0, 12.0) };
     let green_for = |car: &Given, actuated: bool| -> (f64, Trajectories) {
         let lights = map.light_plan(1.0, &[], actuated);
-        let light = lights.index(intersection, side, Signal::Straight).expect("B1 has lights");
+        let light = lights.index(intersection, side, Signal::Straight, 0).expect("B1 has lights");
         let traj = simulate(&map, &plan(&map, std::slice::from_ref(car), lights, vec![], 20.0));
         let green = traj.lights.iter().take_while(|frame| frame[light].colour == Colour::Green).count();
         (green as f64 * FRAME, traj)
@@ -803,4 +803,55 @@ fn a_car_passing_an_actuated_phases_detector_holds_its_green_and_its_absence_end
     // Run as fixed, the phase lasts its written 42 s whatever drives.
     let (fixed, _) = green_for(&on_approach, false);
     assert!(fixed >= 20.0 - 1e-9, "a fixed programme's green ended after {fixed:.1} s");
+}
+
+/// A 2 x 2 grid of two-lane roads (netgenerate; no map data) whose
+/// junction B1 has a right-turn arrow: the right turn from the south goes
+/// on the straight phase and again with the protected left from the west.
+fn arrow_grid() -> CityMap {
+    imported(include_str!("../../../tests/data/sumo/grid2-arrows.net.xml"))
+}
+
+#[test]
+fn a_right_turn_arrow_lets_the_right_turn_go_while_straight_on_waits() {
+    let map = arrow_grid();
+    let b1 = map.intersections.iter().position(|x| x.name == "B1").expect("junction B1");
+    // B1's programme: from the south straight and right green 0-36 s,
+    // yellow to 39; the arrow (right turn, and the west's left) 39-45,
+    // yellow to 48; red to the end of the cycle at 87. Start at 33 s: in
+    // scenario time green to 3 s, yellow to 6, the arrow green 6-12 and
+    // yellow to 15, straight on red from 6 to 54.
+    let mut offsets = vec![0.0; map.intersections.len()];
+    offsets[b1] = 33.0;
+    let lights = map.light_plan(1.0, &offsets, false);
+    let straight_light = lights.index(b1, 'S', Signal::Straight, 0).expect("B1/S/straight");
+    let arrow = lights.index(b1, 'S', Signal::Straight, 1).expect("B1/S/straight-2, the arrow");
+    assert_eq!(map.light_name(arrow), "B1/S/straight-2");
+    assert_eq!(map.light_by_name("B1/S/straight-2"), Ok(arrow));
+    let approach = lane(&map, "B0B1_0");
+    let line = map.lanes[approach].curve.length() - map.layout.stop_line_setback;
+    // Two runs of one car 70 m before the line at 6 m/s, which sees its
+    // light from 30 m (about 6.7 s in): turning right, and straight on.
+    let right = Given { actions: vec![Action::Right], start: 6.0, ..straight("B0B1_0", line - 70.0, 6.0) };
+    let ahead = Given { start: 6.0, ..straight("B0B1_0", line - 70.0, 6.0) };
+    let crossing = |car: &Given| -> (Option<f64>, Trajectories) {
+        let traj = simulate(&map, &plan(&map, std::slice::from_ref(car), lights.clone(), vec![], 60.0));
+        let crossed = traj.states.iter().position(|f| {
+            let (s, r) = map.lanes[approach].curve.local_coordinates(f[0].position);
+            s > line || r.abs() > 3.0
+        });
+        (crossed.map(|k| k as f64 * FRAME), traj)
+    };
+    let (turned, traj) = crossing(&right);
+    let at = |t: f64| &traj.lights[(t / FRAME).round() as usize];
+    assert_eq!((at(1.0)[straight_light].colour, at(1.0)[arrow].colour), (Colour::Green, Colour::Green));
+    assert_eq!((at(4.0)[straight_light].colour, at(4.0)[arrow].colour), (Colour::Yellow, Colour::Yellow));
+    assert_eq!((at(8.0)[straight_light].colour, at(8.0)[arrow].colour), (Colour::Red, Colour::Green));
+    assert_eq!((at(13.0)[straight_light].colour, at(13.0)[arrow].colour), (Colour::Red, Colour::Yellow));
+    let turned = turned.expect("the right turn reached its line");
+    assert!((6.0..15.0).contains(&turned), "the right turn crossed at {turned:.1} s, not on the arrow (6-15 s)");
+    assert_eq!(at(turned)[straight_light].colour, Colour::Red, "it went while straight on was red");
+    let (went, _) = crossing(&ahead);
+    let went = went.expect("the straight car crossed once its green came back");
+    assert!(went >= 54.0, "the straight car crossed at {went:.1} s, before its green at 54 s");
 }
