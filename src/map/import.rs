@@ -215,14 +215,18 @@ fn programmed_lights(
                     Signal::Straight => [Turn::Straight, Turn::Right],
                     Signal::Left => [Turn::Left, Turn::UTurn],
                 };
-                // (programme, colours in its phases) of each light so far.
+                // (programme, colours in its phases) of each light so far;
+                // whether the first link turns on a permissive green; the
+                // movements without a link, which follow the first.
                 let mut variants: Vec<(usize, Vec<Colour>)> = Vec::new();
+                let (mut first_permissive, mut unlinked) = (None, Vec::new());
                 for turn in order {
                     for (id, c) in map.connectors.iter().enumerate() {
                         if c.intersection != Some(k) || c.turn != turn || map.approach_of(id) != Some(approach) {
                             continue;
                         }
                         let Some((programme, link)) = connection_of[id].and_then(|x| net.connections[x].signal) else {
+                            unlinked.push(id);
                             continue;
                         };
                         let p = &net.programmes[programme];
@@ -234,6 +238,7 @@ fn programmed_lights(
                         if read_as != signal {
                             out.permissive_lefts.push(id);
                         }
+                        first_permissive.get_or_insert(read_as != signal);
                         let colours: Vec<Colour> = states.iter().map(|&c| colour_of(c, read_as)).collect();
                         let variant = match variants.iter().position(|v| v.0 == programme && v.1 == colours) {
                             Some(v) => v,
@@ -247,6 +252,9 @@ fn programmed_lights(
                             format!("<junction id=\"{x}\">: the {} movements from {approach} run on more than 256 schedules", signal.name())
                         })?;
                     }
+                }
+                if first_permissive == Some(true) {
+                    out.permissive_lefts.extend(unlinked);
                 }
                 for (variant, (programme, colours)) in variants.into_iter().enumerate() {
                     let p = &net.programmes[programme];
@@ -710,7 +718,9 @@ mod tests {
         let wrong = map.light_by_name("B1/S/straight-3").unwrap_err();
         assert!(wrong.contains("straight, straight-2"), "{wrong}");
         assert!(map.light_by_name("B1/S/straight-1").is_err());
-        assert!(map.light_by_name("B1/S/straight-02").is_err());
+        for wrong in ["B1/S/straight-02", "B1/S/straight-+2", "B1/S/straight-", "B1/S/straight-256"] {
+            assert!(map.light_by_name(wrong).is_err(), "{wrong}");
+        }
         // Lefts without a protected phase go on the permissive green; the
         // west's, protected in the arrow phase, does not.
         assert!(!map.permissive_left(from("A1B1_1", Turn::Left)));

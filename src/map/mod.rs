@@ -436,8 +436,10 @@ impl CityMap {
                 let a = approach.chars().next().filter(|c| approach.len() == 1 && signals::APPROACHES.contains(c));
                 // `left`, or a variant: `left-2`, ...
                 let (base, variant) = match signal.split_once('-') {
-                    Some((base, n)) if !n.starts_with('0') => {
-                        (base, n.parse::<u8>().ok().filter(|&v| v >= 2).map(|v| v - 1))
+                    Some((base, n))
+                        if !n.starts_with('0') && !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) =>
+                    {
+                        (base, n.parse::<u32>().ok().filter(|&v| v >= 2).and_then(|v| u8::try_from(v - 1).ok()))
                     }
                     Some((base, _)) => (base, None),
                     None => (*signal, Some(0)),
@@ -465,18 +467,11 @@ impl CityMap {
                                 labels.join(", ")
                             ));
                         }
-                        None => None,
+                        None => return Err(self.without_lights(text, k)),
                     },
                     (Some(k), Some(a), Some(s), Some(_)) => match self.light_index(k, a, s) {
                         Some(index) => Some(index),
-                        None => {
-                            let x = &self.intersections[k];
-                            return Err(format!(
-                                "{text:?} is not a light: junction {} has no traffic lights (its control is {})",
-                                x.name,
-                                x.control.name()
-                            ));
-                        }
+                        None => return Err(self.without_lights(text, k)),
                     },
                     _ => None,
                 }
@@ -489,10 +484,20 @@ impl CityMap {
             names.sort_unstable();
             let example = names.first().copied().unwrap_or("AC");
             format!(
-                "{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"{example}/W/straight\" ({}; N E S W; straight left)",
+                "{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"{example}/W/straight\" ({}; N E S W; straight left, or on an imported network a light of its own: straight-2, left-2, ..)",
                 names.join(" ")
             )
         })
+    }
+
+    /// Why `text` names no light: junction `k` has none.
+    fn without_lights(&self, text: &str, k: usize) -> String {
+        let x = &self.intersections[k];
+        format!(
+            "{text:?} is not a light: junction {} has no traffic lights (its control is {})",
+            x.name,
+            x.control.name()
+        )
     }
 
     /// The control of the junction `connector` crosses (`None`: a U-turn loop).
