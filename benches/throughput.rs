@@ -71,6 +71,7 @@ fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOpti
         images,
         annotations: false,
         effects: false,
+        lights: Default::default(),
         progress: ProgressMode::Quiet,
         shard: None,
         force: false,
@@ -690,23 +691,31 @@ fn main() {
         let trajectories: Vec<_> =
             plans.iter().take(100).map(|p| causalcity::world::simulate(&expansion.map, p)).collect();
         let names: Vec<String> = expansion.map.intersections.iter().map(|i| i.name.clone()).collect();
-        let t = Instant::now();
-        for (plan, traj) in plans.iter().zip(&trajectories) {
-            let mut sink = Vec::with_capacity(1 << 20);
-            let lights = &plan.world.city().unwrap().lights;
-            let heads: Vec<_> = lights
-                .lights
-                .iter()
-                .map(|l| {
-                    expansion
-                        .map
-                        .signal_head(l.intersection, l.approach, l.signal, l.variant)
-                        .map(|p| expansion.camera.to_pixel(p))
-                })
-                .collect();
-            causalcity::output::logs::write_lights(&mut sink, lights, &names, &heads, traj).unwrap();
+        // lights.csv (every light every frame) and light_changes.csv
+        // (gen --lights changes) side by side: time and bytes per scenario.
+        let mut light_logs = Vec::new();
+        for changes in [false, true] {
+            let t = Instant::now();
+            let mut bytes = 0;
+            for (plan, traj) in plans.iter().zip(&trajectories) {
+                let mut sink = Vec::with_capacity(1 << 20);
+                let lights = &plan.world.city().unwrap().lights;
+                let heads: Vec<_> = lights
+                    .lights
+                    .iter()
+                    .map(|l| {
+                        expansion
+                            .map
+                            .signal_head(l.intersection, l.approach, l.signal, l.variant)
+                            .map(|p| expansion.camera.to_pixel(p))
+                    })
+                    .collect();
+                causalcity::output::logs::write_lights(&mut sink, lights, &names, &heads, traj, changes).unwrap();
+                bytes += sink.len();
+            }
+            light_logs.push((t.elapsed().as_secs_f64() * 1e3 / trajectories.len() as f64, bytes / trajectories.len()));
         }
-        let lights_ms = t.elapsed().as_secs_f64() * 1e3 / trajectories.len() as f64;
+        let [(lights_ms, lights_bytes), (changes_ms, changes_bytes)] = light_logs[..] else { unreachable!() };
         let t = Instant::now();
         for (plan, traj) in plans.iter().zip(&trajectories) {
             let ids: Vec<u32> = plan.cars.iter().map(|c| c.id).collect();
@@ -716,6 +725,11 @@ fn main() {
         let poses_ms = t.elapsed().as_secs_f64() * 1e3 / trajectories.len() as f64;
         println!(
             "\n== city scenario cost, 12 cars x 150 frames: plan {plan_ms:.2} ms, simulate {sim_ms:.2} ms, lights.csv {lights_ms:.2} ms, poses.csv {poses_ms:.2} ms =="
+        );
+        println!(
+            "lights.csv {lights_ms:.3} ms, {lights_bytes} bytes; light_changes.csv (--lights changes) {changes_ms:.3} ms, {changes_bytes} bytes: {:.1}x fewer bytes, {:.1}x faster",
+            lights_bytes as f64 / changes_bytes.max(1) as f64,
+            lights_ms / changes_ms.max(1e-9)
         );
     }
     effects_cost(&root);

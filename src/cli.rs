@@ -21,7 +21,7 @@ use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunO
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
 use causalcity::output::claim::claim_file;
-use causalcity::output::manifest::Products;
+use causalcity::output::manifest::{LightsLog, Products};
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::{Split, WorldKind};
@@ -486,6 +486,14 @@ pub struct GenArgs {
     #[arg(long)]
     pub no_effects: bool,
 
+    /// City world: how the lights' colours are logged. `frames`: lights.csv,
+    /// every light at every frame (most of a poses-only scenario's bytes);
+    /// `changes`: light_changes.csv, every light at frame 0 and then only
+    /// where its colour changes (same columns; the Python package, validate
+    /// and stats read both).
+    #[arg(long, value_enum, default_value_t = LightsArg::Frames)]
+    pub lights: LightsArg,
+
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
     /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.
     #[arg(long, value_name = "K/N")]
@@ -556,6 +564,24 @@ impl From<WorldArg> for WorldKind {
         match w {
             WorldArg::Toy => WorldKind::Toy,
             WorldArg::City => WorldKind::City,
+        }
+    }
+}
+
+/// `gen --lights`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LightsArg {
+    /// lights.csv: every light at every frame.
+    Frames,
+    /// light_changes.csv: every light at frame 0, then where it changes.
+    Changes,
+}
+
+impl From<LightsArg> for LightsLog {
+    fn from(l: LightsArg) -> LightsLog {
+        match l {
+            LightsArg::Frames => LightsLog::Frames,
+            LightsArg::Changes => LightsLog::Changes,
         }
     }
 }
@@ -694,6 +720,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 images: !args.no_images,
                 annotations: args.annotations,
                 effects: !args.no_effects,
+                lights: args.lights.into(),
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -811,7 +838,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     out: args.out,
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
-                    products: Products { images, annotations: false, effects: false },
+                    products: Products { images, annotations: false, effects: false, lights: Default::default() },
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };

@@ -6,7 +6,8 @@
 
 use crate::dataset::{edge_pairs, Dataset};
 use crate::output::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, POSES_CSV, SCENARIO_JSON,
+    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV, POSES_CSV,
+    SCENARIO_JSON,
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
@@ -264,7 +265,8 @@ fn validate_sweep(
         .map(|k| pair_of(k).join("factual"))
         .find(|f| f.is_dir())
         .is_some_and(|f| f.join(crate::output::layout::FrameKind::Rgb.folder()).is_dir());
-    let products = crate::output::manifest::Products { images, annotations: false, effects: false };
+    let products =
+        crate::output::manifest::Products { images, annotations: false, effects: false, lights: Default::default() };
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
     let expected =
         Expected::new(spec, ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras));
@@ -544,7 +546,21 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
             }
         }
     }
-    if city {
+    if city && expected.layout.lights == crate::output::manifest::LightsLog::Changes {
+        // Every light at frame 0, then changes in order (as the Python
+        // package reads it).
+        if read(LIGHT_CHANGES_CSV, &mut problems).is_some() {
+            let path = dir.join(LIGHT_CHANGES_CSV);
+            match crate::dataset::readback::read_light_log(&dir, frames, spec.frame_interval()) {
+                Ok(read) if read.names.len() == lights_per_frame => {}
+                Ok(read) => problems.push(Problem {
+                    path,
+                    message: format!("{} lights at frame 0, expected {lights_per_frame}", read.names.len()),
+                }),
+                Err(message) => problems.push(Problem { path, message }),
+            }
+        }
+    } else if city {
         if let Some(data) = read(LIGHTS_CSV, &mut problems) {
             // Every light of every intersection, every frame.
             let lights = lights_per_frame;

@@ -5,6 +5,7 @@ mod common;
 use common::*;
 use serde_json::Value;
 use sha2::Digest;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 #[test]
@@ -171,4 +172,86 @@ fn the_city_layout_matches_data_schema_and_validates() {
     assert_eq!(output.status.code(), Some(0), "{report}");
     assert_eq!(report["scenarios_checked"], 4);
     assert_eq!(report["problems"].as_array().unwrap().len(), 0);
+}
+
+/// Each light's (colour, since_change) per frame, from a scenario's light
+/// log: lights.csv as it is, light_changes.csv carried forward frame by
+/// frame to `frames`. Keyed by intersection/approach/signal; with the
+/// head's pixel.
+fn light_frames(dir: &Path, interval: f64, frames: usize) -> BTreeMap<String, (Vec<(String, f64)>, String)> {
+    let changes = dir.join("light_changes.csv");
+    let file = if changes.exists() { changes } else { dir.join("lights.csv") };
+    let mut lights: BTreeMap<String, (Vec<(String, f64)>, String)> = BTreeMap::new();
+    for row in csv::Reader::from_path(&file).unwrap().records() {
+        let row = row.unwrap();
+        let frame: usize = row[0].parse().unwrap();
+        let entry = lights.entry(format!("{}/{}/{}", &row[2], &row[3], &row[4])).or_default();
+        entry.1 = format!("{},{}", &row[7], &row[8]);
+        while entry.0.len() < frame {
+            let (colour, since) = entry.0.last().cloned().expect("every light has a row at frame 0");
+            entry.0.push((colour, since + interval));
+        }
+        entry.0.push((row[5].to_string(), row[6].parse().unwrap()));
+    }
+    for (rows, _) in lights.values_mut() {
+        while rows.len() < frames {
+            let (colour, since) = rows.last().cloned().expect("every light has a row at frame 0");
+            rows.push((colour, since + interval));
+        }
+    }
+    lights
+}
+
+#[test]
+fn lights_logged_as_changes_carry_every_frame_of_lights_csv_in_a_fraction_of_the_bytes() {
+    let dir = fresh_dir("e2e-light-changes");
+    let spec = write_spec(&dir, &city_spec("e2e-light-changes", &[(8, 0.5)], (2, 1, 1), 300, "{}"));
+    let (frames_out, changes_out) = (dir.join("frames"), dir.join("changes"));
+    gen_ok(&spec, &frames_out, &["--quiet", "--no-images"]);
+    gen_ok(&spec, &changes_out, &["--quiet", "--no-images", "--lights", "changes"]);
+    assert_eq!(read_json(&changes_out.join("manifest.json"))["lights"], "changes");
+    assert!(read_json(&frames_out.join("manifest.json")).get("lights").is_none(), "the default writes what it wrote");
+    let interval = read_json(&frames_out.join("manifest.json"))["spec"]["frame_interval"].as_f64().unwrap();
+    let (mut full_bytes, mut change_bytes, mut checked) = (0, 0, 0);
+    for (a, b) in scenario_dirs(&frames_out).into_iter().zip(scenario_dirs(&changes_out)) {
+        assert!(!b.join("lights.csv").exists() && !a.join("light_changes.csv").exists());
+        let schema = read_json(&schema_dir().join("light_changes.schema.json"));
+        let columns: Vec<&str> =
+            schema["fields"].as_array().unwrap().iter().map(|f| f["name"].as_str().unwrap()).collect();
+        let mut reader = csv::Reader::from_path(b.join("light_changes.csv")).unwrap();
+        assert!(reader.headers().unwrap().iter().eq(columns.iter().copied()), "light_changes.csv columns");
+        // Every other file the same bytes.
+        for file in ["scenario.json", "poses.csv", "events.csv", "interactions.csv", "effects.csv"] {
+            assert_eq!(std::fs::read(a.join(file)).unwrap(), std::fs::read(b.join(file)).unwrap(), "{file}");
+        }
+        let (full, compact) = (light_frames(&a, interval, 300), light_frames(&b, interval, 300));
+        assert_eq!(full.len(), 32);
+        assert_eq!(full.keys().collect::<Vec<_>>(), compact.keys().collect::<Vec<_>>());
+        for (name, (rows, head)) in &full {
+            let (carried, compact_head) = &compact[name];
+            assert_eq!(head, compact_head, "{name}");
+            assert_eq!(rows.len(), 300);
+            for (f, ((c1, s1), (c2, s2))) in rows.iter().zip(carried).enumerate() {
+                assert_eq!(c1, c2, "{name} frame {f}");
+                assert!((s1 - s2).abs() < 1.5e-3, "{name} frame {f}: since_change {s1} against {s2}");
+                checked += 1;
+            }
+        }
+        full_bytes += std::fs::metadata(a.join("lights.csv")).unwrap().len();
+        change_bytes += std::fs::metadata(b.join("light_changes.csv")).unwrap().len();
+    }
+    assert_eq!(checked, 4 * 32 * 300);
+    assert!(change_bytes * 20 < full_bytes, "light_changes.csv {change_bytes} bytes against lights.csv {full_bytes}");
+    // validate and stats read it, and say the same of both.
+    let checked = run(&["validate", changes_out.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    let stats = |out: &Path| run(&["stats", out.to_str().unwrap(), "--json"]).stdout;
+    let (a, b): (Value, Value) =
+        (serde_json::from_slice(&stats(&frames_out)).unwrap(), serde_json::from_slice(&stats(&changes_out)).unwrap());
+    assert_eq!(a["rows"], b["rows"]);
+    // A resumed run must log the lights as the dataset does.
+    let mixed = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", changes_out.to_str().unwrap(), "--no-images"]);
+    let stderr = String::from_utf8_lossy(&mixed.stderr);
+    assert_eq!(mixed.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("lights: changes there, frames now (--lights)"), "{stderr}");
 }

@@ -494,6 +494,7 @@ fn generate(
         images,
         annotations,
         effects,
+        lights: Default::default(),
         progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
         shard,
         force,

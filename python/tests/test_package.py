@@ -838,3 +838,32 @@ def test_a_real_network_from_sumo_maps_streams_and_reads_back_from_its_dataset(t
     for loaded, scenario in zip(data, streamed):
         np.testing.assert_array_equal(loaded.position, scenario.position)
         np.testing.assert_array_equal(causalcity.simulate(copy, *loaded.key).position, scenario.position)
+
+
+def test_lights_logged_as_changes_read_back_as_the_arrays_of_lights_csv(tmp_path):
+    """gen --lights changes writes light_changes.csv (every light at frame 0,
+    then only its changes): the package reads every frame back, the colours
+    exactly and since_change to the millisecond, in a tenth of the bytes."""
+    spec = json.loads(CITY_SPEC.read_text())
+    spec.update(name="changes", frames=150)
+    spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
+    spec["splits"] = {"train": 3, "val": 0, "test": 0}
+    spec_file = tmp_path / "changes.json"
+    spec_file.write_text(json.dumps(spec))
+    frames, changes = tmp_path / "frames", tmp_path / "changes"
+    cli("gen", "--spec", str(spec_file), "--out", str(frames), "--no-images", "--no-effects")
+    cli("gen", "--spec", str(spec_file), "--out", str(changes), "--no-images", "--no-effects", "--lights", "changes")
+    full, compact = causalcity.open_dataset(frames), causalcity.open_dataset(changes)
+    assert len(full) == len(compact) == 3
+    for a, b in zip(full, compact):
+        assert a.lights.names == b.lights.names and len(a.lights.names) == 32
+        np.testing.assert_array_equal(a.lights.colour, b.lights.colour)
+        np.testing.assert_allclose(a.lights.since_change, b.lights.since_change, atol=1.5e-3, rtol=0)
+        np.testing.assert_array_equal(a.lights.head_pixels, b.lights.head_pixels)
+        np.testing.assert_array_equal(a.interactions.light, b.interactions.light)
+        np.testing.assert_array_equal(a.position, b.position)
+    folders = sorted(p.parent for p in changes.rglob("light_changes.csv"))
+    assert len(folders) == 3 and not list(changes.rglob("lights.csv"))
+    small = sum((f / "light_changes.csv").stat().st_size for f in folders)
+    large = sum(p.stat().st_size for p in frames.rglob("lights.csv"))
+    assert small * 5 < large, (small, large)

@@ -433,9 +433,29 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
 
 /// (frame, intersection, approach) where the straight signal showed red or
 /// yellow, from lights.csv (none without lights).
-fn red_approaches(dir: &Path) -> Result<std::collections::HashSet<(usize, String, char)>, String> {
+fn red_approaches(
+    dir: &Path,
+    scenario: &serde_json::Value,
+) -> Result<std::collections::HashSet<(usize, String, char)>, String> {
     let path = dir.join("lights.csv");
     let mut red = std::collections::HashSet::new();
+    if dir.join(crate::output::layout::LIGHT_CHANGES_CSV).exists() {
+        // gen --lights changes: every frame as the Python package reads it.
+        let frames = scenario["frames"].as_u64().unwrap_or(0) as usize;
+        let interval = scenario["frame_interval"].as_f64().unwrap_or(1.0);
+        let lights = crate::dataset::readback::read_light_log(dir, frames, interval)?;
+        let count = lights.names.len();
+        for (k, name) in lights.names.iter().enumerate() {
+            let mut parts = name.rsplitn(3, '/');
+            let (Some("straight"), Some(side), Some(i)) = (parts.next(), parts.next(), parts.next()) else { continue };
+            for frame in 0..frames {
+                if lights.colour[frame * count + k] != 0 {
+                    red.insert((frame, i.to_string(), side.chars().next().unwrap_or('?')));
+                }
+            }
+        }
+        return Ok(red);
+    }
     if !path.exists() {
         return Ok(red);
     }
@@ -478,7 +498,7 @@ fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, St
     let mut reader = csv::Reader::from_path(&poses_path).map_err(|e| format!("{}: {e}", poses_path.display()))?;
     // Per car: (x, y, speed px/frame) per frame.
     let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
-    let red = red_approaches(dir)?;
+    let red = red_approaches(dir, &scenario)?;
     let causal = CausalTally::of_scenario(&scenario);
     let mut t =
         Tally { cars, histogram: vec![0; HISTOGRAM_BINS], causal, px_per_frame_per_m_s: to_px, ..Tally::default() };

@@ -84,9 +84,8 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
         })?;
         a.effects = Some(read_effects(&effects, cars, frames, threshold)?);
     }
-    let lights = dir.join("lights.csv");
     if value["world"] == "city" {
-        let read = read_lights(&lights, frames)?;
+        let read = read_light_log(dir, frames, summary.frame_interval)?;
         a.interactions = Some(read_interactions(&dir.join("interactions.csv"), frames, cars, &read.names)?);
         a.events = read_events(&dir.join("events.csv"), frames, cars, &read.names)?;
         a.lights = Some(read);
@@ -169,6 +168,92 @@ fn read_poses(path: &Path, a: &mut ScenarioArrays) -> Result<(), String> {
 
 const LIGHT_COLUMNS: [&str; 9] =
     ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
+
+/// The lights of the scenario folder `dir` as arrays, from `lights.csv` or,
+/// where the folder has that instead (`gen --lights changes`),
+/// `light_changes.csv`.
+pub fn read_light_log(dir: &Path, frames: usize, frame_interval: f64) -> Result<LightArrays, String> {
+    let changes = dir.join(crate::output::layout::LIGHT_CHANGES_CSV);
+    match changes.exists() {
+        true => read_light_changes(&changes, frames, frame_interval),
+        false => read_lights(&dir.join(crate::output::layout::LIGHTS_CSV), frames),
+    }
+}
+
+/// `light_changes.csv`: every light at frame 0 (which lists them in plan
+/// order), then a row where a light's colour differs from the frame
+/// before, frames ascending and lights in plan order within a frame. Each
+/// frame between holds the colour, its time since the change growing by
+/// the frame interval (as lights.csv writes it, to the millisecond).
+fn read_light_changes(path: &Path, frames: usize, frame_interval: f64) -> Result<LightArrays, String> {
+    let mut reader = open_csv(path)?;
+    check_header(path, &mut reader, &LIGHT_COLUMNS)?;
+    let mut names: Vec<String> = Vec::new();
+    let mut heads: Vec<f64> = Vec::new();
+    // Per light: its colour and time since the change at its last row, and that row's frame.
+    let mut current: Vec<(u8, f64, usize)> = Vec::new();
+    let (mut colour, mut since_change) = (Vec::new(), Vec::new());
+    let mut filled = 0usize; // frames written to the arrays
+    let mut last: Option<(usize, usize)> = None; // (frame, light) of the row before
+    let fill_to =
+        |to: usize, current: &[(u8, f64, usize)], colour: &mut Vec<u8>, since: &mut Vec<f64>, filled: &mut usize| {
+            while *filled < to {
+                for &(c, s, at) in current {
+                    colour.push(c);
+                    let grown = s + (*filled - at) as f64 * frame_interval;
+                    since.push((grown * 1000.0).round() / 1000.0);
+                }
+                *filled += 1;
+            }
+        };
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let frame: usize = field(path, line, &row, &LIGHT_COLUMNS, 0)?;
+        let name = light_label(&row[2], &row[3], &row[4]);
+        let c = LIGHT_COLOURS.iter().position(|c| c.name() == &row[5]).ok_or_else(|| {
+            format!("{} line {line}: colour {:?} is not one of green, yellow, red", path.display(), &row[5])
+        })? as u8;
+        let since: f64 = field(path, line, &row, &LIGHT_COLUMNS, 6)?;
+        if frame == 0 {
+            if names.contains(&name) || last.is_some_and(|(f, _)| f > 0) {
+                return Err(format!("{} line {line}: light {name} at frame 0 is out of order", path.display()));
+            }
+            for k in [7, 8] {
+                heads.push(match &row[k] {
+                    "" => f64::NAN,
+                    _ => field(path, line, &row, &LIGHT_COLUMNS, k)?,
+                });
+            }
+            names.push(name);
+            current.push((c, since, 0));
+            last = Some((0, names.len() - 1));
+            continue;
+        }
+        let light = names
+            .iter()
+            .position(|x| *x == name)
+            .ok_or_else(|| format!("{} line {line}: light {name} is not one of frame 0's", path.display()))?;
+        if frame >= frames || last.is_some_and(|(f, l)| (frame, light) <= (f, l)) {
+            return Err(format!(
+                "{} line {line}: light {name} at frame {frame} is out of order (frames ascending below {frames}, lights in frame 0's order)",
+                path.display()
+            ));
+        }
+        if current[light].0 == c {
+            return Err(format!(
+                "{} line {line}: light {name} at frame {frame} shows {} as before: not a change",
+                path.display(),
+                &row[5]
+            ));
+        }
+        fill_to(frame, &current, &mut colour, &mut since_change, &mut filled);
+        current[light] = (c, since, frame);
+        last = Some((frame, light));
+    }
+    fill_to(frames, &current, &mut colour, &mut since_change, &mut filled);
+    Ok(LightArrays { names, colour, since_change, head_pixels: heads })
+}
 
 fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
     let mut reader = open_csv(path)?;

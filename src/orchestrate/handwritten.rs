@@ -89,7 +89,12 @@ impl RunOptions {
 
     fn products(&self) -> Products {
         // Effects are a dataset's (gen's) ground truth.
-        Products { images: self.images, annotations: self.annotations && self.images, effects: false }
+        Products {
+            images: self.images,
+            annotations: self.annotations && self.images,
+            effects: false,
+            lights: Default::default(),
+        }
     }
 }
 

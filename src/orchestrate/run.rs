@@ -32,6 +32,8 @@ pub struct GenOptions {
     /// Measure and write every scenario's interventional effects
     /// (effects.csv, causal graphs in scenario.json).
     pub effects: bool,
+    /// City world: how the lights' colours are logged.
+    pub lights: crate::output::manifest::LightsLog,
     pub progress: ProgressMode,
     /// Generate only this part of the dataset.
     pub shard: Option<Shard>,
@@ -562,6 +564,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         images: options.images,
         annotations: options.annotations && options.images,
         effects: options.effects,
+        lights: options.lights,
     };
     let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
     // One writer per folder (the shards of one job together), and only into

@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! scenario.json  poses.csv  pixels.npy  checksums.sha256
-//! lights.csv  events.csv  interactions.csv    (city world)
+//! lights.csv  events.csv  interactions.csv    (city world; light_changes.csv
+//!                                              for lights.csv with gen --lights changes)
 //! annotations.json                            (--annotations)
 //! effects.csv                                 (gen, unless --no-effects)
 //! rgb/NNNN.png  mask/NNNN.png                 (images)
@@ -21,6 +22,9 @@ pub const SCENARIO_JSON: &str = "scenario.json";
 pub const POSES_CSV: &str = "poses.csv";
 /// City world: every light's colour per frame.
 pub const LIGHTS_CSV: &str = "lights.csv";
+/// City world with `gen --lights changes`: every light's colour at frame 0
+/// and where it changes.
+pub const LIGHT_CHANGES_CSV: &str = "light_changes.csv";
 /// City world: what happened, in time order.
 pub const EVENTS_CSV: &str = "events.csv";
 /// What bound each car's speed, per frame (city world).
@@ -70,6 +74,8 @@ pub struct ScenarioLayout {
     pub images: bool,
     pub annotations: bool,
     pub effects: bool,
+    /// City world: which file logs the lights.
+    pub lights: super::manifest::LightsLog,
     /// Extra cameras; they write files only with images.
     pub cameras: Vec<CameraFolder>,
 }
@@ -89,6 +95,7 @@ impl ScenarioLayout {
             images,
             annotations: products.annotations && images,
             effects: products.effects,
+            lights: products.lights,
             cameras: if images { cameras } else { Vec::new() },
         }
     }
@@ -121,6 +128,14 @@ impl ScenarioLayout {
         }
     }
 
+    /// The file that logs the lights (city world).
+    pub fn lights_file(&self) -> &'static str {
+        match self.lights {
+            super::manifest::LightsLog::Frames => LIGHTS_CSV,
+            super::manifest::LightsLog::Changes => LIGHT_CHANGES_CSV,
+        }
+    }
+
     /// Every folder inside the scenario folder, parents first.
     pub fn folders(&self) -> Vec<String> {
         let mut folders = Vec::new();
@@ -142,7 +157,7 @@ impl ScenarioLayout {
     pub fn files(&self) -> Vec<String> {
         let mut names: Vec<String> = vec![SCENARIO_JSON.into(), POSES_CSV.into(), PIXELS_FILE.into()];
         if self.city {
-            names.extend([LIGHTS_CSV.into(), EVENTS_CSV.into(), INTERACTIONS_CSV.into()]);
+            names.extend([self.lights_file().into(), EVENTS_CSV.into(), INTERACTIONS_CSV.into()]);
         }
         if self.annotations {
             names.push(ANNOTATIONS_FILE.into());
@@ -173,7 +188,7 @@ mod tests {
     #[test]
     fn layout_lists_camera_folders_and_files() {
         let cameras = vec![CameraFolder { name: "corner".into(), depth: true }];
-        let all = Products { images: true, annotations: false, effects: true };
+        let all = Products { images: true, annotations: false, effects: true, lights: Default::default() };
         let layout = ScenarioLayout::new(3, true, all, cameras.clone());
         let files = layout.files();
         assert!(files.contains(&"cameras/corner/depth/0002.png".to_string()));
@@ -184,8 +199,12 @@ mod tests {
         assert_eq!(files.len(), 7 + 2 * 3 + 3 * 3 + 1 + 1);
         assert!(layout.folders().contains(&"cameras/corner/depth".to_string()));
         // Without images there are no frames and no camera files.
-        let bare =
-            ScenarioLayout::new(3, false, Products { images: false, annotations: true, effects: false }, cameras);
+        let bare = ScenarioLayout::new(
+            3,
+            false,
+            Products { images: false, annotations: true, effects: false, lights: Default::default() },
+            cameras,
+        );
         assert_eq!(bare.files(), vec!["scenario.json", "poses.csv", "pixels.npy", "checksums.sha256"]);
         assert!(bare.folders().is_empty());
     }

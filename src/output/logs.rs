@@ -25,7 +25,9 @@ fn round(x: f64, decimals: i32) -> f64 {
     (x * f).round() / f
 }
 
-/// One row per frame and light, lights in plan order; `head_pixels` is each
+/// One row per frame and light, lights in plan order (with `changes_only`,
+/// one per light at frame 0 and then only where a light's colour differs
+/// from the frame before: `light_changes.csv`); `head_pixels` is each
 /// light's signal head in the bird's-eye view (empty cells without one).
 /// Lights are most of what a poses-only scenario writes, so each light's
 /// constant cells are formatted once (quoted as the csv writer quotes them)
@@ -36,6 +38,7 @@ pub fn write_lights<W: Write>(
     intersection_names: &[String],
     head_pixels: &[Option<glam::DVec2>],
     trajectories: &Trajectories,
+    changes_only: bool,
 ) -> csv::Result<()> {
     let mut approach = [0u8; 4];
     let mut constant = Vec::with_capacity(plan.lights.len());
@@ -64,7 +67,11 @@ pub fn write_lights<W: Write>(
         prefix.push(b',');
         push_fixed(&mut prefix, frame as f64 * trajectories.frame_interval, 6);
         prefix.push(b',');
-        for (state, (middle, tail)) in states.iter().zip(&constant) {
+        let before = frame.checked_sub(1).map(|f| &trajectories.lights[f]);
+        for (k, (state, (middle, tail))) in states.iter().zip(&constant).enumerate() {
+            if changes_only && before.is_some_and(|b| b[k].colour == state.colour) {
+                continue;
+            }
             buf.extend_from_slice(&prefix);
             buf.extend_from_slice(middle);
             buf.extend_from_slice(state.colour.name().as_bytes());

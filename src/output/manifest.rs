@@ -49,6 +49,9 @@ pub struct Manifest<'a> {
     pub annotations: bool,
     /// Scenarios carry effects.csv and causal graphs (off with `gen --no-effects`).
     pub effects: bool,
+    /// How the lights' colours are written (`gen --lights`); absent: `frames`.
+    #[serde(skip_serializing_if = "LightsLog::is_frames")]
+    pub lights: LightsLog,
     pub camera: &'a Camera,
     pub frames_per_scenario: u32,
     pub frame_file_digits: usize,
@@ -71,6 +74,35 @@ pub struct Products {
     /// effects.csv and the causal graphs in scenario.json (`gen`; off with
     /// `--no-effects`).
     pub effects: bool,
+    /// City world: lights.csv (every light every frame) or
+    /// light_changes.csv (each light at frame 0 and where it changes).
+    pub lights: LightsLog,
+}
+
+/// How a city scenario logs its lights' colours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightsLog {
+    /// `lights.csv`: one row per light and frame.
+    #[default]
+    Frames,
+    /// `light_changes.csv`: one row per light at frame 0, then one per
+    /// light and frame where its colour differs from the frame before.
+    Changes,
+}
+
+impl LightsLog {
+    pub fn is_frames(&self) -> bool {
+        *self == LightsLog::Frames
+    }
+
+    /// As `gen --lights` names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LightsLog::Frames => "frames",
+            LightsLog::Changes => "changes",
+        }
+    }
 }
 
 /// Which part of the dataset a shard run writes.
@@ -100,6 +132,8 @@ pub struct ManifestRecord {
     /// Datasets written before effects existed have none.
     #[serde(default)]
     pub effects: bool,
+    #[serde(default)]
+    pub lights: LightsLog,
     pub limit: Option<u32>,
     pub groups: Vec<GroupRecord>,
     pub complete: bool,
@@ -127,7 +161,7 @@ impl ManifestRecord {
 
     /// The per-scenario files this dataset was written with.
     pub fn products(&self) -> Products {
-        Products { images: self.images, annotations: self.annotations, effects: self.effects }
+        Products { images: self.images, annotations: self.annotations, effects: self.effects, lights: self.lights }
     }
 
     /// What differs between this manifest and a run of `spec` writing
@@ -146,6 +180,9 @@ impl ManifestRecord {
         }
         if self.effects != products.effects {
             out.push(format!("effects: {} there, {} now (--no-effects)", self.effects, products.effects));
+        }
+        if self.lights != products.lights {
+            out.push(format!("lights: {} there, {} now (--lights)", self.lights.name(), products.lights.name()));
         }
         if self.spec_sha256 != spec_sha256(spec) {
             let new = serde_json::to_value(spec).expect("spec serialises");
@@ -224,6 +261,7 @@ impl<'a> Manifest<'a> {
             images: products.images,
             annotations: products.annotations,
             effects: products.effects,
+            lights: products.lights,
             camera,
             frames_per_scenario: spec.frames,
             frame_file_digits: super::frame_digits(spec.frames),

@@ -7,11 +7,10 @@
 use super::annotations::{AnnotatedCar, AnnotationsBuilder, ANNOTATIONS_FILE};
 use super::footage::{signal_heads, Footage};
 use super::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, POSES_CSV,
-    SCENARIO_JSON,
+    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, POSES_CSV, SCENARIO_JSON,
 };
 use super::logs::{write_effects, write_events, write_interactions, write_lights};
-use super::manifest::Products;
+use super::manifest::{LightsLog, Products};
 use super::number::{logged_value, push_fixed};
 use super::png::{encode_png, PixelFormat, PngSettings};
 use super::poses::{write_pixels, write_poses, PIXELS_FILE, PIXEL_DECIMALS};
@@ -135,8 +134,10 @@ impl ScenarioWriter {
         if let Some(city) = plan.world.city() {
             let names = &self.intersection_names;
             let head_pixels: Vec<Option<DVec2>> = heads.iter().map(|h| h.map(|p| camera.to_pixel(p))).collect();
-            bytes +=
-                dir.write_with(LIGHTS_CSV, |w| write_lights(w, &city.lights, names, &head_pixels, trajectories))?;
+            let changes = layout.lights == LightsLog::Changes;
+            bytes += dir.write_with(layout.lights_file(), |w| {
+                write_lights(w, &city.lights, names, &head_pixels, trajectories, changes)
+            })?;
             bytes += dir.write_with(EVENTS_CSV, |w| write_events(w, &city.lights, names, trajectories))?;
             bytes += dir.write_with(INTERACTIONS_CSV, |w| write_interactions(w, &city.lights, names, trajectories))?;
         }
