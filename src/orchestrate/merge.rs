@@ -98,7 +98,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             || shard.count != count
         {
             return Err(GenError::Input(format!(
-                "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --limit or shard count differ) than {}",
+                "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --lights, --limit or shard count differ) than {}",
                 path.display(),
                 manifests[0].0.display()
             )));
