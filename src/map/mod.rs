@@ -483,8 +483,13 @@ impl CityMap {
                 self.signalised.iter().map(|&k| self.intersections[k].name.as_str()).collect();
             names.sort_unstable();
             let example = names.first().copied().unwrap_or("AC");
+            // Numbered lights only where this map has them.
+            let numbered = match self.variant_lights().next() {
+                Some(_) => format!("; numbered lights of their own too, e.g. {}", self.light_name(self.light_count() - 1)),
+                None => String::new(),
+            };
             format!(
-                "{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"{example}/W/straight\" ({}; N E S W; straight left, or on an imported network a light of its own: straight-2, left-2, ..)",
+                "{text:?} is not a light: INTERSECTION/APPROACH/SIGNAL, e.g. \"{example}/W/straight\" ({}; N E S W; straight left){numbered}",
                 names.join(" ")
             )
         })
