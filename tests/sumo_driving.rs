@@ -366,15 +366,9 @@ fn gen_writes_no_network_through_a_linked_networks_folder() {
 /// Green runs of `lights.csv` (seconds, at `frame_interval`), each light's
 /// first and last run left out (cut by the scenario's start and end).
 fn inner_green_runs(lights_csv: &Path, frame_interval: f64) -> Vec<f64> {
-    let text = std::fs::read_to_string(lights_csv).unwrap();
-    let mut colours: std::collections::BTreeMap<(String, String, String), Vec<String>> = Default::default();
-    for line in text.lines().skip(1) {
-        let cells: Vec<&str> = line.split(',').collect();
-        let key = (cells[2].to_string(), cells[3].to_string(), cells[4].to_string());
-        colours.entry(key).or_default().push(cells[5].to_string());
-    }
+    let colours = lights_by_name(lights_csv);
     let mut runs = Vec::new();
-    for sequence in colours.values() {
+    for (sequence, _) in colours.values() {
         let mut lengths: Vec<(String, usize)> = Vec::new();
         for colour in sequence {
             match lengths.last_mut() {
