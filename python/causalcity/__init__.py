@@ -823,6 +823,7 @@ def generate(
     fsync: bool = False,
     progress: bool = True,
     force_space: bool = False,
+    lights: str = "frames",
 ) -> Dict[str, Any]:
     """``causalcity gen`` from Python: writes the dataset to ``out`` (default
     ``data/<spec name>``), resuming an interrupted run, and returns the
@@ -831,7 +832,8 @@ def generate(
     ``--no-effects``, ``shard=(k, n)`` or ``"k/n"``
     is ``--shard k/n``, ``progress=False`` is ``--quiet``,
     ``force_space=True`` is ``--force-space`` (a disk too small for the
-    run raises :class:`InputError` with the figures).
+    run raises :class:`InputError` with the figures), ``lights="changes"``
+    is ``--lights changes`` (``light_changes.csv`` instead of ``lights.csv``).
     """
     spec = _as_spec(spec)
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
@@ -841,6 +843,8 @@ def generate(
             "annotations=True needs images=True: annotations.json holds the frames' masks "
             "(gen refuses --annotations with --no-images)"
         )
+    if lights not in ("frames", "changes"):
+        raise InputError(f'lights={lights!r}: "frames" (lights.csv) or "changes" (light_changes.csv), as gen --lights')
     if shard is not None:
         k, n = _shard_pair(shard)
         shard = f"{k}/{n}"
@@ -857,6 +861,7 @@ def generate(
         fsync,
         progress,
         force_space,
+        lights,
     )
     return _json.loads(summary)
 

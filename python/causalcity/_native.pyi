@@ -83,6 +83,8 @@ def generate(
     force: bool = False,
     fsync: bool = False,
     progress: bool = True,
+    force_space: bool = False,
+    lights: str = "frames",
 ) -> str: ...
 def evaluate(
     dataset: str,

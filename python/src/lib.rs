@@ -467,7 +467,7 @@ fn counterfactual<'py>(
 
 /// `causalcity gen` from Python: the run's summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false))]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false, lights="frames"))]
 #[allow(clippy::too_many_arguments)]
 fn generate(
     py: Python<'_>,
@@ -483,7 +483,13 @@ fn generate(
     fsync: bool,
     progress: bool,
     force_space: bool,
+    lights: &str,
 ) -> PyResult<String> {
+    let lights = match lights {
+        "frames" => causalcity::output::manifest::LightsLog::Frames,
+        "changes" => causalcity::output::manifest::LightsLog::Changes,
+        other => return Err(InputError::new_err(format!("lights: {other:?} is not \"frames\" or \"changes\""))),
+    };
     let shard: Option<Shard> =
         shard.map(|s| s.parse()).transpose().map_err(|e: String| InputError::new_err(format!("shard: {e}")))?;
     let options = GenOptions {
@@ -494,7 +500,7 @@ fn generate(
         images,
         annotations,
         effects,
-        lights: Default::default(),
+        lights,
         progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
         shard,
         force,

@@ -852,7 +852,11 @@ def test_lights_logged_as_changes_read_back_as_the_arrays_of_lights_csv(tmp_path
     spec_file.write_text(json.dumps(spec))
     frames, changes = tmp_path / "frames", tmp_path / "changes"
     cli("gen", "--spec", str(spec_file), "--out", str(frames), "--no-images", "--no-effects")
-    cli("gen", "--spec", str(spec_file), "--out", str(changes), "--no-images", "--no-effects", "--lights", "changes")
+    # causalcity.generate's lights= is gen --lights.
+    causalcity.generate(spec_file, changes, images=False, effects=False, lights="changes", progress=False)
+    with pytest.raises(causalcity.InputError, match="frames"):
+        causalcity.generate(spec_file, tmp_path / "never", lights="compact")
+    assert not (tmp_path / "never").exists()
     full, compact = causalcity.open_dataset(frames), causalcity.open_dataset(changes)
     assert len(full) == len(compact) == 3
     for a, b in zip(full, compact):
