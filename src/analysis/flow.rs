@@ -22,7 +22,6 @@
 //!   speed over its desired speed for the current stretch of its drive queue
 //!   (the stretch after as many turns and merges as `events.csv` shows done).
 
-use crate::map::signals::light_label;
 use crate::map::CityMap;
 use crate::output::arrays::LIGHT_COLOURS;
 use crate::output::logs::read_interactions;
@@ -259,33 +258,13 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
     }
     let mut signals: Vec<(String, Vec<String>)> = Vec::new();
     let mut light_index: HashMap<String, usize> = HashMap::new();
-    let path = dir.join("lights.csv");
-    let compact = dir.join(crate::output::layout::LIGHT_CHANGES_CSV).exists();
-    if compact {
-        // gen --lights changes: every frame, as the Python package reads it.
-        let lights = crate::dataset::readback::read_light_log(dir, frames, frame_interval)?;
-        let count = lights.names.len();
-        for (k, name) in lights.names.iter().enumerate() {
-            light_index.insert(name.clone(), k);
-            let colours = (0..frames).map(|f| LIGHT_COLOURS[lights.colour[f * count + k] as usize].name().to_string());
-            signals.push((name.clone(), colours.collect()));
-        }
-    }
-    let mut reader = match compact {
-        true => None,
-        false => Some(csv::Reader::from_path(&path).map_err(|e| err(&path, &e))?),
-    };
-    for row in reader.iter_mut().flat_map(|r| r.records()) {
-        let row = row.map_err(|e| err(&path, &e))?;
-        let (Some(i), Some(side), Some(signal), Some(colour)) = (row.get(2), row.get(3), row.get(4), row.get(5)) else {
-            return Err(format!("{}: malformed row", path.display()));
-        };
-        let name = light_label(i, side, signal);
-        let k = *light_index.entry(name.clone()).or_insert_with(|| {
-            signals.push((name, Vec::new()));
-            signals.len() - 1
-        });
-        signals[k].1.push(colour.to_string());
+    // Either layout (lights.csv or gen --lights changes), every frame.
+    let lights = crate::dataset::readback::read_light_log(dir, frames, frame_interval)?;
+    let count = lights.names.len();
+    for (k, name) in lights.names.iter().enumerate() {
+        light_index.insert(name.clone(), k);
+        let colours = (0..frames).map(|f| LIGHT_COLOURS[lights.colour[f * count + k] as usize].name().to_string());
+        signals.push((name.clone(), colours.collect()));
     }
     let records = read_interactions(&interactions, frames, n)?;
     let named =

@@ -437,38 +437,23 @@ fn red_approaches(
     dir: &Path,
     scenario: &serde_json::Value,
 ) -> Result<std::collections::HashSet<(usize, String, char)>, String> {
-    let path = dir.join("lights.csv");
     let mut red = std::collections::HashSet::new();
-    if dir.join(crate::output::layout::LIGHT_CHANGES_CSV).exists() {
-        // gen --lights changes: every frame as the Python package reads it.
-        let frames = scenario["frames"].as_u64().unwrap_or(0) as usize;
-        let interval = scenario["frame_interval"].as_f64().unwrap_or(1.0);
-        let lights = crate::dataset::readback::read_light_log(dir, frames, interval)?;
-        let count = lights.names.len();
-        for (k, name) in lights.names.iter().enumerate() {
-            let mut parts = name.rsplitn(3, '/');
-            let (Some("straight"), Some(side), Some(i)) = (parts.next(), parts.next(), parts.next()) else { continue };
-            for frame in 0..frames {
-                if lights.colour[frame * count + k] != 0 {
-                    red.insert((frame, i.to_string(), side.chars().next().unwrap_or('?')));
-                }
+    let layout = [crate::output::layout::LIGHTS_CSV, crate::output::layout::LIGHT_CHANGES_CSV];
+    if !layout.iter().any(|file| dir.join(file).exists()) {
+        return Ok(red);
+    }
+    // Either layout (lights.csv or gen --lights changes), every frame.
+    let frames = scenario["frames"].as_u64().unwrap_or(0) as usize;
+    let interval = scenario["frame_interval"].as_f64().unwrap_or(1.0);
+    let lights = crate::dataset::readback::read_light_log(dir, frames, interval)?;
+    let count = lights.names.len();
+    for (k, name) in lights.names.iter().enumerate() {
+        let mut parts = name.rsplitn(3, '/');
+        let (Some("straight"), Some(side), Some(i)) = (parts.next(), parts.next(), parts.next()) else { continue };
+        for frame in 0..frames {
+            if lights.colour[frame * count + k] != 0 {
+                red.insert((frame, i.to_string(), side.chars().next().unwrap_or('?')));
             }
-        }
-        return Ok(red);
-    }
-    if !path.exists() {
-        return Ok(red);
-    }
-    let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    for row in reader.records() {
-        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
-        let (Some(frame), Some(i), Some(side), Some(signal), Some(colour)) =
-            (row.get(0).and_then(|f| f.parse().ok()), row.get(2), row.get(3), row.get(4), row.get(5))
-        else {
-            return Err(format!("{}: malformed row", path.display()));
-        };
-        if signal == "straight" && colour != "green" {
-            red.insert((frame, i.to_string(), side.chars().next().unwrap_or('?')));
         }
     }
     Ok(red)
