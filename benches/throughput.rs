@@ -71,7 +71,8 @@ fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOpti
         images,
         annotations: false,
         effects: false,
-        lights: Default::default(),
+        // gen's default light log.
+        lights: causalcity::output::manifest::LightsLog::Changes,
         progress: ProgressMode::Quiet,
         shard: None,
         force: false,

@@ -486,12 +486,12 @@ pub struct GenArgs {
     #[arg(long)]
     pub no_effects: bool,
 
-    /// City world: how the lights' colours are logged. `frames`: lights.csv,
-    /// every light at every frame (most of a poses-only scenario's bytes);
-    /// `changes`: light_changes.csv, every light at frame 0 and then only
-    /// where its colour changes (same columns; the Python package, validate
-    /// and stats read both).
-    #[arg(long, value_enum, default_value_t = LightsArg::Frames)]
+    /// City world: how the lights' colours are logged. `changes` (the
+    /// default): light_changes.csv, every light at frame 0 and then only
+    /// where its colour changes; `frames`: lights.csv, every light at every
+    /// frame, about ten times the bytes (most of a poses-only scenario's).
+    /// Same columns; the Python package, validate and stats read both.
+    #[arg(long, value_enum, default_value_t = LightsArg::Changes)]
     pub lights: LightsArg,
 
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a

@@ -64,10 +64,8 @@ fn no_car_enters_an_intersection_against_red_unless_forced() {
     for d in scenario_dirs(&out) {
         let s = read_scenario(&d);
         let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
-        let lights: BTreeMap<(u32, String, String, String), String> = read_csv::<LightRow>(&d.join("lights.csv"))
-            .into_iter()
-            .map(|l| ((l.frame, l.intersection, l.approach, l.signal), l.colour))
-            .collect();
+        let lights: BTreeMap<(u32, String, String, String), String> =
+            light_rows(&d).into_iter().map(|l| ((l.frame, l.intersection, l.approach, l.signal), l.colour)).collect();
         let events: Vec<EventRow> = read_csv(&d.join("events.csv"));
         for (car_id, track) in &by_car {
             let car = &s.cars[*car_id as usize];
@@ -310,7 +308,7 @@ fn same_spec_same_bytes_for_any_thread_count() {
     gen_ok(&spec, &a, &["--quiet", "-j", "1"]);
     gen_ok(&spec, &b, &["--quiet", "-j", "2"]);
     let (ha, hb) = (hash_tree(&a), hash_tree(&b));
-    assert!(ha.keys().any(|k| k.ends_with("lights.csv")) && ha.keys().any(|k| k.contains("rgb/")));
+    assert!(ha.keys().any(|k| k.ends_with("light_changes.csv")) && ha.keys().any(|k| k.contains("rgb/")));
     assert_eq!(ha, hb);
 }
 
@@ -393,7 +391,7 @@ fn the_default_city_design_shows_agency_and_confounding() {
             cvs.push(sd / mean);
         }
         let mut changes: BTreeMap<(String, String, String), (String, usize)> = BTreeMap::new();
-        for l in read_csv::<LightRow>(&d.join("lights.csv")) {
+        for l in light_rows(&d) {
             let entry = changes.entry((l.intersection, l.approach, l.signal)).or_insert((l.colour.clone(), 0));
             if entry.0 != l.colour {
                 entry.0 = l.colour;

@@ -152,7 +152,8 @@ fn the_city_layout_matches_data_schema_and_validates() {
         assert!(scenario["city"]["effects"]["desired_speed_factor"].is_number());
         let cars = scenario["cars"].as_array().unwrap().len();
         for (file, schema, rows_per_frame) in [
-            ("lights.csv", "lights.schema.json", Some(20 * 32)),
+            // gen's default light log: each light at frame 0, then its changes.
+            ("light_changes.csv", "light_changes.schema.json", None),
             ("events.csv", "events.schema.json", None),
             ("interactions.csv", "interactions.schema.json", Some(20 * cars)),
             // Every car removed and its next action changed, each compared with every other car.
@@ -166,6 +167,8 @@ fn the_city_layout_matches_data_schema_and_validates() {
                 assert_eq!(rows, n, "{file} rows");
             }
         }
+        assert!(!d.join("lights.csv").exists(), "gen wrote lights.csv without --lights frames");
+        assert_eq!(light_rows(&d).len(), 20 * 32, "every light at every frame");
     }
     let output = run(&["validate", out.to_str().unwrap(), "--json"]);
     let report: Value = serde_json::from_slice(&output.stdout).unwrap();
@@ -207,10 +210,11 @@ fn lights_logged_as_changes_carry_every_frame_of_lights_csv_in_a_fraction_of_the
     let dir = fresh_dir("e2e-light-changes");
     let spec = write_spec(&dir, &city_spec("e2e-light-changes", &[(8, 0.5)], (2, 1, 1), 300, "{}"));
     let (frames_out, changes_out) = (dir.join("frames"), dir.join("changes"));
-    gen_ok(&spec, &frames_out, &["--quiet", "--no-images"]);
-    gen_ok(&spec, &changes_out, &["--quiet", "--no-images", "--lights", "changes"]);
-    assert_eq!(read_json(&changes_out.join("manifest.json"))["lights"], "changes");
-    assert!(read_json(&frames_out.join("manifest.json")).get("lights").is_none(), "the default writes what it wrote");
+    gen_ok(&spec, &frames_out, &["--quiet", "--no-images", "--lights", "frames"]);
+    gen_ok(&spec, &changes_out, &["--quiet", "--no-images"]);
+    assert_eq!(read_json(&changes_out.join("manifest.json"))["lights"], "changes", "the default, recorded");
+    // No field means frames, as in manifests written before --lights existed.
+    assert!(read_json(&frames_out.join("manifest.json")).get("lights").is_none());
     let interval = read_json(&frames_out.join("manifest.json"))["spec"]["frame_interval"].as_f64().unwrap();
     let (mut full_bytes, mut change_bytes, mut checked) = (0, 0, 0);
     for (a, b) in scenario_dirs(&frames_out).into_iter().zip(scenario_dirs(&changes_out)) {
@@ -237,6 +241,16 @@ fn lights_logged_as_changes_carry_every_frame_of_lights_csv_in_a_fraction_of_the
                 checked += 1;
             }
         }
+        // The tests' light_rows (the library's reader for light_changes.csv)
+        // gives lights.csv's rows as serde reads them.
+        let (read, expanded) = (light_rows(&a), light_rows(&b));
+        assert_eq!(read.len(), 300 * 32);
+        assert_eq!(read.len(), expanded.len());
+        for (r, e) in read.iter().zip(&expanded) {
+            let same = (r.frame, &r.intersection, &r.approach, &r.signal, &r.colour, r.head_px, r.head_py)
+                == (e.frame, &e.intersection, &e.approach, &e.signal, &e.colour, e.head_px, e.head_py);
+            assert!(same && (r.since_change - e.since_change).abs() < 1e-9 && (r.t - e.t).abs() < 1e-6, "{r:?} {e:?}");
+        }
         full_bytes += std::fs::metadata(a.join("lights.csv")).unwrap().len();
         change_bytes += std::fs::metadata(b.join("light_changes.csv")).unwrap().len();
     }
@@ -250,7 +264,16 @@ fn lights_logged_as_changes_carry_every_frame_of_lights_csv_in_a_fraction_of_the
         (serde_json::from_slice(&stats(&frames_out)).unwrap(), serde_json::from_slice(&stats(&changes_out)).unwrap());
     assert_eq!(a["rows"], b["rows"]);
     // A resumed run must log the lights as the dataset does.
-    let mixed = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", changes_out.to_str().unwrap(), "--no-images"]);
+    let mixed = run(&[
+        "gen",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        changes_out.to_str().unwrap(),
+        "--no-images",
+        "--lights",
+        "frames",
+    ]);
     let stderr = String::from_utf8_lossy(&mixed.stderr);
     assert_eq!(mixed.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("lights: changes there, frames now (--lights)"), "{stderr}");

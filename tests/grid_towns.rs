@@ -69,10 +69,9 @@ fn a_three_by_three_grid_town_generates_with_images_and_effects_and_validates() 
     let mut spawn_roads = BTreeSet::new();
     for scenario in &scenarios {
         // Every light of all nine junctions, every frame.
-        let mut lights = csv::Reader::from_path(scenario.join("lights.csv")).unwrap();
-        let rows: Vec<csv::StringRecord> = lights.records().map(|r| r.unwrap()).collect();
+        let rows = light_rows(scenario);
         assert_eq!(rows.len(), 40 * 9 * 8, "{}", scenario.display());
-        let junctions: BTreeSet<&str> = rows.iter().map(|r| r.get(2).unwrap()).collect();
+        let junctions: BTreeSet<&str> = rows.iter().map(|r| r.intersection.as_str()).collect();
         let expected = ["AD", "AE", "AF", "BD", "BE", "BF", "CD", "CE", "CF"];
         assert_eq!(junctions.into_iter().collect::<Vec<_>>(), expected, "{}", scenario.display());
         let json = read_json(&scenario.join("scenario.json"));
@@ -205,7 +204,7 @@ fn a_spec_draws_each_scenarios_town_and_records_it_so_it_can_be_rebuilt() {
         assert!((1..=3).contains(&rows) && [2, 4].contains(&columns), "{town}");
         towns.insert(town.clone());
         // Every light of the town's junctions, every frame.
-        let lights = csv::Reader::from_path(scenario.join("lights.csv")).unwrap().records().count();
+        let lights = light_rows(&scenario).len();
         assert_eq!(lights as u64, 20 * rows * columns * 8, "{}", scenario.display());
 
         // The recorded map rebuilds the town: as a spec's map, `causalcity map` lists its junctions.
@@ -344,7 +343,7 @@ fn a_split_can_hold_out_confounder_ranges_drawing_the_same_numbers_through_them(
         let (a, b) = (read_json(&scenario.join("scenario.json")), read_json(&held_out.join(rel).join("scenario.json")));
         if a["split"] != "test" {
             // Train and val are those of the spec without held_out, byte for byte.
-            for file in ["scenario.json", "poses.csv", "lights.csv"] {
+            for file in ["scenario.json", "poses.csv", "light_changes.csv"] {
                 assert_eq!(
                     std::fs::read(scenario.join(file)).unwrap(),
                     std::fs::read(held_out.join(rel).join(file)).unwrap()
@@ -493,7 +492,7 @@ fn a_split_can_hold_out_the_car_count_keeping_train_and_val_and_every_reader_agr
         let rel = scenario.strip_prefix(&twin_out).unwrap();
         let json = read_json(&held_out.join(rel).join("scenario.json"));
         if json["split"] != "test" {
-            for file in ["scenario.json", "poses.csv", "lights.csv", "effects.csv"] {
+            for file in ["scenario.json", "poses.csv", "light_changes.csv", "effects.csv"] {
                 assert_eq!(
                     std::fs::read(scenario.join(file)).unwrap(),
                     std::fs::read(held_out.join(rel).join(file)).unwrap(),
@@ -703,10 +702,10 @@ fn a_town_with_priority_junctions_and_all_way_stops_generates_draws_and_validate
     let mut kinds = BTreeSet::new();
     for scenario in &scenarios {
         // Only BD has lights: 8 of them, every frame.
-        let lights = std::fs::read_to_string(scenario.join("lights.csv")).unwrap();
-        let junctions: BTreeSet<&str> = lights.lines().skip(1).map(|l| l.split(',').nth(2).unwrap()).collect();
+        let lights = light_rows(scenario);
+        let junctions: BTreeSet<&str> = lights.iter().map(|l| l.intersection.as_str()).collect();
         assert_eq!(junctions, BTreeSet::from(["BD"]), "{}", scenario.display());
-        assert_eq!(lights.lines().count(), 1 + 40 * 8);
+        assert_eq!(lights.len(), 40 * 8);
         for row in read_csv::<InteractionRow>(&scenario.join("interactions.csv")) {
             if row.bound_by == "give_way" {
                 assert!(row.other_car.is_some_and(|j| j != row.car), "{row:?}");
@@ -768,7 +767,7 @@ fn the_shipped_ood_control_spec_tests_on_a_town_without_lights_after_training_wi
     let mut splits = BTreeSet::new();
     for scenario in scenario_dirs(&out) {
         let split = scenario.parent().unwrap().file_name().unwrap().to_str().unwrap().to_string();
-        let rows = std::fs::read_to_string(scenario.join("lights.csv")).unwrap().lines().count() - 1;
+        let rows = light_rows(&scenario).len();
         let town = read_json(&scenario.join("scenario.json"))["town"].as_str().unwrap_or("").to_string();
         if split == "test" {
             assert_eq!(rows, 0, "{}: lights in the held-out town", scenario.display());

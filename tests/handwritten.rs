@@ -225,7 +225,7 @@ fn interventions_act_as_documented() {
     assert!(fired.iter().all(|e| !e.detail.contains("not applied")), "{fired:?}");
     assert!(fired.iter().any(|e| e.car == Some(1) && e.detail.starts_with("Car_2 drives right, straight")));
     // set_light: AD/W/straight is red from 4 s for 5 s.
-    let lights: Vec<LightRow> = read_csv(&dir.join("lights.csv"));
+    let lights = light_rows(&dir);
     for l in lights.iter().filter(|l| l.intersection == "AD" && l.approach == "W" && l.signal == "straight") {
         if (4.0..9.0).contains(&l.t) {
             assert_eq!(l.colour, "red", "t = {}", l.t);

@@ -48,11 +48,12 @@ fn most_car_frames_of_the_default_datasets_are_on_camera() {
     }
 }
 
-/// lights.csv of every scenario under `root`, in dataset order.
+/// The light log (gen's light_changes.csv) of every scenario under `root`,
+/// in dataset order.
 fn all_lights(root: &Path) -> Vec<(PathBuf, String)> {
     scenario_dirs(root)
         .into_iter()
-        .map(|d| (d.clone(), std::fs::read_to_string(d.join("lights.csv")).unwrap()))
+        .map(|d| (d.clone(), std::fs::read_to_string(d.join("light_changes.csv")).unwrap()))
         .collect()
 }
 
@@ -87,8 +88,8 @@ fn lights_differ_between_scenarios_unless_fixed() {
     assert_eq!(random.len(), 12);
     // Default: every scenario starts at its own point of the cycle.
     let distinct: std::collections::BTreeSet<&String> = random.iter().map(|(_, l)| l).collect();
-    assert_eq!(distinct.len(), random.len(), "scenarios share a lights.csv");
-    // Fixed: one lights.csv for all, the original cycle from 0 (AC's east-west straight green since 0 s).
+    assert_eq!(distinct.len(), random.len(), "scenarios share a light log");
+    // Fixed: one light log for all, the original cycle from 0 (AC's east-west straight green since 0 s).
     assert!(fixed.iter().all(|(_, l)| *l == fixed[0].1));
     let row = fixed[0].1.lines().find(|l| l.starts_with("0,0.0,AC,W,straight,")).unwrap();
     assert!(row.starts_with("0,0.0,AC,W,straight,green,0.0,"), "{row}");

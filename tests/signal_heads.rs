@@ -6,17 +6,7 @@
 mod common;
 
 use common::*;
-use serde::Deserialize;
 use std::path::{Path, PathBuf};
-
-/// One row of lights.csv with the head's pixel.
-#[derive(Debug, Deserialize)]
-struct LightRow {
-    frame: u32,
-    colour: String,
-    head_px: f64,
-    head_py: f64,
-}
 
 /// What a lamp colour a pixel shows, by hue (robust to night and fog veils);
 /// `None` for anything else (pavement, housing, asphalt).
@@ -68,7 +58,9 @@ fn signal_heads_show_their_logged_colour_when_visible_and_never_in_the_masks() {
         let scenario_json = read_json(&scenario.join("scenario.json"));
         assert_eq!(scenario_json["city"]["signal_heads"], "visible");
         let ppm = scenario_json["camera"]["pixels_per_metre"].as_f64().unwrap();
-        let rows: Vec<LightRow> = read_csv(&scenario.join("lights.csv"));
+        let rows = light_rows(&scenario);
+        // Every light has a head in the bird's-eye view.
+        let head = |r: &LightRow| (r.head_px.unwrap(), r.head_py.unwrap());
         assert_eq!(rows.len() as u32, 32 * FRAMES);
         for frame in 0..FRAMES {
             let name = format!("{frame:04}.png");
@@ -80,7 +72,8 @@ fn signal_heads_show_their_logged_colour_when_visible_and_never_in_the_masks() {
             assert_eq!(mask, std::fs::read(twin.join("mask").join(&name)).unwrap(), "{name}");
             let heads: Vec<&LightRow> = rows.iter().filter(|r| r.frame == frame).collect();
             for row in &heads {
-                let (x, y) = (row.head_px.round(), row.head_py.round());
+                let (x, y) = head(row);
+                let (x, y) = (x.round(), y.round());
                 if x < 1.0 || y < 1.0 || x > (w - 2) as f64 || y > (h - 2) as f64 {
                     continue;
                 }
@@ -96,7 +89,7 @@ fn signal_heads_show_their_logged_colour_when_visible_and_never_in_the_masks() {
             let reach = 0.5 * 0.9 * std::f64::consts::SQRT_2 * ppm + 2.0;
             for (x, y, p) in image.enumerate_pixels() {
                 if p != hidden_image.get_pixel(x, y) {
-                    let near = heads.iter().any(|r| (r.head_px - x as f64).hypot(r.head_py - y as f64) <= reach);
+                    let near = heads.iter().any(|r| (head(r).0 - x as f64).hypot(head(r).1 - y as f64) <= reach);
                     assert!(near, "{name}: pixel ({x}, {y}) changed away from every head");
                 }
             }

@@ -363,10 +363,10 @@ fn gen_writes_no_network_through_a_linked_networks_folder() {
     assert!(!elsewhere.join("berlin-small.net.xml").exists());
 }
 
-/// Green runs of `lights.csv` (seconds, at `frame_interval`), each light's
-/// first and last run left out (cut by the scenario's start and end).
-fn inner_green_runs(lights_csv: &Path, frame_interval: f64) -> Vec<f64> {
-    let colours = lights_by_name(lights_csv);
+/// Green runs of the scenario's lights (seconds, at `frame_interval`), each
+/// light's first and last run left out (cut by the scenario's start and end).
+fn inner_green_runs(scenario: &Path, frame_interval: f64) -> Vec<f64> {
+    let colours = lights_by_name(scenario);
     let mut runs = Vec::new();
     for (sequence, _) in colours.values() {
         let mut lengths: Vec<(String, usize)> = Vec::new();
@@ -412,7 +412,7 @@ fn actuated_lights_answer_to_traffic_within_their_bounds_and_their_effects_are_m
         assert_valid(&schema, &meta, &scenario);
         let lights = meta["city"]["lights"].as_array().unwrap();
         assert!(!lights.is_empty() && lights.iter().all(|l| l["actuated"] == true), "{}", scenario.display());
-        runs.extend(inner_green_runs(&scenario.join("lights.csv"), 0.5));
+        runs.extend(inner_green_runs(&scenario, 0.5));
         causal_actuated += meta["causal_edges"].as_array().unwrap().len();
     }
     assert!(runs.len() >= 100, "only {} green runs", runs.len());
@@ -429,7 +429,7 @@ fn actuated_lights_answer_to_traffic_within_their_bounds_and_their_effects_are_m
     assert!(lengths.len() >= 8, "green lengths (half seconds) {lengths:?}");
     // Run as fixed programmes, every green lasts its written 21 s.
     for scenario in scenario_dirs(&fixed) {
-        let fixed_runs = inner_green_runs(&scenario.join("lights.csv"), 0.5);
+        let fixed_runs = inner_green_runs(&scenario, 0.5);
         let off: Vec<f64> = fixed_runs.iter().copied().filter(|r| (r - 21.0).abs() > 0.5).collect();
         assert!(!fixed_runs.is_empty() && off.is_empty(), "{}: greens of {off:?} s", scenario.display());
         causal_fixed += read_json(&scenario.join("scenario.json"))["causal_edges"].as_array().unwrap().len();
@@ -447,17 +447,15 @@ fn actuated_lights_answer_to_traffic_within_their_bounds_and_their_effects_are_m
 }
 
 /// Each light's colour per frame, by (intersection, approach, signal), and
-/// its signal head (bird's-eye pixels), from `lights.csv`.
-type LightsCsv = std::collections::BTreeMap<(String, String, String), (Vec<String>, String)>;
+/// its signal head (bird's-eye pixels), from the scenario's light log.
+type LightsCsv = std::collections::BTreeMap<(String, String, String), (Vec<String>, (Option<f64>, Option<f64>))>;
 
-fn lights_by_name(lights_csv: &Path) -> LightsCsv {
+fn lights_by_name(scenario: &Path) -> LightsCsv {
     let mut lights = LightsCsv::new();
-    let mut reader = csv::Reader::from_path(lights_csv).unwrap();
-    for row in reader.records() {
-        let row = row.unwrap();
-        let entry = lights.entry((row[2].to_string(), row[3].to_string(), row[4].to_string())).or_default();
-        entry.0.push(row[5].to_string());
-        entry.1 = format!("{},{}", &row[7], &row[8]);
+    for row in light_rows(scenario) {
+        let entry = lights.entry((row.intersection, row.approach, row.signal)).or_default();
+        entry.0.push(row.colour);
+        entry.1 = (row.head_px, row.head_py);
     }
     lights
 }
@@ -506,7 +504,7 @@ fn a_right_turn_arrow_is_a_light_of_its_own_in_every_file_and_interventions_name
             Some("B1/S/straight-2"),
             "the variant follows the cycle's lights"
         );
-        let lights = lights_by_name(&scenario.join("lights.csv"));
+        let lights = lights_by_name(&scenario);
         assert_eq!(lights.len(), 33, "{:?}", lights.keys());
         let (straight, straight_head) = &lights[&key("straight")];
         let (arrow, arrow_head) = &lights[&key("straight-2")];
@@ -548,7 +546,7 @@ fn a_right_turn_arrow_is_a_light_of_its_own_in_every_file_and_interventions_name
     let held = dir.join("held");
     let ran = run(&["run", "--scenario", file.to_str().unwrap(), "--out", held.to_str().unwrap()]);
     assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
-    let lights = lights_by_name(&held.join("Hold/lights.csv"));
+    let lights = lights_by_name(&held.join("Hold"));
     assert!(lights[&key("straight-2")].0.iter().all(|c| c == "red"));
     assert!(lights[&key("straight")].0.iter().any(|c| c == "green"));
     // One it does not have is refused, naming the ones it has.

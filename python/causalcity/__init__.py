@@ -252,7 +252,8 @@ class Event(NamedTuple):
 
 @dataclass(frozen=True)
 class Lights:
-    """``lights.csv`` as arrays (city world): ``L`` lights in plan order."""
+    """The light log (``light_changes.csv``, gen's default, or ``lights.csv``)
+    as arrays, every frame (city world): ``L`` lights in plan order."""
 
     names: List[str]
     """Each light's name, ``AC/W/straight``, as scenario files and events name it."""
@@ -823,7 +824,7 @@ def generate(
     fsync: bool = False,
     progress: bool = True,
     force_space: bool = False,
-    lights: str = "frames",
+    lights: str = "changes",
 ) -> Dict[str, Any]:
     """``causalcity gen`` from Python: writes the dataset to ``out`` (default
     ``data/<spec name>``), resuming an interrupted run, and returns the
@@ -832,8 +833,9 @@ def generate(
     ``--no-effects``, ``shard=(k, n)`` or ``"k/n"``
     is ``--shard k/n``, ``progress=False`` is ``--quiet``,
     ``force_space=True`` is ``--force-space`` (a disk too small for the
-    run raises :class:`InputError` with the figures), ``lights="changes"``
-    is ``--lights changes`` (``light_changes.csv`` instead of ``lights.csv``).
+    run raises :class:`InputError` with the figures), ``lights="frames"``
+    is ``--lights frames`` (``lights.csv``, every light at every frame,
+    instead of the default ``light_changes.csv``).
     """
     spec = _as_spec(spec)
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")

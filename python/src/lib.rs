@@ -467,7 +467,7 @@ fn counterfactual<'py>(
 
 /// `causalcity gen` from Python: the run's summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false, lights="frames"))]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false, lights="changes"))]
 #[allow(clippy::too_many_arguments)]
 fn generate(
     py: Python<'_>,

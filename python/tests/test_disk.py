@@ -137,15 +137,15 @@ def test_bad_folders_are_named(tmp_path):
         causalcity.load(folder)
     with pytest.raises(KeyError, match="not in"):
         causalcity.open_dataset(DATA / "city").load(("cars08_edges50", "test", 7))
-    lights = folder / "lights.csv"
+    lights = folder / "light_changes.csv"
     shutil.copy(DATA / "city" / key.folder / "poses.csv", folder / "poses.csv")
     rows = lights.read_text().splitlines()
     lights.write_text("\n".join(rows[:1] + [rows[1].replace(",red,", ",blue,").replace(",green,", ",blue,").replace(",yellow,", ",blue,")] + rows[2:]) + "\n")
-    with pytest.raises(causalcity.InputError, match=r"lights\.csv line 2: colour \"blue\""):
+    with pytest.raises(causalcity.InputError, match=r"light_changes\.csv line 2: colour \"blue\""):
         causalcity.load(folder)
     # A city folder must hold its logs, and effects where scenario.json lists causal edges.
-    for name in ("lights.csv", "effects.csv"):
-        shutil.copy(DATA / "city" / key.folder / "lights.csv", lights)
+    for name in ("light_changes.csv", "effects.csv"):
+        shutil.copy(DATA / "city" / key.folder / "light_changes.csv", lights)
         (folder / name).rename(folder / (name + ".away"))
         with pytest.raises(causalcity.InputError, match=f"{name}.*No such file"):
             causalcity.load(folder)

@@ -114,15 +114,31 @@ def assert_effects_match(scenario, folder, metadata):
 
 
 def assert_city_logs_match(scenario, folder):
-    """lights.csv, events.csv and interactions.csv against the arrays."""
-    lights = read_csv(folder / "lights.csv")
+    """The light log (lights.csv, or gen's default light_changes.csv),
+    events.csv and interactions.csv against the arrays."""
+    every_frame = (folder / "lights.csv").exists()
+    lights = read_csv(folder / ("lights.csv" if every_frame else "light_changes.csv"))
     count = len(scenario.lights.names)
     assert count > 0
+    colour = scenario.lights.colour
+    if every_frame:
+        # One row per frame and light.
+        rows = np.ones(colour.shape, dtype=bool)
+    else:
+        # Every light at frame 0, then a row where its colour changed.
+        rows = np.concatenate([np.ones((1, count), dtype=bool), colour[1:] != colour[:-1]])
+        # Between rows, since_change grows by the frame interval.
+        step = scenario.metadata["frame_interval"]
+        held = ~rows
+        grown = np.round((scenario.lights.since_change[:-1] + step) * 1000) / 1000
+        np.testing.assert_allclose(scenario.lights.since_change[1:][held[1:]], grown[held[1:]], atol=1.5e-3, rtol=0)
+    frame_of_row, light_of_row = np.nonzero(rows)
+    np.testing.assert_array_equal(number(lights["frame"]), frame_of_row)
     names = lights["intersection"] + "/" + lights["approach"] + "/" + lights["signal"]
-    assert list(names[:count]) == scenario.lights.names
-    colours = np.array(scenario.lights.colour_names)[scenario.lights.colour].reshape(-1)
+    assert list(names) == [scenario.lights.names[k] for k in light_of_row]
+    colours = np.array(scenario.lights.colour_names)[colour[rows]]
     assert list(colours) == list(lights["colour"])
-    np.testing.assert_array_equal(scenario.lights.since_change.reshape(-1), number(lights["since_change"]))
+    np.testing.assert_array_equal(scenario.lights.since_change[rows], number(lights["since_change"]))
     heads = np.stack([number(lights["head_px"]), number(lights["head_py"])], axis=1)[:count]
     np.testing.assert_array_equal(scenario.lights.head_pixels, heads)
 
@@ -841,9 +857,10 @@ def test_a_real_network_from_sumo_maps_streams_and_reads_back_from_its_dataset(t
 
 
 def test_lights_logged_as_changes_read_back_as_the_arrays_of_lights_csv(tmp_path):
-    """gen --lights changes writes light_changes.csv (every light at frame 0,
-    then only its changes): the package reads every frame back, the colours
-    exactly and since_change to the millisecond, in a tenth of the bytes."""
+    """gen's default light_changes.csv (every light at frame 0, then only its
+    changes) reads back as the arrays of gen --lights frames' lights.csv, the
+    colours exactly and since_change to the millisecond, in a tenth of the
+    bytes."""
     spec = json.loads(CITY_SPEC.read_text())
     spec.update(name="changes", frames=150)
     spec["groups"] = [{"cars": 8, "edge_proportion": 0.5}]
@@ -851,9 +868,10 @@ def test_lights_logged_as_changes_read_back_as_the_arrays_of_lights_csv(tmp_path
     spec_file = tmp_path / "changes.json"
     spec_file.write_text(json.dumps(spec))
     frames, changes = tmp_path / "frames", tmp_path / "changes"
-    cli("gen", "--spec", str(spec_file), "--out", str(frames), "--no-images", "--no-effects")
+    cli("gen", "--spec", str(spec_file), "--out", str(changes), "--no-images", "--no-effects")
     # causalcity.generate's lights= is gen --lights.
-    causalcity.generate(spec_file, changes, images=False, effects=False, lights="changes", progress=False)
+    causalcity.generate(spec_file, frames, images=False, effects=False, lights="frames", progress=False)
+    assert not list(frames.rglob("light_changes.csv"))
     with pytest.raises(causalcity.InputError, match="frames"):
         causalcity.generate(spec_file, tmp_path / "never", lights="compact")
     assert not (tmp_path / "never").exists()

@@ -169,14 +169,20 @@ fn read_poses(path: &Path, a: &mut ScenarioArrays) -> Result<(), String> {
 const LIGHT_COLUMNS: [&str; 9] =
     ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"];
 
-/// The lights of the scenario folder `dir` as arrays, from `lights.csv` or,
-/// where the folder has that instead (`gen --lights changes`),
-/// `light_changes.csv`.
+/// The lights of the scenario folder `dir` as arrays, from
+/// `light_changes.csv` (gen's default) or, where the folder has that
+/// instead (`gen --lights frames`, `run`, `counterfactual`), `lights.csv`.
 pub fn read_light_log(dir: &Path, frames: usize, frame_interval: f64) -> Result<LightArrays, String> {
     let changes = dir.join(crate::output::layout::LIGHT_CHANGES_CSV);
-    match changes.exists() {
-        true => read_light_changes(&changes, frames, frame_interval),
-        false => read_lights(&dir.join(crate::output::layout::LIGHTS_CSV), frames),
+    let every_frame = dir.join(crate::output::layout::LIGHTS_CSV);
+    match (changes.exists(), every_frame.exists()) {
+        (true, _) => read_light_changes(&changes, frames, frame_interval),
+        (false, true) => read_lights(&every_frame, frames),
+        (false, false) => Err(format!(
+            "cannot read {} (nor {}): No such file; a city scenario logs its lights in one of them",
+            changes.display(),
+            crate::output::layout::LIGHTS_CSV
+        )),
     }
 }
 

@@ -239,7 +239,7 @@ pub fn read_scenario(dir: &Path) -> Scenario {
     serde_json::from_value(read_json(&dir.join("scenario.json"))).unwrap()
 }
 
-/// One row of lights.csv.
+/// One row of lights.csv: a light at a frame.
 #[derive(Debug, Clone, Deserialize)]
 pub struct LightRow {
     pub frame: u32,
@@ -249,6 +249,49 @@ pub struct LightRow {
     pub signal: String,
     pub colour: String,
     pub since_change: f64,
+    /// The signal head's bird's-eye pixel; none where the camera has none.
+    pub head_px: Option<f64>,
+    pub head_py: Option<f64>,
+}
+
+/// Every light at every frame of the city scenario in `dir`, in
+/// lights.csv's order (frames, then lights in plan order): lights.csv as
+/// written (`gen --lights frames`, `run`), or gen's default
+/// light_changes.csv expanded by the library's reader, which
+/// `end_to_end.rs` checks against lights.csv light-frame by light-frame.
+pub fn light_rows(dir: &Path) -> Vec<LightRow> {
+    let frames_file = dir.join("lights.csv");
+    if frames_file.exists() {
+        return read_csv(&frames_file);
+    }
+    assert!(dir.join("light_changes.csv").exists(), "{}: neither lights.csv nor light_changes.csv", dir.display());
+    let meta = read_json(&dir.join("scenario.json"));
+    let (frames, interval) = (meta["frames"].as_u64().unwrap() as usize, meta["frame_interval"].as_f64().unwrap());
+    let lights = causalcity::dataset::readback::read_light_log(dir, frames, interval).unwrap();
+    let count = lights.names.len();
+    let mut rows = Vec::with_capacity(frames * count);
+    for frame in 0..frames {
+        for (k, name) in lights.names.iter().enumerate() {
+            let mut parts = name.rsplitn(3, '/');
+            let (signal, approach, intersection) =
+                (parts.next().unwrap(), parts.next().unwrap(), parts.next().unwrap());
+            let head = |i: usize| Some(lights.head_pixels[2 * k + i]).filter(|p| !p.is_nan());
+            rows.push(LightRow {
+                frame: frame as u32,
+                t: frame as f64 * interval,
+                intersection: intersection.to_string(),
+                approach: approach.to_string(),
+                signal: signal.to_string(),
+                colour: causalcity::output::arrays::LIGHT_COLOURS[lights.colour[frame * count + k] as usize]
+                    .name()
+                    .to_string(),
+                since_change: lights.since_change[frame * count + k],
+                head_px: head(0),
+                head_py: head(1),
+            });
+        }
+    }
+    rows
 }
 
 /// One row of events.csv.

@@ -64,14 +64,16 @@ def test_pixels_npy_is_the_pose_logs_px_py(toy_scenarios):
 
 def test_city_logs_load_with_the_documented_dtypes():
     for d in scenarios(CITY):
-        lights = pd.read_csv(d / "lights.csv")
+        lights = pd.read_csv(d / "light_changes.csv")
         assert list(lights.columns) == ["frame", "t", "intersection", "approach", "signal", "colour", "since_change", "head_px", "head_py"]
         assert lights.frame.dtype == np.int64 and lights.since_change.dtype == np.float64
         assert lights.head_px.dtype == np.float64 and lights.head_py.dtype == np.float64
         # A head stands still: one pixel per light over the whole scenario.
         assert (lights.groupby(["intersection", "approach", "signal"])[["head_px", "head_py"]].nunique() == 1).all().all()
         assert set(lights.colour) <= {"green", "yellow", "red"}
-        assert len(lights) == 30 * 32
+        # gen's default log: every light at frame 0, then only its changes.
+        assert list(lights.frame[:32]) == [0] * 32 and (lights.frame[32:] > 0).all()
+        assert 32 <= len(lights) < 30 * 32 and lights.frame.is_monotonic_increasing
         events = pd.read_csv(d / "events.csv", dtype={"car": "Int64", "other_car": "Int64"})
         assert list(events.columns) == ["frame", "t", "kind", "car", "other_car", "light", "detail"]
         # A light is never car 0: red-light runs name their car and their light.
@@ -89,7 +91,7 @@ def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
     columns that may be empty read as nullable Int64, as docs/output-layout.md says."""
     checked = {}
     for d in scenarios(TOY) + scenarios(CITY):
-        for name in ["poses.csv", "lights.csv", "events.csv", "interactions.csv", "effects.csv"]:
+        for name in ["poses.csv", "light_changes.csv", "events.csv", "interactions.csv", "effects.csv"]:
             if not (d / name).exists():
                 continue
             fields = json.loads((SCHEMAS / name.replace(".csv", ".schema.json")).read_text())["fields"]
@@ -114,7 +116,7 @@ def test_every_csv_loads_with_plain_read_csv_as_its_schema_says():
                 for column in nullable:
                     assert typed[column].dtype == pd.Int64Dtype(), (name, column)
             checked[name] = checked.get(name, 0) + 1
-    assert set(checked) == {"poses.csv", "lights.csv", "events.csv", "interactions.csv", "effects.csv"}, checked
+    assert set(checked) == {"poses.csv", "light_changes.csv", "events.csv", "interactions.csv", "effects.csv"}, checked
 
 
 def test_frames_and_masks_decode_and_agree_with_the_poses(toy_scenarios):
