@@ -568,6 +568,8 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
                 (row.get(0)?.parse::<usize>().ok()? == i / lights).then_some(())
             });
         }
+    }
+    if city {
         if let Some(data) = read(EVENTS_CSV, &mut problems) {
             let path = dir.join(EVENTS_CSV);
             let mut reader = csv::Reader::from_reader(&data[..]);

@@ -490,3 +490,68 @@ fn the_slurm_array_example_builds_the_same_dataset() {
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert_eq!(hash_tree(&shared), hash_tree(&whole));
 }
+
+/// Replaces `file` in scenario folder `dir` with `text` and re-signs it in
+/// checksums.sha256, so that only validate's own reading can catch it.
+fn replace_signed(dir: &Path, file: &str, text: &str) {
+    use sha2::Digest;
+    std::fs::write(dir.join(file), text).unwrap();
+    let sums = std::fs::read_to_string(dir.join("checksums.sha256")).unwrap();
+    let digest: String = sha2::Sha256::digest(text.as_bytes()).iter().map(|b| format!("{b:02x}")).collect();
+    let signed: Vec<String> = sums
+        .lines()
+        .map(|l| match l.ends_with(&format!("  {file}")) {
+            true => format!("{digest}  {file}"),
+            false => l.to_string(),
+        })
+        .collect();
+    assert!(signed.iter().any(|l| l.starts_with(&digest)), "{file} is not in checksums.sha256");
+    std::fs::write(dir.join("checksums.sha256"), signed.join("\n") + "\n").unwrap();
+}
+
+#[test]
+fn validate_reads_a_city_scenarios_logs_in_either_light_layout() {
+    let dir = fresh_dir("batch-validate-city");
+    let spec = write_spec(&dir, &city_spec("damage-city", &[(4, 0.5)], (2, 0, 0), 40, "{}"));
+    let scenario = "cars04_edges50/train/00001";
+    for lights in ["changes", "frames"] {
+        let clean = dir.join(format!("clean-{lights}"));
+        gen_ok(&spec, &clean, &["--quiet", "--no-images", "--lights", lights]);
+        let (code, report) = validate_dir(&clean);
+        assert_eq!(code, 0, "{report}");
+        let log = if lights == "changes" { "light_changes.csv" } else { "lights.csv" };
+        assert!(clean.join(scenario).join(log).exists());
+        type Damage = fn(&Path, &str);
+        let damages: [(&str, Damage, &str); 2] = [
+            (
+                "event-of-no-car",
+                |d, _| {
+                    let header = "frame,t,kind,car,other_car,light,detail\n";
+                    replace_signed(d, "events.csv", &format!("{header}3,1.5,collision,9,0,,\n"));
+                },
+                "events.csv: row 2 names no car of this scenario",
+            ),
+            (
+                "light-rows-out-of-order",
+                |d, log| {
+                    let text = std::fs::read_to_string(d.join(log)).unwrap();
+                    let mut lines: Vec<&str> = text.lines().collect();
+                    let last = lines.len() - 1;
+                    lines.swap(1, last);
+                    replace_signed(d, log, &(lines.join("\n") + "\n"));
+                },
+                "",
+            ),
+        ];
+        for (name, damage, needle) in damages {
+            let copy = dir.join(format!("{name}-{lights}"));
+            assert!(Command::new("cp").arg("-r").arg(&clean).arg(&copy).status().unwrap().success());
+            damage(&copy.join(scenario), log);
+            let (code, report) = validate_dir(&copy);
+            assert_eq!(code, 1, "{name} ({lights}): validate should fail: {report}");
+            let needle = if needle.is_empty() { log } else { needle };
+            assert!(report.contains(needle), "{name} ({lights}): report should contain {needle:?}:\n{report}");
+            assert!(!report.contains("checksum mismatch"), "{report}");
+        }
+    }
+}
