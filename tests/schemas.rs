@@ -308,6 +308,13 @@ fn scenario_file_schema_and_parser_agree() {
         "a grid town".into(),
         json!({"Name": "g", "map": {"grid": {"rows": 3, "columns": 3}}, "Vehicles": [{"Id": "a", "Spawn": "E1w"}]}),
     ));
+    // An imported network names its lanes by SUMO's ids (the network beside the file).
+    let net = "grid2-arrows.net.xml";
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo").join(net), dir.join(net)).unwrap();
+    good.push((
+        "a SUMO network".into(),
+        json!({"Name": "n", "map": {"sumo": net}, "Vehicles": [{"Id": "a", "Spawn": "B0B1_0", "DriveQueue": ["right"]}]}),
+    ));
     for (k, (what, doc)) in good.iter().enumerate() {
         let errors = schema_errors(&schema, doc);
         assert!(errors.is_empty(), "{what}: schema rejects a good scenario file: {errors:?}");
@@ -333,6 +340,7 @@ fn scenario_file_schema_and_parser_agree() {
         ("drive queue as text", s(|v| v["Vehicles"][1]["DriveQueue"] = json!("straight"))),
         ("unknown action", s(|v| v["Vehicles"][1]["DriveQueue"] = json!(["fly"]))),
         ("bad spawn", s(|v| v["Vehicles"][1]["Spawn"] = json!("Q9q"))),
+        ("a SUMO lane id in the default city", s(|v| v["Vehicles"][1]["Spawn"] = json!("B0B1_0"))),
         ("a map that draws", s(|v| v["map"] = json!({"grid": {"rows": {"uniform": [2, 3]}, "columns": 2, "x": 1}}))),
         ("missing Id", s(|v| v["Vehicles"][1].as_object_mut().unwrap().remove("Id").map(|_| ()).unwrap())),
         ("bad colour", s(|v| v["Vehicles"][0]["colour"] = json!("orange"))),
