@@ -101,6 +101,9 @@ pub struct RunArgs {
     #[arg(long, conflicts_with = "no_images")]
     pub annotations: bool,
 
+    #[command(flatten)]
+    pub lights: LightsFlag,
+
     /// Exit 2 on the first action, merge distance or spawn that would need
     /// adapting (a turn from the wrong lane, a merge past its lane's end, a
     /// distance that is not a number, two cars on one spot), instead of
@@ -154,6 +157,9 @@ pub struct CounterfactualArgs {
     /// Write scenario.json and the logs only, no PNG frames or masks.
     #[arg(long)]
     pub no_images: bool,
+
+    #[command(flatten)]
+    pub lights: LightsFlag,
 
     /// Print the summaries as JSON.
     #[arg(long)]
@@ -486,13 +492,8 @@ pub struct GenArgs {
     #[arg(long)]
     pub no_effects: bool,
 
-    /// City world: how the lights' colours are logged. `changes` (the
-    /// default): light_changes.csv, every light at frame 0 and then only
-    /// where its colour changes; `frames`: lights.csv, every light at every
-    /// frame, about ten times the bytes (most of a poses-only scenario's).
-    /// Same columns; the Python package, validate and stats read both.
-    #[arg(long, value_enum, default_value_t = LightsArg::Changes)]
-    pub lights: LightsArg,
+    #[command(flatten)]
+    pub lights: LightsFlag,
 
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
     /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.
@@ -568,7 +569,19 @@ impl From<WorldArg> for WorldKind {
     }
 }
 
-/// `gen --lights`.
+/// `--lights` of `gen`, `run` and `counterfactual`.
+#[derive(Debug, Args)]
+pub struct LightsFlag {
+    /// City world: how the lights' colours are logged. `changes` (the
+    /// default): light_changes.csv, every light at frame 0 and then only
+    /// where its colour changes; `frames`: lights.csv, every light at every
+    /// frame, about ten times the bytes (most of a poses-only scenario's).
+    /// Same columns; the Python package, validate and stats read both.
+    #[arg(long, value_enum, default_value_t = LightsArg::Changes)]
+    pub lights: LightsArg,
+}
+
+/// `--lights`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LightsArg {
     /// lights.csv: every light at every frame.
@@ -720,7 +733,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 images: !args.no_images,
                 annotations: args.annotations,
                 effects: !args.no_effects,
-                lights: args.lights.into(),
+                lights: args.lights.lights.into(),
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -815,6 +828,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images: !args.no_images,
                 annotations: args.annotations,
+                lights: args.lights.lights.into(),
                 strict: args.strict,
             };
             let written = run_file(&options)?;
@@ -838,7 +852,12 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     out: args.out,
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
-                    products: Products { images, annotations: false, effects: false, lights: Default::default() },
+                    products: Products {
+                        images,
+                        annotations: false,
+                        effects: false,
+                        lights: args.lights.lights.into(),
+                    },
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };
@@ -853,6 +872,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images,
                 annotations: false,
+                lights: args.lights.lights.into(),
                 strict: false,
             };
             let pairs = counterfactual(&options, args.intervention.as_deref())?;

@@ -266,7 +266,7 @@ fn validate_sweep(
         .find(|f| f.is_dir())
         .is_some_and(|f| f.join(crate::output::layout::FrameKind::Rgb.folder()).is_dir());
     let products =
-        crate::output::manifest::Products { images, annotations: false, effects: false, lights: Default::default() };
+        crate::output::manifest::Products { images, annotations: false, effects: false, lights: sweep.lights };
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
     let expected =
         Expected::new(spec, ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras));

@@ -318,6 +318,72 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
 }
 
 #[test]
+fn run_and_counterfactual_log_the_lights_as_gen_does_and_a_sweep_records_how() {
+    let dir = fresh_dir("hw-light-logs");
+    // run: light_changes.csv by default, lights.csv with --lights frames;
+    // the same lights every frame either way.
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/interventions.json");
+    let mut rows = Vec::new();
+    for (lights, log) in [("changes", "light_changes.csv"), ("frames", "lights.csv")] {
+        let out = dir.join(format!("run-{lights}"));
+        let mut args = vec!["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+        if lights == "frames" {
+            args.extend(["--lights", "frames"]);
+        }
+        let ran = run(&args);
+        assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+        let scenario = out.join("interventions_tour");
+        let other = if log == "lights.csv" { "light_changes.csv" } else { "lights.csv" };
+        assert!(scenario.join(log).exists() && !scenario.join(other).exists(), "run --lights {lights}");
+        rows.push(light_rows(&scenario).into_iter().map(|r| (r.frame, r.signal, r.colour)).collect::<Vec<_>>());
+    }
+    assert!(!rows[0].is_empty());
+    assert_eq!(rows[0], rows[1]);
+
+    // A sweep records its light log, validate checks the runs by it, and a
+    // resume with the other log is refused.
+    let spec = write_spec(&dir, &city_spec("sweep-lights", &[(4, 0.5)], (2, 0, 0), 30, "{}"));
+    let sweep = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["counterfactual", "--sweep", spec.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        args.extend(["--no-images", "-q", "--kinds", "stop"]);
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let (changes, frames) = (dir.join("sweep-changes"), dir.join("sweep-frames"));
+    assert!(sweep(&changes, &[]).status.success());
+    assert!(sweep(&frames, &["--lights", "frames"]).status.success());
+    assert_eq!(read_json(&changes.join("sweep.json"))["lights"], "changes");
+    assert_eq!(read_json(&frames.join("sweep.json"))["lights"], "frames");
+    let pair = |out: &Path, run: &str| out.join("cars04_edges50/train/00000").join(run);
+    for run in ["factual", "counterfactual"] {
+        assert!(
+            pair(&changes, run).join("light_changes.csv").exists() && !pair(&changes, run).join("lights.csv").exists()
+        );
+        assert!(pair(&frames, run).join("lights.csv").exists());
+    }
+    for out in [&changes, &frames] {
+        let checked = run(&["validate", out.to_str().unwrap()]);
+        assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    }
+    // A sweep from before the record said so logged every frame.
+    let mut record = read_json(&frames.join("sweep.json"));
+    record.as_object_mut().unwrap().remove("lights");
+    std::fs::write(frames.join("sweep.json"), record.to_string()).unwrap();
+    let checked = run(&["validate", frames.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    let resumed = sweep(&frames, &[]);
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert_eq!(resumed.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("lights (it was made with --lights frames)"), "{stderr}");
+    // validate reads each pair by the record: told changes, it misses light_changes.csv.
+    record["lights"] = "changes".into();
+    std::fs::write(frames.join("sweep.json"), record.to_string()).unwrap();
+    let checked = run(&["validate", frames.to_str().unwrap()]);
+    assert_eq!(checked.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&checked.stdout).contains("light_changes.csv"));
+}
+
+#[test]
 fn extra_cameras_write_their_own_frames_and_the_chase_camera_keeps_its_car_centred() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/cameras.json");
     let out = fresh_dir("hw-cameras");

@@ -297,6 +297,9 @@ pub struct Sweep {
     pub expansion: Expansion,
     /// `--limit` of the sweep's run: its keys are walked from the spec.
     pub limit: Option<u32>,
+    /// How its runs log the lights (`--lights`; sweeps from before the
+    /// record said so logged every frame).
+    pub lights: crate::output::manifest::LightsLog,
 }
 
 impl Sweep {
@@ -329,6 +332,8 @@ impl Sweep {
             /// Written false when a sweep starts, true when it has finished.
             #[serde(default = "finished")]
             complete: bool,
+            #[serde(default)]
+            lights: crate::output::manifest::LightsLog,
         }
         fn finished() -> bool {
             true
@@ -343,7 +348,8 @@ impl Sweep {
             ));
         }
         let expansion = expansion_from(record.spec, &path)?;
-        Ok(Some((Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit }, record.complete)))
+        let sweep = Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit, lights: record.lights };
+        Ok(Some((sweep, record.complete)))
     }
 
     /// The keys of the sweep's pairs, in order.

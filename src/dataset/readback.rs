@@ -171,7 +171,7 @@ const LIGHT_COLUMNS: [&str; 9] =
 
 /// The lights of the scenario folder `dir` as arrays, from
 /// `light_changes.csv` (gen's default) or, where the folder has that
-/// instead (`gen --lights frames`, `run`, `counterfactual`), `lights.csv`.
+/// instead (`--lights frames`), `lights.csv`.
 pub fn read_light_log(dir: &Path, frames: usize, frame_interval: f64) -> Result<LightArrays, String> {
     let changes = dir.join(crate::output::layout::LIGHT_CHANGES_CSV);
     let every_frame = dir.join(crate::output::layout::LIGHTS_CSV);

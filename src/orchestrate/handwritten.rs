@@ -15,7 +15,7 @@ use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
 use crate::output::claim::{claim, Writer};
-use crate::output::manifest::Products;
+use crate::output::manifest::{LightsLog, Products};
 use crate::output::number::push_fixed;
 use crate::output::poses::logged_pose;
 use crate::output::writer::ScenarioWriter;
@@ -72,6 +72,8 @@ pub struct RunOptions {
     pub world: Option<WorldKind>,
     pub images: bool,
     pub annotations: bool,
+    /// City world: lights.csv or light_changes.csv.
+    pub lights: LightsLog,
     /// Reject what would need adapting (see [`FileOptions::strict`]).
     pub strict: bool,
 }
@@ -93,7 +95,7 @@ impl RunOptions {
             images: self.images,
             annotations: self.annotations && self.images,
             effects: false,
-            lights: Default::default(),
+            lights: self.lights,
         }
     }
 }
@@ -386,6 +388,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             "limit": options.limit,
             "kinds": options.kinds,
             "images": options.products.images,
+            "lights": options.products.lights.name(),
             "complete": pairs.is_some(),
             "pairs": pairs,
         }))
@@ -404,10 +407,15 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                 old["images"] = images.into();
             }
         }
-        let differences: Vec<String> = ["version", "spec", "limit", "kinds", "images"]
+        // Sweeps from before the record had `lights` logged every frame.
+        if old["lights"].is_null() {
+            old["lights"] = LightsLog::Frames.name().into();
+        }
+        let differences: Vec<String> = ["version", "spec", "limit", "kinds", "images", "lights"]
             .into_iter()
             .filter(|field| old[field] != new[field] && !(*field == "images" && old[field].is_null()))
             .map(|field| match field {
+                "lights" => format!("lights (it was made with --lights {})", old[field].as_str().unwrap_or("?")),
                 "images" if new[field] == true => "images (it was made with --no-images)".to_string(),
                 "images" => {
                     "images (it was made with images; add nothing, or use another --out for --no-images)".to_string()

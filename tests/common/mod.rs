@@ -256,7 +256,7 @@ pub struct LightRow {
 
 /// Every light at every frame of the city scenario in `dir`, in
 /// lights.csv's order (frames, then lights in plan order): lights.csv as
-/// written (`gen --lights frames`, `run`), or gen's default
+/// written (`--lights frames`), or the default
 /// light_changes.csv expanded by the library's reader, which
 /// `end_to_end.rs` checks against lights.csv light-frame by light-frame.
 pub fn light_rows(dir: &Path) -> Vec<LightRow> {
