@@ -176,15 +176,19 @@ impl Sim<'_> {
     /// footprints (the same outcome: not near); a footprint is computed
     /// once, when a pair first needs it.
     pub(super) fn detect_collisions(&mut self, now: f64) {
-        let points: Vec<Option<(DVec2, f64)>> =
-            self.cars.iter_mut().map(|car| (!car.removed).then(|| car.near_point())).collect();
+        let mut points = std::mem::take(&mut self.scratch_points);
+        points.clear();
+        points.extend(self.cars.iter_mut().map(|car| (!car.removed).then(|| car.near_point())));
         if let Some(tape) = &mut self.tape {
             tape.note_near_points(&points);
         }
-        let candidates = self.candidate_pairs(&points);
+        let mut candidates = std::mem::take(&mut self.scratch_pairs);
+        let mut extents = std::mem::take(&mut self.scratch_extents);
+        self.candidate_pairs(&points, &mut extents, &mut candidates);
         #[cfg(debug_assertions)]
         self.check_candidates(&candidates);
         self.settle_pairs(&candidates, now, |sim, x| sim.cars[x].footprint(), |_, _, _| {});
+        (self.scratch_points, self.scratch_pairs, self.scratch_extents) = (points, candidates, extents);
     }
 
     /// Settles the candidate pairs (sorted; every other pair is clearly
@@ -205,7 +209,9 @@ impl Sim<'_> {
         if candidates.is_empty() {
             return;
         }
-        let mut boxes: Vec<Option<OrientedBox>> = vec![None; self.cars.len()];
+        let mut boxes = std::mem::take(&mut self.scratch_boxes);
+        boxes.clear();
+        boxes.resize(self.cars.len(), None);
         for &(i, j) in candidates {
             let reach = self.cars[i].reach + self.cars[j].reach;
             let bi = *boxes[i].get_or_insert_with(|| footprint(self, i));
@@ -215,24 +221,28 @@ impl Sim<'_> {
                 self.collide(i, j, now);
             }
         }
+        self.scratch_boxes = boxes;
     }
 
     /// Pairs `(i, j)`, `i < j`, of cars whose centres may be near enough to
-    /// touch, given for each car on the map a point and a radius its centre
-    /// is within (`None`: off the map), in order: a sweep along x over each
-    /// car's reach, so the cost grows with the cars, not their pairs.
-    pub(super) fn candidate_pairs(&self, points: &[Option<(DVec2, f64)>]) -> Vec<(usize, usize)> {
+    /// touch, into `pairs`, given for each car on the map a point and a
+    /// radius its centre is within (`None`: off the map), in order: a sweep
+    /// along x over each car's reach, so the cost grows with the cars, not
+    /// their pairs. `extents` is the sweep's buffer.
+    pub(super) fn candidate_pairs(
+        &self,
+        points: &[Option<(DVec2, f64)>],
+        extents: &mut Vec<(usize, DVec2, f64)>,
+        pairs: &mut Vec<(usize, usize)>,
+    ) {
         // Per car: its point and how far from it another car's point may be
         // and still count (half the pair's bound, with room for round-off).
-        let mut extents: Vec<(usize, DVec2, f64)> = points
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| {
-                p.map(|(point, radius)| (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6))
-            })
-            .collect();
+        extents.clear();
+        extents.extend(points.iter().enumerate().filter_map(|(i, p)| {
+            p.map(|(point, radius)| (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6))
+        }));
         extents.sort_by(|a, b| (a.1.x - a.2).total_cmp(&(b.1.x - b.2)));
-        let mut pairs = Vec::new();
+        pairs.clear();
         for (k, &(i, pi, ei)) in extents.iter().enumerate() {
             for &(j, pj, ej) in &extents[k + 1..] {
                 if pj.x - ej >= pi.x + ei {
@@ -244,7 +254,6 @@ impl Sim<'_> {
             }
         }
         pairs.sort_unstable();
-        pairs
     }
 
     /// Debug builds (every test): no pair left out of `candidates` is near

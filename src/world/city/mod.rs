@@ -203,9 +203,13 @@ struct Sim<'a> {
     /// While a re-run brings a replayed car up to date: its leader's
     /// changes reach its followers through their own snapshots instead.
     quiet_followers: bool,
-    /// Buffers a re-run's collision checks reuse from step to step.
+    /// Buffers the collision checks reuse from step to step (no allocation
+    /// per step): near points, candidate pairs, the sweep's extents and the
+    /// footprints computed.
     scratch_points: Vec<Option<(DVec2, f64)>>,
     scratch_pairs: Vec<(usize, usize)>,
+    scratch_extents: Vec<(usize, DVec2, f64)>,
+    scratch_boxes: Vec<Option<crate::geometry::OrientedBox>>,
 }
 
 impl<'a> Sim<'a> {
@@ -242,6 +246,8 @@ impl<'a> Sim<'a> {
             quiet_followers: false,
             scratch_points: Vec::new(),
             scratch_pairs: Vec::new(),
+            scratch_extents: Vec::new(),
+            scratch_boxes: Vec::new(),
         };
         // What planning adapted shows at the start.
         for i in 0..sim.cars.len() {
