@@ -581,6 +581,13 @@ pub struct LightsFlag {
     pub lights: LightsArg,
 }
 
+impl LightsFlag {
+    /// The light log the flag asks for.
+    pub fn log(&self) -> LightsLog {
+        self.lights.into()
+    }
+}
+
 /// `--lights`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum LightsArg {
@@ -733,7 +740,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 images: !args.no_images,
                 annotations: args.annotations,
                 effects: !args.no_effects,
-                lights: args.lights.lights.into(),
+                lights: args.lights.log(),
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -828,7 +835,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images: !args.no_images,
                 annotations: args.annotations,
-                lights: args.lights.lights.into(),
+                lights: args.lights.log(),
                 strict: args.strict,
             };
             let written = run_file(&options)?;
@@ -852,12 +859,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     out: args.out,
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
-                    products: Products {
-                        images,
-                        annotations: false,
-                        effects: false,
-                        lights: args.lights.lights.into(),
-                    },
+                    products: Products { images, annotations: false, effects: false, lights: args.lights.log() },
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };
@@ -872,7 +874,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 world: args.world.map(Into::into),
                 images,
                 annotations: false,
-                lights: args.lights.lights.into(),
+                lights: args.lights.log(),
                 strict: false,
             };
             let pairs = counterfactual(&options, args.intervention.as_deref())?;

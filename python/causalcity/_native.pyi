@@ -84,7 +84,7 @@ def generate(
     fsync: bool = False,
     progress: bool = True,
     force_space: bool = False,
-    lights: str = "frames",
+    lights: str = "changes",
 ) -> str: ...
 def evaluate(
     dataset: str,
