@@ -73,6 +73,7 @@ fn gen_options(spec: &Path, out: &Path, threads: usize, images: bool) -> GenOpti
         effects: false,
         // gen's default light log.
         lights: causalcity::output::manifest::LightsLog::Changes,
+        packing: causalcity::output::manifest::Packing::Folders,
         progress: ProgressMode::Quiet,
         shard: None,
         force: false,
@@ -597,10 +598,89 @@ fn car_count_cost() {
     }
 }
 
+/// `gen --format tar` against folders: the rate of each, measured side by
+/// side on disk, and the files of the paper-size city either way (issue 38's
+/// target: <= 1,000 files, written at >= 90 % of the folder rate).
+fn packs_rate(root: &Path) {
+    use causalcity::output::manifest::Packing;
+    println!("\n== Packed (--format tar, 64 per tar) vs folders: city, 12 cars x 150 frames, 2 threads, best of 3 interleaved runs, on disk ==");
+    println!(
+        "{:<38} {:>14} {:>14} {:>10} {:>12} {:>12}",
+        "job", "folders sc/s", "packs sc/s", "ratio", "files", "files packed"
+    );
+    let jobs = [
+        ("poses only, 128 scenarios", 128, false, false),
+        ("poses + effects (gen's default), 64", 64, false, true),
+        ("images, 16 scenarios", 16, true, false),
+    ];
+    for (label, train, images, effects) in jobs {
+        let spec = write_world_spec(root, &format!("packs{train}"), "city", 12, train);
+        let (folders, packed) = (root.join("packs-folders"), root.join("packs-packed"));
+        let run = |out: &Path, packing: Packing| {
+            let _ = std::fs::remove_dir_all(out);
+            let options = GenOptions { packing, effects, ..gen_options(&spec, out, 2, images) };
+            generate(&options).unwrap().elapsed.as_secs_f64()
+        };
+        let (mut best_folders, mut best_packed) = (f64::INFINITY, f64::INFINITY);
+        for _ in 0..3 {
+            best_folders = best_folders.min(run(&folders, Packing::Folders));
+            best_packed = best_packed.min(run(&packed, Packing::Tar { per_tar: 64 }));
+        }
+        let count = |dir: &Path| walk_files(dir);
+        println!(
+            "{:<38} {:>14.1} {:>14.1} {:>9.0}% {:>12} {:>12}",
+            label,
+            f64::from(train) / best_folders,
+            f64::from(train) / best_packed,
+            100.0 * best_folders / best_packed,
+            count(&folders),
+            count(&packed)
+        );
+        if images {
+            // Files per scenario with images, for the paper-size count.
+            let per = (count(&folders) - 1) as f64 / f64::from(train);
+            let spec = DatasetSpec::from_file(Path::new("configs/city.json")).unwrap();
+            let expansion = Expansion::from_spec(spec).unwrap();
+            let sequence = expansion.key_sequence(None);
+            let packs = causalcity::output::packs::Packs::new(sequence, 64).len();
+            println!(
+                "paper-size city (configs/city.json, {} scenarios): about {:.1} million files as folders ({per:.0} per scenario), {} as packs [target <= 1,000]",
+                sequence.len(),
+                sequence.len() as f64 * per / 1e6,
+                packs + 1
+            );
+        }
+        let _ = std::fs::remove_dir_all(&folders);
+        let _ = std::fs::remove_dir_all(&packed);
+    }
+}
+
+/// Files under `dir`, counted.
+fn walk_files(dir: &Path) -> usize {
+    let mut n = 0;
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(e.path());
+            } else {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
 fn main() {
     // `cargo bench` passes --bench; ignore arguments.
     let root = std::env::temp_dir().join(format!("causalcity-bench-{}", std::process::id()));
     std::fs::create_dir_all(&root).unwrap();
+    // BENCH_ONLY=packs: only packed against folder output.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "packs") {
+        packs_rate(&root);
+        let _ = std::fs::remove_dir_all(&root);
+        return;
+    }
     // BENCH_ONLY=perspective: only the perspective cameras' figures.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "perspective") {
         perspective_rates();
@@ -636,6 +716,7 @@ fn main() {
     }
     png_settings_comparison();
     perspective_rates();
+    packs_rate(&root);
 
     println!("\n== Toy world with images, 1024x640, 12 cars x 150 frames ==");
     let images_spec = write_spec(&root, "images", 12, 8);

@@ -19,9 +19,10 @@ use causalcity::map_view::{map_view, net_view};
 const NET_PICTURE_PX: u32 = 1200;
 use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunOptions, SweepKind, SweepOptions};
 use causalcity::orchestrate::merge::merge;
+use causalcity::orchestrate::pack::pack_dataset;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
 use causalcity::output::claim::claim_file;
-use causalcity::output::manifest::{LightsLog, Products};
+use causalcity::output::manifest::{LightsLog, Packing, Products};
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
 use causalcity::spec::{Split, WorldKind};
@@ -49,6 +50,9 @@ pub enum Command {
     Gen(GenArgs),
     /// Combine the outputs of `gen --shard K/N` runs into one dataset.
     Merge(MergeArgs),
+    /// Pack a dataset of scenario folders into tar files in a new folder:
+    /// what `gen --format tar` writes for its spec, byte for byte.
+    Pack(PackArgs),
     /// Check a dataset against data-schema/ and its checksums.
     Validate(ValidateArgs),
     /// Per group and split: speeds, stops, collisions, red-light runs, leader-follower gaps.
@@ -495,6 +499,19 @@ pub struct GenArgs {
     #[command(flatten)]
     pub lights: LightsFlag,
 
+    /// How scenarios are stored: `folders` (a folder each) or `tar`: whole
+    /// scenarios packed into WebDataset-style tar files of
+    /// --scenarios-per-tar each, `<group>/<split>/<first>-<last>.tar`, with
+    /// the folders' files and bytes inside (`tar -xf` gives the folders).
+    /// For cluster file systems: the paper-size city is a few hundred files.
+    #[arg(long, value_enum, default_value_t = FormatArg::Folders)]
+    pub format: FormatArg,
+
+    /// With --format tar: scenarios per tar file (the last of a split may
+    /// hold fewer) [default: 64].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub scenarios_per_tar: Option<u32>,
+
     /// Generate only shard K of N (0 <= K < N), e.g. from a Slurm array or a
     /// Kubernetes Indexed Job; combine the shards with `causalcity merge`.
     #[arg(long, value_name = "K/N")]
@@ -537,6 +554,29 @@ pub struct MergeArgs {
 }
 
 #[derive(Debug, Args)]
+pub struct PackArgs {
+    /// The dataset of scenario folders to pack (the one holding manifest.json); only read.
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+
+    /// The folder to write the packed dataset into (empty, or an earlier pack run's to resume).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Scenarios per tar file (the last of a split may hold fewer).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_SCENARIOS_PER_TAR, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub scenarios_per_tar: u32,
+
+    /// Worker threads [default: every core]. Output is identical for any value.
+    #[arg(short = 'j', long = "threads", value_name = "THREADS", value_parser = clap::value_parser!(u32).range(1..=MAX_THREADS as i64))]
+    pub threads: Option<u32>,
+
+    /// No progress output.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
 pub struct ValidateArgs {
     /// Dataset folder (the one holding manifest.json).
     #[arg(value_name = "DIR")]
@@ -568,6 +608,20 @@ impl From<WorldArg> for WorldKind {
         }
     }
 }
+
+/// `gen --format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// A folder per scenario.
+    Folders,
+    /// Tar files of whole scenarios (--scenarios-per-tar each).
+    Tar,
+}
+
+/// `gen --scenarios-per-tar`'s default: the paper-size city (25,000
+/// scenarios) in about 400 tars, a few MB each without images and a few
+/// hundred MB with them (WebDataset's advice: 100 MB to 1 GB).
+pub const DEFAULT_SCENARIOS_PER_TAR: u32 = 64;
 
 /// `--lights` of `gen`, `run` and `counterfactual`.
 #[derive(Debug, Args)]
@@ -741,6 +795,15 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 annotations: args.annotations,
                 effects: !args.no_effects,
                 lights: args.lights.log(),
+                packing: match (args.format, args.scenarios_per_tar) {
+                    (FormatArg::Folders, None) => Packing::Folders,
+                    (FormatArg::Folders, Some(n)) => {
+                        return Err(Error::input(format!(
+                            "--scenarios-per-tar {n} packs tar files: give it with --format tar"
+                        )))
+                    }
+                    (FormatArg::Tar, n) => Packing::Tar { per_tar: n.unwrap_or(DEFAULT_SCENARIOS_PER_TAR) },
+                },
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -751,6 +814,13 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             report(&generate(&options)?, args.json)
         }
         Command::Merge(args) => say(merge(&args.out, &args.shards)?),
+        Command::Pack(args) => say(pack_dataset(
+            &args.dataset,
+            &args.out,
+            args.scenarios_per_tar,
+            args.threads.map(|t| t as usize),
+            progress(args.quiet),
+        )?),
         Command::Export(ExportCommand::Nri(args)) => {
             let options = NriOptions {
                 layout: args.layout.into(),

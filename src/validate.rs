@@ -10,6 +10,8 @@ use crate::output::layout::{
     SCENARIO_JSON,
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
+use crate::output::manifest::Packing;
+use crate::output::packs::{Packs, Scratch};
 use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
@@ -208,11 +210,23 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
             message: "the run that wrote this dataset did not finish: rerun its gen command to complete it".into(),
         });
     }
-    problems.extend(unexpected_entries(dir, keys, spec));
+    let packs = match record.packing() {
+        Packing::Folders => None,
+        Packing::Tar { per_tar } => Some(Packs::new(dataset.key_sequence(), per_tar)),
+    };
+    problems.extend(unexpected_entries(dir, keys, spec, packs.as_ref()));
 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
-    let results: Vec<ScenarioCheck> =
-        pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect());
+    let results: Vec<ScenarioCheck> = match &packs {
+        None => pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect()),
+        Some(packs) => {
+            let scratch = Scratch::new()?;
+            let checked: Vec<Vec<ScenarioCheck>> = pool.install(|| {
+                (0..packs.len()).into_par_iter().map(|n| check_pack(dir, packs, n, &expected, &scratch)).collect()
+            });
+            checked.into_iter().flatten().collect()
+        }
+    };
     let (mut files, mut bytes) = (0, 0);
     let mut prints = Vec::with_capacity(keys.len());
     for (p, f, b, cars) in results {
@@ -341,9 +355,11 @@ fn validate_sweep(
 /// Leftovers of interrupted runs, and files and folders the manifest does
 /// not know: at the root (beside manifest.json and the group folders), in a
 /// group folder (beside its splits) and in a split folder.
-fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> Vec<Problem> {
-    let known: BTreeSet<PathBuf> =
-        keys.iter().map(|k| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name())).collect();
+fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec, packs: Option<&Packs<'_>>) -> Vec<Problem> {
+    let known: BTreeSet<PathBuf> = match packs {
+        None => keys.iter().map(|k| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name())).collect(),
+        Some(packs) => (0..packs.len()).map(|n| packs.path(dir, &packs.pack(n))).collect(),
+    };
     let splits: BTreeSet<PathBuf> = known.iter().filter_map(|p| p.parent().map(Path::to_path_buf)).collect();
     let groups: BTreeSet<PathBuf> = spec.groups.iter().map(|g| dir.join(g.name())).collect();
     let mut problems = Vec::new();
@@ -390,8 +406,13 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
             if known.contains(&path) {
                 continue;
             }
-            let message = if e.file_name().to_string_lossy().starts_with(PARTIAL_PREFIX) {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let message = if name.starts_with(PARTIAL_PREFIX) {
                 "leftover of an interrupted scenario: rerun gen to finish it"
+            } else if packs.is_some() && name.ends_with(".tar.partial") {
+                "leftover of an interrupted pack: rerun gen to finish it"
+            } else if packs.is_some() && name.bytes().all(|b| b.is_ascii_digit()) {
+                "a scenario not packed yet: rerun gen to pack it"
             } else {
                 "not part of this dataset (the manifest does not list it)"
             };
@@ -399,6 +420,49 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec) -> V
         }
     }
     problems
+}
+
+/// Checks the pack `number`: that it holds its scenarios whole and nothing
+/// else, then each of its scenarios as a folder's, unpacked into `scratch`.
+/// Problems name the pack, and the file inside it.
+fn check_pack(
+    dir: &Path,
+    packs: &Packs<'_>,
+    number: usize,
+    expected: &Expected<'_>,
+    scratch: &Scratch,
+) -> Vec<ScenarioCheck> {
+    let pack = packs.pack(number);
+    let keys = packs.keys(&pack);
+    let path = packs.path(dir, &pack);
+    let mut checks: Vec<ScenarioCheck> = keys.iter().map(|_| (Vec::new(), 0, 0, Vec::new())).collect();
+    let problem = |message: String| {
+        let prefix = format!("{}: ", path.display());
+        let message = message.strip_prefix(&prefix).map(str::to_string).unwrap_or(message);
+        Problem { path: path.clone(), message }
+    };
+    if !path.is_file() {
+        checks[0].0.push(problem("missing pack: rerun gen to write it".into()));
+        return checks;
+    }
+    if let Err(why) = crate::output::packs::verify(&path, &keys) {
+        checks[0].0.push(problem(why));
+    }
+    let root = scratch.path().join(number.to_string());
+    if let Err(why) = crate::output::packs::unpack(&path, &root, &|_| true) {
+        checks[0].0.push(problem(why));
+        let _ = std::fs::remove_dir_all(&root);
+        return checks;
+    }
+    for (check, key) in checks.iter_mut().zip(&keys) {
+        let (found, files, bytes, prints) = check_scenario(&root, key, expected);
+        let inside =
+            |p: &Path| p.strip_prefix(&root).map_or_else(|_| p.display().to_string(), |r| r.display().to_string());
+        check.0.extend(found.into_iter().map(|p| problem(format!("{}: {}", inside(&p.path), p.message))));
+        (check.1, check.2, check.3) = (files, bytes, prints);
+    }
+    let _ = std::fs::remove_dir_all(&root);
+    checks
 }
 
 /// Checks one scenario; returns its problems, files and bytes read.

@@ -79,7 +79,7 @@ fn opening_a_dataset_or_a_sweep_takes_the_same_memory_for_a_thousand_scenarios_a
             .filter(|k| k.split == split)
             .map(|k| format!("{}/{}", k.split.name(), k.folder_name()))
             .collect();
-        let dirs = opened.scenario_dirs("cars04_edges50", split);
+        let dirs = opened.scenario_dirs("cars04_edges50", split).unwrap();
         let named: Vec<String> =
             dirs.iter().map(|d| d.strip_prefix(made.join("cars04_edges50")).unwrap().display().to_string()).collect();
         assert_eq!(named, listed);

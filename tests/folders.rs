@@ -263,6 +263,8 @@ fn every_command_refuses_a_folder_it_did_not_write() {
             "counterfactual sweep",
         ),
         (vec!["merge".into(), "--out".into(), p(&dir.join("merged")), p(&toy)], &toy, "no shard manifest"),
+        (vec!["pack".into(), p(&toy), "--out".into(), p(&toy.join("packed"))], &toy, "inside a gen dataset"),
+        (vec!["pack".into(), p(&toy), "--out".into(), p(&sweep)], &sweep, "counterfactual sweep"),
         (
             vec!["merge".into(), "--out".into(), p(&toy), p(&city_shards[0]), p(&city_shards[1])],
             &toy,

@@ -85,6 +85,7 @@ def generate(
     progress: bool = True,
     force_space: bool = False,
     lights: str = "changes",
+    scenarios_per_tar: Optional[int] = None,
 ) -> str: ...
 def evaluate(
     dataset: str,

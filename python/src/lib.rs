@@ -467,7 +467,7 @@ fn counterfactual<'py>(
 
 /// `causalcity gen` from Python: the run's summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false, lights="changes"))]
+#[pyo3(signature = (spec, out, limit=None, threads=None, images=true, annotations=false, effects=true, shard=None, force=false, fsync=false, progress=true, force_space=false, lights="changes", scenarios_per_tar=None))]
 #[allow(clippy::too_many_arguments)]
 fn generate(
     py: Python<'_>,
@@ -484,6 +484,7 @@ fn generate(
     progress: bool,
     force_space: bool,
     lights: &str,
+    scenarios_per_tar: Option<u32>,
 ) -> PyResult<String> {
     let lights = match lights {
         "frames" => causalcity::output::manifest::LightsLog::Frames,
@@ -501,6 +502,10 @@ fn generate(
         annotations,
         effects,
         lights,
+        packing: match scenarios_per_tar {
+            None => causalcity::output::manifest::Packing::Folders,
+            Some(per_tar) => causalcity::output::manifest::Packing::Tar { per_tar: per_tar.max(1) },
+        },
         progress: if progress { ProgressMode::Auto } else { ProgressMode::Quiet },
         shard,
         force,

@@ -344,6 +344,12 @@ impl Predicted {
 /// Where the truth is: a `gen` dataset, or a sweep's pairs.
 struct Truth {
     dir: PathBuf,
+    /// The folder the scenario folders are under: `dir`, or where a packed
+    /// dataset was unpacked.
+    scenarios: PathBuf,
+    /// Keeps a packed dataset's unpacked folders while they are read.
+    #[allow(dead_code)]
+    unpacked: Option<crate::dataset::Unpacked>,
     expansion: Expansion,
     keys: Vec<ScenarioKey>,
     /// Scenario folders carry the causal and direct graphs.
@@ -358,13 +364,23 @@ impl Truth {
                 // Every scenario is scored against its files: evaluate holds
                 // one entry per scenario whatever it does.
                 let keys = sweep.key_sequence().iter().collect();
-                return Ok(Truth { dir: sweep.dir, expansion: sweep.expansion, keys, effects: false, sweep: true });
+                let scenarios = sweep.dir.clone();
+                return Ok(Truth {
+                    dir: sweep.dir,
+                    scenarios,
+                    unpacked: None,
+                    expansion: sweep.expansion,
+                    keys,
+                    effects: false,
+                    sweep: true,
+                });
             }
         }
         let dataset = Dataset::open_complete(dir)?;
         let keys = dataset.keys().collect();
-        let Dataset { dir, record, expansion } = dataset;
-        Ok(Truth { dir, effects: record.effects, expansion, keys, sweep: false })
+        let scenarios = dataset.scenarios_root()?.to_path_buf();
+        let Dataset { dir, record, expansion, unpacked } = dataset;
+        Ok(Truth { dir, scenarios, unpacked, effects: record.effects, expansion, keys, sweep: false })
     }
 
     fn identity(&self) -> DatasetIdentity {
@@ -573,7 +589,7 @@ fn match_scenarios(
     let mut order: Vec<String> = Vec::new();
     for key in &truth.keys {
         let folder = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
-        let pair = truth.dir.join(&key.group).join(key.split.name()).join(key.folder_name());
+        let pair = truth.scenarios.join(&key.group).join(key.split.name()).join(key.folder_name());
         let (dir, counterfactual_dir) =
             if truth.sweep { (pair.join("factual"), Some(pair.join("counterfactual"))) } else { (pair, None) };
         order.push(folder.clone());
@@ -1100,16 +1116,17 @@ fn summarise(
     let (mut edges, mut overall, mut per_scenario) = (Vec::new(), Vec::new(), Vec::new());
     for (g, &graph) in options.graphs.iter().enumerate() {
         let (rows, all) = edge_rows(graph.name(), truth, options, scored, results, |r| graph_pairs(r, g));
-        per_scenario.extend(scenario_rows(graph.name(), dataset, &rows, scored, results, |r| graph_pairs(r, g)));
+        per_scenario
+            .extend(scenario_rows(graph.name(), &truth.scenarios, &rows, scored, results, |r| graph_pairs(r, g)));
         edges.extend(rows);
         overall.extend(all);
     }
     let (rows, all) = edge_rows(PER_FRAME_GRAPH, truth, options, scored, results, frame_pairs);
-    per_scenario.extend(scenario_rows(PER_FRAME_GRAPH, dataset, &rows, scored, results, frame_pairs));
+    per_scenario.extend(scenario_rows(PER_FRAME_GRAPH, &truth.scenarios, &rows, scored, results, frame_pairs));
     edges.extend(rows);
     overall.extend(all);
     let (rows, all) = edge_rows(AFFECTED_GRAPH, truth, options, scored, results, affected_pairs);
-    per_scenario.extend(scenario_rows(AFFECTED_GRAPH, dataset, &rows, scored, results, affected_pairs));
+    per_scenario.extend(scenario_rows(AFFECTED_GRAPH, &truth.scenarios, &rows, scored, results, affected_pairs));
     edges.extend(rows);
     overall.extend(all);
     // Scenarios with trajectories and no edge scores still get a row.
@@ -1119,7 +1136,7 @@ fn summarise(
         .filter(|(_, r)| r.pairs.is_empty() && r.frame_pairs.is_none() && r.affected_pairs.is_none());
     let trajectory_only =
         trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty());
-    per_scenario.extend(trajectory_only.map(|(s, r)| scenario_base(dataset, s, r)));
+    per_scenario.extend(trajectory_only.map(|(s, r)| scenario_base(&truth.scenarios, s, r)));
     per_scenario.sort_by(|a, b| (a.scenario.as_str(), a.graph).cmp(&(b.scenario.as_str(), b.graph)));
     let untuned: Vec<String> = edges
         .iter()
@@ -1170,9 +1187,10 @@ fn frame_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
 
 /// A scenario's row with its name, group, split and trajectory errors
 /// filled in and no edge scores.
-fn scenario_base(dataset: &Path, s: &ScenarioPredictions, r: &ScenarioResult) -> ScenarioScores {
+/// `scenarios`: the folder the scenario folders are under ([`Truth::scenarios`]).
+fn scenario_base(scenarios: &Path, s: &ScenarioPredictions, r: &ScenarioResult) -> ScenarioScores {
     let mean = |errors: &[f64]| (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64);
-    let name = s.dir.strip_prefix(dataset).unwrap_or(&s.dir);
+    let name = s.dir.strip_prefix(scenarios).unwrap_or(&s.dir);
     // A sweep pair's factual run sits one folder below the pair.
     let name = if s.counterfactual_dir.is_some() { name.parent().unwrap_or(name) } else { name };
     ScenarioScores {

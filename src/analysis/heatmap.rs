@@ -101,7 +101,7 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
     let mut dirs = Vec::new();
     for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
         for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
-            dirs.extend(opened.scenario_dirs(&group, split));
+            dirs.extend(opened.scenario_dirs(&group, split)?);
         }
     }
     let camera = opened.expansion.camera;

@@ -340,7 +340,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
     let mut rows = Vec::new();
     for group in &dataset.spec().groups {
         for split in Split::ALL {
-            let dirs = dataset.scenario_dirs(&group.name(), split);
+            let dirs = dataset.scenario_dirs(&group.name(), split).map_err(crate::error::Error::Failure)?;
             if dirs.is_empty() {
                 continue;
             }

@@ -5,7 +5,7 @@
 
 pub mod readback;
 
-use crate::output::manifest::ManifestRecord;
+use crate::output::manifest::{ManifestRecord, Packing};
 use crate::output::scenario_dir;
 use crate::plan::{Expansion, KeySequence, ScenarioKey};
 use crate::spec::{DatasetSpec, Split};
@@ -18,6 +18,21 @@ pub struct Dataset {
     pub dir: PathBuf,
     pub record: ManifestRecord,
     pub expansion: Expansion,
+    /// A packed dataset's (`gen --format tar`) packs, unpacked for readers
+    /// of scenario folders when they first need them; the folders go when
+    /// this goes.
+    pub unpacked: Option<Unpacked>,
+}
+
+/// Where a packed dataset's packs are unpacked (a private temporary
+/// folder, removed when this is dropped) and which are there.
+pub struct Unpacked {
+    scratch: crate::output::packs::Scratch,
+    per_tar: u32,
+    /// Unpack the frames (PNG) too ([`Dataset::with_frames`]); readers of
+    /// the logs leave them in the packs.
+    frames: bool,
+    done: std::sync::Mutex<Vec<bool>>,
 }
 
 impl Dataset {
@@ -27,7 +42,74 @@ impl Dataset {
         let record = ManifestRecord::read(&manifest)?
             .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
         let expansion = expansion_of(&record, &manifest)?;
-        Ok(Dataset { dir: dir.to_path_buf(), record, expansion })
+        let unpacked = match record.packing() {
+            Packing::Folders => None,
+            Packing::Tar { per_tar } => Some(Unpacked {
+                scratch: crate::output::packs::Scratch::new()?,
+                per_tar,
+                frames: false,
+                done: std::sync::Mutex::new(Vec::new()),
+            }),
+        };
+        Ok(Dataset { dir: dir.to_path_buf(), record, expansion, unpacked })
+    }
+
+    /// The folder the scenario folders at `positions` are under: the
+    /// dataset's own, or for a packed dataset, the temporary folder that
+    /// the packs holding them are unpacked into (each once, in parallel).
+    /// Errors name a missing or damaged pack.
+    fn folders_root(&self, positions: std::ops::Range<usize>) -> Result<&Path, String> {
+        let Some(unpacked) = &self.unpacked else { return Ok(&self.dir) };
+        if positions.is_empty() {
+            return Ok(unpacked.scratch.path());
+        }
+        let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
+        let (first, last) = (packs.of_position(positions.start), packs.of_position(positions.end - 1));
+        // Pack numbers run in key order: find those of the two ends.
+        let number_of = |pack: &crate::output::packs::Pack| {
+            let (mut lo, mut hi) = (0usize, packs.len());
+            while lo < hi {
+                let mid = (lo + hi) / 2;
+                if packs.pack(mid).positions.start < pack.positions.start {
+                    lo = mid + 1;
+                } else {
+                    hi = mid;
+                }
+            }
+            lo
+        };
+        let wanted: Vec<usize> = {
+            let mut done = unpacked.done.lock().map_err(|_| "a reader thread failed".to_string())?;
+            if done.is_empty() {
+                done.resize(packs.len(), false);
+            }
+            (number_of(&first)..=number_of(&last)).filter(|&n| !std::mem::replace(&mut done[n], true)).collect()
+        };
+        use rayon::prelude::*;
+        let root = unpacked.scratch.path();
+        wanted
+            .into_par_iter()
+            .try_for_each(|n| {
+                let path = packs.path(&self.dir, &packs.pack(n));
+                if !path.is_file() {
+                    return Err(format!("{}: missing pack (validate says what else is missing)", path.display()));
+                }
+                let frames = unpacked.frames;
+                crate::output::packs::unpack(&path, root, &|name| frames || !name.ends_with(".png"))
+            })
+            .inspect_err(|_| {
+                // What failed to unpack is tried again, not taken as there.
+                if let Ok(mut done) = unpacked.done.lock() {
+                    done.iter_mut().for_each(|d| *d = false);
+                }
+            })?;
+        Ok(root)
+    }
+
+    /// The folder every scenario folder of the dataset is under (see
+    /// [`Dataset::scenario_dirs`]): a packed dataset is unpacked whole.
+    pub fn scenarios_root(&self) -> Result<&Path, String> {
+        self.folders_root(0..self.key_sequence().len())
     }
 
     /// The keys of the scenarios the dataset holds, in its order.
@@ -38,6 +120,16 @@ impl Dataset {
     /// [`Dataset::key_sequence`]'s keys, each made when it is reached.
     pub fn keys(&self) -> impl ExactSizeIterator<Item = ScenarioKey> + '_ {
         (0..self.key_sequence().len()).map(move |i| self.key_sequence().key(i))
+    }
+
+    /// For readers of the frames: a packed dataset's PNGs are unpacked too
+    /// (without this, only the logs and JSON are, and a scenario folder
+    /// read from packs has no `rgb/`, `mask/` or camera frames).
+    pub fn with_frames(mut self) -> Dataset {
+        if let Some(unpacked) = &mut self.unpacked {
+            unpacked.frames = true;
+        }
+        self
     }
 
     /// Opens a dataset whose run has finished.
@@ -69,22 +161,27 @@ impl Dataset {
 
     /// Every scenario folder, in the dataset's order, with its path relative
     /// to the dataset (`<group>/<split>/<scenario>`), which exports mirror.
-    pub fn scenario_paths(&self) -> impl Iterator<Item = (PathBuf, PathBuf)> + '_ {
-        self.keys().map(|k| {
+    /// A packed dataset is unpacked first (into a temporary folder).
+    pub fn scenario_paths(&self) -> Result<impl Iterator<Item = (PathBuf, PathBuf)> + '_, String> {
+        let root = self.scenarios_root()?;
+        Ok(self.keys().map(move |k| {
             let relative = Path::new(&k.group).join(k.split.name()).join(k.folder_name());
-            (self.dir.join(&relative), relative)
-        })
+            (root.join(&relative), relative)
+        }))
     }
 
-    /// Scenario folders of one group and split, in index order.
-    pub fn scenario_dirs(&self, group: &str, split: Split) -> Vec<PathBuf> {
-        let Some(index) = self.spec().groups.iter().position(|g| g.name() == group) else { return Vec::new() };
+    /// Scenario folders of one group and split, in index order. A packed
+    /// dataset's packs that hold them are unpacked first (into a temporary
+    /// folder, each once).
+    pub fn scenario_dirs(&self, group: &str, split: Split) -> Result<Vec<PathBuf>, String> {
+        let Some(index) = self.spec().groups.iter().position(|g| g.name() == group) else { return Ok(Vec::new()) };
         let sequence = self.key_sequence();
-        sequence
-            .positions_of(index, split)
+        let positions = sequence.positions_of(index, split);
+        let root = self.folders_root(positions.clone())?;
+        Ok(positions
             .map(|p| sequence.key(p))
-            .map(|k| scenario_dir(&self.dir, &k.group, split.name(), &k.folder_name()))
-            .collect()
+            .map(|k| scenario_dir(root, &k.group, split.name(), &k.folder_name()))
+            .collect())
     }
 }
 

@@ -255,7 +255,7 @@ fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Resu
         for split in Split::ALL {
             // A split that holds the car count out has its own.
             let cars = opened.spec().group_of(split, group).cars as usize;
-            let dirs = opened.scenario_dirs(&group.name(), split);
+            let dirs = opened.scenario_dirs(&group.name(), split)?;
             if dirs.is_empty() {
                 continue;
             }

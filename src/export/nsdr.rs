@@ -17,7 +17,7 @@ use std::path::Path;
 /// Writes annotations for every scenario of `dataset` under `out`; returns
 /// how many scenarios were written.
 pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?.with_frames();
     if !opened.record.images {
         return Err(Error::Input(format!(
             "{} has no masks (made with --no-images): NS-DR annotations need them; regenerate without --no-images",
@@ -28,7 +28,8 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     let (w, h) = (opened.spec().image.width, opened.spec().image.height);
     let digits = frame_digits(opened.spec().frames);
     // Walked, not listed: memory independent of the dataset's size.
-    let jobs = opened.scenario_paths().map(|(dir, relative)| (dir, out.join(relative)));
+    let packed = opened.unpacked.is_some();
+    let jobs = opened.scenario_paths().map_err(Error::Failure)?.map(|(dir, relative)| (dir, out.join(relative)));
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     jobs.par_bridge()
         .try_for_each(|(source, target)| {
@@ -36,7 +37,11 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
             let json = annotate(source, w, h, digits)?;
             std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
             write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-            link_frames(source, target)?;
+            match packed {
+                false => link_frames(source, target)?,
+                // Unpacked into a temporary folder: links would outlive it.
+                true => copy_frames(source, target)?,
+            }
             bar.inc();
             Ok::<(), String>(())
         })
@@ -65,6 +70,27 @@ fn link_frames(source: &Path, target: &Path) -> Result<(), String> {
     }
     #[cfg(not(unix))]
     let _ = (source, target);
+    Ok(())
+}
+
+/// `rgb/` and `mask/` beside an exported annotations.json, copied from a
+/// packed dataset's scenario (whose folders are temporary); a rerun
+/// replaces them.
+fn copy_frames(source: &Path, target: &Path) -> Result<(), String> {
+    for folder in ["rgb", "mask"] {
+        let (from, to) = (source.join(folder), target.join(folder));
+        if std::fs::symlink_metadata(&to).is_ok_and(|m| !m.is_dir()) {
+            std::fs::remove_file(&to).map_err(|e| format!("cannot replace {}: {e}", to.display()))?;
+        }
+        std::fs::create_dir_all(&to).map_err(|e| io_err(&to)(e).to_string())?;
+        let entries = std::fs::read_dir(&from).map_err(|e| format!("cannot read {}: {e}", from.display()))?;
+        for entry in entries {
+            let entry = entry.map_err(|e| format!("cannot read {}: {e}", from.display()))?;
+            let bytes =
+                std::fs::read(entry.path()).map_err(|e| format!("cannot read {}: {e}", entry.path().display()))?;
+            write_atomically(&to.join(entry.file_name()), &bytes).map_err(|e| e.to_string())?;
+        }
+    }
     Ok(())
 }
 

@@ -108,7 +108,10 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
         &format!("export vcdn {}", dataset.display()),
     )?;
     // Walked, not listed: memory independent of the dataset's size.
-    let jobs = opened.scenario_paths().map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")));
+    let jobs = opened
+        .scenario_paths()
+        .map_err(Error::Failure)?
+        .map(|(dir, relative)| (dir, out.join(relative).with_extension("h5")));
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     jobs.par_bridge()
         .try_for_each(|(source, target)| {

@@ -5,8 +5,10 @@
 
 use super::run::GenError;
 use crate::output::claim::{claim, Writer};
-use crate::output::manifest::{Manifest, ManifestRecord};
+use crate::output::manifest::{Manifest, ManifestRecord, Packing};
+use crate::output::packs::Packs;
 use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use crate::plan::KeySequence;
 use rayon::prelude::*;
 use std::collections::BTreeSet;
 use std::fs;
@@ -95,10 +97,11 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             || record.version != first.version
             || record.products() != first.products()
             || record.limit != first.limit
+            || record.scenarios_per_tar != first.scenarios_per_tar
             || shard.count != count
         {
             return Err(GenError::Input(format!(
-                "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --lights, --limit or shard count differ) than {}",
+                "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --lights, --format, --limit or shard count differ) than {}",
                 path.display(),
                 manifests[0].0.display()
             )));
@@ -134,13 +137,72 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // of scenarios at a time: merging takes the same memory for ten
     // scenarios as for ten million.
     let sequence = expansion.key_sequence(first.limit);
+    let (moved, already) = match first.packing() {
+        Packing::Folders => merge_folders(out, &others, &sequence)?,
+        Packing::Tar { per_tar } => merge_packs(out, &others, Packs::new(sequence, per_tar))?,
+    };
+    // The networks the spec names (read from the first shard's folder).
+    super::run::keep_networks(&expansion.spec, out)?;
+    let manifest =
+        Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), first.packing(), true, None)
+            .to_json();
+    write_atomically(&out.join("manifest.json"), &manifest)?;
+    for (path, _) in &manifests {
+        fs::remove_file(path).map_err(io_err(path))?;
+        if let Some(dir) = path.parent() {
+            let _ = fs::remove_dir(dir); // only when empty
+        }
+    }
+    // The shards' folder trees the scenarios left: empty split and group
+    // folders go, and a shard folder that holds nothing else (once its
+    // lock file has gone with its claim).
+    drop(source_claims);
+    for source in &others {
+        for group in &expansion.spec.groups {
+            let group = source.join(group.name());
+            for split in crate::spec::Split::ALL {
+                let _ = fs::remove_dir(group.join(split.name())); // only when empty
+            }
+            let _ = fs::remove_dir(&group);
+        }
+        let _ = fs::remove_dir(source);
+    }
+    // A shard folder's copies of the networks, now kept in --out: its
+    // networks/ goes when it holds those alone, then the folder if empty.
+    // (Not --out's own, when it is given as a source too.)
+    for source in &others {
+        let folder = source.join(crate::spec::NETWORKS_FOLDER);
+        if !fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
+            continue;
+        }
+        for (name, network) in expansion.spec.networks() {
+            let copy = folder.join(name);
+            if fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
+                fs::remove_file(&copy).map_err(io_err(&copy))?;
+            }
+        }
+        if fs::remove_dir(&folder).is_ok() {
+            let _ = fs::remove_dir(source);
+        }
+    }
+    Ok(format!(
+        "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
+        out.display(),
+        sequence.len()
+    ))
+}
+
+/// Moves every scenario folder into `out` from the shard folders
+/// `others` (checked first, all of them); returns how many moved and how
+/// many duplicate copies were dropped.
+fn merge_folders(out: &Path, others: &[&PathBuf], sequence: &KeySequence<'_>) -> Result<(usize, usize), GenError> {
     // Where the scenario at `position` is; with `compare`, copies of it in
     // two folders must hold the same checksums.
     let locate = |position: usize, compare: bool| -> Result<Located, GenError> {
         let key = sequence.key(position);
         let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
         let mut located = Located { found: to.is_dir().then(|| to.clone()), to, moved: false, duplicates: Vec::new() };
-        for source in &others {
+        for source in others {
             let from = scenario_dir(source, &key.group, key.split.name(), &key.folder_name());
             if !from.is_dir() {
                 continue;
@@ -238,54 +300,116 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             already += 1;
         }
     }
-    // The networks the spec names (read from the first shard's folder).
-    super::run::keep_networks(&expansion.spec, out)?;
-    let manifest =
-        Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), true, None).to_json();
-    write_atomically(&out.join("manifest.json"), &manifest)?;
-    for (path, _) in &manifests {
-        fs::remove_file(path).map_err(io_err(path))?;
-        if let Some(dir) = path.parent() {
-            let _ = fs::remove_dir(dir); // only when empty
-        }
-    }
-    // The shards' folder trees the scenarios left: empty split and group
-    // folders go, and a shard folder that holds nothing else (once its
-    // lock file has gone with its claim).
-    drop(source_claims);
-    for source in &others {
-        for group in &expansion.spec.groups {
-            let group = source.join(group.name());
-            for split in crate::spec::Split::ALL {
-                let _ = fs::remove_dir(group.join(split.name())); // only when empty
+    Ok((moved, already))
+}
+
+/// Moves every pack into `out` from the shard folders `others` (checked
+/// first, all of them: each pack somewhere, copies alike, each whole);
+/// returns how many moved and how many duplicate copies were dropped.
+fn merge_packs(out: &Path, others: &[&PathBuf], packs: Packs<'_>) -> Result<(usize, usize), GenError> {
+    // Where pack `number` is: (its place in --out, the copy kept, whether
+    // that copy moves, other copies to drop).
+    let locate = |number: usize, compare: bool| -> Result<(PathBuf, Option<PathBuf>, bool, Vec<PathBuf>), GenError> {
+        let pack = packs.pack(number);
+        let to = packs.path(out, &pack);
+        let (mut found, mut moved, mut duplicates) = (to.is_file().then(|| to.clone()), false, Vec::new());
+        for source in others {
+            let from = packs.path(source, &pack);
+            if !from.is_file() {
+                continue;
             }
-            let _ = fs::remove_dir(&group);
-        }
-        let _ = fs::remove_dir(source);
-    }
-    // A shard folder's copies of the networks, now kept in --out: its
-    // networks/ goes when it holds those alone, then the folder if empty.
-    // (Not --out's own, when it is given as a source too.)
-    for source in &others {
-        let folder = source.join(crate::spec::NETWORKS_FOLDER);
-        if !fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
-            continue;
-        }
-        for (name, network) in expansion.spec.networks() {
-            let copy = folder.join(name);
-            if fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
-                fs::remove_file(&copy).map_err(io_err(&copy))?;
+            match &found {
+                Some(first) => {
+                    if compare && !same_bytes(&from, first) {
+                        return Err(GenError::Input(format!(
+                            "{} and {} hold the same pack with different contents; nothing was moved",
+                            from.display(),
+                            first.display()
+                        )));
+                    }
+                    duplicates.push(from);
+                }
+                None => {
+                    found = Some(from);
+                    moved = true;
+                }
             }
         }
-        if fs::remove_dir(&folder).is_ok() {
-            let _ = fs::remove_dir(source);
+        Ok((to, found, moved, duplicates))
+    };
+    let (mut absent, mut first_absent) = (0usize, Vec::new());
+    for number in 0..packs.len() {
+        let (to, found, ..) = locate(number, true)?;
+        if found.is_none() {
+            absent += 1;
+            if first_absent.len() < 3 {
+                first_absent.push(to.display().to_string());
+            }
         }
     }
-    Ok(format!(
-        "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
-        out.display(),
-        sequence.len()
-    ))
+    if absent > 0 {
+        return Err(GenError::Input(format!(
+            "{absent} packs are in no shard (first: {}): were all shard folders given? Nothing was moved",
+            first_absent.join(", ")
+        )));
+    }
+    let damaged: Vec<String> = (0..packs.len())
+        .into_par_iter()
+        .filter_map(|number| {
+            let (_, found, ..) = locate(number, false).ok()?;
+            crate::output::packs::verify(found.as_deref()?, &packs.keys(&packs.pack(number))).err()
+        })
+        .collect();
+    if let Some(first_damaged) = damaged.first() {
+        return Err(GenError::Input(format!(
+            "{} packs are damaged (first: {first_damaged}): rerun their shards' gen commands, which rewrite damaged \
+             packs; nothing was moved",
+            damaged.len()
+        )));
+    }
+    let (mut moved, mut already) = (0, 0);
+    for number in 0..packs.len() {
+        let (to, found, moves, duplicates) = locate(number, false)?;
+        if let (true, Some(from)) = (moves, &found) {
+            let parent = to.parent().expect("packs have parents");
+            fs::create_dir_all(parent).map_err(io_err(parent))?;
+            if fs::rename(from, &to).is_err() {
+                // Another filesystem: copy, then remove the source.
+                let partial = crate::output::fresh_partial(&to)?;
+                fs::copy(from, &partial).map_err(io_err(&partial))?;
+                fs::rename(&partial, &to).map_err(io_err(&to))?;
+                fs::remove_file(from).map_err(io_err(from))?;
+            }
+            moved += 1;
+        }
+        for from in &duplicates {
+            fs::remove_file(from).map_err(io_err(from))?;
+            already += 1;
+        }
+    }
+    Ok((moved, already))
+}
+
+/// Whether two files hold the same bytes (read a block at a time).
+fn same_bytes(a: &Path, b: &Path) -> bool {
+    use std::io::Read;
+    let (Ok(fa), Ok(fb)) = (fs::File::open(a), fs::File::open(b)) else { return false };
+    if fa.metadata().map(|m| m.len()).ok() != fb.metadata().map(|m| m.len()).ok() {
+        return false;
+    }
+    let (mut ra, mut rb) = (std::io::BufReader::new(fa), std::io::BufReader::new(fb));
+    let (mut ba, mut bb) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    loop {
+        match (ra.read(&mut ba), rb.read_exact(&mut bb[..0])) {
+            (Ok(0), _) => return true,
+            (Ok(n), Ok(())) => {
+                if rb.read_exact(&mut bb[..n]).is_err() || ba[..n] != bb[..n] {
+                    return false;
+                }
+            }
+            _ => return false,
+        }
+    }
 }
 
 /// Where one scenario is before a merge: its place in `--out`, the folder

@@ -2,7 +2,8 @@
 //! render and write them in parallel, then write the manifest.
 
 use crate::output::claim::{claim, ClaimError, Writer};
-use crate::output::manifest::{Manifest, ManifestRecord, Products, ShardEntry};
+use crate::output::manifest::{Manifest, ManifestRecord, Packing, Products, ShardEntry};
+use crate::output::packs::Packs;
 use crate::output::writer::{ScenarioWriteError, ScenarioWriter, WriterBuffers};
 use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, WriteError, PARTIAL_PREFIX};
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
@@ -34,6 +35,8 @@ pub struct GenOptions {
     pub effects: bool,
     /// City world: how the lights' colours are logged.
     pub lights: crate::output::manifest::LightsLog,
+    /// A folder per scenario, or tar packs of whole scenarios.
+    pub packing: Packing,
     pub progress: ProgressMode,
     /// Generate only this part of the dataset.
     pub shard: Option<Shard>,
@@ -452,6 +455,11 @@ fn foreign_in_group(group: &Path, foreign: &mut Vec<PathBuf>) -> Result<(), Writ
             if is_dir && name.starts_with(PARTIAL_PREFIX) {
                 continue;
             }
+            // Packs (`--format tar`), and the leftover of one being written.
+            let pack_name = name.strip_suffix(".partial").unwrap_or(&name);
+            if !is_dir && crate::output::packs::parse_file_name(pack_name).is_some() {
+                continue;
+            }
             if !(is_dir && name.chars().all(|c| c.is_ascii_digit()) && listing.is_file()) {
                 foreign.push(scenario);
                 continue;
@@ -478,32 +486,41 @@ fn foreign_in_group(group: &Path, foreign: &mut Vec<PathBuf>) -> Result<(), Writ
 }
 
 /// Finished scenarios of `spec` already in `out` (folders with their
-/// checksums), counted from the folders, not from the keys: what a failed
-/// run tells the user it keeps.
+/// checksums, and those packs hold by their names), counted from the
+/// folders, not from the keys: what a failed run tells the user it keeps.
 fn finished_on_disk(out: &Path, spec: &DatasetSpec) -> u64 {
     let mut finished = 0;
     for g in &spec.groups {
         for split in crate::spec::Split::ALL {
             let Ok(entries) = std::fs::read_dir(out.join(g.name()).join(split.name())) else { continue };
-            finished += entries
-                .flatten()
-                .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-                .filter(|e| e.path().join(crate::output::CHECKSUMS).is_file())
-                .count() as u64;
+            for e in entries.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')) {
+                if let Some((first, last)) = crate::output::packs::parse_file_name(&e.file_name().to_string_lossy()) {
+                    finished += u64::from(last - first) + 1;
+                } else if e.path().join(crate::output::CHECKSUMS).is_file() {
+                    finished += 1;
+                }
+            }
         }
     }
     finished
 }
 
-/// Removes hidden leftovers of interrupted scenarios in the spec's folders.
-fn sweep_partials(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
+/// Removes hidden leftovers of interrupted scenarios (and packs) in the
+/// spec's folders.
+pub(crate) fn sweep_partials(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
     for g in &spec.groups {
         for split in crate::spec::Split::ALL {
             let dir = out.join(g.name()).join(split.name());
             let Ok(entries) = std::fs::read_dir(&dir) else { continue };
             for e in entries.flatten() {
-                if e.file_name().to_string_lossy().starts_with(PARTIAL_PREFIX) {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with(PARTIAL_PREFIX) {
                     std::fs::remove_dir_all(e.path()).map_err(io_err(&e.path()))?;
+                } else if name
+                    .strip_suffix(".partial")
+                    .is_some_and(|pack| crate::output::packs::parse_file_name(pack).is_some())
+                {
+                    std::fs::remove_file(e.path()).map_err(io_err(&e.path()))?;
                 }
             }
         }
@@ -530,6 +547,11 @@ impl ShardPositions {
     /// The dataset position of this shard's `i`-th scenario.
     fn position(&self, i: usize) -> usize {
         self.first + i * self.step
+    }
+
+    /// Every position of the shard, in order.
+    fn iter(self) -> impl Iterator<Item = usize> {
+        (0..self.len).map(move |i| self.position(i))
     }
 }
 
@@ -581,7 +603,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     let existing = existing_manifests(&out)?;
     let mut differences: Vec<String> = existing
         .iter()
-        .flat_map(|(_, record)| record.differences(&expansion.spec, products))
+        .flat_map(|(_, record)| record.differences(&expansion.spec, products, options.packing))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect();
@@ -662,7 +684,17 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
 
     let sequence = expansion.key_sequence(options.limit);
     let positions = ShardPositions::new(sequence.len(), options.shard);
-    let total = positions.len as u64;
+    // Packed: a shard run writes whole packs, every `count`-th from `index` on.
+    let packs = match options.packing {
+        Packing::Folders => None,
+        Packing::Tar { per_tar } => Some(Packs::new(sequence, per_tar)),
+    };
+    let pack_numbers = ShardPositions::new(packs.map_or(0, |p| p.len()), options.shard);
+    let my_packs = || pack_numbers.iter();
+    let total = match &packs {
+        None => positions.len as u64,
+        Some(packs) => my_packs().map(|n| u64::from(packs.pack(n).count)).sum(),
+    };
     let shard_entry = options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: total });
     let manifest_file = manifest_path(&out, options.shard);
     let made_manifest_folder = manifest_file.parent().filter(|p| !p.exists()).map(Path::to_path_buf);
@@ -670,7 +702,16 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
     let manifest = |complete| {
-        Manifest::new(&expansion.spec, &expansion.camera, options.limit, products, complete, shard_entry).to_json()
+        Manifest::new(
+            &expansion.spec,
+            &expansion.camera,
+            options.limit,
+            products,
+            options.packing,
+            complete,
+            shard_entry,
+        )
+        .to_json()
     };
     // The manifest goes first, so that whatever follows (the space check's
     // sample included) lands in a folder that says which dataset it is.
@@ -682,7 +723,22 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     let sample = if options.force_space {
         None
     } else {
-        match check_space(expansion, &writer, &out, &sequence, &positions, &times) {
+        let target_of = |position: usize| {
+            let key = sequence.key(position);
+            scenario_dir(&out, &key.group, key.split.name(), &key.folder_name())
+        };
+        // Already written: its folder, or (packed) the pack holding it.
+        let present = |position: usize| {
+            target_of(position).exists() || packs.is_some_and(|p| p.path(&out, &p.of_position(position)).exists())
+        };
+        let checked = match &packs {
+            None => check_space(expansion, &writer, &out, &sequence, positions.iter(), &present, &times),
+            Some(p) => {
+                let candidates = my_packs().flat_map(|n| p.pack(n).positions);
+                check_space(expansion, &writer, &out, &sequence, candidates, &present, &times)
+            }
+        };
+        match checked {
             Ok(sample) => sample,
             Err(GenError::Interrupted { .. }) => return Err(GenError::Interrupted { done: 0, total, out }),
             Err(refused @ GenError::Space { .. }) => {
@@ -707,44 +763,94 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     keep_networks(&expansion.spec, &out)?;
 
     let progress = Progress::new(total, options.progress);
-    let bytes = AtomicU64::new(sample.map_or(0, |(_, b)| b));
+    let bytes = AtomicU64::new(sample.filter(|_| packs.is_none()).map_or(0, |(_, b)| b));
     let written = AtomicU64::new(sample.is_some() as u64);
     let skipped = AtomicU64::new(0);
     let repaired = AtomicU64::new(0);
-    let result = pool.install(|| {
-        (0..positions.len).into_par_iter().try_for_each_init(
-            || writer.buffers(),
-            |buffers, i| {
-                if STOP.load(Ordering::Relaxed) {
-                    return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+    // Plans, simulates and writes the scenario at `position` into its folder,
+    // unless it is there already, whole.
+    let one = |buffers: &mut WriterBuffers, position: usize| -> Result<(), GenError> {
+        if STOP.load(Ordering::Relaxed) {
+            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+        }
+        if sample.is_some_and(|(first, _)| first == position) {
+            progress.inc(); // written (and counted) by the space check
+            return Ok(());
+        }
+        let key = &sequence.key(position);
+        let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+        let intact = target.exists()
+            && verify_scenario(&target)
+                .map_err(|why| {
+                    crate::progress::note(format_args!(
+                        "warning: {} is damaged ({why}): writing it again",
+                        target.display()
+                    ));
+                    repaired.fetch_add(1, Ordering::Relaxed);
+                })
+                .is_ok();
+        if intact {
+            skipped.fetch_add(1, Ordering::Relaxed);
+        } else {
+            let written_bytes = write_scenario(expansion, &writer, key, target, buffers, &times)?;
+            if packs.is_none() {
+                bytes.fetch_add(written_bytes, Ordering::Relaxed);
+            }
+            written.fetch_add(1, Ordering::Relaxed);
+        }
+        progress.inc();
+        Ok(())
+    };
+    let result = pool.install(|| match &packs {
+        None => (0..positions.len)
+            .into_par_iter()
+            .map(|i| positions.position(i))
+            .try_for_each_init(|| writer.buffers(), |buffers, position| one(buffers, position)),
+        Some(packs) => (0..pack_numbers.len).into_par_iter().try_for_each(|i| {
+            let pack = packs.pack(pack_numbers.position(i));
+            let path = packs.path(&out, &pack);
+            let keys = packs.keys(&pack);
+            let folder = |key: &ScenarioKey| scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+            if path.exists() {
+                match crate::output::packs::verify(&path, &keys) {
+                    Ok(()) => {
+                        // Folders a run killed after packing them left behind.
+                        for key in &keys {
+                            let dir = folder(key);
+                            if dir.exists() {
+                                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
+                            }
+                        }
+                        skipped.fetch_add(u64::from(pack.count), Ordering::Relaxed);
+                        (0..pack.count).for_each(|_| progress.inc());
+                        return Ok(());
+                    }
+                    Err(why) => {
+                        crate::progress::note(format_args!("warning: {why}: writing the pack again"));
+                        repaired.fetch_add(u64::from(pack.count), Ordering::Relaxed);
+                    }
                 }
-                if sample.is_some_and(|(first, _)| first == i) {
-                    progress.inc(); // written (and counted) by the space check
-                    return Ok(());
-                }
-                let key = &sequence.key(positions.position(i));
-                let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
-                let intact = target.exists()
-                    && verify_scenario(&target)
-                        .map_err(|why| {
-                            crate::progress::note(format_args!(
-                                "warning: {} is damaged ({why}): writing it again",
-                                target.display()
-                            ));
-                            repaired.fetch_add(1, Ordering::Relaxed);
-                        })
-                        .is_ok();
-                if intact {
-                    skipped.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    let written_bytes = write_scenario(expansion, &writer, key, target, buffers, &times)?;
-                    bytes.fetch_add(written_bytes, Ordering::Relaxed);
-                    written.fetch_add(1, Ordering::Relaxed);
-                }
-                progress.inc();
-                Ok(())
-            },
-        )
+            }
+            // Scenarios are appended to the pack as they finish, in order.
+            let packing = crate::output::packs::PackWriter::begin(&out, keys.clone(), &path)?;
+            pack.positions.clone().into_par_iter().try_for_each_init(
+                || writer.buffers(),
+                |buffers, position| {
+                    one(buffers, position)?;
+                    packing.finished(position - pack.positions.start).map_err(GenError::from)
+                },
+            )?;
+            if STOP.load(Ordering::Relaxed) {
+                return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+            }
+            let size = packing.commit(options.fsync)?;
+            bytes.fetch_add(size, Ordering::Relaxed);
+            keys.par_iter().try_for_each(|key| {
+                let dir = folder(key);
+                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))
+            })?;
+            Ok(())
+        }),
     });
     progress.finish();
     let done = written.load(Ordering::Relaxed) + skipped.load(Ordering::Relaxed);
@@ -805,33 +911,42 @@ fn check_space(
     writer: &TownWriters,
     out: &Path,
     sequence: &crate::plan::KeySequence<'_>,
-    positions: &ShardPositions,
+    candidates: impl Iterator<Item = usize>,
+    present: &dyn Fn(usize) -> bool,
     times: &StageTimes,
 ) -> Result<Option<(usize, u64)>, GenError> {
     let Some(available) = crate::output::free_disk_bytes(out) else {
         return Ok(None);
     };
-    let target_of = |i: usize| {
-        let key = sequence.key(positions.position(i));
+    let target_of = |position: usize| {
+        let key = sequence.key(position);
         scenario_dir(out, &key.group, key.split.name(), &key.folder_name())
     };
-    let (first, pending) = if positions.len <= SPACE_CHECK_EXACT_UP_TO {
-        let missing: Vec<usize> = (0..positions.len).filter(|&i| !target_of(i).exists()).collect();
-        match missing.first() {
-            Some(&first) => (first, missing.len() as u64),
-            None => return Ok(None),
+    let (first, pending) = {
+        let mut candidates = candidates.into_iter().peekable();
+        let mut seen = 0usize;
+        let Some(first) = candidates.by_ref().inspect(|_| seen += 1).find(|&p| !present(p)) else {
+            return Ok(None);
+        };
+        // Up to a point, count exactly which are still missing; above it,
+        // assume all are (stat-ing millions of folders would delay the start).
+        let mut rest = 0u64;
+        let mut counted = 0usize;
+        for p in candidates {
+            counted += 1;
+            if seen + counted <= SPACE_CHECK_EXACT_UP_TO {
+                rest += u64::from(!present(p));
+            } else {
+                rest += 1;
+            }
         }
-    } else {
-        match (0..positions.len).find(|&i| !target_of(i).exists()) {
-            Some(first) => (first, (positions.len - first) as u64),
-            None => return Ok(None),
-        }
+        (first, 1 + rest)
     };
     let target = target_of(first);
     // Folders this check creates, to remove if it refuses.
     let made: Vec<PathBuf> =
         target.ancestors().skip(1).take_while(|a| *a != out && !a.exists()).map(Path::to_path_buf).collect();
-    let key = sequence.key(positions.position(first));
+    let key = sequence.key(first);
     let bytes = write_scenario(expansion, writer, &key, target.clone(), &mut writer.buffers(), times)?;
     let needed = bytes.saturating_mul(pending - 1).saturating_add(SPACE_MARGIN_BYTES);
     let left = crate::output::free_disk_bytes(out).unwrap_or(available);

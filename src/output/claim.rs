@@ -35,6 +35,8 @@ pub enum Writer {
     Gen { shard: Option<(u32, u32)> },
     /// `merge --out`: a dataset's files.
     Merge,
+    /// `pack --out`: a packed dataset's files.
+    Pack,
     /// `counterfactual --sweep`: sweep.json and group folders of pairs.
     Sweep,
     /// `run` / `counterfactual`: one folder per scenario of a file.
@@ -50,6 +52,7 @@ impl Writer {
             Writer::Gen { shard: None } => "gen",
             Writer::Gen { shard: Some(_) } => "gen --shard",
             Writer::Merge => "merge",
+            Writer::Pack => "pack",
             Writer::Sweep => "counterfactual --sweep",
             Writer::Scenarios => "run / counterfactual",
             Writer::Export => "export",
@@ -363,7 +366,7 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
         contents.entries.iter().filter(|(n, is_dir)| !allowed(n, *is_dir)).map(|(n, _)| n.as_str()).collect()
     };
     match writer {
-        Writer::Gen { .. } | Writer::Merge => {
+        Writer::Gen { .. } | Writer::Merge | Writer::Pack => {
             const WRITES: &str = "a dataset (manifest.json, shards/, networks/, group folders such as cars08_edges50/)";
             if contents.sweep {
                 return foreign("a counterfactual sweep (sweep.json)".into(), WRITES, "");

@@ -52,6 +52,10 @@ pub struct Manifest<'a> {
     /// How the lights' colours are written (`gen --lights`); absent: `frames`.
     #[serde(skip_serializing_if = "LightsLog::is_frames")]
     pub lights: LightsLog,
+    /// Scenarios are packed into tar files of this many (`gen --format
+    /// tar`); absent: a folder per scenario.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scenarios_per_tar: Option<u32>,
     pub camera: &'a Camera,
     pub frames_per_scenario: u32,
     pub frame_file_digits: usize,
@@ -105,6 +109,36 @@ impl LightsLog {
     }
 }
 
+/// How a dataset stores its scenarios on disk (`gen --format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Packing {
+    /// `<group>/<split>/<scenario>/`, a folder per scenario.
+    #[default]
+    Folders,
+    /// Whole scenarios packed `per_tar` at a time into tar files
+    /// ([`crate::output::packs`]).
+    Tar { per_tar: u32 },
+}
+
+impl Packing {
+    /// The manifest's `scenarios_per_tar`.
+    pub fn scenarios_per_tar(self) -> Option<u32> {
+        match self {
+            Packing::Folders => None,
+            Packing::Tar { per_tar } => Some(per_tar),
+        }
+    }
+
+    /// As `gen` takes it: `--format folders`, `--format tar
+    /// --scenarios-per-tar N`.
+    pub fn describe(self) -> String {
+        match self {
+            Packing::Folders => "folders".into(),
+            Packing::Tar { per_tar } => format!("tar ({per_tar} scenarios per tar)"),
+        }
+    }
+}
+
 /// Which part of the dataset a shard run writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ShardEntry {
@@ -134,6 +168,9 @@ pub struct ManifestRecord {
     pub effects: bool,
     #[serde(default)]
     pub lights: LightsLog,
+    /// Absent: a folder per scenario.
+    #[serde(default)]
+    pub scenarios_per_tar: Option<u32>,
     pub limit: Option<u32>,
     pub groups: Vec<GroupRecord>,
     pub complete: bool,
@@ -164,9 +201,18 @@ impl ManifestRecord {
         Products { images: self.images, annotations: self.annotations, effects: self.effects, lights: self.lights }
     }
 
+    /// How its scenarios are stored.
+    pub fn packing(&self) -> Packing {
+        match self.scenarios_per_tar {
+            None => Packing::Folders,
+            Some(per_tar) => Packing::Tar { per_tar },
+        }
+    }
+
     /// What differs between this manifest and a run of `spec` writing
-    /// `products`, one line per difference; empty when they agree.
-    pub fn differences(&self, spec: &DatasetSpec, products: Products) -> Vec<String> {
+    /// `products` stored as `packing`, one line per difference; empty when
+    /// they agree.
+    pub fn differences(&self, spec: &DatasetSpec, products: Products, packing: Packing) -> Vec<String> {
         let images = products.images;
         let mut out = Vec::new();
         if self.version != env!("CARGO_PKG_VERSION") {
@@ -183,6 +229,13 @@ impl ManifestRecord {
         }
         if self.lights != products.lights {
             out.push(format!("lights: {} there, {} now (--lights)", self.lights.name(), products.lights.name()));
+        }
+        if self.packing() != packing {
+            out.push(format!(
+                "format: {} there, {} now (--format, --scenarios-per-tar)",
+                self.packing().describe(),
+                packing.describe()
+            ));
         }
         if self.spec_sha256 != spec_sha256(spec) {
             let new = serde_json::to_value(spec).expect("spec serialises");
@@ -226,6 +279,7 @@ impl<'a> Manifest<'a> {
         camera: &'a Camera,
         limit: Option<u32>,
         products: Products,
+        packing: Packing,
         complete: bool,
         shard: Option<ShardEntry>,
     ) -> Manifest<'a> {
@@ -262,6 +316,7 @@ impl<'a> Manifest<'a> {
             annotations: products.annotations,
             effects: products.effects,
             lights: products.lights,
+            scenarios_per_tar: packing.scenarios_per_tar(),
             camera,
             frames_per_scenario: spec.frames,
             frame_file_digits: super::frame_digits(spec.frames),

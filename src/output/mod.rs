@@ -13,6 +13,7 @@ pub mod layout;
 pub mod logs;
 pub mod manifest;
 pub mod number;
+pub mod packs;
 pub mod pair_summary;
 pub mod png;
 pub mod poses;

@@ -75,6 +75,16 @@ impl KeySequence<'_> {
         self.per_split.iter().sum()
     }
 
+    /// How many groups the keys cover.
+    pub fn groups(&self) -> usize {
+        self.groups.len()
+    }
+
+    /// How many keys each group has of `split`.
+    pub fn split_len(&self, split: Split) -> usize {
+        self.per_split[Split::ALL.iter().position(|s| *s == split).unwrap_or(0)] as usize
+    }
+
     /// Every key in order, each made when it is reached.
     pub fn iter(&self) -> impl ExactSizeIterator<Item = ScenarioKey> + '_ {
         (0..self.len()).map(|i| self.key(i))

@@ -1,0 +1,403 @@
+//! Tar packs (`gen --format tar`): whole scenarios, a fixed number at a
+//! time, in WebDataset-style tar files, so that a dataset of millions of
+//! scenarios is thousands of files on a cluster file system.
+//!
+//! A pack holds consecutive scenarios of one group and split and lives in
+//! that split's folder, named by the indices it holds:
+//! `<group>/<split>/<first>-<last>.tar` (`cars08_edges50/train/00000-00063.tar`).
+//! Its members are named as in the folder layout, relative to the dataset
+//! (`cars08_edges50/train/00012/poses.csv`), scenario after scenario, each
+//! scenario's files in name order, `checksums.sha256` among them, with the
+//! same bytes. So `tar -xf P -C OUT` gives the folders `--format folders`
+//! writes, byte for byte. Headers carry nothing that depends on the run
+//! (mode 0644, owner 0, time 0): packs are byte-identical too.
+
+use super::{fresh_partial, hex, io_err, scenario_dir, WriteError, CHECKSUMS};
+use crate::plan::{KeySequence, ScenarioKey};
+use crate::spec::Split;
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::fs;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// One tar's share of the dataset: consecutive scenarios of one group and
+/// split.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Pack {
+    pub group_index: usize,
+    pub split: Split,
+    /// Index (within its group and split) of its first scenario.
+    pub first: u32,
+    pub count: u32,
+    /// Positions of its scenarios in the dataset's key order.
+    pub positions: Range<usize>,
+}
+
+/// The packs of a dataset, in key order, computed from their number and
+/// never listed: the same memory for ten scenarios as for ten million.
+#[derive(Debug, Clone, Copy)]
+pub struct Packs<'a> {
+    sequence: KeySequence<'a>,
+    per_tar: u64,
+    /// Packs per group of each split of [`Split::ALL`].
+    per_split: [u64; 3],
+}
+
+impl<'a> Packs<'a> {
+    /// `per_tar` scenarios per pack (at least one).
+    pub fn new(sequence: KeySequence<'a>, per_tar: u32) -> Packs<'a> {
+        let per_tar = u64::from(per_tar.max(1));
+        let per_split = Split::ALL.map(|s| (sequence.split_len(s) as u64).div_ceil(per_tar));
+        Packs { sequence, per_tar, per_split }
+    }
+
+    pub fn len(&self) -> usize {
+        (self.sequence.groups() as u64 * self.per_split.iter().sum::<u64>()) as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The pack at `number` (`number < len()`).
+    pub fn pack(&self, number: usize) -> Pack {
+        let per_group: u64 = self.per_split.iter().sum();
+        let group_index = (number as u64 / per_group) as usize;
+        let mut within = number as u64 % per_group;
+        let mut split = Split::ALL[0];
+        for (s, &n) in Split::ALL.into_iter().zip(&self.per_split) {
+            split = s;
+            if within < n {
+                break;
+            }
+            within -= n;
+        }
+        let all = self.sequence.positions_of(group_index, split);
+        let first = within * self.per_tar;
+        let start = all.start + first as usize;
+        let end = (start + self.per_tar as usize).min(all.end);
+        Pack { group_index, split, first: first as u32, count: (end - start) as u32, positions: start..end }
+    }
+
+    /// The pack holding the scenario at `position`.
+    pub fn of_position(&self, position: usize) -> Pack {
+        let key = self.sequence.key(position);
+        let all = self.sequence.positions_of(key.group_index, key.split);
+        let first = u64::from(key.index) / self.per_tar * self.per_tar;
+        let start = all.start + first as usize;
+        let end = (start + self.per_tar as usize).min(all.end);
+        Pack {
+            group_index: key.group_index,
+            split: key.split,
+            first: first as u32,
+            count: (end - start) as u32,
+            positions: start..end,
+        }
+    }
+
+    /// The keys of `pack`'s scenarios, in order.
+    pub fn keys(&self, pack: &Pack) -> Vec<ScenarioKey> {
+        pack.positions.clone().map(|p| self.sequence.key(p)).collect()
+    }
+
+    /// Where `pack` lives in the dataset at `root`.
+    pub fn path(&self, root: &Path, pack: &Pack) -> PathBuf {
+        let group = self.sequence.key(pack.positions.start).group;
+        root.join(group).join(pack.split.name()).join(file_name(pack.first, pack.count))
+    }
+}
+
+/// A pack's file name: the first and last index it holds.
+pub fn file_name(first: u32, count: u32) -> String {
+    format!("{first:05}-{:05}.tar", first + count.max(1) - 1)
+}
+
+/// The (first, last) indices a pack's file name says it holds; `None` for
+/// any other name.
+pub fn parse_file_name(name: &str) -> Option<(u32, u32)> {
+    let (first, last) = name.strip_suffix(".tar")?.split_once('-')?;
+    let number = |s: &str| (s.len() >= 5 && s.bytes().all(|b| b.is_ascii_digit())).then(|| s.parse::<u32>().ok())?;
+    let (first, last) = (number(first)?, number(last)?);
+    (first <= last).then_some((first, last))
+}
+
+/// A member name's scenario folder, relative to the dataset.
+fn member_folder(key: &ScenarioKey) -> String {
+    format!("{}/{}/{}", key.group, key.split.name(), key.folder_name())
+}
+
+/// The files a finished scenario folder holds, by its checksum listing, in
+/// name order (the listing among them).
+fn listed_files(dir: &Path) -> Result<Vec<String>, WriteError> {
+    let listing = dir.join(CHECKSUMS);
+    let text = fs::read_to_string(&listing).map_err(io_err(&listing))?;
+    let mut names: Vec<String> =
+        text.lines().filter_map(|l| l.split_once("  ").map(|(_, name)| name.to_string())).collect();
+    names.push(CHECKSUMS.to_string());
+    names.sort();
+    Ok(names)
+}
+
+/// Appends the scenario folder `dir` to `tar` as members `<folder>/<file>`.
+fn append_scenario<W: Write>(
+    tar: &mut tar::Builder<W>,
+    dir: &Path,
+    folder: &str,
+    temp: &Path,
+) -> Result<(), WriteError> {
+    for name in listed_files(dir)? {
+        let path = dir.join(&name);
+        let bytes = fs::read(&path).map_err(io_err(&path))?;
+        let mut header = tar::Header::new_gnu();
+        header.set_entry_type(tar::EntryType::Regular);
+        header.set_mode(0o644);
+        header.set_mtime(0);
+        header.set_uid(0);
+        header.set_gid(0);
+        header.set_size(bytes.len() as u64);
+        tar.append_data(&mut header, format!("{folder}/{name}"), &bytes[..]).map_err(io_err(temp))?;
+    }
+    Ok(())
+}
+
+/// A pack being written while its scenarios are: each finished scenario
+/// folder is appended in key order as soon as those before it are (so
+/// packing overlaps simulation), into a temporary file that
+/// [`PackWriter::commit`] renames into place. The folders stay until then:
+/// a run killed before the rename resumes from them. Dropped without a
+/// commit, it removes its temporary file.
+pub struct PackWriter {
+    root: PathBuf,
+    keys: Vec<ScenarioKey>,
+    target: PathBuf,
+    temp: PathBuf,
+    finished: std::sync::Mutex<Vec<bool>>,
+    /// The tar and the index of the next scenario it takes; `None` once
+    /// committed.
+    tar: std::sync::Mutex<Option<(tar::Builder<BufWriter<fs::File>>, usize)>>,
+}
+
+type OpenTar = Option<(tar::Builder<BufWriter<fs::File>>, usize)>;
+
+impl PackWriter {
+    /// Starts the pack of `keys` (folders under `root`) that will live at
+    /// `target` (never written through a link there).
+    pub fn begin(root: &Path, keys: Vec<ScenarioKey>, target: &Path) -> Result<PackWriter, WriteError> {
+        if let Some(parent) = target.parent() {
+            fs::create_dir_all(parent).map_err(io_err(parent))?;
+        }
+        let temp = fresh_partial(target)?;
+        let file = fs::File::create(&temp).map_err(io_err(&temp))?;
+        let tar = tar::Builder::new(BufWriter::with_capacity(1 << 20, file));
+        Ok(PackWriter {
+            root: root.to_path_buf(),
+            finished: std::sync::Mutex::new(vec![false; keys.len()]),
+            keys,
+            target: target.to_path_buf(),
+            temp,
+            tar: std::sync::Mutex::new(Some((tar, 0))),
+        })
+    }
+
+    fn dir(&self, i: usize) -> PathBuf {
+        let key = &self.keys[i];
+        scenario_dir(&self.root, &key.group, key.split.name(), &key.folder_name())
+    }
+
+    /// Says the scenario at `i` (of the keys) is finished in its folder,
+    /// and appends what can be appended, unless another thread is at it
+    /// (then that thread, or `commit`, appends it).
+    pub fn finished(&self, i: usize) -> Result<(), WriteError> {
+        self.finished.lock().expect("a pack writer thread failed")[i] = true;
+        let Ok(mut tar) = self.tar.try_lock() else { return Ok(()) };
+        self.append_ready(&mut tar)
+    }
+
+    fn append_ready(&self, tar: &mut OpenTar) -> Result<(), WriteError> {
+        let Some((tar, next)) = tar else { return Ok(()) };
+        while *next < self.keys.len() && self.finished.lock().expect("a pack writer thread failed")[*next] {
+            append_scenario(tar, &self.dir(*next), &member_folder(&self.keys[*next]), &self.temp)?;
+            *next += 1;
+        }
+        Ok(())
+    }
+
+    /// Appends the rest (every scenario must be finished), ends the tar
+    /// and renames it into place; returns its size. The folders stay.
+    pub fn commit(self, fsync: bool) -> Result<u64, WriteError> {
+        self.finished.lock().expect("a pack writer thread failed").iter_mut().for_each(|f| *f = true);
+        let mut open = self.tar.lock().expect("a pack writer thread failed");
+        self.append_ready(&mut open)?;
+        let (tar, _) = open.take().expect("committed once");
+        let temp = &self.temp;
+        let file = tar
+            .into_inner()
+            .map_err(io_err(temp))?
+            .into_inner()
+            .map_err(|e| WriteError { path: temp.clone(), source: e.into_error() })?;
+        if fsync {
+            file.sync_all().map_err(io_err(temp))?;
+        }
+        let len = file.metadata().map_err(io_err(temp))?.len();
+        fs::rename(temp, &self.target).map_err(io_err(&self.target))?;
+        Ok(len)
+    }
+}
+
+impl Drop for PackWriter {
+    fn drop(&mut self) {
+        // Not renamed into place (an error, an interruption): no half tar
+        // stays. (After the rename, there is nothing at `temp`.)
+        let _ = fs::remove_file(&self.temp);
+    }
+}
+
+/// Reads a pack's members in order, each as its name (relative to the
+/// dataset) and bytes. Refuses anything but plain files with relative names
+/// inside the dataset; errors name the tar and the member.
+pub fn read_members(path: &Path, mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>) -> Result<(), String> {
+    let file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut archive = tar::Archive::new(BufReader::with_capacity(1 << 20, file));
+    let bad = |e: std::io::Error| format!("{}: not a whole tar: {e}", path.display());
+    for entry in archive.entries().map_err(bad)? {
+        let mut entry = entry.map_err(bad)?;
+        let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
+        let kind = entry.header().entry_type();
+        if !kind.is_file() {
+            return Err(format!(
+                "{}: {name:?} is not a plain file ({kind:?}); a pack holds files only",
+                path.display()
+            ));
+        }
+        if name.starts_with('/') || name.split('/').any(|part| part == ".." || part.is_empty()) {
+            return Err(format!("{}: {name:?} is not a path inside the dataset", path.display()));
+        }
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
+        each(&name, bytes)?;
+    }
+    Ok(())
+}
+
+/// Checks that the pack at `path` holds exactly the scenarios of `keys`,
+/// each whole by its `checksums.sha256`: every file it lists, with its hash,
+/// and nothing else. Says what is wrong otherwise (gen writes such a pack
+/// again).
+pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
+    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (member_folder(k), i)).collect();
+    // Per scenario: each member's hash, and its listing's text.
+    let mut hashes: Vec<BTreeMap<String, String>> = vec![BTreeMap::new(); keys.len()];
+    let mut listings: Vec<Option<String>> = vec![None; keys.len()];
+    read_members(path, |name, bytes| {
+        // `<group>/<split>/<scenario>/<file in it>`
+        let mut parts = name.splitn(4, '/');
+        let folder: Vec<&str> = parts.by_ref().take(3).collect();
+        let (Some(within), Some(&i)) = (parts.next(), folders.get(&folder.join("/"))) else {
+            return Err(format!("{}: {name} belongs to none of its scenarios", path.display()));
+        };
+        let within = within.to_string();
+        if within == CHECKSUMS {
+            listings[i] =
+                Some(String::from_utf8(bytes).map_err(|_| format!("{}: {name} is not text", path.display()))?);
+        } else if hashes[i].insert(within, hex(&Sha256::digest(&bytes))).is_some() {
+            return Err(format!("{}: {name} is in it twice", path.display()));
+        }
+        Ok(())
+    })?;
+    for (key, i) in &folders {
+        let Some(listing) = &listings[*i] else {
+            return Err(format!("{}: {key}/{CHECKSUMS} is missing", path.display()));
+        };
+        let mut files = std::mem::take(&mut hashes[*i]);
+        for line in listing.lines() {
+            let (hash, name) = line
+                .split_once("  ")
+                .ok_or_else(|| format!("{}: {key}/{CHECKSUMS}: {line:?} is not a checksum line", path.display()))?;
+            match files.remove(name) {
+                Some(found) if found == hash => {}
+                Some(_) => return Err(format!("{}: {key}/{name}: its checksum does not match", path.display())),
+                None => return Err(format!("{}: {key}/{name} is missing", path.display())),
+            }
+        }
+        if let Some(extra) = files.keys().next() {
+            return Err(format!("{}: {key}/{extra} is not in its {CHECKSUMS}", path.display()));
+        }
+    }
+    Ok(())
+}
+
+/// Unpacks the pack at `path` under `root`: each member `keep` keeps, at
+/// its name, as `tar -xf` does. For readers of scenario folders; `root`
+/// must be a folder of the reader's own.
+pub fn unpack(path: &Path, root: &Path, keep: &(dyn Fn(&str) -> bool + Sync)) -> Result<(), String> {
+    read_members(path, |name, bytes| {
+        if !keep(name) {
+            return Ok(());
+        }
+        let target = root.join(name);
+        if let Some(parent) = target.parent() {
+            fs::create_dir_all(parent).map_err(|e| format!("cannot write {}: {e}", parent.display()))?;
+        }
+        let mut file = fs::File::create(&target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+        file.write_all(&bytes).map_err(|e| format!("cannot write {}: {e}", target.display()))
+    })
+}
+
+/// A private folder under the system's temporary folder (`TMPDIR`) that
+/// readers unpack packs into; removed with everything in it when dropped.
+#[derive(Debug)]
+pub struct Scratch {
+    root: PathBuf,
+}
+
+impl Scratch {
+    /// Makes a new, empty folder only this user can read.
+    pub fn new() -> Result<Scratch, String> {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static MADE: AtomicU64 = AtomicU64::new(0);
+        let base = std::env::temp_dir();
+        for _ in 0..100 {
+            let nanos =
+                std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+            let n = MADE.fetch_add(1, Ordering::Relaxed);
+            let root = base.join(format!("causalcity-unpacked-{}-{n}-{nanos}", std::process::id()));
+            let mut builder = fs::DirBuilder::new();
+            #[cfg(unix)]
+            std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
+            match builder.create(&root) {
+                Ok(()) => return Ok(Scratch { root }),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                Err(e) => return Err(format!("cannot make a folder to unpack into in {}: {e}", base.display())),
+            }
+        }
+        Err(format!("cannot make a folder to unpack into in {}", base.display()))
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.root
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.root);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pack_names_say_which_indices_they_hold_and_nothing_else_parses() {
+        assert_eq!(file_name(0, 64), "00000-00063.tar");
+        assert_eq!(file_name(128, 7), "00128-00134.tar");
+        assert_eq!(parse_file_name("00128-00134.tar"), Some((128, 134)));
+        assert_eq!(parse_file_name("123456-123460.tar"), Some((123456, 123460)));
+        for other in ["00001.tar", "0001-00002.tar", "00002-00001.tar", "00000-00063.tar.partial", "a0000-00001.tar"] {
+            assert_eq!(parse_file_name(other), None, "{other}");
+        }
+    }
+}

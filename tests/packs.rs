@@ -1,0 +1,374 @@
+//! `gen --format tar`: whole scenarios packed into WebDataset-style tar
+//! files. Checked on real output: the packs unpacked by the system's own
+//! `tar` are the folder layout byte for byte, on any thread count; a packed
+//! run resumes, repairs and merges as a folder run does; and every reader
+//! gives the same answers on packs as on folders.
+
+mod common;
+
+use common::{fresh_dir, gen_ok, hash_tree, read_json, run, sorted_entries, write_spec};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// A small city with images: two groups, 3/1/2 scenarios, 40 frames.
+fn spec(dir: &Path) -> PathBuf {
+    write_spec(
+        dir,
+        r#"{"name": "packed", "world": "city", "seed": 5, "frames": 40, "frame_interval": 0.5,
+            "image": {"width": 192, "height": 120},
+            "groups": [{"cars": 4, "edge_proportion": 0.5}, {"cars": 6, "edge_proportion": 0.5}],
+            "splits": {"train": 3, "val": 1, "test": 2}}"#,
+    )
+}
+
+const PACKED: &[&str] = &["--format", "tar", "--scenarios-per-tar", "2", "-q"];
+
+/// Every file under `root` (its path relative to it).
+fn files(root: &Path) -> Vec<String> {
+    hash_tree(root).into_keys().collect()
+}
+
+/// The packs of a dataset, relative to it, sorted.
+fn packs(root: &Path) -> Vec<String> {
+    files(root).into_iter().filter(|f| f.ends_with(".tar")).collect()
+}
+
+/// Unpacks every pack of `packed` with the system's `tar` into `into`.
+fn untar_all(packed: &Path, into: &Path) {
+    std::fs::create_dir_all(into).unwrap();
+    let found = packs(packed);
+    assert!(!found.is_empty(), "no packs in {}", packed.display());
+    for pack in found {
+        let status = Command::new("tar").arg("-xf").arg(packed.join(&pack)).arg("-C").arg(into).status().unwrap();
+        assert!(status.success(), "tar -xf {pack}");
+    }
+}
+
+/// The tree without its manifest (which says how the scenarios are kept).
+fn scenarios_only(root: &Path) -> BTreeMap<String, String> {
+    let mut tree = hash_tree(root);
+    tree.remove("manifest.json");
+    tree
+}
+
+/// (folders dataset, packed dataset) of [`spec`], made once per test.
+fn both(name: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = fresh_dir(name);
+    let spec = spec(&dir);
+    let (folders, packed) = (dir.join("folders"), dir.join("packed"));
+    gen_ok(&spec, &folders, &["-q", "-j", "2"]);
+    gen_ok(&spec, &packed, &[PACKED, &["-j", "2"]].concat());
+    (spec, folders, packed)
+}
+
+#[test]
+fn packs_hold_the_folder_layouts_files_byte_for_byte_in_a_handful_of_files_on_any_thread_count() {
+    let (spec, folders, packed) = both("packs-bytes");
+    // Each group: train 00000-00001 and 00002-00002, val and test one each.
+    let expected: Vec<String> = ["cars04_edges50", "cars06_edges50"]
+        .iter()
+        .flat_map(|g| {
+            ["test/00000-00001.tar", "train/00000-00001.tar", "train/00002-00002.tar", "val/00000-00000.tar"]
+                .map(|p| format!("{g}/{p}"))
+        })
+        .collect();
+    assert_eq!(packs(&packed), expected);
+    assert_eq!(files(&packed).len(), expected.len() + 1, "packs and the manifest only: {:?}", files(&packed));
+    let folder_files = files(&folders).len();
+    assert!(folder_files > 12 * 80, "the folder layout has {folder_files} files");
+
+    // The system's tar gives back the folder layout, every byte.
+    let untarred = folders.parent().unwrap().join("untarred");
+    untar_all(&packed, &untarred);
+    let (a, b) = (scenarios_only(&folders), hash_tree(&untarred));
+    assert!(a.keys().any(|f| f.ends_with("/rgb/0039.png")) && a.len() == folder_files - 1);
+    assert_eq!(a, b, "unpacked packs differ from the folders");
+
+    // Members run scenario by scenario, each scenario's files in name order.
+    let listing = Command::new("tar").arg("-tf").arg(packed.join(&expected[1])).output().unwrap();
+    let names: Vec<String> = String::from_utf8(listing.stdout).unwrap().lines().map(str::to_string).collect();
+    let first_of_second = names.iter().position(|n| n.contains("/train/00001/")).unwrap();
+    assert!(names[..first_of_second].iter().all(|n| n.starts_with("cars04_edges50/train/00000/")));
+    assert!(names[first_of_second..].iter().all(|n| n.starts_with("cars04_edges50/train/00001/")));
+    let mut sorted = names[..first_of_second].to_vec();
+    sorted.sort();
+    assert_eq!(names[..first_of_second], sorted[..]);
+
+    // The manifest says how; all else in it is the folder dataset's.
+    let (mut m_folders, m_packed) =
+        (read_json(&folders.join("manifest.json")), read_json(&packed.join("manifest.json")));
+    assert_eq!(m_packed["scenarios_per_tar"], 2);
+    common::assert_valid(&common::validator("manifest.schema.json"), &m_packed, &packed.join("manifest.json"));
+    assert!(m_folders.get("scenarios_per_tar").is_none());
+    m_folders["scenarios_per_tar"] = 2.into();
+    assert_eq!(m_folders, m_packed);
+
+    // One thread writes the same packs.
+    let one = folders.parent().unwrap().join("one-thread");
+    gen_ok(&spec, &one, &[PACKED, &["-j", "1"]].concat());
+    assert_eq!(hash_tree(&one), hash_tree(&packed));
+
+    let out = run(&["validate", packed.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("12 of 12 scenarios checked"));
+}
+
+/// Flips one byte of `member`'s data inside the pack at `path`.
+fn damage(path: &Path, member: &str) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let at = bytes.windows(member.len()).position(|w| w == member.as_bytes()).expect("member in the pack");
+    // The data starts one 512-byte header block after the name.
+    let data = (at / 512 + 1) * 512;
+    bytes[data + 10] ^= 0x20;
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn validate_names_the_pack_and_the_file_of_damage_and_gen_writes_that_pack_again() {
+    let (spec, _, packed) = both("packs-damage");
+    let before = hash_tree(&packed);
+    let pack = packed.join("cars06_edges50/train/00000-00001.tar");
+    damage(&pack, "cars06_edges50/train/00001/poses.csv");
+    let out = run(&["validate", packed.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains(&format!("{}: cars06_edges50/train/00001/poses.csv", pack.display())),
+        "validate should name the pack and the member: {text}"
+    );
+
+    let out = gen_ok(&spec, &packed, PACKED);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("writing the pack again"), "{said}");
+    assert_eq!(hash_tree(&packed), before, "the rewritten pack is the original, byte for byte");
+}
+
+#[test]
+fn an_interrupted_packed_run_resumes_to_the_same_bytes_and_leaves_nothing_behind() {
+    let (spec, _, packed) = both("packs-resume");
+    let before = hash_tree(&packed);
+    let split = packed.join("cars04_edges50/train");
+    // A run killed while writing the first pack: one of its scenarios
+    // finished as a folder, the tar half written.
+    let scratch = packed.parent().unwrap().join("scratch");
+    std::fs::create_dir_all(&scratch).unwrap();
+    let status = Command::new("tar")
+        .arg("-xf")
+        .arg(split.join("00000-00001.tar"))
+        .arg("-C")
+        .arg(&scratch)
+        .arg("cars04_edges50/train/00001")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    std::fs::rename(scratch.join("cars04_edges50/train/00001"), split.join("00001")).unwrap();
+    std::fs::remove_file(split.join("00000-00001.tar")).unwrap();
+    std::fs::write(split.join("00000-00001.tar.partial"), b"half a tar").unwrap();
+    // ... and killed after packing the second, before removing its folder.
+    let status =
+        Command::new("tar").arg("-xf").arg(split.join("00002-00002.tar")).arg("-C").arg(&scratch).status().unwrap();
+    assert!(status.success());
+    std::fs::rename(scratch.join("cars04_edges50/train/00002"), split.join("00002")).unwrap();
+    let mut manifest = read_json(&packed.join("manifest.json"));
+    manifest["complete"] = false.into();
+    std::fs::write(packed.join("manifest.json"), serde_json::to_vec_pretty(&manifest).unwrap()).unwrap();
+
+    let out = run(&["validate", packed.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        text.contains("missing pack") && text.contains("not packed yet") && text.contains("did not finish"),
+        "{text}"
+    );
+
+    let out = gen_ok(&spec, &packed, &[PACKED, &["--json"]].concat());
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // The folder kept is not simulated again; its pack partner is.
+    assert_eq!(summary["written"], 1, "{summary}");
+    assert_eq!(summary["skipped"], 11, "{summary}");
+    assert_eq!(hash_tree(&packed), before, "resumed packs, byte for byte, and no leftovers");
+}
+
+#[test]
+fn readers_give_the_same_answers_on_packs_as_on_folders() {
+    let (_, folders, packed) = both("packs-readers");
+    let (f, p) = (folders.to_str().unwrap(), packed.to_str().unwrap());
+    // Readers unpack into TMPDIR, and leave nothing there.
+    let tmp = folders.parent().unwrap().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let run = |args: &[&str]| Command::new(common::bin()).args(args).env("TMPDIR", &tmp).output().unwrap();
+    for command in [&["stats", "--json"][..], &["baseline", "--json"][..]] {
+        let (a, b) = (run(&[command, &[f]].concat()), run(&[command, &[p]].concat()));
+        assert!(a.status.success() && b.status.success(), "{command:?}: {}", String::from_utf8_lossy(&b.stderr));
+        let parse = |out: &[u8]| {
+            let mut report: serde_json::Value = serde_json::from_slice(out).unwrap();
+            // The dataset's path, the one thing that differs.
+            report.as_object_mut().unwrap().remove("dataset");
+            report
+        };
+        let (a, b) = (parse(&a.stdout), parse(&b.stdout));
+        assert!(a.to_string().len() > 500 && a.to_string().contains("cars06_edges50"), "{a}");
+        assert_eq!(a, b, "{command:?}");
+    }
+    let root = folders.parent().unwrap();
+    for (name, dataset) in [("nri-folders", f), ("nri-packed", p)] {
+        let out = run(&["export", "nri", dataset, "--out", root.join(name).to_str().unwrap()]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let (a, b) = (hash_tree(&root.join("nri-folders")), hash_tree(&root.join("nri-packed")));
+    assert!(a.keys().any(|k| k.ends_with(".npy")), "{a:?}");
+    assert_eq!(a, b);
+    for (name, dataset) in [("heat-folders.png", f), ("heat-packed.png", p)] {
+        let out = run(&["heatmap", dataset, "--out", root.join(name).to_str().unwrap()]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    assert_eq!(
+        std::fs::read(root.join("heat-folders.png")).unwrap(),
+        std::fs::read(root.join("heat-packed.png")).unwrap()
+    );
+    // NS-DR: the same annotations; a folder dataset's frames are linked, a
+    // packed one's copied (its unpacked folders are temporary).
+    for (name, dataset) in [("nsdr-folders", f), ("nsdr-packed", p)] {
+        let out = run(&["export", "nsdr", dataset, "--out", root.join(name).to_str().unwrap()]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let (a, b) = (hash_tree(&root.join("nsdr-folders")), hash_tree(&root.join("nsdr-packed")));
+    assert!(a.keys().any(|k| k.ends_with("cars06_edges50/test/00001/annotations.json")), "{a:?}");
+    assert!(a.keys().any(|k| k.ends_with("cars06_edges50/test/00001/rgb/0039.png")), "{a:?}");
+    assert_eq!(a, b);
+    let frame = root.join("nsdr-packed/cars06_edges50/test/00001/mask/0039.png");
+    assert!(!std::fs::symlink_metadata(frame.parent().unwrap()).unwrap().file_type().is_symlink());
+    assert_eq!(
+        std::fs::read(&frame).unwrap(),
+        std::fs::read(folders.join("cars06_edges50/test/00001/mask/0039.png")).unwrap()
+    );
+    // Nothing was unpacked into the dataset, and nothing is left in the
+    // temporary folder.
+    assert_eq!(files(&packed).len(), 9);
+    assert!(sorted_entries(&tmp).is_empty(), "{:?}", sorted_entries(&tmp));
+}
+
+#[test]
+fn a_format_other_than_the_datasets_is_refused_and_scenarios_per_tar_needs_tar() {
+    let (spec, folders, packed) = both("packs-mixed");
+    let before = hash_tree(&packed);
+    let out = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", packed.to_str().unwrap(), "-q"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("format: tar (2 scenarios per tar) there, folders now"), "{said}");
+    assert_eq!(hash_tree(&packed), before);
+    let out =
+        run(&["gen", "--spec", spec.to_str().unwrap(), "--out", folders.to_str().unwrap(), "--format", "tar", "-q"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("format: folders there, tar (64 scenarios per tar) now"), "{said}");
+    let empty = folders.parent().unwrap().join("never");
+    let out =
+        run(&["gen", "--spec", spec.to_str().unwrap(), "--out", empty.to_str().unwrap(), "--scenarios-per-tar", "3"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("--scenarios-per-tar 3 packs tar files: give it with --format tar"), "{said}");
+    assert!(!empty.exists());
+    // --force replaces a packed dataset (its packs are causalcity's own).
+    gen_ok(&spec, &packed, &["-q", "--force"]);
+    assert!(packs(&packed).is_empty());
+    assert_eq!(scenarios_only(&packed), scenarios_only(&folders));
+}
+
+#[test]
+fn packed_shards_merge_into_the_packs_of_one_run() {
+    let (spec, _, packed) = both("packs-merge");
+    let root = packed.parent().unwrap();
+    let (a, b, out) = (root.join("shard-a"), root.join("shard-b"), root.join("merged"));
+    gen_ok(&spec, &a, &[PACKED, &["--shard", "0/3"]].concat());
+    gen_ok(&spec, &b, &[PACKED, &["--shard", "1/3"]].concat());
+    gen_ok(&spec, &b, &[PACKED, &["--shard", "2/3"]].concat());
+    // Shard 0 of 3 writes whole packs: the 1st, 4th and 7th.
+    assert_eq!(
+        packs(&a),
+        [
+            "cars04_edges50/test/00000-00001.tar",
+            "cars04_edges50/train/00000-00001.tar",
+            "cars06_edges50/val/00000-00000.tar"
+        ]
+    );
+    let merged = run(&["merge", "--out", out.to_str().unwrap(), a.to_str().unwrap(), b.to_str().unwrap()]);
+    assert!(merged.status.success(), "{}", String::from_utf8_lossy(&merged.stderr));
+    assert_eq!(hash_tree(&out), hash_tree(&packed));
+    assert!(!a.exists() && !b.exists(), "the shard folders are emptied and removed");
+}
+
+#[test]
+fn the_files_of_a_packed_dataset_are_few_however_many_scenarios() {
+    // 3 groups x 300 scenarios without images, effects or lights: 900
+    // scenarios of 6+ files in 15 packs of 64.
+    let dir = fresh_dir("packs-few");
+    let spec = write_spec(&dir, &common::toy_spec("few", &[(3, 0.5), (4, 0.5), (5, 0.5)], (200, 50, 50), 5));
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--format", "tar", "--no-images", "--no-effects", "-q"]);
+    let found = files(&out);
+    assert_eq!(found.len(), 3 * (4 + 1 + 1) + 1, "{found:?}");
+    assert!(found.contains(&"cars03_edges50/train/00192-00199.tar".to_string()), "{found:?}");
+    let entries = sorted_entries(&out.join("cars05_edges50/val"));
+    assert_eq!(entries.len(), 1);
+}
+
+#[test]
+fn pack_turns_a_folder_dataset_into_the_packs_gen_writes_and_leaves_its_input_alone() {
+    let (_, folders, packed) = both("packs-pack");
+    let input = hash_tree(&folders);
+    let out = folders.parent().unwrap().join("packed-later");
+    let (f, o) = (folders.to_str().unwrap(), out.to_str().unwrap());
+    let done = run(&["pack", f, "--out", o, "--scenarios-per-tar", "2", "-q", "-j", "2"]);
+    assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+    assert!(
+        String::from_utf8_lossy(&done.stdout).contains("packed 12 scenarios"),
+        "{}",
+        String::from_utf8_lossy(&done.stdout)
+    );
+    assert_eq!(hash_tree(&out), hash_tree(&packed), "pack writes what gen --format tar writes");
+    assert_eq!(hash_tree(&folders), input, "the input is only read");
+
+    // Resumes: a lost pack is written again, the others kept.
+    let lost = out.join("cars06_edges50/test/00000-00001.tar");
+    std::fs::remove_file(&lost).unwrap();
+    std::fs::write(out.join("cars06_edges50/test/00000-00001.tar.partial"), b"half").unwrap();
+    let again = run(&["pack", f, "--out", o, "--scenarios-per-tar", "2", "-q"]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert!(String::from_utf8_lossy(&again.stdout).contains("7 packs already there kept"));
+    assert_eq!(hash_tree(&out), hash_tree(&packed));
+
+    // Refused, exit 2, nothing written: into itself, a packed input, another size into a pack.
+    for (args, says) in [
+        (vec!["pack", f, "--out", f], "is the dataset itself"),
+        (
+            vec!["pack", packed.to_str().unwrap(), "--out", folders.parent().unwrap().join("x").to_str().unwrap()],
+            "is packed already",
+        ),
+        (vec!["pack", f, "--out", o, "--scenarios-per-tar", "3"], "already holds another dataset"),
+    ] {
+        let refused = run(&args);
+        let said = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{args:?}: {said}");
+        assert!(said.contains(says), "{args:?}: {said}");
+    }
+    assert!(!folders.parent().unwrap().join("x").exists());
+    assert_eq!(hash_tree(&folders), input);
+    assert_eq!(hash_tree(&out), hash_tree(&packed));
+}
+
+#[test]
+fn a_link_planted_at_a_packs_name_is_replaced_never_written_through() {
+    let (spec, _, packed) = both("packs-link");
+    let before = hash_tree(&packed);
+    let victim = packed.parent().unwrap().join("victim.txt");
+    std::fs::write(&victim, b"not yours").unwrap();
+    let pack = packed.join("cars04_edges50/val/00000-00000.tar");
+    std::fs::remove_file(&pack).unwrap();
+    std::os::unix::fs::symlink(&victim, &pack).unwrap();
+    let out = gen_ok(&spec, &packed, PACKED);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("writing the pack again"));
+    assert_eq!(std::fs::read(&victim).unwrap(), b"not yours");
+    assert!(std::fs::symlink_metadata(&pack).unwrap().file_type().is_file());
+    assert_eq!(hash_tree(&packed), before);
+}
