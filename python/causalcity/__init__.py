@@ -52,6 +52,7 @@ __all__ = [
     "load",
     "open_dataset",
     "open_sweep",
+    "read_tar",
     "Dataset",
     "Sweep",
     "Frames",
@@ -825,6 +826,8 @@ def generate(
     progress: bool = True,
     force_space: bool = False,
     lights: str = "changes",
+    format: str = "folders",  # noqa: A002 (gen --format)
+    scenarios_per_tar: Optional[int] = None,
 ) -> Dict[str, Any]:
     """``causalcity gen`` from Python: writes the dataset to ``out`` (default
     ``data/<spec name>``), resuming an interrupted run, and returns the
@@ -835,7 +838,10 @@ def generate(
     ``force_space=True`` is ``--force-space`` (a disk too small for the
     run raises :class:`InputError` with the figures), ``lights="frames"``
     is ``--lights frames`` (``lights.csv``, every light at every frame,
-    instead of the default ``light_changes.csv``).
+    instead of the default ``light_changes.csv``), ``format="tar"`` is
+    ``--format tar`` (whole scenarios in tar files of ``scenarios_per_tar``
+    each, 64 by default; :func:`open_dataset` and :func:`read_tar` read
+    them).
     """
     spec = _as_spec(spec)
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
@@ -847,6 +853,13 @@ def generate(
         )
     if lights not in ("frames", "changes"):
         raise InputError(f'lights={lights!r}: "frames" (lights.csv) or "changes" (light_changes.csv), as gen --lights')
+    if format not in ("folders", "tar"):
+        raise InputError(f'format={format!r}: "folders" or "tar", as gen --format')
+    if format == "folders" and scenarios_per_tar is not None:
+        raise InputError(f'scenarios_per_tar={scenarios_per_tar!r} packs tar files: give it with format="tar"')
+    per_tar = None
+    if format == "tar":
+        per_tar = _whole("scenarios_per_tar", 64 if scenarios_per_tar is None else scenarios_per_tar, 1, 1_000_000, "gen --scenarios-per-tar")
     if shard is not None:
         k, n = _shard_pair(shard)
         shard = f"{k}/{n}"
@@ -864,6 +877,7 @@ def generate(
         progress,
         force_space,
         lights,
+        per_tar,
     )
     return _json.loads(summary)
 
@@ -987,7 +1001,7 @@ def _per_scenario_row(row: Dict[str, str]) -> Dict[str, Any]:
 
 
 from .loader import Batches, batches, collate  # noqa: E402 (needs the definitions above)
-from .disk import Dataset, Frames, Sweep, load, open_dataset, open_sweep  # noqa: E402 (needs the definitions above)
+from .disk import Dataset, Frames, Sweep, load, open_dataset, open_sweep, read_tar  # noqa: E402 (needs the definitions above)
 
 
 def __dir__() -> List[str]:

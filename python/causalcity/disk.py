@@ -169,11 +169,58 @@ class Dataset:
         self.images = bool(self.manifest.get("images", False))
         self.split = split
         """The split it holds (all when None)."""
+        self.scenarios_per_tar: Optional[int] = self.manifest.get("scenarios_per_tar")
+        """``gen --format tar``: scenarios per tar file (None: a folder per scenario)."""
         self._images = images
+        # A packed dataset's packs are unpacked, when first read, into a
+        # temporary folder of this process's own (made on first use, so a
+        # Dataset goes to DataLoader workers as a plain object).
+        self._scratch: Any = None
+        self._unpacked: set = set()
         # Listed once: a dataset gen finished does not change under its readers.
-        self._keys = [
-            k for k in self.spec.keys(split, self.manifest.get("limit")) if (self.root / k.folder / "scenario.json").is_file()
-        ]
+        keys = self.spec.keys(split, self.manifest.get("limit"))
+        if self.scenarios_per_tar:
+            self._split_sizes: Dict[Tuple[str, str], int] = {}
+            for k in self.spec.keys(None, self.manifest.get("limit")):
+                self._split_sizes[(k.group, k.split)] = self._split_sizes.get((k.group, k.split), 0) + 1
+            self._keys = [k for k in keys if (self.root / self.pack_of(k)).is_file()]
+        else:
+            self._keys = [k for k in keys if (self.root / k.folder / "scenario.json").is_file()]
+
+    def pack_of(self, key: "Key") -> str:
+        """A packed dataset's tar file that holds ``key``'s scenario, relative
+        to the root (``cars08_edges50/train/00000-00063.tar``)."""
+        per = self.scenarios_per_tar
+        if not per:
+            raise InputError(f"{_os.fspath(self.root)} is not packed: its scenarios are folders")
+        first = key.index // per * per
+        last = min(first + per, self._split_sizes[(key.group, key.split)]) - 1
+        return f"{key.group}/{key.split}/{first:05d}-{last:05d}.tar"
+
+    def _folder(self, key: "Key") -> Path:
+        """Where ``key``'s scenario folder is: in the dataset, or for a packed
+        one, where its pack is unpacked (once)."""
+        if not self.scenarios_per_tar:
+            return self.root / key.folder
+        pack = self.pack_of(key)
+        if self._scratch is None:
+            import tempfile
+
+            self._scratch = tempfile.TemporaryDirectory(prefix="causalcity-unpacked-")
+        scratch = Path(self._scratch.name)
+        if pack not in self._unpacked:
+            for folder, files in read_tar(self.root / pack):
+                for name, data in files.items():
+                    target = scratch / folder / name
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(data)
+            self._unpacked.add(pack)
+        return scratch / key.folder
+
+    def __getstate__(self) -> Dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_scratch"], state["_unpacked"] = None, set()
+        return state
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the scenarios on disk, in ``gen``'s order (groups,
@@ -187,9 +234,12 @@ class Dataset:
         from . import Key
 
         key = Key(*key)
-        folder = self.root / key.folder
+        if self.scenarios_per_tar and key not in self._keys:
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}")
+        folder = self._folder(key)
         if not (folder / "scenario.json").is_file():
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/scenario.json)")
+            where = f"its pack {self.pack_of(key)}" if self.scenarios_per_tar else key.folder
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {where})")
         return load(folder, images=self._images if images is None else images)
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
@@ -210,6 +260,37 @@ class Dataset:
 
     def __repr__(self) -> str:
         return f"Dataset({_os.fspath(self.root)!r}, spec={self.spec.name!r}, scenarios={len(self)})"
+
+
+def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
+    """The scenarios of one tar file of a packed dataset (``gen --format
+    tar``), streamed in order, one at a time: each as its folder relative
+    to the dataset (``cars08_edges50/train/00012``) and its files by name
+    within it (``"poses.csv"``, ``"rgb/0000.png"``, ...), holding the bytes
+    the folder layout holds. For streaming pipelines (a PyTorch
+    ``IterableDataset`` over the tar files); :func:`open_dataset` reads a
+    packed dataset as :class:`~causalcity.Scenario` objects.
+
+    Raises :class:`~causalcity.InputError` for a member that is not a plain
+    file inside the dataset."""
+    import tarfile
+
+    current: Optional[str] = None
+    files: Dict[str, bytes] = {}
+    with tarfile.open(_os.fspath(path), "r:") as tar:
+        for member in tar:
+            parts = member.name.split("/")
+            if not member.isfile() or len(parts) < 4 or any(p in ("", ".", "..") for p in parts):
+                raise InputError(f"{_os.fspath(path)}: {member.name!r} is not a scenario's file (a pack holds those only)")
+            folder, name = "/".join(parts[:3]), "/".join(parts[3:])
+            if folder != current:
+                if current is not None:
+                    yield current, files
+                current, files = folder, {}
+            data = tar.extractfile(member)
+            files[name] = data.read() if data is not None else b""
+    if current is not None:
+        yield current, files
 
 
 def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = True) -> Dataset:

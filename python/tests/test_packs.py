@@ -1,0 +1,134 @@
+"""Packed datasets (``gen --format tar``) from Python: ``generate`` writes
+them, ``open_dataset`` reads them into the same arrays as the folder
+layout, ``read_tar`` streams a tar's scenarios with the folders' bytes, and
+``evaluate`` scores them as it scores folders."""
+
+import json
+import pickle
+import tarfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import causalcity
+
+SPEC = {
+    "name": "packed-py",
+    "world": "city",
+    "seed": 9,
+    "frames": 24,
+    "frame_interval": 0.5,
+    "image": {"width": 128, "height": 80},
+    "groups": [{"cars": 4, "edge_proportion": 0.5}, {"cars": 5, "edge_proportion": 0.5}],
+    "splits": {"train": 3, "val": 2, "test": 2},
+}
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    root = tmp_path_factory.mktemp("packs")
+    folders, packed = root / "folders", root / "packed"
+    causalcity.generate(SPEC, folders, progress=False)
+    summary = causalcity.generate(SPEC, packed, progress=False, format="tar", scenarios_per_tar=2)
+    assert summary["written"] == 14
+    return folders, packed
+
+
+def test_a_packed_dataset_is_a_few_tars_whose_scenarios_hold_the_folders_bytes(datasets):
+    folders, packed = datasets
+    tars = sorted(p.relative_to(packed).as_posix() for p in packed.rglob("*.tar"))
+    # Each group: train 00000-00001, 00002-00002; val 00000-00001; test 00000-00001.
+    assert len(tars) == 8 and "cars05_edges50/train/00002-00002.tar" in tars, tars
+    assert sorted(p.name for p in packed.iterdir() if p.is_file()) == ["manifest.json"]
+    seen = 0
+    for tar in tars:
+        for folder, files in causalcity.read_tar(packed / tar):
+            on_disk = sorted(p.relative_to(folders / folder).as_posix() for p in (folders / folder).rglob("*") if p.is_file())
+            assert sorted(files) == on_disk
+            assert "rgb/0023.png" in files and "poses.csv" in files
+            for name, data in files.items():
+                assert data == (folders / folder / name).read_bytes(), f"{folder}/{name}"
+            seen += 1
+    assert seen == 14
+
+
+def test_open_dataset_reads_packs_into_the_arrays_the_folders_give(datasets):
+    folders, packed = datasets
+    a, b = causalcity.open_dataset(folders), causalcity.open_dataset(packed)
+    assert b.scenarios_per_tar == 2 and a.scenarios_per_tar is None
+    assert a.keys() == b.keys() and len(b) == 14
+    for key in b.keys():
+        x, y = a.load(key), b.load(key)
+        assert y.key == key == x.key
+        for field in ("position", "rotation", "pixels", "speed", "in_view", "graph"):
+            np.testing.assert_array_equal(getattr(x, field), getattr(y, field), err_msg=f"{key} {field}")
+        np.testing.assert_array_equal(x.lights.colour, y.lights.colour)
+        np.testing.assert_array_equal(np.asarray(x.rgb), np.asarray(y.rgb))
+        np.testing.assert_array_equal(np.asarray(x.mask), np.asarray(y.mask))
+        assert y.rgb.shape == (24, 80, 128, 3)
+    assert b.pack_of(b.keys("test")[1]) == "cars04_edges50/test/00000-00001.tar"
+    # To DataLoader workers it goes as a plain object, and reads there.
+    copy = pickle.loads(pickle.dumps(causalcity.open_dataset(packed, "val")))
+    np.testing.assert_array_equal(copy[0].position, a.load(copy.keys()[0]).position)
+    with pytest.raises(KeyError):
+        b.load(("cars04_edges50", "test", 7))
+
+
+def test_evaluate_scores_a_packed_dataset_as_its_folders(datasets, tmp_path):
+    folders, packed = datasets
+    rng = np.random.default_rng(3)
+    edges = {}
+    for meta_path in sorted(folders.glob("*/*/*/scenario.json")):
+        rel = meta_path.parent.relative_to(folders).as_posix()
+        if "/train/" in rel:
+            continue
+        meta = json.loads(meta_path.read_text())
+        n = len(meta["cars"])
+        truth = np.zeros((n, n))
+        for lead, follow in meta["edges"]:
+            truth[lead, follow] = 1
+        edges[rel] = truth * 0.5 + rng.random((n, n))
+    path = tmp_path / "pred.npz"
+    causalcity.save_predictions(path, edges, dataset=folders)
+    a = causalcity.evaluate(folders, path, history=10)
+    b = causalcity.evaluate(packed, path, history=10)
+    for report in (a, b):
+        report.pop("dataset", None)
+    assert a["edges"] and a["scenarios"][0]["scenario"] == "cars04_edges50/test/00000"
+    assert a == b
+
+
+def test_generate_refuses_a_format_it_does_not_know_and_a_tar_size_without_tar(tmp_path):
+    with pytest.raises(causalcity.InputError, match='format=.zip.: "folders" or "tar"'):
+        causalcity.generate(SPEC, tmp_path / "a", format="zip", progress=False)
+    with pytest.raises(causalcity.InputError, match="give it with format=.tar."):
+        causalcity.generate(SPEC, tmp_path / "b", scenarios_per_tar=4, progress=False)
+    with pytest.raises(causalcity.InputError, match="scenarios_per_tar=0 is out of range"):
+        causalcity.generate(SPEC, tmp_path / "c", format="tar", scenarios_per_tar=0, progress=False)
+    assert not any(tmp_path.iterdir())
+
+
+def test_read_tar_refuses_a_member_outside_the_dataset(tmp_path):
+    bad = tmp_path / "bad.tar"
+    with tarfile.open(bad, "w") as tar:
+        data = tmp_path / "x"
+        data.write_bytes(b"x")
+        tar.add(data, arcname="../../etc/x")
+    with pytest.raises(causalcity.InputError, match="is not a scenario's file"):
+        list(causalcity.read_tar(bad))
+
+
+def test_the_pytorch_recipe_of_the_docs_streams_every_scenario_of_a_split(datasets):
+    torch = pytest.importorskip("torch")
+    folders, packed = datasets
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "python.md").read_text()
+    recipe = docs.split("class PackedSplit", 1)[1].split("loader = ", 1)[0]
+    scope = {}
+    exec("import io, json\nfrom pathlib import Path\nimport numpy as np, torch, causalcity\nclass PackedSplit" + recipe, scope)
+    loader = torch.utils.data.DataLoader(scope["PackedSplit"](packed, "train"), batch_size=None, num_workers=2)
+    got = dict(loader)
+    assert sorted(got) == sorted(f"{g}/train/{i:05d}" for g in ("cars04_edges50", "cars05_edges50") for i in range(3))
+    for folder, xy in got.items():
+        expected = causalcity.load(folders / folder).position[:, :, :2]
+        np.testing.assert_array_equal(xy.numpy(), expected)
