@@ -13,6 +13,7 @@
 //! (mode 0644, owner 0, time 0): packs are byte-identical too.
 
 use super::{fresh_partial, hex, io_err, scenario_dir, WriteError, CHECKSUMS};
+use crate::plan::expand::split_of;
 use crate::plan::{KeySequence, ScenarioKey};
 use crate::spec::Split;
 use sha2::{Digest, Sha256};
@@ -65,36 +66,22 @@ impl<'a> Packs<'a> {
     pub fn pack(&self, number: usize) -> Pack {
         let per_group: u64 = self.per_split.iter().sum();
         let group_index = (number as u64 / per_group) as usize;
-        let mut within = number as u64 % per_group;
-        let mut split = Split::ALL[0];
-        for (s, &n) in Split::ALL.into_iter().zip(&self.per_split) {
-            split = s;
-            if within < n {
-                break;
-            }
-            within -= n;
-        }
-        let all = self.sequence.positions_of(group_index, split);
-        let first = within * self.per_tar;
-        let start = all.start + first as usize;
-        let end = (start + self.per_tar as usize).min(all.end);
-        Pack { group_index, split, first: first as u32, count: (end - start) as u32, positions: start..end }
+        let (split, within) = split_of(number as u64 % per_group, &self.per_split);
+        self.starting_at(group_index, split, within * self.per_tar)
     }
 
     /// The pack holding the scenario at `position`.
     pub fn of_position(&self, position: usize) -> Pack {
         let key = self.sequence.key(position);
-        let all = self.sequence.positions_of(key.group_index, key.split);
-        let first = u64::from(key.index) / self.per_tar * self.per_tar;
+        self.starting_at(key.group_index, key.split, u64::from(key.index) / self.per_tar * self.per_tar)
+    }
+
+    /// The pack of a group and split whose first scenario has index `first`.
+    fn starting_at(&self, group_index: usize, split: Split, first: u64) -> Pack {
+        let all = self.sequence.positions_of(group_index, split);
         let start = all.start + first as usize;
         let end = (start + self.per_tar as usize).min(all.end);
-        Pack {
-            group_index: key.group_index,
-            split: key.split,
-            first: first as u32,
-            count: (end - start) as u32,
-            positions: start..end,
-        }
+        Pack { group_index, split, first: first as u32, count: (end - start) as u32, positions: start..end }
     }
 
     /// The keys of `pack`'s scenarios, in order.

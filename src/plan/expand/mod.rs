@@ -102,18 +102,25 @@ impl KeySequence<'_> {
     pub fn key(&self, position: usize) -> ScenarioKey {
         let position = position as u64;
         let group_index = (position / self.per_group()) as usize;
-        let mut within = position % self.per_group();
-        let mut split = Split::ALL[0];
-        for (s, &n) in Split::ALL.into_iter().zip(&self.per_split) {
-            split = s;
-            if within < n {
-                break;
-            }
-            within -= n;
-        }
+        let (split, within) = split_of(position % self.per_group(), &self.per_split);
         let group = self.groups[group_index].name();
         ScenarioKey { group, group_index, split, index: within as u32, name: None }
     }
+}
+
+/// Which split the `within`-th item of a group falls in, when each split of
+/// [`Split::ALL`] holds `per_split` items (in that order), and its place
+/// within that split.
+pub fn split_of(mut within: u64, per_split: &[u64; 3]) -> (Split, u64) {
+    let mut split = Split::ALL[0];
+    for (s, &n) in Split::ALL.into_iter().zip(per_split) {
+        split = s;
+        if within < n {
+            break;
+        }
+        within -= n;
+    }
+    (split, within)
 }
 
 /// Keys the stream a scenario's town is drawn from (its own, so drawing
