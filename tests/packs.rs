@@ -262,6 +262,16 @@ fn a_format_other_than_the_datasets_is_refused_and_scenarios_per_tar_needs_tar()
     let said = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{said}");
     assert!(said.contains("format: folders there, tar (64 scenarios per tar) now"), "{said}");
+    // More scenarios would make other packs and leave the first ones behind.
+    let small = folders.parent().unwrap().join("small");
+    gen_ok(&spec, &small, &[PACKED, &["--limit", "1"]].concat());
+    let small_before = hash_tree(&small);
+    let out =
+        run(&["gen", "--spec", spec.to_str().unwrap(), "--out", small.to_str().unwrap(), "--format", "tar", "-q"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("a packed dataset keeps its --limit"), "{said}");
+    assert_eq!(hash_tree(&small), small_before);
     let empty = folders.parent().unwrap().join("never");
     let out =
         run(&["gen", "--spec", spec.to_str().unwrap(), "--out", empty.to_str().unwrap(), "--scenarios-per-tar", "3"]);

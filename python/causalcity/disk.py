@@ -46,6 +46,14 @@ class Frames:
         self.folder = folder
         self.kind = kind
         self._frames, self._width, self._height = frames, width, height
+        # A packed dataset's temporary folder that ``folder`` is in (kept
+        # alive while these frames are; not sent to other processes).
+        self._keep: Any = None
+
+    def __getstate__(self) -> Dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_keep"] = None
+        return state
 
     @property
     def shape(self) -> Tuple[int, ...]:
@@ -186,6 +194,7 @@ class Dataset:
             self._keys = [k for k in keys if (self.root / self.pack_of(k)).is_file()]
         else:
             self._keys = [k for k in keys if (self.root / k.folder / "scenario.json").is_file()]
+        self._key_set = set(self._keys)
 
     def pack_of(self, key: "Key") -> str:
         """A packed dataset's tar file that holds ``key``'s scenario, relative
@@ -234,13 +243,19 @@ class Dataset:
         from . import Key
 
         key = Key(*key)
-        if self.scenarios_per_tar and key not in self._keys:
+        if self.scenarios_per_tar and key not in self._key_set:
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}")
         folder = self._folder(key)
         if not (folder / "scenario.json").is_file():
             where = f"its pack {self.pack_of(key)}" if self.scenarios_per_tar else key.folder
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {where})")
-        return load(folder, images=self._images if images is None else images)
+        scenario = load(folder, images=self._images if images is None else images)
+        # A packed scenario's frames are read from the temporary folder it
+        # was unpacked into: they keep that folder while they live.
+        for frames in (scenario.rgb, scenario.mask):
+            if isinstance(frames, Frames):
+                frames._keep = self._scratch
+        return scenario
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
         """Every scenario of ``split`` (or all), read one at a time."""

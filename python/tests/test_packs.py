@@ -73,6 +73,12 @@ def test_open_dataset_reads_packs_into_the_arrays_the_folders_give(datasets):
     np.testing.assert_array_equal(copy[0].position, a.load(copy.keys()[0]).position)
     with pytest.raises(KeyError):
         b.load(("cars04_edges50", "test", 7))
+    # Frames read from the temporary folder outlive the Dataset that made it.
+    scenario = causalcity.open_dataset(packed)[3]
+    import gc
+
+    gc.collect()
+    np.testing.assert_array_equal(scenario.rgb[23], a[3].rgb[23])
 
 
 def test_evaluate_scores_a_packed_dataset_as_its_folders(datasets, tmp_path):

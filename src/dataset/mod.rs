@@ -83,26 +83,21 @@ impl Dataset {
             if done.is_empty() {
                 done.resize(packs.len(), false);
             }
-            (number_of(&first)..=number_of(&last)).filter(|&n| !std::mem::replace(&mut done[n], true)).collect()
+            (number_of(&first)..=number_of(&last)).filter(|&n| !done[n]).collect()
         };
         use rayon::prelude::*;
         let root = unpacked.scratch.path();
-        wanted
-            .into_par_iter()
-            .try_for_each(|n| {
-                let path = packs.path(&self.dir, &packs.pack(n));
-                if !path.is_file() {
-                    return Err(format!("{}: missing pack (validate says what else is missing)", path.display()));
-                }
-                let frames = unpacked.frames;
-                crate::output::packs::unpack(&path, root, &|name| frames || !name.ends_with(".png"))
-            })
-            .inspect_err(|_| {
-                // What failed to unpack is tried again, not taken as there.
-                if let Ok(mut done) = unpacked.done.lock() {
-                    done.iter_mut().for_each(|d| *d = false);
-                }
-            })?;
+        wanted.into_par_iter().try_for_each(|n| {
+            let path = packs.path(&self.dir, &packs.pack(n));
+            if !path.is_file() {
+                return Err(format!("{}: missing pack (validate says what else is missing)", path.display()));
+            }
+            let frames = unpacked.frames;
+            crate::output::packs::unpack(&path, root, &|name| frames || !name.ends_with(".png"))?;
+            // Marked once whole: what failed is tried again, not taken as there.
+            unpacked.done.lock().map_err(|_| "a reader thread failed".to_string())?[n] = true;
+            Ok(())
+        })?;
         Ok(root)
     }
 

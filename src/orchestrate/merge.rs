@@ -124,7 +124,10 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         )));
     }
     if let Some(existing) = ManifestRecord::read(&out.join("manifest.json")).map_err(GenError::Manifest)? {
-        if existing.spec_sha256 != first.spec_sha256 || existing.version != first.version {
+        if existing.spec_sha256 != first.spec_sha256
+            || existing.version != first.version
+            || existing.scenarios_per_tar != first.scenarios_per_tar
+        {
             return Err(GenError::Input(format!(
                 "{} already holds another dataset: merge into an empty folder",
                 out.display()
@@ -376,8 +379,13 @@ fn merge_packs(out: &Path, others: &[&PathBuf], packs: Packs<'_>) -> Result<(usi
             if fs::rename(from, &to).is_err() {
                 // Another filesystem: copy, then remove the source.
                 let partial = crate::output::fresh_partial(&to)?;
-                fs::copy(from, &partial).map_err(io_err(&partial))?;
-                fs::rename(&partial, &to).map_err(io_err(&to))?;
+                let copied = fs::copy(from, &partial)
+                    .map_err(io_err(&partial))
+                    .and_then(|_| fs::rename(&partial, &to).map_err(io_err(&to)));
+                if copied.is_err() {
+                    let _ = fs::remove_file(&partial);
+                }
+                copied?;
                 fs::remove_file(from).map_err(io_err(from))?;
             }
             moved += 1;

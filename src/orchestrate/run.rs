@@ -622,13 +622,22 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     for (path, record) in &existing {
         let (theirs, ours) = (per_split(record.limit), per_split(options.limit));
         let shrinks = ours.iter().zip(&theirs).any(|(o, t)| o < t);
-        if theirs != ours && (shrinks || options.shard.is_some() || record.shard.is_some()) {
+        // A pack is named by the scenarios it holds, so more of them would
+        // make other packs and leave the old ones behind.
+        let packed = options.packing != Packing::Folders || record.packing() != Packing::Folders;
+        if theirs != ours && (shrinks || packed || options.shard.is_some() || record.shard.is_some()) {
             differences.push(format!(
                 "limit: {} was written with {}, this run asks for {}{}",
                 path.display(),
                 shown(record.limit),
                 shown(options.limit),
-                if shrinks { " (fewer scenarios: the others would stay behind, unlisted)" } else { "" }
+                if shrinks {
+                    " (fewer scenarios: the others would stay behind, unlisted)"
+                } else if packed {
+                    " (a packed dataset keeps its --limit: its packs are named by the scenarios they hold)"
+                } else {
+                    ""
+                }
             ));
         }
     }
