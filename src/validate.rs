@@ -11,8 +11,8 @@ use crate::output::layout::{
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::manifest::Packing;
-use crate::output::packs::{Packs, Scratch};
-use crate::output::poses::{read_pixels, PIXELS_FILE, POSE_COLUMNS};
+use crate::output::packs::Packs;
+use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
 use crate::spec::{DatasetSpec, Split, WorldKind};
@@ -220,10 +220,8 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let results: Vec<ScenarioCheck> = match &packs {
         None => pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect()),
         Some(packs) => {
-            let scratch = Scratch::new()?;
-            let checked: Vec<Vec<ScenarioCheck>> = pool.install(|| {
-                (0..packs.len()).into_par_iter().map(|n| check_pack(dir, packs, n, &expected, &scratch)).collect()
-            });
+            let checked: Vec<Vec<ScenarioCheck>> = pool
+                .install(|| (0..packs.len()).into_par_iter().map(|n| check_pack(dir, packs, n, &expected)).collect());
             checked.into_iter().flatten().collect()
         }
     };
@@ -423,15 +421,10 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec, pack
 }
 
 /// Checks the pack `number`: that it holds its scenarios whole and nothing
-/// else, then each of its scenarios as a folder's, unpacked into `scratch`.
-/// Problems name the pack, and the file inside it.
-fn check_pack(
-    dir: &Path,
-    packs: &Packs<'_>,
-    number: usize,
-    expected: &Expected<'_>,
-    scratch: &Scratch,
-) -> Vec<ScenarioCheck> {
+/// else, then each of its scenarios as a folder's, from its members read
+/// into memory a scenario at a time. Problems name the pack, and the file
+/// inside it.
+fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<'_>) -> Vec<ScenarioCheck> {
     let pack = packs.pack(number);
     let keys = packs.keys(&pack);
     let path = packs.path(dir, &pack);
@@ -448,20 +441,39 @@ fn check_pack(
     if let Err(why) = crate::output::packs::verify(&path, &keys) {
         checks[0].0.push(problem(why));
     }
-    let root = scratch.path().join(number.to_string());
-    if let Err(why) = crate::output::packs::unpack(&path, &root, &|_| true) {
+    let folder_of = |key: &ScenarioKey| format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
+    let index: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (folder_of(k), i)).collect();
+    let mut check = |i: usize, members: BTreeMap<String, Vec<u8>>| {
+        let folder = PathBuf::from(folder_of(&keys[i]));
+        let (found, files, bytes, prints) =
+            check_scenario_files(&folder, &ScenarioFiles::Members(&members), &keys[i], expected);
+        let found = found.into_iter().map(|p| problem(format!("{}: {}", p.path.display(), p.message)));
+        checks[i].0.extend(found);
+        (checks[i].1, checks[i].2, checks[i].3) = (files, bytes, prints);
+    };
+    // Members run scenario by scenario (verify says when they do not).
+    let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
+    let read = crate::output::packs::read_members(&path, |name, bytes| {
+        let mut parts = name.splitn(4, '/');
+        let folder: Vec<&str> = parts.by_ref().take(3).collect();
+        let (Some(within), Some(&i)) = (parts.next(), index.get(&folder.join("/"))) else { return Ok(()) };
+        if current.as_ref().is_none_or(|(c, _)| *c != i) {
+            if let Some((c, members)) = current.take() {
+                check(c, members);
+            }
+            current = Some((i, BTreeMap::new()));
+        }
+        if let Some((_, members)) = current.as_mut() {
+            members.insert(within.to_string(), bytes);
+        }
+        Ok(())
+    });
+    if let Some((c, members)) = current.take() {
+        check(c, members);
+    }
+    if let Err(why) = read {
         checks[0].0.push(problem(why));
-        let _ = std::fs::remove_dir_all(&root);
-        return checks;
     }
-    for (check, key) in checks.iter_mut().zip(&keys) {
-        let (found, files, bytes, prints) = check_scenario(&root, key, expected);
-        let inside =
-            |p: &Path| p.strip_prefix(&root).map_or_else(|_| p.display().to_string(), |r| r.display().to_string());
-        check.0.extend(found.into_iter().map(|p| problem(format!("{}: {}", inside(&p.path), p.message))));
-        (check.1, check.2, check.3) = (files, bytes, prints);
-    }
-    let _ = std::fs::remove_dir_all(&root);
     checks
 }
 
@@ -474,14 +486,60 @@ type ScenarioCheck = (Vec<Problem>, u64, u64, Vec<Fingerprint>);
 /// for two cars exactly when their trajectories are identical as logged.
 type Fingerprint = [u8; 16];
 
+/// Where a scenario's files are read from.
+enum ScenarioFiles<'a> {
+    /// Its folder (the `dir` checks are given).
+    Folder,
+    /// A pack's members, by name within the scenario, held in memory.
+    Members(&'a BTreeMap<String, Vec<u8>>),
+}
+
+impl ScenarioFiles<'_> {
+    fn read(&self, dir: &Path, name: &str) -> std::io::Result<Vec<u8>> {
+        match self {
+            ScenarioFiles::Folder => std::fs::read(dir.join(name)),
+            ScenarioFiles::Members(members) => members
+                .get(name)
+                .cloned()
+                .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "not in the pack")),
+        }
+    }
+
+    /// Every file and folder there, relative to the scenario.
+    fn entries(&self, dir: &Path) -> (Vec<String>, Vec<String>) {
+        match self {
+            ScenarioFiles::Folder => list_entries(dir),
+            ScenarioFiles::Members(members) => {
+                let folders: BTreeSet<String> = members
+                    .keys()
+                    .flat_map(|name| name.match_indices('/').map(|(i, _)| name[..i].to_string()).collect::<Vec<_>>())
+                    .collect();
+                (members.keys().cloned().collect(), folders.into_iter().collect())
+            }
+        }
+    }
+}
+
 fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> ScenarioCheck {
     let dir = scenario_dir(root, &key.group, key.split.name(), &key.folder_name());
+    if !dir.is_dir() {
+        let message = "missing scenario folder: rerun gen to write it".to_string();
+        return (vec![Problem { path: dir, message }], 0, 0, Vec::new());
+    }
+    check_scenario_files(&dir, &ScenarioFiles::Folder, key, expected)
+}
+
+/// Checks one scenario whose files `files` gives; problems name them
+/// under `dir`.
+fn check_scenario_files(
+    dir: &Path,
+    files: &ScenarioFiles<'_>,
+    key: &ScenarioKey,
+    expected: &Expected<'_>,
+) -> ScenarioCheck {
+    let dir = dir.to_path_buf();
     let mut problems = Vec::new();
     let mut problem = |path: &Path, message: String| problems.push(Problem { path: path.to_path_buf(), message });
-    if !dir.is_dir() {
-        problem(&dir, "missing scenario folder: rerun gen to write it".into());
-        return (problems, 0, 0, Vec::new());
-    }
     let spec = expected.spec;
     let layout = &expected.layout;
     let frames = spec.frames as usize;
@@ -492,7 +550,7 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     let wanted: BTreeSet<&str> = names.iter().map(String::as_str).collect();
     let folders = layout.folders();
     let wanted_folders: BTreeSet<&str> = folders.iter().map(String::as_str).collect();
-    let (found_files, found_folders) = list_entries(&dir);
+    let (found_files, found_folders) = files.entries(&dir);
     for extra in found_files.iter().filter(|n| !wanted.contains(n.as_str())) {
         problem(&dir.join(extra), "unexpected file".into());
     }
@@ -501,7 +559,10 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     }
 
     // The checksum listing.
-    let listing: BTreeMap<String, String> = match std::fs::read_to_string(dir.join(CHECKSUMS)) {
+    let text = files.read(&dir, CHECKSUMS).and_then(|bytes| {
+        String::from_utf8(bytes).map_err(|_| std::io::Error::new(std::io::ErrorKind::InvalidData, "not text"))
+    });
+    let listing: BTreeMap<String, String> = match text {
         Ok(text) => {
             text.lines().filter_map(|l| l.split_once("  ").map(|(h, n)| (n.to_string(), h.to_string()))).collect()
         }
@@ -511,10 +572,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
         }
     };
 
+    let source = files;
     let (mut files, mut bytes) = (0u64, 0u64);
     let mut read = |name: &str, problems: &mut Vec<Problem>| -> Option<Vec<u8>> {
         let path = dir.join(name);
-        let data = match std::fs::read(&path) {
+        let data = match source.read(&dir, name) {
             Ok(d) => d,
             Err(e) => {
                 problems.push(Problem { path, message: format!("missing or unreadable: {e}") });
@@ -605,7 +667,10 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
             ok.then_some(()).ok_or(()).ok()
         });
         if read(PIXELS_FILE, &mut problems).is_some() {
-            if let Err(message) = check_pixels(&dir, &data, frames, cars) {
+            let pixels = source
+                .read(&dir, PIXELS_FILE)
+                .map_err(|e| format!("cannot read {}: {e}", dir.join(PIXELS_FILE).display()));
+            if let Err(message) = pixels.and_then(|pixels| check_pixels(&dir, &pixels, &data, frames, cars)) {
                 problems.push(Problem { path: dir.join(PIXELS_FILE), message });
             }
         }
@@ -613,9 +678,10 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     if city && expected.layout.lights == crate::output::manifest::LightsLog::Changes {
         // Every light at frame 0, then changes in order (as the Python
         // package reads it).
-        if read(LIGHT_CHANGES_CSV, &mut problems).is_some() {
+        if let Some(data) = read(LIGHT_CHANGES_CSV, &mut problems) {
             let path = dir.join(LIGHT_CHANGES_CSV);
-            match crate::dataset::readback::read_light_log(&dir, frames, spec.frame_interval()) {
+            let reader = csv::Reader::from_reader(&data[..]);
+            match crate::dataset::readback::parse_light_changes(reader, &path, frames, spec.frame_interval()) {
                 Ok(read) if read.names.len() == lights_per_frame => {}
                 Ok(read) => problems.push(Problem {
                     path,
@@ -836,8 +902,8 @@ fn check_effects(
 }
 
 /// pixels.npy holds poses.csv's px, py as float32, frame by frame.
-fn check_pixels(dir: &Path, poses_csv: &[u8], frames: usize, cars: usize) -> Result<(), String> {
-    let pixels = read_pixels(&dir.join(PIXELS_FILE), frames, cars)?;
+fn check_pixels(dir: &Path, pixels: &[u8], poses_csv: &[u8], frames: usize, cars: usize) -> Result<(), String> {
+    let pixels = parse_pixels(pixels, &dir.join(PIXELS_FILE), frames, cars)?;
     let mut reader = csv::Reader::from_reader(poses_csv);
     for (i, row) in reader.records().enumerate() {
         let logged = row.ok().and_then(|r| Some([r.get(9)?.parse::<f64>().ok()?, r.get(10)?.parse::<f64>().ok()?]));

@@ -110,7 +110,7 @@ fn field<T: std::str::FromStr>(
         .map_err(|_| format!("{} line {line}: {} {text:?} is not a valid value", path.display(), columns[k]))
 }
 
-fn check_header(path: &Path, reader: &mut csv::Reader<std::fs::File>, columns: &[&str]) -> Result<(), String> {
+fn check_header<R: std::io::Read>(path: &Path, reader: &mut csv::Reader<R>, columns: &[&str]) -> Result<(), String> {
     let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
     if header.iter().ne(columns.iter().copied()) {
         return Err(format!(
@@ -192,7 +192,17 @@ pub fn read_light_log(dir: &Path, frames: usize, frame_interval: f64) -> Result<
 /// frame between holds the colour, its time since the change growing by
 /// the frame interval (as lights.csv writes it, to the millisecond).
 fn read_light_changes(path: &Path, frames: usize, frame_interval: f64) -> Result<LightArrays, String> {
-    let mut reader = open_csv(path)?;
+    parse_light_changes(open_csv(path)?, path, frames, frame_interval)
+}
+
+/// [`read_light_changes`] of `light_changes.csv`'s bytes, read from
+/// `reader` (errors name `path`).
+pub fn parse_light_changes<R: std::io::Read>(
+    mut reader: csv::Reader<R>,
+    path: &Path,
+    frames: usize,
+    frame_interval: f64,
+) -> Result<LightArrays, String> {
     check_header(path, &mut reader, &LIGHT_COLUMNS)?;
     let mut names: Vec<String> = Vec::new();
     let mut heads: Vec<f64> = Vec::new();

@@ -36,9 +36,14 @@ pub fn write_pixels<W: Write>(out: W, trajectories: &Trajectories, camera: &Came
 
 /// Reads a `pixels.npy` of `frames` x `cars`: row-major (px, py) pairs.
 pub fn read_pixels(path: &std::path::Path, frames: usize, cars: usize) -> Result<Vec<f32>, String> {
-    let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| fail(&e))?;
+    parse_pixels(&bytes, path, frames, cars)
+}
+
+/// [`read_pixels`] of the file's bytes (errors name `path`).
+pub fn parse_pixels(bytes: &[u8], path: &std::path::Path, frames: usize, cars: usize) -> Result<Vec<f32>, String> {
+    let fail = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let npy = npyz::NpyFile::new(bytes).map_err(|e| fail(&e))?;
     let expected = [frames as u64, cars as u64, 2];
     if npy.shape() != expected || npy.dtype().descr() != "'<f4'" {
         return Err(fail(&format!(
