@@ -438,11 +438,7 @@ fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<
         checks[0].0.push(problem("missing pack: rerun gen to write it".into()));
         return checks;
     }
-    if let Err(why) = crate::output::packs::verify(&path, &keys) {
-        checks[0].0.push(problem(why));
-    }
     let folder_of = |key: &ScenarioKey| format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
-    let index: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (folder_of(k), i)).collect();
     let mut check = |i: usize, members: BTreeMap<String, Vec<u8>>| {
         let folder = PathBuf::from(folder_of(&keys[i]));
         let (found, files, bytes, prints) =
@@ -451,28 +447,20 @@ fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<
         checks[i].0.extend(found);
         (checks[i].1, checks[i].2, checks[i].3) = (files, bytes, prints);
     };
-    // Members run scenario by scenario (verify says when they do not).
-    let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
-    let read = crate::output::packs::read_members(&path, |name, bytes| {
-        let mut parts = name.splitn(4, '/');
-        let folder: Vec<&str> = parts.by_ref().take(3).collect();
-        let (Some(within), Some(&i)) = (parts.next(), index.get(&folder.join("/"))) else { return Ok(()) };
-        if current.as_ref().is_none_or(|(c, _)| *c != i) {
-            if let Some((c, members)) = current.take() {
-                check(c, members);
-            }
-            current = Some((i, BTreeMap::new()));
-        }
-        if let Some((_, members)) = current.as_mut() {
-            members.insert(within.to_string(), bytes);
-        }
+    // One pass: the pack's membership, and each scenario as it is read.
+    let read = crate::output::packs::read_scenarios(&path, &keys, |i, members| {
+        check(i, members);
         Ok(())
     });
-    if let Some((c, members)) = current.take() {
-        check(c, members);
-    }
-    if let Err(why) = read {
-        checks[0].0.push(problem(why));
+    match read {
+        Ok(found) => {
+            for (i, _) in found.iter().enumerate().filter(|(_, f)| !**f) {
+                checks[i]
+                    .0
+                    .push(problem(format!("{} is not in it: rerun gen to write the pack again", folder_of(&keys[i]))));
+            }
+        }
+        Err(why) => checks[0].0.push(problem(why)),
     }
     checks
 }

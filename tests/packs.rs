@@ -145,6 +145,52 @@ fn validate_names_the_pack_and_the_file_of_damage_and_gen_writes_that_pack_again
 }
 
 #[test]
+fn validate_says_when_a_pack_lacks_a_scenario_or_holds_a_stranger_and_gen_repairs_both() {
+    let (spec, folders, packed) = both("packs-membership");
+    let before = hash_tree(&packed);
+    // A pack made by hand with `tar`: one of its two scenarios left out.
+    let short = packed.join("cars06_edges50/train/00000-00001.tar");
+    let status = Command::new("tar")
+        .args(["--sort=name", "-cf"])
+        .arg(&short)
+        .arg("-C")
+        .arg(&folders)
+        .arg("cars06_edges50/train/00000")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    // And one with a scenario of another pack beside its own.
+    let crowded = packed.join("cars04_edges50/test/00000-00001.tar");
+    let status = Command::new("tar")
+        .args(["--sort=name", "-cf"])
+        .arg(&crowded)
+        .arg("-C")
+        .arg(&folders)
+        .args(["cars04_edges50/test/00000", "cars04_edges50/test/00001", "cars04_edges50/val/00000"])
+        .status()
+        .unwrap();
+    assert!(status.success());
+
+    let out = run(&["validate", packed.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains(&format!("{}: cars06_edges50/train/00001 is not in it", short.display())),
+        "validate should name the pack and the scenario it lacks: {text}"
+    );
+    assert!(
+        text.contains(&format!("{}: cars04_edges50/val/00000/", crowded.display()))
+            && text.contains("belongs to none of its scenarios"),
+        "validate should name the pack and the stranger in it: {text}"
+    );
+
+    let out = gen_ok(&spec, &packed, PACKED);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(said.matches("writing the pack again").count(), 2, "{said}");
+    assert_eq!(hash_tree(&packed), before, "both packs rewritten as they were, byte for byte");
+}
+
+#[test]
 fn an_interrupted_packed_run_resumes_to_the_same_bytes_and_leaves_nothing_behind() {
     let (spec, _, packed) = both("packs-resume");
     let before = hash_tree(&packed);

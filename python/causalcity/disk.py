@@ -294,6 +294,8 @@ def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
     files: Dict[str, bytes] = {}
     with tarfile.open(_os.fspath(path), "r:") as tar:
         for member in tar:
+            if member.isdir():  # `tar -cf` of scenario folders lists them too
+                continue
             parts = member.name.split("/")
             if not member.isfile() or len(parts) < 4 or any(p in ("", ".", "..") for p in parts):
                 raise InputError(f"{_os.fspath(path)}: {member.name!r} is not a scenario's file (a pack holds those only)")

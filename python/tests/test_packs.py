@@ -115,6 +115,21 @@ def test_generate_refuses_a_format_it_does_not_know_and_a_tar_size_without_tar(t
     assert not any(tmp_path.iterdir())
 
 
+def test_read_tar_reads_a_pack_made_by_hand_with_its_folder_entries(datasets, tmp_path):
+    # `tar -cf` of scenario folders lists the folders as members too.
+    folders, _ = datasets
+    by_hand = tmp_path / "by-hand.tar"
+    with tarfile.open(by_hand, "w") as tar:
+        for folder in ["cars04_edges50/val/00000", "cars04_edges50/val/00001"]:
+            tar.add(folders / folder, arcname=folder)
+    assert any(m.isdir() for m in tarfile.open(by_hand).getmembers())
+    read = {folder: files for folder, files in causalcity.read_tar(by_hand)}
+    assert sorted(read) == ["cars04_edges50/val/00000", "cars04_edges50/val/00001"]
+    for folder, files in read.items():
+        assert files["poses.csv"] == (folders / folder / "poses.csv").read_bytes()
+        assert len(files) == sum(1 for p in (folders / folder).rglob("*") if p.is_file())
+
+
 def test_read_tar_refuses_a_member_outside_the_dataset(tmp_path):
     bad = tmp_path / "bad.tar"
     with tarfile.open(bad, "w") as tar:

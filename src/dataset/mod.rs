@@ -64,26 +64,12 @@ impl Dataset {
             return Ok(unpacked.scratch.path());
         }
         let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
-        let (first, last) = (packs.of_position(positions.start), packs.of_position(positions.end - 1));
-        // Pack numbers run in key order: find those of the two ends.
-        let number_of = |pack: &crate::output::packs::Pack| {
-            let (mut lo, mut hi) = (0usize, packs.len());
-            while lo < hi {
-                let mid = (lo + hi) / 2;
-                if packs.pack(mid).positions.start < pack.positions.start {
-                    lo = mid + 1;
-                } else {
-                    hi = mid;
-                }
-            }
-            lo
-        };
         let wanted: Vec<usize> = {
             let mut done = unpacked.done.lock().map_err(|_| "a reader thread failed".to_string())?;
             if done.is_empty() {
                 done.resize(packs.len(), false);
             }
-            (number_of(&first)..=number_of(&last)).filter(|&n| !done[n]).collect()
+            (packs.number_of(positions.start)..=packs.number_of(positions.end - 1)).filter(|&n| !done[n]).collect()
         };
         use rayon::prelude::*;
         let root = unpacked.scratch.path();

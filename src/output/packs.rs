@@ -76,6 +76,15 @@ impl<'a> Packs<'a> {
         self.starting_at(key.group_index, key.split, u64::from(key.index) / self.per_tar * self.per_tar)
     }
 
+    /// The number (see [`Packs::pack`]) of the pack holding the scenario at
+    /// `position`.
+    pub fn number_of(&self, position: usize) -> usize {
+        let key = self.sequence.key(position);
+        let per_group: u64 = self.per_split.iter().sum();
+        let before: u64 = self.per_split[..key.split.index()].iter().sum();
+        (key.group_index as u64 * per_group + before + u64::from(key.index) / self.per_tar) as usize
+    }
+
     /// The pack of a group and split whose first scenario has index `first`.
     fn starting_at(&self, group_index: usize, split: Split, first: u64) -> Pack {
         let all = self.sequence.positions_of(group_index, split);
@@ -252,6 +261,10 @@ pub fn read_members(path: &Path, mut each: impl FnMut(&str, Vec<u8>) -> Result<(
         let mut entry = entry.map_err(bad)?;
         let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
         let kind = entry.header().entry_type();
+        if kind.is_dir() {
+            // `tar -cf` of scenario folders lists the folders too: no data.
+            continue;
+        }
         if !kind.is_file() {
             return Err(format!(
                 "{}: {name:?} is not a plain file ({kind:?}); a pack holds files only",
@@ -268,51 +281,81 @@ pub fn read_members(path: &Path, mut each: impl FnMut(&str, Vec<u8>) -> Result<(
     Ok(())
 }
 
+/// A member's scenario folder (`<group>/<split>/<scenario>`) and its name
+/// within that folder; `None` for a name with fewer parts.
+pub fn split_member(name: &str) -> Option<(&str, &str)> {
+    let at = name.match_indices('/').nth(2)?.0;
+    Some((&name[..at], &name[at + 1..]))
+}
+
+/// Reads the pack at `path` a scenario at a time: calls `each(i, members)`
+/// with the members of the `i`-th of `keys`, by name within its folder, in
+/// the pack's order. Refuses a member of none of them, a member twice and a
+/// scenario whose members do not run together. Returns which scenarios it
+/// found members of.
+pub fn read_scenarios(
+    path: &Path,
+    keys: &[ScenarioKey],
+    mut each: impl FnMut(usize, BTreeMap<String, Vec<u8>>) -> Result<(), String>,
+) -> Result<Vec<bool>, String> {
+    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (member_folder(k), i)).collect();
+    let mut found = vec![false; keys.len()];
+    let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
+    read_members(path, |name, bytes| {
+        let Some((i, within)) = split_member(name).and_then(|(f, w)| Some((*folders.get(f)?, w))) else {
+            return Err(format!("{}: {name} belongs to none of its scenarios", path.display()));
+        };
+        if current.as_ref().is_none_or(|(c, _)| *c != i) {
+            if found[i] {
+                return Err(format!("{}: {name}: its scenario's members do not run together", path.display()));
+            }
+            found[i] = true;
+            if let Some((c, members)) = current.replace((i, BTreeMap::new())) {
+                each(c, members)?;
+            }
+        }
+        let members = &mut current.as_mut().expect("set above").1;
+        if members.insert(within.to_string(), bytes).is_some() {
+            return Err(format!("{}: {name} is in it twice", path.display()));
+        }
+        Ok(())
+    })?;
+    if let Some((c, members)) = current {
+        each(c, members)?;
+    }
+    Ok(found)
+}
+
 /// Checks that the pack at `path` holds exactly the scenarios of `keys`,
 /// each whole by its `checksums.sha256`: every file it lists, with its hash,
 /// and nothing else. Says what is wrong otherwise (gen writes such a pack
 /// again).
 pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
-    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (member_folder(k), i)).collect();
-    // Per scenario: each member's hash, and its listing's text.
-    let mut hashes: Vec<BTreeMap<String, String>> = vec![BTreeMap::new(); keys.len()];
-    let mut listings: Vec<Option<String>> = vec![None; keys.len()];
-    read_members(path, |name, bytes| {
-        // `<group>/<split>/<scenario>/<file in it>`
-        let mut parts = name.splitn(4, '/');
-        let folder: Vec<&str> = parts.by_ref().take(3).collect();
-        let (Some(within), Some(&i)) = (parts.next(), folders.get(&folder.join("/"))) else {
-            return Err(format!("{}: {name} belongs to none of its scenarios", path.display()));
-        };
-        let within = within.to_string();
-        if within == CHECKSUMS {
-            listings[i] =
-                Some(String::from_utf8(bytes).map_err(|_| format!("{}: {name} is not text", path.display()))?);
-        } else if hashes[i].insert(within, hex(&Sha256::digest(&bytes))).is_some() {
-            return Err(format!("{}: {name} is in it twice", path.display()));
-        }
-        Ok(())
-    })?;
-    for (key, i) in &folders {
-        let Some(listing) = &listings[*i] else {
-            return Err(format!("{}: {key}/{CHECKSUMS} is missing", path.display()));
-        };
-        let mut files = std::mem::take(&mut hashes[*i]);
+    let found = read_scenarios(path, keys, |i, mut members| {
+        let key = member_folder(&keys[i]);
+        let listing =
+            members.remove(CHECKSUMS).ok_or_else(|| format!("{}: {key}/{CHECKSUMS} is missing", path.display()))?;
+        let listing =
+            String::from_utf8(listing).map_err(|_| format!("{}: {key}/{CHECKSUMS} is not text", path.display()))?;
         for line in listing.lines() {
             let (hash, name) = line
                 .split_once("  ")
                 .ok_or_else(|| format!("{}: {key}/{CHECKSUMS}: {line:?} is not a checksum line", path.display()))?;
-            match files.remove(name) {
-                Some(found) if found == hash => {}
+            match members.remove(name) {
+                Some(bytes) if hex(&Sha256::digest(&bytes)) == hash => {}
                 Some(_) => return Err(format!("{}: {key}/{name}: its checksum does not match", path.display())),
                 None => return Err(format!("{}: {key}/{name} is missing", path.display())),
             }
         }
-        if let Some(extra) = files.keys().next() {
-            return Err(format!("{}: {key}/{extra} is not in its {CHECKSUMS}", path.display()));
+        match members.keys().next() {
+            Some(extra) => Err(format!("{}: {key}/{extra} is not in its {CHECKSUMS}", path.display())),
+            None => Ok(()),
         }
+    })?;
+    match found.iter().position(|f| !f) {
+        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), member_folder(&keys[i]))),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Unpacks the pack at `path` under `root`: each member `keep` keeps, at
@@ -386,5 +429,25 @@ mod tests {
         for other in ["00001.tar", "0001-00002.tar", "00002-00001.tar", "00000-00063.tar.partial", "a0000-00001.tar"] {
             assert_eq!(parse_file_name(other), None, "{other}");
         }
+    }
+
+    #[test]
+    fn every_scenario_is_in_exactly_the_pack_its_number_names() {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/configs/ci-toy.json")).unwrap();
+        let spec = crate::spec::DatasetSpec::from_json(&text).unwrap();
+        let expansion = crate::plan::Expansion::new(spec, std::sync::Arc::new(crate::map::CityMap::default())).unwrap();
+        // 5 groups of 2 + 1 + 1 scenarios; 2 per tar: packs of 2, 1, 1 per group.
+        let packs = Packs::new(expansion.key_sequence(None), 2);
+        assert_eq!(packs.len(), 15);
+        let mut seen = vec![0; expansion.key_sequence(None).len()];
+        for number in 0..packs.len() {
+            let pack = packs.pack(number);
+            for position in pack.positions.clone() {
+                assert_eq!(packs.number_of(position), number, "position {position}");
+                assert_eq!(packs.of_position(position).positions, pack.positions);
+                seen[position] += 1;
+            }
+        }
+        assert_eq!(seen, vec![1; 20], "each scenario in one pack");
     }
 }
