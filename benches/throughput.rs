@@ -318,6 +318,49 @@ fn frame_pipeline(root: &Path) {
     );
 }
 
+/// The city world with images (its default confounders: rain and snow in
+/// some scenarios) against the toy world at the same size, 1 thread, and
+/// the share of the city's image stage that is PNG encoding.
+fn city_images_vs_toy(root: &Path, images_spec: &Path) {
+    // Both specs: 8 scenarios of 150 frames.
+    let pairs = 8.0 * 150.0;
+    println!("\n== City world with images (default confounders) vs toy, 1 thread, best of 3 interleaved runs, in /dev/shm ==");
+    let city_images = write_world_spec(root, "cityimg", "city", 12, 8);
+    // In memory where possible (/dev/shm), so disk noise does not decide the comparison.
+    let scratch = scratch_root(root);
+    let (mut best_toy, mut best_city) = (f64::INFINITY, f64::INFINITY);
+    let mut city_stages = None;
+    for _ in 0..3 {
+        best_toy = best_toy.min(gen(images_spec, &scratch.join("img1"), 1, true));
+        let out = scratch.join("cityimg1");
+        let _ = std::fs::remove_dir_all(&out);
+        let summary = generate(&gen_options(&city_images, &out, 1, true)).unwrap();
+        if summary.elapsed.as_secs_f64() < best_city {
+            best_city = summary.elapsed.as_secs_f64();
+            city_stages = Some(summary.stage_seconds);
+        }
+    }
+    let (rgb_bytes, rgb_files) = dir_bytes(&scratch.join("cityimg1"), "rgb");
+    if scratch != root {
+        let _ = std::fs::remove_dir_all(&scratch);
+    }
+    println!(
+        "toy {:.0}, city {:.0} frame pairs/s per core: city at {:.0} % of the toy world, RGB {:.1} KB per frame",
+        pairs / best_toy,
+        pairs / best_city,
+        100.0 * best_toy / best_city,
+        rgb_bytes as f64 / rgb_files as f64 / 1e3
+    );
+    let st = city_stages.expect("three runs");
+    println!(
+        "city image stage: render {:.2} s, encode {:.2} s, write {:.2} s: encoding {:.0} % of it (issue 38: >= 85 %)",
+        st.render,
+        st.encode,
+        st.write,
+        100.0 * st.encode / (st.render + st.encode + st.write)
+    );
+}
+
 /// Perspective frame pairs (RGB + mask drawn and PNG-encoded) per second on
 /// one core at 1024 x 640: the pinhole bird's-eye view (static parts drawn
 /// once) and a first-person camera driving along a road (everything drawn
@@ -735,6 +778,12 @@ fn main() {
         junction_control_cost();
         return;
     }
+    // BENCH_ONLY=city_images: only the city with images against the toy.
+    if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "city_images") {
+        city_images_vs_toy(&root, &write_spec(&root, "images", 12, 8));
+        let _ = std::fs::remove_dir_all(&root);
+        return;
+    }
     // BENCH_ONLY=effects_city: only the effects on configs/city.json.
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "effects_city") {
         paper_city_effects();
@@ -774,26 +823,7 @@ fn main() {
 
     let toy_pairs_per_s = pairs / one;
 
-    println!("\n== City world with images (default confounders) vs toy, 1 thread, best of 3 interleaved runs, in /dev/shm ==");
-    let city_images = write_world_spec(&root, "cityimg", "city", 12, 8);
-    // In memory where possible (/dev/shm), so disk noise does not decide the comparison.
-    let scratch = scratch_root(&root);
-    let (mut best_toy, mut best_city) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..3 {
-        best_toy = best_toy.min(gen(&images_spec, &scratch.join("img1"), 1, true));
-        best_city = best_city.min(gen(&city_images, &scratch.join("cityimg1"), 1, true));
-    }
-    let (rgb_bytes, rgb_files) = dir_bytes(&scratch.join("cityimg1"), "rgb");
-    if scratch != root {
-        let _ = std::fs::remove_dir_all(&scratch);
-    }
-    println!(
-        "toy {:.0}, city {:.0} frame pairs/s per core: city at {:.0} % of the toy world, RGB {:.1} KB per frame",
-        pairs / best_toy,
-        pairs / best_city,
-        100.0 * best_toy / best_city,
-        rgb_bytes as f64 / rgb_files as f64 / 1e3
-    );
+    city_images_vs_toy(&root, &images_spec);
     let _ = toy_pairs_per_s;
 
     {

@@ -84,8 +84,9 @@ pub struct Scene {
 /// 3 bytes a pixel) and `mask` (1 byte a pixel).
 ///
 /// Between frames of one scene only what the previous frame drew (its cars
-/// and their beams) is restored from the background, and only what changed
-/// is converted into `rgb` and `mask`: a frame costs its cars, not its size.
+/// and their beams, signal heads, rain streaks and snowflakes) is restored
+/// from the background, and only what changed is converted into `rgb` and
+/// `mask`: a frame costs what it draws, not its size.
 pub struct FrameCanvas {
     rgba: Pixmap,
     /// One car's coverage at a time (0 or 255, no anti-aliasing), stamped
@@ -106,6 +107,9 @@ pub struct FrameCanvas {
     heads: Option<DrawnHeads>,
     /// This frame's head rectangles (kept to reuse the allocation).
     head_rects: Vec<PixelRect>,
+    /// This frame's rain streaks' and snowflakes' boxes, pixels (kept to
+    /// reuse the allocation).
+    precipitation: Vec<[f32; 4]>,
 }
 
 /// Signal heads as drawn over one background under one look, and the pixels
@@ -164,6 +168,13 @@ impl PixelRect {
             y1: clip((hi_y + AA_MARGIN_PX).ceil(), h),
         };
         (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
+    }
+
+    /// The pixels of the box `[x0, y0, x1, y1]` (pixels) with an
+    /// anti-aliasing margin, clipped to a `w` x `h` image; `None` when wholly
+    /// outside.
+    fn of_box([x0, y0, x1, y1]: [f32; 4], w: usize, h: usize) -> Option<Self> {
+        PixelRect::around(Transform::identity(), (x0, x1), (y0, y1), w, h)
     }
 }
 
@@ -235,6 +246,7 @@ impl Renderer {
             previous: Vec::new(),
             heads: None,
             head_rects: Vec::new(),
+            precipitation: Vec::new(),
         }
     }
 
@@ -257,10 +269,11 @@ impl Renderer {
             let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
             world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32))
         };
-        // Rain and snow cover the whole frame; otherwise only the cars (and
-        // their beams) change from frame to frame.
+        // Only the cars (and their beams), the signal heads, and rain and
+        // snow change from frame to frame: what they covered last frame is
+        // restored from the background, and only what changed is converted.
         let same_background = canvas.background.as_ref().is_some_and(|b| Arc::ptr_eq(b, &scene.background));
-        let whole_frame = !same_background || look.rain > 0.0 || look.snow > 0.0;
+        let whole_frame = !same_background;
         let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
         std::mem::swap(&mut canvas.dirty, &mut canvas.previous);
         canvas.dirty.clear();
@@ -352,17 +365,14 @@ impl Renderer {
                 stamp(&mut canvas.mask, &mut canvas.coverage, r, car.mask_id);
             }
         }
-        look.draw_precipitation(&mut canvas.rgba, frame);
+        canvas.precipitation.clear();
+        look.draw_precipitation_within(&mut canvas.rgba, frame, &mut canvas.precipitation);
+        canvas.dirty.extend(canvas.precipitation.iter().filter_map(|b| PixelRect::of_box(*b, w, h)));
         // What changed: what the previous frame drew and what this one drew
         // (the whole frame when it was redrawn).
         let drawn: &[PixelRect] = if whole_frame { &[] } else { &canvas.dirty };
         for r in canvas.previous.iter().chain(drawn) {
             convert(&canvas.rgba, &mut canvas.rgb, *r);
-        }
-        if whole_frame {
-            // A weather frame draws everywhere: the next one restores everything.
-            canvas.dirty.clear();
-            canvas.dirty.push(full);
         }
     }
 }
@@ -417,8 +427,34 @@ fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
         let row = y * w;
         let src = &rgba[(row + r.x0) * 4..(row + r.x1) * 4];
         let dst = &mut rgb[(row + r.x0) * 3..(row + r.x1) * 3];
-        for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
-            d.copy_from_slice(&s[..3]);
+        convert_row(src, dst);
+    }
+}
+
+/// RGBA pixels into RGB: each pixel's four bytes are stored whole, the
+/// next pixel's red overwriting the alpha (four-byte stores run several
+/// times faster than three-byte copies); the last pixel gets its three.
+pub(crate) fn convert_row(src: &[u8], dst: &mut [u8]) {
+    let n = src.len() / 4;
+    if n == 0 {
+        return;
+    }
+    for (i, pixel) in src[..(n - 1) * 4].chunks_exact(4).enumerate() {
+        dst[i * 3..i * 3 + 4].copy_from_slice(pixel);
+    }
+    dst[(n - 1) * 3..n * 3].copy_from_slice(&src[(n - 1) * 4..(n - 1) * 4 + 3]);
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn rgba_rows_convert_to_their_rgb_bytes_at_every_length() {
+        for n in 0..9usize {
+            let src: Vec<u8> = (0..n * 4).map(|b| (b * 7 + 1) as u8).collect();
+            let expected: Vec<u8> = src.chunks_exact(4).flat_map(|p| p[..3].to_vec()).collect();
+            let mut dst = vec![0xAA; n * 3];
+            super::convert_row(&src, &mut dst);
+            assert_eq!(dst, expected, "{n} pixels");
         }
     }
 }

@@ -320,9 +320,7 @@ pub fn draw_precipitation(look: &SceneLook, index: u32, frame: &mut PerspectiveF
         px[3] = 255;
     }
     look.draw_precipitation(&mut pixmap, index);
-    for (rgb, px) in frame.rgb.chunks_exact_mut(3).zip(pixmap.data().chunks_exact(4)) {
-        rgb.copy_from_slice(&px[..3]);
-    }
+    super::convert_row(pixmap.data(), &mut frame.rgb);
 }
 
 /// A solid in `look`'s light.

@@ -13,6 +13,9 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
+/// A rain streak's width at 1024 pixels across, pixels.
+const STREAK_WIDTH_PX: f32 = 1.0;
+
 /// Water on asphalt (`cover` 255 = wholly road): darker, with a faint blue sheen.
 fn wet_rgb(rgb: [u8; 3], wet: f64, cover: u8) -> [u8; 3] {
     let k = 1.0 - wet * cover as f64 / 255.0;
@@ -161,6 +164,14 @@ impl SceneLook {
 
     /// Rain streaks and snowflakes of frame `frame`, in pixel space.
     pub fn draw_precipitation(&self, pixmap: &mut Pixmap, frame: u32) {
+        self.draw_precipitation_within(pixmap, frame, &mut Vec::new());
+    }
+
+    /// [`SceneLook::draw_precipitation`], adding to `drawn` a box around
+    /// each streak and flake, `[x0, y0, x1, y1]` in pixels (unclipped; the
+    /// stroke's width included, no margin): every pixel it changed lies in
+    /// one of them.
+    pub fn draw_precipitation_within(&self, pixmap: &mut Pixmap, frame: u32, drawn: &mut Vec<[f32; 4]>) {
         if self.rain <= 0.0 && self.snow <= 0.0 {
             return;
         }
@@ -176,12 +187,14 @@ impl SceneLook {
                 let len = rng.random_range(8.0..16.0) * scale;
                 pb.move_to(x, y);
                 pb.line_to(x - 0.35 * len, y + len);
+                let half = STREAK_WIDTH_PX * scale;
+                drawn.push([x - 0.35 * len - half, y - half, x + half, y + len + half]);
             }
             if let Some(path) = pb.finish() {
                 // Hard-edged streaks: cheaper to draw and to compress, alike to the eye.
                 let mut paint = Paint { anti_alias: false, ..Paint::default() };
                 paint.set_color_rgba8(200, 210, 225, 120);
-                let stroke = Stroke { width: 1.0 * scale, line_cap: LineCap::Butt, ..Stroke::default() };
+                let stroke = Stroke { width: STREAK_WIDTH_PX * scale, line_cap: LineCap::Butt, ..Stroke::default() };
                 pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
             }
         }
@@ -194,6 +207,7 @@ impl SceneLook {
                 let size = rng.random_range(1.5..3.5) * scale;
                 if let Some(rect) = tiny_skia::Rect::from_xywh(x, y, size, size) {
                     pb.push_rect(rect);
+                    drawn.push([x, y, x + size, y + size]);
                 }
             }
             if let Some(path) = pb.finish() {
