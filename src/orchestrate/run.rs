@@ -493,13 +493,22 @@ fn finished_on_disk(out: &Path, spec: &DatasetSpec) -> u64 {
     for g in &spec.groups {
         for split in crate::spec::Split::ALL {
             let Ok(entries) = std::fs::read_dir(out.join(g.name()).join(split.name())) else { continue };
-            for e in entries.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')) {
-                if let Some((first, last)) = crate::output::packs::parse_file_name(&e.file_name().to_string_lossy()) {
-                    finished += u64::from(last - first) + 1;
-                } else if e.path().join(crate::output::CHECKSUMS).is_file() {
-                    finished += 1;
-                }
-            }
+            let entries: Vec<_> =
+                entries.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).collect();
+            let packs: Vec<(u32, u32)> = entries
+                .iter()
+                .filter_map(|e| crate::output::packs::parse_file_name(&e.file_name().to_string_lossy()))
+                .collect();
+            finished += packs.iter().map(|(first, last)| u64::from(last - first) + 1).sum::<u64>();
+            // A finished folder, unless a run killed after packing it left it beside its pack.
+            let packed =
+                |name: &str| name.parse::<u32>().is_ok_and(|i| packs.iter().any(|(f, l)| (*f..=*l).contains(&i)));
+            finished += entries
+                .iter()
+                .filter(|e| {
+                    !packed(&e.file_name().to_string_lossy()) && e.path().join(crate::output::CHECKSUMS).is_file()
+                })
+                .count() as u64;
         }
     }
     finished
