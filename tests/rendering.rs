@@ -294,3 +294,45 @@ fn beams_light_the_road_never_the_car_in_front() {
     renderer.render(&mut fresh, &night, &[front, rear], &[], 1);
     assert!(alone.rgb == fresh.rgb && alone.mask == fresh.mask, "incremental frame differs from a fresh one");
 }
+
+#[test]
+fn rain_and_snow_frames_drawn_one_after_another_equal_frames_drawn_from_scratch() {
+    use causalcity::camera::Camera;
+    use causalcity::map::CityMap;
+    use causalcity::render::weather::SceneLook;
+    use causalcity::render::{CarSprite, Renderer};
+    use glam::DVec2;
+
+    // Only what the previous frame drew is restored: streaks and flakes of
+    // one frame must be gone in the next, wherever they fell.
+    let map = CityMap::default();
+    let renderer = Renderer::new(&map, Camera::birds_eye(512, 320));
+    let car = |x: f64, id: u8| CarSprite {
+        position: DVec2::new(x, 2.0),
+        yaw: 0.3,
+        length: 4.5,
+        width: 1.8,
+        colour: [40, 90, 200],
+        mask_id: id,
+        braking: id % 2 == 0,
+    };
+    let mut checked = 0;
+    for look in [
+        SceneLook { rain: 1.0, wetness: 0.8, seed: 11, ..SceneLook::clear() },
+        SceneLook { snow: 0.7, daylight: 0.2, seed: 12, ..SceneLook::clear() },
+        SceneLook { rain: 0.4, snow: 0.4, fog: 0.3, seed: 13, ..SceneLook::clear() },
+    ] {
+        let scene = renderer.scene(look);
+        let mut running = renderer.canvas();
+        for frame in 0..5u32 {
+            let cars = [car(-10.0 + 3.0 * frame as f64, 1), car(8.0 - 2.0 * frame as f64, 2)];
+            renderer.render(&mut running, &scene, &cars, &[], frame);
+            let mut fresh = renderer.canvas();
+            renderer.render(&mut fresh, &scene, &cars, &[], frame);
+            assert!(running.rgb == fresh.rgb, "frame {frame} of {look:?}: RGB differs from one drawn from scratch");
+            assert!(running.mask == fresh.mask, "frame {frame} of {look:?}: mask differs");
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 15);
+}
