@@ -251,13 +251,24 @@ impl Drop for PackWriter {
 }
 
 /// Reads a pack's members in order, each as its name (relative to the
-/// dataset) and bytes. Refuses anything but plain files with relative names
-/// inside the dataset; errors name the tar and the member.
-pub fn read_members(path: &Path, mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>) -> Result<(), String> {
+/// dataset) and bytes, passing over folder entries. Refuses anything else
+/// but plain files with relative names inside the dataset; errors name the
+/// tar and the member.
+pub fn read_members(path: &Path, each: impl FnMut(&str, Vec<u8>) -> Result<(), String>) -> Result<(), String> {
+    read_members_where(path, &|_| true, each)
+}
+
+/// [`read_members`] of the members `wanted` names, seeking past the others
+/// unread (a reader of the logs skips the frames' bytes).
+pub fn read_members_where(
+    path: &Path,
+    wanted: &dyn Fn(&str) -> bool,
+    mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>,
+) -> Result<(), String> {
     let file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let mut archive = tar::Archive::new(BufReader::with_capacity(1 << 20, file));
+    let mut archive = tar::Archive::new(Skipping(BufReader::with_capacity(1 << 20, file)));
     let bad = |e: std::io::Error| format!("{}: not a whole tar: {e}", path.display());
-    for entry in archive.entries().map_err(bad)? {
+    for entry in archive.entries_with_seek().map_err(bad)? {
         let mut entry = entry.map_err(bad)?;
         let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
         let kind = entry.header().entry_type();
@@ -274,11 +285,37 @@ pub fn read_members(path: &Path, mut each: impl FnMut(&str, Vec<u8>) -> Result<(
         if name.starts_with('/') || name.split('/').any(|part| part == ".." || part.is_empty()) {
             return Err(format!("{}: {name:?} is not a path inside the dataset", path.display()));
         }
+        if !wanted(&name) {
+            continue;
+        }
         let mut bytes = Vec::new();
         entry.read_to_end(&mut bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
         each(&name, bytes)?;
     }
     Ok(())
+}
+
+/// A buffered file whose forward seeks within the buffer keep it: `tar`
+/// seeks past every member it skips, and `BufReader::seek` would drop the
+/// buffer (and read it again) each time.
+struct Skipping(BufReader<fs::File>);
+
+impl std::io::Read for Skipping {
+    fn read(&mut self, into: &mut [u8]) -> std::io::Result<usize> {
+        self.0.read(into)
+    }
+}
+
+impl std::io::Seek for Skipping {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        match to {
+            std::io::SeekFrom::Current(by) => {
+                self.0.seek_relative(by)?;
+                self.0.stream_position()
+            }
+            other => self.0.seek(other),
+        }
+    }
 }
 
 /// A member's scenario folder (`<group>/<split>/<scenario>`) and its name
@@ -362,10 +399,7 @@ pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
 /// its name, as `tar -xf` does. For readers of scenario folders; `root`
 /// must be a folder of the reader's own.
 pub fn unpack(path: &Path, root: &Path, keep: &(dyn Fn(&str) -> bool + Sync)) -> Result<(), String> {
-    read_members(path, |name, bytes| {
-        if !keep(name) {
-            return Ok(());
-        }
+    read_members_where(path, keep, |name, bytes| {
         let target = root.join(name);
         if let Some(parent) = target.parent() {
             fs::create_dir_all(parent).map_err(|e| format!("cannot write {}: {e}", parent.display()))?;
