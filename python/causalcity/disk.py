@@ -180,11 +180,11 @@ class Dataset:
         self.scenarios_per_tar: Optional[int] = self.manifest.get("scenarios_per_tar")
         """``gen --format tar``: scenarios per tar file (None: a folder per scenario)."""
         self._images = images
-        # A packed dataset's packs are unpacked, when first read, into a
-        # temporary folder of this process's own (made on first use, so a
+        # A packed dataset's scenario is unpacked, when read, into a
+        # temporary folder of its own, which lives as long as its frames do.
+        # Each pack's members are listed once per process (not pickled, so a
         # Dataset goes to DataLoader workers as a plain object).
-        self._scratch: Any = None
-        self._unpacked: set = set()
+        self._members: Dict[str, Dict[str, List[Any]]] = {}
         # Listed once: a dataset gen finished does not change under its readers.
         keys = self.spec.keys(split, self.manifest.get("limit"))
         if self.scenarios_per_tar:
@@ -206,29 +206,41 @@ class Dataset:
         last = min(first + per, self._split_sizes[(key.group, key.split)]) - 1
         return f"{key.group}/{key.split}/{first:05d}-{last:05d}.tar"
 
-    def _folder(self, key: "Key") -> Path:
-        """Where ``key``'s scenario folder is: in the dataset, or for a packed
-        one, where its pack is unpacked (once)."""
-        if not self.scenarios_per_tar:
-            return self.root / key.folder
-        pack = self.pack_of(key)
-        if self._scratch is None:
-            import tempfile
+    def _unpack(self, key: "Key", images: bool) -> Any:
+        """A packed dataset's scenario of ``key``, unpacked alone into a new
+        temporary folder (a ``TemporaryDirectory``, removed when dropped),
+        frames only when ``images``; None when its pack does not hold it."""
+        import tarfile
+        import tempfile
 
-            self._scratch = tempfile.TemporaryDirectory(prefix="causalcity-unpacked-")
-        scratch = Path(self._scratch.name)
-        if pack not in self._unpacked:
-            for folder, files in read_tar(self.root / pack):
-                for name, data in files.items():
-                    target = scratch / folder / name
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    target.write_bytes(data)
-            self._unpacked.add(pack)
-        return scratch / key.folder
+        pack = self.pack_of(key)
+        path = self.root / pack
+        with tarfile.open(_os.fspath(path), "r:") as tar:
+            if pack not in self._members:
+                # Reading the headers seeks past the members' bytes.
+                by_folder: Dict[str, List[Any]] = {}
+                for member in tar:
+                    if not member.isdir():
+                        folder, _ = _member_parts(path, member)
+                        by_folder.setdefault(folder, []).append(member)
+                self._members[pack] = by_folder
+            members = self._members[pack].get(key.folder)
+            if members is None:
+                return None
+            scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
+            for member in members:
+                _, name = _member_parts(path, member)
+                if not images and name.endswith(".png"):
+                    continue
+                target = Path(scratch.name) / name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                data = tar.extractfile(member)
+                target.write_bytes(data.read() if data is not None else b"")
+        return scratch
 
     def __getstate__(self) -> Dict[str, Any]:
         state = dict(self.__dict__)
-        state["_scratch"], state["_unpacked"] = None, set()
+        state["_members"] = {}
         return state
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
@@ -245,16 +257,26 @@ class Dataset:
         key = Key(*key)
         if self.scenarios_per_tar and key not in self._key_set:
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}")
-        folder = self._folder(key)
-        if not (folder / "scenario.json").is_file():
-            where = f"its pack {self.pack_of(key)}" if self.scenarios_per_tar else key.folder
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {where})")
-        scenario = load(folder, images=self._images if images is None else images)
-        # A packed scenario's frames are read from the temporary folder it
-        # was unpacked into: they keep that folder while they live.
+        images = self._images if images is None else images
+        if not self.scenarios_per_tar:
+            folder = self.root / key.folder
+            if not (folder / "scenario.json").is_file():
+                raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
+            return load(folder, images=images)
+        scratch = self._unpack(key, images)
+        if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
+        scenario = load(Path(scratch.name), images=images)
+        # Its frames are read from the temporary folder it was unpacked
+        # into: they keep that folder while they live; without frames it
+        # goes now. Read from there, the scenario has the key it has here.
+        object.__setattr__(scenario, "key", key)
+        kept = False
         for frames in (scenario.rgb, scenario.mask):
             if isinstance(frames, Frames):
-                frames._keep = self._scratch
+                frames._keep, kept = scratch, True
+        if not kept:
+            scratch.cleanup()
         return scenario
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
@@ -277,6 +299,16 @@ class Dataset:
         return f"Dataset({_os.fspath(self.root)!r}, spec={self.spec.name!r}, scenarios={len(self)})"
 
 
+def _member_parts(path: Path, member: Any) -> Tuple[str, str]:
+    """A pack member's scenario folder (``group/split/scenario``) and its name
+    within it; :class:`~causalcity.InputError` for a member that is not a
+    scenario's plain file."""
+    parts = member.name.split("/")
+    if not member.isfile() or len(parts) < 4 or any(p in ("", ".", "..") for p in parts):
+        raise InputError(f"{_os.fspath(path)}: {member.name!r} is not a scenario's file (a pack holds those only)")
+    return "/".join(parts[:3]), "/".join(parts[3:])
+
+
 def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
     """The scenarios of one tar file of a packed dataset (``gen --format
     tar``), streamed in order, one at a time: each as its folder relative
@@ -296,10 +328,7 @@ def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
         for member in tar:
             if member.isdir():  # `tar -cf` of scenario folders lists them too
                 continue
-            parts = member.name.split("/")
-            if not member.isfile() or len(parts) < 4 or any(p in ("", ".", "..") for p in parts):
-                raise InputError(f"{_os.fspath(path)}: {member.name!r} is not a scenario's file (a pack holds those only)")
-            folder, name = "/".join(parts[:3]), "/".join(parts[3:])
+            folder, name = _member_parts(Path(path), member)
             if folder != current:
                 if current is not None:
                     yield current, files

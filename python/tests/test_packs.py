@@ -81,6 +81,39 @@ def test_open_dataset_reads_packs_into_the_arrays_the_folders_give(datasets):
     np.testing.assert_array_equal(scenario.rgb[23], a[3].rgb[23])
 
 
+def test_reading_a_packed_dataset_unpacks_one_scenario_at_a_time_and_leaves_nothing(datasets, tmp_path, monkeypatch):
+    # A shuffled DataLoader over a paper-size packed dataset must not fill
+    # TMPDIR: a scenario is unpacked alone, and goes when its frames do.
+    import gc
+    import tempfile
+
+    folders, packed = datasets
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    dataset = causalcity.open_dataset(packed, "train")
+    unpacked = lambda: sorted(p.relative_to(scratch).as_posix() for p in scratch.rglob("*") if p.is_file())
+    without = dataset.load(dataset.keys()[1], images=False)
+    assert without.rgb is None and unpacked() == []
+    scenario = dataset[2]
+    files = unpacked()
+    on_disk = sorted(p.relative_to(folders / scenario.key.folder).as_posix() for p in (folders / scenario.key.folder).rglob("*") if p.is_file())
+    # Only its own files, though its pack holds another scenario.
+    assert len(files) == len(on_disk) and all(f.split("/", 1)[1] in on_disk for f in files), files[:5]
+    np.testing.assert_array_equal(np.asarray(scenario.rgb), np.asarray(causalcity.open_dataset(folders)[scenario.key].rgb))
+    assert scenario.key == dataset.keys()[2]
+    del scenario
+    gc.collect()
+    assert unpacked() == []
+    # An epoch leaves at most the scenario still held behind.
+    for s in dataset:
+        assert s.position.shape[0] > 0
+        assert len({f.split("/", 1)[0] for f in unpacked()}) == 1
+    del s
+    gc.collect()
+    assert unpacked() == []
+
+
 def test_evaluate_scores_a_packed_dataset_as_its_folders(datasets, tmp_path):
     folders, packed = datasets
     rng = np.random.default_rng(3)
