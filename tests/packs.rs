@@ -148,28 +148,18 @@ fn validate_names_the_pack_and_the_file_of_damage_and_gen_writes_that_pack_again
 fn validate_says_when_a_pack_lacks_a_scenario_or_holds_a_stranger_and_gen_repairs_both() {
     let (spec, folders, packed) = both("packs-membership");
     let before = hash_tree(&packed);
-    // A pack made by hand with `tar`: one of its two scenarios left out.
+    // Packs made by hand with `tar` from the folders' scenarios.
+    let tar_cf = |pack: &Path, scenarios: &[&str]| {
+        let status =
+            Command::new("tar").args(["--sort=name", "-cf"]).arg(pack).arg("-C").arg(&folders).args(scenarios).status();
+        assert!(status.unwrap().success(), "tar -cf {}", pack.display());
+    };
+    // One of its two scenarios left out.
     let short = packed.join("cars06_edges50/train/00000-00001.tar");
-    let status = Command::new("tar")
-        .args(["--sort=name", "-cf"])
-        .arg(&short)
-        .arg("-C")
-        .arg(&folders)
-        .arg("cars06_edges50/train/00000")
-        .status()
-        .unwrap();
-    assert!(status.success());
-    // And one with a scenario of another pack beside its own.
+    tar_cf(&short, &["cars06_edges50/train/00000"]);
+    // A scenario of another pack beside its own.
     let crowded = packed.join("cars04_edges50/test/00000-00001.tar");
-    let status = Command::new("tar")
-        .args(["--sort=name", "-cf"])
-        .arg(&crowded)
-        .arg("-C")
-        .arg(&folders)
-        .args(["cars04_edges50/test/00000", "cars04_edges50/test/00001", "cars04_edges50/val/00000"])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    tar_cf(&crowded, &["cars04_edges50/test/00000", "cars04_edges50/test/00001", "cars04_edges50/val/00000"]);
 
     let out = run(&["validate", packed.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
