@@ -418,3 +418,30 @@ fn a_link_planted_at_a_packs_name_is_replaced_never_written_through() {
     assert!(std::fs::symlink_metadata(&pack).unwrap().file_type().is_file());
     assert_eq!(hash_tree(&packed), before);
 }
+
+#[test]
+fn a_reader_done_with_a_split_of_a_packed_dataset_frees_its_unpacked_folders() {
+    use causalcity::dataset::Dataset;
+    use causalcity::spec::Split;
+    // Readers go a group's split at a time: TMPDIR holds one split's logs,
+    // not the dataset's.
+    let (_, folders, packed) = both("packs-release");
+    let dataset = Dataset::open(&packed).unwrap();
+    let train = dataset.scenario_dirs("cars04_edges50", Split::Train).unwrap();
+    assert_eq!(train.len(), 3);
+    for dir in &train {
+        assert!(dir.join("poses.csv").is_file(), "{} unpacked", dir.display());
+        assert!(!dir.join("rgb").exists(), "frames stay in the pack for a reader of the logs");
+    }
+    dataset.release("cars04_edges50", Split::Train).unwrap();
+    assert!(train.iter().all(|d| !d.exists()), "released folders are gone");
+    // Asked for again, they are unpacked again, with the folders' bytes.
+    let again = dataset.scenario_dirs("cars04_edges50", Split::Train).unwrap();
+    for dir in &again {
+        let name = dir.file_name().unwrap();
+        let folder = folders.join("cars04_edges50/train").join(name);
+        assert_eq!(std::fs::read(dir.join("poses.csv")).unwrap(), std::fs::read(folder.join("poses.csv")).unwrap());
+    }
+    assert!(dataset.scenario_dirs("cars06_edges50", Split::Test).unwrap()[0].join("scenario.json").is_file());
+    assert!(again[0].exists(), "releasing one split leaves the others");
+}

@@ -140,7 +140,10 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
     for group in &spec.groups {
         let name = group.name();
         let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
-            dataset.scenario_dirs(&name, split)?.par_iter().map(|d| score_scenario(d, lags, graph)).collect()
+            let scores =
+                dataset.scenario_dirs(&name, split)?.par_iter().map(|d| score_scenario(d, lags, graph)).collect();
+            dataset.release(&name, split)?;
+            scores
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }

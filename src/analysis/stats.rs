@@ -349,6 +349,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
                 .map(|d| tally(d, dataset.expansion.towns()))
                 .collect::<Result<_, _>>()
                 .map_err(crate::error::Error::Failure)?;
+            dataset.release(&group.name(), split).map_err(crate::error::Error::Failure)?;
             rows.push(combine(group.name(), split.name(), tallies));
         }
     }

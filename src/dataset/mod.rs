@@ -151,6 +151,31 @@ impl Dataset {
         }))
     }
 
+    /// A reader is done with `group`'s `split`: a packed dataset's folders
+    /// unpacked for it are removed (read again, they are unpacked again), so
+    /// that a reader going through the dataset a split at a time holds one
+    /// split in `TMPDIR`, not the dataset. Nothing for a folder dataset.
+    pub fn release(&self, group: &str, split: Split) -> Result<(), String> {
+        let Some(unpacked) = &self.unpacked else { return Ok(()) };
+        let Some(index) = self.spec().groups.iter().position(|g| g.name() == group) else { return Ok(()) };
+        let positions = self.key_sequence().positions_of(index, split);
+        if positions.is_empty() {
+            return Ok(());
+        }
+        let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
+        let mut done = unpacked.done.lock().map_err(|_| "a reader thread failed".to_string())?;
+        let folder = unpacked.scratch.path().join(group).join(split.name());
+        if folder.exists() {
+            std::fs::remove_dir_all(&folder).map_err(|e| format!("cannot remove {}: {e}", folder.display()))?;
+        }
+        for n in packs.number_of(positions.start)..=packs.number_of(positions.end - 1) {
+            if let Some(d) = done.get_mut(n) {
+                *d = false;
+            }
+        }
+        Ok(())
+    }
+
     /// Scenario folders of one group and split, in index order. A packed
     /// dataset's packs that hold them are unpacked first (into a temporary
     /// folder, each once).

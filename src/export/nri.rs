@@ -274,6 +274,7 @@ fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Resu
                 .try_for_each(|((((loc, vel), edges), dynamic), dir)| {
                     fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges, dynamic))
                 })?;
+            opened.release(&group.name(), split)?;
             let (f, c) = (frames as u64, cars as u64);
             let loc_shape = match options.layout {
                 NriLayout::Causalcity => [s as u64, f, c, 2],
