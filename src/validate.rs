@@ -438,7 +438,7 @@ fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<
         checks[0].0.push(problem("missing pack: rerun gen to write it".into()));
         return checks;
     }
-    let folder_of = |key: &ScenarioKey| format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
+    let folder_of = ScenarioKey::relative_folder;
     let mut check = |i: usize, members: BTreeMap<String, Vec<u8>>| {
         let folder = PathBuf::from(folder_of(&keys[i]));
         let (found, files, bytes, prints) =
@@ -801,7 +801,7 @@ fn fingerprints(poses_csv: &[u8], frames: usize, cars: usize) -> Vec<Fingerprint
 /// must not overlap): one problem per car, naming the twin it meets first
 /// in the dataset's order (train before val before test within a group).
 fn split_twins(root: &Path, keys: &[ScenarioKey], prints: &[Vec<Fingerprint>]) -> Vec<Problem> {
-    let folder = |k: &ScenarioKey| format!("{}/{}/{}", k.group, k.split.name(), k.folder_name());
+    let folder = ScenarioKey::relative_folder;
     // Every split's first car with each fingerprint.
     let mut first: std::collections::HashMap<(Fingerprint, Split), (usize, usize)> = std::collections::HashMap::new();
     for (k, (key, cars)) in keys.iter().zip(prints).enumerate() {

@@ -588,7 +588,7 @@ fn match_scenarios(
     let mut by_folder: BTreeMap<String, ScenarioPredictions> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
     for key in &truth.keys {
-        let folder = format!("{}/{}/{}", key.group, key.split.name(), key.folder_name());
+        let folder = key.relative_folder();
         let pair = truth.scenarios.join(&key.group).join(key.split.name()).join(key.folder_name());
         let (dir, counterfactual_dir) =
             if truth.sweep { (pair.join("factual"), Some(pair.join("counterfactual"))) } else { (pair, None) };

@@ -69,7 +69,7 @@ impl Dataset {
             if done.is_empty() {
                 done.resize(packs.len(), false);
             }
-            (packs.number_of(positions.start)..=packs.number_of(positions.end - 1)).filter(|&n| !done[n]).collect()
+            packs.numbers_of(positions.clone()).filter(|&n| !done[n]).collect()
         };
         use rayon::prelude::*;
         let root = unpacked.scratch.path();
@@ -168,7 +168,7 @@ impl Dataset {
         if folder.exists() {
             std::fs::remove_dir_all(&folder).map_err(|e| format!("cannot remove {}: {e}", folder.display()))?;
         }
-        for n in packs.number_of(positions.start)..=packs.number_of(positions.end - 1) {
+        for n in packs.numbers_of(positions) {
             if let Some(d) = done.get_mut(n) {
                 *d = false;
             }

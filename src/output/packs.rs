@@ -76,6 +76,12 @@ impl<'a> Packs<'a> {
         self.starting_at(key.group_index, key.split, u64::from(key.index) / self.per_tar * self.per_tar)
     }
 
+    /// The numbers of the packs holding the scenarios at `positions` (not
+    /// empty).
+    pub fn numbers_of(&self, positions: std::ops::Range<usize>) -> std::ops::RangeInclusive<usize> {
+        self.number_of(positions.start)..=self.number_of(positions.end - 1)
+    }
+
     /// The number (see [`Packs::pack`]) of the pack holding the scenario at
     /// `position`.
     pub fn number_of(&self, position: usize) -> usize {
@@ -117,11 +123,6 @@ pub fn parse_file_name(name: &str) -> Option<(u32, u32)> {
     let number = |s: &str| (s.len() >= 5 && s.bytes().all(|b| b.is_ascii_digit())).then(|| s.parse::<u32>().ok())?;
     let (first, last) = (number(first)?, number(last)?);
     (first <= last).then_some((first, last))
-}
-
-/// A member name's scenario folder, relative to the dataset.
-fn member_folder(key: &ScenarioKey) -> String {
-    format!("{}/{}/{}", key.group, key.split.name(), key.folder_name())
 }
 
 /// The files a finished scenario folder holds, by its checksum listing, in
@@ -214,7 +215,7 @@ impl PackWriter {
     fn append_ready(&self, tar: &mut OpenTar) -> Result<(), WriteError> {
         let Some((tar, next)) = tar else { return Ok(()) };
         while *next < self.keys.len() && self.finished.lock().expect("a pack writer thread failed")[*next] {
-            append_scenario(tar, &self.dir(*next), &member_folder(&self.keys[*next]), &self.temp)?;
+            append_scenario(tar, &self.dir(*next), &self.keys[*next].relative_folder(), &self.temp)?;
             *next += 1;
         }
         Ok(())
@@ -335,7 +336,7 @@ pub fn read_scenarios(
     keys: &[ScenarioKey],
     mut each: impl FnMut(usize, BTreeMap<String, Vec<u8>>) -> Result<(), String>,
 ) -> Result<Vec<bool>, String> {
-    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (member_folder(k), i)).collect();
+    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (k.relative_folder(), i)).collect();
     let mut found = vec![false; keys.len()];
     let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
     read_members(path, |name, bytes| {
@@ -369,7 +370,7 @@ pub fn read_scenarios(
 /// again).
 pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
     let found = read_scenarios(path, keys, |i, mut members| {
-        let key = member_folder(&keys[i]);
+        let key = keys[i].relative_folder();
         let listing =
             members.remove(CHECKSUMS).ok_or_else(|| format!("{}: {key}/{CHECKSUMS} is missing", path.display()))?;
         let listing =
@@ -390,7 +391,7 @@ pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
         }
     })?;
     match found.iter().position(|f| !f) {
-        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), member_folder(&keys[i]))),
+        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder())),
         None => Ok(()),
     }
 }

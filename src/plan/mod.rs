@@ -44,6 +44,12 @@ pub struct ScenarioKey {
 }
 
 impl ScenarioKey {
+    /// Its folder relative to the dataset, `<group>/<split>/<folder name>`
+    /// (`cars08_edges50/train/00042`), as pack members name it too.
+    pub fn relative_folder(&self) -> String {
+        format!("{}/{}/{}", self.group, self.split.name(), self.folder_name())
+    }
+
     /// Folder name of the scenario, e.g. `00042` (or a hand-written
     /// scenario's name).
     pub fn folder_name(&self) -> String {
