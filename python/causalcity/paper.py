@@ -106,12 +106,23 @@ QUICK = Setting(
 FULL = Setting(name="full", splits={"train": 4000, "val": 500, "test": 500}, epochs=100, batch_size=128, lr=3e-3)
 
 
-def _spec(path: Path, world: str, setting: Setting, splits: Optional[Dict[str, int]]) -> Spec:
+def _spec(
+    path: Path, world: str, setting: Setting, splits: Optional[Dict[str, int]], groups: Optional[Sequence[str]] = None
+) -> Spec:
+    """The world's spec at this setting's sizes; with ``groups``, only those
+    of its groups (each group's scenarios are the same either way: they are
+    drawn from the seed and the group's name)."""
     if not path.is_file():
         raise InputError(f"{path}: no such spec file (run from the repository root, or give --{world}-spec)")
     raw = json.loads(path.read_text())
     raw["name"] = f"paper-{setting.name}-{world}"
     raw["splits"] = dict(splits or setting.splits)
+    if groups:
+        named = {Spec.from_dict({**raw, "groups": [g]}).groups[0]: g for g in raw.get("groups", [])}
+        unknown = [g for g in groups if g not in named]
+        if unknown:
+            raise InputError(f"--group {' '.join(unknown)}: {path} has no such group (its groups: {', '.join(named)})")
+        raw["groups"] = [g for name, g in named.items() if name in groups]
     return Spec.from_dict(raw)
 
 
@@ -238,6 +249,7 @@ def run(
     quiet: bool = False,
     plan_only: bool = False,
     overlap: Optional[bool] = None,
+    groups: Optional[Sequence[str]] = None,
 ) -> List[dict]:
     """Runs the experiments and writes everything under ``out``; returns the
     result rows. Work is done in units of (world, method, group), each kept
@@ -246,7 +258,9 @@ def run(
     ``plan_only`` prints the projected time per world and method and stops
     there, writing nothing. ``overlap`` runs the methods without a network
     on a thread of their own beside the neural ones (default: when those
-    train on a GPU); the results are the same either way."""
+    train on a GPU); the results are the same either way. ``groups`` runs
+    only those groups of each world (``--group``), with their data in a
+    folder of their own."""
     methods = list(methods or setting.methods)
     for name in methods:
         if name not in METHOD_ORDER and not is_user_method(name):
@@ -254,20 +268,28 @@ def run(
         if is_user_method(name):
             make(name, **_method_options(name, setting, device, seed, quiet))  # refused now, not after hours
     specs = specs or {w: Path("configs") / f"{w}.json" for w in WORLDS}
-    loaded = {world: _spec(Path(specs[world]), world, setting, splits) for world in worlds}
+    loaded = {world: _spec(Path(specs[world]), world, setting, splits, groups) for world in worlds}
     say = (lambda *a: None) if quiet else (lambda text: print(f"[paper] {text}", file=sys.stderr, flush=True))
-    groups = {world: list(loaded[world].groups) for world in worlds}
-    cars = {g: int(g[len("cars") : g.index("_")]) for world in worlds for g in groups[world]}
-    units = [(world, name, group) for world in worlds for name in methods for group in groups[world]]
-    rate, on = _calibrate(setting, device, seed) if any(name in NEURAL for name in methods) else (1.0, device)
-    projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rate) for u in units}
+    chosen = {world: list(loaded[world].groups) for world in worlds}
+    cars = {g: int(g[len("cars") : g.index("_")]) for world in worlds for g in chosen[world]}
+    units = [(world, name, group) for world in worlds for name in methods for group in chosen[world]]
+    # A rerun projects only the units left, and calibrates NRI only when a
+    # neural unit is among them.
+    left = [u for u in units if _read_unit(_unit_path(out, *u), _unit_key(*u, setting, device, seed, loaded[u[0]])) is None]
+    if any(u[1] in NEURAL for u in left):
+        rate, on = _calibrate(setting, device, seed)
+        calibrated = f"NRI calibrated at {rate:.0f} training windows/s on {on}; "
+    else:
+        rate, on, calibrated = 1.0, device, ""
+    projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rate) if u in left else 0.0 for u in units}
     if overlap is None:
         overlap = on.startswith("cuda") and any(u[1] in NEURAL for u in units)
     beside = " with the CPU methods beside the GPU's" if overlap else ""
+    kept = f", {len(units) - len(left)} of them finished earlier" if len(left) < len(units) else ""
     say(
-        f"{len(units)} units (world x method x group), projected {_clock(_overlapped(units, projected, overlap))}"
+        f"{len(units)} units (world x method x group){kept}, projected {_clock(_overlapped(units, projected, overlap))}"
         f"{beside} besides "
-        f"generating the data (NRI calibrated at {rate:.0f} training windows/s on {on}; the classical methods "
+        f"generating the data ({calibrated}the classical methods "
         f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"
     )
     if plan_only:
@@ -286,7 +308,7 @@ def run(
         """Runs one unit, or keeps it from an earlier run, and says so."""
         unit = (world, name, group)
         folder = name.replace(":", "-")  # a user's package.module:Class, as a folder name
-        record = out / "units" / world / folder / f"{group}.json"
+        record = _unit_path(out, world, name, group)
         key = _unit_key(world, name, group, setting, device, seed, spec)
         kept = _read_unit(record, key)
         if kept is None:
@@ -315,12 +337,16 @@ def run(
 
     for world in worlds:
         spec = loaded[world]
-        data = out / "data" / world
+        # Another selection of groups is another dataset (gen refuses to mix specs).
+        data = out / "data" / (world if not groups else "-".join([world, *chosen[world]]))
         start = time.monotonic()
-        say(f"generating {world}: {spec.splits} per group into {data}")
-        generate(spec, data, images=False, progress=not quiet)
-        timings[f"{world}/generate"] = time.monotonic() - start
         mine = [u for u in units if u[0] == world]
+        if any(u in left for u in mine):
+            say(f"generating {world}: {spec.splits} per group into {data}")
+            generate(spec, data, images=False, progress=not quiet)
+            timings[f"{world}/generate"] = time.monotonic() - start
+        else:
+            say(f"every {world} unit finished earlier: its data is not needed")
         host = [u for u in mine if _runs_beside(u[1])] if overlap else []
         # The methods without a network run on the CPU's cores while the
         # neural ones train on the GPU.
@@ -352,6 +378,12 @@ def run(
     _figures(out, rows, worlds)
     (out / "results.md").write_text(markdown(rows, setting, worlds))
     return rows
+
+
+def _unit_path(out: Path, world: str, name: str, group: str) -> Path:
+    """Where a finished unit's record lies (a user's ``package.module:Class``
+    named as a folder may be)."""
+    return out / "units" / world / name.replace(":", "-") / f"{group}.json"
 
 
 def _read_unit(path: Path, key: dict) -> Optional[dict]:
@@ -452,7 +484,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
                 values, errors = [], []
                 for g in groups:
                     r = _get(rows, world=world, method=method, group=g, split="test", graph="designed", metric="f1")
-                    values.append(r["value"] if r else 0.0)
+                    values.append(r["value"] if r else float("nan"))  # a group not run: no bar
                     errors.append((r["se"] or 0.0) if r else 0.0)
                 xs = [k + (mi - (len(discovering) - 1) / 2) * width for k in range(len(groups))]
                 hatch = "//" if method == "frame0" else None
@@ -520,7 +552,8 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
                 continue
             a = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test", graph="designed",
                      metric="auroc")
-            lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {a['value']:.2f} |")
+            auroc = "" if a is None else f"{a['value']:.2f}"
+            lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {auroc} |")
     lines += ["", "Trajectory error (MSE of positions normalised by image size; 8 cars, 50 % linked; test):", ""]
     lines.append("| world | method | 1 step | 10 steps | 20 steps |")
     lines.append("|---|---|---|---|---|")
@@ -541,6 +574,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: <= 30 min on 2 CPU cores")
     parser.add_argument("--out", type=Path, help="output folder [results/paper or results/paper-quick]")
     parser.add_argument("--world", nargs="+", choices=WORLDS, default=list(WORLDS))
+    parser.add_argument("--group", nargs="+", metavar="GROUP",
+                        help="only these groups, e.g. cars08_edges50 (default: every group of the spec)")
     parser.add_argument("--method", nargs="+", metavar="METHOD",
                         help=f"only these methods: {', '.join(METHOD_ORDER)}, or your own as package.module:Class")
     parser.add_argument("--device", default="auto", help="cpu, cuda or auto (default: cuda when available)")
@@ -569,7 +604,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     start = time.monotonic()
     try:
         run(out, setting, args.world, args.method, args.device, args.seed,
-            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet and not args.plan, plan_only=args.plan)
+            {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet and not args.plan, plan_only=args.plan,
+            groups=args.group)
     except (InputError, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

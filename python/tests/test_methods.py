@@ -256,6 +256,60 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
     assert (out / "results.csv").read_bytes() == table
 
 
+def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, capsys, monkeypatch):
+    # A GPU session too short for the full setting runs whole groups one at
+    # a time (--group); the full run then keeps them, and a rerun with every
+    # neural unit kept does not calibrate NRI at all.
+    from causalcity import paper
+
+    setting = paper.dataclasses.replace(paper.QUICK, splits={"train": 3, "val": 2, "test": 2}, epochs=1, extra={})
+    specs = {w: ROOT / "configs" / f"{w}.json" for w in paper.WORLDS}
+    out = tmp_path / "paper"
+    calibrations = []
+    real = paper._calibrate
+    monkeypatch.setattr(paper, "_calibrate", lambda *a: calibrations.append(a) or real(*a))
+
+    def run(groups):
+        capsys.readouterr()
+        rows = paper.run(out, setting, ["toy"], ["path", "nri"], "cpu", 0, specs, groups=groups)
+        return rows, capsys.readouterr().err
+
+    one, err = run(["cars08_edges50"])
+    assert "2 units" in err and err.count("done in") == 2 and len(calibrations) == 1, err
+    assert {r["group"] for r in one} == {"cars08_edges50"}
+    assert sorted(p.name for p in (out / "data").iterdir()) == ["toy-cars08_edges50"]
+    table = (out / "results.md").read_text()
+    auroc = next(r for r in one if r["method"] == "nri" and r["metric"] == "auroc" and r["split"] == "test"
+                 and r["graph"] == "designed")  # fmt: skip
+    line = next(x for x in table.splitlines() if x.startswith("| toy | NRI |"))
+    cells = [c.strip() for c in line.split("|")[3:-1]]  # F1 per group (cars04, cars08, cars12, 8 at 20 %, 80 %), AUROC
+    assert [bool(c) for c in cells] == [False, True, False, False, False, True], line
+    assert cells[-1] == f"{auroc['value']:.2f}", line
+
+    every, err = run(None)
+    assert "10 units (world x method x group), 2 of them finished earlier" in err, err
+    assert err.count("kept from an earlier run") == 2 and err.count("done in") == 8, err
+    assert len(calibrations) == 2
+    assert [r for r in every if r["group"] == "cars08_edges50"] == one
+
+    again, err = run(None)
+    assert "10 of them finished earlier" in err and "calibrated" not in err and "done in" not in err, err
+    assert "generating toy" not in err and "every toy unit finished earlier: its data is not needed" in err, err
+    assert len(calibrations) == 2 and again == every
+
+
+def test_the_paper_refuses_a_group_its_spec_lacks(tmp_path, capsys, monkeypatch):
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "plan"
+    code = paper.main(["--plan", "--group", "cars08_edges50", "cars09_edges50", "--device", "cpu", "--out", str(out)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "--group cars09_edges50:" in err and "configs/toy.json has no such group" in err, err
+    assert "cars04_edges50, " in err and not out.exists()
+
+
 def test_granger_on_every_core_scores_as_on_one(toy):
     from causalcity.methods.classical import Granger
 
