@@ -8,7 +8,7 @@ CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-gpu bench-original-nri counterfactual-table fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-gpu bench-gpu-paper bench-original-nri counterfactual-table fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -110,6 +110,12 @@ bench-methods: python-env
 ## and NRI on NRI's springs at NRI's size. See the script.
 bench-gpu: python-env
 	PYTHON=$(VENV)/bin/python bash benches/gpu_check.sh
+
+## The paper's full setting on one GPU, one group (cars08_edges50) within a
+## time budget (PAPER_SECONDS, default 540): NRI on toy and city first, the
+## CPU methods beside it; the finished units land in results/paper-gpu.
+bench-gpu-paper: python-env
+	PYTHON=$(VENV)/bin/python bash benches/gpu_paper.sh
 
 ## The counterfactual task's reference table (docs/evaluation.md): its
 ## sweep, the three reference methods, their scores and times (prints,
