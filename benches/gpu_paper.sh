@@ -3,11 +3,12 @@
 # for as many whole units as a time budget allows, one group at a time:
 # NRI on the toy world, NRI on the city, then the interaction net on each,
 # while a second process (at low priority) runs the methods without a
-# network on the CPU's cores, PCMCI first. Each finished (world, method, group) unit is
-# copied to $OUT/units, with its predictions and the logs; rerun
-# `python -m causalcity.paper --group GROUP --device cuda --out DIR` over
-# those units (copied under DIR/units) to run what is left and write the
-# table. Prints progress, asserts nothing.
+# network on the CPU's cores, PCMCI first. The finished (world, method,
+# group) units and their predictions are tarred into $OUT/units.tar every
+# 15 s, beside the logs; on the machine that keeps the results, unpack
+# its gpu/ and cpu/ units and predictions into one DIR and rerun
+# `python -m causalcity.paper --group GROUP --device cuda --out DIR` to run
+# what is left and write the table. Prints progress, asserts nothing.
 #
 #   PYTHON=python3 OUT=results/paper-gpu bash benches/gpu_paper.sh
 #
@@ -51,12 +52,17 @@ paper() { # OUT-FOLDER WORLD METHOD...: one paper run, cut off when the budget e
 }
 
 copy_units() { # the finished units so far, so that a run cut off from outside still leaves them in $OUT
+    # One tar, not folders: the device tool brings back files, but not from
+    # folders nested as deep as units/WORLD/METHOD/.
+    local parts=()
     for side in gpu cpu; do
         for kind in units predictions; do
-            [ -d "$WORK/$side/$kind" ] && cp -r "$WORK/$side/$kind" "$OUT/" 2>/dev/null
+            [ -d "$WORK/$side/$kind" ] && parts+=("$side/$kind")
         done
         [ -f "$WORK/$side/timings.json" ] && cp "$WORK/$side/timings.json" "$OUT/timings-$side.json"
     done
+    [ ${#parts[@]} -gt 0 ] && tar -C "$WORK" -cf "$OUT/units.tar.partial" "${parts[@]}" 2>/dev/null &&
+        mv "$OUT/units.tar.partial" "$OUT/units.tar"
     return 0
 }
 (while sleep 15; do copy_units; done) &
@@ -89,5 +95,5 @@ stage "copying the finished units"
 kill $copier 2>/dev/null
 wait $copier 2>/dev/null
 copy_units
-find "$OUT/units" -name "*.json" 2>/dev/null | sort
+tar -tf "$OUT/units.tar" 2>/dev/null | grep "units/.*json$" | sort
 stage "done"
