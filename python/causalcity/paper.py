@@ -250,6 +250,7 @@ def run(
     plan_only: bool = False,
     overlap: Optional[bool] = None,
     groups: Optional[Sequence[str]] = None,
+    report_only: bool = False,
 ) -> List[dict]:
     """Runs the experiments and writes everything under ``out``; returns the
     result rows. Work is done in units of (world, method, group), each kept
@@ -260,7 +261,9 @@ def run(
     on a thread of their own beside the neural ones (default: when those
     train on a GPU); the results are the same either way. ``groups`` runs
     only those groups of each world (``--group``), with their data in a
-    folder of their own."""
+    folder of their own. ``report_only`` (``--report``) writes the table
+    and figures of the units finished so far, runs nothing, and names the
+    units not yet run."""
     methods = list(methods or setting.methods)
     for name in methods:
         if name not in METHOD_ORDER and not is_user_method(name):
@@ -275,7 +278,19 @@ def run(
     units = [(world, name, group) for world in worlds for name in methods for group in chosen[world]]
     # A rerun projects only the units left, and calibrates NRI only when a
     # neural unit is among them.
-    left = [u for u in units if _read_unit(_unit_path(out, *u), _unit_key(*u, setting, device, seed, loaded[u[0]])) is None]
+    finished = {u: _read_unit(_unit_path(out, *u), _unit_key(*u, setting, device, seed, loaded[u[0]])) for u in units}
+    left = [u for u in units if finished[u] is None]
+    if report_only:
+        if len(left) == len(units):
+            raise InputError(f"{out}: no unit of this setting has finished there (a unit counts when made with the "
+                             "same --device, --splits, --epochs and --seed)")  # fmt: skip
+        for u in left:
+            say(f"not run yet, so not in the table: {u[0]} {_label(u[1])} {u[2]}")
+        rows = [row for u in units if finished[u] is not None for row in finished[u]["rows"]]
+        _write_csv(out / "results.csv", rows)
+        _figures(out, rows, worlds)
+        (out / "results.md").write_text(markdown(rows, setting, worlds))
+        return rows
     if any(u[1] in NEURAL for u in left):
         rate, on = _calibrate(setting, device, seed)
         calibrated = f"NRI calibrated at {rate:.0f} training windows/s on {on}; "
@@ -586,7 +601,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--epochs", type=int, help="override the neural methods' epochs")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--plan", action="store_true", help="print the projected time per world and method, then stop")
+    parser.add_argument("--report", action="store_true",
+                        help="write the table and figures of the units finished so far under --out, running nothing "
+                             "(give the run's --device, --splits, --epochs and --group)")
     args = parser.parse_args(argv)
+    if args.plan and args.report:
+        print("error: --plan and --report: give one (--plan projects a run, --report tables a finished one)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     setting = QUICK if args.quick else FULL
     splits = None
     if args.splits:
@@ -605,7 +627,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         run(out, setting, args.world, args.method, args.device, args.seed,
             {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet and not args.plan, plan_only=args.plan,
-            groups=args.group)
+            groups=args.group, report_only=args.report)
     except (InputError, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

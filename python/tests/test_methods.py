@@ -286,6 +286,18 @@ def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, caps
     assert [bool(c) for c in cells] == [False, True, False, False, False, True], line
     assert cells[-1] == f"{auroc['value']:.2f}", line
 
+    # --report: the table of what has finished, nothing run, the rest named
+    (out / "results.md").unlink()
+    capsys.readouterr()
+    reported = paper.run(out, setting, ["toy"], ["path", "nri"], "cpu", 0, specs, report_only=True)
+    err = capsys.readouterr().err
+    assert reported == one and err.count("not run yet, so not in the table") == 8, err
+    assert "not run yet, so not in the table: toy NRI cars12_edges50" in err and "cars08_edges50" not in err, err
+    assert (out / "results.md").read_text() == table and len(calibrations) == 1
+    assert sorted(p.name for p in (out / "data").iterdir()) == ["toy-cars08_edges50"]
+    with pytest.raises(paper.InputError, match="no unit of this setting has finished there"):
+        paper.run(tmp_path / "empty", setting, ["toy"], ["path"], "cpu", 0, specs, report_only=True)
+
     every, err = run(None)
     assert "10 units (world x method x group), 2 of them finished earlier" in err, err
     assert err.count("kept from an earlier run") == 2 and err.count("done in") == 8, err
