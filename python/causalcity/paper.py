@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from . import InputError, Spec, evaluate, generate
+from . import InputError, Spec, _native, evaluate, generate
 from .methods import is_user_method, make
 from .methods.common import run_method
 
@@ -287,9 +287,7 @@ def run(
         for u in left:
             say(f"not run yet, so not in the table: {u[0]} {_label(u[1])} {u[2]}")
         rows = [row for u in units if finished[u] is not None for row in finished[u]["rows"]]
-        _write_csv(out / "results.csv", rows)
-        _figures(out, rows, worlds)
-        (out / "results.md").write_text(markdown(rows, setting, worlds))
+        _write_tables(out, rows, setting, worlds)
         return rows
     if any(u[1] in NEURAL for u in left):
         rate, on = _calibrate(setting, device, seed)
@@ -313,6 +311,9 @@ def run(
                 seconds = sum(v for (w, m, _), v in projected.items() if (w, m) == (world, name))
                 say(f"  {world} {_label(name)}: {_clock(seconds)}")
         return []
+    # Refused now, not after hours: an --out inside a dataset or a sweep, or
+    # through a link (every file below is written by the same rule).
+    _native.claim_output(os.fspath(out / "results.csv"))
     out.mkdir(parents=True, exist_ok=True)
     records: Dict[Tuple[str, str, str], dict] = {}
     timings: Dict[str, float] = {}
@@ -388,11 +389,23 @@ def run(
                 stop.set()
                 raise
     rows = [row for u in units for row in records[u]["rows"]]
-    _write_csv(out / "results.csv", rows)
-    (out / "timings.json").write_text(json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
-    _figures(out, rows, worlds)
-    (out / "results.md").write_text(markdown(rows, setting, worlds))
+    _write(out / "timings.json", json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
+    _write_tables(out, rows, setting, worlds)
     return rows
+
+
+def _write(path: Path, data: "str | bytes") -> None:
+    """Writes a file of the results by the one write rule (never inside a
+    dataset or sweep, never through a link), whole or not at all (a
+    temporary file and a rename)."""
+    _native.write_output(os.fspath(path), data.encode() if isinstance(data, str) else data)
+
+
+def _write_tables(out: Path, rows: List[dict], setting: Setting, worlds: Sequence[str]) -> None:
+    """results.csv, the figures and results.md of ``rows``."""
+    _write_csv(out / "results.csv", rows)
+    _figures(out, rows, worlds)
+    _write(out / "results.md", markdown(rows, setting, worlds))
 
 
 def _unit_path(out: Path, world: str, name: str, group: str) -> Path:
@@ -411,11 +424,7 @@ def _read_unit(path: Path, key: dict) -> Optional[dict]:
 
 
 def _write_unit(path: Path, record: dict) -> None:
-    """Written whole or not at all (a temporary file and a rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(record) + "\n")
-    partial.replace(path)
+    _write(path, json.dumps(record) + "\n")
 
 
 def _rows(world: str, method: str, report: dict) -> List[dict]:
@@ -452,7 +461,7 @@ def _write_csv(path: Path, rows: List[dict]) -> None:
     w.writerow(COLUMNS)
     for r in rows:
         w.writerow([_fmt(r[c]) for c in COLUMNS])
-    path.write_text(buf.getvalue())
+    _write(path, buf.getvalue())
 
 
 def read_results(path: "str | Path") -> List[dict]:
@@ -473,6 +482,12 @@ def _get(rows, **match) -> Optional[dict]:
         if all(r[k] == v for k, v in match.items()):
             return r
     return None
+
+
+def _savefig(fig, path: Path) -> None:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=110, format="png")
+    _write(path, buffer.getvalue())
 
 
 def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
@@ -515,7 +530,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     # single row of them was wider than the figure.
     fig.legend(handles, labels, loc="lower center", ncol=min(3, len(labels)), fontsize=8)
     fig.tight_layout(rect=(0, 0.03 * ((len(labels) + 2) // 3 + 1), 1, 1))
-    fig.savefig(out / "f1.png", dpi=110)
+    _savefig(fig, out / "f1.png")
     plt.close(fig)
 
     predicting = [m for m in _ordered(rows) if any(r["method"] == m and r["metric"] == "trajectory_mse" for r in rows)]
@@ -543,7 +558,7 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "trajectory.png", dpi=110)
+    _savefig(fig, out / "trajectory.png")
     plt.close(fig)
 
 

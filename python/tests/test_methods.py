@@ -322,6 +322,32 @@ def test_the_paper_refuses_a_group_its_spec_lacks(tmp_path, capsys, monkeypatch)
     assert "cars04_edges50, " in err and not out.exists()
 
 
+def test_the_paper_writes_by_the_one_write_rule(tmp_path, toy, capsys, monkeypatch):
+    # Never into a dataset (refused before any work), never through a link.
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    before = sorted(p.relative_to(toy) for p in toy.rglob("*"))
+    inside = toy / "paper"
+    assert paper.main(["--splits", "3/2/2", "--world", "toy", "--method", "path", "--out", str(inside), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "dataset" in err, err
+    assert sorted(p.relative_to(toy) for p in toy.rglob("*")) == before
+
+    out = tmp_path / "paper"
+    flags = ["--splits", "3/2/2", "--world", "toy", "--method", "path", "--group", "cars04_edges50", "--out", str(out)]
+    assert paper.main([*flags, "--quiet"]) == 0
+    elsewhere = tmp_path / "elsewhere.md"
+    elsewhere.write_text("mine\n")
+    (out / "results.md").unlink()
+    (out / "results.md").symlink_to(elsewhere)
+    capsys.readouterr()
+    assert paper.main([*flags, "--report"]) == 2
+    err = capsys.readouterr().err
+    assert "results.md" in err and "link" in err, err
+    assert elsewhere.read_text() == "mine\n"
+
+
 def test_granger_on_every_core_scores_as_on_one(toy):
     from causalcity.methods.classical import Granger
 
