@@ -323,13 +323,12 @@ def run(
     def finish(world: str, name: str, group: str, data: Path, spec: Spec) -> None:
         """Runs one unit, or keeps it from an earlier run, and says so."""
         unit = (world, name, group)
-        folder = name.replace(":", "-")  # a user's package.module:Class, as a folder name
         record = _unit_path(out, world, name, group)
         key = _unit_key(world, name, group, setting, device, seed, spec)
         kept = _read_unit(record, key)
         if kept is None:
             start = time.monotonic()
-            predictions = out / "predictions" / world / folder / f"{group}.npz"
+            predictions = out / "predictions" / world / _folder(name) / f"{group}.npz"
             options = _method_options(name, setting, device, seed, quiet)
             run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
             report = evaluate(data, predictions, graph=["designed", "causal"], csv=None)
@@ -408,10 +407,15 @@ def _write_tables(out: Path, rows: List[dict], setting: Setting, worlds: Sequenc
     _write(out / "results.md", markdown(rows, setting, worlds))
 
 
+def _folder(name: str) -> str:
+    """A method's folder under ``units/`` and ``predictions/`` (a user's
+    ``package.module:Class`` as a name a folder may have)."""
+    return name.replace(":", "-")
+
+
 def _unit_path(out: Path, world: str, name: str, group: str) -> Path:
-    """Where a finished unit's record lies (a user's ``package.module:Class``
-    named as a folder may be)."""
-    return out / "units" / world / name.replace(":", "-") / f"{group}.json"
+    """Where a finished unit's record lies."""
+    return out / "units" / world / _folder(name) / f"{group}.json"
 
 
 def _read_unit(path: Path, key: dict) -> Optional[dict]:
