@@ -262,6 +262,26 @@ fn readers_give_the_same_answers_on_packs_as_on_folders() {
         std::fs::read(root.join("heat-folders.png")).unwrap(),
         std::fs::read(root.join("heat-packed.png")).unwrap()
     );
+    // V-CDN (with HDF5): the same files, with the same arrays in them.
+    #[cfg(feature = "hdf5")]
+    {
+        for (name, dataset) in [("vcdn-folders", f), ("vcdn-packed", p)] {
+            let out = run(&["export", "vcdn", dataset, "--out", root.join(name).to_str().unwrap(), "-q"]);
+            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        }
+        let (a, b) = (hash_tree(&root.join("vcdn-folders")), hash_tree(&root.join("vcdn-packed")));
+        assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+        assert_eq!(a.len(), 12, "{a:?}");
+        for name in a.keys() {
+            let read = |export: &str| -> Vec<f32> {
+                let file = hdf5::File::open(root.join(export).join(name)).unwrap();
+                file.dataset("states").unwrap().read_raw().unwrap()
+            };
+            let (x, y) = (read("vcdn-folders"), read("vcdn-packed"));
+            assert!(!x.is_empty());
+            assert_eq!(x, y, "{name}");
+        }
+    }
     // NS-DR: the same annotations; a folder dataset's frames are linked, a
     // packed one's copied (its unpacked folders are temporary).
     for (name, dataset) in [("nsdr-folders", f), ("nsdr-packed", p)] {
@@ -444,4 +464,53 @@ fn a_reader_done_with_a_split_of_a_packed_dataset_frees_its_unpacked_folders() {
     }
     assert!(dataset.scenario_dirs("cars06_edges50", Split::Test).unwrap()[0].join("scenario.json").is_file());
     assert!(again[0].exists(), "releasing one split leaves the others");
+}
+
+#[test]
+fn a_reader_going_a_split_at_a_time_holds_only_that_split_unpacked() {
+    use causalcity::dataset::Dataset;
+    use causalcity::spec::Split;
+    // heatmap, evaluate and the exports read through `with_split`: while a
+    // split is read its folders are there, and no other split's are.
+    let (_, folders, packed) = both("packs-with-split");
+    let dataset = Dataset::open(&packed).unwrap();
+    let root = dataset.folders_root_unread().to_path_buf();
+    let held = || -> Vec<String> {
+        let mut held = Vec::new();
+        for group in sorted_entries(&root) {
+            for split in sorted_entries(&group) {
+                held.push(split.strip_prefix(&root).unwrap().to_string_lossy().into_owned());
+            }
+        }
+        held
+    };
+    let mut read = Vec::new();
+    for group in ["cars04_edges50", "cars06_edges50"] {
+        for split in Split::ALL {
+            let seen = dataset
+                .with_split(group, split, |dirs| {
+                    for dir in dirs {
+                        let name = dir.file_name().unwrap();
+                        let folder = folders.join(group).join(split.name()).join(name);
+                        assert_eq!(
+                            std::fs::read(dir.join("poses.csv")).unwrap(),
+                            std::fs::read(folder.join("poses.csv")).unwrap()
+                        );
+                    }
+                    Ok((dirs.len(), held()))
+                })
+                .unwrap();
+            assert_eq!(seen.1, vec![format!("{group}/{}", split.name())], "only the split being read is unpacked");
+            read.push(seen.0);
+        }
+    }
+    assert_eq!(read, vec![3, 1, 2, 3, 1, 2], "every split was read, each whole");
+    assert!(held().is_empty(), "nothing is left unpacked: {:?}", held());
+    // The sizes evaluate matches predictions against come from the packs
+    // without unpacking anything, and agree with the folders' scenario.json.
+    let sizes = dataset.packed_scenario_sizes().unwrap().unwrap();
+    assert_eq!(sizes.len(), 12);
+    assert_eq!(sizes["cars06_edges50/test/00001"], (6, 40));
+    assert!(held().is_empty());
+    assert_eq!(Dataset::open(&folders).unwrap().packed_scenario_sizes().unwrap(), None);
 }

@@ -314,7 +314,7 @@ fn rain_and_snow_frames_drawn_one_after_another_equal_frames_drawn_from_scratch(
         width: 1.8,
         colour: [40, 90, 200],
         mask_id: id,
-        braking: id % 2 == 0,
+        braking: id.is_multiple_of(2),
     };
     let mut checked = 0;
     for look in [

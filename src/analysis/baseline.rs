@@ -140,10 +140,7 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
     for group in &spec.groups {
         let name = group.name();
         let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
-            let scores =
-                dataset.scenario_dirs(&name, split)?.par_iter().map(|d| score_scenario(d, lags, graph)).collect();
-            dataset.release(&name, split)?;
-            scores
+            dataset.with_split(&name, split, |dirs| dirs.par_iter().map(|d| score_scenario(d, lags, graph)).collect())
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }

@@ -47,8 +47,8 @@ use crate::error::Error;
 use crate::output::layout::INTERACTIONS_CSV;
 use crate::output::logs::{event_frame, read_interactions};
 use crate::output::pair_summary::PairSummary;
-use crate::plan::{Expansion, ScenarioKey};
-use crate::spec::{Split, WorldKind};
+use crate::plan::ScenarioKey;
+use crate::spec::{DatasetSpec, Split, WorldKind};
 use crate::world::effects::EFFECT_THRESHOLD_M;
 use crate::world::CarState;
 use rayon::prelude::*;
@@ -345,12 +345,15 @@ impl Predicted {
 struct Truth {
     dir: PathBuf,
     /// The folder the scenario folders are under: `dir`, or where a packed
-    /// dataset was unpacked.
+    /// dataset's packs are unpacked while read.
     scenarios: PathBuf,
-    /// Keeps a packed dataset's unpacked folders while they are read.
-    #[allow(dead_code)]
-    unpacked: Option<crate::dataset::Unpacked>,
-    expansion: Expansion,
+    /// A `gen` dataset (not a sweep): scored a split at a time, so that a
+    /// packed one holds one split in TMPDIR.
+    dataset: Option<Dataset>,
+    /// A packed dataset's scenario sizes (cars, frames) by folder, read from
+    /// its packs without unpacking them.
+    sizes: Option<crate::dataset::ScenarioSizes>,
+    spec: DatasetSpec,
     keys: Vec<ScenarioKey>,
     /// Scenario folders carry the causal and direct graphs.
     effects: bool,
@@ -368,8 +371,9 @@ impl Truth {
                 return Ok(Truth {
                     dir: sweep.dir,
                     scenarios,
-                    unpacked: None,
-                    expansion: sweep.expansion,
+                    dataset: None,
+                    sizes: None,
+                    spec: sweep.expansion.spec,
                     keys,
                     effects: false,
                     sweep: true,
@@ -378,13 +382,22 @@ impl Truth {
         }
         let dataset = Dataset::open_complete(dir)?;
         let keys = dataset.keys().collect();
-        let scenarios = dataset.scenarios_root()?.to_path_buf();
-        let Dataset { dir, record, expansion, unpacked } = dataset;
-        Ok(Truth { dir, scenarios, unpacked, effects: record.effects, expansion, keys, sweep: false })
+        let scenarios = dataset.folders_root_unread().to_path_buf();
+        let sizes = dataset.packed_scenario_sizes()?;
+        Ok(Truth {
+            dir: dataset.dir.clone(),
+            scenarios,
+            effects: dataset.record.effects,
+            spec: dataset.spec().clone(),
+            dataset: Some(dataset),
+            sizes,
+            keys,
+            sweep: false,
+        })
     }
 
     fn identity(&self) -> DatasetIdentity {
-        let spec = &self.expansion.spec;
+        let spec = &self.spec;
         let mut splits = BTreeMap::new();
         for key in &self.keys {
             *splits.entry(key.split.name().to_string()).or_insert(0) += 1;
@@ -566,11 +579,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
             dataset.display()
         )),
     }
-    let results: Vec<ScenarioResult> = scored
-        .par_iter()
-        .map(|s| score_scenario(s, &truth, options))
-        .collect::<Result<_, String>>()
-        .map_err(Error::Input)?;
+    let results = score_in_turn(&truth, &scored, options)?;
     let mut report = summarise(&truth, dataset, predictions, options, &scored, &results);
     report.warnings.splice(0..0, warnings);
     Ok(report)
@@ -592,6 +601,7 @@ fn match_scenarios(
         let pair = truth.scenarios.join(&key.group).join(key.split.name()).join(key.folder_name());
         let (dir, counterfactual_dir) =
             if truth.sweep { (pair.join("factual"), Some(pair.join("counterfactual"))) } else { (pair, None) };
+        let size = truth.sizes.as_ref().and_then(|sizes| sizes.get(&folder).copied());
         order.push(folder.clone());
         by_folder.insert(
             folder,
@@ -600,7 +610,7 @@ fn match_scenarios(
                 split: key.split,
                 dir,
                 counterfactual_dir,
-                size: None,
+                size,
                 pair: None,
                 arrays: Default::default(),
             },
@@ -663,7 +673,7 @@ fn match_scenarios(
                         folder (e.g. cars08_edges50/test/00000)"
             .to_string()));
     }
-    let world = truth.expansion.spec.world;
+    let world = truth.spec.world;
     for array in arrays {
         let (folder, what) = Predicted::of(&array.name);
         let Some(scenario) = by_folder.get_mut(folder) else {
@@ -807,6 +817,31 @@ fn match_scenarios(
     Ok((scored, record))
 }
 
+/// Scores every scenario, a group's split at a time (the run of `scored`
+/// that shares one), each split's folders there only while it is scored:
+/// a packed dataset holds one split in TMPDIR.
+fn score_in_turn(
+    truth: &Truth,
+    scored: &[ScenarioPredictions],
+    options: &EvaluateOptions,
+) -> Result<Vec<ScenarioResult>, Error> {
+    let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, String> {
+        run.par_iter().map(|s| score_scenario(s, truth, options)).collect()
+    };
+    let Some(dataset) = &truth.dataset else { return score(scored).map_err(Error::Input) };
+    let mut results = Vec::with_capacity(scored.len());
+    for run in scored.chunk_by(|a, b| a.group == b.group && a.split == b.split) {
+        let (group, split) = (&run[0].group, run[0].split);
+        // Unpacked here (the folders' paths are the run's own); a failure to
+        // unpack is the dataset's, a bad score the input's.
+        dataset.scenario_dirs(group, split).map_err(Error::Failure)?;
+        let scores = score(run);
+        dataset.release(group, split).map_err(Error::Failure)?;
+        results.extend(scores.map_err(Error::Input)?);
+    }
+    Ok(results)
+}
+
 /// Reads one scenario's truth and scores its predictions.
 fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOptions) -> Result<ScenarioResult, String> {
     let summary = ScenarioSummary::read(&s.dir)?;
@@ -843,7 +878,7 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
             Some((scored, frames))
         }
     };
-    let image = &truth.expansion.spec.image;
+    let image = &truth.spec.image;
     let size = (image.width as f64, image.height as f64);
     let mut step_errors = Vec::new();
     if let Some(predicted) = s.get(Predicted::Trajectory) {
@@ -975,7 +1010,7 @@ fn edge_rows<'a>(
 ) -> (Vec<EdgeScores>, Vec<OverallScores>) {
     let mut rows = Vec::new();
     let mut pooled: [Pooled; 3] = Default::default();
-    for group in &truth.expansion.spec.groups {
+    for group in &truth.spec.groups {
         let name = group.name();
         let in_split = |split: Split| -> Vec<GraphPairs<'a>> {
             scored
@@ -1014,10 +1049,10 @@ fn edge_rows<'a>(
             rows.push(EdgeScores {
                 graph,
                 group: name.clone(),
-                cars: truth.expansion.spec.group_of(split, group).cars,
+                cars: truth.spec.group_of(split, group).cars,
                 edge_proportion: group.edge_proportion,
                 split: split.name(),
-                held_out: truth.expansion.spec.held_out.of(split).is_some(),
+                held_out: truth.spec.held_out.of(split).is_some(),
                 scenarios: scenarios.len(),
                 pairs: all.len(),
                 true_edges: counts.true_positives + counts.false_negatives,
@@ -1045,7 +1080,7 @@ fn edge_rows<'a>(
         overall.push(OverallScores {
             graph,
             split: split.name(),
-            held_out: truth.expansion.spec.held_out.of(split).is_some(),
+            held_out: truth.spec.held_out.of(split).is_some(),
             groups,
             scenarios: f1s.len(),
             pairs: all.len(),
@@ -1072,7 +1107,7 @@ fn trajectory_rows(
     errors_of: impl Fn(&ScenarioResult) -> &[f64],
 ) -> Vec<TrajectoryScores> {
     let mut rows = Vec::new();
-    for group in &truth.expansion.spec.groups {
+    for group in &truth.spec.groups {
         let name = group.name();
         for split in Split::ALL {
             let errors: Vec<&[f64]> = scored
@@ -1092,7 +1127,7 @@ fn trajectory_rows(
             if !steps.is_empty() {
                 rows.push(TrajectoryScores {
                     group: name.clone(),
-                    cars: truth.expansion.spec.group_of(split, group).cars,
+                    cars: truth.spec.group_of(split, group).cars,
                     edge_proportion: group.edge_proportion,
                     split: split.name(),
                     scenarios: errors.len(),
@@ -1112,7 +1147,7 @@ fn summarise(
     scored: &[ScenarioPredictions],
     results: &[ScenarioResult],
 ) -> EvaluationReport {
-    let spec = &truth.expansion.spec;
+    let spec = &truth.spec;
     let (mut edges, mut overall, mut per_scenario) = (Vec::new(), Vec::new(), Vec::new());
     for (g, &graph) in options.graphs.iter().enumerate() {
         let (rows, all) = edge_rows(graph.name(), truth, options, scored, results, |r| graph_pairs(r, g));

@@ -98,22 +98,27 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
 fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
     let out = file.path();
     let spec = opened.spec();
-    let mut dirs = Vec::new();
-    for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
-        for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
-            dirs.extend(opened.scenario_dirs(&group, split)?);
-        }
-    }
     let camera = opened.expansion.camera;
     let (w, h) = (camera.width, camera.height);
     let (cw, ch) = (w.div_ceil(CELL_PX) as usize, h.div_ceil(CELL_PX) as usize);
-    let counts = dirs.par_iter().map(|d| count_cells(&d.join("poses.csv"), cw, ch)).try_reduce(
-        || vec![0u64; cw * ch],
-        |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-            Ok(a)
-        },
-    )?;
+    // A split at a time: a packed dataset holds one split in TMPDIR.
+    let mut counts = vec![0u64; cw * ch];
+    let mut scenarios = 0;
+    for group in spec.groups.iter().map(|g| g.name()).filter(|g| filter.group.as_ref().is_none_or(|f| f == g)) {
+        for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
+            let split_counts = opened.with_split(&group, split, |dirs| {
+                scenarios += dirs.len();
+                dirs.par_iter().map(|d| count_cells(&d.join("poses.csv"), cw, ch)).try_reduce(
+                    || vec![0u64; cw * ch],
+                    |mut a, b| {
+                        a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                        Ok(a)
+                    },
+                )
+            })?;
+            counts.iter_mut().zip(split_counts).for_each(|(x, y)| *x += y);
+        }
+    }
     let visited: Vec<f64> = counts.iter().filter(|&&c| c > 0).map(|&c| c as f64).collect();
     let mean = visited.iter().sum::<f64>() / visited.len().max(1) as f64;
     let sd = (visited.iter().map(|c| (c - mean).powi(2)).sum::<f64>() / visited.len().max(1) as f64).sqrt();
@@ -151,7 +156,7 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
     }
     let mut canvas = Canvas { data: &mut rgb, width: iw, height: ih, channels: 3 };
     // The title: what is counted, over what.
-    let mut over = vec![format!("{} scenarios", dirs.len())];
+    let mut over = vec![format!("{scenarios} scenarios")];
     over.extend(filter.group.clone());
     over.extend(filter.split.map(|s| format!("split {}", s.name())));
     let title = format!(
@@ -183,7 +188,7 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
     file.write(&png).map_err(|e| e.to_string())?;
     Ok(HeatmapSummary {
         path: out.to_path_buf(),
-        scenarios: dirs.len(),
+        scenarios,
         car_frames: counts.iter().sum(),
         cells_visited: visited.len(),
         max_count: max,

@@ -340,17 +340,14 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
     let mut rows = Vec::new();
     for group in &dataset.spec().groups {
         for split in Split::ALL {
-            let dirs = dataset.scenario_dirs(&group.name(), split).map_err(crate::error::Error::Failure)?;
-            if dirs.is_empty() {
-                continue;
-            }
-            let tallies: Vec<Tally> = dirs
-                .par_iter()
-                .map(|d| tally(d, dataset.expansion.towns()))
-                .collect::<Result<_, _>>()
+            let tallies: Vec<Tally> = dataset
+                .with_split(&group.name(), split, |dirs| {
+                    dirs.par_iter().map(|d| tally(d, dataset.expansion.towns())).collect()
+                })
                 .map_err(crate::error::Error::Failure)?;
-            dataset.release(&group.name(), split).map_err(crate::error::Error::Failure)?;
-            rows.push(combine(group.name(), split.name(), tallies));
+            if !tallies.is_empty() {
+                rows.push(combine(group.name(), split.name(), tallies));
+            }
         }
     }
     Ok(DatasetStats { world: dataset.spec().world.name().into(), rows })

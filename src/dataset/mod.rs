@@ -24,6 +24,10 @@ pub struct Dataset {
     pub unpacked: Option<Unpacked>,
 }
 
+/// Each scenario's (cars, frames) by its folder relative to the dataset
+/// (`group/split/name`).
+pub type ScenarioSizes = std::collections::HashMap<String, (usize, usize)>;
+
 /// Where a packed dataset's packs are unpacked (a private temporary
 /// folder, removed when this is dropped) and which are there.
 pub struct Unpacked {
@@ -87,10 +91,46 @@ impl Dataset {
         Ok(root)
     }
 
-    /// The folder every scenario folder of the dataset is under (see
-    /// [`Dataset::scenario_dirs`]): a packed dataset is unpacked whole.
-    pub fn scenarios_root(&self) -> Result<&Path, String> {
-        self.folders_root(0..self.key_sequence().len())
+    /// The folder the scenario folders are under while they are read: the
+    /// dataset's own, or the temporary folder a packed dataset's packs are
+    /// unpacked into (nothing is unpacked by asking).
+    pub fn folders_root_unread(&self) -> &Path {
+        match &self.unpacked {
+            None => &self.dir,
+            Some(unpacked) => unpacked.scratch.path(),
+        }
+    }
+
+    /// Each scenario's (cars, frames) from its scenario.json, by its folder
+    /// relative to the dataset (`group/split/name`): for a packed dataset,
+    /// read from the packs in memory (a header scan per pack, nothing
+    /// unpacked); `None` for a folder dataset, whose files are read where
+    /// they are. Errors name the pack and member.
+    pub fn packed_scenario_sizes(&self) -> Result<Option<ScenarioSizes>, String> {
+        let Some(unpacked) = &self.unpacked else { return Ok(None) };
+        use rayon::prelude::*;
+        let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
+        let found: Vec<Vec<(String, (usize, usize))>> = (0..packs.len())
+            .into_par_iter()
+            .map(|n| {
+                let path = packs.path(&self.dir, &packs.pack(n));
+                if !path.is_file() {
+                    return Err(format!("{}: missing pack (validate says what else is missing)", path.display()));
+                }
+                let mut sizes = Vec::new();
+                let wanted =
+                    |name: &str| crate::output::packs::split_member(name).is_some_and(|(_, f)| f == "scenario.json");
+                crate::output::packs::read_members_where(&path, &wanted, |name, bytes| {
+                    let label = path.join(name);
+                    let summary = ScenarioSummary::parse(&bytes, &label, GraphKind::Designed)?;
+                    let (folder, _) = crate::output::packs::split_member(name).expect("wanted names have a folder");
+                    sizes.push((folder.to_string(), (summary.cars.len(), summary.frames as usize)));
+                    Ok(())
+                })?;
+                Ok(sizes)
+            })
+            .collect::<Result<_, String>>()?;
+        Ok(Some(found.into_iter().flatten().collect()))
     }
 
     /// The keys of the scenarios the dataset holds, in its order.
@@ -140,15 +180,20 @@ impl Dataset {
         Ok(())
     }
 
-    /// Every scenario folder, in the dataset's order, with its path relative
-    /// to the dataset (`<group>/<split>/<scenario>`), which exports mirror.
-    /// A packed dataset is unpacked first (into a temporary folder).
-    pub fn scenario_paths(&self) -> Result<impl Iterator<Item = (PathBuf, PathBuf)> + '_, String> {
-        let root = self.scenarios_root()?;
-        Ok(self.keys().map(move |k| {
-            let relative = Path::new(&k.group).join(k.split.name()).join(k.folder_name());
-            (root.join(&relative), relative)
-        }))
+    /// Calls `read` with the scenario folders of `group`'s `split` (in index
+    /// order), then [`Dataset::release`]s them: a reader that goes through a
+    /// packed dataset this way holds one split's folders in `TMPDIR` at a
+    /// time, never the dataset's.
+    pub fn with_split<R>(
+        &self,
+        group: &str,
+        split: Split,
+        read: impl FnOnce(&[PathBuf]) -> Result<R, String>,
+    ) -> Result<R, String> {
+        let dirs = self.scenario_dirs(group, split)?;
+        let result = read(&dirs);
+        self.release(group, split)?;
+        result
     }
 
     /// A reader is done with `group`'s `split`: a packed dataset's folders
@@ -295,8 +340,14 @@ impl ScenarioSummary {
     pub fn read_graph(dir: &Path, graph: GraphKind) -> Result<ScenarioSummary, String> {
         let path = dir.join("scenario.json");
         let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let mut summary: ScenarioSummary = serde_json::from_slice(&bytes)
-            .map_err(|e| format!("{}: not a causalcity scenario: {e}", path.display()))?;
+        ScenarioSummary::parse(&bytes, &path, graph)
+    }
+
+    /// [`ScenarioSummary::read_graph`] of a scenario.json's bytes; errors
+    /// name `path`, where they came from.
+    pub fn parse(bytes: &[u8], path: &Path, graph: GraphKind) -> Result<ScenarioSummary, String> {
+        let mut summary: ScenarioSummary =
+            serde_json::from_slice(bytes).map_err(|e| format!("{}: not a causalcity scenario: {e}", path.display()))?;
         summary.graph = match graph {
             GraphKind::Designed => Some(summary.edges.clone()),
             GraphKind::Causal => summary.causal_edges.clone(),

@@ -11,6 +11,7 @@ use crate::output::claim::{claim, Writer};
 use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
 use crate::progress::{Progress, ProgressMode};
+use crate::spec::Split;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -27,25 +28,32 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     let _claim = claim(out, Writer::Export, &format!("export nsdr {}", dataset.display()))?;
     let (w, h) = (opened.spec().image.width, opened.spec().image.height);
     let digits = frame_digits(opened.spec().frames);
-    // Walked, not listed: memory independent of the dataset's size.
     let packed = opened.unpacked.is_some();
-    let jobs = opened.scenario_paths().map_err(Error::Failure)?.map(|(dir, relative)| (dir, out.join(relative)));
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
-    jobs.par_bridge()
-        .try_for_each(|(source, target)| {
-            let (source, target) = (source.as_path(), target.as_path());
-            let json = annotate(source, w, h, digits)?;
-            std::fs::create_dir_all(target).map_err(|e| io_err(target)(e).to_string())?;
-            write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-            match packed {
-                false => link_frames(source, target)?,
-                // Unpacked into a temporary folder: links would outlive it.
-                true => copy_frames(source, target)?,
-            }
-            bar.inc();
-            Ok::<(), String>(())
-        })
-        .map_err(Error::Failure)?;
+    // A split at a time: a packed dataset holds one split, frames and all,
+    // in TMPDIR.
+    for group in opened.spec().groups.iter().map(|g| g.name()) {
+        for split in Split::ALL {
+            let relative = Path::new(&group).join(split.name());
+            opened
+                .with_split(&group, split, |dirs| {
+                    dirs.par_iter().try_for_each(|source| {
+                        let target = out.join(&relative).join(source.file_name().expect("scenario folders have names"));
+                        let json = annotate(source, w, h, digits)?;
+                        std::fs::create_dir_all(&target).map_err(|e| io_err(&target)(e).to_string())?;
+                        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+                        match packed {
+                            false => link_frames(source, &target)?,
+                            // Unpacked into a temporary folder: links would outlive it.
+                            true => copy_frames(source, &target)?,
+                        }
+                        bar.inc();
+                        Ok::<(), String>(())
+                    })
+                })
+                .map_err(Error::Failure)?;
+        }
+    }
     bar.finish();
     Ok(opened.key_sequence().len())
 }
