@@ -82,6 +82,29 @@ def test_nri_predicts_worse_further_ahead_and_is_the_same_for_the_same_seed(toy,
     assert error[19] > error[9] > error[0], error
 
 
+def test_nri_s_cosine_schedule_and_kl_weight_reach_training(toy):
+    train, val, test = (load_split(toy, "cars06_edges50", s) for s in ("train", "val", "test"))
+    off = ~np.eye(6, dtype=bool)
+    options = dict(epochs=8, batch_size=4, warmup_epochs=1, device="cpu", quiet=True, seed=1)
+    # A KL weighed a million times holds every edge at the prior's 0.1
+    # (measured: within 0.008) ...
+    pinned = make("nri", lr=1e-2, kl_weight=1e6, **options)
+    pinned.fit(train, val)
+    assert pinned.epoch_lrs == [1e-2] * 8
+    assert np.abs(pinned.predict(test).edges[:, off] - 0.1).max() < 0.02
+    # ... while the prediction loss alone moves them off it (measured: 0.19
+    # on average), here with the learning rate falling as half a cosine wave
+    free = make("nri", lr=1e-2, kl_weight=0, lr_schedule="cosine", **options)
+    free.fit(train, val)
+    assert np.abs(free.predict(test).edges[:, off] - 0.1).mean() > 0.05
+    assert free.epoch_lrs[0] == 1e-2 and len(free.epoch_lrs) == 8
+    assert all(a > b > 0 for a, b in zip(free.epoch_lrs, free.epoch_lrs[1:])), free.epoch_lrs
+    assert abs(free.epoch_lrs[-1] - 1e-2 * 0.5 * (1 + np.cos(np.pi * 7 / 8))) < 1e-12
+    for bad in (dict(kl_weight=-1), dict(kl_weight=float("nan")), dict(lr_schedule="step")):
+        with pytest.raises(causalcity.InputError):
+            make("nri", **bad)
+
+
 def test_nri_fitted_on_one_car_count_scores_splits_that_hold_other_counts_out(tmp_path):
     # Train on 6 cars; val holds out 5 and test 9 (held_out.<split>.cars).
     spec = dict(TOY, name="held-cars", splits={"train": 12, "val": 3, "test": 4})
@@ -540,7 +563,8 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
 
     out = tmp_path / "nri.npz"
     args = ["nri", str(toy), "--out", str(out), "--group", "cars06_edges50", "--device", "cpu", "--epochs", "12",
-            "--batch-size", "64", "--lr", "2e-3", "--decoder", "mlp", "--encoder-input", "both", "--time-limit", "1e-6"]  # fmt: skip
+            "--batch-size", "64", "--lr", "2e-3", "--decoder", "mlp", "--encoder-input", "both", "--time-limit", "1e-6",
+            "--lr-schedule", "cosine", "--kl-weight", "10"]  # fmt: skip
     assert main(args) == 0
     err = capsys.readouterr().err
     # the time limit stopped it after the five warm-up epochs and one with edges
@@ -554,6 +578,8 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
         except SystemExit as e:  # argparse refuses its own
             return e.code
 
-    for bad in (["--lr", "-1"], ["--time-limit", "0"], ["--batch-size", "0"], ["--decoder", "gru"]):
+    bad_options = (["--lr", "-1"], ["--time-limit", "0"], ["--batch-size", "0"], ["--decoder", "gru"], ["--kl-weight", "-1"],
+                   ["--lr-schedule", "step"])  # fmt: skip
+    for bad in bad_options:
         assert exit_code(["nri", str(toy), "--out", str(tmp_path / "bad.npz"), "--device", "cpu", *bad]) == 2, bad
         assert not (tmp_path / "bad.npz").exists()

@@ -43,6 +43,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri: pairs (default), nodes (NRI's: each car's own states) or both")
     parser.add_argument("--time-limit", type=float, metavar="SECONDS",
                         help="nri, interaction: stop training after the epoch that reaches this many seconds")
+    parser.add_argument("--lr-schedule", choices=["constant", "cosine"],
+                        help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
+    parser.add_argument("--kl-weight", type=float, metavar="W",
+                        help="nri: the weight of the KL to the sparse prior against the prediction loss")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
@@ -52,9 +56,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     elif args.method in ("nri", "interaction"):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
         given = dict(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, decoder=args.decoder,
-                     time_limit_s=args.time_limit)  # fmt: skip
+                     time_limit_s=args.time_limit, lr_schedule=args.lr_schedule)  # fmt: skip
         if args.method == "nri":
-            given["encoder_input"] = args.encoder_input
+            given.update(encoder_input=args.encoder_input, kl_weight=args.kl_weight)
         options.update({k: v for k, v in given.items() if v is not None})
     elif args.method in ("granger", "pcmci"):
         options["quiet"] = args.quiet

@@ -57,6 +57,7 @@ graph, every pair one edge type, no encoder.
 from __future__ import annotations
 
 import copy
+import math
 import time
 from typing import Optional
 
@@ -437,6 +438,8 @@ class Nri(Method):
         encoder_input: str = "pairs",
         time_limit_s: Optional[float] = None,
         cuda_graphs: bool = True,
+        kl_weight: float = 1.0,
+        lr_schedule: str = "constant",
     ) -> None:
         self.discover = discover
         self.name = "nri" if discover else "interaction"
@@ -463,6 +466,13 @@ class Nri(Method):
             raise InputError(f"time_limit_s={time_limit_s!r} is not a time: use seconds above 0, or None")
         self.time_limit_s = time_limit_s
         self.cuda_graphs = bool(cuda_graphs)
+        if not (isinstance(kl_weight, (int, float)) and 0 <= kl_weight < float("inf")):
+            raise InputError(f"kl_weight={kl_weight!r} is not a weight: use a number from 0 up")
+        if lr_schedule not in ("constant", "cosine"):
+            raise InputError(f"lr_schedule={lr_schedule!r} is not a schedule: use constant or cosine")
+        self.kl_weight, self.lr_schedule = float(kl_weight), lr_schedule
+        self.epoch_lrs: list = []
+        """The learning rate of each epoch."""
         self.device = pick_device(device)
         self.quiet = quiet
         self.losses: list = []
@@ -568,12 +578,12 @@ class Nri(Method):
         if prob is None:
             return nll
         kl = (prob * (torch.log(prob + 1e-16) - self.log_prior)).sum() / (x.shape[0] * self.cars)
-        return nll + kl
+        return nll + self.kl_weight * kl
 
     def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
         torch.manual_seed(self.seed)
         gen = np.random.default_rng(self.seed)
-        self.losses, self.epoch_seconds = [], []
+        self.losses, self.epoch_seconds, self.epoch_lrs = [], [], []
         hist, steps = self._frames(train)
         states = self._states(train)
         flat = states[:, : hist + steps].reshape(-1, 4)
@@ -583,7 +593,10 @@ class Nri(Method):
         self._build(train.cars, hist)
         params = list(self.decoder.parameters()) + (list(self.encoder.parameters()) if self.encoder else [])
         graphs = self.cuda_graphs and self.device.type == "cuda"
-        opt = torch.optim.Adam(params, lr=self.lr, capturable=graphs)
+        # A captured graph reads the learning rate from a tensor, so that
+        # the schedule reaches it.
+        lr = torch.tensor(self.lr, device=self.device) if graphs else self.lr
+        opt = torch.optim.Adam(params, lr=lr, capturable=graphs)
         x_train = self._tensor(states)
         step = _GraphedStep(
             lambda b, f: self._loss(b, hist, steps, f, sample=True), opt, graphs
@@ -600,6 +613,7 @@ class Nri(Method):
         for epoch in range(self.epochs):
             epoch_start = time.perf_counter()
             self.epoch = epoch
+            self._set_lr(opt, epoch)
             self._train_mode(True)
             # every scenario `windows` times, each from a random frame
             order = np.concatenate([gen.permutation(len(train)) for _ in range(self.windows)])
@@ -636,6 +650,22 @@ class Nri(Method):
                 self.encoder.load_state_dict(best[0])
             self.decoder.load_state_dict(best[1])
         self._train_mode(False)
+
+    def _set_lr(self, opt, epoch: int) -> None:
+        """The learning rate of ``epoch``: ``lr`` throughout (``constant``),
+        or (``cosine``) falling from ``lr`` at the first epoch towards 0 at
+        the last, half a cosine wave, so that the encoder's ranking settles
+        in the last epochs instead of being kept from wherever the val loss
+        happened to be lowest."""
+        rate = self.lr
+        if self.lr_schedule == "cosine":
+            rate = self.lr * 0.5 * (1 + math.cos(math.pi * epoch / self.epochs))
+        for group in opt.param_groups:
+            if isinstance(group["lr"], torch.Tensor):
+                group["lr"].fill_(rate)
+            else:
+                group["lr"] = rate
+        self.epoch_lrs.append(rate)
 
     def _train_mode(self, on: bool) -> None:
         for m in (self.encoder, self.decoder):
