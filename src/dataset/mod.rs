@@ -196,6 +196,29 @@ impl Dataset {
         result
     }
 
+    /// Calls `each(folder, relative)` for every scenario of the dataset, in
+    /// parallel within a split, a group's split at a time through
+    /// [`Dataset::with_split`]: `relative` is the scenario's folder
+    /// relative to the dataset (`<group>/<split>/<scenario>`), which exports
+    /// mirror.
+    pub fn each_scenario_in_turn(
+        &self,
+        each: impl Fn(&Path, &Path) -> Result<(), String> + Sync,
+    ) -> Result<(), String> {
+        use rayon::prelude::*;
+        for group in self.spec().groups.iter().map(|g| g.name()) {
+            for split in Split::ALL {
+                let under = Path::new(&group).join(split.name());
+                self.with_split(&group, split, |dirs| {
+                    dirs.par_iter().try_for_each(|dir| {
+                        each(dir, &under.join(dir.file_name().expect("scenario folders have names")))
+                    })
+                })?;
+            }
+        }
+        Ok(())
+    }
+
     /// A reader is done with `group`'s `split`: a packed dataset's folders
     /// unpacked for it are removed (read again, they are unpacked again), so
     /// that a reader going through the dataset a split at a time holds one

@@ -11,8 +11,6 @@ use crate::output::claim::{claim, Writer};
 use crate::output::png::decode_gray8;
 use crate::output::{frame_digits, io_err, write_atomically};
 use crate::progress::{Progress, ProgressMode};
-use crate::spec::Split;
-use rayon::prelude::*;
 use std::path::Path;
 
 /// Writes annotations for every scenario of `dataset` under `out`; returns
@@ -32,28 +30,21 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split, frames and all,
     // in TMPDIR.
-    for group in opened.spec().groups.iter().map(|g| g.name()) {
-        for split in Split::ALL {
-            let relative = Path::new(&group).join(split.name());
-            opened
-                .with_split(&group, split, |dirs| {
-                    dirs.par_iter().try_for_each(|source| {
-                        let target = out.join(&relative).join(source.file_name().expect("scenario folders have names"));
-                        let json = annotate(source, w, h, digits)?;
-                        std::fs::create_dir_all(&target).map_err(|e| io_err(&target)(e).to_string())?;
-                        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-                        match packed {
-                            false => link_frames(source, &target)?,
-                            // Unpacked into a temporary folder: links would outlive it.
-                            true => copy_frames(source, &target)?,
-                        }
-                        bar.inc();
-                        Ok::<(), String>(())
-                    })
-                })
-                .map_err(Error::Failure)?;
-        }
-    }
+    opened
+        .each_scenario_in_turn(|source, relative| {
+            let target = out.join(relative);
+            let json = annotate(source, w, h, digits)?;
+            std::fs::create_dir_all(&target).map_err(|e| io_err(&target)(e).to_string())?;
+            write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+            match packed {
+                false => link_frames(source, &target)?,
+                // Unpacked into a temporary folder: links would outlive it.
+                true => copy_frames(source, &target)?,
+            }
+            bar.inc();
+            Ok(())
+        })
+        .map_err(Error::Failure)?;
     bar.finish();
     Ok(opened.key_sequence().len())
 }

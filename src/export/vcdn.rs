@@ -17,8 +17,6 @@
 use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary};
 use crate::error::Error;
 use crate::progress::{Progress, ProgressMode};
-use crate::spec::Split;
-use rayon::prelude::*;
 use std::path::Path;
 
 /// The arrays of one scenario's V-CDN file, row-major.
@@ -110,29 +108,19 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
     )?;
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split in TMPDIR.
-    for group in opened.spec().groups.iter().map(|g| g.name()) {
-        for split in Split::ALL {
-            let relative = Path::new(&group).join(split.name());
-            opened
-                .with_split(&group, split, |dirs| {
-                    dirs.par_iter().try_for_each(|source| {
-                        let name = source.file_name().expect("scenario folders have names");
-                        let target = out.join(&relative).join(name).with_extension("h5");
-                        let arrays = vcdn_arrays(source, graph)?;
-                        let parent = target.parent().expect("files have a folder");
-                        std::fs::create_dir_all(parent)
-                            .map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
-                        let partial = target.with_extension("h5.partial");
-                        write_hdf5(&partial, &arrays).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-                        std::fs::rename(&partial, &target)
-                            .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-                        bar.inc();
-                        Ok::<(), String>(())
-                    })
-                })
-                .map_err(Error::Failure)?;
-        }
-    }
+    opened
+        .each_scenario_in_turn(|source, relative| {
+            let target = out.join(relative).with_extension("h5");
+            let arrays = vcdn_arrays(source, graph)?;
+            let parent = target.parent().expect("files have a folder");
+            std::fs::create_dir_all(parent).map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
+            let partial = target.with_extension("h5.partial");
+            write_hdf5(&partial, &arrays).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+            std::fs::rename(&partial, &target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+            bar.inc();
+            Ok(())
+        })
+        .map_err(Error::Failure)?;
     bar.finish();
     Ok(opened.key_sequence().len())
 }
