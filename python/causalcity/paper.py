@@ -103,7 +103,19 @@ QUICK = Setting(
     name="quick", splits={"train": 80, "val": 30, "test": 30}, epochs=60, batch_size=32, lr=2e-3,
     extra={"interaction": {"epochs": 30}},
 )  # fmt: skip
-FULL = Setting(name="full", splits={"train": 4000, "val": 500, "test": 500}, epochs=100, batch_size=128, lr=3e-3)
+# At the full setting's size NRI's encoder switches every edge off and the
+# val loss keeps a late epoch (docs/evaluation.md). On 1,000 of its toy
+# training scenarios (40 epochs at batch 128, lr 3e-3, scored on 300 val
+# scenarios that neither train nor the val loss see; `make bench-methods
+# BENCH_ONLY=recipe`) the kept epoch's AUROC is 0.85 by default and 0.96 with
+# the KL weighed 10x and a cosine learning rate: true pairs climb back to a
+# mean p(edge) of 0.3 while the others stay near 0.07. (KL 100x: 0.94;
+# cosine alone: 0.68.) The quick setting keeps the defaults: at its 80
+# scenarios the same recipe scores 0.63 against 0.79.
+FULL = Setting(
+    name="full", splits={"train": 4000, "val": 500, "test": 500}, epochs=100, batch_size=128, lr=3e-3,
+    extra={"nri": {"kl_weight": 10.0, "lr_schedule": "cosine"}},
+)  # fmt: skip
 
 
 def _spec(
