@@ -63,9 +63,9 @@ impl Dataset {
     /// the packs holding them are unpacked into (each once, in parallel).
     /// Errors name a missing or damaged pack.
     fn folders_root(&self, positions: std::ops::Range<usize>) -> Result<&Path, String> {
-        let Some(unpacked) = &self.unpacked else { return Ok(&self.dir) };
+        let Some(unpacked) = &self.unpacked else { return Ok(self.folders_root_unread()) };
         if positions.is_empty() {
-            return Ok(unpacked.scratch.path());
+            return Ok(self.folders_root_unread());
         }
         let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
         let wanted: Vec<usize> = {
@@ -76,7 +76,7 @@ impl Dataset {
             packs.numbers_of(positions.clone()).filter(|&n| !done[n]).collect()
         };
         use rayon::prelude::*;
-        let root = unpacked.scratch.path();
+        let root = self.folders_root_unread();
         wanted.into_par_iter().try_for_each(|n| {
             let path = packs.path(&self.dir, &packs.pack(n));
             if !path.is_file() {
