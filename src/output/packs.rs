@@ -11,6 +11,10 @@
 //! same bytes. So `tar -xf P -C OUT` gives the folders `--format folders`
 //! writes, byte for byte. Headers carry nothing that depends on the run
 //! (mode 0644, owner 0, time 0): packs are byte-identical too.
+//!
+//! A `counterfactual --sweep --format tar` packs its pairs the same way:
+//! each pair folder's `factual/` and `counterfactual/` runs (each by its
+//! own checksum listing), `divergence.csv` and `summary.json`.
 
 use super::{fresh_partial, hex, io_err, scenario_dir, WriteError, CHECKSUMS};
 use crate::plan::expand::split_of;
@@ -137,14 +141,52 @@ fn listed_files(dir: &Path) -> Result<Vec<String>, WriteError> {
     Ok(names)
 }
 
-/// Appends the scenario folder `dir` to `tar` as members `<folder>/<file>`.
-fn append_scenario<W: Write>(
+/// The two runs of a counterfactual pair folder, each a scenario folder.
+pub const PAIR_RUNS: [&str; 2] = ["factual", "counterfactual"];
+
+/// The files a counterfactual pair folder holds beside its two runs.
+pub const PAIR_FILES: [&str; 2] = ["divergence.csv", "summary.json"];
+
+/// The files a finished counterfactual pair folder holds, in name order:
+/// each run's by its checksum listing (`factual/poses.csv`, ...), and
+/// [`PAIR_FILES`] (`summary.json`, written last, comes last).
+fn pair_files(dir: &Path) -> Result<Vec<String>, WriteError> {
+    let mut names = Vec::new();
+    for run in PAIR_RUNS {
+        names.extend(listed_files(&dir.join(run))?.into_iter().map(|name| format!("{run}/{name}")));
+    }
+    names.extend(PAIR_FILES.map(String::from));
+    names.sort();
+    Ok(names)
+}
+
+/// What a pack holds of each key: a scenario folder, or a counterfactual
+/// pair folder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PackUnit {
+    Scenario,
+    Pair,
+}
+
+impl PackUnit {
+    fn files(self, dir: &Path) -> Result<Vec<String>, WriteError> {
+        match self {
+            PackUnit::Scenario => listed_files(dir),
+            PackUnit::Pair => pair_files(dir),
+        }
+    }
+}
+
+/// Appends the folder `dir` to `tar` as members `<folder>/<file>`, its
+/// files as `unit` lists them.
+fn append_folder<W: Write>(
     tar: &mut tar::Builder<W>,
+    unit: PackUnit,
     dir: &Path,
     folder: &str,
     temp: &Path,
 ) -> Result<(), WriteError> {
-    for name in listed_files(dir)? {
+    for name in unit.files(dir)? {
         let path = dir.join(&name);
         let bytes = fs::read(&path).map_err(io_err(&path))?;
         let mut header = tar::Header::new_gnu();
@@ -167,6 +209,7 @@ fn append_scenario<W: Write>(
 /// commit, it removes its temporary file.
 pub struct PackWriter {
     root: PathBuf,
+    unit: PackUnit,
     keys: Vec<ScenarioKey>,
     target: PathBuf,
     temp: PathBuf,
@@ -179,9 +222,19 @@ pub struct PackWriter {
 type OpenTar = Option<(tar::Builder<BufWriter<fs::File>>, usize)>;
 
 impl PackWriter {
-    /// Starts the pack of `keys` (folders under `root`) that will live at
-    /// `target` (never written through a link there).
+    /// Starts the pack of `keys` (scenario folders under `root`) that will
+    /// live at `target` (never written through a link there).
     pub fn begin(root: &Path, keys: Vec<ScenarioKey>, target: &Path) -> Result<PackWriter, WriteError> {
+        PackWriter::begin_of(PackUnit::Scenario, root, keys, target)
+    }
+
+    /// [`PackWriter::begin`] for folders of `unit`'s kind.
+    pub fn begin_of(
+        unit: PackUnit,
+        root: &Path,
+        keys: Vec<ScenarioKey>,
+        target: &Path,
+    ) -> Result<PackWriter, WriteError> {
         if let Some(parent) = target.parent() {
             fs::create_dir_all(parent).map_err(io_err(parent))?;
         }
@@ -190,6 +243,7 @@ impl PackWriter {
         let tar = tar::Builder::new(BufWriter::with_capacity(1 << 20, file));
         Ok(PackWriter {
             root: root.to_path_buf(),
+            unit,
             finished: std::sync::Mutex::new(vec![false; keys.len()]),
             keys,
             target: target.to_path_buf(),
@@ -215,7 +269,7 @@ impl PackWriter {
     fn append_ready(&self, tar: &mut OpenTar) -> Result<(), WriteError> {
         let Some((tar, next)) = tar else { return Ok(()) };
         while *next < self.keys.len() && self.finished.lock().expect("a pack writer thread failed")[*next] {
-            append_scenario(tar, &self.dir(*next), &self.keys[*next].relative_folder(), &self.temp)?;
+            append_folder(tar, self.unit, &self.dir(*next), &self.keys[*next].relative_folder(), &self.temp)?;
             *next += 1;
         }
         Ok(())
@@ -369,29 +423,85 @@ pub fn read_scenarios(
 /// and nothing else. Says what is wrong otherwise (gen writes such a pack
 /// again).
 pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
-    let found = read_scenarios(path, keys, |i, mut members| {
-        let key = keys[i].relative_folder();
-        let listing =
-            members.remove(CHECKSUMS).ok_or_else(|| format!("{}: {key}/{CHECKSUMS} is missing", path.display()))?;
-        let listing =
-            String::from_utf8(listing).map_err(|_| format!("{}: {key}/{CHECKSUMS} is not text", path.display()))?;
-        for line in listing.lines() {
-            let (hash, name) = line
-                .split_once("  ")
-                .ok_or_else(|| format!("{}: {key}/{CHECKSUMS}: {line:?} is not a checksum line", path.display()))?;
-            match members.remove(name) {
-                Some(bytes) if hex(&Sha256::digest(&bytes)) == hash => {}
-                Some(_) => return Err(format!("{}: {key}/{name}: its checksum does not match", path.display())),
-                None => return Err(format!("{}: {key}/{name} is missing", path.display())),
+    verify_of(PackUnit::Scenario, path, keys)
+}
+
+/// [`verify`] for packs of `unit`'s folders. A pair is whole when both its
+/// runs are, by their listings, and it has its [`PAIR_FILES`] and nothing
+/// else.
+pub fn verify_of(unit: PackUnit, path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
+    let found = read_scenarios(path, keys, |i, members| {
+        let folder = keys[i].relative_folder();
+        match unit {
+            PackUnit::Scenario => verify_listed(path, &folder, members),
+            PackUnit::Pair => {
+                let mut runs = split_pair(members);
+                for name in PAIR_FILES {
+                    if runs.pair.remove(name).is_none() {
+                        return Err(format!("{}: {folder}/{name} is missing", path.display()));
+                    }
+                }
+                if let Some(extra) = runs.pair.keys().next() {
+                    return Err(format!("{}: {folder}/{extra} is not part of a pair", path.display()));
+                }
+                for (run, members) in PAIR_RUNS.into_iter().zip(runs.runs) {
+                    verify_listed(path, &format!("{folder}/{run}"), members)?;
+                }
+                Ok(())
             }
-        }
-        match members.keys().next() {
-            Some(extra) => Err(format!("{}: {key}/{extra} is not in its {CHECKSUMS}", path.display())),
-            None => Ok(()),
         }
     })?;
     match found.iter().position(|f| !f) {
         Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder())),
+        None => Ok(()),
+    }
+}
+
+/// A pair's members split by where they lie: each run's (by name within
+/// the run, in [`PAIR_RUNS`] order), and the pair folder's own.
+pub struct PairMembers {
+    pub runs: [BTreeMap<String, Vec<u8>>; 2],
+    pub pair: BTreeMap<String, Vec<u8>>,
+}
+
+/// Splits a pair folder's members (by name within the pair) into its runs'
+/// and its own.
+pub fn split_pair(members: BTreeMap<String, Vec<u8>>) -> PairMembers {
+    let mut split = PairMembers { runs: [BTreeMap::new(), BTreeMap::new()], pair: BTreeMap::new() };
+    for (name, bytes) in members {
+        let run =
+            name.split_once('/').and_then(|(run, within)| Some((PAIR_RUNS.iter().position(|r| *r == run)?, within)));
+        match run {
+            Some((r, within)) => {
+                split.runs[r].insert(within.to_string(), bytes);
+            }
+            None => {
+                split.pair.insert(name, bytes);
+            }
+        }
+    }
+    split
+}
+
+/// Checks that `members` (of the folder `folder`, in the pack at `path`)
+/// are exactly the files its `checksums.sha256` lists, with their hashes.
+fn verify_listed(path: &Path, folder: &str, mut members: BTreeMap<String, Vec<u8>>) -> Result<(), String> {
+    let listing =
+        members.remove(CHECKSUMS).ok_or_else(|| format!("{}: {folder}/{CHECKSUMS} is missing", path.display()))?;
+    let listing =
+        String::from_utf8(listing).map_err(|_| format!("{}: {folder}/{CHECKSUMS} is not text", path.display()))?;
+    for line in listing.lines() {
+        let (hash, name) = line
+            .split_once("  ")
+            .ok_or_else(|| format!("{}: {folder}/{CHECKSUMS}: {line:?} is not a checksum line", path.display()))?;
+        match members.remove(name) {
+            Some(bytes) if hex(&Sha256::digest(&bytes)) == hash => {}
+            Some(_) => return Err(format!("{}: {folder}/{name}: its checksum does not match", path.display())),
+            None => return Err(format!("{}: {folder}/{name} is missing", path.display())),
+        }
+    }
+    match members.keys().next() {
+        Some(extra) => Err(format!("{}: {folder}/{extra} is not in its {CHECKSUMS}", path.display())),
         None => Ok(()),
     }
 }
