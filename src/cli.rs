@@ -142,6 +142,18 @@ pub struct CounterfactualArgs {
     #[arg(long, value_enum, value_delimiter = ',', default_value = "stop,set-desired-speed,run-red-light,remove")]
     pub kinds: Vec<SweepKindArg>,
 
+    /// --sweep: how pairs are stored: `folders` (a folder each) or `tar`:
+    /// whole pairs packed --scenarios-per-tar at a time into
+    /// `<group>/<split>/<first>-<last>.tar`, with the folders' files and
+    /// bytes inside (`tar -xf` gives the folders), as `gen --format tar`.
+    #[arg(long, value_enum, default_value_t = FormatArg::Folders, requires = "sweep")]
+    pub format: FormatArg,
+
+    /// --sweep with --format tar: pairs per tar file (the last of a split
+    /// may hold fewer) [default: 64].
+    #[arg(long, value_name = "N", requires = "sweep", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub scenarios_per_tar: Option<u32>,
+
     /// --sweep: at most N scenarios per split and group.
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(1..))]
     pub limit: Option<u32>,
@@ -618,6 +630,18 @@ pub enum FormatArg {
     Tar,
 }
 
+/// `--format` and `--scenarios-per-tar` (of `gen` and `counterfactual
+/// --sweep`) as one packing.
+fn packing(format: FormatArg, per_tar: Option<u32>) -> Result<Packing, Error> {
+    match (format, per_tar) {
+        (FormatArg::Folders, None) => Ok(Packing::Folders),
+        (FormatArg::Folders, Some(n)) => {
+            Err(Error::input(format!("--scenarios-per-tar {n} packs tar files: give it with --format tar")))
+        }
+        (FormatArg::Tar, n) => Ok(Packing::Tar { per_tar: n.unwrap_or(DEFAULT_SCENARIOS_PER_TAR) }),
+    }
+}
+
 /// `gen --scenarios-per-tar`'s default: the paper-size city (25,000
 /// scenarios) in about 400 tars, a few MB each without images and a few
 /// hundred MB with them (WebDataset's advice: 100 MB to 1 GB).
@@ -795,15 +819,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 annotations: args.annotations,
                 effects: !args.no_effects,
                 lights: args.lights.log(),
-                packing: match (args.format, args.scenarios_per_tar) {
-                    (FormatArg::Folders, None) => Packing::Folders,
-                    (FormatArg::Folders, Some(n)) => {
-                        return Err(Error::input(format!(
-                            "--scenarios-per-tar {n} packs tar files: give it with --format tar"
-                        )))
-                    }
-                    (FormatArg::Tar, n) => Packing::Tar { per_tar: n.unwrap_or(DEFAULT_SCENARIOS_PER_TAR) },
-                },
+                packing: packing(args.format, args.scenarios_per_tar)?,
                 progress: progress(args.quiet),
                 shard: args.shard,
                 force: args.force,
@@ -930,6 +946,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
                     products: Products { images, annotations: false, effects: false, lights: args.lights.log() },
+                    packing: packing(args.format, args.scenarios_per_tar)?,
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };

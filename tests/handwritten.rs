@@ -313,8 +313,35 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
         }
         assert!(with_effect >= 2, "most random stops and removals change something");
         assert!(out.join("sweep.json").exists());
+        // Packed, the same pairs are in tar files whose bytes do not depend
+        // on the threads either.
+        let packed = dir.join(format!("packed{threads}"));
+        let output = run(&[
+            "counterfactual",
+            "--sweep",
+            spec.to_str().unwrap(),
+            "--out",
+            packed.to_str().unwrap(),
+            "--no-images",
+            "-q",
+            "-j",
+            threads,
+            "--kinds",
+            "stop,remove",
+            "--format",
+            "tar",
+            "--scenarios-per-tar",
+            "2",
+        ]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let tars = ["train/00000-00001.tar", "train/00002-00002.tar", "val/00000-00000.tar"];
+        for tar in tars {
+            assert!(packed.join("cars06_edges50").join(tar).is_file(), "{tar}");
+        }
+        trees.push(hash_tree(&packed));
     }
-    assert_eq!(trees[0], trees[1], "the same pairs on 1 and 2 threads");
+    assert_eq!(trees[0], trees[2], "the same pairs on 1 and 2 threads");
+    assert_eq!(trees[1], trees[3], "the same packs on 1 and 2 threads");
 }
 
 #[test]

@@ -477,6 +477,8 @@ pub struct Sweep {
     /// How its runs log the lights (`--lights`; sweeps from before the
     /// record said so logged every frame).
     pub lights: crate::output::manifest::LightsLog,
+    /// Pair folders, or pairs packed into tar files (`--format tar`).
+    pub packing: crate::output::manifest::Packing,
 }
 
 impl Sweep {
@@ -511,6 +513,8 @@ impl Sweep {
             complete: bool,
             #[serde(default)]
             lights: crate::output::manifest::LightsLog,
+            #[serde(default)]
+            scenarios_per_tar: Option<u32>,
         }
         fn finished() -> bool {
             true
@@ -525,12 +529,29 @@ impl Sweep {
             ));
         }
         let expansion = expansion_from(record.spec, &path)?;
-        let sweep = Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit, lights: record.lights };
+        let packing = match record.scenarios_per_tar {
+            None => crate::output::manifest::Packing::Folders,
+            Some(0) => {
+                return Err(format!("{}: scenarios_per_tar 0 is not allowed: use a number above 0", path.display()))
+            }
+            Some(per_tar) => crate::output::manifest::Packing::Tar { per_tar },
+        };
+        let sweep = Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit, lights: record.lights, packing };
         Ok(Some((sweep, record.complete)))
     }
 
     /// The keys of the sweep's pairs, in order.
     pub fn key_sequence(&self) -> KeySequence<'_> {
         self.expansion.key_sequence(self.limit)
+    }
+
+    /// A packed sweep's packs (`None` for pair folders).
+    pub fn packs(&self) -> Option<crate::output::packs::Packs<'_>> {
+        match self.packing {
+            crate::output::manifest::Packing::Folders => None,
+            crate::output::manifest::Packing::Tar { per_tar } => {
+                Some(crate::output::packs::Packs::new(self.key_sequence(), per_tar))
+            }
+        }
     }
 }

@@ -15,14 +15,15 @@ use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
 use crate::output::claim::{claim, Writer};
-use crate::output::manifest::{LightsLog, Products};
+use crate::output::manifest::{LightsLog, Packing, Products};
 use crate::output::number::push_fixed;
+use crate::output::packs::{PackUnit, PackWriter, Packs};
 use crate::output::poses::logged_pose;
 use crate::output::writer::ScenarioWriter;
 use crate::output::{scenario_dir, write_atomically, WriteError};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
-use crate::plan::Expansion;
 use crate::plan::ScenarioPlan;
+use crate::plan::{Expansion, ScenarioKey};
 use crate::progress::{Progress, ProgressMode};
 use crate::spec::WorldKind;
 use crate::timing::StageTimes;
@@ -321,6 +322,9 @@ pub struct SweepOptions {
     pub limit: Option<u32>,
     pub kinds: Vec<SweepKind>,
     pub products: Products,
+    /// Pair folders, or whole pairs packed into tar files (as `gen --format
+    /// tar` packs scenarios).
+    pub packing: Packing,
     pub threads: Option<usize>,
     pub progress: ProgressMode,
 }
@@ -357,7 +361,9 @@ impl std::fmt::Display for SweepSummary {
 /// Counterfactual pairs at scale: for every scenario of a `gen` spec, one
 /// random intervention of the given kinds (drawn from the scenario's own
 /// stream, so the sweep is reproducible), written as
-/// `<out>/<group>/<split>/<index>/` pairs, in parallel.
+/// `<out>/<group>/<split>/<index>/` pairs, in parallel, or packed into
+/// `<out>/<group>/<split>/<first>-<last>.tar` with those pairs' files
+/// inside.
 pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     let expansion = load_spec(&options.spec_path)?;
     if expansion.spec.world != WorldKind::City {
@@ -381,7 +387,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     let describe = format!("counterfactual --sweep {}", options.spec_path.display());
     let _claim = claim(&out, Writer::Sweep, &describe).map_err(GenError::Claim)?;
     let record = |pairs: Option<usize>| {
-        let mut json = serde_json::to_vec_pretty(&serde_json::json!({
+        let mut record = serde_json::json!({
             "format": "causalcity-counterfactual-sweep/1",
             "version": env!("CARGO_PKG_VERSION"),
             "spec": expansion.spec,
@@ -391,8 +397,12 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             "lights": options.products.lights.name(),
             "complete": pairs.is_some(),
             "pairs": pairs,
-        }))
-        .expect("sweep record serialises");
+        });
+        // Only a packed sweep says so: a folder sweep's record is as before.
+        if let Some(per_tar) = options.packing.scenarios_per_tar() {
+            record["scenarios_per_tar"] = per_tar.into();
+        }
+        let mut json = serde_json::to_vec_pretty(&record).expect("sweep record serialises");
         json.push(b'\n');
         json
     };
@@ -411,11 +421,15 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         if old["lights"].is_null() {
             old["lights"] = LightsLog::Frames.name().into();
         }
-        let differences: Vec<String> = ["version", "spec", "limit", "kinds", "images", "lights"]
+        let differences: Vec<String> = ["version", "spec", "limit", "kinds", "images", "lights", "scenarios_per_tar"]
             .into_iter()
             .filter(|field| old[field] != new[field] && !(*field == "images" && old[field].is_null()))
             .map(|field| match field {
                 "lights" => format!("lights (it was made with --lights {})", old[field].as_str().unwrap_or("?")),
+                "scenarios_per_tar" => match old[field].as_u64() {
+                    Some(n) => format!("format (it was made with --format tar --scenarios-per-tar {n})"),
+                    None => "format (it was made with --format folders)".to_string(),
+                },
                 "images" if new[field] == true => "images (it was made with --no-images)".to_string(),
                 "images" => {
                     "images (it was made with images; add nothing, or use another --out for --no-images)".to_string()
@@ -437,48 +451,103 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     let writers = TownWriters::new(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
     let kept = AtomicUsize::new(0);
-    let result = pool.install(|| {
-        keys.par_iter()
-            .map(|key| {
+    let folder_of = |key: &ScenarioKey| scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+    // The pair of `key`, simulated and written into its folder, unless a
+    // complete one is there (a rerun keeps every complete pair).
+    let one = |key: &ScenarioKey| -> Result<PairSummary, GenError> {
+        if stop_flag().load(Ordering::Relaxed) {
+            return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
+        }
+        let folder = folder_of(key);
+        if let Some(summary) = complete_pair(&folder) {
+            kept.fetch_add(1, Ordering::Relaxed);
+            bar.inc();
+            return Ok(summary);
+        }
+        if folder.exists() {
+            std::fs::remove_dir_all(&folder)
+                .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
+        }
+        let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
+            scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
+            reason,
+        })?;
+        let mut counterfactual = plan.clone();
+        let (intervention, record) = random_intervention(&plan, &options.kinds);
+        counterfactual.interventions.push(intervention);
+        let pair = (&plan, &counterfactual);
+        let summary = write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), &folder)?;
+        bar.inc();
+        Ok(summary)
+    };
+    let sequence = expansion.key_sequence(options.limit);
+    let packs = match options.packing {
+        Packing::Folders => None,
+        Packing::Tar { per_tar } => Some(Packs::new(sequence, per_tar)),
+    };
+    let result = pool.install(|| match &packs {
+        None => keys.par_iter().map(one).collect::<Result<Vec<_>, GenError>>(),
+        // As `gen --format tar`: pairs are appended to their pack as they
+        // finish, in order; the pack is renamed into place whole, and its
+        // pair folders removed.
+        Some(packs) => (0..packs.len())
+            .into_par_iter()
+            .map(|number| {
+                let pack = packs.pack(number);
+                let (path, pack_keys) = (packs.path(&out, &pack), packs.keys(&pack));
+                if path.exists() {
+                    match crate::output::packs::verify_of(PackUnit::Pair, &path, &pack_keys) {
+                        Ok(()) => {
+                            let summaries = packed_summaries(&path)?;
+                            for key in &pack_keys {
+                                let dir = folder_of(key);
+                                if dir.exists() {
+                                    std::fs::remove_dir_all(&dir)
+                                        .map_err(|source| GenError::from(WriteError { path: dir, source }))?;
+                                }
+                            }
+                            kept.fetch_add(summaries.len(), Ordering::Relaxed);
+                            (0..summaries.len()).for_each(|_| bar.inc());
+                            return Ok(summaries);
+                        }
+                        Err(why) => crate::progress::note(format_args!("warning: {why}: writing the pack again")),
+                    }
+                }
+                let packing = PackWriter::begin_of(PackUnit::Pair, &out, pack_keys.clone(), &path)?;
+                let summaries = pack_keys
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, key)| {
+                        let summary = one(key)?;
+                        packing.finished(i)?;
+                        Ok(summary)
+                    })
+                    .collect::<Result<Vec<_>, GenError>>()?;
                 if stop_flag().load(Ordering::Relaxed) {
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
                 }
-                let folder = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
-                // A rerun keeps every complete pair and redoes the rest.
-                if let Some(summary) = complete_pair(&folder) {
-                    kept.fetch_add(1, Ordering::Relaxed);
-                    bar.inc();
-                    return Ok(summary);
-                }
-                if folder.exists() {
-                    std::fs::remove_dir_all(&folder)
-                        .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
-                }
-                let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
-                    scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
-                    reason,
+                packing.commit(false)?;
+                pack_keys.par_iter().try_for_each(|key| {
+                    let dir = folder_of(key);
+                    std::fs::remove_dir_all(&dir).map_err(|source| GenError::from(WriteError { path: dir, source }))
                 })?;
-                let mut counterfactual = plan.clone();
-                let (intervention, record) = random_intervention(&plan, &options.kinds);
-                counterfactual.interventions.push(intervention);
-                let pair = (&plan, &counterfactual);
-                let summary =
-                    write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), &folder)?;
-                bar.inc();
-                Ok(summary)
+                Ok(summaries)
             })
             .collect::<Result<Vec<_>, GenError>>()
+            .map(|packed| packed.into_iter().flatten().collect()),
     });
     bar.finish();
     let summaries = match result {
         Ok(summaries) => summaries,
         Err(GenError::Interrupted { .. }) => {
-            let done = (0..keys.len())
-                .filter(|&i| {
-                    let key = &keys[i];
-                    scenario_dir(&out, &key.group, key.split.name(), &key.folder_name()).join("summary.json").exists()
-                })
-                .count() as u64;
+            let in_folders = keys.iter().filter(|key| folder_of(key).join("summary.json").exists()).count();
+            let in_packs: usize = packs
+                .iter()
+                .flat_map(|p| (0..p.len()).map(|n| p.pack(n)))
+                .filter(|pack| packs.is_some_and(|p| p.path(&out, pack).is_file()))
+                .map(|pack| pack.count as usize)
+                .sum();
+            let done = (in_folders + in_packs) as u64;
             return Err(RunError::Write(GenError::Interrupted { done, total: keys.len() as u64, out }));
         }
         Err(e) => return Err(RunError::Write(e)),
@@ -492,6 +561,18 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         pairs_with_effect: summaries.iter().filter(|s| !s.affected.is_empty()).count(),
         mean_affected_cars: affected as f64 / summaries.len().max(1) as f64,
     })
+}
+
+/// The summaries of the pairs in the pack at `path` (whole: verified).
+fn packed_summaries(path: &Path) -> Result<Vec<PairSummary>, GenError> {
+    let mut summaries = Vec::new();
+    crate::output::packs::read_members_where(path, &|name| name.ends_with("/summary.json"), |name, bytes| {
+        let summary = serde_json::from_slice(&bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
+        summaries.push(summary);
+        Ok(())
+    })
+    .map_err(GenError::Input)?;
+    Ok(summaries)
 }
 
 /// Whether the first finished pair found in the sweep at `out` has frames
