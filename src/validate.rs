@@ -11,7 +11,7 @@ use crate::output::layout::{
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::manifest::Packing;
-use crate::output::packs::Packs;
+use crate::output::packs::{split_pair, Packs, PAIR_FILES, PAIR_RUNS};
 use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
@@ -246,12 +246,10 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     })
 }
 
-/// What a pair folder of a sweep holds besides its two runs.
-const PAIR_FILES: [&str; 2] = ["summary.json", "divergence.csv"];
-
 /// Checks a `counterfactual --sweep` output: sweep.json finished, and every
-/// pair there with its summary, its divergence log and both runs checked as
-/// `gen`'s scenarios are (files, columns, checksums).
+/// pair there (in its folder, or in its pack) with its summary, its
+/// divergence log and both runs checked as `gen`'s scenarios are (files,
+/// columns, checksums).
 fn validate_sweep(
     sweep: &crate::dataset::Sweep,
     complete: bool,
@@ -271,12 +269,15 @@ fn validate_sweep(
     }
     let pair_of = |k: &ScenarioKey| scenario_dir(dir, &k.group, k.split.name(), &k.folder_name());
     let keys: Vec<ScenarioKey> = sweep.key_sequence().iter().collect();
+    let packs = sweep.packs();
     // Images or not, as the runs were written (sweep.json does not say).
-    let images = keys
-        .iter()
-        .map(|k| pair_of(k).join("factual"))
-        .find(|f| f.is_dir())
-        .is_some_and(|f| f.join(crate::output::layout::FrameKind::Rgb.folder()).is_dir());
+    let rgb = crate::output::layout::FrameKind::Rgb.folder();
+    let images = match &packs {
+        None => {
+            keys.iter().map(|k| pair_of(k).join("factual")).find(|f| f.is_dir()).is_some_and(|f| f.join(rgb).is_dir())
+        }
+        Some(packs) => packed_pairs_have_images(dir, packs, rgb),
+    };
     let products =
         crate::output::manifest::Products { images, annotations: false, effects: false, lights: sweep.lights };
     let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
@@ -331,7 +332,16 @@ fn validate_sweep(
         (problems, files, bytes, Vec::new())
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;
-    let results: Vec<ScenarioCheck> = pool.install(|| keys.par_iter().map(check_pair).collect());
+    let results: Vec<ScenarioCheck> = match &packs {
+        None => pool.install(|| keys.par_iter().map(check_pair).collect()),
+        Some(packs) => pool
+            .install(|| {
+                (0..packs.len()).into_par_iter().map(|n| check_pair_pack(dir, packs, n, &expected)).collect::<Vec<_>>()
+            })
+            .into_iter()
+            .flatten()
+            .collect(),
+    };
     let (mut files, mut bytes) = (0, 0);
     for (p, f, b, _) in results {
         problems.extend(p);
@@ -348,6 +358,81 @@ fn validate_sweep(
         problems,
         design: None,
     })
+}
+
+/// Whether the first pack of a packed sweep holds frames (false when it is
+/// missing or unreadable: its check says so).
+fn packed_pairs_have_images(dir: &Path, packs: &Packs<'_>, rgb: &str) -> bool {
+    let Some(first) = (!packs.is_empty()).then(|| packs.path(dir, &packs.pack(0))) else { return false };
+    let found = std::cell::Cell::new(false);
+    let frames = format!("/factual/{rgb}/");
+    let _ = crate::output::packs::read_members_where(
+        &first,
+        &|name| {
+            found.set(found.get() || name.contains(&frames));
+            false
+        },
+        |_, _| Ok(()),
+    );
+    found.get()
+}
+
+/// Checks the pack `number` of a packed sweep as [`check_pack`] checks a
+/// dataset's: it holds its pairs and nothing else, each pair has its own
+/// files and a summary that reads, and each run is checked as a scenario
+/// of `gen`'s. Problems name the pack, and the file inside it.
+fn check_pair_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<'_>) -> Vec<ScenarioCheck> {
+    let pack = packs.pack(number);
+    let keys = packs.keys(&pack);
+    let path = packs.path(dir, &pack);
+    let mut checks: Vec<ScenarioCheck> = keys.iter().map(|_| (Vec::new(), 0, 0, Vec::new())).collect();
+    let problem = |message: String| {
+        let prefix = format!("{}: ", path.display());
+        let message = message.strip_prefix(&prefix).map(str::to_string).unwrap_or(message);
+        Problem { path: path.clone(), message }
+    };
+    if !path.is_file() {
+        checks[0].0.push(problem("missing pack: rerun the counterfactual --sweep command to write it".into()));
+        return checks;
+    }
+    let read = crate::output::packs::read_scenarios(&path, &keys, |i, members| {
+        let folder = PathBuf::from(keys[i].relative_folder());
+        let members = split_pair(members);
+        let check = &mut checks[i];
+        for name in PAIR_FILES.iter().filter(|name| !members.pair.contains_key(**name)) {
+            check.0.push(problem(format!("{}: missing", folder.join(name).display())));
+        }
+        for extra in members.pair.keys().filter(|name| !PAIR_FILES.contains(&name.as_str())) {
+            check.0.push(problem(format!("{}: unexpected file", folder.join(extra).display())));
+        }
+        if let Some(text) = members.pair.get("summary.json") {
+            if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(text) {
+                check.0.push(problem(format!("{}: not a pair summary: {e}", folder.join("summary.json").display())));
+            }
+        }
+        for (run, run_members) in PAIR_RUNS.into_iter().zip(&members.runs) {
+            let key = ScenarioKey { name: Some(format!("{}/{run}", keys[i].folder_name())), ..keys[i].clone() };
+            let (found, files, bytes, _) =
+                check_scenario_files(&folder.join(run), &ScenarioFiles::Members(run_members), &key, expected);
+            check.0.extend(found.into_iter().map(|p| problem(format!("{}: {}", p.path.display(), p.message))));
+            check.1 += files;
+            check.2 += bytes;
+        }
+        Ok(())
+    });
+    match read {
+        Ok(found) => {
+            for (i, _) in found.iter().enumerate().filter(|(_, f)| !**f) {
+                let message = format!(
+                    "{} is not in it: rerun the counterfactual --sweep command to write the pack again",
+                    keys[i].relative_folder()
+                );
+                checks[i].0.push(problem(message));
+            }
+        }
+        Err(why) => checks[0].0.push(problem(why)),
+    }
+    checks
 }
 
 /// Leftovers of interrupted runs, and files and folders the manifest does

@@ -358,6 +358,9 @@ struct Truth {
     /// Scenario folders carry the causal and direct graphs.
     effects: bool,
     sweep: bool,
+    /// Where a packed sweep's pairs are unpacked (their logs, no frames)
+    /// for as long as they are scored.
+    _unpacked: Option<crate::output::packs::Scratch>,
 }
 
 impl Truth {
@@ -367,7 +370,8 @@ impl Truth {
                 // Every scenario is scored against its files: evaluate holds
                 // one entry per scenario whatever it does.
                 let keys = sweep.key_sequence().iter().collect();
-                let scenarios = sweep.dir.clone();
+                let unpacked = unpack_sweep(&sweep)?;
+                let scenarios = unpacked.as_ref().map_or_else(|| sweep.dir.clone(), |s| s.path().to_path_buf());
                 return Ok(Truth {
                     dir: sweep.dir,
                     scenarios,
@@ -377,6 +381,7 @@ impl Truth {
                     keys,
                     effects: false,
                     sweep: true,
+                    _unpacked: unpacked,
                 });
             }
         }
@@ -393,6 +398,7 @@ impl Truth {
             sizes,
             keys,
             sweep: false,
+            _unpacked: None,
         })
     }
 
@@ -422,6 +428,25 @@ impl Truth {
         }
         Ok(())
     }
+}
+
+/// A packed sweep's pairs without their frames, unpacked into a folder of
+/// evaluate's own (`None` for a sweep of pair folders). Errors name the
+/// pack.
+fn unpack_sweep(sweep: &Sweep) -> Result<Option<crate::output::packs::Scratch>, String> {
+    let Some(packs) = sweep.packs() else { return Ok(None) };
+    let scratch = crate::output::packs::Scratch::new()?;
+    for number in 0..packs.len() {
+        let path = packs.path(&sweep.dir, &packs.pack(number));
+        if !path.is_file() {
+            return Err(format!(
+                "{}: missing pack: rerun the counterfactual --sweep command to write it",
+                path.display()
+            ));
+        }
+        crate::output::packs::unpack(&path, scratch.path(), &|name| !name.ends_with(".png"))?;
+    }
+    Ok(Some(scratch))
 }
 
 /// One scored scenario's predictions, checked against its files.
