@@ -146,7 +146,84 @@ def load(folder: PathLike, images: bool = True) -> "Scenario":
     return scenario
 
 
-class Dataset:
+class _Packed:
+    """What the readers of a packed output (``gen`` or ``counterfactual
+    --sweep`` with ``--format tar``) share: which tar file holds a key, and
+    a key's folder unpacked alone."""
+
+    root: Path
+    scenarios_per_tar: Optional[int]
+
+    def _index_packs(self, keys: List["Key"]) -> None:
+        """Notes each split's size (from every key of the spec, ``keys``),
+        which names the packs."""
+        self._members: Dict[str, Dict[str, List[Any]]] = {}
+        self._split_sizes: Dict[Tuple[str, str], int] = {}
+        for k in keys:
+            self._split_sizes[(k.group, k.split)] = self._split_sizes.get((k.group, k.split), 0) + 1
+
+    def pack_of(self, key: "Key") -> str:
+        """A packed output's tar file that holds ``key``'s folder, relative
+        to the root (``cars08_edges50/train/00000-00063.tar``)."""
+        per = self.scenarios_per_tar
+        if not per:
+            raise InputError(f"{_os.fspath(self.root)} is not packed: its scenarios are folders")
+        first = key.index // per * per
+        last = min(first + per, self._split_sizes[(key.group, key.split)]) - 1
+        return f"{key.group}/{key.split}/{first:05d}-{last:05d}.tar"
+
+    def _unpack(self, key: "Key", images: bool) -> Any:
+        """The folder of ``key`` (a scenario, or a counterfactual pair),
+        unpacked alone from its pack into a new temporary folder (a
+        ``TemporaryDirectory``, removed when dropped), frames only when
+        ``images``; None when its pack does not hold it."""
+        import tarfile
+        import tempfile
+
+        pack = self.pack_of(key)
+        path = self.root / pack
+        with tarfile.open(_os.fspath(path), "r:") as tar:
+            if pack not in self._members:
+                # Reading the headers seeks past the members' bytes.
+                by_folder: Dict[str, List[Any]] = {}
+                for member in tar:
+                    if not member.isdir():
+                        folder, _ = _member_parts(path, member)
+                        by_folder.setdefault(folder, []).append(member)
+                self._members[pack] = by_folder
+            members = self._members[pack].get(key.folder)
+            if members is None:
+                return None
+            scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
+            for member in members:
+                _, name = _member_parts(path, member)
+                if not images and name.endswith(".png"):
+                    continue
+                target = Path(scratch.name) / name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                data = tar.extractfile(member)
+                target.write_bytes(data.read() if data is not None else b"")
+        return scratch
+
+    def __getstate__(self) -> Dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_members"] = {}
+        return state
+
+
+def _keep_with_frames(scratch: Any, scenarios: List["Scenario"]) -> None:
+    """Hands the temporary folder ``scenarios`` were read from to their
+    frames, which read from it while they live; without frames it goes now."""
+    kept = False
+    for scenario in scenarios:
+        for frames in (scenario.rgb, scenario.mask):
+            if isinstance(frames, Frames):
+                frames._keep, kept = scratch, True
+    if not kept:
+        scratch.cleanup()
+
+
+class Dataset(_Packed):
     """A dataset folder ``gen`` wrote, opened for reading: its manifest, the
     spec it was made from (:attr:`spec`, a :class:`~causalcity.Spec`), its
     keys and its scenarios, read lazily one at a time. ``dataset[key]``,
@@ -184,64 +261,14 @@ class Dataset:
         # temporary folder of its own, which lives as long as its frames do.
         # Each pack's members are listed once per process (not pickled, so a
         # Dataset goes to DataLoader workers as a plain object).
-        self._members: Dict[str, Dict[str, List[Any]]] = {}
+        self._index_packs(self.spec.keys(None, self.manifest.get("limit")) if self.scenarios_per_tar else [])
         # Listed once: a dataset gen finished does not change under its readers.
         keys = self.spec.keys(split, self.manifest.get("limit"))
         if self.scenarios_per_tar:
-            self._split_sizes: Dict[Tuple[str, str], int] = {}
-            for k in self.spec.keys(None, self.manifest.get("limit")):
-                self._split_sizes[(k.group, k.split)] = self._split_sizes.get((k.group, k.split), 0) + 1
             self._keys = [k for k in keys if (self.root / self.pack_of(k)).is_file()]
         else:
             self._keys = [k for k in keys if (self.root / k.folder / "scenario.json").is_file()]
         self._key_set = set(self._keys)
-
-    def pack_of(self, key: "Key") -> str:
-        """A packed dataset's tar file that holds ``key``'s scenario, relative
-        to the root (``cars08_edges50/train/00000-00063.tar``)."""
-        per = self.scenarios_per_tar
-        if not per:
-            raise InputError(f"{_os.fspath(self.root)} is not packed: its scenarios are folders")
-        first = key.index // per * per
-        last = min(first + per, self._split_sizes[(key.group, key.split)]) - 1
-        return f"{key.group}/{key.split}/{first:05d}-{last:05d}.tar"
-
-    def _unpack(self, key: "Key", images: bool) -> Any:
-        """A packed dataset's scenario of ``key``, unpacked alone into a new
-        temporary folder (a ``TemporaryDirectory``, removed when dropped),
-        frames only when ``images``; None when its pack does not hold it."""
-        import tarfile
-        import tempfile
-
-        pack = self.pack_of(key)
-        path = self.root / pack
-        with tarfile.open(_os.fspath(path), "r:") as tar:
-            if pack not in self._members:
-                # Reading the headers seeks past the members' bytes.
-                by_folder: Dict[str, List[Any]] = {}
-                for member in tar:
-                    if not member.isdir():
-                        folder, _ = _member_parts(path, member)
-                        by_folder.setdefault(folder, []).append(member)
-                self._members[pack] = by_folder
-            members = self._members[pack].get(key.folder)
-            if members is None:
-                return None
-            scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
-            for member in members:
-                _, name = _member_parts(path, member)
-                if not images and name.endswith(".png"):
-                    continue
-                target = Path(scratch.name) / name
-                target.parent.mkdir(parents=True, exist_ok=True)
-                data = tar.extractfile(member)
-                target.write_bytes(data.read() if data is not None else b"")
-        return scratch
-
-    def __getstate__(self) -> Dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_members"] = {}
-        return state
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the scenarios on disk, in ``gen``'s order (groups,
@@ -267,16 +294,9 @@ class Dataset:
         if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
         scenario = load(Path(scratch.name), images=images)
-        # Its frames are read from the temporary folder it was unpacked
-        # into: they keep that folder while they live; without frames it
-        # goes now. Read from there, the scenario has the key it has here.
+        # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
-        kept = False
-        for frames in (scenario.rgb, scenario.mask):
-            if isinstance(frames, Frames):
-                frames._keep, kept = scratch, True
-        if not kept:
-            scratch.cleanup()
+        _keep_with_frames(scratch, [scenario])
         return scenario
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
@@ -349,12 +369,13 @@ def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = Tru
 
 
 
-class Sweep:
+class Sweep(_Packed):
     """A ``counterfactual --sweep`` output opened for reading: its record
     (``sweep.json``), the spec it was made from, and its pairs, each a
     :class:`~causalcity.Counterfactual` read from disk (the factual and
     counterfactual runs as :func:`load` reads them, ``divergence.csv``,
-    ``summary.json`` with its ``intervention``)."""
+    ``summary.json`` with its ``intervention``), from pair folders or from
+    the tar files of ``--format tar``."""
 
     def __init__(self, root: PathLike) -> None:
         from . import Spec
@@ -371,25 +392,49 @@ class Sweep:
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
         self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
+        self.scenarios_per_tar: Optional[int] = self.record.get("scenarios_per_tar")
+        """``--format tar``: pairs per tar file (None: a folder per pair)."""
+        self._index_packs(self.spec.keys(None, self.record.get("limit")) if self.scenarios_per_tar else [])
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
-        """The keys of the pairs on disk, in the sweep's order."""
-        return [k for k in self.spec.keys(split, self.record.get("limit")) if (self.root / k.folder / "summary.json").is_file()]
+        """The keys of the pairs on disk (in pair folders, or in the packs
+        there), in the sweep's order."""
+        keys = self.spec.keys(split, self.record.get("limit"))
+        if self.scenarios_per_tar:
+            return [k for k in keys if (self.root / self.pack_of(k)).is_file()]
+        return [k for k in keys if (self.root / k.folder / "summary.json").is_file()]
+
+    def pair_folder(self, key: "Key", images: bool = True) -> Tuple[Path, Any]:
+        """The folder of ``key``'s pair, and what keeps it: for a packed
+        sweep, a new temporary folder the pair is unpacked into (frames only
+        when ``images``; it goes when that ``TemporaryDirectory`` is
+        dropped or cleaned up), else the pair's own folder and None."""
+        from . import Key
+
+        key = Key(*key)
+        if not self.scenarios_per_tar:
+            folder = self.root / key.folder
+            if not (folder / "summary.json").is_file():
+                raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
+            return folder, None
+        scratch = self._unpack(key, images) if (self.root / self.pack_of(key)).is_file() else None
+        if scratch is None or not (Path(scratch.name) / "summary.json").is_file():
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no summary.json in its pack {self.pack_of(key)})")
+        return Path(scratch.name), scratch
 
     def load(self, key: "Key", images: bool = True) -> "Counterfactual":
         """The pair of ``key``: its two runs, divergence and summary."""
-        from . import Counterfactual, Key
+        from . import Counterfactual
 
-        key = Key(*key)
-        folder = self.root / key.folder
-        if not (folder / "summary.json").is_file():
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
+        folder, scratch = self.pair_folder(key, images)
         factual = load(folder / "factual", images=images)
         counterfactual = load(folder / "counterfactual", images=images)
         table = _np.loadtxt(folder / "divergence.csv", delimiter=",", skiprows=1, ndmin=2)
         divergence = _np.zeros((factual.frames, factual.cars))
         divergence[table[:, 0].astype(int), table[:, 2].astype(int)] = table[:, 3]
         summary = _json.loads((folder / "summary.json").read_text())
+        if scratch is not None:
+            _keep_with_frames(scratch, [factual, counterfactual])
         return Counterfactual(name=summary["scenario"], factual=factual, counterfactual=counterfactual,
                               divergence=divergence, summary=summary)  # fmt: skip
 

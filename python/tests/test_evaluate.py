@@ -4,6 +4,7 @@ memory order numpy saves is read the same, and bad predictions files are
 refused with exit status 2 and nothing written."""
 
 import csv
+import io
 import json
 import os
 import shlex
@@ -439,6 +440,74 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
         np.savez(tmp_path / "wrong.npz", **{"cars08_edges50/test/00000" + suffix: np.zeros((3, 8, 2))})
         run = cli("evaluate", CITY, tmp_path / "wrong.npz")
         assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr
+
+
+def test_a_packed_sweep_is_a_few_tar_files_read_scored_and_validated_as_its_folders(sweep, tmp_path):
+    import tarfile
+
+    from causalcity.methods.__main__ import main
+
+    packed = tmp_path / "packed"
+    args = ["counterfactual", "--sweep", sweep.parent / "spec.json", "--no-images", "--quiet", "--kinds", "stop,remove"]
+    run = cli(*args, "--format", "tar", "--scenarios-per-tar", 4, "--out", packed)
+    assert run.returncode == 0, run.stderr
+    groups = causalcity.open_sweep(sweep).spec.groups
+    # 2 train, 4 val and 6 test pairs per group: 1 + 1 + 2 tar files.
+    tars = sorted(packed.rglob("*.tar"))
+    assert len(tars) == 4 * len(groups)
+    assert sorted(p for p in packed.rglob("*") if p.is_file()) == sorted(tars + [packed / "sweep.json"])
+    folder_files = {p.relative_to(sweep).as_posix(): p.read_bytes() for p in sweep.rglob("*") if p.is_file()}
+    assert len(folder_files) > 10 * (len(tars) + 1)
+    # `tar -xf` of every pack gives the pair folders, byte for byte.
+    unpacked = {}
+    for path in tars:
+        with tarfile.open(path) as tar:
+            for member in tar:
+                unpacked[member.name] = tar.extractfile(member).read()
+    del folder_files["sweep.json"]
+    assert unpacked.keys() == folder_files.keys()
+    assert all(unpacked[name] == folder_files[name] for name in folder_files)
+    # The reader gives the same pairs.
+    folders, packs = causalcity.open_sweep(sweep), causalcity.open_sweep(packed)
+    assert packs.scenarios_per_tar == 4 and folders.scenarios_per_tar is None
+    assert packs.keys() == folders.keys() and len(packs.keys()) == 12 * len(groups)
+    for key in packs.keys():
+        a, b = folders.load(key), packs.load(key)
+        assert a.summary == b.summary and np.array_equal(a.divergence, b.divergence)
+        for run_a, run_b in ((a.factual, b.factual), (a.counterfactual, b.counterfactual)):
+            assert np.array_equal(run_a.position, run_b.position) and np.array_equal(run_a.pixels, run_b.pixels)
+    # A reference method predicts the same from either, and evaluate scores both alike.
+    reports = []
+    for source in (sweep, packed):
+        out = tmp_path / f"{source.name}.npz"
+        assert main(["cf_constant_velocity", str(source), "--out", str(out), "--quiet"]) == 0
+        reports.append(causalcity.evaluate(source, out))
+    with np.load(tmp_path / f"{sweep.name}.npz") as a, np.load(tmp_path / "packed.npz") as b:
+        assert sorted(a.files) == sorted(b.files) and all(np.array_equal(a[k], b[k]) for k in a.files)
+    for kind in ("edges", "counterfactuals"):
+        assert reports[0][kind] and reports[0][kind] == reports[1][kind], kind
+    # validate reads the packs: clean, then a changed member named in its pack.
+    run = cli("validate", packed)
+    assert run.returncode == 0 and "valid" in run.stdout, run.stdout + run.stderr
+    damaged = tars[0]
+    with tarfile.open(damaged) as tar:
+        members = [(m, tar.extractfile(m).read()) for m in tar]
+    with tarfile.open(damaged, "w") as tar:
+        for member, data in members:
+            if member.name.endswith("/factual/poses.csv"):
+                data = data.replace(b"0", b"1", 1)
+            tar.addfile(member, io.BytesIO(data))
+    run = cli("validate", packed)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert damaged.name in run.stdout and "factual/poses.csv: checksum mismatch" in run.stdout, run.stdout
+    # A rerun writes that pack again and keeps the others; folders into it are refused.
+    run = cli(*args, "--format", "tar", "--scenarios-per-tar", 4, "--out", packed)
+    assert run.returncode == 0 and "writing the pack again" in run.stderr, run.stderr
+    rewritten = len({member.name.split("/")[2] for member, _ in members})
+    assert f"{rewritten} written now, {12 * len(groups) - rewritten} kept" in run.stdout, run.stdout
+    assert cli("validate", packed).returncode == 0
+    run = cli(*args, "--out", packed)
+    assert run.returncode == 2 and "--format tar --scenarios-per-tar 4" in run.stderr, run.stderr
 
 
 def test_a_held_out_test_split_is_marked_out_of_distribution_beside_the_in_distribution_rows(tmp_path):

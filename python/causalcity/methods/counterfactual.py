@@ -33,7 +33,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -163,24 +163,46 @@ def _run_arrays(folder: Path) -> Tuple[np.ndarray, np.ndarray, dict]:
     return np.asarray(raw["pixels"]), metres, json.loads(raw["scenario_json"])
 
 
+def _pair_folders(root: Path, record: dict, group: str, split: str) -> Iterator[Tuple[str, Path]]:
+    """Each pair of ``group`` and ``split`` on disk, in order, as its folder
+    relative to the sweep and a folder to read it from: its own, or (a
+    packed sweep) a temporary one it is unpacked into without frames, which
+    goes once the next pair is asked for."""
+    if not record.get("scenarios_per_tar"):
+        for folder in sorted(p for p in (root / group / split).glob("*") if (p / "summary.json").is_file()):
+            yield str(folder.relative_to(root)).replace(os.sep, "/"), folder
+        return
+    from ..disk import Sweep
+
+    sweep = Sweep(root)
+    for key in sweep.keys(split):
+        if key.group == group:
+            folder, scratch = sweep.pair_folder(key, images=False)
+            try:
+                yield key.folder, folder
+            finally:
+                scratch.cleanup()
+
+
 def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
-    """Reads every pair of ``group`` and ``split``: the factual runs, the
-    interventions, and on train the counterfactual runs (:attr:`Pairs.truth`)."""
+    """Reads every pair of ``group`` and ``split`` (from pair folders, or from
+    a packed sweep's tar files): the factual runs, the interventions, and on
+    train the counterfactual runs (:attr:`Pairs.truth`)."""
     root = Path(sweep)
     record = _sweep_record(root)
     spec = record["spec"]
     groups = sweep_groups(root)
     if group not in groups:
         raise InputError(f"group {group!r} is not in {root}: its groups are {', '.join(groups)}")
-    folders = sorted(p for p in (root / group / split).glob("*") if (p / "summary.json").is_file())
-    pixels, metres, interventions, cf_pixels, affected = [], [], [], [], []
+    names, pixels, metres, interventions, cf_pixels, affected = [], [], [], [], [], []
     interval = float(spec.get("frame_interval") or 0.1)
-    for folder in folders:
+    for name, folder in _pair_folders(root, record, group, split):
+        names.append(name)
         summary = json.loads((folder / "summary.json").read_text())
         if "intervention" not in summary:
             raise DatasetError(
-                f"{folder / 'summary.json'}: no intervention record: the sweep was made before summary.json recorded "
-                "it; make it again into a new --out"
+                f"{root / name / 'summary.json'}: no intervention record: the sweep was made before summary.json "
+                "recorded it; make it again into a new --out"
             )
         px, m, meta = _run_arrays(folder / "factual")
         interval = float(meta.get("frame_interval", interval))
@@ -197,7 +219,7 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
         sweep=root,
         group=group,
         split=split,
-        folders=[str(f.relative_to(root)).replace(os.sep, "/") for f in folders],
+        folders=names,
         pixels=stack(pixels, (0, frames, 0, 2)),
         metres=stack(metres, (0, frames, 0, 4)),
         interventions=interventions,
