@@ -50,8 +50,9 @@ pub enum Command {
     Gen(GenArgs),
     /// Combine the outputs of `gen --shard K/N` runs into one dataset.
     Merge(MergeArgs),
-    /// Pack a dataset of scenario folders into tar files in a new folder:
-    /// what `gen --format tar` writes for its spec, byte for byte.
+    /// Pack a dataset of scenario folders (or a counterfactual sweep of pair
+    /// folders) into tar files in a new folder: what `gen --format tar`
+    /// (`counterfactual --sweep --format tar`) writes, byte for byte.
     Pack(PackArgs),
     /// Check a dataset against data-schema/ and its checksums.
     Validate(ValidateArgs),
@@ -567,7 +568,9 @@ pub struct MergeArgs {
 
 #[derive(Debug, Args)]
 pub struct PackArgs {
-    /// The dataset of scenario folders to pack (the one holding manifest.json); only read.
+    /// The dataset of scenario folders to pack (the one holding
+    /// manifest.json), or a counterfactual sweep of pair folders (sweep.json);
+    /// only read.
     #[arg(value_name = "DATASET")]
     pub dataset: PathBuf,
 
@@ -575,7 +578,7 @@ pub struct PackArgs {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
 
-    /// Scenarios per tar file (the last of a split may hold fewer).
+    /// Scenarios (or pairs) per tar file (the last of a split may hold fewer).
     #[arg(long, value_name = "N", default_value_t = DEFAULT_SCENARIOS_PER_TAR, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub scenarios_per_tar: u32,
 

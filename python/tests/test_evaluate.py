@@ -467,6 +467,13 @@ def test_a_packed_sweep_is_a_few_tar_files_read_scored_and_validated_as_its_fold
     del folder_files["sweep.json"]
     assert unpacked.keys() == folder_files.keys()
     assert all(unpacked[name] == folder_files[name] for name in folder_files)
+    # `pack` makes the same packs from the pair folders, byte for byte.
+    repacked = tmp_path / "repacked"
+    run = cli("pack", sweep, "--out", repacked, "--scenarios-per-tar", 4, "--quiet")
+    assert run.returncode == 0 and f"into {len(tars)} tar files" in run.stdout, run.stdout + run.stderr
+    mine = sorted(p.relative_to(packed) for p in packed.rglob("*") if p.is_file())
+    assert mine == sorted(p.relative_to(repacked) for p in repacked.rglob("*") if p.is_file())
+    assert all((packed / p).read_bytes() == (repacked / p).read_bytes() for p in mine)
     # The reader gives the same pairs.
     folders, packs = causalcity.open_sweep(sweep), causalcity.open_sweep(packed)
     assert packs.scenarios_per_tar == 4 and folders.scenarios_per_tar is None
