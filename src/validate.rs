@@ -11,7 +11,7 @@ use crate::output::layout::{
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
 use crate::output::manifest::Packing;
-use crate::output::packs::{split_pair, Packs, PAIR_FILES, PAIR_RUNS};
+use crate::output::packs::{split_pair, PackUnit, Packs, PAIR_FILES, PAIR_RUNS};
 use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
@@ -220,8 +220,12 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let results: Vec<ScenarioCheck> = match &packs {
         None => pool.install(|| keys.par_iter().map(|key| check_scenario(dir, key, &expected)).collect()),
         Some(packs) => {
-            let checked: Vec<Vec<ScenarioCheck>> = pool
-                .install(|| (0..packs.len()).into_par_iter().map(|n| check_pack(dir, packs, n, &expected)).collect());
+            let checked: Vec<Vec<ScenarioCheck>> = pool.install(|| {
+                (0..packs.len())
+                    .into_par_iter()
+                    .map(|n| check_pack(dir, packs, n, PackUnit::Scenario, &expected))
+                    .collect()
+            });
             checked.into_iter().flatten().collect()
         }
     };
@@ -336,7 +340,10 @@ fn validate_sweep(
         None => pool.install(|| keys.par_iter().map(check_pair).collect()),
         Some(packs) => pool
             .install(|| {
-                (0..packs.len()).into_par_iter().map(|n| check_pair_pack(dir, packs, n, &expected)).collect::<Vec<_>>()
+                (0..packs.len())
+                    .into_par_iter()
+                    .map(|n| check_pack(dir, packs, n, PackUnit::Pair, &expected))
+                    .collect::<Vec<_>>()
             })
             .into_iter()
             .flatten()
@@ -375,64 +382,6 @@ fn packed_pairs_have_images(dir: &Path, packs: &Packs<'_>, rgb: &str) -> bool {
         |_, _| Ok(()),
     );
     found.get()
-}
-
-/// Checks the pack `number` of a packed sweep as [`check_pack`] checks a
-/// dataset's: it holds its pairs and nothing else, each pair has its own
-/// files and a summary that reads, and each run is checked as a scenario
-/// of `gen`'s. Problems name the pack, and the file inside it.
-fn check_pair_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<'_>) -> Vec<ScenarioCheck> {
-    let pack = packs.pack(number);
-    let keys = packs.keys(&pack);
-    let path = packs.path(dir, &pack);
-    let mut checks: Vec<ScenarioCheck> = keys.iter().map(|_| (Vec::new(), 0, 0, Vec::new())).collect();
-    let problem = |message: String| {
-        let prefix = format!("{}: ", path.display());
-        let message = message.strip_prefix(&prefix).map(str::to_string).unwrap_or(message);
-        Problem { path: path.clone(), message }
-    };
-    if !path.is_file() {
-        checks[0].0.push(problem("missing pack: rerun the counterfactual --sweep command to write it".into()));
-        return checks;
-    }
-    let read = crate::output::packs::read_scenarios(&path, &keys, |i, members| {
-        let folder = PathBuf::from(keys[i].relative_folder());
-        let members = split_pair(members);
-        let check = &mut checks[i];
-        for name in PAIR_FILES.iter().filter(|name| !members.pair.contains_key(**name)) {
-            check.0.push(problem(format!("{}: missing", folder.join(name).display())));
-        }
-        for extra in members.pair.keys().filter(|name| !PAIR_FILES.contains(&name.as_str())) {
-            check.0.push(problem(format!("{}: unexpected file", folder.join(extra).display())));
-        }
-        if let Some(text) = members.pair.get("summary.json") {
-            if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(text) {
-                check.0.push(problem(format!("{}: not a pair summary: {e}", folder.join("summary.json").display())));
-            }
-        }
-        for (run, run_members) in PAIR_RUNS.into_iter().zip(&members.runs) {
-            let key = ScenarioKey { name: Some(format!("{}/{run}", keys[i].folder_name())), ..keys[i].clone() };
-            let (found, files, bytes, _) =
-                check_scenario_files(&folder.join(run), &ScenarioFiles::Members(run_members), &key, expected);
-            check.0.extend(found.into_iter().map(|p| problem(format!("{}: {}", p.path.display(), p.message))));
-            check.1 += files;
-            check.2 += bytes;
-        }
-        Ok(())
-    });
-    match read {
-        Ok(found) => {
-            for (i, _) in found.iter().enumerate().filter(|(_, f)| !**f) {
-                let message = format!(
-                    "{} is not in it: rerun the counterfactual --sweep command to write the pack again",
-                    keys[i].relative_folder()
-                );
-                checks[i].0.push(problem(message));
-            }
-        }
-        Err(why) => checks[0].0.push(problem(why)),
-    }
-    checks
 }
 
 /// Leftovers of interrupted runs, and files and folders the manifest does
@@ -505,14 +454,26 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec, pack
     problems
 }
 
-/// Checks the pack `number`: that it holds its scenarios whole and nothing
-/// else, then each of its scenarios as a folder's, from its members read
-/// into memory a scenario at a time. Problems name the pack, and the file
+/// Checks the pack `number` of a packed dataset (`unit` scenarios) or
+/// sweep (pairs): that it holds its folders whole and nothing else, then
+/// each as a folder's, from its members read into memory a folder at a
+/// time: a scenario as `gen`'s, a pair by its own files, a summary that
+/// reads, and each run as a scenario. Problems name the pack, and the file
 /// inside it.
-fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<'_>) -> Vec<ScenarioCheck> {
+fn check_pack(
+    dir: &Path,
+    packs: &Packs<'_>,
+    number: usize,
+    unit: PackUnit,
+    expected: &Expected<'_>,
+) -> Vec<ScenarioCheck> {
     let pack = packs.pack(number);
     let keys = packs.keys(&pack);
     let path = packs.path(dir, &pack);
+    let rerun = match unit {
+        PackUnit::Scenario => "rerun gen",
+        PackUnit::Pair => "rerun the counterfactual --sweep command",
+    };
     let mut checks: Vec<ScenarioCheck> = keys.iter().map(|_| (Vec::new(), 0, 0, Vec::new())).collect();
     let problem = |message: String| {
         let prefix = format!("{}: ", path.display());
@@ -520,29 +481,56 @@ fn check_pack(dir: &Path, packs: &Packs<'_>, number: usize, expected: &Expected<
         Problem { path: path.clone(), message }
     };
     if !path.is_file() {
-        checks[0].0.push(problem("missing pack: rerun gen to write it".into()));
+        checks[0].0.push(problem(format!("missing pack: {rerun} to write it")));
         return checks;
     }
     let folder_of = ScenarioKey::relative_folder;
-    let mut check = |i: usize, members: BTreeMap<String, Vec<u8>>| {
-        let folder = PathBuf::from(folder_of(&keys[i]));
-        let (found, files, bytes, prints) =
-            check_scenario_files(&folder, &ScenarioFiles::Members(&members), &keys[i], expected);
-        let found = found.into_iter().map(|p| problem(format!("{}: {}", p.path.display(), p.message)));
-        checks[i].0.extend(found);
-        (checks[i].1, checks[i].2, checks[i].3) = (files, bytes, prints);
-    };
-    // One pass: the pack's membership, and each scenario as it is read.
+    // A scenario's files (`members`, of the folder `folder` in the pack)
+    // as `gen`'s, into `check`.
+    let scenario =
+        |check: &mut ScenarioCheck, folder: &Path, members: &BTreeMap<String, Vec<u8>>, key: &ScenarioKey| {
+            let (found, files, bytes, prints) =
+                check_scenario_files(folder, &ScenarioFiles::Members(members), key, expected);
+            check.0.extend(found.into_iter().map(|p| problem(format!("{}: {}", p.path.display(), p.message))));
+            check.1 += files;
+            check.2 += bytes;
+            check.3.extend(prints);
+        };
+    // One pass: the pack's membership, and each folder as it is read.
     let read = crate::output::packs::read_scenarios(&path, &keys, |i, members| {
-        check(i, members);
+        let folder = PathBuf::from(folder_of(&keys[i]));
+        let check = &mut checks[i];
+        match unit {
+            PackUnit::Scenario => scenario(check, &folder, &members, &keys[i]),
+            PackUnit::Pair => {
+                let members = split_pair(members);
+                for name in PAIR_FILES.iter().filter(|name| !members.pair.contains_key(**name)) {
+                    check.0.push(problem(format!("{}: missing", folder.join(name).display())));
+                }
+                for extra in members.pair.keys().filter(|name| !PAIR_FILES.contains(&name.as_str())) {
+                    check.0.push(problem(format!("{}: unexpected file", folder.join(extra).display())));
+                }
+                if let Some(text) = members.pair.get("summary.json") {
+                    if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(text) {
+                        let summary = folder.join("summary.json");
+                        check.0.push(problem(format!("{}: not a pair summary: {e}", summary.display())));
+                    }
+                }
+                for (run, run_members) in PAIR_RUNS.into_iter().zip(&members.runs) {
+                    let key = ScenarioKey { name: Some(format!("{}/{run}", keys[i].folder_name())), ..keys[i].clone() };
+                    scenario(check, &folder.join(run), run_members, &key);
+                }
+                // A pair's runs are not a dataset's scenarios: no twins are sought.
+                check.3.clear();
+            }
+        }
         Ok(())
     });
     match read {
         Ok(found) => {
             for (i, _) in found.iter().enumerate().filter(|(_, f)| !**f) {
-                checks[i]
-                    .0
-                    .push(problem(format!("{} is not in it: rerun gen to write the pack again", folder_of(&keys[i]))));
+                let message = format!("{} is not in it: {rerun} to write the pack again", folder_of(&keys[i]));
+                checks[i].0.push(problem(message));
             }
         }
         Err(why) => checks[0].0.push(problem(why)),

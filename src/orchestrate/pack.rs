@@ -34,19 +34,7 @@ pub fn pack_dataset(
         }
     }
     let opened = Dataset::open_complete(dataset).map_err(GenError::Input)?;
-    if let Packing::Tar { per_tar } = opened.record.packing() {
-        return Err(GenError::Input(format!(
-            "{} is packed already ({per_tar} scenarios per tar): pack reads a dataset of scenario folders",
-            dataset.display()
-        )));
-    }
-    if resolve(out) == resolve(dataset) {
-        return Err(GenError::Input(format!(
-            "--out {} is the dataset itself: pack writes a new dataset and leaves its input as it is; nothing was written",
-            out.display()
-        )));
-    }
-    let _claim = claim(out, Writer::Pack, &format!("pack {}", dataset.display())).map_err(GenError::Claim)?;
+    let _claim = claim_out(dataset, opened.record.packing(), out, Writer::Pack, ("dataset", "scenarios", "scenario"))?;
     let spec = opened.spec();
     let (products, packing) = (opened.record.products(), Packing::Tar { per_tar: per_tar.max(1) });
     let manifest_path = out.join("manifest.json");
@@ -77,17 +65,9 @@ pub fn pack_dataset(
             )
         })
     };
-    let (kept, bytes) = pack_all(&opened.dir, out, &packs, PackUnit::Scenario, &whole, threads, progress)?;
+    let packed = pack_all(&opened.dir, out, &packs, PackUnit::Scenario, &whole, threads, progress)?;
     write_atomically(&manifest_path, &manifest(true))?;
-    Ok(format!(
-        "packed {} scenarios of {} into {} tar files in {} ({:.1} MB written, {kept} packs already there kept) in {:.1} s",
-        opened.key_sequence().len(),
-        dataset.display(),
-        packs.len(),
-        out.display(),
-        bytes as f64 / 1e6,
-        start.elapsed().as_secs_f64()
-    ))
+    Ok(packed.describe(opened.key_sequence().len(), "scenarios", dataset, out, start))
 }
 
 /// Packs the finished sweep `sweep` into `out` as `counterfactual --sweep
@@ -102,19 +82,7 @@ fn pack_sweep(
 ) -> Result<String, GenError> {
     let start = Instant::now();
     let input = &sweep.dir;
-    if let Packing::Tar { per_tar } = sweep.packing {
-        return Err(GenError::Input(format!(
-            "{} is packed already ({per_tar} pairs per tar): pack reads a sweep of pair folders",
-            input.display()
-        )));
-    }
-    if resolve(out) == resolve(input) {
-        return Err(GenError::Input(format!(
-            "--out {} is the sweep itself: pack writes a new sweep and leaves its input as it is; nothing was written",
-            out.display()
-        )));
-    }
-    let _claim = claim(out, Writer::Sweep, &format!("pack {}", input.display())).map_err(GenError::Claim)?;
+    let _claim = claim_out(input, sweep.packing, out, Writer::Sweep, ("sweep", "pairs", "pair"))?;
     // The input's record, as the packed sweep's: the same fields, and how
     // it is packed. (Only a finished sweep opens.)
     let path = input.join(SWEEP_RECORD);
@@ -159,24 +127,63 @@ fn pack_sweep(
             dir.display()
         )),
     };
-    let (kept, bytes) = pack_all(input, out, &packs, PackUnit::Pair, &whole, threads, progress)?;
+    let packed = pack_all(input, out, &packs, PackUnit::Pair, &whole, threads, progress)?;
     write_atomically(&record_path, &json(true))?;
-    Ok(format!(
-        "packed {} counterfactual pairs of {} into {} tar files in {} ({:.1} MB written, {kept} packs already there \
-         kept) in {:.1} s",
-        sweep.key_sequence().len(),
-        input.display(),
-        packs.len(),
-        out.display(),
-        bytes as f64 / 1e6,
-        start.elapsed().as_secs_f64()
-    ))
+    Ok(packed.describe(sweep.key_sequence().len(), "counterfactual pairs", input, out, start))
+}
+
+/// What [`pack_all`] did.
+struct Packed {
+    packs: usize,
+    kept: u64,
+    bytes: u64,
+}
+
+impl Packed {
+    /// In words, for `count` `what` ("scenarios") of `input` packed into
+    /// `out` since `start`.
+    fn describe(&self, count: usize, what: &str, input: &Path, out: &Path, start: Instant) -> String {
+        format!(
+            "packed {count} {what} of {} into {} tar files in {} ({:.1} MB written, {} packs already there kept) in \
+             {:.1} s",
+            input.display(),
+            self.packs,
+            out.display(),
+            self.bytes as f64 / 1e6,
+            self.kept,
+            start.elapsed().as_secs_f64()
+        )
+    }
+}
+
+/// Refuses an `input` (a `what`: "dataset" or "sweep", of `units` in
+/// `unit` folders) that is packed already, or `out` that is `input`; then
+/// claims `out` for `writer`.
+fn claim_out(
+    input: &Path,
+    packing: Packing,
+    out: &Path,
+    writer: Writer,
+    (what, units, unit): (&str, &str, &str),
+) -> Result<crate::output::claim::Claim, GenError> {
+    if let Packing::Tar { per_tar } = packing {
+        return Err(GenError::Input(format!(
+            "{} is packed already ({per_tar} {units} per tar): pack reads a {what} of {unit} folders",
+            input.display()
+        )));
+    }
+    if resolve(out) == resolve(input) {
+        return Err(GenError::Input(format!(
+            "--out {} is the {what} itself: pack writes a new {what} and leaves its input as it is; nothing was written",
+            out.display()
+        )));
+    }
+    claim(out, writer, &format!("pack {}", input.display())).map_err(GenError::Claim)
 }
 
 /// Writes every pack of `packs` from the folders under `input` into `out`,
 /// on `threads` threads, after checking each folder with `whole`; keeps
-/// the packs already there and whole. Returns the packs kept and the bytes
-/// written.
+/// the packs already there and whole.
 fn pack_all(
     input: &Path,
     out: &Path,
@@ -185,7 +192,7 @@ fn pack_all(
     whole: &(dyn Fn(&Path) -> Result<(), String> + Sync),
     threads: Option<usize>,
     progress: ProgressMode,
-) -> Result<(u64, u64), GenError> {
+) -> Result<Packed, GenError> {
     let threads =
         threads.filter(|&t| t > 0).unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new()
@@ -215,5 +222,5 @@ fn pack_all(
         })
     })?;
     bar.finish();
-    Ok((kept.load(Ordering::Relaxed), bytes.load(Ordering::Relaxed)))
+    Ok(Packed { packs: packs.len(), kept: kept.load(Ordering::Relaxed), bytes: bytes.load(Ordering::Relaxed) })
 }
