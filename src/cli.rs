@@ -131,7 +131,7 @@ pub struct CounterfactualArgs {
     /// Interventions to add for the counterfactual (a JSON list, as a
     /// scenario's "interventions"); without it, the scenario's own
     /// interventions make the counterfactual.
-    #[arg(long, value_name = "FILE", requires = "scenario")]
+    #[arg(long, value_name = "FILE")]
     pub intervention: Option<PathBuf>,
 
     /// Counterfactual pairs at scale from a `gen` spec (city world): one
@@ -146,13 +146,14 @@ pub struct CounterfactualArgs {
     /// --sweep: how pairs are stored: `folders` (a folder each) or `tar`:
     /// whole pairs packed --scenarios-per-tar at a time into
     /// `<group>/<split>/<first>-<last>.tar`, with the folders' files and
-    /// bytes inside (`tar -xf` gives the folders), as `gen --format tar`.
-    #[arg(long, value_enum, default_value_t = FormatArg::Folders, requires = "sweep")]
-    pub format: FormatArg,
+    /// bytes inside (`tar -xf` gives the folders), as `gen --format tar`
+    /// [default: folders].
+    #[arg(long, value_enum)]
+    pub format: Option<FormatArg>,
 
     /// --sweep with --format tar: pairs per tar file (the last of a split
     /// may hold fewer) [default: 64].
-    #[arg(long, value_name = "N", requires = "sweep", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub scenarios_per_tar: Option<u32>,
 
     /// --sweep: at most N scenarios per split and group.
@@ -168,7 +169,7 @@ pub struct CounterfactualArgs {
     pub out: Option<PathBuf>,
 
     /// World to run a scenario file in [default: the file's "world", else city].
-    #[arg(long, value_enum, requires = "scenario")]
+    #[arg(long, value_enum)]
     pub world: Option<WorldArg>,
 
     /// Write scenario.json and the logs only, no PNG frames or masks.
@@ -185,6 +186,28 @@ pub struct CounterfactualArgs {
     /// --sweep: no progress output.
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+impl CounterfactualArgs {
+    /// The first flag given that only the other source (`--scenario` or
+    /// `--sweep`) reads. (Clap's `requires` is not enforced beside the
+    /// source group, so this is checked here.)
+    fn flag_of_the_other_source(&self) -> Option<&'static str> {
+        if self.sweep.is_some() {
+            [("--intervention", self.intervention.is_some()), ("--world", self.world.is_some())]
+                .into_iter()
+                .find_map(|(flag, given)| given.then_some(flag))
+        } else {
+            [
+                ("--format", self.format.is_some()),
+                ("--scenarios-per-tar", self.scenarios_per_tar.is_some()),
+                ("--limit", self.limit.is_some()),
+                ("--threads", self.threads.is_some()),
+            ]
+            .into_iter()
+            .find_map(|(flag, given)| given.then_some(flag))
+        }
+    }
 }
 
 #[derive(Debug, Args)]
@@ -942,6 +965,13 @@ pub fn run(cli: Cli) -> Result<(), Error> {
         Command::Counterfactual(args) => {
             causalcity::orchestrate::run::install_signal_handler();
             let images = !args.no_images;
+            if let Some(flag) = args.flag_of_the_other_source() {
+                let (this, other) =
+                    if args.sweep.is_some() { ("--sweep", "--scenario") } else { ("--scenario", "--sweep") };
+                return Err(Error::input(format!(
+                    "{flag} belongs to {other}, not {this}: leave it out (it would be ignored); nothing was written"
+                )));
+            }
             if let Some(spec_path) = args.sweep {
                 let options = SweepOptions {
                     spec_path,
@@ -949,7 +979,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     limit: args.limit,
                     kinds: args.kinds.into_iter().map(Into::into).collect(),
                     products: Products { images, annotations: false, effects: false, lights: args.lights.log() },
-                    packing: packing(args.format, args.scenarios_per_tar)?,
+                    packing: packing(args.format.unwrap_or(FormatArg::Folders), args.scenarios_per_tar)?,
                     threads: args.threads.map(|t| t as usize),
                     progress: progress(args.quiet),
                 };

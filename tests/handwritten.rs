@@ -978,3 +978,30 @@ fn a_scenario_file_can_happen_on_a_grid_town_naming_its_lanes_as_causalcity_map_
         assert!(!out.exists(), "{case}: nothing written");
     }
 }
+
+#[test]
+fn a_counterfactual_flag_of_the_other_source_is_refused_with_exit_2_and_nothing_written() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let file = root.join("configs/examples/stop-the-leader.json");
+    let spec = root.join("configs/ci-city.json");
+    let (file, spec) = (file.to_str().unwrap(), spec.to_str().unwrap());
+    let dir = fresh_dir("hw-other-source");
+    let cases: [(&[&str], &str); 6] = [
+        (&["--scenario", file, "--format", "tar"], "--format"),
+        (&["--scenario", file, "--scenarios-per-tar", "4"], "--scenarios-per-tar"),
+        (&["--scenario", file, "--limit", "1"], "--limit"),
+        (&["--scenario", file, "-j", "2"], "--threads"),
+        (&["--sweep", spec, "--world", "toy"], "--world"),
+        (&["--sweep", spec, "--intervention", file], "--intervention"),
+    ];
+    for (args, flag) in cases {
+        let out = dir.join(flag.trim_start_matches('-'));
+        let mut command = vec!["counterfactual", "--out", out.to_str().unwrap()];
+        command.extend_from_slice(args);
+        let output = run(&command);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(&format!("{flag} belongs to")), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
+}
