@@ -541,12 +541,13 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         Ok(summaries) => summaries,
         Err(GenError::Interrupted { .. }) => {
             let in_folders = keys.iter().filter(|key| folder_of(key).join("summary.json").exists()).count();
-            let in_packs: usize = packs
-                .iter()
-                .flat_map(|p| (0..p.len()).map(|n| p.pack(n)))
-                .filter(|pack| packs.is_some_and(|p| p.path(&out, pack).is_file()))
-                .map(|pack| pack.count as usize)
-                .sum();
+            let in_packs: usize = packs.as_ref().map_or(0, |p| {
+                (0..p.len())
+                    .map(|n| p.pack(n))
+                    .filter(|pack| p.path(&out, pack).is_file())
+                    .map(|pack| pack.count as usize)
+                    .sum()
+            });
             let done = (in_folders + in_packs) as u64;
             return Err(RunError::Write(GenError::Interrupted { done, total: keys.len() as u64, out }));
         }
@@ -566,7 +567,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
 /// The summaries of the pairs in the pack at `path` (whole: verified).
 fn packed_summaries(path: &Path) -> Result<Vec<PairSummary>, GenError> {
     let mut summaries = Vec::new();
-    crate::output::packs::read_members_where(path, &|name| name.ends_with("/summary.json"), |name, bytes| {
+    let summary =
+        |name: &str| crate::output::packs::split_member(name).is_some_and(|(_, within)| within == "summary.json");
+    crate::output::packs::read_members_where(path, &summary, |name, bytes| {
         let summary = serde_json::from_slice(&bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
         summaries.push(summary);
         Ok(())

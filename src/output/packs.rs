@@ -427,24 +427,28 @@ pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
 }
 
 /// [`verify`] for packs of `unit`'s folders. A pair is whole when both its
-/// runs are, by their listings, and it has its [`PAIR_FILES`] and nothing
-/// else.
+/// runs are, by their listings, and it has its [`PAIR_FILES`], a summary
+/// that reads, and nothing else.
 pub fn verify_of(unit: PackUnit, path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
     let found = read_scenarios(path, keys, |i, members| {
         let folder = keys[i].relative_folder();
         match unit {
             PackUnit::Scenario => verify_listed(path, &folder, members),
             PackUnit::Pair => {
-                let mut runs = split_pair(members);
+                let mut split = split_pair(members);
                 for name in PAIR_FILES {
-                    if runs.pair.remove(name).is_none() {
+                    if !split.pair.contains_key(name) {
                         return Err(format!("{}: {folder}/{name} is missing", path.display()));
                     }
                 }
-                if let Some(extra) = runs.pair.keys().next() {
+                let summary = split.pair.remove("summary.json").unwrap_or_default();
+                if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(&summary) {
+                    return Err(format!("{}: {folder}/summary.json: not a pair summary: {e}", path.display()));
+                }
+                if let Some(extra) = split.pair.keys().find(|name| !PAIR_FILES.contains(&name.as_str())) {
                     return Err(format!("{}: {folder}/{extra} is not part of a pair", path.display()));
                 }
-                for (run, members) in PAIR_RUNS.into_iter().zip(runs.runs) {
+                for (run, members) in PAIR_RUNS.into_iter().zip(split.runs) {
                     verify_listed(path, &format!("{folder}/{run}"), members)?;
                 }
                 Ok(())
