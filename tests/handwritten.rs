@@ -265,22 +265,18 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
     let dir = fresh_dir("hw-sweep");
     let spec = write_spec(&dir, &city_spec("sweep", &[(6, 0.5)], (3, 1, 0), 60, "{}"));
     let mut trees = Vec::new();
+    // The sweep into `out` on `threads`, with `extra` flags.
+    let sweep = |out: &Path, threads: &str, extra: &[&str]| {
+        let spec = spec.to_str().unwrap();
+        let mut args = vec!["counterfactual", "--sweep", spec, "--out", out.to_str().unwrap(), "--no-images", "-q"];
+        args.extend_from_slice(&["-j", threads, "--kinds", "stop,remove"]);
+        args.extend_from_slice(extra);
+        let output = run(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    };
     for threads in ["1", "2"] {
         let out = dir.join(format!("out{threads}"));
-        let output = run(&[
-            "counterfactual",
-            "--sweep",
-            spec.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--no-images",
-            "-q",
-            "-j",
-            threads,
-            "--kinds",
-            "stop,remove",
-        ]);
-        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        sweep(&out, threads, &[]);
         trees.push(hash_tree(&out));
         let pairs: Vec<PathBuf> = ["train/00000", "train/00001", "train/00002", "val/00000"]
             .iter()
@@ -316,24 +312,7 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
         // Packed, the same pairs are in tar files whose bytes do not depend
         // on the threads either.
         let packed = dir.join(format!("packed{threads}"));
-        let output = run(&[
-            "counterfactual",
-            "--sweep",
-            spec.to_str().unwrap(),
-            "--out",
-            packed.to_str().unwrap(),
-            "--no-images",
-            "-q",
-            "-j",
-            threads,
-            "--kinds",
-            "stop,remove",
-            "--format",
-            "tar",
-            "--scenarios-per-tar",
-            "2",
-        ]);
-        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        sweep(&packed, threads, &["--format", "tar", "--scenarios-per-tar", "2"]);
         let tars = ["train/00000-00001.tar", "train/00002-00002.tar", "val/00000-00000.tar"];
         for tar in tars {
             assert!(packed.join("cars06_edges50").join(tar).is_file(), "{tar}");
