@@ -166,6 +166,15 @@ pub struct RouteLeg {
     pub prepares: Option<usize>,
 }
 
+impl RouteLeg {
+    /// Position and heading at route arc length `s` (clamped to this leg),
+    /// `lateral` metres left of the centre line.
+    fn pose(&self, s: f64, lateral: f64) -> (DVec2, f64) {
+        let on_curve = self.curve_start + (s - self.route_start).clamp(0.0, self.length);
+        (self.curve.position(on_curve, lateral), self.curve.heading_at(on_curve))
+    }
+}
+
 /// A car's path from the start of its spawn lane, parameterised by arc length.
 #[derive(Debug, Clone)]
 pub struct Route {
@@ -456,9 +465,23 @@ impl Route {
     /// Position and heading at route arc length `s`, `lateral` metres left of
     /// the centre line.
     pub fn pose_at(&self, s: f64, lateral: f64) -> (DVec2, f64) {
-        let leg = self.leg_at(s);
-        let on_curve = leg.curve_start + (s - leg.route_start).clamp(0.0, leg.length);
-        (leg.curve.position(on_curve, lateral), leg.curve.heading_at(on_curve))
+        self.leg_at(s).pose(s, lateral)
+    }
+
+    /// [`Route::pose_at`] for a caller that knows which leg `s` is probably
+    /// on (a car's current leg): the same pose, without the search when
+    /// `hint` is that leg.
+    pub fn pose_at_near(&self, hint: usize, s: f64, lateral: f64) -> (DVec2, f64) {
+        let end = |k: usize| self.legs[k].route_start + self.legs[k].length;
+        let last = self.legs.len() - 1;
+        // The leg `leg_index_at` finds: the first whose end is past `s`, or the last.
+        let found = hint <= last && (hint == 0 || end(hint - 1) <= s) && (hint == last || end(hint) > s);
+        debug_assert!(!found || hint == self.leg_index_at(s), "leg {hint} is not where s = {s} is");
+        if found {
+            self.legs[hint].pose(s, lateral)
+        } else {
+            self.pose_at(s, lateral)
+        }
     }
 
     /// The lanes, lane changes and connectors of the route in order.

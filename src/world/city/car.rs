@@ -214,7 +214,7 @@ impl SimCar<'_> {
 
     /// Centre (metres) and heading (radians) on the map, wander included.
     pub(super) fn pose(&self) -> (DVec2, f64) {
-        self.route.pose_at(self.s, self.wander)
+        self.route.pose_at_near(self.leg, self.s, self.wander)
     }
 
     /// A point and a radius (metres) such that the car's centre is within
