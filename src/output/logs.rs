@@ -4,7 +4,8 @@
 //! `data-schema/interactions.schema.json` and `data-schema/effects.schema.json`.
 
 use super::number::{push_fixed, push_int};
-use super::poses::{Fields, PIXEL_DECIMALS};
+use super::poses::PIXEL_DECIMALS;
+use super::rows::Rows;
 use crate::map::signals::{light_label, LightPlan};
 use crate::world::effects::{EffectReport, EffectRow, InterventionKind};
 use crate::world::{BoundBy, Trajectories};
@@ -168,25 +169,21 @@ pub fn write_interactions<W: Write>(
     plan: &LightPlan,
     intersection_names: &[String],
     trajectories: &Trajectories,
-) -> csv::Result<()> {
-    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
-    w.write_record(INTERACTION_COLUMNS)?;
-    let mut fields = Fields::default();
+) -> std::io::Result<()> {
+    let mut rows = Rows::new(out, &INTERACTION_COLUMNS)?;
     let light_names = light_names(plan, intersection_names);
     for (frame, cars) in trajectories.interactions.iter().enumerate() {
         for (car, interaction) in cars.iter().enumerate() {
-            fields.int(&mut w, frame as u64)?;
-            fields.int(&mut w, car as u64)?;
-            w.write_field(interaction.bound_by.name())?;
+            rows.int(frame as u64).int(car as u64).text(interaction.bound_by.name());
             match interaction.other_car {
-                Some(other) => fields.int(&mut w, other as u64)?,
-                None => w.write_field("")?,
-            }
-            w.write_field(interaction.light.map_or("", |l| light_names[l].as_str()))?;
-            w.write_record(None::<&[u8]>)?;
+                Some(other) => rows.int(other as u64),
+                None => rows.text(""),
+            };
+            rows.text(interaction.light.map_or("", |l| light_names[l].as_str()));
+            rows.end()?;
         }
     }
-    w.flush()?;
+    rows.finish()?;
     Ok(())
 }
 
@@ -239,23 +236,19 @@ pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<
 /// how far the other car moved from its factual trajectory, the first frame
 /// beyond the report's threshold (empty when none) and whether the effect is
 /// direct (`1`) or not (`0`).
-pub fn write_effects<W: Write>(out: W, report: &EffectReport) -> csv::Result<()> {
-    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
-    w.write_record(EFFECT_COLUMNS)?;
-    let mut fields = Fields::default();
+pub fn write_effects<W: Write>(out: W, report: &EffectReport) -> std::io::Result<()> {
+    let mut rows = Rows::new(out, &EFFECT_COLUMNS)?;
     for row in &report.rows {
-        fields.int(&mut w, row.cause as u64)?;
-        fields.int(&mut w, row.effect as u64)?;
-        w.write_field(row.intervention.name())?;
-        fields.fixed(&mut w, row.max_divergence_m, DIVERGENCE_DECIMALS)?;
+        rows.int(row.cause as u64).int(row.effect as u64).text(row.intervention.name());
+        rows.fixed(row.max_divergence_m, DIVERGENCE_DECIMALS);
         match row.first_frame {
-            Some(frame) => fields.int(&mut w, frame as u64)?,
-            None => w.write_field("")?,
-        }
-        w.write_field(if row.direct { "1" } else { "0" })?;
-        w.write_record(None::<&[u8]>)?;
+            Some(frame) => rows.int(frame as u64),
+            None => rows.text(""),
+        };
+        rows.text(if row.direct { "1" } else { "0" });
+        rows.end()?;
     }
-    w.flush()?;
+    rows.finish()?;
     Ok(())
 }
 

@@ -17,6 +17,7 @@ pub mod packs;
 pub mod pair_summary;
 pub mod png;
 pub mod poses;
+pub mod rows;
 pub mod scenario;
 pub mod writer;
 

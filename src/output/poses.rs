@@ -2,6 +2,7 @@
 //! Columns are documented in `data-schema/poses.columns.json`.
 
 use super::number::logged_value;
+use super::rows::Rows;
 use crate::camera::Camera;
 use crate::world::Trajectories;
 use std::io::Write;
@@ -56,31 +57,29 @@ pub fn parse_pixels(bytes: &[u8], path: &std::path::Path, frames: usize, cars: u
 }
 
 /// Writes the pose log of `trajectories` for cars with the given ids.
-pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> csv::Result<()> {
-    let mut writer = csv::WriterBuilder::new().has_headers(false).from_writer(out);
-    writer.write_record(POSE_COLUMNS)?;
-    let mut fields = Fields::default();
+pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> std::io::Result<()> {
+    let mut rows = Rows::new(out, &POSE_COLUMNS)?;
     for (frame, states) in trajectories.states.iter().enumerate() {
         let t = frame as f64 * trajectories.frame_interval;
         for (state, &car) in states.iter().zip(car_ids) {
             let pixel = camera.to_pixel(state.position);
-            fields.int(&mut writer, frame as u64)?;
-            fields.fixed(&mut writer, t, 6)?;
-            fields.int(&mut writer, car as u64)?;
-            fields.fixed(&mut writer, state.position.x, 4)?;
-            fields.fixed(&mut writer, state.position.y, 4)?;
-            fields.fixed(&mut writer, state.z, 4)?;
-            fields.fixed(&mut writer, state.roll, 6)?;
-            fields.fixed(&mut writer, state.pitch, 6)?;
-            fields.fixed(&mut writer, state.yaw, 6)?;
-            fields.fixed(&mut writer, pixel.x, PIXEL_DECIMALS)?;
-            fields.fixed(&mut writer, pixel.y, PIXEL_DECIMALS)?;
-            fields.fixed(&mut writer, state.speed, 4)?;
-            fields.int(&mut writer, camera.contains_pixel(pixel) as u64)?;
-            writer.write_record(None::<&[u8]>)?;
+            rows.int(frame as u64)
+                .fixed(t, 6)
+                .int(car as u64)
+                .fixed(state.position.x, 4)
+                .fixed(state.position.y, 4)
+                .fixed(state.z, 4)
+                .fixed(state.roll, 6)
+                .fixed(state.pitch, 6)
+                .fixed(state.yaw, 6)
+                .fixed(pixel.x, PIXEL_DECIMALS)
+                .fixed(pixel.y, PIXEL_DECIMALS)
+                .fixed(state.speed, 4)
+                .int(camera.contains_pixel(pixel) as u64);
+            rows.end()?;
         }
     }
-    writer.flush()?;
+    rows.finish()?;
     Ok(())
 }
 
@@ -97,24 +96,4 @@ pub fn logged_pose(state: &crate::world::CarState) -> [f64; 7] {
         logged_value(state.yaw, 6),
         logged_value(state.speed, 4),
     ]
-}
-
-/// A scratch buffer for formatting one field at a time.
-#[derive(Default)]
-pub struct Fields(Vec<u8>);
-
-impl Fields {
-    /// Writes `x` rounded to `decimals` places as the next field.
-    pub fn fixed<W: Write>(&mut self, w: &mut csv::Writer<W>, x: f64, decimals: u32) -> csv::Result<()> {
-        self.0.clear();
-        super::number::push_fixed(&mut self.0, x, decimals);
-        w.write_field(&self.0)
-    }
-
-    /// Writes an integer as the next field.
-    pub fn int<W: Write>(&mut self, w: &mut csv::Writer<W>, n: u64) -> csv::Result<()> {
-        self.0.clear();
-        super::number::push_int(&mut self.0, n);
-        w.write_field(&self.0)
-    }
 }
