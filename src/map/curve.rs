@@ -20,7 +20,15 @@ impl Curve {
     /// The straight segment from `start` to `end`.
     pub fn line(start: DVec2, end: DVec2) -> Curve {
         let d = end - start;
-        Curve::Line(Line { start, direction: d.normalize(), length: d.length() })
+        let direction = d.normalize();
+        let heading = direction.y.atan2(direction.x);
+        Curve::Line(Line {
+            start,
+            direction,
+            length: d.length(),
+            heading,
+            left: DVec2::new(-heading.sin(), heading.cos()),
+        })
     }
 
     /// The arc leaving `start` with `heading`, turning by `sweep` radians
@@ -86,21 +94,37 @@ impl Curve {
     /// The point at arc length `longitudinal`, moved `lateral` metres to the
     /// left of the direction of travel. `longitudinal` is clamped to the curve.
     pub fn position(&self, longitudinal: f64, lateral: f64) -> DVec2 {
+        self.pose(longitudinal, lateral).0
+    }
+
+    /// [`Curve::position`] and [`Curve::heading_at`] together, each piece
+    /// of the geometry computed once (a car's pose, every step).
+    pub fn pose(&self, longitudinal: f64, lateral: f64) -> (DVec2, f64) {
         let s = longitudinal.clamp(0.0, self.length());
-        let centre = match self {
-            Curve::Line(c) => c.start + c.direction * s,
-            Curve::Arc(c) => c.point_at_angle(c.angle_at(s)),
-            Curve::LaneChange(c) => c.point_at(c.longitudinal_at_arc_length(s)),
+        let (centre, heading) = match self {
+            Curve::Line(c) => {
+                // The cached left normal is what sin and cos of the heading give.
+                let centre = c.start + c.direction * s;
+                return (if lateral == 0.0 { centre } else { centre + c.left * lateral }, c.heading);
+            }
+            Curve::Arc(c) => {
+                let angle = c.angle_at(s);
+                (c.point_at_angle(angle), c.heading_at_angle(angle))
+            }
+            Curve::LaneChange(c) => {
+                let u = c.longitudinal_at_arc_length(s);
+                (c.point_at(u), c.heading_at_longitudinal(u))
+            }
             Curve::Polyline(c) => {
                 let k = c.piece_at(s);
-                c.points[k] + (c.points[k + 1] - c.points[k]).normalize() * (s - c.cumulative[k])
+                let d = c.points[k + 1] - c.points[k];
+                (c.points[k] + d.normalize() * (s - c.cumulative[k]), d.y.atan2(d.x))
             }
         };
         if lateral == 0.0 {
-            return centre;
+            return (centre, heading);
         }
-        let h = self.heading_at(s);
-        centre + DVec2::new(-h.sin(), h.cos()) * lateral
+        (centre + DVec2::new(-heading.sin(), heading.cos()) * lateral, heading)
     }
 
     /// The centre-line point at arc length `s`.
@@ -112,11 +136,8 @@ impl Curve {
     pub fn heading_at(&self, s: f64) -> f64 {
         let s = s.clamp(0.0, self.length());
         match self {
-            Curve::Line(c) => c.direction.y.atan2(c.direction.x),
-            Curve::Arc(c) => {
-                let a = c.angle_at(s);
-                wrap_angle(a + c.sweep.signum() * PI / 2.0)
-            }
+            Curve::Line(c) => c.heading,
+            Curve::Arc(c) => c.heading_at_angle(c.angle_at(s)),
             Curve::LaneChange(c) => c.heading_at_longitudinal(c.longitudinal_at_arc_length(s)),
             Curve::Polyline(c) => {
                 let k = c.piece_at(s);
@@ -227,6 +248,10 @@ pub struct Line {
     /// Unit vector of travel.
     pub direction: DVec2,
     pub length: f64,
+    /// `direction`'s heading, radians, and the unit normal to its left
+    /// (from that heading's sine and cosine, as other curves compute theirs).
+    heading: f64,
+    left: DVec2,
 }
 
 /// A circular arc; positive `sweep` turns left (counter-clockwise).
@@ -247,6 +272,10 @@ impl Arc {
 
     fn point_at_angle(&self, angle: f64) -> DVec2 {
         self.centre + DVec2::new(angle.cos(), angle.sin()) * self.radius
+    }
+
+    fn heading_at_angle(&self, angle: f64) -> f64 {
+        wrap_angle(angle + self.sweep.signum() * PI / 2.0)
     }
 }
 

@@ -171,7 +171,7 @@ impl RouteLeg {
     /// `lateral` metres left of the centre line.
     fn pose(&self, s: f64, lateral: f64) -> (DVec2, f64) {
         let on_curve = self.curve_start + (s - self.route_start).clamp(0.0, self.length);
-        (self.curve.position(on_curve, lateral), self.curve.heading_at(on_curve))
+        self.curve.pose(on_curve, lateral)
     }
 }
 

@@ -57,7 +57,12 @@ pub fn parse_pixels(bytes: &[u8], path: &std::path::Path, frames: usize, cars: u
 }
 
 /// Writes the pose log of `trajectories` for cars with the given ids.
-pub fn write_poses<W: Write>(out: W, car_ids: &[u32], trajectories: &Trajectories, camera: &Camera) -> std::io::Result<()> {
+pub fn write_poses<W: Write>(
+    out: W,
+    car_ids: &[u32],
+    trajectories: &Trajectories,
+    camera: &Camera,
+) -> std::io::Result<()> {
     let mut rows = Rows::new(out, &POSE_COLUMNS)?;
     for (frame, states) in trajectories.states.iter().enumerate() {
         let t = frame as f64 * trajectories.frame_interval;
