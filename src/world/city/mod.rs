@@ -267,7 +267,13 @@ impl<'a> Sim<'a> {
                 self.replace_actions(i, t);
             }
         }
-        self.fill_occupancy();
+        // Only decisions read the occupancy: a step in which no driver
+        // decides needs none (a factual run taped for effects notes it
+        // every step).
+        let deciding = self.cars.iter().any(|c| !c.removed && t + 1e-9 >= c.next_decision);
+        if deciding || self.tape.is_some() {
+            self.fill_occupancy();
+        }
         self.note_fill();
         for i in 0..self.cars.len() {
             if self.cars[i].removed {
