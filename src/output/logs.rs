@@ -5,7 +5,7 @@
 
 use super::number::{push_fixed, push_int};
 use super::poses::PIXEL_DECIMALS;
-use super::rows::Rows;
+use super::rows::{cells, Rows};
 use crate::map::signals::{light_label, LightPlan};
 use crate::world::effects::{EffectReport, EffectRow, InterventionKind};
 use crate::world::{BoundBy, Trajectories};
@@ -45,8 +45,7 @@ pub fn write_lights<W: Write>(
     let mut constant = Vec::with_capacity(plan.lights.len());
     for (light, head) in plan.lights.iter().zip(head_pixels) {
         let name: &str = light.approach.encode_utf8(&mut approach);
-        let mut middle =
-            csv_cells(&[intersection_names[light.intersection].as_str(), name, light.signal_label().as_str()])?;
+        let mut middle = cells(&[intersection_names[light.intersection].as_str(), name, light.signal_label().as_str()]);
         middle.push(b',');
         let mut tail = Vec::new();
         if let Some(p) = head {
@@ -59,7 +58,7 @@ pub fn write_lights<W: Write>(
         tail.push(b'\n');
         constant.push((middle, tail));
     }
-    let mut buf = csv_cells(&LIGHT_COLUMNS)?;
+    let mut buf = cells(&LIGHT_COLUMNS);
     buf.push(b'\n');
     let mut prefix = Vec::new();
     for (frame, states) in trajectories.lights.iter().enumerate() {
@@ -89,18 +88,6 @@ pub fn write_lights<W: Write>(
     out.write_all(&buf)?;
     out.flush()?;
     Ok(())
-}
-
-/// `fields` as one csv record without its line end, quoted where the csv
-/// writer would quote them.
-fn csv_cells<T: AsRef<[u8]>>(fields: &[T]) -> csv::Result<Vec<u8>> {
-    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
-    w.write_record(fields)?;
-    let mut bytes = w.into_inner().map_err(|e| csv::Error::from(e.into_error()))?;
-    if bytes.last() == Some(&b'\n') {
-        bytes.pop();
-    }
-    Ok(bytes)
 }
 
 #[derive(Serialize)]

@@ -54,18 +54,7 @@ impl<W: Write> Rows<W> {
     /// A text field, quoted as the csv crate quotes it when it must be.
     pub fn text(&mut self, s: &str) -> &mut Self {
         self.separate();
-        if s.bytes().any(|b| matches!(b, b',' | b'"' | b'\r' | b'\n')) {
-            self.buffer.push(b'"');
-            for b in s.bytes() {
-                if b == b'"' {
-                    self.buffer.push(b'"');
-                }
-                self.buffer.push(b);
-            }
-            self.buffer.push(b'"');
-        } else {
-            self.buffer.extend_from_slice(s.as_bytes());
-        }
+        push_text(&mut self.buffer, s);
         self
     }
 
@@ -86,6 +75,36 @@ impl<W: Write> Rows<W> {
         self.out.flush()?;
         Ok(self.out)
     }
+}
+
+/// Appends `s` as a field, quoted as the csv crate quotes it when it must be.
+fn push_text(out: &mut Vec<u8>, s: &str) {
+    if s.bytes().any(|b| matches!(b, b',' | b'"' | b'\r' | b'\n')) {
+        out.push(b'"');
+        for b in s.bytes() {
+            if b == b'"' {
+                out.push(b'"');
+            }
+            out.push(b);
+        }
+        out.push(b'"');
+    } else {
+        out.extend_from_slice(s.as_bytes());
+    }
+}
+
+/// `fields` (two or more) as one row without its line end: the cells a
+/// writer formats once and repeats.
+pub fn cells(fields: &[&str]) -> Vec<u8> {
+    debug_assert!(fields.len() > 1, "the csv crate quotes a lone empty field");
+    let mut out = Vec::new();
+    for (k, field) in fields.iter().enumerate() {
+        if k > 0 {
+            out.push(b',');
+        }
+        push_text(&mut out, field);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -113,6 +132,11 @@ mod tests {
         let ours_bytes = ours.finish().unwrap();
         let theirs_bytes = theirs.into_inner().unwrap();
         assert_eq!(rows, texts.len());
+        let mut quoted = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+        quoted.write_record(texts).unwrap();
+        let mut quoted = quoted.into_inner().unwrap();
+        assert_eq!(quoted.pop(), Some(b'\n'));
+        assert_eq!(cells(&texts), quoted);
         assert_eq!(String::from_utf8(ours_bytes).unwrap(), String::from_utf8(theirs_bytes).unwrap());
     }
 }
