@@ -7,8 +7,11 @@ FEATURES ?= hdf5
 CARGO_FEATURES := $(if $(strip $(FEATURES)),--features "$(FEATURES)",)
 # Through cargo so that CARGO_TARGET_DIR and friends are respected.
 RUN := $(CARGO) run --release --locked --quiet $(CARGO_FEATURES) --
+# The built binary itself, for figures that time or count a whole process
+# (cargo's own start-up would be in them through $(RUN)).
+BIN := $(or $(CARGO_TARGET_DIR),target)/release/causalcity
 
-.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-methods bench-gpu bench-gpu-paper bench-original-nri counterfactual-table fuzz lint fmt clean
+.PHONY: all build install system-deps dataset test test-rust test-python python-env wheel paper bench bench-instructions bench-methods bench-gpu bench-gpu-paper bench-original-nri counterfactual-table fuzz lint fmt clean
 PYTHON ?= python3
 VENV := target/python-venv
 PYDATA := target/python-data
@@ -94,8 +97,14 @@ bench: build python-env
 	$(CARGO) bench --locked $(CARGO_FEATURES) --bench throughput
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/python_throughput.py
 	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check eclipse-sumo
-	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/sumo_side_by_side.py
+	CAUSALCITY_CLI='$(BIN)' $(VENV)/bin/python benches/sumo_side_by_side.py
 	CAUSALCITY_CLI='$(RUN)' $(VENV)/bin/python benches/ground_truth.py
+
+## Instructions a poses-only and an effects `gen` job execute (valgrind's
+## callgrind; repeats exactly where wall time on a shared VM does not).
+## BASE_CLI=path/to/older/causalcity measures it beside this build.
+bench-instructions: build
+	CAUSALCITY_CLI='$(BIN)' python3 benches/instructions.py
 
 ## The reference methods' own figures (prints, asserts nothing): NRI's
 ## training throughput today against an earlier revision's, learning at a
