@@ -40,7 +40,7 @@ pub fn write_lights<W: Write>(
     head_pixels: &[Option<glam::DVec2>],
     trajectories: &Trajectories,
     changes_only: bool,
-) -> csv::Result<()> {
+) -> std::io::Result<()> {
     let mut approach = [0u8; 4];
     let mut constant = Vec::with_capacity(plan.lights.len());
     for (light, head) in plan.lights.iter().zip(head_pixels) {

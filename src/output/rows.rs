@@ -54,7 +54,18 @@ impl<W: Write> Rows<W> {
     /// A text field, quoted as the csv crate quotes it when it must be.
     pub fn text(&mut self, s: &str) -> &mut Self {
         self.separate();
-        push_text(&mut self.buffer, s);
+        if s.bytes().any(|b| matches!(b, b',' | b'"' | b'\r' | b'\n')) {
+            self.buffer.push(b'"');
+            for b in s.bytes() {
+                if b == b'"' {
+                    self.buffer.push(b'"');
+                }
+                self.buffer.push(b);
+            }
+            self.buffer.push(b'"');
+        } else {
+            self.buffer.extend_from_slice(s.as_bytes());
+        }
         self
     }
 
@@ -77,34 +88,15 @@ impl<W: Write> Rows<W> {
     }
 }
 
-/// Appends `s` as a field, quoted as the csv crate quotes it when it must be.
-fn push_text(out: &mut Vec<u8>, s: &str) {
-    if s.bytes().any(|b| matches!(b, b',' | b'"' | b'\r' | b'\n')) {
-        out.push(b'"');
-        for b in s.bytes() {
-            if b == b'"' {
-                out.push(b'"');
-            }
-            out.push(b);
-        }
-        out.push(b'"');
-    } else {
-        out.extend_from_slice(s.as_bytes());
-    }
-}
-
 /// `fields` (two or more) as one row without its line end: the cells a
 /// writer formats once and repeats.
 pub fn cells(fields: &[&str]) -> Vec<u8> {
     debug_assert!(fields.len() > 1, "the csv crate quotes a lone empty field");
-    let mut out = Vec::new();
-    for (k, field) in fields.iter().enumerate() {
-        if k > 0 {
-            out.push(b',');
-        }
-        push_text(&mut out, field);
+    let mut row = Rows { out: io::sink(), buffer: Vec::new(), row_has_field: false };
+    for field in fields {
+        row.text(field);
     }
-    out
+    row.buffer
 }
 
 #[cfg(test)]
