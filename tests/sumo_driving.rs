@@ -558,3 +558,45 @@ fn a_right_turn_arrow_is_a_light_of_its_own_in_every_file_and_interventions_name
     assert!(stderr.contains("B1/S/straight-3") && stderr.contains("straight, straight-2"), "{stderr}");
     assert!(!dir.join("held2").exists());
 }
+
+#[test]
+fn datasets_on_a_junction_of_five_arms_generate_with_frames_and_effects_and_validate() {
+    for (network, own_light) in [("star5-priority.net.xml", None), ("star5-lights.net.xml", Some("C/N/straight-2"))] {
+        let dir = fresh_dir(&format!("sumo-{network}"));
+        let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo").join(network);
+        std::fs::copy(&source, dir.join(network)).unwrap();
+        let spec = write_spec(
+            &dir,
+            &format!(
+                r#"{{"name": "star5", "world": "city", "seed": 5, "frames": 80, "frame_interval": 0.5,
+                    "image": {{"width": 256, "height": 160}},
+                    "groups": [{{"cars": 6, "edge_proportion": 0.5}}], "splits": {{"train": 2, "val": 1, "test": 1}},
+                    "actions_per_car": 4, "map": {{"sumo": "{network}"}}}}"#
+            ),
+        );
+        let out = dir.join("out");
+        gen_ok(&spec, &out, &[]);
+        let scenarios = scenario_dirs(&out);
+        assert_eq!(scenarios.len(), 4, "{network}");
+        for scenario in &scenarios {
+            assert!(scenario.join("rgb/0079.png").is_file() && scenario.join("mask/0079.png").is_file());
+            let effects = std::fs::read_to_string(scenario.join("effects.csv")).unwrap();
+            assert!(effects.lines().count() > 6, "{}: {} effects rows", scenario.display(), effects.lines().count());
+            let meta = read_json(&scenario.join("scenario.json"));
+            let lights: Vec<String> = meta["city"]["lights"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|l| format!("{}/{}/{}", l["intersection"], l["approach"], l["signal"]).replace('"', ""))
+                .collect();
+            // The side street from the north runs on a light of its own.
+            assert_eq!(
+                own_light.is_some_and(|name| lights.iter().any(|l| l == name)),
+                own_light.is_some(),
+                "{lights:?}"
+            );
+        }
+        let report = run(&["validate", out.to_str().unwrap()]);
+        assert!(report.status.success(), "{network}: {}", String::from_utf8_lossy(&report.stdout));
+    }
+}

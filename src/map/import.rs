@@ -407,6 +407,37 @@ fn splitting_movements(connectors: &[Connector]) -> Vec<Vec<(usize, f64)>> {
     running_together(connectors, |a, b| a.from == b.from, false, 1.0)
 }
 
+/// The lanes, ascending, that arrive at a priority junction from a side of
+/// its priority road on a lesser road than another arm from that side
+/// (`priority`: each lane's edge priority, as netconvert set it). A
+/// compass side can hold two arms, at a junction of five arms or more or
+/// where a side street joins at a slant. Only the arms of the side's
+/// highest-priority edge are the priority road's, as in SUMO, whose
+/// netconvert makes the others' links yield (state `m`).
+fn side_roads(map: &CityMap, priority: impl Fn(LaneId) -> i32) -> Vec<LaneId> {
+    let arriving = |lane: LaneId| match map.lanes[lane].end {
+        LaneEnd::Intersection { intersection, approach } => Some((intersection, approach)),
+        LaneEnd::Loop(_) => None,
+    };
+    let mut top: HashMap<(usize, char), i32> = HashMap::new();
+    for lane in 0..map.lanes.len() {
+        if let Some(side) = arriving(lane) {
+            let p = top.entry(side).or_insert(i32::MIN);
+            *p = (*p).max(priority(lane));
+        }
+    }
+    (0..map.lanes.len())
+        .filter(|&lane| {
+            arriving(lane).is_some_and(|(k, approach)| {
+                let x = &map.intersections[k];
+                x.control == JunctionControl::Priority
+                    && x.major.holds(approach)
+                    && priority(lane) < top[&(k, approach)]
+            })
+        })
+        .collect()
+}
+
 impl CityMap {
     /// The driveable map of `net`, with lane changes `lane_change_m` long.
     /// Refused when no two lanes reach each other.
@@ -633,6 +664,7 @@ impl CityMap {
                 _ => Axis::EastWest,
             };
         }
+        map.side_roads = side_roads(&map, |lane| net.lanes[ids[lane]].priority);
         let lights = programmed_lights(net, &map, &ids, &connection_of)?;
         (map.programmed, map.link_variants, map.permissive_lefts, map.actuated) =
             (lights.lights, lights.link_variants, lights.permissive_lefts, lights.actuated);
@@ -726,5 +758,132 @@ mod tests {
         assert!(!map.permissive_left(from("A1B1_1", Turn::Left)));
         assert!(map.permissive_left(from("top1B1_1", Turn::Left)));
         assert!(!map.permissive_left(ahead));
+    }
+
+    /// SUMO's own answer for each movement of `text`'s priority junctions:
+    /// `(from lane, to lane) -> whether its link yields` (state `m`, where
+    /// `M` is the priority road's).
+    fn sumo_yields(text: &str) -> HashMap<(String, String), bool> {
+        #[derive(serde::Deserialize)]
+        struct Net {
+            #[serde(rename = "connection", default)]
+            connections: Vec<Link>,
+        }
+        #[derive(serde::Deserialize)]
+        struct Link {
+            #[serde(rename = "@from")]
+            from: String,
+            #[serde(rename = "@to")]
+            to: String,
+            #[serde(rename = "@fromLane")]
+            from_lane: u32,
+            #[serde(rename = "@toLane")]
+            to_lane: u32,
+            #[serde(rename = "@state")]
+            state: String,
+        }
+        let net: Net = quick_xml::de::from_str(text).unwrap();
+        net.connections
+            .into_iter()
+            .filter(|l| !l.from.starts_with(':') && (l.state == "M" || l.state == "m"))
+            .map(|l| ((format!("{}_{}", l.from, l.from_lane), format!("{}_{}", l.to, l.to_lane)), l.state == "m"))
+            .collect()
+    }
+
+    /// The map of `text`, with SUMO's yield answer for each of its
+    /// movements at a priority junction: `(connector, SUMO yields)`.
+    fn against_sumo(text: &str) -> (CityMap, Vec<(usize, bool)>) {
+        let map = CityMap::from_sumo(&SumoNetwork::from_xml(text).unwrap(), 6.0).unwrap().0;
+        let sumo = sumo_yields(text);
+        let name = |lane: LaneId| map.lanes[lane].name.clone();
+        let movements = (0..map.connectors.len())
+            .filter(|&c| map.control_of(c) == Some(JunctionControl::Priority))
+            .filter_map(|c| {
+                let key = (name(map.connectors[c].from), name(map.connectors[c].to));
+                sumo.get(&key).map(|&yields| (c, yields))
+            })
+            .collect();
+        (map, movements)
+    }
+
+    #[test]
+    fn at_a_junction_of_five_arms_a_side_street_from_the_priority_roads_side_gives_way_as_sumo_says() {
+        let text = include_str!("../../tests/data/sumo/star5-priority.net.xml");
+        let (map, movements) = against_sumo(text);
+        // The priority road runs north-south (edges nC, sC: priority 3); the
+        // side street nwC (priority 1) arrives from the north too, 30
+        // degrees off the priority road.
+        let lane = |name: &str| map.lane_by_name(name).unwrap();
+        assert_eq!(map.lanes[lane("nwC_0")].end, map.lanes[lane("nC_0")].end, "both arrive from the north");
+        assert!(map.on_priority_road(lane("nC_0")) && map.on_priority_road(lane("sC_0")));
+        for side in ["nwC_0", "eC_0", "swC_0"] {
+            assert!(!map.on_priority_road(lane(side)), "{side} is on the priority road");
+        }
+        // Every movement this map keeps yields exactly where SUMO's does.
+        assert!(movements.len() >= 15, "only {} movements compared", movements.len());
+        for &(c, yields) in &movements {
+            let (from, to) = (&map.lanes[map.connectors[c].from].name, &map.lanes[map.connectors[c].to].name);
+            assert_eq!(map.gives_way(c), yields, "{from} -> {to}: SUMO says yields = {yields}");
+        }
+        // The side street's straight on gives way to the priority road's.
+        let from = |name: &str, turn: Turn| map.exit(lane(name), turn).unwrap();
+        // Both go on into Cs.
+        let (side, main) = (from("nwC_0", Turn::Straight), from("nC_0", Turn::Straight));
+        assert!(map.conflicts(side).contains(&main));
+        assert!(map.goes_before(main, side) && !map.goes_before(side, main));
+    }
+
+    #[test]
+    fn on_berlins_priority_junctions_straight_on_and_left_turns_yield_where_sumos_do() {
+        let (map, movements) = against_sumo(include_str!("../../tests/data/sumo/berlin-small.net.xml"));
+        // Right turns and U-turns are left out: SUMO makes the priority
+        // road's right turns yield to the pedestrian crossings this import
+        // leaves out, and its turnarounds yield to no one.
+        let compared: Vec<_> = movements
+            .into_iter()
+            .filter(|&(c, _)| matches!(map.connectors[c].turn, Turn::Straight | Turn::Left))
+            .collect();
+        assert!(compared.len() >= 25, "only {} movements compared", compared.len());
+        assert!(compared.iter().any(|&(_, yields)| yields), "no yielding movement compared");
+        for &(c, yields) in &compared {
+            let (from, to) = (&map.lanes[map.connectors[c].from].name, &map.lanes[map.connectors[c].to].name);
+            assert_eq!(map.gives_way(c), yields, "{from} -> {to}: SUMO says yields = {yields}");
+        }
+    }
+
+    #[test]
+    fn at_a_junction_of_five_arms_each_arms_lights_and_signs_stand_beside_that_arm() {
+        let lights = include_str!("../../tests/data/sumo/star5-lights.net.xml");
+        let map = CityMap::from_sumo(&SumoNetwork::from_xml(lights).unwrap(), 6.0).unwrap().0;
+        let lane = |name: &str| map.lane_by_name(name).unwrap();
+        let from = |name: &str, turn: Turn| map.exit(lane(name), turn).unwrap();
+        let line = |map: &CityMap, name: &str| {
+            let curve = &map.lanes[map.lane_by_name(name).unwrap()].curve;
+            curve.position(curve.length(), 0.0)
+        };
+        // nC and nwC both arrive from the north; netconvert's programme gives
+        // nwC a phase of its own, so its straight on runs on a light of its own.
+        let (main, side) =
+            (map.light_of(from("nC_0", Turn::Straight)).unwrap(), map.light_of(from("nwC_0", Turn::Straight)).unwrap());
+        assert_eq!((map.light_name(main), map.light_name(side)), ("C/N/straight".into(), "C/N/straight-2".into()));
+        let head = |index: usize| {
+            let (k, approach, signal, variant) = map.light_at(index);
+            map.signal_head(k, approach, signal, variant).unwrap()
+        };
+        for (light, own, other) in [(main, "nC_0", "nwC_0"), (side, "nwC_0", "nC_0")] {
+            let (near, far) = (head(light).distance(line(&map, own)), head(light).distance(line(&map, other)));
+            assert!(
+                near < 12.0 && near < far,
+                "{}: {near:.1} m from {own}'s line, {far:.1} m from {other}'s",
+                map.light_name(light)
+            );
+        }
+        // At the priority junction each minor arm's give-way sign stands at
+        // its own line.
+        let priority = include_str!("../../tests/data/sumo/star5-priority.net.xml");
+        let map = CityMap::from_sumo(&SumoNetwork::from_xml(priority).unwrap(), 6.0).unwrap().0;
+        let sign = map.sign_of(map.lane_by_name("nwC_0").unwrap()).unwrap();
+        let (near, far) = (sign.distance(line(&map, "nwC_0")), sign.distance(line(&map, "nC_0")));
+        assert!(near < 6.0 && near < far, "the sign stands {near:.1} m from nwC's line, {far:.1} m from nC's");
     }
 }

@@ -336,6 +336,13 @@ pub struct CityMap {
     /// network's movements that share internal lanes before they split).
     /// Empty in a grid town.
     pub(crate) splitting: Vec<Vec<(ConnectorId, f64)>>,
+    /// Lanes, ascending, that arrive at a priority junction from a side of
+    /// its priority road but not on it: another arm from the same compass
+    /// side is the more important road (an imported network's side street
+    /// joining at a slant, or a junction of five arms or more). They give
+    /// way as the other road does. Empty in a grid town, which has one arm
+    /// per side.
+    pub(crate) side_roads: Vec<LaneId>,
 }
 
 impl Default for CityMap {
@@ -519,6 +526,18 @@ impl CityMap {
         }
     }
 
+    /// Whether `lane` arrives at its junction on the junction's priority
+    /// road: from a side of the junction's [`Axis`], and not a
+    /// [side road](CityMap::side_roads) arriving from that side too.
+    pub fn on_priority_road(&self, lane: LaneId) -> bool {
+        match self.lanes[lane].end {
+            LaneEnd::Intersection { intersection, approach } => {
+                self.intersections[intersection].major.holds(approach) && self.side_roads.binary_search(&lane).is_err()
+            }
+            LaneEnd::Loop(_) => false,
+        }
+    }
+
     /// Right of way at a junction without lights, as a key: of two
     /// conflicting movements the one with the lower key goes first. At a
     /// priority junction the priority road's straight and right turns
@@ -531,7 +550,7 @@ impl CityMap {
         let x = &self.intersections[k];
         let class = match x.control {
             JunctionControl::Priority => {
-                let major = self.approach_of(connector).is_some_and(|a| x.major.holds(a));
+                let major = self.on_priority_road(c.from);
                 2 * u8::from(!major) + u8::from(matches!(c.turn, Turn::Left | Turn::UTurn))
             }
             JunctionControl::Signals | JunctionControl::AllWayStop | JunctionControl::RightBeforeLeft => 0,
@@ -595,8 +614,9 @@ impl CityMap {
     /// `variant`) stands, metres: on the pavement beside the kerb of the
     /// approach's outer lane, level with its stop line (the left head
     /// [`SIGNAL_HEAD_SPACING_M`] further back, each variant's two spacings
-    /// behind its signal's), where no car drives over it. `None` for an
-    /// approach the map does not have.
+    /// behind its signal's), where no car drives over it. Where two arms
+    /// arrive from the approach's side, beside the arm of the first movement
+    /// the light governs. `None` for an approach the map does not have.
     pub fn signal_head(
         &self,
         intersection: usize,
@@ -604,14 +624,62 @@ impl CityMap {
         signal: signals::Signal,
         variant: u8,
     ) -> Option<DVec2> {
-        let lane = self.lanes.iter().find(|l| {
-            l.position != LanePosition::Inner
-                && matches!(l.end, LaneEnd::Intersection { intersection: i, approach: a } if i == intersection && a == approach)
-        })?;
+        let arriving = |l: &Lane| matches!(l.end, LaneEnd::Intersection { intersection: i, approach: a } if i == intersection && a == approach);
+        let mut lane = self.lanes.iter().position(|l| l.position != LanePosition::Inner && arriving(l))?;
+        if self.arms_from_side(lane) > 1 {
+            let governed = (0..self.connectors.len()).find(|&c| {
+                self.connectors[c].intersection == Some(intersection)
+                    && self.approach_of(c) == Some(approach)
+                    && self.light_of(c).is_some_and(|index| {
+                        let (_, _, s, v) = self.light_at(index);
+                        (s, v) == (signal, variant)
+                    })
+            });
+            if let Some(c) = governed {
+                lane = self.kerb_lane(self.connectors[c].from);
+            }
+        }
+        Some(self.beside_line(lane, signal, variant))
+    }
+
+    /// Where the sign of `lane`'s arm stands at its junction (a stop sign or
+    /// a give-way triangle; [`CityMap::signal_head`]'s place for straight
+    /// on), beside the arm's own kerb where its side has two arms.
+    pub fn sign_of(&self, lane: LaneId) -> Option<DVec2> {
+        let LaneEnd::Intersection { intersection, approach } = self.lanes[lane].end else { return None };
+        if self.arms_from_side(lane) > 1 {
+            return Some(self.beside_line(self.kerb_lane(lane), signals::Signal::Straight, 0));
+        }
+        self.signal_head(intersection, approach, signals::Signal::Straight, 0)
+    }
+
+    /// The kerb-side lane of `lane`'s arm: its outermost neighbour on the
+    /// right that arrives where it does.
+    fn kerb_lane(&self, mut lane: LaneId) -> LaneId {
+        while let Some(right) = self.adjacent_lane(lane, false).filter(|&r| self.lanes[r].end == self.lanes[lane].end) {
+            lane = right;
+        }
+        lane
+    }
+
+    /// How many arms (kerb lanes) arrive at `lane`'s junction from its side.
+    fn arms_from_side(&self, lane: LaneId) -> usize {
+        let end = self.lanes[lane].end;
+        let mut kerbs: Vec<LaneId> =
+            (0..self.lanes.len()).filter(|&l| self.lanes[l].end == end).map(|l| self.kerb_lane(l)).collect();
+        kerbs.sort_unstable();
+        kerbs.dedup();
+        kerbs.len()
+    }
+
+    /// A point on the pavement beside `lane`'s kerb, level with its stop
+    /// line, the places of `signal` and `variant` further back.
+    fn beside_line(&self, lane: LaneId, signal: signals::Signal, variant: u8) -> DVec2 {
+        let lane = &self.lanes[lane];
         let spacings = f64::from(variant) * 2.0 + if signal == signals::Signal::Left { 1.0 } else { 0.0 };
         let back = self.layout.stop_line_setback + spacings * SIGNAL_HEAD_SPACING_M;
         let kerb = self.layout.lane_width / 2.0;
-        Some(lane.curve.position(lane.curve.length() - back, -(kerb + self.layout.sidewalk_width / 2.0)))
+        lane.curve.position(lane.curve.length() - back, -(kerb + self.layout.sidewalk_width / 2.0))
     }
 
     /// Builds the network for `layout`.
@@ -838,6 +906,7 @@ impl CityMap {
             permissive_lefts: Vec::new(),
             merging,
             splitting,
+            side_roads: Vec::new(),
         }
     }
 

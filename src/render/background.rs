@@ -268,10 +268,10 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         } else {
             quad_along(pixmap, t, curve, 0.0, len, half - 0.2, half - 0.05, CENTRE_LINE);
         }
-        let crate::map::LaneEnd::Intersection { intersection, approach } = lane.end else { continue };
+        let crate::map::LaneEnd::Intersection { intersection, .. } = lane.end else { continue };
         let line = len - map.layout.stop_line_setback;
         let junction = &map.intersections[intersection];
-        let sign = map.signal_head(intersection, approach, crate::map::signals::Signal::Straight, 0);
+        let sign = map.sign_of(id);
         let kerb_side = map.adjacent_lane(id, false).is_none();
         match junction.control {
             JunctionControl::Signals => quad_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),
@@ -283,7 +283,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
                 }
             }
             JunctionControl::RightBeforeLeft => {}
-            JunctionControl::Priority if junction.major.holds(approach) => {}
+            JunctionControl::Priority if map.on_priority_road(id) => {}
             JunctionControl::Priority => {
                 let mut k = -half;
                 while k < half {

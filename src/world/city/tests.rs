@@ -855,3 +855,71 @@ fn a_right_turn_arrow_lets_the_right_turn_go_while_straight_on_waits() {
     let went = went.expect("the straight car crossed once its green came back");
     assert!(went >= 54.0, "the straight car crossed at {went:.1} s, before its green at 54 s");
 }
+
+#[test]
+fn at_a_junction_of_five_arms_a_side_street_from_the_priority_roads_side_waits_for_it() {
+    use crate::world::BoundBy;
+    // Five arms; the priority road runs north-south, and side street nwC
+    // joins from the north too, 30 degrees off it. Both cars go straight on
+    // into Cs; the side street's car is nearer its line.
+    let map = imported(include_str!("../../../tests/data/sumo/star5-priority.net.xml"));
+    let before_line =
+        |name: &str, metres: f64| map.lanes[lane(&map, name)].curve.length() - map.layout.stop_line_setback - metres;
+    let car = |name: &'static str, metres: f64| Given {
+        lane: name,
+        at: before_line(name, metres),
+        actions: vec![Action::Straight],
+        merges: vec![],
+        desired: 6.0,
+        start: 6.0,
+    };
+    let cars = [car("nC_0", 16.0), car("nwC_0", 8.0)];
+    let centre = map.intersections[0].centre;
+    let enters = |traj: &Trajectories, car: usize| {
+        traj.states.iter().position(|f| f[car].position.distance(centre) < 6.0).expect("the car crosses")
+    };
+    let no_lights = || LightPlan::cycle(map.signalised(), 1.0, &[]);
+    let traj = simulate(&map, &plan(&map, &cars, no_lights(), vec![], 30.0));
+    assert!(traj.events.iter().all(|e| e.kind != EventKind::Collision), "{:?}", traj.events);
+    let (main, side) = (enters(&traj, 0), enters(&traj, 1));
+    assert!(main < side, "the priority road's car entered at frame {main}, the side street's at {side}");
+    let gave_way = traj.interactions.iter().any(|f| f[1].bound_by == BoundBy::GiveWay && f[1].other_car == Some(0));
+    assert!(gave_way, "the side street's car never gave way");
+    assert!(traj.interactions.iter().all(|f| f[0].bound_by != BoundBy::GiveWay), "the priority road's car gave way");
+    // Alone, the side street's car would have entered first.
+    let alone = simulate(&map, &plan(&map, &cars[1..], no_lights(), vec![], 30.0));
+    assert!(enters(&alone, 0) < main, "the test does not force a conflict");
+}
+
+#[test]
+fn cars_on_every_arm_of_a_five_arm_junction_cross_it_for_minutes_without_collision() {
+    let turns = [Action::Left, Action::Right, Action::Straight, Action::Right, Action::Left];
+    for text in [
+        include_str!("../../../tests/data/sumo/star5-priority.net.xml"),
+        include_str!("../../../tests/data/sumo/star5-lights.net.xml"),
+    ] {
+        let map = imported(text);
+        // Two cars on every lane, each with its own queue of turns.
+        let mut cars = Vec::new();
+        for (k, id) in map.spawn_points().into_iter().enumerate() {
+            let name: &'static str = Box::leak(map.lanes[id].name.clone().into_boxed_str());
+            for (j, at) in [20.0, 60.0].into_iter().enumerate() {
+                let actions: Vec<Action> = (0..6).map(|a| turns[(k + j + a) % turns.len()]).collect();
+                cars.push(Given { lane: name, at, actions, merges: vec![], desired: 8.0, start: 0.0 });
+            }
+        }
+        assert_eq!(cars.len(), 20);
+        let seconds = 240.0;
+        let lights = map.light_plan(1.0, &vec![0.0; map.intersections.len()], false);
+        let traj = simulate(&map, &plan(&map, &cars, lights, vec![], seconds));
+        let collisions: Vec<_> = traj.events.iter().filter(|e| e.kind == EventKind::Collision).collect();
+        assert!(collisions.is_empty(), "{collisions:?}");
+        // Every car crosses the junction again and again.
+        let centre = map.intersections[0].centre;
+        for car in 0..cars.len() {
+            let inside: Vec<bool> = traj.states.iter().map(|f| f[car].position.distance(centre) < 8.0).collect();
+            let entries = inside.windows(2).filter(|w| !w[0] && w[1]).count();
+            assert!(entries >= 2, "car {car} from {} entered the junction {entries} times", cars[car].lane);
+        }
+    }
+}
