@@ -188,7 +188,7 @@ fn lane_row(map: &CityMap, id: usize) -> LaneRow {
         heading: compass,
         length_m: lane.curve.length(),
         ends_at,
-        turns: map.allowed_turns(id).iter().map(|t| format!("{t:?}").to_lowercase()).collect(),
+        turns: map.allowed_turns(id).iter().map(|t| t.name().to_string()).collect(),
         start: [lane.curve.start().x, lane.curve.start().y],
         end: [lane.curve.end().x, lane.curve.end().y],
         junction: match lane.end {
@@ -368,7 +368,7 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         .map_err(|e| Error::Input(format!("{}: {e}", net_path.display())))?;
     let mut turns = vec![Vec::new(); net.lanes.len()];
     for c in &net.connections {
-        turns[c.from].push(format!("{:?}", c.turn).to_lowercase());
+        turns[c.from].push(c.turn.name().to_string());
     }
     let lanes = net
         .lanes
@@ -448,7 +448,7 @@ fn variant_lights(map: &crate::map::CityMap) -> Vec<(String, Vec<String>)> {
         if map.light_at(light).3 == 0 {
             continue;
         }
-        let movement = format!("{} {}", map.lanes[connector.from].name, format!("{:?}", connector.turn).to_lowercase());
+        let movement = format!("{} {}", map.lanes[connector.from].name, connector.turn.name());
         match lights.iter_mut().find(|(l, _)| *l == light) {
             Some((_, movements)) => movements.push(movement),
             None => lights.push((light, vec![movement])),

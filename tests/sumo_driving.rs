@@ -578,11 +578,22 @@ fn datasets_on_a_junction_of_five_arms_generate_with_frames_and_effects_and_vali
         gen_ok(&spec, &out, &[]);
         let scenarios = scenario_dirs(&out);
         assert_eq!(scenarios.len(), 4, "{network}");
+        let schema = validator("scenario.schema.json");
+        let mut slight = 0;
         for scenario in &scenarios {
             assert!(scenario.join("rgb/0079.png").is_file() && scenario.join("mask/0079.png").is_file());
             let effects = std::fs::read_to_string(scenario.join("effects.csv")).unwrap();
             assert!(effects.lines().count() > 6, "{}: {} effects rows", scenario.display(), effects.lines().count());
             let meta = read_json(&scenario.join("scenario.json"));
+            assert_valid(&schema, &meta, scenario);
+            // Drive queues use the lesser of two rights or lefts too.
+            slight += meta["cars"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|car| car["actions"].as_array().unwrap())
+                .filter(|a| *a == "slight_left" || *a == "slight_right")
+                .count();
             let lights: Vec<String> = meta["city"]["lights"]
                 .as_array()
                 .unwrap()
@@ -596,6 +607,7 @@ fn datasets_on_a_junction_of_five_arms_generate_with_frames_and_effects_and_vali
                 "{lights:?}"
             );
         }
+        assert!(slight > 0, "{network}: no car was given a slight turn");
         let report = run(&["validate", out.to_str().unwrap()]);
         assert!(report.status.success(), "{network}: {}", String::from_utf8_lossy(&report.stdout));
     }

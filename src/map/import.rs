@@ -211,9 +211,9 @@ fn programmed_lights(
     for &k in map.signalised() {
         for approach in APPROACHES {
             for signal in [Signal::Straight, Signal::Left] {
-                let order: [Turn; 2] = match signal {
-                    Signal::Straight => [Turn::Straight, Turn::Right],
-                    Signal::Left => [Turn::Left, Turn::UTurn],
+                let order: [Turn; 3] = match signal {
+                    Signal::Straight => [Turn::Straight, Turn::Right, Turn::SlightRight],
+                    Signal::Left => [Turn::Left, Turn::UTurn, Turn::SlightLeft],
                 };
                 // (programme, colours in its phases) of each light so far;
                 // whether the first link turns on a permissive green; the
@@ -460,11 +460,27 @@ impl CityMap {
         // Movements out of each lane: the file's connections (a turnaround
         // only where it is the lane's only one), else a loop onto the road
         // back.
+        // A lane with two rights (SUMO's sharp `r` and slight `R`) or two
+        // lefts, at a junction of five arms or more, drives the slight one
+        // as a turn of its own.
+        let mut sharp = vec![[false; 2]; n];
+        for c in net.connections.iter().filter(|c| !c.slight) {
+            match c.turn {
+                Turn::Right => sharp[c.from][0] = true,
+                Turn::Left => sharp[c.from][1] = true,
+                _ => {}
+            }
+        }
         let mut moves: Vec<Vec<(usize, Turn, Option<usize>)>> = vec![Vec::new(); n];
         for (k, c) in net.connections.iter().enumerate() {
+            let turn = match c.turn {
+                Turn::Right if c.slight && sharp[c.from][0] => Turn::SlightRight,
+                Turn::Left if c.slight && sharp[c.from][1] => Turn::SlightLeft,
+                turn => turn,
+            };
             let slot = &mut moves[c.from];
-            if !slot.iter().any(|m| m.1 == c.turn) {
-                slot.push((c.to, c.turn, Some(k)));
+            if !slot.iter().any(|m| m.1 == turn) {
+                slot.push((c.to, turn, Some(k)));
             }
         }
         for slot in moves.iter_mut() {
@@ -885,5 +901,36 @@ mod tests {
         let sign = map.sign_of(map.lane_by_name("nwC_0").unwrap()).unwrap();
         let (near, far) = (sign.distance(line(&map, "nwC_0")), sign.distance(line(&map, "nC_0")));
         assert!(near < 6.0 && near < far, "the sign stands {near:.1} m from nwC's line, {far:.1} m from nC's");
+    }
+
+    #[test]
+    fn at_a_junction_of_five_arms_every_movement_of_the_file_is_driven_the_lesser_of_two_rights_or_lefts_as_slight() {
+        let text = include_str!("../../tests/data/sumo/star5-priority.net.xml");
+        let map = CityMap::from_sumo(&SumoNetwork::from_xml(text).unwrap(), 6.0).unwrap().0;
+        let wanted: Vec<(String, String)> = sumo_yields(text).into_keys().collect();
+        assert_eq!(wanted.len(), 20, "the file's movements through C");
+        let name = |lane: LaneId| map.lanes[lane].name.clone();
+        for (from, to) in &wanted {
+            let lane = map.lane_by_name(from).unwrap();
+            let driven: Vec<String> = map.exits_from(lane).map(|c| name(map.connectors[c].to)).collect();
+            assert!(driven.contains(to), "{from} -> {to} is not driven (it drives to {driven:?})");
+        }
+        // From the north: the sharp right into the side street from the
+        // north-west, the slight one into the south-west's; from the south:
+        // the left into the south-west, the slight one into the north-west.
+        let exit =
+            |from: &str, turn: Turn| name(map.connectors[map.exit(map.lane_by_name(from).unwrap(), turn).unwrap()].to);
+        assert_eq!((exit("nC_0", Turn::Right), exit("nC_0", Turn::SlightRight)), ("Cnw_0".into(), "Csw_0".into()));
+        assert_eq!((exit("sC_0", Turn::Left), exit("sC_0", Turn::SlightLeft)), ("Csw_0".into(), "Cnw_0".into()));
+        let lane = map.lane_by_name("nC_0").unwrap();
+        assert_eq!(map.allowed_turns(lane), [Turn::Left, Turn::Straight, Turn::Right, Turn::SlightRight]);
+        // A slight left crosses oncoming traffic: it yields at the priority
+        // junction and runs on the left signal at lights.
+        let slight_left = map.exit(map.lane_by_name("sC_0").unwrap(), Turn::SlightLeft).unwrap();
+        assert!(map.gives_way(slight_left));
+        let lights = include_str!("../../tests/data/sumo/star5-lights.net.xml");
+        let lit = CityMap::from_sumo(&SumoNetwork::from_xml(lights).unwrap(), 6.0).unwrap().0;
+        let slight_left = lit.exit(lit.lane_by_name("sC_0").unwrap(), Turn::SlightLeft).unwrap();
+        assert_eq!(lit.light_at(lit.light_of(slight_left).unwrap()).2, Signal::Left);
     }
 }

@@ -222,7 +222,18 @@ pub enum Turn {
     Straight,
     /// The off-camera loop at the end of a road.
     UTurn,
+    /// The lesser of two left turns from one lane (SUMO's `L` beside an
+    /// `l`), at a junction of five arms or more.
+    #[serde(rename = "slight_left")]
+    SlightLeft,
+    /// The lesser of two right turns from one lane (SUMO's `R` beside an
+    /// `r`), at a junction of five arms or more.
+    #[serde(rename = "slight_right")]
+    SlightRight,
 }
+
+/// How many kinds of [`Turn`] there are: the slots of a lane's exits.
+const TURN_KINDS: usize = 6;
 
 impl Turn {
     /// Index of the turn in a per-lane table of exits.
@@ -232,7 +243,35 @@ impl Turn {
             Turn::Right => 1,
             Turn::Straight => 2,
             Turn::UTurn => 3,
+            Turn::SlightLeft => 4,
+            Turn::SlightRight => 5,
         }
+    }
+
+    /// Its name in listings and `scenario.json`: `left`, `right`,
+    /// `straight`, `uturn`, `slight_left`, `slight_right`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Turn::Left => "left",
+            Turn::Right => "right",
+            Turn::Straight => "straight",
+            Turn::UTurn => "uturn",
+            Turn::SlightLeft => "slight_left",
+            Turn::SlightRight => "slight_right",
+        }
+    }
+
+    /// Whether the movement turns across oncoming traffic (a left turn of
+    /// either kind, or a U-turn): it runs on its side's `left` light and,
+    /// without a protected phase, gives way to oncoming traffic.
+    pub fn crosses_oncoming(self) -> bool {
+        matches!(self, Turn::Left | Turn::SlightLeft | Turn::UTurn)
+    }
+
+    /// Whether the movement bears left, so that a driver making it keeps to
+    /// the left lanes: a left turn of either kind.
+    pub fn bears_left(self) -> bool {
+        matches!(self, Turn::Left | Turn::SlightLeft)
     }
 }
 
@@ -298,7 +337,7 @@ pub struct CityMap {
     lane_by_name: HashMap<String, LaneId>,
     /// Per lane, the connector leaving it for each turn (indexed by
     /// [`Turn::slot`]): looked up at every decision, so a table, not a hash.
-    exits: Vec<[Option<ConnectorId>; 4]>,
+    exits: Vec<[Option<ConnectorId>; TURN_KINDS]>,
     /// For each connector, the connectors of the same intersection whose
     /// paths cross or meet it (cars on them could collide).
     conflicts: Vec<Vec<ConnectorId>>,
@@ -425,8 +464,7 @@ impl CityMap {
         let c = &self.connectors[connector];
         let intersection = c.intersection?;
         let approach = self.approach_of(connector)?;
-        let signal =
-            if matches!(c.turn, Turn::Left | Turn::UTurn) { signals::Signal::Left } else { signals::Signal::Straight };
+        let signal = if c.turn.crosses_oncoming() { signals::Signal::Left } else { signals::Signal::Straight };
         match self.link_variants.get(connector).copied().unwrap_or(0) {
             0 => self.light_index(intersection, approach, signal),
             variant => self.variant_index(intersection, approach, signal, variant),
@@ -551,7 +589,7 @@ impl CityMap {
         let class = match x.control {
             JunctionControl::Priority => {
                 let major = self.on_priority_road(c.from);
-                2 * u8::from(!major) + u8::from(matches!(c.turn, Turn::Left | Turn::UTurn))
+                2 * u8::from(!major) + u8::from(c.turn.crosses_oncoming())
             }
             JunctionControl::Signals | JunctionControl::AllWayStop | JunctionControl::RightBeforeLeft => 0,
         };
@@ -573,7 +611,7 @@ impl CityMap {
             let lane = &self.lanes[self.connectors[c].from].curve;
             lane.heading_at(lane.length())
         };
-        let left = |c: ConnectorId| matches!(self.connectors[c].turn, Turn::Left | Turn::UTurn);
+        let left = |c: ConnectorId| self.connectors[c].turn.crosses_oncoming();
         // Whether `a` goes first by the rules of the road alone: from `b`'s
         // right (its heading turned a quarter counter-clockwise from `b`'s),
         // or oncoming while `b` turns left and `a` does not.
@@ -882,7 +920,7 @@ impl CityMap {
         beside: Vec<[Option<LaneId>; 2]>,
     ) -> CityMap {
         let lane_by_name = lanes.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
-        let mut exits = vec![[None; 4]; lanes.len()];
+        let mut exits = vec![[None; TURN_KINDS]; lanes.len()];
         for (i, c) in connectors.iter().enumerate() {
             exits[c.from][c.turn.slot()] = Some(i);
         }
@@ -950,7 +988,9 @@ impl CityMap {
 
     /// Every connector leaving the end of `lane`.
     pub fn exits_from(&self, lane: LaneId) -> impl Iterator<Item = ConnectorId> + '_ {
-        [Turn::Left, Turn::Straight, Turn::Right, Turn::UTurn].into_iter().filter_map(move |t| self.exit(lane, t))
+        [Turn::Left, Turn::Straight, Turn::Right, Turn::UTurn, Turn::SlightLeft, Turn::SlightRight]
+            .into_iter()
+            .filter_map(move |t| self.exit(lane, t))
     }
 
     /// Connectors that run into one path with `connector`'s before its end
@@ -991,7 +1031,7 @@ impl CityMap {
     /// lane or one further that way does: the next lane change a driver
     /// makes for the turn.
     pub fn lane_towards(&self, lane: LaneId, turn: Turn) -> Option<LaneId> {
-        let to_left = turn == Turn::Left;
+        let to_left = turn.bears_left();
         let next = self.adjacent_lane(lane, to_left)?;
         let mut probe = Some(next);
         while let Some(l) = probe {
@@ -1070,7 +1110,7 @@ impl CityMap {
     /// The movement a driver with no action left makes at the end of
     /// `lane`: straight on, or at a T-junction's stem the lane's only turn.
     pub fn default_turn(&self, lane: LaneId) -> Turn {
-        [Turn::Straight, Turn::Right, Turn::Left, Turn::UTurn]
+        [Turn::Straight, Turn::Right, Turn::Left, Turn::UTurn, Turn::SlightRight, Turn::SlightLeft]
             .into_iter()
             .find(|&t| self.exit(lane, t).is_some())
             .unwrap_or(Turn::Straight)
@@ -1095,7 +1135,10 @@ impl CityMap {
 
     /// Turns allowed at the end of `lane` (none for lanes that end in a loop).
     pub fn allowed_turns(&self, lane: LaneId) -> Vec<Turn> {
-        [Turn::Left, Turn::Straight, Turn::Right].into_iter().filter(|&t| self.exit(lane, t).is_some()).collect()
+        [Turn::Left, Turn::Straight, Turn::Right, Turn::SlightLeft, Turn::SlightRight]
+            .into_iter()
+            .filter(|&t| self.exit(lane, t).is_some())
+            .collect()
     }
 }
 

@@ -35,10 +35,26 @@ pub enum Action {
     MergeL,
     #[serde(rename = "mergeR")]
     MergeR,
+    /// The lesser of two left turns at a junction of five arms or more
+    /// ([`Turn::SlightLeft`]).
+    #[serde(rename = "slight_left")]
+    SlightLeft,
+    /// The lesser of two right turns at a junction of five arms or more
+    /// ([`Turn::SlightRight`]).
+    #[serde(rename = "slight_right")]
+    SlightRight,
 }
 
 impl Action {
-    pub const ALL: [Action; 5] = [Action::Left, Action::Right, Action::Straight, Action::MergeL, Action::MergeR];
+    pub const ALL: [Action; 7] = [
+        Action::Left,
+        Action::Right,
+        Action::Straight,
+        Action::MergeL,
+        Action::MergeR,
+        Action::SlightLeft,
+        Action::SlightRight,
+    ];
 
     /// The name used in scenario files.
     pub fn name(self) -> &'static str {
@@ -48,12 +64,26 @@ impl Action {
             Action::Straight => "straight",
             Action::MergeL => "mergeL",
             Action::MergeR => "mergeR",
+            Action::SlightLeft => "slight_left",
+            Action::SlightRight => "slight_right",
         }
     }
 
     /// The action a scenario file names `name`.
     pub fn from_name(name: &str) -> Option<Action> {
         Action::ALL.into_iter().find(|a| a.name() == name)
+    }
+
+    /// The action that makes `turn` at a junction (straight on for a
+    /// U-turn loop, which no action asks for).
+    pub fn making(turn: Turn) -> Action {
+        match turn {
+            Turn::Left => Action::Left,
+            Turn::Right => Action::Right,
+            Turn::SlightLeft => Action::SlightLeft,
+            Turn::SlightRight => Action::SlightRight,
+            Turn::Straight | Turn::UTurn => Action::Straight,
+        }
     }
 
     pub fn is_merge(self) -> bool {
@@ -66,7 +96,9 @@ impl Action {
             Action::Left => Some(Turn::Left),
             Action::Right => Some(Turn::Right),
             Action::Straight => Some(Turn::Straight),
-            _ => None,
+            Action::SlightLeft => Some(Turn::SlightLeft),
+            Action::SlightRight => Some(Turn::SlightRight),
+            Action::MergeL | Action::MergeR => None,
         }
     }
 }
@@ -312,7 +344,7 @@ impl Route {
                         }
                         // As early as it fits: on the lane before, if the car came
                         // straight on (or round a loop) from it, else on this one.
-                        let to_left = turn == Turn::Left;
+                        let to_left = turn.bears_left();
                         // (At a T-junction's stem no lane may go straight on.)
                         let beside_turns = map.lane_towards(lane, turn).is_some();
                         // (Grid towns go back once per lane change a turn needs.)
@@ -663,6 +695,8 @@ fn turn_name(turn: Turn) -> &'static str {
         Turn::Right => "right",
         Turn::Straight => "straight on",
         Turn::UTurn => "round",
+        Turn::SlightLeft => "slightly left",
+        Turn::SlightRight => "slightly right",
     }
 }
 

@@ -274,6 +274,9 @@ pub struct SumoConnection {
     pub from: usize,
     pub to: usize,
     pub turn: Turn,
+    /// A partial turn (`dir` `R` or `L`, beside which a lane may also have
+    /// a full one, `r` or `l`).
+    pub slight: bool,
     /// Its path through the junction (the shapes of the internal lanes it
     /// crosses, in turn), metres; empty when the file has none (a straight
     /// join).
@@ -558,7 +561,8 @@ impl SumoNetwork {
                 }
                 _ => None,
             };
-            connections.push(SumoConnection { from, to, turn, path, signal });
+            let slight = c.dir == "R" || c.dir == "L";
+            connections.push(SumoConnection { from, to, turn, slight, path, signal });
         }
         if lanes.is_empty() {
             return Err("the network has no lane a passenger car may drive".into());

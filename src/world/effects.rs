@@ -123,7 +123,7 @@ pub fn changed_action(map: &CityMap, plan: &ScenarioPlan, car: usize) -> Option<
     let c = &plan.cars[car];
     let next = *c.actions.first()?;
     Some(match next {
-        Action::Left | Action::Right => Action::Straight,
+        Action::Left | Action::Right | Action::SlightLeft | Action::SlightRight => Action::Straight,
         Action::MergeL => Action::MergeR,
         Action::MergeR => Action::MergeL,
         Action::Straight => {

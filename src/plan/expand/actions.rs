@@ -10,7 +10,8 @@ const MERGE_SHARE: f64 = 0.25;
 
 /// A random drive queue drawn as the original's `scenarioGenerator.py`
 /// draws it, whatever lane the car will be in: each action `left`, `right`
-/// or `straight` with equal chance. (The original writes merge names only
+/// or `straight` with equal chance (and, at a junction of five arms or
+/// more, `slight_left` and `slight_right` where the road has them). (The original writes merge names only
 /// into `MergeAtDistances`, where its engine never carried them out, so no
 /// merges are drawn.) Drivers plan the lane changes their turns need.
 ///
@@ -30,9 +31,12 @@ pub(super) fn original_actions(
     for _ in 0..count {
         let Some(approach) = past_loop(map, lane) else { break };
         let exit = |a: Action| a.turn().and_then(|turn| road_exit(map, approach, turn));
-        let mut action = DRAWN[rng.random_range(0..3)];
+        // At a junction of five arms or more, the slight turns too.
+        let slight = [Action::SlightLeft, Action::SlightRight].into_iter().filter(|&a| exit(a).is_some());
+        let drawn: Vec<Action> = DRAWN.into_iter().chain(slight).collect();
+        let mut action = drawn[rng.random_range(0..drawn.len())];
         if exit(action).is_none() {
-            let possible: Vec<Action> = DRAWN.into_iter().filter(|&a| exit(a).is_some()).collect();
+            let possible: Vec<Action> = drawn.into_iter().filter(|&a| exit(a).is_some()).collect();
             if !possible.is_empty() {
                 action = possible[rng.random_range(0..possible.len())];
             }
@@ -112,11 +116,7 @@ pub(super) fn random_actions(
             break;
         }
         let turn = turns[rng.random_range(0..turns.len())];
-        let action = match turn {
-            crate::map::Turn::Left => Action::Left,
-            crate::map::Turn::Right => Action::Right,
-            _ => Action::Straight,
-        };
+        let action = Action::making(turn);
         actions.push(action);
         merges.push(0.0);
         let connector = map.exit(approach, turn).expect("allowed turn has a connector");

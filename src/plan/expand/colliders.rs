@@ -163,11 +163,7 @@ impl Planner {
             let (mut actions, mut merges) = self.draw_actions(rng, city.action_drawing, lane, s);
             let movements: Vec<ConnectorId> = before.into_iter().chain([y]).collect();
             for (k, &m) in movements.iter().enumerate() {
-                let action = match self.map.connectors[m].turn {
-                    Turn::Left => Action::Left,
-                    Turn::Right => Action::Right,
-                    _ => Action::Straight,
-                };
+                let action = Action::making(self.map.connectors[m].turn);
                 if actions.len() <= k {
                     actions.push(action);
                     merges.push(0.0);

@@ -7,7 +7,7 @@ use super::spawn::{spawn_spans, split_owning_start, SpawnSpan, OWNED_START_SEARC
 use crate::camera::Camera;
 use crate::geometry::OrientedBox;
 use crate::map::signals::{LightPlan, DEFAULT_CYCLE};
-use crate::map::{Action, AdaptationKind, CityMap, LaneId, LanePolicy, LegKind, Route, Turn};
+use crate::map::{Action, AdaptationKind, CityMap, LaneId, LanePolicy, LegKind, Route};
 use crate::plan::confounders::ConfounderModel;
 use crate::plan::{
     stream_key, CarAgency, CarPlan, CityPlan, Fallback, GivenCar, OnLeaderLost, Role, ScenarioKey, ScenarioPlan,
@@ -447,11 +447,7 @@ impl Planner {
                     LegKind::Connector(c) => Some(self.map.connectors[c].turn),
                     _ => None,
                 });
-                actions[k] = match made {
-                    Some(Turn::Left) => Action::Left,
-                    Some(Turn::Right) => Action::Right,
-                    _ => Action::Straight,
-                };
+                actions[k] = made.map_or(Action::Straight, Action::making);
             }
             if actions == before.as_slice() {
                 break;

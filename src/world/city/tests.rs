@@ -893,25 +893,40 @@ fn at_a_junction_of_five_arms_a_side_street_from_the_priority_roads_side_waits_f
 
 #[test]
 fn cars_on_every_arm_of_a_five_arm_junction_cross_it_for_minutes_without_collision() {
-    let turns = [Action::Left, Action::Right, Action::Straight, Action::Right, Action::Left];
+    let turns = [
+        Action::Left,
+        Action::SlightRight,
+        Action::Straight,
+        Action::Right,
+        Action::SlightLeft,
+        Action::Left,
+        Action::Right,
+    ];
     for text in [
         include_str!("../../../tests/data/sumo/star5-priority.net.xml"),
         include_str!("../../../tests/data/sumo/star5-lights.net.xml"),
     ] {
         let map = imported(text);
-        // Two cars on every lane, each with its own queue of turns.
+        // Two cars on every lane, each with its own queue of turns, slight
+        // ones included (skipped, as any turn a road lacks, where it has none).
         let mut cars = Vec::new();
         for (k, id) in map.spawn_points().into_iter().enumerate() {
             let name: &'static str = Box::leak(map.lanes[id].name.clone().into_boxed_str());
             for (j, at) in [20.0, 60.0].into_iter().enumerate() {
-                let actions: Vec<Action> = (0..6).map(|a| turns[(k + j + a) % turns.len()]).collect();
+                let actions: Vec<Action> = (0..6).map(|a| turns[(k + 2 * j + a) % turns.len()]).collect();
                 cars.push(Given { lane: name, at, actions, merges: vec![], desired: 8.0, start: 0.0 });
             }
         }
         assert_eq!(cars.len(), 20);
         let seconds = 240.0;
         let lights = map.light_plan(1.0, &vec![0.0; map.intersections.len()], false);
-        let traj = simulate(&map, &plan(&map, &cars, lights, vec![], seconds));
+        let mut scenario = plan(&map, &cars, lights, vec![], seconds);
+        // The rules the towns' specs use: under the original's, two cars of
+        // one lane on different movements can wait on each other for good
+        // at lights (docs/city.md#driving-rules).
+        let WorldPlan::City(city) = &mut scenario.world else { unreachable!() };
+        city.rules = crate::spec::DrivingRules::Cooperative;
+        let traj = simulate(&map, &scenario);
         let collisions: Vec<_> = traj.events.iter().filter(|e| e.kind == EventKind::Collision).collect();
         assert!(collisions.is_empty(), "{collisions:?}");
         // Every car crosses the junction again and again.
@@ -922,4 +937,29 @@ fn cars_on_every_arm_of_a_five_arm_junction_cross_it_for_minutes_without_collisi
             assert!(entries >= 2, "car {car} from {} entered the junction {entries} times", cars[car].lane);
         }
     }
+}
+
+#[test]
+fn at_a_junction_of_five_arms_right_and_slight_right_lead_into_different_streets() {
+    let map = imported(include_str!("../../../tests/data/sumo/star5-priority.net.xml"));
+    let ends_on = |action: Action| {
+        let car = Given { lane: "nC_0", at: 60.0, actions: vec![action], merges: vec![], desired: 8.0, start: 8.0 };
+        let traj = simulate(&map, &plan(&map, &[car], LightPlan::cycle(map.signalised(), 1.0, &[]), vec![], 25.0));
+        // The lane whose centre line the car is nearest at the end.
+        let at = traj.states[traj.frames() - 1][0].position;
+        let nearest = (0..map.lanes.len()).min_by(|&a, &b| {
+            let d = |l: usize| {
+                let c = &map.lanes[l].curve;
+                (0..=40)
+                    .map(|k| c.position(c.length() * k as f64 / 40.0, 0.0).distance(at))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            d(a).total_cmp(&d(b))
+        });
+        map.lanes[nearest.unwrap()].name.clone()
+    };
+    assert_eq!(ends_on(Action::Right), "Cnw_0");
+    assert_eq!(ends_on(Action::SlightRight), "Csw_0");
+    assert_eq!(ends_on(Action::Straight), "Cs_0");
+    assert_eq!(ends_on(Action::Left), "Ce_0");
 }
