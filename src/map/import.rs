@@ -780,29 +780,23 @@ mod tests {
     /// `(from lane, to lane) -> whether its link yields` (state `m`, where
     /// `M` is the priority road's).
     fn sumo_yields(text: &str) -> HashMap<(String, String), bool> {
-        #[derive(serde::Deserialize)]
-        struct Net {
-            #[serde(rename = "connection", default)]
-            connections: Vec<Link>,
-        }
-        #[derive(serde::Deserialize)]
-        struct Link {
-            #[serde(rename = "@from")]
-            from: String,
-            #[serde(rename = "@to")]
-            to: String,
-            #[serde(rename = "@fromLane")]
-            from_lane: u32,
-            #[serde(rename = "@toLane")]
-            to_lane: u32,
-            #[serde(rename = "@state")]
-            state: String,
-        }
-        let net: Net = quick_xml::de::from_str(text).unwrap();
-        net.connections
-            .into_iter()
-            .filter(|l| !l.from.starts_with(':') && (l.state == "M" || l.state == "m"))
-            .map(|l| ((format!("{}_{}", l.from, l.from_lane), format!("{}_{}", l.to, l.to_lane)), l.state == "m"))
+        // Read apart from the import's parser: each `<connection .../>`'s
+        // attributes, as the file spells them.
+        let attribute = |tag: &str, name: &str| -> String {
+            let start = tag.find(&format!(" {name}=\"")).unwrap_or_else(|| panic!("{name} in {tag}")) + name.len() + 3;
+            tag[start..start + tag[start..].find('"').unwrap()].to_string()
+        };
+        text.split("<connection ")
+            .skip(1)
+            .map(|rest| &rest[..rest.find("/>").unwrap()])
+            .map(|tag| format!(" {tag}"))
+            .filter(|tag| !attribute(tag, "from").starts_with(':'))
+            .filter_map(|tag| {
+                let state = attribute(&tag, "state");
+                let from = format!("{}_{}", attribute(&tag, "from"), attribute(&tag, "fromLane"));
+                let to = format!("{}_{}", attribute(&tag, "to"), attribute(&tag, "toLane"));
+                (state == "M" || state == "m").then(|| ((from, to), state == "m"))
+            })
             .collect()
     }
 
