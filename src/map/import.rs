@@ -460,27 +460,11 @@ impl CityMap {
         // Movements out of each lane: the file's connections (a turnaround
         // only where it is the lane's only one), else a loop onto the road
         // back.
-        // A lane with two rights (SUMO's sharp `r` and slight `R`) or two
-        // lefts, at a junction of five arms or more, drives the slight one
-        // as a turn of its own.
-        let mut sharp = vec![[false; 2]; n];
-        for c in net.connections.iter().filter(|c| !c.slight) {
-            match c.turn {
-                Turn::Right => sharp[c.from][0] = true,
-                Turn::Left => sharp[c.from][1] = true,
-                _ => {}
-            }
-        }
         let mut moves: Vec<Vec<(usize, Turn, Option<usize>)>> = vec![Vec::new(); n];
         for (k, c) in net.connections.iter().enumerate() {
-            let turn = match c.turn {
-                Turn::Right if c.slight && sharp[c.from][0] => Turn::SlightRight,
-                Turn::Left if c.slight && sharp[c.from][1] => Turn::SlightLeft,
-                turn => turn,
-            };
             let slot = &mut moves[c.from];
-            if !slot.iter().any(|m| m.1 == turn) {
-                slot.push((c.to, turn, Some(k)));
+            if !slot.iter().any(|m| m.1 == c.turn) {
+                slot.push((c.to, c.turn, Some(k)));
             }
         }
         for slot in moves.iter_mut() {
@@ -643,6 +627,23 @@ impl CityMap {
         for (id, c) in connectors.iter().enumerate() {
             if c.intersection.is_none() {
                 lanes[c.from].end = LaneEnd::Loop(id);
+            }
+        }
+        // A lane whose full right (or left) leads to a lane left out drives
+        // its slight one as its right (left).
+        let mut full = vec![[false; 2]; lanes.len()];
+        for c in &connectors {
+            match c.turn {
+                Turn::Right => full[c.from][0] = true,
+                Turn::Left => full[c.from][1] = true,
+                _ => {}
+            }
+        }
+        for c in &mut connectors {
+            match c.turn {
+                Turn::SlightRight if !full[c.from][0] => c.turn = Turn::Right,
+                Turn::SlightLeft if !full[c.from][1] => c.turn = Turn::Left,
+                _ => {}
             }
         }
         if let Some(l) = lanes.iter().find(|l| matches!(l.end, LaneEnd::Loop(usize::MAX))) {

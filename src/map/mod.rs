@@ -691,23 +691,38 @@ impl CityMap {
         self.signal_head(intersection, approach, signals::Signal::Straight, 0)
     }
 
-    /// The kerb-side lane of `lane`'s arm: its outermost neighbour on the
-    /// right that arrives where it does.
-    fn kerb_lane(&self, mut lane: LaneId) -> LaneId {
-        while let Some(right) = self.adjacent_lane(lane, false).filter(|&r| self.lanes[r].end == self.lanes[lane].end) {
-            lane = right;
-        }
-        lane
+    /// The road an imported lane belongs to: SUMO's edge, from the lane's
+    /// id (`EDGE_INDEX`), with its index.
+    fn edge_and_index(&self, lane: LaneId) -> (&str, u32) {
+        let name = self.lanes[lane].name.as_str();
+        name.rsplit_once('_').and_then(|(edge, i)| Some((edge, i.parse().ok()?))).unwrap_or((name, 0))
     }
 
-    /// How many arms (kerb lanes) arrive at `lane`'s junction from its side.
-    fn arms_from_side(&self, lane: LaneId) -> usize {
+    /// The kerb-side lane of `lane`'s arm: of the lanes of its edge that
+    /// arrive where it does, the one of the lowest index (a lane closed to
+    /// cars between them does not split the arm). A grid town's lane is its
+    /// own arm's here; its sides have one arm each.
+    fn kerb_lane(&self, lane: LaneId) -> LaneId {
+        let (edge, _) = self.edge_and_index(lane);
         let end = self.lanes[lane].end;
-        let mut kerbs: Vec<LaneId> =
-            (0..self.lanes.len()).filter(|&l| self.lanes[l].end == end).map(|l| self.kerb_lane(l)).collect();
-        kerbs.sort_unstable();
-        kerbs.dedup();
-        kerbs.len()
+        (0..self.lanes.len())
+            .filter(|&l| self.lanes[l].end == end && self.edge_and_index(l).0 == edge)
+            .min_by_key(|&l| self.edge_and_index(l).1)
+            .unwrap_or(lane)
+    }
+
+    /// How many arms (edges) arrive at `lane`'s junction from its side: one
+    /// in a grid town.
+    fn arms_from_side(&self, lane: LaneId) -> usize {
+        if !self.is_imported() {
+            return 1;
+        }
+        let end = self.lanes[lane].end;
+        let mut edges: Vec<&str> =
+            (0..self.lanes.len()).filter(|&l| self.lanes[l].end == end).map(|l| self.edge_and_index(l).0).collect();
+        edges.sort_unstable();
+        edges.dedup();
+        edges.len()
     }
 
     /// A point on the pavement beside `lane`'s kerb, level with its stop

@@ -273,10 +273,10 @@ pub struct SumoConnection {
     /// Indices into [`SumoNetwork::lanes`].
     pub from: usize,
     pub to: usize,
+    /// Its turn: a partial one (`dir` `R` or `L`) is a slight turn where
+    /// its lane also has a full one of its kind (`r` or `l`: a junction of
+    /// five arms or more), else a right or left.
     pub turn: Turn,
-    /// A partial turn (`dir` `R` or `L`, beside which a lane may also have
-    /// a full one, `r` or `l`).
-    pub slight: bool,
     /// Its path through the junction (the shapes of the internal lanes it
     /// crosses, in turn), metres; empty when the file has none (a straight
     /// join).
@@ -520,6 +520,8 @@ impl SumoNetwork {
             .filter_map(|c| Some(((c.from.as_str(), c.from_lane, c.to.as_str(), c.to_lane), c.via.as_deref()?)))
             .collect();
         let mut connections = Vec::new();
+        // Connections with a partial turn (`R`, `L`), ascending.
+        let mut partial = Vec::new();
         for c in &raw.connections {
             let (Some(&from), Some(&to)) =
                 (lane_index.get(&(c.from.as_str(), c.from_lane)), lane_index.get(&(c.to.as_str(), c.to_lane)))
@@ -561,8 +563,28 @@ impl SumoNetwork {
                 }
                 _ => None,
             };
-            let slight = c.dir == "R" || c.dir == "L";
-            connections.push(SumoConnection { from, to, turn, slight, path, signal });
+            if c.dir == "R" || c.dir == "L" {
+                partial.push(connections.len());
+            }
+            connections.push(SumoConnection { from, to, turn, path, signal });
+        }
+        // A lane with a full and a partial right (or left) drives the
+        // partial one as a slight turn.
+        let mut full = vec![[false; 2]; lanes.len()];
+        for (k, c) in connections.iter().enumerate() {
+            match c.turn {
+                Turn::Right if partial.binary_search(&k).is_err() => full[c.from][0] = true,
+                Turn::Left if partial.binary_search(&k).is_err() => full[c.from][1] = true,
+                _ => {}
+            }
+        }
+        for &k in &partial {
+            let c = &mut connections[k];
+            match c.turn {
+                Turn::Right if full[c.from][0] => c.turn = Turn::SlightRight,
+                Turn::Left if full[c.from][1] => c.turn = Turn::SlightLeft,
+                _ => {}
+            }
         }
         if lanes.is_empty() {
             return Err("the network has no lane a passenger car may drive".into());

@@ -271,13 +271,14 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
         let crate::map::LaneEnd::Intersection { intersection, .. } = lane.end else { continue };
         let line = len - map.layout.stop_line_setback;
         let junction = &map.intersections[intersection];
-        let sign = map.sign_of(id);
+        // A stop sign or give-way triangle, on the kerb side only.
         let kerb_side = map.adjacent_lane(id, false).is_none();
+        let sign = || if kerb_side { map.sign_of(id) } else { None };
         match junction.control {
             JunctionControl::Signals => quad_along(pixmap, t, curve, line, line + 0.4, -half, half, WHITE),
             JunctionControl::AllWayStop => {
                 quad_along(pixmap, t, curve, line - 0.1, line + 0.5, -half, half, WHITE);
-                if let Some(p) = sign.filter(|_| kerb_side) {
+                if let Some(p) = sign() {
                     circle(pixmap, t, p.x, p.y, 0.55, WHITE);
                     circle(pixmap, t, p.x, p.y, 0.45, STOP_SIGN);
                 }
@@ -290,7 +291,7 @@ fn draw_network_roads(map: &CityMap, pixmap: &mut Pixmap, road: &mut Pixmap, t: 
                     quad_along(pixmap, t, curve, line, line + 0.4, k, (k + 0.6).min(half), WHITE);
                     k += 1.0;
                 }
-                if let Some(p) = sign.filter(|_| kerb_side) {
+                if let Some(p) = sign() {
                     let ahead = curve.position(len, 0.0) - curve.position(len - 1.0, 0.0);
                     give_way_triangle(pixmap, t, p, ahead.normalize_or_zero());
                 }

@@ -886,9 +886,9 @@ fn at_a_junction_of_five_arms_a_side_street_from_the_priority_roads_side_waits_f
     let gave_way = traj.interactions.iter().any(|f| f[1].bound_by == BoundBy::GiveWay && f[1].other_car == Some(0));
     assert!(gave_way, "the side street's car never gave way");
     assert!(traj.interactions.iter().all(|f| f[0].bound_by != BoundBy::GiveWay), "the priority road's car gave way");
-    // Alone, the side street's car would have entered first.
+    // Alone, the side street's car would have entered first, and sooner.
     let alone = simulate(&map, &plan(&map, &cars[1..], no_lights(), vec![], 30.0));
-    assert!(enters(&alone, 0) < main, "the test does not force a conflict");
+    assert!(enters(&alone, 0) < main && enters(&alone, 0) < side, "the test does not force a conflict");
 }
 
 #[test]
