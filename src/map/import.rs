@@ -631,14 +631,7 @@ impl CityMap {
         }
         // A lane whose full right (or left) leads to a lane left out drives
         // its slight one as its right (left).
-        let mut full = vec![[false; 2]; lanes.len()];
-        for c in &connectors {
-            match c.turn {
-                Turn::Right => full[c.from][0] = true,
-                Turn::Left => full[c.from][1] = true,
-                _ => {}
-            }
-        }
+        let full = super::full_turns(lanes.len(), connectors.iter().map(|c| (c.from, c.turn)));
         for c in &mut connectors {
             match c.turn {
                 Turn::SlightRight if !full[c.from][0] => c.turn = Turn::Right,

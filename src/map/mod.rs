@@ -275,6 +275,21 @@ impl Turn {
     }
 }
 
+/// Per lane (of `lanes` lanes), whether `turns` (lane, turn) give it a
+/// full right (`[0]`) and a full left (`[1]`): where a lane has one, a
+/// partial turn the same way is a slight one.
+pub(crate) fn full_turns(lanes: usize, turns: impl IntoIterator<Item = (LaneId, Turn)>) -> Vec<[bool; 2]> {
+    let mut full = vec![[false; 2]; lanes];
+    for (lane, turn) in turns {
+        match turn {
+            Turn::Right => full[lane][0] = true,
+            Turn::Left => full[lane][1] = true,
+            _ => {}
+        }
+    }
+    full
+}
+
 /// What a lane runs into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LaneEnd {

@@ -570,14 +570,14 @@ impl SumoNetwork {
         }
         // A lane with a full and a partial right (or left) drives the
         // partial one as a slight turn.
-        let mut full = vec![[false; 2]; lanes.len()];
-        for (k, c) in connections.iter().enumerate() {
-            match c.turn {
-                Turn::Right if partial.binary_search(&k).is_err() => full[c.from][0] = true,
-                Turn::Left if partial.binary_search(&k).is_err() => full[c.from][1] = true,
-                _ => {}
-            }
-        }
+        let full = super::full_turns(
+            lanes.len(),
+            connections
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| partial.binary_search(k).is_err())
+                .map(|(_, c)| (c.from, c.turn)),
+        );
         for &k in &partial {
             let c = &mut connections[k];
             match c.turn {

@@ -11,9 +11,10 @@ const MERGE_SHARE: f64 = 0.25;
 /// A random drive queue drawn as the original's `scenarioGenerator.py`
 /// draws it, whatever lane the car will be in: each action `left`, `right`
 /// or `straight` with equal chance (and, at a junction of five arms or
-/// more, `slight_left` and `slight_right` where the road has them). (The original writes merge names only
-/// into `MergeAtDistances`, where its engine never carried them out, so no
-/// merges are drawn.) Drivers plan the lane changes their turns need.
+/// more, `slight_left` and `slight_right` where the road has them). (The
+/// original writes merge names only into `MergeAtDistances`, where its
+/// engine never carried them out, so no merges are drawn.) Drivers plan
+/// the lane changes their turns need.
 ///
 /// On a town with T-junctions, a movement that no lane of the road has at
 /// the junction the action applies to is drawn again among those it has
