@@ -228,7 +228,8 @@ impl Sim<'_> {
     /// touch, into `pairs`, given for each car on the map a point and a
     /// radius its centre is within (`None`: off the map), in order: a sweep
     /// along x over each car's reach, so the cost grows with the cars, not
-    /// their pairs. `extents` is the sweep's buffer.
+    /// their pairs. `extents` is the sweep's buffer, kept from step to step
+    /// for its order.
     pub(super) fn candidate_pairs(
         &self,
         points: &[Option<(DVec2, f64)>],
@@ -237,10 +238,22 @@ impl Sim<'_> {
     ) {
         // Per car: its point and how far from it another car's point may be
         // and still count (half the pair's bound, with room for round-off).
-        extents.clear();
-        extents.extend(points.iter().enumerate().filter_map(|(i, p)| {
-            p.map(|(point, radius)| (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6))
-        }));
+        let extent = |i: usize, (point, radius): (DVec2, f64)| {
+            (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6)
+        };
+        // Kept in the order the last step's sort left when the same cars
+        // are on the map (they move little in a step), so the sort finds it
+        // nearly sorted; the pairs found do not depend on the order.
+        let same_cars =
+            extents.len() == points.iter().flatten().count() && extents.iter().all(|e| points[e.0].is_some());
+        if same_cars {
+            for e in extents.iter_mut() {
+                *e = extent(e.0, points[e.0].expect("checked above"));
+            }
+        } else {
+            extents.clear();
+            extents.extend(points.iter().enumerate().filter_map(|(i, p)| p.map(|p| extent(i, p))));
+        }
         extents.sort_by(|a, b| (a.1.x - a.2).total_cmp(&(b.1.x - b.2)));
         pairs.clear();
         for (k, &(i, pi, ei)) in extents.iter().enumerate() {
