@@ -24,6 +24,7 @@ pub mod output;
 pub mod plan;
 pub mod preview;
 pub mod progress;
+pub mod remainder;
 pub mod render;
 pub mod spec;
 pub mod timing;

@@ -366,7 +366,7 @@ fn smootherstep_derivative(t: f64) -> f64 {
 
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_angle(a: f64) -> f64 {
-    let mut a = a % (2.0 * PI);
+    let mut a = crate::remainder::fmod(a, 2.0 * PI);
     if a <= -PI {
         a += 2.0 * PI;
     } else if a > PI {

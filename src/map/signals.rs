@@ -209,7 +209,7 @@ impl Light {
     /// Colour at scenario time `t` (seconds).
     pub fn state_at(&self, t: f64) -> LightState {
         let period: f64 = self.schedule.iter().map(|s| s.duration).sum();
-        let mut local = (t + self.offset).rem_euclid(period);
+        let mut local = crate::remainder::rem_euclid(t + self.offset, period);
         // Merge runs of one colour (a wrap from the last step to the first).
         for (i, step) in self.schedule.iter().enumerate() {
             if local < step.duration {
