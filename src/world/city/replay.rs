@@ -267,7 +267,7 @@ impl<'a> Recording<'a> {
         sim.frozen = (0..n).map(|i| self.group[i] != self.group[cause]).collect();
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
-        let mut dirty = vec![false; self.map.track_count()];
+        let mut buffers = StepBuffers { dirty: vec![false; self.map.track_count()], ..StepBuffers::default() };
         let (mut states, mut interactions) = (Vec::new(), Vec::new());
         let mut replayed = 0;
         for frame in 0..changed.frames as usize {
@@ -277,7 +277,7 @@ impl<'a> Recording<'a> {
             if frame > 0 {
                 for k in (frame - 1) * steps..frame * steps {
                     let t = Sim::step_time(k, steps, changed.frame_interval, dt);
-                    sim.replay_step(self, k, t, dt, steps, &mut dirty);
+                    sim.replay_step(self, k, t, dt, steps, &mut buffers);
                     replayed += sim.frozen.iter().filter(|&&f| f).count();
                 }
             }
@@ -301,6 +301,16 @@ impl<'a> Recording<'a> {
         let car_steps = n * steps * (changed.frames as usize).saturating_sub(1);
         Some((trajectories, replayed, car_steps))
     }
+}
+
+/// What a re-run's steps reuse (nothing allocated per step): per track
+/// whether it is marked, the tracks marked, and the replayed cars trying a
+/// decision.
+#[derive(Default)]
+struct StepBuffers {
+    dirty: Vec<bool>,
+    marked: Vec<usize>,
+    trying: Vec<usize>,
 }
 
 /// Whether `changed`'s interventions are ones a re-run replays around:
@@ -341,7 +351,7 @@ fn groups(cars: &[SimCar]) -> Vec<usize> {
 impl<'s> Sim<'s> {
     /// One step of a re-run (global step `k`, from `t` to `t + dt` seconds):
     /// [`Sim::step`] for the simulated cars, the tape for the replayed ones.
-    fn replay_step(&mut self, rec: &Recording<'s>, k: usize, t: f64, dt: f64, steps: usize, dirty: &mut [bool]) {
+    fn replay_step(&mut self, rec: &Recording<'s>, k: usize, t: f64, dt: f64, steps: usize, buffers: &mut StepBuffers) {
         let n = self.cars.len();
         self.fire_interventions(t, dt);
         for i in 0..n {
@@ -350,19 +360,23 @@ impl<'s> Sim<'s> {
             }
         }
         // Replayed cars about to decide on what may differ from the factual
-        // run try the decision; those who decide otherwise wake up.
-        let marked = self.mark_dirty(rec, k, dirty);
-        let trying: Vec<usize> = (0..n)
-            .filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])))
-            .collect();
-        for &track in &marked {
-            dirty[track] = false;
+        // run try the decision; those who decide otherwise wake up. (Most
+        // steps no replayed car decides, and nothing need be marked.)
+        let StepBuffers { dirty, marked, trying } = buffers;
+        trying.clear();
+        trying.extend((0..n).filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some()));
+        if !trying.is_empty() {
+            self.mark_dirty(rec, k, dirty, marked);
+            trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])));
+            for &track in marked.iter() {
+                dirty[track] = false;
+            }
         }
         let mut waking = Vec::new();
         if !trying.is_empty() {
             self.fill_replayed(rec, k);
             self.show_replayed(rec, k);
-            for c in trying {
+            for &c in trying.iter() {
                 if !self.decides_as_taped(rec, c, k, t, dt, steps) {
                     waking.push(c);
                 }
@@ -461,9 +475,9 @@ impl<'s> Sim<'s> {
 
     /// Marks in `dirty` every track on which a simulated car stands, or stood
     /// in the factual run, when it is not where and as fast as the tape says
-    /// at step `k`; returns the tracks marked.
-    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [bool]) -> Vec<usize> {
-        let mut marked = Vec::new();
+    /// at step `k`; lists the tracks marked in `marked`.
+    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [bool], marked: &mut Vec<usize>) {
+        marked.clear();
         for i in (0..self.cars.len()).filter(|&i| !self.frozen[i]) {
             let index = rec.tape.index(k, i);
             let taped = rec.tape.places[index];
@@ -482,7 +496,6 @@ impl<'s> Sim<'s> {
                 }
             }
         }
-        marked
     }
 
     /// Brings car `c`'s group up to the end of step `to` (-1: the start)
@@ -531,25 +544,29 @@ impl<'s> Sim<'s> {
     /// replayed car's footprint from the tape; a replayed car that a
     /// simulated one touches wakes up (with its group) before the collision.
     fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
-        let n = self.cars.len();
+        // Replayed cars' points as taped, simulated ones' as they are now.
         let mut points = std::mem::take(&mut self.scratch_points);
         points.clear();
-        for i in 0..n {
-            points.push(match (self.frozen[i], self.cars[i].removed) {
-                (true, _) => rec.tape.near[rec.tape.index(k, i)],
-                (false, true) => None,
-                (false, false) => Some(self.cars[i].near_point()),
-            });
+        points.extend_from_slice(&rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)]);
+        for (i, point) in points.iter_mut().enumerate() {
+            if !self.frozen[i] {
+                *point = (!self.cars[i].removed).then(|| self.cars[i].near_point());
+            }
         }
         // Pairs of replayed cars did what they did in the factual run (no
         // collision): only pairs with a simulated car are looked at.
         let mut candidates = std::mem::take(&mut self.scratch_pairs);
         candidates.clear();
-        for i in (0..n).filter(|&i| !self.frozen[i]) {
-            let Some((pi, ri)) = points[i] else { continue };
-            for j in (0..n).filter(|&j| j != i && (self.frozen[j] || j > i)) {
-                let Some((pj, rj)) = points[j] else { continue };
-                let reach = self.cars[i].reach + self.cars[j].reach;
+        let frozen = &self.frozen;
+        for (i, point) in points.iter().enumerate() {
+            let (false, Some((pi, ri))) = (frozen[i], *point) else { continue };
+            let reach_i = self.cars[i].reach;
+            for (j, point) in points.iter().enumerate() {
+                let Some((pj, rj)) = *point else { continue };
+                if j == i || (!frozen[j] && j < i) {
+                    continue;
+                }
+                let reach = reach_i + self.cars[j].reach;
                 if pi.distance(pj) - ri - rj < reach + CONTACT_RELEASE + 1e-6 {
                     candidates.push((i.min(j), i.max(j)));
                 }
