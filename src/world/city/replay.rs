@@ -561,15 +561,22 @@ impl<'s> Sim<'s> {
         for (i, point) in points.iter().enumerate() {
             let (false, Some((pi, ri))) = (frozen[i], *point) else { continue };
             let reach_i = self.cars[i].reach;
-            for (j, point) in points.iter().enumerate() {
-                let Some((pj, rj)) = *point else { continue };
-                if j == i || (!frozen[j] && j < i) {
-                    continue;
-                }
+            let mut check = |j: usize, point: &Option<(DVec2, f64)>| {
+                let Some((pj, rj)) = *point else { return };
                 let reach = reach_i + self.cars[j].reach;
                 if pi.distance(pj) - ri - rj < reach + CONTACT_RELEASE + 1e-6 {
                     candidates.push((i.min(j), i.max(j)));
                 }
+            };
+            // Replayed cars before it, every car after it (a pair of
+            // simulated cars once).
+            for (j, point) in points[..i].iter().enumerate() {
+                if frozen[j] {
+                    check(j, point);
+                }
+            }
+            for (j, point) in points.iter().enumerate().skip(i + 1) {
+                check(j, point);
             }
         }
         candidates.sort_unstable();
