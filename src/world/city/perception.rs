@@ -87,7 +87,18 @@ type Candidate = (f64, usize);
 
 /// The nearest of `candidates`; the first one on a tie.
 fn nearest(candidates: impl Iterator<Item = Candidate>) -> Option<Candidate> {
-    candidates.fold(None, |best, (d, j)| if best.is_none_or(|(b, _)| d < b) { Some((d, j)) } else { best })
+    let mut best = None;
+    candidates.for_each(|candidate| closer(&mut best, candidate));
+    best
+}
+
+/// Keeps `candidate` in `best` when it is nearer (the first one on a tie).
+/// The hot searches call it from plain loops, which cost less than
+/// flattened iterators over one or two tracks.
+fn closer(best: &mut Option<Candidate>, (d, j): Candidate) {
+    if best.is_none_or(|(b, _)| d < b) {
+        *best = Some((d, j));
+    }
 }
 
 impl Sim<'_> {
@@ -274,19 +285,18 @@ impl Sim<'_> {
         let claims_count = self.map.control_of(c) == Some(JunctionControl::Signals) && !self.cooperative();
         // On an imported network movements may run together well into the
         // junction before they part: in front until its back is past that.
-        let occupants = self.map.exits_from(from).filter(|&o| o != c).flat_map(|sibling| {
+        let mut best: Option<Candidate> = None;
+        for sibling in self.map.exits_from(from).filter(|&o| o != c) {
             let shared = self.map.shared_start(c, sibling);
-            self.occupants(self.map.connector_track(sibling)).iter().map(move |&(j, pos)| {
+            for &(j, pos) in self.occupants(self.map.connector_track(sibling)) {
                 let clearance = if shared > 0.0 { shared + self.cars[j].plan.length } else { SIBLING_CLEARANCE };
-                (j, pos, clearance)
-            })
-        });
-        nearest(
-            occupants
-                .map(|(j, pos, clearance)| (leg.route_start + pos.max(0.0) - car.s, j, pos, clearance))
-                .filter(|&(d, j, pos, clearance)| j != i && pos < clearance && d > 0.0 && (pos >= 0.0 || claims_count))
-                .map(|(d, j, _, _)| (d, j)),
-        )
+                let d = leg.route_start + pos.max(0.0) - car.s;
+                if j != i && pos < clearance && d > 0.0 && (pos >= 0.0 || claims_count) {
+                    closer(&mut best, (d, j));
+                }
+            }
+        }
+        best
     }
 
     /// Cars on movements that run into one path with connector `c` before
@@ -317,15 +327,18 @@ impl Sim<'_> {
             LegKind::Connector(c) => ([Some(self.map.connector_track(c)), None], 0.0, leg.length),
             LegKind::LaneChange { from, to, at } => ([Some(from), Some(to)], at, at + run),
         };
-        nearest(
-            tracks
-                .into_iter()
-                .flatten()
-                .flat_map(|track| self.occupants(track).iter())
-                .filter(|&&(j, pos)| j != i && pos >= start - 0.01 && pos <= end + 0.01)
-                .map(|&(j, pos)| (leg.route_start + (pos - start) - car.s, j))
-                .filter(|&(d, _)| d > 0.0),
-        )
+        let mut best: Option<Candidate> = None;
+        for track in tracks.into_iter().flatten() {
+            for &(j, pos) in self.occupants(track) {
+                if j != i && pos >= start - 0.01 && pos <= end + 0.01 {
+                    let d = leg.route_start + (pos - start) - car.s;
+                    if d > 0.0 {
+                        closer(&mut best, (d, j));
+                    }
+                }
+            }
+        }
+        best
     }
 
     /// Distance from car `i`'s front to where it must stop for a light or for
