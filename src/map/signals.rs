@@ -217,7 +217,7 @@ impl Light {
                 // Earlier steps of the same colour count too.
                 let mut j = i;
                 loop {
-                    j = (j + self.schedule.len() - 1) % self.schedule.len();
+                    j = j.checked_sub(1).unwrap_or(self.schedule.len() - 1);
                     if j == i || self.schedule[j].colour != step.colour {
                         break;
                     }
