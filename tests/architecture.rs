@@ -5,12 +5,13 @@
 use std::path::{Path, PathBuf};
 
 /// Top-level modules by layer: a module may use its own layer and lower ones.
-const LAYERS: [(&str, u32); 20] = [
+const LAYERS: [(&str, u32); 21] = [
     ("error", 0),
     ("timing", 0),
     ("progress", 0),
     ("json", 0),
     ("geometry", 0),
+    ("remainder", 0),
     ("camera", 0),
     ("map", 1),
     ("spec", 2),
