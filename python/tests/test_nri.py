@@ -22,18 +22,21 @@ SEND, RECV = torch.tensor([p[0] for p in PAIRS]), torch.tensor([p[1] for p in PA
 
 def assert_batched_is_the_loop(decoder, seq, past, edges):
     """The batched step and NRI's per-type, per-pair loop give the same
-    outputs, loss and gradients (float64)."""
+    outputs, loss and gradients (float64), the edge weights' gradient (what
+    trains the encoder) included."""
     losses, grads = [], []
     for reference in (False, True):
         decoder.zero_grad()
-        out = decoder(seq, past, edges, truth_until=4, reference=reference)
+        weights = edges.detach().clone().requires_grad_(True)
+        out = decoder(seq, past, weights, truth_until=4, reference=reference)
         loss = ((out - seq[:, 1:]) ** 2).sum()
         loss.backward()
         losses.append(loss.item())
-        grads.append(torch.cat([p.grad.flatten() for p in decoder.parameters() if p.grad is not None]))
+        grads.append(torch.cat([p.grad.flatten() for p in decoder.parameters() if p.grad is not None]
+                               + [weights.grad.flatten()]))  # fmt: skip
     assert losses[0] == pytest.approx(losses[1], rel=1e-12)
     assert torch.allclose(grads[0], grads[1], rtol=1e-9, atol=1e-12)
-    assert grads[0].abs().sum() > 0
+    assert grads[0].abs().sum() > 0 and grads[0][-edges.numel() :].abs().sum() > 0
 
 
 def inputs(types: int, seed: int):

@@ -341,14 +341,14 @@ class NriRollout(CounterfactualMethod):
                                 e[:, index] = 0.0
                                 if e.shape[-1] > 1:
                                     e[:, index, 0] = 1.0
-                    weights = nri.decoder._message_weights()
+                    weights, grid = nri.decoder._message_weights(), nri.decoder.grid(e)
                     hidden = torch.zeros(1, pairs.cars, nri.decoder.hidden, device=nri.device)
                     state, memory, out = seq[:, 0], past, [seq[0, warm - 1]]
                     for t in range(warm + steps - 2):
                         if t < warm:
                             state = seq[:, t]
                         memory = torch.cat([state[:, :, None], memory[:, :, :-1]], dim=2)
-                        state, hidden = nri.decoder.step(state, hidden, e, memory, weights)
+                        state, hidden = nri.decoder.step(state, hidden, grid, memory, weights)
                         frame = f - warm + t + 2
                         if intervene and iv["do"] == "stop" and f < frame <= f + stop_frames:
                             state = state.clone()
