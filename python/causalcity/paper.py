@@ -170,11 +170,16 @@ PARALLEL = ("granger", "pcmci")
 """The methods that run one process per core."""
 
 
-def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
-    """Training windows per second of NRI with this setting's batch on
-    ``device``, 8 cars, 150 frames, measured on the last of two short
-    epochs of random walks (three on a GPU), its val pass included (a few
-    seconds), and the device it ran on."""
+def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[Tuple[float, float], str]:
+    """NRI's windows per second with this setting's batch on ``device``, 8
+    cars, 150 frames: (training, val loss), each timed on its own in the
+    last of two short epochs of random walks (three on a GPU; a few seconds
+    in all), and the device it ran on. Apart, because a val window is a
+    forward pass alone, and on a GPU an eager one beside training steps
+    replayed as CUDA graphs: one rate for both took the calibration's one
+    val batch (a quarter of its windows, a thirtieth of the full
+    setting's) for training, and projected NRI's H200 time at 1.4-1.8x
+    what it took."""
     import numpy as np
 
     from .methods.common import Episodes
@@ -194,7 +199,8 @@ def _calibrate(setting: Setting, device: str, seed: int) -> Tuple[float, str]:
     on_gpu = options.get("device", "auto") != "cpu" and _torch_cuda()
     nri = make("nri", **{**options, "epochs": 3 if on_gpu else 2, "warmup_epochs": 0})
     nri.fit(walks, None)
-    return scenarios * nri.windows / max(nri.epoch_seconds[-1], 1e-6), str(nri.device)
+    training = max(nri.epoch_seconds[-1] - nri.val_seconds[-1], 1e-6)
+    return (scenarios * nri.windows / training, scenarios / max(nri.val_seconds[-1], 1e-6)), str(nri.device)
 
 
 def _torch_cuda() -> bool:
@@ -203,16 +209,19 @@ def _torch_cuda() -> bool:
     return torch.cuda.is_available()
 
 
-def _projected_seconds(name: str, setting: Setting, cars: int, windows_per_s: float) -> float:
-    """One (world, method, group) unit's expected seconds."""
+def _projected_seconds(name: str, setting: Setting, cars: int, rates: Tuple[float, float]) -> float:
+    """One (world, method, group) unit's expected seconds; ``rates`` are
+    NRI's calibrated (training, forward-only) windows per second."""
     splits = setting.splits
     scenarios = sum(splits.values())
     if name in NEURAL:
         options = _method_options(name, setting, "cpu", 0, True)
         epochs = options.get("epochs", setting.epochs)
-        windows = 4 * splits["train"] * epochs + splits["val"] * epochs + scenarios
+        training, forward = rates
+        # Each epoch's val loss, and the predictions of every split at the end.
+        seconds = 4 * splits["train"] * epochs / training + (splits["val"] * epochs + scenarios) / forward
         # A window costs about what its pairs cost: cars x (cars - 1), 56 at 8 cars.
-        return windows / windows_per_s * cars * (cars - 1) / 56
+        return seconds * cars * (cars - 1) / 56
     seconds = SECONDS_PER_SCENARIO.get(name, 0.05) * scenarios * max(cars, 4) / 8
     if name in PARALLEL:
         seconds *= 2 / max(os.cpu_count() or 1, 2)  # measured on 2 cores; they use every core
@@ -302,11 +311,11 @@ def run(
         _write_tables(out, rows, setting, worlds)
         return rows
     if any(u[1] in NEURAL for u in left):
-        rate, on = _calibrate(setting, device, seed)
-        calibrated = f"NRI calibrated at {rate:.0f} training windows/s on {on}; "
+        rates, on = _calibrate(setting, device, seed)
+        calibrated = f"NRI calibrated at {rates[0]:.0f} training windows/s and {rates[1]:.0f} val windows/s on {on}; "
     else:
-        rate, on, calibrated = 1.0, device, ""
-    projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rate) if u in left else 0.0 for u in units}
+        rates, on, calibrated = (1.0, 1.0), device, ""
+    projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rates) if u in left else 0.0 for u in units}
     if overlap is None:
         overlap = on.startswith("cuda") and any(u[1] in NEURAL for u in units)
     beside = " with the CPU methods beside the GPU's" if overlap else ""

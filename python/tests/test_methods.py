@@ -243,12 +243,16 @@ def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsy
     out = tmp_path / "plan"
     assert paper.main(["--plan", "--splits", "20/5/5", "--epochs", "2", "--device", "cpu", "--out", str(out)]) == 0
     err = capsys.readouterr().err
-    assert "80 units" in err and "projected" in err and "training windows/s on cpu" in err, err
+    assert "80 units" in err and "projected" in err and "training windows/s and" in err, err
+    assert "val windows/s on cpu" in err, err
     for world in paper.WORLDS:
         for method in paper.METHOD_ORDER:
             line = next(x for x in err.splitlines() if x.startswith(f"[paper]   {world} {paper._label(method)}:"))
             assert line.rsplit(" ", 1)[-1][0].isdigit(), line
     assert not out.exists()
+    # NRI's val windows (a forward pass) are projected at their own rate,
+    # apart from its training windows: 1,600,000 at 1,000/s, 55,000 at 4,000/s.
+    assert paper._projected_seconds("nri", paper.FULL, 8, (1000.0, 4000.0)) == pytest.approx(1600 + 13.75)
 
 
 def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, capsys):

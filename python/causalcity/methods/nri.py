@@ -538,6 +538,8 @@ class Nri(Method):
         self.epoch_seconds: list = []
         """Wall-clock seconds of each epoch, its val loss included (the
         device synchronised at the end of each)."""
+        self.val_seconds: list = []
+        """The part of each epoch's seconds spent on its val loss."""
 
     # -- data ---------------------------------------------------------------
     def _states(self, episodes: Episodes) -> np.ndarray:
@@ -641,7 +643,7 @@ class Nri(Method):
     def fit(self, train: Episodes, val: Optional[Episodes]) -> None:
         torch.manual_seed(self.seed)
         gen = np.random.default_rng(self.seed)
-        self.losses, self.epoch_seconds, self.epoch_lrs = [], [], []
+        self.losses, self.epoch_seconds, self.val_seconds, self.epoch_lrs = [], [], [], []
         hist, steps = self._frames(train)
         states = self._states(train)
         flat = states[:, : hist + steps].reshape(-1, 4)
@@ -687,12 +689,14 @@ class Nri(Method):
                 loss = step(phase, batch, first, full=len(batch) == self.batch_size)
                 total += loss * len(batch)
             train_loss = float(total) / len(order)
+            val_start = time.perf_counter()
             # (val may hold the car count out: scored on its own, then back)
             self._wire(val_cars)
             val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
             self._wire(train.cars)
             self.losses.append((epoch, train_loss, val_loss))
             self.epoch_seconds.append(time.perf_counter() - epoch_start)
+            self.val_seconds.append(time.perf_counter() - val_start)
             # (the epochs without edges cannot be the one kept)
             if val_loss < best_loss and (epoch >= self.warmup_epochs or not self.discover):
                 best_loss = val_loss
