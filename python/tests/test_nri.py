@@ -95,6 +95,23 @@ def test_a_time_limit_keeps_the_epochs_done():
     assert nri.predict(train).edges.shape == (20, 5, 5)
 
 
+def test_a_model_wired_back_to_its_car_count_reads_the_tensors_it_trained_with():
+    # A captured CUDA graph reads the very tensors it was captured with; each
+    # epoch's val pass may wire the model to another car count and back, so
+    # the decoder and encoder must get those same tensors back, not equal
+    # copies whose memory the graph never sees (checked here on the CPU).
+    train = springs.episodes(10, frames=40, seed=1)
+    nri = make("nri", epochs=1, batch_size=8, device="cpu", quiet=True, history=20, steps=5, warm=5, pair_every=2,
+               window=4, warmup_epochs=0)  # fmt: skip
+    nri.fit(train, None)
+    kept = (nri.decoder.grid_index, nri.decoder.send, nri.decoder.recv, nri.encoder.send, nri.encoder.recv)
+    nri._wire(4)
+    assert nri.decoder.grid_index.shape == (12,) and nri.decoder.grid_index is not kept[0]
+    nri._wire(5)
+    again = (nri.decoder.grid_index, nri.decoder.send, nri.decoder.recv, nri.encoder.send, nri.encoder.recv)
+    assert all(a is b for a, b in zip(again, kept))
+
+
 def test_springs_follow_nri_s_physics():
     positions, velocities, edges = springs.simulate(40, particles=5, frames=49, seed=4)
     assert positions.shape == velocities.shape == (40, 49, 5, 2) and edges.shape == (40, 5, 5)

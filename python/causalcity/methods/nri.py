@@ -109,14 +109,15 @@ class _Mlp(nn.Module):
 
 def _wiring(cars: int, device) -> tuple:
     """Every ordered pair (i, j), i != j, of ``cars`` cars, and as tensors:
-    the senders and receivers [E], and their one-hot [E, N] matrices (the
-    MLP decoder gathers and sums by matrix products, whose gradients are
+    the senders and receivers [E], their one-hot [E, N] matrices (the MLP
+    decoder gathers and sums by matrix products, whose gradients are
     products too: an indexed gather's gradient is a scattered sum, slow on
-    a CPU; the recurrent decoder gathers nothing, see RnnDecoder.step)."""
+    a CPU) and where each pair lies on the grid of every (receiver, sender)
+    [E] (the recurrent decoder gathers nothing, see RnnDecoder.step)."""
     pairs = [(i, j) for i in range(cars) for j in range(cars) if i != j]
     send = torch.tensor([p[0] for p in pairs], dtype=torch.long, device=device)
     recv = torch.tensor([p[1] for p in pairs], dtype=torch.long, device=device)
-    return pairs, send, recv, F.one_hot(send, cars).float(), F.one_hot(recv, cars).float()
+    return pairs, send, recv, F.one_hot(send, cars).float(), F.one_hot(recv, cars).float(), recv * cars + send
 
 
 class _WeightedSum(torch.autograd.Function):
@@ -143,11 +144,13 @@ class _Wired(nn.Module):
     """A decoder whose weights do not depend on the car count: only its
     pair index tensors do, which :meth:`wire` replaces."""
 
-    def wire(self, send, recv, send_matrix, recv_matrix) -> None:
+    def wire(self, send, recv, send_matrix, recv_matrix, grid_index) -> None:
+        """Points the decoder at another car count's pair tensors (those of
+        :func:`_wiring`, kept by the owner: a captured CUDA graph goes on
+        reading the tensors it was captured with)."""
         self.send, self.recv = send, recv
         self.send_matrix, self.recv_matrix = send_matrix, recv_matrix
-        self.cars = send_matrix.shape[1]
-        self.grid_index = recv * self.cars + send
+        self.cars, self.grid_index = send_matrix.shape[1], grid_index
 
     def grid(self, edges: torch.Tensor) -> torch.Tensor:
         """The computed edge types' weights, from edges [B, E, K], on the
@@ -566,15 +569,15 @@ class Nri(Method):
         training count's own tensors when the model comes back to it."""
         if cars not in self._wirings:
             self._wirings[cars] = _wiring(cars, self.device)
-        pairs, send, recv, send_matrix, recv_matrix = self._wirings[cars]
+        pairs, send, recv, send_matrix, recv_matrix, grid_index = self._wirings[cars]
         self.cars, self.pairs = cars, pairs
         if self.encoder is not None:
             self.encoder.send, self.encoder.recv = send, recv
-        self.decoder.wire(send, recv, send_matrix, recv_matrix)
+        self.decoder.wire(send, recv, send_matrix, recv_matrix, grid_index)
 
     def _build(self, cars: int, hist: int) -> None:
         self._wirings = {cars: _wiring(cars, self.device)}
-        pairs, send, recv, _, _ = self._wirings[cars]
+        pairs, send, recv = self._wirings[cars][:3]
         self.cars, self.pairs = cars, pairs
         types = 2 if self.discover else 1
         frames = len(range(0, hist, self.pair_every))
@@ -695,8 +698,9 @@ class Nri(Method):
             val_loss = self._evaluate_loss(x_val if x_val is not None else x_train, hist, steps)
             self._wire(train.cars)
             self.losses.append((epoch, train_loss, val_loss))
-            self.epoch_seconds.append(time.perf_counter() - epoch_start)
-            self.val_seconds.append(time.perf_counter() - val_start)
+            now = time.perf_counter()
+            self.epoch_seconds.append(now - epoch_start)
+            self.val_seconds.append(now - val_start)
             # (the epochs without edges cannot be the one kept)
             if val_loss < best_loss and (epoch >= self.warmup_epochs or not self.discover):
                 best_loss = val_loss
