@@ -8,7 +8,20 @@
 /// stack and appended at once (the logs format millions of numbers).
 pub fn push_fixed(out: &mut Vec<u8>, x: f64, decimals: u32) {
     debug_assert!(decimals <= 9);
-    let scale = POWERS_OF_TEN[decimals as usize];
+    // The logs' column widths, each with its scale a constant, so that the
+    // divisions by it compile to multiplications (the poses' numbers are
+    // most of a poses-only run's writing).
+    match decimals {
+        3 => push_scaled(out, x, 3, 1_000),
+        4 => push_scaled(out, x, 4, 10_000),
+        6 => push_scaled(out, x, 6, 1_000_000),
+        _ => push_scaled(out, x, decimals, POWERS_OF_TEN[decimals as usize]),
+    }
+}
+
+/// [`push_fixed`] with `scale` = 10^`decimals`.
+#[inline(always)]
+fn push_scaled(out: &mut Vec<u8>, x: f64, decimals: u32, scale: u64) {
     let scaled = (x * scale as f64).round();
     if !scaled.is_finite() || scaled.abs() >= 9.0e18 {
         // Out of the fast path's range: fall back to the general form.

@@ -8,24 +8,80 @@ use crate::spec::DriverParams;
 
 /// A car-following model: each method returns the speed the driver wants
 /// `dt` seconds from now.
+///
+/// What a model reads of the free road ([`CarFollowing::free_road`], a power
+/// of the speed in the IDM family) is the same for every constraint of one
+/// decision, so a decision computes it once and hands it to the `_given`
+/// forms; the plain forms compute it themselves.
 pub trait CarFollowing: Send + Sync {
     fn name(&self) -> &'static str;
+    /// The model's free-road term for a driver at `speed` wanting `desired`
+    /// (m/s).
+    fn free_road(&self, p: &DriverParams, speed: f64, desired: f64) -> FreeRoad;
+    /// [`CarFollowing::free_speed`] given this speed's `free` road term.
+    fn free_speed_given(&self, p: &DriverParams, speed: f64, free: FreeRoad, dt: f64) -> f64;
+    /// [`CarFollowing::follow_acceleration`] given this speed's `free` road term.
+    fn follow_acceleration_given(
+        &self,
+        p: &DriverParams,
+        speed: f64,
+        desired: f64,
+        free: FreeRoad,
+        gap: f64,
+        leader_speed: f64,
+    ) -> f64;
     /// On an empty road, towards `desired`.
-    fn free_speed(&self, p: &DriverParams, speed: f64, desired: f64, dt: f64) -> f64;
+    fn free_speed(&self, p: &DriverParams, speed: f64, desired: f64, dt: f64) -> f64 {
+        self.free_speed_given(p, speed, self.free_road(p, speed, desired), dt)
+    }
     /// The acceleration (m/s^2, negative when braking) the driver wants
     /// behind a car `gap` metres ahead (bumper to bumper) driving at
     /// `leader_speed`, before any kinematic limit.
-    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64;
+    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
+        self.follow_acceleration_given(p, speed, desired, self.free_road(p, speed, desired), gap, leader_speed)
+    }
     /// Behind a car `gap` metres ahead (bumper to bumper) driving at `leader_speed`.
     fn follow_speed(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64, dt: f64) -> f64 {
-        (speed + self.follow_acceleration(p, speed, desired, gap, leader_speed) * dt).max(0.0)
+        self.follow_speed_given(p, speed, desired, self.free_road(p, speed, desired), gap, leader_speed, dt)
+    }
+    /// [`CarFollowing::follow_speed`] given this speed's `free` road term.
+    #[allow(clippy::too_many_arguments)]
+    fn follow_speed_given(
+        &self,
+        p: &DriverParams,
+        speed: f64,
+        desired: f64,
+        free: FreeRoad,
+        gap: f64,
+        leader_speed: f64,
+        dt: f64,
+    ) -> f64 {
+        (speed + self.follow_acceleration_given(p, speed, desired, free, gap, leader_speed) * dt).max(0.0)
     }
     /// Stopping for a standing obstacle (a stop line) `distance` metres ahead.
     fn stop_speed(&self, p: &DriverParams, speed: f64, desired: f64, distance: f64, dt: f64) -> f64 {
+        self.stop_speed_given(p, speed, desired, self.free_road(p, speed, desired), distance, dt)
+    }
+    /// [`CarFollowing::stop_speed`] given this speed's `free` road term.
+    fn stop_speed_given(
+        &self,
+        p: &DriverParams,
+        speed: f64,
+        desired: f64,
+        free: FreeRoad,
+        distance: f64,
+        dt: f64,
+    ) -> f64 {
         // A stop line is a standing car whose back is `distance` + min_gap away.
-        self.follow_speed(p, speed, desired, distance + p.min_gap - STOP_LINE_MARGIN, 0.0, dt)
+        self.follow_speed_given(p, speed, desired, free, distance + p.min_gap - STOP_LINE_MARGIN, 0.0, dt)
     }
 }
+
+/// What a car-following model reads of the free road at one speed (the
+/// IDM's `(v / v0)^delta`, the IIDM's free-road acceleration in m/s^2),
+/// made by [`CarFollowing::free_road`] for the same model and speed only.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FreeRoad(f64);
 
 /// How far before a stop line a car's front comes to rest, metres.
 pub const STOP_LINE_MARGIN: f64 = 0.2;
@@ -67,15 +123,27 @@ impl CarFollowing for Idm {
         "idm"
     }
 
-    fn free_speed(&self, p: &DriverParams, speed: f64, desired: f64, dt: f64) -> f64 {
-        let a = p.max_acceleration * (1.0 - self.free_term(speed, desired));
+    fn free_road(&self, _: &DriverParams, speed: f64, desired: f64) -> FreeRoad {
+        FreeRoad(self.free_term(speed, desired))
+    }
+
+    fn free_speed_given(&self, p: &DriverParams, speed: f64, free: FreeRoad, dt: f64) -> f64 {
+        let a = p.max_acceleration * (1.0 - free.0);
         (speed + a * dt).max(0.0)
     }
 
-    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
+    fn follow_acceleration_given(
+        &self,
+        p: &DriverParams,
+        speed: f64,
+        _: f64,
+        free: FreeRoad,
+        gap: f64,
+        leader_speed: f64,
+    ) -> f64 {
         let gap = gap.max(0.01);
         let wanted = desired_gap(p, speed, leader_speed);
-        p.max_acceleration * (1.0 - self.free_term(speed, desired) - (wanted / gap).powi(2))
+        p.max_acceleration * (1.0 - free.0 - (wanted / gap).powi(2))
     }
 }
 
@@ -118,15 +186,27 @@ impl CarFollowing for Iidm {
         "iidm"
     }
 
-    fn free_speed(&self, p: &DriverParams, speed: f64, desired: f64, dt: f64) -> f64 {
-        (speed + self.free_acceleration(p, speed, desired) * dt).max(0.0)
+    fn free_road(&self, p: &DriverParams, speed: f64, desired: f64) -> FreeRoad {
+        FreeRoad(self.free_acceleration(p, speed, desired))
     }
 
-    fn follow_acceleration(&self, p: &DriverParams, speed: f64, desired: f64, gap: f64, leader_speed: f64) -> f64 {
+    fn free_speed_given(&self, _: &DriverParams, speed: f64, free: FreeRoad, dt: f64) -> f64 {
+        (speed + free.0 * dt).max(0.0)
+    }
+
+    fn follow_acceleration_given(
+        &self,
+        p: &DriverParams,
+        speed: f64,
+        desired: f64,
+        free: FreeRoad,
+        gap: f64,
+        leader_speed: f64,
+    ) -> f64 {
         let gap = gap.max(0.01);
         let wanted = desired_gap(p, speed, leader_speed);
         let z = wanted / gap;
-        let free = self.free_acceleration(p, speed, desired);
+        let free = free.0;
         let a = p.max_acceleration;
         if speed <= desired {
             if z >= 1.0 {

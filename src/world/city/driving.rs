@@ -31,7 +31,9 @@ impl Sim<'_> {
             (car.driver, car.v, car.desired())
         };
         // The lowest target wins; on a tie the constraint found first.
-        let mut target = model.free_speed(&p, v, desired, dt);
+        // The free-road term is the same for every constraint below.
+        let free = model.free_road(&p, v, desired);
+        let mut target = model.free_speed_given(&p, v, free, dt);
         let mut binding = Interaction::FREE;
         let mut bind = |speed: f64, by: Interaction| {
             if speed < target {
@@ -43,7 +45,7 @@ impl Sim<'_> {
             let perceived = gap * (p.perception_noise * self.cars[i].noise).exp();
             let other = Some(self.cars[j].plan.id);
             bind(
-                model.follow_speed(&p, v, desired, perceived, leader_speed, dt),
+                model.follow_speed_given(&p, v, desired, free, perceived, leader_speed, dt),
                 Interaction { bound_by: BoundBy::Car, other_car: other, light: None },
             );
         }
@@ -58,7 +60,7 @@ impl Sim<'_> {
                 }
                 Stop::AllWayLine => Interaction { bound_by: BoundBy::StopLine, other_car: None, light: None },
             };
-            bind(model.stop_speed(&p, v, desired, distance, dt), by);
+            bind(model.stop_speed_given(&p, v, desired, free, distance, dt), by);
         }
         // A curve limit below the speed is reached over a reaction time, not
         // in one step (the acceleration is held until the next decision).
@@ -67,7 +69,7 @@ impl Sim<'_> {
         bind(curve_target, Interaction { bound_by: BoundBy::Curve, other_car: None, light: None });
         if let Some(distance) = self.merge_wait(i, t) {
             let by = Interaction { bound_by: BoundBy::Merge, other_car: None, light: None };
-            bind(model.stop_speed(&p, v, desired, distance, dt), by);
+            bind(model.stop_speed_given(&p, v, desired, free, distance, dt), by);
         }
         if t < self.cars[i].stopped_until {
             target = 0.0;

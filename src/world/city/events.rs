@@ -261,7 +261,9 @@ impl Sim<'_> {
                 if pj.x - ej >= pi.x + ei {
                     break;
                 }
-                if pi.distance(pj) < ei + ej {
+                // Squared: a pair at the limit is, by the extents' slack,
+                // too far apart to touch either way.
+                if pi.distance_squared(pj) < (ei + ej) * (ei + ej) {
                     pairs.push((i.min(j), i.max(j)));
                 }
             }
