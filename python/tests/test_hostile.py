@@ -194,6 +194,7 @@ def test_methods_out_is_checked_before_any_work_and_bad_input_exits_2(toy, tmp_p
         (["nri", "--device", "bogus"], "device='bogus'"),
         (["nri", "--epochs", "-1"], "use 1 or more"),
         (["nri", "--epochs", "0"], "use 1 or more"),
+        (["nri_trail", "--decoder", "rnn"], "give those to nri instead"),
         (["granger", "--split", "test", "--group", "cars99_edges50"], "cars99_edges50"),
     ]:
         run = methods(args[0], toy, "--out", tmp_path / "p.npz", *args[1:])

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch", reason='the reference methods need pip inst
 from causalcity.methods import make, springs  # noqa: E402
 from causalcity.methods.common import auroc_of  # noqa: E402
 from causalcity import InputError  # noqa: E402
-from causalcity.methods.nri import MlpDecoder, RnnDecoder  # noqa: E402
+from causalcity.methods.nri import MlpDecoder, RnnDecoder, TrailDecoder  # noqa: E402
 
 
 CARS = 5
@@ -57,6 +57,35 @@ def test_the_batched_decoder_is_nri_s_loop(types, skip_first):
 
 
 @pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
+def test_the_trail_decoder_on_the_grid_is_the_pair_by_pair_loop(types, skip_first):
+    seq, edges = inputs(types, 20 + types)
+    decoder = TrailDecoder(4, 16, types, skip_first, SEND, RECV, window=6).double()
+    decoder.vel_to_pos = torch.tensor([0.7, 1.3], dtype=torch.float64)
+    decoder.vel_offset = torch.tensor([0.01, -0.02], dtype=torch.float64)
+    past = torch.randn(3, CARS, 6, 4, dtype=torch.float64)
+    assert_batched_is_the_loop(decoder, seq, past, edges)
+
+
+def test_a_trail_message_reaches_only_a_car_on_its_sender_s_trail():
+    # Car 0 drove along y = 0 and turned; car 1 stands on that road where car
+    # 0 was 3 frames ago, car 2 far off it. Car 0's message to car 1 says
+    # where car 0 went from there; car 2 hears (almost) nothing.
+    decoder = TrailDecoder(4, 8, 2, True, SEND[:0], RECV[:0], window=6).double()
+    decoder.vel_to_pos = torch.tensor([1.0, 1.0], dtype=torch.float64) / 2**0.5  # distances in these units
+    with torch.no_grad():
+        decoder.log_temperature.fill_(-3.0)  # as training sharpens it
+    trail = torch.zeros(6, 4, dtype=torch.float64)
+    trail[:, 0] = -torch.arange(6, dtype=torch.float64)  # x: 0, -1, ... -5 (newest first)
+    trail[:, 2] = 1.0
+    trail[2, 2:] = torch.tensor([0.0, 1.0], dtype=torch.float64)  # from x = -3 it went up
+    here = torch.tensor([[-3.0, 0.0], [-3.0, 40.0]], dtype=torch.float64)
+    velocity = torch.tensor([[1.0, 0.0], [1.0, 0.0]], dtype=torch.float64)
+    features, gate = decoder._trail(here, velocity, trail.expand(2, 6, 4))
+    assert features[0, :2].tolist() == pytest.approx([0.0, 1.0], abs=0.02)
+    assert gate[0].item() > 0.95 and gate[1].item() < 1e-6
+
+
+@pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
 def test_the_batched_mlp_decoder_is_nri_s_loop(types, skip_first):
     seq, edges = inputs(types, 10 + types)
     decoder = MlpDecoder(4, 16, types, skip_first, SEND, RECV).double()
@@ -78,12 +107,17 @@ def test_springs_integrate_alike_in_numpy_and_pytorch():
 
 @pytest.mark.parametrize(
     "option, value, says",
-    [("decoder", "gru", "use rnn or mlp"), ("encoder_input", "cars", "use pairs, nodes or both"),
+    [("decoder", "gru", "use rnn, mlp or trail"), ("encoder_input", "cars", "use pairs, nodes, both or heading"),
      ("time_limit_s", 0, "seconds above 0")],
 )  # fmt: skip
 def test_nri_refuses_an_unknown_option_value(option, value, says):
     with pytest.raises(InputError, match=says):
         make("nri", device="cpu", **{option: value})
+
+
+def test_the_trail_decoder_refuses_a_window_without_a_trail():
+    with pytest.raises(InputError, match="window=1: the trail decoder needs a window of at least 2 frames"):
+        make("nri", device="cpu", decoder="trail", window=1)
 
 
 def test_a_time_limit_keeps_the_epochs_done():

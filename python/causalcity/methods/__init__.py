@@ -10,6 +10,8 @@ method                  discovers   predicts      needs (extras)
 ``granger``             yes         no            scipy (``[methods]``)
 ``pcmci``               yes         no            tigramite (``[methods]``)
 ``nri``                 yes         yes           torch (``[methods]``)
+``nri_trail``           yes         yes           torch: NRI whose messages
+                                                  read the sender's trail
 ``interaction``         no          yes           torch: NRI's decoder on the
                                                   complete graph (NS-DR's role)
 ``frame0``              yes         no            scikit-learn: the leak row
@@ -83,6 +85,12 @@ def _nri(**options) -> Method:
     return Nri(**options)
 
 
+def _nri_trail(**options) -> Method:
+    from .nri import Nri
+
+    return Nri(decoder="trail", encoder_input="heading", name="nri_trail", **options)
+
+
 def _interaction(**options) -> Method:
     from .nri import Nri
 
@@ -112,6 +120,7 @@ METHODS: Dict[str, Callable[..., Method]] = {
     "granger": _granger,
     "pcmci": _pcmci,
     "nri": _nri,
+    "nri_trail": _nri_trail,
     "interaction": _interaction,
     "frame0": _frame0,
     "path": _path,

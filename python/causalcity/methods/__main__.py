@@ -33,14 +33,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--out", required=True, help="the predictions .npz to write")
     parser.add_argument("--group", nargs="+", help="only these groups")
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
-    parser.add_argument("--epochs", type=_positive, help="nri, interaction: training epochs, at least 1 (default 30)")
+    parser.add_argument("--epochs", type=_positive, help="nri, nri_trail, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", default="auto", help="nri, interaction: cpu, cuda or auto (default)")
     parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; use 128 or more on a GPU)")
     parser.add_argument("--lr", type=float, help="nri, interaction: Adam's learning rate (default 1e-3)")
-    parser.add_argument("--decoder", choices=["rnn", "mlp"],
-                        help="nri, interaction: rnn (default, with memory) or mlp (NRI's Markovian springs decoder)")
-    parser.add_argument("--encoder-input", choices=["pairs", "nodes", "both"],
-                        help="nri: pairs (default), nodes (NRI's: each car's own states) or both")
+    parser.add_argument("--decoder", choices=["rnn", "mlp", "trail"],
+                        help="nri, interaction: rnn (default, with memory), mlp (NRI's Markovian springs decoder) or "
+                             "trail (a message says what the sender did where the receiver is now; nri_trail's)")
+    parser.add_argument("--encoder-input", choices=["pairs", "nodes", "both", "heading"],
+                        help="nri: pairs (default), nodes (NRI's: each car's own states), both, or heading (each "
+                             "pair's relative positions in the receiver's heading frame; nri_trail's)")
     parser.add_argument("--time-limit", type=float, metavar="SECONDS",
                         help="nri, interaction: stop training after the epoch that reaches this many seconds")
     parser.add_argument("--lr-schedule", choices=["constant", "cosine"],
@@ -53,10 +55,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     options = {}
     if is_user_method(args.method):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
-    elif args.method in ("nri", "interaction"):
+    elif args.method in ("nri", "interaction", "nri_trail"):
+        if args.method == "nri_trail" and (args.decoder or args.encoder_input):
+            print("error: nri_trail is nri with --decoder trail --encoder-input heading: give those to nri instead",
+                  file=sys.stderr)  # fmt: skip
+            return 2
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
         given = dict(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, decoder=args.decoder,
                      time_limit_s=args.time_limit, lr_schedule=args.lr_schedule)  # fmt: skip
+        if args.method == "nri_trail":
+            given.update(decoder=None, kl_weight=args.kl_weight)
         if args.method == "nri":
             given.update(encoder_input=args.encoder_input, kl_weight=args.kl_weight)
         options.update({k: v for k, v in given.items() if v is not None})
