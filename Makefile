@@ -113,10 +113,11 @@ bench-instructions: build
 bench-methods: python-env
 	$(VENV)/bin/python benches/nri_methods.py
 
-## Issue 35's GPU figures in one run of about 9 minutes on one H100-class
+## Issue 35's GPU figures in one run of about 10 minutes on one H100-class
 ## GPU: the full setting's projection, one NRI epoch at the paper's size
-## (eager against CUDA graphs), NRI against Granger on the full-size toy,
-## and NRI on NRI's springs at NRI's size. See the script.
+## (eager against CUDA graphs), NRI and NRI with trail messages against
+## the path rule and Granger on the full-size toy, and NRI on NRI's springs
+## at NRI's size. See the script.
 bench-gpu: python-env
 	PYTHON=$(VENV)/bin/python bash benches/gpu_check.sh
 

@@ -1,8 +1,9 @@
 #!/bin/bash
-# Issue 35's GPU figures in one run of about 9 minutes on one H100-class GPU
+# Issue 35's GPU figures in one run of about 10 minutes on one H100-class GPU
 # (prints, asserts nothing): the full setting's projection, one NRI epoch at
-# the paper's size (eager against CUDA graphs), NRI against Granger on the
-# toy world at full size, and NRI on NRI's springs at NRI's data size.
+# the paper's size (eager against CUDA graphs), NRI and NRI with trail
+# messages against the path rule and Granger on the toy world at full size,
+# and NRI on NRI's springs at NRI's data size.
 #
 #   PYTHON=python3 bash benches/gpu_check.sh
 #
@@ -19,8 +20,8 @@ stage "device"
 $PYTHON -c "import torch, os; print(torch.__version__, torch.cuda.get_device_name() if torch.cuda.is_available() else 'no CUDA device', os.cpu_count(), 'cores')"
 stage "the full setting's projection"
 timeout 120 $PYTHON -m causalcity.paper --plan --device "$BENCH_DEVICE"
-stage "one epoch at the paper's size, then NRI and Granger on the toy at full size"
-BENCH_ONLY=epoch,toy BENCH_TOY_SECONDS=${TOY_SECONDS:-200} timeout 420 $PYTHON benches/nri_methods.py
+stage "one epoch at the paper's size, then NRI, NRI with trail messages, the path rule and Granger on the toy at full size"
+BENCH_ONLY=epoch,toy BENCH_TOY_SECONDS=${TOY_SECONDS:-120} timeout 480 $PYTHON benches/nri_methods.py
 stage "springs at NRI's size"
 BENCH_ONLY=springs BENCH_SPRINGS_TRAIN=${SPRINGS_TRAIN:-50000} BENCH_SPRINGS_EPOCHS=500 BENCH_SPRINGS_SECONDS=${SPRINGS_SECONDS:-150} \
     timeout 300 $PYTHON benches/nri_methods.py

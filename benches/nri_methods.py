@@ -18,9 +18,10 @@ speed, measured side by side in one run (prints figures, asserts nothing).
    scenarios of 8 cars (and 500 val, the val loss included in the epoch),
    at the paper setting's batch of 128 and at 512; target <= 5 s on one
    H100-class GPU at 128.
-5. (``toy``) NRI at the toy's full size (4,000 / 500 / 500, 8 cars, 50 %):
-   test AUROC, F1 at val's best threshold and the share of edges whose
-   direction is right, beside Granger on the same data.
+5. (``toy``) NRI and NRI with trail messages at the toy's full size (4,000
+   / 500 / 500, 8 cars, 50 %): test AUROC, F1 at val's best threshold and
+   the share of edges whose direction is right, beside the path rule and
+   Granger on the same data.
 6. (``recipe``) NRI's edges epoch by epoch (AUROC, mean edge probability
    of true and other pairs) under training recipes: the default, and a KL
    weighed against the prediction loss with a cosine learning rate, on val
@@ -33,7 +34,8 @@ BENCH_SPRINGS_EPOCHS (default "10,30"), BENCH_SPRINGS_SECONDS (a time limit
 per fit), BENCH_SPRINGS_SETTING ("nri", NRI's springs setting, the default
 on a GPU; "default", our default model, the default on a CPU), BENCH_DEVICE (default cpu), BENCH_NRI_BEFORE, BENCH_TOY_TRAIN
 (default 4000), BENCH_TOY_SECONDS (time limit per NRI fit, default none),
-BENCH_TOY_EPOCHS (default 100), BENCH_TOY_METHODS (default "granger,nri"),
+BENCH_TOY_EPOCHS (default 100), BENCH_TOY_METHODS (default
+"path,granger,nri,nri_trail"),
 BENCH_RECIPE_TRAIN (default 1000), BENCH_RECIPE_EPOCHS (default 40),
 BENCH_RECIPES (default "default,kl10-cosine,kl100-cosine": klW-SCHEDULE).
 """
@@ -211,11 +213,9 @@ def toy_full(tmp: Path) -> None:
     group = "cars08_edges50"
     test = load_split(folder, group, "test")
     print(f"\n== toy at full size: 8 cars, 50 %, {size}/500/500, {device_name()} ==")
-    wanted = os.environ.get("BENCH_TOY_METHODS", "granger,nri").split(",")
-    runs = [
-        ("granger", dict(quiet=True)),
-        ("nri", dict(epochs=epochs, batch_size=128, lr=3e-3, time_limit_s=limit, device=DEVICE, quiet=True)),
-    ]  # fmt: skip
+    wanted = os.environ.get("BENCH_TOY_METHODS", "path,granger,nri,nri_trail").split(",")
+    neural = dict(epochs=epochs, batch_size=128, lr=3e-3, time_limit_s=limit, device=DEVICE, quiet=True)
+    runs = [("path", dict()), ("granger", dict(quiet=True)), ("nri", neural), ("nri_trail", neural)]
     for k, (name, options) in enumerate(r for r in runs if r[0] in wanted):
         predictions = tmp / f"toy-{k}.npz"
         start = time.perf_counter()
