@@ -133,17 +133,24 @@ def test_nri_fitted_on_one_car_count_scores_splits_that_hold_other_counts_out(tm
     assert rows["test"]["held_out"] is True and rows["test"]["pairs"] == 4 * 9 * 8
 
 
-def test_nri_finds_the_toy_edges_from_trajectories_alone(tmp_path):
+@pytest.fixture(scope="module")
+def toy_200(tmp_path_factory):
+    """Train, val and test of a toy group of 8 cars at 50 %: 200 / 10 / 20."""
+    out = tmp_path_factory.mktemp("nri") / "toy"
+    spec = dict(TOY, name="nri-toy", seed=11, frames=150, groups=[{"cars": 8, "edge_proportion": 0.5}])
+    spec["splits"] = {"train": 200, "val": 10, "test": 20}
+    causalcity.generate(spec, out, images=False, effects=False, progress=False)
+    return [load_split(out, "cars08_edges50", s) for s in ("train", "val", "test")]
+
+
+def test_nri_finds_the_toy_edges_from_trajectories_alone(toy_200):
     # The full setting's recipe (batch 128, learning rate 3e-3) on 200
     # training scenarios for 60 epochs: about two minutes on 2 CPU cores.
     # (The recipe this test used before, batch 8 on 60 scenarios, sat near
     # chance: 0.69 with one PyTorch release, 0.58 with the next.) The
     # encoder never sees a label; its edge probabilities must still rank the
     # designed edges far above chance on test scenarios it was not trained on.
-    spec = dict(TOY, name="nri-toy", seed=11, frames=150, groups=[{"cars": 8, "edge_proportion": 0.5}])
-    spec["splits"] = {"train": 200, "val": 10, "test": 20}
-    causalcity.generate(spec, tmp_path / "toy", images=False, effects=False, progress=False)
-    train, val, test = (load_split(tmp_path / "toy", "cars08_edges50", s) for s in ("train", "val", "test"))
+    train, val, test = toy_200
     method = make("nri", epochs=60, batch_size=128, lr=3e-3, device="cpu", quiet=True, seed=0)
     method.fit(train, val)
     predicted = method.predict(test)
@@ -158,7 +165,7 @@ def test_nri_finds_the_toy_edges_from_trajectories_alone(tmp_path):
     assert ((predicted.trajectories - truth) ** 2).mean() < ((constant - truth) ** 2).mean()
 
 
-def test_nri_with_trail_messages_finds_who_leads_in_the_toy_world(tmp_path):
+def test_nri_with_trail_messages_finds_who_leads_in_the_toy_world(toy_200):
     # NRI's own messages learn nearness in the toy world, so its direction
     # stays at chance (docs/evaluation.md); trail messages and a heading
     # frame for the encoder (nri_trail) get it. Never shown a label, it must
@@ -166,10 +173,7 @@ def test_nri_with_trail_messages_finds_who_leads_in_the_toy_world(tmp_path):
     # point most of them the right way.
     from causalcity.methods.common import direction_right
 
-    spec = dict(TOY, name="nri-trail-toy", seed=11, frames=150, groups=[{"cars": 8, "edge_proportion": 0.5}])
-    spec["splits"] = {"train": 200, "val": 10, "test": 20}
-    causalcity.generate(spec, tmp_path / "toy", images=False, effects=False, progress=False)
-    train, val, test = (load_split(tmp_path / "toy", "cars08_edges50", s) for s in ("train", "val", "test"))
+    train, val, test = toy_200
     method = make("nri_trail", epochs=30, batch_size=128, lr=3e-3, device="cpu", quiet=True, seed=0)
     method.fit(train, val)
     edges = method.predict(test).edges

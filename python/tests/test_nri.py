@@ -85,6 +85,24 @@ def test_a_trail_message_reaches_only_a_car_on_its_sender_s_trail():
     assert gate[0].item() > 0.95 and gate[1].item() < 1e-6
 
 
+def test_the_heading_frame_says_who_is_ahead_and_a_car_at_rest_keeps_its_heading():
+    nri = make("nri_trail", device="cpu")
+    nri.mean, nri.std = np.zeros(4), np.ones(4)
+    nri._build(3, 20)
+    seen = torch.zeros(1, 4, 3, 4)  # [batch, frames, cars, (x, y, vx, vy)]
+    seen[0, :, 0, 0] = torch.tensor([0.0, 1.0, 2.0, 2.0])  # car 0 drives along +x, then stops
+    seen[0, 1:3, 0, 2] = 1.0
+    seen[0, :, 1, 0] = 5.0  # car 1 stands ahead of it, car 2 to its left
+    seen[0, :, 2, 1] = 3.0
+    pairs = nri._heading_pairs(seen).view(1, 6, 4, 2)[0]
+    seen_from_0 = {i: pairs[nri.pairs.index((i, 0))].tolist() for i in (1, 2)}
+    # frame 0: car 0 has not moved yet, so no heading; frame 3: at rest, it keeps +x
+    assert seen_from_0[1] == [[0.0, 0.0], [4.0, 0.0], [3.0, 0.0], [3.0, 0.0]]
+    assert seen_from_0[2] == [[0.0, 0.0], [-1.0, 3.0], [-2.0, 3.0], [-2.0, 3.0]]
+    # car 0 seen from a car that never moves: nothing
+    assert pairs[nri.pairs.index((0, 1))].abs().sum() == 0
+
+
 @pytest.mark.parametrize("types, skip_first", [(2, True), (1, False), (3, False)])
 def test_the_batched_mlp_decoder_is_nri_s_loop(types, skip_first):
     seq, edges = inputs(types, 10 + types)

@@ -725,11 +725,20 @@ class Nri(Method):
         of pair (i, j): without a heading, "ahead" has no sign, and the
         encoder could not tell a leader from its follower. The heading is the
         receiver's motion in standardised position units; a car standing
-        still has none (both numbers 0)."""
+        still keeps the heading it last moved with (one that has not moved
+        yet has none: both numbers 0). "Still" is a motion below a
+        thousandth of the velocity's standard deviation, which the
+        standardisation's rounding stays far below."""
         pos = seen[..., :2]
         vel_to_pos, vel_offset = self._motion
         motion = seen[..., 2:] * vel_to_pos + vel_offset
-        heading = motion / motion.norm(dim=-1, keepdim=True).clamp(min=1e-9)
+        speed = motion.norm(dim=-1, keepdim=True)
+        moving = speed > 1e-3 * vel_to_pos.norm()
+        heading = torch.where(moving, motion / speed.clamp(min=1e-12), torch.zeros_like(motion))
+        # the latest frame at or before each one at which the car moved
+        frames = torch.arange(seen.shape[1], device=seen.device)[None, :, None]
+        last = torch.where(moving[..., 0], frames, torch.zeros_like(frames)).cummax(dim=1).values
+        heading = heading.gather(1, last[..., None].expand_as(heading))
         send, recv = self.encoder.send, self.encoder.recv
         rel = pos[:, :, send] - pos[:, :, recv]  # [B, T, E, 2]
         forward = heading[:, :, recv]
