@@ -5,6 +5,7 @@ predictions get worse with the horizon and are the same for the same seed,
 and the whole pipeline runs end to end, writing a
 results table, a CSV and two figures."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -413,6 +414,55 @@ def test_granger_on_every_core_scores_as_on_one(toy):
     one, many = Granger(lags=(4,), workers=1, quiet=True), Granger(lags=(4,), workers=2, quiet=True)
     assert len(train) > 8  # enough scenarios for the process pool to be used
     assert np.array_equal(one.predict(train).edges, many.predict(train).edges)
+
+
+def test_pcmci_finds_a_planted_lagged_link_and_nothing_else():
+    from causalcity.methods.pcmci import run_pcmci
+
+    rng = np.random.default_rng(1)
+    series = np.zeros((300, 3))
+    for t in range(3, len(series)):
+        series[t, 0] = 0.5 * series[t - 1, 0] + rng.normal()
+        series[t, 1] = 0.4 * series[t - 1, 1] + 0.8 * series[t - 3, 0] + rng.normal()
+        series[t, 2] = 0.5 * series[t - 1, 2] + rng.normal()
+    val = run_pcmci(series, 4, 0.05)  # [source, target, lag]
+    assert np.abs(val[0, 1]).argmax() == 3 and abs(val[0, 1, 3]) > 0.5, val[0, 1]
+    others = [abs(val[i, j, lag]) for i in range(3) for j in range(3) for lag in range(1, 5)
+              if i != j and (i, j, lag) != (0, 1, 3)]  # fmt: skip
+    assert len(others) == 23 and max(others) < 0.2, max(others)
+    for j in range(3):  # each series' own past
+        assert val[j, j, 1] > 0.25, val[j, j]
+
+
+@pytest.mark.parametrize("world", ["toy", "city"])
+def test_pcmci_gives_tigramites_scores(world, toy, tmp_path):
+    """The numpy PCMCI is tigramite's run_pcmci (ParCorr, analytic): the
+    same scores on generated scenarios, toy and city, to rounding."""
+    pytest.importorskip("tigramite")
+    data, group = toy, "cars06_edges50"
+    if world == "city":
+        spec = json.loads((ROOT / "tests/python/city.json").read_text())
+        spec.update(frames=120, splits={"train": 1, "val": 1, "test": 3})
+        data, group = tmp_path / "city", "cars08_edges50"
+        causalcity.generate(spec, data, images=False, effects=False, progress=False)
+    test = load_split(data, group, "test")
+    test = dataclasses.replace(test, folders=test.folders[:3], pixels=test.pixels[:3], metres=test.metres[:3],
+                               graph=test.graph[:3])  # fmt: skip
+    fast = make("pcmci", quiet=True, workers=1).predict(test).edges
+    reference = make("pcmci", quiet=True, workers=1, backend="tigramite").predict(test).edges
+    assert fast.shape == reference.shape and len(fast) >= 3
+    assert np.abs(reference).max() > 0.3  # links were found, not all zeros
+    np.testing.assert_allclose(fast, reference, rtol=0, atol=1e-9)
+
+
+def test_only_pcmci_has_backends(toy, tmp_path, capsys):
+    from causalcity.methods.__main__ import main
+
+    with pytest.raises(causalcity.InputError, match="backend 'fast'"):
+        make("pcmci", backend="fast")
+    assert main(["granger", str(toy), "--backend", "tigramite", "--out", str(tmp_path / "g.npz")]) == 2
+    assert "only pcmci has backends" in capsys.readouterr().err
+    assert not (tmp_path / "g.npz").exists()
 
 
 USER_METHODS = '''

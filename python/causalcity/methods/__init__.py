@@ -8,7 +8,8 @@ method                  discovers   predicts      needs (extras)
 ======================  ==========  ============  =============================
 ``constant_velocity``   no          yes           numpy (the floor)
 ``granger``             yes         no            scipy (``[methods]``)
-``pcmci``               yes         no            tigramite (``[methods]``)
+``pcmci``               yes         no            scipy: tigramite's algorithm
+                                                  (``backend="tigramite"``: tigramite)
 ``nri``                 yes         yes           torch (``[methods]``)
 ``nri_trail``           yes         yes           torch: NRI whose messages
                                                   read the sender's trail

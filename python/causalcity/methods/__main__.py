@@ -49,10 +49,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
     parser.add_argument("--kl-weight", type=float, metavar="W",
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
+    parser.add_argument("--backend", choices=["numpy", "tigramite"],
+                        help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
+                             "faster, the same scores to 1e-10) or tigramite itself")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
     options = {}
+    if args.backend is not None and args.method != "pcmci":
+        print(f"error: --backend {args.backend}: only pcmci has backends, not {args.method}", file=sys.stderr)
+        return 2
     if is_user_method(args.method):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
     elif args.method in ("nri", "interaction", "nri_trail"):
@@ -70,6 +76,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         options.update({k: v for k, v in given.items() if v is not None})
     elif args.method in ("granger", "pcmci"):
         options["quiet"] = args.quiet
+        if args.backend is not None:
+            options["backend"] = args.backend
     elif args.method == "frame0":
         options["seed"] = args.seed
     elif args.method == "supervised":

