@@ -18,8 +18,8 @@
 # WORK (the datasets' folder, default /tmp/paper-gpu). Needs the causalcity
 # package with the methods extra importable by $PYTHON (for a machine
 # without a network: make wheel here, then pip install --no-deps --target
-# /tmp/site target/wheels/*.whl and PYTHONPATH=/tmp/site there; PCMCI also
-# needs tigramite). Run from the repository root.
+# /tmp/site target/wheels/*.whl and PYTHONPATH=/tmp/site there). Run from
+# the repository root.
 set -u
 PYTHON=${PYTHON:-python3}
 OUT=${OUT:-results/paper-gpu}
@@ -69,9 +69,8 @@ copy_units() { # the finished units so far, so that a run cut off from outside s
 copier=$!
 
 # The CPU's share, niced so that it never holds up the GPU's: PCMCI first,
-# since it gains most from many cores (tigramite may be missing).
-cpu_methods="path frame0 granger constant_velocity supervised"
-$PYTHON -c "import tigramite" 2>/dev/null && cpu_methods="pcmci $cpu_methods" || echo "tigramite missing: no PCMCI here"
+# since it gains most from many cores (its numpy backend needs no tigramite).
+cpu_methods="pcmci path frame0 granger constant_velocity supervised"
 (
     for world in toy city; do
         # shellcheck disable=SC2086
