@@ -27,8 +27,12 @@ speed, measured side by side in one run (prints figures, asserts nothing).
    weighed against the prediction loss with a cosine learning rate, on val
    scenarios neither train nor the val loss see. About 10 min a recipe on
    2 cores at the default 1,000 training scenarios and 40 epochs.
+7. (``pcmci``) PCMCI's numpy backend against tigramite itself on the same
+   toy and city scenarios (8 cars): seconds per scenario on every core, the
+   ratio, and the largest difference between their scores. About a minute
+   and a half on 2 cores.
 
-Environment: BENCH_ONLY (sections, default "throughput,learning,springs";
+Environment: BENCH_ONLY (sections, default "throughput,learning,springs,pcmci";
 also "epoch", "toy" and "recipe"), BENCH_SPRINGS_TRAIN (default "500,2000"),
 BENCH_SPRINGS_EPOCHS (default "10,30"), BENCH_SPRINGS_SECONDS (a time limit
 per fit), BENCH_SPRINGS_SETTING ("nri", NRI's springs setting, the default
@@ -305,13 +309,42 @@ def device_name() -> str:
     return f"cpu, {torch.get_num_threads()} threads"
 
 
+def pcmci_backends(tmp: Path) -> None:
+    import dataclasses
+
+    import numpy as np
+
+    print("\n== PCMCI: the numpy backend against tigramite, 8 cars, 50 % linked, every core ==")
+    try:
+        import tigramite  # noqa: F401
+    except ImportError:
+        print("tigramite is not installed: nothing to compare with")
+        return
+    for world in ("toy", "city"):
+        raw = json.loads((ROOT / "configs" / f"{world}.json").read_text())
+        raw["groups"] = [g for g in raw["groups"] if g["cars"] == 8 and g["edge_proportion"] == 0.5]
+        raw.update(name=f"bench-pcmci-{world}", splits={"train": 1, "val": 1, "test": 40})
+        causalcity.generate(raw, tmp / f"pcmci-{world}", images=False, effects=False, progress=False)
+        test = load_split(tmp / f"pcmci-{world}", "cars08_edges50", "test")
+        few = dataclasses.replace(test, folders=test.folders[:8], pixels=test.pixels[:8], metres=test.metres[:8],
+                                  graph=test.graph[:8])  # fmt: skip
+        rows = {}
+        for backend, data in (("tigramite", few), ("numpy", test)):
+            start = time.perf_counter()
+            edges = make("pcmci", quiet=True, backend=backend).predict(data).edges
+            rows[backend] = ((time.perf_counter() - start) / len(data), edges[: len(few)])
+        (slow, reference), (fast, ours) = rows["tigramite"], rows["numpy"]
+        print(f"{world}: tigramite {slow:.3f} s per scenario ({len(few)} scenarios), numpy {fast:.3f} s ({len(test)}): "
+              f"{slow / fast:.0f}x; largest score difference {np.abs(reference - ours).max():.1e}", flush=True)
+
+
 SECTIONS = {"throughput": throughput, "learning": learning, "springs": springs_figure, "epoch": epoch_time,
-            "toy": toy_full, "recipe": recipes}  # fmt: skip
+            "toy": toy_full, "recipe": recipes, "pcmci": pcmci_backends}  # fmt: skip
 
 
 def main() -> int:
     torch.manual_seed(0)
-    chosen = os.environ.get("BENCH_ONLY", "throughput,learning,springs").split(",")
+    chosen = os.environ.get("BENCH_ONLY", "throughput,learning,springs,pcmci").split(",")
     unknown = [c for c in chosen if c not in SECTIONS]
     if unknown:
         print(f"BENCH_ONLY: {', '.join(unknown)} is not a section: use {', '.join(SECTIONS)}", file=sys.stderr)
