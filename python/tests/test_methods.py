@@ -432,6 +432,9 @@ def test_pcmci_finds_a_planted_lagged_link_and_nothing_else():
     assert len(others) == 23 and max(others) < 0.2, max(others)
     for j in range(3):  # each series' own past
         assert val[j, j, 1] > 0.25, val[j, j]
+    # two frames hold no sample with a past to test on: no scores, no error
+    short = make("pcmci", quiet=True, workers=1).scores(np.random.default_rng(2).normal(size=(2, 3, 2)))
+    assert short.shape == (3, 3) and not short.any()
 
 
 @pytest.mark.parametrize("world", ["toy", "city"])

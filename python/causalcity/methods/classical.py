@@ -197,6 +197,8 @@ class Pcmci(Method):
         keep = np.flatnonzero(varies)
         noise = np.random.default_rng(0).normal(0.0, 1e-6, size=(frames, len(keep)))
         tau_max = max(1, min(self.tau_max, frames // 4))
+        if frames <= 2 * tau_max:
+            return scores  # no sample has a past of 2 tau_max frames to test on
         val = self._val_matrix(data[:, keep] + noise, tau_max)
         strength = np.nan_to_num(np.abs(val[:, :, 1:]).max(axis=2))  # [source, target]
         car = keep // components
