@@ -271,19 +271,13 @@ def recipes(tmp: Path) -> None:
     loss keeps a late epoch; a KL weighed against the prediction loss with
     a cosine learning rate keeps them. Scored on val scenarios that neither
     train nor the val loss see (the test split is left alone)."""
-    import dataclasses
-
     size = int(os.environ.get("BENCH_RECIPE_TRAIN", "1000"))
     epochs = int(os.environ.get("BENCH_RECIPE_EPOCHS", "40"))
     folder = toy_dataset(tmp / f"recipe-{size}", size, 1, val=500)
     group = "cars08_edges50"
     train, val = load_split(folder, group, "train"), load_split(folder, group, "val")
 
-    def part(ep, rows):
-        return dataclasses.replace(ep, folders=ep.folders[rows], pixels=ep.pixels[rows], metres=ep.metres[rows],
-                                   graph=ep.graph[rows])  # fmt: skip
-
-    val, scored = part(val, slice(0, 200)), part(val, slice(200, None))
+    val, scored = val.part(slice(0, 200)), val.part(slice(200, None))
     chosen = os.environ.get("BENCH_RECIPES", "default,kl10-cosine,kl100-cosine").split(",")
     print(f"\n== NRI's edges over training: toy 8 cars, 50 %, {size} train, 200 val for the loss, "
           f"{len(scored)} val scored, {epochs} epochs at batch 128, lr 3e-3, {device_name()} ==")  # fmt: skip
@@ -310,8 +304,6 @@ def device_name() -> str:
 
 
 def pcmci_backends(tmp: Path) -> None:
-    import dataclasses
-
     import numpy as np
 
     print("\n== PCMCI: the numpy backend against tigramite, 8 cars, 50 % linked, every core ==")
@@ -326,8 +318,7 @@ def pcmci_backends(tmp: Path) -> None:
         raw.update(name=f"bench-pcmci-{world}", splits={"train": 1, "val": 1, "test": 40})
         causalcity.generate(raw, tmp / f"pcmci-{world}", images=False, effects=False, progress=False)
         test = load_split(tmp / f"pcmci-{world}", "cars08_edges50", "test")
-        few = dataclasses.replace(test, folders=test.folders[:8], pixels=test.pixels[:8], metres=test.metres[:8],
-                                  graph=test.graph[:8])  # fmt: skip
+        few = test.part(slice(0, 8))
         rows = {}
         for backend, data in (("tigramite", few), ("numpy", test)):
             start = time.perf_counter()

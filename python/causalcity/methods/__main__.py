@@ -10,6 +10,7 @@ from typing import Optional, Sequence
 from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
+from .classical import Pcmci
 from .common import DatasetError, run_method
 
 
@@ -49,7 +50,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
     parser.add_argument("--kl-weight", type=float, metavar="W",
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
-    parser.add_argument("--backend", choices=["numpy", "tigramite"],
+    parser.add_argument("--backend", choices=Pcmci.BACKENDS,
                         help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
                              "faster, the same scores to 1e-10) or tigramite itself")
     parser.add_argument("--seed", type=int, default=0)

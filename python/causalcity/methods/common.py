@@ -8,6 +8,7 @@ import json
 import os
 import sys
 import time
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
@@ -51,6 +52,11 @@ class Episodes:
     @property
     def frames(self) -> int:
         return int(self.pixels.shape[1])
+
+    def part(self, rows: slice) -> "Episodes":
+        """These scenarios' ``rows`` (a slice), as Episodes of their own."""
+        return dataclasses.replace(self, folders=self.folders[rows], pixels=self.pixels[rows],
+                                   metres=self.metres[rows], graph=self.graph[rows])  # fmt: skip
 
 
 @dataclass

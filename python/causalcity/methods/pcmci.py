@@ -24,8 +24,8 @@ T - 2 tau_max - (2 + conditions) degrees of freedom.
 Tigramite builds each test's array through its data frame, hashes it for a
 cache, and calls SciPy's general ``pearsonr`` and ``t.sf``: on one 8-car
 scenario's 16 series that overhead is nearly all of about 3,800 tests. Here
-a test is a slice of one precomputed array of lagged copies and one small
-least-squares solve. Same decisions, same ``val_matrix`` to rounding
+each lagged series is standardised once, and every test of one size is a
+slice of those rows in one stacked QR decomposition. Same decisions, same ``val_matrix`` to rounding
 (``python/tests/test_methods.py`` compares both on toy and city scenarios).
 """
 
@@ -75,8 +75,8 @@ class _Tests:
 
     def _regressed(self, rows: List[int]) -> float:
         """The partial correlation of rows 0 and 1 given the others by least
-        squares on the samples (tigramite's way; for tests with too few
-        samples for a correlation matrix to invert)."""
+        squares on the samples, tigramite's way: for tests with no more
+        samples than rows, where a QR has no row left for y's residual."""
         data = self.rows[rows]
         if len(rows) > 2:
             conditions = data[2:].T
@@ -92,7 +92,7 @@ class _Tests:
         tigramite. The tests with as many conditions are stacked into one
         QR decomposition of their samples, conditions first: x's residual
         on them is R[m, m] q_m and y's is R[m, m+1] q_m + R[m+1, m+1] q_m+1."""
-        vals, pvals = np.zeros(len(tests)), np.ones(len(tests))
+        vals = np.zeros(len(tests))  # stays 0 where x or y is constant
         chosen = [self._nodes(*test) for test in tests]
         freedom = np.array([self.samples - len(rows) if rows is not None else 1 for rows in chosen], dtype=float)
         by_width: Dict[int, List[int]] = {}
@@ -115,7 +115,7 @@ class _Tests:
         p = np.where(np.abs(np.abs(vals) - 1.0) <= sys.float_info.min, 0.0, p)
         p = np.where(freedom < 1, np.nan, p)
         constant = np.array([rows is None for rows in chosen], dtype=bool)
-        return np.where(constant, 0.0, vals), np.where(constant, 1.0, p)
+        return vals, np.where(constant, 1.0, p)
 
 
 def _candidates(variables: int, tau_max: int) -> List[Node]:
