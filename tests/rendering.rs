@@ -296,11 +296,12 @@ fn beams_light_the_road_never_the_car_in_front() {
 }
 
 #[test]
-fn rain_and_snow_frames_drawn_one_after_another_equal_frames_drawn_from_scratch() {
+fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_scratch() {
     use causalcity::camera::Camera;
+    use causalcity::map::signals::Colour;
     use causalcity::map::CityMap;
     use causalcity::render::weather::SceneLook;
-    use causalcity::render::{CarSprite, Renderer};
+    use causalcity::render::{CarSprite, HeadSprite, Renderer};
     use glam::DVec2;
 
     // Only what the previous frame drew is restored: streaks and flakes of
@@ -326,9 +327,17 @@ fn rain_and_snow_frames_drawn_one_after_another_equal_frames_drawn_from_scratch(
         let mut running = renderer.canvas();
         for frame in 0..5u32 {
             let cars = [car(-10.0 + 3.0 * frame as f64, 1), car(8.0 - 2.0 * frame as f64, 2)];
-            renderer.render(&mut running, &scene, &cars, &[], frame);
+            // Signal heads under the cars' paths and one apart; their
+            // colours change at frame 3.
+            let colour = if frame < 3 { Colour::Red } else { Colour::Green };
+            let heads = [
+                HeadSprite { position: DVec2::new(-4.0, 2.5), colour },
+                HeadSprite { position: DVec2::new(5.0, 1.5), colour: Colour::Yellow },
+                HeadSprite { position: DVec2::new(20.0, -9.0), colour },
+            ];
+            renderer.render(&mut running, &scene, &cars, &heads, frame);
             let mut fresh = renderer.canvas();
-            renderer.render(&mut fresh, &scene, &cars, &[], frame);
+            renderer.render(&mut fresh, &scene, &cars, &heads, frame);
             assert!(running.rgb == fresh.rgb, "frame {frame} of {look:?}: RGB differs from one drawn from scratch");
             assert!(running.mask == fresh.mask, "frame {frame} of {look:?}: mask differs");
             checked += 1;

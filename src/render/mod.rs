@@ -7,6 +7,7 @@ pub mod background;
 pub mod network;
 pub mod palette;
 pub mod perspective;
+pub mod raster;
 pub mod text;
 pub mod weather;
 
@@ -84,14 +85,12 @@ pub struct Scene {
 /// 3 bytes a pixel) and `mask` (1 byte a pixel).
 ///
 /// Between frames of one scene only what the previous frame drew (its cars
-/// and their beams, signal heads, rain streaks and snowflakes) is restored
-/// from the background, and only what changed is converted into `rgb` and
-/// `mask`: a frame costs what it draws, not its size.
+/// and their beams, rain streaks and snowflakes) is restored from the
+/// background, signal heads stay until their colours change, and only what
+/// changed is converted into `rgb` and `mask`: a frame costs what it draws,
+/// not its size.
 pub struct FrameCanvas {
     rgba: Pixmap,
-    /// One car's coverage at a time (0 or 255, no anti-aliasing), stamped
-    /// into `mask` as the car's id and cleared again.
-    coverage: tiny_skia::Mask,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
     /// The background `rgba` was last restored from (kept alive so that
@@ -130,18 +129,32 @@ struct PixelRect {
     y1: usize,
 }
 
-/// Pixels added around a shape's exact bounds for anti-aliased edges.
-const AA_MARGIN_PX: f32 = 2.0;
+/// Pixels added around a shape's exact bounds for anti-aliased edges (their
+/// coverage reaches half a pixel past an edge along its normal).
+const AA_MARGIN_PX: f32 = 1.0;
 /// Beams reach this far ahead of a car's front, metres (weather.rs draws them).
 const BEAM_REACH_M: f32 = 3.5;
 /// Half the width a beam pair can span, metres, beyond 0.3 x the car's width.
 const BEAM_HALF_SPREAD_M: f32 = 0.9;
 
 impl PixelRect {
-    /// The pixels that shapes inside the car-frame box `[x0, x1] x [y0, y1]`
-    /// (metres) can touch under `transform`, clipped to a `w` x `h` image;
-    /// `None` when wholly outside.
-    fn around(transform: Transform, (x0, x1): (f32, f32), (y0, y1): (f32, f32), w: usize, h: usize) -> Option<Self> {
+    /// The pixels that anti-aliased shapes inside the car-frame box
+    /// `[x0, x1] x [y0, y1]` (metres) can touch under `transform`, clipped
+    /// to a `w` x `h` image; `None` when wholly outside.
+    fn around(transform: Transform, x: (f32, f32), y: (f32, f32), w: usize, h: usize) -> Option<Self> {
+        PixelRect::within(transform, x, y, AA_MARGIN_PX, w, h)
+    }
+
+    /// The pixels within `margin` pixels of the box `[x0, x1] x [y0, y1]`
+    /// placed by `transform`, clipped to a `w` x `h` image.
+    fn within(
+        transform: Transform,
+        (x0, x1): (f32, f32),
+        (y0, y1): (f32, f32),
+        margin: f32,
+        w: usize,
+        h: usize,
+    ) -> Option<Self> {
         let mut corners = [
             tiny_skia::Point::from_xy(x0, y0),
             tiny_skia::Point::from_xy(x1, y0),
@@ -162,19 +175,24 @@ impl PixelRect {
         }
         let clip = |v: f32, max: usize| v.clamp(0.0, max as f32) as usize;
         let rect = PixelRect {
-            x0: clip((lo_x - AA_MARGIN_PX).floor(), w),
-            y0: clip((lo_y - AA_MARGIN_PX).floor(), h),
-            x1: clip((hi_x + AA_MARGIN_PX).ceil(), w),
-            y1: clip((hi_y + AA_MARGIN_PX).ceil(), h),
+            x0: clip((lo_x - margin).floor(), w),
+            y0: clip((lo_y - margin).floor(), h),
+            x1: clip((hi_x + margin).ceil(), w),
+            y1: clip((hi_y + margin).ceil(), h),
         };
         (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
     }
 
-    /// The pixels of the box `[x0, y0, x1, y1]` (pixels) with an
-    /// anti-aliasing margin, clipped to a `w` x `h` image; `None` when wholly
-    /// outside.
+    /// Whether the two rectangles share a pixel.
+    fn meets(&self, other: &PixelRect) -> bool {
+        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
+    }
+
+    /// The pixels whose centres can lie in the box `[x0, y0, x1, y1]`
+    /// (pixels; hard-edged shapes need no margin), clipped to a `w` x `h`
+    /// image; `None` when wholly outside.
     fn of_box([x0, y0, x1, y1]: [f32; 4], w: usize, h: usize) -> Option<Self> {
-        PixelRect::around(Transform::identity(), (x0, x1), (y0, y1), w, h)
+        PixelRect::within(Transform::identity(), (x0, x1), (y0, y1), 0.0, w, h)
     }
 }
 
@@ -238,7 +256,6 @@ impl Renderer {
         let (w, h) = (self.camera.width, self.camera.height);
         FrameCanvas {
             rgba: Pixmap::new(w, h).expect("image size was validated"),
-            coverage: tiny_skia::Mask::new(w, h).expect("image size was validated"),
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
             background: None,
@@ -277,10 +294,13 @@ impl Renderer {
         let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
         std::mem::swap(&mut canvas.dirty, &mut canvas.previous);
         canvas.dirty.clear();
+        // A car's rectangle reaches over its beams only when they shine.
+        let beams = look.shows_beams();
         canvas.dirty.extend(cars.iter().filter_map(|car| {
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
-            let half_span = hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M);
-            PixelRect::around(car_frame(car), (-hl, hl + BEAM_REACH_M), (-half_span, half_span), w, h)
+            let (reach, half_span) =
+                if beams { (BEAM_REACH_M, hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M)) } else { (0.0, hw) };
+            PixelRect::around(car_frame(car), (-hl, hl + reach), (-half_span, half_span), w, h)
         }));
         let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
         let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
@@ -289,7 +309,6 @@ impl Renderer {
         canvas
             .head_rects
             .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
-        canvas.dirty.extend(&canvas.head_rects);
         if whole_frame {
             canvas.rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.mask.fill(0);
@@ -301,9 +320,11 @@ impl Renderer {
                 restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
             }
         }
-        // The heads' rectangles hold the background now (they were dirty
-        // last frame, or the whole frame was restored), so the same heads
-        // over the same background give the same pixels as last time.
+        // Signal heads stay on the canvas from frame to frame. Where the
+        // restore above wiped part of one, the pixels kept from when the same
+        // heads were drawn over the same background go back: outside the
+        // restored rectangles they are what the canvas holds already, and
+        // inside they are converted with those rectangles.
         let same_heads = canvas
             .heads
             .as_ref()
@@ -311,59 +332,69 @@ impl Renderer {
         if same_heads {
             let drawn = canvas.heads.as_ref().expect("checked above");
             for (r, pixels) in &drawn.pixels {
-                put_rect(&mut canvas.rgba, *r, pixels);
-            }
-        } else if !heads.is_empty() {
-            let mut paint = Paint { anti_alias: true, ..Paint::default() };
-            for head in heads {
-                let t = head_frame(head);
-                let rgb = look.shade(HOUSING_RGB);
-                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                let body =
-                    Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
-                canvas.rgba.fill_rect(body, &paint, t, None);
-                let rgb = look.veil(lamp_rgb(head.colour));
-                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
-                    canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+                if whole_frame || canvas.previous.iter().any(|p| p.meets(r)) {
+                    put_rect(&mut canvas.rgba, *r, pixels);
                 }
             }
-            let pixels = canvas.head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
-            canvas.heads =
-                Some(DrawnHeads { background: scene.background.clone(), look: *look, heads: heads.to_vec(), pixels });
+        } else {
+            // Heads of another colour (or none): the old ones and the new
+            // ones' places go back to the background, and are converted.
+            if !whole_frame {
+                let old = canvas.heads.take().map(|d| d.pixels).unwrap_or_default();
+                for r in old.iter().map(|(r, _)| r).chain(&canvas.head_rects) {
+                    restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
+                    canvas.dirty.push(*r);
+                }
+            }
+            canvas.heads = None;
+            if !heads.is_empty() {
+                let mut paint = Paint { anti_alias: true, ..Paint::default() };
+                for head in heads {
+                    let t = head_frame(head);
+                    let rgb = look.shade(HOUSING_RGB);
+                    paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                    let body =
+                        Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
+                    canvas.rgba.fill_rect(body, &paint, t, None);
+                    let rgb = look.veil(lamp_rgb(head.colour));
+                    paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                    if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
+                        canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+                    }
+                }
+                let pixels = canvas.head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
+                canvas.heads = Some(DrawnHeads {
+                    background: scene.background.clone(),
+                    look: *look,
+                    heads: heads.to_vec(),
+                    pixels,
+                });
+            }
         }
         // Beams lie on the road, under every car.
         look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
         for car in cars {
             let t = car_frame(car);
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
-            let body = Rect::from_ltrb(-hl, -hw, hl, hw).expect("car size was validated");
-            let mut paint = Paint { anti_alias: true, ..Paint::default() };
-            let body_colour = look.shade(car.colour);
-            paint.set_color_rgba8(body_colour[0], body_colour[1], body_colour[2], 255);
-            canvas.rgba.fill_rect(body, &paint, t, None);
+            let Some(body) = raster::PlacedRect::new(t, (-hl, hl), (-hw, hw)) else { continue };
+            raster::fill_aa(&mut canvas.rgba, &body, look.shade(car.colour));
             // Windscreen towards the front shows the heading.
-            let glass_colour = look.shade([36, 40, 52]);
-            paint.set_color_rgba8(glass_colour[0], glass_colour[1], glass_colour[2], 255);
-            if let Some(glass) = Rect::from_ltrb(hl * 0.15, -hw * 0.8, hl * 0.55, hw * 0.8) {
-                canvas.rgba.fill_rect(glass, &paint, t, None);
+            if let Some(glass) = raster::PlacedRect::new(t, (hl * 0.15, hl * 0.55), (-hw * 0.8, hw * 0.8)) {
+                raster::fill_aa(&mut canvas.rgba, &glass, look.shade([36, 40, 52]));
             }
             if car.braking {
                 let rgb = look.veil(BRAKE_LIGHT_RGB);
-                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
                 let (back, front) = (-hl, -hl + 2.0 * hl * BRAKE_LIGHT_LENGTH);
                 let (inner, outer) = (hw * BRAKE_LIGHT_ACROSS.0, hw * BRAKE_LIGHT_ACROSS.1);
-                let lights = [Rect::from_ltrb(back, inner, front, outer), Rect::from_ltrb(back, -outer, front, -inner)];
-                for light in lights.into_iter().flatten() {
-                    canvas.rgba.fill_rect(light, &paint, t, None);
+                for across in [(inner, outer), (-outer, -inner)] {
+                    if let Some(light) = raster::PlacedRect::new(t, (back, front), across) {
+                        raster::fill_aa(&mut canvas.rgba, &light, rgb);
+                    }
                 }
             }
             // The mask: exactly the pixels whose centres the body covers,
             // later cars over earlier ones.
-            if let Some(r) = PixelRect::around(t, (-hl, hl), (-hw, hw), w, h) {
-                canvas.coverage.fill_path(&PathBuilder::from_rect(body), FillRule::Winding, false, t);
-                stamp(&mut canvas.mask, &mut canvas.coverage, r, car.mask_id);
-            }
+            raster::stamp(&mut canvas.mask, w, &body, car.mask_id);
         }
         canvas.precipitation.clear();
         look.draw_precipitation_within(&mut canvas.rgba, frame, &mut canvas.precipitation);
@@ -403,22 +434,6 @@ fn restore(rgba: &mut Pixmap, mask: &mut [u8], background: &Pixmap, r: PixelRect
     }
 }
 
-/// Writes `id` into `mask` wherever `coverage` is set within `r`, and
-/// clears `coverage` there for the next car.
-fn stamp(mask: &mut [u8], coverage: &mut tiny_skia::Mask, r: PixelRect, id: u8) {
-    let w = coverage.width() as usize;
-    let covered = coverage.data_mut();
-    for y in r.y0..r.y1 {
-        let row = y * w;
-        for (m, c) in mask[row + r.x0..row + r.x1].iter_mut().zip(&mut covered[row + r.x0..row + r.x1]) {
-            if *c != 0 {
-                *m = id;
-                *c = 0;
-            }
-        }
-    }
-}
-
 /// Copies `r` of the drawing buffer into the frame's RGB image.
 fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
     let w = rgba.width() as usize;
@@ -431,25 +446,29 @@ fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
     }
 }
 
-/// RGBA pixels into RGB: each pixel's four bytes are stored whole, the
-/// next pixel's red overwriting the alpha (four-byte stores run several
-/// times faster than three-byte copies); the last pixel gets its three.
+/// RGBA pixels into RGB: four pixels (16 bytes) at a time are packed into
+/// three little-endian words (12 bytes), which the compiler turns into
+/// vector shuffles; the remaining pixels are copied one by one.
 pub(crate) fn convert_row(src: &[u8], dst: &mut [u8]) {
     let n = src.len() / 4;
-    if n == 0 {
-        return;
+    let quads = n / 4;
+    for (s, d) in src.chunks_exact(16).zip(dst.chunks_exact_mut(12)) {
+        let p = |i: usize| u32::from_le_bytes([s[4 * i], s[4 * i + 1], s[4 * i + 2], s[4 * i + 3]]);
+        let (p0, p1, p2, p3) = (p(0), p(1), p(2), p(3));
+        d[0..4].copy_from_slice(&((p0 & 0x00ff_ffff) | (p1 << 24)).to_le_bytes());
+        d[4..8].copy_from_slice(&(((p1 >> 8) & 0xffff) | (p2 << 16)).to_le_bytes());
+        d[8..12].copy_from_slice(&(((p2 >> 16) & 0xff) | (p3 << 8)).to_le_bytes());
     }
-    for (i, pixel) in src[..(n - 1) * 4].chunks_exact(4).enumerate() {
-        dst[i * 3..i * 3 + 4].copy_from_slice(pixel);
+    for i in quads * 4..n {
+        dst[i * 3..i * 3 + 3].copy_from_slice(&src[i * 4..i * 4 + 3]);
     }
-    dst[(n - 1) * 3..n * 3].copy_from_slice(&src[(n - 1) * 4..(n - 1) * 4 + 3]);
 }
 
 #[cfg(test)]
 mod tests {
     #[test]
     fn rgba_rows_convert_to_their_rgb_bytes_at_every_length() {
-        for n in 0..9usize {
+        for n in 0..19usize {
             let src: Vec<u8> = (0..n * 4).map(|b| (b * 7 + 1) as u8).collect();
             let expected: Vec<u8> = src.chunks_exact(4).flat_map(|p| p[..3].to_vec()).collect();
             let mut dst = vec![0xAA; n * 3];

@@ -7,14 +7,21 @@
 //! car's colour (the same result for opaque shapes). Rain and snow are drawn
 //! per frame from a seeded stream, so frames are reproducible.
 
+use super::raster::{self, PlacedRect};
 use crate::plan::ScenarioPlan;
 use crate::world::Trajectories;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
+use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Transform};
 
 /// A rain streak's width at 1024 pixels across, pixels.
 const STREAK_WIDTH_PX: f32 = 1.0;
+/// A rain streak's colour and opacity (of 255).
+const STREAK_RGB: [u8; 3] = [200, 210, 225];
+const STREAK_ALPHA: u8 = 120;
+/// A snowflake's colour and opacity (of 255).
+const FLAKE_RGB: [u8; 3] = [250, 250, 252];
+const FLAKE_ALPHA: u8 = 220;
 
 /// Water on asphalt (`cover` 255 = wholly road): darker, with a faint blue sheen.
 fn wet_rgb(rgb: [u8; 3], wet: f64, cover: u8) -> [u8; 3] {
@@ -131,10 +138,10 @@ impl SceneLook {
     /// car-frame transform (x forward, y left, metres) and length and width,
     /// drawn over the road in one pass.
     pub fn draw_headlights(&self, pixmap: &mut Pixmap, cars: impl Iterator<Item = (Transform, f32, f32)>) {
-        let strength = (1.0 - self.daylight) as f32;
-        if strength <= 0.05 {
+        if !self.shows_beams() {
             return;
         }
+        let strength = (1.0 - self.daylight) as f32;
         let mut pb = PathBuilder::new();
         for (to_canvas, length, width) in cars {
             let front = length / 2.0;
@@ -162,6 +169,11 @@ impl SceneLook {
         }
     }
 
+    /// Whether cars' headlights draw beams (at dusk and night).
+    pub fn shows_beams(&self) -> bool {
+        (1.0 - self.daylight) as f32 > 0.05
+    }
+
     /// Rain streaks and snowflakes of frame `frame`, in pixel space.
     pub fn draw_precipitation(&self, pixmap: &mut Pixmap, frame: u32) {
         self.draw_precipitation_within(pixmap, frame, &mut Vec::new());
@@ -179,41 +191,30 @@ impl SceneLook {
         let scale = w / 1024.0;
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ (frame as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let streaks = (200.0 * self.rain * (w * h / (1024.0 * 640.0)) as f64) as usize;
-        if streaks > 0 {
-            let mut pb = PathBuilder::new();
-            for _ in 0..streaks {
-                let x = rng.random_range(0.0..w);
-                let y = rng.random_range(0.0..h);
-                let len = rng.random_range(8.0..16.0) * scale;
-                pb.move_to(x, y);
-                pb.line_to(x - 0.35 * len, y + len);
-                let half = STREAK_WIDTH_PX * scale;
-                drawn.push([x - 0.35 * len - half, y - half, x + half, y + len + half]);
-            }
-            if let Some(path) = pb.finish() {
-                // Hard-edged streaks: cheaper to draw and to compress, alike to the eye.
-                let mut paint = Paint { anti_alias: false, ..Paint::default() };
-                paint.set_color_rgba8(200, 210, 225, 120);
-                let stroke = Stroke { width: STREAK_WIDTH_PX * scale, line_cap: LineCap::Butt, ..Stroke::default() };
-                pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
+        for _ in 0..streaks {
+            let x = rng.random_range(0.0..w);
+            let y = rng.random_range(0.0..h);
+            let len = rng.random_range(8.0..16.0) * scale;
+            // Along the streak from its top, and across it.
+            let (dx, dy) = (-0.35 * len, len);
+            let reach = (dx * dx + dy * dy).sqrt();
+            let (ux, uy) = (dx / reach, dy / reach);
+            let along = Transform::from_row(ux, uy, -uy, ux, x, y);
+            let half = STREAK_WIDTH_PX * scale;
+            drawn.push([x - 0.35 * len - half, y - half, x + half, y + len + half]);
+            // Hard-edged streaks: cheaper to draw and to compress, alike to the eye.
+            if let Some(streak) = PlacedRect::new(along, (0.0, reach), (-half / 2.0, half / 2.0)) {
+                raster::fill_hard(pixmap, &streak, STREAK_RGB, STREAK_ALPHA);
             }
         }
         let flakes = (420.0 * self.snow * (w * h / (1024.0 * 640.0)) as f64) as usize;
-        if flakes > 0 {
-            let mut pb = PathBuilder::new();
-            for _ in 0..flakes {
-                let x = rng.random_range(0.0..w);
-                let y = rng.random_range(0.0..h);
-                let size = rng.random_range(1.5..3.5) * scale;
-                if let Some(rect) = tiny_skia::Rect::from_xywh(x, y, size, size) {
-                    pb.push_rect(rect);
-                    drawn.push([x, y, x + size, y + size]);
-                }
-            }
-            if let Some(path) = pb.finish() {
-                let mut paint = Paint { anti_alias: false, ..Paint::default() };
-                paint.set_color_rgba8(250, 250, 252, 220);
-                pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
+        for _ in 0..flakes {
+            let x = rng.random_range(0.0..w);
+            let y = rng.random_range(0.0..h);
+            let size = rng.random_range(1.5..3.5) * scale;
+            if let Some(flake) = PlacedRect::new(Transform::identity(), (x, x + size), (y, y + size)) {
+                raster::fill_hard(pixmap, &flake, FLAKE_RGB, FLAKE_ALPHA);
+                drawn.push([x, y, x + size, y + size]);
             }
         }
     }
