@@ -453,8 +453,8 @@ pub(crate) fn convert_row(src: &[u8], dst: &mut [u8]) {
     let n = src.len() / 4;
     let quads = n / 4;
     for (s, d) in src.chunks_exact(16).zip(dst.chunks_exact_mut(12)) {
-        let p = |i: usize| u32::from_le_bytes([s[4 * i], s[4 * i + 1], s[4 * i + 2], s[4 * i + 3]]);
-        let (p0, p1, p2, p3) = (p(0), p(1), p(2), p(3));
+        let quad = u128::from_le_bytes(s.try_into().expect("16 bytes"));
+        let (p0, p1, p2, p3) = (quad as u32, (quad >> 32) as u32, (quad >> 64) as u32, (quad >> 96) as u32);
         d[0..4].copy_from_slice(&((p0 & 0x00ff_ffff) | (p1 << 24)).to_le_bytes());
         d[4..8].copy_from_slice(&(((p1 >> 8) & 0xffff) | (p2 << 16)).to_le_bytes());
         d[8..12].copy_from_slice(&(((p2 >> 16) & 0xff) | (p3 << 8)).to_le_bytes());
