@@ -121,6 +121,89 @@ impl PlacedRect {
     }
 }
 
+/// A convex quadrilateral given by its corners on the canvas (pixels, in
+/// order around it, either way).
+#[derive(Debug, Clone, Copy)]
+pub struct ConvexQuad {
+    corners: [(f32, f32); 4],
+}
+
+impl ConvexQuad {
+    /// The quadrilateral with these corners; `None` when they are not finite
+    /// or enclose no area.
+    pub fn new(corners: [(f32, f32); 4]) -> Option<ConvexQuad> {
+        let area: f32 = (0..4)
+            .map(|i| {
+                let ((x0, y0), (x1, y1)) = (corners[i], corners[(i + 1) % 4]);
+                x0 * y1 - x1 * y0
+            })
+            .sum();
+        (area.is_finite() && area != 0.0).then_some(ConvexQuad { corners })
+    }
+
+    /// The rows (clipped to `0..height`) whose centre line it crosses.
+    fn rows(&self, height: usize) -> std::ops::Range<usize> {
+        let lo = self.corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
+        let hi = self.corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max);
+        let first = (lo - 0.5).ceil().clamp(0.0, height as f32) as usize;
+        let last = ((hi - 0.5).floor() + 1.0).clamp(0.0, height as f32) as usize;
+        first.min(last)..last
+    }
+
+    /// The columns of row `row` (clipped to `0..width`) whose pixel centres
+    /// lie inside, edges included.
+    fn span(&self, row: usize, width: usize) -> Option<Span> {
+        let yc = row as f32 + 0.5;
+        let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
+        let area: f32 = (0..4)
+            .map(|i| {
+                let ((x0, y0), (x1, y1)) = (self.corners[i], self.corners[(i + 1) % 4]);
+                x0 * y1 - x1 * y0
+            })
+            .sum();
+        let turn = area.signum();
+        for i in 0..4 {
+            let ((ax, ay), (bx, by)) = (self.corners[i], self.corners[(i + 1) % 4]);
+            // Inside: turn * cross(b - a, p - a) >= 0, linear in p's x.
+            let slope = -(by - ay) * turn;
+            let at_zero = ((bx - ax) * (yc - ay) + (by - ay) * ax) * turn;
+            if slope == 0.0 {
+                if at_zero < 0.0 {
+                    return None;
+                }
+            } else if slope > 0.0 {
+                lo = lo.max(-at_zero / slope);
+            } else {
+                hi = hi.min(-at_zero / slope);
+            }
+        }
+        let first = (lo - 0.5).ceil().max(0.0);
+        let last = (hi - 0.5).floor().min(width as f32 - 1.0);
+        (first <= last).then(|| (first as usize, last as usize + 1))
+    }
+}
+
+/// Blends `colour` at alpha `alpha` once into every pixel whose centre lies
+/// in either of `pair` (hard edges; where they overlap, the light is not
+/// doubled).
+pub fn fill_hard_union(pixmap: &mut Pixmap, pair: [Option<ConvexQuad>; 2], colour: [u8; 3], alpha: u8) {
+    let (w, h) = (pixmap.width() as usize, pixmap.height() as usize);
+    let rows = pair.iter().flatten().map(|q| q.rows(h)).filter(|r| !r.is_empty());
+    let (first, last) = rows.fold((usize::MAX, 0), |(a, b), r| (a.min(r.start), b.max(r.end)));
+    let data = pixmap.data_mut();
+    for y in first..last {
+        let mut spans = pair.map(|q| q.and_then(|q| q.span(y, w)));
+        spans.sort_unstable();
+        let mut done = 0;
+        for (x0, x1) in spans.into_iter().flatten() {
+            for px in data[(y * w + x0.max(done)) * 4..(y * w + x1.max(done)) * 4].chunks_exact_mut(4) {
+                blend(px, colour, alpha);
+            }
+            done = done.max(x1);
+        }
+    }
+}
+
 /// `colour` at alpha `a` over the opaque RGBA pixel `dst`.
 fn blend(dst: &mut [u8], colour: [u8; 3], a: u8) {
     let (a, keep) = (a as u32, 255 - a as u32);
@@ -237,6 +320,27 @@ mod tests {
         assert!(checked > 1000);
         let expected = (2.0 * hl * 3.0) * (2.0 * hw * 3.0);
         assert!((area - expected).abs() < expected * 0.01, "area {area} vs {expected}");
+    }
+
+    #[test]
+    fn overlapping_quads_light_each_pixel_once_and_only_inside() {
+        // Two overlapping diamonds, one clockwise, one not.
+        let a = ConvexQuad::new([(5.0, 1.0), (9.0, 5.0), (5.0, 9.0), (1.0, 5.0)]).unwrap();
+        let b = ConvexQuad::new([(7.0, 1.0), (3.0, 5.0), (7.0, 9.0), (11.0, 5.0)]).unwrap();
+        let mut p = canvas(12, 10);
+        fill_hard_union(&mut p, [Some(a), Some(b)], [210, 20, 30], 128);
+        let inside = |(cx, cy): (f32, f32), x: f32, y: f32| (x - cx).abs() + (y - cy).abs() <= 4.0;
+        let mut lit = 0;
+        for y in 0..10 {
+            for x in 0..12 {
+                let (xc, yc) = (x as f32 + 0.5, y as f32 + 0.5);
+                let expected = if inside((5.0, 5.0), xc, yc) || inside((7.0, 5.0), xc, yc) { 110 } else { 10 };
+                assert_eq!(p.data()[(y * 12 + x) * 4], expected, "pixel ({x}, {y})");
+                lit += (expected == 110) as usize;
+            }
+        }
+        assert!(lit > 40, "{lit} pixels lit");
+        assert!(ConvexQuad::new([(1.0, 1.0), (2.0, 2.0), (3.0, 3.0), (4.0, 4.0)]).is_none(), "no area");
     }
 
     #[test]

@@ -12,13 +12,15 @@ use crate::plan::ScenarioPlan;
 use crate::world::Trajectories;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tiny_skia::{FillRule, Paint, PathBuilder, Pixmap, Transform};
+use tiny_skia::{Pixmap, Transform};
 
 /// A rain streak's width at 1024 pixels across, pixels.
 const STREAK_WIDTH_PX: f32 = 1.0;
 /// A rain streak's colour and opacity (of 255).
 const STREAK_RGB: [u8; 3] = [200, 210, 225];
 const STREAK_ALPHA: u8 = 120;
+/// Headlight beams' colour (their opacity grows with darkness).
+const BEAM_RGB: [u8; 3] = [255, 236, 170];
 /// A snowflake's colour and opacity (of 255).
 const FLAKE_RGB: [u8; 3] = [250, 250, 252];
 const FLAKE_ALPHA: u8 = 220;
@@ -142,10 +144,11 @@ impl SceneLook {
             return;
         }
         let strength = (1.0 - self.daylight) as f32;
-        let mut pb = PathBuilder::new();
+        // Soft translucent light: hard edges look alike and cost far less.
+        let alpha = (110.0 * strength) as u8;
         for (to_canvas, length, width) in cars {
             let front = length / 2.0;
-            for side in [-1.0f32, 1.0] {
+            let beams = [-1.0f32, 1.0].map(|side| {
                 let y = side * width * 0.3;
                 let mut points = [
                     tiny_skia::Point::from_xy(front, y - 0.1),
@@ -154,18 +157,10 @@ impl SceneLook {
                     tiny_skia::Point::from_xy(front, y + 0.1),
                 ];
                 to_canvas.map_points(&mut points);
-                pb.move_to(points[0].x, points[0].y);
-                for p in &points[1..] {
-                    pb.line_to(p.x, p.y);
-                }
-                pb.close();
-            }
-        }
-        if let Some(path) = pb.finish() {
-            // Soft translucent light: hard edges look alike and cost far less.
-            let mut paint = Paint { anti_alias: false, ..Paint::default() };
-            paint.set_color_rgba8(255, 236, 170, (110.0 * strength) as u8);
-            pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
+                raster::ConvexQuad::new(points.map(|p| (p.x, p.y)))
+            });
+            // A car's two beams overlap ahead of it: that light is not doubled.
+            raster::fill_hard_union(pixmap, beams, BEAM_RGB, alpha);
         }
     }
 
