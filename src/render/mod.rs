@@ -325,6 +325,8 @@ impl Renderer {
         // heads were drawn over the same background go back: outside the
         // restored rectangles they are what the canvas holds already, and
         // inside they are converted with those rectangles.
+        // (Heads are drawn over the canvas's background, so after a whole
+        // frame, whose background is new, they are never the same.)
         let same_heads = canvas
             .heads
             .as_ref()
@@ -332,7 +334,7 @@ impl Renderer {
         if same_heads {
             let drawn = canvas.heads.as_ref().expect("checked above");
             for (r, pixels) in &drawn.pixels {
-                if whole_frame || canvas.previous.iter().any(|p| p.meets(r)) {
+                if canvas.previous.iter().any(|p| p.meets(r)) {
                     put_rect(&mut canvas.rgba, *r, pixels);
                 }
             }
