@@ -1,8 +1,9 @@
 //! The few shapes drawn every frame, rasterised directly: rectangles in
 //! their own frame (a car's body, windscreen and brake lights; a rain
-//! streak; a snowflake) placed on the canvas by an affine map.
+//! streak; a snowflake) placed on the canvas by an affine map, and convex
+//! quadrilaterals (headlight beams).
 //!
-//! Each row of pixels meets a placed rectangle in one span of pixel centres,
+//! Each row of pixels meets such a shape in one span of pixel centres,
 //! found from the row's centre line, so a shape costs its rows and its edge
 //! pixels, not its bounding box: the inside is stored whole, and only the
 //! pixels within half a pixel of an edge get a coverage.
@@ -126,6 +127,9 @@ impl PlacedRect {
 #[derive(Debug, Clone, Copy)]
 pub struct ConvexQuad {
     corners: [(f32, f32); 4],
+    /// 1 when the corners run counter-clockwise in the canvas's axes, -1
+    /// when clockwise.
+    turn: f32,
 }
 
 impl ConvexQuad {
@@ -138,7 +142,7 @@ impl ConvexQuad {
                 x0 * y1 - x1 * y0
             })
             .sum();
-        (area.is_finite() && area != 0.0).then_some(ConvexQuad { corners })
+        (area.is_finite() && area != 0.0).then_some(ConvexQuad { corners, turn: area.signum() })
     }
 
     /// The rows (clipped to `0..height`) whose centre line it crosses.
@@ -155,13 +159,7 @@ impl ConvexQuad {
     fn span(&self, row: usize, width: usize) -> Option<Span> {
         let yc = row as f32 + 0.5;
         let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-        let area: f32 = (0..4)
-            .map(|i| {
-                let ((x0, y0), (x1, y1)) = (self.corners[i], self.corners[(i + 1) % 4]);
-                x0 * y1 - x1 * y0
-            })
-            .sum();
-        let turn = area.signum();
+        let turn = self.turn;
         for i in 0..4 {
             let ((ax, ay), (bx, by)) = (self.corners[i], self.corners[(i + 1) % 4]);
             // Inside: turn * cross(b - a, p - a) >= 0, linear in p's x.
