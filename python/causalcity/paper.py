@@ -3,7 +3,7 @@ city datasets, trains and evaluates every reference method on both, and
 writes a results CSV, figures in the style of the paper's figures 4 and 5,
 and a Markdown table::
 
-    python -m causalcity.paper --quick            # about 35 min on 2 CPU cores
+    python -m causalcity.paper --quick            # about 40 min on 2 CPU cores (--plan projects it)
     python -m causalcity.paper --device cuda      # the paper's 4000/500/500
 
 Both worlds use the paper's groups (4, 8 and 12 cars with 50 % of cars
@@ -640,7 +640,7 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m causalcity.paper", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: about 35 min on 2 CPU cores")
+    parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: about 40 min on 2 CPU cores (--plan projects it)")
     parser.add_argument("--out", type=Path, help="output folder [results/paper or results/paper-quick]")
     parser.add_argument("--world", nargs="+", choices=WORLDS, default=list(WORLDS))
     parser.add_argument("--group", nargs="+", metavar="GROUP",
