@@ -80,10 +80,7 @@ impl PlacedRect {
             lo = lo.max(t1.min(t2));
             hi = hi.min(t1.max(t2));
         }
-        // Pixel x has its centre at x + 0.5.
-        let first = (lo - 0.5).ceil().max(0.0);
-        let last = (hi - 0.5).floor().min(width as f32 - 1.0);
-        (first <= last).then(|| (first as usize, last as usize + 1))
+        as_span(centres_within(lo, hi, width))
     }
 
     /// The rows (clipped to `0..height`) the rectangle grown by `grow` can
@@ -107,9 +104,7 @@ impl PlacedRect {
         if !(lo.is_finite() && hi.is_finite()) {
             return 0..0;
         }
-        let first = (lo - 0.5).ceil().max(0.0) as usize;
-        let last = ((hi - 0.5).floor() + 1.0).clamp(0.0, height as f32) as usize;
-        first.min(last)..last
+        centres_within(lo, hi, height)
     }
 
     /// The box-filtered coverage (0 to 255) of the pixel at `(x, y)`.
@@ -149,9 +144,7 @@ impl ConvexQuad {
     fn rows(&self, height: usize) -> std::ops::Range<usize> {
         let lo = self.corners.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
         let hi = self.corners.iter().map(|c| c.1).fold(f32::NEG_INFINITY, f32::max);
-        let first = (lo - 0.5).ceil().clamp(0.0, height as f32) as usize;
-        let last = ((hi - 0.5).floor() + 1.0).clamp(0.0, height as f32) as usize;
-        first.min(last)..last
+        centres_within(lo, hi, height)
     }
 
     /// The columns of row `row` (clipped to `0..width`) whose pixel centres
@@ -175,10 +168,21 @@ impl ConvexQuad {
                 hi = hi.min(-at_zero / slope);
             }
         }
-        let first = (lo - 0.5).ceil().max(0.0);
-        let last = (hi - 0.5).floor().min(width as f32 - 1.0);
-        (first <= last).then(|| (first as usize, last as usize + 1))
+        as_span(centres_within(lo, hi, width))
     }
+}
+
+/// The pixels of `0..limit` whose centres (pixel `i`'s at `i + 0.5`) lie in
+/// `[lo, hi]`; empty when none do or a bound is NaN.
+fn centres_within(lo: f32, hi: f32, limit: usize) -> std::ops::Range<usize> {
+    let first = (lo - 0.5).ceil().clamp(0.0, limit as f32) as usize;
+    let end = ((hi - 0.5).floor() + 1.0).clamp(0.0, limit as f32) as usize;
+    first.min(end)..end
+}
+
+/// A non-empty range as a span.
+fn as_span(columns: std::ops::Range<usize>) -> Option<Span> {
+    (!columns.is_empty()).then_some((columns.start, columns.end))
 }
 
 /// Blends `colour` at alpha `alpha` once into every pixel whose centre lies
