@@ -84,40 +84,37 @@ pub struct Scene {
 /// Reusable per-thread buffers: the finished frame is in `rgb` (row-major,
 /// 3 bytes a pixel) and `mask` (1 byte a pixel).
 ///
-/// Between frames of one scene only what the previous frame drew (its cars
-/// and their beams, rain streaks and snowflakes) is restored from the
-/// background, signal heads stay until their colours change, and only what
-/// changed is converted into `rgb` and `mask`: a frame costs what it draws,
-/// not its size.
+/// A frame is two layers. What stands still (the background and the signal
+/// heads, which change colour every few seconds) is kept drawn, in RGBA for
+/// tiny-skia and in RGB; what moves (cars and their beams, rain streaks and
+/// snowflakes) is drawn straight into `rgb`. Between frames of one scene
+/// only what the previous frame drew is copied back from the still layer:
+/// a frame costs what it draws, not its size.
 pub struct FrameCanvas {
-    rgba: Pixmap,
+    /// The background with the signal heads drawn over it.
+    still_rgba: Pixmap,
+    /// `still_rgba` as RGB rows: what every frame starts from.
+    still_rgb: Vec<u8>,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
-    /// The background `rgba` was last restored from (kept alive so that
+    /// The background `still_rgba` was drawn over (kept alive so that
     /// identity means the same pixels).
     background: Option<Arc<Pixmap>>,
-    /// Pixel rectangles the last frame drew over the background.
-    dirty: Vec<PixelRect>,
-    /// The frame before's, kept to reuse its allocation.
-    previous: Vec<PixelRect>,
-    /// The signal heads last drawn and the pixels they left: heads change
-    /// colour every few seconds, so most frames copy these back instead of
-    /// drawing them again.
-    heads: Option<DrawnHeads>,
-    /// This frame's head rectangles (kept to reuse the allocation).
+    /// The signal heads on the still layer, and the look they were drawn under.
+    heads: Option<(SceneLook, Vec<HeadSprite>)>,
+    /// Their pixel rectangles.
     head_rects: Vec<PixelRect>,
+    /// Pixel rectangles this frame drew over the still layer, its cars'
+    /// first.
+    dirty: Vec<PixelRect>,
+    /// How many of `dirty` are cars' (where the mask was written).
+    cars_in_dirty: usize,
+    /// The frame before's, then this frame's rectangles to copy back.
+    previous: Vec<PixelRect>,
+    cars_in_previous: usize,
     /// This frame's rain streaks' and snowflakes' boxes, pixels (kept to
     /// reuse the allocation).
     precipitation: Vec<[f32; 4]>,
-}
-
-/// Signal heads as drawn over one background under one look, and the pixels
-/// of their rectangles afterwards (RGBA rows).
-struct DrawnHeads {
-    background: Arc<Pixmap>,
-    look: SceneLook,
-    heads: Vec<HeadSprite>,
-    pixels: Vec<(PixelRect, Vec<u8>)>,
 }
 
 /// A rectangle of pixels, `x0..x1` by `y0..y1`.
@@ -181,11 +178,6 @@ impl PixelRect {
             y1: clip((hi_y + margin).ceil(), h),
         };
         (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
-    }
-
-    /// Whether the two rectangles share a pixel.
-    fn meets(&self, other: &PixelRect) -> bool {
-        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
     }
 
     /// The pixels whose centres can lie in the box `[x0, y0, x1, y1]`
@@ -255,14 +247,17 @@ impl Renderer {
     pub fn canvas(&self) -> FrameCanvas {
         let (w, h) = (self.camera.width, self.camera.height);
         FrameCanvas {
-            rgba: Pixmap::new(w, h).expect("image size was validated"),
+            still_rgba: Pixmap::new(w, h).expect("image size was validated"),
+            still_rgb: vec![0; (w * h * 3) as usize],
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
             background: None,
-            dirty: Vec::new(),
-            previous: Vec::new(),
             heads: None,
             head_rects: Vec::new(),
+            dirty: Vec::new(),
+            cars_in_dirty: 0,
+            previous: Vec::new(),
+            cars_in_previous: 0,
             precipitation: Vec::new(),
         }
     }
@@ -286,13 +281,9 @@ impl Renderer {
             let (c, s) = (car.yaw.cos() as f32, car.yaw.sin() as f32);
             world.pre_concat(Transform::from_row(c, s, -s, c, car.position.x as f32, car.position.y as f32))
         };
-        // Only the cars (and their beams), the signal heads, and rain and
-        // snow change from frame to frame: what they covered last frame is
-        // restored from the background, and only what changed is converted.
-        let same_background = canvas.background.as_ref().is_some_and(|b| Arc::ptr_eq(b, &scene.background));
-        let whole_frame = !same_background;
-        let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
+        let whole_frame = !canvas.background.as_ref().is_some_and(|b| Arc::ptr_eq(b, &scene.background));
         std::mem::swap(&mut canvas.dirty, &mut canvas.previous);
+        canvas.cars_in_previous = canvas.cars_in_dirty;
         canvas.dirty.clear();
         // A car's rectangle reaches over its beams only when they shine.
         let beams = look.shows_beams();
@@ -302,87 +293,77 @@ impl Renderer {
                 if beams { (BEAM_REACH_M, hw.max(0.3 * car.width as f32 + BEAM_HALF_SPREAD_M)) } else { (0.0, hw) };
             PixelRect::around(car_frame(car), (-hl, hl + reach), (-half_span, half_span), w, h)
         }));
-        let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
-        let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
-        let housing = (-half_housing, half_housing);
-        canvas.head_rects.clear();
-        canvas
-            .head_rects
-            .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
+        canvas.cars_in_dirty = canvas.dirty.len();
         if whole_frame {
-            canvas.rgba.data_mut().copy_from_slice(scene.background.data());
-            canvas.mask.fill(0);
+            canvas.still_rgba.data_mut().copy_from_slice(scene.background.data());
             canvas.background = Some(scene.background.clone());
-            canvas.previous.clear();
-            canvas.previous.push(full);
-        } else {
-            for r in &canvas.previous {
-                restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
-            }
-        }
-        // Signal heads stay on the canvas from frame to frame. Where the
-        // restore above wiped part of one, the pixels kept from when the same
-        // heads were drawn over the same background go back: outside the
-        // restored rectangles they are what the canvas holds already, and
-        // inside they are converted with those rectangles.
-        // (Heads are drawn over the canvas's background, so after a whole
-        // frame, whose background is new, they are never the same.)
-        let same_heads = canvas
-            .heads
-            .as_ref()
-            .is_some_and(|d| Arc::ptr_eq(&d.background, &scene.background) && d.look == *look && d.heads == heads);
-        if same_heads {
-            let drawn = canvas.heads.as_ref().expect("checked above");
-            for (r, pixels) in &drawn.pixels {
-                if canvas.previous.iter().any(|p| p.meets(r)) {
-                    put_rect(&mut canvas.rgba, *r, pixels);
-                }
-            }
-        } else {
-            // Heads of another colour (or none): the old ones and the new
-            // ones' places go back to the background, and are converted.
-            if !whole_frame {
-                let old = canvas.heads.take().map(|d| d.pixels).unwrap_or_default();
-                for r in old.iter().map(|(r, _)| r).chain(&canvas.head_rects) {
-                    restore(&mut canvas.rgba, &mut canvas.mask, &scene.background, *r);
-                    canvas.dirty.push(*r);
-                }
-            }
             canvas.heads = None;
-            if !heads.is_empty() {
-                let mut paint = Paint { anti_alias: true, ..Paint::default() };
-                for head in heads {
-                    let t = head_frame(head);
-                    let rgb = look.shade(HOUSING_RGB);
-                    paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                    let body =
-                        Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
-                    canvas.rgba.fill_rect(body, &paint, t, None);
-                    let rgb = look.veil(lamp_rgb(head.colour));
-                    paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                    if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
-                        canvas.rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
-                    }
+            canvas.head_rects.clear();
+        }
+        // The still layer: heads of other colours (or none) go back to the
+        // background and are drawn again. Their rectangles join the ones to
+        // copy into the frame.
+        let redrawn_from = canvas.previous.len();
+        let same_heads = canvas.heads.as_ref().is_some_and(|(l, drawn)| l == look && drawn == heads);
+        if !same_heads {
+            for r in canvas.head_rects.drain(..) {
+                restore(&mut canvas.still_rgba, &scene.background, r);
+                canvas.previous.push(r);
+            }
+            let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
+            let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
+            let housing = (-half_housing, half_housing);
+            canvas
+                .head_rects
+                .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
+            let mut paint = Paint { anti_alias: true, ..Paint::default() };
+            for head in heads {
+                let t = head_frame(head);
+                let rgb = look.shade(HOUSING_RGB);
+                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                let body =
+                    Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
+                canvas.still_rgba.fill_rect(body, &paint, t, None);
+                let rgb = look.veil(lamp_rgb(head.colour));
+                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+                if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
+                    canvas.still_rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
                 }
-                let pixels = canvas.head_rects.iter().map(|r| (*r, get_rect(&canvas.rgba, *r))).collect();
-                canvas.heads = Some(DrawnHeads {
-                    background: scene.background.clone(),
-                    look: *look,
-                    heads: heads.to_vec(),
-                    pixels,
-                });
+            }
+            canvas.previous.extend_from_slice(&canvas.head_rects);
+            canvas.heads = Some((*look, heads.to_vec()));
+        }
+        // The frame starts from the still layer where the last frame drew
+        // (or everywhere, over a new background).
+        if whole_frame {
+            convert(&canvas.still_rgba, &mut canvas.still_rgb, PixelRect { x0: 0, y0: 0, x1: w, y1: h });
+            canvas.rgb.copy_from_slice(&canvas.still_rgb);
+            canvas.mask.fill(0);
+        } else {
+            for r in &canvas.previous[redrawn_from..] {
+                convert(&canvas.still_rgba, &mut canvas.still_rgb, *r);
+            }
+            for r in &canvas.previous {
+                copy_rgb(&canvas.still_rgb, &mut canvas.rgb, w, *r);
+            }
+            for r in &canvas.previous[..canvas.cars_in_previous] {
+                for y in r.y0..r.y1 {
+                    canvas.mask[y * w + r.x0..y * w + r.x1].fill(0);
+                }
             }
         }
-        // Beams lie on the road, under every car.
-        look.draw_headlights(&mut canvas.rgba, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
+        // What moves, straight into the frame. Beams lie on the road, under
+        // every car; rain and snow over everything.
+        let mut image = raster::RgbImage::new(&mut canvas.rgb, w, h).expect("sized for this camera");
+        look.draw_headlights(&mut image, cars.iter().map(|c| (car_frame(c), c.length as f32, c.width as f32)));
         for car in cars {
             let t = car_frame(car);
             let (hl, hw) = ((car.length / 2.0) as f32, (car.width / 2.0) as f32);
             let Some(body) = raster::PlacedRect::new(t, (-hl, hl), (-hw, hw)) else { continue };
-            raster::fill_aa(&mut canvas.rgba, &body, look.shade(car.colour));
+            raster::fill_aa(&mut image, &body, look.shade(car.colour));
             // Windscreen towards the front shows the heading.
             if let Some(glass) = raster::PlacedRect::new(t, (hl * 0.15, hl * 0.55), (-hw * 0.8, hw * 0.8)) {
-                raster::fill_aa(&mut canvas.rgba, &glass, look.shade([36, 40, 52]));
+                raster::fill_aa(&mut image, &glass, look.shade([36, 40, 52]));
             }
             if car.braking {
                 let rgb = look.veil(BRAKE_LIGHT_RGB);
@@ -390,7 +371,7 @@ impl Renderer {
                 let (inner, outer) = (hw * BRAKE_LIGHT_ACROSS.0, hw * BRAKE_LIGHT_ACROSS.1);
                 for across in [(inner, outer), (-outer, -inner)] {
                     if let Some(light) = raster::PlacedRect::new(t, (back, front), across) {
-                        raster::fill_aa(&mut canvas.rgba, &light, rgb);
+                        raster::fill_aa(&mut image, &light, rgb);
                     }
                 }
             }
@@ -399,44 +380,30 @@ impl Renderer {
             raster::stamp(&mut canvas.mask, w, &body, car.mask_id);
         }
         canvas.precipitation.clear();
-        look.draw_precipitation_within(&mut canvas.rgba, frame, &mut canvas.precipitation);
+        look.draw_precipitation_within(&mut image, frame, &mut canvas.precipitation);
         canvas.dirty.extend(canvas.precipitation.iter().filter_map(|b| PixelRect::of_box(*b, w, h)));
-        // What changed: what the previous frame drew and what this one drew
-        // (the whole frame when it was redrawn).
-        let drawn: &[PixelRect] = if whole_frame { &[] } else { &canvas.dirty };
-        for r in canvas.previous.iter().chain(drawn) {
-            convert(&canvas.rgba, &mut canvas.rgb, *r);
-        }
     }
 }
 
-/// The RGBA rows of `r`.
-fn get_rect(rgba: &Pixmap, r: PixelRect) -> Vec<u8> {
-    let w = rgba.width() as usize;
-    (r.y0..r.y1).flat_map(|y| &rgba.data()[(y * w + r.x0) * 4..(y * w + r.x1) * 4]).copied().collect()
-}
-
-/// Writes RGBA rows taken by [`get_rect`] back into `r`.
-fn put_rect(rgba: &mut Pixmap, r: PixelRect, pixels: &[u8]) {
-    let w = rgba.width() as usize;
-    let row = (r.x1 - r.x0) * 4;
-    for (y, src) in (r.y0..r.y1).zip(pixels.chunks_exact(row)) {
-        rgba.data_mut()[(y * w + r.x0) * 4..(y * w + r.x1) * 4].copy_from_slice(src);
-    }
-}
-
-/// Puts the background back in `r` and clears the mask there.
-fn restore(rgba: &mut Pixmap, mask: &mut [u8], background: &Pixmap, r: PixelRect) {
+/// Puts the background back in `r`.
+fn restore(rgba: &mut Pixmap, background: &Pixmap, r: PixelRect) {
     let w = rgba.width() as usize;
     let (rgba, back) = (rgba.data_mut(), background.data());
     for y in r.y0..r.y1 {
         let (from, to) = ((y * w + r.x0) * 4, (y * w + r.x1) * 4);
         rgba[from..to].copy_from_slice(&back[from..to]);
-        mask[y * w + r.x0..y * w + r.x1].fill(0);
     }
 }
 
-/// Copies `r` of the drawing buffer into the frame's RGB image.
+/// Copies `r` of one `w`-wide RGB image into another.
+fn copy_rgb(from: &[u8], to: &mut [u8], w: usize, r: PixelRect) {
+    for y in r.y0..r.y1 {
+        let (a, b) = ((y * w + r.x0) * 3, (y * w + r.x1) * 3);
+        to[a..b].copy_from_slice(&from[a..b]);
+    }
+}
+
+/// Copies `r` of the RGBA still layer into its RGB copy.
 fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
     let w = rgba.width() as usize;
     let rgba = rgba.data();

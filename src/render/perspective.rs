@@ -311,16 +311,10 @@ impl PerspectiveRenderer {
 /// Rain streaks and snowflakes of frame `index` over a drawn frame, as the
 /// flat views draw them (in image space; the masks stay as they are).
 pub fn draw_precipitation(look: &SceneLook, index: u32, frame: &mut PerspectiveFrame) {
-    if look.rain <= 0.0 && look.snow <= 0.0 {
-        return;
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    if let Some(mut image) = super::raster::RgbImage::new(&mut frame.rgb, w, h) {
+        look.draw_precipitation(&mut image, index);
     }
-    let Some(mut pixmap) = tiny_skia::Pixmap::new(frame.width, frame.height) else { return };
-    for (px, rgb) in pixmap.data_mut().chunks_exact_mut(4).zip(frame.rgb.chunks_exact(3)) {
-        px[..3].copy_from_slice(rgb);
-        px[3] = 255;
-    }
-    look.draw_precipitation(&mut pixmap, index);
-    super::convert_row(pixmap.data(), &mut frame.rgb);
 }
 
 /// A solid in `look`'s light.

@@ -14,11 +14,33 @@
 //! - Hard-edged fills and the instance mask take exactly the pixels whose
 //!   centres lie inside (edges included).
 //!
-//! The canvas is a `tiny_skia::Pixmap` whose pixels are opaque (the
-//! background is), so blending a colour with alpha `a` is
+//! They draw straight into a frame's RGB rows ([`RgbImage`]), whose pixels
+//! are opaque, so blending a colour with alpha `a` is
 //! `(colour a + dst (255 - a)) / 255`, rounded.
 
-use tiny_skia::{Pixmap, Transform};
+use tiny_skia::Transform;
+
+/// An opaque RGB image being drawn on: `height` rows of `width` pixels, 3
+/// bytes each, borrowed from the frame that owns them.
+pub struct RgbImage<'a> {
+    pub data: &'a mut [u8],
+    pub width: usize,
+    pub height: usize,
+}
+
+impl<'a> RgbImage<'a> {
+    /// `data` as `width` x `height` RGB pixels; `None` when the sizes
+    /// disagree.
+    pub fn new(data: &'a mut [u8], width: usize, height: usize) -> Option<RgbImage<'a>> {
+        (data.len() == width * height * 3).then_some(RgbImage { data, width, height })
+    }
+
+    /// The pixels `x0..x1` of row `y`, 3 bytes each.
+    fn span_mut(&mut self, y: usize, (x0, x1): Span) -> &mut [u8] {
+        let row = y * self.width;
+        &mut self.data[(row + x0) * 3..(row + x1) * 3]
+    }
+}
 
 /// A rectangle `[x0, x1] x [y0, y1]` of a shape's own frame, and where that
 /// frame lies on the canvas.
@@ -188,17 +210,16 @@ fn as_span(columns: std::ops::Range<usize>) -> Option<Span> {
 /// Blends `colour` at alpha `alpha` once into every pixel whose centre lies
 /// in either of `pair` (hard edges; where they overlap, the light is not
 /// doubled).
-pub fn fill_hard_union(pixmap: &mut Pixmap, pair: [Option<ConvexQuad>; 2], colour: [u8; 3], alpha: u8) {
-    let (w, h) = (pixmap.width() as usize, pixmap.height() as usize);
+pub fn fill_hard_union(image: &mut RgbImage, pair: [Option<ConvexQuad>; 2], colour: [u8; 3], alpha: u8) {
+    let (w, h) = (image.width, image.height);
     let rows = pair.iter().flatten().map(|q| q.rows(h)).filter(|r| !r.is_empty());
     let (first, last) = rows.fold((usize::MAX, 0), |(a, b), r| (a.min(r.start), b.max(r.end)));
-    let data = pixmap.data_mut();
     for y in first..last {
         let mut spans = pair.map(|q| q.and_then(|q| q.span(y, w)));
         spans.sort_unstable();
         let mut done = 0;
         for (x0, x1) in spans.into_iter().flatten() {
-            for px in data[(y * w + x0.max(done)) * 4..(y * w + x1.max(done)) * 4].chunks_exact_mut(4) {
+            for px in image.span_mut(y, (x0.max(done), x1.max(done))).chunks_exact_mut(3) {
                 blend(px, colour, alpha);
             }
             done = done.max(x1);
@@ -206,45 +227,40 @@ pub fn fill_hard_union(pixmap: &mut Pixmap, pair: [Option<ConvexQuad>; 2], colou
     }
 }
 
-/// `colour` at alpha `a` over the opaque RGBA pixel `dst`.
+/// `colour` at alpha `a` over the opaque RGB pixel `dst`.
 fn blend(dst: &mut [u8], colour: [u8; 3], a: u8) {
     let (a, keep) = (a as u32, 255 - a as u32);
     for k in 0..3 {
         dst[k] = ((colour[k] as u32 * a + dst[k] as u32 * keep + 127) / 255) as u8;
     }
-    dst[3] = 255;
 }
 
 /// Fills `rect` with the opaque `colour`, anti-aliased.
-pub fn fill_aa(pixmap: &mut Pixmap, rect: &PlacedRect, colour: [u8; 3]) {
-    let (w, h) = (pixmap.width() as usize, pixmap.height() as usize);
+pub fn fill_aa(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3]) {
+    let (w, h) = (image.width, image.height);
     let half_pixel = 0.5 / rect.pixels_per_unit;
-    let solid = [colour[0], colour[1], colour[2], 255];
-    let data = pixmap.data_mut();
     for y in rect.rows(half_pixel, h) {
         let Some((x0, x1)) = rect.span(y, half_pixel, w) else { continue };
         let (i0, i1) = rect.span(y, -half_pixel, w).map_or((x1, x1), |(a, b)| (a.max(x0), b.min(x1).max(a.max(x0))));
-        let row = &mut data[y * w * 4..(y + 1) * w * 4];
+        let row = image.span_mut(y, (0, w));
         for x in (x0..i0).chain(i1..x1) {
             let a = rect.coverage(x, y);
             if a > 0 {
-                blend(&mut row[x * 4..x * 4 + 4], colour, a);
+                blend(&mut row[x * 3..x * 3 + 3], colour, a);
             }
         }
-        for px in row[i0 * 4..i1 * 4].chunks_exact_mut(4) {
-            px.copy_from_slice(&solid);
+        for px in row[i0 * 3..i1 * 3].chunks_exact_mut(3) {
+            px.copy_from_slice(&colour);
         }
     }
 }
 
 /// Blends `colour` at alpha `alpha` into every pixel whose centre lies in
 /// `rect` (hard edges).
-pub fn fill_hard(pixmap: &mut Pixmap, rect: &PlacedRect, colour: [u8; 3], alpha: u8) {
-    let (w, h) = (pixmap.width() as usize, pixmap.height() as usize);
-    let data = pixmap.data_mut();
-    for y in rect.rows(0.0, h) {
-        if let Some((x0, x1)) = rect.span(y, 0.0, w) {
-            for px in data[(y * w + x0) * 4..(y * w + x1) * 4].chunks_exact_mut(4) {
+pub fn fill_hard(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3], alpha: u8) {
+    for y in rect.rows(0.0, image.height) {
+        if let Some(span) = rect.span(y, 0.0, image.width) {
+            for px in image.span_mut(y, span).chunks_exact_mut(3) {
                 blend(px, colour, alpha);
             }
         }
@@ -266,10 +282,25 @@ pub fn stamp(mask: &mut [u8], width: usize, rect: &PlacedRect, id: u8) {
 mod tests {
     use super::*;
 
-    fn canvas(w: u32, h: u32) -> Pixmap {
-        let mut p = Pixmap::new(w, h).unwrap();
-        p.fill(tiny_skia::Color::from_rgba8(10, 20, 30, 255));
-        p
+    /// An RGB canvas of one colour, (10, 20, 30).
+    struct Canvas {
+        data: Vec<u8>,
+        width: usize,
+    }
+
+    impl Canvas {
+        fn image(&mut self) -> RgbImage<'_> {
+            let height = self.data.len() / 3 / self.width;
+            RgbImage::new(&mut self.data, self.width, height).unwrap()
+        }
+
+        fn red(&self, x: usize, y: usize) -> u8 {
+            self.data[(y * self.width + x) * 3]
+        }
+    }
+
+    fn canvas(width: usize, height: usize) -> Canvas {
+        Canvas { data: [10, 20, 30].repeat(width * height), width }
     }
 
     #[test]
@@ -278,8 +309,8 @@ mod tests {
         // quarter, half or three quarters on its edges.
         let rect = PlacedRect::new(Transform::identity(), (1.5, 4.75), (2.25, 4.75)).unwrap();
         let mut p = canvas(8, 8);
-        fill_aa(&mut p, &rect, [250, 20, 30]);
-        let red = |x: usize, y: usize| p.data()[(y * 8 + x) * 4] as i32;
+        fill_aa(&mut p.image(), &rect, [250, 20, 30]);
+        let red = |x: usize, y: usize| p.red(x, y) as i32;
         let expect = |cover: f32| (250.0 * cover + 10.0 * (1.0 - cover)).round() as i32;
         assert_eq!(red(2, 3), 250, "inside");
         assert_eq!(red(0, 3), 10, "outside");
@@ -300,7 +331,7 @@ mod tests {
         let (hl, hw) = (4.0, 1.5);
         let rect = PlacedRect::new(to_canvas, (-hl, hl), (-hw, hw)).unwrap();
         let mut p = canvas(40, 40);
-        fill_aa(&mut p, &rect, [250, 20, 30]);
+        fill_aa(&mut p.image(), &rect, [250, 20, 30]);
         let mut mask = vec![0u8; 40 * 40];
         stamp(&mut mask, 40, &rect, 7);
         let inverse = to_canvas.invert().unwrap();
@@ -308,7 +339,7 @@ mod tests {
         let mut checked = 0;
         for y in 0..40 {
             for x in 0..40 {
-                area += (p.data()[(y * 40 + x) * 4] as f32 - 10.0) / 240.0;
+                area += (p.red(x, y) as f32 - 10.0) / 240.0;
                 let mut c = [tiny_skia::Point::from_xy(x as f32 + 0.5, y as f32 + 0.5)];
                 inverse.map_points(&mut c);
                 let inside = c[0].x.abs() <= hl && c[0].y.abs() <= hw;
@@ -330,14 +361,14 @@ mod tests {
         let a = ConvexQuad::new([(5.0, 1.0), (9.0, 5.0), (5.0, 9.0), (1.0, 5.0)]).unwrap();
         let b = ConvexQuad::new([(7.0, 1.0), (3.0, 5.0), (7.0, 9.0), (11.0, 5.0)]).unwrap();
         let mut p = canvas(12, 10);
-        fill_hard_union(&mut p, [Some(a), Some(b)], [210, 20, 30], 128);
+        fill_hard_union(&mut p.image(), [Some(a), Some(b)], [210, 20, 30], 128);
         let inside = |(cx, cy): (f32, f32), x: f32, y: f32| (x - cx).abs() + (y - cy).abs() <= 4.0;
         let mut lit = 0;
         for y in 0..10 {
             for x in 0..12 {
                 let (xc, yc) = (x as f32 + 0.5, y as f32 + 0.5);
                 let expected = if inside((5.0, 5.0), xc, yc) || inside((7.0, 5.0), xc, yc) { 110 } else { 10 };
-                assert_eq!(p.data()[(y * 12 + x) * 4], expected, "pixel ({x}, {y})");
+                assert_eq!(p.red(x, y), expected, "pixel ({x}, {y})");
                 lit += (expected == 110) as usize;
             }
         }
@@ -349,8 +380,8 @@ mod tests {
     fn hard_fills_blend_only_the_pixels_whose_centres_are_inside() {
         let rect = PlacedRect::new(Transform::identity(), (1.0, 3.0), (0.6, 1.5)).unwrap();
         let mut p = canvas(5, 3);
-        fill_hard(&mut p, &rect, [210, 20, 30], 128);
-        let red: Vec<u8> = p.data().chunks_exact(4).map(|px| px[0]).collect();
+        fill_hard(&mut p.image(), &rect, [210, 20, 30], 128);
+        let red: Vec<u8> = p.data.chunks_exact(3).map(|px| px[0]).collect();
         // Row 0 (centre 0.5) is outside; row 1 (centre 1.5) is on the edge: in.
         assert_eq!(red, [10, 10, 10, 10, 10, 10, 110, 110, 10, 10, 10, 10, 10, 10, 10]);
     }

@@ -7,7 +7,7 @@
 //! car's colour (the same result for opaque shapes). Rain and snow are drawn
 //! per frame from a seeded stream, so frames are reproducible.
 
-use super::raster::{self, PlacedRect};
+use super::raster::{self, PlacedRect, RgbImage};
 use crate::plan::ScenarioPlan;
 use crate::world::Trajectories;
 use rand::{RngExt, SeedableRng};
@@ -139,7 +139,7 @@ impl SceneLook {
     /// Headlight beams (at dusk and night) of every car, each given as its
     /// car-frame transform (x forward, y left, metres) and length and width,
     /// drawn over the road in one pass.
-    pub fn draw_headlights(&self, pixmap: &mut Pixmap, cars: impl Iterator<Item = (Transform, f32, f32)>) {
+    pub fn draw_headlights(&self, image: &mut RgbImage, cars: impl Iterator<Item = (Transform, f32, f32)>) {
         if !self.shows_beams() {
             return;
         }
@@ -160,7 +160,7 @@ impl SceneLook {
                 raster::ConvexQuad::new(points.map(|p| (p.x, p.y)))
             });
             // A car's two beams overlap ahead of it: that light is not doubled.
-            raster::fill_hard_union(pixmap, beams, BEAM_RGB, alpha);
+            raster::fill_hard_union(image, beams, BEAM_RGB, alpha);
         }
     }
 
@@ -170,19 +170,19 @@ impl SceneLook {
     }
 
     /// Rain streaks and snowflakes of frame `frame`, in pixel space.
-    pub fn draw_precipitation(&self, pixmap: &mut Pixmap, frame: u32) {
-        self.draw_precipitation_within(pixmap, frame, &mut Vec::new());
+    pub fn draw_precipitation(&self, image: &mut RgbImage, frame: u32) {
+        self.draw_precipitation_within(image, frame, &mut Vec::new());
     }
 
     /// [`SceneLook::draw_precipitation`], adding to `drawn` a box around
     /// each streak and flake, `[x0, y0, x1, y1]` in pixels (unclipped; the
     /// stroke's width included, no margin): every pixel it changed lies in
     /// one of them.
-    pub fn draw_precipitation_within(&self, pixmap: &mut Pixmap, frame: u32, drawn: &mut Vec<[f32; 4]>) {
+    pub fn draw_precipitation_within(&self, image: &mut RgbImage, frame: u32, drawn: &mut Vec<[f32; 4]>) {
         if self.rain <= 0.0 && self.snow <= 0.0 {
             return;
         }
-        let (w, h) = (pixmap.width() as f32, pixmap.height() as f32);
+        let (w, h) = (image.width as f32, image.height as f32);
         let scale = w / 1024.0;
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ (frame as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let streaks = (200.0 * self.rain * (w * h / (1024.0 * 640.0)) as f64) as usize;
@@ -199,7 +199,7 @@ impl SceneLook {
             drawn.push([x - 0.35 * len - half, y - half, x + half, y + len + half]);
             // Hard-edged streaks: cheaper to draw and to compress, alike to the eye.
             if let Some(streak) = PlacedRect::new(along, (0.0, reach), (-half / 2.0, half / 2.0)) {
-                raster::fill_hard(pixmap, &streak, STREAK_RGB, STREAK_ALPHA);
+                raster::fill_hard(image, &streak, STREAK_RGB, STREAK_ALPHA);
             }
         }
         let flakes = (420.0 * self.snow * (w * h / (1024.0 * 640.0)) as f64) as usize;
@@ -208,7 +208,7 @@ impl SceneLook {
             let y = rng.random_range(0.0..h);
             let size = rng.random_range(1.5..3.5) * scale;
             if let Some(flake) = PlacedRect::new(Transform::identity(), (x, x + size), (y, y + size)) {
-                raster::fill_hard(pixmap, &flake, FLAKE_RGB, FLAKE_ALPHA);
+                raster::fill_hard(image, &flake, FLAKE_RGB, FLAKE_ALPHA);
                 drawn.push([x, y, x + size, y + size]);
             }
         }
