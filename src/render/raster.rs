@@ -197,8 +197,13 @@ impl ConvexQuad {
 /// The pixels of `0..limit` whose centres (pixel `i`'s at `i + 0.5`) lie in
 /// `[lo, hi]`; empty when none do or a bound is NaN.
 fn centres_within(lo: f32, hi: f32, limit: usize) -> std::ops::Range<usize> {
-    let first = (lo - 0.5).ceil().clamp(0.0, limit as f32) as usize;
-    let end = ((hi - 0.5).floor() + 1.0).clamp(0.0, limit as f32) as usize;
+    // ceil(lo - 0.5) and floor(hi - 0.5) + 1, clamped to 0..=limit, from
+    // integer truncation (the target's baseline has no rounding
+    // instruction, so `ceil` and `floor` are calls).
+    let clamped = |v: f32| if v > 0.0 { v.min(limit as f32) } else { 0.0 };
+    let (a, b) = (clamped(lo - 0.5), clamped(hi - 0.5));
+    let first = a as usize + (((a as usize) as f32) < a) as usize;
+    let end = if hi - 0.5 >= 0.0 { (b as usize + 1).min(limit) } else { 0 };
     first.min(end)..end
 }
 
@@ -301,6 +306,27 @@ mod tests {
 
     fn canvas(width: usize, height: usize) -> Canvas {
         Canvas { data: [10, 20, 30].repeat(width * height), width }
+    }
+
+    #[test]
+    fn centres_within_is_ceil_and_floor_clamped() {
+        let reference = |lo: f32, hi: f32, limit: usize| {
+            let first = (lo - 0.5).ceil().clamp(0.0, limit as f32) as usize;
+            let end = ((hi - 0.5).floor() + 1.0).clamp(0.0, limit as f32) as usize;
+            first.min(end)..end
+        };
+        let mut values = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -3.0, -0.5, 0.0, 1e9];
+        values.extend((-40..120).map(|i| i as f32 * 0.25 - 0.01 * (i % 3) as f32));
+        let mut checked = 0;
+        for &lo in &values {
+            for &hi in &values {
+                for limit in [0, 1, 7, 20] {
+                    assert_eq!(centres_within(lo, hi, limit), reference(lo, hi, limit), "{lo} {hi} {limit}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 10_000);
     }
 
     #[test]
