@@ -170,12 +170,11 @@ impl PixelRect {
         if !(lo_x.is_finite() && lo_y.is_finite() && hi_x.is_finite() && hi_y.is_finite()) {
             return None;
         }
-        let clip = |v: f32, max: usize| v.clamp(0.0, max as f32) as usize;
         let rect = PixelRect {
-            x0: clip((lo_x - margin).floor(), w),
-            y0: clip((lo_y - margin).floor(), h),
-            x1: clip((hi_x + margin).ceil(), w),
-            y1: clip((hi_y + margin).ceil(), h),
+            x0: raster::floor_within(lo_x - margin, w),
+            y0: raster::floor_within(lo_y - margin, h),
+            x1: raster::ceil_within(hi_x + margin, w),
+            y1: raster::ceil_within(hi_y + margin, h),
         };
         (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
     }

@@ -197,14 +197,27 @@ impl ConvexQuad {
 /// The pixels of `0..limit` whose centres (pixel `i`'s at `i + 0.5`) lie in
 /// `[lo, hi]`; empty when none do or a bound is NaN.
 fn centres_within(lo: f32, hi: f32, limit: usize) -> std::ops::Range<usize> {
-    // ceil(lo - 0.5) and floor(hi - 0.5) + 1, clamped to 0..=limit, from
-    // integer truncation (the target's baseline has no rounding
-    // instruction, so `ceil` and `floor` are calls).
-    let clamped = |v: f32| if v > 0.0 { v.min(limit as f32) } else { 0.0 };
-    let (a, b) = (clamped(lo - 0.5), clamped(hi - 0.5));
-    let first = a as usize + (((a as usize) as f32) < a) as usize;
-    let end = if hi - 0.5 >= 0.0 { (b as usize + 1).min(limit) } else { 0 };
+    let first = ceil_within(lo - 0.5, limit);
+    let end = if hi - 0.5 >= 0.0 { (floor_within(hi - 0.5, limit) + 1).min(limit) } else { 0 };
     first.min(end)..end
+}
+
+/// `v.ceil().clamp(0, limit)` as an index (0 for NaN), from integer
+/// truncation: the target's baseline has no rounding instruction, so `ceil`
+/// and `floor` are calls, and rows and spans need millions a run.
+pub(crate) fn ceil_within(v: f32, limit: usize) -> usize {
+    let v = if v > 0.0 { v.min(limit as f32) } else { 0.0 };
+    let t = v as usize;
+    t + ((t as f32) < v) as usize
+}
+
+/// `v.floor().clamp(0, limit)` as an index (0 for NaN).
+pub(crate) fn floor_within(v: f32, limit: usize) -> usize {
+    if v > 0.0 {
+        v.min(limit as f32) as usize
+    } else {
+        0
+    }
 }
 
 /// A non-empty range as a span.
@@ -309,7 +322,7 @@ mod tests {
     }
 
     #[test]
-    fn centres_within_is_ceil_and_floor_clamped() {
+    fn pixel_ranges_are_ceil_and_floor_clamped() {
         let reference = |lo: f32, hi: f32, limit: usize| {
             let first = (lo - 0.5).ceil().clamp(0.0, limit as f32) as usize;
             let end = ((hi - 0.5).floor() + 1.0).clamp(0.0, limit as f32) as usize;
@@ -322,6 +335,9 @@ mod tests {
             for &hi in &values {
                 for limit in [0, 1, 7, 20] {
                     assert_eq!(centres_within(lo, hi, limit), reference(lo, hi, limit), "{lo} {hi} {limit}");
+                    let clamped = |v: f32| v.clamp(0.0, limit as f32) as usize;
+                    assert_eq!(ceil_within(lo, limit), clamped(lo.ceil()), "ceil {lo} {limit}");
+                    assert_eq!(floor_within(lo, limit), clamped(lo.floor()), "floor {lo} {limit}");
                     checked += 1;
                 }
             }
