@@ -237,9 +237,7 @@ pub fn fill_hard_union(image: &mut RgbImage, pair: [Option<ConvexQuad>; 2], colo
         spans.sort_unstable();
         let mut done = 0;
         for (x0, x1) in spans.into_iter().flatten() {
-            for px in image.span_mut(y, (x0.max(done), x1.max(done))).chunks_exact_mut(3) {
-                blend(px, colour, alpha);
-            }
+            blend_span(image.span_mut(y, (x0.max(done), x1.max(done))), colour, alpha);
             done = done.max(x1);
         }
     }
@@ -250,6 +248,24 @@ fn blend(dst: &mut [u8], colour: [u8; 3], a: u8) {
     let (a, keep) = (a as u32, 255 - a as u32);
     for k in 0..3 {
         dst[k] = ((colour[k] as u32 * a + dst[k] as u32 * keep + 127) / 255) as u8;
+    }
+}
+
+/// [`blend`] over every pixel of `span` (RGB bytes): 16 pixels at a time
+/// through one pattern of the colour's terms, which the compiler turns into
+/// vector arithmetic (a beam blends thousands of pixels a frame).
+fn blend_span(span: &mut [u8], colour: [u8; 3], a: u8) {
+    let (a, keep) = (a as u32, 255 - a as u32);
+    let terms = colour.map(|c| c as u32 * a + 127);
+    let pattern: [u32; 48] = std::array::from_fn(|i| terms[i % 3]);
+    let mut chunks = span.chunks_exact_mut(48);
+    for chunk in &mut chunks {
+        for (d, t) in chunk.iter_mut().zip(&pattern) {
+            *d = ((t + *d as u32 * keep) / 255) as u8;
+        }
+    }
+    for (d, t) in chunks.into_remainder().iter_mut().zip(&pattern) {
+        *d = ((t + *d as u32 * keep) / 255) as u8;
     }
 }
 
@@ -278,9 +294,7 @@ pub fn fill_aa(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3]) {
 pub fn fill_hard(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3], alpha: u8) {
     for y in rect.rows(0.0, image.height) {
         if let Some(span) = rect.span(y, 0.0, image.width) {
-            for px in image.span_mut(y, span).chunks_exact_mut(3) {
-                blend(px, colour, alpha);
-            }
+            blend_span(image.span_mut(y, span), colour, alpha);
         }
     }
 }
@@ -343,6 +357,23 @@ mod tests {
             }
         }
         assert!(checked > 10_000);
+    }
+
+    #[test]
+    fn a_span_blends_as_its_pixels_one_by_one() {
+        for pixels in [0, 1, 15, 16, 17, 40] {
+            for alpha in [0, 1, 120, 254, 255] {
+                let original: Vec<u8> = (0..pixels * 3).map(|i| (i * 37 % 256) as u8).collect();
+                let mut one_by_one = original.clone();
+                for px in one_by_one.chunks_exact_mut(3) {
+                    blend(px, [250, 7, 128], alpha);
+                }
+                let mut span = original.clone();
+                blend_span(&mut span, [250, 7, 128], alpha);
+                assert_eq!(span, one_by_one, "{pixels} pixels at alpha {alpha}");
+                assert!(pixels == 0 || alpha == 0 || span != original, "nothing blended");
+            }
+        }
     }
 
     #[test]
