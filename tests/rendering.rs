@@ -305,7 +305,9 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
     use glam::DVec2;
 
     // Only what the previous frame drew is restored: streaks and flakes of
-    // one frame must be gone in the next, wherever they fell.
+    // one frame must be gone in the next, wherever they fell. One canvas
+    // runs through every scene, as a worker's does through its scenarios:
+    // clear scenes share one background, the others each have their own.
     let map = CityMap::default();
     let renderer = Renderer::new(&map, Camera::birds_eye(512, 320));
     let car = |x: f64, id: u8| CarSprite {
@@ -317,24 +319,35 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
         mask_id: id,
         braking: id.is_multiple_of(2),
     };
+    let mut running = renderer.canvas();
     let mut checked = 0;
     for look in [
         SceneLook { rain: 1.0, wetness: 0.8, seed: 11, ..SceneLook::clear() },
         SceneLook { snow: 0.7, daylight: 0.2, seed: 12, ..SceneLook::clear() },
+        SceneLook::clear(),
+        SceneLook { seed: 99, ..SceneLook::clear() },
         SceneLook { rain: 0.4, snow: 0.4, fog: 0.3, seed: 13, ..SceneLook::clear() },
+        SceneLook { daylight: 0.0, seed: 14, ..SceneLook::clear() },
     ] {
         let scene = renderer.scene(look);
-        let mut running = renderer.canvas();
-        for frame in 0..5u32 {
-            let cars = [car(-10.0 + 3.0 * frame as f64, 1), car(8.0 - 2.0 * frame as f64, 2)];
-            // Signal heads under the cars' paths and one apart; their
-            // colours change at frame 3.
+        for frame in 0..6u32 {
+            // No car in frame 4.
+            let cars: Vec<_> = if frame == 4 {
+                vec![]
+            } else {
+                vec![car(-10.0 + 3.0 * frame as f64, 1), car(8.0 - 2.0 * frame as f64, 2)]
+            };
+            // Signal heads under the cars' paths and one apart: none in
+            // frame 0, red until frame 3, then green, and none again in frame 5.
             let colour = if frame < 3 { Colour::Red } else { Colour::Green };
-            let heads = [
-                HeadSprite { position: DVec2::new(-4.0, 2.5), colour },
-                HeadSprite { position: DVec2::new(5.0, 1.5), colour: Colour::Yellow },
-                HeadSprite { position: DVec2::new(20.0, -9.0), colour },
-            ];
+            let heads = match frame {
+                0 | 5 => vec![],
+                _ => vec![
+                    HeadSprite { position: DVec2::new(-4.0, 2.5), colour },
+                    HeadSprite { position: DVec2::new(5.0, 1.5), colour: Colour::Yellow },
+                    HeadSprite { position: DVec2::new(20.0, -9.0), colour },
+                ],
+            };
             renderer.render(&mut running, &scene, &cars, &heads, frame);
             let mut fresh = renderer.canvas();
             renderer.render(&mut fresh, &scene, &cars, &heads, frame);
@@ -343,5 +356,5 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
             checked += 1;
         }
     }
-    assert_eq!(checked, 15);
+    assert_eq!(checked, 36);
 }

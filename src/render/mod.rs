@@ -88,8 +88,10 @@ pub struct Scene {
 /// heads, which change colour every few seconds) is kept drawn, in RGBA for
 /// tiny-skia and in RGB; what moves (cars and their beams, rain streaks and
 /// snowflakes) is drawn straight into `rgb`. Between frames of one scene
-/// only what the previous frame drew is copied back from the still layer:
-/// a frame costs what it draws, not its size.
+/// only what the previous frame drew, and the heads that changed, are
+/// copied back from the still layer: a frame costs what it draws, not its
+/// size. The next frame draws over `rgb` and `mask` as this one left them,
+/// so callers only read them.
 pub struct FrameCanvas {
     /// The background with the signal heads drawn over it.
     still_rgba: Pixmap,
@@ -111,6 +113,7 @@ pub struct FrameCanvas {
     cars_in_dirty: usize,
     /// The frame before's, then this frame's rectangles to copy back.
     previous: Vec<PixelRect>,
+    /// How many of `previous` are the frame before's cars'.
     cars_in_previous: usize,
     /// This frame's rain streaks' and snowflakes' boxes, pixels (kept to
     /// reuse the allocation).
@@ -299,8 +302,8 @@ impl Renderer {
             canvas.heads = None;
             canvas.head_rects.clear();
         }
-        // The still layer: heads of other colours (or none) go back to the
-        // background and are drawn again. Their rectangles join the ones to
+        // The still layer: heads other than those drawn (colours, places,
+        // the look, or none) go back to the background and are drawn again. Their rectangles join the ones to
         // copy into the frame.
         let redrawn_from = canvas.previous.len();
         let same_heads = canvas.heads.as_ref().is_some_and(|(l, drawn)| l == look && drawn == heads);

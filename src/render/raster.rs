@@ -195,7 +195,8 @@ impl ConvexQuad {
 }
 
 /// The pixels of `0..limit` whose centres (pixel `i`'s at `i + 0.5`) lie in
-/// `[lo, hi]`; empty when none do or a bound is NaN.
+/// `[lo, hi]`; empty when none do or `hi` is NaN (a NaN `lo` bounds
+/// nothing; callers' `min` and `max` never give one).
 fn centres_within(lo: f32, hi: f32, limit: usize) -> std::ops::Range<usize> {
     let first = ceil_within(lo - 0.5, limit);
     let end = if hi - 0.5 >= 0.0 { (floor_within(hi - 0.5, limit) + 1).min(limit) } else { 0 };
