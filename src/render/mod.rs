@@ -97,6 +97,8 @@ pub struct FrameCanvas {
     still_rgba: Pixmap,
     /// `still_rgba` as RGB rows: what every frame starts from.
     still_rgb: Vec<u8>,
+    /// Whether `still_rgb` lags `still_rgba` (after a whole frame).
+    still_rgb_stale: bool,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
     /// The background `still_rgba` was drawn over (kept alive so that
@@ -251,6 +253,7 @@ impl Renderer {
         FrameCanvas {
             still_rgba: Pixmap::new(w, h).expect("image size was validated"),
             still_rgb: vec![0; (w * h * 3) as usize],
+            still_rgb_stale: true,
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
             background: None,
@@ -336,14 +339,21 @@ impl Renderer {
             canvas.heads = Some((*look, heads.to_vec()));
         }
         // The frame starts from the still layer where the last frame drew
-        // (or everywhere, over a new background).
+        // (or everywhere, over a new background). Its RGB copy is made when
+        // a second frame needs it: a moving camera's frames are all whole.
+        let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
         if whole_frame {
-            convert(&canvas.still_rgba, &mut canvas.still_rgb, PixelRect { x0: 0, y0: 0, x1: w, y1: h });
-            canvas.rgb.copy_from_slice(&canvas.still_rgb);
+            convert(&canvas.still_rgba, &mut canvas.rgb, full);
             canvas.mask.fill(0);
+            canvas.still_rgb_stale = true;
         } else {
-            for r in &canvas.previous[redrawn_from..] {
-                convert(&canvas.still_rgba, &mut canvas.still_rgb, *r);
+            if canvas.still_rgb_stale {
+                convert(&canvas.still_rgba, &mut canvas.still_rgb, full);
+                canvas.still_rgb_stale = false;
+            } else {
+                for r in &canvas.previous[redrawn_from..] {
+                    convert(&canvas.still_rgba, &mut canvas.still_rgb, *r);
+                }
             }
             for r in &canvas.previous {
                 copy_rgb(&canvas.still_rgb, &mut canvas.rgb, w, *r);
