@@ -415,7 +415,8 @@ fn copy_rgb(from: &[u8], to: &mut [u8], w: usize, r: PixelRect) {
     }
 }
 
-/// Copies `r` of the RGBA still layer into its RGB copy.
+/// Copies `r` of the RGBA still layer into an RGB image of its size (its
+/// RGB copy, or a whole frame).
 fn convert(rgba: &Pixmap, rgb: &mut [u8], r: PixelRect) {
     let w = rgba.width() as usize;
     let rgba = rgba.data();
