@@ -10,9 +10,9 @@ use causalcity::map::CityMap;
 use causalcity::plan::{Expansion, ScenarioKey, ScenarioPlan, WorldPlan};
 use causalcity::spec::DatasetSpec;
 use causalcity::world::city::replay::Recording;
-use causalcity::world::city::CityWorld;
-use causalcity::world::driver::model_by_name;
-use causalcity::world::effects::{intervened, measure_with, InterventionKind, Rerun};
+use causalcity::world::effects::{
+    intervened, measure_recorded, measure_with, simulate_recorded, FactualRun, InterventionKind, Rerun,
+};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -43,8 +43,7 @@ fn for_each_recording(spec: DatasetSpec, mut f: impl FnMut(&ScenarioKey, &Scenar
         let plan = expansion.plan(&key).unwrap();
         let map = &expansion.town_of(&plan).map;
         let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
-        let world = CityWorld::with_model(model_by_name(city.driver_model));
-        let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+        let recording = Recording::record(map, &plan, city, &never).unwrap();
         f(&key, &plan, map, &recording);
     }
 }
@@ -103,6 +102,33 @@ fn replayed_reruns_match_full_reruns_on_every_group_of_the_paper_city() {
     assert!(replayed_scenarios >= 16, "only {replayed_scenarios} of {scenarios} scenarios replayed");
     let share = replayed as f64 / car_steps as f64;
     assert!(share > 0.25, "only {:.0} % of car steps replayed", 100.0 * share);
+}
+
+#[test]
+fn gens_recorded_factual_run_is_the_plain_one_and_gives_the_same_effects() {
+    // gen records the factual run as it simulates it (no second simulation
+    // for the effects): every field of its trajectories, and the effects,
+    // must be those of simulating alone and re-running every car.
+    let groups = [(4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)];
+    let expansion = Expansion::from_spec(spec("gen-path", &groups, 2, "")).unwrap();
+    let never = AtomicBool::new(false);
+    let (mut scenarios, mut recorded) = (0, 0);
+    for key in expansion.keys(None) {
+        let plan = expansion.plan(&key).unwrap();
+        let map = &expansion.town_of(&plan).map;
+        let run = simulate_recorded(map, &plan, &never).unwrap();
+        let plain = causalcity::world::simulate(map, &plan);
+        // Debug prints every f64 exactly: states, lights, events, interactions.
+        assert_eq!(format!("{:?}", run.trajectories()), format!("{plain:?}"), "{key:?}: the recorded run differs");
+        let (reference, _) = measure_with(map, &plan, &plain, Rerun::Full, &never).unwrap();
+        assert_eq!(measure_recorded(map, &plan, &run, &never).unwrap(), reference, "{key:?}: effects differ");
+        recorded += matches!(run, FactualRun::Recorded(_)) as usize;
+        assert_eq!(format!("{:?}", run.into_trajectories()), format!("{plain:?}"));
+        scenarios += 1;
+    }
+    assert_eq!(scenarios, 10);
+    // 4-car scenarios are not worth a recording; the others are.
+    assert_eq!(recorded, 8, "{recorded} of {scenarios} scenarios recorded");
 }
 
 #[test]

@@ -13,6 +13,7 @@ use crate::output::arrays::{
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::render::{FrameCanvas, Renderer};
 use crate::spec::Split;
+use crate::timing::StageTimes;
 use crate::world::Trajectories;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -114,13 +115,9 @@ impl Generator {
         let town = plan.town_index();
         let map = &self.expansion.towns()[town].map;
         let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
-        let trajectories = crate::world::simulate_until(map, &plan, stop).ok_or_else(interrupted)?;
-        let effects = match effects {
-            true => {
-                Some(crate::world::effects::measure_until(map, &plan, &trajectories, stop).ok_or_else(interrupted)?)
-            }
-            false => None,
-        };
+        let (trajectories, effects) =
+            super::run::simulate_with_effects(map, &plan, effects, stop, &StageTimes::default())
+                .ok_or_else(interrupted)?;
         arrays(&self.expansion, &plan, &trajectories, effects, canvas.map(|c| (self.renderer(town), c)), into)
     }
 }

@@ -995,18 +995,30 @@ fn write_scenario(
     })?;
     let interrupted = || GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() };
     let map = &expansion.town_of(&plan).map;
-    let trajectories =
-        times.time(Stage::Simulate, || crate::world::simulate_until(map, &plan, &STOP)).ok_or_else(interrupted)?;
     let writer = writers.of(&plan);
-    let effects = match writer.products().effects {
-        true => Some(
-            times
-                .time(Stage::Effects, || crate::world::effects::measure_until(map, &plan, &trajectories, &STOP))
-                .ok_or_else(interrupted)?,
-        ),
-        false => None,
-    };
-    write_simulated(writer, &plan, &trajectories, effects.as_ref(), target, buffers, times)
+    let (run, effects) =
+        simulate_with_effects(map, &plan, writer.products().effects, &STOP, times).ok_or_else(interrupted)?;
+    write_simulated(writer, &plan, &run, effects.as_ref(), target, buffers, times)
+}
+
+/// Simulates `plan` (the simulate stage) and, when `effects`, measures its
+/// interventional effects (the effects stage). The factual run is recorded
+/// for the effects' re-runs as it is simulated, so the simulate stage
+/// includes the recording. `None` when `stop` was set.
+pub(crate) fn simulate_with_effects(
+    map: &crate::map::CityMap,
+    plan: &ScenarioPlan,
+    effects: bool,
+    stop: &AtomicBool,
+    times: &StageTimes,
+) -> Option<(Trajectories, Option<EffectReport>)> {
+    use crate::world::effects::{measure_recorded, simulate_recorded, FactualRun};
+    if !effects {
+        return Some((times.time(Stage::Simulate, || crate::world::simulate_until(map, plan, stop))?, None));
+    }
+    let run: FactualRun = times.time(Stage::Simulate, || simulate_recorded(map, plan, stop))?;
+    let report = times.time(Stage::Effects, || measure_recorded(map, plan, &run, stop))?;
+    Some((run.into_trajectories(), Some(report)))
 }
 
 /// Peak resident set size of this process (VmHWM), where the OS reports it.

@@ -96,6 +96,10 @@ fn desired_gap(p: &DriverParams, speed: f64, leader_speed: f64) -> f64 {
             .max(0.0)
 }
 
+/// The IDM's acceleration exponent, 4 in the original paper (Treiber,
+/// Hennecke, Helbing 2000), which the IIDM keeps.
+const IDM_DELTA: f64 = 4.0;
+
 /// The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000).
 #[derive(Debug, Clone, Copy)]
 pub struct Idm {
@@ -105,7 +109,7 @@ pub struct Idm {
 
 impl Default for Idm {
     fn default() -> Self {
-        Idm { delta: 4.0 }
+        Idm { delta: IDM_DELTA }
     }
 }
 
@@ -161,7 +165,7 @@ pub struct Iidm {
 
 impl Default for Iidm {
     fn default() -> Self {
-        Iidm { delta: 4.0 }
+        Iidm { delta: IDM_DELTA }
     }
 }
 
@@ -229,6 +233,17 @@ pub fn model_by_name(name: crate::spec::DriverModel) -> Box<dyn CarFollowing> {
     match name {
         crate::spec::DriverModel::Idm => Box::new(Idm::default()),
         crate::spec::DriverModel::Iidm => Box::new(Iidm::default()),
+    }
+}
+
+/// [`model_by_name`]'s model with its default parameters, shared: a
+/// recording of a run (`city::replay::Recording`) outlives any one world.
+pub fn shared_model(name: crate::spec::DriverModel) -> &'static dyn CarFollowing {
+    static IDM: Idm = Idm { delta: IDM_DELTA };
+    static IIDM: Iidm = Iidm { delta: IDM_DELTA };
+    match name {
+        crate::spec::DriverModel::Idm => &IDM,
+        crate::spec::DriverModel::Iidm => &IIDM,
     }
 }
 

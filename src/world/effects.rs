@@ -16,8 +16,6 @@
 //! Units: metres; frames are the scenario's frame indices.
 
 use super::city::replay::Recording;
-use super::city::CityWorld;
-use super::driver::model_by_name;
 use super::{simulate_until, Interaction, Trajectories};
 use crate::map::{Action, CityMap, LegKind, Turn};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
@@ -211,23 +209,90 @@ pub fn measure_with(
     how: Rerun,
     stop: &AtomicBool,
 ) -> Option<(EffectReport, RerunCost)> {
-    let world;
     let recording = match (&plan.world, how) {
         (WorldPlan::City(city), Rerun::Incremental) if Recording::pays_for(plan) => {
-            world = CityWorld::with_model(model_by_name(city.driver_model));
-            let recording = Recording::record(&world, map, plan, city, stop)?;
+            let recording = Recording::record(map, plan, city, stop)?;
             debug_assert!(recording.factual().states == factual.states, "the recorded run is the factual one");
-            recording.replayable().then_some(recording)
+            Some(recording)
         }
         _ => None,
     };
+    measure_runs(map, plan, factual, recording.as_ref(), stop)
+}
+
+/// A scenario's factual run, as its effects' re-runs reuse it.
+pub enum FactualRun<'a> {
+    /// Recorded while simulated, for re-runs that replay the cars an
+    /// intervention has not reached (city world, where that pays:
+    /// [`Recording::pays_for`]).
+    Recorded(Recording<'a>),
+    /// Simulated alone: its re-runs simulate every car.
+    Simulated(Trajectories),
+}
+
+impl FactualRun<'_> {
+    /// The factual run's trajectories.
+    pub fn trajectories(&self) -> &Trajectories {
+        match self {
+            FactualRun::Recorded(recording) => recording.factual(),
+            FactualRun::Simulated(trajectories) => trajectories,
+        }
+    }
+
+    /// The factual run's trajectories, any recording dropped.
+    pub fn into_trajectories(self) -> Trajectories {
+        match self {
+            FactualRun::Recorded(recording) => recording.into_factual(),
+            FactualRun::Simulated(trajectories) => trajectories,
+        }
+    }
+}
+
+/// Simulates `plan` as [`simulate_until`] does, with the same trajectories,
+/// recording the run where its effects' re-runs can replay it: measuring the
+/// effects ([`measure_recorded`]) then needs no second factual simulation.
+/// `None` when `stop` was set.
+pub fn simulate_recorded<'a>(map: &'a CityMap, plan: &'a ScenarioPlan, stop: &AtomicBool) -> Option<FactualRun<'a>> {
+    match &plan.world {
+        WorldPlan::City(city) if Recording::pays_for(plan) => {
+            Recording::record(map, plan, city, stop).map(FactualRun::Recorded)
+        }
+        _ => simulate_until(map, plan, stop).map(FactualRun::Simulated),
+    }
+}
+
+/// [`measure_until`] on a factual run that [`simulate_recorded`] made of
+/// `plan`: the same report.
+pub fn measure_recorded(
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    run: &FactualRun,
+    stop: &AtomicBool,
+) -> Option<EffectReport> {
+    let recording = match run {
+        FactualRun::Recorded(recording) => Some(recording),
+        FactualRun::Simulated(_) => None,
+    };
+    measure_runs(map, plan, run.trajectories(), recording, stop).map(|(report, _)| report)
+}
+
+/// Re-runs `plan` once per car and intervention, replaying from `recording`
+/// where it is replayable, and compares every other car with `factual`.
+fn measure_runs(
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    factual: &Trajectories,
+    recording: Option<&Recording>,
+    stop: &AtomicBool,
+) -> Option<(EffectReport, RerunCost)> {
+    let recording = recording.filter(|r| r.replayable());
     let mut rows = Vec::new();
     let mut cost = RerunCost::default();
     for (a, cause) in plan.cars.iter().enumerate() {
         for kind in InterventionKind::ALL {
             let Some(changed) = intervened(map, plan, a, kind) else { continue };
             cost.reruns += 1;
-            let rerun = match &recording {
+            let rerun = match recording {
                 Some(recording) => {
                     let (rerun, replayed, car_steps) = recording.rerun(&changed, a, stop)?;
                     cost.incremental += 1;

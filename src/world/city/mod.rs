@@ -101,11 +101,6 @@ impl CityWorld {
     ) -> Option<Trajectories> {
         Sim::new(map, plan, city, self.model.as_ref()).run(stop)
     }
-
-    /// The car-following model its drivers use.
-    fn model(&self) -> &dyn CarFollowing {
-        self.model.as_ref()
-    }
 }
 
 impl Sim<'_> {

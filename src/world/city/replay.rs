@@ -26,12 +26,13 @@
 use super::car::SimCar;
 use super::events::CONTACT_RELEASE;
 use super::perception::Places;
-use super::{CityWorld, Sim, MAX_STEP};
+use super::{Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
 use crate::map::CityMap;
 use crate::map::Route;
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
+use crate::world::driver::{shared_model, CarFollowing};
 use crate::world::Trajectories;
 use glam::DVec2;
 use std::cell::RefCell;
@@ -186,7 +187,8 @@ impl Sim<'_> {
 
 /// A scenario's factual run recorded for its effects re-runs.
 pub struct Recording<'a> {
-    world: &'a CityWorld,
+    /// The drivers' car-following model.
+    model: &'static dyn CarFollowing,
     map: &'a CityMap,
     plan: &'a ScenarioPlan,
     factual: Trajectories,
@@ -197,27 +199,33 @@ pub struct Recording<'a> {
 
 impl<'a> Recording<'a> {
     /// Simulates `plan` (its city parts `city`) recording the tape; `None`
-    /// when `stop` was set.
+    /// when `stop` was set. The run is the factual one: the same
+    /// trajectories as simulating `plan` without recording.
     pub fn record(
-        world: &'a CityWorld,
         map: &'a CityMap,
         plan: &'a ScenarioPlan,
         city: &'a CityPlan,
         stop: &AtomicBool,
     ) -> Option<Recording<'a>> {
-        let mut sim = Sim::new(map, plan, city, world.model());
+        let model = shared_model(city.driver_model);
+        let mut sim = Sim::new(map, plan, city, model);
         sim.reads = Some(RefCell::new(Vec::new()));
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         sim.tape = Some(Box::new(Tape::new(&sim.cars, steps * (plan.frames as usize).saturating_sub(1))));
         let factual = sim.run(stop)?;
         let tape = *sim.tape.take().expect("set above");
         let group = groups(&sim.cars);
-        Some(Recording { world, map, plan, factual, tape, group })
+        Some(Recording { model, map, plan, factual, tape, group })
     }
 
     /// The factual run's trajectories.
     pub fn factual(&self) -> &Trajectories {
         &self.factual
+    }
+
+    /// The factual run's trajectories, the recording dropped.
+    pub fn into_factual(self) -> Trajectories {
+        self.factual
     }
 
     /// Whether re-runs can replay cars from this recording: the plan has no
@@ -258,7 +266,7 @@ impl<'a> Recording<'a> {
         stop: &AtomicBool,
     ) -> Option<(Trajectories, usize, usize)> {
         let WorldPlan::City(city) = &changed.world else { return None };
-        let mut sim = Sim::new(self.map, changed, city, self.world.model());
+        let mut sim = Sim::new(self.map, changed, city, self.model);
         if !self.replayable() || !replays(changed, cause) {
             return Some((sim.run(stop)?, 0, 0));
         }
@@ -639,8 +647,7 @@ mod tests {
             let plan = expansion.plan(&key).unwrap();
             let map = &expansion.town_of(&plan).map;
             let WorldPlan::City(city) = &plan.world else { panic!("a city plan") };
-            let world = CityWorld::with_model(crate::world::driver::model_by_name(city.driver_model));
-            let recording = Recording::record(&world, map, &plan, city, &never).unwrap();
+            let recording = Recording::record(map, &plan, city, &never).unwrap();
             let steps = (plan.frame_interval / MAX_STEP).ceil() as usize * (plan.frames as usize - 1);
             let per_car_step = recording.tape.bytes() as f64 / (plan.cars.len() * steps) as f64;
             assert!(
