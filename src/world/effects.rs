@@ -294,10 +294,10 @@ fn measure_runs(
             cost.reruns += 1;
             let rerun = match recording {
                 Some(recording) => {
-                    let (rerun, replayed, car_steps) = recording.rerun(&changed, a, stop)?;
+                    let (rerun, replayed) = recording.rerun(&changed, a, stop)?;
                     cost.incremental += 1;
-                    cost.replayed_car_steps += replayed;
-                    cost.car_steps += car_steps;
+                    cost.replayed_car_steps += replayed.car_steps;
+                    cost.car_steps += replayed.of;
                     rerun
                 }
                 None => simulate_until(map, &changed, stop)?,

@@ -205,7 +205,7 @@ impl Sim<'_> {
     }
 
     /// The cars that follow car `i` and are still in the scene.
-    fn followers_of(&self, i: usize) -> Vec<usize> {
+    pub(super) fn followers_of(&self, i: usize) -> Vec<usize> {
         (0..self.cars.len()).filter(|&j| self.cars[j].leader == Some(i) && !self.cars[j].removed).collect()
     }
 
@@ -225,12 +225,27 @@ impl Sim<'_> {
             }
         }
         let merges = leader.merges.clone();
-        for follower in self.followers_of(i) {
-            let done = self.cars[follower].actions_done;
-            self.cars[follower].pending_actions = Some(PendingQueue::slice(&seen, &merges, done));
-            if let Some(tape) = &mut self.tape {
-                tape.touch(follower);
-            }
+        let followers = self.followers_of(i);
+        if followers.is_empty() {
+            return;
+        }
+        if let Some(tape) = &mut self.tape {
+            tape.note_shown(i, &seen, &merges);
+        }
+        for follower in followers {
+            // A re-run simulates a simulated leader's followers too (`replay.rs`).
+            debug_assert!(!self.frozen[follower], "a replayed follower of simulated car {i}");
+            self.show_queue(follower, &seen, &merges);
+        }
+    }
+
+    /// Follower `follower` sees its leader's drive queue `seen` (merges at
+    /// `merges`): it takes the actions from the ones it has done.
+    pub(super) fn show_queue(&mut self, follower: usize, seen: &[Action], merges: &[f64]) {
+        let done = self.cars[follower].actions_done;
+        self.cars[follower].pending_actions = Some(PendingQueue::slice(seen, merges, done));
+        if let Some(tape) = &mut self.tape {
+            tape.touch(follower);
         }
     }
 

@@ -5,16 +5,22 @@
 //! where it was on its route after moving, and the tracks each decision
 //! read; and a snapshot of a car at the end of every step in which something
 //! besides its own motion changed it (it decided, or its leader showed it
-//! new actions).
+//! new actions); and every drive queue a leader showed its followers as it
+//! re-planned or gave up a lane change.
 //!
-//! A re-run simulates the intervened car's leader-follower group and replays
-//! every other car from the tape. A replayed car is brought up to date (its
-//! latest snapshot, moved on step by step) and simulated from then on, with
-//! its group, as soon as
+//! A re-run simulates the intervened car and its followers (theirs, and so
+//! on) and replays every other car from the tape. A replayed car is brought
+//! up to date (its latest snapshot, moved on step by step) and simulated
+//! from then on, with its followers, as soon as
 //! - a decision it takes would read a track on which a simulated car stands
 //!   elsewhere, or at another speed, than the tape says, and the decision,
 //!   tried, ends the step otherwise than the tape's snapshot, or
 //! - a simulated car touches it (a collision).
+//!
+//! A leader's re-plans reach its followers, so a simulated car's followers
+//! are always simulated; a replayed leader's re-plans reach its simulated
+//! followers from the tape, at the point of the step where the factual run
+//! showed them.
 //!
 //! Until then it does what the factual run did, so a re-run's positions and
 //! interactions are those of simulating every car, bit for bit
@@ -29,7 +35,7 @@ use super::perception::Places;
 use super::{Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
 use crate::map::CityMap;
-use crate::map::Route;
+use crate::map::{Action, Route};
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
 use crate::world::driver::{shared_model, CarFollowing};
@@ -79,11 +85,27 @@ pub(super) struct Tape<'a> {
     /// Per car, `(step, state at the end of that step)` in step order; step
     /// -1 is the start.
     snapshots: Vec<Vec<(i64, SimCar<'a>)>>,
-    /// This step: where each car stood, and which cars something changed.
+    /// What leaders showed their followers (their drive queues, when they
+    /// re-planned), in step order.
+    shown: Vec<Shown>,
+    /// This step: where each car stood, and which cars something changed;
+    /// whether the occupancy was filled (the drivers are deciding).
     current_places: Vec<Places>,
     touched: Vec<bool>,
+    filled: bool,
     /// Whether any cars collided.
     pub(super) collided: bool,
+}
+
+/// A leader's drive queue shown to its followers (`Sim::show_followers`):
+/// at step `step`, in its re-planning phase (before the drivers decide) or
+/// as a driver gave up a lane change.
+struct Shown {
+    step: usize,
+    replanning: bool,
+    leader: usize,
+    seen: Vec<Action>,
+    merges: Vec<f64>,
 }
 
 impl<'a> Tape<'a> {
@@ -102,8 +124,10 @@ impl<'a> Tape<'a> {
             decision: Vec::with_capacity(size),
             reads: Vec::new(),
             snapshots: cars.iter().map(|c| vec![(-1, c.clone())]).collect(),
+            shown: Vec::new(),
             current_places: vec![Places::default(); n],
             touched: vec![false; n],
+            filled: false,
             collided: false,
         }
     }
@@ -133,6 +157,21 @@ impl<'a> Tape<'a> {
         self.touched[i] = true;
     }
 
+    /// Car `leader` showed its followers its drive queue `seen` (merges at
+    /// `merges`) in this step.
+    pub(super) fn note_shown(&mut self, leader: usize, seen: &[Action], merges: &[f64]) {
+        let filled = self.places.len() / self.cars;
+        let (step, replanning) = if self.filled { (filled - 1, false) } else { (filled, true) };
+        self.shown.push(Shown { step, replanning, leader, seen: seen.to_vec(), merges: merges.to_vec() });
+    }
+
+    /// What leaders showed their followers at `step`.
+    fn shown_at(&self, step: usize) -> &[Shown] {
+        let start = self.shown.partition_point(|e| e.step < step);
+        let end = start + self.shown[start..].partition_point(|e| e.step == step);
+        &self.shown[start..end]
+    }
+
     fn index(&self, step: usize, car: usize) -> usize {
         step * self.cars + car
     }
@@ -149,6 +188,7 @@ impl Sim<'_> {
         let Some(tape) = &mut self.tape else { return };
         tape.places.extend_from_slice(&tape.current_places);
         tape.current_places.fill(Places::default());
+        tape.filled = true;
         for car in &self.cars {
             tape.speed.push(car.v);
             tape.actions_done.push(car.actions_done);
@@ -171,6 +211,7 @@ impl Sim<'_> {
     /// car something besides its motion changed.
     pub(super) fn note_step_end(&mut self) {
         let Some(tape) = &mut self.tape else { return };
+        tape.filled = false;
         let step = (tape.places.len() / tape.cars) as i64 - 1;
         for (i, car) in self.cars.iter().enumerate() {
             tape.s_wander.push((car.s, car.wander));
@@ -193,8 +234,8 @@ pub struct Recording<'a> {
     plan: &'a ScenarioPlan,
     factual: Trajectories,
     tape: Tape<'a>,
-    /// Each car's leader-follower group (the index of its first car).
-    group: Vec<usize>,
+    /// Each car's followers.
+    followers: Vec<Vec<usize>>,
 }
 
 impl<'a> Recording<'a> {
@@ -214,8 +255,13 @@ impl<'a> Recording<'a> {
         sim.tape = Some(Box::new(Tape::new(&sim.cars, steps * (plan.frames as usize).saturating_sub(1))));
         let factual = sim.run(stop)?;
         let tape = *sim.tape.take().expect("set above");
-        let group = groups(&sim.cars);
-        Some(Recording { model, map, plan, factual, tape, group })
+        let mut followers = vec![Vec::new(); sim.cars.len()];
+        for (i, car) in sim.cars.iter().enumerate() {
+            if let Some(leader) = car.leader.filter(|&l| l < followers.len()) {
+                followers[leader].push(i);
+            }
+        }
+        Some(Recording { model, map, plan, factual, tape, followers })
     }
 
     /// The factual run's trajectories.
@@ -255,24 +301,22 @@ impl<'a> Recording<'a> {
     /// Re-simulates `changed` (the recorded plan with interventions on car
     /// `cause` only), replaying the cars it has not reached; the positions
     /// and interactions are those of simulating every car (no lights or
-    /// events). `None` when `stop` was set; also how many car steps were
-    /// replayed, and how many there were.
+    /// events), and what it replayed. `None` when `stop` was set.
     /// Anything else (a recording that is not [`Recording::replayable`],
     /// other interventions) is simulated in full, with no car step replayed.
-    pub fn rerun(
-        &self,
-        changed: &ScenarioPlan,
-        cause: usize,
-        stop: &AtomicBool,
-    ) -> Option<(Trajectories, usize, usize)> {
+    pub fn rerun(&self, changed: &ScenarioPlan, cause: usize, stop: &AtomicBool) -> Option<(Trajectories, Replayed)> {
         let WorldPlan::City(city) = &changed.world else { return None };
         let mut sim = Sim::new(self.map, changed, city, self.model);
         if !self.replayable() || !replays(changed, cause) {
-            return Some((sim.run(stop)?, 0, 0));
+            return Some((sim.run(stop)?, Replayed::default()));
         }
         let n = sim.cars.len();
-        // The start is the factual one: every car as planned.
-        sim.frozen = (0..n).map(|i| self.group[i] != self.group[cause]).collect();
+        // The start is the factual one: every car as planned. The cause and
+        // its followers (theirs, and so on) are simulated.
+        sim.frozen = vec![true; n];
+        for m in self.subtree(cause) {
+            sim.frozen[m] = false;
+        }
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
         let mut buffers = StepBuffers { dirty: vec![false; self.map.track_count()], ..StepBuffers::default() };
@@ -307,8 +351,22 @@ impl<'a> Recording<'a> {
             interactions,
         };
         let car_steps = n * steps * (changed.frames as usize).saturating_sub(1);
-        Some((trajectories, replayed, car_steps))
+        let shown_from_tape = buffers.shown_from_tape;
+        Some((trajectories, Replayed { car_steps: replayed, of: car_steps, shown_from_tape }))
     }
+}
+
+/// What a re-run replayed from the factual run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Replayed {
+    /// Car steps replayed, of all the re-run's car steps.
+    pub car_steps: usize,
+    pub of: usize,
+    /// Drive queues that replayed leaders showed followers from the tape:
+    /// simulated followers as the leaders re-planned, followers woken in
+    /// that step, and simulated followers as the leaders gave up lane
+    /// changes.
+    pub shown_from_tape: [usize; 3],
 }
 
 /// What a re-run's steps reuse (nothing allocated per step): per track
@@ -319,6 +377,8 @@ struct StepBuffers {
     dirty: Vec<bool>,
     marked: Vec<usize>,
     trying: Vec<usize>,
+    /// Queues shown from the tape so far (see [`Replayed`]).
+    shown_from_tape: [usize; 3],
 }
 
 /// Whether `changed`'s interventions are ones a re-run replays around:
@@ -335,25 +395,24 @@ fn replays(changed: &ScenarioPlan, cause: usize) -> bool {
     }
 }
 
-/// Each car's leader-follower group, as the index of the group's first car:
-/// a leader's re-planning reaches its followers, so a group is simulated or
-/// replayed as one.
-fn groups(cars: &[SimCar]) -> Vec<usize> {
-    let mut group: Vec<usize> = (0..cars.len()).collect();
-    fn root(group: &mut [usize], mut i: usize) -> usize {
-        while group[i] != i {
-            group[i] = group[group[i]];
-            i = group[i];
+impl Recording<'_> {
+    /// Car `c` and its followers, theirs, and so on: a leader's re-planning
+    /// reaches its followers, so a simulated car's followers are simulated
+    /// too, while its leader can be replayed (its re-plans shown to it from
+    /// the tape).
+    fn subtree(&self, c: usize) -> Vec<usize> {
+        let mut cars = vec![c];
+        let mut next = 0;
+        while next < cars.len() {
+            for &f in &self.followers[cars[next]] {
+                if !cars.contains(&f) {
+                    cars.push(f);
+                }
+            }
+            next += 1;
         }
-        i
+        cars
     }
-    for (i, car) in cars.iter().enumerate() {
-        if let Some(leader) = car.leader.filter(|&l| l < cars.len()) {
-            let (a, b) = (root(&mut group, i), root(&mut group, leader));
-            group[a.max(b)] = a.min(b);
-        }
-    }
-    (0..cars.len()).map(|i| root(&mut group, i)).collect()
 }
 
 impl<'s> Sim<'s> {
@@ -362,15 +421,22 @@ impl<'s> Sim<'s> {
     fn replay_step(&mut self, rec: &Recording<'s>, k: usize, t: f64, dt: f64, steps: usize, buffers: &mut StepBuffers) {
         let n = self.cars.len();
         self.fire_interventions(t, dt);
+        // Re-planning in car order, a replayed leader's re-plans shown to its
+        // simulated followers from the tape.
+        let shown = rec.tape.shown_at(k);
         for i in 0..n {
-            if !self.frozen[i] && self.cars[i].pending_actions.is_some() {
-                self.replace_actions(i, t);
+            if !self.frozen[i] {
+                if self.cars[i].pending_actions.is_some() {
+                    self.replace_actions(i, t);
+                }
+            } else if !shown.is_empty() {
+                buffers.shown_from_tape[0] += self.show_taped(shown, true, i, |sim, f| !sim.frozen[f]);
             }
         }
         // Replayed cars about to decide on what may differ from the factual
         // run try the decision; those who decide otherwise wake up. (Most
         // steps no replayed car decides, and nothing need be marked.)
-        let StepBuffers { dirty, marked, trying } = buffers;
+        let StepBuffers { dirty, marked, trying, shown_from_tape } = buffers;
         trying.clear();
         trying.extend((0..n).filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some()));
         if !trying.is_empty() {
@@ -391,16 +457,26 @@ impl<'s> Sim<'s> {
             }
         }
         if !waking.is_empty() {
-            let mut woken = Vec::new();
+            let mut woken = vec![false; n];
             for c in waking {
-                woken.extend(self.wake_group(rec, c, k as i64 - 1, steps, dt));
-            }
-            woken.sort_unstable();
-            for i in woken {
-                if self.cars[i].pending_actions.is_some() {
-                    self.replace_actions(i, t);
+                for m in self.wake(rec, c, k as i64 - 1, steps, dt) {
+                    woken[m] = true;
                 }
             }
+            // Their re-planning this step, as the factual run had it (they
+            // were replayed until now): in car order, what their leaders
+            // showed them from the tape (simulated followers were shown it
+            // above).
+            self.quiet_followers = true;
+            for i in 0..n {
+                if woken[i] && self.cars[i].pending_actions.is_some() {
+                    self.replace_actions(i, t);
+                }
+                if !shown.is_empty() {
+                    shown_from_tape[1] += self.show_taped(shown, true, i, |_, f| woken[f]);
+                }
+            }
+            self.quiet_followers = false;
         }
         // What the simulated drivers deciding now see, replayed cars as taped.
         let deciding =
@@ -418,12 +494,43 @@ impl<'s> Sim<'s> {
                 self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
             }
         }
+        // Lane changes replayed leaders gave up as they decided, shown to
+        // their simulated followers.
+        if !shown.is_empty() {
+            for i in 0..n {
+                if self.frozen[i] {
+                    shown_from_tape[2] += self.show_taped(shown, false, i, |sim, f| !sim.frozen[f]);
+                }
+            }
+        }
         for i in 0..n {
             if !self.frozen[i] && !self.cars[i].removed {
                 self.advance(i, t, dt);
             }
         }
         self.replayed_collisions(rec, k, t + dt, steps, dt);
+    }
+
+    /// Shows the followers of car `leader` for which `to` holds what the
+    /// tape says `leader` showed them at this step (`shown`), in its
+    /// re-planning phase or not (`replanning`); returns how many it showed.
+    fn show_taped(
+        &mut self,
+        shown: &[Shown],
+        replanning: bool,
+        leader: usize,
+        to: impl Fn(&Sim, usize) -> bool,
+    ) -> usize {
+        let mut count = 0;
+        for event in shown.iter().filter(|e| e.leader == leader && e.replanning == replanning) {
+            for follower in self.followers_of(leader) {
+                if to(self, follower) {
+                    self.show_queue(follower, &event.seen, &event.merges);
+                    count += 1;
+                }
+            }
+        }
+        count
     }
 
     /// What simulated drivers read of the replayed cars at step `k`: their
@@ -506,11 +613,11 @@ impl<'s> Sim<'s> {
         }
     }
 
-    /// Brings car `c`'s group up to the end of step `to` (-1: the start)
-    /// from the tape and simulates it from then on; returns the cars woken.
-    fn wake_group(&mut self, rec: &Recording<'s>, c: usize, to: i64, steps: usize, dt: f64) -> Vec<usize> {
-        let woken: Vec<usize> =
-            (0..self.cars.len()).filter(|&m| self.frozen[m] && rec.group[m] == rec.group[c]).collect();
+    /// Brings car `c` and its replayed followers (theirs, and so on) up to
+    /// the end of step `to` (-1: the start) from the tape and simulates them
+    /// from then on; returns the cars woken.
+    fn wake(&mut self, rec: &Recording<'s>, c: usize, to: i64, steps: usize, dt: f64) -> Vec<usize> {
+        let woken: Vec<usize> = rec.subtree(c).into_iter().filter(|&m| self.frozen[m]).collect();
         for &m in &woken {
             self.catch_up(rec, m, to, steps, dt);
             self.frozen[m] = false;
@@ -550,7 +657,7 @@ impl<'s> Sim<'s> {
 
     /// [`Sim::detect_collisions`] at the end of step `k` (time `now`), a
     /// replayed car's footprint from the tape; a replayed car that a
-    /// simulated one touches wakes up (with its group) before the collision.
+    /// simulated one touches wakes up (with its followers) before the collision.
     fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
         // Replayed cars' points as taped, simulated ones' as they are now.
         let mut points = std::mem::take(&mut self.scratch_points);
@@ -595,11 +702,11 @@ impl<'s> Sim<'s> {
                 sim.cars[x].footprint()
             }
         };
-        // A replayed car a simulated one touches wakes (with its group) first.
+        // A replayed car a simulated one touches wakes (with its followers) first.
         let wake = |sim: &mut Sim<'s>, i: usize, j: usize| {
             for x in [i, j] {
                 if sim.frozen[x] {
-                    sim.wake_group(rec, x, k as i64, steps, dt);
+                    sim.wake(rec, x, k as i64, steps, dt);
                 }
             }
         };
@@ -628,6 +735,7 @@ impl Tape<'_> {
             + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
             + self.reads.capacity() * 8
             + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
+            + self.shown.iter().map(|e| size_of::<Shown>() + e.seen.capacity() + e.merges.capacity() * 8).sum::<usize>()
     }
 }
 
