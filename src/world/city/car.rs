@@ -23,8 +23,9 @@ pub(super) struct SimCar<'p> {
     pub(super) route: Arc<Route>,
     /// Drive-queue index of the route's first action.
     pub(super) action_base: usize,
-    /// Merge distance per drive-queue action, metres along its lane.
-    pub(super) merges: Vec<f64>,
+    /// Merge distance per drive-queue action, metres along its lane
+    /// (shared with snapshots until it changes).
+    pub(super) merges: Arc<Vec<f64>>,
     /// Route arc length of the car's centre, metres.
     pub(super) s: f64,
     /// Speed along the route, m/s.
@@ -59,8 +60,9 @@ pub(super) struct SimCar<'p> {
     pub(super) desired_override: Option<f64>,
     /// Intervention: taken off the map.
     pub(super) removed: bool,
-    /// The drive queue: the plan's, until an intervention replaces the rest.
-    pub(super) actions: Vec<Action>,
+    /// The drive queue: the plan's, until an intervention replaces the rest
+    /// (shared with snapshots until it changes).
+    pub(super) actions: Arc<Vec<Action>>,
     /// Intervention: actions (and merge distances) waiting to replace the
     /// rest once the car is on a lane.
     pub(super) pending_actions: Option<PendingQueue>,
@@ -161,7 +163,7 @@ impl<'p> SimCar<'p> {
             agency,
             route,
             action_base: 0,
-            merges: plan.merge_distances.clone(),
+            merges: Arc::new(plan.merge_distances.clone()),
             s: plan.spawn_distance,
             v: agency.start_speed,
             accel: 0.0,
@@ -180,7 +182,7 @@ impl<'p> SimCar<'p> {
             stopped_until: f64::NEG_INFINITY,
             desired_override: None,
             removed: false,
-            actions: plan.actions.clone(),
+            actions: Arc::new(plan.actions.clone()),
             pending_actions: None,
             given_up: Vec::new(),
             logged_adaptations: Vec::new(),

@@ -10,6 +10,7 @@ use crate::plan::confounders::ConfounderName;
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::OnLeaderLost;
 use crate::world::{BoundBy, Event, EventKind, Interaction};
+use std::sync::Arc;
 
 /// A re-planned route must reach this many times the car's fastest planned
 /// desired speed times the time left, so it outlasts the scenario even if
@@ -178,10 +179,12 @@ impl Sim<'_> {
         match planned {
             Ok(route) => {
                 let done = car.actions_done;
-                car.actions.truncate(done);
-                car.actions.extend(actions);
-                car.merges.truncate(done);
-                car.merges.extend(merges);
+                let own = Arc::make_mut(&mut car.actions);
+                own.truncate(done);
+                own.extend(actions);
+                let own = Arc::make_mut(&mut car.merges);
+                own.truncate(done);
+                own.extend(merges);
                 car.follow_route(route, lane_s, done);
                 car.committed = None;
                 car.given_up.retain(|&k| k < done);
@@ -218,13 +221,13 @@ impl Sim<'_> {
             return;
         }
         let leader = &self.cars[i];
-        let mut seen = leader.actions.clone();
+        let mut seen = leader.actions.to_vec();
         for &k in &leader.given_up {
             if let Some(action) = seen.get_mut(k).filter(|a| !a.is_merge()) {
                 *action = Action::Straight;
             }
         }
-        let merges = leader.merges.clone();
+        let merges = Arc::clone(&leader.merges);
         let followers = self.followers_of(i);
         if followers.is_empty() {
             return;
