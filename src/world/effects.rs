@@ -15,7 +15,7 @@
 //!
 //! Units: metres; frames are the scenario's frame indices.
 
-use super::city::replay::Recording;
+use super::city::replay::{Recording, RerunTrajectories};
 use super::{simulate_until, Interaction, Trajectories};
 use crate::map::{Action, CityMap, LegKind, Turn};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
@@ -294,13 +294,13 @@ fn measure_runs(
             cost.reruns += 1;
             let rerun = match recording {
                 Some(recording) => {
-                    let (rerun, replayed) = recording.rerun(&changed, a, stop)?;
+                    let (rerun, replayed) = recording.rerun_frames(&changed, a, stop)?;
                     cost.incremental += 1;
                     cost.replayed_car_steps += replayed.car_steps;
                     cost.car_steps += replayed.of;
                     rerun
                 }
-                None => simulate_until(map, &changed, stop)?,
+                None => RerunTrajectories::Full(simulate_until(map, &changed, stop)?),
             };
             for (b, effect) in plan.cars.iter().enumerate().filter(|&(b, _)| b != a) {
                 rows.push(compare(plan, factual, &rerun, b, cause.id, effect.id, kind));
@@ -315,19 +315,20 @@ fn measure_runs(
 fn compare(
     plan: &ScenarioPlan,
     factual: &Trajectories,
-    rerun: &Trajectories,
+    rerun: &RerunTrajectories,
     b: usize,
     cause: u32,
     effect: u32,
     intervention: InterventionKind,
 ) -> EffectRow {
-    let distance = |frame: usize| factual.states[frame][b].position.distance(rerun.states[frame][b].position);
-    let frames = factual.states.len().min(rerun.states.len());
+    let frames = factual.states.len().min(rerun.frames());
     let mut max_divergence_m = 0.0f64;
     let mut first_frame = None;
     let mut onset = None;
-    for frame in 0..frames {
-        let d = distance(frame);
+    // Before the first frame the re-run simulated car b in, it is the
+    // factual car: no distance.
+    for frame in rerun.first_simulated(b).min(frames)..frames {
+        let d = factual.states[frame][b].position.distance(rerun.state(frame, b).position);
         max_divergence_m = max_divergence_m.max(d);
         if d > ONSET_M && onset.is_none() {
             onset = Some(frame);
@@ -340,13 +341,11 @@ fn compare(
     // What bound b's speed where it first moved (and the frame before, as a
     // decision shows at the frame after it), in either run.
     let bound_by_a = onset.is_some_and(|f| {
-        let names_a = |run: &Trajectories, frame: usize| {
-            run.interactions
-                .get(frame)
-                .and_then(|cars| cars.get(b))
-                .is_some_and(|i: &Interaction| i.other_car == Some(cause))
-        };
-        (f.saturating_sub(1)..=f).any(|frame| names_a(factual, frame) || names_a(rerun, frame))
+        let names_a = |i: Option<&Interaction>| i.is_some_and(|i| i.other_car == Some(cause));
+        (f.saturating_sub(1)..=f).any(|frame| {
+            names_a(factual.interactions.get(frame).and_then(|cars| cars.get(b)))
+                || names_a(rerun.interaction(frame, b))
+        })
     });
     EffectRow {
         cause,

@@ -195,6 +195,9 @@ struct Sim<'a> {
     tape: Option<Box<replay::Tape<'a>>>,
     /// A re-run's cars replayed from the tape rather than simulated.
     frozen: Vec<bool>,
+    /// The cars not `frozen`, in car order (a re-run's steps walk these,
+    /// not every car).
+    live: Vec<usize>,
     /// While a re-run brings a replayed car up to date: its leader's
     /// changes reach its followers through their own snapshots instead.
     quiet_followers: bool,
@@ -238,6 +241,7 @@ impl<'a> Sim<'a> {
             reads: None,
             tape: None,
             frozen: vec![false; plan.cars.len()],
+            live: (0..plan.cars.len()).collect(),
             quiet_followers: false,
             scratch_points: Vec::new(),
             scratch_pairs: Vec::new(),

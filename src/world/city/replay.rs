@@ -39,7 +39,7 @@ use crate::map::{Action, Route};
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
 use crate::world::driver::{shared_model, CarFollowing};
-use crate::world::Trajectories;
+use crate::world::{CarState, Interaction, Trajectories};
 use glam::DVec2;
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -109,10 +109,15 @@ struct Shown {
 }
 
 impl<'a> Tape<'a> {
-    /// An empty tape for `cars` (as they start) and `steps` steps.
-    fn new(cars: &[SimCar<'a>], steps: usize) -> Tape<'a> {
+    /// An empty tape for `cars` (as they start) and `steps` steps of `dt`
+    /// seconds.
+    fn new(cars: &[SimCar<'a>], steps: usize, dt: f64) -> Tape<'a> {
         let n = cars.len();
         let size = n * steps;
+        // A snapshot at every decision (one per reaction time) and a few
+        // more: reserved, as copying a growing list of cars cost more than
+        // taking them.
+        let decisions = |c: &SimCar| (steps as f64 * dt / c.driver.reaction_time.max(dt)).ceil() as usize + 4;
         Tape {
             cars: n,
             places: Vec::with_capacity(size),
@@ -123,7 +128,14 @@ impl<'a> Tape<'a> {
             routes: cars.iter().map(|c| vec![(-1, Arc::clone(&c.route))]).collect(),
             decision: Vec::with_capacity(size),
             reads: Vec::new(),
-            snapshots: cars.iter().map(|c| vec![(-1, c.clone())]).collect(),
+            snapshots: cars
+                .iter()
+                .map(|c| {
+                    let mut snapshots = Vec::with_capacity(decisions(c));
+                    snapshots.push((-1, c.clone()));
+                    snapshots
+                })
+                .collect(),
             shown: Vec::new(),
             current_places: vec![Places::default(); n],
             touched: vec![false; n],
@@ -252,7 +264,8 @@ impl<'a> Recording<'a> {
         let mut sim = Sim::new(map, plan, city, model);
         sim.reads = Some(RefCell::new(Vec::new()));
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
-        sim.tape = Some(Box::new(Tape::new(&sim.cars, steps * (plan.frames as usize).saturating_sub(1))));
+        let dt = plan.frame_interval / steps as f64;
+        sim.tape = Some(Box::new(Tape::new(&sim.cars, steps * (plan.frames as usize).saturating_sub(1), dt)));
         let factual = sim.run(stop)?;
         let tape = *sim.tape.take().expect("set above");
         let mut followers = vec![Vec::new(); sim.cars.len()];
@@ -305,24 +318,47 @@ impl<'a> Recording<'a> {
     /// Anything else (a recording that is not [`Recording::replayable`],
     /// other interventions) is simulated in full, with no car step replayed.
     pub fn rerun(&self, changed: &ScenarioPlan, cause: usize, stop: &AtomicBool) -> Option<(Trajectories, Replayed)> {
+        let (run, replayed) = self.rerun_frames(changed, cause, stop)?;
+        let trajectories = match run {
+            RerunTrajectories::Full(trajectories) => trajectories,
+            RerunTrajectories::Replayed(frames) => frames.to_trajectories(changed.frame_interval),
+        };
+        Some((trajectories, replayed))
+    }
+
+    /// [`Recording::rerun`], a replayed re-run kept as the frames of the
+    /// cars it simulated (the others' are the factual run's).
+    pub fn rerun_frames(
+        &self,
+        changed: &ScenarioPlan,
+        cause: usize,
+        stop: &AtomicBool,
+    ) -> Option<(RerunTrajectories<'_>, Replayed)> {
         let WorldPlan::City(city) = &changed.world else { return None };
         let mut sim = Sim::new(self.map, changed, city, self.model);
         if !self.replayable() || !replays(changed, cause) {
-            return Some((sim.run(stop)?, Replayed::default()));
+            return Some((RerunTrajectories::Full(sim.run(stop)?), Replayed::default()));
         }
         let n = sim.cars.len();
         // The start is the factual one: every car as planned. The cause and
         // its followers (theirs, and so on) are simulated.
         sim.frozen = vec![true; n];
+        sim.live.clear();
         for m in self.subtree(cause) {
-            sim.frozen[m] = false;
+            sim.thaw(m);
         }
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
         let mut buffers = StepBuffers { dirty: vec![false; self.map.track_count()], ..StepBuffers::default() };
-        let (mut states, mut interactions) = (Vec::new(), Vec::new());
+        let frames = changed.frames as usize;
+        let mut run = RerunFrames {
+            factual: &self.factual,
+            from: vec![frames; n],
+            states: vec![Vec::new(); n],
+            interactions: vec![Vec::new(); n],
+        };
         let mut replayed = 0;
-        for frame in 0..changed.frames as usize {
+        for frame in 0..frames {
             if stop.load(Ordering::Relaxed) {
                 return None;
             }
@@ -330,29 +366,124 @@ impl<'a> Recording<'a> {
                 for k in (frame - 1) * steps..frame * steps {
                     let t = Sim::step_time(k, steps, changed.frame_interval, dt);
                     sim.replay_step(self, k, t, dt, steps, &mut buffers);
-                    replayed += sim.frozen.iter().filter(|&&f| f).count();
+                    replayed += n - sim.live.len();
                 }
             }
             let t = frame as f64 * changed.frame_interval;
             sim.fire_interventions(t, dt);
-            let (factual_states, factual_interactions) =
-                (&self.factual.states[frame], &self.factual.interactions[frame]);
-            states.push((0..n).map(|i| if sim.frozen[i] { factual_states[i] } else { sim.cars[i].state() }).collect());
-            interactions.push(
-                (0..n).map(|i| if sim.frozen[i] { factual_interactions[i] } else { sim.cars[i].binding }).collect(),
-            );
+            // A car simulated once stays simulated.
+            for &i in &sim.live {
+                if run.from[i] == frames {
+                    run.from[i] = frame;
+                    run.states[i].reserve_exact(frames - frame);
+                    run.interactions[i].reserve_exact(frames - frame);
+                }
+                run.states[i].push(sim.cars[i].state());
+                run.interactions[i].push(sim.cars[i].binding);
+            }
         }
-        let trajectories = Trajectories {
-            frame_interval: changed.frame_interval,
-            states,
+        let car_steps = n * steps * frames.saturating_sub(1);
+        let shown_from_tape = buffers.shown_from_tape;
+        Some((RerunTrajectories::Replayed(run), Replayed { car_steps: replayed, of: car_steps, shown_from_tape }))
+    }
+}
+
+/// A re-run as [`Recording::rerun_frames`] made it.
+pub enum RerunTrajectories<'r> {
+    /// Every car simulated.
+    Full(Trajectories),
+    /// The cars it simulated; the others replayed.
+    Replayed(RerunFrames<'r>),
+}
+
+impl RerunTrajectories<'_> {
+    /// The frames.
+    pub fn frames(&self) -> usize {
+        match self {
+            RerunTrajectories::Full(run) => run.states.len(),
+            RerunTrajectories::Replayed(run) => run.frames(),
+        }
+    }
+
+    /// The first frame in which car `car` was simulated (0 in a full re-run).
+    pub fn first_simulated(&self, car: usize) -> usize {
+        match self {
+            RerunTrajectories::Full(_) => 0,
+            RerunTrajectories::Replayed(run) => run.first_simulated(car),
+        }
+    }
+
+    /// Car `car` at frame `frame`.
+    pub fn state(&self, frame: usize, car: usize) -> &CarState {
+        match self {
+            RerunTrajectories::Full(run) => &run.states[frame][car],
+            RerunTrajectories::Replayed(run) => run.state(frame, car),
+        }
+    }
+
+    /// What bound car `car`'s latest decision at frame `frame`, if the
+    /// world records it (the city does).
+    pub fn interaction(&self, frame: usize, car: usize) -> Option<&Interaction> {
+        match self {
+            RerunTrajectories::Full(run) => run.interactions.get(frame).and_then(|cars| cars.get(car)),
+            RerunTrajectories::Replayed(run) => Some(run.interaction(frame, car)),
+        }
+    }
+}
+
+/// A replayed re-run's cars: each car's frames from the first one in which
+/// it was simulated; before that (and for a car replayed throughout) the
+/// factual run's, bit for bit.
+pub struct RerunFrames<'r> {
+    factual: &'r Trajectories,
+    /// Per car, the first frame simulated (the frame count: none).
+    from: Vec<usize>,
+    /// Per car, its states and what bound it from `from` on.
+    states: Vec<Vec<CarState>>,
+    interactions: Vec<Vec<Interaction>>,
+}
+
+impl RerunFrames<'_> {
+    /// The frames (the factual run's count).
+    pub fn frames(&self) -> usize {
+        self.factual.states.len()
+    }
+
+    /// The first frame in which car `car` was simulated (before it, the
+    /// re-run's car is the factual run's); [`RerunFrames::frames`] when never.
+    pub fn first_simulated(&self, car: usize) -> usize {
+        self.from[car]
+    }
+
+    /// Car `car` at frame `frame`.
+    pub fn state(&self, frame: usize, car: usize) -> &CarState {
+        match frame.checked_sub(self.from[car]) {
+            Some(at) => &self.states[car][at],
+            None => &self.factual.states[frame][car],
+        }
+    }
+
+    /// What bound car `car`'s latest decision at frame `frame`.
+    pub fn interaction(&self, frame: usize, car: usize) -> &Interaction {
+        match frame.checked_sub(self.from[car]) {
+            Some(at) => &self.interactions[car][at],
+            None => &self.factual.interactions[frame][car],
+        }
+    }
+
+    /// Every car, frame by frame (no lights or events), as
+    /// [`Recording::rerun`] returns it.
+    pub fn to_trajectories(&self, frame_interval: f64) -> Trajectories {
+        let cars = self.from.len();
+        let frames = 0..self.frames();
+        Trajectories {
+            frame_interval,
+            states: frames.clone().map(|f| (0..cars).map(|c| *self.state(f, c)).collect()).collect(),
             lights: Vec::new(),
             events: Vec::new(),
             confounder_changes: Vec::new(),
-            interactions,
-        };
-        let car_steps = n * steps * (changed.frames as usize).saturating_sub(1);
-        let shown_from_tape = buffers.shown_from_tape;
-        Some((trajectories, Replayed { car_steps: replayed, of: car_steps, shown_from_tape }))
+            interactions: frames.map(|f| (0..cars).map(|c| *self.interaction(f, c)).collect()).collect(),
+        }
     }
 }
 
@@ -423,14 +554,25 @@ impl<'s> Sim<'s> {
         self.fire_interventions(t, dt);
         // Re-planning in car order, a replayed leader's re-plans shown to its
         // simulated followers from the tape.
+        // (Most steps nothing was shown: only the simulated cars' own
+        // re-plans, in car order.)
         let shown = rec.tape.shown_at(k);
-        for i in 0..n {
-            if !self.frozen[i] {
+        if shown.is_empty() {
+            for at in 0..self.live.len() {
+                let i = self.live[at];
                 if self.cars[i].pending_actions.is_some() {
                     self.replace_actions(i, t);
                 }
-            } else if !shown.is_empty() {
-                buffers.shown_from_tape[0] += self.show_taped(shown, true, i, |sim, f| !sim.frozen[f]);
+            }
+        } else {
+            for i in 0..n {
+                if !self.frozen[i] {
+                    if self.cars[i].pending_actions.is_some() {
+                        self.replace_actions(i, t);
+                    }
+                } else {
+                    buffers.shown_from_tape[0] += self.show_taped(shown, true, i, |sim, f| !sim.frozen[f]);
+                }
             }
         }
         // Replayed cars about to decide on what may differ from the factual
@@ -441,7 +583,11 @@ impl<'s> Sim<'s> {
         trying.extend((0..n).filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some()));
         if !trying.is_empty() {
             self.mark_dirty(rec, k, dirty, marked);
-            trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])));
+            if marked.is_empty() {
+                trying.clear();
+            } else {
+                trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])));
+            }
             for &track in marked.iter() {
                 dirty[track] = false;
             }
@@ -479,19 +625,16 @@ impl<'s> Sim<'s> {
             self.quiet_followers = false;
         }
         // What the simulated drivers deciding now see, replayed cars as taped.
-        let deciding =
-            (0..n).any(|i| !self.frozen[i] && !self.cars[i].removed && t + 1e-9 >= self.cars[i].next_decision);
-        if deciding {
+        let due = |car: &SimCar| !car.removed && t + 1e-9 >= car.next_decision;
+        if self.live.iter().any(|&i| due(&self.cars[i])) {
             self.fill_replayed(rec, k);
             self.show_replayed(rec, k);
-        }
-        for i in 0..n {
-            if self.frozen[i] || self.cars[i].removed {
-                continue;
-            }
-            if t + 1e-9 >= self.cars[i].next_decision {
-                self.decide(i, t, dt);
-                self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
+            for at in 0..self.live.len() {
+                let i = self.live[at];
+                if due(&self.cars[i]) {
+                    self.decide(i, t, dt);
+                    self.cars[i].next_decision = t + self.cars[i].driver.reaction_time;
+                }
             }
         }
         // Lane changes replayed leaders gave up as they decided, shown to
@@ -503,8 +646,9 @@ impl<'s> Sim<'s> {
                 }
             }
         }
-        for i in 0..n {
-            if !self.frozen[i] && !self.cars[i].removed {
+        for at in 0..self.live.len() {
+            let i = self.live[at];
+            if !self.cars[i].removed {
                 self.advance(i, t, dt);
             }
         }
@@ -593,7 +737,7 @@ impl<'s> Sim<'s> {
     /// at step `k`; lists the tracks marked in `marked`.
     fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [bool], marked: &mut Vec<usize>) {
         marked.clear();
-        for i in (0..self.cars.len()).filter(|&i| !self.frozen[i]) {
+        for &i in &self.live {
             let index = rec.tape.index(k, i);
             let taped = rec.tape.places[index];
             let car = &self.cars[i];
@@ -620,9 +764,17 @@ impl<'s> Sim<'s> {
         let woken: Vec<usize> = rec.subtree(c).into_iter().filter(|&m| self.frozen[m]).collect();
         for &m in &woken {
             self.catch_up(rec, m, to, steps, dt);
-            self.frozen[m] = false;
+            self.thaw(m);
         }
         woken
+    }
+
+    /// Car `m` is simulated from now on.
+    fn thaw(&mut self, m: usize) {
+        self.frozen[m] = false;
+        if let Err(at) = self.live.binary_search(&m) {
+            self.live.insert(at, m);
+        }
     }
 
     /// Car `m` as the factual run had it at the end of step `to`: its latest
@@ -659,39 +811,38 @@ impl<'s> Sim<'s> {
     /// replayed car's footprint from the tape; a replayed car that a
     /// simulated one touches wakes up (with its followers) before the collision.
     fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
-        // Replayed cars' points as taped, simulated ones' as they are now.
+        // Replayed cars' points as taped, simulated ones' (in `live` order)
+        // as they are now.
+        let taped = &rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)];
         let mut points = std::mem::take(&mut self.scratch_points);
         points.clear();
-        points.extend_from_slice(&rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)]);
-        for (i, point) in points.iter_mut().enumerate() {
-            if !self.frozen[i] {
-                *point = (!self.cars[i].removed).then(|| self.cars[i].near_point());
-            }
+        for at in 0..self.live.len() {
+            let car = &mut self.cars[self.live[at]];
+            points.push((!car.removed).then(|| car.near_point()));
         }
         // Pairs of replayed cars did what they did in the factual run (no
         // collision): only pairs with a simulated car are looked at.
         let mut candidates = std::mem::take(&mut self.scratch_pairs);
         candidates.clear();
-        let frozen = &self.frozen;
-        for (i, point) in points.iter().enumerate() {
-            let (false, Some((pi, ri))) = (frozen[i], *point) else { continue };
+        for (a, &i) in self.live.iter().enumerate() {
+            let Some((pi, ri)) = points[a] else { continue };
             let reach_i = self.cars[i].reach;
-            let mut check = |j: usize, point: &Option<(DVec2, f64)>| {
-                let Some((pj, rj)) = *point else { return };
-                let reach = reach_i + self.cars[j].reach;
-                if pi.distance(pj) - ri - rj < reach + CONTACT_RELEASE + 1e-6 {
-                    candidates.push((i.min(j), i.max(j)));
-                }
+            let near = |j: usize, (pj, rj): (DVec2, f64)| {
+                pi.distance(pj) - ri - rj < reach_i + self.cars[j].reach + CONTACT_RELEASE + 1e-6
             };
-            // Replayed cars before it, every car after it (a pair of
+            // Every replayed car, and the simulated cars after it (a pair of
             // simulated cars once).
-            for (j, point) in points[..i].iter().enumerate() {
-                if frozen[j] {
-                    check(j, point);
+            for (j, point) in taped.iter().enumerate() {
+                if let (true, Some(pj)) = (self.frozen[j], *point) {
+                    if near(j, pj) {
+                        candidates.push((i.min(j), i.max(j)));
+                    }
                 }
             }
-            for (j, point) in points.iter().enumerate().skip(i + 1) {
-                check(j, point);
+            for (b, &j) in self.live.iter().enumerate().skip(a + 1) {
+                if points[b].is_some_and(|pj| near(j, pj)) {
+                    candidates.push((i, j));
+                }
             }
         }
         candidates.sort_unstable();
