@@ -228,17 +228,10 @@ impl CarFollowing for Iidm {
     }
 }
 
-/// A car-following model by name, as specs and scenario.json give it.
-pub fn model_by_name(name: crate::spec::DriverModel) -> Box<dyn CarFollowing> {
-    match name {
-        crate::spec::DriverModel::Idm => Box::new(Idm::default()),
-        crate::spec::DriverModel::Iidm => Box::new(Iidm::default()),
-    }
-}
-
-/// [`model_by_name`]'s model with its default parameters, shared: a
-/// recording of a run (`city::replay::Recording`) outlives any one world.
-pub fn shared_model(name: crate::spec::DriverModel) -> &'static dyn CarFollowing {
+/// A car-following model by name, as specs and scenario.json give it, with
+/// its default parameters; shared, as a recording of a run
+/// (`city::replay::Recording`) outlives any one world.
+pub fn model_by_name(name: crate::spec::DriverModel) -> &'static dyn CarFollowing {
     static IDM: Idm = Idm { delta: IDM_DELTA };
     static IIDM: Iidm = Iidm { delta: IDM_DELTA };
     match name {

@@ -209,14 +209,11 @@ pub fn measure_with(
     how: Rerun,
     stop: &AtomicBool,
 ) -> Option<(EffectReport, RerunCost)> {
-    let recording = match (&plan.world, how) {
-        (WorldPlan::City(city), Rerun::Incremental) if Recording::pays_for(plan) => {
-            let recording = Recording::record(map, plan, city, stop)?;
-            debug_assert!(recording.factual().states == factual.states, "the recorded run is the factual one");
-            Some(recording)
-        }
-        _ => None,
+    let recording = match how {
+        Rerun::Incremental => record_if_it_pays(map, plan, stop)?,
+        Rerun::Full => None,
     };
+    debug_assert!(recording.as_ref().is_none_or(|r| r.factual().states == factual.states), "the factual run");
     measure_runs(map, plan, factual, recording.as_ref(), stop)
 }
 
@@ -253,11 +250,19 @@ impl FactualRun<'_> {
 /// effects ([`measure_recorded`]) then needs no second factual simulation.
 /// `None` when `stop` was set.
 pub fn simulate_recorded<'a>(map: &'a CityMap, plan: &'a ScenarioPlan, stop: &AtomicBool) -> Option<FactualRun<'a>> {
+    match record_if_it_pays(map, plan, stop)? {
+        Some(recording) => Some(FactualRun::Recorded(recording)),
+        None => simulate_until(map, plan, stop).map(FactualRun::Simulated),
+    }
+}
+
+/// `plan` simulated and recorded for its re-runs where replaying pays
+/// ([`Recording::pays_for`]); `Some(None)` where it does not (nothing
+/// simulated), `None` when `stop` was set.
+fn record_if_it_pays<'a>(map: &'a CityMap, plan: &'a ScenarioPlan, stop: &AtomicBool) -> Option<Option<Recording<'a>>> {
     match &plan.world {
-        WorldPlan::City(city) if Recording::pays_for(plan) => {
-            Recording::record(map, plan, city, stop).map(FactualRun::Recorded)
-        }
-        _ => simulate_until(map, plan, stop).map(FactualRun::Simulated),
+        WorldPlan::City(city) if Recording::pays_for(plan) => Recording::record(map, plan, city, stop).map(Some),
+        _ => Some(None),
     }
 }
 

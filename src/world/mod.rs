@@ -237,9 +237,7 @@ pub fn simulate(map: &CityMap, plan: &ScenarioPlan) -> Trajectories {
 pub fn simulate_until(map: &CityMap, plan: &ScenarioPlan, stop: &AtomicBool) -> Option<Trajectories> {
     match &plan.world {
         WorldPlan::Toy { step_m } => toy::simulate(map, plan, *step_m, stop),
-        WorldPlan::City(city) => {
-            city::CityWorld::with_model(driver::model_by_name(city.driver_model)).simulate_until(map, plan, city, stop)
-        }
+        WorldPlan::City(city) => city::simulate_with(driver::model_by_name(city.driver_model), map, plan, city, stop),
     }
 }
 

@@ -99,8 +99,19 @@ impl CityWorld {
         city: &CityPlan,
         stop: &AtomicBool,
     ) -> Option<Trajectories> {
-        Sim::new(map, plan, city, self.model.as_ref()).run(stop)
+        simulate_with(self.model.as_ref(), map, plan, city, stop)
     }
+}
+
+/// [`CityWorld::simulate_until`] with drivers that use `model`.
+pub fn simulate_with(
+    model: &dyn CarFollowing,
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    city: &CityPlan,
+    stop: &AtomicBool,
+) -> Option<Trajectories> {
+    Sim::new(map, plan, city, model).run(stop)
 }
 
 impl Sim<'_> {

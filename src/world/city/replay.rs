@@ -38,7 +38,7 @@ use crate::map::CityMap;
 use crate::map::{Action, Route};
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
-use crate::world::driver::{shared_model, CarFollowing};
+use crate::world::driver::{model_by_name, CarFollowing};
 use crate::world::{CarState, Interaction, Trajectories};
 use glam::DVec2;
 use std::cell::RefCell;
@@ -260,7 +260,7 @@ impl<'a> Recording<'a> {
         city: &'a CityPlan,
         stop: &AtomicBool,
     ) -> Option<Recording<'a>> {
-        let model = shared_model(city.driver_model);
+        let model = model_by_name(city.driver_model);
         let mut sim = Sim::new(map, plan, city, model);
         sim.reads = Some(RefCell::new(Vec::new()));
         let steps = (plan.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
