@@ -24,7 +24,9 @@
 //!
 //! Until then it does what the factual run did, so a re-run's positions and
 //! interactions are those of simulating every car, bit for bit
-//! (`tests/incremental_effects.rs` runs both side by side). Scenarios with
+//! (`tests/incremental_effects.rs` runs both side by side). A re-run's steps
+//! walk the simulated cars only, and it keeps only their frames
+//! ([`RerunFrames`]): a replayed car's are the factual run's. Scenarios with
 //! interventions of their own, a collision in the factual run, few cars or
 //! a tape too long to hold are re-run in full, as is any re-run other than
 //! one removal or action change of its cause at time 0.
