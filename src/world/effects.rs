@@ -222,7 +222,7 @@ pub enum FactualRun<'a> {
     /// Recorded while simulated, for re-runs that replay the cars an
     /// intervention has not reached (city world, where that pays:
     /// [`Recording::pays_for`]).
-    Recorded(Recording<'a>),
+    Recorded(Box<Recording<'a>>),
     /// Simulated alone: its re-runs simulate every car.
     Simulated(Trajectories),
 }
@@ -251,7 +251,7 @@ impl FactualRun<'_> {
 /// `None` when `stop` was set.
 pub fn simulate_recorded<'a>(map: &'a CityMap, plan: &'a ScenarioPlan, stop: &AtomicBool) -> Option<FactualRun<'a>> {
     match record_if_it_pays(map, plan, stop)? {
-        Some(recording) => Some(FactualRun::Recorded(recording)),
+        Some(recording) => Some(FactualRun::Recorded(Box::new(recording))),
         None => simulate_until(map, plan, stop).map(FactualRun::Simulated),
     }
 }
@@ -275,7 +275,7 @@ pub fn measure_recorded(
     stop: &AtomicBool,
 ) -> Option<EffectReport> {
     let recording = match run {
-        FactualRun::Recorded(recording) => Some(recording),
+        FactualRun::Recorded(recording) => Some(&**recording),
         FactualRun::Simulated(_) => None,
     };
     measure_runs(map, plan, run.trajectories(), recording, stop).map(|(report, _)| report)
