@@ -140,7 +140,7 @@ fn gens_recorded_factual_run_is_the_plain_one_and_gives_the_same_effects() {
     // gen records the factual run as it simulates it (no second simulation
     // for the effects): every field of its trajectories, and the effects,
     // must be those of simulating alone and re-running every car.
-    let groups = [(4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)];
+    let groups = [(3, 0.5), (4, 0.5), (8, 0.2), (8, 0.5), (8, 0.8), (12, 0.5)];
     let expansion = Expansion::from_spec(spec("gen-path", &groups, 2, "")).unwrap();
     let never = AtomicBool::new(false);
     let (mut scenarios, mut recorded) = (0, 0);
@@ -157,9 +157,10 @@ fn gens_recorded_factual_run_is_the_plain_one_and_gives_the_same_effects() {
         assert_eq!(format!("{:?}", run.into_trajectories()), format!("{plain:?}"));
         scenarios += 1;
     }
-    assert_eq!(scenarios, 10);
-    // 4-car scenarios are not worth a recording; the others are.
-    assert_eq!(recorded, 8, "{recorded} of {scenarios} scenarios recorded");
+    assert_eq!(scenarios, 12);
+    // 3-car scenarios are not worth a recording (fewer than
+    // MIN_CARS_TO_REPLAY); the others are.
+    assert_eq!(recorded, 10, "{recorded} of {scenarios} scenarios recorded");
 }
 
 #[test]

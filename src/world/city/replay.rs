@@ -47,12 +47,14 @@ use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-/// Fewest cars for which replaying pays. Measured on `configs/city.json`
-/// (`BENCH_ONLY=effects make bench`, one core): 4 cars replay 31 % of car
-/// steps and gain nothing once the recording is paid for (0.84x the full
-/// re-runs' speed); 8 cars replay 50-58 % and are 1.12-1.27x faster, 12
-/// cars 63 % and 1.42x.
-pub const MIN_CARS_TO_REPLAY: usize = 6;
+/// Fewest cars for which replaying pays. Measured with `gen --json` (one
+/// core, no images, best of 3), side by side with full re-runs: 200
+/// scenarios of 4 cars on the paper's compact map take 1.97 s to simulate
+/// (recording) and measure effects against 2.10 s re-running every car
+/// (-6 %; callgrind on `configs/city.json`'s 4-car group: effects -24 %
+/// instructions). Since re-runs walk only their simulated cars, 4 cars pay;
+/// they did not before (0.84x). Below 4 no paper group was measured.
+pub const MIN_CARS_TO_REPLAY: usize = 4;
 
 /// Largest tape a scenario records for its re-runs, bytes (one per worker
 /// thread at a time): the paper's 12-car city scenario needs about 11 MB.
