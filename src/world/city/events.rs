@@ -14,6 +14,22 @@ use rand::RngExt;
 /// Gap at which two cars that collided count as apart again, metres.
 pub(super) const CONTACT_RELEASE: f64 = 0.3;
 
+/// How far (metres) from a car's near point (`radius` its bound,
+/// [`super::car::SimCar::near_point`]) another car's point may be and still
+/// count as a candidate pair: half the pair's bound (the car's half
+/// diagonal `reach`, half of [`CONTACT_RELEASE`]), with room for round-off.
+/// Two cars are candidates when their points are closer than the sum.
+pub(super) fn extent(reach: f64, radius: f64) -> f64 {
+    radius + reach + CONTACT_RELEASE / 2.0 + 1e-6
+}
+
+/// Whether two cars at near points `a` and `b` with extents `ea` and `eb`
+/// ([`extent`]) are a candidate pair (squared: a pair at the limit is, by
+/// the extents' slack, too far apart to touch either way).
+pub(super) fn may_touch(a: DVec2, ea: f64, b: DVec2, eb: f64) -> bool {
+    a.distance_squared(b) < (ea + eb) * (ea + eb)
+}
+
 impl Sim<'_> {
     /// Logs every stop line car `i` crossed on red while its front moved
     /// from `front_before` to `front_after` (route metres), at time `now`.
@@ -180,7 +196,7 @@ impl Sim<'_> {
         points.clear();
         points.extend(self.cars.iter_mut().map(|car| (!car.removed).then(|| car.near_point())));
         if let Some(tape) = &mut self.tape {
-            tape.note_near_points(&points);
+            tape.note_extents(points.iter().zip(&self.cars).map(|(p, car)| p.map(|(point, r)| (point, extent(car.reach, r)))));
         }
         let mut candidates = std::mem::take(&mut self.scratch_pairs);
         let mut extents = std::mem::take(&mut self.scratch_extents);
@@ -238,9 +254,7 @@ impl Sim<'_> {
     ) {
         // Per car: its point and how far from it another car's point may be
         // and still count (half the pair's bound, with room for round-off).
-        let extent = |i: usize, (point, radius): (DVec2, f64)| {
-            (i, point, radius + self.cars[i].reach + CONTACT_RELEASE / 2.0 + 1e-6)
-        };
+        let extent = |i: usize, (point, radius): (DVec2, f64)| (i, point, extent(self.cars[i].reach, radius));
         // Kept in the order the last step's sort left when the same cars
         // are on the map (they move little in a step), so the sort finds it
         // nearly sorted; the pairs found do not depend on the order.
@@ -261,9 +275,7 @@ impl Sim<'_> {
                 if pj.x - ej >= pi.x + ei {
                     break;
                 }
-                // Squared: a pair at the limit is, by the extents' slack,
-                // too far apart to touch either way.
-                if pi.distance_squared(pj) < (ei + ej) * (ei + ej) {
+                if may_touch(pi, ei, pj, ej) {
                     pairs.push((i.min(j), i.max(j)));
                 }
             }

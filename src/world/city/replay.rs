@@ -32,7 +32,7 @@
 //! one removal or action change of its cause at time 0.
 
 use super::car::SimCar;
-use super::events::CONTACT_RELEASE;
+use super::events::{extent, may_touch};
 use super::perception::Places;
 use super::{Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
@@ -76,16 +76,21 @@ pub(super) struct Tape<'a> {
     /// Speed (m/s) and drive-queue actions done when the drivers decided.
     speed: Vec<f64>,
     actions_done: Vec<usize>,
-    /// After moving: route arc length and sideways wander (metres), and a
-    /// point and radius the centre is within (`None`: off the map).
+    /// After moving: route arc length and sideways wander (metres), and the
+    /// collision check's near point and extent (`events::extent`; a NaN
+    /// point when off the map, near nothing).
     s_wander: Vec<(f64, f64)>,
-    near: Vec<Option<(DVec2, f64)>>,
+    near: Vec<(DVec2, f64)>,
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
     /// The tracks each decision read (`reads[start..end]`); `None` when the
     /// car did not decide at that step.
     decision: Vec<Option<(usize, usize)>>,
     reads: Vec<usize>,
+    /// The cars that decided, step by step in car order
+    /// (`deciders[deciders_from[step]..deciders_from[step + 1]]`).
+    deciders: Vec<usize>,
+    deciders_from: Vec<usize>,
     /// Per car, `(step, state at the end of that step)` in step order; step
     /// -1 is the start.
     snapshots: Vec<Vec<(i64, SimCar<'a>)>>,
@@ -132,6 +137,8 @@ impl<'a> Tape<'a> {
             routes: cars.iter().map(|c| vec![(-1, Arc::clone(&c.route))]).collect(),
             decision: Vec::with_capacity(size),
             reads: Vec::new(),
+            deciders: Vec::new(),
+            deciders_from: Vec::with_capacity(steps + 1),
             snapshots: cars
                 .iter()
                 .map(|c| {
@@ -153,9 +160,10 @@ impl<'a> Tape<'a> {
         self.current_places[i] = *places;
     }
 
-    /// The collision check's points and radii this step.
-    pub(super) fn note_near_points(&mut self, points: &[Option<(DVec2, f64)>]) {
-        self.near.extend_from_slice(points);
+    /// The collision check's near points and extents this step (`None`:
+    /// off the map).
+    pub(super) fn note_extents(&mut self, extents: impl Iterator<Item = Option<(DVec2, f64)>>) {
+        self.near.extend(extents.map(|e| e.unwrap_or((DVec2::NAN, 0.0))));
     }
 
     /// Car `car`'s footprint after moving in step `step`, as the factual
@@ -192,6 +200,12 @@ impl<'a> Tape<'a> {
         step * self.cars + car
     }
 
+    /// The cars that decided at `step`, in car order.
+    fn deciders_at(&self, step: usize) -> &[usize] {
+        let end = self.deciders_from.get(step + 1).copied().unwrap_or(self.deciders.len());
+        &self.deciders[self.deciders_from[step]..end]
+    }
+
     /// The tracks car `car`'s decision at `step` read, if it decided then.
     fn reads_of(&self, step: usize, car: usize) -> Option<&[usize]> {
         self.decision[self.index(step, car)].map(|(start, end)| &self.reads[start..end])
@@ -210,6 +224,7 @@ impl Sim<'_> {
             tape.actions_done.push(car.actions_done);
         }
         tape.decision.extend(std::iter::repeat_n(None, tape.cars));
+        tape.deciders_from.push(tape.deciders.len());
     }
 
     /// Taping: car `i` just decided, reading the tracks noted since it began.
@@ -219,7 +234,9 @@ impl Sim<'_> {
         tape.reads.extend(reads.borrow().iter().copied());
         let step = tape.places.len() / tape.cars - 1;
         let index = tape.index(step, i);
+        debug_assert!(tape.decision[index].is_none(), "car {i} decided twice in step {step}");
         tape.decision[index] = Some((start, tape.reads.len()));
+        tape.deciders.push(i);
         tape.touched[i] = true;
     }
 
@@ -584,7 +601,7 @@ impl<'s> Sim<'s> {
         // steps no replayed car decides, and nothing need be marked.)
         let StepBuffers { dirty, marked, trying, shown_from_tape } = buffers;
         trying.clear();
-        trying.extend((0..n).filter(|&c| self.frozen[c] && rec.tape.reads_of(k, c).is_some()));
+        trying.extend(rec.tape.deciders_at(k).iter().copied().filter(|&c| self.frozen[c]));
         if !trying.is_empty() {
             self.mark_dirty(rec, k, dirty, marked);
             if marked.is_empty() {
@@ -818,33 +835,32 @@ impl<'s> Sim<'s> {
         // Replayed cars' points as taped, simulated ones' (in `live` order)
         // as they are now.
         let taped = &rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)];
+        // Simulated cars' near points and extents (in `live` order).
         let mut points = std::mem::take(&mut self.scratch_points);
         points.clear();
         for at in 0..self.live.len() {
             let car = &mut self.cars[self.live[at]];
-            points.push((!car.removed).then(|| car.near_point()));
+            points.push((!car.removed).then(|| {
+                let (point, radius) = car.near_point();
+                (point, extent(car.reach, radius))
+            }));
         }
         // Pairs of replayed cars did what they did in the factual run (no
-        // collision): only pairs with a simulated car are looked at.
+        // collision): only pairs with a simulated car are looked at, by the
+        // factual check's test (`Sim::candidate_pairs`).
         let mut candidates = std::mem::take(&mut self.scratch_pairs);
         candidates.clear();
         for (a, &i) in self.live.iter().enumerate() {
-            let Some((pi, ri)) = points[a] else { continue };
-            let reach_i = self.cars[i].reach;
-            let near = |j: usize, (pj, rj): (DVec2, f64)| {
-                pi.distance(pj) - ri - rj < reach_i + self.cars[j].reach + CONTACT_RELEASE + 1e-6
-            };
+            let Some((pi, ei)) = points[a] else { continue };
             // Every replayed car, and the simulated cars after it (a pair of
             // simulated cars once).
-            for (j, point) in taped.iter().enumerate() {
-                if let (true, Some(pj)) = (self.frozen[j], *point) {
-                    if near(j, pj) {
-                        candidates.push((i.min(j), i.max(j)));
-                    }
+            for (j, (&(pj, ej), &frozen)) in taped.iter().zip(&self.frozen).enumerate() {
+                if frozen && may_touch(pi, ei, pj, ej) {
+                    candidates.push((i.min(j), i.max(j)));
                 }
             }
             for (b, &j) in self.live.iter().enumerate().skip(a + 1) {
-                if points[b].is_some_and(|pj| near(j, pj)) {
+                if points[b].is_some_and(|(pj, ej)| may_touch(pi, ei, pj, ej)) {
                     candidates.push((i, j));
                 }
             }
@@ -886,9 +902,9 @@ impl Tape<'_> {
             + self.speed.capacity() * 8
             + self.actions_done.capacity() * 8
             + self.s_wander.capacity() * 16
-            + self.near.capacity() * size_of::<Option<(DVec2, f64)>>()
+            + self.near.capacity() * size_of::<(DVec2, f64)>()
             + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
-            + self.reads.capacity() * 8
+            + (self.reads.capacity() + self.deciders.capacity() + self.deciders_from.capacity()) * 8
             + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
             + self.shown.iter().map(|e| size_of::<Shown>() + e.seen.capacity() + e.merges.capacity() * 8).sum::<usize>()
     }
