@@ -105,6 +105,7 @@ impl SimCar<'_> {
     /// its target as the car moves. Returns the front's route position (metres) before and
     /// after, or `None` while the car is held after a collision (at rest
     /// until `now`).
+    #[inline]
     fn drive(&mut self, dt: f64, now: f64) -> Option<(f64, f64)> {
         if now <= self.hold_until {
             self.v = 0.0;
