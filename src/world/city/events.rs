@@ -196,7 +196,9 @@ impl Sim<'_> {
         points.clear();
         points.extend(self.cars.iter_mut().map(|car| (!car.removed).then(|| car.near_point())));
         if let Some(tape) = &mut self.tape {
-            tape.note_extents(points.iter().zip(&self.cars).map(|(p, car)| p.map(|(point, r)| (point, extent(car.reach, r)))));
+            tape.note_extents(
+                points.iter().zip(&self.cars).map(|(p, car)| p.map(|(point, r)| (point, extent(car.reach, r)))),
+            );
         }
         let mut candidates = std::mem::take(&mut self.scratch_pairs);
         let mut extents = std::mem::take(&mut self.scratch_extents);
