@@ -832,10 +832,9 @@ impl<'s> Sim<'s> {
     /// replayed car's footprint from the tape; a replayed car that a
     /// simulated one touches wakes up (with its followers) before the collision.
     fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
-        // Replayed cars' points as taped, simulated ones' (in `live` order)
-        // as they are now.
+        // Near points and extents: replayed cars' as taped, simulated ones'
+        // (in `live` order) as they are now.
         let taped = &rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)];
-        // Simulated cars' near points and extents (in `live` order).
         let mut points = std::mem::take(&mut self.scratch_points);
         points.clear();
         for at in 0..self.live.len() {
