@@ -83,7 +83,7 @@ wheel: python-env
 
 ## The paper's experiments on toy and city: datasets, every reference method
 ## trained and evaluated, results CSV, figures and Markdown table under
-## results/. Quick by default (about 40 min on 2 cores, projected by --plan); the paper's full
+## results/. Quick by default (about 55 min on 2 cores, projected by --plan); the paper's full
 ## 4000/500/500 setting: make paper PAPER_FLAGS="--device cuda".
 PAPER_FLAGS ?= --quick
 paper: python-env

@@ -3,7 +3,7 @@ city datasets, trains and evaluates every reference method on both, and
 writes a results CSV, figures in the style of the paper's figures 4 and 5,
 and a Markdown table::
 
-    python -m causalcity.paper --quick            # about 40 min on 2 CPU cores (--plan projects it)
+    python -m causalcity.paper --quick            # about 55 min on 2 CPU cores (--plan projects it)
     python -m causalcity.paper --device cuda      # the paper's 4000/500/500
 
 Both worlds use the paper's groups (4, 8 and 12 cars with 50 % of cars
@@ -174,10 +174,11 @@ SECONDS_PER_SCENARIO = {
     "pcmci": 0.04,
 }
 NEURAL = ("nri", "interaction", "nri_trail")
-# A trail-message window's cost against one of NRI's: 60 epochs on 200 toy
-# training scenarios took 376-419 s against NRI's 282 s (2-core CPU); the
-# projection scales NRI's calibration by it.
-TRAIL_COST = 1.4
+# A trail-message window's cost against one of NRI's, measured in whole quick
+# runs on a 2-core CPU: toy 926 s against NRI's 449 s, city 14.7 min against
+# 7.3 (2026-12-03). A 60-epoch run on 200 toy scenarios had suggested 1.4,
+# which left --plan 1.22x short. The projection scales NRI's calibration by it.
+TRAIL_COST = 2.0
 PARALLEL = ("granger", "pcmci")
 """The methods that run one process per core."""
 
@@ -640,7 +641,7 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m causalcity.paper", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: about 40 min on 2 CPU cores (--plan projects it)")
+    parser.add_argument("--quick", action="store_true", help="fewer scenarios and epochs: about 55 min on 2 CPU cores (--plan projects it)")
     parser.add_argument("--out", type=Path, help="output folder [results/paper or results/paper-quick]")
     parser.add_argument("--world", nargs="+", choices=WORLDS, default=list(WORLDS))
     parser.add_argument("--group", nargs="+", metavar="GROUP",
