@@ -321,14 +321,17 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
     };
     let mut running = renderer.canvas();
     let mut checked = 0;
-    for look in [
+    for (i, look) in [
         SceneLook { rain: 1.0, wetness: 0.8, seed: 11, ..SceneLook::clear() },
         SceneLook { snow: 0.7, daylight: 0.2, seed: 12, ..SceneLook::clear() },
         SceneLook::clear(),
         SceneLook { seed: 99, ..SceneLook::clear() },
         SceneLook { rain: 0.4, snow: 0.4, fog: 0.3, seed: 13, ..SceneLook::clear() },
         SceneLook { daylight: 0.0, seed: 14, ..SceneLook::clear() },
-    ] {
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let scene = renderer.scene(look);
         for frame in 0..6u32 {
             // No car in frame 4.
@@ -338,9 +341,12 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
                 vec![car(-10.0 + 3.0 * frame as f64, 1), car(8.0 - 2.0 * frame as f64, 2)]
             };
             // Signal heads under the cars' paths and one apart: none in
-            // frame 0, red until frame 3, then green, and none again in frame 5.
+            // frame 0, red until frame 3, then green, and none again in
+            // frame 5. In every other scene a fourth head overlaps the first,
+            // so that its change redraws every head; otherwise only the two
+            // that changed are redrawn.
             let colour = if frame < 3 { Colour::Red } else { Colour::Green };
-            let heads = match frame {
+            let mut heads = match frame {
                 0 | 5 => vec![],
                 _ => vec![
                     HeadSprite { position: DVec2::new(-4.0, 2.5), colour },
@@ -348,6 +354,9 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
                     HeadSprite { position: DVec2::new(20.0, -9.0), colour },
                 ],
             };
+            if i % 2 == 1 && !heads.is_empty() {
+                heads.push(HeadSprite { position: DVec2::new(-3.5, 2.7), colour: Colour::Yellow });
+            }
             renderer.render(&mut running, &scene, &cars, &heads, frame);
             let mut fresh = renderer.canvas();
             renderer.render(&mut fresh, &scene, &cars, &heads, frame);

@@ -88,17 +88,17 @@ pub struct Scene {
 /// heads, which change colour every few seconds) is kept drawn, in RGBA for
 /// tiny-skia and in RGB; what moves (cars and their beams, rain streaks and
 /// snowflakes) is drawn straight into `rgb`. Between frames of one scene
-/// only what the previous frame drew, and the heads that changed, are
-/// copied back from the still layer: a frame costs what it draws, not its
-/// size. The next frame draws over `rgb` and `mask` as this one left them,
+/// the pixels that rain and snow covered are put back from a log saved as
+/// they were drawn, then what the previous frame's cars drew, and the heads
+/// that changed, are copied back from the still layer: a frame costs what
+/// it draws, not its size. The next frame draws over `rgb` and `mask` as
+/// this one left them,
 /// so callers only read them.
 pub struct FrameCanvas {
     /// The background with the signal heads drawn over it.
     still_rgba: Pixmap,
     /// `still_rgba` as RGB rows: what every frame starts from.
     still_rgb: Vec<u8>,
-    /// Whether `still_rgb` lags `still_rgba` (after a whole frame).
-    still_rgb_stale: bool,
     pub rgb: Vec<u8>,
     pub mask: Vec<u8>,
     /// The background `still_rgba` was drawn over (kept alive so that
@@ -106,8 +106,8 @@ pub struct FrameCanvas {
     background: Option<Arc<Pixmap>>,
     /// The signal heads on the still layer, and the look they were drawn under.
     heads: Option<(SceneLook, Vec<HeadSprite>)>,
-    /// Their pixel rectangles.
-    head_rects: Vec<PixelRect>,
+    /// Their pixel rectangles, one per head (`None` off the image).
+    head_rects: Vec<Option<PixelRect>>,
     /// Pixel rectangles this frame drew over the still layer, its cars'
     /// first.
     dirty: Vec<PixelRect>,
@@ -117,9 +117,9 @@ pub struct FrameCanvas {
     previous: Vec<PixelRect>,
     /// How many of `previous` are the frame before's cars'.
     cars_in_previous: usize,
-    /// This frame's rain streaks' and snowflakes' boxes, pixels (kept to
-    /// reuse the allocation).
-    precipitation: Vec<[f32; 4]>,
+    /// The pixels under this frame's rain streaks and snowflakes, as they
+    /// were before them.
+    precipitation: raster::Undo,
 }
 
 /// A rectangle of pixels, `x0..x1` by `y0..y1`.
@@ -184,11 +184,9 @@ impl PixelRect {
         (rect.x0 < rect.x1 && rect.y0 < rect.y1).then_some(rect)
     }
 
-    /// The pixels whose centres can lie in the box `[x0, y0, x1, y1]`
-    /// (pixels; hard-edged shapes need no margin), clipped to a `w` x `h`
-    /// image; `None` when wholly outside.
-    fn of_box([x0, y0, x1, y1]: [f32; 4], w: usize, h: usize) -> Option<Self> {
-        PixelRect::within(Transform::identity(), (x0, x1), (y0, y1), 0.0, w, h)
+    /// Whether the two share a pixel.
+    fn meets(&self, other: &PixelRect) -> bool {
+        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
     }
 }
 
@@ -253,7 +251,6 @@ impl Renderer {
         FrameCanvas {
             still_rgba: Pixmap::new(w, h).expect("image size was validated"),
             still_rgb: vec![0; (w * h * 3) as usize],
-            still_rgb_stale: true,
             rgb: vec![0; (w * h * 3) as usize],
             mask: vec![0; (w * h) as usize],
             background: None,
@@ -263,7 +260,7 @@ impl Renderer {
             cars_in_dirty: 0,
             previous: Vec::new(),
             cars_in_previous: 0,
-            precipitation: Vec::new(),
+            precipitation: raster::Undo::default(),
         }
     }
 
@@ -306,54 +303,87 @@ impl Renderer {
             canvas.head_rects.clear();
         }
         // The still layer: heads other than those drawn (colours, places,
-        // the look, or none) go back to the background and are drawn again. Their rectangles join the ones to
-        // copy into the frame.
+        // the look, or none) go back to the background and are drawn again.
+        // When only some heads changed colour and none of their rectangles
+        // meets another head's, only those are: every other head would be
+        // drawn again on the same background, to the same pixels. Their
+        // rectangles join the ones to copy into the frame.
         let redrawn_from = canvas.previous.len();
-        let same_heads = canvas.heads.as_ref().is_some_and(|(l, drawn)| l == look && drawn == heads);
-        if !same_heads {
-            for r in canvas.head_rects.drain(..) {
-                restore(&mut canvas.still_rgba, &scene.background, r);
-                canvas.previous.push(r);
+        let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
+        let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
+        let drawn = match &canvas.heads {
+            Some((l, drawn)) if l == look && drawn.len() == heads.len() => Some(drawn),
+            _ => None,
+        };
+        let changed: Option<Vec<usize>> = drawn.and_then(|drawn| {
+            if drawn.iter().zip(heads).any(|(a, b)| a.position != b.position) {
+                return None;
             }
-            let head_frame = |head: &HeadSprite| world.pre_translate(head.position.x as f32, head.position.y as f32);
-            let half_housing = (HEAD_HOUSING_M / 2.0) as f32;
-            let housing = (-half_housing, half_housing);
-            canvas
-                .head_rects
-                .extend(heads.iter().filter_map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
-            let mut paint = Paint { anti_alias: true, ..Paint::default() };
-            for head in heads {
-                let t = head_frame(head);
-                let rgb = look.shade(HOUSING_RGB);
-                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                let body =
-                    Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
-                canvas.still_rgba.fill_rect(body, &paint, t, None);
-                let rgb = look.veil(lamp_rgb(head.colour));
-                paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
-                if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
-                    canvas.still_rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+            let changed: Vec<usize> = (0..heads.len()).filter(|&i| drawn[i].colour != heads[i].colour).collect();
+            let alone = |i: usize| {
+                canvas.head_rects[i].is_none_or(|r| {
+                    canvas.head_rects.iter().enumerate().all(|(j, o)| j == i || o.is_none_or(|o| !r.meets(&o)))
+                })
+            };
+            changed.iter().all(|&i| alone(i)).then_some(changed)
+        });
+        let all_heads = changed.is_none();
+        let redraw: Vec<usize> = match changed {
+            Some(changed) => changed,
+            None => {
+                for r in canvas.head_rects.drain(..).flatten() {
+                    restore(&mut canvas.still_rgba, &scene.background, r);
+                    canvas.previous.push(r);
+                }
+                let housing = (-half_housing, half_housing);
+                canvas
+                    .head_rects
+                    .extend(heads.iter().map(|head| PixelRect::around(head_frame(head), housing, housing, w, h)));
+                (0..heads.len()).collect()
+            }
+        };
+        let mut paint = Paint { anti_alias: true, ..Paint::default() };
+        for &i in &redraw {
+            let head = &heads[i];
+            if !all_heads {
+                // Alone: its rectangle holds only its own pixels.
+                if let Some(r) = canvas.head_rects[i] {
+                    restore(&mut canvas.still_rgba, &scene.background, r);
                 }
             }
-            canvas.previous.extend_from_slice(&canvas.head_rects);
+            let t = head_frame(head);
+            let rgb = look.shade(HOUSING_RGB);
+            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+            let body = Rect::from_ltrb(-half_housing, -half_housing, half_housing, half_housing).expect("fixed size");
+            canvas.still_rgba.fill_rect(body, &paint, t, None);
+            let rgb = look.veil(lamp_rgb(head.colour));
+            paint.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
+            if let Some(lamp) = PathBuilder::from_circle(0.0, 0.0, HEAD_LAMP_RADIUS_M as f32) {
+                canvas.still_rgba.fill_path(&lamp, &paint, FillRule::Winding, t, None);
+            }
+            canvas.previous.extend(canvas.head_rects[i]);
+        }
+        if all_heads || !redraw.is_empty() {
             canvas.heads = Some((*look, heads.to_vec()));
         }
         // The frame starts from the still layer where the last frame drew
-        // (or everywhere, over a new background). Its RGB copy is made when
-        // a second frame needs it: a moving camera's frames are all whole.
-        let full = PixelRect { x0: 0, y0: 0, x1: w, y1: h };
+        // (or everywhere, over a new background: converted once into the
+        // still layer's RGB, then copied row by row, which costs less than
+        // converting again; one memcpy of the whole frame measured slower).
         if whole_frame {
-            convert(&canvas.still_rgba, &mut canvas.rgb, full);
+            convert(&canvas.still_rgba, &mut canvas.still_rgb, PixelRect { x0: 0, y0: 0, x1: w, y1: h });
+            for (to, from) in canvas.rgb.chunks_exact_mut(w * 3).zip(canvas.still_rgb.chunks_exact(w * 3)) {
+                to.copy_from_slice(from);
+            }
             canvas.mask.fill(0);
-            canvas.still_rgb_stale = true;
+            canvas.precipitation.clear();
         } else {
-            if canvas.still_rgb_stale {
-                convert(&canvas.still_rgba, &mut canvas.still_rgb, full);
-                canvas.still_rgb_stale = false;
-            } else {
-                for r in &canvas.previous[redrawn_from..] {
-                    convert(&canvas.still_rgba, &mut canvas.still_rgb, *r);
-                }
+            // Rain and snow came last: unwound first, the frame is the
+            // still layer plus the last frame's cars, which the rectangles
+            // below put back.
+            canvas.precipitation.restore(&mut canvas.rgb);
+            for r in &canvas.previous[redrawn_from..] {
+                convert(&canvas.still_rgba, &mut canvas.still_rgb, *r);
             }
             for r in &canvas.previous {
                 copy_rgb(&canvas.still_rgb, &mut canvas.rgb, w, *r);
@@ -391,9 +421,7 @@ impl Renderer {
             // later cars over earlier ones.
             raster::stamp(&mut canvas.mask, w, &body, car.mask_id);
         }
-        canvas.precipitation.clear();
-        look.draw_precipitation_within(&mut image, frame, &mut canvas.precipitation);
-        canvas.dirty.extend(canvas.precipitation.iter().filter_map(|b| PixelRect::of_box(*b, w, h)));
+        look.draw_precipitation_saving(&mut image, frame, Some(&mut canvas.precipitation));
     }
 }
 
@@ -411,7 +439,7 @@ fn restore(rgba: &mut Pixmap, background: &Pixmap, r: PixelRect) {
 fn copy_rgb(from: &[u8], to: &mut [u8], w: usize, r: PixelRect) {
     for y in r.y0..r.y1 {
         let (a, b) = ((y * w + r.x0) * 3, (y * w + r.x1) * 3);
-        to[a..b].copy_from_slice(&from[a..b]);
+        raster::copy_short(&mut to[a..b], &from[a..b]);
     }
 }
 
@@ -456,6 +484,16 @@ mod tests {
             let mut dst = vec![0xAA; n * 3];
             super::convert_row(&src, &mut dst);
             assert_eq!(dst, expected, "{n} pixels");
+        }
+    }
+
+    #[test]
+    fn short_copies_write_every_byte_of_every_length() {
+        for n in 0..80usize {
+            let from: Vec<u8> = (0..n).map(|b| (b * 13 + 5) as u8).collect();
+            let mut to = vec![0u8; n];
+            super::raster::copy_short(&mut to, &from);
+            assert_eq!(to, from, "copy of {n} bytes");
         }
     }
 }

@@ -171,14 +171,12 @@ impl SceneLook {
 
     /// Rain streaks and snowflakes of frame `frame`, in pixel space.
     pub fn draw_precipitation(&self, image: &mut RgbImage, frame: u32) {
-        self.draw_precipitation_within(image, frame, &mut Vec::new());
+        self.draw_precipitation_saving(image, frame, None);
     }
 
-    /// [`SceneLook::draw_precipitation`], adding to `drawn` a box around
-    /// each streak and flake, `[x0, y0, x1, y1]` in pixels (unclipped; the
-    /// stroke's width included, no margin): every pixel it changed lies in
-    /// one of them.
-    pub fn draw_precipitation_within(&self, image: &mut RgbImage, frame: u32, drawn: &mut Vec<[f32; 4]>) {
+    /// [`SceneLook::draw_precipitation`], saving in `undo` (when given)
+    /// every pixel before a streak or flake changes it.
+    pub fn draw_precipitation_saving(&self, image: &mut RgbImage, frame: u32, mut undo: Option<&mut raster::Undo>) {
         if self.rain <= 0.0 && self.snow <= 0.0 {
             return;
         }
@@ -196,10 +194,9 @@ impl SceneLook {
             let (ux, uy) = (dx / reach, dy / reach);
             let along = Transform::from_row(ux, uy, -uy, ux, x, y);
             let half = STREAK_WIDTH_PX * scale;
-            drawn.push([x - 0.35 * len - half, y - half, x + half, y + len + half]);
             // Hard-edged streaks: cheaper to draw and to compress, alike to the eye.
             if let Some(streak) = PlacedRect::new(along, (0.0, reach), (-half / 2.0, half / 2.0)) {
-                raster::fill_hard(image, &streak, STREAK_RGB, STREAK_ALPHA);
+                raster::fill_hard(image, &streak, STREAK_RGB, STREAK_ALPHA, undo.as_deref_mut());
             }
         }
         let flakes = (420.0 * self.snow * (w * h / (1024.0 * 640.0)) as f64) as usize;
@@ -208,8 +205,7 @@ impl SceneLook {
             let y = rng.random_range(0.0..h);
             let size = rng.random_range(1.5..3.5) * scale;
             if let Some(flake) = PlacedRect::new(Transform::identity(), (x, x + size), (y, y + size)) {
-                raster::fill_hard(image, &flake, FLAKE_RGB, FLAKE_ALPHA);
-                drawn.push([x, y, x + size, y + size]);
+                raster::fill_hard(image, &flake, FLAKE_RGB, FLAKE_ALPHA, undo.as_deref_mut());
             }
         }
     }
