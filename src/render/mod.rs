@@ -92,8 +92,7 @@ pub struct Scene {
 /// they were drawn, then what the previous frame's cars drew, and the heads
 /// that changed, are copied back from the still layer: a frame costs what
 /// it draws, not its size. The next frame draws over `rgb` and `mask` as
-/// this one left them,
-/// so callers only read them.
+/// this one left them, so callers only read them.
 pub struct FrameCanvas {
     /// The background with the signal heads drawn over it.
     still_rgba: Pixmap,
