@@ -142,20 +142,8 @@ impl PixelRect {
     /// The pixels that anti-aliased shapes inside the car-frame box
     /// `[x0, x1] x [y0, y1]` (metres) can touch under `transform`, clipped
     /// to a `w` x `h` image; `None` when wholly outside.
-    fn around(transform: Transform, x: (f32, f32), y: (f32, f32), w: usize, h: usize) -> Option<Self> {
-        PixelRect::within(transform, x, y, AA_MARGIN_PX, w, h)
-    }
-
-    /// The pixels within `margin` pixels of the box `[x0, x1] x [y0, y1]`
-    /// placed by `transform`, clipped to a `w` x `h` image.
-    fn within(
-        transform: Transform,
-        (x0, x1): (f32, f32),
-        (y0, y1): (f32, f32),
-        margin: f32,
-        w: usize,
-        h: usize,
-    ) -> Option<Self> {
+    fn around(transform: Transform, (x0, x1): (f32, f32), (y0, y1): (f32, f32), w: usize, h: usize) -> Option<Self> {
+        let margin = AA_MARGIN_PX;
         let mut corners = [
             tiny_skia::Point::from_xy(x0, y0),
             tiny_skia::Point::from_xy(x1, y0),
