@@ -226,7 +226,25 @@ impl<'a> Sim<'a> {
     fn new(map: &'a CityMap, plan: &'a ScenarioPlan, city: &'a CityPlan, model: &'a dyn CarFollowing) -> Sim<'a> {
         let cars =
             plan.cars.iter().zip(&city.agency).map(|(c, agency)| SimCar::new(c, agency, city.sim_stream)).collect();
-        let mut sim = Sim {
+        let mut sim = Sim::with_cars(map, plan, city, model, cars);
+        // What planning adapted shows at the start.
+        for i in 0..sim.cars.len() {
+            sim.log_adaptations(i, 0.0);
+        }
+        sim.settle_start_speeds();
+        sim
+    }
+
+    /// `plan` with its cars as `cars`, nothing fired yet, no one in the
+    /// occupancy: [`Sim::new`] before the cars' start is settled.
+    fn with_cars(
+        map: &'a CityMap,
+        plan: &'a ScenarioPlan,
+        city: &'a CityPlan,
+        model: &'a dyn CarFollowing,
+        cars: Vec<SimCar<'a>>,
+    ) -> Sim<'a> {
+        Sim {
             map,
             plan,
             city,
@@ -258,13 +276,7 @@ impl<'a> Sim<'a> {
             scratch_pairs: Vec::new(),
             scratch_extents: Vec::new(),
             scratch_boxes: Vec::new(),
-        };
-        // What planning adapted shows at the start.
-        for i in 0..sim.cars.len() {
-            sim.log_adaptations(i, 0.0);
         }
-        sim.settle_start_speeds();
-        sim
     }
 
     /// One step from `t` to `t + dt` seconds: interventions, re-plans, who is

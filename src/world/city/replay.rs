@@ -356,13 +356,18 @@ impl<'a> Recording<'a> {
         stop: &AtomicBool,
     ) -> Option<(RerunTrajectories<'_>, Replayed)> {
         let WorldPlan::City(city) = &changed.world else { return None };
-        let mut sim = Sim::new(self.map, changed, city, self.model);
         if !self.replayable() || !replays(changed, cause) {
+            let mut sim = Sim::new(self.map, changed, city, self.model);
             return Some((RerunTrajectories::Full(sim.run(stop)?), Replayed::default()));
         }
+        // The start is the factual run's, as the tape has it (its cars only
+        // differ by the intervention, which has not fired yet), and so is
+        // the occupancy it left.
+        let start = self.tape.snapshots.iter().map(|s| s[0].1.clone()).collect();
+        let mut sim = Sim::with_cars(self.map, changed, city, self.model, start);
+        sim.fill_occupancy();
         let n = sim.cars.len();
-        // The start is the factual one: every car as planned. The cause and
-        // its followers (theirs, and so on) are simulated.
+        // The cause and its followers (theirs, and so on) are simulated.
         sim.frozen = vec![true; n];
         sim.live.clear();
         for m in self.subtree(cause) {
