@@ -44,7 +44,7 @@ mod tests;
 use super::driver::{CarFollowing, Iidm};
 use super::{Event, Trajectories};
 use crate::map::route::LegKind;
-use crate::map::signals::{Colour, Light};
+use crate::map::signals::{Colour, Light, LightState};
 use crate::map::CityMap;
 use crate::plan::confounders::{ConfounderModel, Confounders};
 use crate::plan::interventions::Intervention;
@@ -134,6 +134,7 @@ impl Sim<'_> {
         let mut states = Vec::with_capacity(plan.frames as usize);
         let mut lights = Vec::with_capacity(plan.frames as usize);
         let mut interactions = Vec::with_capacity(plan.frames as usize);
+        let twins = light_twins(&city.lights.lights);
         for frame in 0..plan.frames as usize {
             if stop.load(Ordering::Relaxed) {
                 return None;
@@ -149,7 +150,7 @@ impl Sim<'_> {
             sim.fire_interventions(t, dt);
             states.push(sim.cars.iter().map(SimCar::state).collect());
             interactions.push(sim.cars.iter().map(|c| c.binding).collect());
-            lights.push((0..city.lights.lights.len()).map(|l| sim.light_state(l, t)).collect());
+            lights.push(sim.light_states(&twins, t));
         }
         // A change shows from the first frame at or after it.
         let confounder_changes = sim
@@ -165,6 +166,35 @@ impl Sim<'_> {
             confounder_changes,
             interactions,
         })
+    }
+}
+
+/// For each light, the first light with the same offset and schedule (the
+/// light itself when none comes before it): such lights show the same
+/// states. Towns whose junctions share a clock have many (a 2 x 2 town
+/// with equal offsets: 8 of 32), and the per-frame record looked every
+/// light up, 14 % of a plain simulation's instructions.
+fn light_twins(lights: &[Light]) -> Vec<usize> {
+    (0..lights.len())
+        .map(|l| {
+            let same = |m: &usize| lights[*m].offset == lights[l].offset && lights[*m].schedule == lights[l].schedule;
+            (0..l).find(same).unwrap_or(l)
+        })
+        .collect()
+}
+
+impl Sim<'_> {
+    /// Every light's state at time `t` (seconds), a light with a twin
+    /// ([`light_twins`]) copying the twin's when neither an intervention nor
+    /// a detector can set them apart.
+    fn light_states(&self, twins: &[usize], t: f64) -> Vec<LightState> {
+        let planned = self.light_overrides.is_empty() && self.light_plans.is_empty() && self.actuation.is_empty();
+        let mut states: Vec<LightState> = Vec::with_capacity(twins.len());
+        for (l, &twin) in twins.iter().enumerate() {
+            let state = if planned && twin < l { states[twin] } else { self.light_state(l, t) };
+            states.push(state);
+        }
+        states
     }
 }
 
