@@ -963,3 +963,38 @@ fn at_a_junction_of_five_arms_right_and_slight_right_lead_into_different_streets
     assert_eq!(ends_on(Action::Straight), "Cs_0");
     assert_eq!(ends_on(Action::Left), "Ce_0");
 }
+
+#[test]
+fn every_light_records_its_own_schedule_where_lights_share_one_and_where_an_intervention_sets_one_apart() {
+    let map = CityMap::default();
+    // The default cycle at every junction from time 0: lights share
+    // schedules across junctions; A1w's two lights get one of their own.
+    let lights = lights_with(&map, &["A1w"], &[(Colour::Red, 3.0), (Colour::Green, 4.0)]);
+    let twins = super::light_twins(&lights.lights);
+    let shared: Vec<usize> = (0..twins.len()).filter(|&l| twins[l] != l).collect();
+    assert!(!shared.is_empty(), "no two lights share a schedule: the test checks nothing of the sharing");
+    // One light that shares its schedule is forced red for 2 s from t = 1.
+    let forced = shared[0];
+    let (from, seconds) = (1.0, 2.0);
+    let set = Intervention {
+        trigger: Trigger::At(from),
+        effect: Effect::SetLight { light: forced, colour: Colour::Red, seconds },
+        label: "forced red".into(),
+    };
+    let traj = simulate(&map, &plan(&map, &[straight("A1w", 20.0, 2.0)], lights.clone(), vec![set], 6.0));
+    let mut apart = 0;
+    for (frame, states) in traj.lights.iter().enumerate() {
+        let t = frame as f64 * FRAME;
+        assert_eq!(states.len(), lights.lights.len());
+        for (l, state) in states.iter().enumerate() {
+            let expected = if l == forced && t >= from && t < from + seconds {
+                crate::map::signals::LightState { colour: Colour::Red, since_change: t - from }
+            } else {
+                lights.lights[l].state_at(t)
+            };
+            assert_eq!(*state, expected, "light {l} at {t:.1} s");
+        }
+        apart += (states[forced] != states[twins[forced]]) as usize;
+    }
+    assert!(apart > 0, "the forced light never showed otherwise than its twin: the override went unchecked");
+}
