@@ -86,28 +86,19 @@ impl PlacedRect {
     fn span(&self, row: usize, grow: f32, width: usize) -> Option<Span> {
         let yc = row as f32 + 0.5;
         let [sx, kx, tx, ky, sy, ty] = self.to_shape;
-        let slopes = [sx, ky];
-        let at_zero = [kx * yc + tx, sy * yc + ty];
-        let (x0, x1, y0, y1) = (self.x.0 - grow, self.x.1 + grow, self.y.0 - grow, self.y.1 + grow);
-        if x0 > x1 || y0 > y1 {
-            return None;
-        }
-        // Where the row's centre line enters and leaves each axis's band:
-        // four independent divisions, laid out so that they are done as one
-        // vector division (rows are found millions of times a run).
-        let ends = [x0 - at_zero[0], x1 - at_zero[0], y0 - at_zero[1], y1 - at_zero[1]];
-        let per = [slopes[0], slopes[0], slopes[1], slopes[1]];
-        let t: [f32; 4] = std::array::from_fn(|i| ends[i] / per[i]);
         let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-        for axis in 0..2 {
-            if slopes[axis] == 0.0 {
-                let (a, b) = if axis == 0 { (x0, x1) } else { (y0, y1) };
-                if at_zero[axis] < a || at_zero[axis] > b {
+        for (slope, at_zero, (a, b)) in [(sx, kx * yc + tx, self.x), (ky, sy * yc + ty, self.y)] {
+            let (a, b) = (a - grow, b + grow);
+            if a > b {
+                return None;
+            }
+            if slope == 0.0 {
+                if at_zero < a || at_zero > b {
                     return None;
                 }
                 continue;
             }
-            let (t1, t2) = (t[2 * axis], t[2 * axis + 1]);
+            let (t1, t2) = ((a - at_zero) / slope, (b - at_zero) / slope);
             lo = lo.max(t1.min(t2));
             hi = hi.min(t1.max(t2));
         }
