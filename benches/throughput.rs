@@ -222,6 +222,8 @@ fn effects_cost(root: &Path) {
             cost.incremental += c.incremental;
             cost.replayed_car_steps += c.replayed_car_steps;
             cost.car_steps += c.car_steps;
+            cost.tries += c.tries;
+            cost.woke += c.woke;
         }
         let t = Instant::now();
         for plan in &plans {
@@ -239,13 +241,15 @@ fn effects_cost(root: &Path) {
         println!(
             "effects per scenario: every car re-simulated {full:.2} ms ({:.1}x the factual simulation, {one:.2} ms), \
              incremental {measured:.2} ms ({:.1}x; {:.2}x faster); {} of {} re-runs incremental, \
-             {:.0} % of their car steps replayed",
+             {:.0} % of their car steps replayed; {} decisions of replayed cars tried, {} of them woke the car",
             full / one,
             measured / one,
             full / measured,
             cost.incremental,
             cost.reruns,
-            100.0 * cost.replayed_car_steps as f64 / cost.car_steps.max(1) as f64
+            100.0 * cost.replayed_car_steps as f64 / cost.car_steps.max(1) as f64,
+            cost.tries,
+            cost.woke
         );
         let floor = plans.iter().zip(&factual).map(|(p, f)| effects_floor(map, p, f)).sum::<f64>() / plans.len() as f64;
         println!(

@@ -199,6 +199,10 @@ pub struct RerunCost {
     /// incremental re-runs.
     pub replayed_car_steps: usize,
     pub car_steps: usize,
+    /// Decisions of replayed cars tried, and how many woke their car
+    /// ([`crate::world::city::replay::Replayed`]).
+    pub tries: usize,
+    pub woke: usize,
 }
 
 /// [`measure_until`] with re-runs made as `how` says, and what they cost.
@@ -303,6 +307,8 @@ fn measure_runs(
                     cost.incremental += 1;
                     cost.replayed_car_steps += replayed.car_steps;
                     cost.car_steps += replayed.of;
+                    cost.tries += replayed.tries;
+                    cost.woke += replayed.woke;
                     rerun
                 }
                 None => RerunTrajectories::Full(simulate_until(map, &changed, stop)?),

@@ -177,8 +177,17 @@ impl Sim<'_> {
     /// order: the one way perception reads the occupancy, so that a run
     /// recording what decisions depend on notes every track read.
     fn occupants(&self, track: usize) -> &[(usize, f64)] {
+        self.occupants_from(track, f64::NEG_INFINITY)
+    }
+
+    /// [`Sim::occupants`] for a reader that looks only at the cars at `from`
+    /// metres along `track` or beyond: a car before `from`, or anything
+    /// about it, cannot change what it finds. A recording notes the bound,
+    /// so that an effects re-run tries the decision again only when a car
+    /// it changed stands (or stood) within it (`replay.rs`).
+    fn occupants_from(&self, track: usize, from: f64) -> &[(usize, f64)] {
         if let Some(reads) = &self.reads {
-            reads.borrow_mut().push(track);
+            reads.borrow_mut().push((track, from));
         }
         &self.occupancy[track]
     }
@@ -327,9 +336,14 @@ impl Sim<'_> {
             LegKind::Connector(c) => ([Some(self.map.connector_track(c)), None], 0.0, leg.length),
             LegKind::LaneChange { from, to, at } => ([Some(from), Some(to)], at, at + run),
         };
+        // Only cars ahead count: at `pos`, `d` below is `pos - behind` up to
+        // round-off (about 1e-13 m here), so a car a micrometre or more
+        // behind that is never one.
+        let behind = start + (car.s - leg.route_start);
+        let from = (start - 0.01).max(behind - 1e-6);
         let mut best: Option<Candidate> = None;
         for track in tracks.into_iter().flatten() {
-            for &(j, pos) in self.occupants(track) {
+            for &(j, pos) in self.occupants_from(track, from) {
                 if j != i && pos >= start - 0.01 && pos <= end + 0.01 {
                     let d = leg.route_start + (pos - start) - car.s;
                     if d > 0.0 {

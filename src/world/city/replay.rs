@@ -13,8 +13,9 @@
 //! up to date (its latest snapshot, moved on step by step) and simulated
 //! from then on, with its followers, as soon as
 //! - a decision it takes would read a track on which a simulated car stands
-//!   elsewhere, or at another speed, than the tape says, and the decision,
-//!   tried, ends the step otherwise than the tape's snapshot, or
+//!   elsewhere, or at another speed, than the tape says (at a position the
+//!   read looks at: a search for the car ahead looks only ahead), and the
+//!   decision, tried, ends the step otherwise than the tape's snapshot, or
 //! - a simulated car touches it (a collision).
 //!
 //! A leader's re-plans reach its followers, so a simulated car's followers
@@ -83,10 +84,11 @@ pub(super) struct Tape<'a> {
     near: Vec<(DVec2, f64)>,
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
-    /// The tracks each decision read (`reads[start..end]`); `None` when the
+    /// The tracks each decision read, each with the position from which on
+    /// a car there could change it (`reads[start..end]`); `None` when the
     /// car did not decide at that step.
     decision: Vec<Option<(usize, usize)>>,
-    reads: Vec<usize>,
+    reads: Vec<(usize, f64)>,
     /// The cars that decided, step by step in car order
     /// (`deciders[deciders_from[step]..deciders_from[step + 1]]`).
     deciders: Vec<usize>,
@@ -207,7 +209,7 @@ impl<'a> Tape<'a> {
     }
 
     /// The tracks car `car`'s decision at `step` read, if it decided then.
-    fn reads_of(&self, step: usize, car: usize) -> Option<&[usize]> {
+    fn reads_of(&self, step: usize, car: usize) -> Option<&[(usize, f64)]> {
         self.decision[self.index(step, car)].map(|(start, end)| &self.reads[start..end])
     }
 }
@@ -375,7 +377,8 @@ impl<'a> Recording<'a> {
         }
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
-        let mut buffers = StepBuffers { dirty: vec![false; self.map.track_count()], ..StepBuffers::default() };
+        let mut buffers =
+            StepBuffers { dirty: vec![f64::NEG_INFINITY; self.map.track_count()], ..StepBuffers::default() };
         let frames = changed.frames as usize;
         let mut run = RerunFrames {
             factual: &self.factual,
@@ -409,8 +412,9 @@ impl<'a> Recording<'a> {
             }
         }
         let car_steps = n * steps * frames.saturating_sub(1);
-        let shown_from_tape = buffers.shown_from_tape;
-        Some((RerunTrajectories::Replayed(run), Replayed { car_steps: replayed, of: car_steps, shown_from_tape }))
+        let StepBuffers { shown_from_tape, tries, woke, .. } = buffers;
+        let replayed = Replayed { car_steps: replayed, of: car_steps, shown_from_tape, tries, woke };
+        Some((RerunTrajectories::Replayed(run), replayed))
     }
 }
 
@@ -524,18 +528,27 @@ pub struct Replayed {
     /// that step, and simulated followers as the leaders gave up lane
     /// changes.
     pub shown_from_tape: [usize; 3],
+    /// Decisions of replayed cars tried because they read where a simulated
+    /// car differed from the tape, and how many of them woke their car.
+    pub tries: usize,
+    pub woke: usize,
 }
 
 /// What a re-run's steps reuse (nothing allocated per step): per track
-/// whether it is marked, the tracks marked, and the replayed cars trying a
+/// the farthest position along it at which a simulated car stands, or
+/// stood in the factual run, otherwise than the tape says (negative
+/// infinity: none), the tracks marked, and the replayed cars trying a
 /// decision.
 #[derive(Default)]
 struct StepBuffers {
-    dirty: Vec<bool>,
+    dirty: Vec<f64>,
     marked: Vec<usize>,
     trying: Vec<usize>,
-    /// Queues shown from the tape so far (see [`Replayed`]).
+    /// Queues shown from the tape so far, decisions tried and cars they
+    /// woke (see [`Replayed`]).
     shown_from_tape: [usize; 3],
+    tries: usize,
+    woke: usize,
 }
 
 /// Whether `changed`'s interventions are ones a re-run replays around:
@@ -604,7 +617,7 @@ impl<'s> Sim<'s> {
         // Replayed cars about to decide on what may differ from the factual
         // run try the decision; those who decide otherwise wake up. (Most
         // steps no replayed car decides, and nothing need be marked.)
-        let StepBuffers { dirty, marked, trying, shown_from_tape } = buffers;
+        let StepBuffers { dirty, marked, trying, shown_from_tape, tries, woke } = buffers;
         trying.clear();
         trying.extend(rec.tape.deciders_at(k).iter().copied().filter(|&c| self.frozen[c]));
         if !trying.is_empty() {
@@ -612,21 +625,24 @@ impl<'s> Sim<'s> {
             if marked.is_empty() {
                 trying.clear();
             } else {
-                trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(|&tr| dirty[tr])));
+                let changed = |&(track, from): &(usize, f64)| dirty[track] > f64::NEG_INFINITY && dirty[track] >= from;
+                trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(changed)));
             }
             for &track in marked.iter() {
-                dirty[track] = false;
+                dirty[track] = f64::NEG_INFINITY;
             }
         }
         let mut waking = Vec::new();
         if !trying.is_empty() {
             self.fill_replayed(rec, k);
             self.show_replayed(rec, k);
+            *tries += trying.len();
             for &c in trying.iter() {
                 if !self.decides_as_taped(rec, c, k, t, dt, steps) {
                     waking.push(c);
                 }
             }
+            *woke += waking.len();
         }
         if !waking.is_empty() {
             let mut woken = vec![false; n];
@@ -760,8 +776,9 @@ impl<'s> Sim<'s> {
 
     /// Marks in `dirty` every track on which a simulated car stands, or stood
     /// in the factual run, when it is not where and as fast as the tape says
-    /// at step `k`; lists the tracks marked in `marked`.
-    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [bool], marked: &mut Vec<usize>) {
+    /// at step `k`, with the farthest such position along it; lists the
+    /// tracks marked in `marked`.
+    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [f64], marked: &mut Vec<usize>) {
         marked.clear();
         for &i in &self.live {
             let index = rec.tape.index(k, i);
@@ -773,11 +790,13 @@ impl<'s> Sim<'s> {
                 && car.v == rec.tape.speed[index]
                 && car.actions_done == rec.tape.actions_done[index];
             if !same {
-                for &(track, _) in now.iter().chain(taped.iter()) {
-                    if !dirty[track] {
-                        dirty[track] = true;
+                for &(track, pos) in now.iter().chain(taped.iter()) {
+                    if dirty[track] == f64::NEG_INFINITY {
                         marked.push(track);
                     }
+                    // The farthest along; a position that is not a number
+                    // marks the whole track.
+                    dirty[track] = if pos.is_nan() { f64::INFINITY } else { dirty[track].max(pos) };
                 }
             }
         }
@@ -908,7 +927,8 @@ impl Tape<'_> {
             + self.s_wander.capacity() * 16
             + self.near.capacity() * size_of::<(DVec2, f64)>()
             + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
-            + (self.reads.capacity() + self.deciders.capacity() + self.deciders_from.capacity()) * 8
+            + self.reads.capacity() * size_of::<(usize, f64)>()
+            + (self.deciders.capacity() + self.deciders_from.capacity()) * 8
             + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
             + self.shown.iter().map(|e| size_of::<Shown>() + e.seen.capacity() + e.merges.capacity() * 8).sum::<usize>()
     }

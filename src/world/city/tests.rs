@@ -998,3 +998,34 @@ fn every_light_records_its_own_schedule_where_lights_share_one_and_where_an_inte
     }
     assert!(apart > 0, "the forced light never showed otherwise than its twin: the override went unchecked");
 }
+
+#[test]
+fn an_effects_rerun_never_tries_again_the_decisions_of_cars_driving_ahead_of_the_one_removed() {
+    use super::replay::Recording;
+    use crate::world::effects::{intervened, InterventionKind};
+    // Blocks 96 m wide: A1w long enough that no car reaches its end.
+    let map = CityMap::new(crate::map::MapLayout {
+        north_south_roads: vec![('C', -48.0), ('D', 48.0)],
+        extent_x: 100.0,
+        ..Default::default()
+    });
+    let length = map.lanes[lane(&map, "A1w")].curve.length();
+    assert!(length > 45.0, "A1w is {length} m: too short for four cars and 4 s");
+    // Green throughout; car 3 drives last, behind the other three.
+    let lights = lights_with(&map, &["A1w"], &[(Colour::Green, 100.0)]);
+    let cars: Vec<Given> = [27.0, 19.0, 11.0, 3.0].iter().map(|&at| straight("A1w", at, 2.0)).collect();
+    let factual_plan = plan(&map, &cars, lights, vec![], 4.0);
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let city = factual_plan.world.city().expect("city plan");
+    let recording = Recording::record(&map, &factual_plan, city, &never).expect("never stopped");
+    assert!(recording.replayable());
+    let changed = intervened(&map, &factual_plan, 3, InterventionKind::Remove).expect("a removal");
+    let (rerun, replayed) = recording.rerun(&changed, 3, &never).expect("never stopped");
+    // The three cars ahead read their lane, on which the removed car
+    // stood, at every decision, but only ahead of themselves.
+    assert!(replayed.car_steps > 0, "nothing was replayed: {replayed:?}");
+    assert_eq!(replayed.tries, 0, "decisions of cars ahead were tried again: {replayed:?}");
+    let full = simulate(&map, &changed);
+    assert_eq!(rerun.states, full.states, "the replayed re-run differs from the full one");
+    assert_eq!(rerun.interactions, full.interactions);
+}
