@@ -167,6 +167,19 @@ impl Sim<'_> {
             interactions,
         })
     }
+
+    /// Every light's state at time `t` (seconds), a light with a twin
+    /// ([`light_twins`]) copying the twin's when neither an intervention nor
+    /// a detector can set them apart.
+    fn light_states(&self, twins: &[usize], t: f64) -> Vec<LightState> {
+        let planned = self.light_overrides.is_empty() && self.light_plans.is_empty() && self.actuation.is_empty();
+        let mut states: Vec<LightState> = Vec::with_capacity(twins.len());
+        for (l, &twin) in twins.iter().enumerate() {
+            let state = if planned && twin < l { states[twin] } else { self.light_state(l, t) };
+            states.push(state);
+        }
+        states
+    }
 }
 
 /// For each light, the first light with the same offset and schedule (the
@@ -181,21 +194,6 @@ fn light_twins(lights: &[Light]) -> Vec<usize> {
             (0..l).find(same).unwrap_or(l)
         })
         .collect()
-}
-
-impl Sim<'_> {
-    /// Every light's state at time `t` (seconds), a light with a twin
-    /// ([`light_twins`]) copying the twin's when neither an intervention nor
-    /// a detector can set them apart.
-    fn light_states(&self, twins: &[usize], t: f64) -> Vec<LightState> {
-        let planned = self.light_overrides.is_empty() && self.light_plans.is_empty() && self.actuation.is_empty();
-        let mut states: Vec<LightState> = Vec::with_capacity(twins.len());
-        for (l, &twin) in twins.iter().enumerate() {
-            let state = if planned && twin < l { states[twin] } else { self.light_state(l, t) };
-            states.push(state);
-        }
-        states
-    }
 }
 
 /// A running simulation: the cars, what interventions changed so far (lights,

@@ -377,8 +377,7 @@ impl<'a> Recording<'a> {
         }
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
-        let mut buffers =
-            StepBuffers { dirty: vec![f64::NEG_INFINITY; self.map.track_count()], ..StepBuffers::default() };
+        let mut buffers = StepBuffers { dirty: vec![CLEAN; self.map.track_count()], ..StepBuffers::default() };
         let frames = changed.frames as usize;
         let mut run = RerunFrames {
             factual: &self.factual,
@@ -534,10 +533,15 @@ pub struct Replayed {
     pub woke: usize,
 }
 
+/// A track no simulated car marked, in [`StepBuffers::dirty`]. Tested with
+/// `!= CLEAN`: a whole-track read's bound is negative infinity too, so
+/// `>=` alone would find an unmarked track changed.
+const CLEAN: f64 = f64::NEG_INFINITY;
+
 /// What a re-run's steps reuse (nothing allocated per step): per track
 /// the farthest position along it at which a simulated car stands, or
-/// stood in the factual run, otherwise than the tape says (negative
-/// infinity: none), the tracks marked, and the replayed cars trying a
+/// stood in the factual run, otherwise than the tape says ([`CLEAN`]:
+/// none), the tracks marked, and the replayed cars trying a
 /// decision.
 #[derive(Default)]
 struct StepBuffers {
@@ -625,11 +629,11 @@ impl<'s> Sim<'s> {
             if marked.is_empty() {
                 trying.clear();
             } else {
-                let changed = |&(track, from): &(usize, f64)| dirty[track] > f64::NEG_INFINITY && dirty[track] >= from;
+                let changed = |&(track, from): &(usize, f64)| dirty[track] != CLEAN && dirty[track] >= from;
                 trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(changed)));
             }
             for &track in marked.iter() {
-                dirty[track] = f64::NEG_INFINITY;
+                dirty[track] = CLEAN;
             }
         }
         let mut waking = Vec::new();
@@ -791,7 +795,7 @@ impl<'s> Sim<'s> {
                 && car.actions_done == rec.tape.actions_done[index];
             if !same {
                 for &(track, pos) in now.iter().chain(taped.iter()) {
-                    if dirty[track] == f64::NEG_INFINITY {
+                    if dirty[track] == CLEAN {
                         marked.push(track);
                     }
                     // The farthest along; a position that is not a number
