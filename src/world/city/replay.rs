@@ -637,9 +637,13 @@ impl<'s> Sim<'s> {
             }
         }
         let mut waking = Vec::new();
+        // Whether the occupancy and the replayed cars' speeds are this
+        // step's as the simulated drivers about to decide must see them.
+        let mut shown_now = false;
         if !trying.is_empty() {
             self.fill_replayed(rec, k);
             self.show_replayed(rec, k);
+            shown_now = true;
             *tries += trying.len();
             for &c in trying.iter() {
                 if !self.decides_as_taped(rec, c, k, t, dt, steps) {
@@ -649,6 +653,8 @@ impl<'s> Sim<'s> {
             *woke += waking.len();
         }
         if !waking.is_empty() {
+            // The woken cars are simulated now: the occupancy is filled again.
+            shown_now = false;
             let mut woken = vec![false; n];
             for c in waking {
                 for m in self.wake(rec, c, k as i64 - 1, steps, dt) {
@@ -673,8 +679,13 @@ impl<'s> Sim<'s> {
         // What the simulated drivers deciding now see, replayed cars as taped.
         let due = |car: &SimCar| !car.removed && t + 1e-9 >= car.next_decision;
         if self.live.iter().any(|&i| due(&self.cars[i])) {
-            self.fill_replayed(rec, k);
-            self.show_replayed(rec, k);
+            // A try leaves the occupancy as it found it, and its car's speed
+            // and actions done as taped: what the tries saw stands, unless
+            // one woke its car.
+            if !shown_now {
+                self.fill_replayed(rec, k);
+                self.show_replayed(rec, k);
+            }
             for at in 0..self.live.len() {
                 let i = self.live[at];
                 if due(&self.cars[i]) {
