@@ -82,6 +82,13 @@ pub(super) struct Tape<'a> {
     /// point when off the map, near nothing).
     s_wander: Vec<(f64, f64)>,
     near: Vec<(DVec2, f64)>,
+    /// Per step, how much nearer two cars' near points could come through
+    /// one of them in that step: the largest, over the cars, of how far
+    /// its point moved plus how much its extent grew since the step before
+    /// (infinite where a car came onto the map). A re-run that found a
+    /// simulated car clear of every taped one by a gap skips the pairs
+    /// until its own moves and these have used the gap up.
+    near_shift: Vec<f64>,
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
     /// The tracks each decision read, each with the position from which on
@@ -136,6 +143,7 @@ impl<'a> Tape<'a> {
             actions_done: Vec::with_capacity(size),
             s_wander: Vec::with_capacity(size),
             near: Vec::with_capacity(size),
+            near_shift: Vec::with_capacity(steps),
             routes: cars.iter().map(|c| vec![(-1, Arc::clone(&c.route))]).collect(),
             decision: Vec::with_capacity(size),
             reads: Vec::new(),
@@ -165,7 +173,18 @@ impl<'a> Tape<'a> {
     /// The collision check's near points and extents this step (`None`:
     /// off the map).
     pub(super) fn note_extents(&mut self, extents: impl Iterator<Item = Option<(DVec2, f64)>>) {
+        let from = self.near.len();
         self.near.extend(extents.map(|e| e.unwrap_or((DVec2::NAN, 0.0))));
+        let (before, now) = self.near.split_at(from);
+        let before = from.checked_sub(self.cars).map(|at| &before[at..]);
+        let shift = |(k, &(point, extent)): (usize, &(DVec2, f64))| match before.map(|b| b[k]) {
+            // Off the map: near nothing.
+            _ if point.is_nan() => 0.0,
+            Some((was, grown_from)) if !was.is_nan() => point.distance(was) + (extent - grown_from).max(0.0),
+            // The first step, or back on the map.
+            _ => f64::INFINITY,
+        };
+        self.near_shift.push(now.iter().enumerate().map(shift).fold(0.0, f64::max));
     }
 
     /// Car `car`'s footprint after moving in step `step`, as the factual
@@ -377,7 +396,11 @@ impl<'a> Recording<'a> {
         }
         let steps = (changed.frame_interval / MAX_STEP).ceil().max(1.0) as usize;
         let dt = changed.frame_interval / steps as f64;
-        let mut buffers = StepBuffers { dirty: vec![CLEAN; self.map.track_count()], ..StepBuffers::default() };
+        let mut buffers = StepBuffers {
+            dirty: vec![CLEAN; self.map.track_count()],
+            clearances: vec![Clearance::default(); n],
+            ..StepBuffers::default()
+        };
         let frames = changed.frames as usize;
         let mut run = RerunFrames {
             factual: &self.factual,
@@ -533,6 +556,29 @@ pub struct Replayed {
     pub woke: usize,
 }
 
+/// How clear a simulated car was of every taped car at the end of step
+/// `step` (`usize::MAX`: never checked): its near point and extent then,
+/// and the least of `distance - extent - extent` over the taped cars, metres
+/// (negative when a pair was a candidate).
+#[derive(Debug, Clone, Copy)]
+struct Clearance {
+    step: usize,
+    point: DVec2,
+    extent: f64,
+    gap: f64,
+}
+
+impl Default for Clearance {
+    fn default() -> Clearance {
+        Clearance { step: usize::MAX, point: DVec2::NAN, extent: 0.0, gap: f64::NEG_INFINITY }
+    }
+}
+
+/// What a simulated car must have to spare, metres, to skip the taped cars
+/// in a collision check: far more than the round-off of the gaps summed
+/// over a run (about 1e-10 m), far less than the gaps themselves (metres).
+const CLEARANCE_MARGIN_M: f64 = 1e-3;
+
 /// A track no simulated car marked, in [`StepBuffers::dirty`]. Tested with
 /// `!= CLEAN`: a whole-track read's bound is negative infinity too, so
 /// `>=` alone would find an unmarked track changed.
@@ -548,6 +594,8 @@ struct StepBuffers {
     dirty: Vec<f64>,
     marked: Vec<usize>,
     trying: Vec<usize>,
+    /// Per car, how clear of the taped cars it last was.
+    clearances: Vec<Clearance>,
     /// Queues shown from the tape so far, decisions tried and cars they
     /// woke (see [`Replayed`]).
     shown_from_tape: [usize; 3],
@@ -621,7 +669,7 @@ impl<'s> Sim<'s> {
         // Replayed cars about to decide on what may differ from the factual
         // run try the decision; those who decide otherwise wake up. (Most
         // steps no replayed car decides, and nothing need be marked.)
-        let StepBuffers { dirty, marked, trying, shown_from_tape, tries, woke } = buffers;
+        let StepBuffers { dirty, marked, trying, clearances, shown_from_tape, tries, woke } = buffers;
         trying.clear();
         trying.extend(rec.tape.deciders_at(k).iter().copied().filter(|&c| self.frozen[c]));
         if !trying.is_empty() {
@@ -709,7 +757,7 @@ impl<'s> Sim<'s> {
                 self.advance(i, t, dt);
             }
         }
-        self.replayed_collisions(rec, k, t + dt, steps, dt);
+        self.replayed_collisions(rec, k, t + dt, steps, dt, clearances);
     }
 
     /// Shows the followers of car `leader` for which `to` holds what the
@@ -870,7 +918,15 @@ impl<'s> Sim<'s> {
     /// [`Sim::detect_collisions`] at the end of step `k` (time `now`), a
     /// replayed car's footprint from the tape; a replayed car that a
     /// simulated one touches wakes up (with its followers) before the collision.
-    fn replayed_collisions(&mut self, rec: &Recording<'s>, k: usize, now: f64, steps: usize, dt: f64) {
+    fn replayed_collisions(
+        &mut self,
+        rec: &Recording<'s>,
+        k: usize,
+        now: f64,
+        steps: usize,
+        dt: f64,
+        clearances: &mut [Clearance],
+    ) {
         // Near points and extents: replayed cars' as taped, simulated ones'
         // (in `live` order) as they are now.
         let taped = &rec.tape.near[rec.tape.index(k, 0)..rec.tape.index(k + 1, 0)];
@@ -890,13 +946,30 @@ impl<'s> Sim<'s> {
         candidates.clear();
         for (a, &i) in self.live.iter().enumerate() {
             let Some((pi, ei)) = points[a] else { continue };
-            // Every replayed car, and the simulated cars after it (a pair of
-            // simulated cars once).
-            for (j, (&(pj, ej), &frozen)) in taped.iter().zip(&self.frozen).enumerate() {
-                if frozen && may_touch(pi, ei, pj, ej) {
-                    candidates.push((i.min(j), i.max(j)));
+            // Every replayed car, unless this one was clear of them all at
+            // the step before by more than they and it can have closed in
+            // since (what it had to spare, less its own point's move and its
+            // extent's growth, less the most any taped car's did).
+            let last = &mut clearances[i];
+            let clear = last.step.checked_add(1) == Some(k) && {
+                last.gap -= pi.distance(last.point) + (ei - last.extent).max(0.0) + rec.tape.near_shift[k];
+                last.gap > CLEARANCE_MARGIN_M
+            };
+            *last = Clearance { step: k, point: pi, extent: ei, gap: last.gap };
+            if !clear {
+                let mut gap = f64::INFINITY;
+                for (j, (&(pj, ej), &frozen)) in taped.iter().zip(&self.frozen).enumerate() {
+                    if frozen {
+                        if may_touch(pi, ei, pj, ej) {
+                            candidates.push((i.min(j), i.max(j)));
+                        }
+                        // Not a number off the map: never the least.
+                        gap = gap.min(pi.distance(pj) - ei - ej);
+                    }
                 }
+                last.gap = gap;
             }
+            // The simulated cars after it (a pair of simulated cars once).
             for (b, &j) in self.live.iter().enumerate().skip(a + 1) {
                 if points[b].is_some_and(|(pj, ej)| may_touch(pi, ei, pj, ej)) {
                     candidates.push((i, j));
@@ -941,6 +1014,7 @@ impl Tape<'_> {
             + self.actions_done.capacity() * 8
             + self.s_wander.capacity() * 16
             + self.near.capacity() * size_of::<(DVec2, f64)>()
+            + self.near_shift.capacity() * 8
             + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
             + self.reads.capacity() * size_of::<(usize, f64)>()
             + (self.deciders.capacity() + self.deciders_from.capacity()) * 8
