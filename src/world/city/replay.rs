@@ -63,7 +63,7 @@ pub const MAX_TAPE_BYTES: usize = 64 << 20;
 
 /// What the tape holds per car and step, bytes, with room: occupancy places
 /// (56), speed and actions done (16), route position and wander (16),
-/// collision bound (32), decision and its reads (about 35), and a share of
+/// collision bound (32), decisions and their reads (about 15), and a share of
 /// the snapshots (an 840-byte car at every decision, about every 6 steps).
 /// Measured on `configs/city.json`'s 12-car scenarios: 250-310 (a test
 /// keeps it within this).
@@ -92,9 +92,9 @@ pub(super) struct Tape<'a> {
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
     /// The tracks each decision read, each with the position from which on
-    /// a car there could change it (`reads[start..end]`); `None` when the
-    /// car did not decide at that step.
-    decision: Vec<Option<(usize, usize)>>,
+    /// a car there could change it (`reads[start..end]`), in the order of
+    /// `deciders`.
+    decisions: Vec<DecisionReads>,
     reads: Vec<(usize, f64)>,
     /// The cars that decided, step by step in car order
     /// (`deciders[deciders_from[step]..deciders_from[step + 1]]`).
@@ -113,6 +113,20 @@ pub(super) struct Tape<'a> {
     filled: bool,
     /// Whether any cars collided.
     pub(super) collided: bool,
+}
+
+/// The tracks one decision read: `Tape::reads[reads.0..reads.1]`, and a
+/// bit for each (`track_bit`), so that a re-run can tell in one test that
+/// none of them was marked changed (most of the time).
+#[derive(Debug, Clone, Copy)]
+struct DecisionReads {
+    reads: (usize, usize),
+    tracks: u64,
+}
+
+/// A track's bit in [`DecisionReads::tracks`]: tracks 64 apart share one.
+fn track_bit(track: usize) -> u64 {
+    1 << (track % 64)
 }
 
 /// A leader's drive queue shown to its followers (`Sim::show_followers`):
@@ -145,7 +159,7 @@ impl<'a> Tape<'a> {
             near: Vec::with_capacity(size),
             near_shift: Vec::with_capacity(steps),
             routes: cars.iter().map(|c| vec![(-1, Arc::clone(&c.route))]).collect(),
-            decision: Vec::with_capacity(size),
+            decisions: Vec::new(),
             reads: Vec::new(),
             deciders: Vec::new(),
             deciders_from: Vec::with_capacity(steps + 1),
@@ -221,15 +235,16 @@ impl<'a> Tape<'a> {
         step * self.cars + car
     }
 
-    /// The cars that decided at `step`, in car order.
-    fn deciders_at(&self, step: usize) -> &[usize] {
+    /// The decisions taken at `step` (positions in `deciders`, in car order).
+    fn decisions_at(&self, step: usize) -> std::ops::Range<usize> {
         let end = self.deciders_from.get(step + 1).copied().unwrap_or(self.deciders.len());
-        &self.deciders[self.deciders_from[step]..end]
+        self.deciders_from[step]..end
     }
 
-    /// The tracks car `car`'s decision at `step` read, if it decided then.
-    fn reads_of(&self, step: usize, car: usize) -> Option<&[(usize, f64)]> {
-        self.decision[self.index(step, car)].map(|(start, end)| &self.reads[start..end])
+    /// The tracks decision `d` (a position in `deciders`) read.
+    fn reads_of(&self, d: usize) -> &[(usize, f64)] {
+        let (start, end) = self.decisions[d].reads;
+        &self.reads[start..end]
     }
 }
 
@@ -244,7 +259,6 @@ impl Sim<'_> {
             tape.speed.push(car.v);
             tape.actions_done.push(car.actions_done);
         }
-        tape.decision.extend(std::iter::repeat_n(None, tape.cars));
         tape.deciders_from.push(tape.deciders.len());
     }
 
@@ -253,10 +267,13 @@ impl Sim<'_> {
         let (Some(tape), Some(reads)) = (&mut self.tape, &self.reads) else { return };
         let start = tape.reads.len();
         tape.reads.extend(reads.borrow().iter().copied());
+        let tracks = tape.reads[start..].iter().fold(0, |bits, &(track, _)| bits | track_bit(track));
         let step = tape.places.len() / tape.cars - 1;
-        let index = tape.index(step, i);
-        debug_assert!(tape.decision[index].is_none(), "car {i} decided twice in step {step}");
-        tape.decision[index] = Some((start, tape.reads.len()));
+        debug_assert!(
+            tape.decisions_at(step).last().is_none_or(|d| tape.deciders[d] < i),
+            "car {i} decided twice, or out of car order, in step {step}"
+        );
+        tape.decisions.push(DecisionReads { reads: (start, tape.reads.len()), tracks });
         tape.deciders.push(i);
         tape.touched[i] = true;
     }
@@ -587,8 +604,8 @@ const CLEAN: f64 = f64::NEG_INFINITY;
 /// What a re-run's steps reuse (nothing allocated per step): per track
 /// the farthest position along it at which a simulated car stands, or
 /// stood in the factual run, otherwise than the tape says ([`CLEAN`]:
-/// none), the tracks marked, and the replayed cars trying a
-/// decision.
+/// none), the tracks marked, and the decisions of replayed cars tried
+/// (positions in the tape's `deciders`).
 #[derive(Default)]
 struct StepBuffers {
     dirty: Vec<f64>,
@@ -671,14 +688,17 @@ impl<'s> Sim<'s> {
         // steps no replayed car decides, and nothing need be marked.)
         let StepBuffers { dirty, marked, trying, clearances, shown_from_tape, tries, woke } = buffers;
         trying.clear();
-        trying.extend(rec.tape.deciders_at(k).iter().copied().filter(|&c| self.frozen[c]));
+        trying.extend(rec.tape.decisions_at(k).filter(|&d| self.frozen[rec.tape.deciders[d]]));
         if !trying.is_empty() {
             self.mark_dirty(rec, k, dirty, marked);
             if marked.is_empty() {
                 trying.clear();
             } else {
                 let changed = |&(track, from): &(usize, f64)| dirty[track] != CLEAN && dirty[track] >= from;
-                trying.retain(|&c| rec.tape.reads_of(k, c).is_some_and(|r| r.iter().any(changed)));
+                let marked_bits = marked.iter().fold(0, |bits, &track| bits | track_bit(track));
+                trying.retain(|&d| {
+                    rec.tape.decisions[d].tracks & marked_bits != 0 && rec.tape.reads_of(d).iter().any(changed)
+                });
             }
             for &track in marked.iter() {
                 dirty[track] = CLEAN;
@@ -693,7 +713,7 @@ impl<'s> Sim<'s> {
             self.show_replayed(rec, k);
             shown_now = true;
             *tries += trying.len();
-            for &c in trying.iter() {
+            for &c in trying.iter().map(|&d| &rec.tape.deciders[d]) {
                 if !self.decides_as_taped(rec, c, k, t, dt, steps) {
                     waking.push(c);
                 }
@@ -1015,7 +1035,7 @@ impl Tape<'_> {
             + self.s_wander.capacity() * 16
             + self.near.capacity() * size_of::<(DVec2, f64)>()
             + self.near_shift.capacity() * 8
-            + self.decision.capacity() * size_of::<Option<(usize, usize)>>()
+            + self.decisions.capacity() * size_of::<DecisionReads>()
             + self.reads.capacity() * size_of::<(usize, f64)>()
             + (self.deciders.capacity() + self.deciders_from.capacity()) * 8
             + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
