@@ -710,7 +710,6 @@ impl<'s> Sim<'s> {
         let mut shown_now = false;
         if !trying.is_empty() {
             self.fill_replayed(rec, k);
-            self.show_replayed(rec, k);
             shown_now = true;
             *tries += trying.len();
             for &c in trying.iter().map(|&d| &rec.tape.deciders[d]) {
@@ -752,7 +751,6 @@ impl<'s> Sim<'s> {
             // one woke its car.
             if !shown_now {
                 self.fill_replayed(rec, k);
-                self.show_replayed(rec, k);
             }
             for at in 0..self.live.len() {
                 let i = self.live[at];
@@ -802,16 +800,6 @@ impl<'s> Sim<'s> {
         count
     }
 
-    /// What simulated drivers read of the replayed cars at step `k`: their
-    /// speed and actions done as taped.
-    fn show_replayed(&mut self, rec: &Recording<'s>, k: usize) {
-        for c in (0..self.cars.len()).filter(|&c| self.frozen[c]) {
-            let index = rec.tape.index(k, c);
-            self.cars[c].v = rec.tape.speed[index];
-            self.cars[c].actions_done = rec.tape.actions_done[index];
-        }
-    }
-
     /// Whether replayed car `c`, deciding at step `k` (time `t`) on this
     /// step's occupancy, ends the step as the factual run had it: brought up
     /// to date, it re-plans, decides and moves (its followers told nothing),
@@ -839,13 +827,17 @@ impl<'s> Sim<'s> {
         same
     }
 
-    /// The occupancy at step `k`: simulated cars where they are, replayed
-    /// ones where the tape has them.
+    /// What simulated drivers deciding at step `k` see: the occupancy,
+    /// simulated cars where they are and replayed ones where the tape has
+    /// them, and the replayed cars' speeds and actions done as taped.
     fn fill_replayed(&mut self, rec: &Recording<'s>, k: usize) {
         self.clear_occupancy();
         for i in 0..self.cars.len() {
             let places = if self.frozen[i] {
-                rec.tape.places[rec.tape.index(k, i)]
+                let index = rec.tape.index(k, i);
+                self.cars[i].v = rec.tape.speed[index];
+                self.cars[i].actions_done = rec.tape.actions_done[index];
+                rec.tape.places[index]
             } else if self.cars[i].removed {
                 continue;
             } else {
