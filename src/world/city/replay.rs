@@ -82,18 +82,18 @@ pub(super) struct Tape<'a> {
     /// point when off the map, near nothing).
     s_wander: Vec<(f64, f64)>,
     near: Vec<(DVec2, f64)>,
-    /// Per step, how much nearer two cars' near points could come through
-    /// one of them in that step: the largest, over the cars, of how far
-    /// its point moved plus how much its extent grew since the step before
-    /// (infinite where a car came onto the map). A re-run that found a
-    /// simulated car clear of every taped one by a gap skips the pairs
-    /// until its own moves and these have used the gap up.
+    /// Per step `k`, how much one car can have eaten into a pair's gap
+    /// (distance less both extents) since step `k - 1`: the largest, over
+    /// the cars, of how far its near point moved plus how much its extent
+    /// grew (infinite at step 0 and where a car came back onto the map). A
+    /// re-run that found a simulated car clear of every taped one by a gap
+    /// skips the pairs until its own moves and these have used the gap up.
     near_shift: Vec<f64>,
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
-    /// The tracks each decision read, each with the position from which on
-    /// a car there could change it (`reads[start..end]`), in the order of
-    /// `deciders`.
+    /// Each decision's reads (`DecisionReads`), in the order of `deciders`:
+    /// the tracks it read, each with the position from which on a car
+    /// there could change it, are `reads[start..end]`.
     decisions: Vec<DecisionReads>,
     reads: Vec<(usize, f64)>,
     /// The cars that decided, step by step in car order
@@ -573,10 +573,11 @@ pub struct Replayed {
     pub woke: usize,
 }
 
-/// How clear a simulated car was of every taped car at the end of step
-/// `step` (`usize::MAX`: never checked): its near point and extent then,
-/// and the least of `distance - extent - extent` over the taped cars, metres
-/// (negative when a pair was a candidate).
+/// How clear a simulated car is of every taped car, as of the end of step
+/// `step` (`usize::MAX`: never seen): its near point and extent then, and
+/// a lower bound on the least `distance - extent - extent` over the taped
+/// cars, metres (exact at a step that checked every pair; negative when a
+/// pair was a candidate).
 #[derive(Debug, Clone, Copy)]
 struct Clearance {
     step: usize,
@@ -604,8 +605,9 @@ const CLEAN: f64 = f64::NEG_INFINITY;
 /// What a re-run's steps reuse (nothing allocated per step): per track
 /// the farthest position along it at which a simulated car stands, or
 /// stood in the factual run, otherwise than the tape says ([`CLEAN`]:
-/// none), the tracks marked, and the decisions of replayed cars tried
-/// (positions in the tape's `deciders`).
+/// none), the tracks marked, the decisions of replayed cars tried
+/// (positions in the tape's `deciders`), and each car's clearance of the
+/// taped cars.
 #[derive(Default)]
 struct StepBuffers {
     dirty: Vec<f64>,
@@ -707,10 +709,10 @@ impl<'s> Sim<'s> {
         let mut waking = Vec::new();
         // Whether the occupancy and the replayed cars' speeds are this
         // step's as the simulated drivers about to decide must see them.
-        let mut shown_now = false;
+        let mut filled_now = false;
         if !trying.is_empty() {
             self.fill_replayed(rec, k);
-            shown_now = true;
+            filled_now = true;
             *tries += trying.len();
             for &c in trying.iter().map(|&d| &rec.tape.deciders[d]) {
                 if !self.decides_as_taped(rec, c, k, t, dt, steps) {
@@ -721,7 +723,7 @@ impl<'s> Sim<'s> {
         }
         if !waking.is_empty() {
             // The woken cars are simulated now: the occupancy is filled again.
-            shown_now = false;
+            filled_now = false;
             let mut woken = vec![false; n];
             for c in waking {
                 for m in self.wake(rec, c, k as i64 - 1, steps, dt) {
@@ -749,7 +751,7 @@ impl<'s> Sim<'s> {
             // A try leaves the occupancy as it found it, and its car's speed
             // and actions done as taped: what the tries saw stands, unless
             // one woke its car.
-            if !shown_now {
+            if !filled_now {
                 self.fill_replayed(rec, k);
             }
             for at in 0..self.live.len() {
