@@ -105,6 +105,44 @@ impl PlacedRect {
         as_span(centres_within(lo, hi, width))
     }
 
+    /// [`PlacedRect::span`] for many rows at one `grow`, with what does not
+    /// depend on the row worked out once (a car's body or a rain streak asks
+    /// for a span on each of its rows, thousands a frame).
+    fn scan(&self, grow: f32) -> RowScan {
+        let [sx, kx, tx, ky, sy, ty] = self.to_shape;
+        let (x, y) = ((self.x.0 - grow, self.x.1 + grow), (self.y.0 - grow, self.y.1 + grow));
+        let finite = self.to_shape.iter().chain([&x.0, &x.1, &y.0, &y.1]).all(|v| v.is_finite());
+        // Where neither slope is 0 and every term is finite, no quotient is
+        // NaN, so each slab's lower bound is the quotient of its lower end
+        // (the upper end when the slope is negative: division by a
+        // negative number reverses the order and rounding keeps it) and
+        // `min` and `max` are plain comparisons: the same bounds as `span`.
+        // A slab whose slope is 0 bounds no column: it lets a row through
+        // or not (an upright rectangle, such as a snowflake or a car
+        // heading due east, has one).
+        if !(finite && x.0 <= x.1 && y.0 <= y.1) {
+            return RowScan::General { rect: *self, grow };
+        }
+        let ends = |slope: f32, (a, b): (f32, f32)| if slope > 0.0 { (a, b) } else { (b, a) };
+        let ((x_lo, x_hi), (y_lo, y_hi)) = (ends(sx, x), ends(ky, y));
+        match (sx != 0.0, ky != 0.0) {
+            (true, true) => RowScan::Turned {
+                slopes: [sx, ky],
+                row_terms: [kx, sy],
+                offsets: [tx, ty],
+                lower: [x_lo, y_lo],
+                upper: [x_hi, y_hi],
+            },
+            (true, false) => {
+                RowScan::Gated { slope: sx, row_term: kx, offset: tx, ends: (x_lo, x_hi), gate: (sy, ty, y) }
+            }
+            (false, true) => {
+                RowScan::Gated { slope: ky, row_term: sy, offset: ty, ends: (y_lo, y_hi), gate: (kx, tx, x) }
+            }
+            (false, false) => RowScan::General { rect: *self, grow },
+        }
+    }
+
     /// The rows (clipped to `0..height`) the rectangle grown by `grow` can
     /// reach.
     fn rows(&self, grow: f32, height: usize) -> std::ops::Range<usize> {
@@ -136,6 +174,69 @@ impl PlacedRect {
         let along = |p: f32, (a, b): (f32, f32)| ((p - a) * s).min(0.5) + ((b - p) * s).min(0.5);
         let c = along(u, self.x).clamp(0.0, 1.0) * along(v, self.y).clamp(0.0, 1.0);
         (c * 255.0 + 0.5) as u8
+    }
+}
+
+/// The spans of a [`PlacedRect`] grown by a fixed amount, row after row:
+/// the same spans as [`PlacedRect::span`], found with four divisions and no
+/// branch per row where the rectangle is turned (neither of its axes runs
+/// along the rows), two where it is upright, and by `span` itself where a
+/// term is not finite or the grown rectangle is empty.
+#[derive(Debug, Clone, Copy)]
+enum RowScan {
+    Turned {
+        /// Each slab's change in shape coordinate per canvas column (`sx`, `ky`).
+        slopes: [f32; 2],
+        /// Each slab's change per canvas row (`kx`, `sy`) and its offset (`tx`, `ty`).
+        row_terms: [f32; 2],
+        offsets: [f32; 2],
+        /// The slab's end that bounds the columns from below, and from above.
+        lower: [f32; 2],
+        upper: [f32; 2],
+    },
+    /// One slab bounds the columns, the other (slope 0) admits whole rows.
+    Gated {
+        slope: f32,
+        row_term: f32,
+        offset: f32,
+        /// The bounding slab's ends, lower bound first.
+        ends: (f32, f32),
+        /// The admitting slab's change per row, offset and ends.
+        gate: (f32, f32, (f32, f32)),
+    },
+    General {
+        rect: PlacedRect,
+        grow: f32,
+    },
+}
+
+impl RowScan {
+    /// The columns of row `row` (clipped to `0..width`) whose pixel centres
+    /// lie in the grown rectangle; `None` when there are none.
+    #[inline]
+    fn span(&self, row: usize, width: usize) -> Option<Span> {
+        match *self {
+            RowScan::Turned { slopes, row_terms, offsets, lower, upper } => {
+                let yc = row as f32 + 0.5;
+                let at_zero = [row_terms[0] * yc + offsets[0], row_terms[1] * yc + offsets[1]];
+                let quotient = |end: [f32; 2], k: usize| (end[k] - at_zero[k]) / slopes[k];
+                let (lo0, lo1, hi0, hi1) =
+                    (quotient(lower, 0), quotient(lower, 1), quotient(upper, 0), quotient(upper, 1));
+                let lo = if lo1 > lo0 { lo1 } else { lo0 };
+                let hi = if hi1 < hi0 { hi1 } else { hi0 };
+                as_span(centres_within(lo, hi, width))
+            }
+            RowScan::Gated { slope, row_term, offset, ends, gate: (gate_row_term, gate_offset, (a, b)) } => {
+                let yc = row as f32 + 0.5;
+                let gated = gate_row_term * yc + gate_offset;
+                if gated < a || gated > b {
+                    return None;
+                }
+                let at_zero = row_term * yc + offset;
+                as_span(centres_within((ends.0 - at_zero) / slope, (ends.1 - at_zero) / slope, width))
+            }
+            RowScan::General { rect, grow } => rect.span(row, grow, width),
+        }
     }
 }
 
@@ -226,18 +327,25 @@ fn centres_within(lo: f32, hi: f32, limit: usize) -> std::ops::Range<usize> {
 /// truncation: the target's baseline has no rounding instruction, so `ceil`
 /// and `floor` are calls, and rows and spans need millions a run.
 pub(crate) fn ceil_within(v: f32, limit: usize) -> usize {
-    let v = if v > 0.0 { v.min(limit as f32) } else { 0.0 };
-    let t = v as usize;
-    t + ((t as f32) < v) as usize
+    let v = if v > 0.0 { v.min(limit_f32(limit)) } else { 0.0 };
+    let t = v as u32;
+    t as usize + ((t as f32) < v) as usize
 }
 
 /// `v.floor().clamp(0, limit)` as an index (0 for NaN).
 pub(crate) fn floor_within(v: f32, limit: usize) -> usize {
     if v > 0.0 {
-        v.min(limit as f32) as usize
+        v.min(limit_f32(limit)) as u32 as usize
     } else {
         0
     }
+}
+
+/// `limit` as an `f32`, through `u32`: `usize` to `f32` and back take a
+/// branch each for the top bit, which no image's size has (limits above
+/// `u32::MAX` count as `u32::MAX`).
+fn limit_f32(limit: usize) -> f32 {
+    limit.min(u32::MAX as usize) as u32 as f32
 }
 
 /// A non-empty range as a span.
@@ -252,13 +360,17 @@ pub fn fill_hard_union(image: &mut RgbImage, pair: [Option<ConvexQuad>; 2], colo
     let (w, h) = (image.width, image.height);
     let rows = pair.iter().flatten().map(|q| q.rows(h)).filter(|r| !r.is_empty());
     let (first, last) = rows.fold((usize::MAX, 0), |(a, b), r| (a.min(r.start), b.max(r.end)));
+    let [a, b] = pair;
     for y in first..last {
-        let mut spans = pair.map(|q| q.and_then(|q| q.span(y, w)));
-        spans.sort_unstable();
-        let mut done = 0;
-        for (x0, x1) in spans.into_iter().flatten() {
-            blend_span(image.span_mut(y, (x0.max(done), x1.max(done))), colour, alpha);
-            done = done.max(x1);
+        match (a.and_then(|q| q.span(y, w)), b.and_then(|q| q.span(y, w))) {
+            (Some(one), Some(other)) => {
+                // Left to right; the second from where the first ended.
+                let (first, second) = if one <= other { (one, other) } else { (other, one) };
+                blend_span(image.span_mut(y, first), colour, alpha);
+                blend_span(image.span_mut(y, (second.0.max(first.1), second.1.max(first.1))), colour, alpha);
+            }
+            (Some(only), None) | (None, Some(only)) => blend_span(image.span_mut(y, only), colour, alpha),
+            (None, None) => {}
         }
     }
 }
@@ -298,13 +410,27 @@ fn blend_span(span: &mut [u8], colour: [u8; 3], a: u8) {
     }
 }
 
+/// Sets every pixel of `span` (RGB bytes) to `colour`: 16 pixels at a time
+/// from one pattern, as a car's row is mostly inside.
+fn fill_span(span: &mut [u8], colour: [u8; 3]) {
+    let pattern: [u8; 48] = std::array::from_fn(|i| colour[i % 3]);
+    let mut chunks = span.chunks_exact_mut(48);
+    for chunk in &mut chunks {
+        chunk.copy_from_slice(&pattern);
+    }
+    let rest = chunks.into_remainder();
+    let n = rest.len();
+    rest.copy_from_slice(&pattern[..n]);
+}
+
 /// Fills `rect` with the opaque `colour`, anti-aliased.
 pub fn fill_aa(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3]) {
     let (w, h) = (image.width, image.height);
     let half_pixel = 0.5 / rect.pixels_per_unit;
+    let (outer, inner) = (rect.scan(half_pixel), rect.scan(-half_pixel));
     for y in rect.rows(half_pixel, h) {
-        let Some((x0, x1)) = rect.span(y, half_pixel, w) else { continue };
-        let (i0, i1) = rect.span(y, -half_pixel, w).map_or((x1, x1), |(a, b)| (a.max(x0), b.min(x1).max(a.max(x0))));
+        let Some((x0, x1)) = outer.span(y, w) else { continue };
+        let (i0, i1) = inner.span(y, w).map_or((x1, x1), |(a, b)| (a.max(x0), b.min(x1).max(a.max(x0))));
         let row = image.span_mut(y, (0, w));
         for x in (x0..i0).chain(i1..x1) {
             let a = rect.coverage(x, y);
@@ -312,17 +438,16 @@ pub fn fill_aa(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3]) {
                 blend(&mut row[x * 3..x * 3 + 3], colour, a);
             }
         }
-        for px in row[i0 * 3..i1 * 3].chunks_exact_mut(3) {
-            px.copy_from_slice(&colour);
-        }
+        fill_span(&mut row[i0 * 3..i1 * 3], colour);
     }
 }
 
 /// Blends `colour` at alpha `alpha` into every pixel whose centre lies in
 /// `rect` (hard edges), first saving those pixels in `undo` when given.
 pub fn fill_hard(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3], alpha: u8, mut undo: Option<&mut Undo>) {
+    let scan = rect.scan(0.0);
     for y in rect.rows(0.0, image.height) {
-        if let Some(span) = rect.span(y, 0.0, image.width) {
+        if let Some(span) = scan.span(y, image.width) {
             if let Some(undo) = undo.as_deref_mut() {
                 undo.save(image, y, span);
             }
@@ -398,8 +523,9 @@ impl Undo {
 /// centre lies in `rect` (no anti-aliasing).
 pub fn stamp(mask: &mut [u8], width: usize, rect: &PlacedRect, id: u8) {
     let height = mask.len() / width.max(1);
+    let scan = rect.scan(0.0);
     for y in rect.rows(0.0, height) {
-        if let Some((x0, x1)) = rect.span(y, 0.0, width) {
+        if let Some((x0, x1)) = scan.span(y, width) {
             mask[y * width + x0..y * width + x1].fill(id);
         }
     }
@@ -452,6 +578,39 @@ mod tests {
             }
         }
         assert!(checked > 10_000);
+    }
+
+    #[test]
+    fn a_row_scan_finds_the_spans_that_span_finds() {
+        // Turned, axis-aligned, mirrored, tiny, huge, off the canvas and
+        // empty rectangles, grown and shrunk, on every row they reach.
+        let mut checked = 0;
+        let mut filled = 0;
+        for k in 0..400u32 {
+            let angle = k as f32 * 0.37 + if k % 7 == 0 { 0.0 } else { 0.013 };
+            let scale = [0.05, 1.0, 3.7, 40.0][k as usize % 4];
+            // Every third one upright: a quarter turn, exactly.
+            let (c, s) = match k % 3 {
+                0 => [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][(k / 3) as usize % 4],
+                _ => (angle.cos(), angle.sin()),
+            };
+            let (c, s) = (c * scale, s * scale);
+            let mirror = if k % 5 == 0 { -1.0 } else { 1.0 };
+            let shift = ((k * 37 % 90) as f32 - 15.0 + 0.25 * (k % 3) as f32, (k * 53 % 70) as f32 - 10.0);
+            let to_canvas = Transform::from_row(c, s, -s * mirror, c * mirror, shift.0, shift.1);
+            let half = (0.3 + (k % 9) as f32 * 0.45, 0.1 + (k % 4) as f32 * 0.3);
+            let Some(rect) = PlacedRect::new(to_canvas, (-half.0, half.0), (-half.1 * 0.5, half.1)) else { continue };
+            for grow in [0.0, 0.5 / rect.pixels_per_unit, -0.5 / rect.pixels_per_unit, -3.0] {
+                let scan = rect.scan(grow);
+                for row in 0..100 {
+                    let expected = rect.span(row, grow, 80);
+                    assert_eq!(scan.span(row, 80), expected, "rectangle {k}, grow {grow}, row {row}");
+                    checked += 1;
+                    filled += expected.is_some() as usize;
+                }
+            }
+        }
+        assert!(checked > 100_000 && filled > 10_000, "{checked} rows checked, {filled} with a span");
     }
 
     #[test]
