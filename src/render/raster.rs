@@ -74,12 +74,6 @@ impl PlacedRect {
         })
     }
 
-    /// The shape-frame point seen at canvas point `(px, py)`.
-    fn shape_point(&self, px: f32, py: f32) -> (f32, f32) {
-        let [sx, kx, tx, ky, sy, ty] = self.to_shape;
-        (sx * px + kx * py + tx, ky * px + sy * py + ty)
-    }
-
     /// The columns of row `row` (clipped to `0..width`) whose pixel centres
     /// lie in the rectangle grown by `grow` units on every side (shrunk when
     /// negative); `None` when there are none.
@@ -167,13 +161,22 @@ impl PlacedRect {
         centres_within(lo, hi, height)
     }
 
-    /// The box-filtered coverage (0 to 255) of the pixel at `(x, y)`.
-    fn coverage(&self, x: usize, y: usize) -> u8 {
-        let (u, v) = self.shape_point(x as f32 + 0.5, y as f32 + 0.5);
+    /// The box-filtered coverage (0 to 255) of the pixel at column `x` of
+    /// row `y`, for each `x`, from the shape-frame point at the pixel's
+    /// centre (`u = sx x + kx y + tx`, `v = ky x + sy y + ty`), with the
+    /// row's products worked out once.
+    fn coverage_in_row(&self, y: usize) -> impl Fn(usize) -> u8 + '_ {
+        let [sx, kx, tx, ky, sy, ty] = self.to_shape;
+        let py = y as u32 as f32 + 0.5;
+        let (kx_py, sy_py) = (kx * py, sy * py);
         let s = self.pixels_per_unit;
-        let along = |p: f32, (a, b): (f32, f32)| ((p - a) * s).min(0.5) + ((b - p) * s).min(0.5);
-        let c = along(u, self.x).clamp(0.0, 1.0) * along(v, self.y).clamp(0.0, 1.0);
-        (c * 255.0 + 0.5) as u8
+        let along = move |p: f32, (a, b): (f32, f32)| ((p - a) * s).min(0.5) + ((b - p) * s).min(0.5);
+        move |x| {
+            let px = x as u32 as f32 + 0.5;
+            let (u, v) = (sx * px + kx_py + tx, ky * px + sy_py + ty);
+            let c = along(u, self.x).clamp(0.0, 1.0) * along(v, self.y).clamp(0.0, 1.0);
+            (c * 255.0 + 0.5) as u8
+        }
     }
 }
 
@@ -361,15 +364,16 @@ pub fn fill_hard_union(image: &mut RgbImage, pair: [Option<ConvexQuad>; 2], colo
     let rows = pair.iter().flatten().map(|q| q.rows(h)).filter(|r| !r.is_empty());
     let (first, last) = rows.fold((usize::MAX, 0), |(a, b), r| (a.min(r.start), b.max(r.end)));
     let [a, b] = pair;
+    let light = SpanBlend::new(colour, alpha);
     for y in first..last {
         match (a.and_then(|q| q.span(y, w)), b.and_then(|q| q.span(y, w))) {
             (Some(one), Some(other)) => {
                 // Left to right; the second from where the first ended.
                 let (first, second) = if one <= other { (one, other) } else { (other, one) };
-                blend_span(image.span_mut(y, first), colour, alpha);
-                blend_span(image.span_mut(y, (second.0.max(first.1), second.1.max(first.1))), colour, alpha);
+                light.blend(image.span_mut(y, first));
+                light.blend(image.span_mut(y, (second.0.max(first.1), second.1.max(first.1))));
             }
-            (Some(only), None) | (None, Some(only)) => blend_span(image.span_mut(y, only), colour, alpha),
+            (Some(only), None) | (None, Some(only)) => light.blend(image.span_mut(y, only)),
             (None, None) => {}
         }
     }
@@ -398,15 +402,35 @@ fn blend_span(span: &mut [u8], colour: [u8; 3], a: u8) {
         }
         return;
     }
-    let pattern: [u32; 48] = std::array::from_fn(|i| terms[i % 3]);
-    let mut chunks = span.chunks_exact_mut(48);
-    for chunk in &mut chunks {
-        for (d, t) in chunk.iter_mut().zip(&pattern) {
+    SpanBlend::new(colour, a as u8).blend(span);
+}
+
+/// `colour` at one alpha, ready to blend over many spans (a headlight
+/// beam's rows): [`blend_span`]'s pattern built once.
+struct SpanBlend {
+    keep: u32,
+    /// The colour's terms, `colour * a + 127`, for 16 pixels.
+    pattern: [u32; 48],
+}
+
+impl SpanBlend {
+    fn new(colour: [u8; 3], a: u8) -> SpanBlend {
+        let terms = colour.map(|c| c as u32 * a as u32 + 127);
+        SpanBlend { keep: 255 - a as u32, pattern: std::array::from_fn(|i| terms[i % 3]) }
+    }
+
+    /// Blends over every pixel of `span` (RGB bytes).
+    fn blend(&self, span: &mut [u8]) {
+        let (keep, pattern) = (self.keep, &self.pattern);
+        let mut chunks = span.chunks_exact_mut(48);
+        for chunk in &mut chunks {
+            for (d, t) in chunk.iter_mut().zip(pattern) {
+                *d = ((t + *d as u32 * keep) / 255) as u8;
+            }
+        }
+        for (d, t) in chunks.into_remainder().iter_mut().zip(pattern) {
             *d = ((t + *d as u32 * keep) / 255) as u8;
         }
-    }
-    for (d, t) in chunks.into_remainder().iter_mut().zip(&pattern) {
-        *d = ((t + *d as u32 * keep) / 255) as u8;
     }
 }
 
@@ -432,8 +456,9 @@ pub fn fill_aa(image: &mut RgbImage, rect: &PlacedRect, colour: [u8; 3]) {
         let Some((x0, x1)) = outer.span(y, w) else { continue };
         let (i0, i1) = inner.span(y, w).map_or((x1, x1), |(a, b)| (a.max(x0), b.min(x1).max(a.max(x0))));
         let row = image.span_mut(y, (0, w));
+        let coverage = rect.coverage_in_row(y);
         for x in (x0..i0).chain(i1..x1) {
-            let a = rect.coverage(x, y);
+            let a = coverage(x);
             if a > 0 {
                 blend(&mut row[x * 3..x * 3 + 3], colour, a);
             }
@@ -484,8 +509,11 @@ pub(crate) fn copy_short(to: &mut [u8], from: &[u8]) {
 /// row of every streak's box.
 #[derive(Debug, Default)]
 pub struct Undo {
-    /// The saved bytes, span after span.
+    /// The saved bytes, span after span, in `bytes[..used]`. The buffer
+    /// keeps its length between frames (what lies past `used` is stale), so
+    /// saving a streak's row of a few bytes neither zeroes nor allocates.
     bytes: Vec<u8>,
+    used: usize,
     /// Where each span came from: its first byte in the image, its length.
     spans: Vec<(usize, usize)>,
 }
@@ -494,17 +522,20 @@ impl Undo {
     /// Saves the pixels `span` of row `y` before they change.
     fn save(&mut self, image: &RgbImage, y: usize, (x0, x1): Span) {
         let start = (y * image.width + x0) * 3;
-        let end = start + (x1 - x0) * 3;
-        self.spans.push((start, end - start));
-        let at = self.bytes.len();
-        self.bytes.resize(at + (end - start), 0);
-        copy_short(&mut self.bytes[at..], &image.data[start..end]);
+        let len = (x1 - x0) * 3;
+        self.spans.push((start, len));
+        let (at, end) = (self.used, self.used + len);
+        if end > self.bytes.len() {
+            self.bytes.resize((2 * end).max(4096), 0);
+        }
+        copy_short(&mut self.bytes[at..end], &image.data[start..start + len]);
+        self.used = end;
     }
 
     /// Puts every saved pixel back into `data`, the last saved first (so
     /// overlapping shapes unwind in order), and forgets them.
     pub fn restore(&mut self, data: &mut [u8]) {
-        let mut end = self.bytes.len();
+        let mut end = self.used;
         for &(start, len) in self.spans.iter().rev() {
             copy_short(&mut data[start..start + len], &self.bytes[end - len..end]);
             end -= len;
@@ -514,8 +545,14 @@ impl Undo {
 
     /// Forgets every saved pixel (the image was redrawn whole).
     pub fn clear(&mut self) {
-        self.bytes.clear();
+        self.used = 0;
         self.spans.clear();
+    }
+
+    /// Whether no pixel is saved.
+    #[cfg(test)]
+    fn is_empty(&self) -> bool {
+        self.used == 0 && self.spans.is_empty()
     }
 }
 
@@ -727,6 +764,6 @@ mod tests {
         assert!(changed > 60, "{changed} bytes drawn");
         undo.restore(&mut p.data);
         assert_eq!(p.data, original);
-        assert!(undo.spans.is_empty() && undo.bytes.is_empty(), "forgotten once restored");
+        assert!(undo.is_empty(), "forgotten once restored");
     }
 }
