@@ -137,6 +137,14 @@ impl PlacedRect {
         }
     }
 
+    /// [`PlacedRect::span`] kept out of line, so that the row scan's common
+    /// cases inline into the fills.
+    #[cold]
+    #[inline(never)]
+    fn span_cold(&self, row: usize, grow: f32, width: usize) -> Option<Span> {
+        self.span(row, grow, width)
+    }
+
     /// The rows (clipped to `0..height`) the rectangle grown by `grow` can
     /// reach.
     fn rows(&self, grow: f32, height: usize) -> std::ops::Range<usize> {
@@ -216,7 +224,7 @@ enum RowScan {
 impl RowScan {
     /// The columns of row `row` (clipped to `0..width`) whose pixel centres
     /// lie in the grown rectangle; `None` when there are none.
-    #[inline]
+    #[inline(always)]
     fn span(&self, row: usize, width: usize) -> Option<Span> {
         match *self {
             RowScan::Turned { slopes, row_terms, offsets, lower, upper } => {
@@ -238,7 +246,7 @@ impl RowScan {
                 let at_zero = row_term * yc + offset;
                 as_span(centres_within((ends.0 - at_zero) / slope, (ends.1 - at_zero) / slope, width))
             }
-            RowScan::General { rect, grow } => rect.span(row, grow, width),
+            RowScan::General { rect, grow } => rect.span_cold(row, grow, width),
         }
     }
 }
@@ -444,7 +452,7 @@ fn fill_span(span: &mut [u8], colour: [u8; 3]) {
     }
     let rest = chunks.into_remainder();
     let n = rest.len();
-    rest.copy_from_slice(&pattern[..n]);
+    copy_short(rest, &pattern[..n]);
 }
 
 /// Fills `rect` with the opaque `colour`, anti-aliased.
@@ -496,10 +504,16 @@ pub(crate) fn copy_short(to: &mut [u8], from: &[u8]) {
         }
         // The last 8 bytes again covers the rest, whatever the length.
         to[n - 8..].copy_from_slice(&from[n - 8..]);
-    } else {
-        for (t, f) in to.iter_mut().zip(from) {
-            *t = *f;
-        }
+    } else if n >= 4 {
+        // Two 4-byte copies that overlap (a loop here became a `memcpy`
+        // call: a pixel or two of a streak's row is the common case).
+        to[..4].copy_from_slice(&from[..4]);
+        to[n - 4..].copy_from_slice(&from[n - 4..]);
+    } else if n >= 2 {
+        to[..2].copy_from_slice(&from[..2]);
+        to[n - 2..].copy_from_slice(&from[n - 2..]);
+    } else if n == 1 {
+        to[0] = from[0];
     }
 }
 
@@ -648,6 +662,17 @@ mod tests {
             }
         }
         assert!(checked > 100_000 && filled > 10_000, "{checked} rows checked, {filled} with a span");
+    }
+
+    #[test]
+    fn short_copies_copy_every_byte_and_no_other() {
+        for n in 0..80 {
+            let from: Vec<u8> = (0..n).map(|i| (i * 7 + 1) as u8).collect();
+            let mut to = vec![0u8; n + 2];
+            copy_short(&mut to[1..n + 1], &from);
+            assert_eq!(&to[1..n + 1], &from[..], "{n} bytes");
+            assert_eq!((to[0], to[n + 1]), (0, 0), "{n} bytes: a neighbour changed");
+        }
     }
 
     #[test]
