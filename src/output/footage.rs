@@ -105,10 +105,12 @@ impl<'a> Footage<'a> {
             }
             return Ok(());
         }
-        let mut scene = renderer.scene(SceneLook::at_frame(plan, trajectories, 0));
+        // The scenario's background under its light and water is drawing
+        // too: it counts as rendering.
+        let mut scene = times.time(Stage::Render, || renderer.scene(SceneLook::at_frame(plan, trajectories, 0)));
         for frame in 0..trajectories.frames() {
             if frame > 0 && trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
-                scene = renderer.scene(SceneLook::at_frame(plan, trajectories, frame));
+                scene = times.time(Stage::Render, || renderer.scene(SceneLook::at_frame(plan, trajectories, frame)));
             }
             self.fill_sprites(&mut sprites, &mut head_sprites, frame);
             let frame = frame as u32;
