@@ -370,17 +370,23 @@ impl FrameWriter<'_, '_> {
             let owned;
             let (renderer, scene) = match camera_plan.kind {
                 CameraKind::Static { .. } => {
+                    // Drawing the background (once for a fixed camera, every
+                    // frame for a moving one) counts as rendering.
                     let (r, s) = fixed.get_or_insert_with(|| {
-                        let r = Renderer::new(map, camera);
-                        let s = r.scene(look);
-                        (r, s)
+                        self.times.time(Stage::Render, || {
+                            let r = Renderer::new(map, camera);
+                            let s = r.scene(look);
+                            (r, s)
+                        })
                     });
                     (&*r, &*s)
                 }
                 _ => {
-                    let r = Renderer::new(map, camera);
-                    let s = r.scene(look);
-                    owned = (r, s);
+                    owned = self.times.time(Stage::Render, || {
+                        let r = Renderer::new(map, camera);
+                        let s = r.scene(look);
+                        (r, s)
+                    });
                     (&owned.0, &owned.1)
                 }
             };
