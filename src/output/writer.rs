@@ -367,26 +367,23 @@ impl FrameWriter<'_, '_> {
             if trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 fixed = None;
             }
+            // Drawing the background (once for a fixed camera, every frame
+            // for a moving one) counts as rendering.
+            let background = || {
+                self.times.time(Stage::Render, || {
+                    let r = Renderer::new(map, camera);
+                    let s = r.scene(look);
+                    (r, s)
+                })
+            };
             let owned;
             let (renderer, scene) = match camera_plan.kind {
                 CameraKind::Static { .. } => {
-                    // Drawing the background (once for a fixed camera, every
-                    // frame for a moving one) counts as rendering.
-                    let (r, s) = fixed.get_or_insert_with(|| {
-                        self.times.time(Stage::Render, || {
-                            let r = Renderer::new(map, camera);
-                            let s = r.scene(look);
-                            (r, s)
-                        })
-                    });
+                    let (r, s) = fixed.get_or_insert_with(background);
                     (&*r, &*s)
                 }
                 _ => {
-                    owned = self.times.time(Stage::Render, || {
-                        let r = Renderer::new(map, camera);
-                        let s = r.scene(look);
-                        (r, s)
-                    });
+                    owned = background();
                     (&owned.0, &owned.1)
                 }
             };

@@ -391,9 +391,9 @@ pub fn fill_hard_union(image: &mut RgbImage, pair: [Option<ConvexQuad>; 2], colo
 
 /// `colour` at alpha `a` over the opaque RGB pixel `dst`.
 fn blend(dst: &mut [u8], colour: [u8; 3], a: u8) {
-    let (a, keep) = (a as u32, 255 - a as u32);
+    let (terms, keep) = (blend_terms(colour, a), 255 - a as u32);
     for k in 0..3 {
-        dst[k] = ((colour[k] as u32 * a + dst[k] as u32 * keep + 127) / 255) as u8;
+        dst[k] = blend_byte(terms[k], dst[k], keep);
     }
 }
 
@@ -401,18 +401,31 @@ fn blend(dst: &mut [u8], colour: [u8; 3], a: u8) {
 /// through one pattern of the colour's terms, which the compiler turns into
 /// vector arithmetic (a beam blends thousands of pixels a frame).
 fn blend_span(span: &mut [u8], colour: [u8; 3], a: u8) {
-    let (a, keep) = (a as u32, 255 - a as u32);
-    let terms = colour.map(|c| c as u32 * a + 127);
     if span.len() < 48 {
         // A rain streak's few pixels: building the pattern costs more.
+        let (terms, keep) = (blend_terms(colour, a), 255 - a as u32);
         for px in span.chunks_exact_mut(3) {
             for k in 0..3 {
-                px[k] = ((terms[k] + px[k] as u32 * keep) / 255) as u8;
+                px[k] = blend_byte(terms[k], px[k], keep);
             }
         }
         return;
     }
-    SpanBlend::new(colour, a as u8).blend(span);
+    SpanBlend::new(colour, a).blend(span);
+}
+
+/// `colour`'s terms at alpha `a` (out of 255): `colour * a + 127` per
+/// channel, the part of a blend that does not depend on the pixel.
+#[inline(always)]
+fn blend_terms(colour: [u8; 3], a: u8) -> [u32; 3] {
+    colour.map(|c| c as u32 * a as u32 + 127)
+}
+
+/// Byte `d` under a colour's `term` ([`blend_terms`]), `keep` = 255 - a:
+/// `(colour * a + d * (255 - a) + 127) / 255`.
+#[inline(always)]
+fn blend_byte(term: u32, d: u8, keep: u32) -> u8 {
+    ((term + d as u32 * keep) / 255) as u8
 }
 
 /// `colour` at one alpha, ready to blend over many spans (a headlight
@@ -425,7 +438,7 @@ struct SpanBlend {
 
 impl SpanBlend {
     fn new(colour: [u8; 3], a: u8) -> SpanBlend {
-        let terms = colour.map(|c| c as u32 * a as u32 + 127);
+        let terms = blend_terms(colour, a);
         SpanBlend { keep: 255 - a as u32, pattern: std::array::from_fn(|i| terms[i % 3]) }
     }
 
@@ -434,12 +447,12 @@ impl SpanBlend {
         let (keep, pattern) = (self.keep, &self.pattern);
         let mut chunks = span.chunks_exact_mut(48);
         for chunk in &mut chunks {
-            for (d, t) in chunk.iter_mut().zip(pattern) {
-                *d = ((t + *d as u32 * keep) / 255) as u8;
+            for (d, &t) in chunk.iter_mut().zip(pattern) {
+                *d = blend_byte(t, *d, keep);
             }
         }
-        for (d, t) in chunks.into_remainder().iter_mut().zip(pattern) {
-            *d = ((t + *d as u32 * keep) / 255) as u8;
+        for (d, &t) in chunks.into_remainder().iter_mut().zip(pattern) {
+            *d = blend_byte(t, *d, keep);
         }
     }
 }
