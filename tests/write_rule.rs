@@ -324,3 +324,102 @@ fn a_sweep_made_without_images_is_not_kept_by_a_run_with_images() {
     let summary: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
     assert_eq!(summary["kept"], 3, "{summary}");
 }
+
+#[test]
+fn rewriting_a_damaged_scenario_never_removes_the_users_files_in_it() {
+    let dir = fresh_dir("rule-damaged-user-file");
+    let data = toy_dataset(&dir);
+    let spec = dir.join("spec.json");
+    let scenario = data.join("cars04_edges50/train/00000");
+    let notes = scenario.join("notes.txt");
+    std::fs::write(&notes, "the user's").unwrap();
+    let mut poses = std::fs::OpenOptions::new().append(true).open(scenario.join("poses.csv")).unwrap();
+    poses.write_all(b"damage\n").unwrap();
+    drop(poses);
+    // (The run stops there, its manifest saying the dataset is unfinished.)
+    let group = data.join("cars04_edges50");
+    let before = hash_tree(&group);
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert_refused(&output, "path(s) causalcity did not write");
+    assert!(stderr(&output).contains(s(&notes)), "names the file: {}", stderr(&output));
+    assert_eq!(hash_tree(&group), before, "nothing was replaced");
+
+    // Without the user's file, the damaged scenario is written again.
+    std::fs::remove_file(&notes).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_valid(&data);
+}
+
+#[test]
+fn a_linked_split_folder_is_never_written_through_by_gen_merge_or_pack() {
+    let dir = fresh_dir("rule-linked-split");
+    let data = toy_dataset(&dir);
+    let spec = dir.join("spec.json");
+    // Another dataset's val folder, linked in place of this one's.
+    let other = dir.join("other");
+    let other_specs = dir.join("other-spec");
+    std::fs::create_dir_all(&other_specs).unwrap();
+    let other_spec = write_spec(&other_specs, &toy_spec("other", &[(4, 0.5)], (1, 1, 1), 30));
+    gen_ok(&other_spec, &other, &["--quiet", "--no-images"]);
+    let other_before = hash_tree(&other);
+    let val = data.join("cars04_edges50/val");
+    std::fs::remove_dir_all(&val).unwrap();
+    std::os::unix::fs::symlink(other.join("cars04_edges50/val"), &val).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert_refused(&output, "never writes through a link");
+    assert!(stderr(&output).contains(s(&val)), "names the link: {}", stderr(&output));
+
+    // merge into a shard folder whose split is a link.
+    let (a, b) = (dir.join("shard0"), dir.join("shard1"));
+    gen_ok(&spec, &a, &["--quiet", "--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &b, &["--quiet", "--no-images", "--shard", "1/2"]);
+    let linked = a.join("cars04_edges50/test");
+    let _ = std::fs::remove_dir_all(&linked);
+    std::os::unix::fs::symlink(other.join("cars04_edges50/test"), &linked).unwrap();
+    assert_refused(&run(&["merge", "--out", s(&a), s(&b)]), "never writes through a link");
+
+    // pack resuming into a folder whose split is a link.
+    std::fs::remove_file(&val).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let packed = dir.join("packed");
+    assert!(run(&["pack", "--quiet", "--out", s(&packed), s(&data)]).status.success());
+    let train = packed.join("cars04_edges50/train");
+    std::fs::remove_dir_all(&train).unwrap();
+    std::os::unix::fs::symlink(other.join("cars04_edges50/train"), &train).unwrap();
+    assert_refused(&run(&["pack", "--quiet", "--out", s(&packed), s(&data)]), "never writes through a link");
+    assert_eq!(hash_tree(&other), other_before, "the other dataset is as it was");
+}
+
+#[test]
+fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
+    let dir = fresh_dir("rule-run-folder");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let text = std::fs::read_to_string(&example).unwrap();
+    let name = common::read_json(&example)[0]["Name"].as_str().unwrap().to_string();
+    // The scenario file kept inside the folder its scenario would be written to.
+    let out = dir.join("out");
+    let folder = out.join(&name);
+    std::fs::create_dir_all(&folder).unwrap();
+    let input = folder.join("scenario-file.json");
+    std::fs::write(&input, &text).unwrap();
+    let output = run(&["run", "--no-images", "--scenario", s(&input), "--out", s(&out)]);
+    assert_refused(&output, "path(s) causalcity did not write");
+    assert_eq!(std::fs::read_to_string(&input).unwrap(), text, "its input is untouched");
+
+    // A rerun into its own output replaces its own folder; a user's file
+    // inside a counterfactual's factual/ stops the rerun.
+    let cf = dir.join("cf");
+    let args = ["counterfactual", "--no-images", "--scenario", s(&example), "--out", s(&cf)];
+    assert!(run(&args).status.success());
+    assert!(run(&args).status.success(), "a rerun replaces what it wrote");
+    let notes = cf.join(&name).join("factual/notes.txt");
+    std::fs::write(&notes, "the user's").unwrap();
+    let before = hash_tree(&cf);
+    assert_refused(&run(&args), "path(s) causalcity did not write");
+    assert_eq!(hash_tree(&cf), before, "nothing was replaced");
+    // `run` into the counterfactual's folder would replace the pair.
+    assert_refused(&run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]), "summary.json");
+    assert_eq!(hash_tree(&cf), before, "nothing was replaced");
+}

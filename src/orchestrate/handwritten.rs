@@ -10,7 +10,9 @@
 //! the distance between a car's factual and counterfactual positions;
 //! `summary.json` lists the cars it moved at all (the effect set).
 
-use super::run::{keep_networks, load_spec, scenario_writer, stop_flag, write_simulated, GenError, TownWriters};
+use super::run::{
+    keep_networks, load_spec, refuse_linked_splits, scenario_writer, stop_flag, write_simulated, GenError, TownWriters,
+};
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::dataset::SWEEP_RECORD;
 use crate::map::CityMap;
@@ -156,8 +158,15 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
                 .ok_or(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() })?;
             let path = out.join(&s.name);
             let times = StageTimes::default();
-            let bytes =
-                write_simulated(&writer, &s.plan, &trajectories, None, path.clone(), &mut writer.buffers(), &times)?;
+            let bytes = write_simulated(
+                &writer,
+                &s.plan,
+                &trajectories,
+                None,
+                (&out, path.clone()),
+                &mut writer.buffers(),
+                &times,
+            )?;
             let warnings = warnings(s, &trajectories);
             Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
@@ -191,7 +200,7 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
-            write_pair(&s.expansion, &writer, &s.name, (factual, counterfactual), None, &out.join(&s.name))
+            write_pair(&s.expansion, &writer, &s.name, (factual, counterfactual), None, (&out, &out.join(&s.name)))
         })
         .collect::<Result<Vec<_>, GenError>>()
         .map_err(RunError::Write)
@@ -268,27 +277,44 @@ pub fn simulate_pair(
     Some(SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary })
 }
 
+/// What a pair folder holds when `writer` writes the pair (`factual`,
+/// `counterfactual`): paths relative to it.
+fn pair_files(writer: &ScenarioWriter, (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan)) -> Vec<String> {
+    let mut names: Vec<String> = PAIR_FILES.iter().map(|n| n.to_string()).collect();
+    for (side, plan) in [("factual", factual), ("counterfactual", counterfactual)] {
+        let layout = writer.layout(plan);
+        names.extend(layout.files().into_iter().chain(layout.folders()).map(|n| format!("{side}/{n}")));
+    }
+    names
+}
+
+/// The files and folders at a pair folder's top level.
+const PAIR_FILES: [&str; 4] = ["factual", "counterfactual", "divergence.csv", "summary.json"];
+
 /// Simulates a factual / counterfactual pair (the counterfactual's extra
-/// interventions come after the factual's) and writes it into `folder`.
+/// interventions come after the factual's) and writes it into `folder`
+/// inside the output folder `root`.
 fn write_pair(
     expansion: &Expansion,
     writer: &ScenarioWriter,
     name: &str,
     (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan),
     record: Option<InterventionRecord>,
-    folder: &Path,
+    (root, folder): (&Path, &Path),
 ) -> Result<PairSummary, GenError> {
+    let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
+    crate::output::refuse_links_below(root, folder).map_err(refused)?;
     let mut pair = simulate_pair(expansion, name, factual, counterfactual, stop_flag())
         .ok_or(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() })?;
     pair.summary.intervention = record;
     let (mut buffers, times) = (writer.buffers(), StageTimes::default());
-    write_simulated(writer, factual, &pair.factual, None, folder.join("factual"), &mut buffers, &times)?;
+    write_simulated(writer, factual, &pair.factual, None, (root, folder.join("factual")), &mut buffers, &times)?;
     write_simulated(
         writer,
         counterfactual,
         &pair.counterfactual,
         None,
-        folder.join("counterfactual"),
+        (root, folder.join("counterfactual")),
         &mut buffers,
         &times,
     )?;
@@ -386,6 +412,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         .map_err(|e| RunError::Write(GenError::Threads { threads, reason: e.to_string() }))?;
     let describe = format!("counterfactual --sweep {}", options.spec_path.display());
     let _claim = claim(&out, Writer::Sweep, &describe).map_err(GenError::Claim)?;
+    refuse_linked_splits(&out, &expansion.spec)?;
     let record = |pairs: Option<usize>| {
         let mut record = serde_json::json!({
             "format": "causalcity-counterfactual-sweep/1",
@@ -464,10 +491,6 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             bar.inc();
             return Ok(summary);
         }
-        if folder.exists() {
-            std::fs::remove_dir_all(&folder)
-                .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
-        }
         let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
@@ -476,7 +499,18 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         let (intervention, record) = random_intervention(&plan, &options.kinds);
         counterfactual.interventions.push(intervention);
         let pair = (&plan, &counterfactual);
-        let summary = write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), &folder)?;
+        // An incomplete pair is written again from scratch: removed first,
+        // unless the way to it is a link or it holds what no run wrote.
+        let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
+        crate::output::refuse_links_below(&out, &folder).map_err(refused)?;
+        if std::fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
+            let ours = pair_files(writers.of(&plan), pair);
+            crate::output::refuse_foreign(&folder, &ours, "a new pair folder").map_err(refused)?;
+            std::fs::remove_dir_all(&folder)
+                .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
+        }
+        let summary =
+            write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), (&out, &folder))?;
         bar.inc();
         Ok(summary)
     };

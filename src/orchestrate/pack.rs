@@ -36,6 +36,7 @@ pub fn pack_dataset(
     let opened = Dataset::open_complete(dataset).map_err(GenError::Input)?;
     let _claim = claim_out(dataset, opened.record.packing(), out, Writer::Pack, ("dataset", "scenarios", "scenario"))?;
     let spec = opened.spec();
+    super::run::refuse_linked_splits(out, spec)?;
     let (products, packing) = (opened.record.products(), Packing::Tar { per_tar: per_tar.max(1) });
     let manifest_path = out.join("manifest.json");
     if let Some(existing) = ManifestRecord::read(&manifest_path).map_err(GenError::Manifest)? {
@@ -83,6 +84,7 @@ fn pack_sweep(
     let start = Instant::now();
     let input = &sweep.dir;
     let _claim = claim_out(input, sweep.packing, out, Writer::Sweep, ("sweep", "pairs", "pair"))?;
+    super::run::refuse_linked_splits(out, &sweep.expansion.spec)?;
     // The input's record, as the packed sweep's: the same fields, and how
     // it is packed. (Only a finished sweep opens.)
     let path = input.join(SWEEP_RECORD);

@@ -280,6 +280,20 @@ impl TownWriters {
     }
 }
 
+/// Refuses a link at any group or split folder of `spec`'s in `out`
+/// (checked before anything is written or moved): scenarios, pairs and
+/// packs are written below them, and never through a link. The output
+/// folder's top level is its claim's to check.
+pub(crate) fn refuse_linked_splits(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
+    for group in &spec.groups {
+        for split in crate::spec::Split::ALL {
+            let folder = out.join(group.name()).join(split.name());
+            crate::output::refuse_links_below(out, &folder).map_err(|why| GenError::Input(why.to_string()))?;
+        }
+    }
+    Ok(())
+}
+
 /// Writes a simulated scenario into `target` through `writer`, stopping
 /// when the run is interrupted.
 pub(crate) fn write_simulated(
@@ -287,13 +301,14 @@ pub(crate) fn write_simulated(
     plan: &ScenarioPlan,
     trajectories: &Trajectories,
     effects: Option<&EffectReport>,
-    target: PathBuf,
+    target: (&Path, PathBuf),
     buffers: &mut WriterBuffers,
     times: &StageTimes,
 ) -> Result<u64, GenError> {
     writer.write(plan, trajectories, effects, target, buffers, &STOP, times).map_err(|e| match e {
         ScenarioWriteError::Write(error) => GenError::Write { error, done: 0 },
         ScenarioWriteError::Interrupted => GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() },
+        ScenarioWriteError::Refused(why) => GenError::Input(why.to_string()),
     })
 }
 
@@ -606,6 +621,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         None => format!("gen {}", options.spec_path.display()),
     };
     let _claim = claim(&out, Writer::Gen { shard }, &describe).map_err(GenError::Claim)?;
+    refuse_linked_splits(&out, &expansion.spec)?;
 
     // One dataset per folder: same spec, tool version and image setting;
     // the shards of one folder split it the same way.
@@ -810,7 +826,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         if intact {
             skipped.fetch_add(1, Ordering::Relaxed);
         } else {
-            let written_bytes = write_scenario(expansion, &writer, key, target, buffers, &times)?;
+            let written_bytes = write_scenario(expansion, &writer, key, (&out, target), buffers, &times)?;
             if packs.is_none() {
                 bytes.fetch_add(written_bytes, Ordering::Relaxed);
             }
@@ -965,7 +981,7 @@ fn check_space(
     let made: Vec<PathBuf> =
         target.ancestors().skip(1).take_while(|a| *a != out && !a.exists()).map(Path::to_path_buf).collect();
     let key = sequence.key(first);
-    let bytes = write_scenario(expansion, writer, &key, target.clone(), &mut writer.buffers(), times)?;
+    let bytes = write_scenario(expansion, writer, &key, (out, target.clone()), &mut writer.buffers(), times)?;
     let needed = bytes.saturating_mul(pending - 1).saturating_add(SPACE_MARGIN_BYTES);
     let left = crate::output::free_disk_bytes(out).unwrap_or(available);
     if needed <= left {
@@ -985,7 +1001,7 @@ fn write_scenario(
     expansion: &Expansion,
     writers: &TownWriters,
     key: &ScenarioKey,
-    target: PathBuf,
+    target: (&Path, PathBuf),
     buffers: &mut WriterBuffers,
     times: &StageTimes,
 ) -> Result<u64, GenError> {

@@ -251,6 +251,107 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     written
 }
 
+/// Why causalcity will not write a folder: the way to it, or the folder
+/// itself, is a link (writing through it could land anywhere), or the
+/// folder holds files causalcity did not write, which replacing it would
+/// remove. The user's to resolve (exit status 2); nothing is written or
+/// removed.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Refused(pub String);
+
+/// Refuses a link at `path` or at any folder between `root` (the output
+/// folder, whose own links its claim checks) and it. Components that do
+/// not exist yet end the check: nothing below them exists either.
+pub fn refuse_links_below(root: &Path, path: &Path) -> Result<(), Refused> {
+    let Ok(rest) = path.strip_prefix(root) else { return Ok(()) };
+    let mut at = root.to_path_buf();
+    for part in rest.components() {
+        at.push(part);
+        match fs::symlink_metadata(&at) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let to = fs::read_link(&at).map_or_else(|_| "somewhere".to_string(), |t| t.display().to_string());
+                return Err(Refused(format!(
+                    "{} is a link (to {to}) inside the output folder {}: causalcity never writes through a link. \
+                     Put a real folder there (or remove the link) and rerun",
+                    at.display(),
+                    root.display()
+                )));
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    Ok(())
+}
+
+/// Refuses to replace the folder `dir` (when there is one) if it holds
+/// anything causalcity did not write there: every file must be listed in
+/// a `checksums.sha256` of `dir` or of a folder in it, or be one of `ours`
+/// (paths relative to `dir`, `/`-separated: what the rewrite writes), and
+/// every empty folder one of `ours` or a folder of a listed file. `what`
+/// names what would replace it in the message (`a new scenario folder`).
+pub fn refuse_foreign(dir: &Path, ours: &[String], what: &str) -> Result<(), Refused> {
+    let mut known: std::collections::HashSet<String> = ours.iter().cloned().collect();
+    let mut foreign = Vec::new();
+    let mut stack = vec![(dir.to_path_buf(), String::new())];
+    while let Some((folder, prefix)) = stack.pop() {
+        // A listing's names count as ours, with their folders.
+        if let Ok(listing) = fs::read_to_string(folder.join(CHECKSUMS)) {
+            for name in listing.lines().filter_map(|line| line.split_once("  ").map(|(_, n)| n)) {
+                let full = format!("{prefix}{name}");
+                let mut parent = full.as_str();
+                while let Some((up, _)) = parent.rsplit_once('/') {
+                    known.insert(up.to_string());
+                    parent = up;
+                }
+                known.insert(full);
+            }
+        }
+        let entries = match fs::read_dir(&folder) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(Refused(format!("cannot read {}: {e}", folder.display()))),
+        };
+        let mut empty = true;
+        for entry in entries {
+            let entry = entry.map_err(|e| Refused(format!("cannot read {}: {e}", folder.display())))?;
+            empty = false;
+            let file_name = entry.file_name().to_string_lossy().into_owned();
+            // Leftovers of an interrupted write of ours, which the rewrite
+            // clears.
+            if file_name.starts_with(PARTIAL_PREFIX) || file_name.ends_with(".partial") {
+                continue;
+            }
+            let name = format!("{prefix}{file_name}");
+            let real_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+            if real_dir {
+                stack.push((entry.path(), format!("{name}/")));
+            } else if !known.contains(&name) && name.rsplit('/').next() != Some(CHECKSUMS) {
+                foreign.push(entry.path());
+            }
+        }
+        let own = prefix.trim_end_matches('/');
+        if empty && !own.is_empty() && !known.contains(own) {
+            foreign.push(folder);
+        }
+    }
+    if foreign.is_empty() {
+        return Ok(());
+    }
+    foreign.sort();
+    let shown: Vec<String> = foreign.iter().take(5).map(|p| format!("  {}", p.display())).collect();
+    let more = foreign.len().saturating_sub(shown.len());
+    Err(Refused(format!(
+        "{} would be replaced by {what}, but it holds {} path(s) causalcity did not write:\n{}{}\n\
+         Nothing was replaced. Move them out of it (or use another --out), then rerun.",
+        dir.display(),
+        foreign.len(),
+        shown.join("\n"),
+        if more > 0 { format!("\n  ... and {more} more") } else { String::new() }
+    )))
+}
+
 /// Checks a finished scenario folder against its `checksums.sha256`: the
 /// listing is there and every file it lists is there with its hash. Says
 /// what is wrong otherwise (a rerun rewrites such a scenario; `merge`

@@ -27,7 +27,7 @@ use crate::timing::{Stage, StageTimes};
 use crate::world::effects::EffectReport;
 use crate::world::{CarState, Trajectories};
 use glam::DVec2;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -40,6 +40,10 @@ pub enum ScenarioWriteError {
     /// The stop flag was raised; nothing of the scenario is kept.
     #[error("interrupted")]
     Interrupted,
+    /// The way to the folder is a link, or the folder there holds what
+    /// causalcity did not write; nothing is written.
+    #[error(transparent)]
+    Refused(#[from] super::Refused),
 }
 
 /// Writes scenarios of one run; shared by the run's threads.
@@ -105,22 +109,30 @@ impl ScenarioWriter {
         )
     }
 
-    /// Writes a simulated scenario into the folder `target`, atomically;
-    /// returns the bytes written. Checks `stop` every frame. `effects` are
-    /// the scenario's measured interventional effects, written when this
-    /// writer's products ask for them.
+    /// Writes a simulated scenario into the folder `target` inside the
+    /// output folder `root`, atomically; returns the bytes written. Checks
+    /// `stop` every frame. `effects` are the scenario's measured
+    /// interventional effects, written when this writer's products ask for
+    /// them. Refuses a link on the way from `root`, and a folder at
+    /// `target` that holds files causalcity did not write (a rewrite
+    /// replaces the folder whole).
     #[allow(clippy::too_many_arguments)]
     pub fn write(
         &self,
         plan: &ScenarioPlan,
         trajectories: &Trajectories,
         effects: Option<&EffectReport>,
-        target: PathBuf,
+        (root, target): (&Path, PathBuf),
         buffers: &mut WriterBuffers,
         stop: &AtomicBool,
         times: &StageTimes,
     ) -> Result<u64, ScenarioWriteError> {
         let layout = self.layout(plan);
+        super::refuse_links_below(root, &target)?;
+        if std::fs::symlink_metadata(&target).is_ok_and(|m| m.is_dir()) {
+            let ours: Vec<String> = layout.files().into_iter().chain(layout.folders()).collect();
+            super::refuse_foreign(&target, &ours, "a new scenario folder")?;
+        }
         let camera = &self.camera;
         let mut dir = ScenarioDir::begin(target, &layout, self.fsync, times)?;
         let model = crate::world::model_name(&plan.world);
