@@ -121,6 +121,14 @@ pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<
     }
     let dataset = Dataset::open_complete(dir).map_err(Error::Input)?;
     dataset.require_graph(graph).map_err(Error::Input)?;
+    if dataset.spec().frames < 2 {
+        return Err(Error::Input(format!(
+            "{}: its scenarios have {} frame, and following needs a path: the baseline scores scenarios of 2 frames \
+             or more",
+            dir.display(),
+            dataset.spec().frames
+        )));
+    }
     let duration = dataset.spec().frames as f64 * dataset.spec().frame_interval();
     let lags: Vec<f64> = match max_lag_s {
         Some(lag) => vec![lag],
@@ -269,7 +277,10 @@ pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[
     if frames < 2 {
         return vec![f64::INFINITY; max_lags.len()];
     }
-    let longest = max_lags.iter().copied().max().unwrap_or(1).max(1);
+    // A lag beyond the scenario's start reaches the same positions as one
+    // back to it (frame `t` looks at most `frames - 1` back).
+    let max_lags: Vec<usize> = max_lags.iter().map(|&lag| lag.clamp(1, frames - 1)).collect();
+    let longest = max_lags.iter().copied().max().unwrap_or(1);
     let mut totals = vec![0.0; max_lags.len()];
     let mut nearest_within = vec![f64::INFINITY; longest + 1];
     for (t, &[fx, fy]) in follower.iter().enumerate().take(frames).skip(1) {
@@ -282,8 +293,8 @@ pub fn following_scores(leader: &[[f64; 2]], follower: &[[f64; 2]], max_lags: &[
             }
             *within = nearest;
         }
-        for (total, &lag) in totals.iter_mut().zip(max_lags) {
-            *total += nearest_within[lag.max(1)].sqrt();
+        for (total, &lag) in totals.iter_mut().zip(&max_lags) {
+            *total += nearest_within[lag].sqrt();
         }
     }
     totals.into_iter().map(|total| total / (frames - 1) as f64).collect()

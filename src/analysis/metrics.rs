@@ -118,7 +118,8 @@ pub fn best_threshold(pairs: &[ScoredPair]) -> Option<f64> {
             (best_f1, best_k) = (f1, k);
         }
     }
-    let below = sorted[best_k - 1].0;
+    // No finite score (a scenario too short to score): nothing to separate.
+    let below = sorted.get(best_k.checked_sub(1)?)?.0;
     Some(match sorted.get(best_k) {
         Some(&(above, _)) => (below + above) / 2.0,
         None => below * 1.5 + 1e-9,

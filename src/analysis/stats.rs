@@ -459,10 +459,10 @@ fn red_approaches(
 
 fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, String> {
     let path = dir.join("scenario.json");
-    let scenario: serde_json::Value = std::fs::read(&path)
-        .map_err(|e| e.to_string())
-        .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    // Checked as every reader checks it (car ids, edges, frames).
+    crate::dataset::ScenarioSummary::parse(&bytes, &path, crate::dataset::GraphKind::Designed)?;
+    let scenario: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
     // The scenario's town (a dataset of several names it), else the only one.
     let map: &CityMap = match scenario["town"].as_str() {
         Some(name) => {

@@ -277,6 +277,8 @@ fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, Str
     let root = if in_shards { folder.parent().unwrap_or(folder) } else { folder };
     spec.read_networks_in_dataset(root)
         .map_err(|e| format!("{}: the network its spec names is missing or unreadable: {e}", path.display()))?;
+    // A hand-edited record is checked as a spec file is (frames, sizes, ...).
+    spec.validate().map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
     Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 
@@ -377,6 +379,32 @@ impl ScenarioSummary {
             GraphKind::Direct => summary.direct_edges.clone(),
         }
         .ok_or_else(|| format!("{}: no `{}` (it was written without effects)", path.display(), graph.field()))?;
+        // What a spec allows, so that readers' tables stay the size of a
+        // real scenario however the file was edited.
+        if !(1..=crate::spec::MAX_FRAMES).contains(&summary.frames) {
+            return Err(format!(
+                "{}: frames {} is not a scenario's: use 1 to {}",
+                path.display(),
+                summary.frames,
+                crate::spec::MAX_FRAMES
+            ));
+        }
+        let interval = summary.frame_interval;
+        if !(interval.is_finite() && interval > 0.0 && interval <= crate::spec::MAX_FRAME_INTERVAL_S) {
+            return Err(format!(
+                "{}: frame_interval {interval} is not a scenario's: seconds above 0 and at most {}",
+                path.display(),
+                crate::spec::MAX_FRAME_INTERVAL_S
+            ));
+        }
+        if summary.cars.len() > crate::spec::MAX_CARS as usize {
+            return Err(format!(
+                "{}: {} cars is more than a scenario has (at most {})",
+                path.display(),
+                summary.cars.len(),
+                crate::spec::MAX_CARS
+            ));
+        }
         let cars = summary.cars.len() as u32;
         if summary.cars.iter().enumerate().any(|(i, c)| c.id != i as u32)
             || summary.edges.iter().chain(&summary.graph).any(|e| e[0] >= cars || e[1] >= cars)
@@ -385,6 +413,23 @@ impl ScenarioSummary {
         }
         Ok(summary)
     }
+}
+
+/// Fewest bytes a row of poses.csv takes.
+const MIN_POSE_ROW_BYTES: u64 = 26;
+
+/// Refuses a pose log at `path` too short to hold `frames` x `cars` rows
+/// (a scenario.json edited to claim more), before any memory is set aside
+/// for them.
+pub(crate) fn poses_fit(path: &Path, frames: usize, cars: usize) -> Result<(), String> {
+    let bytes = std::fs::metadata(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?.len();
+    if (frames as u64).saturating_mul(cars as u64).saturating_mul(MIN_POSE_ROW_BYTES) > bytes {
+        return Err(format!(
+            "{frames} frames x {cars} cars (its scenario.json) are more rows than {} ({bytes} bytes) can hold",
+            path.display()
+        ));
+    }
+    Ok(())
 }
 
 /// One row of poses.csv (the columns readers use).
@@ -415,6 +460,7 @@ impl PoseLog {
     /// Reads `dir/poses.csv`, which must hold exactly `frames` x `cars` rows.
     pub fn read(dir: &Path, frames: usize, cars: usize) -> Result<PoseLog, String> {
         let path = dir.join("poses.csv");
+        poses_fit(&path, frames, cars)?;
         let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let mut poses = vec![Pose::default(); frames * cars];
         let mut filled = vec![false; frames * cars];

@@ -25,20 +25,10 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
     let value: serde_json::Value =
         serde_json::from_slice(&scenario_json).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let (frames, cars) = (summary.frames as usize, summary.cars.len());
-    // Every pose row takes at least this many bytes: a scenario.json that
-    // claims more rows than poses.csv can hold is refused before any
-    // memory is set aside for them.
-    const MIN_POSE_ROW_BYTES: u64 = 26;
+    // A scenario.json that claims more rows than poses.csv can hold is
+    // refused before any memory is set aside for them.
     let poses_path = dir.join("poses.csv");
-    let poses_bytes =
-        std::fs::metadata(&poses_path).map_err(|e| format!("cannot read {}: {e}", poses_path.display()))?.len();
-    if (frames as u64).saturating_mul(cars as u64).saturating_mul(MIN_POSE_ROW_BYTES) > poses_bytes {
-        return Err(format!(
-            "{}: says {frames} frames x {cars} cars, more rows than {} ({poses_bytes} bytes) can hold",
-            json_path.display(),
-            poses_path.display()
-        ));
-    }
+    super::poses_fit(&poses_path, frames, cars)?;
     if let Some(car) = summary.cars.iter().enumerate().find(|(i, c)| c.id as usize != *i) {
         return Err(format!(
             "{}: cars[{}] has id {}; ids must be 0, 1, ... in order",

@@ -276,7 +276,10 @@ impl std::error::Error for SpecError {}
 pub const MAX_CARS: u32 = 255;
 const MAX_IMAGE_SIDE: u32 = 8192;
 const MIN_IMAGE_SIDE: u32 = 32;
-const MAX_FRAMES: u32 = 100_000;
+/// Most frames a scenario has.
+pub const MAX_FRAMES: u32 = 100_000;
+/// Most seconds between two frames.
+pub const MAX_FRAME_INTERVAL_S: f64 = 10.0;
 const MAX_SCENARIOS_PER_SPLIT: u32 = 10_000_000;
 const MAX_ACTIONS: u32 = 100;
 
@@ -353,10 +356,13 @@ impl DatasetSpec {
         }
         range("frames", self.frames, 1, MAX_FRAMES)?;
         let interval = self.frame_interval();
-        if !(interval.is_finite() && interval > 0.0 && interval <= 10.0) {
+        if !(interval.is_finite() && interval > 0.0 && interval <= MAX_FRAME_INTERVAL_S) {
             return Err(SpecError::new(
                 "frame_interval",
-                format!("{} is not allowed: seconds between frames, above 0 and at most 10", Shown(interval)),
+                format!(
+                    "{} is not allowed: seconds between frames, above 0 and at most {MAX_FRAME_INTERVAL_S}",
+                    Shown(interval)
+                ),
             ));
         }
         range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;

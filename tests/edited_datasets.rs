@@ -1,0 +1,98 @@
+//! Readers given a dataset whose files were edited by hand, or asked for
+//! more than a scenario holds: a clear error naming the file and what is
+//! wrong, never a panic (exit 101) or an allocation that aborts (134).
+
+mod common;
+
+use common::{city_spec, fresh_dir, gen_ok, run, write_spec};
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// Exit `code`, `says` in the message, and no panic.
+fn assert_error(output: &Output, code: i32, says: &str) {
+    let text = stderr(output);
+    assert!(!text.contains("panicked"), "a panic: {text}");
+    assert_eq!(output.status.code(), Some(code), "stderr: {text}");
+    assert!(text.contains(says), "expected {says:?} in: {text}");
+}
+
+fn s(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A small city dataset of `frames` frames (4 cars, splits 1/1/1).
+fn city(dir: &Path, frames: u32) -> PathBuf {
+    let spec = write_spec(dir, &city_spec("edited", &[(4, 0.5)], (1, 1, 1), frames, "{}"));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    data
+}
+
+/// `data` copied to `to`, with `edit` applied to its train scenario's
+/// scenario.json (or, with `manifest`, to manifest.json).
+fn edited(data: &Path, to: &Path, manifest: bool, edit: impl Fn(&mut serde_json::Value)) -> PathBuf {
+    let copy = std::process::Command::new("cp").args(["-r", s(data), s(to)]).status().unwrap();
+    assert!(copy.success());
+    let file = if manifest { to.join("manifest.json") } else { to.join("cars04_edges50/train/00000/scenario.json") };
+    let mut value: serde_json::Value = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+    edit(&mut value);
+    std::fs::write(&file, serde_json::to_vec(&value).unwrap()).unwrap();
+    to.to_path_buf()
+}
+
+#[test]
+fn a_scenario_json_edited_out_of_range_is_named_by_every_reader() {
+    let dir = fresh_dir("edited-scenario-json");
+    let data = city(&dir, 20);
+    let bad_edge = edited(&data, &dir.join("edge"), false, |v| v["edges"] = serde_json::json!([[0, 99]]));
+    for command in ["stats", "baseline"] {
+        assert_error(&run(&[command, s(&bad_edge)]), 1, "edges must name them");
+    }
+    let no_interval = edited(&data, &dir.join("interval"), false, |v| v["frame_interval"] = 0.into());
+    assert_error(&run(&["baseline", s(&no_interval)]), 1, "frame_interval 0");
+    // Claims a billion frames: refused before memory is set aside for them.
+    let billion = edited(&data, &dir.join("billion"), false, |v| v["frames"] = 1_000_000_000u64.into());
+    for command in ["stats", "baseline"] {
+        assert_error(&run(&[command, s(&billion)]), 1, "frames 1000000000");
+    }
+    let scenario = billion.join("cars04_edges50/train/00000");
+    assert_error(&run(&["preview", s(&scenario), "--out", s(&dir.join("p.gif"))]), 1, "frames 1000000000");
+    // Claims the most a spec allows, far more than its poses.csv holds.
+    let most = edited(&data, &dir.join("most"), false, |v| v["frames"] = 100_000.into());
+    assert_error(&run(&["baseline", s(&most)]), 1, "more rows than");
+    let manifest = edited(&data, &dir.join("manifest"), true, |v| v["spec"]["frames"] = 0.into());
+    assert_error(&run(&["export", "nri", s(&manifest), "--out", s(&dir.join("nri"))]), 2, "the spec in it is invalid");
+    assert!(!dir.join("nri").exists(), "nothing exported");
+}
+
+#[test]
+fn the_baseline_refuses_one_frame_scenarios_and_clamps_lags_beyond_the_scenario() {
+    let dir = fresh_dir("baseline-short");
+    let short = dir.join("short");
+    std::fs::create_dir_all(&short).unwrap();
+    city(&short, 1);
+    assert_error(&run(&["baseline", s(&short.join("data"))]), 2, "2 frames or more");
+
+    // 20 frames of 1 s: a lag of 1e18 s (or one that overflows an integer
+    // of frames) scores as a lag back to the first frame does.
+    let data = city(&dir, 20);
+    let json = |lag: &str| {
+        let output = run(&["baseline", s(&data), "--max-lag", lag, "--json"]);
+        assert!(output.status.success(), "--max-lag {lag}: {}", stderr(&output));
+        let mut value: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+        // The lag asked for is reported as given.
+        value.as_object_mut().unwrap().remove("lags_s");
+        for row in value["groups"].as_array_mut().into_iter().flatten() {
+            row.as_object_mut().unwrap().remove("max_lag_s");
+        }
+        value
+    };
+    let whole = json("20");
+    assert!(whole.to_string().contains("auroc"), "{whole}");
+    assert_eq!(json("1e18"), whole);
+    assert_eq!(json("1e10"), whole);
+}
