@@ -6,10 +6,10 @@
 
 use crate::dataset::{edge_pairs, Dataset};
 use crate::output::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV, POSES_CSV,
-    SCENARIO_JSON,
+    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV,
+    POSES_CSV, SCENARIO_JSON,
 };
-use crate::output::logs::{parse_effects, EVENT_COLUMNS, LIGHT_COLUMNS};
+use crate::output::logs::{parse_effects, EVENT_COLUMNS, INTERACTION_COLUMNS, LIGHT_COLUMNS};
 use crate::output::manifest::Packing;
 use crate::output::packs::{split_pair, PackUnit, Packs, PAIR_FILES, PAIR_RUNS};
 use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
@@ -787,6 +787,17 @@ fn check_scenario_files(
                     break;
                 }
             }
+        }
+    }
+
+    if city {
+        if let Some(data) = read(INTERACTIONS_CSV, &mut problems) {
+            // One row per car and frame: frame by frame, cars in id order.
+            let path = dir.join(INTERACTIONS_CSV);
+            check_csv(&path, &data, &INTERACTION_COLUMNS, frames * cars, &mut problems, |row, i| {
+                let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(1)?.parse::<usize>().ok()?);
+                (cars > 0 && frame == i / cars && car == i % cars).then_some(())
+            });
         }
     }
 

@@ -96,3 +96,32 @@ fn the_baseline_refuses_one_frame_scenarios_and_clamps_lags_beyond_the_scenario(
     assert_eq!(json("1e18"), whole);
     assert_eq!(json("1e10"), whole);
 }
+
+#[test]
+fn validate_checks_every_city_log_interactions_included() {
+    let dir = fresh_dir("validate-interactions");
+    let data = city(&dir, 20);
+    let clean = run(&["validate", s(&data)]);
+    assert!(clean.status.success(), "{}", String::from_utf8_lossy(&clean.stdout));
+    // 3 scenarios of 7 files each (scenario, poses, pixels, lights, events,
+    // interactions, effects), every one read and checked.
+    assert!(String::from_utf8_lossy(&clean.stdout).contains("21 files"), "{}", String::from_utf8_lossy(&clean.stdout));
+    let interactions = "cars04_edges50/train/00000/interactions.csv";
+    let missing = dir.join("missing");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&missing)]).status().unwrap().success());
+    std::fs::remove_file(missing.join(interactions)).unwrap();
+    let output = run(&["validate", s(&missing)]);
+    assert_eq!(output.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&output.stdout).contains("interactions.csv: missing"), "{output:?}");
+    // A row taken out: the checksum and the row order say so.
+    let short = dir.join("short");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&short)]).status().unwrap().success());
+    let path = short.join(interactions);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines.remove(6);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let report = String::from_utf8_lossy(&run(&["validate", s(&short)]).stdout).into_owned();
+    assert!(report.contains("interactions.csv: checksum mismatch"), "{report}");
+    assert!(report.contains("interactions.csv: row 7 is malformed or out of order"), "{report}");
+}
