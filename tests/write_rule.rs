@@ -423,3 +423,32 @@ fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
     assert_refused(&run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]), "summary.json");
     assert_eq!(hash_tree(&cf), before, "nothing was replaced");
 }
+
+#[test]
+fn an_out_that_is_a_file_or_lies_under_one_is_bad_input() {
+    let dir = fresh_dir("rule-out-file");
+    let spec = write_spec(&dir, &toy_spec("rule", &[(4, 0.5)], (1, 1, 1), 20));
+    let file = dir.join("notes.txt");
+    std::fs::write(&file, "the user's").unwrap();
+    let dangling = dir.join("dangling");
+    std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
+    for (out, says) in [
+        (file.clone(), "is a file, not a folder"),
+        (file.join("sub"), "which is a file, not a folder"),
+        (dangling.clone(), "is a symbolic link"),
+    ] {
+        let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+        let commands = [
+            vec!["gen", "--quiet", "--no-images", "--spec", s(&spec)],
+            vec!["run", "--no-images", "--scenario", s(&scenario)],
+        ];
+        for command in commands {
+            let mut args = command.clone();
+            args.extend(["--out", s(&out)]);
+            let output = run(&args);
+            assert_refused(&output, says);
+        }
+    }
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "the user's");
+    assert!(!dir.join("nowhere").exists());
+}

@@ -158,6 +158,24 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
             why: "an empty path names no folder: give the output folder, e.g. data/toy".into(),
         });
     }
+    // A file (or a dangling link) where the folder should be, or a file on
+    // the way to it: the user's to fix, as the folder's contents are.
+    match fs::symlink_metadata(dir) {
+        Ok(m) if m.file_type().is_symlink() && !dir.is_dir() => return Err(link_error(dir)),
+        Ok(m) if !m.is_dir() && !m.file_type().is_symlink() => {
+            return Err(ClaimError::BadPath {
+                path: dir.to_path_buf(),
+                why: "is a file, not a folder: give --out a folder (a new one, or one this command wrote)".into(),
+            })
+        }
+        _ => {}
+    }
+    if let Some(file) = dir.ancestors().skip(1).find(|a| fs::symlink_metadata(a).is_ok_and(|m| m.is_file())) {
+        return Err(ClaimError::BadPath {
+            path: dir.to_path_buf(),
+            why: format!("lies under {}, which is a file, not a folder", file.display()),
+        });
+    }
     check_ancestors(dir)?;
     check_contents(dir, writer)?;
     let created = (!dir.exists()).then(|| dir.to_path_buf());
