@@ -133,7 +133,12 @@ def _spec(
     drawn from the seed and the group's name)."""
     if not path.is_file():
         raise InputError(f"{path}: no such spec file (run from the repository root, or give --{world}-spec)")
-    raw = json.loads(path.read_text())
+    try:
+        raw = json.loads(path.read_text())
+    except (UnicodeDecodeError, ValueError) as e:
+        raise InputError(f"{path}: not a spec file (JSON): {e}") from None
+    if not isinstance(raw, dict):
+        raise InputError(f"{path}: not a spec file (a JSON object with name, world, groups, ...)")
     raw["name"] = f"paper-{setting.name}-{world}"
     raw["splits"] = dict(splits or setting.splits)
     if groups:
@@ -543,6 +548,13 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     for method in _ordered(rows):
         colours.setdefault(method, next(spare))
     discovering = [m for m in _ordered(rows) if any(r["method"] == m and r["metric"] == "f1" for r in rows)]
+    if discovering:
+        _f1_figure(plt, out, rows, worlds, discovering, colours)
+    _error_figure(plt, out, rows, worlds, colours)
+
+
+def _f1_figure(plt, out: Path, rows: List[dict], worlds: Sequence[str], discovering: List[str], colours: dict) -> None:
+    """f1.png: each discovering method's test F1 per group (none without one)."""
     fig, axes = plt.subplots(len(worlds), 2, figsize=(11, 3.6 * len(worlds)), squeeze=False)
     for wi, world in enumerate(worlds):
         for ci, (groups, xlabel, ticks) in enumerate(
@@ -573,6 +585,9 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     _savefig(fig, out / "f1.png")
     plt.close(fig)
 
+
+def _error_figure(plt, out: Path, rows: List[dict], worlds: Sequence[str], colours: dict) -> None:
+    """trajectory.png: each predicting method's test error by steps ahead."""
     predicting = [m for m in _ordered(rows) if any(r["method"] == m and r["metric"] == "trajectory_mse" for r in rows)]
     fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 3.8), squeeze=False)
     for wi, world in enumerate(worlds):
@@ -600,6 +615,17 @@ def _figures(out: Path, rows: List[dict], worlds: Sequence[str]) -> None:
     fig.tight_layout()
     _savefig(fig, out / "trajectory.png")
     plt.close(fig)
+
+
+def _positive(text: str) -> int:
+    """A whole number >= 1, for argparse (which then exits 2 with the message)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
+    return value
 
 
 def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
@@ -653,7 +679,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--toy-spec", type=Path, default=Path("configs/toy.json"))
     parser.add_argument("--city-spec", type=Path, default=Path("configs/city.json"))
     parser.add_argument("--splits", help="override scenarios per split, e.g. 40/10/10 (train/val/test)")
-    parser.add_argument("--epochs", type=int, help="override the neural methods' epochs")
+    parser.add_argument("--epochs", type=_positive, help="override the neural methods' epochs")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--plan", action="store_true", help="print the projected time per world and method, then stop")
     parser.add_argument("--report", action="store_true",
@@ -678,7 +704,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         # every neural method's epochs, the setting's per-method ones too
         setting = dataclasses.replace(setting, epochs=args.epochs, extra={})
     out = args.out or Path("results") / ("paper-quick" if args.quick else "paper")
-    start = time.monotonic()
+    start, started_at = time.monotonic(), time.time()
     try:
         run(out, setting, args.world, args.method, args.device, args.seed,
             {"toy": args.toy_spec, "city": args.city_spec}, splits, args.quiet and not args.plan, plan_only=args.plan,
@@ -689,8 +715,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.plan:
         return 0
     print((out / "results.md").read_text())
-    print(f"wrote {out / 'results.csv'}, {out / 'f1.png'}, {out / 'trajectory.png'} and {out / 'results.md'} "
-          f"in {time.monotonic() - start:.0f} s")
+    # f1.png only where a method discovers edges.
+    names = ["results.csv", "f1.png", "trajectory.png", "results.md"]
+    wrote = [str(out / n) for n in names if (out / n).is_file() and (out / n).stat().st_mtime >= started_at - 1]
+    print(f"wrote {', '.join(wrote[:-1])} and {wrote[-1]} in {time.monotonic() - start:.0f} s")
     return 0
 
 

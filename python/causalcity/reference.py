@@ -78,7 +78,10 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 def _poses(folder: Path, frames: int, cars: int) -> np.ndarray:
     """[frames, cars, 4]: x, y, yaw, speed."""
-    table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+    try:
+        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as e:
+        raise ValueError(f"{folder / 'poses.csv'}: not the pose log gen writes ({e})") from None
     if table.shape[0] != frames * cars:
         raise ValueError(f"{folder / 'poses.csv'}: {table.shape[0]} rows, expected {frames} x {cars}")
     return table[:, [_X, _Y, _YAW, _SPEED]].reshape(frames, cars, 4)
@@ -193,7 +196,7 @@ def scenario_pairs(folder: Path, method: str, graph: str = "designed") -> Tuple[
     """Features [pairs, F], labels [pairs] (a leads b in ``graph``) and a
     same-lane mask [pairs] (at frame 0, a ahead of b in b's lane) for every
     ordered pair of the scenario in ``folder``."""
-    meta = json.loads((folder / "scenario.json").read_text())
+    meta = _read_json(folder / "scenario.json")
     field = GRAPHS[graph]
     if field not in meta:
         raise ValueError(f"{folder / 'scenario.json'} has no {field}: the dataset was made with gen --no-effects")
@@ -211,6 +214,46 @@ def scenario_pairs(folder: Path, method: str, graph: str = "designed") -> Tuple[
     same_lane = _frame_features(poses[0])[..., 5].astype(bool)
     off = ~np.eye(n, dtype=bool)
     return feats[off], labels[off], same_lane[off]
+
+
+def _read_json(path: Path) -> dict:
+    """A JSON object from ``path``; a ValueError naming it otherwise."""
+    try:
+        value = json.loads(path.read_text())
+    except (UnicodeDecodeError, ValueError) as e:
+        raise ValueError(f"{path}: cannot be read as JSON ({e}); causalcity validate tells what else is damaged") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: not a file gen wrote (a JSON object)")
+    return value
+
+
+def _scenario_folders(root: Path) -> Dict[Tuple[str, str], List[Path]]:
+    """Every finished scenario folder of the complete dataset ``root``, by
+    (group, split), checked against the counts its manifest lists."""
+    if not root.is_dir():
+        raise ValueError(f"{root} is not a folder: give the dataset folder gen wrote (the one holding manifest.json)")
+    path = root / "manifest.json"
+    if not path.is_file():
+        raise ValueError(f"no manifest.json in {root}: not a dataset gen wrote")
+    manifest = _read_json(path)
+    groups = manifest.get("groups")
+    if not isinstance(groups, list) or not all(isinstance(g, dict) and "name" in g for g in groups):
+        raise ValueError(f"{path}: no list of groups: not a manifest gen wrote")
+    if manifest.get("complete") is not True:
+        raise ValueError(f"{root} is not complete: finish it with its gen command first")
+    folders = {}
+    for g in groups:
+        for split in SPLITS:
+            # Hidden folders are scenarios still being written.
+            found = sorted(p for p in (root / g["name"] / split).glob("*") if p.is_dir() and not p.name.startswith("."))
+            expected = g.get("splits", {}).get(split)
+            if expected is not None and len(found) != expected:
+                raise ValueError(
+                    f"{root / g['name'] / split}: {len(found)} scenario folders, but {path} lists {expected}; "
+                    f"causalcity validate {root} tells what is missing"
+                )
+            folders[(g["name"], split)] = found
+    return folders
 
 
 def _table(folders: Sequence[Path], method: str, graph: str):
@@ -255,15 +298,15 @@ def evaluate(
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError('the reference classifiers need scikit-learn: pip install "./python[reference]"') from e
     root = Path(dataset)
-    manifest = json.loads((root / "manifest.json").read_text())
     if graph not in GRAPHS:
         raise ValueError(f"graph {graph!r} is not one of {', '.join(GRAPHS)}")
-    names = [g["name"] for g in manifest["groups"]]
+    every = _scenario_folders(root)
+    names = list(dict.fromkeys(group for group, _ in every))
     results = []
     for group in names if groups is None else groups:
         if group not in names:
             raise ValueError(f"group {group!r} is not in {root}: its groups are {', '.join(names)}")
-        folders = {s: sorted(p for p in (root / group / s).glob("*") if p.is_dir()) for s in SPLITS}
+        folders = {s: every[(group, s)] for s in SPLITS}
         for method in methods:
             train = _table(folders["train"], method, graph)
             test = _table(folders["test"], method, graph)
@@ -327,7 +370,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser.parse_args(argv)
     try:
         results = evaluate(args.dataset, args.method, args.graph, args.group)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if args.json:

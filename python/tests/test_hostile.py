@@ -253,3 +253,27 @@ def test_set_epoch_reaches_persistent_workers():
     reference = epochs(num_workers=0)
     assert reference[0] != reference[1] != reference[2], "each epoch its own batches"
     assert epochs(num_workers=2, persistent_workers=True) == reference
+
+
+def test_a_scenario_folder_missing_from_a_complete_dataset_is_named_not_skipped(toy, tmp_path):
+    copy = tmp_path / "copy"
+    for rel, data in tree(toy).items():
+        (copy / rel).parent.mkdir(parents=True, exist_ok=True)
+        (copy / rel).write_bytes(data)
+    split = copy / GROUP / "val"
+    gone = sorted(p for p in split.iterdir())[0]
+    for f in gone.iterdir():
+        f.unlink()
+    gone.rmdir()
+    run = methods("path", copy, "--out", tmp_path / "p.npz")
+    assert run.returncode == 1, (run.returncode, run.stderr)
+    assert str(split) in run.stderr and "manifest.json lists" in run.stderr and "Traceback" not in run.stderr
+    assert not (tmp_path / "p.npz").exists()
+    # A scenario still being written (hidden) is not one of the finished.
+    gone.with_name(".partial-" + gone.name).mkdir()
+    from causalcity.methods import load_split
+
+    with pytest.raises(RuntimeError, match="manifest.json lists"):
+        load_split(copy, GROUP, "val")
+    with pytest.raises(causalcity.InputError, match="'training' is not one of train, val, test"):
+        load_split(toy, GROUP, "training")

@@ -380,6 +380,26 @@ def test_the_paper_refuses_a_group_its_spec_lacks(tmp_path, capsys, monkeypatch)
     assert "cars04_edges50, " in err and not out.exists()
 
 
+def test_a_paper_run_of_trajectory_methods_only_finishes_and_bad_epochs_are_refused_first(tmp_path, capsys, monkeypatch):
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "paper"
+    flags = ["--splits", "2/1/1", "--world", "toy", "--group", "cars04_edges50", "--out", str(out), "--quiet"]
+    # No method discovers edges: no F1 figure, the rest written.
+    assert paper.main([*flags, "--method", "constant_velocity"]) == 0
+    printed = capsys.readouterr().out
+    assert (out / "results.md").is_file() and (out / "trajectory.png").is_file() and not (out / "f1.png").exists()
+    assert "f1.png" not in printed and "trajectory.png" in printed, printed
+    # --epochs is checked with the other flags, before data or calibration.
+    for epochs in ("0", "-5"):
+        again = tmp_path / f"epochs{epochs}"
+        with pytest.raises(SystemExit) as ended:
+            paper.main([*flags[:-3], "--out", str(again), "--method", "nri", "--epochs", epochs])
+        assert ended.value.code == 2 and "use 1 or more" in capsys.readouterr().err
+        assert not again.exists()
+
+
 def test_the_paper_writes_by_the_one_write_rule(tmp_path, toy, capsys, monkeypatch):
     # Never into a dataset (refused before any work), never through a link.
     from causalcity import paper

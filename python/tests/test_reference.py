@@ -100,3 +100,27 @@ def test_the_command_line_prints_json_and_refuses_what_is_not_there(toy, tmp_pat
     causalcity.generate(TOY, bare, images=False, effects=False, progress=False, limit=2)
     assert reference.main([str(bare), "--graph", "causal"]) == 2
     assert "--no-effects" in capsys.readouterr().err
+
+
+def test_unfinished_datasets_and_missing_scenarios_are_refused_not_scored(toy, tmp_path, capsys):
+    """A run still writing (or killed) leaves hidden .partial folders and a
+    manifest that says it is not complete; neither is ever scored."""
+    copy = tmp_path / "copy"
+    for p in sorted(Path(toy).rglob("*")):
+        if p.is_file():
+            (copy / p.relative_to(toy)).parent.mkdir(parents=True, exist_ok=True)
+            (copy / p.relative_to(toy)).write_bytes(p.read_bytes())
+    test = copy / "cars08_edges50" / "test"
+    first = sorted(test.iterdir())[0]
+    first.rename(test / (".partial-" + first.name))
+    assert reference.main([str(copy), "--method", "frame0"]) == 2
+    err = capsys.readouterr().err
+    assert "7 scenario folders" in err and "lists 8" in err, err
+    manifest = json.loads((copy / "manifest.json").read_text())
+    manifest["complete"] = False
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    assert reference.main([str(copy), "--method", "frame0"]) == 2
+    assert "is not complete" in capsys.readouterr().err
+    # The manifest's path instead of the folder: a one-line error, no traceback.
+    assert reference.main([str(toy / "manifest.json")]) == 2
+    assert "is not a folder" in capsys.readouterr().err

@@ -102,6 +102,11 @@ def _manifest(dataset: Path) -> dict:
     if not path.is_file():
         raise InputError(f"no manifest.json in {dataset}: not a dataset gen wrote")
     manifest = _read_json(path)
+    groups = manifest.get("groups") if isinstance(manifest, dict) else None
+    if not isinstance(groups, list) or not all(isinstance(g, dict) and "name" in g for g in groups):
+        raise DatasetError(f"{path}: no list of groups: not a manifest gen wrote")
+    if not isinstance(manifest.get("spec"), dict):
+        raise DatasetError(f"{path}: no spec: not a manifest gen wrote")
     if not manifest.get("complete", False):
         raise InputError(f"{dataset} is not complete: finish it with its gen command first")
     return manifest
@@ -143,7 +148,19 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
     spec = manifest["spec"]
     if group not in groups_of(root):
         raise InputError(f"group {group!r} is not in {root}: its groups are {', '.join(groups_of(root))}")
-    folders = sorted(p for p in (root / group / split).glob("*") if (p / "scenario.json").is_file())
+    if split not in SPLITS:
+        raise InputError(f"split {split!r} is not one of {', '.join(SPLITS)}")
+    # Hidden folders are scenarios being written; the manifest says how many
+    # finished ones there are.
+    folders = sorted(
+        p for p in (root / group / split).glob("*") if not p.name.startswith(".") and (p / "scenario.json").is_file()
+    )
+    listed = next(g for g in manifest["groups"] if g["name"] == group).get("splits", {}).get(split)
+    if listed is not None and len(folders) != listed:
+        raise DatasetError(
+            f"{root / group / split}: {len(folders)} scenario folders, but {root / 'manifest.json'} lists {listed}; "
+            f"causalcity validate {root} tells what is missing"
+        )
     pixels, metres, graphs = [], [], []
     interval = float(spec.get("frame_interval") or 0.1)
     for folder in folders:
