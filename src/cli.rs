@@ -139,9 +139,10 @@ pub struct CounterfactualArgs {
     #[arg(long, value_name = "SPEC")]
     pub sweep: Option<PathBuf>,
 
-    /// --sweep: kinds of intervention to draw from.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "stop,set-desired-speed,run-red-light,remove")]
-    pub kinds: Vec<SweepKindArg>,
+    /// --sweep: kinds of intervention to draw from [default:
+    /// stop,set-desired-speed,run-red-light,remove].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub kinds: Option<Vec<SweepKindArg>>,
 
     /// --sweep: how pairs are stored: `folders` (a folder each) or `tar`:
     /// whole pairs packed --scenarios-per-tar at a time into
@@ -199,6 +200,7 @@ impl CounterfactualArgs {
                 .find_map(|(flag, given)| given.then_some(flag))
         } else {
             [
+                ("--kinds", self.kinds.is_some()),
                 ("--format", self.format.is_some()),
                 ("--scenarios-per-tar", self.scenarios_per_tar.is_some()),
                 ("--limit", self.limit.is_some()),
@@ -777,6 +779,13 @@ pub enum SweepKindArg {
     Remove,
 }
 
+impl SweepKindArg {
+    /// Every kind: `--kinds`' default.
+    fn every() -> Vec<SweepKindArg> {
+        vec![SweepKindArg::Stop, SweepKindArg::SetDesiredSpeed, SweepKindArg::RunRedLight, SweepKindArg::Remove]
+    }
+}
+
 impl From<SweepKindArg> for SweepKind {
     fn from(k: SweepKindArg) -> SweepKind {
         match k {
@@ -977,7 +986,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     spec_path,
                     out: args.out,
                     limit: args.limit,
-                    kinds: args.kinds.into_iter().map(Into::into).collect(),
+                    kinds: args.kinds.unwrap_or_else(SweepKindArg::every).into_iter().map(Into::into).collect(),
                     products: Products { images, annotations: false, effects: false, lights: args.lights.log() },
                     packing: packing(args.format.unwrap_or(FormatArg::Folders), args.scenarios_per_tar)?,
                     threads: args.threads.map(|t| t as usize),

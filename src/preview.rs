@@ -70,6 +70,16 @@ impl std::fmt::Display for PreviewSummary {
 /// Writes the preview of the scenario in `scenario_dir` to `out`.
 pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Result<PreviewSummary, Error> {
     let kind = check_options(out, options).map_err(Error::Input)?;
+    // No scenario folder (or extra camera's folder) there: a dataset's root,
+    // a typo. The argument is wrong, not the data.
+    if scenario_of_camera(scenario_dir).is_none() && !scenario_dir.join("scenario.json").is_file() {
+        let hint = if scenario_dir.join("manifest.json").is_file() {
+            ", it is a dataset: give one of its scenario folders, e.g. <dataset>/<group>/train/00000"
+        } else {
+            ": give a scenario folder (the one holding scenario.json)"
+        };
+        return Err(Error::Input(format!("{} holds no scenario.json{hint}", scenario_dir.display())));
+    }
     let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)])?;
     render(scenario_dir, &file, options, kind).map_err(Error::Failure)
 }
@@ -92,6 +102,15 @@ fn check_options(out: &Path, options: &PreviewOptions) -> Result<Kind, String> {
     }
 }
 
+/// The scenario folder of an extra camera's folder
+/// (`<scenario>/cameras/<name>`), if `dir` is one.
+fn scenario_of_camera(dir: &Path) -> Option<&Path> {
+    dir.parent()
+        .filter(|p| p.file_name().is_some_and(|n| n == "cameras") && !dir.join("scenario.json").exists())
+        .and_then(Path::parent)
+        .filter(|s| s.join("scenario.json").exists())
+}
+
 fn render(
     scenario_dir: &Path,
     file: &OutputFile,
@@ -102,11 +121,7 @@ fn render(
     // An extra camera's folder (`<scenario>/cameras/<name>`): its frames,
     // the scenario's cars. Trails and arrows are drawn in bird's-eye pixels,
     // so only on the bird's-eye view.
-    let scenario_of_camera = scenario_dir
-        .parent()
-        .filter(|p| p.file_name().is_some_and(|n| n == "cameras") && !scenario_dir.join("scenario.json").exists())
-        .and_then(Path::parent)
-        .filter(|s| s.join("scenario.json").exists());
+    let scenario_of_camera = scenario_of_camera(scenario_dir);
     let camera = scenario_of_camera.is_some();
     let meta_dir = scenario_of_camera.unwrap_or(scenario_dir);
     let scenario = ScenarioSummary::read(meta_dir)?;

@@ -125,3 +125,17 @@ fn validate_checks_every_city_log_interactions_included() {
     assert!(report.contains("interactions.csv: checksum mismatch"), "{report}");
     assert!(report.contains("interactions.csv: row 7 is malformed or out of order"), "{report}");
 }
+
+#[test]
+fn preview_of_a_folder_without_a_scenario_is_bad_input() {
+    let dir = fresh_dir("preview-no-scenario");
+    let data = city(&dir, 20);
+    let gif = dir.join("p.gif");
+    assert_error(
+        &run(&["preview", s(&data), "--out", s(&gif)]),
+        2,
+        "it is a dataset: give one of its scenario folders",
+    );
+    assert_error(&run(&["preview", s(&dir.join("nowhere")), "--out", s(&gif)]), 2, "holds no scenario.json");
+    assert!(!gif.exists());
+}

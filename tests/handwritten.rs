@@ -965,7 +965,8 @@ fn a_counterfactual_flag_of_the_other_source_is_refused_with_exit_2_and_nothing_
     let spec = root.join("configs/ci-city.json");
     let (file, spec) = (file.to_str().unwrap(), spec.to_str().unwrap());
     let dir = fresh_dir("hw-other-source");
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
+        (&["--scenario", file, "--kinds", "stop"], "--kinds"),
         (&["--scenario", file, "--format", "tar"], "--format"),
         (&["--scenario", file, "--scenarios-per-tar", "4"], "--scenarios-per-tar"),
         (&["--scenario", file, "--limit", "1"], "--limit"),
