@@ -138,6 +138,13 @@ fn a_trajectory_error_that_overflows_is_named_not_reported_as_null() {
     let output = run(&["evaluate", s(&data), s(&path), "--history", "20", "--json"]);
     assert_refused(&output, "overflows");
     assert!(stderr(&output).contains("cars04_edges50/test/00000/trajectory"), "{}", stderr(&output));
+    assert!(stderr(&output).contains(&format!("{}: array", s(&path))), "names the file: {}", stderr(&output));
+    // Longer than the scenario: no advice of a history it cannot have.
+    let long = dir.join("long.npz");
+    npz(&long, &[("cars04_edges50/test/00000/trajectory", npy(&[40, 4, 2], &[1.0; 320]))]);
+    let output = run(&["evaluate", s(&data), s(&long), "--history", "20"]);
+    assert_refused(&output, "predict at most 10 steps");
+    assert!(!stderr(&output).contains("--history at most"), "{}", stderr(&output));
 }
 
 #[test]

@@ -604,7 +604,13 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
             dataset.display()
         )),
     }
-    let results = score_in_turn(&truth, &scored, options)?;
+    let results = score_in_turn(&truth, &scored, options).map_err(|e| match e {
+        // What a prediction array got wrong, named with its file.
+        Error::Input(message) if message.starts_with("array ") => {
+            Error::Input(format!("{}: {message}", predictions.display()))
+        }
+        e => e,
+    })?;
     let mut report = summarise(&truth, dataset, predictions, options, &scored, &results);
     report.warnings.splice(0..0, warnings);
     Ok(report)
@@ -761,14 +767,17 @@ fn match_scenarios(
                     )));
                 }
                 if options.history.checked_add(shape[0]).is_none_or(|end| end > frames) {
+                    // A shorter history helps only while one frame of it is left.
+                    let history = frames.saturating_sub(shape[0]);
+                    let or_history =
+                        if history >= 1 { format!(", or give --history at most {history}") } else { String::new() };
                     return Err(bad(format!(
                         "array {:?} predicts {} steps after {} frames of history, but the scenario has {frames} \
-                         frames: predict at most {} steps, or give --history at most {}",
+                         frames: predict at most {} steps{or_history}",
                         array.name,
                         shape[0],
                         options.history,
                         frames.saturating_sub(options.history),
-                        frames.saturating_sub(shape[0])
                     )));
                 }
             }
