@@ -622,6 +622,11 @@ fn scenario_files_are_read_strictly() {
             vec!["interventions[0]", "unknown field `speed`", "seconds"],
         ),
         (
+            "speed-beyond-the-towns",
+            one(r#"{"at": 1, "do": "set_desired_speed", "car": "Car_1", "speed": 1e9}"#),
+            vec!["interventions[0].speed", "1000000000 is not allowed", "at most 20"],
+        ),
+        (
             "unknown-effect",
             one(r#"{"at": 1, "do": "fly", "car": "Car_1"}"#),
             vec!["interventions[0].do", "\"fly\" is not an intervention", "set_light_plan"],

@@ -280,6 +280,12 @@ pub enum ActionDrawing {
     LaneValid,
 }
 
+/// Most a desired speed may be, m/s (72 km/h): the spec's mean, a scenario
+/// file's per-leg speeds and an intervention's all stay within it, the
+/// city being streets with signalised junctions (the original CausalCity's
+/// cars keep to town speeds).
+pub const MAX_DESIRED_SPEED_M_S: f64 = 20.0;
+
 /// City-world settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -432,7 +438,7 @@ impl Default for CitySpec {
 
 impl CitySpec {
     pub fn validate(&self) -> Result<(), SpecError> {
-        positive("city.desired_speed", self.desired_speed, 20.0, "m/s")?;
+        positive("city.desired_speed", self.desired_speed, MAX_DESIRED_SPEED_M_S, "m/s")?;
         unit_interval("city.desired_speed_spread", self.desired_speed_spread, 0.9)?;
         unit_interval("city.red_light_runner_probability", self.red_light_runner_probability, 1.0)?;
         let d = &self.driver;

@@ -91,6 +91,13 @@ fn resolve_intervention(
         },
         RawEffect::RunRedLight { car } => Effect::RunRedLights { car: car_named("car", car)? },
         RawEffect::SetDesiredSpeed { car, speed } => {
+            let max = crate::spec::MAX_DESIRED_SPEED_M_S;
+            if *speed > max {
+                return Err((
+                    "speed".into(),
+                    format!("{} is not allowed: m/s, above 0 and at most {max}", Shown(*speed)),
+                ));
+            }
             Effect::SetDesiredSpeed { car: car_named("car", car)?, speed: positive("speed", *speed, "m/s")? }
         }
         RawEffect::Remove { car } => Effect::Remove { car: car_named("car", car)? },

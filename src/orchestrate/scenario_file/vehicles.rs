@@ -170,11 +170,12 @@ pub(super) fn resolve_vehicle(
     let desired_speeds = match &vehicle.desired_speeds {
         None => None,
         Some(list) if list.len() == actions.len() + 1 => {
-            if let Some((i, v)) = list.iter().enumerate().find(|(_, v)| !(**v > 0.0 && **v <= 20.0)) {
+            let max = crate::spec::MAX_DESIRED_SPEED_M_S;
+            if let Some((i, v)) = list.iter().enumerate().find(|(_, v)| !(**v > 0.0 && **v <= max)) {
                 return Err(here.err(
                     car,
                     format!("desired_speeds[{i}]"),
-                    format!("{} is not allowed: m/s, above 0 and at most 20", Shown(*v)),
+                    format!("{} is not allowed: m/s, above 0 and at most {max}", Shown(*v)),
                 ));
             }
             Some(list.clone())
