@@ -42,7 +42,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 from . import InputError, Spec, _native, evaluate, generate
 from .methods import is_user_method, make
-from .methods.common import run_method
+from .methods.common import positive_int as _positive, run_method
 
 WORLDS = ("toy", "city")
 # The table's order: the first frame only, the simple rule, classical,
@@ -615,17 +615,6 @@ def _error_figure(plt, out: Path, rows: List[dict], worlds: Sequence[str], colou
     fig.tight_layout()
     _savefig(fig, out / "trajectory.png")
     plt.close(fig)
-
-
-def _positive(text: str) -> int:
-    """A whole number >= 1, for argparse (which then exits 2 with the message)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
-    return value
 
 
 def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:

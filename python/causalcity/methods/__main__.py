@@ -11,7 +11,7 @@ from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .classical import Pcmci
-from .common import DatasetError, run_method
+from .common import DatasetError, positive_int as _positive, run_method
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -133,17 +133,6 @@ def _counterfactual(args: argparse.Namespace):
         )
     fresh()  # refused before any reading
     return run_counterfactual_method(fresh, args.dataset, args.out, args.group, args.split, args.quiet)
-
-
-def _positive(text: str) -> int:
-    """A whole number >= 1, for argparse (which then exits 2 with the message)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
-    return value
 
 
 if __name__ == "__main__":

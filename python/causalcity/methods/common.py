@@ -136,6 +136,19 @@ def _scenario_arrays(folder: Path) -> Tuple[dict, np.ndarray, np.ndarray]:
     return meta, pixels, metres
 
 
+def positive_int(text: str) -> int:
+    """A whole number >= 1, for argparse (which then exits 2 with the message)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
+    return value
+
+
 def groups_of(dataset: "str | Path") -> List[str]:
     """The dataset's group names, in its spec's order."""
     return [g["name"] for g in _manifest(Path(dataset))["groups"]]
