@@ -347,7 +347,7 @@ fn rewriting_a_damaged_scenario_never_removes_the_users_files_in_it() {
     let group = data.join("cars04_edges50");
     let before = hash_tree(&group);
     let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
-    assert_refused(&output, "path(s) causalcity did not write");
+    assert_refused(&output, "are not files causalcity wrote there");
     assert!(stderr(&output).contains(s(&notes)), "names the file: {}", stderr(&output));
     assert_eq!(hash_tree(&group), before, "nothing was replaced");
 
@@ -412,7 +412,7 @@ fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
     let input = folder.join("scenario-file.json");
     std::fs::write(&input, &text).unwrap();
     let output = run(&["run", "--no-images", "--scenario", s(&input), "--out", s(&out)]);
-    assert_refused(&output, "path(s) causalcity did not write");
+    assert_refused(&output, "are not files causalcity wrote there");
     assert_eq!(std::fs::read_to_string(&input).unwrap(), text, "its input is untouched");
 
     // A rerun into its own output replaces its own folder; a user's file
@@ -424,10 +424,10 @@ fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
     let notes = cf.join(&name).join("factual/notes.txt");
     std::fs::write(&notes, "the user's").unwrap();
     let before = hash_tree(&cf);
-    assert_refused(&run(&args), "path(s) causalcity did not write");
+    assert_refused(&run(&args), "are not files causalcity wrote there");
     assert_eq!(hash_tree(&cf), before, "nothing was replaced");
     // `run` into the counterfactual's folder would replace the pair.
-    assert_refused(&run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]), "summary.json");
+    assert_refused(&run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]), "counterfactual/");
     assert_eq!(hash_tree(&cf), before, "nothing was replaced");
 }
 
@@ -441,7 +441,7 @@ fn an_out_that_is_a_file_or_lies_under_one_is_bad_input() {
     std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
     for (out, says) in [
         (file.clone(), "is a file, not a folder"),
-        (file.join("sub"), "which is a file, not a folder"),
+        (file.join("sub"), "which is not a folder"),
         (dangling.clone(), "is a symbolic link"),
     ] {
         let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
@@ -458,4 +458,52 @@ fn an_out_that_is_a_file_or_lies_under_one_is_bad_input() {
     }
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "the user's");
     assert!(!dir.join("nowhere").exists());
+}
+
+#[test]
+fn only_what_a_checksum_listing_names_counts_as_causalcitys() {
+    let dir = fresh_dir("rule-own-files");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let name = common::read_json(&example)[0]["Name"].as_str().unwrap().to_string();
+    // A user's file of the name causalcity writes, in a folder causalcity
+    // never finished (no listing): the user's, not to be overwritten.
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join(&name)).unwrap();
+    let mine = out.join(&name).join("scenario.json");
+    std::fs::copy(&example, &mine).unwrap();
+    assert_refused(&run(&["run", "--no-images", "--scenario", s(&mine), "--out", s(&out)]), "scenario.json");
+    assert_eq!(std::fs::read(&mine).unwrap(), std::fs::read(&example).unwrap());
+
+    // In a damaged scenario: a file named like a leftover, and a folder
+    // with a checksum listing of its own, are the user's too.
+    let data = toy_dataset(&dir);
+    let spec = dir.join("spec.json");
+    let scenario = data.join("cars04_edges50/train/00000");
+    std::fs::remove_file(scenario.join("poses.csv")).unwrap();
+    std::fs::write(scenario.join("draft.partial"), "the user's").unwrap();
+    std::fs::create_dir(scenario.join("backup")).unwrap();
+    std::fs::write(scenario.join("backup/notes.txt"), "the user's").unwrap();
+    let sum = "8a4fc2b8a4b1e0cb7d3c85f5d1b1a5cfa45d3a1a0e2f13e9c3b1dbce5e1b1f1d  notes.txt\n";
+    std::fs::write(scenario.join("backup/checksums.sha256"), sum).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert_refused(&output, "draft.partial");
+    assert!(stderr(&output).contains("backup/notes.txt"), "{}", stderr(&output));
+    assert!(scenario.join("draft.partial").exists() && scenario.join("backup/notes.txt").exists());
+}
+
+#[test]
+fn merge_never_moves_scenarios_through_a_link_in_a_shard() {
+    let dir = fresh_dir("rule-merge-shard-link");
+    let spec = write_spec(&dir, &toy_spec("rule", &[(4, 0.5)], (2, 1, 1), 20));
+    let (a, b) = (dir.join("shard0"), dir.join("shard1"));
+    gen_ok(&spec, &a, &["--quiet", "--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &b, &["--quiet", "--no-images", "--shard", "1/2"]);
+    // One of b's splits lives elsewhere, linked in.
+    let elsewhere = dir.join("elsewhere");
+    let split = std::fs::read_dir(b.join("cars04_edges50")).unwrap().flatten().next().unwrap().path();
+    std::fs::rename(&split, &elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, &split).unwrap();
+    let before = hash_tree(&elsewhere);
+    assert_refused(&run(&["merge", "--out", s(&a), s(&b)]), "never writes through a link");
+    assert_eq!(hash_tree(&elsewhere), before, "nothing moved out of it");
 }

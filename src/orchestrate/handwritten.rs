@@ -11,7 +11,8 @@
 //! `summary.json` lists the cars it moved at all (the effect set).
 
 use super::run::{
-    keep_networks, load_spec, refuse_linked_splits, scenario_writer, stop_flag, write_simulated, GenError, TownWriters,
+    keep_networks, load_spec, refuse_linked_splits, remove_packed, scenario_writer, stop_flag, write_simulated,
+    GenError, TownWriters,
 };
 use super::scenario_file::{load, load_interventions, FileOptions, LoadedScenario, ScenarioFileError};
 use crate::dataset::SWEEP_RECORD;
@@ -277,19 +278,20 @@ pub fn simulate_pair(
     Some(SimulatedPair { factual: a, counterfactual: b, divergence_csv, divergence_m, summary })
 }
 
-/// What a pair folder holds when `writer` writes the pair (`factual`,
-/// `counterfactual`): paths relative to it.
-fn pair_files(writer: &ScenarioWriter, (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan)) -> Vec<String> {
-    let mut names: Vec<String> = PAIR_FILES.iter().map(|n| n.to_string()).collect();
-    for (side, plan) in [("factual", factual), ("counterfactual", counterfactual)] {
-        let layout = writer.layout(plan);
-        names.extend(layout.files().into_iter().chain(layout.folders()).map(|n| format!("{side}/{n}")));
-    }
-    names
-}
-
-/// The files and folders at a pair folder's top level.
-const PAIR_FILES: [&str; 4] = ["factual", "counterfactual", "divergence.csv", "summary.json"];
+/// What causalcity writes in a pair folder: its two scenario folders (each
+/// with its own checksum listing), the divergence and the summary, and
+/// the leftovers of an interrupted write of them.
+const PAIR_OWN: crate::output::OwnFiles<'static> = crate::output::OwnFiles {
+    listed: &["factual", "counterfactual"],
+    names: &[
+        "divergence.csv",
+        "summary.json",
+        "divergence.csv.partial",
+        "summary.json.partial",
+        ".partial-factual",
+        ".partial-counterfactual",
+    ],
+};
 
 /// Simulates a factual / counterfactual pair (the counterfactual's extra
 /// interventions come after the factual's) and writes it into `folder`
@@ -486,6 +488,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
         }
         let folder = folder_of(key);
+        let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
+        // Never kept, read or written through a link.
+        crate::output::refuse_links_below(&out, &folder).map_err(refused)?;
         if let Some(summary) = complete_pair(&folder) {
             kept.fetch_add(1, Ordering::Relaxed);
             bar.inc();
@@ -500,12 +505,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         counterfactual.interventions.push(intervention);
         let pair = (&plan, &counterfactual);
         // An incomplete pair is written again from scratch: removed first,
-        // unless the way to it is a link or it holds what no run wrote.
-        let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
-        crate::output::refuse_links_below(&out, &folder).map_err(refused)?;
+        // unless it holds what no run wrote.
         if std::fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
-            let ours = pair_files(writers.of(&plan), pair);
-            crate::output::refuse_foreign(&folder, &ours, "a new pair folder").map_err(refused)?;
+            crate::output::refuse_foreign(&folder, &PAIR_OWN, "a new pair folder").map_err(refused)?;
             std::fs::remove_dir_all(&folder)
                 .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
         }
@@ -534,11 +536,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                         Ok(()) => {
                             let summaries = packed_summaries(&path)?;
                             for key in &pack_keys {
-                                let dir = folder_of(key);
-                                if dir.exists() {
-                                    std::fs::remove_dir_all(&dir)
-                                        .map_err(|source| GenError::from(WriteError { path: dir, source }))?;
-                                }
+                                remove_packed(&out, &folder_of(key), &PAIR_OWN)?;
                             }
                             kept.fetch_add(summaries.len(), Ordering::Relaxed);
                             (0..summaries.len()).for_each(|_| bar.inc());
@@ -561,10 +559,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                     return Err(GenError::Interrupted { done: 0, total: 0, out: PathBuf::new() });
                 }
                 packing.commit(false)?;
-                pack_keys.par_iter().try_for_each(|key| {
-                    let dir = folder_of(key);
-                    std::fs::remove_dir_all(&dir).map_err(|source| GenError::from(WriteError { path: dir, source }))
-                })?;
+                pack_keys.par_iter().try_for_each(|key| remove_packed(&out, &folder_of(key), &PAIR_OWN))?;
                 Ok(summaries)
             })
             .collect::<Result<Vec<_>, GenError>>()

@@ -280,6 +280,19 @@ impl TownWriters {
     }
 }
 
+/// Removes the folder `dir` (in `out`) whose scenario or pair is now in its
+/// pack, if it is there: never through a link, and never when it holds
+/// anything but `own`.
+pub(crate) fn remove_packed(out: &Path, dir: &Path, own: &crate::output::OwnFiles) -> Result<(), GenError> {
+    let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
+    crate::output::refuse_links_below(out, dir).map_err(refused)?;
+    if std::fs::symlink_metadata(dir).is_ok_and(|m| m.is_dir()) {
+        crate::output::refuse_foreign(dir, own, "its tar pack").map_err(refused)?;
+        std::fs::remove_dir_all(dir).map_err(io_err(dir))?;
+    }
+    Ok(())
+}
+
 /// Refuses a link at any group or split folder of `spec`'s in `out`
 /// (checked before anything is written or moved): scenarios, pairs and
 /// packs are written below them, and never through a link. The output
@@ -813,6 +826,8 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         }
         let key = &sequence.key(position);
         let target = scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+        // Never kept, read or written through a link.
+        crate::output::refuse_links_below(&out, &target).map_err(|why| GenError::Input(why.to_string()))?;
         let intact = target.exists()
             && verify_scenario(&target)
                 .map_err(|why| {
@@ -850,10 +865,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
                     Ok(()) => {
                         // Folders a run killed after packing them left behind.
                         for key in &keys {
-                            let dir = folder(key);
-                            if dir.exists() {
-                                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
-                            }
+                            remove_packed(&out, &folder(key), &crate::output::OwnFiles::SCENARIO)?;
                         }
                         skipped.fetch_add(u64::from(pack.count), Ordering::Relaxed);
                         (0..pack.count).for_each(|_| progress.inc());
@@ -879,10 +891,8 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             }
             let size = packing.commit(options.fsync)?;
             bytes.fetch_add(size, Ordering::Relaxed);
-            keys.par_iter().try_for_each(|key| {
-                let dir = folder(key);
-                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))
-            })?;
+            keys.par_iter()
+                .try_for_each(|key| remove_packed(&out, &folder(key), &crate::output::OwnFiles::SCENARIO))?;
             Ok(())
         }),
     });

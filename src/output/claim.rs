@@ -170,10 +170,16 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
         }
         _ => {}
     }
-    if let Some(file) = dir.ancestors().skip(1).find(|a| fs::symlink_metadata(a).is_ok_and(|m| m.is_file())) {
+    // (A link on the way counts as what it leads to: a file, or nothing.)
+    if let Some(file) = dir
+        .ancestors()
+        .skip(1)
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| fs::symlink_metadata(a).is_ok() && !a.is_dir())
+    {
         return Err(ClaimError::BadPath {
             path: dir.to_path_buf(),
-            why: format!("lies under {}, which is a file, not a folder", file.display()),
+            why: format!("lies under {}, which is not a folder (a file, or a link to none)", file.display()),
         });
     }
     check_ancestors(dir)?;

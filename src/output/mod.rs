@@ -285,29 +285,43 @@ pub fn refuse_links_below(root: &Path, path: &Path) -> Result<(), Refused> {
     Ok(())
 }
 
+/// What causalcity writes in a folder it replaces whole: the files the
+/// `checksums.sha256` of each folder in `listed` names (paths relative to
+/// the folder; `""` the folder itself) and each path of `names` (a folder
+/// named there counts whole: an interrupted write's leftover).
+pub struct OwnFiles<'a> {
+    pub listed: &'a [&'a str],
+    pub names: &'a [&'a str],
+}
+
+impl OwnFiles<'_> {
+    /// A scenario folder: what its own checksum listing names.
+    pub const SCENARIO: OwnFiles<'static> = OwnFiles { listed: &[""], names: &[] };
+}
+
 /// Refuses to replace the folder `dir` (when there is one) if it holds
-/// anything causalcity did not write there: every file must be listed in
-/// a `checksums.sha256` of `dir` or of a folder in it, or be one of `ours`
-/// (paths relative to `dir`, `/`-separated: what the rewrite writes), and
-/// every empty folder one of `ours` or a folder of a listed file. `what`
-/// names what would replace it in the message (`a new scenario folder`).
-pub fn refuse_foreign(dir: &Path, ours: &[String], what: &str) -> Result<(), Refused> {
-    let mut known: std::collections::HashSet<String> = ours.iter().cloned().collect();
+/// anything else than `own` (every empty folder must be one of them or hold
+/// one). `what` names what would replace it in the message (`a new
+/// scenario folder`).
+pub fn refuse_foreign(dir: &Path, own: &OwnFiles, what: &str) -> Result<(), Refused> {
+    let mut known: std::collections::HashSet<String> = own.names.iter().map(|n| n.to_string()).collect();
+    for folder in own.listed {
+        let prefix = if folder.is_empty() { String::new() } else { format!("{folder}/") };
+        known.insert(format!("{prefix}{CHECKSUMS}"));
+        let Ok(listing) = fs::read_to_string(dir.join(folder).join(CHECKSUMS)) else { continue };
+        for name in listing.lines().filter_map(|line| line.split_once("  ").map(|(_, n)| n)) {
+            let full = format!("{prefix}{name}");
+            let mut parent = full.as_str();
+            while let Some((up, _)) = parent.rsplit_once('/') {
+                known.insert(up.to_string());
+                parent = up;
+            }
+            known.insert(full);
+        }
+    }
     let mut foreign = Vec::new();
     let mut stack = vec![(dir.to_path_buf(), String::new())];
     while let Some((folder, prefix)) = stack.pop() {
-        // A listing's names count as ours, with their folders.
-        if let Ok(listing) = fs::read_to_string(folder.join(CHECKSUMS)) {
-            for name in listing.lines().filter_map(|line| line.split_once("  ").map(|(_, n)| n)) {
-                let full = format!("{prefix}{name}");
-                let mut parent = full.as_str();
-                while let Some((up, _)) = parent.rsplit_once('/') {
-                    known.insert(up.to_string());
-                    parent = up;
-                }
-                known.insert(full);
-            }
-        }
         let entries = match fs::read_dir(&folder) {
             Ok(entries) => entries,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
@@ -317,22 +331,19 @@ pub fn refuse_foreign(dir: &Path, ours: &[String], what: &str) -> Result<(), Ref
         for entry in entries {
             let entry = entry.map_err(|e| Refused(format!("cannot read {}: {e}", folder.display())))?;
             empty = false;
-            let file_name = entry.file_name().to_string_lossy().into_owned();
-            // Leftovers of an interrupted write of ours, which the rewrite
-            // clears.
-            if file_name.starts_with(PARTIAL_PREFIX) || file_name.ends_with(".partial") {
+            let name = format!("{prefix}{}", entry.file_name().to_string_lossy());
+            let real_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+            if real_dir && own.names.contains(&name.as_str()) {
                 continue;
             }
-            let name = format!("{prefix}{file_name}");
-            let real_dir = entry.file_type().is_ok_and(|t| t.is_dir());
             if real_dir {
                 stack.push((entry.path(), format!("{name}/")));
-            } else if !known.contains(&name) && name.rsplit('/').next() != Some(CHECKSUMS) {
+            } else if !known.contains(&name) {
                 foreign.push(entry.path());
             }
         }
-        let own = prefix.trim_end_matches('/');
-        if empty && !own.is_empty() && !known.contains(own) {
+        let this = prefix.trim_end_matches('/');
+        if empty && !this.is_empty() && !known.contains(this) {
             foreign.push(folder);
         }
     }
@@ -343,8 +354,9 @@ pub fn refuse_foreign(dir: &Path, ours: &[String], what: &str) -> Result<(), Ref
     let shown: Vec<String> = foreign.iter().take(5).map(|p| format!("  {}", p.display())).collect();
     let more = foreign.len().saturating_sub(shown.len());
     Err(Refused(format!(
-        "{} would be replaced by {what}, but it holds {} path(s) causalcity did not write:\n{}{}\n\
-         Nothing was replaced. Move them out of it (or use another --out), then rerun.",
+        "{} would be replaced by {what}, but it holds {} path(s) that are not files causalcity wrote there \
+         (named in its checksums.sha256):\n{}{}\nNothing was replaced. Move them out of it (or use another \
+         --out), then rerun.",
         dir.display(),
         foreign.len(),
         shown.join("\n"),

@@ -130,8 +130,7 @@ impl ScenarioWriter {
         let layout = self.layout(plan);
         super::refuse_links_below(root, &target)?;
         if std::fs::symlink_metadata(&target).is_ok_and(|m| m.is_dir()) {
-            let ours: Vec<String> = layout.files().into_iter().chain(layout.folders()).collect();
-            super::refuse_foreign(&target, &ours, "a new scenario folder")?;
+            super::refuse_foreign(&target, &super::OwnFiles::SCENARIO, "a new scenario folder")?;
         }
         let camera = &self.camera;
         let mut dir = ScenarioDir::begin(target, &layout, self.fsync, times)?;
