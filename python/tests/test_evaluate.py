@@ -279,7 +279,8 @@ def bad_files(predictions, tmp_path):
         ("missing", "missing 1"),
         ("unknown", "names no scenario"),
         ("trajectory", "[steps,"),
-        ("horizon", "--history"),
+        # 40 steps of a 30-frame scenario: no history fits, so only the steps are advised.
+        ("horizon", "predict at most 10 steps"),
         ("frames_toy", "only the city world"),
         ("empty", "holds no arrays"),
         ("text", "not an .npz"),
