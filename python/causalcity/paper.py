@@ -45,6 +45,9 @@ from .methods import is_user_method, make
 from .methods.common import positive_int as _positive, run_method
 
 WORLDS = ("toy", "city")
+# The tables and figures a run writes at the top of --out (f1.png only
+# where a method discovers edges), in the order the last line names them.
+TOP_FILES = ("results.csv", "f1.png", "trajectory.png", "results.md")
 # The table's order: the first frame only, the simple rule, classical,
 # neural, and the supervised upper bound; the predictors among them.
 METHOD_ORDER = (
@@ -353,8 +356,12 @@ def run(
                 say(f"  {world} {_label(name)}: {_clock(seconds)}")
         return []
     # Refused now, not after hours: an --out inside a dataset or a sweep, or
-    # through a link (every file below is written by the same rule).
+    # through a link (every file below is written by the same rule), and a
+    # link anywhere on the way to what the run writes below --out.
     _native.claim_output(os.fspath(out / "results.csv"))
+    data_of = {world: out / "data" / (world if not groups else "-".join([world, *chosen[world]])) for world in worlds}
+    _refuse_links_below(out, [p for u in units for p in (_unit_path(out, *u), _predictions_path(out, *u))])
+    _refuse_links_below(out, [out / n for n in (*TOP_FILES, "timings.json")] + list(data_of.values()))
     out.mkdir(parents=True, exist_ok=True)
     records: Dict[Tuple[str, str, str], dict] = {}
     timings: Dict[str, float] = {}
@@ -369,7 +376,8 @@ def run(
         kept = _read_unit(record, key)
         if kept is None:
             start = time.monotonic()
-            predictions = out / "predictions" / world / _folder(name) / f"{group}.npz"
+            predictions = _predictions_path(out, world, name, group)
+            _refuse_links_below(out, [record, predictions])  # one made since the start
             options = _method_options(name, setting, device, seed, quiet)
             run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
             report = evaluate(data, predictions, graph=["designed", "causal"], csv=None)
@@ -394,7 +402,7 @@ def run(
     for world in worlds:
         spec = loaded[world]
         # Another selection of groups is another dataset (gen refuses to mix specs).
-        data = out / "data" / (world if not groups else "-".join([world, *chosen[world]]))
+        data = data_of[world]
         start = time.monotonic()
         mine = [u for u in units if u[0] == world]
         if any(u in left for u in mine):
@@ -457,6 +465,32 @@ def _folder(name: str) -> str:
 def _unit_path(out: Path, world: str, name: str, group: str) -> Path:
     """Where a finished unit's record lies."""
     return out / "units" / world / _folder(name) / f"{group}.json"
+
+
+def _predictions_path(out: Path, world: str, name: str, group: str) -> Path:
+    """Where a unit's predictions file lies."""
+    return out / "predictions" / world / _folder(name) / f"{group}.npz"
+
+
+def _refuse_links_below(out: Path, paths: Sequence[Path]) -> None:
+    """The write rule below ``--out``: nothing is written through a
+    symbolic link there (``units/``, ``predictions/``, ``data/`` and the
+    folders and files in them), as ``gen`` refuses a link below its own
+    ``--out``. Raises ``InputError`` naming the first link on the way to
+    any of ``paths``; to keep the results on another disk, make ``--out``
+    itself that folder (or a link to it)."""
+    seen = set()
+    for path in paths:
+        here = out
+        for part in path.relative_to(out).parts:
+            here = here / part
+            if here in seen:
+                continue
+            seen.add(here)
+            if here.is_symlink():
+                raise InputError(f"{here} is a symbolic link: paper writes below {out} only into folders of its own, "
+                                 "never through a link out of it; remove the link (to keep the results on another "
+                                 "disk, give that folder as --out) and rerun")  # fmt: skip
 
 
 def _read_unit(path: Path, key: dict) -> Optional[dict]:
@@ -704,9 +738,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.plan:
         return 0
     print((out / "results.md").read_text())
-    # f1.png only where a method discovers edges.
-    names = ["results.csv", "f1.png", "trajectory.png", "results.md"]
-    wrote = [str(out / n) for n in names if (out / n).is_file() and (out / n).stat().st_mtime >= started_at - 1]
+    wrote = [str(out / n) for n in TOP_FILES if (out / n).is_file() and (out / n).stat().st_mtime >= started_at - 1]
     print(f"wrote {', '.join(wrote[:-1])} and {wrote[-1]} in {time.monotonic() - start:.0f} s")
     return 0
 

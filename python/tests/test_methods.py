@@ -425,6 +425,21 @@ def test_the_paper_writes_by_the_one_write_rule(tmp_path, toy, capsys, monkeypat
     assert "results.md" in err and "link" in err, err
     assert elsewhere.read_text() == "mine\n"
 
+    # Below --out too: a link at units/, at a world's predictions or at the
+    # data folder is refused before any work, and nothing lands where it points.
+    for below in ("units", "predictions/toy", "data"):
+        fresh = tmp_path / f"fresh-{below.replace('/', '-')}"
+        target = tmp_path / f"target-{below.replace('/', '-')}"
+        target.mkdir()
+        (fresh / below).parent.mkdir(parents=True)
+        (fresh / below).symlink_to(target, target_is_directory=True)
+        code = paper.main([*flags[:-1], str(fresh), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 2, (below, err)
+        assert str(fresh / below) in err and "symbolic link" in err, err
+        assert list(target.iterdir()) == [], below
+        assert sorted(p.name for p in fresh.iterdir()) == [below.split("/")[0]], below
+
 
 def test_granger_on_every_core_scores_as_on_one(toy):
     from causalcity.methods.classical import Granger
