@@ -507,3 +507,45 @@ fn merge_never_moves_scenarios_through_a_link_in_a_shard() {
     assert_refused(&run(&["merge", "--out", s(&a), s(&b)]), "never writes through a link");
     assert_eq!(hash_tree(&elsewhere), before, "nothing moved out of it");
 }
+
+#[test]
+fn merge_never_takes_a_link_at_a_scenario_folder_as_the_scenario() {
+    let dir = fresh_dir("rule-merge-scenario-link");
+    let spec = write_spec(&dir, &toy_spec("rule", &[(4, 0.5)], (2, 1, 1), 20));
+    let (a, b) = (dir.join("shard0"), dir.join("shard1"));
+    gen_ok(&spec, &a, &["--quiet", "--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &b, &["--quiet", "--no-images", "--shard", "1/2"]);
+    let scenarios = |shard: &Path| -> Vec<PathBuf> {
+        let mut found = Vec::new();
+        for split in std::fs::read_dir(shard.join("cars04_edges50")).unwrap().flatten() {
+            found.extend(std::fs::read_dir(split.path()).unwrap().flatten().map(|e| e.path()));
+        }
+        found.sort();
+        found
+    };
+    let (in_a, in_b) = (scenarios(&a), scenarios(&b));
+    assert!(!in_a.is_empty() && !in_b.is_empty(), "both shards hold scenarios");
+    // In --out, b's first scenario as a link to a copy of it elsewhere: not
+    // the scenario in place (merge kept the link and dropped b's copy).
+    let copy = dir.join("copy");
+    let place = a.join(in_b[0].strip_prefix(&b).unwrap());
+    std::fs::create_dir_all(place.parent().unwrap()).unwrap();
+    assert!(std::process::Command::new("cp").args(["-r", s(&in_b[0]), s(&copy)]).status().unwrap().success());
+    std::os::unix::fs::symlink(&copy, &place).unwrap();
+    let (before_a, before_b) = (hash_tree(&a), hash_tree(&b));
+    let output = run(&["merge", "--out", s(&a), s(&b)]);
+    assert_refused(&output, "never writes through a link");
+    assert!(stderr(&output).contains(s(&place)), "names the link: {}", stderr(&output));
+    assert_eq!((hash_tree(&a), hash_tree(&b)), (before_a, before_b), "nothing moved");
+    assert!(in_b[0].is_dir(), "b's scenario is still there");
+
+    // In a shard, a scenario folder as a link: never moved into --out.
+    std::fs::remove_file(&place).unwrap();
+    let moved = dir.join("moved");
+    std::fs::rename(&in_b[0], &moved).unwrap();
+    std::os::unix::fs::symlink(&moved, &in_b[0]).unwrap();
+    let output = run(&["merge", "--out", s(&a), s(&b)]);
+    assert_refused(&output, "never writes through a link");
+    assert!(stderr(&output).contains(s(&in_b[0])), "names the link: {}", stderr(&output));
+    assert!(!place.exists() && std::fs::symlink_metadata(&place).is_err(), "no link landed in --out");
+}

@@ -200,6 +200,18 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     ))
 }
 
+/// Whether a scenario folder or pack `path` in the dataset or shard folder
+/// `root` is there (`kind` says what counts); a link there is refused:
+/// merge never takes one as the scenario already in place, nor moves,
+/// reads or removes anything through it.
+fn there(root: &Path, path: &Path, kind: impl Fn(&fs::Metadata) -> bool) -> Result<bool, GenError> {
+    let metadata = fs::symlink_metadata(path);
+    if metadata.as_ref().is_ok_and(|m| m.file_type().is_symlink()) {
+        crate::output::refuse_links_below(root, path).map_err(|why| GenError::Input(why.to_string()))?;
+    }
+    Ok(metadata.is_ok_and(|m| !m.file_type().is_symlink() && kind(&m)))
+}
+
 /// Moves every scenario folder into `out` from the shard folders
 /// `others` (checked first, all of them); returns how many moved and how
 /// many duplicate copies were dropped.
@@ -209,10 +221,11 @@ fn merge_folders(out: &Path, others: &[&PathBuf], sequence: &KeySequence<'_>) ->
     let locate = |position: usize, compare: bool| -> Result<Located, GenError> {
         let key = sequence.key(position);
         let to = scenario_dir(out, &key.group, key.split.name(), &key.folder_name());
-        let mut located = Located { found: to.is_dir().then(|| to.clone()), to, moved: false, duplicates: Vec::new() };
+        let found = there(out, &to, |m| m.is_dir())?.then(|| to.clone());
+        let mut located = Located { found, to, moved: false, duplicates: Vec::new() };
         for source in others {
             let from = scenario_dir(source, &key.group, key.split.name(), &key.folder_name());
-            if !from.is_dir() {
+            if !there(source, &from, |m| m.is_dir())? {
                 continue;
             }
             match &located.found {
@@ -320,10 +333,11 @@ fn merge_packs(out: &Path, others: &[&PathBuf], packs: Packs<'_>) -> Result<(usi
     let locate = |number: usize, compare: bool| -> Result<(PathBuf, Option<PathBuf>, bool, Vec<PathBuf>), GenError> {
         let pack = packs.pack(number);
         let to = packs.path(out, &pack);
-        let (mut found, mut moved, mut duplicates) = (to.is_file().then(|| to.clone()), false, Vec::new());
+        let (mut found, mut moved, mut duplicates) =
+            (there(out, &to, |m| m.is_file())?.then(|| to.clone()), false, Vec::new());
         for source in others {
             let from = packs.path(source, &pack);
-            if !from.is_file() {
+            if !there(source, &from, |m| m.is_file())? {
                 continue;
             }
             match &found {
