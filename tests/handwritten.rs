@@ -540,6 +540,15 @@ fn a_gen_spec_can_list_cameras_and_validate_checks_their_files() {
             {"name": "west", "static": {"centre": [-24, 0], "rotation_deg": 90}, "width": 320, "height": 200}]"#,
         1,
     );
+    // Camera folders whose names differ only in case are one folder on
+    // macOS and Windows: refused in a spec as in a scenario file.
+    std::fs::create_dir_all(dir.join("alike")).unwrap();
+    let alike = write_spec(&dir.join("alike"), &spec.replacen("\"west\"", "\"Follow0\"", 1));
+    let output = run(&["gen", "--spec", alike.to_str().unwrap(), "--out", dir.join("alike-out").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("cameras[1].name") && stderr.contains("only in case"), "{stderr}");
+    assert!(!dir.join("alike-out").exists());
     let spec_path = write_spec(&dir, &spec);
     assert_valid(&validator("spec.schema.json"), &read_json(&spec_path), &spec_path);
     let out = dir.join("out");
@@ -640,6 +649,25 @@ fn scenario_files_are_read_strictly() {
             "unknown-light",
             one(r#"{"at": 1, "do": "set_light", "light": "AX/W/straight", "colour": "red", "seconds": 2}"#),
             vec!["interventions[0].light", "\"AX/W/straight\" is not a light", "(AC AD BC BD; N E S W; straight left)"],
+        ),
+        (
+            "names-alike-but-for-case",
+            format!(
+                r#"[{{"Name": "Left", "frames": 10, "Vehicles": [{OK_CAR}]}}, {{"Name": "left", "frames": 10, "Vehicles": [{OK_CAR}]}}]"#
+            ),
+            vec!["scenario \"left\"", "field Name", "\"Left\"", "only in case"],
+        ),
+        (
+            "the-same-name-twice",
+            format!(r#"[{{"Name": "Twice", "Vehicles": [{OK_CAR}]}}, {{"Name": "Twice", "Vehicles": [{OK_CAR}]}}]"#),
+            vec!["scenario \"Twice\"", "field Name", "names another scenario too"],
+        ),
+        (
+            "cameras-alike-but-for-case",
+            format!(
+                r#"[{{"Name": "Cams", "frames": 10, "Vehicles": [{OK_CAR}], "cameras": [{{"name": "Chase", "chase": "Car_1"}}, {{"name": "chase", "chase": "Car_1"}}]}}]"#
+            ),
+            vec!["scenario \"Cams\"", "cameras[1].name", "\"Chase\"", "only in case"],
         ),
         (
             "vehicle-as-a-list",

@@ -221,6 +221,22 @@ pub fn valid_folder_name(name: &str) -> bool {
         && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
+/// Why `name` may not name a folder beside `others`, which name `what`s (a
+/// scenario, a camera): it is one of them, or differs from one only in
+/// case (one folder on macOS and Windows, where the second would land in
+/// the first's). `None` when it may.
+pub fn folder_name_clash<'a>(name: &str, others: impl IntoIterator<Item = &'a str>, what: &str) -> Option<String> {
+    let other = others.into_iter().find(|other| other.eq_ignore_ascii_case(name))?;
+    Some(if other == name {
+        format!("{name:?} names another {what} too: names must be unique (they name folders)")
+    } else {
+        format!(
+            "{name:?} differs from another {what}'s name {other:?} only in case: they name folders, which macOS and \
+             Windows do not tell apart by case"
+        )
+    })
+}
+
 fn unit_interval(field: &str, value: f64, hi: f64) -> Result<(), SpecError> {
     if !(value.is_finite() && (0.0..=hi).contains(&value)) {
         return Err(SpecError::new(field, format!("{} is not allowed: use 0 to {hi}", Shown(value))));
@@ -514,7 +530,6 @@ impl DatasetSpec {
         self.check_actuated_lights()?;
         self.birds_eye_camera()?;
         let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
-        let mut names = std::collections::HashSet::new();
         for (i, camera) in self.cameras.iter().enumerate() {
             let field = format!("cameras[{i}]");
             camera.plan(&field, |car| match car {
@@ -525,11 +540,10 @@ impl DatasetSpec {
                 )),
                 CarRef::Name(name) => Err(format!("{name:?}: in a spec, name the car by its id (0, 1, ...)")),
             })?;
-            if !names.insert(camera.name.as_str()) {
-                return Err(SpecError::new(
-                    format!("{field}.name"),
-                    format!("{:?} names another camera too", camera.name),
-                ));
+            if let Some(why) =
+                folder_name_clash(&camera.name, self.cameras[..i].iter().map(|c| c.name.as_str()), "camera")
+            {
+                return Err(SpecError::new(format!("{field}.name"), why));
             }
         }
         Ok(())

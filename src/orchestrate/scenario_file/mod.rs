@@ -32,7 +32,10 @@ use crate::geometry::OrientedBox;
 use crate::json::{self, JsonError, Shown};
 use crate::map::{CityMap, LanePolicy, Route};
 use crate::plan::{stream_key, Expansion, GivenCar, PlannedTown, ScenarioKey, ScenarioPlan};
-use crate::spec::{valid_folder_name, CameraSpec, CarRef, DatasetSpec, Split, WorldKind};
+use crate::spec::{
+    folder_name_clash, valid_folder_name, CameraSpec, CarRef, DatasetSpec, Split, WorldKind, MAX_FRAMES,
+    MAX_FRAME_INTERVAL_S,
+};
 use interventions::{car_index, resolve_interventions};
 use raw::{raw_interventions, RawIntervention, RawScenario};
 use serde_json::Value;
@@ -149,15 +152,13 @@ pub fn load_text(
     let mut loaded: Vec<LoadedScenario> = Vec::new();
     for (index, entry) in entries.into_iter().enumerate() {
         let scenario = load_one(path, index, entry, options, map)?;
-        if loaded.iter().any(|l| l.name == scenario.name) {
+        if let Some(message) = folder_name_clash(&scenario.name, loaded.iter().map(|l| l.name.as_str()), "scenario") {
             return Err(ScenarioFileError {
                 file: path.to_path_buf(),
                 scenario: Some(scenario.name.clone()),
                 car: None,
                 field: "Name".into(),
-                message:
-                    "another scenario of the file has this name: names must be unique (they name the output folders)"
-                        .into(),
+                message,
             });
         }
         loaded.push(scenario);
@@ -272,15 +273,15 @@ fn resolve(
     let world = options.world.or(raw.world).unwrap_or(WorldKind::City);
     let seed = raw.seed.unwrap_or(DEFAULT_SEED);
     let frames = raw.frames.unwrap_or_else(DatasetSpec::default_frames);
-    if !(1..=100_000).contains(&frames) {
-        return Err(here.err(None, "frames", format!("{frames} is not allowed: 1 to 100000")));
+    if !(1..=MAX_FRAMES).contains(&frames) {
+        return Err(here.err(None, "frames", format!("{frames} is not allowed: 1 to {MAX_FRAMES}")));
     }
     if let Some(t) = raw.frame_interval {
-        if !(t > 0.0 && t <= 10.0) {
+        if !(t > 0.0 && t <= MAX_FRAME_INTERVAL_S) {
             return Err(here.err(
                 None,
                 "frame_interval",
-                format!("{} is not allowed: seconds, above 0 and at most 10", Shown(t)),
+                format!("{} is not allowed: seconds, above 0 and at most {MAX_FRAME_INTERVAL_S}", Shown(t)),
             ));
         }
     }
@@ -436,8 +437,8 @@ fn resolve_cameras(
                 CarRef::Id(id) => car_index(names, &id.to_string()),
             })
             .map_err(|e| here.err(None, e.field, e.message))?;
-        if plans.iter().any(|p| p.name == plan.name) {
-            return Err(here.err(None, format!("{field}.name"), format!("{:?} names another camera too", plan.name)));
+        if let Some(why) = folder_name_clash(&plan.name, plans.iter().map(|p| p.name.as_str()), "camera") {
+            return Err(here.err(None, format!("{field}.name"), why));
         }
         plans.push(plan);
     }
