@@ -636,6 +636,20 @@ fn scenario_files_are_read_strictly() {
             vec!["interventions[0].speed", "1000000000 is not allowed", "at most 20"],
         ),
         (
+            "after-the-last-frame",
+            one(r#"{"at": 1000, "do": "stop", "car": "Car_1", "seconds": 2}"#),
+            vec![
+                "interventions[0].at",
+                "1000 s is after the scenario's last frame (frame 9 at",
+                "would change nothing",
+            ],
+        ),
+        (
+            "past-the-last-frame",
+            one(r#"{"at_frame": 10, "do": "remove", "car": "Car_1"}"#),
+            vec!["interventions[0].at_frame", "10 is not a frame of this scenario", "give 0 to 9"],
+        ),
+        (
             "unknown-effect",
             one(r#"{"at": 1, "do": "fly", "car": "Car_1"}"#),
             vec!["interventions[0].do", "\"fly\" is not an intervention", "set_light_plan"],

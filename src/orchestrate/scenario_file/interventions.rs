@@ -58,14 +58,42 @@ fn resolve_intervention(
             Err((field.to_string(), format!("{} is not allowed: {what}, above 0", Shown(v))))
         }
     };
+    // An intervention after the last frame changes nothing a file records:
+    // refused, so that a counterfactual is never silently the factual run.
+    let (frames, interval) = (expansion.spec.frames, expansion.spec.frame_interval());
+    let last_s = (frames.saturating_sub(1)) as f64 * interval;
     let (trigger, when_text) = match &raw.trigger {
         RawTrigger::At(t) => {
             if !(t.is_finite() && *t >= 0.0) {
                 return Err(("at".into(), format!("{} is not allowed: seconds from the start, 0 or more", Shown(*t))));
             }
+            if *t > last_s {
+                return Err((
+                    "at".into(),
+                    format!(
+                        "{} s is after the scenario's last frame (frame {} at {} s): it would change nothing; give 0 \
+                         to {} s",
+                        Shown(*t),
+                        frames.saturating_sub(1),
+                        Shown(last_s),
+                        Shown(last_s)
+                    ),
+                ));
+            }
             (Trigger::At(*t), format!("at {t} s"))
         }
-        RawTrigger::AtFrame(f) => (Trigger::At(*f as f64 * expansion.spec.frame_interval()), format!("at frame {f}")),
+        RawTrigger::AtFrame(f) => {
+            if *f >= u64::from(frames) {
+                return Err((
+                    "at_frame".into(),
+                    format!(
+                        "{f} is not a frame of this scenario: it would change nothing; give 0 to {}",
+                        frames.saturating_sub(1)
+                    ),
+                ));
+            }
+            (Trigger::At(*f as f64 * interval), format!("at frame {f}"))
+        }
         RawTrigger::When(RawWhen { car: Some(car), reaches: Some(name), light: None, turns: None }) => {
             let car = car_named("when.car", car)?;
             let intersection = map.intersections.iter().position(|x| x.name == *name).ok_or_else(|| {
