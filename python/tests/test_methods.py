@@ -501,6 +501,26 @@ def test_only_pcmci_has_backends(toy, tmp_path, capsys):
     assert not (tmp_path / "g.npz").exists()
 
 
+def test_a_flag_a_method_does_not_take_is_refused_not_ignored(toy, tmp_path, capsys):
+    # `path --epochs 5` ran as `path`, the flag ignored without a word.
+    from causalcity.methods.__main__ import main
+
+    out = tmp_path / "p.npz"
+    for method, flags, says in [
+        ("path", ["--epochs", "5"], "--epochs does nothing for path"),
+        ("granger", ["--device", "cpu"], "--device does nothing for granger"),
+        ("interaction", ["--kl-weight", "2"], "--kl-weight does nothing for interaction"),
+        ("frame0", ["--lr", "0.1"], "--lr does nothing for frame0"),
+    ]:
+        assert main([method, str(toy), "--out", str(out), *flags]) == 2, method
+        err = capsys.readouterr().err
+        assert says in err and "nri" in err, err
+        assert not out.exists()
+    # Without the flag, the same command runs.
+    assert main(["path", str(toy), "--out", str(out), "--quiet"]) == 0
+    assert out.is_file()
+
+
 USER_METHODS = '''
 import numpy as np
 from causalcity.methods import Method, Predicted

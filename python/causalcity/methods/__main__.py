@@ -14,6 +14,35 @@ from .classical import Pcmci
 from .common import DatasetError, positive_int as _positive, run_method
 
 
+# The flags that set up one method or another, and the methods each applies
+# to (a user's class takes --device); --seed and --quiet apply to every one.
+_TRAINING = ("epochs", "device", "batch_size", "lr", "time_limit", "lr_schedule")
+_TAKES = {
+    "nri": (*_TRAINING, "decoder", "encoder_input", "kl_weight"),
+    "nri_trail": (*_TRAINING, "kl_weight"),
+    "interaction": (*_TRAINING, "decoder"),
+    "pcmci": ("backend",),
+    "cf_nri": ("epochs", "device"),
+}
+_FLAGS = (*_TRAINING, "decoder", "encoder_input", "kl_weight", "backend")
+
+
+def _flag_not_taken(args: argparse.Namespace) -> Optional[str]:
+    """Why a flag given does nothing for ``args.method`` (it was ignored
+    silently: ``path --epochs 5`` ran as ``path``), or ``None``."""
+    if args.method not in METHODS and args.method not in COUNTERFACTUAL_METHODS and not is_user_method(args.method):
+        return None  # an unknown method is named as such further on
+    takes = ("device",) if is_user_method(args.method) else _TAKES.get(args.method, ())
+    for flag in _FLAGS:
+        if getattr(args, flag) is not None and flag not in takes:
+            option = "--" + flag.replace("_", "-")
+            if flag == "backend":
+                return f"{option} {args.backend}: only pcmci has backends, not {args.method}"
+            which = [m for m, t in _TAKES.items() if flag in t] + (["your own class"] if flag == "device" else [])
+            return f"{option} does nothing for {args.method}: it sets up {', '.join(which)} only"
+    return None
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m causalcity.methods",
@@ -35,7 +64,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--group", nargs="+", help="only these groups")
     parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
     parser.add_argument("--epochs", type=_positive, help="nri, nri_trail, interaction: training epochs, at least 1 (default 30)")
-    parser.add_argument("--device", default="auto", help="nri, interaction: cpu, cuda or auto (default)")
+    parser.add_argument("--device", help="nri, interaction, cf_nri, your own class: cpu, cuda or auto (default)")
     parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; use 128 or more on a GPU)")
     parser.add_argument("--lr", type=float, help="nri, interaction: Adam's learning rate (default 1e-3)")
     parser.add_argument("--decoder", choices=["rnn", "mlp", "trail"],
@@ -57,16 +86,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
     options = {}
-    if args.backend is not None and args.method != "pcmci":
-        print(f"error: --backend {args.backend}: only pcmci has backends, not {args.method}", file=sys.stderr)
+    if args.method == "nri_trail" and (args.decoder or args.encoder_input):
+        print("error: nri_trail is nri with --decoder trail --encoder-input heading: give those to nri instead",
+              file=sys.stderr)  # fmt: skip
         return 2
+    not_taken = _flag_not_taken(args)
+    if not_taken:
+        print(f"error: {not_taken}", file=sys.stderr)
+        return 2
+    args.device = args.device or "auto"
     if is_user_method(args.method):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
     elif args.method in ("nri", "interaction", "nri_trail"):
-        if args.method == "nri_trail" and (args.decoder or args.encoder_input):
-            print("error: nri_trail is nri with --decoder trail --encoder-input heading: give those to nri instead",
-                  file=sys.stderr)  # fmt: skip
-            return 2
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
         given = dict(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, decoder=args.decoder,
                      time_limit_s=args.time_limit, lr_schedule=args.lr_schedule)  # fmt: skip
