@@ -266,7 +266,7 @@ fn scenario_parser(dir: &Path, name: &str, text: &str) -> Result<(), String> {
 
 fn scenario_base() -> Value {
     json!([{
-        "Name": "agree", "frames": 10, "seed": 2,
+        "Name": "agree", "frames": 30, "seed": 2,
         "Vehicles": [
             {"Id": "Car_1", "Spawn": "A1w", "SpawnAtDistance": 5, "DriveQueue": ["straight"], "MergeAtDistances": [0],
              "desired_speeds": [2, 2], "time_headway": 1.5, "runs_red_lights": false, "colour": "#ff8800"},
@@ -385,7 +385,7 @@ fn scenario_file_schema_and_parser_agree() {
     let text = base.to_string();
     for (k, (what, bad_text)) in [
         ("trailing garbage", format!("{text} xyz")),
-        ("duplicate scenario key", text.replace(r#""frames":10"#, r#""frames":10,"frames":20"#)),
+        ("duplicate scenario key", text.replace(r#""frames":30"#, r#""frames":30,"frames":20"#)),
         ("duplicate vehicle key", text.replace(r#""Spawn":"B1w""#, r#""Spawn":"B1w","Spawn":"C1w""#)),
         ("duplicate key in when", text.replace(r#""reaches":"AC""#, r#""reaches":"AC","reaches":"BD""#)),
     ]
