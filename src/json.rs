@@ -87,8 +87,29 @@ pub fn from_value_untagged_path<T: DeserializeOwned>(value: Value) -> Result<T, 
 }
 
 fn from_value_with<T: DeserializeOwned>(value: Value, skip_variants: bool) -> Result<T, JsonError> {
-    serde_path_to_error::deserialize(Strict(value))
-        .map_err(|e| JsonError { path: format_path(e.path(), skip_variants), message: e.into_inner().to_string() })
+    serde_path_to_error::deserialize(Strict(value)).map_err(|e| JsonError {
+        path: format_path(e.path(), skip_variants),
+        message: in_plain_words(&e.into_inner().to_string()),
+    })
+}
+
+/// serde's "expected u32" and the like in the words of a JSON file: a
+/// user wrote a number, a list or an object, not a Rust type.
+fn in_plain_words(message: &str) -> String {
+    const WHOLE: [&str; 9] = ["u8", "u16", "u32", "u64", "usize", "i8", "i16", "i32", "i64"];
+    let plain_type = |rust: &str| match rust {
+        "f32" | "f64" => Some("a number"),
+        "a sequence" => Some("a list"),
+        _ if WHOLE.contains(&rust) => Some("a whole number"),
+        _ => None,
+    };
+    match message.rsplit_once("expected ") {
+        Some((before, rust)) => match plain_type(rust) {
+            Some(words) => format!("{before}expected {words}"),
+            None => message.to_string(),
+        },
+        None => message.to_string(),
+    }
 }
 
 fn format_path(path: &serde_path_to_error::Path, skip_variants: bool) -> String {

@@ -514,6 +514,12 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    // A value of the wrong kind is told in a JSON file's words, not Rust's
+    // ("expected u32", "expected f64" before).
+    let frames = with(|v| v["frames"] = "ten".into());
+    rejected("frames-text", &frames, &["field `frames`", "string \"ten\", expected a whole number"]);
+    let interval = with(|v| v["frame_interval"] = "x".into());
+    rejected("interval-text", &interval, &["field `frame_interval`", "string \"x\", expected a number"]);
     let proportion = with(|v| v["groups"][0]["edge_proportion"] = 0.25.into()).replace("0.25", "1e308");
     rejected("proportion-1e308", &proportion, &["groups[0].edge_proportion", "1e308 is not allowed"]);
     rejected(
