@@ -145,6 +145,30 @@ fn validate_names_the_pack_and_the_file_of_damage_and_gen_writes_that_pack_again
 }
 
 #[test]
+fn a_reader_names_the_pack_and_member_it_could_not_read_not_a_temporary_folder() {
+    let (_, _, packed) = both("packs-reader-damage");
+    let pack = packed.join("cars04_edges50/test/00000-00001.tar");
+    let member = "cars04_edges50/test/00001/poses.csv";
+    // The first pose row's frame number made unreadable (same length: the pack stays a tar).
+    let mut bytes = std::fs::read(&pack).unwrap();
+    let at = bytes.windows(member.len()).position(|w| w == member.as_bytes()).expect("member in the pack");
+    let data = (at / 512 + 1) * 512;
+    let row = data + bytes[data..].iter().position(|&b| b == b'\n').unwrap() + 1;
+    bytes[row] = b'x';
+    std::fs::write(&pack, bytes).unwrap();
+    let mut checked = 0;
+    for command in ["stats", "baseline"] {
+        let out = run(&[command, packed.to_str().unwrap()]);
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{command}: {said}");
+        assert!(said.contains(&format!("{}: {member}", pack.display())), "{command} names the pack and member: {said}");
+        assert!(!said.contains("causalcity-unpacked"), "{command} names a temporary folder: {said}");
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+}
+
+#[test]
 fn validate_says_when_a_pack_lacks_a_scenario_or_holds_a_stranger_and_gen_repairs_both() {
     let (spec, folders, packed) = both("packs-membership");
     let before = hash_tree(&packed);

@@ -869,7 +869,7 @@ fn score_in_turn(
         // Unpacked here (the folders' paths are the run's own); a failure to
         // unpack is the dataset's, a bad score the input's.
         dataset.scenario_dirs(group, split).map_err(Error::Failure)?;
-        let scores = score(run);
+        let scores = score(run).map_err(|e| dataset.name_packed_paths(e));
         dataset.release(group, split).map_err(Error::Failure)?;
         results.extend(scores.map_err(Error::Input)?);
     }

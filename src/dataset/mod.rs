@@ -191,9 +191,46 @@ impl Dataset {
         read: impl FnOnce(&[PathBuf]) -> Result<R, String>,
     ) -> Result<R, String> {
         let dirs = self.scenario_dirs(group, split)?;
-        let result = read(&dirs);
+        let result = read(&dirs).map_err(|e| self.name_packed_paths(e));
         self.release(group, split)?;
         result
+    }
+
+    /// `message` with each path into the temporary folder that a packed
+    /// dataset's scenarios are unpacked into told as where the file is:
+    /// `<pack>: <group>/<split>/<scenario>/<file>`, as `validate` names a
+    /// file in a pack. Unchanged for a folder dataset.
+    pub fn name_packed_paths(&self, message: String) -> String {
+        let Some(unpacked) = &self.unpacked else { return message };
+        let prefix = format!("{}/", unpacked.scratch.path().display());
+        let mut named = String::with_capacity(message.len());
+        let mut rest = message.as_str();
+        while let Some(at) = rest.find(&prefix) {
+            named.push_str(&rest[..at]);
+            let after = &rest[at + prefix.len()..];
+            let end = after.find(|c: char| c == ':' || c == ',' || c.is_whitespace()).unwrap_or(after.len());
+            let relative = &after[..end];
+            let parts: Vec<&str> = relative.splitn(4, '/').collect();
+            match (parts.len() >= 3).then(|| self.pack_of(parts[0], parts[1], parts[2])).flatten() {
+                Some(pack) => named.push_str(&format!("{}: {relative}", pack.display())),
+                None => named.push_str(&format!("{} (in its tar pack)", self.dir.join(relative).display())),
+            }
+            rest = &after[end..];
+        }
+        named.push_str(rest);
+        named
+    }
+
+    /// The tar pack holding scenario folder `name` of `group`'s `split`.
+    fn pack_of(&self, group: &str, split: &str, name: &str) -> Option<PathBuf> {
+        let unpacked = self.unpacked.as_ref()?;
+        let index = self.spec().groups.iter().position(|g| g.name() == group)?;
+        let split = Split::ALL.into_iter().find(|s| s.name() == split)?;
+        let sequence = self.key_sequence();
+        let position = sequence.positions_of(index, split).find(|&p| sequence.key(p).folder_name() == name)?;
+        let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
+        let number = packs.numbers_of(position..position + 1).next()?;
+        Some(packs.path(&self.dir, &packs.pack(number)))
     }
 
     /// Calls `each(folder, relative)` for every scenario of the dataset, in

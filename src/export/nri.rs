@@ -273,7 +273,8 @@ fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Resu
                 .zip(dirs.par_iter())
                 .try_for_each(|((((loc, vel), edges), dynamic), dir)| {
                     fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges, dynamic))
-                })?;
+                })
+                .map_err(|e| opened.name_packed_paths(e))?;
             opened.release(&group.name(), split)?;
             let (f, c) = (frames as u64, cars as u64);
             let loc_shape = match options.layout {
