@@ -359,16 +359,19 @@ use whole_numbers;
 fn whole_number_message(n: &Number, min: i128, max: i128) -> String {
     let allowed = format!("use a whole number from {min} to {max}");
     let value = n.as_f64().unwrap_or(f64::NAN);
+    // A float as written (1e12, not 1000000000000.0), an integer whole; past
+    // what a float holds exactly, by which end it passes.
+    let shown = |beyond: &str, end: i128| match n.is_f64() {
+        true if value.abs() >= 1e16 => format!("a number {beyond} {end}"),
+        true => Shown(value).to_string(),
+        false => n.to_string(),
+    };
     if n.is_f64() && value.is_finite() && value.fract() != 0.0 {
         format!("{} is not a whole number: {allowed}", Shown(value))
     } else if value > max as f64 || (n.is_f64() && value >= max as f64) {
-        let shown =
-            if n.is_f64() && value >= 1e16 { "a number above ".to_string() + &max.to_string() } else { n.to_string() };
-        format!("{shown} is too large: {allowed}")
+        format!("{} is too large: {allowed}", shown("above", max))
     } else if value < min as f64 {
-        let shown =
-            if n.is_f64() && value <= -1e16 { "a number below ".to_string() + &min.to_string() } else { n.to_string() };
-        format!("{shown} is too small: {allowed}")
+        format!("{} is too small: {allowed}", shown("below", min))
     } else {
         format!("{} is written as a decimal: {allowed}, without a decimal point or exponent", Shown(value))
     }

@@ -514,6 +514,8 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "1000000000000.0");
+    rejected("frames-1e12", &frames, &["field `frames`", " 1000000000000 is too large"]);
     // A value of the wrong kind is told in a JSON file's words, not Rust's
     // ("expected u32", "expected f64" before).
     let frames = with(|v| v["frames"] = "ten".into());
