@@ -645,6 +645,19 @@ fn scenario_files_are_read_strictly() {
             ],
         ),
         (
+            // 0.3 s x 3 is 0.8999999999999999 in floating point: 0.9 is the
+            // last frame's time as typed (accepted: interventions[0]), 0.95 is past it.
+            "after-the-last-frame-by-a-fraction",
+            format!(
+                r#"[{{"Name": "Strict", "frames": 4, "frame_interval": 0.3, "Vehicles": [{OK_CAR}], "interventions": [{{"at": 0.9, "do": "remove", "car": "Car_1"}}, {{"at": 0.95, "do": "remove", "car": "Car_1"}}]}}]"#
+            ),
+            vec![
+                "interventions[1].at",
+                "0.95 s is after the scenario's last frame (frame 3 at 0.9 s)",
+                "give 0 to 0.9 s",
+            ],
+        ),
+        (
             "past-the-last-frame",
             one(r#"{"at_frame": 10, "do": "remove", "car": "Car_1"}"#),
             vec!["interventions[0].at_frame", "10 is not a frame of this scenario", "give 0 to 9"],

@@ -61,13 +61,15 @@ fn resolve_intervention(
     // An intervention after the last frame changes nothing a file records:
     // refused, so that a counterfactual is never silently the factual run.
     let (frames, interval) = (expansion.spec.frames, expansion.spec.frame_interval());
-    let last_s = (frames.saturating_sub(1)) as f64 * interval;
+    // The last frame's time as a user types it (0.9, not 0.8999999999999999);
+    // a trigger fires within 1e-9 s of its time, as the simulation has it.
+    let last_s = ((frames.saturating_sub(1)) as f64 * interval * 1e9).round() / 1e9;
     let (trigger, when_text) = match &raw.trigger {
         RawTrigger::At(t) => {
             if !(t.is_finite() && *t >= 0.0) {
                 return Err(("at".into(), format!("{} is not allowed: seconds from the start, 0 or more", Shown(*t))));
             }
-            if *t > last_s {
+            if *t > last_s + 1e-9 {
                 return Err((
                     "at".into(),
                     format!(
