@@ -582,6 +582,17 @@ def test_a_users_own_method_runs_through_the_paper_pipeline(tmp_path, user_modul
     assert test["group"] == "cars08_edges50" and test["f1"] == pytest.approx(paper_f1)
 
 
+def test_device_is_refused_for_a_users_class_that_does_not_take_it(toy, tmp_path, user_module, capsys):
+    from causalcity.methods.__main__ import main
+
+    out = tmp_path / "closest.npz"
+    # Closest's constructor takes seed only: --device was dropped silently.
+    assert main([f"{user_module}:Closest", str(toy), "--out", str(out), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert f"--device does nothing for {user_module}:Closest" in err and "takes device" in err, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     "name, message",
     [

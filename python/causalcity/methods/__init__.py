@@ -136,6 +136,29 @@ def is_user_method(name: str) -> bool:
     return ":" in name
 
 
+def _takes(target, option: str) -> bool:
+    """Whether the constructor ``target`` takes ``option`` (by name, or any
+    keyword)."""
+    try:
+        parameters = inspect.signature(target).parameters
+    except (TypeError, ValueError):
+        return False
+    return option in parameters or any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+
+
+def user_method_takes(name: str, option: str) -> bool:
+    """Whether a user's class ``package.module:Class`` takes ``option``;
+    ``True`` when it cannot be loaded (making it says why)."""
+    module_name, _, attribute = name.partition(":")
+    try:
+        target = importlib.import_module(module_name)
+        for part in attribute.split("."):
+            target = getattr(target, part)
+    except Exception:  # a user's module may raise anything on import
+        return True
+    return not callable(target) or _takes(target, option)
+
+
 def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
     """A fresh instance of the class ``package.module:Class``, given those of
     ``options`` its constructor takes; every failure is a ``ValueError``
@@ -154,12 +177,7 @@ def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
         target = getattr(target, part)
     if not callable(target):
         raise ValueError(f"method {name!r}: {attribute} is not a class")
-    try:
-        parameters = inspect.signature(target).parameters
-    except (TypeError, ValueError):
-        parameters = {}
-    takes_any = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in parameters.values())
-    given = {k: v for k, v in options.items() if takes_any or k in parameters}
+    given = {k: v for k, v in options.items() if _takes(target, k)}
     method = target(**given)
     missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
     if missing:

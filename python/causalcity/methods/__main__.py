@@ -8,7 +8,7 @@ import sys
 from typing import Optional, Sequence
 
 from .. import GenerationError, InputError
-from . import METHODS, is_user_method, make
+from . import METHODS, is_user_method, make, user_method_takes
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .classical import Pcmci
 from .common import DatasetError, positive_int as _positive, run_method
@@ -32,13 +32,18 @@ def _flag_not_taken(args: argparse.Namespace) -> Optional[str]:
     silently: ``path --epochs 5`` ran as ``path``), or ``None``."""
     if args.method not in METHODS and args.method not in COUNTERFACTUAL_METHODS and not is_user_method(args.method):
         return None  # an unknown method is named as such further on
-    takes = ("device",) if is_user_method(args.method) else _TAKES.get(args.method, ())
+    if is_user_method(args.method):
+        # --device is given to a user's class whose constructor takes it.
+        takes = ("device",) if user_method_takes(args.method, "device") else ()
+    else:
+        takes = _TAKES.get(args.method, ())
     for flag in _FLAGS:
         if getattr(args, flag) is not None and flag not in takes:
             option = "--" + flag.replace("_", "-")
             if flag == "backend":
                 return f"{option} {args.backend}: only pcmci has backends, not {args.method}"
-            which = [m for m, t in _TAKES.items() if flag in t] + (["your own class"] if flag == "device" else [])
+            which = [m for m, t in _TAKES.items() if flag in t]
+            which += ["a class of yours whose constructor takes device"] if flag == "device" else []
             return f"{option} does nothing for {args.method}: it sets up {', '.join(which)} only"
     return None
 
