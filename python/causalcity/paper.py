@@ -360,8 +360,10 @@ def run(
     # link anywhere on the way to what the run writes below --out.
     _native.claim_output(os.fspath(out / "results.csv"))
     data_of = {world: out / "data" / (world if not groups else "-".join([world, *chosen[world]])) for world in worlds}
-    _refuse_links_below(out, [p for u in units for p in (_unit_path(out, *u), _predictions_path(out, *u))])
-    _refuse_links_below(out, [out / n for n in (*TOP_FILES, "timings.json")] + list(data_of.values()))
+    # What this run writes: the units left, their worlds' data, the tables.
+    _refuse_links_below(out, [p for u in left for p in (_unit_path(out, *u), _predictions_path(out, *u))])
+    _refuse_links_below(out, [data_of[w] for w in worlds if any(u[0] == w for u in left)])
+    _refuse_links_below(out, [out / n for n in (*TOP_FILES, "timings.json")])
     out.mkdir(parents=True, exist_ok=True)
     records: Dict[Tuple[str, str, str], dict] = {}
     timings: Dict[str, float] = {}

@@ -439,6 +439,15 @@ def test_the_paper_writes_by_the_one_write_rule(tmp_path, toy, capsys, monkeypat
         assert str(fresh / below) in err and "symbolic link" in err, err
         assert list(target.iterdir()) == [], below
         assert sorted(p.name for p in fresh.iterdir()) == [below.split("/")[0]], below
+    # A rerun that only rewrites the tables writes nothing through a link to
+    # the finished run's data moved elsewhere: it runs.
+    (out / "results.md").unlink()  # the link planted above
+    data = next((out / "data").iterdir())
+    moved = tmp_path / "moved-data"
+    data.rename(moved)
+    data.symlink_to(moved, target_is_directory=True)
+    assert paper.main([*flags, "--quiet"]) == 0, capsys.readouterr().err
+    assert (out / "results.md").is_file()
 
 
 def test_granger_on_every_core_scores_as_on_one(toy):
