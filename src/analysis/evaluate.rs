@@ -360,7 +360,7 @@ struct Truth {
     sweep: bool,
     /// Where a packed sweep's pairs are unpacked (their logs, no frames)
     /// for as long as they are scored.
-    _unpacked: Option<crate::output::packs::Scratch>,
+    unpacked: Option<crate::output::packs::Scratch>,
 }
 
 impl Truth {
@@ -381,7 +381,7 @@ impl Truth {
                     keys,
                     effects: false,
                     sweep: true,
-                    _unpacked: unpacked,
+                    unpacked,
                 });
             }
         }
@@ -398,7 +398,7 @@ impl Truth {
             sizes,
             keys,
             sweep: false,
-            _unpacked: None,
+            unpacked: None,
         })
     }
 
@@ -414,6 +414,16 @@ impl Truth {
             seed: spec.seed,
             spec_sha256: crate::output::manifest::spec_sha256(spec),
             splits,
+        }
+    }
+
+    /// `message` naming a file of a packed dataset or sweep by its pack and
+    /// member, not by the temporary folder it was unpacked into.
+    fn name_unpacked(&self, message: String) -> String {
+        match (&self.dataset, &self.unpacked) {
+            (Some(dataset), _) => dataset.name_packed_paths(message),
+            (None, Some(scratch)) => crate::output::packs::name_unpacked_paths(message, scratch.path(), &self.dir),
+            (None, None) => message,
         }
     }
 
@@ -862,14 +872,14 @@ fn score_in_turn(
     let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, String> {
         run.par_iter().map(|s| score_scenario(s, truth, options)).collect()
     };
-    let Some(dataset) = &truth.dataset else { return score(scored).map_err(Error::Input) };
+    let Some(dataset) = &truth.dataset else { return score(scored).map_err(|e| Error::Input(truth.name_unpacked(e))) };
     let mut results = Vec::with_capacity(scored.len());
     for run in scored.chunk_by(|a, b| a.group == b.group && a.split == b.split) {
         let (group, split) = (&run[0].group, run[0].split);
         // Unpacked here (the folders' paths are the run's own); a failure to
         // unpack is the dataset's, a bad score the input's.
         dataset.scenario_dirs(group, split).map_err(Error::Failure)?;
-        let scores = score(run).map_err(|e| dataset.name_packed_paths(e));
+        let scores = score(run).map_err(|e| truth.name_unpacked(e));
         dataset.release(group, split).map_err(Error::Failure)?;
         results.extend(scores.map_err(Error::Input)?);
     }

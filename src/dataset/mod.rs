@@ -121,7 +121,8 @@ impl Dataset {
                 let wanted =
                     |name: &str| crate::output::packs::split_member(name).is_some_and(|(_, f)| f == "scenario.json");
                 crate::output::packs::read_members_where(&path, &wanted, |name, bytes| {
-                    let label = path.join(name);
+                    // Named as validate names a member: `<pack>: <member>`.
+                    let label = PathBuf::from(format!("{}: {name}", path.display()));
                     let summary = ScenarioSummary::parse(&bytes, &label, GraphKind::Designed)?;
                     let (folder, _) = crate::output::packs::split_member(name).expect("wanted names have a folder");
                     sizes.push((folder.to_string(), (summary.cars.len(), summary.frames as usize)));
@@ -197,40 +198,14 @@ impl Dataset {
     }
 
     /// `message` with each path into the temporary folder that a packed
-    /// dataset's scenarios are unpacked into told as where the file is:
-    /// `<pack>: <group>/<split>/<scenario>/<file>`, as `validate` names a
-    /// file in a pack. Unchanged for a folder dataset.
+    /// dataset's scenarios are unpacked into told as where the file is
+    /// ([`crate::output::packs::name_unpacked_paths`]). Unchanged for a
+    /// folder dataset.
     pub fn name_packed_paths(&self, message: String) -> String {
-        let Some(unpacked) = &self.unpacked else { return message };
-        let prefix = format!("{}/", unpacked.scratch.path().display());
-        let mut named = String::with_capacity(message.len());
-        let mut rest = message.as_str();
-        while let Some(at) = rest.find(&prefix) {
-            named.push_str(&rest[..at]);
-            let after = &rest[at + prefix.len()..];
-            let end = after.find(|c: char| c == ':' || c == ',' || c.is_whitespace()).unwrap_or(after.len());
-            let relative = &after[..end];
-            let parts: Vec<&str> = relative.splitn(4, '/').collect();
-            match (parts.len() >= 3).then(|| self.pack_of(parts[0], parts[1], parts[2])).flatten() {
-                Some(pack) => named.push_str(&format!("{}: {relative}", pack.display())),
-                None => named.push_str(&format!("{} (in its tar pack)", self.dir.join(relative).display())),
-            }
-            rest = &after[end..];
+        match &self.unpacked {
+            Some(unpacked) => crate::output::packs::name_unpacked_paths(message, unpacked.scratch.path(), &self.dir),
+            None => message,
         }
-        named.push_str(rest);
-        named
-    }
-
-    /// The tar pack holding scenario folder `name` of `group`'s `split`.
-    fn pack_of(&self, group: &str, split: &str, name: &str) -> Option<PathBuf> {
-        let unpacked = self.unpacked.as_ref()?;
-        let index = self.spec().groups.iter().position(|g| g.name() == group)?;
-        let split = Split::ALL.into_iter().find(|s| s.name() == split)?;
-        let sequence = self.key_sequence();
-        let position = sequence.positions_of(index, split).find(|&p| sequence.key(p).folder_name() == name)?;
-        let packs = crate::output::packs::Packs::new(self.key_sequence(), unpacked.per_tar);
-        let number = packs.numbers_of(position..position + 1).next()?;
-        Some(packs.path(&self.dir, &packs.pack(number)))
     }
 
     /// Calls `each(folder, relative)` for every scenario of the dataset, in

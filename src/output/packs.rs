@@ -115,6 +115,44 @@ impl<'a> Packs<'a> {
     }
 }
 
+/// `message` with each path into `scratch`, where packs of the dataset or
+/// sweep at `root` were unpacked, told as where the file is: `<pack>:
+/// <group>/<split>/<scenario>/<file>`, as `validate` names a file in a pack
+/// (a path into a temporary folder, gone when the command ends, helps no
+/// one).
+pub fn name_unpacked_paths(message: String, scratch: &Path, root: &Path) -> String {
+    let prefix = format!("{}/", scratch.display());
+    let mut named = String::with_capacity(message.len());
+    let mut rest = message.as_str();
+    while let Some(at) = rest.find(&prefix) {
+        named.push_str(&rest[..at]);
+        let after = &rest[at + prefix.len()..];
+        let end = after.find(|c: char| c == ':' || c == ',' || c.is_whitespace()).unwrap_or(after.len());
+        let member = &after[..end];
+        match pack_holding(root, member) {
+            Some(pack) => named.push_str(&format!("{}: {member}", pack.display())),
+            None => named.push_str(&format!("{} (in its tar pack)", root.join(member).display())),
+        }
+        rest = &after[end..];
+    }
+    named.push_str(rest);
+    named
+}
+
+/// The pack under `root` that holds `member` (`<group>/<split>/<index>/...`):
+/// the one whose name's index range takes in the scenario's.
+fn pack_holding(root: &Path, member: &str) -> Option<PathBuf> {
+    let mut parts = member.splitn(4, '/');
+    let (group, split, scenario) = (parts.next()?, parts.next()?, parts.next()?);
+    let index: u32 = scenario.parse().ok()?;
+    let folder = root.join(group).join(split);
+    std::fs::read_dir(&folder).ok()?.flatten().find_map(|entry| {
+        let name = entry.file_name();
+        let (first, last) = parse_file_name(name.to_str()?)?;
+        (first..=last).contains(&index).then(|| folder.join(&name))
+    })
+}
+
 /// A pack's file name: the first and last index it holds.
 pub fn file_name(first: u32, count: u32) -> String {
     format!("{first:05}-{:05}.tar", first + count.max(1) - 1)
@@ -568,6 +606,33 @@ impl Drop for Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_path_into_the_unpacked_folder_is_named_by_its_pack_and_member() {
+        let base = std::env::temp_dir().join(format!("causalcity-name-unpacked-{}", std::process::id()));
+        let (root, scratch) = (base.join("data"), base.join("scratch"));
+        let split = root.join("cars04_edges50/test");
+        std::fs::create_dir_all(&split).unwrap();
+        for name in ["00000-00001.tar", "00002-00003.tar"] {
+            std::fs::write(split.join(name), b"").unwrap();
+        }
+        let message = format!(
+            "{}/cars04_edges50/test/00003/counterfactual/poses.csv: row 2 is not a pose; {}/cars04_edges50/val/00000",
+            scratch.display(),
+            scratch.display()
+        );
+        let named = name_unpacked_paths(message, &scratch, &root);
+        assert_eq!(
+            named,
+            format!(
+                "{}: cars04_edges50/test/00003/counterfactual/poses.csv: row 2 is not a pose; {} (in its tar pack)",
+                split.join("00002-00003.tar").display(),
+                root.join("cars04_edges50/val/00000").display()
+            )
+        );
+        assert!(!named.contains(&scratch.display().to_string()));
+        std::fs::remove_dir_all(&base).unwrap();
+    }
 
     #[test]
     fn pack_names_say_which_indices_they_hold_and_nothing_else_parses() {
