@@ -103,12 +103,15 @@ fn in_plain_words(message: &str) -> String {
         _ if WHOLE.contains(&rust) => Some("a whole number"),
         _ => None,
     };
+    // What was found, as JSON names it.
+    let message = message.replacen("invalid type: sequence,", "invalid type: a list,", 1);
+    let message = message.replacen("invalid type: map,", "invalid type: an object,", 1);
     match message.rsplit_once("expected ") {
         Some((before, rust)) => match plain_type(rust) {
             Some(words) => format!("{before}expected {words}"),
-            None => message.to_string(),
+            None => message,
         },
-        None => message.to_string(),
+        None => message,
     }
 }
 
@@ -366,9 +369,11 @@ fn whole_number_message(n: &Number, min: i128, max: i128) -> String {
         true => Shown(value).to_string(),
         false => n.to_string(),
     };
+    // A float at a maximum that a float rounds up (2^64 - 1 to 2^64) is past it.
+    let past_max = value > max as f64 || (n.is_f64() && value >= max as f64 && (max as f64) as i128 != max);
     if n.is_f64() && value.is_finite() && value.fract() != 0.0 {
         format!("{} is not a whole number: {allowed}", Shown(value))
-    } else if value > max as f64 || (n.is_f64() && value >= max as f64) {
+    } else if past_max {
         format!("{} is too large: {allowed}", shown("above", max))
     } else if value < min as f64 {
         format!("{} is too small: {allowed}", shown("below", min))
@@ -490,7 +495,7 @@ mod tests {
     fn a_list_is_not_an_object() {
         let e = parse_strict::<Doc>(r#"{"size": [3, 4]}"#).unwrap_err();
         assert_eq!(e.path, "size");
-        assert!(e.message.contains("invalid type: sequence, expected an object"), "{e:?}");
+        assert!(e.message.contains("invalid type: a list, expected an object"), "{e:?}");
     }
 
     #[test]

@@ -699,7 +699,7 @@ fn scenario_files_are_read_strictly() {
         (
             "vehicle-as-a-list",
             r#"[{"Name": "Strict", "Vehicles": [["Car_1", "A1w"]]}]"#.into(),
-            vec!["scenario \"Strict\"", "Vehicles[0]", "invalid type: sequence, expected an object"],
+            vec!["scenario \"Strict\"", "Vehicles[0]", "invalid type: a list, expected an object"],
         ),
         (
             "distance-as-text",

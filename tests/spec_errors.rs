@@ -207,7 +207,7 @@ fn unknown_or_conflicting_keys_in_a_distribution_are_named() {
     rejected(
         "dist-list",
         &city_with(r#"{"confounders": {"snow": [0, 1]}}"#),
-        &["city.confounders.snow", "invalid type: sequence"],
+        &["city.confounders.snow", "invalid type: a list"],
     );
 }
 
@@ -216,12 +216,12 @@ fn lists_in_place_of_objects_are_rejected() {
     rejected(
         "image-list",
         &with(|v| v["image"] = serde_json::json!([1024, 640])),
-        &["`image`", "invalid type: sequence, expected an object"],
+        &["`image`", "invalid type: a list, expected an object"],
     );
     rejected(
         "splits-list",
         &with(|v| v["splits"] = serde_json::json!([1, 0, 0])),
-        &["`splits`", "invalid type: sequence, expected an object"],
+        &["`splits`", "invalid type: a list, expected an object"],
     );
     rejected(
         "group-list",
@@ -516,6 +516,9 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "1000000000000.0");
     rejected("frames-1e12", &frames, &["field `frames`", " 1000000000000 is too large"]);
+    // The largest value a field holds, written as a float, is not "too large".
+    let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "4294967295.0");
+    rejected("frames-max-as-float", &frames, &["field `frames`", "4294967295 is written as a decimal"]);
     // A value of the wrong kind is told in a JSON file's words, not Rust's
     // ("expected u32", "expected f64" before).
     let frames = with(|v| v["frames"] = "ten".into());
