@@ -272,7 +272,7 @@ pub fn refuse_links_below(root: &Path, path: &Path) -> Result<(), Refused> {
             Ok(m) if m.file_type().is_symlink() => {
                 let to = fs::read_link(&at).map_or_else(|_| "somewhere".to_string(), |t| t.display().to_string());
                 return Err(Refused(format!(
-                    "{} is a link (to {to}) inside the output folder {}: causalcity never writes through a link. \
+                    "{} is a link (to {to}) inside {}: causalcity never writes through a link. \
                      Put a real folder there (or remove the link) and rerun",
                     at.display(),
                     root.display()
