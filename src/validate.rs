@@ -566,8 +566,8 @@ impl ScenarioFiles<'_> {
         }
     }
 
-    /// Every file and folder there, relative to the scenario.
-    fn entries(&self, dir: &Path) -> (Vec<String>, Vec<String>) {
+    /// Every file, folder and link there, relative to the scenario.
+    fn entries(&self, dir: &Path) -> Entries {
         match self {
             ScenarioFiles::Folder => list_entries(dir),
             ScenarioFiles::Members(members) => {
@@ -575,7 +575,11 @@ impl ScenarioFiles<'_> {
                     .keys()
                     .flat_map(|name| name.match_indices('/').map(|(i, _)| name[..i].to_string()).collect::<Vec<_>>())
                     .collect();
-                (members.keys().cloned().collect(), folders.into_iter().collect())
+                Entries {
+                    files: members.keys().cloned().collect(),
+                    folders: folders.into_iter().collect(),
+                    links: Vec::new(),
+                }
             }
         }
     }
@@ -611,12 +615,19 @@ fn check_scenario_files(
     let wanted: BTreeSet<&str> = names.iter().map(String::as_str).collect();
     let folders = layout.folders();
     let wanted_folders: BTreeSet<&str> = folders.iter().map(String::as_str).collect();
-    let (found_files, found_folders) = files.entries(&dir);
-    for extra in found_files.iter().filter(|n| !wanted.contains(n.as_str())) {
+    let found = files.entries(&dir);
+    for extra in found.files.iter().filter(|n| !wanted.contains(n.as_str())) {
         problem(&dir.join(extra), "unexpected file".into());
     }
-    for extra in found_folders.iter().filter(|n| !wanted_folders.contains(n.as_str())) {
+    for extra in found.folders.iter().filter(|n| !wanted_folders.contains(n.as_str())) {
         problem(&dir.join(extra), "unexpected folder".into());
+    }
+    for link in &found.links {
+        problem(
+            &dir.join(link),
+            "a symbolic link: a dataset holds its own files, never links (rerun gen, which writes the scenario again)"
+                .into(),
+        );
     }
 
     // The checksum listing.
@@ -1043,8 +1054,8 @@ fn check_mask(data: &[u8], w: u32, h: u32, ids: &BTreeSet<u8>) -> Result<(), Str
 }
 
 /// Relative paths of every file and every folder under `dir`.
-fn list_entries(dir: &Path) -> (Vec<String>, Vec<String>) {
-    let (mut files, mut folders) = (Vec::new(), Vec::new());
+fn list_entries(dir: &Path) -> Entries {
+    let mut found = Entries::default();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
         let Ok(entries) = std::fs::read_dir(&d) else { continue };
@@ -1052,13 +1063,25 @@ fn list_entries(dir: &Path) -> (Vec<String>, Vec<String>) {
             let path = e.path();
             let Ok(rel) = path.strip_prefix(dir) else { continue };
             let rel = rel.to_string_lossy().into_owned();
-            if path.is_dir() {
-                stack.push(path);
-                folders.push(rel);
-            } else {
-                files.push(rel);
+            // A link is never followed: not into a folder, not to a file.
+            match e.file_type() {
+                Ok(kind) if kind.is_symlink() => found.links.push(rel),
+                Ok(kind) if kind.is_dir() => {
+                    stack.push(path);
+                    found.folders.push(rel);
+                }
+                _ => found.files.push(rel),
             }
         }
     }
-    (files, folders)
+    found
+}
+
+/// What a scenario folder holds, each path relative to it.
+#[derive(Default)]
+struct Entries {
+    files: Vec<String>,
+    folders: Vec<String>,
+    /// Symbolic links (to files or folders), never followed.
+    links: Vec<String>,
 }

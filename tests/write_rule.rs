@@ -549,3 +549,41 @@ fn merge_never_takes_a_link_at_a_scenario_folder_as_the_scenario() {
     assert!(stderr(&output).contains(s(&in_b[0])), "names the link: {}", stderr(&output));
     assert!(!place.exists() && std::fs::symlink_metadata(&place).is_err(), "no link landed in --out");
 }
+
+#[test]
+fn a_link_to_a_file_inside_a_scenario_is_never_kept_as_its_file() {
+    let dir = fresh_dir("rule-file-link");
+    let data = toy_dataset(&dir);
+    let scenario = data.join("cars04_edges50/train/00000");
+    // poses.csv lives elsewhere, linked in: the same bytes, so checksums pass.
+    let elsewhere = dir.join("elsewhere-poses.csv");
+    std::fs::rename(scenario.join("poses.csv"), &elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, scenario.join("poses.csv")).unwrap();
+    let before = std::fs::read(&elsewhere).unwrap();
+    let report = run(&["validate", s(&data)]);
+    let said = String::from_utf8_lossy(&report.stdout).into_owned() + &stderr(&report);
+    assert_eq!(report.status.code(), Some(1), "{said}");
+    assert!(said.contains(&format!("{}: a symbolic link", s(&scenario.join("poses.csv")))), "{said}");
+    // gen writes the scenario again, with a file of its own; the other file stays.
+    let spec = dir.join("spec.json");
+    let output = run(&["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&data)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let meta = std::fs::symlink_metadata(scenario.join("poses.csv")).unwrap();
+    assert!(meta.is_file() && !meta.file_type().is_symlink());
+    assert_eq!(std::fs::read(&elsewhere).unwrap(), before);
+    assert_valid(&data);
+
+    // merge does not move a scenario holding a link.
+    let (a, b) = (dir.join("shard0"), dir.join("shard1"));
+    gen_ok(&spec, &a, &["--quiet", "--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &b, &["--quiet", "--no-images", "--shard", "1/2"]);
+    let split = b.join("cars04_edges50/train");
+    let linked = std::fs::read_dir(&split).unwrap().flatten().next().expect("b holds a train scenario").path();
+    let moved = dir.join("moved-poses.csv");
+    std::fs::rename(linked.join("poses.csv"), &moved).unwrap();
+    std::os::unix::fs::symlink(&moved, linked.join("poses.csv")).unwrap();
+    let (before_a, before_b) = (hash_tree(&a), hash_tree(&b));
+    let output = run(&["merge", "--out", s(&a), s(&b)]);
+    assert_refused(&output, "a symbolic link");
+    assert_eq!((hash_tree(&a), hash_tree(&b)), (before_a, before_b), "nothing moved");
+}

@@ -364,8 +364,23 @@ pub fn refuse_foreign(dir: &Path, own: &OwnFiles, what: &str) -> Result<(), Refu
     )))
 }
 
+/// The first symbolic link on the way from `dir` to the file `name` (a
+/// path relative to it), if any: a scenario holds its own files, and one
+/// read through a link may be anyone's.
+pub fn link_below(dir: &Path, name: &str) -> Option<PathBuf> {
+    let mut at = dir.to_path_buf();
+    for part in Path::new(name).components() {
+        at.push(part);
+        if fs::symlink_metadata(&at).is_ok_and(|m| m.file_type().is_symlink()) {
+            return Some(at);
+        }
+    }
+    None
+}
+
 /// Checks a finished scenario folder against its `checksums.sha256`: the
-/// listing is there and every file it lists is there with its hash. Says
+/// listing is there and every file it lists is there with its hash, none
+/// of them through a symbolic link. Says
 /// what is wrong otherwise (a rerun rewrites such a scenario; `merge`
 /// refuses it).
 pub fn verify_scenario(dir: &Path) -> Result<(), String> {
@@ -378,6 +393,9 @@ pub fn verify_scenario(dir: &Path) -> Result<(), String> {
         };
         if name.contains("..") || name.starts_with('/') {
             return Err(format!("{}: {name:?} is not a file of the scenario", listing_path.display()));
+        }
+        if let Some(link) = link_below(dir, name) {
+            return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
         }
         let path = dir.join(name);
         let data = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
