@@ -14,8 +14,9 @@ from .classical import Pcmci
 from .common import DatasetError, positive_int as _positive, run_method
 
 
-# The flags that set up one method or another, and the methods each applies
-# to (a user's class takes --device); --seed and --quiet apply to every one.
+# The flags that set up one method or another, and the reference methods
+# each applies to (a user's class takes --device when its constructor does);
+# --seed and --quiet apply to every method.
 _TRAINING = ("epochs", "device", "batch_size", "lr", "time_limit", "lr_schedule")
 _TAKES = {
     "nri": (*_TRAINING, "decoder", "encoder_input", "kl_weight"),
