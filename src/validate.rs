@@ -1053,7 +1053,7 @@ fn check_mask(data: &[u8], w: u32, h: u32, ids: &BTreeSet<u8>) -> Result<(), Str
     Ok(())
 }
 
-/// Relative paths of every file and every folder under `dir`.
+/// Relative paths of every file, folder and symbolic link under `dir`.
 fn list_entries(dir: &Path) -> Entries {
     let mut found = Entries::default();
     let mut stack = vec![dir.to_path_buf()];

@@ -361,9 +361,8 @@ def run(
     _native.claim_output(os.fspath(out / "results.csv"))
     data_of = {world: out / "data" / (world if not groups else "-".join([world, *chosen[world]])) for world in worlds}
     # What this run writes: the units left, their worlds' data, the tables.
-    _refuse_links_below(out, [p for u in left for p in (_unit_path(out, *u), _predictions_path(out, *u))])
-    _refuse_links_below(out, [data_of[w] for w in worlds if any(u[0] == w for u in left)])
-    _refuse_links_below(out, [out / n for n in (*TOP_FILES, "timings.json")])
+    writes = [p for u in left for p in (_unit_path(out, *u), _predictions_path(out, *u), data_of[u[0]])]
+    _refuse_links_below(out, writes + [out / n for n in (*TOP_FILES, "timings.json")])
     out.mkdir(parents=True, exist_ok=True)
     records: Dict[Tuple[str, str, str], dict] = {}
     timings: Dict[str, float] = {}

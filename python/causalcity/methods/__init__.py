@@ -149,20 +149,15 @@ def _takes(target, option: str) -> bool:
 def user_method_takes(name: str, option: str) -> bool:
     """Whether a user's class ``package.module:Class`` takes ``option``;
     ``True`` when it cannot be loaded (making it says why)."""
-    module_name, _, attribute = name.partition(":")
     try:
-        target = importlib.import_module(module_name)
-        for part in attribute.split("."):
-            target = getattr(target, part)
+        return _takes(_user_class(name), option)
     except Exception:  # a user's module may raise anything on import
         return True
-    return not callable(target) or _takes(target, option)
 
 
-def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
-    """A fresh instance of the class ``package.module:Class``, given those of
-    ``options`` its constructor takes; every failure is a ``ValueError``
-    naming ``name`` and what is wrong."""
+def _user_class(name: str):
+    """The class ``package.module:Class`` names; every failure is a
+    ``ValueError`` naming ``name`` and what is wrong."""
     module_name, _, attribute = name.partition(":")
     if not module_name or not attribute:
         raise ValueError(f"method {name!r}: give a reference method ({', '.join(METHODS)}) or package.module:Class")
@@ -177,6 +172,14 @@ def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
         target = getattr(target, part)
     if not callable(target):
         raise ValueError(f"method {name!r}: {attribute} is not a class")
+    return target
+
+
+def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
+    """A fresh instance of the class ``package.module:Class``, given those of
+    ``options`` its constructor takes; every failure is a ``ValueError``
+    naming ``name`` and what is wrong."""
+    target = _user_class(name)
     given = {k: v for k, v in options.items() if _takes(target, k)}
     method = target(**given)
     missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
