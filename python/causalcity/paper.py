@@ -474,24 +474,14 @@ def _predictions_path(out: Path, world: str, name: str, group: str) -> Path:
 
 
 def _refuse_links_below(out: Path, paths: Sequence[Path]) -> None:
-    """The write rule below ``--out``: nothing is written through a
-    symbolic link there (``units/``, ``predictions/``, ``data/`` and the
-    folders and files in them), as ``gen`` refuses a link below its own
-    ``--out``. Raises ``InputError`` naming the first link on the way to
-    any of ``paths``; to keep the results on another disk, make ``--out``
-    itself that folder (or a link to it)."""
-    seen = set()
-    for path in paths:
-        here = out
-        for part in path.relative_to(out).parts:
-            here = here / part
-            if here in seen:
-                continue
-            seen.add(here)
-            if here.is_symlink():
-                raise InputError(f"{here} is a symbolic link: paper writes below {out} only into folders of its own, "
-                                 "never through a link out of it; remove the link (to keep the results on another "
-                                 "disk, give that folder as --out) and rerun")  # fmt: skip
+    """The write rule below ``--out`` (Rust's, the one ``gen`` applies below
+    its own): raises ``InputError`` naming the first symbolic link at any of
+    ``paths`` or on the way to it (``units/``, ``predictions/``, ``data/``
+    and what is in them)."""
+    try:
+        _native.refuse_links_below(os.fspath(out), [os.fspath(p) for p in paths])
+    except InputError as e:
+        raise InputError(f"{e} (to keep paper's results on another disk, give that folder as --out)") from None
 
 
 def _read_unit(path: Path, key: dict) -> Optional[dict]:

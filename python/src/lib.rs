@@ -17,6 +17,7 @@ use causalcity::orchestrate::in_memory::{Prefetch as Prefetch_, Waited};
 use causalcity::orchestrate::run::{
     clear_stop, generate_expansion, load_spec, request_stop, GenError, GenOptions, Shard, MAX_THREADS,
 };
+use causalcity::output;
 use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
 use causalcity::output::claim::{claim_file, resolve};
 use causalcity::output::layout::FrameKind;
@@ -534,6 +535,17 @@ fn claim_output(path: PathBuf, inputs: Vec<(String, PathBuf)>) -> PyResult<()> {
     Ok(())
 }
 
+/// The write rule below an output folder `root` that a caller fills with
+/// folders of its own: refuses (`InputError`) a symbolic link at any of
+/// `paths` or on the way to it from `root`, as `gen` does below `--out`.
+#[pyfunction]
+fn refuse_links_below(root: PathBuf, paths: Vec<PathBuf>) -> PyResult<()> {
+    for path in &paths {
+        output::refuse_links_below(&root, path).map_err(|e| InputError::new_err(e.to_string()))?;
+    }
+    Ok(())
+}
+
 /// The record of the dataset (or sweep) in `dir` that a predictions file
 /// carries, as JSON text (see `evaluate`'s `DATASET_RECORD`).
 #[pyfunction]
@@ -741,6 +753,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(claim_output, m)?)?;
+    m.add_function(wrap_pyfunction!(refuse_links_below, m)?)?;
     m.add_function(wrap_pyfunction!(following_scores, m)?)?;
     m.add_function(wrap_pyfunction!(dataset_identity, m)?)?;
     m.add_function(wrap_pyfunction!(write_output, m)?)?;
