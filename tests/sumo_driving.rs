@@ -446,6 +446,43 @@ fn actuated_lights_answer_to_traffic_within_their_bounds_and_their_effects_are_m
     assert_eq!(hash_tree(&one), hash_tree(&actuated));
 }
 
+#[test]
+fn actuated_phases_that_may_end_at_once_last_a_step_and_the_run_ends() {
+    // grid3-actuated with every phase's shortest length 0 (greens and
+    // yellows alike): without traffic a phase may end as soon as it began,
+    // and gen went round the phases for ever at the first gap. A phase now
+    // lasts at least a step, as in SUMO.
+    let dir = fresh_dir("sumo-actuated-zero");
+    let network =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/grid3-actuated.net.xml"))
+            .unwrap();
+    let zero: Vec<String> = network
+        .lines()
+        .map(|line| match line.contains("duration=\"3\"") {
+            true => line.replace("\"/>", "\" minDur=\"0\" maxDur=\"6\"/>"),
+            false => line.replace("minDur=\"5\"", "minDur=\"0\""),
+        })
+        .collect();
+    assert_eq!(zero.iter().filter(|l| l.contains("minDur=\"0\"")).count(), 36, "every phase");
+    std::fs::write(dir.join("zero.net.xml"), zero.join("\n")).unwrap();
+    let spec = write_spec(
+        &dir,
+        r#"{"name": "actuated-zero", "world": "city", "seed": 5, "frames": 60, "frame_interval": 0.5,
+            "groups": [{"cars": 4, "edge_proportion": 0.5}], "splits": {"train": 1, "val": 1, "test": 1},
+            "map": {"sumo": "zero.net.xml"}, "city": {"lights": {"cycle_scale": 0.5, "actuated": true}}}"#,
+    );
+    let out = dir.join("out");
+    let ran =
+        run_within(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"], 120);
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let checked = run(&["validate", out.to_str().unwrap()]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    // Greens shorter than the written shortest (2.5 s at cycle_scale 0.5)
+    // show once the first gap has passed: phases of a step.
+    let runs: Vec<f64> = scenario_dirs(&out).iter().flat_map(|s| inner_green_runs(s, 0.5)).collect();
+    assert!(runs.iter().any(|&r| r < 2.5), "greens of {runs:?} s");
+}
+
 /// Each light's colour per frame, by (intersection, approach, signal), and
 /// its signal head (bird's-eye pixels), from the scenario's light log.
 type LightsCsv = std::collections::BTreeMap<(String, String, String), (Vec<String>, (Option<f64>, Option<f64>))>;

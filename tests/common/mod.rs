@@ -26,6 +26,24 @@ pub fn run(args: &[&str]) -> Output {
     Command::new(bin()).args(args).output().expect("run causalcity")
 }
 
+/// Runs causalcity like [`run`], but kills it and fails the test if it
+/// has not finished within `seconds` (for inputs that once made it hang).
+pub fn run_within(args: &[&str], seconds: u64) -> Output {
+    use std::process::Stdio;
+    let child =
+        Command::new(bin()).args(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run causalcity");
+    let pid = child.id();
+    let (done, finished) = std::sync::mpsc::channel();
+    std::thread::spawn(move || done.send(child.wait_with_output()));
+    match finished.recv_timeout(std::time::Duration::from_secs(seconds)) {
+        Ok(output) => output.expect("read causalcity's output"),
+        Err(_) => {
+            let _ = Command::new("kill").args(["-9", &pid.to_string()]).status();
+            panic!("causalcity {args:?} did not finish within {seconds} s");
+        }
+    }
+}
+
 /// Runs `causalcity gen` and asserts it succeeded.
 pub fn gen_ok(spec: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()];

@@ -103,8 +103,9 @@ impl<'a> Actuation<'a> {
 
     /// Brings every programme to time `t`: notes the detectors cars are
     /// over (`cars`: a lane, a car's centre in metres along it and the
-    /// car's length), then ends each phase that is over, as often as
-    /// needed. A second call at the same time does nothing.
+    /// car's length), then ends each programme's phase if it is over (one
+    /// a call: a phase lasts at least a step). A second call at the same
+    /// time does nothing.
     pub(super) fn advance(&mut self, t: f64, cars: impl Iterator<Item = (usize, f64, f64)>) {
         if self.programmes.is_empty() || t <= self.now + EPS {
             return;
@@ -118,7 +119,11 @@ impl<'a> Actuation<'a> {
         }
         for programme in &mut self.programmes {
             programme.before.clone_from(&programme.shown);
-            while let Some(end) = programme.phase_end(t) {
+            // One phase ends per advance at most: a phase lasts at least a
+            // step, as in SUMO. (Phases shorter than a step would otherwise
+            // end over and over without time moving on: every shortest
+            // length 0, or a cycle scaled to nothing.)
+            if let Some(end) = programme.phase_end(t) {
                 programme.phase = (programme.phase + 1) % programme.run.phases.len();
                 programme.started = end;
                 for (shown, (_, colours)) in programme.shown.iter_mut().zip(&programme.run.lights) {
@@ -219,6 +224,32 @@ mod tests {
         // And a car that never reaches the detector changes nothing.
         let far = reds(&run(), 12.0, |_| Some(30.0));
         assert!((far[0] - 5.0).abs() < 0.06, "{far:?}");
+    }
+
+    #[test]
+    fn a_phase_lasts_at_least_a_step_even_when_its_shortest_is_zero() {
+        // Every phase may end at once (minDur 0, no traffic): before, the
+        // programme went round its phases without end at the first gap.
+        // Each phase now lasts one step of 0.05 s, so 2 s of steps show 20
+        // reds (the green phase and the red one take turns). Run on a
+        // thread of its own, so that a loop that never ends fails the test.
+        let zero = ActuatedRun {
+            phases: vec![
+                ActuatedPhase { duration: 12.0, bounds: Some((0.0, 20.0)), detectors: vec![(0, 10.0)] },
+                ActuatedPhase { duration: 4.0, bounds: Some((0.0, 6.0)), detectors: vec![(0, 10.0)] },
+            ],
+            ..run()
+        };
+        let (done, finished) = std::sync::mpsc::channel();
+        std::thread::spawn(move || done.send(reds(&zero, 5.0, |_| None)).unwrap());
+        let turned = finished.recv_timeout(std::time::Duration::from_secs(20)).expect("5 s of steps end");
+        // The first gap ends the green 3 s in (every detector counts as just
+        // passed at the start); from then on every other step is red.
+        assert!((turned[0] - 3.05).abs() < 0.06, "{turned:?}");
+        assert_eq!(turned.len(), 20, "{turned:?}");
+        for pair in turned.windows(2) {
+            assert!((pair[1] - pair[0] - 0.1).abs() < 1e-6, "{turned:?}");
+        }
     }
 
     #[test]
