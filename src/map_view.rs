@@ -362,8 +362,9 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
             )));
         }
     }
-    let text = std::fs::read_to_string(net_path)
-        .map_err(|e| Error::Input(format!("cannot read SUMO network {}: {e}", net_path.display())))?;
+    let bytes = crate::spec::read_network_file(net_path).map_err(Error::Input)?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| Error::Input(format!("{}: not UTF-8 text, so not a .net.xml", net_path.display())))?;
     let net = crate::map::sumo::SumoNetwork::from_xml(&text)
         .map_err(|e| Error::Input(format!("{}: {e}", net_path.display())))?;
     let mut turns = vec![Vec::new(); net.lanes.len()];

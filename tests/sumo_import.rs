@@ -72,6 +72,19 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
         ),
         ("shape", broken_shape, r#"<lane id="-172014854#1_1">: shape"#),
         ("not-xml", "<html><body>hello".to_string(), "not a SUMO network"),
+        // A junction given twice (the second replaced the first and its
+        // light was dropped), a connection from an edge the file does not
+        // have (dropped, and the lanes behind it with it): refused.
+        (
+            "twice",
+            text.replacen("</net>", r#"<junction id="1560592097" type="priority" x="0" y="0"/></net>"#, 1),
+            r#"<junction id="1560592097">: defined twice"#,
+        ),
+        (
+            "typo",
+            text.replacen(r#"<connection from=""#, r#"<connection from="no-such-edge"#, 1),
+            r#"from="no-such-edge"#,
+        ),
     ] {
         let net = dir.join(format!("{name}.net.xml"));
         std::fs::write(&net, bad).unwrap();
@@ -95,6 +108,13 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
         assert_eq!(refused.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&refused.stderr));
     }
     assert_eq!(std::fs::read(berlin()).unwrap(), before);
+    // A named pipe given as the network was waited on for ever: refused.
+    let fifo = dir.join("pipe.net.xml");
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let refused = run_within(&["map", "--net", fifo.to_str().unwrap()], 60);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("pipe.net.xml: not a regular file"), "{stderr}");
 }
 
 #[test]

@@ -81,6 +81,15 @@ impl Curve {
         Some(Curve::Polyline(Polyline { points: kept, cumulative }))
     }
 
+    /// How many straight pieces a polyline has (other curves: 1).
+    #[cfg(test)]
+    pub(crate) fn pieces(&self) -> usize {
+        match self {
+            Curve::Polyline(c) => c.points.len() - 1,
+            _ => 1,
+        }
+    }
+
     /// Length of the curve in metres.
     pub fn length(&self) -> f64 {
         match self {

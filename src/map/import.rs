@@ -71,8 +71,14 @@ fn approach_side(heading: f64) -> char {
     }
 }
 
+/// Most points of a dead end's loop: a half circle 650 m across at 0.5 m
+/// (dead ends loop onto a lane a few metres away; a file whose back lane
+/// starts kilometres away still gets a loop, drawn coarser).
+const MAX_U_TURN_POINTS: usize = 4096;
+
 /// A half circle to the left from `a` (heading `heading`) round to `b`: the
-/// loop at a road's end. Points every 0.5 m or closer.
+/// loop at a road's end. Points every 0.5 m or closer, up to
+/// [`MAX_U_TURN_POINTS`].
 fn u_turn(a: DVec2, heading: f64, b: DVec2) -> Option<Curve> {
     let centre = (a + b) / 2.0;
     let radius = a.distance(b) / 2.0;
@@ -83,7 +89,7 @@ fn u_turn(a: DVec2, heading: f64, b: DVec2) -> Option<Curve> {
     let u = (a - centre) / radius;
     // Turn the way that first heads forward.
     let sign = if u.perp().dot(forward) >= 0.0 { 1.0 } else { -1.0 };
-    let n = ((PI * radius / 0.5).ceil() as usize).max(8);
+    let n = ((PI * radius / 0.5).ceil() as usize).clamp(8, MAX_U_TURN_POINTS);
     let points: Vec<DVec2> = (0..=n)
         .map(|k| {
             let t = sign * PI * k as f64 / n as f64;
@@ -710,6 +716,20 @@ mod tests {
         // Yellow, red, a lane without links of the programme: none.
         assert!(!detects(b"yy", &[0, 1], false, never));
         assert!(!detects(b"GG", &[], false, never));
+    }
+
+    #[test]
+    fn a_dead_ends_loop_has_points_every_half_metre_up_to_a_bound() {
+        // Onto the back lane 3.2 m away: a half circle of 5 m in 11 pieces.
+        let near = u_turn(DVec2::ZERO, 0.0, DVec2::new(0.0, 3.2)).unwrap();
+        assert_eq!(near.pieces(), 11);
+        assert!((near.length() - PI * 1.6).abs() < 0.05, "{}", near.length());
+        // A broken file's back lane 1,900 km away (coordinates within the
+        // import's bounds): the same half circle, in no more pieces than the
+        // bound (at 0.5 m it would take 6 million points).
+        let far = u_turn(DVec2::ZERO, 0.0, DVec2::new(0.0, 1.9e6)).unwrap();
+        assert_eq!(far.pieces(), MAX_U_TURN_POINTS);
+        assert!((far.length() / (PI * 0.95e6) - 1.0).abs() < 1e-3, "{}", far.length());
     }
 
     #[test]

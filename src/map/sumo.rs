@@ -322,6 +322,18 @@ pub struct SumoNetwork {
 /// `default.lanewidth`).
 pub const SUMO_DEFAULT_LANE_WIDTH_M: f64 = 3.2;
 
+/// Largest coordinate of any point of an imported network, metres, on
+/// either axis: 1,000 km. netconvert moves a network's origin to its
+/// south-west corner, so its coordinates run from 0 to its size, and no
+/// region a scenario drives is near that. Beyond it a point is a broken
+/// file, and geometry built from it (the loop at a dead end, a lane's
+/// route) would not fit in memory.
+pub const MAX_NETWORK_COORDINATE_M: f64 = 1.0e6;
+
+/// Widest lane an imported network may give, metres: roads' lanes are a
+/// few metres wide (SUMO's default [`SUMO_DEFAULT_LANE_WIDTH_M`]).
+pub const MAX_LANE_WIDTH_M: f64 = 50.0;
+
 /// Parses `"x1,y1 x2,y2 ..."`.
 fn polyline(text: &str) -> Option<Vec<DVec2>> {
     text.split_whitespace()
@@ -330,9 +342,18 @@ fn polyline(text: &str) -> Option<Vec<DVec2>> {
             let x: f64 = parts.next()?.parse().ok()?;
             let y: f64 = parts.next()?.parse().ok()?;
             // A third value (z) is allowed and ignored.
-            (x.is_finite() && y.is_finite()).then_some(DVec2::new(x, y))
+            within_reach(x, y).then_some(DVec2::new(x, y))
         })
         .collect()
+}
+
+/// What a shape or position must be, for messages.
+const POINTS_ALLOWED: &str = "x,y points in metres, each number from -1000000 to 1000000";
+
+/// Whether `x, y` is a point a network may have: finite, and within
+/// [`MAX_NETWORK_COORDINATE_M`] of the origin on both axes.
+fn within_reach(x: f64, y: f64) -> bool {
+    x.abs() <= MAX_NETWORK_COORDINATE_M && y.abs() <= MAX_NETWORK_COORDINATE_M
 }
 
 /// Whether a lane with these `allow` / `disallow` lists lets passenger cars on.
@@ -370,7 +391,11 @@ impl SumoNetwork {
         let mut junctions = Vec::new();
         let mut junction_index = HashMap::new();
         let mut unsupported: HashMap<&str, &str> = HashMap::new();
+        let mut junction_ids = std::collections::HashSet::new();
         for j in &raw.junctions {
+            if !junction_ids.insert(j.id.as_str()) {
+                return Err(format!("<junction id=\"{}\">: defined twice; each junction's id must be unique", j.id));
+            }
             if j.kind == "internal" {
                 continue;
             }
@@ -378,16 +403,39 @@ impl SumoNetwork {
                 unsupported.insert(j.id.as_str(), j.kind.as_str());
                 continue;
             };
-            if !(j.x.is_finite() && j.y.is_finite()) {
-                return Err(format!("<junction id=\"{}\">: x, y are not finite", j.id));
+            if !within_reach(j.x, j.y) {
+                return Err(format!("<junction id=\"{}\">: x {}, y {}; allowed: {POINTS_ALLOWED}", j.id, j.x, j.y));
             }
             let shape = match &j.shape {
                 Some(text) => polyline(text)
-                    .ok_or_else(|| format!("<junction id=\"{}\">: shape {text:?} is not x,y points", j.id))?,
+                    .ok_or_else(|| format!("<junction id=\"{}\">: shape {text:?}; allowed: {POINTS_ALLOWED}", j.id))?,
                 None => Vec::new(),
             };
             junction_index.insert(j.id.as_str(), junctions.len());
             junctions.push(SumoJunction { id: j.id.clone(), kind, centre: DVec2::new(j.x, j.y), shape });
+        }
+
+        // Every edge and lane of the file (internal ones and those cars do
+        // not drive included), for connections to name.
+        let mut edge_lanes: HashMap<&str, Vec<u32>> = HashMap::new();
+        let mut lane_ids = std::collections::HashSet::new();
+        for e in &raw.edges {
+            if edge_lanes.contains_key(e.id.as_str()) {
+                return Err(format!("<edge id=\"{}\">: defined twice; each edge's id must be unique", e.id));
+            }
+            let indices = edge_lanes.entry(e.id.as_str()).or_default();
+            for l in &e.lanes {
+                if indices.contains(&l.index) {
+                    return Err(format!(
+                        "<edge id=\"{}\">: two lanes have index {}; each lane of an edge has its own",
+                        e.id, l.index
+                    ));
+                }
+                if !lane_ids.insert(l.id.as_str()) {
+                    return Err(format!("<lane id=\"{}\">: defined twice; each lane's id must be unique", l.id));
+                }
+                indices.push(l.index);
+            }
         }
 
         let mut lanes = Vec::new();
@@ -442,7 +490,7 @@ impl SumoNetwork {
                     continue;
                 }
                 let shape = polyline(&l.shape).filter(|s| s.len() >= 2).ok_or_else(|| {
-                    format!("<lane id=\"{}\">: shape {:?} is not two or more x,y points", l.id, l.shape)
+                    format!("<lane id=\"{}\">: shape {:?}; allowed: two or more {POINTS_ALLOWED}", l.id, l.shape)
                 })?;
                 if !(l.length.is_finite() && l.length > 0.0 && l.speed.is_finite() && l.speed > 0.0) {
                     return Err(format!(
@@ -451,8 +499,11 @@ impl SumoNetwork {
                     ));
                 }
                 let width = l.width.unwrap_or(SUMO_DEFAULT_LANE_WIDTH_M);
-                if !(width.is_finite() && width > 0.0) {
-                    return Err(format!("<lane id=\"{}\">: width {width} m must be positive", l.id));
+                if !(width > 0.0 && width <= MAX_LANE_WIDTH_M) {
+                    return Err(format!(
+                        "<lane id=\"{}\">: width {width} m; allowed: above 0 and at most {MAX_LANE_WIDTH_M} m",
+                        l.id
+                    ));
                 }
                 lane_index.insert((e.id.as_str(), l.index), lanes.len());
                 lanes.push(SumoLane {
@@ -476,10 +527,19 @@ impl SumoNetwork {
             if programme_index.contains_key(p.id.as_str()) {
                 continue; // another programme of the same lights: the first one runs
             }
+            if !p.offset.is_finite() {
+                return Err(format!(
+                    "<tlLogic id=\"{}\">: offset {}; allowed: a finite number of seconds",
+                    p.id, p.offset
+                ));
+            }
             let (mut phases, mut actuated) = (Vec::new(), Vec::new());
             for ph in &p.phases {
                 if !(ph.duration.is_finite() && ph.duration > 0.0) {
-                    return Err(format!("<tlLogic id=\"{}\">: a phase lasts {} s", p.id, ph.duration));
+                    return Err(format!(
+                        "<tlLogic id=\"{}\">: a phase lasts {} s; allowed: seconds above 0",
+                        p.id, ph.duration
+                    ));
                 }
                 if let Some(bad) = ph.state.chars().find(|c| !"rRyYgGsuoO".contains(*c)) {
                     return Err(format!(
@@ -523,12 +583,26 @@ impl SumoNetwork {
         // Connections with a partial turn (`R`, `L`), ascending.
         let mut partial = Vec::new();
         for c in &raw.connections {
+            let name = || format!("<connection from=\"{}_{}\" to=\"{}_{}\">", c.from, c.from_lane, c.to, c.to_lane);
+            for (end, edge, lane) in [("from", &c.from, c.from_lane), ("to", &c.to, c.to_lane)] {
+                let Some(indices) = edge_lanes.get(edge.as_str()) else {
+                    return Err(format!("{}: {end}=\"{edge}\" is no <edge> of the file", name()));
+                };
+                if !indices.contains(&lane) {
+                    return Err(format!("{}: <edge id=\"{edge}\"> has no lane of index {lane}", name()));
+                }
+            }
+            if let Some(tl) = c.tl.as_deref().filter(|tl| !programme_index.contains_key(tl)) {
+                return Err(format!("{}: tl=\"{tl}\" is no <tlLogic> of the file", name()));
+            }
+            if let Some(link) = c.link_index.filter(|&l| l < -1) {
+                return Err(format!("{}: linkIndex {link}; allowed: -1 (no light) or 0 and above", name()));
+            }
             let (Some(&from), Some(&to)) =
                 (lane_index.get(&(c.from.as_str(), c.from_lane)), lane_index.get(&(c.to.as_str(), c.to_lane)))
             else {
                 continue; // to or from a lane left out (or an internal lane)
             };
-            let name = || format!("<connection from=\"{}_{}\" to=\"{}_{}\">", c.from, c.from_lane, c.to, c.to_lane);
             let turn = turn_of(&c.dir)
                 .ok_or_else(|| format!("{}: dir=\"{}\" is not allowed: s, l, L, r, R or t", name(), c.dir))?;
             let mut path = Vec::new();
@@ -536,8 +610,9 @@ impl SumoNetwork {
             while let Some(lane) = via {
                 let Some(text) = internal_shapes.get(lane) else { break };
                 path.extend(
-                    polyline(text)
-                        .ok_or_else(|| format!("{}: internal lane {lane}'s shape is not x,y points", name()))?,
+                    polyline(text).ok_or_else(|| {
+                        format!("{}: internal lane {lane}'s shape; allowed: {POINTS_ALLOWED}", name())
+                    })?,
                 );
                 // `:J_9_0` is lane 0 of internal edge `:J_9`.
                 let (edge, index) = lane.rsplit_once('_').unwrap_or((lane, ""));
@@ -549,9 +624,7 @@ impl SumoNetwork {
             }
             let signal = match (&c.tl, c.link_index.and_then(|l| usize::try_from(l).ok())) {
                 (Some(tl), Some(link)) => {
-                    let p = *programme_index
-                        .get(tl.as_str())
-                        .ok_or_else(|| format!("{}: tl=\"{tl}\" is no <tlLogic> of the file", name()))?;
+                    let p = programme_index[tl.as_str()];
                     if let Some((_, state)) = programmes[p].phases.iter().find(|(_, s)| link >= s.len()) {
                         return Err(format!(
                             "{}: linkIndex {link} is beyond the {} links of <tlLogic id=\"{tl}\">'s phase {state:?}",
@@ -698,6 +771,52 @@ mod tests {
                 r#"type="static" programID="0" offset="2">"#,
                 r#"type="actuated" programID="0" offset="2"><param key="max-gap" value="soon"/>"#,
                 r#"<tlLogic id="J1">: <param key="max-gap" value="soon"/>; allowed: seconds above 0"#,
+            ),
+            // What a broken file has that was taken, or silently dropped, before.
+            (
+                r#"<junction id="J2" type="priority" x="25" y="0"/>"#,
+                r#"<junction id="J2" type="priority" x="25" y="0"/><junction id="J1" type="priority" x="9" y="9"/>"#,
+                r#"<junction id="J1">: defined twice; each junction's id must be unique"#,
+            ),
+            (
+                r#"<edge id=":c" function="crossing">"#,
+                r#"<edge id="b"><lane id="b_9" index="0" speed="5" length="5" shape="0,9 5,9"/></edge><edge id=":c" function="crossing">"#,
+                r#"<edge id="b">: defined twice; each edge's id must be unique"#,
+            ),
+            (r#"id="a_1" index="1""#, r#"id="a_1" index="0""#, r#"<edge id="a">: two lanes have index 0"#),
+            (
+                r#"offset="2""#,
+                r#"offset="NaN""#,
+                r#"<tlLogic id="J1">: offset NaN; allowed: a finite number of seconds"#,
+            ),
+            (r#"offset="2""#, r#"offset="inf""#, r#"<tlLogic id="J1">: offset inf; allowed"#),
+            (
+                r#"<connection from="a" to="b""#,
+                r#"<connection from="aa" to="b""#,
+                r#"<connection from="aa_0" to="b_0">: from="aa" is no <edge> of the file"#,
+            ),
+            (
+                r#"to="b" fromLane="0" toLane="0" via"#,
+                r#"to="b" fromLane="0" toLane="3" via"#,
+                r#"<connection from="a_0" to="b_3">: <edge id="b"> has no lane of index 3"#,
+            ),
+            (r#"tl="J1" linkIndex="0""#, r#"tl="J7""#, r#"tl="J7" is no <tlLogic> of the file"#),
+            (r#"linkIndex="0""#, r#"linkIndex="-5""#, "linkIndex -5; allowed: -1 (no light) or 0 and above"),
+            (
+                r#"shape="0,0 10,0""#,
+                r#"shape="-1e308,0 10,0""#,
+                r#"<lane id="a_0">: shape "-1e308,0 10,0"; allowed: two or more x,y points in metres, each number from -1000000 to 1000000"#,
+            ),
+            (
+                r#"shape="10,-2 15,-2 15,2 10,2""#,
+                r#"shape="10,-2 1e7,-2 15,2 10,2""#,
+                r#"<junction id="J1">: shape "10,-2 1e7,-2 15,2 10,2"; allowed: x,y points"#,
+            ),
+            (r#"x="12" y="0" shape"#, r#"x="12" y="2e6" shape"#, r#"<junction id="J1">: x 12, y 2000000; allowed"#),
+            (
+                r#"length="10" shape="15,0 25,0""#,
+                r#"length="10" width="1e9" shape="15,0 25,0""#,
+                r#"<lane id="b_0">: width 1000000000 m; allowed: above 0 and at most 50 m"#,
             ),
         ] {
             assert!(TINY.contains(from), "{from}");

@@ -50,12 +50,23 @@ pub fn network_file_name(sumo: &str) -> &str {
     Path::new(sumo).file_name().and_then(|n| n.to_str()).unwrap_or(sumo)
 }
 
+/// The bytes of the SUMO network file at `path`; an error naming it when it
+/// cannot be read or is not a regular file (a pipe or a device would be
+/// read without end).
+pub fn read_network_file(path: &Path) -> Result<Vec<u8>, String> {
+    let cannot = |why: String| format!("cannot read SUMO network {}: {why}", path.display());
+    let metadata = std::fs::metadata(path).map_err(|e| cannot(e.to_string()))?;
+    if !metadata.is_file() {
+        return Err(cannot("not a regular file; give a .net.xml file".into()));
+    }
+    std::fs::read(path).map_err(|e| cannot(e.to_string()))
+}
+
 impl ImportedNetwork {
     /// Reads and builds the network at `path` with lane changes
     /// `lane_change_m` long; errors name `field`, the file and what is wrong.
     pub fn read(path: &Path, lane_change_m: f64, field: &str) -> Result<ImportedNetwork, SpecError> {
-        let bytes = std::fs::read(path)
-            .map_err(|e| SpecError::new(field, format!("cannot read SUMO network {}: {e}", path.display())))?;
+        let bytes = read_network_file(path).map_err(|e| SpecError::new(field, e))?;
         let text = std::str::from_utf8(&bytes)
             .map_err(|_| SpecError::new(field, format!("{}: not UTF-8 text, so not a .net.xml", path.display())))?;
         let net = SumoNetwork::from_xml(text).map_err(|e| SpecError::new(field, format!("{}: {e}", path.display())))?;
