@@ -307,6 +307,12 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &grid(serde_json::json!({"rows": 2, "columns": {"choice": [2, 9]}})),
         &["map.grid.columns", "9 is not allowed", "1 to 8"],
     );
+    // A range is judged by its ends: listing [1, 2^64 - 1] took all memory.
+    rejected(
+        "grid-drawn-huge",
+        &grid(serde_json::json!({"rows": {"uniform": [1, u64::MAX]}, "columns": 2})),
+        &["map.grid.rows", "uniform range [1, 18446744073709551615] is not allowed", "1 to 8"],
+    );
     rejected(
         "grid-drawn-empty",
         &grid(serde_json::json!({"rows": {"choice": []}, "columns": 2})),

@@ -359,15 +359,19 @@ impl RoadCount {
             }
             _ => {}
         }
-        for roads in self.values() {
-            if !(1..=MAX_GRID_ROADS).contains(&roads) {
-                return Err(SpecError::new(
-                    field,
-                    format!("{roads} is not allowed: give a whole number of roads from 1 to {MAX_GRID_ROADS}"),
-                ));
+        let allowed = 1..=MAX_GRID_ROADS;
+        // A range is judged by its ends (listing it could take all memory).
+        let refused = match self {
+            RoadCount::Uniform { uniform: [lo, hi] } => (!allowed.contains(lo) || !allowed.contains(hi))
+                .then(|| format!("uniform range [{lo}, {hi}] is not allowed")),
+            _ => self.values().into_iter().find(|n| !allowed.contains(n)).map(|n| format!("{n} is not allowed")),
+        };
+        match refused {
+            Some(what) => {
+                Err(SpecError::new(field, format!("{what}: give a whole number of roads from 1 to {MAX_GRID_ROADS}")))
             }
+            None => Ok(()),
         }
-        Ok(())
     }
 }
 
