@@ -95,7 +95,7 @@ fn from_value_with<T: DeserializeOwned>(value: Value, skip_variants: bool) -> Re
 
 /// serde's "expected u32" and the like in the words of a JSON file: a
 /// user wrote a number, a list or an object, not a Rust type.
-fn in_plain_words(message: &str) -> String {
+pub(crate) fn in_plain_words(message: &str) -> String {
     const WHOLE: [&str; 9] = ["u8", "u16", "u32", "u64", "usize", "i8", "i16", "i32", "i64"];
     let plain_type = |rust: &str| match rust {
         "f32" | "f64" => Some("a number"),

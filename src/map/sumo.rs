@@ -225,6 +225,104 @@ fn seconds_param(programme: &RawProgramme, key: &str, default: f64) -> Result<f6
     }
 }
 
+/// Just the names of a `.net.xml`'s elements, read when the file itself
+/// could not be: what [`unreadable`] names an element by.
+#[derive(Debug, Default, Deserialize)]
+struct Names {
+    #[serde(rename = "edge", default)]
+    edges: Vec<EdgeNames>,
+    #[serde(rename = "junction", default)]
+    junctions: Vec<Named>,
+    #[serde(rename = "connection", default)]
+    connections: Vec<ConnectionNames>,
+    #[serde(rename = "tlLogic", default)]
+    programmes: Vec<Named>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct EdgeNames {
+    #[serde(rename = "@id")]
+    id: Option<String>,
+    #[serde(rename = "lane", default)]
+    lanes: Vec<Named>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct Named {
+    #[serde(rename = "@id")]
+    id: Option<String>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct ConnectionNames {
+    #[serde(rename = "@from")]
+    from: Option<String>,
+    #[serde(rename = "@to")]
+    to: Option<String>,
+}
+
+/// Why `text` is not a network, naming the element and the attribute
+/// the reader stopped at (`<lane id="a_0">: speed: invalid type: string
+/// "fast", expected a number`; `<junction id="J1">: no x attribute`),
+/// in the words the JSON reader uses.
+fn unreadable(text: &str, error: &serde_path_to_error::Error<quick_xml::DeError>) -> String {
+    use serde_path_to_error::Segment;
+    let mut elements: Vec<(&str, usize)> = Vec::new();
+    let mut attribute = None;
+    let segments: Vec<&Segment> = error.path().iter().collect();
+    for (k, segment) in segments.iter().enumerate() {
+        match (segment, segments.get(k + 1)) {
+            (Segment::Map { key }, Some(Segment::Seq { index })) => elements.push((key.as_str(), *index)),
+            (Segment::Map { key }, None) if key.starts_with('@') => attribute = Some(&key[1..]),
+            _ => {}
+        }
+    }
+    let inner = error.inner().to_string();
+    if elements.is_empty() {
+        return format!("not a SUMO network (.net.xml): {inner}");
+    }
+    let names: Names = quick_xml::de::from_str(text).unwrap_or_default();
+    let id = |what: &str, id: Option<&Option<String>>, place: usize| match id.and_then(|i| i.as_deref()) {
+        Some(id) => format!("<{what} id=\"{id}\">"),
+        None => format!("<{what}> number {}", place + 1),
+    };
+    let element = match elements.as_slice() {
+        [("edge", e)] => id("edge", names.edges.get(*e).map(|e| &e.id), *e),
+        [("edge", e), ("lane", l)] => match names.edges.get(*e).and_then(|e| e.lanes.get(*l)) {
+            Some(Named { id: Some(lane) }) => format!("<lane id=\"{lane}\">"),
+            _ => format!("{}'s <lane> number {}", id("edge", names.edges.get(*e).map(|e| &e.id), *e), l + 1),
+        },
+        [("junction", j)] => id("junction", names.junctions.get(*j).map(|j| &j.id), *j),
+        [("connection", c)] => match names.connections.get(*c) {
+            Some(ConnectionNames { from: Some(from), to: Some(to) }) => {
+                format!("<connection from=\"{from}\" to=\"{to}\">")
+            }
+            _ => format!("<connection> number {}", c + 1),
+        },
+        [("tlLogic", p)] => id("tlLogic", names.programmes.get(*p).map(|p| &p.id), *p),
+        [("tlLogic", p), (inside, k)] => {
+            format!("{}'s <{inside}> number {}", id("tlLogic", names.programmes.get(*p).map(|p| &p.id), *p), k + 1)
+        }
+        _ => format!("<{}>", elements.iter().map(|(name, _)| *name).collect::<Vec<_>>().join("> <")),
+    };
+    // `invalid type: string "fast", expected f64`: the value as written,
+    // and what the attribute takes.
+    let value = inner.strip_prefix("invalid type: string ").and_then(|m| m.rsplit_once(", expected "));
+    let takes = |rust: &str| match rust {
+        "f64" | "f32" => "a number",
+        "u8" | "u16" | "u32" | "u64" | "usize" => "a whole number, 0 or more",
+        _ => "a whole number",
+    };
+    match (attribute, inner.strip_prefix("missing field `@").and_then(|m| m.strip_suffix('`')), value) {
+        (_, Some(missing), _) => format!("{element}: no {missing} attribute"),
+        (Some(attribute), None, Some((written, rust))) => {
+            format!("{element}: {attribute}={written}; allowed: {}", takes(rust))
+        }
+        (Some(attribute), None, None) => format!("{element}: {attribute}: {}", crate::json::in_plain_words(&inner)),
+        (None, None, _) => format!("{element}: {}", crate::json::in_plain_words(&inner)),
+    }
+}
+
 /// SUMO junction types this reader refuses, and why.
 const UNSUPPORTED_JUNCTIONS: [(&str, &str); 4] = [
     ("rail_crossing", "rail crossings"),
@@ -380,7 +478,8 @@ impl SumoNetwork {
     /// Reads the text of a `.net.xml`; errors name the element, its id and
     /// what is wrong (the file's name is the caller's to add).
     pub fn from_xml(text: &str) -> Result<SumoNetwork, String> {
-        let raw: RawNet = quick_xml::de::from_str(text).map_err(|e| format!("not a SUMO network (.net.xml): {e}"))?;
+        let mut de = quick_xml::de::Deserializer::from_str(text);
+        let raw: RawNet = serde_path_to_error::deserialize(&mut de).map_err(|e| unreadable(text, &e))?;
         if raw.version.is_none() {
             return Err("<net> has no version attribute: not a network netconvert wrote".into());
         }
@@ -771,6 +870,18 @@ mod tests {
                 r#"type="static" programID="0" offset="2">"#,
                 r#"type="actuated" programID="0" offset="2"><param key="max-gap" value="soon"/>"#,
                 r#"<tlLogic id="J1">: <param key="max-gap" value="soon"/>; allowed: seconds above 0"#,
+            ),
+            // A missing or malformed attribute: the element by its id.
+            (r#"id="b_0" index="0" speed="13.9""#, r#"id="b_0" index="0""#, r#"<lane id="b_0">: no speed attribute"#),
+            (
+                r#"id="a_1" index="1""#,
+                r#"id="a_1" index="-1""#,
+                r#"<lane id="a_1">: index="-1"; allowed: a whole number, 0 or more"#,
+            ),
+            (
+                r#"<phase duration="3" state="y"/>"#,
+                r#"<phase duration="soon" state="y"/>"#,
+                r#"<tlLogic id="J1">'s <phase> number 2: duration="soon"; allowed: a number"#,
             ),
             // What a broken file has that was taken, or silently dropped, before.
             (
