@@ -230,8 +230,8 @@ pub struct PreviewArgs {
     #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..))]
     pub every: u32,
 
-    /// GIF frames per second [default: the scenario's real speed at --every,
-    /// sped up so that the GIF lasts at most 15 s].
+    /// GIF frames per second, 0.5 to 50 [default: the scenario's real speed
+    /// at --every, sped up so that the GIF lasts at most 15 s].
     #[arg(long, value_parser = positive_number)]
     pub fps: Option<f64>,
 

@@ -81,8 +81,26 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
         return Err(Error::Input(format!("{} holds no scenario.json{hint}", scenario_dir.display())));
     }
     let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)])?;
-    render(scenario_dir, &file, options, kind).map_err(Error::Failure)
+    render(scenario_dir, &file, options, kind).map_err(|e| match e.starts_with(SHEET_TOO_LARGE) {
+        // The flags asked for it: bad input, nothing written.
+        true => Error::Input(e),
+        false => Error::Failure(e),
+    })
 }
+
+/// How [`render`]'s message for a contact sheet over [`MAX_SHEET_PIXELS`]
+/// begins.
+const SHEET_TOO_LARGE: &str = "a contact sheet of";
+
+/// Most pixels of a contact sheet (8192 x 8192): its tiles, the sheet and
+/// its RGB copy are then under a GB together.
+const MAX_SHEET_PIXELS: u64 = 8192 * 8192;
+
+/// Slowest and fastest GIF a preview writes, frames per second: a frame's
+/// delay is whole centiseconds, 2 at least (viewers show shorter delays
+/// slowed down), 200 at most (2 s a frame).
+const MIN_FPS: f64 = 0.5;
+const MAX_FPS: f64 = 50.0;
 
 /// The options' errors, found before anything is read (exit status 2), and
 /// what the output's extension asks for.
@@ -91,8 +109,10 @@ fn check_options(out: &Path, options: &PreviewOptions) -> Result<Kind, String> {
         return Err(format!("--scale must be in (0, 1], not {}", options.scale));
     }
     if let Some(fps) = options.fps {
-        if !(fps > 0.0 && fps <= 100.0) {
-            return Err(format!("--fps must be in (0, 100], not {fps}"));
+        if !(MIN_FPS..=MAX_FPS).contains(&fps) {
+            return Err(format!(
+                "--fps must be from {MIN_FPS} to {MAX_FPS} (a GIF holds each frame whole hundredths of a second, at least 2 of them, and this writer at most 200), not {fps}"
+            ));
         }
     }
     match out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
@@ -210,7 +230,7 @@ fn render(
 
     // Real time at --every, sped up to last at most LONGEST_DEFAULT_GIF_S.
     let real_fps = 1.0 / (scenario.frame_interval * options.every as f64);
-    let fps = options.fps.unwrap_or(real_fps.max(chosen.len() as f64 / LONGEST_DEFAULT_GIF_S)).clamp(0.5, 50.0);
+    let fps = options.fps.unwrap_or(real_fps.max(chosen.len() as f64 / LONGEST_DEFAULT_GIF_S)).clamp(MIN_FPS, MAX_FPS);
     // GIF delays are whole hundredths of a second (players round finer ones).
     let delay_cs = (100.0 / fps).round().max(2.0);
     let fps = 100.0 / delay_cs;
@@ -234,12 +254,26 @@ fn render(
                 Ok(size)
             }
             Kind::Sheet => {
-                let tiles: Vec<RgbaImage> = chosen.iter().map(|&f| draw(f)).collect::<Result<_, _>>()?;
-                let (tw, th) = tiles[0].dimensions();
-                let columns = (options.columns as usize).min(tiles.len()) as u32;
-                let rows = tiles.len().div_ceil(columns as usize) as u32;
+                // The first tile gives the sheet's size, checked before the
+                // others are drawn (a sheet of ten 8192 px frames needed 8 GB).
+                let first = draw(chosen[0])?;
+                let (tw, th) = first.dimensions();
+                let columns = (options.columns as usize).min(chosen.len()) as u32;
+                let rows = chosen.len().div_ceil(columns as usize) as u32;
                 let gap = 4;
-                let (sw, sh) = (columns * tw + (columns + 1) * gap, rows * th + (rows + 1) * gap);
+                let (sw, sh) =
+                    (columns as u64 * (tw + gap) as u64 + gap as u64, rows as u64 * (th + gap) as u64 + gap as u64);
+                if sw * sh > MAX_SHEET_PIXELS {
+                    return Err(format!(
+                        "{SHEET_TOO_LARGE} {} frames of {tw}x{th} in {columns} columns would be {sw}x{sh} pixels, over the {MAX_SHEET_PIXELS} a sheet may have: use a smaller --scale or fewer --sheet-frames",
+                        chosen.len()
+                    ));
+                }
+                let (sw, sh) = (sw as u32, sh as u32);
+                let mut tiles = vec![first];
+                for &f in &chosen[1..] {
+                    tiles.push(draw(f)?);
+                }
                 let mut sheet = RgbaImage::from_pixel(sw, sh, image::Rgba([24, 24, 24, 255]));
                 for (i, tile) in tiles.iter().enumerate() {
                     let (c, r) = (i as u32 % columns, i as u32 / columns);

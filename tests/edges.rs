@@ -132,10 +132,14 @@ fn out_of_range_flags_exit_2_naming_the_flag() {
     let out = small_dataset(&dir, (1, 0, 0));
     let scenario = out.join("cars04_edges50/train/00000");
     let spec = dir.join("spec.json");
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--scale", "0"], "--scale"),
         (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "0"], "--fps"),
         (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "200"], "--fps"),
+        // Beyond what a GIF's delay in whole hundredths of a second gives
+        // (it was clamped to 0.5-50 without a word).
+        (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "75"], "from 0.5 to 50"),
+        (&["preview", scenario.to_str().unwrap(), "--out", "x.gif", "--fps", "0.1"], "from 0.5 to 50"),
         (&["preview", scenario.to_str().unwrap(), "--out", "x.bmp"], "--out"),
         (&["baseline", out.to_str().unwrap(), "--max-lag", "NaN"], "--max-lag"),
         (&["gen", "--spec", spec.to_str().unwrap(), "--limit", "-1"], "--limit"),
@@ -174,4 +178,40 @@ fn gen_json_reports_seconds_per_stage() {
         ["plan", "simulate", "render", "encode", "write", "checksum"].iter().map(|s| stages[s].as_f64().unwrap()).sum();
     let threads = summary["threads"].as_f64().unwrap();
     assert!(total <= elapsed * threads + 1e-3, "stages {total} s exceed {threads} threads x {elapsed} s");
+}
+
+#[test]
+fn a_contact_sheet_too_large_to_hold_is_refused_before_it_is_drawn() {
+    // Twelve 4096 x 2048 frames side by side at full scale: 49,200 x 2,056
+    // pixels (a sheet of ten 8192 px frames panicked for want of memory).
+    let dir = fresh_dir("edges-sheet");
+    let spec = toy_spec("sheet", &[(4, 0.5)], (1, 0, 0), 12).replacen(
+        "\"frames\"",
+        "\"image\": {\"width\": 4096, \"height\": 2048}, \"leader_gap_px\": 200, \"frames\"",
+        1,
+    );
+    let spec = write_spec(&dir, &spec);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-effects"]);
+    let scenario = out.join("cars04_edges50/train/00000");
+    let sheet = dir.join("sheet.png");
+    let refused = run(&[
+        "preview",
+        scenario.to_str().unwrap(),
+        "--out",
+        sheet.to_str().unwrap(),
+        "--scale",
+        "1",
+        "--sheet-frames",
+        "12",
+        "--columns",
+        "12",
+    ]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(text(&refused).contains("would be 49204x2056 pixels"), "{}", text(&refused));
+    assert!(!sheet.exists() && !dir.join("sheet.png.partial").exists());
+    // Fewer columns at a smaller scale fit.
+    let fits = run(&["preview", scenario.to_str().unwrap(), "--out", sheet.to_str().unwrap(), "--sheet-frames", "12"]);
+    assert_eq!(fits.status.code(), Some(0), "{}", text(&fits));
+    assert!(sheet.exists());
 }
