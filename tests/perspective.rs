@@ -313,3 +313,45 @@ fn weather_shades_perspective_views_and_leaves_masks_alone() {
     assert_eq!(clear.mask, rain.mask);
     assert_eq!(clear.mask, night.mask);
 }
+
+#[test]
+fn a_pinhole_camera_over_a_large_town_draws_it_in_bounded_memory() {
+    // A 10 km town: its ground texture at 10 px/m asked for 40 GB and gen
+    // aborted. It is drawn coarser now, with roads still on it.
+    let dir = fresh_dir("perspective-large-town");
+    let spec = r#"{ "name": "large", "world": "city", "seed": 1, "frames": 3,
+        "groups": [{ "cars": 2, "edge_proportion": 1.0 }], "splits": { "train": 1, "val": 0, "test": 0 },
+        "map": {"extent_x": 5000, "extent_y": 5000},
+        "cameras": [{"name": "p", "pinhole": {}, "width": 64, "height": 64}] }"#;
+    let spec = write_spec(&dir, spec);
+    let out = dir.join("out");
+    let made = gen_ok(&spec, &out, &["--json", "--no-effects", "-j", "1"]);
+    let summary: serde_json::Value = serde_json::from_slice(&made.stdout).unwrap();
+    let peak = summary["peak_memory"].as_f64().expect("peak memory");
+    assert!(peak < 2e9, "peak memory {peak} bytes");
+    let frame = image::open(out.join("cars02_edges100/train/00000/cameras/p/rgb/0000.png")).unwrap().to_rgb8();
+    assert_eq!(frame.dimensions(), (64, 64));
+    let colours: std::collections::BTreeSet<[u8; 3]> = frame.pixels().map(|p| p.0).collect();
+    assert!(colours.len() > 3, "a frame of {} colours", colours.len());
+}
+
+#[test]
+fn without_images_a_specs_cameras_are_said_to_write_nothing() {
+    // They were dropped without a word while scenario.json listed them.
+    let dir = fresh_dir("perspective-no-images");
+    let spec = r#"{ "name": "noimg", "world": "city", "seed": 1, "frames": 3,
+        "groups": [{ "cars": 2, "edge_proportion": 1.0 }], "splits": { "train": 1, "val": 0, "test": 0 },
+        "cameras": [{"name": "top", "pinhole": {}, "width": 64, "height": 64},
+                    {"name": "street", "static": {"centre": [0, 0]}, "width": 64, "height": 64}] }"#;
+    let spec = write_spec(&dir, spec);
+    let out = dir.join("out");
+    let made = gen_ok(&spec, &out, &["--no-images", "--no-effects", "-q"]);
+    let stderr = String::from_utf8_lossy(&made.stderr);
+    assert!(stderr.contains("warning: --no-images: the spec's cameras (top, street) write nothing"), "{stderr}");
+    assert!(!out.join("cars02_edges100/train/00000/cameras").exists());
+    // With images, no such warning.
+    let with = dir.join("with");
+    let made = gen_ok(&spec, &with, &["--no-effects", "-q"]);
+    assert!(!String::from_utf8_lossy(&made.stderr).contains("warning"));
+    assert!(with.join("cars02_edges100/train/00000/cameras/street/poses.csv").exists());
+}

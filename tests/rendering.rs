@@ -367,3 +367,33 @@ fn rain_snow_and_signal_heads_drawn_one_after_another_equal_frames_drawn_from_sc
     }
     assert_eq!(checked, 36);
 }
+
+#[test]
+fn a_city_image_too_small_to_show_a_car_is_warned_of() {
+    // 32 x 32 of the junctions: 0.4 px per metre, a car 0.39 of a pixel.
+    // Its masks are empty, and gen said nothing before.
+    let dir = fresh_dir("rendering-tiny-city");
+    let tiny = city_spec("tiny", &[(4, 0.5)], (1, 0, 0), 5, "{}").replacen(
+        "\"frames\"",
+        "\"image\": {\"width\": 32, \"height\": 32}, \"frames\"",
+        1,
+    );
+    let spec = write_spec(&dir, &tiny);
+    let out = dir.join("out");
+    let made = gen_ok(&spec, &out, &["--no-effects", "-q"]);
+    let stderr = String::from_utf8_lossy(&made.stderr);
+    assert!(stderr.contains("warning: a 32x32 image") && stderr.contains("covers 0.39 of a pixel"), "{stderr}");
+    // Fewer mask pixels than car frames in view: most cars are missing.
+    let scenario = &scenario_dirs(&out)[0];
+    let in_view = read_poses(&scenario.join("poses.csv")).iter().filter(|p| p.in_view == 1).count();
+    let mut shown = 0;
+    for entry in std::fs::read_dir(scenario.join("mask")).unwrap() {
+        let mask = image::open(entry.unwrap().path()).unwrap().to_luma8();
+        shown += mask.pixels().filter(|p| p.0[0] != 0).count();
+    }
+    assert!(in_view >= 10 && shown < in_view, "{shown} mask pixels for {in_view} car frames in view");
+    // 128 x 80 shows them (2.6 px per metre): no warning.
+    let fine = write_spec(&dir, &tiny.replace("\"width\": 32, \"height\": 32", "\"width\": 128, \"height\": 80"));
+    let made = gen_ok(&fine, &dir.join("fine"), &["--no-effects", "-q"]);
+    assert!(!String::from_utf8_lossy(&made.stderr).contains("warning"), "{}", String::from_utf8_lossy(&made.stderr));
+}

@@ -543,6 +543,18 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
         &with(|v| v["cameras"] = serde_json::json!([{"name": "low", "pinhole": {"position": [0, 0, -5]}}])),
         &["cameras[0].pinhole.position[2]", "-5 is not allowed", "above the ground"],
     );
+    // Far beyond any map, as map.camera_area is bounded: the frames were
+    // blank and poses.csv held inf.
+    rejected(
+        "camera-far-away",
+        &with(|v| v["cameras"] = serde_json::json!([{"name": "far", "static": {"centre": [0, 1e30]}}])),
+        &["cameras[0].static.centre[1]", "1e30 is not allowed", "within +-100000"],
+    );
+    rejected(
+        "pinhole-far-up",
+        &with(|v| v["cameras"] = serde_json::json!([{"name": "up", "pinhole": {"position": [0, 0, 1e308]}}])),
+        &["cameras[0].pinhole.position[2]", "1e308 is not allowed"],
+    );
     rejected(
         "tiny-toy-image",
         &with(|v| v["image"] = serde_json::json!({"width": 32, "height": 32})),

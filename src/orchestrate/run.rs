@@ -619,6 +619,19 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
 }
 
 fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
+    // A camera is pictures: without images it writes nothing, which
+    // scenario.json (listing it) does not tell.
+    let cameras = &expansion.spec.cameras;
+    if !options.images && !cameras.is_empty() {
+        let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+        crate::progress::note(format_args!(
+            "warning: --no-images: the spec's cameras ({}) write nothing (no cameras/ folders)",
+            names.join(", ")
+        ));
+    }
+    if let Some(why) = expansion.spec.cars_below_a_pixel().filter(|_| options.images) {
+        crate::progress::note(format_args!("warning: {why}"));
+    }
     let products = Products {
         images: options.images,
         annotations: options.annotations && options.images,

@@ -43,8 +43,8 @@ const CABIN_LENGTH_SHARE: f64 = 0.5;
 const CABIN_WIDTH_SHARE: f64 = 0.85;
 /// Pixels of the ground texture per metre.
 const TEXTURE_PX_PER_M: f64 = 10.0;
-/// Most pixels along a side of an imported network's ground texture (a
-/// larger network is drawn coarser).
+/// Most pixels along a side of the ground texture (a town or network over
+/// 400 m across is drawn coarser): three 64 MB copies of it at most.
 const MAX_TEXTURE_SIDE: f64 = 4096.0;
 /// Direction towards the sun (unnormalised), for shading faces.
 const SUN: [f64; 3] = [0.35, 0.55, 0.75];
@@ -118,7 +118,10 @@ impl World3d {
             return World3d { texture, ground, buildings: Vec::new() };
         }
         let (half_x, half_y) = (map.layout.extent_x + 10.0, map.layout.extent_y + 10.0);
-        let (w, h) = ((2.0 * half_x * TEXTURE_PX_PER_M) as u32, (2.0 * half_y * TEXTURE_PX_PER_M) as u32);
+        // At most MAX_TEXTURE_SIDE pixels a side: a 5 km town at 10 px/m
+        // asked for 40 GB.
+        let ppm = TEXTURE_PX_PER_M.min(MAX_TEXTURE_SIDE / (2.0 * half_x.max(half_y)));
+        let (w, h) = (((2.0 * half_x * ppm) as u32).max(1), ((2.0 * half_y * ppm) as u32).max(1));
         let altitude = Camera::altitude_to_frame(w, h, DVec2::new(2.0 * half_x, 2.0 * half_y));
         let texture = Camera::birds_eye_over(w, h, DVec2::ZERO, altitude);
         let pixmap = draw_background(map, &texture).pixmap;

@@ -164,6 +164,7 @@ impl CameraSpec {
             if !(view.centre.iter().all(|c| c.is_finite()) && view.rotation_deg.is_finite()) {
                 return Err(SpecError::new(format!("{field}.static"), "centre and rotation_deg must be numbers"));
             }
+            within_reach(&format!("{field}.static.centre"), &view.centre)?;
             CameraKind::Static { centre: view.centre, rotation_deg: view.rotation_deg }
         } else if let Some(c) = &self.chase {
             CameraKind::Chase { car: car("chase", c)? }
@@ -177,6 +178,7 @@ impl CameraSpec {
             if !(view.position.iter().chain([&view.yaw_deg, &view.pitch_deg, &view.roll_deg]).all(|v| v.is_finite())) {
                 return Err(SpecError::new(here, "position, yaw_deg, pitch_deg and roll_deg must be numbers"));
             }
+            within_reach(&format!("{here}.position"), &view.position)?;
             if view.position[2] <= 0.0 {
                 return Err(SpecError::new(
                     format!("{here}.position[2]"),
@@ -215,5 +217,22 @@ impl CameraSpec {
             other => other,
         };
         Ok(CameraPlan { name: self.name.clone(), width, height, zoom: self.zoom, depth: self.depth, kind })
+    }
+}
+
+/// A camera's position (`centre` [x, y] or `position` [x, y, z], metres)
+/// within [`MAX_CAMERA_COORDINATE`] on every axis, as `map.camera_area`
+/// is: far beyond any map a camera sees nothing, and its pixel
+/// coordinates of the cars overflow.
+fn within_reach(field: &str, position: &[f64]) -> Result<(), SpecError> {
+    match position.iter().position(|v| v.abs() > MAX_CAMERA_COORDINATE) {
+        Some(k) => Err(SpecError::new(
+            format!("{field}[{k}]"),
+            format!(
+                "{} is not allowed: metres within +-{MAX_CAMERA_COORDINATE} (the coordinates map.camera_area may give)",
+                Shown(position[k])
+            ),
+        )),
+        None => Ok(()),
     }
 }

@@ -413,7 +413,9 @@ const MAX_MAP_EXTENT: f64 = 5000.0;
 /// network's coordinates run from 0 to its size (netconvert moves its origin
 /// to the south-west corner), so this admits a 100 km cut, a region larger
 /// than any city.
-const MAX_CAMERA_COORDINATE: f64 = 100_000.0;
+/// It bounds every camera's position too (`cameras[i].static.centre`,
+/// `cameras[i].pinhole.position`).
+pub(super) const MAX_CAMERA_COORDINATE: f64 = 100_000.0;
 
 impl MapSpec {
     /// Every town this map section can draw, as a map section of its own

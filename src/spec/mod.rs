@@ -595,6 +595,20 @@ impl DatasetSpec {
         Ok(Camera::birds_eye_over(width, height, (lo + hi) / 2.0, altitude))
     }
 
+    /// In the city, when the bird's-eye view shows a car (`car_length_m` x
+    /// `car_width_m`) as less than a pixel: why, for a warning (the frames
+    /// and masks then miss most cars while `poses.csv` has them in view).
+    pub fn cars_below_a_pixel(&self) -> Option<String> {
+        let camera = self.birds_eye_camera().ok()?;
+        let area = self.car_length_m * self.car_width_m * camera.pixels_per_metre.powi(2);
+        (self.world == WorldKind::City && area < 1.0).then(|| {
+            format!(
+                "a {}x{} image from {:.1} m up shows {:.3} px per metre, so a car ({} m x {} m) covers {area:.2} of a pixel: the frames and masks will miss most cars. Use a larger image (the default is 1024x640), a smaller map.camera_area or a lower map.camera_altitude_m",
+                camera.width, camera.height, camera.altitude_m, camera.pixels_per_metre, self.car_length_m, self.car_width_m
+            )
+        })
+    }
+
     /// `city.lights.actuated` needs an imported network in some split: a
     /// grid town's lights run the fixed cycle.
     fn check_actuated_lights(&self) -> Result<(), SpecError> {
