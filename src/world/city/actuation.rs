@@ -124,6 +124,9 @@ impl<'a> Actuation<'a> {
             // end over and over without time moving on: every shortest
             // length 0, or a cycle scaled to nothing.)
             if let Some(end) = programme.phase_end(t) {
+                // A phase kept past its end by the rule above ends now, in
+                // this step: the next one starts here, not in the past.
+                let end = if end <= self.now { t } else { end };
                 programme.phase = (programme.phase + 1) % programme.run.phases.len();
                 programme.started = end;
                 for (shown, (_, colours)) in programme.shown.iter_mut().zip(&programme.run.lights) {
@@ -250,6 +253,34 @@ mod tests {
         for pair in turned.windows(2) {
             assert!((pair[1] - pair[0] - 0.1).abs() < 1e-6, "{turned:?}");
         }
+    }
+
+    #[test]
+    fn phases_shorter_than_a_step_start_in_the_step_that_shows_them() {
+        // Fixed phases of 0.01 s (a cycle scaled to almost nothing): each
+        // lasts a step, and a light's time since its change never reaches
+        // back before the step that showed the change (it grew by most of
+        // a step each step before).
+        let short = ActuatedRun {
+            phases: vec![
+                ActuatedPhase { duration: 0.01, bounds: None, detectors: vec![] },
+                ActuatedPhase { duration: 0.01, bounds: None, detectors: vec![] },
+            ],
+            ..run()
+        };
+        let state0 = LightState { colour: Colour::Green, since_change: 0.0 };
+        let mut a = Actuation::new(std::slice::from_ref(&short), 1, 1, |_| state0);
+        let mut changes = 0;
+        let mut last = Colour::Green;
+        for k in 0..=100 {
+            let t = k as f64 * 0.05;
+            a.advance(t, std::iter::empty());
+            let state = a.state(0, t).unwrap();
+            assert!(state.since_change <= 0.05 + 1e-9, "at {t} s: {state:?}");
+            changes += usize::from(state.colour != last);
+            last = state.colour;
+        }
+        assert_eq!(changes, 100, "a change every step");
     }
 
     #[test]
