@@ -71,7 +71,7 @@ fn approach_side(heading: f64) -> char {
     }
 }
 
-/// Most points of a dead end's loop: a half circle 650 m across at 0.5 m
+/// Most points of a dead end's loop: a half circle of 650 m radius at 0.5 m
 /// (dead ends loop onto a lane a few metres away; a file whose back lane
 /// starts kilometres away still gets a loop, drawn coarser).
 const MAX_U_TURN_POINTS: usize = 4096;

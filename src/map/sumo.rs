@@ -421,12 +421,16 @@ pub struct SumoNetwork {
 pub const SUMO_DEFAULT_LANE_WIDTH_M: f64 = 3.2;
 
 /// Largest coordinate of any point of an imported network, metres, on
-/// either axis: 1,000 km. netconvert moves a network's origin to its
-/// south-west corner, so its coordinates run from 0 to its size, and no
-/// region a scenario drives is near that. Beyond it a point is a broken
-/// file, and geometry built from it (the loop at a dead end, a lane's
-/// route) would not fit in memory.
-pub const MAX_NETWORK_COORDINATE_M: f64 = 1.0e6;
+/// either axis: 10,000 km, which UTM coordinates never reach (netconvert
+/// keeps them with `--offset.disable-normalization`; by default it moves
+/// the origin to the network's south-west corner).
+pub const MAX_NETWORK_COORDINATE_M: f64 = 1.0e7;
+
+/// Largest span of an imported network's points, metres, on either axis:
+/// 1,000 km, more than any region a scenario drives. A larger one is a
+/// broken file, and geometry built from it (the loop at a dead end, a
+/// lane's route) would not fit in memory.
+pub const MAX_NETWORK_SPAN_M: f64 = 1.0e6;
 
 /// Widest lane an imported network may give, metres: roads' lanes are a
 /// few metres wide (SUMO's default [`SUMO_DEFAULT_LANE_WIDTH_M`]).
@@ -446,7 +450,7 @@ fn polyline(text: &str) -> Option<Vec<DVec2>> {
 }
 
 /// What a shape or position must be, for messages.
-const POINTS_ALLOWED: &str = "x,y points in metres, each number from -1000000 to 1000000";
+const POINTS_ALLOWED: &str = "x,y points in metres, each number from -10000000 to 10000000";
 
 /// Whether `x, y` is a point a network may have: finite, and within
 /// [`MAX_NETWORK_COORDINATE_M`] of the origin on both axes.
@@ -761,6 +765,35 @@ impl SumoNetwork {
         if lanes.is_empty() {
             return Err("the network has no lane a passenger car may drive".into());
         }
+        let network = SumoNetwork { junctions, lanes, connections, programmes, left_out: Vec::new() };
+        let (lo, hi) = network.bounds();
+        let span = hi - lo;
+        if span.max_element() > MAX_NETWORK_SPAN_M {
+            // The lane or junction farthest from the bulk of the network
+            // (the median point) names where to look.
+            let median = |axis: fn(&DVec2) -> f64| {
+                let mut values: Vec<f64> = network.lanes.iter().flat_map(|l| l.shape.iter().map(axis)).collect();
+                values.sort_by(f64::total_cmp);
+                values[values.len() / 2]
+            };
+            let centre = DVec2::new(median(|p| p.x), median(|p| p.y));
+            let far =
+                network.lanes.iter().flat_map(|l| l.shape.iter().map(move |p| (*p, format!("<lane id=\"{}\">", l.id))));
+            let far = far.chain(
+                network
+                    .junctions
+                    .iter()
+                    .flat_map(|j| j.shape.iter().map(move |p| (*p, format!("<junction id=\"{}\">", j.id)))),
+            );
+            let (point, element) = far
+                .max_by(|a, b| a.0.distance(centre).total_cmp(&b.0.distance(centre)))
+                .expect("a network with lanes has points");
+            return Err(format!(
+                "the network spans {:.0} m x {:.0} m (its farthest point {element} at {}, {}); allowed: at most {MAX_NETWORK_SPAN_M} m a side",
+                span.x, span.y, point.x, point.y
+            ));
+        }
+        let SumoNetwork { junctions, lanes, connections, programmes, .. } = network;
         if !unsupported.is_empty() {
             *left_out.entry("junctions of edges closed to cars").or_default() += unsupported.len();
         }
@@ -916,14 +949,20 @@ mod tests {
             (
                 r#"shape="0,0 10,0""#,
                 r#"shape="-1e308,0 10,0""#,
-                r#"<lane id="a_0">: shape "-1e308,0 10,0"; allowed: two or more x,y points in metres, each number from -1000000 to 1000000"#,
+                r#"<lane id="a_0">: shape "-1e308,0 10,0"; allowed: two or more x,y points in metres, each number from -10000000 to 10000000"#,
             ),
             (
                 r#"shape="10,-2 15,-2 15,2 10,2""#,
-                r#"shape="10,-2 1e7,-2 15,2 10,2""#,
-                r#"<junction id="J1">: shape "10,-2 1e7,-2 15,2 10,2"; allowed: x,y points"#,
+                r#"shape="10,-2 1e8,-2 15,2 10,2""#,
+                r#"<junction id="J1">: shape "10,-2 1e8,-2 15,2 10,2"; allowed: x,y points"#,
             ),
-            (r#"x="12" y="0" shape"#, r#"x="12" y="2e6" shape"#, r#"<junction id="J1">: x 12, y 2000000; allowed"#),
+            (r#"x="12" y="0" shape"#, r#"x="12" y="2e7" shape"#, r#"<junction id="J1">: x 12, y 20000000; allowed"#),
+            // Within the coordinates' bounds, but 2,000 km across.
+            (
+                r#"shape="0,0 10,0""#,
+                r#"shape="-2e6,0 10,0""#,
+                r#"the network spans 2000025 m x 4 m (its farthest point <lane id="a_0"> at -2000000, 0); allowed: at most 1000000 m a side"#,
+            ),
             (
                 r#"length="10" shape="15,0 25,0""#,
                 r#"length="10" width="1e9" shape="15,0 25,0""#,
