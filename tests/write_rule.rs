@@ -587,3 +587,27 @@ fn a_link_to_a_file_inside_a_scenario_is_never_kept_as_its_file() {
     assert_refused(&output, "a symbolic link");
     assert_eq!((hash_tree(&a), hash_tree(&b)), (before_a, before_b), "nothing moved");
 }
+
+#[test]
+fn nothing_is_written_into_a_dataset_still_being_written_in_shards() {
+    // A gen --shard folder has no manifest.json until its merge: a heatmap
+    // or an export written there went in, and the next shard and the
+    // merge then refused the folder for holding it.
+    let dir = fresh_dir("write-rule-shards");
+    let source = toy_dataset(&dir);
+    let spec = write_spec(&dir, &toy_spec("sharded", &[(4, 0.5)], (2, 1, 1), 10));
+    let sharded = dir.join("sharded");
+    gen_ok(&spec, &sharded, &["--no-images", "--shard", "0/2", "-q"]);
+    for (args, written) in [
+        (vec!["heatmap", s(&source), "--out", s(&sharded.join("h.png"))], sharded.join("h.png")),
+        (vec!["heatmap", s(&source), "--out", s(&sharded.join("shards/h.png"))], sharded.join("shards/h.png")),
+        (vec!["export", "nri", s(&source), "--out", s(&sharded.join("nri"))], sharded.join("nri")),
+    ] {
+        assert_refused(&run(&args), "written in shards");
+        assert!(!written.exists(), "{}", written.display());
+    }
+    gen_ok(&spec, &sharded, &["--no-images", "--shard", "1/2", "-q"]);
+    let merged = run(&["merge", "--out", s(&sharded)]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+    assert_valid(&sharded);
+}

@@ -479,9 +479,22 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
     let holds = |path: PathBuf, format: &str| {
         path.is_file() && fs::read(&path).is_ok_and(|b| b.windows(format.len()).any(|w| w == format.as_bytes()))
     };
+    // A `gen --shard` folder before its merge has no manifest.json yet,
+    // only its shards' (`shards/K-of-N.json`).
+    let sharded = |dir: &Path| {
+        fs::read_dir(dir.join("shards")).is_ok_and(|entries| {
+            entries.flatten().any(|e| {
+                let name = e.file_name();
+                let name = name.to_string_lossy();
+                name.contains("-of-") && name.ends_with(".json") && holds(e.path(), super::manifest::MANIFEST_FORMAT)
+            })
+        })
+    };
     for ancestor in absolute.ancestors().skip(1) {
         let inside = if holds(ancestor.join("manifest.json"), super::manifest::MANIFEST_FORMAT) {
             "a gen dataset"
+        } else if sharded(ancestor) {
+            "a gen dataset written in shards (shards/K-of-N.json)"
         } else if holds(ancestor.join("sweep.json"), SWEEP_FORMAT_PREFIX) {
             "a counterfactual sweep"
         } else {
