@@ -186,3 +186,28 @@ fn run_given_a_dataset_spec_says_to_use_gen() {
         assert!(!out.exists(), "{command} wrote {}", out.display());
     }
 }
+
+#[test]
+fn an_nri_export_never_leaves_an_earlier_exports_files_beside_its_own() {
+    // Exporting a dataset without val and test scenarios into the folder of
+    // an earlier export kept that export's valid and test arrays: an NRI
+    // loader read train from one dataset, valid and test from another.
+    let dir = fresh_dir("export-earlier");
+    let full = dir.join("full");
+    gen_ok(&write_spec(&dir, &toy_spec("full", &[(4, 0.5)], (2, 1, 1), 10)), &full, &["--no-images", "-q"]);
+    let train_only = dir.join("train-only");
+    gen_ok(&write_spec(&dir, &toy_spec("train", &[(4, 0.5)], (2, 0, 0), 10)), &train_only, &["--no-images", "-q"]);
+    let out = dir.join("nri");
+    let first = run(&["export", "nri", full.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let before = hash_tree(&out);
+    let mixed = run(&["export", "nri", train_only.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let stderr = String::from_utf8_lossy(&mixed.stderr);
+    assert_eq!(mixed.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("cars04_edges50/loc_") && stderr.contains("is not a file this export writes"), "{stderr}");
+    assert_eq!(hash_tree(&out), before, "nothing written");
+    // The same export again replaces its own files.
+    let again = run(&["export", "nri", full.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(hash_tree(&out), before);
+}

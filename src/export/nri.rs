@@ -235,7 +235,42 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
         )));
     }
     let _claim = claim(out, Writer::Export, &format!("export nri {}", dataset.display()))?;
+    refuse_earlier_export(&opened, out, options)?;
     export_nri_groups(&opened, out, options).map_err(Error::Failure)
+}
+
+/// Refuses an `out` holding a file this export would not write: an earlier
+/// export's (of another dataset, split sizes or options) would stay beside
+/// this one's, and an NRI loader would read train from one dataset and
+/// valid or test from another. Files this export writes are replaced.
+fn refuse_earlier_export(opened: &Dataset, out: &Path, options: &NriOptions) -> Result<(), Error> {
+    let mut kinds = vec!["loc", "vel", "edges"];
+    if options.dynamic {
+        kinds.push("dynamic_edges");
+    }
+    let mut writes = std::collections::BTreeSet::new();
+    for key in opened.keys() {
+        for kind in &kinds {
+            let file = format!("{kind}_{}{}.npy", nri_split_name(key.split), options.suffix);
+            writes.insert(Path::new(&key.group).join(file));
+        }
+    }
+    let Ok(groups) = std::fs::read_dir(out) else { return Ok(()) };
+    for group in groups.flatten() {
+        let Ok(files) = std::fs::read_dir(group.path()) else { continue };
+        for file in files.flatten() {
+            let relative = Path::new(&group.file_name()).join(file.file_name());
+            if !writes.contains(&relative) {
+                return Err(Error::Input(format!(
+                    "{} is not a file this export writes (an earlier export's, of another dataset, split or options?): \
+                     left beside this one, an NRI loader would mix the two. Remove it (or the folder's earlier \
+                     export), or export into an empty --out",
+                    out.join(&relative).display()
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Whether `suffix` keeps every file it names inside its group folder.
