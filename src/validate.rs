@@ -230,6 +230,9 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
         }
     };
     let (mut files, mut bytes) = (0, 0);
+    // A scenario is checked when it has files to check: a missing one
+    // (an interrupted run's) is a problem, not a scenario checked.
+    let checked = results.iter().filter(|r| r.1 > 0).count();
     let mut prints = Vec::with_capacity(keys.len());
     for (p, f, b, cars) in results {
         problems.extend(p);
@@ -241,7 +244,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     Ok(ValidationReport {
         dir: dir.to_path_buf(),
         scenarios_expected: keys.len(),
-        scenarios_checked: keys.len(),
+        scenarios_checked: checked,
         files_checked: files,
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),
@@ -350,6 +353,7 @@ fn validate_sweep(
             .collect(),
     };
     let (mut files, mut bytes) = (0, 0);
+    let checked = results.iter().filter(|r| r.1 > 0).count();
     for (p, f, b, _) in results {
         problems.extend(p);
         files += f;
@@ -358,7 +362,7 @@ fn validate_sweep(
     Ok(ValidationReport {
         dir: dir.clone(),
         scenarios_expected: keys.len(),
-        scenarios_checked: keys.len(),
+        scenarios_checked: checked,
         files_checked: files,
         bytes_read: bytes,
         seconds: start.elapsed().as_secs_f64(),

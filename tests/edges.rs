@@ -215,3 +215,30 @@ fn a_contact_sheet_too_large_to_hold_is_refused_before_it_is_drawn() {
     assert_eq!(fits.status.code(), Some(0), "{}", text(&fits));
     assert!(sheet.exists());
 }
+
+#[test]
+fn empty_selections_one_frame_exports_and_missing_scenarios_are_told_as_they_are() {
+    let dir = fresh_dir("edges-degenerate");
+    // A heat map of a split without scenarios: exit 2, no picture (it drew
+    // an empty map and said "0 scenarios", exit 0).
+    let no_test = dir.join("no-test");
+    gen_ok(&write_spec(&dir, &toy_spec("nt", &[(4, 0.5)], (2, 0, 0), 10)), &no_test, &["--no-images", "-q"]);
+    let picture = dir.join("h.png");
+    let refused = run(&["heatmap", no_test.to_str().unwrap(), "--out", picture.to_str().unwrap(), "--split", "test"]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(text(&refused).contains("no scenarios in split test"), "{}", text(&refused));
+    assert!(!picture.exists());
+    // NRI arrays of 1-frame scenarios: every velocity was 0 without a word.
+    let one = dir.join("one-frame");
+    gen_ok(&write_spec(&dir, &toy_spec("one", &[(4, 0.5)], (2, 1, 1), 1)), &one, &["--no-images", "-q"]);
+    let nri = dir.join("nri");
+    let refused = run(&["export", "nri", one.to_str().unwrap(), "--out", nri.to_str().unwrap()]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(text(&refused).contains("2 frames or more"), "{}", text(&refused));
+    assert!(!nri.exists());
+    // validate counts the scenarios it checked, not those it expected.
+    std::fs::remove_dir_all(no_test.join("cars04_edges50/train/00001")).unwrap();
+    let checked = run(&["validate", no_test.to_str().unwrap()]);
+    assert_eq!(checked.status.code(), Some(1), "{}", text(&checked));
+    assert!(text(&checked).contains("1 of 2 scenarios checked"), "{}", text(&checked));
+}

@@ -91,6 +91,17 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             names.join(", ")
         )));
     }
+    let chosen = opened
+        .keys()
+        .filter(|k| filter.group.as_ref().is_none_or(|g| g == &k.group) && filter.split.is_none_or(|s| s == k.split));
+    if chosen.count() == 0 {
+        return Err(Error::Input(format!(
+            "{}: no scenarios{}{}: nothing to map",
+            dataset.display(),
+            filter.group.as_ref().map_or(String::new(), |g| format!(" in group {g}")),
+            filter.split.map_or(String::new(), |s| format!(" in split {}", s.name()))
+        )));
+    }
     let file = claim_file(out, &[("the dataset it maps", dataset)])?;
     draw(&opened, &file, filter).map_err(Error::Failure)
 }

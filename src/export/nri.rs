@@ -227,6 +227,13 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
             opened.spec().world.name()
         )));
     }
+    if opened.spec().frames < 2 {
+        return Err(Error::Input(format!(
+            "{}: its scenarios have 1 frame, and a velocity needs two (vel[0] = loc[1] - loc[0]): export nri \
+             needs scenarios of 2 frames or more",
+            dataset.display()
+        )));
+    }
     if !valid_suffix(&options.suffix) {
         return Err(Error::Input(format!(
             "--suffix {:?}: a suffix is part of a file name: letters, digits, '-', '_' and '.' only, no '..' \
