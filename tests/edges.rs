@@ -228,6 +228,14 @@ fn empty_selections_one_frame_exports_and_missing_scenarios_are_told_as_they_are
     assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
     assert!(text(&refused).contains("no scenarios in split test"), "{}", text(&refused));
     assert!(!picture.exists());
+    // The baseline without test scenarios scored nothing, exit 0.
+    let refused = run(&["baseline", no_test.to_str().unwrap()]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(
+        text(&refused).contains("it has no test scenarios, and the baseline scores its test"),
+        "{}",
+        text(&refused)
+    );
     // NRI arrays of 1-frame scenarios: every velocity was 0 without a word.
     let one = dir.join("one-frame");
     gen_ok(&write_spec(&dir, &toy_spec("one", &[(4, 0.5)], (2, 1, 1), 1)), &one, &["--no-images", "-q"]);

@@ -129,6 +129,21 @@ pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<
             dataset.spec().frames
         )));
     }
+    // A threshold learnt on train, scored on test: both must have scenarios
+    // (without test it scored nothing, exit 0; without train it blamed the
+    // edge proportion).
+    for (split, role) in [(Split::Train, "learns its threshold on"), (Split::Test, "scores")] {
+        if !dataset.keys().any(|k| k.split == split) {
+            return Err(Error::Input(format!(
+                "{}: it has no {} scenarios, and the baseline {role} its {} scenarios: generate a dataset whose \
+                 splits.{} is 1 or more",
+                dir.display(),
+                split.name(),
+                split.name(),
+                split.name()
+            )));
+        }
+    }
     let duration = dataset.spec().frames as f64 * dataset.spec().frame_interval();
     let lags: Vec<f64> = match max_lag_s {
         Some(lag) => vec![lag],
