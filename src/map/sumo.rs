@@ -765,41 +765,45 @@ impl SumoNetwork {
         if lanes.is_empty() {
             return Err("the network has no lane a passenger car may drive".into());
         }
-        let network = SumoNetwork { junctions, lanes, connections, programmes, left_out: Vec::new() };
-        let (lo, hi) = network.bounds();
-        let span = hi - lo;
-        if span.max_element() > MAX_NETWORK_SPAN_M {
-            // The lane or junction farthest from the bulk of the network
-            // (the median point) names where to look.
-            let median = |axis: fn(&DVec2) -> f64| {
-                let mut values: Vec<f64> = network.lanes.iter().flat_map(|l| l.shape.iter().map(axis)).collect();
-                values.sort_by(f64::total_cmp);
-                values[values.len() / 2]
-            };
-            let centre = DVec2::new(median(|p| p.x), median(|p| p.y));
-            let far =
-                network.lanes.iter().flat_map(|l| l.shape.iter().map(move |p| (*p, format!("<lane id=\"{}\">", l.id))));
-            let far = far.chain(
-                network
-                    .junctions
-                    .iter()
-                    .flat_map(|j| j.shape.iter().map(move |p| (*p, format!("<junction id=\"{}\">", j.id)))),
-            );
-            let (point, element) = far
-                .max_by(|a, b| a.0.distance(centre).total_cmp(&b.0.distance(centre)))
-                .expect("a network with lanes has points");
-            return Err(format!(
-                "the network spans {:.0} m x {:.0} m (its farthest point {element} at {}, {}); allowed: at most {MAX_NETWORK_SPAN_M} m a side",
-                span.x, span.y, point.x, point.y
-            ));
-        }
-        let SumoNetwork { junctions, lanes, connections, programmes, .. } = network;
         if !unsupported.is_empty() {
             *left_out.entry("junctions of edges closed to cars").or_default() += unsupported.len();
         }
         let mut left_out: Vec<(&'static str, usize)> = left_out.into_iter().collect();
         left_out.sort();
-        Ok(SumoNetwork { junctions, lanes, connections, programmes, left_out })
+        let network = SumoNetwork { junctions, lanes, connections, programmes, left_out };
+        network.refuse_too_wide()?;
+        Ok(network)
+    }
+
+    /// Refuses a network spanning more than [`MAX_NETWORK_SPAN_M`] on an
+    /// axis, naming the lane or junction outline farthest from the bulk of
+    /// it (the median lane point): where to look in the file.
+    fn refuse_too_wide(&self) -> Result<(), String> {
+        let (lo, hi) = self.bounds();
+        let span = hi - lo;
+        if span.max_element() <= MAX_NETWORK_SPAN_M {
+            return Ok(());
+        }
+        let median = |axis: fn(&DVec2) -> f64| {
+            let mut values: Vec<f64> = self.lanes.iter().flat_map(|l| l.shape.iter().map(axis)).collect();
+            values.sort_by(f64::total_cmp);
+            values[values.len() / 2]
+        };
+        let centre = DVec2::new(median(|p| p.x), median(|p| p.y));
+        let lanes =
+            self.lanes.iter().flat_map(|l| l.shape.iter().map(move |p| (*p, format!("<lane id=\"{}\">", l.id))));
+        let outlines = self
+            .junctions
+            .iter()
+            .flat_map(|j| j.shape.iter().map(move |p| (*p, format!("<junction id=\"{}\">", j.id))));
+        let (point, element) = lanes
+            .chain(outlines)
+            .max_by(|a, b| a.0.distance(centre).total_cmp(&b.0.distance(centre)))
+            .expect("a network with lanes has points");
+        Err(format!(
+            "the network spans {:.0} m x {:.0} m (its farthest point {element} at {}, {}); allowed: at most {MAX_NETWORK_SPAN_M} m a side",
+            span.x, span.y, point.x, point.y
+        ))
     }
 
     /// Lower and upper corners of everything drawn (lanes and junction
