@@ -211,3 +211,36 @@ fn an_nri_export_never_leaves_an_earlier_exports_files_beside_its_own() {
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
     assert_eq!(hash_tree(&out), before);
 }
+
+#[test]
+fn an_nsdr_export_never_leaves_an_earlier_exports_scenarios_beside_its_own() {
+    // An export of fewer scenarios over an earlier one kept the earlier
+    // export's extra scenario folders, their annotations pointing into the
+    // other dataset.
+    let dir = fresh_dir("export-nsdr-earlier");
+    let spec = |name: &str, splits| {
+        city_spec(name, &[(4, 0.5)], splits, 5, "{}").replacen(
+            "\"frames\"",
+            "\"image\": {\"width\": 128, \"height\": 80}, \"frames\"",
+            1,
+        )
+    };
+    let (more, fewer) = (dir.join("more"), dir.join("fewer"));
+    gen_ok(&write_spec(&dir, &spec("more", (2, 1, 1))), &more, &["--no-effects", "-q"]);
+    gen_ok(&write_spec(&dir, &spec("fewer", (1, 0, 0))), &fewer, &["--no-effects", "-q"]);
+    let out = dir.join("nsdr");
+    let first = run(&["export", "nsdr", more.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    // Scenario 00000 is one the second export would write over.
+    let annotations = out.join("cars04_edges50/train/00000/annotations.json");
+    let before = std::fs::read(&annotations).unwrap();
+    let mixed = run(&["export", "nsdr", fewer.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let stderr = String::from_utf8_lossy(&mixed.stderr);
+    assert_eq!(mixed.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("is not a scenario this export writes"), "{stderr}");
+    assert_eq!(std::fs::read(&annotations).unwrap(), before, "nothing written");
+    // The same export again replaces its own scenarios.
+    let again = run(&["export", "nsdr", more.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(std::fs::read(&annotations).unwrap(), before);
+}
