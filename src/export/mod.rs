@@ -5,3 +5,77 @@
 pub mod nri;
 pub mod nsdr;
 pub mod vcdn;
+
+use crate::error::Error;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// Refuses an `out` holding, `depth` folders down, an entry this export
+/// would not write (`writes`, relative to `out`): an earlier export's, of
+/// another dataset, split sizes or options, would stay beside this one's,
+/// and a loader would read part of one dataset and part of another. Files
+/// at the top of `out` (the lock) are not an export's; a file where a
+/// folder of this export's layout goes is a stray; what this export
+/// writes is replaced. `entry` names the kind of thing at `depth` (`a
+/// file`, `a scenario`).
+fn refuse_earlier_export(out: &Path, depth: usize, writes: &BTreeSet<PathBuf>, entry: &str) -> Result<(), Error> {
+    let children = |dir: &Path| -> Vec<PathBuf> {
+        let mut found: Vec<PathBuf> =
+            std::fs::read_dir(dir).into_iter().flatten().flatten().map(|e| e.path()).collect();
+        found.sort();
+        found
+    };
+    let mut level: Vec<PathBuf> = children(out).into_iter().filter(|p| p.is_dir()).collect();
+    for down in 2..=depth {
+        let mut next = Vec::new();
+        for folder in &level {
+            for child in children(folder) {
+                let relative = child.strip_prefix(out).unwrap_or(&child).to_path_buf();
+                let stray = match down == depth {
+                    true => !writes.contains(&relative),
+                    false => !child.is_dir(),
+                };
+                if stray {
+                    return Err(Error::Input(format!(
+                        "{} is not {entry} this export writes (an earlier export's, of another dataset, split sizes \
+                         or options?): left beside this one, a loader would mix the two. Remove it (or the folder's \
+                         earlier export), or export into an empty --out",
+                        child.display()
+                    )));
+                }
+                next.push(child);
+            }
+        }
+        level = next;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn writes(paths: &[&str]) -> BTreeSet<PathBuf> {
+        paths.iter().map(PathBuf::from).collect()
+    }
+
+    #[test]
+    fn an_earlier_exports_entries_are_refused_and_this_exports_own_and_the_lock_are_not() {
+        let scratch = crate::output::packs::Scratch::new().unwrap();
+        let out = scratch.path();
+        let own = writes(&["g/train/s0.h5", "g/train/s0.h5.partial"]);
+        std::fs::write(out.join(".lock"), "").unwrap();
+        std::fs::create_dir_all(out.join("g/train")).unwrap();
+        std::fs::write(out.join("g/train/s0.h5"), "").unwrap();
+        assert!(refuse_earlier_export(out, 3, &own, "a scenario").is_ok());
+
+        std::fs::write(out.join("g/train/s1.h5"), "").unwrap();
+        let err = refuse_earlier_export(out, 3, &own, "a scenario").unwrap_err().to_string();
+        assert!(err.contains("g/train/s1.h5 is not a scenario this export writes"), "{err}");
+        std::fs::remove_file(out.join("g/train/s1.h5")).unwrap();
+
+        std::fs::write(out.join("g/notes.txt"), "").unwrap();
+        let err = refuse_earlier_export(out, 3, &own, "a scenario").unwrap_err().to_string();
+        assert!(err.contains("g/notes.txt is not a scenario"), "{err}");
+    }
+}

@@ -246,10 +246,8 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
     export_nri_groups(&opened, out, options).map_err(Error::Failure)
 }
 
-/// Refuses an `out` holding a file this export would not write: an earlier
-/// export's (of another dataset, split sizes or options) would stay beside
-/// this one's, and an NRI loader would read train from one dataset and
-/// valid or test from another. Files this export writes are replaced.
+/// The files this export writes, relative to `out`: an NRI loader reads a
+/// group's splits as one set, so anything else there is refused.
 fn refuse_earlier_export(opened: &Dataset, out: &Path, options: &NriOptions) -> Result<(), Error> {
     let mut kinds = vec!["loc", "vel", "edges"];
     if options.dynamic {
@@ -262,22 +260,7 @@ fn refuse_earlier_export(opened: &Dataset, out: &Path, options: &NriOptions) -> 
             writes.insert(Path::new(&key.group).join(file));
         }
     }
-    let Ok(groups) = std::fs::read_dir(out) else { return Ok(()) };
-    for group in groups.flatten() {
-        let Ok(files) = std::fs::read_dir(group.path()) else { continue };
-        for file in files.flatten() {
-            let relative = Path::new(&group.file_name()).join(file.file_name());
-            if !writes.contains(&relative) {
-                return Err(Error::Input(format!(
-                    "{} is not a file this export writes (an earlier export's, of another dataset, split or options?): \
-                     left beside this one, an NRI loader would mix the two. Remove it (or the folder's earlier \
-                     export), or export into an empty --out",
-                    out.join(&relative).display()
-                )));
-            }
-        }
-    }
-    Ok(())
+    super::refuse_earlier_export(out, 2, &writes, "a file")
 }
 
 /// Whether `suffix` keeps every file it names inside its group folder.

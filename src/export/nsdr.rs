@@ -50,33 +50,11 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     Ok(opened.key_sequence().len())
 }
 
-/// Refuses an `out` holding a scenario folder (or a file) this export would
-/// not write: an earlier export's, of another dataset or split sizes, would
-/// stay beside this one's, its annotations pointing into the other dataset.
-/// The scenario folders this export writes are replaced.
+/// The scenario folders this export writes, relative to `out`; anything
+/// else there is refused.
 fn refuse_earlier_export(opened: &Dataset, out: &Path) -> Result<(), Error> {
-    let writes: std::collections::BTreeSet<PathBuf> =
-        opened.keys().map(|k| PathBuf::from(k.relative_folder())).collect();
-    let entries = |dir: &Path| std::fs::read_dir(dir).into_iter().flatten().flatten().map(|e| e.path());
-    let strays = entries(out).flat_map(|group| {
-        let splits: Vec<PathBuf> = entries(&group).collect();
-        splits.into_iter().flat_map(move |split| match split.is_dir() {
-            true => entries(&split).collect::<Vec<_>>(),
-            false => vec![split],
-        })
-    });
-    for stray in strays {
-        let relative = stray.strip_prefix(out).unwrap_or(&stray);
-        if !writes.contains(relative) {
-            return Err(Error::Input(format!(
-                "{} is not a scenario this export writes (an earlier export's, of another dataset or split \
-                 sizes?): left beside this one, a loader would mix the two. Remove it (or the folder's earlier \
-                 export), or export into an empty --out",
-                stray.display()
-            )));
-        }
-    }
-    Ok(())
+    let writes = opened.keys().map(|k| PathBuf::from(k.relative_folder())).collect();
+    super::refuse_earlier_export(out, 3, &writes, "a scenario")
 }
 
 /// `rgb/` and `mask/` beside an exported annotations.json, as links to the

@@ -17,7 +17,7 @@
 use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary};
 use crate::error::Error;
 use crate::progress::{Progress, ProgressMode};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The arrays of one scenario's V-CDN file, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -106,6 +106,12 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
         crate::output::claim::Writer::Export,
         &format!("export vcdn {}", dataset.display()),
     )?;
+    // Its scenario files, and their partial writes a cut-off run left.
+    let writes = opened
+        .keys()
+        .flat_map(|k| ["h5", "h5.partial"].map(|ext| PathBuf::from(k.relative_folder()).with_extension(ext)))
+        .collect();
+    super::refuse_earlier_export(out, 3, &writes, "a scenario file")?;
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split in TMPDIR.
     opened
