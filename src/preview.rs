@@ -81,16 +81,8 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
         return Err(Error::Input(format!("{} holds no scenario.json{hint}", scenario_dir.display())));
     }
     let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)])?;
-    render(scenario_dir, &file, options, kind).map_err(|e| match e.starts_with(SHEET_TOO_LARGE) {
-        // The flags asked for it: bad input, nothing written.
-        true => Error::Input(e),
-        false => Error::Failure(e),
-    })
+    render(scenario_dir, &file, options, kind)
 }
-
-/// How [`render`]'s message for a contact sheet over [`MAX_SHEET_PIXELS`]
-/// begins.
-const SHEET_TOO_LARGE: &str = "a contact sheet of";
 
 /// Most pixels of a contact sheet (8192 x 8192): its tiles, the sheet and
 /// its RGB copy are then under a GB together.
@@ -136,7 +128,7 @@ fn render(
     file: &OutputFile,
     options: &PreviewOptions,
     kind: Kind,
-) -> Result<PreviewSummary, String> {
+) -> Result<PreviewSummary, Error> {
     let out = file.path();
     // An extra camera's folder (`<scenario>/cameras/<name>`): its frames,
     // the scenario's cars. Trails and arrows are drawn in bird's-eye pixels,
@@ -144,9 +136,9 @@ fn render(
     let scenario_of_camera = scenario_of_camera(scenario_dir);
     let camera = scenario_of_camera.is_some();
     let meta_dir = scenario_of_camera.unwrap_or(scenario_dir);
-    let scenario = ScenarioSummary::read(meta_dir)?;
+    let scenario = ScenarioSummary::read(meta_dir).map_err(Error::Failure)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
-    let poses = PoseLog::read(meta_dir, frames, cars)?;
+    let poses = PoseLog::read(meta_dir, frames, cars).map_err(Error::Failure)?;
     let options = &PreviewOptions {
         trails: options.trails && !camera,
         arrows: options.arrows && !camera,
@@ -156,7 +148,10 @@ fn render(
     let digits = frame_digits(scenario.frames);
     let first = scenario_dir.join(format!("rgb/{:0digits$}.png", 0));
     if !first.exists() {
-        return Err(format!("{} has no frames (made with --no-images?): nothing to preview", scenario_dir.display()));
+        return Err(Error::Failure(format!(
+            "{} has no frames (made with --no-images?): nothing to preview",
+            scenario_dir.display()
+        )));
     }
     let colours: Vec<[u8; 3]> = scenario
         .cars
@@ -234,29 +229,31 @@ fn render(
     // GIF delays are whole hundredths of a second (players round finer ones).
     let delay_cs = (100.0 / fps).round().max(2.0);
     let fps = 100.0 / delay_cs;
-    let partial = file.partial().map_err(|e| e.to_string())?;
-    let result = (|| -> Result<(u32, u32), String> {
-        let file = std::fs::File::create(&partial).map_err(|e| format!("cannot write {}: {e}", partial.display()))?;
+    let partial = file.partial().map_err(|e| Error::Failure(e.to_string()))?;
+    let result = (|| -> Result<(u32, u32), Error> {
+        let failure = Error::Failure;
+        let file =
+            std::fs::File::create(&partial).map_err(|e| failure(format!("cannot write {}: {e}", partial.display())))?;
         let writer = std::io::BufWriter::new(file);
         match kind {
             Kind::Gif => {
                 let delay = Delay::from_numer_denom_ms(delay_cs as u32 * 10, 1);
                 let mut encoder = GifEncoder::new_with_speed(writer, 10);
-                encoder.set_repeat(Repeat::Infinite).map_err(|e| e.to_string())?;
+                encoder.set_repeat(Repeat::Infinite).map_err(|e| failure(e.to_string()))?;
                 let mut size = (0, 0);
                 for &frame in &chosen {
-                    let image = draw(frame)?;
+                    let image = draw(frame).map_err(failure)?;
                     size = image.dimensions();
                     encoder
                         .encode_frame(Frame::from_parts(image, 0, 0, delay))
-                        .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+                        .map_err(|e| failure(format!("cannot write {}: {e}", out.display())))?;
                 }
                 Ok(size)
             }
             Kind::Sheet => {
                 // The first tile gives the sheet's size, checked before the
                 // others are drawn (a sheet of ten 8192 px frames needed 8 GB).
-                let first = draw(chosen[0])?;
+                let first = draw(chosen[0]).map_err(failure)?;
                 let (tw, th) = first.dimensions();
                 let columns = (options.columns as usize).min(chosen.len()) as u32;
                 let rows = chosen.len().div_ceil(columns as usize) as u32;
@@ -264,15 +261,16 @@ fn render(
                 let (sw, sh) =
                     (columns as u64 * (tw + gap) as u64 + gap as u64, rows as u64 * (th + gap) as u64 + gap as u64);
                 if sw * sh > MAX_SHEET_PIXELS {
-                    return Err(format!(
-                        "{SHEET_TOO_LARGE} {} frames of {tw}x{th} in {columns} columns would be {sw}x{sh} pixels, over the {MAX_SHEET_PIXELS} a sheet may have: use a smaller --scale or fewer --sheet-frames",
+                    // The flags asked for it: bad input, nothing written.
+                    return Err(Error::Input(format!(
+                        "a contact sheet of {} frames of {tw}x{th} in {columns} columns would be {sw}x{sh} pixels, over the {MAX_SHEET_PIXELS} a sheet may have: use a smaller --scale or fewer --sheet-frames",
                         chosen.len()
-                    ));
+                    )));
                 }
                 let (sw, sh) = (sw as u32, sh as u32);
                 let mut tiles = vec![first];
                 for &f in &chosen[1..] {
-                    tiles.push(draw(f)?);
+                    tiles.push(draw(f).map_err(failure)?);
                 }
                 let mut sheet = RgbaImage::from_pixel(sw, sh, image::Rgba([24, 24, 24, 255]));
                 for (i, tile) in tiles.iter().enumerate() {
@@ -288,7 +286,7 @@ fn render(
                 }
                 let rgb = image::DynamicImage::ImageRgba8(sheet).to_rgb8();
                 rgb.write_with_encoder(image::codecs::png::PngEncoder::new(writer))
-                    .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
+                    .map_err(|e| failure(format!("cannot write {}: {e}", out.display())))?;
                 Ok((sw, sh))
             }
         }
@@ -300,7 +298,7 @@ fn render(
             return Err(e);
         }
     };
-    file.commit(&partial).map_err(|e| e.to_string())?;
+    file.commit(&partial).map_err(|e| Error::Failure(e.to_string()))?;
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     let gif = matches!(kind, Kind::Gif);
     Ok(PreviewSummary {
