@@ -180,6 +180,11 @@ pub struct CounterfactualArgs {
     #[command(flatten)]
     pub lights: LightsFlag,
 
+    /// --scenario: exit 2 on the first action, merge distance or spawn
+    /// that would need adapting, as `run --strict`.
+    #[arg(long)]
+    pub strict: bool,
+
     /// Print the summaries as JSON.
     #[arg(long)]
     pub json: bool,
@@ -195,9 +200,13 @@ impl CounterfactualArgs {
     /// source group, so this is checked here.)
     fn flag_of_the_other_source(&self) -> Option<&'static str> {
         if self.sweep.is_some() {
-            [("--intervention", self.intervention.is_some()), ("--world", self.world.is_some())]
-                .into_iter()
-                .find_map(|(flag, given)| given.then_some(flag))
+            [
+                ("--intervention", self.intervention.is_some()),
+                ("--world", self.world.is_some()),
+                ("--strict", self.strict),
+            ]
+            .into_iter()
+            .find_map(|(flag, given)| given.then_some(flag))
         } else {
             [
                 ("--kinds", self.kinds.is_some()),
@@ -1004,14 +1013,18 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                 images,
                 annotations: false,
                 lights: args.lights.log(),
-                strict: false,
+                strict: args.strict,
             };
             let pairs = counterfactual(&options, args.intervention.as_deref())?;
-            if args.json {
-                return say(serde_json::to_string_pretty(&pairs).map_err(Error::failure)?);
+            for warning in pairs.iter().flat_map(|p| &p.warnings) {
+                causalcity::progress::note(format_args!("warning: {warning}"));
             }
-            for pair in &pairs {
-                say(pair)?;
+            let summaries: Vec<_> = pairs.into_iter().map(|p| p.summary).collect();
+            if args.json {
+                return say(serde_json::to_string_pretty(&summaries).map_err(Error::failure)?);
+            }
+            for summary in &summaries {
+                say(summary)?;
             }
             Ok(())
         }

@@ -1045,3 +1045,209 @@ fn a_counterfactual_flag_of_the_other_source_is_refused_with_exit_2_and_nothing_
         assert!(!out.exists(), "{args:?} wrote {}", out.display());
     }
 }
+
+/// A two-car scenario on its own `rows` x `columns` grid town, Car_1 on
+/// B1w (a lane of every grid), with `interventions`.
+fn on_own_grid(rows: u32, columns: u32, interventions: &str) -> String {
+    format!(
+        r#"[{{"Name": "g", "seed": 7, "frames": 20, "map": {{"grid": {{"rows": {rows}, "columns": {columns}}}}},
+        "Vehicles": [
+          {{"Id": "Car_1", "Spawn": "B1w", "SpawnAtDistance": 4, "DriveQueue": ["straight"], "MergeAtDistances": [0]}},
+          {{"Id": "Car_2", "Spawn": "A1w", "SpawnAtDistance": 4, "DriveQueue": ["straight"], "MergeAtDistances": [0]}}],
+        "interventions": {interventions}}}]"#
+    )
+}
+
+#[test]
+fn an_intervention_file_names_lights_and_intersections_on_the_scenarios_own_map() {
+    // The file's names were resolved on the default city: on a 1 x 1 town
+    // BD's index panicked (exit 101, half a pair written); on a 3 x 3 town
+    // another light (CE) was switched without a word; and AF, a light of
+    // the 3 x 3 town only, was refused.
+    let dir = fresh_dir("hw-own-map-interventions");
+    let stop = r#"[{"at": 0.5, "do": "stop", "car": "Car_1", "seconds": 1}]"#;
+    let counterfactual = |name: &str, rows: u32, interventions: &str| {
+        let (file, extra) = (dir.join(format!("{name}.json")), dir.join(format!("{name}-interventions.json")));
+        std::fs::write(&file, on_own_grid(rows, rows, stop)).unwrap();
+        std::fs::write(&extra, interventions).unwrap();
+        let out = dir.join(name);
+        let output = run(&[
+            "counterfactual",
+            "--scenario",
+            file.to_str().unwrap(),
+            "--intervention",
+            extra.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-images",
+        ]);
+        (output, out)
+    };
+    let set_light = |light: &str| {
+        format!(r#"[{{"at": 0.5, "do": "set_light", "light": "{light}", "colour": "red", "seconds": 2}}]"#)
+    };
+    for (rows, light) in [(3, "BD/W/straight"), (3, "AF/W/straight")] {
+        let (output, out) = counterfactual(&format!("grid{rows}-{}", &light[..2]), rows, &set_light(light));
+        assert!(output.status.success(), "{light}: {}", String::from_utf8_lossy(&output.stderr));
+        let events = std::fs::read_to_string(out.join("g/counterfactual/events.csv")).unwrap();
+        let switched: Vec<&str> =
+            events.lines().filter(|l| l.contains(",intervention,") && l.contains("red for 2 s")).collect();
+        assert_eq!(switched.len(), 1, "{events}");
+        assert!(switched[0].contains(&format!(",{light},")), "{light} asked, switched: {}", switched[0]);
+    }
+    let (output, out) = counterfactual("grid1", 1, &set_light("BD/W/straight"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("\"BD/W/straight\" is not a light"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+    // An intersection it lacks is told with the ones it has.
+    let (output, _) = counterfactual(
+        "grid1-reach",
+        1,
+        r#"[{"when": {"car": "Car_1", "reaches": "BD"}, "do": "stop", "car": "Car_2", "seconds": 1}]"#,
+    );
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("\"BD\" is not an intersection of this map: AB"), "{stderr}");
+}
+
+#[test]
+fn a_car_moved_off_another_at_the_start_leads_it_when_it_now_stands_ahead() {
+    // Two cars written on one spot of one lane with one drive queue: the
+    // second starts 2.3 m further on. The pair was taken as written (Car_1
+    // leading), while the poses and interactions had Car_2 ahead and Car_1
+    // bound by it.
+    let dir = fresh_dir("hw-moved-spawn");
+    let file = dir.join("pair.json");
+    let car = |id: &str| {
+        format!(
+            r#"{{"Id": "{id}", "Spawn": "B1w", "SpawnAtDistance": 3, "DriveQueue": ["straight"], "MergeAtDistances": [0]}}"#
+        )
+    };
+    std::fs::write(
+        &file,
+        format!(r#"[{{"Name": "p", "seed": 7, "frames": 30, "Vehicles": [{}, {}]}}]"#, car("Car_1"), car("Car_2")),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("starting at 5.3 m"), "{stderr}");
+    let record = read_json(&out.join("p/scenario.json"));
+    assert_eq!(record["edges"], serde_json::json!([[1, 0]]), "Car_2, moved ahead, leads");
+    assert_eq!(record["cars"][1]["role"], "leader");
+    // The follower is the one the interactions bind by the other car.
+    let interactions = std::fs::read_to_string(out.join("p/interactions.csv")).unwrap();
+    let bound: Vec<&str> = interactions.lines().filter(|l| l.split(',').nth(2) == Some("car")).collect();
+    assert!(!bound.is_empty(), "{interactions}");
+    for row in bound {
+        let fields: Vec<&str> = row.split(',').collect();
+        assert_eq!((fields[1], fields[3]), ("0", "1"), "only Car_1 follows, bound by Car_2: {row}");
+    }
+}
+
+#[test]
+fn counterfactual_tells_what_it_adapted_and_what_never_fired_and_refuses_an_empty_file() {
+    let dir = fresh_dir("hw-cf-warnings");
+    let write = |name: &str, text: String| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let scenario = |queue: &str, merge: &str, interventions: &str| {
+        format!(
+            r#"[{{"Name": "b", "seed": 7, "frames": 20, "Vehicles": [
+              {{"Id": "Car_1", "Spawn": "B1w", "SpawnAtDistance": 14, "DriveQueue": [{queue}], "MergeAtDistances": [{merge}]}},
+              {{"Id": "Car_2", "Spawn": "C2y", "SpawnAtDistance": 4, "DriveQueue": ["straight"], "MergeAtDistances": [0]}}],
+              "interventions": {interventions}}}]"#
+        )
+    };
+    let stop = r#"[{"at": 0.5, "do": "stop", "car": "Car_1", "seconds": 2}]"#;
+    let counterfactual = |file: &Path, out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut args =
+            vec!["counterfactual", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+        args.extend_from_slice(extra);
+        (run(&args), out)
+    };
+    // A left turn it cannot take from B1w, and a merge name read as 0: run
+    // warned of both, counterfactual said nothing.
+    let adapted = write("adapted.json", scenario(r#""left""#, r#""mergeL""#, stop));
+    let (output, _) = counterfactual(&adapted, "adapted", &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains(r#"warning: scenario "b", car "Car_1", field MergeAtDistances[0]"#), "{stderr}");
+    assert!(stderr.contains(r#"car "Car_1", at 0.0 s, skipped: DriveQueue[0] left"#), "{stderr}");
+    let (output, out) = counterfactual(&adapted, "adapted-strict", &["--strict"]);
+    assert_eq!(output.status.code(), Some(2), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(!out.exists());
+    // An intervention whose car never reaches the intersection.
+    let never = r#"[{"when": {"car": "Car_2", "reaches": "AD"}, "do": "stop", "car": "Car_1", "seconds": 2}]"#;
+    let never = write("never.json", scenario(r#""straight""#, "0", never));
+    let (output, out) = counterfactual(&never, "never", &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("reaches AD)\" never fired in the scenario's 3.8 s"), "{stderr}");
+    assert_eq!(read_json(&out.join("b/summary.json"))["intervention_time_s"], serde_json::Value::Null);
+    // One that fires: no such warning.
+    let fires = write("fires.json", scenario(r#""straight""#, "0", stop));
+    let (output, _) = counterfactual(&fires, "fires", &[]);
+    assert!(output.status.success());
+    assert!(!String::from_utf8_lossy(&output.stderr).contains("never fired"));
+    // An empty intervention file: the counterfactual would be the factual run.
+    let empty = write("empty.json", "[]".into());
+    let (output, out) = counterfactual(&fires, "empty", &["--intervention", empty.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("empty.json, field interventions: the list is empty"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn run_and_counterfactual_never_write_over_an_input_lying_in_their_output() {
+    let dir = fresh_dir("hw-own-input");
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let out = dir.join("out");
+    let args = |scenario: &Path| {
+        ["run", "--scenario", scenario.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]
+            .map(String::from)
+    };
+    let first = run(&args(&file).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    // The scenario file kept under a name the run writes, in its folder.
+    let inside = out.join("stop_the_leader/events.csv");
+    std::fs::copy(&file, &inside).unwrap();
+    let before = hash_tree(&out);
+    let output = run(&args(&inside).iter().map(String::as_str).collect::<Vec<_>>());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("never writes onto its own input"), "{stderr}");
+    assert_eq!(hash_tree(&out), before, "the input and the folder are as they were");
+
+    // An intervention file kept as a pair's summary.json.
+    let pairs = dir.join("pairs");
+    let interventions = dir.join("stop.json");
+    std::fs::write(&interventions, r#"[{"at": 1, "do": "stop", "car": "Car_1", "seconds": 1}]"#).unwrap();
+    let counterfactual = |extra: &Path| {
+        run(&[
+            "counterfactual",
+            "--scenario",
+            file.to_str().unwrap(),
+            "--intervention",
+            extra.to_str().unwrap(),
+            "--out",
+            pairs.to_str().unwrap(),
+            "--no-images",
+        ])
+    };
+    assert!(counterfactual(&interventions).status.success());
+    let inside = pairs.join("stop_the_leader/summary.json");
+    std::fs::copy(&interventions, &inside).unwrap();
+    let before = hash_tree(&pairs);
+    let output = counterfactual(&inside);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("where the intervention file"), "{stderr}");
+    assert_eq!(hash_tree(&pairs), before);
+}

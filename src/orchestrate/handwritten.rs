@@ -120,35 +120,78 @@ pub struct Written {
 /// the simulation adapted or skipped, in time order.
 fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
     let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
-    let driven = trajectories
+    read.chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect()
+}
+
+/// Every action the simulation of `plan` adapted or skipped, in time order,
+/// one sentence each naming the scenario (and `run`, e.g. `the
+/// counterfactual run, `, when there are two) and the car.
+fn driven_warnings(scenario: &str, plan: &ScenarioPlan, trajectories: &Trajectories, run: &str) -> Vec<String> {
+    trajectories
         .events
         .iter()
         // A lane change is always the driver's own, for a turn written from
         // a lane that does not allow it: an adaptation like the others.
         .filter(|e| matches!(e.kind, EventKind::ActionAdapted | EventKind::ActionSkipped | EventKind::LaneChange))
         .map(|e| {
-            let car = s.plan.cars.iter().find(|c| Some(c.id) == e.car).map_or("?", |c| c.name.as_str());
+            let car = plan.cars.iter().find(|c| Some(c.id) == e.car).map_or("?", |c| c.name.as_str());
             let what = match e.kind {
                 EventKind::ActionSkipped => "skipped",
                 EventKind::LaneChange => "changed lanes for a turn its lane does not allow",
                 _ => "adapted",
             };
-            format!("scenario {:?}, car {car:?}, at {:.1} s, {what}: {}", s.name, e.t, e.detail)
-        });
-    read.chain(driven).collect()
+            format!("scenario {scenario:?}, {run}car {car:?}, at {:.1} s, {what}: {}", e.t, e.detail)
+        })
+        .collect()
 }
 
-fn load_file(options: &RunOptions) -> Result<(Arc<CityMap>, Vec<LoadedScenario>), RunError> {
+/// The warnings of a counterfactual pair: what its factual run adapted,
+/// what only its counterfactual run adapted, and each added intervention
+/// that never fired (a car that never reaches the intersection, a light
+/// that never turns that colour): its counterfactual is then the factual
+/// run.
+fn pair_warnings(
+    scenario: &str,
+    (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan),
+    pair: &SimulatedPair,
+) -> Vec<String> {
+    let mut warnings = driven_warnings(scenario, factual, &pair.factual, "");
+    // The same adaptation in both runs (before the intervention) is told once.
+    let as_counterfactual = |plan, run| driven_warnings(scenario, plan, run, "the counterfactual run, ");
+    let in_factual = as_counterfactual(factual, &pair.factual);
+    let in_counterfactual = as_counterfactual(counterfactual, &pair.counterfactual);
+    warnings.extend(in_counterfactual.into_iter().filter(|w| !in_factual.contains(w)));
+    let fired = |label: &str| {
+        let count = |t: &Trajectories| {
+            t.events.iter().filter(|e| e.kind == EventKind::Intervention && e.detail == label).count()
+        };
+        count(&pair.counterfactual) > count(&pair.factual)
+    };
+    for intervention in &counterfactual.interventions[factual.interventions.len()..] {
+        if !fired(&intervention.label) {
+            let end = counterfactual.frames.saturating_sub(1) as f64 * counterfactual.frame_interval;
+            warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {:.1} s: the \
+                 counterfactual run is the factual one",
+                intervention.label, end
+            ));
+        }
+    }
+    warnings
+}
+
+/// The scenarios of the file, each on its own map or the default one.
+fn load_file(options: &RunOptions) -> Result<Vec<LoadedScenario>, RunError> {
     let map = Arc::new(CityMap::default());
-    let scenarios = load(&options.scenario_file, FileOptions { world: options.world, strict: options.strict }, &map)
-        .map_err(RunError::Input)?;
-    Ok((map, scenarios))
+    load(&options.scenario_file, FileOptions { world: options.world, strict: options.strict }, &map)
+        .map_err(RunError::Input)
 }
 
 /// Simulates and writes every scenario of the file into `<out>/<Name>/`.
 pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
-    let (_, scenarios) = load_file(options)?;
+    let scenarios = load_file(options)?;
     let out = options.out();
+    refuse_inputs_below(&out, &scenarios, &[("the scenario file", options.scenario_file.as_path())])?;
     let describe = format!("run {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
     scenarios
@@ -187,24 +230,54 @@ pub use crate::output::pair_summary::{CarDivergence, InterventionRecord, PairSum
 /// the interventions of `intervention_file` to the scenario; without one,
 /// the scenario's own interventions make the counterfactual and the factual
 /// runs without them.
-pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) -> Result<Vec<PairSummary>, RunError> {
-    let (map, scenarios) = load_file(options)?;
+pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) -> Result<Vec<WrittenPair>, RunError> {
+    let scenarios = load_file(options)?;
     let extras = match intervention_file {
-        Some(file) => Some(load_interventions(file, &scenarios, &map).map_err(RunError::Input)?),
+        Some(file) => Some(load_interventions(file, &scenarios).map_err(RunError::Input)?),
         None => None,
     };
     let pairs = pair_plans(&options.scenario_file, &scenarios, extras)?;
     let out = options.out();
+    let mut inputs = vec![("the scenario file", options.scenario_file.as_path())];
+    inputs.extend(intervention_file.map(|file| ("the intervention file", file)));
+    refuse_inputs_below(&out, &scenarios, &inputs)?;
     let describe = format!("counterfactual {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
     pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
-            write_pair(&s.expansion, &writer, &s.name, (factual, counterfactual), None, (&out, &out.join(&s.name)))
+            let (summary, driven) = write_pair(
+                &s.expansion,
+                &writer,
+                &s.name,
+                (factual, counterfactual),
+                None,
+                (&out, &out.join(&s.name)),
+            )?;
+            let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
+            Ok(WrittenPair { summary, warnings: read.chain(driven).collect() })
         })
         .collect::<Result<Vec<_>, GenError>>()
         .map_err(RunError::Write)
+}
+
+/// One pair `counterfactual` wrote: its summary.json, and what reading and
+/// driving adapted or what never fired, one sentence each.
+pub struct WrittenPair {
+    pub summary: PairSummary,
+    pub warnings: Vec<String>,
+}
+
+/// Refuses an input file that lies in a scenario folder this command
+/// writes (`<out>/<Name>/`): written over, the run would destroy what it
+/// reads.
+fn refuse_inputs_below(out: &Path, scenarios: &[LoadedScenario], inputs: &[(&str, &Path)]) -> Result<(), RunError> {
+    for s in scenarios {
+        let folder = out.join(&s.name);
+        crate::output::claim::refuse_inputs_inside(&folder, inputs).map_err(GenError::Claim)?;
+    }
+    Ok(())
 }
 
 /// Each scenario of `file` with its factual and counterfactual plans. The
@@ -303,7 +376,7 @@ fn write_pair(
     (factual, counterfactual): (&ScenarioPlan, &ScenarioPlan),
     record: Option<InterventionRecord>,
     (root, folder): (&Path, &Path),
-) -> Result<PairSummary, GenError> {
+) -> Result<(PairSummary, Vec<String>), GenError> {
     let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
     crate::output::refuse_links_below(root, folder).map_err(refused)?;
     let mut pair = simulate_pair(expansion, name, factual, counterfactual, stop_flag())
@@ -324,7 +397,8 @@ fn write_pair(
     let mut json = serde_json::to_vec_pretty(&pair.summary).expect("summary serialises");
     json.push(b'\n');
     write_atomically(&folder.join("summary.json"), &json)?;
-    Ok(pair.summary)
+    let warnings = pair_warnings(name, (factual, counterfactual), &pair);
+    Ok((pair.summary, warnings))
 }
 
 /// Kinds of random intervention `counterfactual --sweep` draws from.
@@ -511,7 +585,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             std::fs::remove_dir_all(&folder)
                 .map_err(|source| GenError::from(WriteError { path: folder.clone(), source }))?;
         }
-        let summary =
+        // A sweep's interventions fire at a time (the summary says whether
+        // one changed anything); its scenarios are a spec's, read unchanged.
+        let (summary, _) =
             write_pair(&expansion, writers.of(&plan), &key.folder_name(), pair, Some(record), (&out, &folder))?;
         bar.inc();
         Ok(summary)

@@ -424,7 +424,7 @@ pub fn counterfactual_arrays(
     let map = Arc::new(CityMap::default());
     let loaded = load_text(scenarios.origin, scenarios.text, FileOptions::default(), &map).map_err(RunError::Input)?;
     let extras = match interventions {
-        Some(i) => Some(load_interventions_text(i.origin, i.text, &loaded, &map).map_err(RunError::Input)?),
+        Some(i) => Some(load_interventions_text(i.origin, i.text, &loaded).map_err(RunError::Input)?),
         None => None,
     };
     let pairs = pair_plans(scenarios.origin, &loaded, extras)?;

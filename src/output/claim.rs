@@ -536,6 +536,22 @@ pub fn resolve(path: &Path) -> PathBuf {
     }
 }
 
+/// Refuses `inputs` (files a command reads, each described for the
+/// message) that lie inside `folder`, which it is about to write: a run
+/// whose input sits in its own output folder would write over it.
+pub fn refuse_inputs_inside(folder: &Path, inputs: &[(&str, &Path)]) -> Result<(), ClaimError> {
+    let resolved = resolve(folder);
+    for (what, input) in inputs {
+        if resolve(input).starts_with(&resolved) {
+            return Err(ClaimError::OwnInput {
+                path: folder.to_path_buf(),
+                what: format!("where {what} {} lies, and this command writes that folder", input.display()),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// A single file a command writes beside its main output or instead of
 /// one (a report, an image, a predictions file), checked by the one write
 /// rule: never inside a dataset or sweep (the command owns no file there),

@@ -99,7 +99,11 @@ fn resolve_intervention(
         RawTrigger::When(RawWhen { car: Some(car), reaches: Some(name), light: None, turns: None }) => {
             let car = car_named("when.car", car)?;
             let intersection = map.intersections.iter().position(|x| x.name == *name).ok_or_else(|| {
-                ("when.reaches".to_string(), format!("{name:?} is not an intersection: AC, AD, BC or BD"))
+                let known: Vec<&str> = map.intersections.iter().map(|x| x.name.as_str()).collect();
+                (
+                    "when.reaches".to_string(),
+                    format!("{name:?} is not an intersection of this map: {}", known.join(", ")),
+                )
             })?;
             (Trigger::CarReaches { car, intersection }, format!("when {} reaches {name}", names[car]))
         }
@@ -193,14 +197,14 @@ fn resolve_intervention(
 
 /// Reads an intervention file (a list of interventions, as in a scenario's
 /// `interventions`, or one intervention object) once, and checks it against
-/// each of `scenarios`: one list of interventions per scenario.
+/// each of `scenarios`, its names resolved on that scenario's map: one list
+/// of interventions per scenario.
 pub fn load_interventions(
     path: &Path,
     scenarios: &[LoadedScenario],
-    map: &CityMap,
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
     let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
-    load_interventions_text(path, &text, scenarios, map)
+    load_interventions_text(path, &text, scenarios)
 }
 
 /// [`load_interventions`] of `text`, a file's contents; errors name `path`.
@@ -208,7 +212,6 @@ pub fn load_interventions_text(
     path: &Path,
     text: &str,
     scenarios: &[LoadedScenario],
-    map: &CityMap,
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
     let file_error = |field: String, message: String| file_error(path, field, message);
     // Paths as in a scenario's `interventions`, whether the file is a list or one object.
@@ -223,6 +226,14 @@ pub fn load_interventions_text(
         one => raw_intervention(one, "interventions[0]").map(|one| vec![one]),
     }
     .map_err(|e| file_error(e.path, e.message))?;
+    if list.is_empty() {
+        return Err(file_error(
+            "interventions".into(),
+            "the list is empty: the counterfactual would be the factual run; give at least one intervention \
+             (or {\"do\": \"none\"} to check a pipeline on identical runs)"
+                .into(),
+        ));
+    }
     scenarios
         .iter()
         .map(|scenario| {
@@ -231,6 +242,9 @@ pub fn load_interventions_text(
                 return Err(here.err(None, "", "interventions need the city world (the toy world has no agency)"));
             }
             let names: Vec<String> = scenario.plan.cars.iter().map(|c| c.name.clone()).collect();
+            // The scenario's own map where it has one: lights and
+            // intersections are named on the map it drives.
+            let map = &scenario.expansion.map;
             resolve_interventions(&here, &list, "interventions", &names, map, &scenario.expansion)
         })
         .collect()

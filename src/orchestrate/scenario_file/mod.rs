@@ -345,8 +345,6 @@ fn resolve(
         let car = resolve_vehicle(here, k, vehicle, map, world, travel, &cars, options.strict, &mut warnings)?;
         cars.push(car);
     }
-    // The leader-follower pairs are the file's as written.
-    let pairs = infer_pairs(&cars);
     // Nobody may start on top of anybody else: strictly an error, else the
     // later car moves forward along its lane to the first free place.
     let footprint = |c: &GivenCar, s: f64| {
@@ -390,6 +388,9 @@ fn resolve(
         }
         boxes.push(footprint(&cars[j], cars[j].spawn_distance));
     }
+    // The leader-follower pairs as the cars start: a car moved forward off
+    // another leads it if it now stands ahead (as the poses show it).
+    let pairs = infer_pairs(&cars);
     let names: Vec<String> = cars.iter().map(|c| c.name.clone()).collect();
     let key = ScenarioKey {
         group: "scenarios".into(),
