@@ -246,3 +246,30 @@ fn an_nsdr_export_never_leaves_an_earlier_exports_scenarios_beside_its_own() {
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
     assert_eq!(std::fs::read(&annotations).unwrap(), before);
 }
+
+#[test]
+fn an_nri_export_that_fails_part_way_leaves_an_earlier_export_as_it_was() {
+    // A scenario of the test split gone from the dataset: the export failed
+    // there, with this dataset's train and valid arrays already written
+    // over the earlier export's, beside its test arrays.
+    let dir = fresh_dir("export-fails-part-way");
+    let earlier = dir.join("earlier");
+    gen_ok(&write_spec(&dir, &toy_spec("earlier", &[(4, 0.5)], (2, 1, 1), 10)), &earlier, &["--no-images", "-q"]);
+    let damaged = dir.join("damaged");
+    gen_ok(&write_spec(&dir, &toy_spec("damaged", &[(4, 0.5)], (2, 1, 1), 12)), &damaged, &["--no-images", "-q"]);
+    let out = dir.join("nri");
+    let first = run(&["export", "nri", earlier.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let before = hash_tree(&out);
+    assert_eq!(before.len(), 9, "{before:?}");
+    std::fs::remove_dir_all(damaged.join("cars04_edges50/test/00000")).unwrap();
+    let failed = run(&["export", "nri", damaged.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("test/00000"), "{stderr}");
+    assert_eq!(hash_tree(&out), before, "the earlier export whole, and nothing staged left behind");
+    // The earlier dataset exports again over it, as before.
+    let again = run(&["export", "nri", earlier.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(hash_tree(&out), before);
+}

@@ -186,13 +186,19 @@ impl LittleEndian for i64 {
     }
 }
 
-/// Writes a C-order `.npy`: npyz writes the header (magic, version, dtype,
-/// shape), the data follows as raw little-endian bytes, streamed in chunks
-/// rather than element by element. Atomic: written beside and renamed.
+/// Where [`write_npy`] writes `path` until the whole export has been written.
+fn staged(path: &Path) -> PathBuf {
+    path.with_extension("npy.partial")
+}
+
+/// Writes a C-order `.npy` at `staged(path)`: npyz writes the header (magic,
+/// version, dtype, shape), the data follows as raw little-endian bytes,
+/// streamed in chunks rather than element by element. The export renames
+/// every file it staged once all are written.
 fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<(), String> {
     use npyz::WriterBuilder;
     use std::io::Write;
-    let partial = path.with_extension("npy.partial");
+    let partial = staged(path);
     let write = || -> std::io::Result<()> {
         let mut file = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&partial)?);
         npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(&mut file).write_header_only()?;
@@ -204,9 +210,7 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
             }
             file.write_all(&chunk)?;
         }
-        file.flush()?;
-        drop(file);
-        std::fs::rename(&partial, path)
+        file.flush()
     };
     write().map_err(|e| {
         let _ = std::fs::remove_file(&partial);
@@ -243,7 +247,23 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
     }
     let _claim = claim(out, Writer::Export, &format!("export nri {}", dataset.display()))?;
     refuse_earlier_export(&opened, out, options)?;
-    export_nri_groups(&opened, out, options).map_err(Error::Failure)
+    // All or nothing: a failure part way (a scenario gone from the
+    // dataset) leaves an earlier export as it was, never this export's
+    // first splits beside an earlier one's others.
+    let mut written = Vec::new();
+    let report = export_nri_groups(&opened, out, options, &mut written);
+    let commit = report.and_then(|report| {
+        for path in &written {
+            std::fs::rename(staged(path), path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        }
+        Ok(report)
+    });
+    if commit.is_err() {
+        for path in &written {
+            let _ = std::fs::remove_file(staged(path));
+        }
+    }
+    commit.map_err(Error::Failure)
 }
 
 /// The files this export writes, relative to `out`: an NRI loader reads a
@@ -256,8 +276,11 @@ fn refuse_earlier_export(opened: &Dataset, out: &Path, options: &NriOptions) -> 
     let mut writes = std::collections::BTreeSet::new();
     for key in opened.keys() {
         for kind in &kinds {
-            let file = format!("{kind}_{}{}.npy", nri_split_name(key.split), options.suffix);
-            writes.insert(Path::new(&key.group).join(file));
+            let file =
+                Path::new(&key.group).join(format!("{kind}_{}{}.npy", nri_split_name(key.split), options.suffix));
+            // With what a cut-off run of it staged.
+            writes.insert(staged(&file));
+            writes.insert(file);
         }
     }
     super::refuse_earlier_export(out, 2, &writes, "a file")
@@ -270,7 +293,14 @@ fn valid_suffix(suffix: &str) -> bool {
         && suffix.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
-fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Result<Vec<String>, String> {
+/// Writes every group's and split's files at their [`staged`] paths,
+/// listing each in `written` as it is begun.
+fn export_nri_groups(
+    opened: &Dataset,
+    out: &Path,
+    options: &NriOptions,
+    written: &mut Vec<PathBuf>,
+) -> Result<Vec<String>, String> {
     let frames = opened.spec().frames as usize;
     let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
     let mut report = Vec::new();
@@ -307,6 +337,10 @@ fn export_nri_groups(opened: &Dataset, out: &Path, options: &NriOptions) -> Resu
                 NriLayout::Nri => [s as u64, f, 2, c],
             };
             let name = |kind: &str| group_dir.join(format!("{kind}_{}{}.npy", nri_split_name(split), options.suffix));
+            written.extend(["loc", "vel", "edges"].map(name));
+            if options.dynamic {
+                written.push(name("dynamic_edges"));
+            }
             let (wrote_loc, (wrote_vel, wrote_edges)) = rayon::join(
                 || write_npy(&name("loc"), &loc_shape, &loc),
                 || {
