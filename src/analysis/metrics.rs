@@ -121,8 +121,16 @@ pub fn best_threshold(pairs: &[ScoredPair]) -> Option<f64> {
     // No finite score (a scenario too short to score): nothing to separate.
     let below = sorted.get(best_k.checked_sub(1)?)?.0;
     Some(match sorted.get(best_k) {
-        Some(&(above, _)) => (below + above) / 2.0,
-        None => below * 1.5 + 1e-9,
+        // By halves where the sum overflows (scores near the float's ends).
+        Some(&(above, _)) => match (below + above) / 2.0 {
+            mid if mid.is_infinite() => below / 2.0 + above / 2.0,
+            mid if mid > below => mid,
+            // Neighbouring floats: the upper one (a score is linked below it).
+            _ => above,
+        },
+        // Every pair linked: above the highest score by half its size (by
+        // 1e-9 near 0), whatever its sign.
+        None => below + (below.abs() * 0.5).max(1e-9),
     })
 }
 
@@ -137,6 +145,21 @@ mod tests {
         assert!(t > 0.2 && t < 3.0);
         assert_eq!(Counts::at(&pairs, t).f1(), Some(1.0));
         assert_eq!(best_threshold(&[(1.0, false)]), None);
+    }
+
+    #[test]
+    fn calling_every_pair_linked_puts_the_threshold_above_every_score_of_either_sign() {
+        // Negated scores of one value, every pair linked: the threshold was
+        // 1.5 x the score, below it for a negative score, so none was called.
+        for score in [-1.0, -1e-12, 0.0, 2.0, -1e300, 1e300] {
+            let pairs = [(score, true), (score, true)];
+            let t = best_threshold(&pairs).unwrap();
+            assert_eq!(Counts::at(&pairs, t).true_positives, 2, "score {score}: threshold {t}");
+        }
+        // Midway between the two scores it separates, without overflow.
+        let wide = [(-1e308, true), (1e308, false)];
+        let t = best_threshold(&wide).unwrap();
+        assert!(t.is_finite() && Counts::at(&wide, t).f1() == Some(1.0), "{t}");
     }
 
     #[test]
