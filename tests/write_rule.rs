@@ -412,7 +412,7 @@ fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
     let input = folder.join("scenario-file.json");
     std::fs::write(&input, &text).unwrap();
     let output = run(&["run", "--no-images", "--scenario", s(&input), "--out", s(&out)]);
-    assert_refused(&output, "are not files causalcity wrote there");
+    assert_refused(&output, "never writes onto its own input");
     assert_eq!(std::fs::read_to_string(&input).unwrap(), text, "its input is untouched");
 
     // A rerun into its own output replaces its own folder; a user's file
