@@ -139,3 +139,19 @@ fn preview_of_a_folder_without_a_scenario_is_bad_input() {
     assert_error(&run(&["preview", s(&dir.join("nowhere")), "--out", s(&gif)]), 2, "holds no scenario.json");
     assert!(!gif.exists());
 }
+
+#[test]
+fn a_manifest_whose_spec_was_edited_is_refused_by_every_reader() {
+    // Another seed in manifest.json's spec: validate said valid, and the
+    // readers took it for the spec of scenarios it did not make.
+    let dir = fresh_dir("edited-manifest-spec");
+    let data = city(&dir, 20);
+    let reseeded = edited(&data, &dir.join("seed"), true, |v| v["spec"]["seed"] = 8.into());
+    let smaller = edited(&data, &dir.join("splits"), true, |v| v["spec"]["splits"]["train"] = 0.into());
+    for edited in [&reseeded, &smaller] {
+        for command in ["validate", "stats", "baseline"] {
+            assert_error(&run(&[command, s(edited)]), 2, "manifest.json: its spec does not hash to its spec_sha256");
+        }
+    }
+    assert!(run(&["validate", s(&data)]).status.success(), "the dataset as gen wrote it is valid");
+}

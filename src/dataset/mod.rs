@@ -271,9 +271,28 @@ impl Dataset {
     }
 }
 
-/// The expansion of the spec a manifest (at `path`) records.
+/// The expansion of the spec a manifest (at `path`) records, refused when
+/// the spec no longer hashes to the manifest's `spec_sha256`: an edited
+/// spec would describe scenarios other than the ones on disk (another
+/// seed simulates others; smaller splits hide some).
 pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, String> {
-    expansion_from(record.spec.clone(), path)
+    let expansion = expansion_from(record.spec.clone(), path)?;
+    let hashed = crate::output::manifest::spec_sha256(&expansion.spec);
+    if hashed != record.spec_sha256 {
+        return Err(format!(
+            "{}: its spec does not hash to its spec_sha256 ({} recorded, {} now): it was edited after gen wrote \
+             the dataset, so it no longer describes the scenarios on disk; restore it (or regenerate)",
+            path.display(),
+            short_hash(&record.spec_sha256),
+            short_hash(&hashed)
+        ));
+    }
+    Ok(expansion)
+}
+
+/// A hash's first 12 characters, as messages show it.
+fn short_hash(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
 }
 
 /// The expansion of a spec recorded (as JSON) in the file at `path`.
