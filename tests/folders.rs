@@ -339,3 +339,84 @@ fn a_smaller_limit_into_an_existing_dataset_is_refused_and_a_larger_one_extends_
     assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
     assert!(stderr(&refused).contains("no --limit"), "{}", stderr(&refused));
 }
+
+#[test]
+fn a_merge_cut_off_part_way_is_finished_by_the_same_command() {
+    // Killed while moving scenarios, merge left them in --out with no
+    // manifest: a rerun refused --out as foreign, and the shard folders had
+    // lost the scenarios moved. An uncut merge is timed, then merges are
+    // killed at fractions of that time until kills land while scenarios
+    // move (its last part; timing varies by machine).
+    let dir = fresh_dir("folders-merge-cut-off");
+    let spec = write_spec(&dir, &toy_spec("cut", &[(3, 0.5), (4, 0.5)], (400, 50, 50), 2));
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet", "--no-images", "--no-effects"]);
+    let (s0, s1, out) = (dir.join("s0"), dir.join("s1"), dir.join("out"));
+    let shards = || {
+        for folder in [&s0, &s1, &out] {
+            let _ = std::fs::remove_dir_all(folder);
+        }
+        gen_ok(&spec, &s0, &["--quiet", "--no-images", "--no-effects", "--shard", "0/2"]);
+        gen_ok(&spec, &s1, &["--quiet", "--no-images", "--no-effects", "--shard", "1/2"]);
+    };
+    let args = ["merge", "--out", out.to_str().unwrap(), s0.to_str().unwrap(), s1.to_str().unwrap()];
+    shards();
+    let started = std::time::Instant::now();
+    let whole = Command::new(bin()).args(args).output().unwrap();
+    let took = started.elapsed();
+    assert!(whole.status.success(), "{}", stderr(&whole));
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+    let mut cut_off = Vec::new();
+    for percent in [50, 60, 70, 80, 85, 90, 95, 75, 65, 55, 98] {
+        shards();
+        let mut merge = Command::new(bin()).args(args).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+        std::thread::sleep(took * percent / 100);
+        let _ = merge.kill();
+        let _ = merge.wait();
+        let moved = out.join("cars03_edges50/train").read_dir().map_or(0, |d| d.count());
+        if moved == 0 || out.join("manifest.json").exists() {
+            continue; // killed before it moved anything, or after it finished
+        }
+        let rerun = run(&args);
+        assert!(rerun.status.success(), "killed at {percent} % of a merge, {moved} moved: {}", stderr(&rerun));
+        assert_valid(&out);
+        assert_eq!(hash_tree(&out), hash_tree(&reference), "killed at {percent} % of a merge");
+        assert!(!s0.exists() && !s1.exists(), "the shard folders are emptied and removed");
+        cut_off.push(percent);
+        if cut_off.len() == 2 {
+            break;
+        }
+    }
+    assert!(!cut_off.is_empty(), "no kill landed while scenarios moved ({took:?} a merge): the test checked nothing");
+}
+
+#[test]
+fn shards_of_another_dataset_are_named_by_what_differs_and_a_shard_count_fits_the_scenarios() {
+    let dir = fresh_dir("folders-merge-differs");
+    let spec = write_spec(&dir, &toy_spec("differs", &[(3, 0.5)], (3, 1, 1), 5));
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace(r#""seed": 11"#, r#""seed": 12"#)).unwrap();
+    let (s0, s1) = (dir.join("s0"), dir.join("s1"));
+    gen_ok(&spec, &s0, &["--quiet", "--no-images", "--shard", "0/2"]);
+    gen_ok(&other, &s1, &["--quiet", "--no-images", "--shard", "1/2", "--no-effects"]);
+    let (b0, b1) = (hash_tree(&s0), hash_tree(&s1));
+    let out = dir.join("out");
+    let mixed = run(&["merge", "--out", out.to_str().unwrap(), s0.to_str().unwrap(), s1.to_str().unwrap()]);
+    assert_eq!(mixed.status.code(), Some(2), "{}", stderr(&mixed));
+    // It said every field that might differ; now it names the ones that do.
+    assert!(stderr(&mixed).contains("effects (--no-effects): false here, true in the first"), "{}", stderr(&mixed));
+    assert!(stderr(&mixed).contains("spec.seed: 12 here, 11 in the first"), "{}", stderr(&mixed));
+    assert_eq!((hash_tree(&s0), hash_tree(&s1)), (b0, b1), "nothing moved");
+    // 5 scenarios shared by 2^32 - 1 shards: all but 5 would hold none, and
+    // their merge listed every missing one (gigabytes).
+    let many = dir.join("many");
+    let refused =
+        run(&["gen", "--spec", spec.to_str().unwrap(), "--out", many.to_str().unwrap(), "--shard", "0/4294967295"]);
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(stderr(&refused).contains("this run has 5 scenarios to share out"), "{}", stderr(&refused));
+    assert!(!many.exists(), "nothing written");
+    gen_ok(&spec, &many, &["--quiet", "--no-images", "--shard", "0/5"]);
+    let merged = run(&["merge", "--out", many.to_str().unwrap()]);
+    assert_eq!(merged.status.code(), Some(2));
+    assert!(stderr(&merged).contains("shards 1, 2, 3, 4 of 5 are missing"), "{}", stderr(&merged));
+}

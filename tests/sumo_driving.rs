@@ -262,6 +262,46 @@ fn a_real_network_dataset_resumes_merges_sweeps_and_refuses_a_changed_network() 
     let checked = run(&["validate", s2.to_str().unwrap()]);
     assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
 
+    // A shard's copy of the network that is a link is never read through:
+    // merge takes another shard's copy, and a link in --out is replaced by
+    // the file. A shard whose copy is gone merges from the other's.
+    let (s4, s5, s6, merged2) = (dir.join("s4"), dir.join("s5"), dir.join("s6"), dir.join("merged2"));
+    gen_ok(&spec, &s4, &["--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &s5, &["--no-images", "--shard", "1/2"]);
+    let elsewhere = dir.join("elsewhere.net.xml");
+    std::fs::write(&elsewhere, b"not a network").unwrap();
+    std::fs::remove_file(s4.join("networks/berlin-small.net.xml")).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, s4.join("networks/berlin-small.net.xml")).unwrap();
+    let m = run(&["merge", "--out", merged2.to_str().unwrap(), s4.to_str().unwrap(), s5.to_str().unwrap()]);
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    assert_eq!(std::fs::read(merged2.join("networks/berlin-small.net.xml")).unwrap(), original);
+    assert_eq!(std::fs::read(&elsewhere).unwrap(), b"not a network", "the link's target untouched");
+    // Every shard's copy a link: refused, nothing moved.
+    let s7 = dir.join("s7");
+    gen_ok(&spec, &s6, &["--no-images", "--shard", "0/2"]);
+    gen_ok(&spec, &s7, &["--no-images", "--shard", "1/2"]);
+    for shard in [&s6, &s7] {
+        std::fs::remove_file(shard.join("networks/berlin-small.net.xml")).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, shard.join("networks/berlin-small.net.xml")).unwrap();
+    }
+    let before = (hash_tree(&s6), hash_tree(&s7));
+    let merged3 = dir.join("merged3");
+    let linked = run(&["merge", "--out", merged3.to_str().unwrap(), s6.to_str().unwrap(), s7.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&linked.stderr);
+    assert_eq!(linked.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("networks/berlin-small.net.xml is a link"), "{stderr}");
+    assert_eq!((hash_tree(&s6), hash_tree(&s7)), before, "nothing moved");
+    // gen resuming into a folder whose copy is a link puts the file in its place.
+    let resumed = dir.join("resumed");
+    gen_ok(&spec, &resumed, &["--no-images", "--limit", "1"]);
+    std::fs::remove_file(resumed.join("networks/berlin-small.net.xml")).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, resumed.join("networks/berlin-small.net.xml")).unwrap();
+    gen_ok(&spec, &resumed, &["--no-images"]);
+    let kept = resumed.join("networks/berlin-small.net.xml");
+    assert!(std::fs::symlink_metadata(&kept).unwrap().is_file(), "the link replaced by the file");
+    assert_eq!(std::fs::read(&kept).unwrap(), original);
+    assert_eq!(std::fs::read(&elsewhere).unwrap(), b"not a network");
+
     // A counterfactual sweep keeps it too, and validates.
     let sweep = dir.join("sweep");
     let swept = run(&[

@@ -92,27 +92,25 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // Every shard must come from the same spec, version and settings.
     let count = first.shard.expect("shard manifests carry their shard").count;
     for (path, record) in &manifests {
-        let shard = record.shard.expect("shard manifests carry their shard");
-        if record.spec_sha256 != first.spec_sha256
-            || record.version != first.version
-            || record.products() != first.products()
-            || record.limit != first.limit
-            || record.scenarios_per_tar != first.scenarios_per_tar
-            || shard.count != count
-        {
+        let differences = record.shard_differences(&first, ("here", "in the first"));
+        if !differences.is_empty() {
             return Err(GenError::Input(format!(
-                "{} belongs to another dataset (spec, version, --no-images, --annotations, --no-effects, --lights, --format, --limit or shard count differ) than {}",
+                "{} belongs to another dataset than {}: {}; nothing was moved",
                 path.display(),
-                manifests[0].0.display()
+                manifests[0].0.display(),
+                differences.join("; ")
             )));
         }
     }
     let present: BTreeSet<u32> = manifests.iter().map(|(_, r)| r.shard.expect("shard").index).collect();
-    let missing: Vec<String> = (0..count).filter(|i| !present.contains(i)).map(|i| i.to_string()).collect();
-    if !missing.is_empty() {
+    // Counted, and the first few named: a count of 2^32 - 1 lists no more.
+    let missing = count as usize - present.len();
+    if missing > 0 {
+        let first: Vec<String> = (0..count).filter(|i| !present.contains(i)).take(10).map(|i| i.to_string()).collect();
+        let more = if missing > first.len() { format!(" and {} more", missing - first.len()) } else { String::new() };
         return Err(GenError::Input(format!(
-            "shards {} of {count} are missing: run `causalcity gen --shard K/{count}` for them",
-            missing.join(", ")
+            "shards {}{more} of {count} are missing: run `causalcity gen --shard K/{count}` for them",
+            first.join(", ")
         )));
     }
     let incomplete: Vec<String> =
@@ -135,7 +133,14 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         }
     }
 
-    let expansion = crate::dataset::expansion_of(&first, &manifests[0].0).map_err(GenError::Manifest)?;
+    // The spec with its networks, from the first shard folder whose copies
+    // read whole (each shard keeps one); none: bad input, nothing moved.
+    let mut expansions = manifests.iter().map(|(path, _)| crate::dataset::expansion_of(&first, path));
+    let first_error = match expansions.next().expect("a manifest, found above") {
+        Ok(expansion) => Ok(expansion),
+        Err(e) => expansions.find_map(Result::ok).ok_or(e),
+    };
+    let expansion = first_error.map_err(|e| GenError::Input(format!("{e}; nothing was moved")))?;
     // Keys are walked, never listed, and every pass below holds one chunk
     // of scenarios at a time: merging takes the same memory for ten
     // scenarios as for ten million.
@@ -145,9 +150,14 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     for folder in std::iter::once(out).chain(others.iter().map(|p| p.as_path())) {
         super::run::refuse_linked_splits(folder, &expansion.spec)?;
     }
+    // Once every scenario is checked and before the first moves, --out
+    // holds every shard manifest: a merge cut off part way leaves a shard
+    // folder (as shards writing into one folder make) that the same merge
+    // command finishes, the scenarios already moved found in place.
+    let mark_out = || keep_shard_manifests(out, &manifests);
     let (moved, already) = match first.packing() {
-        Packing::Folders => merge_folders(out, &others, &sequence)?,
-        Packing::Tar { per_tar } => merge_packs(out, &others, Packs::new(sequence, per_tar))?,
+        Packing::Folders => merge_folders(out, &others, &sequence, &mark_out)?,
+        Packing::Tar { per_tar } => merge_packs(out, &others, Packs::new(sequence, per_tar), &mark_out)?,
     };
     // The networks the spec names (read from the first shard's folder).
     super::run::keep_networks(&expansion.spec, out)?;
@@ -155,10 +165,16 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), first.packing(), true, None)
             .to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
+    // The shard manifests, in the shard folders and their copies in --out.
     for (path, _) in &manifests {
-        fs::remove_file(path).map_err(io_err(path))?;
-        if let Some(dir) = path.parent() {
-            let _ = fs::remove_dir(dir); // only when empty
+        let copy = out.join("shards").join(path.file_name().expect("a shard manifest is a file"));
+        for manifest in [path, &copy] {
+            if fs::symlink_metadata(manifest).is_ok() {
+                fs::remove_file(manifest).map_err(io_err(manifest))?;
+            }
+            if let Some(dir) = manifest.parent() {
+                let _ = fs::remove_dir(dir); // only when empty
+            }
         }
     }
     // The shards' folder trees the scenarios left: empty split and group
@@ -185,7 +201,9 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         }
         for (name, network) in expansion.spec.networks() {
             let copy = folder.join(name);
-            if fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
+            // A link there is left alone, never read through.
+            let is_file = fs::symlink_metadata(&copy).is_ok_and(|m| m.is_file());
+            if is_file && fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
                 fs::remove_file(&copy).map_err(io_err(&copy))?;
             }
         }
@@ -198,6 +216,22 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         out.display(),
         sequence.len()
     ))
+}
+
+/// Copies into `out/shards/` each shard manifest of `manifests` that it
+/// lacks (never through a link).
+fn keep_shard_manifests(out: &Path, manifests: &[(PathBuf, ManifestRecord)]) -> Result<(), GenError> {
+    let folder = out.join("shards");
+    for (path, _) in manifests {
+        let target = folder.join(path.file_name().expect("a shard manifest is a file"));
+        if fs::symlink_metadata(&target).is_ok() {
+            continue;
+        }
+        crate::output::refuse_links_below(out, &target).map_err(|why| GenError::Input(why.to_string()))?;
+        fs::create_dir_all(&folder).map_err(io_err(&folder))?;
+        write_atomically(&target, &fs::read(path).map_err(io_err(path))?)?;
+    }
+    Ok(())
 }
 
 /// Whether a scenario folder or pack `path` in the dataset or shard folder
@@ -215,7 +249,12 @@ fn there(root: &Path, path: &Path, kind: impl Fn(&fs::Metadata) -> bool) -> Resu
 /// Moves every scenario folder into `out` from the shard folders
 /// `others` (checked first, all of them); returns how many moved and how
 /// many duplicate copies were dropped.
-fn merge_folders(out: &Path, others: &[&PathBuf], sequence: &KeySequence<'_>) -> Result<(usize, usize), GenError> {
+fn merge_folders(
+    out: &Path,
+    others: &[&PathBuf],
+    sequence: &KeySequence<'_>,
+    before_moving: &dyn Fn() -> Result<(), GenError>,
+) -> Result<(usize, usize), GenError> {
     // Where the scenario at `position` is; with `compare`, copies of it in
     // two folders must hold the same checksums.
     let locate = |position: usize, compare: bool| -> Result<Located, GenError> {
@@ -299,6 +338,7 @@ fn merge_folders(out: &Path, others: &[&PathBuf], sequence: &KeySequence<'_>) ->
 
     // Move every scenario into place, and drop the copies of those already
     // there (checked above: the copy kept is whole), scenario by scenario.
+    before_moving()?;
     let (mut moved, mut already) = (0, 0);
     for position in 0..sequence.len() {
         let located = locate(position, false)?;
@@ -327,7 +367,12 @@ fn merge_folders(out: &Path, others: &[&PathBuf], sequence: &KeySequence<'_>) ->
 /// Moves every pack into `out` from the shard folders `others` (checked
 /// first, all of them: each pack somewhere, copies alike, each whole);
 /// returns how many moved and how many duplicate copies were dropped.
-fn merge_packs(out: &Path, others: &[&PathBuf], packs: Packs<'_>) -> Result<(usize, usize), GenError> {
+fn merge_packs(
+    out: &Path,
+    others: &[&PathBuf],
+    packs: Packs<'_>,
+    before_moving: &dyn Fn() -> Result<(), GenError>,
+) -> Result<(usize, usize), GenError> {
     // Where pack `number` is: (its place in --out, the copy kept, whether
     // that copy moves, other copies to drop).
     let locate = |number: usize, compare: bool| -> Result<(PathBuf, Option<PathBuf>, bool, Vec<PathBuf>), GenError> {
@@ -389,6 +434,7 @@ fn merge_packs(out: &Path, others: &[&PathBuf], packs: Packs<'_>) -> Result<(usi
             damaged.len()
         )));
     }
+    before_moving()?;
     let (mut moved, mut already) = (0, 0);
     for number in 0..packs.len() {
         let (to, found, moves, duplicates) = locate(number, false)?;

@@ -380,7 +380,9 @@ pub(crate) fn keep_networks(spec: &DatasetSpec, out: &Path) -> Result<(), GenErr
     }
     for (name, network) in networks {
         let path = folder.join(&name);
-        if std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
+        // A link there is replaced by the file, never read or written through.
+        let is_file = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file());
+        if !is_file || std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
             // A temporary name of this process's own: shards started
             // together write the same bytes side by side.
             let temp = folder.join(format!(".{name}.{}.partial", std::process::id()));
@@ -749,6 +751,20 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         Packing::Folders => None,
         Packing::Tar { per_tar } => Some(Packs::new(sequence, per_tar)),
     };
+    // More shards than scenarios (or packs) to share: the rest would hold
+    // none, and their merge would wait for manifests nobody needs.
+    if let Some(shard) = options.shard {
+        let (units, what) = packs.map_or((sequence.len(), "scenarios"), |p| (p.len(), "tar files"));
+        if shard.count as usize > units {
+            return Err(GenError::Input(format!(
+                "--shard {}/{}: this run has {units} {what} to share out, so shards {units} to {} would hold \
+                 none: use at most {units} shards",
+                shard.index,
+                shard.count,
+                shard.count - 1
+            )));
+        }
+    }
     let pack_numbers = ShardPositions::new(packs.map_or(0, |p| p.len()), options.shard);
     let my_packs = || pack_numbers.iter();
     let total = match &packs {

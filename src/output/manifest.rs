@@ -239,8 +239,39 @@ impl ManifestRecord {
         }
         if self.spec_sha256 != spec_sha256(spec) {
             let new = serde_json::to_value(spec).expect("spec serialises");
-            diff_values("spec", &self.spec, &new, &mut out);
+            diff_values("spec", &self.spec, &new, ("there", "now"), &mut out);
             if out.is_empty() {
+                out.push("spec: contents differ".into());
+            }
+        }
+        out
+    }
+
+    /// What differs between this shard manifest and `other`'s, which
+    /// `labels` name (`here`, `in the first`), one line per difference;
+    /// empty when they are shards of one dataset.
+    pub fn shard_differences(&self, other: &ManifestRecord, labels: (&str, &str)) -> Vec<String> {
+        let (a, b) = labels;
+        let mut out = Vec::new();
+        let mut differ = |field: &str, mine: String, theirs: String| {
+            if mine != theirs {
+                out.push(format!("{field}: {mine} {a}, {theirs} {b}"));
+            }
+        };
+        differ("tool version", self.version.clone(), other.version.clone());
+        differ("images (--no-images)", self.images.to_string(), other.images.to_string());
+        differ("annotations (--annotations)", self.annotations.to_string(), other.annotations.to_string());
+        differ("effects (--no-effects)", self.effects.to_string(), other.effects.to_string());
+        differ("lights (--lights)", self.lights.name().into(), other.lights.name().into());
+        differ("format (--format, --scenarios-per-tar)", self.packing().describe(), other.packing().describe());
+        let limit = |l: Option<u32>| l.map_or("none".to_string(), |l| l.to_string());
+        differ("--limit", limit(self.limit), limit(other.limit));
+        let count = |r: &ManifestRecord| r.shard.map_or("none".to_string(), |s| s.count.to_string());
+        differ("shard count (--shard K/N)", count(self), count(other));
+        if self.spec_sha256 != other.spec_sha256 {
+            let before = out.len();
+            diff_values("spec", &self.spec, &other.spec, labels, &mut out);
+            if out.len() == before {
                 out.push("spec: contents differ".into());
             }
         }
@@ -248,14 +279,22 @@ impl ManifestRecord {
     }
 }
 
-fn diff_values(path: &str, old: &serde_json::Value, new: &serde_json::Value, out: &mut Vec<String>) {
+/// One line per value that differs between `old` and `new` (at JSON
+/// `path`), each side named by `labels` (`8 there, 7 now`).
+fn diff_values(
+    path: &str,
+    old: &serde_json::Value,
+    new: &serde_json::Value,
+    labels: (&str, &str),
+    out: &mut Vec<String>,
+) {
     use serde_json::Value;
     match (old, new) {
         (Value::Object(a), Value::Object(b)) => {
             let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
             for k in keys {
                 let null = Value::Null;
-                diff_values(&format!("{path}.{k}"), a.get(k).unwrap_or(&null), b.get(k).unwrap_or(&null), out);
+                diff_values(&format!("{path}.{k}"), a.get(k).unwrap_or(&null), b.get(k).unwrap_or(&null), labels, out);
             }
         }
         _ if old != new => {
@@ -267,7 +306,7 @@ fn diff_values(path: &str, old: &serde_json::Value, new: &serde_json::Value, out
                     text
                 }
             };
-            out.push(format!("{path}: {} there, {} now", short(old), short(new)))
+            out.push(format!("{path}: {} {}, {} {}", short(old), labels.0, short(new), labels.1))
         }
         _ => {}
     }
