@@ -59,6 +59,10 @@ fn claiming(from: &Path, to: &Path, per_split: u32) -> PathBuf {
     let mut manifest: Value = serde_json::from_slice(&std::fs::read(from.join("manifest.json")).unwrap()).unwrap();
     manifest["spec"]["splits"] = serde_json::json!({"train": per_split, "val": per_split, "test": per_split});
     manifest["limit"] = Value::Null;
+    // Its hash as gen records it, for the spec it now claims.
+    let spec: causalcity::spec::DatasetSpec = serde_json::from_value(manifest["spec"].clone()).unwrap();
+    let spec = causalcity::plan::Expansion::from_spec(spec).unwrap().spec;
+    manifest["spec_sha256"] = causalcity::output::manifest::spec_sha256(&spec).into();
     std::fs::write(to.join("manifest.json"), manifest.to_string()).unwrap();
     to.to_path_buf()
 }
