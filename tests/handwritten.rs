@@ -126,6 +126,21 @@ fn counterfactual_of(name: &str, extra: &[&str]) -> PathBuf {
     out.join("stop_the_leader")
 }
 
+/// `counterfactual` of the scenario file `scenario` with the intervention
+/// file `interventions` into `out`, without images.
+fn counterfactual_with_file(scenario: &Path, interventions: &Path, out: &Path) -> std::process::Output {
+    run(&[
+        "counterfactual",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--intervention",
+        interventions.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--no-images",
+    ])
+}
+
 /// The stop-the-leader pair with `interventions` (a JSON list) for the counterfactual.
 fn counterfactual_with(name: &str, interventions: &str) -> PathBuf {
     let dir = fresh_dir(&format!("{name}-file"));
@@ -945,16 +960,7 @@ fn the_documented_intervention_file_runs_as_docs_show() {
     assert!(docs.contains(std::fs::read_to_string(&file).unwrap().trim()), "the docs show another file");
     let out = fresh_dir("hw-intervention-file").join("cf");
     let scenario = root.join("configs/examples/stop-the-leader.json");
-    let output = run(&[
-        "counterfactual",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--intervention",
-        file.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--no-images",
-    ]);
+    let output = counterfactual_with_file(&scenario, &file, &out);
     let said = String::from_utf8_lossy(&output.stdout);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(docs.contains(said.trim()), "docs show another result than {said}");
@@ -1071,17 +1077,7 @@ fn an_intervention_file_names_lights_and_intersections_on_the_scenarios_own_map(
         std::fs::write(&file, on_own_grid(rows, rows, stop)).unwrap();
         std::fs::write(&extra, interventions).unwrap();
         let out = dir.join(name);
-        let output = run(&[
-            "counterfactual",
-            "--scenario",
-            file.to_str().unwrap(),
-            "--intervention",
-            extra.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--no-images",
-        ]);
-        (output, out)
+        (counterfactual_with_file(&file, &extra, &out), out)
     };
     let set_light = |light: &str| {
         format!(r#"[{{"at": 0.5, "do": "set_light", "light": "{light}", "colour": "red", "seconds": 2}}]"#)
@@ -1229,18 +1225,7 @@ fn run_and_counterfactual_never_write_over_an_input_lying_in_their_output() {
     let pairs = dir.join("pairs");
     let interventions = dir.join("stop.json");
     std::fs::write(&interventions, r#"[{"at": 1, "do": "stop", "car": "Car_1", "seconds": 1}]"#).unwrap();
-    let counterfactual = |extra: &Path| {
-        run(&[
-            "counterfactual",
-            "--scenario",
-            file.to_str().unwrap(),
-            "--intervention",
-            extra.to_str().unwrap(),
-            "--out",
-            pairs.to_str().unwrap(),
-            "--no-images",
-        ])
-    };
+    let counterfactual = |extra: &Path| counterfactual_with_file(&file, extra, &pairs);
     assert!(counterfactual(&interventions).status.success());
     let inside = pairs.join("stop_the_leader/summary.json");
     std::fs::copy(&interventions, &inside).unwrap();
