@@ -98,6 +98,14 @@ def _whole(name: str, value: Any, minimum: int, maximum: int, flag: Optional[str
     return value
 
 
+def _flag(name: str, value: Any) -> bool:
+    """``value`` of the argument ``name`` as a bool: True or False (a numpy
+    bool too), never a string or a number taken by truthiness."""
+    if isinstance(value, (bool, _np.bool_)):
+        return bool(value)
+    raise TypeError(f"{name}={value!r}: give True or False")
+
+
 def _optional_whole(name: str, value: Any, minimum: int, maximum: int, flag: Optional[str] = None) -> Optional[int]:
     return None if value is None else _whole(name, value, minimum, maximum, flag)
 
@@ -492,6 +500,7 @@ def simulate(
     """
     spec = _as_spec(spec)
     index = _whole("index", index, 0, _U32_MAX)
+    images, effects = _flag("images", images), _flag("effects", effects)
     raw = _native.simulate(spec._native, group, split, index, images, effects)
     return _scenario(raw, Key(group, split, index))
 
@@ -593,8 +602,8 @@ class Stream:
     ) -> None:
         self.spec = spec
         self.split = split
-        self.images = images
-        self.effects = effects
+        self.images = _flag("images", images)
+        self.effects = _flag("effects", effects)
         self.threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
         self.ahead = _optional_whole("ahead", ahead, 1, _U32_MAX)
         self.shard = _process_shard(shard)
@@ -794,6 +803,7 @@ def counterfactual(
     runs without them. City world only; see docs/handwritten-scenarios.md.
     """
     text, origin = _json_input(scenario, "<dict>")
+    images = _flag("images", images)
     if intervention is None:
         raws = _native.counterfactual(text, origin, None, None, images)
     else:
@@ -846,6 +856,7 @@ def generate(
     spec = _as_spec(spec)
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
     threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
+    images, annotations, effects = _flag("images", images), _flag("annotations", annotations), _flag("effects", effects)
     if annotations and not images:
         raise InputError(
             "annotations=True needs images=True: annotations.json holds the frames' masks "
@@ -933,6 +944,15 @@ def save_predictions(
         if given is not None and not isinstance(given, Mapping):
             raise InputError(f"save_predictions: {label} is a {type(given).__name__}: give a dict of scenario folder -> array")
         for folder, values in (given or {}).items():
+            # A Key names its folder; any other name must be a folder's.
+            folder = folder.folder if isinstance(folder, Key) else folder
+            if not isinstance(folder, str) or folder == _DATASET_RECORD:
+                raise InputError(
+                    f"save_predictions: {label} key {folder!r} is not a scenario folder: give Key.folder "
+                    "(e.g. 'cars08_edges50/test/00000') or a Key"
+                )
+            if _np.iscomplexobj(values):
+                raise InputError(f"save_predictions: {label}[{folder!r}] holds complex numbers: give real scores")
             try:
                 values = _np.asarray(values)
                 # float16 and float32 are read as they are: half the bytes or less

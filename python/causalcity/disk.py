@@ -146,6 +146,53 @@ def load(folder: PathLike, images: bool = True) -> "Scenario":
     return scenario
 
 
+def _read_record(path: Path, what: str) -> Dict[str, Any]:
+    """``manifest.json`` or ``sweep.json`` as gen or a sweep writes it: an
+    object with a ``spec`` object, and ``scenarios_per_tar`` and ``limit``
+    whole numbers above 0 where given; :class:`~causalcity.InputError`
+    naming the file and field otherwise."""
+    try:
+        record = _json.loads(path.read_text())
+    except ValueError as e:
+        raise InputError(f"{_os.fspath(path)}: not JSON: {e}") from None
+    if not isinstance(record, dict):
+        raise InputError(f"{_os.fspath(path)}: expected an object, found {type(record).__name__}: not {what}")
+    if not isinstance(record.get("spec"), dict):
+        raise InputError(f"{_os.fspath(path)}: field spec: missing or not an object: not {what}")
+    for field in ("scenarios_per_tar", "limit"):
+        value = record.get(field)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise InputError(f"{_os.fspath(path)}: field {field}: {value!r} is not allowed: a whole number above 0, or absent")
+    return record
+
+
+def _as_key(key: Any) -> "Key":
+    """``key`` (a :class:`~causalcity.Key` or a ``(group, split, index)``
+    tuple) as a Key; TypeError naming what it is otherwise."""
+    from . import Key
+
+    parts = tuple(key) if isinstance(key, (tuple, list)) else None
+    ok = (
+        parts is not None
+        and len(parts) == 3
+        and isinstance(parts[0], str)
+        and isinstance(parts[1], str)
+        and isinstance(parts[2], (int, _np.integer))
+        and not isinstance(parts[2], (bool, _np.bool_))
+    )
+    if not ok:
+        raise TypeError(
+            f"{key!r} is not a scenario key: give a causalcity.Key or a (group, split, index) tuple, "
+            "e.g. ('cars08_edges50', 'test', 0), or an int position"
+        )
+    return Key(parts[0], parts[1], int(parts[2]))
+
+
+def _check_split(split: Optional[str]) -> None:
+    if split is not None and split not in ("train", "val", "test"):
+        raise InputError(f"split {split!r} is not one of train, val, test")
+
+
 class _Packed:
     """What the readers of a packed output (``gen`` or ``counterfactual
     --sweep`` with ``--format tar``) share: which tar file holds a key, and
@@ -240,10 +287,7 @@ class Dataset(_Packed):
         if not manifest.is_file():
             sweep = " (it is a counterfactual sweep: use causalcity.open_sweep)" if (self.root / "sweep.json").is_file() else ""
             raise FileNotFoundError(f"{_os.fspath(self.root)}: no manifest.json, so not a dataset gen wrote{sweep}")
-        try:
-            self.manifest: Dict[str, Any] = _json.loads(manifest.read_text())
-        except ValueError as e:
-            raise InputError(f"{_os.fspath(manifest)}: not JSON: {e}") from None
+        self.manifest: Dict[str, Any] = _read_record(manifest, "a manifest gen wrote")
         if not self.manifest.get("complete", False):
             _warnings.warn(
                 f"{_os.fspath(self.root)} is unfinished (manifest.json's complete is false): "
@@ -251,6 +295,13 @@ class Dataset(_Packed):
                 stacklevel=2,
             )
         self.spec = Spec.from_dict(self.manifest["spec"], networks=self.root / "networks")
+        recorded = self.manifest.get("spec_sha256")
+        if recorded is not None and recorded != self.spec._native.sha256:
+            raise InputError(
+                f"{_os.fspath(manifest)}: its spec does not hash to its spec_sha256 ({str(recorded)[:12]} recorded, "
+                f"{self.spec._native.sha256[:12]} now): it was edited after gen wrote the dataset, so it no longer "
+                "describes the scenarios on disk; restore it (or regenerate)"
+            )
         self.images = bool(self.manifest.get("images", False))
         self.split = split
         """The split it holds (all when None)."""
@@ -269,21 +320,32 @@ class Dataset(_Packed):
         else:
             self._keys = [k for k in keys if (self.root / k.folder / "scenario.json").is_file()]
         self._key_set = set(self._keys)
+        missing = len(keys) - len(self._keys)
+        if self.manifest.get("complete", False) and missing > 0:
+            first = next(k for k in keys if k not in self._key_set)
+            _warnings.warn(
+                f"{_os.fspath(self.root)}: {missing} of the {len(keys)} scenarios its manifest lists are not on disk "
+                f"(first: {first.folder}), though it says it is complete: they are left out; `causalcity validate` "
+                "checks it",
+                stacklevel=2,
+            )
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the scenarios on disk, in ``gen``'s order (groups,
         then train, val, test, then index); ``split`` keeps one split. A
         sharded or unfinished dataset lists only the folders it has."""
+        _check_split(split)
         return [k for k in self._keys if split is None or k.split == split]
 
     def load(self, key: "Key", images: Optional[bool] = None) -> "Scenario":
         """The scenario of ``key`` (a :class:`~causalcity.Key` or a
         ``(group, split, index)`` tuple), as :func:`load` reads it."""
-        from . import Key
-
-        key = Key(*key)
-        if self.scenarios_per_tar and key not in self._key_set:
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}")
+        key = _as_key(key)
+        # Only this dataset's keys (of its split, when opened with one): a
+        # group or split that is not one, or a name with ../, is refused.
+        if key not in self._key_set:
+            held = f"'s {self.split} split" if self.split else ""
+            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}{held}: no such scenario on disk")
         images = self._images if images is None else images
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
@@ -301,11 +363,12 @@ class Dataset(_Packed):
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
         """Every scenario of ``split`` (or all), read one at a time."""
+        _check_split(split)
         for key in self.keys(split):
             yield self.load(key, images=images)
 
     def __getitem__(self, key: Any) -> "Scenario":
-        if isinstance(key, (int, _np.integer)) and not isinstance(key, bool):
+        if isinstance(key, (int, _np.integer)) and not isinstance(key, (bool, _np.bool_)):
             return self.load(self._keys[int(key)])
         return self.load(key)
 
@@ -363,10 +426,45 @@ def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = Tru
     """The dataset ``gen`` wrote in ``root``, opened for reading (see
     :class:`Dataset`); ``split`` keeps one split, ``images=False`` reads
     no frames."""
-    if split is not None and split not in ("train", "val", "test"):
-        raise InputError(f"split {split!r} is not one of train, val, test")
+    _check_split(split)
     return Dataset(root, split, images)
 
+
+
+def _read_divergence(path: Path, frames: int, cars: int) -> _np.ndarray:
+    """A pair's ``divergence.csv`` (``frame,t,car,distance_m,distance_px``, a
+    row per frame and car in that order) as ``[frames, cars]`` metres;
+    :class:`~causalcity.InputError` naming the file, line and field for a
+    file that is not as the sweep wrote it."""
+    header = "frame,t,car,distance_m,distance_px"
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as e:
+        raise InputError(f"{_os.fspath(path)}: cannot read it: {e}") from None
+    if not lines or lines[0] != header:
+        raise InputError(f"{_os.fspath(path)}: line 1: expected the header {header!r}")
+    if len(lines) - 1 != frames * cars:
+        raise InputError(
+            f"{_os.fspath(path)}: {len(lines) - 1} rows, expected {frames * cars} (a row per frame and car, "
+            f"{frames} frames x {cars} cars)"
+        )
+    divergence = _np.zeros((frames, cars))
+    for number, line in enumerate(lines[1:], start=2):
+        fields = line.split(",")
+        frame, car = divmod(number - 2, cars)
+        try:
+            if len(fields) != 5 or int(fields[0]) != frame or int(fields[2]) != car:
+                raise ValueError
+            distance = float(fields[3])
+        except ValueError:
+            raise InputError(
+                f"{_os.fspath(path)}: line {number}: {line!r}: expected frame {frame}, car {car} and a distance "
+                "in metres, as the sweep writes them"
+            ) from None
+        if not (distance >= 0.0 and distance < float("inf")):
+            raise InputError(f"{_os.fspath(path)}: line {number}: distance_m {fields[3]!r}: a distance, 0 or more")
+        divergence[frame, car] = distance
+    return divergence
 
 
 class Sweep(_Packed):
@@ -385,20 +483,19 @@ class Sweep(_Packed):
         if not record.is_file():
             dataset = " (it is a dataset: use causalcity.open_dataset)" if (self.root / "manifest.json").is_file() else ""
             raise FileNotFoundError(f"{_os.fspath(self.root)}: no sweep.json, so not a counterfactual --sweep output{dataset}")
-        try:
-            self.record: Dict[str, Any] = _json.loads(record.read_text())
-        except ValueError as e:
-            raise InputError(f"{_os.fspath(record)}: not JSON: {e}") from None
+        self.record: Dict[str, Any] = _read_record(record, "a counterfactual sweep's record")
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
         self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
         self.scenarios_per_tar: Optional[int] = self.record.get("scenarios_per_tar")
         """``--format tar``: pairs per tar file (None: a folder per pair)."""
         self._index_packs(self.spec.keys(None, self.record.get("limit")) if self.scenarios_per_tar else [])
+        self._all_keys = set(self.spec.keys(None, self.record.get("limit")))
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the pairs on disk (in pair folders, or in the packs
         there), in the sweep's order."""
+        _check_split(split)
         keys = self.spec.keys(split, self.record.get("limit"))
         if self.scenarios_per_tar:
             return [k for k in keys if (self.root / self.pack_of(k)).is_file()]
@@ -409,9 +506,9 @@ class Sweep(_Packed):
         sweep, a new temporary folder the pair is unpacked into (frames only
         when ``images``; it goes when that ``TemporaryDirectory`` is
         dropped or cleaned up), else the pair's own folder and None."""
-        from . import Key
-
-        key = Key(*key)
+        key = _as_key(key)
+        if key not in self._all_keys:
+            raise KeyError(f"{tuple(key)} is not a pair of {_os.fspath(self.root)}")
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
             if not (folder / "summary.json").is_file():
@@ -429,9 +526,7 @@ class Sweep(_Packed):
         folder, scratch = self.pair_folder(key, images)
         factual = load(folder / "factual", images=images)
         counterfactual = load(folder / "counterfactual", images=images)
-        table = _np.loadtxt(folder / "divergence.csv", delimiter=",", skiprows=1, ndmin=2)
-        divergence = _np.zeros((factual.frames, factual.cars))
-        divergence[table[:, 0].astype(int), table[:, 2].astype(int)] = table[:, 3]
+        divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)
         summary = _json.loads((folder / "summary.json").read_text())
         if scratch is not None:
             _keep_with_frames(scratch, [factual, counterfactual])

@@ -44,6 +44,7 @@ from . import (
     Spec,
     Stream,
     _as_spec,
+    _flag,
     _scenario,
     _shard_pair,
     _torch_dataset_class,
@@ -94,6 +95,19 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
     frames = {s.frames for s in scenarios}
     if len(frames) != 1:
         raise InputError(f"scenarios of different lengths ({sorted(frames)} frames) cannot share a batch")
+    intervals = {float(s.t[1] - s.t[0]) if s.frames > 1 else None for s in scenarios}
+    if len(intervals) > 1:
+        raise InputError(
+            f"scenarios of different frame intervals ({sorted(i for i in intervals if i is not None)} s; another "
+            "world or dataset?) cannot share a batch: their frames would not line up"
+        )
+    keys = [s.key for s in scenarios if s.key is not None]
+    if len(set(keys)) != len(keys):
+        twice = next(k for k in keys if keys.count(k) > 1)
+        raise InputError(
+            f"collate: {twice.folder} is in the batch twice (scenarios of two datasets?): a batch's keys name "
+            "its scenarios, so each may appear once"
+        )
     size, cars = len(scenarios), max(s.cars for s in scenarios)
     (count,) = frames
     out: Dict[str, Any] = {
@@ -205,11 +219,11 @@ class Batches:
     ) -> None:
         self.stream = stream
         self.batch_size = _whole("batch_size", batch_size, 1, _U32_MAX)
-        self.shuffle = bool(shuffle)
+        self.shuffle = _flag("shuffle", shuffle)
         self.seed = _whole("seed", seed, 0, 2**64 - 1)
-        self.drop_last = bool(drop_last)
-        self.mix_groups = bool(mix_groups)
-        self.tensors = tensors
+        self.drop_last = _flag("drop_last", drop_last)
+        self.mix_groups = _flag("mix_groups", mix_groups)
+        self.tensors = None if tensors is None else _flag("tensors", tensors)
         # Shared memory: DataLoader workers, persistent ones included, read
         # the epoch set here after they started.
         self._epoch = _mp.RawValue("q", 0)

@@ -308,6 +308,12 @@ impl Spec {
         &self.json
     }
 
+    /// SHA-256 (hex) of the spec as a manifest's `spec_sha256` records it.
+    #[getter]
+    fn sha256(&self) -> String {
+        causalcity::output::manifest::spec_sha256(&self.expansion().spec)
+    }
+
     #[getter]
     fn path(&self) -> Option<String> {
         self.path.as_ref().map(|p| p.to_string_lossy().into_owned())

@@ -184,3 +184,93 @@ def test_a_split_opened_from_disk_is_a_map_style_dataset_for_a_dataloader():
     np.testing.assert_array_equal(batch["graph"][0].numpy(), simulated.graph)
     with pytest.raises(causalcity.InputError, match="split 'dev'"):
         causalcity.open_dataset(DATA / "city", "dev")
+
+
+def test_a_dataset_hands_out_only_its_own_scenarios_by_key(tmp_path):
+    # Keys outside the dataset were read: another split's (opened with one),
+    # and with ../ in the group, another dataset's.
+    train = causalcity.open_dataset(DATA / "city", "train", images=False)
+    test_key = causalcity.open_dataset(DATA / "city").keys("test")[0]
+    with pytest.raises(KeyError, match="'s train split"):
+        train.load(test_key)
+    with pytest.raises(KeyError, match="is not in"):
+        train[tuple(test_key)]
+    sneaky = (f"{test_key.group}/train/00000/../../../../toy/cars04_edges50", "train", 0)
+    with pytest.raises(KeyError, match="is not in"):
+        causalcity.open_dataset(DATA / "city").load(sneaky)
+    for bad in ["cars08_edges50/train/00000", ("cars08_edges50", "train", "0"), True, 1.5, None]:
+        with pytest.raises(TypeError, match="not a scenario key"):
+            train[bad]
+    for split in ("bogus", 0):
+        with pytest.raises(causalcity.InputError, match="is not one of train, val, test"):
+            train.keys(split)
+        with pytest.raises(causalcity.InputError, match="is not one of train, val, test"):
+            list(train.scenarios(split))
+    # Its own keys still load, by key, tuple and position.
+    key = train.keys()[0]
+    assert train.load(key).key == key == train[tuple(key)].key == train[0].key
+
+
+def test_a_manifest_edited_or_malformed_is_named_and_a_missing_scenario_is_told(tmp_path):
+    def copy_with(name, edit):
+        root = tmp_path / name
+        shutil.copytree(DATA / "city", root)
+        manifest = json.loads((root / "manifest.json").read_text())
+        manifest = edit(manifest)
+        (root / "manifest.json").write_text(json.dumps(manifest))
+        return root
+
+    def reseed(m):
+        m["spec"]["seed"] += 1
+        return m
+
+    # Another seed: open_dataset took it, and simulate(spec, key) no longer
+    # gave the scenario on disk.
+    with pytest.raises(causalcity.InputError, match=r"manifest\.json: its spec does not hash to its spec_sha256"):
+        causalcity.open_dataset(copy_with("seed", reseed))
+    for name, edit, says in [
+        ("list", lambda m: [m], "expected an object, found list"),
+        ("nospec", lambda m: {k: v for k, v in m.items() if k != "spec"}, "field spec: missing"),
+        ("pertar", lambda m: {**m, "scenarios_per_tar": "x"}, "field scenarios_per_tar: 'x'"),
+        ("limit", lambda m: {**m, "limit": -1}, "field limit: -1"),
+    ]:
+        with pytest.raises(causalcity.InputError, match=f"manifest.json: {says}"):
+            causalcity.open_dataset(copy_with(name, edit))
+    # A complete dataset missing a scenario folder says so.
+    root = copy_with("missing", lambda m: m)
+    key = causalcity.open_dataset(root).keys("val")[0]
+    shutil.rmtree(root / key.folder)
+    with pytest.warns(UserWarning, match=f"1 of the 3 scenarios its manifest lists are not on disk \\(first: {key.folder}\\)"):
+        data = causalcity.open_dataset(root)
+    assert key not in data.keys()
+
+
+def test_a_sweeps_divergence_csv_is_read_as_written_or_named(tmp_path):
+    root = tmp_path / "sweep"
+    shutil.copytree(DATA / "sweep", root)
+    sweep = causalcity.open_sweep(root)
+    key = sweep.keys()[0]
+    pair = sweep.load(key, images=False)
+    path = root / key.folder / "divergence.csv"
+    text = path.read_text()
+    rows = text.splitlines()
+    # The array is the file's: spot-check a row against the CSV.
+    frame, _, car, metres, _ = rows[len(rows) // 2].split(",")
+    assert pair.divergence[int(frame), int(car)] == float(metres)
+    # Edited files were read without a check: IndexError, numpy errors, or a
+    # frame -1 written silently into the last frame.
+    for edit, says in [
+        (rows[:1], "0 rows, expected"),
+        ([rows[0]] + [rows[1].replace("0,", "999,", 1)] + rows[2:], "line 2: .*expected frame 0, car 0"),
+        ([rows[0]] + [",".join(rows[1].split(",")[:3] + ["abc"] + rows[1].split(",")[4:])] + rows[2:], "line 2"),
+        ([rows[0]] + ["-1,0.0,-1,7.0,1.0"] + rows[2:], "line 2"),
+        (["frame,car"] + rows[1:], "line 1: expected the header"),
+    ]:
+        path.write_text("\n".join(edit) + "\n")
+        with pytest.raises(causalcity.InputError, match=f"divergence.csv: {says}"):
+            sweep.load(key, images=False)
+    path.unlink()
+    with pytest.raises(causalcity.InputError, match="divergence.csv: cannot read it"):
+        sweep.load(key, images=False)
+    with pytest.raises(KeyError, match="not a pair of"):
+        sweep.load(("cars08_edges50/../..", "train", 0))

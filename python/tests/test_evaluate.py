@@ -543,3 +543,35 @@ def test_a_held_out_test_split_is_marked_out_of_distribution_beside_the_in_distr
     assert "val* " not in text
     towns = {json.loads(p.read_text())["town"] for p in data.glob("*/test/*/scenario.json")}
     assert towns == {"grid-4x4"}
+
+
+def test_constant_scores_for_every_edge_are_scored_as_every_edge_called(tmp_path):
+    # The best cut on val called every pair linked; the threshold then lay
+    # below a positive score (F1 0, nothing called), above a negative one.
+    data = causalcity.open_dataset(TOY, images=False)
+    results = {}
+    for value in (1.0, -1.0):
+        edges = {k.folder: np.full((data.load(k).cars,) * 2, value) for k in data.keys() if k.split != "train"}
+        path = tmp_path / f"const{value}.npz"
+        causalcity.save_predictions(path, edges=edges, dataset=TOY)
+        rows = causalcity.evaluate(TOY, path)["scenarios"]
+        results[value] = {r["scenario"]: (r["predicted_edges"], r["f1"]) for r in rows if r["split"] == "test"}
+    assert results[1.0] and results[1.0] == results[-1.0], results
+    assert all(predicted > 0 for predicted, _ in results[1.0].values()), results
+
+
+def test_save_predictions_takes_keys_or_folders_and_refuses_what_it_would_change(tmp_path):
+    data = causalcity.open_dataset(TOY, images=False)
+    key = data.keys("test")[0]
+    cars = data.load(key).cars
+    by_key = tmp_path / "by-key.npz"
+    causalcity.save_predictions(by_key, edges={key: np.eye(cars)})
+    assert list(np.load(by_key).keys()) == [key.folder]
+    for edges, says in [
+        ({key.folder: np.eye(cars) * (1 + 1j)}, "complex numbers"),
+        ({"causalcity-dataset": np.eye(cars)}, "is not a scenario folder"),
+        ({3: np.eye(cars)}, "is not a scenario folder"),
+    ]:
+        with pytest.raises(causalcity.InputError, match=says):
+            causalcity.save_predictions(tmp_path / "bad.npz", edges=edges)
+    assert not (tmp_path / "bad.npz").exists()
