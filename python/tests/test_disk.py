@@ -274,3 +274,17 @@ def test_a_sweeps_divergence_csv_is_read_as_written_or_named(tmp_path):
         sweep.load(key, images=False)
     with pytest.raises(KeyError, match="not a pair of"):
         sweep.load(("cars08_edges50/../..", "train", 0))
+
+
+def test_a_renamed_interactions_column_is_named(tmp_path):
+    # interactions.csv's header was not read: a renamed column loaded as if
+    # it were the one expected (poses.csv's header was checked).
+    key = causalcity.open_dataset(DATA / "city").keys("test")[0]
+    folder = tmp_path / "renamed"
+    shutil.copytree(DATA / "city" / key.folder, folder)
+    path = folder / "interactions.csv"
+    lines = path.read_text().splitlines()
+    assert lines[0] == "frame,car,bound_by,other_car,light"
+    path.write_text("\n".join(["frame,car,bound_by,77,light"] + lines[1:]) + "\n")
+    with pytest.raises(causalcity.InputError, match=r'interactions\.csv: columns .*"77"'):
+        causalcity.load(folder)

@@ -189,6 +189,15 @@ pub struct InteractionRecord {
 pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<InteractionRecord>, String> {
     let fail = |what: String| format!("{}: {what}", path.display());
     let mut reader = csv::Reader::from_path(path).map_err(|e| fail(e.to_string()))?;
+    // The columns as written: a renamed or reordered column is not read
+    // as another one.
+    let header = reader.headers().map_err(|e| fail(e.to_string()))?;
+    if header.iter().ne(INTERACTION_COLUMNS) {
+        return Err(fail(format!(
+            "columns {:?}, expected {INTERACTION_COLUMNS:?}",
+            header.iter().collect::<Vec<_>>()
+        )));
+    }
     let mut records: Vec<Option<InteractionRecord>> = vec![None; frames * cars];
     for (line, row) in reader.records().enumerate() {
         let row = row.map_err(|e| fail(e.to_string()))?;
