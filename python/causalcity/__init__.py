@@ -619,6 +619,8 @@ class Stream:
                 groups = list(groups)
             except TypeError:
                 raise InputError(f"groups={groups!r} is not a list of group names, e.g. [{spec.groups[0]!r}]") from None
+            if not groups:
+                raise InputError("groups=[] names no group, so the stream would be empty: leave it out for every group")
             unknown = [g for g in groups if g not in spec.groups]
             if unknown:
                 raise InputError(

@@ -351,15 +351,30 @@ class Dataset(_Packed):
             folder = self.root / key.folder
             if not (folder / "scenario.json").is_file():
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
+            self._require_frames(folder, images)
             return load(folder, images=images)
         scratch = self._unpack(key, images)
         if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
+        self._require_frames(Path(scratch.name), images, self.pack_of(key))
         scenario = load(Path(scratch.name), images=images)
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
         _keep_with_frames(scratch, [scenario])
         return scenario
+
+    def _require_frames(self, folder: Path, images: bool, pack: Optional[str] = None) -> None:
+        """Frames asked for from a dataset with images: a scenario without
+        its ``rgb/`` or ``mask/`` is damaged, not a scenario without images."""
+        if not (images and self.images):
+            return
+        for kind in ("rgb", "mask"):
+            if not (folder / kind).is_dir():
+                where = f"its pack {pack}" if pack else _os.fspath(folder)
+                raise InputError(
+                    f"{where}: no {kind}/ though the dataset has images (manifest.json images: true): the scenario "
+                    "is damaged (causalcity validate names what is missing); images=False reads it without frames"
+                )
 
     def scenarios(self, split: Optional[str] = None, images: Optional[bool] = None) -> Iterator["Scenario"]:
         """Every scenario of ``split`` (or all), read one at a time."""

@@ -288,3 +288,13 @@ def test_a_renamed_interactions_column_is_named(tmp_path):
     path.write_text("\n".join(["frame,car,bound_by,77,light"] + lines[1:]) + "\n")
     with pytest.raises(causalcity.InputError, match=r'interactions\.csv: columns .*"77"'):
         causalcity.load(folder)
+
+
+def test_a_scenario_without_its_frames_in_a_dataset_with_images_is_named(tmp_path):
+    root = tmp_path / "city"
+    shutil.copytree(DATA / "city", root)
+    key = causalcity.open_dataset(root).keys("test")[0]
+    shutil.rmtree(root / key.folder / "rgb")
+    with pytest.raises(causalcity.InputError, match="no rgb/ though the dataset has images"):
+        causalcity.open_dataset(root).load(key)
+    assert causalcity.open_dataset(root, images=False).load(key).rgb is None

@@ -185,3 +185,10 @@ def test_flags_are_true_or_false_and_a_batch_never_mixes_datasets():
         causalcity.collate([toy[0], city[0]])
     with pytest.raises(causalcity.InputError, match="in the batch twice"):
         causalcity.collate([city[0], city[0]])
+
+
+def test_a_stream_of_no_groups_is_refused():
+    data = Path(os.environ.get("CAUSALCITY_DATA", ROOT / "target" / "python-data"))
+    spec = causalcity.open_dataset(data / "city", images=False).spec
+    with pytest.raises(causalcity.InputError, match=r"groups=\[\] names no group"):
+        causalcity.stream(spec, "train", groups=[])
