@@ -366,6 +366,10 @@ fn a_merge_cut_off_part_way_is_finished_by_the_same_command() {
     let took = started.elapsed();
     assert!(whole.status.success(), "{}", stderr(&whole));
     assert_eq!(hash_tree(&out), hash_tree(&reference));
+    // Run again once it finished (a retried cluster task): said as it is.
+    let again = run(&args);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(stderr(&again).contains("already holds a complete dataset: merged before?"), "{}", stderr(&again));
     let mut cut_off = Vec::new();
     for percent in [50, 60, 70, 80, 85, 90, 95, 75, 65, 55, 98] {
         shards();

@@ -49,7 +49,15 @@ fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
 pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     for (i, source) in sources.iter().enumerate() {
         if !source.is_dir() {
-            return Err(GenError::Input(format!("{} is not a folder", source.display())));
+            // A merge run again after it finished (a retried cluster task):
+            // its shard folders are gone into --out.
+            let merged = ManifestRecord::read(&out.join("manifest.json")).ok().flatten().is_some_and(|m| m.complete)
+                && !out.join("shards").exists();
+            let hint = match merged {
+                true => format!(" ({} already holds a complete dataset: merged before?)", out.display()),
+                false => String::new(),
+            };
+            return Err(GenError::Input(format!("{} is not a folder{hint}", source.display())));
         }
         let real = crate::output::claim::resolve(source);
         if let Some(twin) = sources[..i].iter().find(|s| crate::output::claim::resolve(s) == real) {
