@@ -193,10 +193,7 @@ pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<
     // as another one.
     let header = reader.headers().map_err(|e| fail(e.to_string()))?;
     if header.iter().ne(INTERACTION_COLUMNS) {
-        return Err(fail(format!(
-            "columns {:?}, expected {INTERACTION_COLUMNS:?}",
-            header.iter().collect::<Vec<_>>()
-        )));
+        return Err(fail(format!("columns {:?}, expected {INTERACTION_COLUMNS:?}", header.iter().collect::<Vec<_>>())));
     }
     let mut records: Vec<Option<InteractionRecord>> = vec![None; frames * cars];
     for (line, row) in reader.records().enumerate() {
