@@ -324,7 +324,7 @@ class Dataset(_Packed):
         if self.manifest.get("complete", False) and missing > 0:
             first = next(k for k in keys if k not in self._key_set)
             _warnings.warn(
-                f"{_os.fspath(self.root)}: {missing} of the {len(keys)} scenarios its manifest lists are not on disk "
+                f"{_os.fspath(self.root)}: {missing} of the {len(keys)} scenarios its manifest lists{' in ' + split if split else ''} are not on disk "
                 f"(first: {first.folder}), though it says it is complete: they are left out; `causalcity validate` "
                 "checks it",
                 stacklevel=2,
@@ -340,13 +340,15 @@ class Dataset(_Packed):
     def load(self, key: "Key", images: Optional[bool] = None) -> "Scenario":
         """The scenario of ``key`` (a :class:`~causalcity.Key` or a
         ``(group, split, index)`` tuple), as :func:`load` reads it."""
+        from . import _flag
+
         key = _as_key(key)
         # Only this dataset's keys (of its split, when opened with one): a
         # group or split that is not one, or a name with ../, is refused.
         if key not in self._key_set:
             held = f"'s {self.split} split" if self.split else ""
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)}{held}: no such scenario on disk")
-        images = self._images if images is None else images
+        images = self._images if images is None else _flag("images", images)
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
             if not (folder / "scenario.json").is_file():
@@ -441,8 +443,10 @@ def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = Tru
     """The dataset ``gen`` wrote in ``root``, opened for reading (see
     :class:`Dataset`); ``split`` keeps one split, ``images=False`` reads
     no frames."""
+    from . import _flag
+
     _check_split(split)
-    return Dataset(root, split, images)
+    return Dataset(root, split, _flag("images", images))
 
 
 
@@ -536,8 +540,9 @@ class Sweep(_Packed):
 
     def load(self, key: "Key", images: bool = True) -> "Counterfactual":
         """The pair of ``key``: its two runs, divergence and summary."""
-        from . import Counterfactual
+        from . import Counterfactual, _flag
 
+        images = _flag("images", images)
         folder, scratch = self.pair_folder(key, images)
         factual = load(folder / "factual", images=images)
         counterfactual = load(folder / "counterfactual", images=images)

@@ -101,13 +101,6 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
             f"scenarios of different frame intervals ({sorted(i for i in intervals if i is not None)} s; another "
             "world or dataset?) cannot share a batch: their frames would not line up"
         )
-    keys = [s.key for s in scenarios if s.key is not None]
-    if len(set(keys)) != len(keys):
-        twice = next(k for k in keys if keys.count(k) > 1)
-        raise InputError(
-            f"collate: {twice.folder} is in the batch twice (scenarios of two datasets?): a batch's keys name "
-            "its scenarios, so each may appear once"
-        )
     size, cars = len(scenarios), max(s.cars for s in scenarios)
     (count,) = frames
     out: Dict[str, Any] = {
