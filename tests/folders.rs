@@ -423,4 +423,16 @@ fn shards_of_another_dataset_are_named_by_what_differs_and_a_shard_count_fits_th
     let merged = run(&["merge", "--out", many.to_str().unwrap()]);
     assert_eq!(merged.status.code(), Some(2));
     assert!(stderr(&merged).contains("shards 1, 2, 3, 4 of 5 are missing"), "{}", stderr(&merged));
+    // A shard manifest numbered past its count (hand-edited): named, where
+    // the missing count underflowed.
+    let manifest = many.join("shards/0-of-5.json");
+    let text = std::fs::read_to_string(&manifest).unwrap().replace(r#""index": 0"#, r#""index": 7"#);
+    std::fs::write(&manifest, text).unwrap();
+    let merged = run(&["merge", "--out", many.to_str().unwrap()]);
+    assert_eq!(merged.status.code(), Some(2), "{}", stderr(&merged));
+    assert!(
+        stderr(&merged).contains("shard index 7 is not allowed: a shard of 5 is numbered 0 to 4"),
+        "{}",
+        stderr(&merged)
+    );
 }

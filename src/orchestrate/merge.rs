@@ -100,6 +100,16 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // Every shard must come from the same spec, version and settings.
     let count = first.shard.expect("shard manifests carry their shard").count;
     for (path, record) in &manifests {
+        let shard = record.shard.expect("shard manifests carry their shard");
+        if shard.index >= shard.count {
+            return Err(GenError::Input(format!(
+                "{}: shard index {} is not allowed: a shard of {} is numbered 0 to {}; nothing was moved",
+                path.display(),
+                shard.index,
+                shard.count,
+                shard.count.saturating_sub(1)
+            )));
+        }
         let differences = record.shard_differences(&first, ("here", "in the first"));
         if !differences.is_empty() {
             return Err(GenError::Input(format!(
@@ -143,7 +153,21 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
 
     // The spec with its networks, from the first shard folder whose copies
     // read whole (each shard keeps one); none: bad input, nothing moved.
-    let mut expansions = manifests.iter().map(|(path, _)| crate::dataset::expansion_of(&first, path));
+    // A copy that is a link is never read through (merge moves and removes
+    // what is in the shard folders).
+    let linked = |path: &Path| -> Option<PathBuf> {
+        let root = path.parent().and_then(Path::parent).unwrap_or(Path::new("."));
+        let mut spec: crate::spec::DatasetSpec = serde_json::from_value(first.spec.clone()).ok()?;
+        spec.network_copies(root).into_iter().find(|c| fs::symlink_metadata(c).is_ok_and(|m| m.is_symlink()))
+    };
+    let mut expansions = manifests.iter().map(|(path, _)| match linked(path) {
+        Some(link) => Err(format!(
+            "{} is a link: a shard keeps its own copy of each network, and merge never reads through a link; put \
+             the file itself there",
+            link.display()
+        )),
+        None => crate::dataset::expansion_of(&first, path),
+    });
     let first_error = match expansions.next().expect("a manifest, found above") {
         Ok(expansion) => Ok(expansion),
         Err(e) => expansions.find_map(Result::ok).ok_or(e),
@@ -173,16 +197,20 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), first.packing(), true, None)
             .to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
-    // The shard manifests, in the shard folders and their copies in --out.
-    for (path, _) in &manifests {
-        let copy = out.join("shards").join(path.file_name().expect("a shard manifest is a file"));
-        for manifest in [path, &copy] {
-            if fs::symlink_metadata(manifest).is_ok() {
-                fs::remove_file(manifest).map_err(io_err(manifest))?;
-            }
-            if let Some(dir) = manifest.parent() {
-                let _ = fs::remove_dir(dir); // only when empty
-            }
+    // The shard manifests: the shard folders' first, then their copies in
+    // --out (the last to go, so that a merge cut off in between is still
+    // finished by running it again).
+    let copies: Vec<PathBuf> = manifests
+        .iter()
+        .map(|(path, _)| out.join("shards").join(path.file_name().expect("a shard manifest is a file")))
+        .collect();
+    let originals = manifests.iter().map(|(path, _)| path).filter(|path| !copies.contains(path));
+    for manifest in originals.chain(&copies) {
+        if fs::symlink_metadata(manifest).is_ok() {
+            fs::remove_file(manifest).map_err(io_err(manifest))?;
+        }
+        if let Some(dir) = manifest.parent() {
+            let _ = fs::remove_dir(dir); // only when empty
         }
     }
     // The shards' folder trees the scenarios left: empty split and group

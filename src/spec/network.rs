@@ -135,24 +135,19 @@ impl DatasetSpec {
     }
 
     /// Reads the networks of a dataset's spec from its `networks/` folder.
-    /// A copy there that is a link is refused, never read through.
     pub fn read_networks_in_dataset(&mut self, root: &Path) -> Result<(), SpecError> {
         let folder = root.join(NETWORKS_FOLDER);
-        for (field, map) in self.map_sections_mut() {
-            let Some(sumo) = &map.sumo else { continue };
-            let path = folder.join(network_file_name(sumo));
-            if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink()) {
-                return Err(SpecError::new(
-                    format!("{field}.sumo"),
-                    format!(
-                        "{} is a link: a dataset keeps its own copy of each network and never reads through a \
-                         link; put the file itself there",
-                        path.display()
-                    ),
-                ));
-            }
-        }
         self.read_networks(|sumo| folder.join(network_file_name(sumo)))
+    }
+
+    /// Where the dataset in `root` keeps a copy of each network the spec
+    /// names (read or not).
+    pub fn network_copies(&mut self, root: &Path) -> Vec<PathBuf> {
+        let folder = root.join(NETWORKS_FOLDER);
+        self.map_sections_mut()
+            .into_iter()
+            .filter_map(|(_, map)| Some(folder.join(network_file_name(map.sumo.as_deref()?))))
+            .collect()
     }
 
     /// The networks read, by the file name a dataset keeps them under.
