@@ -118,7 +118,7 @@ impl DatasetIdentity {
             self.name,
             self.world,
             self.seed,
-            self.spec_sha256.get(..12).unwrap_or(&self.spec_sha256),
+            crate::output::short_hash(&self.spec_sha256),
             splits.join("/")
         )
     }

@@ -283,16 +283,11 @@ pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, S
             "{}: its spec does not hash to its spec_sha256 ({} recorded, {} now): it was edited after gen wrote \
              the dataset, so it no longer describes the scenarios on disk; restore it (or regenerate)",
             path.display(),
-            short_hash(&record.spec_sha256),
-            short_hash(&hashed)
+            crate::output::short_hash(&record.spec_sha256),
+            crate::output::short_hash(&hashed)
         ));
     }
     Ok(expansion)
-}
-
-/// A hash's first 12 characters, as messages show it.
-fn short_hash(hash: &str) -> &str {
-    hash.get(..12).unwrap_or(hash)
 }
 
 /// The expansion of a spec recorded (as JSON) in the file at `path`.

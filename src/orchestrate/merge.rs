@@ -155,10 +155,11 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // read whole (each shard keeps one); none: bad input, nothing moved.
     // A copy that is a link is never read through (merge moves and removes
     // what is in the shard folders).
-    let linked = |path: &Path| -> Option<PathBuf> {
+    let mut named: Option<crate::spec::DatasetSpec> = serde_json::from_value(first.spec.clone()).ok();
+    let mut linked = |path: &Path| -> Option<PathBuf> {
         let root = path.parent().and_then(Path::parent).unwrap_or(Path::new("."));
-        let mut spec: crate::spec::DatasetSpec = serde_json::from_value(first.spec.clone()).ok()?;
-        spec.network_copies(root).into_iter().find(|c| fs::symlink_metadata(c).is_ok_and(|m| m.is_symlink()))
+        let copies = named.as_mut()?.network_copies(root);
+        copies.into_iter().find(|c| fs::symlink_metadata(c).is_ok_and(|m| m.is_symlink()))
     };
     let mut expansions = manifests.iter().map(|(path, _)| match linked(path) {
         Some(link) => Err(format!(
@@ -238,8 +239,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         for (name, network) in expansion.spec.networks() {
             let copy = folder.join(name);
             // A link there is left alone, never read through.
-            let is_file = fs::symlink_metadata(&copy).is_ok_and(|m| m.is_file());
-            if is_file && fs::read(&copy).ok().as_deref() == Some(&network.bytes[..]) {
+            if crate::output::holds_bytes(&copy, &network.bytes) {
                 fs::remove_file(&copy).map_err(io_err(&copy))?;
             }
         }

@@ -381,8 +381,7 @@ pub(crate) fn keep_networks(spec: &DatasetSpec, out: &Path) -> Result<(), GenErr
     for (name, network) in networks {
         let path = folder.join(&name);
         // A link there is replaced by the file, never read or written through.
-        let is_file = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file());
-        if !is_file || std::fs::read(&path).ok().as_deref() != Some(&network.bytes[..]) {
+        if !crate::output::holds_bytes(&path, &network.bytes) {
             // A temporary name of this process's own: shards started
             // together write the same bytes side by side.
             let temp = folder.join(format!(".{name}.{}.partial", std::process::id()));

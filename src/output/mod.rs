@@ -238,6 +238,17 @@ pub fn fresh_partial(path: &Path) -> Result<PathBuf, WriteError> {
     Ok(temp)
 }
 
+/// Whether `path` is a plain file (not a link, never read through one)
+/// holding exactly `bytes`.
+pub fn holds_bytes(path: &Path, bytes: &[u8]) -> bool {
+    fs::symlink_metadata(path).is_ok_and(|m| m.is_file()) && fs::read(path).ok().as_deref() == Some(bytes)
+}
+
+/// A hash (hex) as messages show it: its first 12 characters.
+pub fn short_hash(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
+}
+
 /// Writes `bytes` to `path` through a temporary file and a rename (which
 /// replaces a link at `path` rather than writing through it).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
