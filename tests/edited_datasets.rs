@@ -155,3 +155,33 @@ fn a_manifest_whose_spec_was_edited_is_refused_by_every_reader() {
     }
     assert!(run(&["validate", s(&data)]).status.success(), "the dataset as gen wrote it is valid");
 }
+
+#[test]
+fn a_sweep_whose_spec_was_edited_is_refused_and_one_from_before_the_hash_opens() {
+    // sweep.json recorded no hash of its spec: a sweep edited to another
+    // seed validated, and readers took it for pairs it did not make.
+    let dir = fresh_dir("edited-sweep-spec");
+    let spec = write_spec(&dir, &city_spec("edited-sweep", &[(4, 0.5)], (1, 1, 1), 20, "{}"));
+    let sweep = dir.join("sweep");
+    let made = run(&["counterfactual", "--sweep", s(&spec), "--out", s(&sweep), "--no-images", "-q"]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let record_path = sweep.join("sweep.json");
+    let record: serde_json::Value = serde_json::from_slice(&std::fs::read(&record_path).unwrap()).unwrap();
+    assert_eq!(record["spec_sha256"].as_str().map(str::len), Some(64), "the record keeps the spec's hash");
+    let rewrite = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut value = record.clone();
+        edit(&mut value);
+        std::fs::write(&record_path, serde_json::to_vec(&value).unwrap()).unwrap();
+    };
+    rewrite(&|v| v["spec"]["seed"] = 8.into());
+    assert_error(&run(&["validate", s(&sweep)]), 2, "sweep.json: its spec does not hash to its spec_sha256");
+    let packed = dir.join("packed");
+    assert_error(&run(&["pack", s(&sweep), "--out", s(&packed)]), 2, "its spec does not hash");
+    assert!(!packed.exists(), "a refused pack writes nothing");
+    // A sweep written before the record kept the hash is read as before.
+    rewrite(&|v| {
+        v.as_object_mut().unwrap().remove("spec_sha256");
+    });
+    let checked = run(&["validate", s(&sweep)]);
+    assert!(checked.status.success(), "{}", stderr(&checked));
+}

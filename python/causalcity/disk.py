@@ -166,6 +166,19 @@ def _read_record(path: Path, what: str) -> Dict[str, Any]:
     return record
 
 
+def _check_spec_hash(spec: Any, record: Dict[str, Any], path: Path, who: str, what: str) -> None:
+    """Refuses a record (at ``path``) whose spec no longer hashes to the
+    ``spec_sha256`` it recorded (records from before it was kept lack it):
+    edited after ``who``, it describes other ``what`` than the ones on disk."""
+    recorded = record.get("spec_sha256")
+    if recorded is not None and recorded != spec._native.sha256:
+        raise InputError(
+            f"{_os.fspath(path)}: its spec does not hash to its spec_sha256 ({str(recorded)[:12]} recorded, "
+            f"{spec._native.sha256[:12]} now): it was edited after {who}, so it no longer describes the {what} on "
+            "disk; restore it (or regenerate)"
+        )
+
+
 def _as_key(key: Any) -> "Key":
     """``key`` (a :class:`~causalcity.Key` or a ``(group, split, index)``
     tuple) as a Key; TypeError naming what it is otherwise."""
@@ -295,13 +308,7 @@ class Dataset(_Packed):
                 stacklevel=2,
             )
         self.spec = Spec.from_dict(self.manifest["spec"], networks=self.root / "networks")
-        recorded = self.manifest.get("spec_sha256")
-        if recorded is not None and recorded != self.spec._native.sha256:
-            raise InputError(
-                f"{_os.fspath(manifest)}: its spec does not hash to its spec_sha256 ({str(recorded)[:12]} recorded, "
-                f"{self.spec._native.sha256[:12]} now): it was edited after gen wrote the dataset, so it no longer "
-                "describes the scenarios on disk; restore it (or regenerate)"
-            )
+        _check_spec_hash(self.spec, self.manifest, manifest, "gen wrote the dataset", "scenarios")
         self.images = bool(self.manifest.get("images", False))
         self.split = split
         """The split it holds (all when None)."""
@@ -506,6 +513,7 @@ class Sweep(_Packed):
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
         self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
+        _check_spec_hash(self.spec, self.record, record, "the sweep was run", "pairs")
         self.scenarios_per_tar: Optional[int] = self.record.get("scenarios_per_tar")
         """``--format tar``: pairs per tar file (None: a folder per pair)."""
         self._index_packs(self.spec.keys(None, self.record.get("limit")) if self.scenarios_per_tar else [])

@@ -276,6 +276,23 @@ def test_a_sweeps_divergence_csv_is_read_as_written_or_named(tmp_path):
         sweep.load(("cars08_edges50/../..", "train", 0))
 
 
+def test_a_sweep_whose_spec_was_edited_is_refused(tmp_path):
+    # sweep.json recorded no hash: a sweep edited to another seed opened,
+    # and simulate(sweep.spec, key) no longer gave its factual runs.
+    root = tmp_path / "sweep"
+    shutil.copytree(DATA / "sweep", root)
+    record = json.loads((root / "sweep.json").read_text())
+    assert record["spec_sha256"] == causalcity.open_sweep(root).spec._native.sha256
+    record["spec"]["seed"] += 1
+    (root / "sweep.json").write_text(json.dumps(record))
+    with pytest.raises(causalcity.InputError, match=r"sweep\.json: its spec does not hash to its spec_sha256"):
+        causalcity.open_sweep(root)
+    # A sweep from before the hash was recorded opens as it did.
+    del record["spec_sha256"]
+    (root / "sweep.json").write_text(json.dumps(record))
+    assert causalcity.open_sweep(root).keys()
+
+
 def test_a_renamed_interactions_column_is_named(tmp_path):
     # interactions.csv's header was not read: a renamed column loaded as if
     # it were the one expected (poses.csv's header was checked).

@@ -277,17 +277,25 @@ impl Dataset {
 /// seed simulates others; smaller splits hide some).
 pub fn expansion_of(record: &ManifestRecord, path: &Path) -> Result<Expansion, String> {
     let expansion = expansion_from(record.spec.clone(), path)?;
-    let hashed = crate::output::manifest::spec_sha256(&expansion.spec);
-    if hashed != record.spec_sha256 {
-        return Err(format!(
-            "{}: its spec does not hash to its spec_sha256 ({} recorded, {} now): it was edited after gen wrote \
-             the dataset, so it no longer describes the scenarios on disk; restore it (or regenerate)",
-            path.display(),
-            crate::output::short_hash(&record.spec_sha256),
-            crate::output::short_hash(&hashed)
-        ));
-    }
+    check_spec_hash(&expansion, &record.spec_sha256, path, "gen wrote the dataset", "scenarios")?;
     Ok(expansion)
+}
+
+/// Refuses a record (at `path`) whose spec no longer hashes to the
+/// `spec_sha256` it recorded: edited after `who` (its writer), so that it
+/// describes other `what` than the ones on disk.
+fn check_spec_hash(expansion: &Expansion, recorded: &str, path: &Path, who: &str, what: &str) -> Result<(), String> {
+    let hashed = crate::output::manifest::spec_sha256(&expansion.spec);
+    if hashed == recorded {
+        return Ok(());
+    }
+    Err(format!(
+        "{}: its spec does not hash to its spec_sha256 ({} recorded, {} now): it was edited after {who}, so it no \
+         longer describes the {what} on disk; restore it (or regenerate)",
+        path.display(),
+        crate::output::short_hash(recorded),
+        crate::output::short_hash(&hashed)
+    ))
 }
 
 /// The expansion of a spec recorded (as JSON) in the file at `path`.
@@ -587,6 +595,9 @@ impl Sweep {
             lights: crate::output::manifest::LightsLog,
             #[serde(default)]
             scenarios_per_tar: Option<u32>,
+            /// The spec's hash (sweeps from before it was recorded lack it).
+            #[serde(default)]
+            spec_sha256: Option<String>,
         }
         fn finished() -> bool {
             true
@@ -601,6 +612,9 @@ impl Sweep {
             ));
         }
         let expansion = expansion_from(record.spec, &path)?;
+        if let Some(recorded) = &record.spec_sha256 {
+            check_spec_hash(&expansion, recorded, &path, "the sweep was run", "pairs")?;
+        }
         let packing = match record.scenarios_per_tar {
             None => crate::output::manifest::Packing::Folders,
             Some(0) => {

@@ -494,6 +494,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             "format": "causalcity-counterfactual-sweep/1",
             "version": env!("CARGO_PKG_VERSION"),
             "spec": expansion.spec,
+            "spec_sha256": crate::output::manifest::spec_sha256(&expansion.spec),
             "limit": options.limit,
             "kinds": options.kinds,
             "images": options.products.images,
