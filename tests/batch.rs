@@ -222,6 +222,15 @@ fn three_shards_merged_equal_one_run() {
     let output = run(&["merge", "--out", partial.to_str().unwrap()]);
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("shards 1, 2 of 3 are missing"));
+
+    // A shard finished by a whole run: the dataset one run writes, without
+    // the shard's manifest (left behind, merge took it for a job to finish,
+    // and validate ignored it).
+    gen_ok(&spec, &partial, &["--quiet"]);
+    assert!(!partial.join("shards").exists(), "the shard manifest outlived the whole run");
+    assert_eq!(hash_tree(&partial), expected);
+    let (code, text) = validate_dir(&partial);
+    assert_eq!(code, 0, "{text}");
 }
 
 #[test]

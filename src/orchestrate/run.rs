@@ -454,6 +454,27 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     Ok(())
 }
 
+/// Once a whole (unsharded) run has completed `out`, removes the manifests
+/// of `gen --shard` runs of the same dataset found there when it started:
+/// their scenarios are now the dataset's, listed by its manifest, as after
+/// a merge (left behind, they were offered to `merge` as a job to finish).
+/// Shards run under a shared lock, which the whole run's excludes.
+fn remove_finished_shards(out: &Path, existing: &[(PathBuf, ManifestRecord)]) -> Result<(), GenError> {
+    for (path, _) in existing.iter().filter(|(_, record)| record.shard.is_some()) {
+        match std::fs::remove_file(path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io_err(path)(e).into()),
+            _ => {}
+        }
+    }
+    let shards = out.join("shards");
+    if std::fs::symlink_metadata(&shards).is_ok_and(|m| m.is_dir())
+        && std::fs::read_dir(&shards).is_ok_and(|mut d| d.next().is_none())
+    {
+        std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
+    }
+    Ok(())
+}
+
 /// Collects into `foreign` every path under a group folder that no run
 /// wrote: anything but split folders of scenario folders (each file listed
 /// in its checksums, or the listing itself) and hidden leftovers of
@@ -936,6 +957,9 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     }
     let final_manifest = manifest(true);
     write_atomically(&manifest_file, &final_manifest)?;
+    if options.shard.is_none() {
+        remove_finished_shards(&out, &existing)?;
+    }
     let written = written.load(Ordering::Relaxed);
     Ok(Summary {
         out,
