@@ -1050,7 +1050,10 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             if found.problems.is_empty() {
                 Ok(())
             } else {
-                Err(Error::Failure(format!("{} problems found", found.problems.len())))
+                Err(Error::Failure(match found.problems.len() {
+                    1 => "1 problem found".to_string(),
+                    n => format!("{n} problems found"),
+                }))
             }
         }
     }

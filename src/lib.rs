@@ -2,7 +2,7 @@
 //! reasoning. Data flows one way, and every layer imports only the ones
 //! before it:
 //!
-//! [`json`], [`geometry`], [`camera`], [`map`] -> [`spec`] -> [`plan`] -> [`world`] ->
+//! [`json`], [`input`], [`geometry`], [`camera`], [`map`] -> [`spec`] -> [`plan`] -> [`world`] ->
 //! [`render`] -> [`output`] -> [`dataset`], [`validate`], [`analysis`],
 //! [`export`], [`preview`] -> [`orchestrate`].
 //!
@@ -16,6 +16,7 @@ pub mod dataset;
 pub mod error;
 pub mod export;
 pub mod geometry;
+pub mod input;
 pub mod json;
 pub mod map;
 pub mod map_view;

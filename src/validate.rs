@@ -159,7 +159,11 @@ impl fmt::Display for ValidationReport {
             self.files_checked,
             self.bytes_read as f64 / 1e6,
             self.seconds,
-            if self.problems.is_empty() { "valid".to_string() } else { format!("{} problems", self.problems.len()) }
+            match self.problems.len() {
+                0 => "valid".to_string(),
+                1 => "1 problem".to_string(),
+                n => format!("{n} problems"),
+            }
         )
     }
 }
@@ -562,7 +566,13 @@ enum ScenarioFiles<'a> {
 impl ScenarioFiles<'_> {
     fn read(&self, dir: &Path, name: &str) -> std::io::Result<Vec<u8>> {
         match self {
-            ScenarioFiles::Folder => std::fs::read(dir.join(name)),
+            // Never through a link (named as one), nor from a pipe or a device.
+            ScenarioFiles::Folder => match std::fs::symlink_metadata(dir.join(name)) {
+                Ok(m) if m.is_symlink() => {
+                    Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "a symbolic link, not followed"))
+                }
+                _ => crate::input::read_data(&dir.join(name)),
+            },
             ScenarioFiles::Members(members) => members
                 .get(name)
                 .cloned()
@@ -591,6 +601,18 @@ impl ScenarioFiles<'_> {
 
 fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> ScenarioCheck {
     let dir = scenario_dir(root, &key.group, key.split.name(), &key.folder_name());
+    // A dataset holds its own folders: a linked one is not checked through
+    // (gen refuses to write through it).
+    let linked = [dir.parent().and_then(Path::parent), dir.parent(), Some(dir.as_path())]
+        .into_iter()
+        .flatten()
+        .find(|folder| std::fs::symlink_metadata(folder).is_ok_and(|m| m.is_symlink()));
+    if let Some(folder) = linked {
+        let message = "a symbolic link: a dataset holds its own folders, never links (replace it with the folder \
+                       it points to, or rerun gen into a new folder)"
+            .to_string();
+        return (vec![Problem { path: folder.to_path_buf(), message }], 0, 0, Vec::new());
+    }
     if !dir.is_dir() {
         let message = "missing scenario folder: rerun gen to write it".to_string();
         return (vec![Problem { path: dir, message }], 0, 0, Vec::new());
@@ -742,12 +764,10 @@ fn check_scenario_files(
             let ok = cars > 0 && frame == i / cars && car == i % cars;
             ok.then_some(()).ok_or(()).ok()
         });
-        if read(PIXELS_FILE, &mut problems).is_some() {
-            let pixels = source
-                .read(&dir, PIXELS_FILE)
-                .map_err(|e| format!("cannot read {}: {e}", dir.join(PIXELS_FILE).display()));
-            if let Err(message) = pixels.and_then(|pixels| check_pixels(&dir, &pixels, &data, frames, cars)) {
-                problems.push(Problem { path: dir.join(PIXELS_FILE), message });
+        if let Some(pixels) = read(PIXELS_FILE, &mut problems) {
+            if let Err(message) = check_pixels(&dir, &pixels, &data, frames, cars) {
+                let path = dir.join(PIXELS_FILE);
+                problems.push(Problem { message: without_path(message, &path), path });
             }
         }
     }
@@ -763,7 +783,7 @@ fn check_scenario_files(
                     path,
                     message: format!("{} lights at frame 0, expected {lights_per_frame}", read.names.len()),
                 }),
-                Err(message) => problems.push(Problem { path, message }),
+                Err(message) => problems.push(Problem { message: without_path(message, &path), path }),
             }
         }
     } else if city {
@@ -986,6 +1006,15 @@ fn check_effects(
         }
     }
     Ok(())
+}
+
+/// A reader's `message` without the `path: ` it begins with (a problem is
+/// printed after its path).
+fn without_path(message: String, path: &Path) -> String {
+    match message.strip_prefix(&format!("{}: ", path.display())) {
+        Some(rest) => rest.to_string(),
+        None => message,
+    }
 }
 
 /// pixels.npy holds poses.csv's px, py as float32, frame by frame.

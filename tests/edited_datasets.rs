@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{city_spec, fresh_dir, gen_ok, run, write_spec};
+use common::{city_spec, fresh_dir, gen_ok, run, run_within, write_spec};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -184,4 +184,45 @@ fn a_sweep_whose_spec_was_edited_is_refused_and_one_from_before_the_hash_opens()
     });
     let checked = run(&["validate", s(&sweep)]);
     assert!(checked.status.success(), "{}", stderr(&checked));
+}
+
+#[test]
+fn pipes_devices_and_linked_folders_are_refused_by_name_never_read_without_end() {
+    // A spec, manifest or scenario.json that was a pipe hung the command;
+    // one linked to /dev/zero read until memory ran out. A linked scenario
+    // folder validated, though gen refuses to write through it.
+    let dir = fresh_dir("edited-pipes");
+    let data = city(&dir, 20);
+    let fifo = dir.join("pipe.json");
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for args in [vec!["map", "--spec", s(&fifo)], vec!["gen", "--spec", s(&fifo), "--out", s(&dir.join("never"))]] {
+        assert_error(&run_within(&args, 30), 2, "pipe.json: not a regular file (a pipe or a device)");
+    }
+    assert!(!dir.join("never").exists());
+    let piped = dir.join("piped");
+    std::fs::create_dir(&piped).unwrap();
+    std::os::unix::fs::symlink(&fifo, piped.join("manifest.json")).unwrap();
+    for command in ["validate", "stats"] {
+        assert_error(&run_within(&[command, s(&piped)], 30), 2, "manifest.json: not a regular file");
+    }
+    // A scenario.json linked to the pipe: named, never read.
+    let linked_file = edited(&data, &dir.join("linked-file"), false, |_| {});
+    let json = linked_file.join("cars04_edges50/train/00000/scenario.json");
+    std::fs::remove_file(&json).unwrap();
+    std::os::unix::fs::symlink(&fifo, &json).unwrap();
+    let checked = run_within(&["validate", s(&linked_file)], 30);
+    assert_eq!(checked.status.code(), Some(1), "{}", stderr(&checked));
+    assert!(String::from_utf8_lossy(&checked.stdout).contains("scenario.json: a symbolic link"));
+    assert_error(&run_within(&["stats", s(&linked_file)], 30), 1, "scenario.json: not a regular file");
+    // A scenario folder that is a link to a good copy: named by validate.
+    let linked_folder = dir.join("linked-folder");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&linked_folder)]).status().unwrap().success());
+    let folder = linked_folder.join("cars04_edges50/test/00000");
+    std::fs::remove_dir_all(&folder).unwrap();
+    std::os::unix::fs::symlink(data.join("cars04_edges50/test/00000"), &folder).unwrap();
+    let checked = run(&["validate", s(&linked_folder)]);
+    assert_eq!(checked.status.code(), Some(1), "a linked scenario folder is not valid: {}", stderr(&checked));
+    let report = String::from_utf8_lossy(&checked.stdout);
+    assert!(report.contains("cars04_edges50/test/00000: a symbolic link"), "{report}");
+    assert!(stderr(&checked).contains("1 problem found"), "{}", stderr(&checked));
 }

@@ -493,7 +493,7 @@ impl PairTruth {
     /// have `cars` cars and `frames` frames.
     fn read(factual_dir: &Path, frame_interval: f64, (cars, frames): (usize, usize)) -> Result<PairTruth, String> {
         let path = factual_dir.parent().unwrap_or(factual_dir).join("summary.json");
-        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bytes = crate::input::read_record(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let summary: PairSummary = serde_json::from_slice(&bytes)
             .map_err(|e| format!("{}: not a counterfactual pair's summary: {e}", path.display()))?;
         let (frame, car) = match &summary.intervention {

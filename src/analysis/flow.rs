@@ -223,7 +223,7 @@ pub fn read_scenario_flow(dir: &Path, map: &CityMap) -> Result<Option<ScenarioFl
     }
     let err = |path: &Path, e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
     let path = dir.join("scenario.json");
-    let scenario: serde_json::Value = std::fs::read(&path)
+    let scenario: serde_json::Value = crate::input::read_record(&path)
         .map_err(|e| err(&path, &e))
         .and_then(|b| serde_json::from_slice(&b).map_err(|e| err(&path, &e)))?;
     let cars: Vec<CarFacts> = scenario["cars"]

@@ -37,7 +37,9 @@ const MAX_ITEM_SIZE: u64 = 8;
 /// an error for a name that has no place in the file. Errors name the file
 /// and, where one is at fault, the array.
 pub fn read_npz(path: &Path, max_values: impl FnMut(&str) -> Result<u64, String>) -> Result<Vec<NamedArray>, String> {
-    let file = std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
+    crate::input::regular_file(path).map_err(cannot)?;
+    let file = std::fs::File::open(path).map_err(cannot)?;
     read_npz_from(std::io::BufReader::new(file), max_values).map_err(|e| format!("{}: {e}", path.display()))
 }
 

@@ -459,7 +459,7 @@ fn red_approaches(
 
 fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, String> {
     let path = dir.join("scenario.json");
-    let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bytes = crate::input::read_record(&path).map_err(|e| format!("{}: {e}", path.display()))?;
     // Checked as every reader checks it (car ids, edges, frames).
     crate::dataset::ScenarioSummary::parse(&bytes, &path, crate::dataset::GraphKind::Designed)?;
     let scenario: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;

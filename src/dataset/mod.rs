@@ -398,7 +398,7 @@ impl ScenarioSummary {
     /// errors name the file (and the field, when the graph is missing).
     pub fn read_graph(dir: &Path, graph: GraphKind) -> Result<ScenarioSummary, String> {
         let path = dir.join("scenario.json");
-        let bytes = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bytes = crate::input::read_record(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         ScenarioSummary::parse(&bytes, &path, graph)
     }
 
@@ -578,7 +578,7 @@ impl Sweep {
     /// an unfinished one rather than refusing it).
     pub fn open_even_unfinished(dir: &Path) -> Result<Option<(Sweep, bool)>, String> {
         let path = dir.join(SWEEP_RECORD);
-        let bytes = match std::fs::read(&path) {
+        let bytes = match crate::input::read_record(&path) {
             Ok(bytes) => bytes,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(format!("cannot read {}: {e}", path.display())),

@@ -21,7 +21,8 @@ use std::path::Path;
 pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
     let summary = ScenarioSummary::read(dir)?;
     let json_path = dir.join("scenario.json");
-    let scenario_json = std::fs::read(&json_path).map_err(|e| format!("cannot read {}: {e}", json_path.display()))?;
+    let scenario_json =
+        crate::input::read_record(&json_path).map_err(|e| format!("cannot read {}: {e}", json_path.display()))?;
     let value: serde_json::Value =
         serde_json::from_slice(&scenario_json).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let (frames, cars) = (summary.frames as usize, summary.cars.len());

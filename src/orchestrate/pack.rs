@@ -89,7 +89,8 @@ fn pack_sweep(
     // it is packed. (Only a finished sweep opens.)
     let path = input.join(SWEEP_RECORD);
     let read = |path: &Path| -> Result<serde_json::Value, GenError> {
-        let bytes = std::fs::read(path).map_err(|e| GenError::Input(format!("cannot read {}: {e}", path.display())))?;
+        let bytes = crate::input::read_record(path)
+            .map_err(|e| GenError::Input(format!("cannot read {}: {e}", path.display())))?;
         serde_json::from_slice(&bytes).map_err(|e| GenError::Input(format!("{}: not JSON: {e}", path.display())))
     };
     let mut record = read(&path)?;

@@ -251,7 +251,7 @@ pub fn write_effects<W: Write>(out: W, report: &EffectReport) -> std::io::Result
 /// exactly when the divergence exceeds `threshold_m`, and `direct` only
 /// with an effect. Rows come back in file order.
 pub fn read_effects(path: &Path, cars: usize, frames: usize, threshold_m: f64) -> Result<Vec<EffectRow>, String> {
-    let data = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let data = crate::input::read_data(path).map_err(|e| format!("{}: {e}", path.display()))?;
     parse_effects(path, &data, cars, frames, threshold_m)
 }
 

@@ -187,7 +187,7 @@ pub struct GroupRecord {
 impl ManifestRecord {
     /// Reads a manifest; `Ok(None)` when there is none.
     pub fn read(path: &Path) -> Result<Option<ManifestRecord>, String> {
-        match std::fs::read(path) {
+        match crate::input::read_record(path) {
             Ok(bytes) => serde_json::from_slice(&bytes)
                 .map(Some)
                 .map_err(|e| format!("{} is not a causalcity manifest: {e}", path.display())),

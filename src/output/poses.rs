@@ -41,7 +41,7 @@ pub fn write_pixels<W: Write>(mut out: W, trajectories: &Trajectories, camera: &
 
 /// Reads a `pixels.npy` of `frames` x `cars`: row-major (px, py) pairs.
 pub fn read_pixels(path: &std::path::Path, frames: usize, cars: usize) -> Result<Vec<f32>, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let bytes = crate::input::read_data(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     parse_pixels(&bytes, path, frames, cars)
 }
 

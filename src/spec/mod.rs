@@ -352,7 +352,7 @@ impl DatasetSpec {
 
     /// Reads, parses and checks a spec file.
     pub fn from_file(path: &Path) -> Result<DatasetSpec, SpecError> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::input::read_record_text(path)
             .map_err(|e| SpecError::new("", format!("cannot read spec file {}: {e}", path.display())))?;
         let mut spec = DatasetSpec::from_json(&text)?;
         spec.read_networks_beside(path)?;

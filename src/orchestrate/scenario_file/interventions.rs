@@ -203,7 +203,7 @@ pub fn load_interventions(
     path: &Path,
     scenarios: &[LoadedScenario],
 ) -> Result<Vec<Vec<Intervention>>, ScenarioFileError> {
-    let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
+    let text = crate::input::read_record_text(path).map_err(|e| unreadable(path, e))?;
     load_interventions_text(path, &text, scenarios)
 }
 

@@ -112,7 +112,7 @@ fn unreadable(path: &Path, e: std::io::Error) -> ScenarioFileError {
 
 /// Reads and checks every scenario of `path`.
 pub fn load(path: &Path, options: FileOptions, map: &Arc<CityMap>) -> Result<Vec<LoadedScenario>, ScenarioFileError> {
-    let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
+    let text = crate::input::read_record_text(path).map_err(|e| unreadable(path, e))?;
     load_text(path, &text, options, map)
 }
 
