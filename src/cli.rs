@@ -21,7 +21,7 @@ use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunO
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::pack::pack_dataset;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
-use causalcity::output::claim::claim_file;
+use causalcity::output::claim::{claim_file, FileKind};
 use causalcity::output::manifest::{LightsLog, Packing, Products};
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
@@ -940,8 +940,9 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     )));
                 }
             }
-            let csv = args.csv.as_deref().map(|path| claim_file(path, &inputs)).transpose()?;
-            let per_scenario = args.per_scenario.as_deref().map(|path| claim_file(path, &inputs)).transpose()?;
+            let claim = |path: &std::path::Path| claim_file(path, &inputs, FileKind::Text);
+            let csv = args.csv.as_deref().map(claim).transpose()?;
+            let per_scenario = args.per_scenario.as_deref().map(claim).transpose()?;
             let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
             if let Some(csv) = csv {
                 csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;

@@ -4,7 +4,7 @@
 
 use crate::error::Error;
 use crate::map::{CityMap, LaneEnd};
-use crate::output::claim::claim_file;
+use crate::output::claim::{claim_file, FileKind};
 use crate::plan::expand::Expansion;
 use crate::render::background::draw_background;
 use crate::render::text::{draw_label, label_size, Canvas};
@@ -113,7 +113,7 @@ pub fn map_view(spec_path: &Path, out: Option<&Path>, town: Option<&str>) -> Res
     let summary =
         MapSummary { picture: out.map(Path::to_path_buf), town: shown.name.clone(), towns, ..map_summary(map) };
     if let Some(out) = out {
-        let file = claim_file(out, &[("the spec it draws", spec_path)])?;
+        let file = claim_file(out, &[("the spec it draws", spec_path)], FileKind::Png)?;
         let camera = shown.camera;
         let mut rgba = draw_background(map, &camera).pixmap.take();
         let mut canvas = Canvas { data: &mut rgba, width: camera.width, height: camera.height, channels: 4 };
@@ -415,7 +415,7 @@ pub fn net_view(net_path: &Path, out: Option<&Path>, longest: u32) -> Result<Net
         picture: out.map(Path::to_path_buf),
     };
     if let Some(out) = out {
-        let file = claim_file(out, &[("the network it draws", net_path)])?;
+        let file = claim_file(out, &[("the network it draws", net_path)], FileKind::Png)?;
         let view = crate::render::network::NetworkView::fitting(&net, longest);
         let mut rgba = crate::render::network::draw_network(&net, &view).take();
         let mut canvas = Canvas { data: &mut rgba, width: view.width, height: view.height, channels: 4 };

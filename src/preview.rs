@@ -7,7 +7,7 @@
 
 use crate::dataset::{PoseLog, ScenarioSummary};
 use crate::error::Error;
-use crate::output::claim::{claim_file, OutputFile};
+use crate::output::claim::{claim_file, FileKind, OutputFile};
 use crate::output::frame_digits;
 use crate::output::png::decode_gray8;
 use crate::render::text::{draw_label, Canvas};
@@ -80,7 +80,11 @@ pub fn preview(scenario_dir: &Path, out: &Path, options: &PreviewOptions) -> Res
         };
         return Err(Error::Input(format!("{} holds no scenario.json{hint}", scenario_dir.display())));
     }
-    let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)])?;
+    let writes = match kind {
+        Kind::Gif => FileKind::Gif,
+        Kind::Sheet => FileKind::Png,
+    };
+    let file = claim_file(out, &[("the scenario folder it previews", scenario_dir)], writes)?;
     render(scenario_dir, &file, options, kind)
 }
 

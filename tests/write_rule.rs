@@ -113,6 +113,19 @@ fn evaluate_csv_never_lands_in_the_dataset_on_its_input_or_through_a_link() {
     assert!(output.status.success(), "{}", stderr(&output));
     let table = std::fs::read_to_string(&csv).unwrap();
     assert!(table.lines().count() > 1 && table.contains("cars04_edges50"), "{table}");
+    // A rerun replaces its own table; a file of another kind is kept (a
+    // spec given as --csv by a slip of the hand was written over).
+    let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&csv)]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let spec = dir.join("spec.json");
+    std::fs::write(&spec, "{\"name\": \"mine\"}\n").unwrap();
+    let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&spec)]);
+    assert_refused(&output, "already holds JSON (such as a spec), and this command writes text");
+    assert_eq!(std::fs::read_to_string(&spec).unwrap(), "{\"name\": \"mine\"}\n");
+    let picture = dir.join("heat.png");
+    std::fs::write(&picture, "frame,score\n0,1\n").unwrap();
+    assert_refused(&run(&["heatmap", s(&data), "--out", s(&picture)]), "already holds text");
+    assert_eq!(std::fs::read_to_string(&picture).unwrap(), "frame,score\n0,1\n");
 }
 
 #[test]

@@ -358,7 +358,7 @@ def run(
     # Refused now, not after hours: an --out inside a dataset or a sweep, or
     # through a link (every file below is written by the same rule), and a
     # link anywhere on the way to what the run writes below --out.
-    _native.claim_output(os.fspath(out / "results.csv"))
+    _native.claim_output(os.fspath(out / "results.csv"), writes="text")
     data_of = {world: out / "data" / (world if not groups else "-".join([world, *chosen[world]])) for world in worlds}
     # What this run writes: the units left, their worlds' data, the tables.
     writes = [p for u in left for p in (_unit_path(out, *u), _predictions_path(out, *u), data_of[u[0]])]

@@ -19,7 +19,7 @@ use causalcity::orchestrate::run::{
 };
 use causalcity::output;
 use causalcity::output::arrays::{batch_frame_buffer, recycle_frame_buffer, ScenarioArrays, LIGHT_COLOURS};
-use causalcity::output::claim::{claim_file, resolve};
+use causalcity::output::claim::{claim_file, resolve, FileKind};
 use causalcity::output::layout::FrameKind;
 use causalcity::plan::{Expansion, ScenarioKey};
 use causalcity::progress::ProgressMode;
@@ -531,13 +531,21 @@ fn generate(
 }
 
 /// Checks by the one write rule (never inside a dataset or sweep, never
-/// onto an input, never through a link) that a file may be written at
-/// `path`; `inputs` are (what, path) of what the caller reads.
+/// onto an input, never through a link, never over a file of another kind)
+/// that a file holding `writes` ("zip", "png", "json" or "text") may be
+/// written at `path`; `inputs` are (what, path) of what the caller reads.
 #[pyfunction]
-#[pyo3(signature = (path, inputs=Vec::new()))]
-fn claim_output(path: PathBuf, inputs: Vec<(String, PathBuf)>) -> PyResult<()> {
+#[pyo3(signature = (path, inputs=Vec::new(), writes="zip"))]
+fn claim_output(path: PathBuf, inputs: Vec<(String, PathBuf)>, writes: &str) -> PyResult<()> {
     let inputs: Vec<(&str, &Path)> = inputs.iter().map(|(what, p)| (what.as_str(), p.as_path())).collect();
-    claim_file(&path, &inputs).map_err(py_err)?;
+    let writes = match writes {
+        "zip" => FileKind::Zip,
+        "png" => FileKind::Png,
+        "json" => FileKind::Json,
+        "text" => FileKind::Text,
+        other => return Err(InputError::new_err(format!("writes={other:?}: use zip, png, json or text"))),
+    };
+    claim_file(&path, &inputs, writes).map_err(py_err)?;
     Ok(())
 }
 
@@ -564,7 +572,7 @@ fn dataset_identity(dir: PathBuf) -> PyResult<String> {
 /// and a rename.
 #[pyfunction]
 fn write_output(py: Python<'_>, path: PathBuf, data: Vec<u8>) -> PyResult<()> {
-    let file = claim_file(&path, &[]).map_err(py_err)?;
+    let file = claim_file(&path, &[], FileKind::of(&data[..data.len().min(4096)])).map_err(py_err)?;
     py.detach(|| file.write(&data)).map_err(|e| GenerationError::new_err(e.to_string()))
 }
 
@@ -587,8 +595,9 @@ fn evaluate(
     if csv.is_some() && csv.as_deref().map(resolve) == per_scenario.as_deref().map(resolve) {
         return Err(InputError::new_err("csv and per_scenario name the same file: give each table its own file"));
     }
-    let csv = csv.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;
-    let per_scenario = per_scenario.map(|path| claim_file(&path, &inputs)).transpose().map_err(py_err)?;
+    let claim = |path: PathBuf| claim_file(&path, &inputs, FileKind::Text);
+    let csv = csv.map(claim).transpose().map_err(py_err)?;
+    let per_scenario = per_scenario.map(claim).transpose().map_err(py_err)?;
     let mut kinds: Vec<GraphKind> = Vec::new();
     for name in &graphs {
         let Some(kind) = GraphKind::ALL.into_iter().find(|k| k.name() == name) else {

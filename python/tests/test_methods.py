@@ -510,6 +510,31 @@ def test_only_pcmci_has_backends(toy, tmp_path, capsys):
     assert not (tmp_path / "g.npz").exists()
 
 
+def test_predictions_never_replace_a_file_of_another_kind(toy, tmp_path, capsys):
+    # `--out` given a spec (or any file that is not an earlier .npz) wrote
+    # the predictions over it, exit 0.
+    from causalcity.methods.__main__ import main
+
+    spec = tmp_path / "spec.json"
+    notes = tmp_path / "notes.txt"
+    spec.write_text(json.dumps(TOY))
+    notes.write_text("my notes\n")
+    for target, held in [(spec, "JSON (such as a spec)"), (notes, "text (such as a CSV table)")]:
+        before = target.read_bytes()
+        assert main(["path", str(toy), "--out", str(target), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert f"already holds {held}, and this command writes a zip archive" in err, err
+        assert target.read_bytes() == before
+        with pytest.raises(causalcity.InputError, match="already holds"):
+            causalcity.save_predictions(target, {"cars06_edges50/test/00000": np.zeros((6, 6))})
+        assert target.read_bytes() == before
+    # An earlier run's predictions are replaced, as before.
+    out = tmp_path / "p.npz"
+    assert main(["path", str(toy), "--out", str(out), "--quiet"]) == 0
+    assert main(["path", str(toy), "--out", str(out), "--quiet"]) == 0
+    assert out.read_bytes()[:4] == b"PK\x03\x04"
+
+
 def test_a_flag_a_method_does_not_take_is_refused_not_ignored(toy, tmp_path, capsys):
     # `path --epochs 5` ran as `path`, the flag ignored without a word.
     from causalcity.methods.__main__ import main

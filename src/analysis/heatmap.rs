@@ -7,7 +7,7 @@
 
 use crate::dataset::Dataset;
 use crate::error::Error;
-use crate::output::claim::{claim_file, OutputFile};
+use crate::output::claim::{claim_file, FileKind, OutputFile};
 use crate::output::png::{encode_png, PixelFormat, PngSettings};
 use crate::render::text::{draw_label, label_size, Canvas};
 use crate::spec::Split;
@@ -102,7 +102,7 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
             filter.split.map_or(String::new(), |s| format!(" in split {}", s.name()))
         )));
     }
-    let file = claim_file(out, &[("the dataset it maps", dataset)])?;
+    let file = claim_file(out, &[("the dataset it maps", dataset)], FileKind::Png)?;
     draw(&opened, &file, filter).map_err(Error::Failure)
 }
 

@@ -563,11 +563,66 @@ pub struct OutputFile {
     path: PathBuf,
 }
 
-/// Checks that a command may write the file `path`: `inputs` are the files
-/// and folders it reads (a dataset, a predictions file, a scenario), each
-/// described for the message (e.g. `("the dataset", path)`). The folder it
-/// goes into is created by [`OutputFile::write`] if missing.
-pub fn claim_file(path: &Path, inputs: &[(&str, &Path)]) -> Result<OutputFile, ClaimError> {
+/// What a single output file holds, told by its first bytes. A file
+/// already at the path is replaced only by one holding the same kind: a
+/// predictions `.npz` never lands on a spec, nor a CSV table on an image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    /// A zip archive (`.npz`).
+    Zip,
+    Png,
+    Gif,
+    /// A JSON object or array.
+    Json,
+    /// Other UTF-8 text (CSV, Markdown).
+    Text,
+    /// Anything else.
+    Binary,
+}
+
+impl FileKind {
+    /// The kind of a file that begins with `head` (its first few KB).
+    pub fn of(head: &[u8]) -> FileKind {
+        if head.starts_with(b"PK\x03\x04") || head.starts_with(b"PK\x05\x06") {
+            return FileKind::Zip;
+        }
+        if head.starts_with(b"\x89PNG\r\n\x1a\n") {
+            return FileKind::Png;
+        }
+        if head.starts_with(b"GIF87a") || head.starts_with(b"GIF89a") {
+            return FileKind::Gif;
+        }
+        // Text cut short at the end of `head` is still text.
+        let text = match std::str::from_utf8(head) {
+            Ok(text) => text,
+            Err(e) if e.error_len().is_none() => std::str::from_utf8(&head[..e.valid_up_to()]).unwrap_or_default(),
+            Err(_) => return FileKind::Binary,
+        };
+        match text.trim_start().chars().next() {
+            Some('{' | '[') => FileKind::Json,
+            _ => FileKind::Text,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            FileKind::Zip => "a zip archive (such as an .npz)",
+            FileKind::Png => "a PNG image",
+            FileKind::Gif => "a GIF",
+            FileKind::Json => "JSON (such as a spec)",
+            FileKind::Text => "text (such as a CSV table)",
+            FileKind::Binary => "binary data",
+        }
+    }
+}
+
+/// Checks that a command may write the file `path`, holding `writes`:
+/// `inputs` are the files and folders it reads (a dataset, a predictions
+/// file, a scenario), each described for the message (e.g. `("the
+/// dataset", path)`). A file already there is replaced only if it holds
+/// the same kind of contents (an earlier run's output), or nothing. The
+/// folder it goes into is created by [`OutputFile::write`] if missing.
+pub fn claim_file(path: &Path, inputs: &[(&str, &Path)], writes: FileKind) -> Result<OutputFile, ClaimError> {
     let not_a_file = |why: String| Err(ClaimError::BadPath { path: path.to_path_buf(), why });
     let named = path.file_name().is_some_and(|n| n != "." && n != "..");
     if !named {
@@ -594,7 +649,27 @@ pub fn claim_file(path: &Path, inputs: &[(&str, &Path)]) -> Result<OutputFile, C
             return Err(ClaimError::OwnInput { path: path.to_path_buf(), what: format!("inside {what}") });
         }
     }
+    if let Some(held) = existing_kind(path).filter(|held| *held != writes) {
+        return not_a_file(format!(
+            "already holds {}, and this command writes {} there: nothing is replaced. Remove it, or choose another \
+             path",
+            held.name(),
+            writes.name()
+        ));
+    }
     Ok(OutputFile { path: path.to_path_buf() })
+}
+
+/// The kind of the regular file at `path` (`None`: no file, or an empty one).
+fn existing_kind(path: &Path) -> Option<FileKind> {
+    use std::io::Read;
+    let metadata = fs::symlink_metadata(path).ok()?;
+    if !metadata.is_file() || metadata.len() == 0 {
+        return None;
+    }
+    let mut head = Vec::with_capacity(4096);
+    File::open(path).ok()?.take(4096).read_to_end(&mut head).ok()?;
+    Some(FileKind::of(&head))
 }
 
 impl OutputFile {
