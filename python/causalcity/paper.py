@@ -408,7 +408,18 @@ def run(
         mine = [u for u in units if u[0] == world]
         if any(u in left for u in mine):
             say(f"generating {world}: {spec.splits} per group into {data}")
-            generate(spec, data, images=False, progress=not quiet)
+            try:
+                generate(spec, data, images=False, progress=not quiet)
+            except InputError as e:
+                if "made differently" not in str(e):
+                    raise
+                # (gen's own advice, --force, is not a flag of this command.)
+                differences = str(e).split("\n")[1:-1]
+                raise InputError(
+                    f"{data} holds {world} data made with another setting:\n" + "\n".join(differences)
+                    + f"\nUse another --out, or remove {data} to generate it again (the finished units under "
+                    f"{out / 'units'} are kept either way)"
+                ) from None
             timings[f"{world}/generate"] = time.monotonic() - start
         else:
             say(f"every {world} unit finished earlier: its data is not needed")
@@ -490,7 +501,13 @@ def _read_unit(path: Path, key: dict) -> Optional[dict]:
         record = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return record if isinstance(record, dict) and record.get("key") == json.loads(json.dumps(key)) else None
+    if not isinstance(record, dict) or record.get("key") != json.loads(json.dumps(key)):
+        return None
+    # Rows as _rows makes them, and the unit's time: else it is run again.
+    rows, seconds = record.get("rows"), record.get("seconds")
+    whole = isinstance(rows, list) and all(isinstance(r, dict) and set(COLUMNS) <= r.keys() for r in rows)
+    timed = isinstance(seconds, (int, float)) and not isinstance(seconds, bool)
+    return record if whole and timed else None
 
 
 def _write_unit(path: Path, record: dict) -> None:
@@ -712,6 +729,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         except ValueError:
             print(f"error: --splits {args.splits!r}: give train/val/test counts, e.g. 40/10/10", file=sys.stderr)
             return 2
+        if train < 1 or val < 0 or test < 1:
+            print(f"error: --splits {args.splits!r}: give at least 1 train and 1 test scenario per group (and 0 or "
+                  "more val), e.g. 40/10/10", file=sys.stderr)  # fmt: skip
+            return 2
         splits = {"train": train, "val": val, "test": test}
         setting = dataclasses.replace(setting, splits=splits)
     if args.epochs is not None:
@@ -726,6 +747,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (InputError, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Each finished unit is on disk; the one cut off is run again.
+        print(f"\ninterrupted: the finished units are kept in {out / 'units'}; rerun the same command to go on",
+              file=sys.stderr)  # fmt: skip
+        return 130
     if args.plan:
         return 0
     print((out / "results.md").read_text())

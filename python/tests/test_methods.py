@@ -312,6 +312,43 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
     redone = [p for p in predictions if p.stat().st_mtime_ns != stamps[p]]
     assert [p.relative_to(out).as_posix() for p in redone] == ["predictions/toy/frame0/cars08_edges50.npz"]
     assert (out / "results.csv").read_bytes() == table
+    # A record whose key is right but whose rows are not (edited by hand,
+    # or written by another version): run again (it raised KeyError).
+    record = out / "units" / "toy" / "path" / "cars04_edges50.json"
+    for rows in ([{"bad": 1}], "notalist"):
+        record.write_text(json.dumps({**json.loads(record.read_text()), "rows": rows}))
+        third = run()
+        assert third.count("kept from an earlier run") == 9 and third.count("done in") == 1, third
+        assert (out / "results.csv").read_bytes() == table
+
+
+def test_the_paper_says_what_to_do_when_cut_off_or_given_other_splits(tmp_path, capsys, monkeypatch):
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "paper"
+    base = ["--world", "toy", "--method", "path", "--group", "cars04_edges50", "--out", str(out), "--quiet"]
+    # Splits without train or test scenarios: refused before any data (it
+    # generated the data, then failed, and the next try was refused).
+    for splits in ("0/1/1", "2/1/0"):
+        assert paper.main(["--splits", splits, *base]) == 2
+        assert "give at least 1 train and 1 test scenario" in capsys.readouterr().err
+        assert not out.exists()
+    assert paper.main(["--splits", "3/1/1", *base]) == 0
+    capsys.readouterr()
+    # Other splits into the same --out: the advice is this command's (it
+    # said "--force", which paper does not take).
+    assert paper.main(["--splits", "4/1/1", *base]) == 2
+    err = capsys.readouterr().err
+    assert "made with another setting" in err and "remove" in err and "--force" not in err, err
+    # Ctrl-C: one line and exit 130 (a traceback before), the finished units kept.
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(paper, "generate", interrupted)
+    assert paper.main(["--splits", "5/1/1", *base]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted: the finished units are kept" in err and "Traceback" not in err, err
 
 
 def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, capsys, monkeypatch):
