@@ -572,6 +572,28 @@ def test_predictions_never_replace_a_file_of_another_kind(toy, tmp_path, capsys)
     assert out.read_bytes()[:4] == b"PK\x03\x04"
 
 
+def test_the_methods_command_names_bad_numbers_by_flag_and_a_dataset_that_is_not_a_folder(toy, tmp_path, capsys):
+    # "--lr nan" said "lr=nan ..." (the Python keyword), and an empty
+    # dataset path said that --out lay inside the dataset it reads.
+    from causalcity.methods.__main__ import main
+
+    out = tmp_path / "p.npz"
+    for flags, says in [
+        (["--lr", "nan"], "argument --lr: nan is not allowed: use a finite number"),
+        (["--time-limit", "-5"], "argument --time-limit: -5 is not allowed: use a number above 0"),
+        (["--kl-weight", "-1"], "argument --kl-weight: -1 is not allowed: use a number from 0 up"),
+    ]:
+        with pytest.raises(SystemExit) as exit:
+            main(["nri", str(toy), "--out", str(out), *flags])
+        assert exit.value.code == 2 and says in capsys.readouterr().err
+    (tmp_path / "file.txt").write_text("x")
+    for dataset, says in [("", "an empty path"), (str(tmp_path / "none"), "no such folder"),
+                          (str(tmp_path / "file.txt"), "a file")]:  # fmt: skip
+        assert main(["path", dataset, "--out", str(out)]) == 2
+        assert f"{says}: give the folder gen" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_a_flag_a_method_does_not_take_is_refused_not_ignored(toy, tmp_path, capsys):
     # `path --epochs 5` ran as `path`, the flag ignored without a word.
     from causalcity.methods.__main__ import main

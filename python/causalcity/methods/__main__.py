@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Optional, Sequence
 
 from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make, user_method_takes
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .classical import Pcmci
-from .common import DatasetError, positive_int as _positive, run_method
+from .common import DatasetError, non_negative_float, positive_float, positive_int as _positive, run_method
 
 
 # The flags that set up one method or another, and the reference methods
@@ -72,18 +73,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--epochs", type=_positive, help="nri, nri_trail, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", help="nri, interaction, cf_nri, your own class: cpu, cuda or auto (default)")
     parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; use 128 or more on a GPU)")
-    parser.add_argument("--lr", type=float, help="nri, interaction: Adam's learning rate (default 1e-3)")
+    parser.add_argument("--lr", type=positive_float, help="nri, interaction: Adam's learning rate (default 1e-3)")
     parser.add_argument("--decoder", choices=["rnn", "mlp", "trail"],
                         help="nri, interaction: rnn (default, with memory), mlp (NRI's Markovian springs decoder) or "
                              "trail (a message says what the sender did where the receiver is now; nri_trail's)")
     parser.add_argument("--encoder-input", choices=["pairs", "nodes", "both", "heading"],
                         help="nri: pairs (default), nodes (NRI's: each car's own states), both, or heading (each "
                              "pair's relative positions in the receiver's heading frame; nri_trail's)")
-    parser.add_argument("--time-limit", type=float, metavar="SECONDS",
+    parser.add_argument("--time-limit", type=positive_float, metavar="SECONDS",
                         help="nri, interaction: stop training after the epoch that reaches this many seconds")
     parser.add_argument("--lr-schedule", choices=["constant", "cosine"],
                         help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
-    parser.add_argument("--kl-weight", type=float, metavar="W",
+    parser.add_argument("--kl-weight", type=non_negative_float, metavar="W",
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
     parser.add_argument("--backend", choices=Pcmci.BACKENDS,
                         help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
@@ -101,6 +102,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"error: {not_taken}", file=sys.stderr)
         return 2
     args.device = args.device or "auto"
+    # (An empty path names the working folder, which then held --out.)
+    if not args.dataset or not Path(args.dataset).is_dir():
+        what = "an empty path" if not args.dataset else "no such folder" if not Path(args.dataset).exists() else "a file"
+        print(f"error: dataset {args.dataset!r}: {what}: give the folder gen (or counterfactual --sweep) wrote",
+              file=sys.stderr)  # fmt: skip
+        return 2
     if is_user_method(args.method):
         options.update(device=args.device, seed=args.seed, quiet=args.quiet)
     elif args.method in ("nri", "interaction", "nri_trail"):

@@ -136,6 +136,39 @@ def _scenario_arrays(folder: Path) -> Tuple[dict, np.ndarray, np.ndarray]:
     return meta, pixels, metres
 
 
+def positive_float(text: str) -> float:
+    """A finite number above 0, for argparse."""
+    import argparse
+
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text} is not allowed: use a number above 0")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number of 0 or more, for argparse."""
+    import argparse
+
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text} is not allowed: use a number from 0 up")
+    return value
+
+
+def _finite(text: str) -> float:
+    import argparse
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} is not allowed: use a finite number")
+    return value
+
+
 def positive_int(text: str) -> int:
     """A whole number >= 1, for argparse (which then exits 2 with the message)."""
     import argparse
