@@ -226,3 +226,22 @@ fn pipes_devices_and_linked_folders_are_refused_by_name_never_read_without_end()
     assert!(report.contains("cars04_edges50/test/00000: a symbolic link"), "{report}");
     assert!(stderr(&checked).contains("1 problem found"), "{}", stderr(&checked));
 }
+
+#[test]
+fn gen_into_a_folder_whose_manifest_is_not_causalcitys_is_bad_input() {
+    // Exit 1 (a failure while running) before; the folder given is the
+    // problem, as validate and stats say with exit 2.
+    let dir = fresh_dir("edited-foreign-manifest");
+    let spec = write_spec(&dir, &city_spec("foreign", &[(4, 0.5)], (1, 1, 1), 10, "{}"));
+    let out = dir.join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("manifest.json"), "{\"name\": \"my web app\"}").unwrap();
+    for force in [false, true] {
+        let mut args = vec!["gen", "--spec", s(&spec), "--out", s(&out), "--quiet"];
+        if force {
+            args.push("--force");
+        }
+        assert_error(&run(&args), 2, "manifest.json is not a causalcity manifest");
+        assert_eq!(std::fs::read_to_string(out.join("manifest.json")).unwrap(), "{\"name\": \"my web app\"}");
+    }
+}

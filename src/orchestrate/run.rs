@@ -166,6 +166,8 @@ pub enum GenError {
         size_in_words(SPACE_MARGIN_BYTES)
     )]
     Space { out: PathBuf, needed: u64, available: u64, per_scenario: u64, pending: u64 },
+    /// A manifest in the output that is unreadable or not causalcity's:
+    /// the folder given is the problem (exit 2).
     #[error("{0}")]
     Manifest(String),
     #[error("interrupted: {done} of {total} scenarios are complete in {out}. Rerun the same command to resume.")]
@@ -204,7 +206,11 @@ impl GenError {
     /// 2 for bad input, 130 when interrupted, 1 for failures while running.
     pub fn exit_code(&self) -> i32 {
         match self {
-            GenError::Spec { .. } | GenError::Mixed { .. } | GenError::Input(_) | GenError::Space { .. } => 2,
+            GenError::Spec { .. }
+            | GenError::Mixed { .. }
+            | GenError::Input(_)
+            | GenError::Space { .. }
+            | GenError::Manifest(_) => 2,
             GenError::Claim(e) => e.exit_code(),
             GenError::Interrupted { .. } => 130,
             _ => 1,
