@@ -531,6 +531,9 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("frames-text", &frames, &["field `frames`", "string \"ten\", expected a whole number"]);
     let interval = with(|v| v["frame_interval"] = "x".into());
     rejected("interval-text", &interval, &["field `frame_interval`", "string \"x\", expected a number"]);
+    // 1e-300 s was taken, and stats printed speeds of 300 digits.
+    let interval = with(|v| v["frame_interval"] = 1e-300.into());
+    rejected("interval-tiny", &interval, &["field `frame_interval`", "1e-300 is not allowed", "from 0.001 to 10"]);
     let proportion = with(|v| v["groups"][0]["edge_proportion"] = 0.25.into()).replace("0.25", "1e308");
     rejected("proportion-1e308", &proportion, &["groups[0].edge_proportion", "1e308 is not allowed"]);
     rejected(
