@@ -245,3 +245,35 @@ fn gen_into_a_folder_whose_manifest_is_not_causalcitys_is_bad_input() {
         assert_eq!(std::fs::read_to_string(out.join("manifest.json")).unwrap(), "{\"name\": \"my web app\"}");
     }
 }
+
+#[test]
+fn stats_and_heatmap_read_poses_and_events_as_every_reader_does() {
+    // An emptied poses.csv gave speeds of 0, a NaN speed printed NaN, and a
+    // header-less events.csv counted no events: exit 0 each time.
+    let dir = fresh_dir("edited-stats-logs");
+    let data = city(&dir, 20);
+    let copy = |name: &str, file: &str, edit: &dyn Fn(String) -> String| {
+        let to = dir.join(name);
+        assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&to)]).status().unwrap().success());
+        let path = to.join("cars04_edges50/train/00000").join(file);
+        std::fs::write(&path, edit(std::fs::read_to_string(&path).unwrap())).unwrap();
+        to
+    };
+    let emptied = copy("emptied", "poses.csv", &|_| String::new());
+    let nan = copy("nan", "poses.csv", &|text| {
+        let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+        let mut fields: Vec<&str> = lines[1].split(',').collect();
+        fields[11] = "NaN";
+        lines[1] = fields.join(",");
+        lines.join("\n") + "\n"
+    });
+    let no_header = copy("no-header", "events.csv", &|_| String::new());
+    let heat = dir.join("heat.png");
+    for (copy, says) in [(&emptied, "poses.csv (0 bytes) can hold"), (&nan, "poses.csv: row 2 is not a pose")] {
+        assert_error(&run(&["stats", s(copy)]), 1, says);
+        assert_error(&run(&["heatmap", s(copy), "--out", s(&heat)]), 1, says);
+        assert!(!heat.exists(), "no picture of a damaged dataset");
+    }
+    assert_error(&run(&["stats", s(&no_header)]), 1, "events.csv: columns [], expected frame,t,kind");
+    assert!(run(&["stats", s(&data)]).status.success());
+}

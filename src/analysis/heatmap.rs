@@ -119,7 +119,7 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
         for split in Split::ALL.into_iter().filter(|s| filter.split.is_none_or(|f| f == *s)) {
             let split_counts = opened.with_split(&group, split, |dirs| {
                 scenarios += dirs.len();
-                dirs.par_iter().map(|d| count_cells(&d.join("poses.csv"), cw, ch)).try_reduce(
+                dirs.par_iter().map(|d| count_cells(d, cw, ch)).try_reduce(
                     || vec![0u64; cw * ch],
                     |mut a, b| {
                         a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
@@ -209,17 +209,15 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
     })
 }
 
-fn count_cells(poses: &Path, cw: usize, ch: usize) -> Result<Vec<u64>, String> {
+/// The poses of the scenario in `dir` counted per `CELL_PX` cell, read as
+/// every reader reads them (every frame of every car of its scenario.json,
+/// once, finite; an empty or edited log was counted as it came).
+fn count_cells(dir: &Path, cw: usize, ch: usize) -> Result<Vec<u64>, String> {
     let mut counts = vec![0u64; cw * ch];
-    let mut reader = csv::Reader::from_path(poses).map_err(|e| format!("{}: {e}", poses.display()))?;
-    for row in reader.records() {
-        let row = row.map_err(|e| format!("{}: {e}", poses.display()))?;
-        let (Some(px), Some(py)) =
-            (row.get(9).and_then(|v| v.parse::<f64>().ok()), row.get(10).and_then(|v| v.parse::<f64>().ok()))
-        else {
-            return Err(format!("{}: malformed row", poses.display()));
-        };
-        let (cx, cy) = ((px + 0.5) / CELL_PX as f64, (py + 0.5) / CELL_PX as f64);
+    let summary = crate::dataset::ScenarioSummary::read(dir)?;
+    let log = crate::dataset::PoseLog::read(dir, summary.frames as usize, summary.cars.len())?;
+    for pose in (0..log.frames).flat_map(|frame| log.frame(frame)) {
+        let (cx, cy) = ((pose.px + 0.5) / CELL_PX as f64, (pose.py + 0.5) / CELL_PX as f64);
         if cx >= 0.0 && cy >= 0.0 && (cx as usize) < cw && (cy as usize) < ch {
             counts[cy as usize * cw + cx as usize] += 1;
         }

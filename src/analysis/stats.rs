@@ -461,7 +461,7 @@ fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, St
     let path = dir.join("scenario.json");
     let bytes = crate::input::read_record(&path).map_err(|e| format!("{}: {e}", path.display()))?;
     // Checked as every reader checks it (car ids, edges, frames).
-    crate::dataset::ScenarioSummary::parse(&bytes, &path, crate::dataset::GraphKind::Designed)?;
+    let summary = crate::dataset::ScenarioSummary::parse(&bytes, &path, crate::dataset::GraphKind::Designed)?;
     let scenario: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
     // The scenario's town (a dataset of several names it), else the only one.
     let map: &CityMap = match scenario["town"].as_str() {
@@ -477,30 +477,24 @@ fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, St
     let cars = scenario["cars"].as_array().map_or(0, Vec::len);
     let to_px = scenario["frame_interval"].as_f64().unwrap_or(0.0)
         * scenario["camera"]["pixels_per_metre"].as_f64().unwrap_or(0.0);
-    let poses_path = dir.join("poses.csv");
-    let mut reader = csv::Reader::from_path(&poses_path).map_err(|e| format!("{}: {e}", poses_path.display()))?;
+    // Every frame of every car, once, as every reader takes it (an empty
+    // or edited log gave speeds of 0 or NaN before).
+    let log = crate::dataset::PoseLog::read(dir, summary.frames as usize, cars)?;
     // Per car: (x, y, speed px/frame) per frame.
-    let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); cars];
+    let mut tracks: Vec<Vec<(f64, f64, f64)>> = vec![Vec::with_capacity(log.frames); cars];
     let red = red_approaches(dir, &scenario)?;
     let causal = CausalTally::of_scenario(&scenario);
     let mut t =
         Tally { cars, histogram: vec![0; HISTOGRAM_BINS], causal, px_per_frame_per_m_s: to_px, ..Tally::default() };
-    for row in reader.records() {
-        let row = row.map_err(|e| format!("{}: {e}", poses_path.display()))?;
-        let num = |i: usize| row.get(i).and_then(|v| v.parse::<f64>().ok());
-        let (Some(car), Some(x), Some(y), Some(speed), Some(view)) = (num(2), num(3), num(4), num(11), num(12)) else {
-            return Err(format!("{}: malformed row", poses_path.display()));
-        };
-        let car = car as usize;
-        if car >= cars {
-            return Err(format!("{}: car {car} is not in scenario.json", poses_path.display()));
+    for frame in 0..log.frames {
+        for (car, pose) in log.frame(frame).iter().enumerate() {
+            let px = pose.speed * to_px;
+            tracks[car].push((pose.x, pose.y, px));
+            t.car_frames += 1;
+            t.speed_sum += px;
+            t.histogram[((px / HISTOGRAM_BIN_PX).round() as usize).min(HISTOGRAM_BINS - 1)] += 1;
+            t.in_view += pose.in_view as usize;
         }
-        let px = speed * to_px;
-        tracks[car].push((x, y, px));
-        t.car_frames += 1;
-        t.speed_sum += px;
-        t.histogram[((px / HISTOGRAM_BIN_PX).round() as usize).min(HISTOGRAM_BINS - 1)] += 1;
-        t.in_view += (view > 0.5) as usize;
     }
     let hw = map.layout.road_half_width();
     // The intersection arm a point stands on, as (intersection, the side
@@ -556,6 +550,15 @@ fn tally(dir: &Path, towns: &[crate::plan::expand::Planner]) -> Result<Tally, St
     let events = dir.join("events.csv");
     if events.exists() {
         let mut reader = csv::Reader::from_path(&events).map_err(|e| format!("{}: {e}", events.display()))?;
+        let columns = reader.headers().map_err(|e| format!("{}: {e}", events.display()))?;
+        if !columns.iter().eq(crate::output::logs::EVENT_COLUMNS.iter().copied()) {
+            return Err(format!(
+                "{}: columns {:?}, expected {}",
+                events.display(),
+                columns.iter().collect::<Vec<_>>(),
+                crate::output::logs::EVENT_COLUMNS.join(",")
+            ));
+        }
         let mut changers = std::collections::BTreeSet::new();
         for row in reader.records() {
             let row = row.map_err(|e| format!("{}: {e}", events.display()))?;

@@ -515,7 +515,8 @@ impl PoseLog {
             else {
                 return Err(bad());
             };
-            if frame >= frames || car >= cars || filled[frame * cars + car] {
+            let finite = [x, y, yaw, px, py, speed].iter().all(|v| v.is_finite());
+            if !finite || frame >= frames || car >= cars || filled[frame * cars + car] {
                 return Err(bad());
             }
             filled[frame * cars + car] = true;
