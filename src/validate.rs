@@ -207,7 +207,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let layout = ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.products(), cameras);
     let expected = Expected::new(spec, layout);
 
-    let mut problems = Vec::new();
+    let mut problems = derived_fields_edited(&manifest_path, &dataset);
     if !record.complete {
         problems.push(Problem {
             path: manifest_path.clone(),
@@ -544,6 +544,47 @@ fn check_pack(
         Err(why) => checks[0].0.push(problem(why)),
     }
     checks
+}
+
+/// The manifest's fields that gen derives from its spec (scenario and
+/// frame counts, each group's cars and split sizes) that no longer agree
+/// with it: edited by hand, they mislead readers of the manifest alone
+/// (the spec's own edits are refused by its `spec_sha256`).
+fn derived_fields_edited(path: &Path, dataset: &Dataset) -> Vec<Problem> {
+    let record = &dataset.record;
+    let Some(written) = crate::input::read_record(path).ok().and_then(|b| serde_json::from_slice(&b).ok()) else {
+        return Vec::new(); // (Dataset::open read it a moment ago)
+    };
+    let written: serde_json::Value = written;
+    let manifest = crate::output::manifest::Manifest::new(
+        dataset.spec(),
+        &dataset.expansion.camera,
+        record.limit,
+        record.products(),
+        record.packing(),
+        record.complete,
+        None,
+    );
+    let derived = serde_json::to_value(&manifest).expect("a manifest serialises");
+    let mut fields: Vec<String> = ["scenarios", "frames_per_scenario", "frame_file_digits"]
+        .into_iter()
+        .filter(|field| written[field] != derived[field])
+        .map(|field| format!("`{field}` is {} here, {} by its spec", written[field], derived[field]))
+        .collect();
+    let groups = |v: &serde_json::Value| -> Vec<serde_json::Value> {
+        let entries = v["groups"].as_array().cloned().unwrap_or_default();
+        entries.iter().map(|g| serde_json::json!([g["name"], g["cars"], g["splits"]])).collect()
+    };
+    if groups(&written) != groups(&derived) {
+        fields.push("`groups` (names, cars or split sizes) differ from its spec's".to_string());
+    }
+    fields
+        .into_iter()
+        .map(|field| Problem {
+            path: path.to_path_buf(),
+            message: format!("{field}: edited after gen wrote it; restore it (or regenerate)"),
+        })
+        .collect()
 }
 
 /// Checks one scenario; returns its problems, files and bytes read.

@@ -154,6 +154,15 @@ fn a_manifest_whose_spec_was_edited_is_refused_by_every_reader() {
         }
     }
     assert!(run(&["validate", s(&data)]).status.success(), "the dataset as gen wrote it is valid");
+    // The fields gen derives from the spec, edited: validate said valid.
+    let counted = edited(&data, &dir.join("counted"), true, |v| v["scenarios"] = 80_000_000_000u64.into());
+    let grown = edited(&data, &dir.join("grown"), true, |v| v["groups"][0]["cars"] = 1_000_000.into());
+    for (edited, says) in [(&counted, "`scenarios` is 80000000000 here, 3 by its spec"), (&grown, "`groups`")] {
+        let checked = run(&["validate", s(edited)]);
+        assert_eq!(checked.status.code(), Some(1), "{}", stderr(&checked));
+        let report = String::from_utf8_lossy(&checked.stdout);
+        assert!(report.contains(says) && report.contains("edited after gen wrote it"), "{report}");
+    }
 }
 
 #[test]
