@@ -242,6 +242,39 @@ fn a_link_into_a_dataset_does_not_get_an_export_or_a_picture_inside_it() {
 }
 
 #[test]
+fn an_export_never_writes_through_a_link_planted_in_its_folder() {
+    // export nri wrote through a link at its staged loc_train.npy.partial
+    // (the file it pointed to, outside --out, became an array), and export
+    // nsdr through a linked split folder (helper audit).
+    let dir = fresh_dir("rule-export-links");
+    let spec = write_spec(&dir, &toy_spec("links", &[(4, 0.5)], (2, 1, 1), 8));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet"]);
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, "keep me").unwrap();
+    let elsewhere = dir.join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let nri = dir.join("nri");
+    std::fs::create_dir_all(nri.join("cars04_edges50")).unwrap();
+    std::os::unix::fs::symlink(&victim, nri.join("cars04_edges50/loc_train.npy.partial")).unwrap();
+    let nsdr = dir.join("nsdr");
+    std::fs::create_dir_all(nsdr.join("cars04_edges50")).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, nsdr.join("cars04_edges50/train")).unwrap();
+    for (kind, out) in [("nri", &nri), ("nsdr", &nsdr)] {
+        assert_refused(&run(&["export", kind, s(&data), "--out", s(out), "--quiet"]), "is a symbolic link");
+    }
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    assert_eq!(std::fs::read_dir(&elsewhere).unwrap().count(), 0, "nothing written outside --out");
+    // Without the links, both export.
+    std::fs::remove_file(nri.join("cars04_edges50/loc_train.npy.partial")).unwrap();
+    std::fs::remove_file(nsdr.join("cars04_edges50/train")).unwrap();
+    for (kind, out) in [("nri", &nri), ("nsdr", &nsdr)] {
+        let output = run(&["export", kind, s(&data), "--out", s(out), "--quiet"]);
+        assert!(output.status.success(), "{}", stderr(&output));
+    }
+}
+
+#[test]
 fn an_export_refuses_a_folder_holding_the_users_subfolders() {
     let dir = fresh_dir("rule-export-foreign");
     let data = toy_dataset(&dir);

@@ -25,11 +25,30 @@ fn refuse_earlier_export(out: &Path, depth: usize, writes: &BTreeSet<PathBuf>, e
         found.sort();
         found
     };
-    let mut level: Vec<PathBuf> = children(out).into_iter().filter(|p| p.is_dir()).collect();
+    // A link in the export's layout is never written through (a linked
+    // split folder took a scenario's files outside --out).
+    let linked = |path: &Path| -> Result<(), Error> {
+        match std::fs::symlink_metadata(path) {
+            Ok(m) if m.is_symlink() => Err(Error::Input(format!(
+                "{} is a symbolic link: an export never writes through one, which could reach outside --out. \
+                 Remove it, or export into an empty --out",
+                path.display()
+            ))),
+            _ => Ok(()),
+        }
+    };
+    let mut level: Vec<PathBuf> = Vec::new();
+    for child in children(out) {
+        if child.is_dir() {
+            linked(&child)?;
+            level.push(child);
+        }
+    }
     for down in 2..=depth {
         let mut next = Vec::new();
         for folder in &level {
             for child in children(folder) {
+                linked(&child)?;
                 let relative = child.strip_prefix(out).unwrap_or(&child).to_path_buf();
                 let stray = match down == depth {
                     true => !writes.contains(&relative),

@@ -198,7 +198,10 @@ fn staged(path: &Path) -> PathBuf {
 fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<(), String> {
     use npyz::WriterBuilder;
     use std::io::Write;
-    let partial = staged(path);
+    // (A leftover or a link planted at the staged name is removed first,
+    // never written through.)
+    let partial = crate::output::fresh_partial(path).map_err(|e| e.to_string())?;
+    debug_assert_eq!(partial, staged(path));
     let write = || -> std::io::Result<()> {
         let mut file = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&partial)?);
         npyz::WriteOptions::<T>::new().default_dtype().shape(shape).writer(&mut file).write_header_only()?;
