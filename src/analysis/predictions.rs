@@ -300,7 +300,7 @@ impl Literal<'_> {
     }
 
     fn skip_space(&mut self) {
-        while self.peek().is_some_and(char::is_whitespace) {
+        while self.peek().is_some_and(|c| c.is_ascii_whitespace()) {
             self.at += 1;
         }
     }
@@ -484,6 +484,12 @@ mod tests {
             .contains("structured"));
         assert!(parse_header("{'descr': '<f8', 'shape': (1,)}").unwrap_err().contains("fortran_order"));
         assert!(parse_header("{'descr': '<f8', 'fortran_order': False, 'shape': (99999999999999999999,)}").is_err());
+        // Whitespace beyond ASCII (a no-break or ideographic space) is not
+        // Python's: an error, never a panic (it stepped into the middle of
+        // the character).
+        for odd in ["{\u{a0}'descr': '<f8', 'fortran_order': False, 'shape': (4, 4), }", "{'descr':\u{3000}'<f8'}"] {
+            assert!(parse_header(odd).is_err(), "{odd}");
+        }
     }
 
     #[test]
