@@ -373,7 +373,7 @@ def sweep(tmp_path_factory):
 def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_affected_cars(sweep, tmp_path):
     steps = 12
     rng = np.random.default_rng(3)
-    predicted, affected, expected, expected_affected, removed_cars = {}, {}, {}, {}, 0
+    predicted, affected, expected, expected_affected, removed_cars, removed_alone = {}, {}, {}, {}, 0, 0
     truth_of = {}
     for summary_path in sorted(sweep.glob("*/*/*/summary.json")):
         rel = summary_path.parent.relative_to(sweep).as_posix()
@@ -392,9 +392,14 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
         err = (((guess - truth) / [1024, 640]) ** 2).mean(axis=2)
         expected[rel] = np.array([err[k][on_map[k]].mean() for k in range(steps)])
         moved = np.array([c["max_divergence_m"] > 0.5 for c in summary["cars"]])
-        if moved.any():
-            expected_affected[rel] = np.array([err[k][on_map[k] & moved].mean() if (on_map[k] & moved).any() else 0.0
-                                               for k in range(steps)])  # fmt: skip
+        # A step with no affected car on the map has no error (a removed
+        # intervened car alone scored a perfect 0 whatever was predicted).
+        per_step = np.array([err[k][on_map[k] & moved].mean() if (on_map[k] & moved).any() else np.nan
+                             for k in range(steps)])  # fmt: skip
+        if moved.any() and not np.isnan(per_step).all():
+            expected_affected[rel] = per_step
+        elif moved.any():
+            removed_alone += 1
         affected[rel] = moved * 1.0 + rng.normal(0, 0.6, n)
         truth_of[rel] = (moved, car)
     assert removed_cars > 0
@@ -408,7 +413,10 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
         assert rows
         for row in rows:
             rels = [r for r in want_of if r.split("/")[1] == row["split"]]
-            assert [s["mse"] for s in row["steps"]] == pytest.approx(list(np.mean([want_of[r] for r in rels], axis=0)), rel=1e-9)
+            table = np.array([want_of[r] for r in rels])
+            want = {k + 1: np.nanmean(table[:, k]) for k in range(steps) if not np.isnan(table[:, k]).all()}
+            assert {s["step"]: s["mse"] for s in row["steps"]} == pytest.approx(want, rel=1e-9)
+    assert removed_alone > 0, "a removal that moved no other car should be in the sweep (its pair is not scored)"
     (test_row,) = [e for e in report["edges"] if e["graph"] == "affected" and e["split"] == "test"]
     y = np.concatenate(others)
     s = np.concatenate([affected[rel][np.arange(len(m)) != c] for rel, (m, c) in truth_of.items() if "/test/" in rel])

@@ -955,9 +955,13 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
 
 /// The normalised squared error of a predicted `[steps, cars, 2]`
 /// trajectory against `poses` at each step after `history`, over the cars
-/// on the map (a removed car is parked off it and not scored). A position
-/// so far off that its error overflows is refused, naming the array: an
-/// infinite error would read as "not scored" in the JSON report.
+/// on the map (a removed car is parked off it and not scored). A step at
+/// which no counted car is on the map has no error (NaN, skipped by the
+/// means); with none at any step the scenario is not scored (empty): the
+/// removed intervened car alone among the affected cars scored a perfect
+/// 0 whatever was predicted. A position so far off that its error
+/// overflows is refused, naming the array: an infinite error would read as
+/// "not scored" in the JSON report.
 fn trajectory_errors(
     predicted: &NamedArray,
     poses: &PoseLog,
@@ -970,7 +974,7 @@ fn trajectory_errors(
     if !(0..cars).any(counted) {
         return Ok(Vec::new());
     }
-    let errors: Vec<f64> = (0..steps)
+    let errors: Vec<Option<f64>> = (0..steps)
         .map(|step| {
             let (mut total, mut scored) = (0.0, 0usize);
             for car in (0..cars).filter(|&c| counted(c)) {
@@ -983,15 +987,13 @@ fn trajectory_errors(
                 total += (dx * dx + dy * dy) / 2.0;
                 scored += 1;
             }
-            // Every car removed: nothing was left to predict.
-            if scored == 0 {
-                0.0
-            } else {
-                total / scored as f64
-            }
+            // Every counted car off the map: nothing was left to predict.
+            (scored > 0).then(|| total / scored as f64)
         })
         .collect();
-    match errors.iter().position(|e| !e.is_finite()) {
+    let Some(last) = errors.iter().rposition(Option::is_some) else { return Ok(Vec::new()) };
+    let errors: Vec<f64> = errors[..=last].iter().map(|e| e.unwrap_or(f64::NAN)).collect();
+    match errors.iter().position(|e| e.is_infinite()) {
         None => Ok(errors),
         Some(step) => {
             let worst = predicted.values[step * cars * 2..(step + 1) * cars * 2].iter().fold(0.0f64, |worst, v| {
@@ -1163,10 +1165,13 @@ fn trajectory_rows(
             let longest = errors.iter().map(|e| e.len()).max().unwrap_or(0);
             let steps = (0..longest)
                 .map(|k| {
-                    let at_step: Vec<f64> = errors.iter().filter_map(|e| e.get(k).copied()).collect();
+                    // (NaN: no car to score at that step.)
+                    let at_step: Vec<f64> =
+                        errors.iter().filter_map(|e| e.get(k).copied().filter(|v| !v.is_nan())).collect();
                     let (mse, se) = mean_se(&at_step);
                     StepError { step: k + 1, mse, se, scenarios: at_step.len() }
                 })
+                .filter(|step| step.scenarios > 0)
                 .collect::<Vec<_>>();
             if !steps.is_empty() {
                 rows.push(TrajectoryScores {
@@ -1268,7 +1273,10 @@ fn frame_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
 /// filled in and no edge scores.
 /// `scenarios`: the folder the scenario folders are under ([`Truth::scenarios`]).
 fn scenario_base(scenarios: &Path, s: &ScenarioPredictions, r: &ScenarioResult) -> ScenarioScores {
-    let mean = |errors: &[f64]| (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64);
+    let mean = |errors: &[f64]| {
+        let scored: Vec<f64> = errors.iter().copied().filter(|e| !e.is_nan()).collect();
+        (!scored.is_empty()).then(|| scored.iter().sum::<f64>() / scored.len() as f64)
+    };
     let name = s.dir.strip_prefix(scenarios).unwrap_or(&s.dir);
     // A sweep pair's factual run sits one folder below the pair.
     let name = if s.counterfactual_dir.is_some() { name.parent().unwrap_or(name) } else { name };
