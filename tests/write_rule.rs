@@ -143,6 +143,31 @@ fn a_history_that_overflows_is_refused_not_a_panic() {
 }
 
 #[test]
+fn trajectories_of_one_split_predict_the_same_steps() {
+    // One train scenario predicting 3 steps beside another's 2: step 3 was
+    // scored from it alone, the row counting both (helper audit).
+    let dir = fresh_dir("rule-uneven-steps");
+    let data = toy_dataset(&dir);
+    let path = dir.join("uneven.npz");
+    let (short, long) = (npy(&[2, 4, 2], &[100.0; 16]), npy(&[3, 4, 2], &[100.0; 24]));
+    npz(
+        &path,
+        &[("cars04_edges50/train/00000/trajectory", long), ("cars04_edges50/train/00001/trajectory", short.clone())],
+    );
+    assert_refused(
+        &run(&["evaluate", s(&data), s(&path), "--history", "20"]),
+        "predicts 2 steps and \"cars04_edges50/train/00000\" 3: predict the same steps for every scenario of \
+         cars04_edges50/train",
+    );
+    npz(
+        &path,
+        &[("cars04_edges50/train/00000/trajectory", short.clone()), ("cars04_edges50/train/00001/trajectory", short)],
+    );
+    let output = run(&["evaluate", s(&data), s(&path), "--history", "20"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+}
+
+#[test]
 fn a_trajectory_error_that_overflows_is_named_not_reported_as_null() {
     let dir = fresh_dir("rule-overflow");
     let data = toy_dataset(&dir);

@@ -840,6 +840,28 @@ fn match_scenarios(
                 entry.1.push(folder);
             }
         }
+        // A trajectory's steps ahead are the same for every scenario of a
+        // split: the error at a step is a mean over the split's scenarios
+        // (with one scenario predicting further, its steps were scored from
+        // it alone).
+        if what == Predicted::Trajectory {
+            let mut steps_of: BTreeMap<(String, &'static str), (usize, &str)> = BTreeMap::new();
+            for folder in &order {
+                let s = &by_folder[folder];
+                let Some(array) = s.get(what) else { continue };
+                let steps = array.shape[0];
+                let (first, named) = *steps_of.entry((s.group.clone(), s.split.name())).or_insert((steps, folder));
+                if steps != first {
+                    return Err(bad(format!(
+                        "array {:?} predicts {steps} steps and {named:?} {first}: predict the same steps for every \
+                         scenario of {}/{}",
+                        array.name,
+                        s.group,
+                        s.split.name()
+                    )));
+                }
+            }
+        }
         for ((group, split), (present, missing)) in splits {
             if present > 0 && !missing.is_empty() {
                 return Err(bad(format!(
