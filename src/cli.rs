@@ -361,8 +361,8 @@ pub struct MapArgs {
 
     /// A SUMO road network (.net.xml, as netconvert writes it from
     /// OpenStreetMap or OpenDRIVE) instead of a spec: list its junctions
-    /// and the lanes cars may drive, and with --out draw it. Generating on
-    /// it is not supported yet (docs/sumo.md).
+    /// and the lanes cars may drive, and with --out draw it. A spec's
+    /// `map.sumo` generates datasets on it (docs/sumo.md).
     #[arg(long, value_name = "FILE")]
     pub net: Option<PathBuf>,
 
