@@ -43,8 +43,14 @@ impl Dataset {
     /// Opens the dataset in `dir`; errors name the folder and what is wrong.
     pub fn open(dir: &Path) -> Result<Dataset, String> {
         let manifest = dir.join("manifest.json");
-        let record = ManifestRecord::read(&manifest)?
-            .ok_or_else(|| format!("no manifest.json in {}: not a causalcity dataset", dir.display()))?;
+        let record = ManifestRecord::read(&manifest)?.ok_or_else(|| match dir.join(SWEEP_RECORD).is_file() {
+            true => format!(
+                "{} is a counterfactual sweep (sweep.json), not a gen dataset: this command reads datasets gen \
+                     wrote",
+                dir.display()
+            ),
+            false => format!("no manifest.json in {}: not a causalcity dataset", dir.display()),
+        })?;
         let expansion = expansion_of(&record, &manifest)?;
         let unpacked = match record.packing() {
             Packing::Folders => None,

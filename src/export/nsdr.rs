@@ -71,6 +71,12 @@ fn link_frames(source: &Path, target: &Path) -> Result<(), String> {
         match std::fs::read_link(&link) {
             Ok(existing) if existing == original => continue, // a rerun
             Ok(_) => std::fs::remove_file(&link).map_err(|e| format!("cannot replace {}: {e}", link.display()))?,
+            // Frames an earlier export copied (from a packed dataset): its
+            // own, replaced by the link (a rerun from folders failed with
+            // "File exists").
+            Err(_) if std::fs::symlink_metadata(&link).is_ok_and(|m| m.is_dir()) => {
+                std::fs::remove_dir_all(&link).map_err(|e| format!("cannot replace {}: {e}", link.display()))?
+            }
             Err(_) => {}
         }
         std::os::unix::fs::symlink(&original, &link).map_err(|e| io_err(&link)(e).to_string())?;

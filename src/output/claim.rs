@@ -71,7 +71,7 @@ pub enum ClaimError {
     InUse { dir: PathBuf, holder: String },
     #[error("{dir} holds {what}: {command} writes only {writes}. Use another --out{hint}")]
     Foreign { dir: PathBuf, what: String, command: &'static str, writes: &'static str, hint: &'static str },
-    #[error("{dir} is inside {inside} ({ancestor}), which it would then fail to validate: use an --out outside it")]
+    #[error("{dir} is inside {inside} ({ancestor}), which it would then fail to validate: write outside it")]
     Inside { dir: PathBuf, inside: &'static str, ancestor: PathBuf },
     #[error("cannot write {path}: {source}\nFix the folder's permissions, or choose another --out.")]
     Io { path: PathBuf, source: std::io::Error },
