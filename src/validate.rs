@@ -191,6 +191,13 @@ impl<'a> Expected<'a> {
 /// Checks the dataset in `dir`. Errors only when `dir` is not a dataset.
 pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, String> {
     let start = Instant::now();
+    if let Some(holder) = crate::output::claim::writer_at_work(dir) {
+        return Err(format!(
+            "{} is being written now ({holder}): validate it once that has finished (its half-written scenarios \
+             are not damage)",
+            dir.display()
+        ));
+    }
     let manifest_path = dir.join("manifest.json");
     if !manifest_path.exists() {
         if let Some((sweep, complete)) = crate::dataset::Sweep::open_even_unfinished(dir)? {

@@ -564,3 +564,27 @@ fn validate_reads_a_city_scenarios_logs_in_either_light_layout() {
         }
     }
 }
+
+#[test]
+fn validate_while_gen_writes_says_so_not_that_the_dataset_is_damaged() {
+    // validate of a folder gen was writing reported "did not finish: rerun
+    // its gen command", leftovers and missing scenarios (helper audit).
+    let dir = fresh_dir("batch-validate-busy");
+    let spec = write_spec(&dir, &toy_spec("busy", &[(8, 0.5)], (20000, 0, 0), 100));
+    let out = dir.join("out");
+    let mut gen =
+        gen_cmd(&spec, &out, &["-j", "1", "--no-images"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !out.join("cars08_edges50").exists() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let checked = run(&["validate", out.to_str().unwrap()]);
+    let still_running = gen.try_wait().unwrap().is_none();
+    let _ = gen.kill();
+    let _ = gen.wait();
+    assert!(still_running, "gen finished before validate ran: the test checked nothing");
+    let text = String::from_utf8_lossy(&checked.stderr);
+    assert_eq!(checked.status.code(), Some(2), "{text}");
+    assert!(text.contains("is being written now") && text.contains("gen"), "{text}");
+    assert!(checked.stdout.is_empty(), "no problems listed: {}", String::from_utf8_lossy(&checked.stdout));
+}

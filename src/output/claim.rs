@@ -300,6 +300,20 @@ fn read_holder(path: &Path) -> String {
     }
 }
 
+/// Who is writing `dir` now (a command holding its lock, or shards
+/// running), if anyone: a reader then says so rather than report a folder
+/// half written as damaged. Takes no lock and creates nothing.
+pub fn writer_at_work(dir: &Path) -> Option<String> {
+    let busy =
+        |path: &Path| File::open(path).is_ok_and(|f| matches!(f.try_lock_shared(), Err(TryLockError::WouldBlock)));
+    let shards = fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|e| e.file_name().to_string_lossy().starts_with(".causalcity-shard-") && busy(&e.path()));
+    (shards || busy(&dir.join(LOCK_FILE))).then(|| holders(dir))
+}
+
 /// Who holds `dir`'s locks: the exclusive holder, or the shards running.
 fn holders(dir: &Path) -> String {
     let mut shard_holders: Vec<String> = fs::read_dir(dir)
