@@ -422,6 +422,12 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
     s = np.concatenate([affected[rel][np.arange(len(m)) != c] for rel, (m, c) in truth_of.items() if "/test/" in rel])
     assert test_row["auroc"] == pytest.approx(roc_auc_score(y, s), abs=1e-9)
     assert test_row["pairs"] == len(y) and test_row["true_edges"] == y.sum()
+    # The intervened car's own score is ignored, as documented, so a NaN
+    # there is taken (it was refused).
+    ignored = {rel: np.where(np.arange(len(a)) == truth_of[rel][1], np.nan, a) for rel, a in affected.items()}
+    causalcity.save_predictions(tmp_path / "nan.npz", counterfactuals=predicted, affected=ignored)
+    again = causalcity.evaluate(sweep, tmp_path / "nan.npz")
+    assert [e for e in again["edges"] if e["graph"] == "affected"] == [e for e in report["edges"] if e["graph"] == "affected"]
     rows = list(csv.DictReader(open(tmp_path / "pairs.csv")))
     assert {r["graph"] for r in rows} == {"affected"} and len(rows) == len(predicted)
     run = cli("evaluate", sweep, tmp_path / "cf.npz")

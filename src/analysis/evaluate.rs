@@ -805,15 +805,21 @@ fn match_scenarios(
                     array.name
                 )));
             }
+            Predicted::Edges | Predicted::PerFrame | Predicted::Affected => {}
+        }
+        // The scores that are ignored (a graph's diagonal, the intervened
+        // car's own affected score) may be anything, NaN included.
+        let intervened = match what {
             Predicted::Affected => {
                 let mut failure = None;
-                scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?;
+                Some(scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?.car)
             }
-            Predicted::Edges | Predicted::PerFrame => {}
-        }
+            _ => None,
+        };
         let graph_like = matches!(what, Predicted::Edges | Predicted::PerFrame);
         let off_diagonal = |i: usize| !graph_like || (i % (cars * cars)) / cars != i % cars;
-        if let Some(i) = (0..array.values.len()).find(|&i| off_diagonal(i) && !array.values[i].is_finite()) {
+        let scored = |i: usize| off_diagonal(i) && intervened != Some(i);
+        if let Some(i) = (0..array.values.len()).find(|&i| scored(i) && !array.values[i].is_finite()) {
             let mut index = Vec::new();
             let mut rest = i;
             for &n in shape.iter().rev() {
