@@ -309,6 +309,11 @@ def run(
     and figures of the units finished so far, runs nothing, and names the
     units not yet run."""
     methods = list(methods or setting.methods)
+    # A name given twice would run its units twice over one file each.
+    for flag, given in (("--method", methods), ("--group", groups or []), ("--world", worlds)):
+        twice = sorted({g for g in given if list(given).count(g) > 1})
+        if twice:
+            raise InputError(f"{flag} names {', '.join(twice)} twice: give each once")
     for name in methods:
         if name not in METHOD_ORDER and not is_user_method(name):
             raise InputError(f"--method {name} is not one of {', '.join(METHOD_ORDER)}, nor package.module:Class")

@@ -334,6 +334,11 @@ def test_the_paper_says_what_to_do_when_cut_off_or_given_other_splits(tmp_path, 
         assert paper.main(["--splits", splits, *base]) == 2
         assert "give at least 1 train and 1 test scenario" in capsys.readouterr().err
         assert not out.exists()
+    # A group or method named twice ran its units twice over one file each.
+    for flag, name in (("--group", "cars04_edges50"), ("--method", "path")):
+        assert paper.main(["--splits", "3/1/1", *base, flag, name, name]) == 2
+        assert f"{flag} names {name} twice" in capsys.readouterr().err
+        assert not out.exists()
     assert paper.main(["--splits", "3/1/1", *base]) == 0
     capsys.readouterr()
     # Other splits into the same --out: the advice is this command's (it
