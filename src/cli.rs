@@ -940,9 +940,10 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     )));
                 }
             }
-            let claim = |path: &std::path::Path| claim_file(path, &inputs, FileKind::Text);
-            let csv = args.csv.as_deref().map(claim).transpose()?;
-            let per_scenario = args.per_scenario.as_deref().map(claim).transpose()?;
+            use causalcity::analysis::evaluate::{PER_SCENARIO_CSV_HEADER, TABLE_CSV_HEADER};
+            let claim = |header| move |path: &std::path::Path| claim_file(path, &inputs, FileKind::Table(header));
+            let csv = args.csv.as_deref().map(claim(TABLE_CSV_HEADER)).transpose()?;
+            let per_scenario = args.per_scenario.as_deref().map(claim(PER_SCENARIO_CSV_HEADER)).transpose()?;
             let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
             if let Some(csv) = csv {
                 csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;

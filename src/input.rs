@@ -28,7 +28,12 @@ pub fn read_regular(path: &Path, limit: u64) -> io::Result<Vec<u8>> {
     if metadata.len() > limit {
         return Err(too_large(metadata.len()));
     }
-    let mut bytes = Vec::with_capacity(metadata.len() as usize);
+    // A file larger than memory (a sparse one, say) is an error, not an
+    // abort.
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(metadata.len() as usize).map_err(|_| {
+        io::Error::new(io::ErrorKind::OutOfMemory, format!("{} bytes, more than memory holds", metadata.len()))
+    })?;
     // (A file that grows while read stops at the limit.)
     std::fs::File::open(path)?.take(limit.saturating_add(1)).read_to_end(&mut bytes)?;
     if bytes.len() as u64 > limit {

@@ -245,8 +245,9 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     // (an interrupted run's) is a problem, not a scenario checked.
     let checked = results.iter().filter(|r| r.1 > 0).count();
     let mut prints = Vec::with_capacity(keys.len());
+    let mut named_links = BTreeSet::new();
     for (p, f, b, cars) in results {
-        problems.extend(p);
+        problems.extend(p.into_iter().filter(|p| once(&mut named_links, p)));
         files += f;
         bytes += b;
         prints.push(cars);
@@ -334,10 +335,18 @@ fn validate_sweep(
                 problems.push(Problem { path: pair.join(name), message: "missing".into() });
             }
         }
-        if let Ok(text) = std::fs::read(pair.join("summary.json")) {
-            if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(&text) {
-                problems.push(Problem { path: pair.join("summary.json"), message: format!("not a pair summary: {e}") });
+        // (Never through a link, nor from a pipe.)
+        match ScenarioFiles::Folder.read(&pair, "summary.json") {
+            Ok(text) => {
+                if let Err(e) = serde_json::from_slice::<crate::output::pair_summary::PairSummary>(&text) {
+                    let message = format!("not a pair summary: {e}");
+                    problems.push(Problem { path: pair.join("summary.json"), message });
+                }
             }
+            Err(e) if found_files.iter().any(|f| f == "summary.json") => {
+                problems.push(Problem { path: pair.join("summary.json"), message: format!("unreadable: {e}") });
+            }
+            Err(_) => {} // missing, said above
         }
         let (mut files, mut bytes) = (0, 0);
         for run in ["factual", "counterfactual"] {
@@ -365,8 +374,9 @@ fn validate_sweep(
     };
     let (mut files, mut bytes) = (0, 0);
     let checked = results.iter().filter(|r| r.1 > 0).count();
+    let mut named_links = BTreeSet::new();
     for (p, f, b, _) in results {
-        problems.extend(p);
+        problems.extend(p.into_iter().filter(|p| once(&mut named_links, p)));
         files += f;
         bytes += b;
     }
@@ -594,6 +604,15 @@ fn derived_fields_edited(path: &Path, dataset: &Dataset) -> Vec<Problem> {
         .collect()
 }
 
+/// How validate names a linked group, split or scenario folder.
+const LINKED_FOLDER: &str = "a symbolic link: a dataset holds its own folders";
+
+/// False for a linked folder `named` holds already: each of its scenarios
+/// finds a linked group or split folder, which is named once.
+fn once(named: &mut BTreeSet<PathBuf>, problem: &Problem) -> bool {
+    !problem.message.starts_with(LINKED_FOLDER) || named.insert(problem.path.clone())
+}
+
 /// Checks one scenario; returns its problems, files and bytes read.
 /// One scenario's findings: problems, files and bytes read, and each car's
 /// trajectory fingerprint (from poses.csv).
@@ -651,14 +670,15 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     let dir = scenario_dir(root, &key.group, key.split.name(), &key.folder_name());
     // A dataset holds its own folders: a linked one is not checked through
     // (gen refuses to write through it).
-    let linked = [dir.parent().and_then(Path::parent), dir.parent(), Some(dir.as_path())]
-        .into_iter()
-        .flatten()
-        .find(|folder| std::fs::symlink_metadata(folder).is_ok_and(|m| m.is_symlink()));
+    // (Every folder from the root down: group, split, a sweep's pair, the
+    // scenario or run.)
+    let mut below_root: Vec<&Path> = dir.ancestors().take_while(|a| *a != root).collect();
+    below_root.reverse();
+    let linked = below_root.into_iter().find(|folder| std::fs::symlink_metadata(folder).is_ok_and(|m| m.is_symlink()));
     if let Some(folder) = linked {
-        let message = "a symbolic link: a dataset holds its own folders, never links (replace it with the folder \
-                       it points to, or rerun gen into a new folder)"
-            .to_string();
+        let message = format!(
+            "{LINKED_FOLDER}, never links (replace it with the folder it points to, or rerun gen into a new folder)"
+        );
         return (vec![Problem { path: folder.to_path_buf(), message }], 0, 0, Vec::new());
     }
     if !dir.is_dir() {

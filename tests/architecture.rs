@@ -5,8 +5,9 @@
 use std::path::{Path, PathBuf};
 
 /// Top-level modules by layer: a module may use its own layer and lower ones.
-const LAYERS: [(&str, u32); 21] = [
+const LAYERS: [(&str, u32); 22] = [
     ("error", 0),
+    ("input", 0),
     ("timing", 0),
     ("progress", 0),
     ("json", 0),

@@ -182,6 +182,20 @@ fn a_sweep_whose_spec_was_edited_is_refused_and_one_from_before_the_hash_opens()
         edit(&mut value);
         std::fs::write(&record_path, serde_json::to_vec(&value).unwrap()).unwrap();
     };
+    // A pair's summary.json linked to a copy elsewhere: named, not read
+    // through (it validated).
+    let summary = std::fs::read_dir(sweep.join("cars04_edges50/train")).unwrap().next().unwrap().unwrap().path();
+    let summary = summary.join("summary.json");
+    let copy = dir.join("summary-copy.json");
+    std::fs::copy(&summary, &copy).unwrap();
+    std::fs::remove_file(&summary).unwrap();
+    std::os::unix::fs::symlink(&copy, &summary).unwrap();
+    let checked = run_within(&["validate", s(&sweep)], 30);
+    assert_eq!(checked.status.code(), Some(1), "{}", stderr(&checked));
+    let report = String::from_utf8_lossy(&checked.stdout);
+    assert!(report.contains("summary.json: unreadable: a symbolic link, not followed"), "{report}");
+    std::fs::remove_file(&summary).unwrap();
+    std::fs::copy(&copy, &summary).unwrap();
     rewrite(&|v| v["spec"]["seed"] = 8.into());
     assert_error(&run(&["validate", s(&sweep)]), 2, "sweep.json: its spec does not hash to its spec_sha256");
     let packed = dir.join("packed");
@@ -223,6 +237,13 @@ fn pipes_devices_and_linked_folders_are_refused_by_name_never_read_without_end()
     assert_eq!(checked.status.code(), Some(1), "{}", stderr(&checked));
     assert!(String::from_utf8_lossy(&checked.stdout).contains("scenario.json: a symbolic link"));
     assert_error(&run_within(&["stats", s(&linked_file)], 30), 1, "scenario.json: not a regular file");
+    // A pipe at the lock file: validate asks whether a command is writing
+    // the folder without opening it (it hung).
+    let locked = dir.join("piped-lock");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&locked)]).status().unwrap().success());
+    assert!(std::process::Command::new("mkfifo").arg(locked.join(".causalcity.lock")).status().unwrap().success());
+    let checked = run_within(&["validate", s(&locked)], 30);
+    assert!(!stderr(&checked).contains("is being written now"), "{}", stderr(&checked));
     // A scenario folder that is a link to a good copy: named by validate.
     let linked_folder = dir.join("linked-folder");
     assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&linked_folder)]).status().unwrap().success());
@@ -234,6 +255,14 @@ fn pipes_devices_and_linked_folders_are_refused_by_name_never_read_without_end()
     let report = String::from_utf8_lossy(&checked.stdout);
     assert!(report.contains("cars04_edges50/test/00000: a symbolic link"), "{report}");
     assert!(stderr(&checked).contains("1 problem found"), "{}", stderr(&checked));
+    // A linked group folder: named once, not once per scenario in it.
+    let linked_group = dir.join("linked-group");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&linked_group)]).status().unwrap().success());
+    std::fs::remove_dir_all(linked_group.join("cars04_edges50")).unwrap();
+    std::os::unix::fs::symlink(data.join("cars04_edges50"), linked_group.join("cars04_edges50")).unwrap();
+    let checked = run(&["validate", s(&linked_group)]);
+    assert!(stderr(&checked).contains("1 problem found"), "{}", stderr(&checked));
+    assert!(String::from_utf8_lossy(&checked.stdout).contains("linked-group/cars04_edges50: a symbolic link"));
 }
 
 #[test]

@@ -114,13 +114,24 @@ fn evaluate_csv_never_lands_in_the_dataset_on_its_input_or_through_a_link() {
     let table = std::fs::read_to_string(&csv).unwrap();
     assert!(table.lines().count() > 1 && table.contains("cars04_edges50"), "{table}");
     // A rerun replaces its own table; a file of another kind is kept (a
-    // spec given as --csv by a slip of the hand was written over).
+    // spec given as --csv by a slip of the hand was written over), and so
+    // are notes (text, but not this table).
+    let header = table.lines().next().unwrap().to_string();
+    std::fs::write(&csv, format!("{header}\nan earlier run's row\n")).unwrap();
     let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&csv)]);
     assert!(output.status.success(), "{}", stderr(&output));
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), table, "the earlier table is replaced");
+    let notes = dir.join("notes.md");
+    std::fs::write(&notes, "# my notes\n").unwrap();
+    for flag in ["--csv", "--per-scenario"] {
+        let output = run(&["evaluate", s(&data), s(&pred), flag, s(&notes)]);
+        assert_refused(&output, "already holds text other than this command's table");
+    }
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "# my notes\n");
     let spec = dir.join("spec.json");
     std::fs::write(&spec, "{\"name\": \"mine\"}\n").unwrap();
     let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&spec)]);
-    assert_refused(&output, "already holds JSON (such as a spec), and this command writes text");
+    assert_refused(&output, "already holds JSON (such as a spec), and this command writes a CSV table");
     assert_eq!(std::fs::read_to_string(&spec).unwrap(), "{\"name\": \"mine\"}\n");
     let picture = dir.join("heat.png");
     std::fs::write(&picture, "frame,score\n0,1\n").unwrap();

@@ -1369,14 +1369,20 @@ fn cell(value: Option<f64>, none: &str) -> String {
     value.map_or(none.to_string(), |v| if v != 0.0 && v.abs() < 1e-3 { format!("{v:.6e}") } else { format!("{v:.6}") })
 }
 
+/// The header of `evaluate --csv` (one row per value).
+pub const TABLE_CSV_HEADER: &str = "group,cars,edge_proportion,split,graph,metric,step,value,se,scenarios";
+
+/// The header of `evaluate --per-scenario` (one row per scenario and graph).
+pub const PER_SCENARIO_CSV_HEADER: &str = "scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,\
+                                           true_positives,precision,recall,f1,shd,auroc,trajectory_mse,\
+                                           counterfactual_mse";
+
 impl EvaluationReport {
     /// The per-scenario rows as a CSV table (`--per-scenario`), one row per
     /// scenario and graph, in folder order; empty cells where a value does
     /// not apply.
     pub fn per_scenario_csv(&self) -> String {
-        let mut out = String::from(
-            "scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,true_positives,precision,recall,f1,shd,auroc,trajectory_mse,counterfactual_mse\n",
-        );
+        let mut out = format!("{PER_SCENARIO_CSV_HEADER}\n");
         for r in &self.per_scenario {
             out += &format!(
                 "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
@@ -1407,7 +1413,7 @@ impl EvaluationReport {
     /// `counterfactual_mse`; step empty for edge metrics; se empty where
     /// there is none).
     pub fn to_csv(&self) -> String {
-        let mut out = String::from("group,cars,edge_proportion,split,graph,metric,step,value,se,scenarios\n");
+        let mut out = format!("{TABLE_CSV_HEADER}\n");
         for e in &self.edges {
             let metrics: [(&str, Option<f64>, Option<f64>); 7] = [
                 ("f1", Some(e.f1), e.f1_se),

@@ -302,10 +302,14 @@ fn read_holder(path: &Path) -> String {
 
 /// Who is writing `dir` now (a command holding its lock, or shards
 /// running), if anyone: a reader then says so rather than report a folder
-/// half written as damaged. Takes no lock and creates nothing.
+/// half written as damaged. Creates nothing; it tries each lock file's
+/// shared lock and lets go at once (plain files only: never a pipe, never
+/// through a link).
 pub fn writer_at_work(dir: &Path) -> Option<String> {
-    let busy =
-        |path: &Path| File::open(path).is_ok_and(|f| matches!(f.try_lock_shared(), Err(TryLockError::WouldBlock)));
+    let busy = |path: &Path| {
+        fs::symlink_metadata(path).is_ok_and(|m| m.is_file())
+            && File::open(path).is_ok_and(|f| matches!(f.try_lock_shared(), Err(TryLockError::WouldBlock)))
+    };
     let shards = fs::read_dir(dir)
         .into_iter()
         .flatten()
@@ -590,6 +594,9 @@ pub enum FileKind {
     Json,
     /// Other UTF-8 text (CSV, Markdown).
     Text,
+    /// A CSV table whose first line is this header: it replaces only an
+    /// earlier table of the same columns (never notes or a script).
+    Table(&'static str),
     /// Anything else.
     Binary,
 }
@@ -625,6 +632,7 @@ impl FileKind {
             FileKind::Gif => "a GIF",
             FileKind::Json => "JSON (such as a spec)",
             FileKind::Text => "text (such as a CSV table)",
+            FileKind::Table(_) => "a CSV table",
             FileKind::Binary => "binary data",
         }
     }
@@ -663,19 +671,29 @@ pub fn claim_file(path: &Path, inputs: &[(&str, &Path)], writes: FileKind) -> Re
             return Err(ClaimError::OwnInput { path: path.to_path_buf(), what: format!("inside {what}") });
         }
     }
-    if let Some(held) = existing_kind(path).filter(|held| *held != writes) {
-        return not_a_file(format!(
-            "already holds {}, and this command writes {} there: nothing is replaced. Remove it, or choose another \
-             path",
-            held.name(),
-            writes.name()
-        ));
+    if let Some(head) = existing_head(path) {
+        let held = FileKind::of(&head);
+        let (same, held) = match writes {
+            FileKind::Table(header) if held == FileKind::Text => {
+                let first = head.split(|&b| b == b'\n').next().unwrap_or_default();
+                (first == header.as_bytes(), "text other than this command's table (its first line differs)")
+            }
+            _ => (held == writes, held.name()),
+        };
+        if !same {
+            return not_a_file(format!(
+                "already holds {held}, and this command writes {} there: nothing is replaced. Remove it, or choose \
+                 another path",
+                writes.name()
+            ));
+        }
     }
     Ok(OutputFile { path: path.to_path_buf() })
 }
 
-/// The kind of the regular file at `path` (`None`: no file, or an empty one).
-fn existing_kind(path: &Path) -> Option<FileKind> {
+/// The first 4 KB of the regular file at `path` (`None`: no file, not a
+/// plain file, or an empty one).
+fn existing_head(path: &Path) -> Option<Vec<u8>> {
     use std::io::Read;
     let metadata = fs::symlink_metadata(path).ok()?;
     if !metadata.is_file() || metadata.len() == 0 {
@@ -683,7 +701,7 @@ fn existing_kind(path: &Path) -> Option<FileKind> {
     }
     let mut head = Vec::with_capacity(4096);
     File::open(path).ok()?.take(4096).read_to_end(&mut head).ok()?;
-    Some(FileKind::of(&head))
+    Some(head)
 }
 
 impl OutputFile {
