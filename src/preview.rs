@@ -179,7 +179,9 @@ fn render(
         if options.masks {
             let mask_path = scenario_dir.join(format!("mask/{frame:0digits$}.png"));
             let data = std::fs::read(&mask_path).map_err(|e| format!("cannot read {}: {e}", mask_path.display()))?;
-            let mask = decode_gray8(&data, w, h).map_err(|e| format!("{}: {e}", mask_path.display()))?;
+            // (The size expected is the rgb frame's: either may be the odd one.)
+            let mask = decode_gray8(&data, w, h)
+                .map_err(|e| format!("{}: {e} (the size of {})", mask_path.display(), rgb_path.display()))?;
             let mut by_mask = [None; 256];
             for (car, c) in scenario.cars.iter().enumerate() {
                 by_mask[c.mask_id as usize] = Some(colours[car]);

@@ -273,3 +273,19 @@ fn an_nri_export_that_fails_part_way_leaves_an_earlier_export_as_it_was() {
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
     assert_eq!(hash_tree(&out), before);
 }
+
+#[test]
+fn an_nri_export_of_a_dataset_without_val_says_it_writes_no_val_files() {
+    // It wrote train and test and nothing about val, which NRI's loaders
+    // read (helper audit).
+    let dir = fresh_dir("export-no-val");
+    let spec = write_spec(&dir, &toy_spec("noval", &[(4, 0.5)], (2, 0, 1), 20));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let out = dir.join("nri");
+    let output = run(&["export", "nri", data.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(said.contains("valid 0 scenarios (the dataset's val split is empty): no *_valid.npy written"), "{said}");
+    assert!(out.join("cars04_edges50/loc_train.npy").is_file() && !out.join("cars04_edges50/loc_valid.npy").exists());
+}

@@ -315,6 +315,16 @@ fn export_nri_groups(
             let cars = opened.spec().group_of(split, group).cars as usize;
             let dirs = opened.scenario_dirs(&group.name(), split)?;
             if dirs.is_empty() {
+                // Said, not silent: NRI's loaders read all three splits.
+                report.push(format!(
+                    "{}: {} 0 scenarios (the dataset's {} split is empty): no *_{}{}.npy written, which NRI's \
+                     loaders expect",
+                    group_dir.display(),
+                    nri_split_name(split),
+                    split.name(),
+                    nri_split_name(split),
+                    options.suffix
+                ));
                 continue;
             }
             let s = dirs.len();
