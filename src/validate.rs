@@ -569,10 +569,6 @@ fn check_pack(
 /// (the spec's own edits are refused by its `spec_sha256`).
 fn derived_fields_edited(path: &Path, dataset: &Dataset) -> Vec<Problem> {
     let record = &dataset.record;
-    let Some(written) = crate::input::read_record(path).ok().and_then(|b| serde_json::from_slice(&b).ok()) else {
-        return Vec::new(); // (Dataset::open read it a moment ago)
-    };
-    let written: serde_json::Value = written;
     let manifest = crate::output::manifest::Manifest::new(
         dataset.spec(),
         &dataset.expansion.camera,
@@ -583,16 +579,25 @@ fn derived_fields_edited(path: &Path, dataset: &Dataset) -> Vec<Problem> {
         None,
     );
     let derived = serde_json::to_value(&manifest).expect("a manifest serialises");
-    let mut fields: Vec<String> = ["scenarios", "frames_per_scenario", "frame_file_digits"]
+    let written = [
+        ("scenarios", &record.scenarios),
+        ("frames_per_scenario", &record.frames_per_scenario),
+        ("frame_file_digits", &record.frame_file_digits),
+    ];
+    let mut fields: Vec<String> = written
         .into_iter()
-        .filter(|field| written[field] != derived[field])
-        .map(|field| format!("`{field}` is {} here, {} by its spec", written[field], derived[field]))
+        .filter(|(field, value)| **value != derived[field])
+        .map(|(field, value)| format!("`{field}` is {value} here, {} by its spec", derived[field]))
         .collect();
-    let groups = |v: &serde_json::Value| -> Vec<serde_json::Value> {
-        let entries = v["groups"].as_array().cloned().unwrap_or_default();
-        entries.iter().map(|g| serde_json::json!([g["name"], g["cars"], g["splits"]])).collect()
-    };
-    if groups(&written) != groups(&derived) {
+    let written_groups: Vec<serde_json::Value> =
+        record.groups.iter().map(|g| serde_json::json!([g.name, g.cars, g.splits])).collect();
+    let derived_groups: Vec<serde_json::Value> = derived["groups"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|g| serde_json::json!([g["name"], g["cars"], g["splits"]]))
+        .collect();
+    if written_groups != derived_groups {
         fields.push("`groups` (names, cars or split sizes) differ from its spec's".to_string());
     }
     fields

@@ -450,12 +450,17 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
             }
         }
     }
-    if real_folder && std::fs::read_dir(&networks).map(|mut d| d.next().is_none()).unwrap_or(false) {
-        std::fs::remove_dir(&networks).map_err(io_err(&networks))?;
-    }
-    let shards = out.join("shards");
-    if shards.exists() && std::fs::read_dir(&shards).map(|mut d| d.next().is_none()).unwrap_or(false) {
-        std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
+    remove_dir_if_empty(&networks)?;
+    Ok(remove_dir_if_empty(&out.join("shards"))?)
+}
+
+/// Removes `dir` if it is a real, empty folder; a link, a file, a folder
+/// with anything in it or no folder at all is left as it is.
+fn remove_dir_if_empty(dir: &Path) -> Result<(), WriteError> {
+    if std::fs::symlink_metadata(dir).is_ok_and(|m| m.is_dir())
+        && std::fs::read_dir(dir).is_ok_and(|mut d| d.next().is_none())
+    {
+        std::fs::remove_dir(dir).map_err(io_err(dir))?;
     }
     Ok(())
 }
@@ -472,13 +477,7 @@ fn remove_finished_shards(out: &Path, existing: &[(PathBuf, ManifestRecord)]) ->
             _ => {}
         }
     }
-    let shards = out.join("shards");
-    if std::fs::symlink_metadata(&shards).is_ok_and(|m| m.is_dir())
-        && std::fs::read_dir(&shards).is_ok_and(|mut d| d.next().is_none())
-    {
-        std::fs::remove_dir(&shards).map_err(io_err(&shards))?;
-    }
-    Ok(())
+    Ok(remove_dir_if_empty(&out.join("shards"))?)
 }
 
 /// Collects into `foreign` every path under a group folder that no run

@@ -176,12 +176,25 @@ pub struct ManifestRecord {
     pub complete: bool,
     #[serde(default)]
     pub shard: Option<ShardEntry>,
+    /// Fields gen derives from the spec, as written (`validate` compares
+    /// them with the spec's): scenario and frame counts, frame file digits.
+    #[serde(default)]
+    pub scenarios: serde_json::Value,
+    #[serde(default)]
+    pub frames_per_scenario: serde_json::Value,
+    #[serde(default)]
+    pub frame_file_digits: serde_json::Value,
 }
 
-/// A group as read back from a manifest.
+/// A group as read back from a manifest: its name, and its cars and split
+/// sizes as written (derived from the spec).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct GroupRecord {
     pub name: String,
+    #[serde(default)]
+    pub cars: serde_json::Value,
+    #[serde(default)]
+    pub splits: serde_json::Value,
 }
 
 impl ManifestRecord {
