@@ -374,7 +374,7 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
     steps = 12
     rng = np.random.default_rng(3)
     predicted, affected, expected, expected_affected, removed_cars, removed_alone = {}, {}, {}, {}, 0, 0
-    truth_of = {}
+    truth_of, start_of = {}, {}
     for summary_path in sorted(sweep.glob("*/*/*/summary.json")):
         rel = summary_path.parent.relative_to(sweep).as_posix()
         summary = json.loads(summary_path.read_text())
@@ -402,6 +402,7 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
             removed_alone += 1
         affected[rel] = moved * 1.0 + rng.normal(0, 0.6, n)
         truth_of[rel] = (moved, car)
+        start_of[rel] = (start, meta["frames"])
     assert removed_cars > 0
     others = [m[np.arange(len(m)) != c] for rel, (m, c) in truth_of.items() if "/test/" in rel]
     assert sum(o.sum() for o in others) > 0, "some test intervention should move another car"
@@ -439,6 +440,17 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
     causalcity.save_predictions(tmp_path / "long.npz", counterfactuals=too_long)
     run = cli("evaluate", sweep, tmp_path / "long.npz")
     assert run.returncode == 2 and "from the intervention's frame" in run.stderr, run.stderr
+    # Every pair of a split predicts the same steps, fewer only where its run ends: one cut short (it
+    # dropped out of the later steps' means) or one predicting further (scored alone there) is refused.
+    room = [r for r in predicted if "/test/" in r and start_of[r][0] + steps + 2 <= start_of[r][1]]
+    assert len(room) >= 2
+    for length in (steps - 4, steps + 2):
+        uneven = dict(predicted)
+        uneven[room[1]] = np.zeros((length, predicted[room[1]].shape[1], 2))
+        causalcity.save_predictions(tmp_path / "uneven.npz", counterfactuals=uneven)
+        run = cli("evaluate", sweep, tmp_path / "uneven.npz")
+        assert run.returncode == 2 and room[1] in run.stderr and f" {length}" in run.stderr, run.stderr
+        assert "predict the same steps for every pair" in run.stderr, run.stderr
     # A damaged summary.json (fewer cars than its runs) is a failure naming it, not a crash.
     import shutil
 

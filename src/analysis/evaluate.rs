@@ -868,6 +868,41 @@ fn match_scenarios(
                 }
             }
         }
+        // A counterfactual's steps likewise, but for a pair whose run ends
+        // sooner: it predicts up to its last frame (a pair cut short was
+        // left out of the later steps' means, or one predicting further
+        // was scored alone there).
+        if what == Predicted::Counterfactual {
+            let mut longest: BTreeMap<(String, &'static str), (usize, &str)> = BTreeMap::new();
+            for folder in &order {
+                let s = &by_folder[folder];
+                let Some(array) = s.get(what) else { continue };
+                let entry = longest.entry((s.group.clone(), s.split.name())).or_insert((0, folder));
+                if array.shape[0] > entry.0 {
+                    *entry = (array.shape[0], folder);
+                }
+            }
+            for folder in &order {
+                let s = &by_folder[folder];
+                let (Some(array), Some(pair), Some((_, frames))) = (s.get(what), s.pair.as_ref(), s.size) else {
+                    continue;
+                };
+                let (horizon, named) = longest[&(s.group.clone(), s.split.name())];
+                let expected = horizon.min(frames.saturating_sub(pair.frame));
+                if array.shape[0] != expected {
+                    return Err(bad(format!(
+                        "array {:?} predicts {} steps from the intervention's frame {} of {frames}, and {named:?} \
+                         {horizon}: predict the same steps for every pair of {}/{} ({expected} for this one; fewer \
+                         only where a pair's run ends)",
+                        array.name,
+                        array.shape[0],
+                        pair.frame,
+                        s.group,
+                        s.split.name()
+                    )));
+                }
+            }
+        }
         for ((group, split), (present, missing)) in splits {
             if present > 0 && !missing.is_empty() {
                 return Err(bad(format!(
