@@ -917,8 +917,8 @@ def save_predictions(
 
     ``dataset``, the folder the predictions were made on (a ``gen``
     dataset or a sweep), is recorded in the file (array
-    ``causalcity-dataset``: its spec's hash, name, world, seed and split
-    sizes), and :func:`evaluate` then refuses to score the file against
+    ``causalcity-dataset``: its spec's hash, name, world, seed, split
+    sizes, and a sweep's ``--kinds``), and :func:`evaluate` then refuses to score the file against
     any other dataset. Without it, ``evaluate`` warns that nothing checks
     the match.
 

@@ -469,6 +469,37 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
         assert run.returncode == 2 and "counterfactual --sweep" in run.stderr, run.stderr
 
 
+def test_predictions_made_on_one_sweep_are_refused_on_a_sweep_of_other_kinds(sweep, tmp_path):
+    # The same spec swept with the kinds in another order intervenes otherwise on every pair.
+    other = tmp_path / "other"
+    run = cli("counterfactual", "--sweep", sweep.parent / "spec.json", "--no-images", "--quiet", "--kinds",
+              "remove,stop", "--out", other)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    interventions = lambda root: [json.loads(p.read_text())["intervention"] for p in sorted(root.glob("*/*/*/summary.json"))]
+    assert interventions(other) != interventions(sweep)
+    affected = {
+        p.parent.relative_to(sweep).as_posix(): np.linspace(0, 1, len(json.loads(p.read_text())["cars"]))
+        for p in sweep.glob("*/*/*/summary.json")
+    }
+    causalcity.save_predictions(tmp_path / "made.npz", affected=affected, dataset=sweep)
+    assert cli("evaluate", sweep, tmp_path / "made.npz").returncode == 0
+    run = cli("evaluate", other, tmp_path / "made.npz")
+    assert run.returncode == 2, run.stderr
+    assert "--kinds stop,remove" in run.stderr and "--kinds remove,stop" in run.stderr, run.stderr
+    # A record written before sweeps gave their kinds still scores.
+    arrays = dict(np.load(tmp_path / "made.npz"))
+    record = json.loads(arrays["causalcity-dataset"].tobytes())
+    assert record.pop("kinds") == ["stop", "remove"]
+    arrays["causalcity-dataset"] = np.frombuffer(json.dumps(record).encode(), dtype=np.uint8)
+    np.savez(tmp_path / "older.npz", **arrays)
+    assert cli("evaluate", other, tmp_path / "older.npz").returncode == 0
+    # A kind named twice would record a sweep no other spelling matches: refused, nothing written.
+    run = cli("counterfactual", "--sweep", sweep.parent / "spec.json", "--no-images", "--quiet", "--kinds",
+              "stop,remove,stop", "--out", tmp_path / "twice")  # fmt: skip
+    assert run.returncode == 2 and "stop is given twice" in run.stderr, run.stderr
+    assert not (tmp_path / "twice").exists()
+
+
 def test_a_packed_sweep_is_a_few_tar_files_read_scored_and_validated_as_its_folders(sweep, tmp_path):
     import tarfile
 

@@ -101,6 +101,11 @@ pub struct DatasetIdentity {
     pub spec_sha256: String,
     /// Scenarios per split over all groups (after any `--limit`).
     pub splits: BTreeMap<String, usize>,
+    /// A sweep's `--kinds` of intervention, in order: with the spec they
+    /// decide each pair's intervention (empty for a `gen` dataset, and in
+    /// records written before sweeps gave them).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub kinds: Vec<String>,
 }
 
 impl DatasetIdentity {
@@ -113,14 +118,28 @@ impl DatasetIdentity {
     fn describe(&self) -> String {
         let splits: Vec<String> =
             ["train", "val", "test"].iter().map(|s| self.splits.get(*s).copied().unwrap_or(0).to_string()).collect();
+        let kinds = if self.kinds.is_empty() {
+            String::new()
+        } else {
+            format!(", a sweep of --kinds {}", self.kinds.join(","))
+        };
         format!(
-            "{} ({} world, seed {}, spec sha256 {}, {} train/val/test scenarios)",
+            "{} ({} world, seed {}, spec sha256 {}, {} train/val/test scenarios{kinds})",
             self.name,
             self.world,
             self.seed,
             crate::output::short_hash(&self.spec_sha256),
             splits.join("/")
         )
+    }
+
+    /// Whether predictions recorded as made on `self` belong to `ours`: the
+    /// same in every field, a record without a sweep's kinds (written
+    /// before sweeps gave them) taking any.
+    fn matches(&self, ours: &DatasetIdentity) -> bool {
+        let kinds = if self.kinds.is_empty() { &ours.kinds } else { &self.kinds };
+        (&self.name, &self.world, self.seed, &self.spec_sha256, &self.splits, kinds)
+            == (&ours.name, &ours.world, ours.seed, &ours.spec_sha256, &ours.splits, &ours.kinds)
     }
 }
 
@@ -358,6 +377,8 @@ struct Truth {
     /// Scenario folders carry the causal and direct graphs.
     effects: bool,
     sweep: bool,
+    /// A sweep's `--kinds`, in order (empty for a `gen` dataset).
+    kinds: Vec<String>,
     /// Where a packed sweep's pairs are unpacked (their logs, no frames)
     /// for as long as they are scored.
     unpacked: Option<crate::output::packs::Scratch>,
@@ -381,6 +402,7 @@ impl Truth {
                     keys,
                     effects: false,
                     sweep: true,
+                    kinds: sweep.kinds,
                     unpacked,
                 });
             }
@@ -398,6 +420,7 @@ impl Truth {
             sizes,
             keys,
             sweep: false,
+            kinds: Vec::new(),
             unpacked: None,
         })
     }
@@ -414,6 +437,7 @@ impl Truth {
             seed: spec.seed,
             spec_sha256: crate::output::manifest::spec_sha256(spec),
             splits,
+            kinds: self.kinds.clone(),
         }
     }
 
@@ -596,7 +620,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     let mut warnings = Vec::new();
     let ours = truth.identity();
     match record {
-        Some(theirs) if theirs != ours => {
+        Some(theirs) if !theirs.matches(&ours) => {
             return Err(Error::Input(format!(
                 "{}: these predictions were made on {}, and {} is {}: score them against the dataset they were \
                  made on",

@@ -566,6 +566,9 @@ pub struct Sweep {
     pub lights: crate::output::manifest::LightsLog,
     /// Pair folders, or pairs packed into tar files (`--format tar`).
     pub packing: crate::output::manifest::Packing,
+    /// Its `--kinds` of intervention, in the order given (which, with the
+    /// spec, decides each pair's intervention).
+    pub kinds: Vec<String>,
 }
 
 impl Sweep {
@@ -605,6 +608,8 @@ impl Sweep {
             /// The spec's hash (sweeps from before it was recorded lack it).
             #[serde(default)]
             spec_sha256: Option<String>,
+            #[serde(default)]
+            kinds: Vec<String>,
         }
         fn finished() -> bool {
             true
@@ -629,7 +634,14 @@ impl Sweep {
             }
             Some(per_tar) => crate::output::manifest::Packing::Tar { per_tar },
         };
-        let sweep = Sweep { dir: dir.to_path_buf(), expansion, limit: record.limit, lights: record.lights, packing };
+        let sweep = Sweep {
+            dir: dir.to_path_buf(),
+            expansion,
+            limit: record.limit,
+            lights: record.lights,
+            packing,
+            kinds: record.kinds,
+        };
         Ok(Some((sweep, record.complete)))
     }
 

@@ -477,6 +477,17 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
     if options.kinds.is_empty() {
         return Err(RunError::Usage("--kinds: give at least one kind".into()));
     }
+    // The kinds, in order, decide each pair's intervention and are recorded
+    // as the sweep's: one named twice would record a sweep no other
+    // spelling of it matches.
+    if let Some(twice) = options.kinds.iter().enumerate().find_map(|(i, k)| options.kinds[..i].contains(k).then_some(k))
+    {
+        let name = serde_json::to_value(twice).ok().and_then(|v| v.as_str().map(|s| s.replace('_', "-")));
+        return Err(RunError::Usage(format!(
+            "--kinds: {} is given twice: name each kind once",
+            name.unwrap_or_default()
+        )));
+    }
     let out = options
         .out
         .clone()
