@@ -644,6 +644,26 @@ class Closest(Method):
 
 class Silent(Method):
     """Neither discovers nor predicts."""
+
+
+class Miscounted(Method):
+    """Scores one scenario fewer than it is given."""
+
+    discovers = True
+
+    def predict(self, episodes):
+        cars = episodes.metres.shape[2]
+        return Predicted(edges=np.zeros((len(episodes) - 1, cars, cars)))
+
+
+from causalcity.methods.counterfactual import CounterfactualMethod, CounterfactualPrediction
+
+
+class ShortChanged(CounterfactualMethod):
+    """Predicts one pair fewer than it is given."""
+
+    def predict(self, pairs):
+        return CounterfactualPrediction([np.zeros((5, pairs.cars, 2))] * (len(pairs) - 1), np.zeros((len(pairs), pairs.cars)))
 '''
 
 
@@ -689,6 +709,19 @@ def test_device_is_refused_for_a_users_class_that_does_not_take_it(toy, tmp_path
     err = capsys.readouterr().err
     assert f"--device does nothing for {user_module}:Closest" in err and "takes device" in err, err
     assert not out.exists()
+
+
+def test_a_method_returning_too_few_predictions_is_named_not_a_traceback(toy, sweep, tmp_path, user_module, capsys):
+    # Too few failed with an IndexError deep in the runner; too many were cut silently.
+    from causalcity.methods.__main__ import main
+
+    for name, data, says in [(f"{user_module}:Miscounted", toy, "returned edges for"),
+                             (f"{user_module}:ShortChanged", sweep, "returned positions for")]:  # fmt: skip
+        out = tmp_path / "p.npz"
+        assert main([name, str(data), "--out", str(out), "--quiet"]) == 2, name
+        err = capsys.readouterr().err
+        assert says in err and "return one per" in err and ".predict on" in err, err
+        assert not out.exists()
 
 
 @pytest.mark.parametrize(

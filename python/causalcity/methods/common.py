@@ -337,11 +337,22 @@ def run_method(
     return Path(out)
 
 
-def fit_per_group(make_method, root: Path, groups, load, splits: Iterable[str], quiet: bool, unit: str = "scenarios"):
+def fit_per_group(
+    make_method,
+    root: Path,
+    groups,
+    load,
+    splits: Iterable[str],
+    quiet: bool,
+    unit: str = "scenarios",
+    parts: Dict[str, bool] = {"edges": False, "trajectories": False},
+):
     """For each group: a fresh method (``make_method()``) fitted on
     ``load(root, group, "train")`` (and val), then ``(data, predicted)``
     for each split of ``splits`` that has data. Bad groups or splits are
-    refused before any reading."""
+    refused before any reading. ``parts`` names the prediction's fields
+    (``True``: it may not be None), each of which must hold one entry per
+    scenario (pair) of the data, or a method's mistake is named."""
     if isinstance(groups, (str, bytes)):
         raise InputError(f"groups={groups!r} is one string: give a list of group names, e.g. [{groups!r}]")
     splits = list(splits)
@@ -361,4 +372,28 @@ def fit_per_group(make_method, root: Path, groups, load, splits: Iterable[str], 
         for split in splits:
             data = val if split == "val" else load(root, group, split)
             if len(data) > 0:
-                yield data, method.predict(data)
+                predicted = method.predict(data)
+                _check_predicted(predicted, data, parts, f"{label}.predict on {root / group}/{split}", unit)
+                yield data, predicted
+
+
+def _check_predicted(predicted, data, parts: Dict[str, bool], where: str, unit: str) -> None:
+    """Refuses a method's output that does not hold one entry per
+    scenario (pair) of ``data`` in each of ``parts`` (a short one failed
+    with an IndexError, a long one was cut silently)."""
+    one = unit[:-1] if unit.endswith("s") else unit
+    for part, required in parts.items():
+        if not hasattr(predicted, part):
+            raise InputError(f"{where} returned a {type(predicted).__name__}, which has no {part!r}: return a "
+                             f"prediction with {' and '.join(parts)}")  # fmt: skip
+        values = getattr(predicted, part)
+        if values is None and not required:
+            continue
+        try:
+            count = len(values)
+        except TypeError:
+            count = None
+        if count != len(data):
+            held = f"{count} {unit}" if count is not None else f"a {type(values).__name__}"
+            raise InputError(f"{where} returned {part} for {held}, and it has {len(data)}: return one per {one}, "
+                             f"in the order given")  # fmt: skip

@@ -393,7 +393,9 @@ def run_counterfactual_method(
     names = sweep_groups(root) if groups is None else groups
     counterfactuals: Dict[str, np.ndarray] = {}
     affected: Dict[str, np.ndarray] = {}
-    for pairs, predicted in fit_per_group(make_method, root, names, load_pairs, splits, quiet, unit="pairs"):
+    for pairs, predicted in fit_per_group(
+        make_method, root, names, load_pairs, splits, quiet, unit="pairs", parts={"positions": True, "affected": True}
+    ):
         for k, folder in enumerate(pairs.folders):
             counterfactuals[folder] = predicted.positions[k]
             affected[folder] = predicted.affected[k]
