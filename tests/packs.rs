@@ -538,3 +538,100 @@ fn a_reader_going_a_split_at_a_time_holds_only_that_split_unpacked() {
     assert!(held().is_empty());
     assert_eq!(Dataset::open(&folders).unwrap().packed_scenario_sizes().unwrap(), None);
 }
+
+/// The members of the pack at `path`, in order: (name, bytes).
+fn members(path: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut archive = tar::Archive::new(std::fs::File::open(path).unwrap());
+    let mut found = Vec::new();
+    for entry in archive.entries().unwrap() {
+        let mut entry = entry.unwrap();
+        let name = entry.path().unwrap().to_string_lossy().into_owned();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+        found.push((name, bytes));
+    }
+    found
+}
+
+/// A tar of `members`, in order.
+fn tar_of(members: &[(String, Vec<u8>)]) -> Vec<u8> {
+    let mut builder = tar::Builder::new(Vec::new());
+    for (name, bytes) in members {
+        let mut header = tar::Header::new_gnu();
+        header.set_size(bytes.len() as u64);
+        header.set_mode(0o644);
+        builder.append_data(&mut header, name, bytes.as_slice()).unwrap();
+    }
+    builder.into_inner().unwrap()
+}
+
+#[test]
+fn every_reader_refuses_a_pack_with_a_member_twice_a_stranger_or_cut_short() {
+    // Only validate held packs to their rule: the readers unpacked a member
+    // twice with the last copy winning (other speeds, exit 0), a member of
+    // another scenario beside the pack's own, and a pack cut short at a
+    // member's header as one with fewer scenarios.
+    let (_, folders, packed) = both("packs-tampered");
+    let rel = "cars04_edges50/test/00000-00001.tar";
+    let original = members(&packed.join(rel));
+    let poses = "cars04_edges50/test/00001/poses.csv";
+    let at = original.iter().position(|(name, _)| name == poses).expect("poses.csv in the pack");
+    let mut twice = original.clone();
+    let mut edited = original[at].1.clone();
+    let row = edited.iter().position(|&b| b == b'\n').unwrap() + 1;
+    edited.truncate(row);
+    twice.push((poses.to_string(), edited));
+    let mut stranger = original.clone();
+    stranger.push(("cars06_edges50/test/00000/poses.csv".to_string(), original[at].1.clone()));
+    let whole = tar_of(&original);
+    let last = original.last().unwrap().0.as_bytes();
+    let header = whole.windows(last.len()).rposition(|w| w == last).unwrap() / 512 * 512;
+    let cases = [
+        ("twice", tar_of(&twice), "is in it twice"),
+        ("stranger", tar_of(&stranger), "belongs to none of its scenarios"),
+        ("cut", whole[..header].to_vec(), "cut short"),
+    ];
+    let mut checked = 0;
+    for (case, bytes, says) in cases {
+        let dir = fresh_dir(&format!("packs-tampered-{case}"));
+        let data = dir.join("data");
+        for (file, _) in hash_tree(&packed) {
+            std::fs::create_dir_all(data.join(&file).parent().unwrap()).unwrap();
+            std::fs::copy(packed.join(&file), data.join(&file)).unwrap();
+        }
+        std::fs::write(data.join(rel), &bytes).unwrap();
+        for command in ["stats", "baseline", "validate"] {
+            let out = run(&[command, data.to_str().unwrap()]);
+            let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{case}: {command}: {said}");
+            assert!(said.contains(&data.join(rel).display().to_string()), "{case}: {command} names the pack: {said}");
+            assert!(said.contains(says), "{case}: {command} says {says:?}: {said}");
+            assert!(!said.contains("causalcity-unpacked"), "{case}: {command} names a temporary folder: {said}");
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 9);
+    // The rule takes a pack made by hand with `tar -cf pack.tar ./group/...`,
+    // whose members' names start `./` (stats took it, validate did not).
+    let dotted = fresh_dir("packs-tampered-dotted").join("data");
+    for (file, _) in hash_tree(&packed) {
+        std::fs::create_dir_all(dotted.join(&file).parent().unwrap()).unwrap();
+        std::fs::copy(packed.join(&file), dotted.join(&file)).unwrap();
+    }
+    let status = Command::new("tar")
+        .args(["--sort=name", "-cf"])
+        .arg(dotted.join(rel))
+        .arg("-C")
+        .arg(&folders)
+        .args(["./cars04_edges50/test/00000", "./cars04_edges50/test/00001"])
+        .status();
+    assert!(status.unwrap().success());
+    assert!(members(&dotted.join(rel)).iter().all(|(name, _)| name.starts_with("./")));
+    let out = run(&["validate", dotted.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && said.contains("valid"), "{said}");
+    let stats = |data: &Path| run(&["stats", data.to_str().unwrap(), "--json"]).stdout;
+    let (theirs, ours) = (stats(&dotted), stats(&packed));
+    assert!(ours.len() > 100, "stats --json of the packed dataset: {}", String::from_utf8_lossy(&ours));
+    assert_eq!(theirs, ours, "stats of the hand-made pack are those of gen's");
+}

@@ -478,7 +478,8 @@ fn unpack_sweep(sweep: &Sweep) -> Result<Option<crate::output::packs::Scratch>, 
                 path.display()
             ));
         }
-        crate::output::packs::unpack(&path, scratch.path(), &|name| !name.ends_with(".png"))?;
+        let keys = packs.keys(&packs.pack(number));
+        crate::output::packs::unpack(&path, &keys, scratch.path(), &|name| !name.ends_with(".png"))?;
     }
     Ok(Some(scratch))
 }
@@ -616,7 +617,14 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     for &graph in &options.graphs {
         truth.require_graph(graph).map_err(Error::Input)?;
     }
-    let (scored, record) = match_scenarios(&truth, predictions, options)?;
+    // A packed dataset's files are named by pack and member, not by where
+    // they were unpacked.
+    let named = |e: Error| match e {
+        Error::Input(m) => Error::Input(truth.name_unpacked(m)),
+        Error::Failure(m) => Error::Failure(truth.name_unpacked(m)),
+        other => other,
+    };
+    let (scored, record) = match_scenarios(&truth, predictions, options).map_err(named)?;
     let mut warnings = Vec::new();
     let ours = truth.identity();
     match record {

@@ -89,7 +89,8 @@ impl Dataset {
                 return Err(format!("{}: missing pack (validate says what else is missing)", path.display()));
             }
             let frames = unpacked.frames;
-            crate::output::packs::unpack(&path, root, &|name| frames || !name.ends_with(".png"))?;
+            let keys = packs.keys(&packs.pack(n));
+            crate::output::packs::unpack(&path, &keys, root, &|name| frames || !name.ends_with(".png"))?;
             // Marked once whole: what failed is tried again, not taken as there.
             unpacked.done.lock().map_err(|_| "a reader thread failed".to_string())?[n] = true;
             Ok(())
@@ -134,6 +135,17 @@ impl Dataset {
                     sizes.push((folder.to_string(), (summary.cars.len(), summary.frames as usize)));
                     Ok(())
                 })?;
+                // Every scenario the pack's name promises has its summary.
+                let found: std::collections::BTreeSet<&str> = sizes.iter().map(|(f, _)| f.as_str()).collect();
+                if let Some(key) =
+                    packs.keys(&packs.pack(n)).iter().find(|k| !found.contains(k.relative_folder().as_str()))
+                {
+                    return Err(format!(
+                        "{}: {}/scenario.json is not in it: the pack is damaged (validate says more)",
+                        path.display(),
+                        key.relative_folder()
+                    ));
+                }
                 Ok(sizes)
             })
             .collect::<Result<_, String>>()?;

@@ -358,12 +358,18 @@ pub fn read_members_where(
     wanted: &dyn Fn(&str) -> bool,
     mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>,
 ) -> Result<(), String> {
-    let file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    ends_whole(&mut file).map_err(|e| format!("{}: {e}: the pack is damaged", path.display()))?;
     let mut archive = tar::Archive::new(Skipping(BufReader::with_capacity(1 << 20, file)));
     let bad = |e: std::io::Error| format!("{}: not a whole tar: {e}", path.display());
     for entry in archive.entries_with_seek().map_err(bad)? {
         let mut entry = entry.map_err(bad)?;
         let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
+        // `tar -cf pack.tar ./group/...` names members from `./`.
+        let name = match name.strip_prefix("./") {
+            Some(rest) => rest.to_string(),
+            None => name,
+        };
         let kind = entry.header().entry_type();
         if kind.is_dir() {
             // `tar -cf` of scenario folders lists the folders too: no data.
@@ -385,6 +391,26 @@ pub fn read_members_where(
         entry.read_to_end(&mut bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
         each(&name, bytes)?;
     }
+    Ok(())
+}
+
+/// Checks that `file` ends as every tar ends, in two empty 512-byte blocks
+/// after whole blocks (a tar cut short at a member's header read as one
+/// with fewer members, without a word); leaves it at its start.
+fn ends_whole(file: &mut fs::File) -> Result<(), String> {
+    use std::io::{Seek, SeekFrom};
+    let len = file.metadata().map_err(|e| e.to_string())?.len();
+    if len < 1024 || len % 512 != 0 {
+        return Err(format!(
+            "cut short or not a tar ({len} bytes, not whole 512-byte blocks ending in two empty ones)"
+        ));
+    }
+    let mut end = [0u8; 1024];
+    file.seek(SeekFrom::Start(len - 1024)).and_then(|_| file.read_exact(&mut end)).map_err(|e| e.to_string())?;
+    if end.iter().any(|&b| b != 0) {
+        return Err("cut short: it does not end in the two empty 512-byte blocks that end a tar".to_string());
+    }
+    file.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
     Ok(())
 }
 
@@ -418,42 +444,81 @@ pub fn split_member(name: &str) -> Option<(&str, &str)> {
     Some((&name[..at], &name[at + 1..]))
 }
 
+/// The rule every reader holds a pack's members to, checked as they come:
+/// each belongs to one of the pack's scenarios (by the pack's name), no
+/// member comes twice, a scenario's members run together, and every
+/// scenario has some.
+struct MemberOrder<'a> {
+    path: &'a Path,
+    folders: BTreeMap<String, usize>,
+    found: Vec<bool>,
+    /// The scenario being read, and the names within it seen so far.
+    current: Option<usize>,
+    names: std::collections::BTreeSet<String>,
+}
+
+impl<'a> MemberOrder<'a> {
+    fn new(path: &'a Path, keys: &[ScenarioKey]) -> MemberOrder<'a> {
+        let folders = keys.iter().enumerate().map(|(i, k)| (k.relative_folder(), i)).collect();
+        MemberOrder { path, folders, found: vec![false; keys.len()], current: None, names: Default::default() }
+    }
+
+    /// The scenario (its index in the keys) `name` belongs to, whether it
+    /// is the first of that scenario's members, and its name within the
+    /// scenario's folder.
+    fn member<'n>(&mut self, name: &'n str) -> Result<(usize, bool, &'n str), String> {
+        let path = self.path.display();
+        let Some((i, within)) = split_member(name).and_then(|(f, w)| Some((*self.folders.get(f)?, w))) else {
+            return Err(format!("{path}: {name} belongs to none of its scenarios (by the pack's name)"));
+        };
+        let first = self.current != Some(i);
+        if first {
+            if self.found[i] {
+                return Err(format!("{path}: {name}: its scenario's members do not run together"));
+            }
+            self.found[i] = true;
+            self.current = Some(i);
+            self.names.clear();
+        }
+        if !self.names.insert(within.to_string()) {
+            return Err(format!("{path}: {name} is in it twice"));
+        }
+        Ok((i, first, within))
+    }
+
+    /// The first scenario of which no member came.
+    fn missing(&self) -> Option<usize> {
+        self.found.iter().position(|f| !f)
+    }
+}
+
 /// Reads the pack at `path` a scenario at a time: calls `each(i, members)`
 /// with the members of the `i`-th of `keys`, by name within its folder, in
-/// the pack's order. Refuses a member of none of them, a member twice and a
-/// scenario whose members do not run together. Returns which scenarios it
-/// found members of.
+/// the pack's order. Refuses what [`MemberOrder`] refuses but a scenario
+/// with no members. Returns which scenarios it found members of.
 pub fn read_scenarios(
     path: &Path,
     keys: &[ScenarioKey],
     mut each: impl FnMut(usize, BTreeMap<String, Vec<u8>>) -> Result<(), String>,
 ) -> Result<Vec<bool>, String> {
-    let folders: BTreeMap<String, usize> = keys.iter().enumerate().map(|(i, k)| (k.relative_folder(), i)).collect();
-    let mut found = vec![false; keys.len()];
+    let mut order = MemberOrder::new(path, keys);
     let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
     read_members(path, |name, bytes| {
-        let Some((i, within)) = split_member(name).and_then(|(f, w)| Some((*folders.get(f)?, w))) else {
-            return Err(format!("{}: {name} belongs to none of its scenarios", path.display()));
-        };
-        if current.as_ref().is_none_or(|(c, _)| *c != i) {
-            if found[i] {
-                return Err(format!("{}: {name}: its scenario's members do not run together", path.display()));
-            }
-            found[i] = true;
+        let (i, first, within) = order.member(name)?;
+        if first {
             if let Some((c, members)) = current.replace((i, BTreeMap::new())) {
                 each(c, members)?;
             }
         }
-        let members = &mut current.as_mut().expect("set above").1;
-        if members.insert(within.to_string(), bytes).is_some() {
-            return Err(format!("{}: {name} is in it twice", path.display()));
+        if let Some((_, members)) = current.as_mut() {
+            members.insert(within.to_string(), bytes);
         }
         Ok(())
     })?;
     if let Some((c, members)) = current {
         each(c, members)?;
     }
-    Ok(found)
+    Ok(order.found)
 }
 
 /// Checks that the pack at `path` holds exactly the scenarios of `keys`,
@@ -548,18 +613,48 @@ fn verify_listed(path: &Path, folder: &str, mut members: BTreeMap<String, Vec<u8
     }
 }
 
-/// Unpacks the pack at `path` under `root`: each member `keep` keeps, at
-/// its name, as `tar -xf` does. For readers of scenario folders; `root`
-/// must be a folder of the reader's own.
-pub fn unpack(path: &Path, root: &Path, keep: &(dyn Fn(&str) -> bool + Sync)) -> Result<(), String> {
-    read_members_where(path, keep, |name, bytes| {
+/// Unpacks the pack at `path`, which holds the scenarios of `keys`, under
+/// `root`: each member `keep` keeps, at its name, as `tar -xf` does. For
+/// readers of scenario folders; `root` must be a folder of the reader's
+/// own. Holds every member, kept or not, to [`MemberOrder`]'s rule (a
+/// member twice was unpacked last copy winning; one of another scenario
+/// landed beside the pack's own).
+pub fn unpack(
+    path: &Path,
+    keys: &[ScenarioKey],
+    root: &Path,
+    keep: &(dyn Fn(&str) -> bool + Sync),
+) -> Result<(), String> {
+    let order = std::cell::RefCell::new(MemberOrder::new(path, keys));
+    let refused = std::cell::RefCell::new(None);
+    // A member the rule refuses is taken, so that `each` stops the read.
+    let wanted = |name: &str| match order.borrow_mut().member(name) {
+        Ok(_) => keep(name),
+        Err(e) => {
+            *refused.borrow_mut() = Some(e);
+            true
+        }
+    };
+    read_members_where(path, &wanted, |name, bytes| {
+        if let Some(e) = refused.borrow_mut().take() {
+            return Err(e);
+        }
         let target = root.join(name);
         if let Some(parent) = target.parent() {
             fs::create_dir_all(parent).map_err(|e| format!("cannot write {}: {e}", parent.display()))?;
         }
         let mut file = fs::File::create(&target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
         file.write_all(&bytes).map_err(|e| format!("cannot write {}: {e}", target.display()))
-    })
+    })?;
+    let missing = order.borrow().missing();
+    match missing {
+        Some(i) => Err(format!(
+            "{}: holds no member of {}, which its name says it holds: the pack is damaged (validate says more)",
+            path.display(),
+            keys[i].relative_folder()
+        )),
+        None => Ok(()),
+    }
 }
 
 /// A private folder under the system's temporary folder (`TMPDIR`) that
