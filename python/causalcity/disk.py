@@ -236,34 +236,61 @@ class _Packed:
         """The folder of ``key`` (a scenario, or a counterfactual pair),
         unpacked alone from its pack into a new temporary folder (a
         ``TemporaryDirectory``, removed when dropped), frames only when
-        ``images``; None when its pack does not hold it."""
-        import tarfile
+        ``images``. :class:`~causalcity.InputError` names a pack that breaks
+        the packs' rule (:class:`_MemberOrder`: a member twice was taken
+        last copy winning; a pack cut short as one without its last
+        scenarios)."""
         import tempfile
 
         pack = self.pack_of(key)
         path = self.root / pack
-        with tarfile.open(_os.fspath(path), "r:") as tar:
+        with _open_pack(path) as tar:
             if pack not in self._members:
                 # Reading the headers seeks past the members' bytes.
+                order = _MemberOrder(path, f"{key.group}/{key.split}")
                 by_folder: Dict[str, List[Any]] = {}
-                for member in tar:
-                    if not member.isdir():
-                        folder, _ = _member_parts(path, member)
-                        by_folder.setdefault(folder, []).append(member)
+                with _naming_damage(path):
+                    for member in tar:
+                        if not member.isdir():
+                            folder, _, _ = order.member(member)
+                            by_folder.setdefault(folder, []).append(member)
+                order.check_whole()
                 self._members[pack] = by_folder
             members = self._members[pack].get(key.folder)
             if members is None:
-                return None
+                raise InputError(f"{_os.fspath(path)}: holds no member of {key.folder}: the pack is damaged")
             scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
-            for member in members:
-                _, name = _member_parts(path, member)
-                if not images and name.endswith(".png"):
-                    continue
-                target = Path(scratch.name) / name
-                target.parent.mkdir(parents=True, exist_ok=True)
-                data = tar.extractfile(member)
-                target.write_bytes(data.read() if data is not None else b"")
+            with _naming_damage(path):
+                for member in members:
+                    _, name = _member_parts(path, member)
+                    if not images and name.endswith(".png"):
+                        continue
+                    target = Path(scratch.name) / name
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    data = tar.extractfile(member)
+                    target.write_bytes(data.read() if data is not None else b"")
         return scratch
+
+    def _as_members(self, scratch: Any, key: "Key") -> Any:
+        """A context in which an :class:`~causalcity.InputError` naming a file
+        of ``key``'s folder unpacked into ``scratch`` names it by its pack
+        and member instead (as the command line does), and ``scratch`` is
+        removed on any error."""
+        import contextlib
+
+        @contextlib.contextmanager
+        def naming():
+            try:
+                yield
+            except InputError as e:
+                scratch.cleanup()
+                where = f"{_os.fspath(self.root / self.pack_of(key))}: {key.folder}"
+                raise InputError(str(e).replace(scratch.name, where)) from None
+            except BaseException:
+                scratch.cleanup()
+                raise
+
+        return naming()
 
     def __getstate__(self) -> Dict[str, Any]:
         state = dict(self.__dict__)
@@ -365,8 +392,9 @@ class Dataset(_Packed):
         scratch = self._unpack(key, images)
         if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
-        self._require_frames(Path(scratch.name), images, self.pack_of(key))
-        scenario = load(Path(scratch.name), images=images)
+        with self._as_members(scratch, key):
+            self._require_frames(Path(scratch.name), images, self.pack_of(key))
+            scenario = load(Path(scratch.name), images=images)
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
         _keep_with_frames(scratch, [scenario])
@@ -408,12 +436,111 @@ class Dataset(_Packed):
 
 def _member_parts(path: Path, member: Any) -> Tuple[str, str]:
     """A pack member's scenario folder (``group/split/scenario``) and its name
-    within it; :class:`~causalcity.InputError` for a member that is not a
+    within it (a name may start ``./``, as ``tar -cf pack.tar ./group``
+    writes); :class:`~causalcity.InputError` for a member that is not a
     scenario's plain file."""
-    parts = member.name.split("/")
+    name = member.name[2:] if member.name.startswith("./") else member.name
+    parts = name.split("/")
     if not member.isfile() or len(parts) < 4 or any(p in ("", ".", "..") for p in parts):
         raise InputError(f"{_os.fspath(path)}: {member.name!r} is not a scenario's file (a pack holds those only)")
     return "/".join(parts[:3]), "/".join(parts[3:])
+
+
+class _MemberOrder:
+    """The rule every reader holds a pack's members to, checked as they
+    come, as the command line's readers do: each belongs to one of the
+    scenarios the pack's name gives (``<first>-<last>.tar`` of one group
+    and split), no member comes twice, a scenario's members run together,
+    and (:meth:`check_whole`) every scenario has some."""
+
+    def __init__(self, path: Path, group_split: Optional[str]) -> None:
+        import re
+
+        self.path = path
+        found = re.fullmatch(r"(\d+)-(\d+)\.tar", path.name)
+        self.range = (int(found[1]), int(found[2])) if found and int(found[1]) <= int(found[2]) else None
+        # Unknown for a pack read alone: its first member's then.
+        self.group_split = group_split
+        self.found: set = set()
+        self.current: Optional[str] = None
+        self.names: set = set()
+
+    def member(self, member: Any) -> Tuple[str, str, bool]:
+        """The member's scenario folder, its name within it, and whether it
+        is that scenario's first member."""
+        where = _os.fspath(self.path)
+        folder, name = _member_parts(self.path, member)
+        group_split, _, index = folder.rpartition("/")
+        if self.group_split is None:
+            self.group_split = group_split
+        in_range = index.isdigit() and (self.range is None or self.range[0] <= int(index) <= self.range[1])
+        if group_split != self.group_split or not in_range:
+            raise InputError(f"{where}: {member.name} belongs to none of its scenarios (by the pack's name)")
+        first = folder != self.current
+        if first:
+            if int(index) in self.found:
+                raise InputError(f"{where}: {member.name}: its scenario's members do not run together")
+            self.found.add(int(index))
+            self.current, self.names = folder, set()
+        if name in self.names:
+            raise InputError(f"{where}: {member.name} is in it twice")
+        self.names.add(name)
+        return folder, name, first
+
+    def check_whole(self) -> None:
+        """Refuses a pack without members of a scenario its name gives."""
+        if self.range is None:
+            return
+        for index in range(self.range[0], self.range[1] + 1):
+            if index not in self.found:
+                raise InputError(
+                    f"{_os.fspath(self.path)}: holds no member of {self.group_split}/{index:05d}, which its name "
+                    "says it holds: the pack is damaged"
+                )
+
+
+def _open_pack(path: Path) -> Any:
+    """The tar file at ``path``, opened for reading after checking that it
+    ends as a tar ends (two empty 512-byte blocks after whole blocks: one
+    cut short at a member's header read as one with fewer members);
+    :class:`~causalcity.InputError` naming it otherwise."""
+    import tarfile
+
+    where = _os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, 2)
+            end = b""
+            if size >= 1024 and size % 512 == 0:
+                f.seek(size - 1024)
+                end = f.read(1024)
+    except OSError as e:
+        raise InputError(f"{where}: cannot read it: {e}") from None
+    if end != bytes(1024):
+        raise InputError(f"{where}: cut short or not a tar ({size} bytes; a tar ends in two empty 512-byte "
+                         "blocks): the pack is damaged")  # fmt: skip
+    with _naming_damage(path):
+        return tarfile.open(where, "r:")
+
+
+class _naming_damage:
+    """Turns what :mod:`tarfile` raises on a damaged pack (a ``ReadError``,
+    an overflowing size field) into an :class:`~causalcity.InputError`
+    naming the pack."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: Any, error: Any, trace: Any) -> bool:
+        import tarfile
+
+        # (A size field past any offset raises ValueError on the seek.)
+        if kind is not None and issubclass(kind, (tarfile.TarError, OverflowError, EOFError, ValueError)):
+            raise InputError(f"{_os.fspath(self.path)}: not a whole tar ({error}): the pack is damaged") from None
+        return False
 
 
 def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
@@ -426,22 +553,26 @@ def read_tar(path: PathLike) -> Iterator[Tuple[str, Dict[str, bytes]]]:
     packed dataset as :class:`~causalcity.Scenario` objects.
 
     Raises :class:`~causalcity.InputError` for a member that is not a plain
-    file inside the dataset."""
-    import tarfile
-
+    file inside the dataset, and for a pack that breaks the packs' rule: a
+    member of none of the scenarios its name (``<first>-<last>.tar``) gives,
+    a member twice, a scenario's members apart, a scenario with none, or a
+    pack cut short. A scenario is yielded once all of it has been read."""
+    path = Path(path)
+    order = _MemberOrder(path, None)
     current: Optional[str] = None
     files: Dict[str, bytes] = {}
-    with tarfile.open(_os.fspath(path), "r:") as tar:
+    with _open_pack(path) as tar, _naming_damage(path):
         for member in tar:
             if member.isdir():  # `tar -cf` of scenario folders lists them too
                 continue
-            folder, name = _member_parts(Path(path), member)
-            if folder != current:
+            folder, name, first = order.member(member)
+            if first:
                 if current is not None:
                     yield current, files
                 current, files = folder, {}
             data = tar.extractfile(member)
             files[name] = data.read() if data is not None else b""
+    order.check_whole()
     if current is not None:
         yield current, files
 
@@ -552,10 +683,13 @@ class Sweep(_Packed):
 
         images = _flag("images", images)
         folder, scratch = self.pair_folder(key, images)
-        factual = load(folder / "factual", images=images)
-        counterfactual = load(folder / "counterfactual", images=images)
-        divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)
-        summary = _json.loads((folder / "summary.json").read_text())
+        import contextlib
+
+        with self._as_members(scratch, key) if scratch is not None else contextlib.nullcontext():
+            factual = load(folder / "factual", images=images)
+            counterfactual = load(folder / "counterfactual", images=images)
+            divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)
+            summary = _json.loads((folder / "summary.json").read_text())
         if scratch is not None:
             _keep_with_frames(scratch, [factual, counterfactual])
         return Counterfactual(name=summary["scenario"], factual=factual, counterfactual=counterfactual,

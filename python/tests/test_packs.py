@@ -186,3 +186,53 @@ def test_the_pytorch_recipe_of_the_docs_streams_every_scenario_of_a_split(datase
     for folder, xy in got.items():
         expected = causalcity.load(folders / folder).position[:, :, :2]
         np.testing.assert_array_equal(xy.numpy(), expected)
+
+
+def test_every_reader_refuses_a_pack_with_a_member_twice_apart_a_stranger_or_cut_short(datasets, tmp_path):
+    # read_tar yielded a scenario twice (a member after the next scenario's), took the last of two copies and
+    # read a pack cut short at a member's header as one with fewer scenarios; open_dataset took the last copy.
+    import io
+    import shutil
+
+    _, packed = datasets
+    rel = "cars04_edges50/val/00000-00001.tar"
+    with tarfile.open(packed / rel) as tar:
+        members = [(m.name, tar.extractfile(m).read()) for m in tar]
+    poses = "cars04_edges50/val/00000/poses.csv"
+    at = [name for name, _ in members].index(poses)
+    edited = members[at][1][: members[at][1].index(b"\n") + 1]
+
+    def tar_of(items):
+        out = io.BytesIO()
+        with tarfile.open(fileobj=out, mode="w") as tar:
+            for name, data in items:
+                info = tarfile.TarInfo(name)
+                info.size = len(data)
+                tar.addfile(info, io.BytesIO(data))
+        return out.getvalue()
+
+    whole = tar_of(members)
+    last_header = whole.rindex(members[-1][0].encode()) // 512 * 512
+    cases = {
+        "twice": (tar_of(members[: at + 1] + [(poses, edited)] + members[at + 1 :]), "is in it twice"),
+        "apart": (tar_of(members + [(poses, edited)]), "do not run together"),
+        "stranger": (tar_of(members + [("cars05_edges50/val/00000/poses.csv", edited)]), "belongs to none of its"),
+        "cut": (whole[:last_header], "cut short"),
+    }
+    for case, (data, says) in cases.items():
+        copy = tmp_path / case
+        shutil.copytree(packed, copy)
+        (copy / rel).write_bytes(data)
+        with pytest.raises(causalcity.InputError, match=says) as raised:
+            list(causalcity.read_tar(copy / rel))
+        assert str(copy / rel) in str(raised.value), raised.value
+        with pytest.raises(causalcity.InputError, match=says):
+            causalcity.open_dataset(copy, images=False)[("cars04_edges50", "val", 1)]
+    # Members named from `./` (`tar -cf pack.tar ./group/...`) are read as the pack gen wrote.
+    dotted = tmp_path / "dotted"
+    shutil.copytree(packed, dotted)
+    (dotted / rel).write_bytes(tar_of([("./" + name, data) for name, data in members]))
+    assert list(causalcity.read_tar(dotted / rel)) == list(causalcity.read_tar(packed / rel))
+    key = ("cars04_edges50", "val", 1)
+    got, want = causalcity.open_dataset(dotted, images=False)[key], causalcity.open_dataset(packed, images=False)[key]
+    np.testing.assert_array_equal(got.position, want.position)
