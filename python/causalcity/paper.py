@@ -27,6 +27,7 @@ interface (see ``causalcity.methods``), trained and scored the same way.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import dataclasses
 import io
@@ -38,7 +39,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 from . import InputError, Spec, _native, evaluate, generate
 from .methods import is_user_method, make
@@ -48,6 +49,8 @@ WORLDS = ("toy", "city")
 # The tables and figures a run writes at the top of --out (f1.png only
 # where a method discovers edges), in the order the last line names them.
 TOP_FILES = ("results.csv", "f1.png", "trajectory.png", "results.md")
+# The lock a run holds in its --out (see `_only_run`).
+PAPER_LOCK = ".causalcity-paper.lock"
 # The table's order: the first frame only, the simple rule, classical,
 # neural, and the supervised upper bound; the predictors among them.
 METHOD_ORDER = (
@@ -369,94 +372,124 @@ def run(
     writes = [p for u in left for p in (_unit_path(out, *u), _predictions_path(out, *u), data_of[u[0]])]
     _refuse_links_below(out, writes + [out / n for n in (*TOP_FILES, "timings.json")])
     out.mkdir(parents=True, exist_ok=True)
-    records: Dict[Tuple[str, str, str], dict] = {}
-    timings: Dict[str, float] = {}
-    lock = threading.Lock()
-    clock = dict(started=time.monotonic(), projected=0.0, measured=0.0)
+    # One run at a time in --out: two would run the same units and write
+    # the same tables at once.
+    with _only_run(out):
+        records: Dict[Tuple[str, str, str], dict] = {}
+        timings: Dict[str, float] = {}
+        lock = threading.Lock()
+        clock = dict(started=time.monotonic(), projected=0.0, measured=0.0)
 
-    def finish(world: str, name: str, group: str, data: Path, spec: Spec) -> None:
-        """Runs one unit, or keeps it from an earlier run, and says so."""
-        unit = (world, name, group)
-        record = _unit_path(out, world, name, group)
-        key = _unit_key(world, name, group, setting, device, seed, spec)
-        kept = _read_unit(record, key)
-        if kept is None:
+        def finish(world: str, name: str, group: str, data: Path, spec: Spec) -> None:
+            """Runs one unit, or keeps it from an earlier run, and says so."""
+            unit = (world, name, group)
+            record = _unit_path(out, world, name, group)
+            key = _unit_key(world, name, group, setting, device, seed, spec)
+            kept = _read_unit(record, key)
+            if kept is None:
+                start = time.monotonic()
+                predictions = _predictions_path(out, world, name, group)
+                _refuse_links_below(out, [record, predictions])  # one made since the start
+                options = _method_options(name, setting, device, seed, quiet)
+                run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
+                report = evaluate(data, predictions, graph=["designed", "causal"], csv=None)
+                seconds = time.monotonic() - start
+                kept = dict(key=key, seconds=seconds, rows=_rows(world, name, report))
+                _write_unit(record, kept)
+                verb = f"done in {_clock(seconds)}"
+            else:
+                seconds, verb = 0.0, "kept from an earlier run"
+            with lock:
+                if seconds:
+                    clock["projected"] += projected[unit]
+                    clock["measured"] += seconds
+                records[unit] = kept
+                timings[f"{world}/{name}"] = timings.get(f"{world}/{name}", 0.0) + kept["seconds"]
+                left = [u for u in units if u not in records]
+                pace = clock["measured"] / clock["projected"] if clock["projected"] > 0 else 1.0
+                eta = _overlapped(left, projected, overlap) * pace
+                say(f"{len(records)}/{len(units)} {world} {_label(name)} {group}: {verb}; "
+                    f"elapsed {_clock(time.monotonic() - clock['started'])}, ETA {_clock(eta)}")  # fmt: skip
+
+        for world in worlds:
+            spec = loaded[world]
+            # Another selection of groups is another dataset (gen refuses to mix specs).
+            data = data_of[world]
             start = time.monotonic()
-            predictions = _predictions_path(out, world, name, group)
-            _refuse_links_below(out, [record, predictions])  # one made since the start
-            options = _method_options(name, setting, device, seed, quiet)
-            run_method(lambda: make(name, **options), data, predictions, groups=[group], quiet=quiet)
-            report = evaluate(data, predictions, graph=["designed", "causal"], csv=None)
-            seconds = time.monotonic() - start
-            kept = dict(key=key, seconds=seconds, rows=_rows(world, name, report))
-            _write_unit(record, kept)
-            verb = f"done in {_clock(seconds)}"
-        else:
-            seconds, verb = 0.0, "kept from an earlier run"
-        with lock:
-            if seconds:
-                clock["projected"] += projected[unit]
-                clock["measured"] += seconds
-            records[unit] = kept
-            timings[f"{world}/{name}"] = timings.get(f"{world}/{name}", 0.0) + kept["seconds"]
-            left = [u for u in units if u not in records]
-            pace = clock["measured"] / clock["projected"] if clock["projected"] > 0 else 1.0
-            eta = _overlapped(left, projected, overlap) * pace
-            say(f"{len(records)}/{len(units)} {world} {_label(name)} {group}: {verb}; "
-                f"elapsed {_clock(time.monotonic() - clock['started'])}, ETA {_clock(eta)}")  # fmt: skip
+            mine = [u for u in units if u[0] == world]
+            if any(u in left for u in mine):
+                say(f"generating {world}: {spec.splits} per group into {data}")
+                try:
+                    generate(spec, data, images=False, progress=not quiet)
+                except InputError as e:
+                    if "made differently" not in str(e):
+                        raise
+                    # (gen's own advice, --force, is not a flag of this command.)
+                    differences = str(e).split("\n")[1:-1]
+                    raise InputError(
+                        f"{data} holds {world} data made with another setting:\n" + "\n".join(differences)
+                        + f"\nUse another --out, or remove {data} to generate it again (the finished units under "
+                        f"{out / 'units'} are kept either way)"
+                    ) from None
+                timings[f"{world}/generate"] = time.monotonic() - start
+            else:
+                say(f"every {world} unit finished earlier: its data is not needed")
+            host = [u for u in mine if _runs_beside(u[1])] if overlap else []
+            # The methods without a network run on the CPU's cores while the
+            # neural ones train on the GPU.
+            stop = threading.Event()
 
-    for world in worlds:
-        spec = loaded[world]
-        # Another selection of groups is another dataset (gen refuses to mix specs).
-        data = data_of[world]
-        start = time.monotonic()
-        mine = [u for u in units if u[0] == world]
-        if any(u in left for u in mine):
-            say(f"generating {world}: {spec.splits} per group into {data}")
-            try:
-                generate(spec, data, images=False, progress=not quiet)
-            except InputError as e:
-                if "made differently" not in str(e):
+            def run_host() -> None:
+                for u in host:
+                    if stop.is_set():
+                        return  # the main thread failed or was interrupted
+                    finish(*u, data, spec)
+
+            with ThreadPoolExecutor(1) as beside:
+                pending = beside.submit(run_host)
+                try:
+                    for u in mine:
+                        if u not in host:
+                            if pending.done():
+                                pending.result()  # a failed CPU unit stops the run now, not after the GPU's
+                            finish(*u, data, spec)
+                    pending.result()
+                except BaseException:
+                    # The CPU thread ends after the unit it is in; this error, not
+                    # the thread's, is the one raised.
+                    stop.set()
                     raise
-                # (gen's own advice, --force, is not a flag of this command.)
-                differences = str(e).split("\n")[1:-1]
-                raise InputError(
-                    f"{data} holds {world} data made with another setting:\n" + "\n".join(differences)
-                    + f"\nUse another --out, or remove {data} to generate it again (the finished units under "
-                    f"{out / 'units'} are kept either way)"
-                ) from None
-            timings[f"{world}/generate"] = time.monotonic() - start
-        else:
-            say(f"every {world} unit finished earlier: its data is not needed")
-        host = [u for u in mine if _runs_beside(u[1])] if overlap else []
-        # The methods without a network run on the CPU's cores while the
-        # neural ones train on the GPU.
-        stop = threading.Event()
+        rows = [row for u in units for row in records[u]["rows"]]
+        _write(out / "timings.json", json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
+        _write_tables(out, rows, setting, worlds)
+        return rows
 
-        def run_host() -> None:
-            for u in host:
-                if stop.is_set():
-                    return  # the main thread failed or was interrupted
-                finish(*u, data, spec)
 
-        with ThreadPoolExecutor(1) as beside:
-            pending = beside.submit(run_host)
-            try:
-                for u in mine:
-                    if u not in host:
-                        if pending.done():
-                            pending.result()  # a failed CPU unit stops the run now, not after the GPU's
-                        finish(*u, data, spec)
-                pending.result()
-            except BaseException:
-                # The CPU thread ends after the unit it is in; this error, not
-                # the thread's, is the one raised.
-                stop.set()
-                raise
-    rows = [row for u in units for row in records[u]["rows"]]
-    _write(out / "timings.json", json.dumps({k: round(v, 1) for k, v in timings.items()}, indent=2) + "\n")
-    _write_tables(out, rows, setting, worlds)
-    return rows
+@contextlib.contextmanager
+def _only_run(out: Path) -> Iterator[None]:
+    """Holds ``out``'s lock (``.causalcity-paper.lock``, an exclusive
+    ``flock`` released when the run ends, however it ends): a second run on
+    the same ``--out`` is refused, naming the first's process. The lock file
+    is opened without following a link."""
+    import fcntl
+
+    path = out / PAPER_LOCK
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as e:
+        raise InputError(f"{path}: cannot open this run's lock file ({e.strerror}; a link there is not followed)") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise InputError(f"{out}: another paper run (process {holder}) is running there: wait for it to end, or "
+                             "give another --out") from None  # fmt: skip
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
 
 
 def _write(path: Path, data: "str | bytes") -> None:

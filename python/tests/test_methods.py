@@ -492,6 +492,44 @@ def test_the_paper_writes_by_the_one_write_rule(tmp_path, toy, capsys, monkeypat
     assert (out / "results.md").is_file()
 
 
+def test_a_second_paper_run_on_the_same_out_is_refused_while_the_first_runs(tmp_path, capsys, monkeypatch):
+    # Two runs on one --out ran the same units and wrote the same tables at once.
+    import fcntl
+    import os
+
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "paper"
+    flags = ["--splits", "3/2/2", "--world", "toy", "--method", "path", "--group", "cars04_edges50", "--out", str(out),
+             "--quiet"]  # fmt: skip
+    out.mkdir()
+    held = os.open(out / paper.PAPER_LOCK, os.O_RDWR | os.O_CREAT)
+    os.write(held, b"4242\n")
+    fcntl.flock(held, fcntl.LOCK_EX)  # as the first run's process holds it
+    try:
+        assert paper.main(flags) == 2
+        err = capsys.readouterr().err
+        assert "another paper run (process 4242) is running there" in err, err
+        assert sorted(p.name for p in out.iterdir()) == [paper.PAPER_LOCK]
+    finally:
+        os.close(held)
+    assert paper.main(flags) == 0, capsys.readouterr().err
+    # Released when a run ends: the next one in the same process runs.
+    assert paper.main(flags) == 0, capsys.readouterr().err
+    assert (out / "results.md").is_file()
+    # A link planted at the lock's place is not followed.
+    elsewhere = tmp_path / "elsewhere.txt"
+    elsewhere.write_text("mine\n")
+    (out / paper.PAPER_LOCK).unlink()
+    (out / paper.PAPER_LOCK).symlink_to(elsewhere)
+    capsys.readouterr()
+    assert paper.main(flags) == 2
+    err = capsys.readouterr().err
+    assert "lock file" in err and "link" in err, err
+    assert elsewhere.read_text() == "mine\n"
+
+
 def test_granger_on_every_core_scores_as_on_one(toy):
     from causalcity.methods.classical import Granger
 
