@@ -375,6 +375,10 @@ fn whole_number_message(n: &Number, min: i128, max: i128) -> String {
         format!("{} is not a whole number: {allowed}", Shown(value))
     } else if past_max {
         format!("{} is too large: {allowed}", shown("above", max))
+    } else if value < min as f64 && min == 0 {
+        // Not "from 0 to 4294967295": the type's top is not the field's,
+        // whose own range is checked once it reads.
+        format!("{} is too small: use a whole number, 0 or more", shown("below", min))
     } else if value < min as f64 {
         format!("{} is too small: {allowed}", shown("below", min))
     } else {

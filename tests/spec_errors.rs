@@ -520,6 +520,9 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    // Below 0 names no type's top ("from 0 to 4294967295" is not the field's range).
+    let frames = with(|v| v["frames"] = (-5).into());
+    rejected("frames-negative", &frames, &["field `frames`", "-5 is too small: use a whole number, 0 or more"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "1000000000000.0");
     rejected("frames-1e12", &frames, &["field `frames`", " 1000000000000 is too large"]);
     // The largest value a field holds, written as a float, is not "too large".
