@@ -544,6 +544,17 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
         &with(|v| v["cameras"] = serde_json::json!([{"name": "driver", "first_person": -1}])),
         &["cameras[0].first_person", "-1 is not a car: its id (a whole number from 0) or its name"],
     );
+    // A zoom on a perspective camera was taken and did nothing.
+    for (case, camera, kind) in [
+        ("zoom-first-person", serde_json::json!({"name": "driver", "first_person": 0, "zoom": 3}), "first_person"),
+        ("zoom-pinhole", serde_json::json!({"name": "high", "pinhole": {}, "zoom": 2}), "pinhole"),
+    ] {
+        rejected(
+            case,
+            &with(|v| v["cameras"] = serde_json::json!([camera])),
+            &["cameras[0].zoom", &format!("does nothing for a {kind} camera"), "leave it out"],
+        );
+    }
     rejected(
         "pinhole-below-ground",
         &with(|v| v["cameras"] = serde_json::json!([{"name": "low", "pinhole": {"position": [0, 0, -5]}}])),

@@ -205,6 +205,24 @@ impl CameraSpec {
             })
         };
         positive(&format!("{field}.zoom"), self.zoom, 20.0, "times the bird's-eye scale")?;
+        // A perspective camera's view is its field of view: a zoom there
+        // was taken and did nothing.
+        let perspective = match kind {
+            CameraKind::Pinhole(_) => Some(("pinhole", "; pinhole.fov_deg sets its view")),
+            CameraKind::ThirdPerson { .. } => Some(("third_person", "")),
+            CameraKind::FirstPerson { .. } => Some(("first_person", "")),
+            CameraKind::Static { .. } | CameraKind::Chase { .. } => None,
+        };
+        if let (Some((kind_name, instead)), true) = (perspective, self.zoom != 1.0) {
+            return Err(SpecError::new(
+                format!("{field}.zoom"),
+                format!(
+                    "{} does nothing for a {kind_name} camera (zoom scales the bird's-eye views, static and chase): \
+                     leave it out{instead}",
+                    Shown(self.zoom)
+                ),
+            ));
+        }
         let (w, h) = match kind {
             CameraKind::Chase { .. } => (256, 256),
             _ => (1024, 640),
