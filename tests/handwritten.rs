@@ -103,6 +103,27 @@ fn bad_scenarios_exit_2_naming_scenario_car_and_field() {
         }
         assert!(!out.exists(), "case {k}: nothing may be written");
     }
+    // A DriveQueue of millions of actions aborted run out of memory (a route
+    // is planned whole), and a frame_interval below a millisecond froze every
+    // car (t was 0 at every frame of 5e-324), exit 0.
+    let long =
+        format!(r#"{{"Id": "Car_2", "Spawn": "B1w", "DriveQueue": [{}]}}"#, vec![r#""straight""#; 1001].join(", "));
+    let frozen = format!(r#"[{{"Name": "Bad_1", "frames": 10, "frame_interval": 5e-324, "Vehicles": [{ok}]}}]"#);
+    for (case, text, parts) in [
+        ("long", scenario_with(&format!("{ok}, {long}")), ["field DriveQueue", "1001 actions: at most 1000"]),
+        ("frozen", frozen, ["field frame_interval", "5e-324 is not allowed: seconds, from 0.001 to 10"]),
+    ] {
+        let file = dir.join(format!("{case}.json"));
+        std::fs::write(&file, text).unwrap();
+        let out = dir.join(format!("out-{case}"));
+        let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{case}: {stderr}");
+        for part in ["scenario \"Bad_1\"", parts[0], parts[1]] {
+            assert!(stderr.contains(part), "{case}: {part:?} missing from {stderr}");
+        }
+        assert!(!out.exists(), "{case}: nothing may be written");
+    }
     // Interventions are checked too, with their path.
     let file = dir.join("bad-intervention.json");
     std::fs::write(

@@ -142,7 +142,7 @@ fn resolve_intervention(
         },
         RawEffect::ReplaceActions { car, actions, merge_distances } => {
             let car = car_named("car", car)?;
-            let actions = resolve_actions(actions, |k| format!("actions[{k}]"))?;
+            let actions = resolve_actions(actions, "actions", |k| format!("actions[{k}]"))?;
             let merge_distances = match merge_distances {
                 None => vec![0.0; actions.len()],
                 Some(d) if d.len() == actions.len() => {

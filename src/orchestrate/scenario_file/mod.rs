@@ -34,7 +34,7 @@ use crate::map::{CityMap, LanePolicy, Route};
 use crate::plan::{stream_key, Expansion, GivenCar, PlannedTown, ScenarioKey, ScenarioPlan};
 use crate::spec::{
     folder_name_clash, valid_folder_name, CameraSpec, CarRef, DatasetSpec, Split, WorldKind, MAX_FRAMES,
-    MAX_FRAME_INTERVAL_S,
+    MAX_FRAME_INTERVAL_S, MIN_FRAME_INTERVAL_S,
 };
 use interventions::{car_index, resolve_interventions};
 use raw::{raw_interventions, RawIntervention, RawScenario};
@@ -277,11 +277,13 @@ fn resolve(
         return Err(here.err(None, "frames", format!("{frames} is not allowed: 1 to {MAX_FRAMES}")));
     }
     if let Some(t) = raw.frame_interval {
-        if !(t > 0.0 && t <= MAX_FRAME_INTERVAL_S) {
+        // As a spec's: below a millisecond frames repeat (t was 0 at every
+        // frame of 5e-324 and the cars never moved).
+        if !(MIN_FRAME_INTERVAL_S..=MAX_FRAME_INTERVAL_S).contains(&t) {
             return Err(here.err(
                 None,
                 "frame_interval",
-                format!("{} is not allowed: seconds, above 0 and at most {MAX_FRAME_INTERVAL_S}", Shown(t)),
+                format!("{} is not allowed: seconds, from {MIN_FRAME_INTERVAL_S} to {MAX_FRAME_INTERVAL_S}", Shown(t)),
             ));
         }
     }

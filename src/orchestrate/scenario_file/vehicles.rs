@@ -11,11 +11,26 @@ use crate::spec::WorldKind;
 use serde_json::Value;
 use std::sync::Arc;
 
-/// Actions by name; `field(i)` is the JSON path of entry `i`.
+/// Most actions one list of a scenario file may hold (a `DriveQueue`, an
+/// intervention's `actions`): a car's route is planned whole when it is
+/// read, about 700 bytes an action, and 5 million aborted `run` out of
+/// memory. The original's files hold a handful (its README's example, 5);
+/// a spec draws at most 100 (`actions_per_car`).
+pub const MAX_ACTIONS_IN_A_LIST: usize = 1000;
+
+/// Actions by name; `list` is the JSON path of the list and `field(i)` of
+/// entry `i`.
 pub(super) fn resolve_actions(
     names: &[String],
+    list: &str,
     field: impl Fn(usize) -> String,
 ) -> Result<Vec<Action>, (String, String)> {
+    if names.len() > MAX_ACTIONS_IN_A_LIST {
+        return Err((
+            list.to_string(),
+            format!("{} actions: at most {MAX_ACTIONS_IN_A_LIST} (its route is planned whole)", names.len()),
+        ));
+    }
     names
         .iter()
         .enumerate()
@@ -90,7 +105,7 @@ pub(super) fn resolve_vehicle(
             ),
         ));
     }
-    let actions = resolve_actions(&vehicle.drive_queue, |i| format!("DriveQueue[{i}]"))
+    let actions = resolve_actions(&vehicle.drive_queue, "DriveQueue", |i| format!("DriveQueue[{i}]"))
         .map_err(|(field, message)| here.err(car, field, message))?;
     let merge_distances: Vec<f64> = match &vehicle.merge_at_distances {
         None => vec![0.0; actions.len()],
