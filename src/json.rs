@@ -29,6 +29,25 @@ impl fmt::Display for Shown {
     }
 }
 
+/// A text value shown in a message: quoted as written, or when long, its
+/// first 64 characters and its length (a 100 MB name was echoed whole in
+/// a one-line error).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShownText<'a>(pub &'a str);
+
+impl fmt::Display for ShownText<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        const SHOWN: usize = 64;
+        match self.0.char_indices().nth(SHOWN + 16) {
+            None => write!(f, "{:?}", self.0),
+            Some(_) => {
+                let cut = self.0.char_indices().nth(SHOWN).map_or(self.0.len(), |(at, _)| at);
+                write!(f, "{:?}... ({} characters)", &self.0[..cut], self.0.chars().count())
+            }
+        }
+    }
+}
+
 /// A problem in a JSON document: the path of the field (`a.b[2].c`, empty
 /// for the whole document) and what is wrong.
 #[derive(Debug, Clone, PartialEq)]

@@ -520,6 +520,13 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    // A long name is shown by its start and length: 100 MB of it was echoed whole.
+    let long = with(|v| v["name"] = "a".repeat(100_000).into());
+    rejected("name-long", &long, &["field `name`", "\"aaaa", "... (100000 characters) is not allowed"]);
+    let dir = fresh_dir("spec-errors-name-long-size");
+    let said =
+        run(&["gen", "--spec", write_spec(&dir, &long).to_str().unwrap(), "--out", dir.join("o").to_str().unwrap()]);
+    assert!(said.stderr.len() < 1_000, "{} bytes of error", said.stderr.len());
     // Below 0 names no type's top ("from 0 to 4294967295" is not the field's range).
     let frames = with(|v| v["frames"] = (-5).into());
     rejected("frames-negative", &frames, &["field `frames`", "-5 is too small: use a whole number, 0 or more"]);

@@ -18,6 +18,7 @@
 
 use super::curve::Curve;
 use super::{CityMap, ConnectorId, LaneEnd, LaneId, LanePosition, Turn};
+use crate::json::Shown;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -585,7 +586,10 @@ fn place_merge(
     let lane_len = map.lanes[lane].curve.length();
     let (first, last) = (grid_up(earliest), grid_down(lane_len - run));
     if !asked.is_finite() || asked < earliest - 1e-9 {
-        let moved = format!("merge distance {asked} m lies behind the car, which is {earliest:.2} m along lane {name}");
+        let moved = format!(
+            "merge distance {} m lies behind the car, which is {earliest:.2} m along lane {name}",
+            Shown(asked)
+        );
         return if first <= last {
             Ok((target, first, Some((moved, format!("merging from {first:.1} m")))))
         } else {
@@ -594,7 +598,8 @@ fn place_merge(
     }
     if asked + run > lane_len + 1e-9 {
         let moved = format!(
-            "merge distance {asked} m is past the lane end: lane {name} is {lane_len:.2} m long and a merge needs {run} m, so use at most {:.2}",
+            "merge distance {} m is past the lane end: lane {name} is {lane_len:.2} m long and a merge needs {run} m, so use at most {:.2}",
+            Shown(asked),
             lane_len - run
         );
         return if first <= last {

@@ -370,8 +370,8 @@ impl DatasetSpec {
             return Err(SpecError::new(
                 "name",
                 format!(
-                    "{:?} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (not starting with a dot); it names the output folder",
-                    self.name
+                    "{} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (not starting with a dot); it names the output folder",
+                    crate::json::ShownText(&self.name)
                 ),
             ));
         }

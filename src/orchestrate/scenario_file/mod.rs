@@ -29,7 +29,7 @@ pub use interventions::{load_interventions, load_interventions_text};
 
 use crate::camera::CameraPlan;
 use crate::geometry::OrientedBox;
-use crate::json::{self, JsonError, Shown};
+use crate::json::{self, JsonError, Shown, ShownText};
 use crate::map::{CityMap, LanePolicy, Route};
 use crate::plan::{stream_key, Expansion, GivenCar, PlannedTown, ScenarioKey, ScenarioPlan};
 use crate::spec::{
@@ -60,10 +60,10 @@ impl fmt::Display for ScenarioFileError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.file.display())?;
         if let Some(s) = &self.scenario {
-            write!(f, ": scenario {s:?}")?;
+            write!(f, ": scenario {}", ShownText(s))?;
         }
         if let Some(c) = &self.car {
-            write!(f, ", car {c:?}")?;
+            write!(f, ", car {}", ShownText(c))?;
         }
         if !self.field.is_empty() {
             write!(f, ", field {}", self.field)?;
@@ -266,7 +266,8 @@ fn resolve(
             None,
             "Name",
             format!(
-                "{name:?} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (it names the output folder)"
+                "{} is not allowed: use 1 to 64 characters from A-Z a-z 0-9 - _ . (it names the output folder)",
+                ShownText(&name)
             ),
         ));
     }
