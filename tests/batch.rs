@@ -588,3 +588,40 @@ fn validate_while_gen_writes_says_so_not_that_the_dataset_is_damaged() {
     assert!(text.contains("is being written now") && text.contains("gen"), "{text}");
     assert!(checked.stdout.is_empty(), "no problems listed: {}", String::from_utf8_lossy(&checked.stdout));
 }
+
+#[test]
+fn a_forced_shard_never_removes_a_dataset_other_shards_are_writing() {
+    // `gen --shard 2/3 --force` of another seed removed the scenarios and
+    // manifest of a shard still running (which then failed, saying its
+    // finished scenarios were kept), exit 0.
+    let dir = fresh_dir("batch-forced-shard");
+    let spec = small_spec(&dir);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-images", "--shard", "0/3"]);
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let before = hash_tree(&out);
+    // Shard 1 of the job at work: it holds the folder's lock shared.
+    let running = std::fs::File::open(out.join(".causalcity.lock")).or_else(|_| {
+        std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(out.join(".causalcity.lock"))
+    });
+    let running = running.unwrap();
+    running.lock_shared().unwrap();
+    let forced =
+        |extra: &[&str]| gen_cmd(&other, &out, &[&["--no-images", "--shard", "2/3", "--force"], extra].concat());
+    let output = forced(&[]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("while another run") && stderr.contains("nothing was removed"), "{stderr}");
+    let mut after = hash_tree(&out);
+    after.remove(".causalcity.lock");
+    let mut expected = before.clone();
+    expected.remove(".causalcity.lock");
+    assert_eq!(after, expected, "the running job's dataset is untouched");
+    // Once the others have stopped, the forced shard replaces it.
+    drop(running);
+    let output = forced(&[]).output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(read_json(&out.join("shards/2-of-3.json"))["spec"]["seed"], 12);
+    assert!(!out.join("shards/0-of-3.json").exists(), "the old job's shard is gone with its dataset");
+}

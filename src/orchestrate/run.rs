@@ -673,7 +673,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         Some(s) => format!("gen {} --shard {s}", options.spec_path.display()),
         None => format!("gen {}", options.spec_path.display()),
     };
-    let _claim = claim(&out, Writer::Gen { shard }, &describe).map_err(GenError::Claim)?;
+    let mut claim = claim(&out, Writer::Gen { shard }, &describe).map_err(GenError::Claim)?;
     refuse_linked_splits(&out, &expansion.spec)?;
 
     // One dataset per folder: same spec, tool version and image setting;
@@ -746,7 +746,16 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             ));
         }
         let removing = Instant::now();
-        remove_dataset(&out, &existing)?;
+        // A shard shares the folder with the job's other shards: it removes
+        // the old dataset only while none is writing there (one did remove
+        // a running shard's scenarios, which then failed).
+        claim.alone(|| remove_dataset(&out, &existing)).ok_or_else(|| {
+            GenError::Input(format!(
+                "{}: --force would remove the dataset there while another run (a shard of this job) is writing \
+                 in it: nothing was removed; rerun once the others have stopped",
+                out.display()
+            ))
+        })??;
         removal = removing.elapsed();
         if !quiet {
             crate::progress::note(format_args!("removed it in {:.1} s", removal.as_secs_f64()));

@@ -128,6 +128,26 @@ pub struct Claim {
     created: Option<PathBuf>,
 }
 
+impl Claim {
+    /// Runs `work` with the folder to this writer alone: a shard's shared
+    /// folder lock is taken exclusively for it (and shared again after), so
+    /// that `gen --shard --force` never removes a dataset other shards are
+    /// writing. `None`, and `work` not run, while another writer holds it.
+    pub fn alone<T>(&mut self, work: impl FnOnce() -> T) -> Option<T> {
+        let Some((_, file, true)) = self.locks.first() else {
+            return Some(work()); // held exclusively already, or not locked
+        };
+        if file.try_lock().is_err() {
+            return None;
+        }
+        let done = work();
+        // Shared again, for the other shards; were it lost, the drop would
+        // still remove the lock file only as its last holder.
+        let _ = file.try_lock_shared();
+        Some(done)
+    }
+}
+
 impl Drop for Claim {
     fn drop(&mut self) {
         for (path, file, shared) in self.locks.drain(..).rev() {
