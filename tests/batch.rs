@@ -625,3 +625,42 @@ fn a_forced_shard_never_removes_a_dataset_other_shards_are_writing() {
     assert_eq!(read_json(&out.join("shards/2-of-3.json"))["spec"]["seed"], 12);
     assert!(!out.join("shards/0-of-3.json").exists(), "the old job's shard is gone with its dataset");
 }
+
+#[test]
+fn merge_takes_equivalent_limits_and_never_shrinks_a_whole_dataset() {
+    // Splits of 4/2/2: a limit of 4 or more is no limit.
+    let dir = fresh_dir("batch-merge-limits");
+    let spec = small_spec(&dir);
+    let whole = dir.join("whole");
+    gen_ok(&spec, &whole, &["--quiet", "--no-images"]);
+    let expected = hash_tree(&whole);
+    // gen lets shards of equivalent limits into one folder; merge refused them.
+    let shared = dir.join("shared");
+    for (k, limit) in [(0, &["--limit", "100"][..]), (1, &[][..]), (2, &["--limit", "4"][..])] {
+        gen_ok(&spec, &shared, &[&["--quiet", "--no-images", "--shard", &format!("{k}/3")], limit].concat());
+    }
+    let output = run(&["merge", "--out", shared.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let (code, text) = validate_dir(&shared);
+    assert_eq!(code, 0, "{text}");
+    let scenarios = |tree: &std::collections::BTreeMap<String, String>| {
+        tree.iter().filter(|(k, _)| k.contains('/')).map(|(k, v)| (k.clone(), v.clone())).collect::<Vec<_>>()
+    };
+    assert_eq!(scenarios(&hash_tree(&shared)), scenarios(&expected), "the scenarios one run writes");
+    // Shards of --limit 1 merged into the whole dataset rewrote its manifest
+    // with limit 1, leaving most of it unlisted (validate failed), exit 0.
+    let mut shards = Vec::new();
+    for k in 0..3 {
+        let out = dir.join(format!("limited{k}"));
+        gen_ok(&spec, &out, &["--quiet", "--no-images", "--limit", "1", "--shard", &format!("{k}/3")]);
+        shards.push(out.to_str().unwrap().to_string());
+    }
+    let mut args = vec!["merge", "--out", whole.to_str().unwrap()];
+    args.extend(shards.iter().map(String::as_str));
+    let output = run(&args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("--limit: none there, 1 in the shards") && stderr.contains("nothing was moved"), "{stderr}");
+    assert_eq!(hash_tree(&whole), expected, "the whole dataset is untouched");
+    assert!(shards.iter().all(|s| Path::new(s).join("shards").exists()), "the shards are where they were");
+}

@@ -140,13 +140,16 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         )));
     }
     if let Some(existing) = ManifestRecord::read(&out.join("manifest.json")).map_err(GenError::Manifest)? {
-        if existing.spec_sha256 != first.spec_sha256
-            || existing.version != first.version
-            || existing.scenarios_per_tar != first.scenarios_per_tar
-        {
+        // The dataset there and the shards' must be one in every option:
+        // shards of --limit 1 merged into a whole dataset rewrote its
+        // manifest with that limit, leaving most of it unlisted.
+        let mut differences = existing.shard_differences(&first, ("there", "in the shards"));
+        differences.retain(|d| !d.starts_with("shard count"));
+        if !differences.is_empty() {
             return Err(GenError::Input(format!(
-                "{} already holds another dataset: merge into an empty folder",
-                out.display()
+                "{} already holds another dataset ({}): merge into an empty folder; nothing was moved",
+                out.display(),
+                differences.join("; ")
             )));
         }
     }

@@ -260,6 +260,13 @@ impl ManifestRecord {
         out
     }
 
+    /// The limit as it acts on the spec's split sizes: `None` when there
+    /// is none or it is at or above the largest split.
+    pub fn effective_limit(&self) -> Option<u32> {
+        let largest = ["train", "val", "test"].iter().filter_map(|s| self.spec["splits"][s].as_u64()).max();
+        self.limit.filter(|&l| largest.is_none_or(|largest| u64::from(l) < largest))
+    }
+
     /// What differs between this shard manifest and `other`'s, which
     /// `labels` name (`here`, `in the first`), one line per difference;
     /// empty when they are shards of one dataset.
@@ -277,8 +284,12 @@ impl ManifestRecord {
         differ("effects (--no-effects)", self.effects.to_string(), other.effects.to_string());
         differ("lights (--lights)", self.lights.name().into(), other.lights.name().into());
         differ("format (--format, --scenarios-per-tar)", self.packing().describe(), other.packing().describe());
+        // A limit at or above every split's size is the same dataset as no
+        // limit, as gen takes it (merge refused shards gen had let in).
         let limit = |l: Option<u32>| l.map_or("none".to_string(), |l| l.to_string());
-        differ("--limit", limit(self.limit), limit(other.limit));
+        if self.effective_limit() != other.effective_limit() {
+            differ("--limit", limit(self.limit), limit(other.limit));
+        }
         let count = |r: &ManifestRecord| r.shard.map_or("none".to_string(), |s| s.count.to_string());
         differ("shard count (--shard K/N)", count(self), count(other));
         if self.spec_sha256 != other.spec_sha256 {
