@@ -456,6 +456,20 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec, pack
             }
         }
     }
+    // A whole dataset's manifest lists every scenario: a shard manifest
+    // beside it was left by a shard run after the job was merged (merge
+    // would take it for a job to finish).
+    let shards = dir.join("shards");
+    if std::fs::symlink_metadata(&shards).is_ok_and(|m| m.is_dir()) {
+        for e in std::fs::read_dir(&shards).into_iter().flatten().flatten() {
+            problems.push(Problem {
+                path: e.path(),
+                message: "a shard's manifest beside the whole dataset's (a shard run after its job was merged): \
+                          remove it (a whole gen of the spec removes it)"
+                    .into(),
+            });
+        }
+    }
     for split in splits {
         let Ok(entries) = std::fs::read_dir(&split) else { continue };
         for e in entries.flatten() {

@@ -660,7 +660,36 @@ fn merge_takes_equivalent_limits_and_never_shrinks_a_whole_dataset() {
     let output = run(&args);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("--limit: none there, 1 in the shards") && stderr.contains("nothing was moved"), "{stderr}");
+    assert!(
+        stderr.contains("--limit: none there, 1 in the shards") && stderr.contains("nothing was moved"),
+        "{stderr}"
+    );
     assert_eq!(hash_tree(&whole), expected, "the whole dataset is untouched");
     assert!(shards.iter().all(|s| Path::new(s).join("shards").exists()), "the shards are where they were");
+}
+
+#[test]
+fn a_shard_retried_after_its_merge_writes_nothing_and_validate_names_a_shard_manifest_left_beside() {
+    // A retried shard wrote its manifest back into the merged dataset, which
+    // validate called valid and merge then took for a job missing shards.
+    let dir = fresh_dir("batch-retried-shard");
+    let spec = small_spec(&dir);
+    let shared = dir.join("shared");
+    for k in 0..3 {
+        gen_ok(&spec, &shared, &["--quiet", "--no-images", "--shard", &format!("{k}/3")]);
+    }
+    assert!(run(&["merge", "--out", shared.to_str().unwrap()]).status.success());
+    let merged = hash_tree(&shared);
+    let output = gen_cmd(&spec, &shared, &["--no-images", "--shard", "1/3"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success() && stderr.contains("shard 1/3 has nothing to do"), "{stderr}");
+    assert_eq!(hash_tree(&shared), merged, "the merged dataset is as it was");
+    assert_eq!(validate_dir(&shared).0, 0);
+    // One left there all the same (copied, or by an older version) is named.
+    std::fs::create_dir_all(shared.join("shards")).unwrap();
+    std::fs::write(shared.join("shards/0-of-3.json"), "{}").unwrap();
+    let out = run(&["validate", shared.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(said.contains("shards/0-of-3.json: a shard's manifest beside the whole dataset's"), "{said}");
 }

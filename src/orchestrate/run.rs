@@ -805,6 +805,32 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         None => positions.len as u64,
         Some(packs) => my_packs().map(|n| u64::from(packs.pack(n).count)).sum(),
     };
+    // A shard retried after its job was merged: the folder holds the whole
+    // dataset, complete, and the shard's manifest would make it a job to
+    // finish again (merge then asked for the other shards).
+    // (Not once --force has removed it.)
+    let merged = differences.is_empty() && existing.iter().any(|(_, r)| r.shard.is_none() && r.complete);
+    if let Some(shard) = options.shard.filter(|_| merged) {
+        crate::progress::note(format_args!(
+            "{} holds the whole dataset, complete (this job's shards were merged): shard {shard} has nothing to do",
+            out.display()
+        ));
+        return Ok(Summary {
+            out,
+            scenarios: total,
+            written: 0,
+            skipped: 0,
+            repaired: 0,
+            failed: 0,
+            frame_pairs: 0,
+            bytes: 0,
+            elapsed: start.elapsed(),
+            threads,
+            peak_memory: peak_memory_bytes(),
+            shard: Some(shard.to_string()),
+            stage_seconds: StageTimes::default().seconds(),
+        });
+    }
     let shard_entry = options.shard.map(|s| ShardEntry { index: s.index, count: s.count, scenarios: total });
     let manifest_file = manifest_path(&out, options.shard);
     let made_manifest_folder = manifest_file.parent().filter(|p| !p.exists()).map(Path::to_path_buf);
