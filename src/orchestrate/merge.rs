@@ -47,12 +47,19 @@ fn copy_tree(from: &Path, to: &Path) -> std::io::Result<()> {
 
 /// Merges shard outputs in `sources` (and any already in `out`) into `out`.
 pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
+    // A merge run again after it finished (a retried cluster task): its
+    // shard folders are gone into --out, which is complete. Said, and done
+    // (it was refused, exit 2, and a retrying scheduler saw a failure).
+    let merged = ManifestRecord::read(&out.join("manifest.json")).ok().flatten().is_some_and(|m| m.complete)
+        && !out.join("shards").exists();
+    if merged && !sources.is_empty() && sources.iter().all(|s| fs::symlink_metadata(s).is_err()) {
+        return Ok(format!(
+            "nothing to merge: {} holds the complete dataset, and the shard folders are gone into it (merged before)",
+            out.display()
+        ));
+    }
     for (i, source) in sources.iter().enumerate() {
         if !source.is_dir() {
-            // A merge run again after it finished (a retried cluster task):
-            // its shard folders are gone into --out.
-            let merged = ManifestRecord::read(&out.join("manifest.json")).ok().flatten().is_some_and(|m| m.complete)
-                && !out.join("shards").exists();
             let hint = match merged {
                 true => format!(" ({} already holds a complete dataset: merged before?)", out.display()),
                 false => String::new(),
