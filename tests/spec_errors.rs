@@ -520,6 +520,20 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
     rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    // Light timings past any sense: at a cycle_scale of 1e-300 every light
+    // changed at every frame, exit 0.
+    rejected(
+        "cycle-scale-tiny",
+        &city_with(r#"{"lights": {"cycle_scale": 1e-300}}"#),
+        &["city.lights.cycle_scale", "1e-300 is not allowed", "from 0.01 to 10"],
+    );
+    let schedule = r#"{"lights": {"overrides": [{"intersection": "AC", "approach": "W", "signal": "straight",
+        "offset": 0, "schedule": [{"colour": "green", "duration": 5}, {"colour": "red", "duration": 1e-300}]}]}}"#;
+    rejected(
+        "schedule-tiny",
+        &city_with(schedule),
+        &["city.lights.overrides[0].schedule[1].duration", "1e-300 is not allowed", "at least 0.04"],
+    );
     // A long name is shown by its start and length: 100 MB of it was echoed whole.
     let long = with(|v| v["name"] = "a".repeat(100_000).into());
     rejected("name-long", &long, &["field `name`", "\"aaaa", "... (100000 characters) is not allowed"]);

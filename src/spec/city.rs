@@ -402,6 +402,15 @@ pub struct StartSpec {
 /// Most cars one platoon may hold: two lanes of the longest on-camera
 /// segment hold about this many queued cars.
 const MAX_PLATOON_CARS: u32 = 16;
+/// Smallest `lights.cycle_scale`: the original's shortest phase (a 4 s
+/// yellow) then lasts 0.04 s. At 1e-300 every light changed at every frame.
+const MIN_CYCLE_SCALE: f64 = 0.01;
+/// Shortest step of a light's override schedule, seconds (as short as the
+/// shortest phase `MIN_CYCLE_SCALE` allows).
+const MIN_PHASE_S: f64 = 0.04;
+/// Most steps in one override schedule: every scenario.json holds a copy
+/// of the spec (a million steps wrote 8.6 MB per scenario).
+const MAX_SCHEDULE_STEPS: usize = 1000;
 
 fn is_zero_u32(n: &u32) -> bool {
     *n == 0
@@ -491,7 +500,17 @@ impl CitySpec {
             ));
         }
         start.speed_fraction.check("city.start.speed_fraction", 0.0, 1.0)?;
-        positive("city.lights.cycle_scale", self.lights.cycle_scale, 10.0, "factor")?;
+        let scale = self.lights.cycle_scale;
+        if !(MIN_CYCLE_SCALE..=10.0).contains(&scale) {
+            return Err(SpecError::new(
+                "city.lights.cycle_scale",
+                format!(
+                    "{} is not allowed: a factor from {MIN_CYCLE_SCALE} to 10 (the original's 4 s yellow then lasts \
+                     0.04 s; below, every light changes at every frame)",
+                    Shown(scale)
+                ),
+            ));
+        }
         if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !o.is_finite()) {
             return Err(SpecError::new(
                 "city.lights.offsets",
@@ -515,10 +534,22 @@ impl CitySpec {
                     format!("{:?} is not allowed: use N, E, S or W", o.approach),
                 ));
             }
-            if o.schedule.is_empty() || o.schedule.iter().any(|st| !(st.duration.is_finite() && st.duration > 0.0)) {
+            if o.schedule.is_empty() || o.schedule.len() > MAX_SCHEDULE_STEPS {
                 return Err(SpecError::new(
                     format!("{field}.schedule"),
-                    "give at least one {\"colour\": \"green\"|\"yellow\"|\"red\", \"duration\": seconds above 0}",
+                    format!(
+                        "{} steps: give 1 to {MAX_SCHEDULE_STEPS} {{\"colour\": \"green\"|\"yellow\"|\"red\", \
+                         \"duration\": seconds}} (every scenario.json holds a copy)",
+                        o.schedule.len()
+                    ),
+                ));
+            }
+            if let Some((k, st)) =
+                o.schedule.iter().enumerate().find(|(_, st)| !(st.duration.is_finite() && st.duration >= MIN_PHASE_S))
+            {
+                return Err(SpecError::new(
+                    format!("{field}.schedule[{k}].duration"),
+                    format!("{} is not allowed: seconds, at least {MIN_PHASE_S}", Shown(st.duration)),
                 ));
             }
             if !o.offset.is_finite() {
