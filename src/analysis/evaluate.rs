@@ -1048,6 +1048,19 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
     })
 }
 
+/// A threshold in the table's 9 columns: 4 decimals, or in exponent form
+/// where those would show nothing or overflow the column (a threshold of
+/// -1e-9 printed `-0.0000`, one near 1e300 all its digits).
+fn shown_threshold(t: f64) -> String {
+    if t == 0.0 {
+        "0.0000".to_string()
+    } else if (1e-3..1e4).contains(&t.abs()) {
+        format!("{t:.4}")
+    } else {
+        format!("{t:.2e}")
+    }
+}
+
 /// The normalised squared error of a predicted `[steps, cars, 2]`
 /// trajectory against `poses` at each step after `history`, over the cars
 /// on the map (a removed car is parked off it and not scored). A step at
@@ -1558,7 +1571,7 @@ impl fmt::Display for EvaluationReport {
             for e in &self.edges {
                 writeln!(
                     f,
-                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9.4} {:<7} {:>6} {:>6} {:>12} {:>12}",
+                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
                     e.graph,
                     e.group,
                     if e.held_out { format!("{}*", e.split) } else { e.split.to_string() },
@@ -1568,7 +1581,7 @@ impl fmt::Display for EvaluationReport {
                     show(e.auroc),
                     show(e.auprc),
                     e.predicted_edges,
-                    e.threshold,
+                    shown_threshold(e.threshold),
                     e.threshold_from,
                     show(e.precision),
                     show(e.recall),
@@ -1658,5 +1671,20 @@ impl fmt::Display for EvaluationReport {
             )?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shown_threshold;
+
+    #[test]
+    fn a_threshold_fills_its_column_and_never_reads_as_a_negative_zero() {
+        for (t, shown) in
+            [(0.5, "0.5000"), (-0.0, "0.0000"), (-1e-9, "-1.00e-9"), (1e300, "1.00e300"), (-12.5, "-12.5000")]
+        {
+            assert_eq!(shown_threshold(t), shown);
+            assert!(shown.len() <= 9, "{shown} overflows the column");
+        }
     }
 }
