@@ -246,6 +246,12 @@ fn a_no_op_intervention_gives_identical_folders() {
     // The scenario's own stop is in both runs; the added intervention does nothing.
     assert_eq!(hash_tree(&pair.join("factual")), hash_tree(&pair.join("counterfactual")));
     assert_eq!(read_json(&pair.join("summary.json"))["affected"], serde_json::json!([]));
+    // Said as what it is (the summary line had a blank where it goes).
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/cameras.json");
+    let out = fresh_dir("hw-noop-said").join("out");
+    let said = counterfactual_with_file(&scenario, &file, &out);
+    let stdout = String::from_utf8_lossy(&said.stdout);
+    assert!(said.status.success() && stdout.contains("cameras: no intervention -> affected 0 of"), "{stdout}");
 }
 
 #[test]

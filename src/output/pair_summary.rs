@@ -56,11 +56,13 @@ pub struct PairSummary {
 impl std::fmt::Display for PairSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let affected = if self.affected.is_empty() { "none".to_string() } else { self.affected.join(", ") };
+        // A file of `{"do": "none"}` intervenes on nothing: said so, not blank.
+        let what =
+            if self.interventions.is_empty() { "no intervention".to_string() } else { self.interventions.join("; ") };
         write!(
             f,
-            "{}: {} -> affected {} of {} cars: {affected}",
+            "{}: {what} -> affected {} of {} cars: {affected}",
             self.scenario,
-            self.interventions.join("; "),
             self.affected.len(),
             self.cars.len()
         )
