@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{city_spec, fresh_dir, gen_ok, run, run_within, write_spec};
+use common::{city_spec, fresh_dir, gen_ok, read_json, run, run_within, write_spec};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -314,4 +314,36 @@ fn stats_and_heatmap_read_poses_and_events_as_every_reader_does() {
     }
     assert_error(&run(&["stats", s(&no_header)]), 1, "events.csv: columns [], expected frame,t,kind");
     assert!(run(&["stats", s(&data)]).status.success());
+}
+
+#[test]
+fn a_dataset_written_within_an_earlier_versions_limits_still_reads() {
+    // Limits added since (the lowest cycle_scale and schedule step, a zoom
+    // on a perspective camera, the lowest frame_interval) hold new specs
+    // only: every reader refused a dataset written before them ("the spec
+    // in it is invalid").
+    let dir = fresh_dir("edited-earlier-limits");
+    let spec = write_spec(&dir, &city_spec("earlier", &[(4, 0.5)], (2, 0, 1), 20, "{}"));
+    let out = dir.join("data");
+    gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+    let path = out.join("manifest.json");
+    let mut manifest = read_json(&path);
+    manifest["spec"]["city"]["lights"]["cycle_scale"] = 0.005.into();
+    // As that version recorded it: the hash of the spec it ran.
+    let recorded: causalcity::spec::DatasetSpec = serde_json::from_value(manifest["spec"].clone()).unwrap();
+    manifest["spec_sha256"] = causalcity::output::manifest::spec_sha256(&recorded).into();
+    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+    let stats = run(&["stats", out.to_str().unwrap()]);
+    assert!(stats.status.success(), "{}", String::from_utf8_lossy(&stats.stderr));
+    assert!(String::from_utf8_lossy(&stats.stdout).contains("cars04_edges50"));
+    // Given as input, the same spec is held to them.
+    let given = std::fs::read_to_string(&spec)
+        .unwrap()
+        .replace(r#""city": {}"#, r#""city": {"lights": {"cycle_scale": 0.005}}"#);
+    assert!(given.contains("0.005"));
+    let output =
+        run(&["gen", "--spec", write_spec(&dir, &given).to_str().unwrap(), "--out", dir.join("new").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("city.lights.cycle_scale") && stderr.contains("from 0.01 to 10"), "{stderr}");
 }

@@ -330,7 +330,8 @@ fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, Str
     spec.read_networks_in_dataset(root)
         .map_err(|e| format!("{}: the network its spec names is missing or unreadable: {e}", path.display()))?;
     // A hand-edited record is checked as a spec file is (frames, sizes, ...).
-    spec.validate().map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
+    // (Limits added since an earlier version wrote it are not applied.)
+    spec.validate_recorded().map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
     Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 

@@ -130,6 +130,32 @@ fn default_zoom() -> f64 {
 }
 
 impl CameraSpec {
+    /// The checks a camera given as input passes beyond [`CameraSpec::plan`]'s
+    /// (a spec recorded by an earlier version may predate them): a zoom on
+    /// a perspective camera, which was taken and did nothing.
+    pub fn check_input(&self, field: &str) -> Result<(), SpecError> {
+        let kind = if self.pinhole.is_some() {
+            Some(("pinhole", "; pinhole.fov_deg sets its view"))
+        } else if self.third_person.is_some() {
+            Some(("third_person", ""))
+        } else if self.first_person.is_some() {
+            Some(("first_person", ""))
+        } else {
+            None
+        };
+        match kind {
+            Some((kind_name, instead)) if self.zoom != 1.0 => Err(SpecError::new(
+                format!("{field}.zoom"),
+                format!(
+                    "{} does nothing for a {kind_name} camera (zoom scales the bird's-eye views, static and chase): \
+                     leave it out{instead}",
+                    Shown(self.zoom)
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// Checks the camera (at JSON path `field`); `car_index` resolves a
     /// chased car to its index or says which cars there are.
     pub fn plan(
@@ -205,24 +231,6 @@ impl CameraSpec {
             })
         };
         positive(&format!("{field}.zoom"), self.zoom, 20.0, "times the bird's-eye scale")?;
-        // A perspective camera's view is its field of view: a zoom there
-        // was taken and did nothing.
-        let perspective = match kind {
-            CameraKind::Pinhole(_) => Some(("pinhole", "; pinhole.fov_deg sets its view")),
-            CameraKind::ThirdPerson { .. } => Some(("third_person", "")),
-            CameraKind::FirstPerson { .. } => Some(("first_person", "")),
-            CameraKind::Static { .. } | CameraKind::Chase { .. } => None,
-        };
-        if let (Some((kind_name, instead)), true) = (perspective, self.zoom != 1.0) {
-            return Err(SpecError::new(
-                format!("{field}.zoom"),
-                format!(
-                    "{} does nothing for a {kind_name} camera (zoom scales the bird's-eye views, static and chase): \
-                     leave it out{instead}",
-                    Shown(self.zoom)
-                ),
-            ));
-        }
         let (w, h) = match kind {
             CameraKind::Chase { .. } => (256, 256),
             _ => (1024, 640),

@@ -447,6 +447,13 @@ impl Default for CitySpec {
 
 impl CitySpec {
     pub fn validate(&self) -> Result<(), SpecError> {
+        self.validate_as(false)
+    }
+
+    /// [`CitySpec::validate`], of a spec given as input or (`recorded`)
+    /// read back from a dataset an earlier version wrote: the light timing
+    /// limits added since are then not applied.
+    pub fn validate_as(&self, recorded: bool) -> Result<(), SpecError> {
         positive("city.desired_speed", self.desired_speed, MAX_DESIRED_SPEED_M_S, "m/s")?;
         unit_interval("city.desired_speed_spread", self.desired_speed_spread, 0.9)?;
         unit_interval("city.red_light_runner_probability", self.red_light_runner_probability, 1.0)?;
@@ -501,7 +508,8 @@ impl CitySpec {
         }
         start.speed_fraction.check("city.start.speed_fraction", 0.0, 1.0)?;
         let scale = self.lights.cycle_scale;
-        if !(MIN_CYCLE_SCALE..=10.0).contains(&scale) {
+        let lowest = if recorded { f64::MIN_POSITIVE } else { MIN_CYCLE_SCALE };
+        if !(scale.is_finite() && (lowest..=10.0).contains(&scale)) {
             return Err(SpecError::new(
                 "city.lights.cycle_scale",
                 format!(
@@ -534,7 +542,9 @@ impl CitySpec {
                     format!("{:?} is not allowed: use N, E, S or W", o.approach),
                 ));
             }
-            if o.schedule.is_empty() || o.schedule.len() > MAX_SCHEDULE_STEPS {
+            let (most_steps, shortest) =
+                if recorded { (usize::MAX, f64::MIN_POSITIVE) } else { (MAX_SCHEDULE_STEPS, MIN_PHASE_S) };
+            if o.schedule.is_empty() || o.schedule.len() > most_steps {
                 return Err(SpecError::new(
                     format!("{field}.schedule"),
                     format!(
@@ -545,7 +555,7 @@ impl CitySpec {
                 ));
             }
             if let Some((k, st)) =
-                o.schedule.iter().enumerate().find(|(_, st)| !(st.duration.is_finite() && st.duration >= MIN_PHASE_S))
+                o.schedule.iter().enumerate().find(|(_, st)| !(st.duration.is_finite() && st.duration >= shortest))
             {
                 return Err(SpecError::new(
                     format!("{field}.schedule[{k}].duration"),

@@ -364,8 +364,22 @@ impl DatasetSpec {
         Ok(spec)
     }
 
-    /// Checks every field's range and the groups' consistency.
+    /// Checks every field's range and the groups' consistency, as a spec
+    /// given as input.
     pub fn validate(&self) -> Result<(), SpecError> {
+        self.validate_as(false)
+    }
+
+    /// [`DatasetSpec::validate`] of a spec recorded in a dataset or sweep
+    /// (its manifest.json, sweep.json): limits added since an earlier
+    /// version wrote it are not applied, so that what it wrote still reads
+    /// (the lowest frame_interval, cycle_scale and schedule step, a zoom on
+    /// a perspective camera).
+    pub fn validate_recorded(&self) -> Result<(), SpecError> {
+        self.validate_as(true)
+    }
+
+    fn validate_as(&self, recorded: bool) -> Result<(), SpecError> {
         if !valid_folder_name(&self.name) {
             return Err(SpecError::new(
                 "name",
@@ -377,7 +391,8 @@ impl DatasetSpec {
         }
         range("frames", self.frames, 1, MAX_FRAMES)?;
         let interval = self.frame_interval();
-        if !(interval.is_finite() && (MIN_FRAME_INTERVAL_S..=MAX_FRAME_INTERVAL_S).contains(&interval)) {
+        let lowest = if recorded { f64::MIN_POSITIVE } else { MIN_FRAME_INTERVAL_S };
+        if !(interval.is_finite() && (lowest..=MAX_FRAME_INTERVAL_S).contains(&interval)) {
             return Err(SpecError::new(
                 "frame_interval",
                 format!(
@@ -475,7 +490,7 @@ impl DatasetSpec {
         }
         match (&self.city, self.world) {
             (Some(city), WorldKind::City) => {
-                city.validate()?;
+                city.validate_as(recorded)?;
                 let platoon = city.start.platoon_cars;
                 for split in Split::ALL {
                     let graph = self.graph_of(split);
@@ -537,6 +552,9 @@ impl DatasetSpec {
         let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
         for (i, camera) in self.cameras.iter().enumerate() {
             let field = format!("cameras[{i}]");
+            if !recorded {
+                camera.check_input(&field)?;
+            }
             camera.plan(&field, |car| match car {
                 CarRef::Id(id) if *id < fewest_cars => Ok(*id as usize),
                 CarRef::Id(id) => Err(format!(

@@ -435,6 +435,7 @@ fn resolve_cameras(
     let mut plans: Vec<CameraPlan> = Vec::new();
     for (i, camera) in specs.iter().enumerate() {
         let field = format!("cameras[{i}]");
+        camera.check_input(&field).map_err(|e| here.err(None, e.field, e.message))?;
         let plan = camera
             .plan(&field, |car| match car {
                 CarRef::Name(name) => car_index(names, name),
