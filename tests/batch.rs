@@ -680,6 +680,11 @@ fn a_shard_retried_after_its_merge_writes_nothing_and_validate_names_a_shard_man
     }
     assert!(run(&["merge", "--out", shared.to_str().unwrap()]).status.success());
     let merged = hash_tree(&shared);
+    // The merge task retried (the k8s example's `merge --out D`): done, exit 0.
+    let again = run(&["merge", "--out", shared.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&again.stdout).into_owned() + &String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success() && said.contains("nothing to merge"), "{said}");
+    assert_eq!(hash_tree(&shared), merged);
     let output = gen_cmd(&spec, &shared, &["--no-images", "--shard", "1/3"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success() && stderr.contains("shard 1/3 has nothing to do"), "{stderr}");

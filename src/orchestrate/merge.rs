@@ -52,11 +52,10 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // (it was refused, exit 2, and a retrying scheduler saw a failure).
     let merged = ManifestRecord::read(&out.join("manifest.json")).ok().flatten().is_some_and(|m| m.complete)
         && !out.join("shards").exists();
-    if merged && !sources.is_empty() && sources.iter().all(|s| fs::symlink_metadata(s).is_err()) {
-        return Ok(format!(
-            "nothing to merge: {} holds the complete dataset, and the shard folders are gone into it (merged before)",
-            out.display()
-        ));
+    // (Shards that wrote into --out itself leave no folders to name.)
+    if merged && sources.iter().all(|s| fs::symlink_metadata(s).is_err()) {
+        let gone = if sources.is_empty() { "" } else { ", and the shard folders are gone into it" };
+        return Ok(format!("nothing to merge: {} holds the complete dataset{gone} (merged before)", out.display()));
     }
     for (i, source) in sources.iter().enumerate() {
         if !source.is_dir() {

@@ -749,7 +749,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         // A shard shares the folder with the job's other shards: it removes
         // the old dataset only while none is writing there (one did remove
         // a running shard's scenarios, which then failed).
-        claim.alone(|| remove_dataset(&out, &existing)).ok_or_else(|| {
+        claim.alone(|| remove_dataset(&out, &existing)).map_err(GenError::Claim)?.ok_or_else(|| {
             GenError::Input(format!(
                 "{}: --force would remove the dataset there while another run (a shard of this job) is writing \
                  in it: nothing was removed; rerun once the others have stopped",

@@ -132,19 +132,24 @@ impl Claim {
     /// Runs `work` with the folder to this writer alone: a shard's shared
     /// folder lock is taken exclusively for it (and shared again after), so
     /// that `gen --shard --force` never removes a dataset other shards are
-    /// writing. `None`, and `work` not run, while another writer holds it.
-    pub fn alone<T>(&mut self, work: impl FnOnce() -> T) -> Option<T> {
-        let Some((_, file, true)) = self.locks.first() else {
-            return Some(work()); // held exclusively already, or not locked
+    /// writing. `Ok(None)`, and `work` not run, while another writer holds
+    /// it. Converting a lock drops it first (flock(2)): one that cannot be
+    /// shared again is an error, never a run going on unlocked.
+    pub fn alone<T>(&mut self, work: impl FnOnce() -> T) -> Result<Option<T>, ClaimError> {
+        let Some((path, file, true)) = self.locks.first() else {
+            return Ok(Some(work())); // held exclusively already, or not locked
+        };
+        let lost = |path: &Path| {
+            let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+            ClaimError::InUse { holder: holders(&dir), dir }
         };
         if file.try_lock().is_err() {
-            return None;
+            file.try_lock_shared().map_err(|_| lost(path))?;
+            return Ok(None);
         }
         let done = work();
-        // Shared again, for the other shards; were it lost, the drop would
-        // still remove the lock file only as its last holder.
-        let _ = file.try_lock_shared();
-        Some(done)
+        file.try_lock_shared().map_err(|_| lost(path))?;
+        Ok(Some(done))
     }
 }
 
