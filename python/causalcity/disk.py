@@ -457,7 +457,7 @@ class _MemberOrder:
         import re
 
         self.path = path
-        found = re.fullmatch(r"(\d+)-(\d+)\.tar", path.name)
+        found = re.fullmatch(r"([0-9]{5,})-([0-9]{5,})\.tar", path.name)
         self.range = (int(found[1]), int(found[2])) if found and int(found[1]) <= int(found[2]) else None
         # Unknown for a pack read alone: its first member's then.
         self.group_split = group_split
@@ -468,12 +468,16 @@ class _MemberOrder:
     def member(self, member: Any) -> Tuple[str, str, bool]:
         """The member's scenario folder, its name within it, and whether it
         is that scenario's first member."""
+        import re
+
         where = _os.fspath(self.path)
         folder, name = _member_parts(self.path, member)
         group_split, _, index = folder.rpartition("/")
         if self.group_split is None:
             self.group_split = group_split
-        in_range = index.isdigit() and (self.range is None or self.range[0] <= int(index) <= self.range[1])
+        # A scenario folder is its index in 5 or more ASCII digits (00012), as gen names it.
+        named = re.fullmatch(r"[0-9]{5,}", index) is not None and index == f"{int(index):05d}"
+        in_range = named and (self.range is None or self.range[0] <= int(index) <= self.range[1])
         if group_split != self.group_split or not in_range:
             raise InputError(f"{where}: {member.name} belongs to none of its scenarios (by the pack's name)")
         first = folder != self.current

@@ -485,6 +485,10 @@ def _only_run(out: Path) -> Iterator[None]:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
             raise InputError(f"{out}: another paper run (process {holder}) is running there: wait for it to end, or "
                              "give another --out") from None  # fmt: skip
+        except OSError as e:
+            # A filesystem without locks (some network filesystems), as gen takes it: said, and run.
+            print(f"[paper] warning: {out} cannot be locked ({e.strerror}): nothing stops a second run there",
+                  file=sys.stderr)  # fmt: skip
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         yield

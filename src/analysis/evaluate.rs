@@ -1052,13 +1052,18 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
 /// where those would show nothing or overflow the column (a threshold of
 /// -1e-9 printed `-0.0000`, one near 1e300 all its digits).
 fn shown_threshold(t: f64) -> String {
+    const COLUMN: usize = 9;
     if t == 0.0 {
-        "0.0000".to_string()
-    } else if (1e-3..1e4).contains(&t.abs()) {
-        format!("{t:.4}")
-    } else {
-        format!("{t:.2e}")
+        return "0.0000".to_string();
     }
+    let fixed = format!("{t:.4}");
+    if t.abs() >= 1e-3 && fixed.len() <= COLUMN {
+        return fixed;
+    }
+    [format!("{t:.2e}"), format!("{t:.1e}")]
+        .into_iter()
+        .find(|s| s.len() <= COLUMN)
+        .unwrap_or_else(|| format!("{t:.0e}"))
 }
 
 /// The normalised squared error of a predicted `[steps, cars, 2]`
@@ -1680,9 +1685,17 @@ mod tests {
 
     #[test]
     fn a_threshold_fills_its_column_and_never_reads_as_a_negative_zero() {
-        for (t, shown) in
-            [(0.5, "0.5000"), (-0.0, "0.0000"), (-1e-9, "-1.00e-9"), (1e300, "1.00e300"), (-12.5, "-12.5000")]
-        {
+        for (t, shown) in [
+            (0.5, "0.5000"),
+            (-0.0, "0.0000"),
+            (-1e-9, "-1.00e-9"),
+            (1e300, "1.00e300"),
+            (-12.5, "-12.5000"),
+            (-1234.5678, "-1.23e3"),
+            (-9999.99999, "-1.00e4"),
+            (-1e-300, "-1.0e-300"),
+            (f64::MIN, "-1.80e308"),
+        ] {
             assert_eq!(shown_threshold(t), shown);
             assert!(shown.len() <= 9, "{shown} overflows the column");
         }
