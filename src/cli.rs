@@ -570,7 +570,7 @@ pub struct GenArgs {
     pub force: bool,
 
     /// Write even when the disk looks too small. Before it starts, gen writes
-    /// one scenario, measures it and refuses (exit 2, with the figures) when
+    /// one scenario of the most cars, measures it and refuses (exit 2, with the figures) when
     /// that many bytes for every scenario still to write exceed the free space.
     #[arg(long)]
     pub force_space: bool,

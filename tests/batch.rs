@@ -698,3 +698,32 @@ fn a_shard_retried_after_its_merge_writes_nothing_and_validate_names_a_shard_man
     assert_eq!(out.status.code(), Some(1), "{said}");
     assert!(said.contains("shards/0-of-3.json: a shard's manifest beside the whole dataset's"), "{said}");
 }
+
+#[test]
+fn the_space_check_measures_a_scenario_of_the_most_cars() {
+    // It measured the first scenario, of the spec's first group: a job of
+    // 4- and 12-car scenarios was estimated at the 4-car size (a 1-car and
+    // 88-car spec, 40x low), and a run the disk could not hold started.
+    let dir = fresh_dir("batch-space-most-cars");
+    let spec = write_spec(&dir, &toy_spec("mixed", &[(4, 0.5), (12, 0.5)], (10_000_000, 0, 0), 20));
+    let output = gen_cmd(&spec, &dir.join("out"), &["--no-images", "--no-effects"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    let rest = &stderr[stderr.find("scenarios of about ").expect("the size per scenario") + 19..];
+    let each_kb: f64 = rest[..rest.find("kB").expect("in kB")].trim().parse().unwrap();
+    // The two kinds of scenario, as a small run of the same spec writes them.
+    let small = dir.join("small");
+    gen_ok(&spec, &small, &["--quiet", "--no-images", "--no-effects", "--limit", "1"]);
+    let kb = |group: &str| -> f64 {
+        let folder = small.join(group).join("train/00000");
+        let files: Vec<_> = std::fs::read_dir(&folder).unwrap().map(|e| e.unwrap().metadata().unwrap().len()).collect();
+        assert!(!files.is_empty(), "{}", folder.display());
+        files.iter().sum::<u64>() as f64 / 1e3
+    };
+    let (four, twelve) = (kb("cars04_edges50"), kb("cars12_edges50"));
+    assert!(twelve > 1.5 * four, "12 cars write more: {twelve} kB against {four} kB");
+    assert!(
+        (each_kb - twelve).abs() / twelve < 0.1,
+        "measured {each_kb} kB, a 12-car scenario is {twelve} kB: {stderr}"
+    );
+}

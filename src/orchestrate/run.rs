@@ -156,7 +156,7 @@ pub enum GenError {
     Mixed { out: PathBuf, differences: Vec<String> },
     #[error(
         "{out} is on a disk with {} free, but this run would write about {} more: {pending} scenarios \
-         of about {} each (measured on the first one, which was removed again), and it keeps {} free \
+         of about {} each (measured on one of the most cars, which was removed again), and it keeps {} free \
          besides for manifests and the file system's own bookkeeping.\n\
          Free some space, write fewer scenarios (--limit N, --no-images), or pass --force-space to write \
          anyway (the run then stops when the disk is full; rerun to resume).",
@@ -1038,8 +1038,36 @@ const SPACE_CHECK_EXACT_UP_TO: usize = 200_000;
 /// the scenarios' bytes.
 const SPACE_MARGIN_BYTES: u64 = 64 << 20;
 
+/// Where the scenarios of the most cars are among the run's positions:
+/// their groups' splits (a held-out split has its own count), sorted.
+struct MostCars(Vec<std::ops::Range<usize>>);
+
+impl MostCars {
+    fn of(expansion: &Expansion, sequence: &crate::plan::KeySequence<'_>) -> MostCars {
+        let spec = &expansion.spec;
+        let classes: Vec<(std::ops::Range<usize>, u32)> = (0..sequence.groups())
+            .filter_map(|g| spec.groups.get(g).map(|group| (g, group)))
+            .flat_map(|(g, group)| {
+                crate::spec::Split::ALL.map(|split| (sequence.positions_of(g, split), spec.group_of(split, group).cars))
+            })
+            .filter(|(positions, _)| !positions.is_empty())
+            .collect();
+        let most = classes.iter().map(|(_, cars)| *cars).max().unwrap_or(0);
+        let mut ranges: Vec<_> =
+            classes.into_iter().filter(|(_, cars)| *cars == most).map(|(positions, _)| positions).collect();
+        ranges.sort_by_key(|r| r.start);
+        MostCars(ranges)
+    }
+
+    fn holds(&self, position: usize) -> bool {
+        let at = self.0.partition_point(|r| r.end <= position);
+        self.0.get(at).is_some_and(|r| r.contains(&position))
+    }
+}
+
 /// Whether the disk can hold this run: writes the first missing scenario
-/// (the run keeps it: returns its position and bytes), measures it, and
+/// of the most cars (the run keeps it: returns its position and bytes),
+/// measures it, and
 /// when that many bytes for every missing scenario would not fit, removes
 /// it again (and the folders made for it) and refuses with the figures.
 fn check_space(
@@ -1058,25 +1086,32 @@ fn check_space(
         let key = sequence.key(position);
         scenario_dir(out, &key.group, key.split.name(), &key.folder_name())
     };
+    // Scenarios of more cars write more: the one measured is the first
+    // missing one of the most cars, so that the estimate errs high, not
+    // low (the first scenario, of the spec's first group, was taken for
+    // every group's: a 1-car one for a job of 88-car ones, 40x low).
+    let most_cars = MostCars::of(expansion, sequence);
     let (first, pending) = {
         let mut candidates = candidates.into_iter().peekable();
         let mut seen = 0usize;
-        let Some(first) = candidates.by_ref().inspect(|_| seen += 1).find(|&p| !present(p)) else {
+        let Some(first_missing) = candidates.by_ref().inspect(|_| seen += 1).find(|&p| !present(p)) else {
             return Ok(None);
         };
+        let mut sample = most_cars.holds(first_missing).then_some(first_missing);
         // Up to a point, count exactly which are still missing; above it,
         // assume all are (stat-ing millions of folders would delay the start).
         let mut rest = 0u64;
         let mut counted = 0usize;
         for p in candidates {
             counted += 1;
-            if seen + counted <= SPACE_CHECK_EXACT_UP_TO {
-                rest += u64::from(!present(p));
-            } else {
-                rest += 1;
+            let exact = seen + counted <= SPACE_CHECK_EXACT_UP_TO;
+            let missing = if exact || (sample.is_none() && most_cars.holds(p)) { !present(p) } else { true };
+            if missing && sample.is_none() && most_cars.holds(p) {
+                sample = Some(p);
             }
+            rest += u64::from(missing || !exact);
         }
-        (first, 1 + rest)
+        (sample.unwrap_or(first_missing), 1 + rest)
     };
     let target = target_of(first);
     // Folders this check creates, to remove if it refuses.
