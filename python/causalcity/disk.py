@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json as _json
 import os as _os
+import re
 import warnings as _warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Dict, Iterator, List, Optional, Tuple, Union
@@ -454,8 +455,6 @@ class _MemberOrder:
     and (:meth:`check_whole`) every scenario has some."""
 
     def __init__(self, path: Path, group_split: Optional[str]) -> None:
-        import re
-
         self.path = path
         found = re.fullmatch(r"([0-9]{5,})-([0-9]{5,})\.tar", path.name)
         self.range = (int(found[1]), int(found[2])) if found and int(found[1]) <= int(found[2]) else None
@@ -468,8 +467,6 @@ class _MemberOrder:
     def member(self, member: Any) -> Tuple[str, str, bool]:
         """The member's scenario folder, its name within it, and whether it
         is that scenario's first member."""
-        import re
-
         where = _os.fspath(self.path)
         folder, name = _member_parts(self.path, member)
         group_split, _, index = folder.rpartition("/")

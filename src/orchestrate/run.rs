@@ -1105,8 +1105,11 @@ fn check_space(
         for p in candidates {
             counted += 1;
             let exact = seen + counted <= SPACE_CHECK_EXACT_UP_TO;
-            let missing = if exact || (sample.is_none() && most_cars.holds(p)) { !present(p) } else { true };
-            if missing && sample.is_none() && most_cars.holds(p) {
+            let wanted = sample.is_none() && most_cars.holds(p);
+            // Past the exact count a scenario is taken as missing, unless it
+            // is looked at as the sample.
+            let missing = !(exact || wanted) || !present(p);
+            if wanted && missing {
                 sample = Some(p);
             }
             rest += u64::from(missing || !exact);
