@@ -694,7 +694,26 @@ class Miscounted(Method):
         return Predicted(edges=np.zeros((len(episodes) - 1, cars, cars)))
 
 
+class Buggy(Method):
+    """A bug in the user's own fit, raising a ValueError."""
+
+    discovers = True
+
+    def fit(self, train, val):
+        return self._reshape(train.metres)
+
+    def _reshape(self, metres):
+        raise ValueError("cannot reshape array of size 7 into shape (3,)")
+
+
 from causalcity.methods.counterfactual import CounterfactualMethod, CounterfactualPrediction
+
+
+class BuggyCounterfactual(CounterfactualMethod):
+    """A bug in the user's own predict, raising an OSError."""
+
+    def predict(self, pairs):
+        raise OSError("my_cache.bin: no such file")
 
 
 class ShortChanged(CounterfactualMethod):
@@ -759,6 +778,21 @@ def test_a_method_returning_too_few_predictions_is_named_not_a_traceback(toy, sw
         assert main([name, str(data), "--out", str(out), "--quiet"]) == 2, name
         err = capsys.readouterr().err
         assert says in err and "return one per" in err and ".predict on" in err, err
+        assert not out.exists()
+
+
+def test_a_bug_in_a_users_method_shows_its_traceback_not_bad_input(toy, sweep, tmp_path, user_module, capsys):
+    # A ValueError or OSError raised in a user's fit or predict was printed as
+    # "error: <message>", exit 2 (bad input), without a line of where it came from.
+    from causalcity.methods.__main__ import main
+
+    for name, data, says in [(f"{user_module}:Buggy", toy, "Buggy.fit on"),
+                             (f"{user_module}:BuggyCounterfactual", sweep, "BuggyCounterfactual.predict on")]:  # fmt: skip
+        out = tmp_path / "p.npz"
+        assert main([name, str(data), "--out", str(out), "--quiet"]) == 1, name
+        err = capsys.readouterr().err
+        assert "Traceback (most recent call last)" in err and "user_methods.py" in err, err
+        assert says in err and "nothing was written" in err, err
         assert not out.exists()
 
 

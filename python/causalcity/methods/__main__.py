@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -12,7 +13,7 @@ from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make, user_method_takes
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .classical import Pcmci
-from .common import DatasetError, non_negative_float, positive_float, positive_int as _positive, run_method
+from .common import DatasetError, MethodFailed, non_negative_float, positive_float, positive_int as _positive, run_method
 
 
 # The flags that set up one method or another, and the reference methods
@@ -134,6 +135,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             # Made once up front, so that a bad option is refused before any reading.
             make(args.method, **options)
             out = run_method(lambda: make(args.method, **options), args.dataset, args.out, args.group, args.split, args.quiet)
+    except MethodFailed as e:
+        # the method's own traceback: the bug is in its code
+        traceback.print_exception(e.__cause__, file=sys.stderr)
+        print(f"error: {e}; nothing was written", file=sys.stderr)
+        return 1
     except (InputError, ValueError, FileNotFoundError, NotADirectoryError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

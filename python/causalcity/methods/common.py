@@ -84,6 +84,26 @@ class Method:
         raise NotImplementedError
 
 
+class MethodFailed(Exception):
+    """A method's own ``fit`` or ``predict`` raised (a bug in the method, not
+    bad input): the message names the method, the call and the group; the
+    method's exception is its ``__cause__``, whose traceback the command
+    line prints (exit status 1). A user's ``ValueError`` or ``OSError`` was
+    reported as bad input, exit 2, by its message alone."""
+
+
+def _call(where: str, call, *args):
+    """``call(*args)``, a method's exception raised as :class:`MethodFailed`
+    naming ``where``; the package's own errors (bad input, a damaged
+    dataset read through the episodes) and interrupts pass as they are."""
+    try:
+        return call(*args)
+    except (InputError, DatasetError, _native.GenerationError):
+        raise
+    except Exception as e:
+        raise MethodFailed(f"{where} raised {type(e).__name__}: {e}") from e
+
+
 class DatasetError(RuntimeError):
     """A file of a dataset that cannot be read as gen writes it (damaged or
     changed by hand): a failure while working, exit status 1 from the
@@ -361,20 +381,28 @@ def fit_per_group(
             raise InputError(f"split {split!r} is not one of {', '.join(SPLITS)}")
     for group in list(groups):
         method = make_method()
-        label = getattr(method, "name", type(method).__name__)
+        label = _label(method)
         train = load(root, group, "train")
         val = load(root, group, "val")
         if len(train) == 0:
             raise InputError(f"{root / group}: no train {unit} to fit {label} on")
         if not quiet:
             print(f"{label}: {group} (train {len(train)} {unit}, val {len(val)})", file=sys.stderr)
-        method.fit(train, val if len(val) else None)
+        _call(f"{label}.fit on {root / group}", method.fit, train, val if len(val) else None)
         for split in splits:
             data = val if split == "val" else load(root, group, split)
             if len(data) > 0:
-                predicted = method.predict(data)
+                predicted = _call(f"{label}.predict on {root / group}/{split}", method.predict, data)
                 _check_predicted(predicted, data, parts, f"{label}.predict on {root / group}/{split}", unit)
                 yield data, predicted
+
+
+def _label(method) -> str:
+    """A method's name in progress lines and errors: its ``name``, or its
+    class's where it keeps the base classes' (a user's class read as
+    "method")."""
+    name = getattr(method, "name", None)
+    return type(method).__name__ if name in (None, Method.name, "counterfactual") else str(name)
 
 
 def _check_predicted(predicted, data, parts: Dict[str, bool], where: str, unit: str) -> None:
