@@ -133,6 +133,23 @@ fn evaluate_csv_never_lands_in_the_dataset_on_its_input_or_through_a_link() {
     let output = run(&["evaluate", s(&data), s(&pred), "--csv", s(&spec)]);
     assert_refused(&output, "already holds JSON (such as a spec), and this command writes a CSV table");
     assert_eq!(std::fs::read_to_string(&spec).unwrap(), "{\"name\": \"mine\"}\n");
+    // A FIFO (or a device node: as root, --csv /dev/full became a CSV
+    // file) is not renamed over: it is refused and stays what it was.
+    let (fifo, png_fifo) = (dir.join("pipe.csv"), dir.join("pipe.png"));
+    for path in [&fifo, &png_fifo] {
+        assert!(std::process::Command::new("mkfifo").arg(path).status().unwrap().success());
+    }
+    for command in [
+        vec!["evaluate", s(&data), s(&pred), "--csv", s(&fifo)],
+        vec!["evaluate", s(&data), s(&pred), "--per-scenario", s(&fifo)],
+        vec!["heatmap", s(&data), "--out", s(&png_fifo)],
+    ] {
+        assert_refused(&run(&command), "is a FIFO (named pipe), not a regular file: nothing is written there");
+        use std::os::unix::fs::FileTypeExt;
+        for path in [&fifo, &png_fifo] {
+            assert!(std::fs::symlink_metadata(path).unwrap().file_type().is_fifo(), "{command:?} replaced {path:?}");
+        }
+    }
     let picture = dir.join("heat.png");
     std::fs::write(&picture, "frame,score\n0,1\n").unwrap();
     assert_refused(&run(&["heatmap", s(&data), "--out", s(&picture)]), "already holds text");

@@ -678,6 +678,13 @@ pub fn claim_file(path: &Path, inputs: &[(&str, &Path)], writes: FileKind) -> Re
     match fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => return Err(link_error(path)),
         Ok(m) if m.is_dir() => return not_a_file("is a folder: give the path of a file to write".into()),
+        // Renamed over, a device node (as root, /dev/null) or a FIFO became this command's file.
+        Ok(m) if !m.is_file() => {
+            return not_a_file(format!(
+                "is {}, not a regular file: nothing is written there; give the path of a file",
+                special_file(&m.file_type())
+            ))
+        }
         _ => {}
     }
     // A part of the path that exists must be a folder.
@@ -714,6 +721,23 @@ pub fn claim_file(path: &Path, inputs: &[(&str, &Path)], writes: FileKind) -> Re
         }
     }
     Ok(OutputFile { path: path.to_path_buf() })
+}
+
+/// What a file that is neither a regular file, a folder nor a link is.
+fn special_file(kind: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        match () {
+            _ if kind.is_char_device() => return "a character device",
+            _ if kind.is_block_device() => return "a block device",
+            _ if kind.is_fifo() => return "a FIFO (named pipe)",
+            _ if kind.is_socket() => return "a socket",
+            _ => {}
+        }
+    }
+    let _ = kind;
+    "a special file"
 }
 
 /// The first 4 KB of the regular file at `path` (`None`: no file, not a
