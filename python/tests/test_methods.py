@@ -694,6 +694,28 @@ class Miscounted(Method):
         return Predicted(edges=np.zeros((len(episodes) - 1, cars, cars)))
 
 
+class NotFinite(Method):
+    """Scores NaN for one pair, and NaN for every car with itself (unread)."""
+
+    discovers = True
+
+    def predict(self, episodes):
+        cars = episodes.metres.shape[2]
+        edges = np.zeros((len(episodes), cars, cars))
+        edges[:, range(cars), range(cars)] = np.nan
+        edges[-1, 1, 0] = np.nan
+        return Predicted(edges=edges)
+
+
+class SelfNaN(NotFinite):
+    """NaN for every car with itself only, which evaluate does not read."""
+
+    def predict(self, episodes):
+        predicted = super().predict(episodes)
+        predicted.edges[-1, 1, 0] = 0.0
+        return predicted
+
+
 class Buggy(Method):
     """A bug in the user's own fit, raising a ValueError."""
 
@@ -707,6 +729,15 @@ class Buggy(Method):
 
 
 from causalcity.methods.counterfactual import CounterfactualMethod, CounterfactualPrediction
+
+
+class InfinitePosition(CounterfactualMethod):
+    """Predicts an infinite position for one car of the last pair."""
+
+    def predict(self, pairs):
+        positions = [np.zeros((pairs.steps(k), pairs.cars, 2)) for k in range(len(pairs))]
+        positions[-1][0, 1, 0] = np.inf
+        return CounterfactualPrediction(positions, np.zeros((len(pairs), pairs.cars)))
 
 
 class BuggyCounterfactual(CounterfactualMethod):
@@ -779,6 +810,23 @@ def test_a_method_returning_too_few_predictions_is_named_not_a_traceback(toy, sw
         err = capsys.readouterr().err
         assert says in err and "return one per" in err and ".predict on" in err, err
         assert not out.exists()
+
+
+def test_a_method_predicting_nan_or_infinity_is_refused_before_writing(toy, sweep, tmp_path, user_module, capsys):
+    # The file was written, exit 0, and only evaluate refused it.
+    from causalcity.methods.__main__ import main
+
+    for name, data, says in [(f"{user_module}:NotFinite", toy, "returned edges holding nan for scenario"),
+                             (f"{user_module}:InfinitePosition", sweep, "returned positions holding inf for pair")]:  # fmt: skip
+        out = tmp_path / "p.npz"
+        assert main([name, str(data), "--out", str(out), "--quiet"]) == 2, name
+        err = capsys.readouterr().err
+        assert says in err and "every value must be a finite number" in err, err
+        assert not out.exists()
+    # A car's score for itself is not read, by evaluate or by this check.
+    out = tmp_path / "self.npz"
+    assert main([f"{user_module}:SelfNaN", str(toy), "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
+    assert causalcity.evaluate(toy, out)["edges"]
 
 
 def test_a_bug_in_a_users_method_shows_its_traceback_not_bad_input(toy, sweep, tmp_path, user_module, capsys):

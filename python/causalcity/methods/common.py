@@ -405,10 +405,25 @@ def _label(method) -> str:
     return type(method).__name__ if name in (None, Method.name, "counterfactual") else str(name)
 
 
+def _unread(part: str, value: np.ndarray, data, i: int):
+    """Where evaluate does not read entry ``i`` of a prediction's ``part``
+    (``True``): a car's score for itself, the intervened car's affected
+    score."""
+    unread = np.zeros(value.shape, dtype=bool)
+    if part == "edges" and value.ndim == 2 and value.shape[0] == value.shape[1]:
+        np.fill_diagonal(unread, True)
+    elif part == "affected" and value.ndim == 1 and hasattr(data, "interventions"):
+        car = data.interventions[i].get("car")
+        if isinstance(car, int) and 0 <= car < len(unread):
+            unread[car] = True
+    return unread
+
+
 def _check_predicted(predicted, data, parts: Dict[str, bool], where: str, unit: str) -> None:
     """Refuses a method's output that does not hold one entry per
     scenario (pair) of ``data`` in each of ``parts`` (a short one failed
-    with an IndexError, a long one was cut silently)."""
+    with an IndexError, a long one was cut silently), or that holds NaN or
+    infinity (written, and refused only by evaluate)."""
     one = unit[:-1] if unit.endswith("s") else unit
     for part, required in parts.items():
         if not hasattr(predicted, part):
@@ -425,3 +440,13 @@ def _check_predicted(predicted, data, parts: Dict[str, bool], where: str, unit: 
             held = f"{count} {unit}" if count is not None else f"a {type(values).__name__}"
             raise InputError(f"{where} returned {part} for {held}, and it has {len(data)}: return one per {one}, "
                              f"in the order given")  # fmt: skip
+        for i, value in enumerate(values):
+            try:
+                value = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                continue  # not numbers: the writer names it
+            bad = np.argwhere(~np.isfinite(value) & ~_unread(part, value, data, i))
+            if len(bad):
+                at = tuple(int(x) for x in bad[0])
+                raise InputError(f"{where} returned {part} holding {value[at]} for {one} {i} at {list(at)}: every "
+                                 f"value must be a finite number (evaluate refuses the file)")  # fmt: skip
