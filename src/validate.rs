@@ -4,7 +4,7 @@
 //! ids consistent across scenario.json, the CSV logs and the masks, and the
 //! SHA-256 of every file. Reports every problem with its path.
 
-use crate::dataset::{edge_pairs, Dataset};
+use crate::dataset::Dataset;
 use crate::output::layout::{
     CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV,
     POSES_CSV, SCENARIO_JSON,
@@ -16,7 +16,6 @@ use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
 use crate::spec::{DatasetSpec, Split, WorldKind};
-use crate::world::effects::{EffectReport, InterventionKind};
 use rayon::prelude::*;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -846,11 +845,19 @@ fn check_scenario_files(
     let mut fingerprints_here = Vec::new();
     if let Some(data) = read(POSES_CSV, &mut problems) {
         fingerprints_here = fingerprints(&data, frames, cars);
+        let before = problems.len();
         check_csv(&dir.join(POSES_CSV), &data, &POSE_COLUMNS, frames * cars, &mut problems, |row, i| {
             let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(2)?.parse::<usize>().ok()?);
             let ok = cars > 0 && frame == i / cars && car == i % cars;
             ok.then_some(()).ok_or(()).ok()
         });
+        // In order and complete: then every value as the readers take it.
+        if problems.len() == before {
+            let path = dir.join(POSES_CSV);
+            if let Err(message) = crate::dataset::poses::read_pose_rows(&data[..], &path, frames, cars, |_| {}) {
+                problems.push(Problem { message: without_path(message, &path), path });
+            }
+        }
         if let Some(pixels) = read(PIXELS_FILE, &mut problems) {
             if let Err(message) = check_pixels(&dir, &pixels, &data, frames, cars) {
                 let path = dir.join(PIXELS_FILE);
@@ -1034,9 +1041,8 @@ fn split_twins(root: &Path, keys: &[ScenarioKey], prints: &[Vec<Fingerprint>]) -
     problems
 }
 
-/// effects.csv parses (every field checked), has one row per cause, other
-/// car and intervention (every car removed; its next action changed where it
-/// has one), and scenario.json's graphs are the ones its rows give.
+/// effects.csv parses (every field checked) and agrees with scenario.json
+/// ([`crate::dataset::effects::check_effects`]).
 fn check_effects(
     dir: &Path,
     data: &[u8],
@@ -1049,58 +1055,17 @@ fn check_effects(
         .as_f64()
         .ok_or_else(|| format!("{} has no effect_threshold_m to check effects.csv against", json.display()))?;
     let rows = parse_effects(&dir.join(EFFECTS_CSV), data, cars, frames, threshold)?;
-    let mut seen = BTreeSet::new();
-    let mut per_cause: BTreeMap<(u32, InterventionKind), usize> = BTreeMap::new();
-    for r in &rows {
-        if !seen.insert((r.cause, r.intervention, r.effect)) {
-            return Err(format!("two rows for cause {}, effect {}, {}", r.cause, r.effect, r.intervention.name()));
-        }
-        *per_cause.entry((r.cause, r.intervention)).or_default() += 1;
-    }
-    for (&(cause, kind), &n) in &per_cause {
-        if n + 1 != cars {
-            return Err(format!("cause {cause}, {}: {n} rows, expected one per other car ({})", kind.name(), cars - 1));
-        }
-    }
-    // Every car removed; every car with actions given another next action.
-    let with_actions = |car: usize| record["cars"][car]["actions"].as_array().is_some_and(|a| !a.is_empty());
-    for (kind, causes) in [
-        (InterventionKind::Remove, cars),
-        (InterventionKind::NextAction, (0..cars).filter(|&c| with_actions(c)).count()),
-    ] {
-        let rows = seen.iter().filter(|&&(_, k, _)| k == kind).count();
-        if rows != causes * cars.saturating_sub(1) {
-            return Err(format!(
-                "{rows} {} rows, expected {} ({causes} cars intervened on, each against every other car)",
-                kind.name(),
-                causes * cars.saturating_sub(1)
-            ));
-        }
-    }
-    let report = EffectReport { threshold_m: threshold, rows };
-    let designed = edge_pairs(record, "edges").unwrap_or_default();
-    for (field, expected) in [
-        ("causal_edges", report.causal_edges()),
-        ("direct_edges", report.direct_edges()),
-        ("edges_without_effect", report.edges_without_effect(&designed)),
-    ] {
-        match edge_pairs(record, field) {
-            Some(found) if found == expected => {}
-            Some(found) => {
-                return Err(format!("{} `{field}` is {found:?}; effects.csv's rows give {expected:?}", json.display()))
-            }
-            None => return Err(format!("{} has no list of pairs `{field}`", json.display())),
-        }
-    }
-    Ok(())
+    crate::dataset::effects::check_effects(rows, record, &json, cars, threshold).map(|_| ())
 }
 
 /// A reader's `message` without the `path: ` it begins with (a problem is
 /// printed after its path).
 fn without_path(message: String, path: &Path) -> String {
-    match message.strip_prefix(&format!("{}: ", path.display())) {
-        Some(rest) => rest.to_string(),
-        None => message,
+    let shown = path.display().to_string();
+    match (message.strip_prefix(&format!("{shown}: ")), message.strip_prefix(&format!("{shown} "))) {
+        (Some(rest), _) => rest.to_string(),
+        (None, Some(rest)) if rest.starts_with("line ") => rest.to_string(), // "<path> line 6: ..."
+        _ => message,
     }
 }
 

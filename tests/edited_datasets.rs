@@ -50,7 +50,7 @@ fn a_scenario_json_edited_out_of_range_is_named_by_every_reader() {
     let data = city(&dir, 20);
     let bad_edge = edited(&data, &dir.join("edge"), false, |v| v["edges"] = serde_json::json!([[0, 99]]));
     for command in ["stats", "baseline"] {
-        assert_error(&run(&[command, s(&bad_edge)]), 1, "edges must name them");
+        assert_error(&run(&[command, s(&bad_edge)]), 1, "edges: pair [0, 99] names a car beyond the 4 cars");
     }
     let no_interval = edited(&data, &dir.join("interval"), false, |v| v["frame_interval"] = 0.into());
     assert_error(&run(&["baseline", s(&no_interval)]), 1, "frame_interval 0");
@@ -307,7 +307,9 @@ fn stats_and_heatmap_read_poses_and_events_as_every_reader_does() {
     });
     let no_header = copy("no-header", "events.csv", &|_| String::new());
     let heat = dir.join("heat.png");
-    for (copy, says) in [(&emptied, "poses.csv (0 bytes) can hold"), (&nan, "poses.csv: row 2 is not a pose")] {
+    for (copy, says) in
+        [(&emptied, "poses.csv (0 bytes) can hold"), (&nan, r#"poses.csv line 2: speed "NaN" is not allowed"#)]
+    {
         assert_error(&run(&["stats", s(copy)]), 1, says);
         assert_error(&run(&["heatmap", s(copy), "--out", s(&heat)]), 1, says);
         assert!(!heat.exists(), "no picture of a damaged dataset");
@@ -346,4 +348,124 @@ fn a_dataset_written_within_an_earlier_versions_limits_still_reads() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("city.lights.cycle_scale") && stderr.contains("from 0.01 to 10"), "{stderr}");
+}
+
+/// `data` copied to `to` with `edit` applied to the text of its train
+/// scenario's `file`, and the scenario's checksum of it updated (as a
+/// careful editor would), so that only the values speak.
+fn edited_file(data: &Path, to: &Path, file: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    use sha2::Digest;
+    assert!(std::process::Command::new("cp").args(["-r", s(data), s(to)]).status().unwrap().success());
+    let scenario = to.join("cars04_edges50/train/00000");
+    let text = edit(std::fs::read_to_string(scenario.join(file)).unwrap());
+    std::fs::write(scenario.join(file), &text).unwrap();
+    let digest: String = sha2::Sha256::digest(text.as_bytes()).iter().map(|b| format!("{b:02x}")).collect();
+    let sums = scenario.join("checksums.sha256");
+    let lines: Vec<String> = std::fs::read_to_string(&sums)
+        .unwrap()
+        .lines()
+        .map(|l| if l.ends_with(&format!("  {file}")) { format!("{digest}  {file}") } else { l.to_string() })
+        .collect();
+    std::fs::write(&sums, lines.join("\n") + "\n").unwrap();
+    to.to_path_buf()
+}
+
+/// poses.csv with field `column` of data row `row` (0-based) set to `value`.
+fn pose_set(text: String, row: usize, column: usize, value: &str) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut fields: Vec<String> = lines[row + 1].split(',').map(str::to_string).collect();
+    fields[column] = value.to_string();
+    lines[row + 1] = fields.join(",");
+    lines.join("\n") + "\n"
+}
+
+#[test]
+fn pose_values_outside_the_schema_and_malformed_graphs_are_named_by_every_reader() {
+    // Each was read as written, exit 0: a NaN or 1e308 speed (stats' mean
+    // speed became inf), a negative speed, a yaw of 100 rad, a t that
+    // differs between the cars of a frame (validate said valid too); a
+    // self-loop or a repeated pair in any graph of scenario.json (stats'
+    // gaps and edge counts changed).
+    let dir = fresh_dir("edited-pose-values");
+    let data = city(&dir, 20);
+    let cases: Vec<(&str, usize, usize, &str, &str)> = vec![
+        ("nan-speed", 5, 11, "nan", r#"line 7: speed "nan" is not allowed: metres per second, 0 or more"#),
+        ("huge-speed", 5, 11, "1e308", r#"speed "1e308" is not allowed"#),
+        ("negative-speed", 2, 11, "-5", r#"speed "-5" is not allowed"#),
+        ("yaw", 3, 8, "100", r#"line 5: yaw "100" is not allowed: radians from -3.141593 to 3.141593"#),
+        ("infinite-x", 1, 3, "inf", r#"x "inf" is not allowed: a finite number within +-1e9"#),
+        ("t", 5, 1, "7.25", "line 7: t 7.25 differs from frame 1's t"),
+    ];
+    let mut checked = 0;
+    for (name, row, column, value, says) in &cases {
+        let bad = edited_file(&data, &dir.join(name), "poses.csv", |t| pose_set(t, *row, *column, value));
+        for command in ["stats", "baseline"] {
+            assert_error(&run(&[command, s(&bad)]), 1, says);
+        }
+        let report = run(&["validate", s(&bad)]);
+        assert_eq!(report.status.code(), Some(1), "validate {name}");
+        let text = String::from_utf8_lossy(&report.stdout);
+        assert!(text.contains("poses.csv: ") && text.contains(says), "{text}");
+        checked += 1;
+    }
+    assert_eq!(checked, cases.len());
+    // A pipe where poses.csv should be is named as one (it was "more rows
+    // than poses.csv (0 bytes) can hold").
+    let piped = dir.join("piped");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&piped)]).status().unwrap().success());
+    let poses = piped.join("cars04_edges50/train/00000/poses.csv");
+    std::fs::remove_file(&poses).unwrap();
+    assert!(std::process::Command::new("mkfifo").arg(&poses).status().unwrap().success());
+    assert_error(&run_within(&["stats", s(&piped)], 60), 1, "not a regular file (a pipe or a device)");
+
+    for (name, field, pairs, says) in [
+        ("self-loop", "edges", serde_json::json!([[2, 2]]), "edges: pair [2, 2] links a car to itself"),
+        ("twice", "edges", serde_json::json!([[1, 2], [1, 2]]), "edges: pair [1, 2] is given twice"),
+        ("beyond", "causal_edges", serde_json::json!([[0, 50]]), "causal_edges: pair [0, 50] names a car beyond"),
+    ] {
+        let bad = edited(&data, &dir.join(name), false, |v| v[field] = pairs.clone());
+        assert_error(&run(&["stats", s(&bad)]), 1, says);
+    }
+}
+
+#[test]
+fn export_nri_refuses_non_finite_pixels_and_a_manifest_claiming_more_than_memory() {
+    // NRI's export reads pixels.npy alone: a NaN or an infinity there was
+    // exported into loc_train.npy, exit 0.
+    let dir = fresh_dir("edited-pixels");
+    let data = city(&dir, 20);
+    for (name, value, says) in
+        [("nan", f32::NAN, "holds NaN at [0, 1, 0]"), ("inf", f32::INFINITY, "holds inf at [0, 1, 0]")]
+    {
+        let copy = dir.join(name);
+        assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&copy)]).status().unwrap().success());
+        let path = copy.join("cars04_edges50/train/00000/pixels.npy");
+        let mut bytes = std::fs::read(&path).unwrap();
+        let start = 10 + u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        // frame 0, car 1, px
+        bytes[start + 8..start + 12].copy_from_slice(&value.to_le_bytes());
+        std::fs::write(&path, bytes).unwrap();
+        let out = dir.join(format!("{name}-nri"));
+        assert_error(&run(&["export", "nri", s(&copy), "--out", s(&out), "--quiet"]), 1, says);
+        assert!(!out.join("cars04_edges50/loc_train.npy").exists(), "nothing exported");
+    }
+    // A manifest edited (its hash recomputed) to claim 88-car scenarios of
+    // 100,000 frames, 20,000 of them: the export aborted (exit 134)
+    // setting aside 1.4 TB before a scenario was read.
+    let claimed = dir.join("claimed");
+    assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&claimed)]).status().unwrap().success());
+    let path = claimed.join("manifest.json");
+    let mut manifest = read_json(&path);
+    manifest["spec"]["frames"] = 100_000.into();
+    manifest["spec"]["groups"][0]["cars"] = 88.into();
+    manifest["spec"]["splits"] = serde_json::json!({"train": 20000, "val": 1, "test": 1});
+    manifest["limit"] = serde_json::Value::Null;
+    let spec: causalcity::spec::DatasetSpec = serde_json::from_value(manifest["spec"].clone()).unwrap();
+    let spec = causalcity::plan::Expansion::from_spec(spec).unwrap().spec;
+    manifest["spec_sha256"] = causalcity::output::manifest::spec_sha256(&spec).into();
+    std::fs::write(&path, manifest.to_string()).unwrap();
+    let output = run(&["export", "nri", s(&claimed), "--out", s(&dir.join("claimed-nri")), "--quiet"]);
+    let text = stderr(&output);
+    assert!(!text.contains("panicked") && !text.contains("memory allocation"), "{text}");
+    assert!(matches!(output.status.code(), Some(1 | 2)), "exit {:?}: {text}", output.status.code());
 }

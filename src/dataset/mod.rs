@@ -3,6 +3,8 @@
 //! reads datasets (stats, heatmap, exports), and a scenario folder read
 //! back into arrays ([`readback`]).
 
+pub mod effects;
+pub mod poses;
 pub mod readback;
 
 use crate::output::manifest::{ManifestRecord, Packing};
@@ -459,10 +461,23 @@ impl ScenarioSummary {
             ));
         }
         let cars = summary.cars.len() as u32;
-        if summary.cars.iter().enumerate().any(|(i, c)| c.id != i as u32)
-            || summary.edges.iter().chain(&summary.graph).any(|e| e[0] >= cars || e[1] >= cars)
-        {
-            return Err(format!("{}: car ids must be 0..{cars} in order, and edges must name them", path.display()));
+        if let Some((i, car)) = summary.cars.iter().enumerate().find(|(i, c)| c.id != *i as u32) {
+            return Err(format!("{}: cars[{i}] has id {}: car ids must be 0..{cars} in order", path.display(), car.id));
+        }
+        // Every graph the file holds, whichever is read: a self-loop or a
+        // pair given twice changed stats' gaps and edge counts silently.
+        let graphs = [("edges", Some(&summary.edges)), ("causal_edges", summary.causal_edges.as_ref())];
+        for (field, pairs) in graphs.into_iter().chain([("direct_edges", summary.direct_edges.as_ref())]) {
+            let mut seen = std::collections::HashSet::new();
+            for &[a, b] in pairs.into_iter().flatten() {
+                let why = match () {
+                    _ if a >= cars || b >= cars => format!("names a car beyond the {cars} cars (ids 0..{cars})"),
+                    _ if a == b => "links a car to itself".to_string(),
+                    _ if !seen.insert((a, b)) => "is given twice".to_string(),
+                    _ => continue,
+                };
+                return Err(format!("{}: {field}: pair [{a}, {b}] {why}", path.display()));
+            }
         }
         Ok(summary)
     }
@@ -475,7 +490,8 @@ const MIN_POSE_ROW_BYTES: u64 = 26;
 /// (a scenario.json edited to claim more), before any memory is set aside
 /// for them.
 pub(crate) fn poses_fit(path: &Path, frames: usize, cars: usize) -> Result<(), String> {
-    let bytes = std::fs::metadata(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?.len();
+    // A pipe or a folder is named as what it is, never opened.
+    let bytes = crate::input::regular_file(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?.len();
     if (frames as u64).saturating_mul(cars as u64).saturating_mul(MIN_POSE_ROW_BYTES) > bytes {
         return Err(format!(
             "{frames} frames x {cars} cars (its scenario.json) are more rows than {} ({bytes} bytes) can hold",
@@ -514,41 +530,13 @@ impl PoseLog {
     pub fn read(dir: &Path, frames: usize, cars: usize) -> Result<PoseLog, String> {
         let path = dir.join("poses.csv");
         poses_fit(&path, frames, cars)?;
-        let mut reader = csv::Reader::from_path(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let file = std::fs::File::open(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let mut poses = vec![Pose::default(); frames * cars];
-        let mut filled = vec![false; frames * cars];
-        let mut row = csv::ByteRecord::new();
-        let mut n = 0usize;
-        while reader.read_byte_record(&mut row).map_err(|e| format!("{}: {e}", path.display()))? {
-            n += 1;
-            let bad = || format!("{}: row {} is not a pose of this scenario", path.display(), n + 1);
-            let field = |i: usize| row.get(i).and_then(|v| std::str::from_utf8(v).ok());
-            let num = |i: usize| field(i).and_then(|v| v.parse::<f64>().ok());
-            let (Some(frame), Some(car)) =
-                (field(0).and_then(|v| v.parse::<usize>().ok()), field(2).and_then(|v| v.parse::<usize>().ok()))
-            else {
-                return Err(bad());
-            };
-            let (Some(x), Some(y), Some(yaw), Some(px), Some(py), Some(speed), Some(view)) =
-                (num(3), num(4), num(8), num(9), num(10), num(11), num(12))
-            else {
-                return Err(bad());
-            };
-            let finite = [x, y, yaw, px, py, speed].iter().all(|v| v.is_finite());
-            if !finite || frame >= frames || car >= cars || filled[frame * cars + car] {
-                return Err(bad());
-            }
-            filled[frame * cars + car] = true;
-            poses[frame * cars + car] = Pose { x, y, px, py, yaw, speed, in_view: view > 0.5 };
-        }
-        if let Some(missing) = filled.iter().position(|f| !f) {
-            return Err(format!(
-                "{}: no pose for frame {} car {} (expected {frames} frames x {cars} cars)",
-                path.display(),
-                missing / cars,
-                missing % cars
-            ));
-        }
+        poses::read_pose_rows(std::io::BufReader::new(file), &path, frames, cars, |row| {
+            let ([x, y, _], [px, py]) = (row.position, row.pixel);
+            let (yaw, speed, in_view) = (row.rotation[2], row.speed, row.in_view);
+            poses[row.frame * cars + row.car] = Pose { x, y, px, py, yaw, speed, in_view };
+        })?;
         Ok(PoseLog { frames, cars, poses })
     }
 

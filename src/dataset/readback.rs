@@ -10,7 +10,6 @@ use crate::output::arrays::{EventRow, InteractionArrays, LightArrays, ScenarioAr
 use crate::output::layout::{frame_digits, FrameKind};
 use crate::output::logs::{read_effects, read_interactions as read_interaction_records};
 use crate::output::png::decode_8bit;
-use crate::output::poses::POSE_COLUMNS;
 use crate::world::{BoundBy, EventKind};
 use std::path::Path;
 
@@ -70,10 +69,27 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
     // it lists causal edges, the city's logs in the city world.
     let effects = dir.join("effects.csv");
     if value.get("causal_edges").is_some() {
-        let threshold = value["effect_threshold_m"].as_f64().ok_or_else(|| {
-            format!("{}: effect_threshold_m is missing, but the folder has effects.csv", json_path.display())
+        let threshold = match &value["effect_threshold_m"] {
+            serde_json::Value::Null => {
+                return Err(format!(
+                    "{}: effect_threshold_m is missing, but it lists causal_edges",
+                    json_path.display()
+                ))
+            }
+            v => v.as_f64().filter(|t| t.is_finite() && *t > 0.0).ok_or_else(|| {
+                format!("{}: effect_threshold_m {v} is not allowed: metres above 0", json_path.display())
+            })?,
+        };
+        let rows = read_effects(&effects, cars, frames, threshold)?;
+        // As validate holds them: every row once, and the graphs they give.
+        let report = super::effects::check_effects(rows, &value, &json_path, cars, threshold).map_err(|e| {
+            if e.starts_with(&json_path.display().to_string()) {
+                e
+            } else {
+                format!("{}: {e}", effects.display())
+            }
         })?;
-        a.effects = Some(read_effects(&effects, cars, frames, threshold)?);
+        a.effects = Some(report.rows);
     }
     if value["world"] == "city" {
         let read = read_light_log(dir, frames, summary.frame_interval)?;
@@ -101,6 +117,35 @@ fn field<T: std::str::FromStr>(
         .map_err(|_| format!("{} line {line}: {} {text:?} is not a valid value", path.display(), columns[k]))
 }
 
+/// [`field`] of a duration: finite seconds, 0 or more.
+fn seconds(path: &Path, line: usize, row: &csv::StringRecord, columns: &[&str], k: usize) -> Result<f64, String> {
+    let value: f64 = field(path, line, row, columns, k)?;
+    if !(value.is_finite() && value >= 0.0) {
+        return Err(format!(
+            "{} line {line}: {} {value} is not allowed: seconds, 0 or more",
+            path.display(),
+            columns[k]
+        ));
+    }
+    Ok(value)
+}
+
+/// [`field`] of a pixel coordinate: finite (empty: none, NaN).
+fn pixel(path: &Path, line: usize, row: &csv::StringRecord, columns: &[&str], k: usize) -> Result<f64, String> {
+    if row.get(k) == Some("") {
+        return Ok(f64::NAN);
+    }
+    let value: f64 = field(path, line, row, columns, k)?;
+    if !value.is_finite() {
+        return Err(format!(
+            "{} line {line}: {} {value} is not allowed: a finite pixel, or empty",
+            path.display(),
+            columns[k]
+        ));
+    }
+    Ok(value)
+}
+
 fn check_header<R: std::io::Read>(path: &Path, reader: &mut csv::Reader<R>, columns: &[&str]) -> Result<(), String> {
     let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
     if header.iter().ne(columns.iter().copied()) {
@@ -115,46 +160,16 @@ fn check_header<R: std::io::Read>(path: &Path, reader: &mut csv::Reader<R>, colu
 
 fn read_poses(path: &Path, a: &mut ScenarioArrays) -> Result<(), String> {
     let (frames, cars) = (a.frames, a.cars);
-    let mut reader = open_csv(path)?;
-    check_header(path, &mut reader, &POSE_COLUMNS)?;
-    let mut filled = vec![false; frames * cars];
-    for (n, row) in reader.records().enumerate() {
-        let line = n + 2;
-        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
-        let get = |k: usize| field::<f64>(path, line, &row, &POSE_COLUMNS, k);
-        let (frame, car) =
-            (field::<usize>(path, line, &row, &POSE_COLUMNS, 0)?, field::<usize>(path, line, &row, &POSE_COLUMNS, 2)?);
-        if frame >= frames || car >= cars || filled[frame * cars + car] {
-            return Err(format!(
-                "{} line {line}: frame {frame}, car {car} is outside {frames} frames x {cars} cars or given twice",
-                path.display()
-            ));
-        }
-        let at = frame * cars + car;
-        filled[at] = true;
-        a.t[frame] = get(1)?;
-        for k in 0..3 {
-            a.position[at * 3 + k] = get(3 + k)?;
-            a.rotation[at * 3 + k] = get(6 + k)?;
-        }
-        a.pixels[at * 2] = get(9)?;
-        a.pixels[at * 2 + 1] = get(10)?;
-        a.speed[at] = get(11)?;
-        a.in_view[at] = match row.get(12) {
-            Some("1") => 1,
-            Some("0") => 0,
-            other => return Err(format!("{} line {line}: in_view {other:?} is not 0 or 1", path.display())),
-        };
-    }
-    if let Some(missing) = filled.iter().position(|f| !f) {
-        return Err(format!(
-            "{}: no pose for frame {} car {} ({frames} frames x {cars} cars expected)",
-            path.display(),
-            missing / cars,
-            missing % cars
-        ));
-    }
-    Ok(())
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    super::poses::read_pose_rows(std::io::BufReader::new(file), path, frames, cars, |row| {
+        let at = row.frame * cars + row.car;
+        a.t[row.frame] = row.t;
+        a.position[at * 3..at * 3 + 3].copy_from_slice(&row.position);
+        a.rotation[at * 3..at * 3 + 3].copy_from_slice(&row.rotation);
+        a.pixels[at * 2..at * 2 + 2].copy_from_slice(&row.pixel);
+        a.speed[at] = row.speed;
+        a.in_view[at] = row.in_view as u8;
+    })
 }
 
 const LIGHT_COLUMNS: [&str; 9] =
@@ -221,16 +236,13 @@ pub fn parse_light_changes<R: std::io::Read>(
         let c = LIGHT_COLOURS.iter().position(|c| c.name() == &row[5]).ok_or_else(|| {
             format!("{} line {line}: colour {:?} is not one of green, yellow, red", path.display(), &row[5])
         })? as u8;
-        let since: f64 = field(path, line, &row, &LIGHT_COLUMNS, 6)?;
+        let since = seconds(path, line, &row, &LIGHT_COLUMNS, 6)?;
         if frame == 0 {
             if names.contains(&name) || last.is_some_and(|(f, _)| f > 0) {
                 return Err(format!("{} line {line}: light {name} at frame 0 is out of order", path.display()));
             }
             for k in [7, 8] {
-                heads.push(match &row[k] {
-                    "" => f64::NAN,
-                    _ => field(path, line, &row, &LIGHT_COLUMNS, k)?,
-                });
+                heads.push(pixel(path, line, &row, &LIGHT_COLUMNS, k)?);
             }
             names.push(name);
             current.push((c, since, 0));
@@ -276,10 +288,7 @@ fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
         if frame == 0 {
             lights.names.push(name.clone());
             for k in [7, 8] {
-                lights.head_pixels.push(match &row[k] {
-                    "" => f64::NAN,
-                    _ => field(path, line, &row, &LIGHT_COLUMNS, k)?,
-                });
+                lights.head_pixels.push(pixel(path, line, &row, &LIGHT_COLUMNS, k)?);
             }
         }
         let count = lights.names.len().max(1);
@@ -293,7 +302,7 @@ fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
             format!("{} line {line}: colour {:?} is not one of green, yellow, red", path.display(), &row[5])
         })?;
         lights.colour.push(colour as u8);
-        lights.since_change.push(field(path, line, &row, &LIGHT_COLUMNS, 6)?);
+        lights.since_change.push(seconds(path, line, &row, &LIGHT_COLUMNS, 6)?);
         rows += 1;
     }
     if rows != frames * lights.names.len() {
@@ -341,7 +350,7 @@ fn read_events(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Re
         let line = n + 2;
         let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
         let frame: u64 = field(path, line, &row, &EVENT_COLUMNS, 0)?;
-        if frame as usize > frames {
+        if frame as usize >= frames {
             return Err(format!(
                 "{} line {line}: frame {frame} is beyond the scenario's {frames} frames",
                 path.display()
@@ -367,12 +376,20 @@ fn read_events(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Re
             }
         };
         light_index(&|| format!("{} line {line}", path.display()), lights, &row[5])?;
+        let t: f64 = field(path, line, &row, &EVENT_COLUMNS, 1)?;
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(format!("{} line {line}: t {t} is not allowed: seconds, 0 or more", path.display()));
+        }
+        let (car, other_car) = (car(3)?, car(4)?);
+        if car.is_some() && car == other_car {
+            return Err(format!("{} line {line}: other_car is the car itself ({})", path.display(), &row[3]));
+        }
         events.push(EventRow {
             frame,
-            t: field(path, line, &row, &EVENT_COLUMNS, 1)?,
+            t,
             kind: kind.name(),
-            car: car(3)?,
-            other_car: car(4)?,
+            car,
+            other_car,
             light: (!row[5].is_empty()).then(|| row[5].to_string()),
             detail: row[6].to_string(),
         });
@@ -403,7 +420,8 @@ pub fn read_frames(
     let mut out = Vec::new();
     for frame in start..end {
         let path = dir.join(kind.folder()).join(format!("{frame:0digits$}.png"));
-        let data = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        // A regular file only: a pipe hung the reader, a link to /dev/zero filled memory.
+        let data = crate::input::read_data(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         out.extend(decode_8bit(&data, width, height, colour).map_err(|e| format!("{}: {e}", path.display()))?);
     }
     Ok(out)

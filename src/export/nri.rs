@@ -329,11 +329,12 @@ fn export_nri_groups(
             }
             let s = dirs.len();
             let block = frames * cars * 2;
-            let (mut loc, mut vel) = (vec![0f32; s * block], vec![0f32; s * block]);
-            let mut edges = vec![0i64; s * cars * cars];
+            let at = || format!("{} {}", group_dir.display(), split.name());
+            let (mut loc, mut vel) = (zeroed::<f32>(s, block, &at)?, zeroed::<f32>(s, block, &at)?);
+            let mut edges = zeroed::<i64>(s, cars * cars, &at)?;
             // Without `dynamic`, a placeholder byte per scenario keeps the zip even.
             let graphs = if options.dynamic { frames * cars * cars } else { 1 };
-            let mut dynamic = vec![0u8; s * graphs];
+            let mut dynamic = zeroed::<u8>(s, graphs, &at)?;
             loc.par_chunks_mut(block)
                 .zip(vel.par_chunks_mut(block))
                 .zip(edges.par_chunks_mut(cars * cars))
@@ -378,4 +379,19 @@ fn export_nri_groups(
         }
     }
     Ok(report)
+}
+
+/// `scenarios` x `each` zeros, or an error naming `at` where memory cannot
+/// hold them (a manifest edited to claim more scenarios, frames or cars
+/// than its files hold aborted the export before a scenario was read).
+fn zeroed<T: Clone + Default>(scenarios: usize, each: usize, at: &dyn Fn() -> String) -> Result<Vec<T>, String> {
+    let too_many = || {
+        let bytes = (scenarios as f64) * (each as f64) * std::mem::size_of::<T>() as f64;
+        format!("{}: {scenarios} scenarios of {each} values each ({bytes:.3e} bytes) are more than memory holds", at())
+    };
+    let n = scenarios.checked_mul(each).ok_or_else(too_many)?;
+    let mut values = Vec::new();
+    values.try_reserve_exact(n).map_err(|_| too_many())?;
+    values.resize(n, T::default());
+    Ok(values)
 }

@@ -212,6 +212,14 @@ pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<
             Some(_) => Some(index(3, cars).ok_or_else(|| fail(format!("line {line}: other_car is not a car id")))?),
         };
         let light = row.get(4).filter(|l| !l.is_empty()).map(str::to_string);
+        if other_car == Some(car) {
+            return Err(fail(format!("line {line}: car {car} is bound by itself (other_car {car})")));
+        }
+        if bound_by == BoundBy::Free && (other_car.is_some() || light.is_some()) {
+            return Err(fail(format!(
+                "line {line}: bound_by free names an other_car or a light: a free car has neither"
+            )));
+        }
         let slot = &mut records[frame * cars + car];
         if slot.is_some() {
             return Err(fail(format!("line {line}: a second row for frame {frame}, car {car}")));

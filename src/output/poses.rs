@@ -11,6 +11,13 @@ use std::io::Write;
 pub const POSE_COLUMNS: [&str; 13] =
     ["frame", "t", "car", "x", "y", "z", "roll", "pitch", "yaw", "px", "py", "speed", "in_view"];
 
+/// Largest magnitude of a position (metres) or pixel that readers take from
+/// a pose log or `pixels.npy`: far beyond any map or bird's-eye camera
+/// causalcity writes (a removed car is parked 10 km off the map, 128,000 px
+/// in the default view), and far below where sums of them overflow (a
+/// speed of 1e308 made `stats`' mean speed infinite).
+pub const MAX_POSE_MAGNITUDE: f64 = 1e9;
+
 /// Decimals of px and py in the log.
 pub const PIXEL_DECIMALS: u32 = 3;
 
@@ -57,7 +64,14 @@ pub fn parse_pixels(bytes: &[u8], path: &std::path::Path, frames: usize, cars: u
             npy.dtype().descr()
         )));
     }
-    npy.into_vec::<f32>().map_err(|e| fail(&e))
+    let values = npy.into_vec::<f32>().map_err(|e| fail(&e))?;
+    // The limit poses.csv's px, py are read with: an export reads only
+    // this file.
+    if let Some(i) = values.iter().position(|v| !v.is_finite() || v.abs() as f64 > MAX_POSE_MAGNITUDE) {
+        let at = [i / (2 * cars.max(1)), i / 2 % cars.max(1), i % 2];
+        return Err(fail(&format!("holds {} at {at:?}: every pixel must be a finite number within +-1e9", values[i])));
+    }
+    Ok(values)
 }
 
 /// Writes the pose log of `trajectories` for cars with the given ids.
