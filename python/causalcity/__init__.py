@@ -510,7 +510,8 @@ def map(  # noqa: A001 (causalcity.map, as the CLI's `map`)
 ) -> Dict[str, Any]:
     """The spec's road network, as ``causalcity map`` lists it, with arrays:
 
-    - ``town``: the town shown (``"default"``, ``"grid-3x4"``, ..) and
+    - ``town``: the town shown (``"custom"``, the four-intersection city;
+      ``"grid-3x4"``, ..) and
       ``towns``, every town the spec draws (one unless ``map.grid`` draws
       rows or columns per scenario); ``town=`` picks one (the first when
       None), as ``Scenario.town`` names it;

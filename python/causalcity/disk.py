@@ -43,10 +43,12 @@ class Frames:
 
     dtype = _np.dtype(_np.uint8)
 
-    def __init__(self, folder: Path, kind: str, frames: int, width: int, height: int) -> None:
+    def __init__(self, folder: Path, kind: str, frames: int, width: int, height: int, cars: Optional[int] = None) -> None:
         self.folder = folder
         self.kind = kind
         self._frames, self._width, self._height = frames, width, height
+        # A mask's values are 0 (no car) and a car's mask_id (its id + 1).
+        self._cars = cars
         # A packed dataset's temporary folder that ``folder`` is in (kept
         # alive while these frames are; not sent to other processes).
         self._keep: Any = None
@@ -72,7 +74,14 @@ class Frames:
         raw = _native.read_frames(
             _os.fspath(self.folder), self.kind, self._frames, start, end, self._width, self._height
         )
-        return _np.asarray(raw)
+        out = _np.asarray(raw)
+        if self.kind == "mask" and self._cars is not None and out.size and int(out.max()) > self._cars:
+            frame = start + int(_np.argmax(out.reshape(len(out), -1).max(axis=1) > self._cars))
+            raise InputError(
+                f"{_os.fspath(self.folder)}: mask frame {frame} holds the value {int(out[frame - start].max())}, and "
+                f"the scenario has {self._cars} cars: a mask holds 0 (no car) or a car's mask_id, 1 to {self._cars}"
+            )
+        return out
 
     def __getitem__(self, index: Any) -> _np.ndarray:
         index = index if isinstance(index, tuple) else (index,)
@@ -85,10 +94,15 @@ class Frames:
                 raise IndexError(f"frame {int(first)} is outside the scenario's {self._frames} frames")
             out = self._read(i, i + 1)[0]
             return out[rest] if rest else out
+        if isinstance(first, (bool, _np.bool_)):
+            return _np.asarray(self)[index]  # numpy's new axis (or none), as an array gives
         chosen = _np.arange(self._frames)[first]
         if chosen.ndim == 0:
             out = self._read(int(chosen), int(chosen) + 1)[0]
             return out[rest] if rest else out
+        if chosen.ndim > 1:  # an index array of any shape gives frames in that shape, as numpy does
+            out = self[(chosen.ravel(),) + rest]
+            return out.reshape(chosen.shape + out.shape[1:])
         chosen = chosen.ravel()
         if len(chosen) == 0:
             out = self._read(0, 0)
@@ -124,7 +138,11 @@ def load(folder: PathLike, images: bool = True) -> "Scenario":
     from . import Key, _scenario
 
     path = Path(folder)
-    if not (path / "scenario.json").is_file():
+    record = path / "scenario.json"
+    if record.exists() and not record.is_file():
+        kind = "a folder" if record.is_dir() else "not a regular file (a pipe or a device)"
+        raise InputError(f"{_os.fspath(record)}: {kind}, so it is not read; a scenario folder holds gen's scenario.json")
+    if not record.is_file():
         raise FileNotFoundError(
             f"{_os.fspath(path)}: no scenario.json; a scenario folder is one that gen wrote, "
             "e.g. data/ci-city/cars08_edges50/test/00000 (open_dataset reads a whole dataset)"
@@ -137,14 +155,36 @@ def load(folder: PathLike, images: bool = True) -> "Scenario":
     key = None
     place = tuple(path.resolve().parts[-3:])
     if all(k in meta for k in ("group", "split", "index", "name")) and place == (meta["group"], meta["split"], meta["name"]):
-        key = Key(meta["group"], meta["split"], int(meta["index"]))
+        key = Key(meta["group"], meta["split"], _record_whole(record, meta, "index", 0))
     scenario = _scenario(raw, key)
     if images and (path / "rgb").is_dir():
-        camera = meta.get("camera", {})
-        frames, width, height = int(meta["frames"]), int(camera["width"]), int(camera["height"])
+        camera = meta.get("camera")
+        if not isinstance(camera, dict):
+            raise InputError(f"{_os.fspath(record)}: field camera: {camera!r} is not allowed: the camera's object "
+                             "(width, height, ...), as gen writes it beside rgb/")  # fmt: skip
+        width = _record_whole(record, camera, "width", 1, "camera.")
+        height = _record_whole(record, camera, "height", 1, "camera.")
+        frames = _record_whole(record, meta, "frames", 1)
         object.__setattr__(scenario, "rgb", Frames(path, "rgb", frames, width, height))
-        object.__setattr__(scenario, "mask", Frames(path, "mask", frames, width, height))
+        object.__setattr__(scenario, "mask", Frames(path, "mask", frames, width, height, cars=scenario.cars))
     return scenario
+
+
+_MAX_WHOLE = 1 << 31
+"""The largest index, frame count or image side a scenario.json may give
+(a spec's are far smaller)."""
+
+
+def _record_whole(record: Path, values: Dict[str, Any], field: str, minimum: int, prefix: str = "") -> int:
+    """``values[field]`` of the scenario.json at ``record``: a whole number
+    from ``minimum``; :class:`~causalcity.InputError` naming the file,
+    field and value otherwise (a width of -256 gave frames of a negative
+    shape, ``true`` a width of 1, a missing one a KeyError)."""
+    value = values.get(field)
+    if isinstance(value, bool) or not isinstance(value, int) or not minimum <= value <= _MAX_WHOLE:
+        raise InputError(f"{_os.fspath(record)}: field {prefix}{field}: {value!r} is not allowed: a whole number, "
+                         f"{minimum} or more")  # fmt: skip
+    return value
 
 
 def _read_record(path: Path, what: str) -> Dict[str, Any]:
@@ -164,6 +204,11 @@ def _read_record(path: Path, what: str) -> Dict[str, Any]:
         value = record.get(field)
         if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             raise InputError(f"{_os.fspath(path)}: field {field}: {value!r} is not allowed: a whole number above 0, or absent")
+    # Flags read by truthiness took "false" for true.
+    for field in ("images", "complete"):
+        value = record.get(field)
+        if value is not None and not isinstance(value, bool):
+            raise InputError(f"{_os.fspath(path)}: field {field}: {value!r} is not allowed: true or false")
     return record
 
 
@@ -267,9 +312,14 @@ class _Packed:
                     if not images and name.endswith(".png"):
                         continue
                     target = Path(scratch.name) / name
-                    target.parent.mkdir(parents=True, exist_ok=True)
                     data = tar.extractfile(member)
-                    target.write_bytes(data.read() if data is not None else b"")
+                    try:
+                        target.parent.mkdir(parents=True, exist_ok=True)
+                        target.write_bytes(data.read() if data is not None else b"")
+                    except (FileExistsError, NotADirectoryError, IsADirectoryError):
+                        scratch.cleanup()
+                        raise InputError(f"{_os.fspath(path)}: {member.name} is both a file and a folder of the "
+                                         "pack's members: the pack is damaged") from None  # fmt: skip
         return scratch
 
     def _as_members(self, scratch: Any, key: "Key") -> Any:
@@ -299,16 +349,46 @@ class _Packed:
         return state
 
 
+def _check_is(scenario: "Scenario", key: "Key", record: Path) -> None:
+    """Refuses a scenario whose scenario.json (at ``record``) names another
+    key than the one it was read for: a folder linked to another
+    scenario's, an edited index, or pack members renamed were handed back
+    as ``key`` with the other scenario's arrays."""
+    meta = scenario.metadata
+    found = (meta.get("group"), meta.get("split"), meta.get("index"))
+    if found != (key.group, key.split, key.index):
+        raise InputError(
+            f"{_os.fspath(record)}: it is scenario {found[0]}/{found[1]} index {found[2]}, not {key.folder} "
+            f"(index {key.index}) where it was read: a linked or renamed folder, or an edited scenario.json; "
+            "causalcity validate names what else is wrong"
+        )
+
+
 def _keep_with_frames(scratch: Any, scenarios: List["Scenario"]) -> None:
     """Hands the temporary folder ``scenarios`` were read from to their
     frames, which read from it while they live; without frames it goes now."""
-    kept = False
+    kept, holder = False, _Kept(scratch)
     for scenario in scenarios:
         for frames in (scenario.rgb, scenario.mask):
             if isinstance(frames, Frames):
-                frames._keep, kept = scratch, True
+                frames._keep, kept = holder, True
     if not kept:
         scratch.cleanup()
+
+
+class _Kept:
+    """A temporary folder that frames read from, removed once the last of
+    them goes (left to ``TemporaryDirectory``'s own finaliser, its removal
+    warned "Implicitly cleaning up" under ``-W always`` and pytest)."""
+
+    def __init__(self, scratch: Any) -> None:
+        self.scratch = scratch
+
+    def __del__(self) -> None:
+        try:
+            self.scratch.cleanup()
+        except Exception:  # at interpreter exit, or already removed
+            pass
 
 
 class Dataset(_Packed):
@@ -389,13 +469,16 @@ class Dataset(_Packed):
             if not (folder / "scenario.json").is_file():
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
             self._require_frames(folder, images)
-            return load(folder, images=images)
+            scenario = load(folder, images=images)
+            _check_is(scenario, key, folder / "scenario.json")
+            return scenario
         scratch = self._unpack(key, images)
         if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
             raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
         with self._as_members(scratch, key):
             self._require_frames(Path(scratch.name), images, self.pack_of(key))
             scenario = load(Path(scratch.name), images=images)
+            _check_is(scenario, key, Path(scratch.name) / "scenario.json")
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
         _keep_with_frames(scratch, [scenario])
@@ -494,9 +577,10 @@ class _MemberOrder:
             return
         for index in range(self.range[0], self.range[1] + 1):
             if index not in self.found:
+                scenario = f"{self.group_split}/{index:05d}" if self.group_split else f"scenario {index:05d}"
                 raise InputError(
-                    f"{_os.fspath(self.path)}: holds no member of {self.group_split}/{index:05d}, which its name "
-                    "says it holds: the pack is damaged"
+                    f"{_os.fspath(self.path)}: holds no member of {scenario}, which its name says it holds: the pack "
+                    "is damaged"
                 )
 
 
@@ -507,8 +591,12 @@ def _open_pack(path: Path) -> Any:
     :class:`~causalcity.InputError` naming it otherwise."""
     import tarfile
 
+    import stat
+
     where = _os.fspath(path)
     try:
+        if not stat.S_ISREG(_os.stat(path).st_mode):  # a pipe blocked open() until its writer came
+            raise InputError(f"{where}: not a regular file (a folder, a pipe or a device), so it is not read as a pack")
         with open(path, "rb") as f:
             size = f.seek(0, 2)
             end = b""
@@ -539,6 +627,8 @@ class _naming_damage:
         import tarfile
 
         # (A size field past any offset raises ValueError on the seek.)
+        if kind is not None and issubclass(kind, InputError):
+            return False  # already says what is wrong (a ValueError too)
         if kind is not None and issubclass(kind, (tarfile.TarError, OverflowError, EOFError, ValueError)):
             raise InputError(f"{_os.fspath(self.path)}: not a whole tar ({error}): the pack is damaged") from None
         return False

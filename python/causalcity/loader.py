@@ -135,6 +135,11 @@ def collate(scenarios: Sequence[Scenario], tensors: Optional[bool] = None) -> Di
             other[b, :, : s.cars] = s.interactions.other_car
         out["bound_by"], out["other_car"] = bound_by, other
     if all(s.rgb is not None for s in scenarios):
+        sizes = {tuple(s.rgb.shape[1:3]) for s in scenarios}
+        if len(sizes) > 1:
+            named = ", ".join(f"{s.key or 'scenario ' + str(b)}: {s.rgb.shape[2]} x {s.rgb.shape[1]}" for b, s in enumerate(scenarios))
+            raise InputError(f"scenarios of different image sizes cannot share a batch ({named}); images=False "
+                             "batches them without frames")  # fmt: skip
         out["rgb"] = _np.stack([s.rgb for s in scenarios])
         out["mask"] = _np.stack([s.mask for s in scenarios])
     return _as_tensors(out, tensors)
@@ -145,6 +150,8 @@ def _as_tensors(out: Dict[str, Any], tensors: Optional[bool]) -> Dict[str, Any]:
     (default: when torch is imported)."""
     if tensors is None:
         tensors = _torch() is not None
+    elif not isinstance(tensors, (bool, _np.bool_)):
+        raise TypeError(f"tensors={tensors!r}: give True, False or None")
     if tensors:
         torch = _torch()
         if torch is None:

@@ -1,0 +1,307 @@
+"""Files of a dataset damaged, edited or replaced, read by the Python
+package: each is an InputError naming the file (and field) or gives what
+numpy would, never another scenario's arrays under the key asked for, a
+value outside the schema, a hang or a raw traceback from a library."""
+
+import json
+import os
+import shutil
+import tarfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import causalcity
+
+SPEC = {
+    "name": "damaged",
+    "world": "toy",
+    "seed": 5,
+    "frames": 6,
+    "image": {"width": 256, "height": 160},
+    "groups": [{"cars": 4, "edge_proportion": 0.5}],
+    "splits": {"train": 2, "val": 1, "test": 1},
+}
+CITY = dict(json.loads((Path(__file__).resolve().parents[2] / "configs" / "ci-city.json").read_text()))
+GROUP = "cars04_edges50"
+FIRST = f"{GROUP}/train/00000"
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    out = tmp_path_factory.mktemp("damaged") / "toy"
+    causalcity.generate(SPEC, out, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def packed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("damaged") / "packed"
+    causalcity.generate(SPEC, out, progress=False, images=False, format="tar", scenarios_per_tar=2)
+    return out
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory):
+    out = tmp_path_factory.mktemp("damaged") / "city"
+    spec = dict(CITY, name="damaged-city", frames=12, groups=[{"cars": 4, "edge_proportion": 0.5}],
+                splits={"train": 1, "val": 1, "test": 1})  # fmt: skip
+    causalcity.generate(spec, out, progress=False, images=False)
+    return out
+
+
+def in_a_process(code, *args):
+    """Runs ``code`` (given ``args`` as sys.argv[1:]) in a fresh Python, at
+    most 60 s (a reader that opens a pipe waits for a writer forever, in
+    native code no signal reaches): its stderr."""
+    import subprocess
+    import sys
+
+    try:
+        run = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"still reading after 60 s (a pipe was opened): {code}")
+    return run.stderr
+
+
+def copy_of(dataset, tmp_path, name="copy"):
+    to = tmp_path / name
+    shutil.copytree(dataset, to, symlinks=True)
+    return to
+
+
+def edit_json(path, edit):
+    value = json.loads(path.read_text())
+    edit(value)
+    path.write_text(json.dumps(value))
+
+
+def set_field(path, row, column, value):
+    """CSV `path` with `column` of data row `row` set to `value`."""
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    fields = lines[row + 1].split(",")
+    fields[header.index(column)] = value
+    lines[row + 1] = ",".join(fields)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_a_scenario_is_never_handed_back_under_another_key(toy, packed, tmp_path):
+    # A folder linked to another scenario's, or an edited index: the other
+    # scenario's arrays came back as the key asked for.
+    linked = copy_of(toy, tmp_path, "linked")
+    target = linked / FIRST
+    shutil.rmtree(target)
+    target.symlink_to(linked / GROUP / "train" / "00001", target_is_directory=True)
+    data = causalcity.open_dataset(linked, "train")
+    with pytest.raises(causalcity.InputError, match=r"it is scenario cars04_edges50/train index 1, not cars04_edges50/train/00000"):
+        data.load((GROUP, "train", 0))
+    assert data.load((GROUP, "train", 1)).key.index == 1, "the scenario itself still reads"
+
+    edited = copy_of(toy, tmp_path, "edited")
+    edit_json(edited / FIRST / "scenario.json", lambda v: v.update(index=7))
+    with pytest.raises(causalcity.InputError, match="index 7, not cars04_edges50/train/00000"):
+        causalcity.open_dataset(edited, "train").load((GROUP, "train", 0))
+
+    # Two members of a pack renamed into each other's scenario.
+    swapped = copy_of(packed, tmp_path, "swapped")
+    pack = swapped / GROUP / "train" / "00000-00001.tar"
+    with tarfile.open(pack) as tar:
+        members = [(m, tar.extractfile(m).read()) for m in tar.getmembers()]
+    with tarfile.open(pack, "w", format=tarfile.USTAR_FORMAT) as tar:
+        renamed = []
+        for m, data in members:
+            m.name = m.name.replace("/00000/", "/0000X/").replace("/00001/", "/00000/").replace("/0000X/", "/00001/")
+            renamed.append((m, data))
+        for m, data in sorted(renamed, key=lambda md: md[0].name):
+            tar.addfile(m, __import__("io").BytesIO(data))
+    with pytest.raises(causalcity.InputError, match="index 1, not cars04_edges50/train/00000"):
+        causalcity.open_dataset(swapped, "train").load((GROUP, "train", 0))
+
+
+def test_pose_values_outside_the_schema_are_refused(toy, tmp_path):
+    cases = [("speed", "nan", 'speed "nan" is not allowed'), ("x", "1e400", 'x "1e400" is not allowed'),
+             ("speed", "-5", 'speed "-5" is not allowed'), ("t", "9.5", "t 9.5 differs from frame 1's t")]  # fmt: skip
+    checked = 0
+    for column, value, says in cases:
+        copy = copy_of(toy, tmp_path, f"poses-{column}-{value}")
+        set_field(copy / FIRST / "poses.csv", 5, column, value)
+        with pytest.raises(causalcity.InputError, match=f"poses.csv line 7: {says}"):
+            causalcity.load(copy / FIRST)
+        checked += 1
+    assert checked == len(cases)
+
+
+def test_effects_must_agree_with_scenario_json(toy, tmp_path):
+    # A repeated row, or a row that gives an edge scenario.json does not
+    # list: read as written (causal_graph with an edge of no record).
+    twice = copy_of(toy, tmp_path, "twice")
+    path = twice / FIRST / "effects.csv"
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines + [lines[1]]) + "\n")
+    with pytest.raises(causalcity.InputError, match="effects.csv: two rows for cause"):
+        causalcity.load(twice / FIRST)
+
+    disagrees = copy_of(toy, tmp_path, "disagrees")
+    path = disagrees / FIRST / "effects.csv"
+    rows = path.read_text().splitlines()
+    meta = json.loads((disagrees / FIRST / "scenario.json").read_text())
+    listed = {tuple(e) for e in meta["causal_edges"]}
+    header = rows[0].split(",")
+    for i, row in enumerate(rows[1:], start=1):
+        fields = row.split(",")
+        if (int(fields[0]), int(fields[1])) not in listed:
+            fields[header.index("max_divergence_m")] = "3.0"
+            fields[header.index("first_frame")] = "4"
+            rows[i] = ",".join(fields)
+            break
+    else:
+        pytest.fail("every pair is a causal edge: nothing to edit")
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(causalcity.InputError, match="scenario.json `causal_edges` is"):
+        causalcity.load(disagrees / FIRST)
+
+    edit_json(copy_of(toy, tmp_path, "threshold") / FIRST / "scenario.json", lambda v: v.update(effect_threshold_m="x"))
+    with pytest.raises(causalcity.InputError, match='effect_threshold_m "x" is not allowed: metres above 0'):
+        causalcity.load(tmp_path / "threshold" / FIRST)
+
+
+def test_city_logs_outside_the_schema_are_refused(city, tmp_path):
+    scenario = f"{GROUP}/train/00000"
+    meta = json.loads((city / scenario / "scenario.json").read_text())
+    cases = []
+    events = (city / scenario / "events.csv").read_text().splitlines()
+    if len(events) > 1:
+        cases += [("events.csv", 0, "frame", str(meta["frames"]), "is beyond the scenario's"),
+                  ("events.csv", 0, "t", "nan", "t NaN is not allowed: seconds, 0 or more")]  # fmt: skip
+    cases += [("light_changes.csv", 0, "since_change", "-7", "since_change -7 is not allowed: seconds, 0 or more"),
+              ("light_changes.csv", 0, "head_px", "inf", "head_px inf is not allowed: a finite pixel")]  # fmt: skip
+    interactions = (city / scenario / "interactions.csv").read_text().splitlines()
+    header = interactions[0].split(",")
+    free = next(i for i, r in enumerate(interactions[1:]) if r.split(",")[header.index("bound_by")] == "free")
+    car = interactions[free + 1].split(",")[header.index("car")]
+    other = "1" if car != "1" else "0"
+    cases += [("interactions.csv", free, "other_car", other, "bound_by free names an other_car"),
+              ("interactions.csv", free, "other_car", car, f"car {car} is bound by itself")]  # fmt: skip
+    checked = 0
+    for n, (file, row, column, value, says) in enumerate(cases):
+        copy = copy_of(city, tmp_path, f"city-{n}")
+        set_field(copy / scenario / file, row, column, value)
+        with pytest.raises(causalcity.InputError, match=f"{file}.*{says}"):
+            causalcity.load(copy / scenario)
+        checked += 1
+    assert checked == len(cases) >= 4
+
+
+def test_frames_and_records_that_cannot_be_read_are_named(toy, tmp_path):
+    copy = copy_of(toy, tmp_path, "frames")
+    scenario = copy / FIRST
+    # A pipe where a frame should be hung the reader; a link to /dev/zero filled memory.
+    (scenario / "rgb" / "0003.png").unlink()
+    os.mkfifo(scenario / "rgb" / "0003.png")
+    (scenario / "rgb" / "0004.png").unlink()
+    (scenario / "rgb" / "0004.png").symlink_to("/dev/zero")
+    read = "import sys, causalcity; causalcity.load(sys.argv[1]).rgb[int(sys.argv[2])]"
+    for frame in (3, 4):
+        said = in_a_process(read, scenario, frame)
+        assert f"InputError: cannot read {scenario}/rgb/000{frame}.png: not a regular file" in said, said
+    s = causalcity.load(scenario)
+    # A mask value that is no car of the scenario (4 cars: mask_ids 1 to 4).
+    mask = np.asarray(s.mask[0]).copy()
+    mask[0, 0] = 99
+    from PIL import Image
+
+    Image.fromarray(mask).save(scenario / "mask" / "0000.png")
+    with pytest.raises(causalcity.InputError, match="mask frame 0 holds the value 99, and the scenario has 4 cars"):
+        causalcity.load(scenario).mask[0]
+    # Camera sizes that are no image's (a negative shape; true taken as 1; missing: a KeyError).
+    for camera, says in [({"width": -256, "height": 160}, "camera.width: -256"), ({"width": True, "height": 160}, "camera.width: True"),
+                         ({"height": 160}, "camera.width: None"), (None, "field camera: None")]:  # fmt: skip
+        edit_json(scenario / "scenario.json", lambda v: v.update(camera=camera))
+        with pytest.raises(causalcity.InputError, match=says):
+            causalcity.load(scenario)
+    # scenario.json a folder: named as one, not "no scenario.json".
+    (scenario / "scenario.json").unlink()
+    (scenario / "scenario.json").mkdir()
+    with pytest.raises(causalcity.InputError, match="scenario.json: a folder"):
+        causalcity.load(scenario)
+
+
+def test_frames_index_as_numpy_does(toy):
+    s = causalcity.open_dataset(toy, "train").load((GROUP, "train", 0))
+    whole = np.asarray(s.rgb)
+    picks = np.array([[1, 2], [3, 0]])
+    assert s.rgb[picks].shape == whole[picks].shape == (2, 2, 160, 256, 3)
+    np.testing.assert_array_equal(s.rgb[picks], whole[picks])
+    assert s.rgb[True].shape == whole[True].shape == (1, 6, 160, 256, 3)
+
+
+def test_flags_and_batches_of_the_wrong_kind_are_named(toy, tmp_path):
+    copy = copy_of(toy, tmp_path, "flags")
+    edit_json(copy / "manifest.json", lambda v: v.update(images="false"))
+    with pytest.raises(causalcity.InputError, match="manifest.json: field images: 'false' is not allowed: true or false"):
+        causalcity.open_dataset(copy)
+    data = causalcity.open_dataset(toy, "train")
+    with pytest.raises(TypeError, match="tensors='no'"):
+        causalcity.collate([data[0]], tensors="no")
+    # Scenarios of two image sizes: numpy's "all input arrays must have the same shape".
+    bigger = dict(SPEC, name="bigger", image={"width": 320, "height": 160})
+    causalcity.generate(bigger, tmp_path / "bigger", progress=False, limit=1)
+    other = causalcity.open_dataset(tmp_path / "bigger", "train")[0]
+    with pytest.raises(causalcity.InputError, match="scenarios of different image sizes cannot share a batch"):
+        causalcity.collate([data[0], other], tensors=False)
+
+
+def test_damaged_packs_are_named_once_and_a_pipe_never_read(packed, tmp_path):
+    copy = copy_of(packed, tmp_path, "packs")
+    pack = copy / GROUP / "train" / "00000-00001.tar"
+    # A member that is both a file and a folder: a raw FileExistsError.
+    with tarfile.open(pack) as tar:
+        members = [(m, tar.extractfile(m).read()) for m in tar.getmembers()]
+    with tarfile.open(pack, "w", format=tarfile.USTAR_FORMAT) as tar:
+        for m, data in members:
+            tar.addfile(m, __import__("io").BytesIO(data))
+        clash = tarfile.TarInfo(f"{GROUP}/train/00001/poses.csv/extra")
+        clash.size = 1
+        tar.addfile(clash, __import__("io").BytesIO(b"x"))
+    with pytest.raises(causalcity.InputError, match="is both a file and a folder") as error:
+        causalcity.open_dataset(copy, "train").load((GROUP, "train", 1))
+    assert "not a whole tar" not in str(error.value)
+    # A member the rule refuses is named once, not as "not a whole tar (...)".
+    with tarfile.open(pack, "w", format=tarfile.USTAR_FORMAT) as tar:
+        for m, data in members + members[-1:]:
+            tar.addfile(m, __import__("io").BytesIO(data))
+    with pytest.raises(causalcity.InputError, match="is in it twice") as error:
+        list(causalcity.read_tar(pack))
+    assert "not a whole tar" not in str(error.value)
+    # A pipe for a pack: open() blocked until a writer came.
+    pipe = tmp_path / "00000-00001.tar"
+    os.mkfifo(pipe)
+    said = in_a_process("import sys, causalcity; list(causalcity.read_tar(sys.argv[1]))", pipe)
+    assert f"InputError: {pipe}: not a regular file" in said, said
+
+
+def test_a_packed_scenarios_temporary_folder_goes_with_its_last_frames_without_a_warning(tmp_path):
+    import gc
+    import glob
+    import tempfile
+    import warnings
+
+    causalcity.generate(dict(SPEC, frames=3), tmp_path / "p", progress=False, format="tar", scenarios_per_tar=2)
+    data = causalcity.open_dataset(tmp_path / "p", "train")
+    pattern = os.path.join(tempfile.gettempdir(), "causalcity-scenario-*")
+    before = set(glob.glob(pattern))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = data[0]
+        (made,) = set(glob.glob(pattern)) - before
+        rgb = s.rgb
+        del s
+        gc.collect()
+        assert rgb[2].shape == (160, 256, 3) and os.path.isdir(made), "kept while frames read from it"
+        del rgb
+        gc.collect()
+        assert not os.path.exists(made), "removed with the last frames"
+    # TemporaryDirectory's own finaliser warned "Implicitly cleaning up".
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]
