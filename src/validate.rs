@@ -355,6 +355,17 @@ fn validate_sweep(
             files += f;
             bytes += b;
         }
+        // Whole files that read: then whether they are this pair's and agree,
+        // as evaluate and the Python package hold them.
+        if problems.is_empty() {
+            if let Err(message) =
+                crate::dataset::pairs::check_pair(&pair, (&key.group, key.split.name(), key.index.into()))
+            {
+                let shown = format!("{}/", pair.display());
+                let message = message.strip_prefix(&shown).map(str::to_string).unwrap_or(message);
+                problems.push(Problem { path: pair.clone(), message });
+            }
+        }
         (problems, files, bytes, Vec::new())
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.unwrap_or(0)).build().map_err(|e| e.to_string())?;

@@ -469,3 +469,59 @@ fn export_nri_refuses_non_finite_pixels_and_a_manifest_claiming_more_than_memory
     assert!(!text.contains("panicked") && !text.contains("memory allocation"), "{text}");
     assert!(matches!(output.status.code(), Some(1 | 2)), "exit {:?}: {text}", output.status.code());
 }
+
+#[test]
+fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
+    // Each was scored by evaluate as written and validated: a car's
+    // max_divergence_m edited, the intervention moved to another car or a
+    // later frame, a divergence.csv of another pair.
+    let dir = fresh_dir("edited-pairs");
+    let spec = write_spec(&dir, &city_spec("edited-pairs", &[(4, 0.5)], (1, 1, 1), 20, "{}"));
+    let sweep = dir.join("sweep");
+    let made =
+        run(&["counterfactual", "--sweep", s(&spec), "--out", s(&sweep), "--no-images", "-q", "--kinds", "stop"]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let checked = run(&["validate", s(&sweep)]);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
+    let pair = "cars04_edges50/test/00000";
+    let summary: serde_json::Value = read_json(&sweep.join(pair).join("summary.json"));
+    let car = summary["intervention"]["car"].as_u64().unwrap() as usize;
+    let frame = summary["intervention"]["frame"].as_u64().unwrap();
+    let moved = summary["cars"].as_array().unwrap().iter().position(|c| c["max_divergence_m"].as_f64() > Some(0.01));
+    let moved = moved.expect("the stopped car's pair moves some car");
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let edits: Vec<(&str, Edit, String)> = vec![
+        (
+            "divergence",
+            Box::new(move |v| v["cars"][moved]["max_divergence_m"] = 3.0.into()),
+            format!("car {moved}'s largest divergence is"),
+        ),
+        (
+            "car",
+            Box::new(move |v| v["intervention"]["car"] = ((car + 1) % 4).into()),
+            format!("intervention car {} is named", (car + 1) % 4),
+        ),
+        (
+            "frame",
+            Box::new(|v| v["intervention"]["frame"] = 19.into()),
+            "before the intervention's frame 19".to_string(),
+        ),
+        ("order", Box::new(|v| v["cars"].as_array_mut().unwrap().reverse()), "cars[0] is car 3".to_string()),
+    ];
+    assert!(frame < 19, "the intervention fires before the last frame");
+    let mut checked = 0;
+    for (name, edit, says) in &edits {
+        let copy = dir.join(name);
+        assert!(std::process::Command::new("cp").args(["-r", s(&sweep), s(&copy)]).status().unwrap().success());
+        let path = copy.join(pair).join("summary.json");
+        let mut value = read_json(&path);
+        edit(&mut value);
+        std::fs::write(&path, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+        let output = run(&["validate", s(&copy)]);
+        let text = String::from_utf8_lossy(&output.stdout);
+        assert_eq!(output.status.code(), Some(1), "{name}: {text}");
+        assert!(text.contains(says.as_str()), "{name}: expected {says:?} in {text}");
+        checked += 1;
+    }
+    assert_eq!(checked, edits.len());
+}

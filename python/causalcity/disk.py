@@ -748,7 +748,8 @@ class Sweep(_Packed):
         keys = self.spec.keys(split, self.record.get("limit"))
         if self.scenarios_per_tar:
             return [k for k in keys if (self.root / self.pack_of(k)).is_file()]
-        return [k for k in keys if (self.root / k.folder / "summary.json").is_file()]
+        # (A summary.json that is not a file is listed, and named when loaded.)
+        return [k for k in keys if _os.path.lexists(self.root / k.folder / "summary.json")]
 
     def pair_folder(self, key: "Key", images: bool = True) -> Tuple[Path, Any]:
         """The folder of ``key``'s pair, and what keeps it: for a packed
@@ -760,7 +761,7 @@ class Sweep(_Packed):
             raise KeyError(f"{tuple(key)} is not a pair of {_os.fspath(self.root)}")
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
-            if not (folder / "summary.json").is_file():
+            if not _os.path.lexists(folder / "summary.json"):
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
             return folder, None
         scratch = self._unpack(key, images) if (self.root / self.pack_of(key)).is_file() else None
@@ -773,10 +774,14 @@ class Sweep(_Packed):
         from . import Counterfactual, _flag
 
         images = _flag("images", images)
+        key = _as_key(key)
         folder, scratch = self.pair_folder(key, images)
         import contextlib
 
         with self._as_members(scratch, key) if scratch is not None else contextlib.nullcontext():
+            # The pair's own runs and files, agreeing (a linked run or an
+            # edited summary.json was handed back as this pair).
+            _native.check_pair(_os.fspath(folder), key.group, key.split, key.index)
             factual = load(folder / "factual", images=images)
             counterfactual = load(folder / "counterfactual", images=images)
             divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)

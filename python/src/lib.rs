@@ -359,6 +359,16 @@ fn simulate<'py>(
 
 /// A scenario folder `gen` or `counterfactual` wrote, read back as the
 /// dict [`simulate`] gives (without frames: see [`read_frames`]).
+/// Checks the counterfactual pair in `dir`, read as `(group, split,
+/// index)` of its sweep, by the rule every reader of a sweep holds
+/// (`causalcity::dataset::pairs`): `InputError` naming the file otherwise.
+#[pyfunction]
+fn check_pair(py: Python<'_>, dir: PathBuf, group: String, split: String, index: u64) -> PyResult<()> {
+    py.detach(|| causalcity::dataset::pairs::check_pair(&dir, (&group, &split, index)))
+        .map(|_| ())
+        .map_err(InputError::new_err)
+}
+
 #[pyfunction]
 fn read_scenario(py: Python<'_>, dir: PathBuf) -> PyResult<Bound<'_, PyDict>> {
     let arrays = py.detach(|| read_scenario_(&dir)).map_err(InputError::new_err)?;
@@ -763,6 +773,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_THREADS", MAX_THREADS)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(read_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(check_pair, m)?)?;
     m.add_function(wrap_pyfunction!(read_frames, m)?)?;
     m.add_class::<Prefetch>()?;
     m.add_function(wrap_pyfunction!(counterfactual, m)?)?;

@@ -305,3 +305,59 @@ def test_a_packed_scenarios_temporary_folder_goes_with_its_last_frames_without_a
         assert not os.path.exists(made), "removed with the last frames"
     # TemporaryDirectory's own finaliser warned "Implicitly cleaning up".
     assert not [w for w in caught if issubclass(w.category, ResourceWarning)], [str(w.message) for w in caught]
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    import shlex
+    import subprocess
+
+    folder = tmp_path_factory.mktemp("damaged-sweep")
+    spec = dict(CITY, name="damaged-sweep", frames=20, groups=[{"cars": 4, "edge_proportion": 0.5}],
+                splits={"train": 1, "val": 1, "test": 1})  # fmt: skip
+    (folder / "spec.json").write_text(json.dumps(spec))
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", "target/release/causalcity"))
+    args = ["counterfactual", "--sweep", folder / "spec.json", "--no-images", "--quiet", "--kinds", "stop"]
+    subprocess.run(command + [str(a) for a in args] + ["--out", str(folder / "sweep")], check=True)
+    return folder / "sweep"
+
+
+def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
+    from causalcity.methods.common import DatasetError
+    from causalcity.methods.counterfactual import load_pairs
+
+    test = f"{GROUP}/test/00000"
+    # The test pair linked to the val pair: both runs, summary and
+    # divergence of another pair were handed back (and scored) as this one.
+    linked = copy_of(sweep, tmp_path, "linked-pair")
+    shutil.rmtree(linked / test)
+    (linked / test).symlink_to(linked / GROUP / "val" / "00000", target_is_directory=True)
+    with pytest.raises(causalcity.InputError, match='it is a run of "cars04_edges50"/"val" index 0'):
+        causalcity.open_sweep(linked).load((GROUP, "test", 0))
+    with pytest.raises(DatasetError, match="not of cars04_edges50/test index 0"):
+        load_pairs(linked, GROUP, "test")
+
+    # A car's max_divergence_m edited: its affected label changed silently.
+    edited = copy_of(sweep, tmp_path, "edited-pair")
+    summary = json.loads((edited / test / "summary.json").read_text())
+    moved = next(i for i, c in enumerate(summary["cars"]) if c["max_divergence_m"] > 0.01)
+    summary["cars"][moved]["max_divergence_m"] = 0.0
+    (edited / test / "summary.json").write_text(json.dumps(summary))
+    says = f"car {moved}'s largest divergence is"
+    with pytest.raises(causalcity.InputError, match=says):
+        causalcity.open_sweep(edited).load((GROUP, "test", 0))
+    with pytest.raises(DatasetError, match=says):
+        load_pairs(edited, GROUP, "test")
+    predictions = tmp_path / "cf.npz"
+    from causalcity.methods.__main__ import main
+
+    assert main(["cf_copy", str(sweep), "--out", str(predictions), "--quiet"]) == 0
+    with pytest.raises(RuntimeError, match=says):
+        causalcity.evaluate(edited, predictions)
+
+    # A pipe for divergence.csv hung the reader.
+    piped = copy_of(sweep, tmp_path, "piped-pair")
+    (piped / test / "divergence.csv").unlink()
+    os.mkfifo(piped / test / "divergence.csv")
+    said = in_a_process("import sys, causalcity; s = causalcity.open_sweep(sys.argv[1]); s.load(s.keys('test')[0])", piped)
+    assert "divergence.csv: not a regular file" in said, said

@@ -46,7 +46,6 @@ use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary, Sweep};
 use crate::error::Error;
 use crate::output::layout::INTERACTIONS_CSV;
 use crate::output::logs::{event_frame, read_interactions};
-use crate::output::pair_summary::PairSummary;
 use crate::plan::ScenarioKey;
 use crate::spec::{DatasetSpec, Split, WorldKind};
 use crate::world::effects::EFFECT_THRESHOLD_M;
@@ -516,11 +515,18 @@ struct PairTruth {
 impl PairTruth {
     /// Reads the summary.json of the pair around `factual_dir`, whose runs
     /// have `cars` cars and `frames` frames.
-    fn read(factual_dir: &Path, frame_interval: f64, (cars, frames): (usize, usize)) -> Result<PairTruth, String> {
-        let path = factual_dir.parent().unwrap_or(factual_dir).join("summary.json");
-        let bytes = crate::input::read_record(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let summary: PairSummary = serde_json::from_slice(&bytes)
-            .map_err(|e| format!("{}: not a counterfactual pair's summary: {e}", path.display()))?;
+    fn read(
+        factual_dir: &Path,
+        (group, split): (&str, Split),
+        frame_interval: f64,
+        (cars, frames): (usize, usize),
+    ) -> Result<PairTruth, String> {
+        let pair = factual_dir.parent().unwrap_or(factual_dir);
+        let path = pair.join("summary.json");
+        let index = pair.file_name().and_then(|n| n.to_str()).and_then(|n| n.parse::<u64>().ok()).unwrap_or(u64::MAX);
+        // The pair's own runs and files, agreeing (an edited or swapped
+        // summary.json was scored as written).
+        let summary = crate::dataset::pairs::check_pair(pair, (group, split.name(), index))?;
         let (frame, car) = match &summary.intervention {
             Some(record) => (record.frame as usize, record.car as usize),
             None => {
@@ -572,8 +578,10 @@ impl ScenarioPredictions {
     /// The pair's truth (a sweep only), read once; failures as in [`Self::size`].
     fn pair(&mut self, failure: &mut Option<Error>) -> Result<&PairTruth, String> {
         if self.pair.is_none() {
-            let read = ScenarioSummary::read(&self.dir)
-                .and_then(|s| PairTruth::read(&self.dir, s.frame_interval, (s.cars.len(), s.frames as usize)));
+            let read = ScenarioSummary::read(&self.dir).and_then(|s| {
+                let size = (s.cars.len(), s.frames as usize);
+                PairTruth::read(&self.dir, (&self.group, self.split), s.frame_interval, size)
+            });
             match read {
                 Ok(pair) => self.pair = Some(pair),
                 Err(e) => {

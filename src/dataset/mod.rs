@@ -4,6 +4,7 @@
 //! back into arrays ([`readback`]).
 
 pub mod effects;
+pub mod pairs;
 pub mod poses;
 pub mod readback;
 

@@ -169,7 +169,8 @@ def _pair_folders(root: Path, record: dict, group: str, split: str) -> Iterator[
     packed sweep) a temporary one it is unpacked into without frames, which
     goes once the next pair is asked for."""
     if not record.get("scenarios_per_tar"):
-        for folder in sorted(p for p in (root / group / split).glob("*") if (p / "summary.json").is_file()):
+        # (A summary.json that is not a file is taken, and named when read.)
+        for folder in sorted(p for p in (root / group / split).glob("*") if os.path.lexists(p / "summary.json")):
             yield str(folder.relative_to(root)).replace(os.sep, "/"), folder
         return
     from ..disk import Sweep
@@ -198,6 +199,12 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
     interval = float(spec.get("frame_interval") or 0.1)
     for name, folder in _pair_folders(root, record, group, split):
         names.append(name)
+        index = name.rsplit("/", 1)[-1]
+        try:
+            # The pair's own runs and files, agreeing, as evaluate holds them.
+            _native.check_pair(os.fspath(folder), group, split, int(index) if index.isdigit() else -1)
+        except (InputError, OverflowError) as e:
+            raise DatasetError(str(e).replace(os.fspath(folder), os.fspath(root / name))) from None
         summary = json.loads((folder / "summary.json").read_text())
         if "intervention" not in summary:
             raise DatasetError(

@@ -1,0 +1,165 @@
+//! One rule for a counterfactual pair's folder, held by every reader of a
+//! sweep (`evaluate`, `validate` and the Python package): both runs are the
+//! pair's own scenario (its group, split and index) and of one size,
+//! `summary.json` names the pair and its cars as the runs do, the
+//! intervention lies within the run and names its car, and every car's
+//! `max_divergence_m` is the largest of its rows in `divergence.csv`, which
+//! holds no divergence before the intervention's frame (the runs are
+//! identical until then). An edited, swapped or linked file was scored as
+//! written.
+
+use crate::output::pair_summary::PairSummary;
+use std::path::Path;
+
+/// Slack between `max_divergence_m` (full precision) and `divergence.csv`'s
+/// distances (written to 0.1 mm), metres.
+const DIVERGENCE_SLACK_M: f64 = 1e-4;
+
+/// Checks the pair folder `pair`, read as `(group, split, index)` of its
+/// sweep, and returns its summary. Errors name the file and what differs.
+pub fn check_pair(pair: &Path, (group, split, index): (&str, &str, u64)) -> Result<PairSummary, String> {
+    let read_json = |path: &Path| -> Result<serde_json::Value, String> {
+        let bytes = crate::input::read_record(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        serde_json::from_slice(&bytes).map_err(|e| format!("{}: not JSON: {e}", path.display()))
+    };
+    let mut runs = Vec::new();
+    for run in ["factual", "counterfactual"] {
+        let path = pair.join(run).join("scenario.json");
+        let record = read_json(&path)?;
+        let found = (record["group"].as_str(), record["split"].as_str(), record["index"].as_u64());
+        if found != (Some(group), Some(split), Some(index)) {
+            return Err(format!(
+                "{}: it is a run of {}/{} index {}, not of {group}/{split} index {index} where it was read: a linked, \
+                 copied or renamed run",
+                path.display(),
+                record["group"],
+                record["split"],
+                record["index"]
+            ));
+        }
+        runs.push((path, record));
+    }
+    let size = |record: &serde_json::Value| {
+        let names: Vec<String> = record["cars"]
+            .as_array()
+            .map(|cars| cars.iter().map(|c| c["name"].as_str().unwrap_or_default().to_string()).collect())
+            .unwrap_or_default();
+        (record["frames"].as_u64().unwrap_or(0) as usize, names)
+    };
+    let ((frames, names), (cf_frames, cf_names)) = (size(&runs[0].1), size(&runs[1].1));
+    if (frames, names.len()) != (cf_frames, cf_names.len()) {
+        return Err(format!(
+            "{}: {cf_frames} frames of {} cars, and the factual run has {frames} frames of {} cars: a run of \
+             another pair",
+            runs[1].0.display(),
+            cf_names.len(),
+            names.len()
+        ));
+    }
+    let path = pair.join("summary.json");
+    let bytes = crate::input::read_record(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let summary: PairSummary = serde_json::from_slice(&bytes)
+        .map_err(|e| format!("{}: not a counterfactual pair's summary: {e}", path.display()))?;
+    let bad = |what: String| Err(format!("{}: {what}", path.display()));
+    // The pair's folder name (a packed pair is read from a temporary folder).
+    let folder = format!("{index:05}");
+    if summary.scenario != folder {
+        return bad(format!(
+            "scenario {:?}, but it was read as pair {folder:?}: another pair's summary",
+            summary.scenario
+        ));
+    }
+    if summary.cars.len() != names.len() {
+        return bad(format!("{} cars, and its runs have {}", summary.cars.len(), names.len()));
+    }
+    for (i, car) in summary.cars.iter().enumerate() {
+        if car.id as usize != i || car.name != names[i] {
+            return bad(format!(
+                "cars[{i}] is car {} {:?}, and the runs' car {i} is {:?}: cars in id order, as the runs name them",
+                car.id, car.name, names[i]
+            ));
+        }
+        if !(car.max_divergence_m.is_finite() && car.max_divergence_m >= 0.0) {
+            return bad(format!("cars[{i}].max_divergence_m {} is not a distance, 0 or more", car.max_divergence_m));
+        }
+    }
+    if let Some(record) = &summary.intervention {
+        let car = record.car as usize;
+        if car >= names.len() || record.frame as usize >= frames {
+            return bad(format!(
+                "intervention on car {} at frame {}, and its runs have {} cars and {frames} frames",
+                record.car,
+                record.frame,
+                names.len()
+            ));
+        }
+        if record.car_name != names[car] {
+            return bad(format!(
+                "intervention car {car} is named {:?}, and the runs' car {car} is {:?}",
+                record.car_name, names[car]
+            ));
+        }
+    }
+    let first = summary.intervention.as_ref().map(|r| r.frame as usize);
+    check_divergence(&pair.join("divergence.csv"), &summary, frames, first)?;
+    Ok(summary)
+}
+
+/// divergence.csv: a row per frame and car in order, each distance 0 or
+/// more, none before `first` (the intervention's frame), and each car's
+/// largest the summary's `max_divergence_m`.
+fn check_divergence(path: &Path, summary: &PairSummary, frames: usize, first: Option<usize>) -> Result<(), String> {
+    let data = crate::input::read_data(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut reader = csv::Reader::from_reader(&data[..]);
+    let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
+    let columns = ["frame", "t", "car", "distance_m", "distance_px"];
+    if header.iter().ne(columns) {
+        return Err(format!(
+            "{}: columns {:?}, expected {columns:?}",
+            path.display(),
+            header.iter().collect::<Vec<_>>()
+        ));
+    }
+    let cars = summary.cars.len();
+    let mut largest = vec![0.0f64; cars];
+    let mut rows = 0usize;
+    for (n, row) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let (frame, car) = (n / cars.max(1), n % cars.max(1));
+        let whole = |k: usize| row.get(k).and_then(|v| v.parse::<usize>().ok());
+        let distance = row.get(3).and_then(|v| v.parse::<f64>().ok()).filter(|d| d.is_finite() && *d >= 0.0);
+        let Some(distance) = distance.filter(|_| whole(0) == Some(frame) && whole(2) == Some(car) && n < frames * cars)
+        else {
+            return Err(format!(
+                "{} line {line}: {:?}: expected frame {frame}, car {car} and a distance in metres, 0 or more",
+                path.display(),
+                row.iter().collect::<Vec<_>>().join(",")
+            ));
+        };
+        if first.is_some_and(|f| frame < f) && distance > 0.0 {
+            return Err(format!(
+                "{} line {line}: car {car} diverges at frame {frame}, before the intervention's frame {}: the runs \
+                 are identical until it (another pair's file, or an edited frame)",
+                path.display(),
+                first.unwrap_or(0)
+            ));
+        }
+        largest[car] = largest[car].max(distance);
+        rows += 1;
+    }
+    if rows != frames * cars {
+        return Err(format!("{}: {rows} rows, expected {frames} frames x {cars} cars", path.display()));
+    }
+    for (car, (&found, summarised)) in largest.iter().zip(&summary.cars).enumerate() {
+        let summarised = summarised.max_divergence_m;
+        if (found - summarised).abs() > DIVERGENCE_SLACK_M + 1e-9 * summarised {
+            return Err(format!(
+                "{}: car {car}'s largest divergence is {found} m, and summary.json's max_divergence_m {summarised}: \
+                 one of them is another pair's or edited",
+                path.display()
+            ));
+        }
+    }
+    Ok(())
+}
