@@ -569,6 +569,24 @@ fn check_pack(
                     let key = ScenarioKey { name: Some(format!("{}/{run}", keys[i].folder_name())), ..keys[i].clone() };
                     scenario(check, &folder.join(run), run_members, &key);
                 }
+                // Whole files that read: then whether they are this pair's
+                // and agree, as for a pair folder.
+                if check.0.is_empty() {
+                    let read = |name: &str| {
+                        let (held, file) = match name.split_once('/') {
+                            Some((run, file)) => {
+                                (PAIR_RUNS.iter().position(|r| *r == run).map(|r| &members.runs[r]), file)
+                            }
+                            None => (Some(&members.pair), name),
+                        };
+                        let missing = || format!("{}: missing", folder.join(name).display());
+                        held.and_then(|m| m.get(file)).cloned().ok_or_else(missing)
+                    };
+                    let key = (keys[i].group.as_str(), keys[i].split.name(), keys[i].index.into());
+                    if let Err(message) = crate::dataset::pairs::check_pair_files(&read, &folder, key) {
+                        check.0.push(problem(message));
+                    }
+                }
                 // A pair's runs are not a dataset's scenarios: no twins are sought.
                 check.3.clear();
             }

@@ -524,4 +524,26 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
         checked += 1;
     }
     assert_eq!(checked, edits.len());
+    // The same rule for a packed sweep's pairs (validate parsed the summary only).
+    let packed = dir.join("packed");
+    let args = ["--no-images", "-q", "--kinds", "stop", "--format", "tar", "--scenarios-per-tar", "4"];
+    let made = run(&[&["counterfactual", "--sweep", s(&spec), "--out", s(&packed)][..], &args[..]].concat());
+    assert!(made.status.success(), "{}", stderr(&made));
+    let tar = packed.join("cars04_edges50/test/00000-00000.tar");
+    let mut bytes = std::fs::read(&tar).unwrap();
+    let (from, to) = (&b"\"max_divergence_m\": 0.0,"[..], &b"\"max_divergence_m\": 5.0,"[..]);
+    let at = bytes.windows(from.len()).position(|w| w == from).expect("a car that did not move");
+    bytes[at..at + from.len()].copy_from_slice(to);
+    std::fs::write(&tar, bytes).unwrap();
+    let output = run(&["validate", s(&packed)]);
+    let text = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(output.status.code(), Some(1), "{text}");
+    assert!(text.contains("largest divergence is 0 m, and summary.json's max_divergence_m 5"), "{text}");
+    // sweep.json's limit edited to 0: "0 of 0 scenarios checked: valid".
+    let none = dir.join("limit-0");
+    assert!(std::process::Command::new("cp").args(["-r", s(&sweep), s(&none)]).status().unwrap().success());
+    let mut record = read_json(&none.join("sweep.json"));
+    record["limit"] = 0.into();
+    std::fs::write(none.join("sweep.json"), record.to_string()).unwrap();
+    assert_error(&run(&["validate", s(&none)]), 2, "sweep.json: limit 0 is not allowed");
 }

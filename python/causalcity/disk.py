@@ -732,6 +732,10 @@ class Sweep(_Packed):
             dataset = " (it is a dataset: use causalcity.open_dataset)" if (self.root / "manifest.json").is_file() else ""
             raise FileNotFoundError(f"{_os.fspath(self.root)}: no sweep.json, so not a counterfactual --sweep output{dataset}")
         self.record: Dict[str, Any] = _read_record(record, "a counterfactual sweep's record")
+        form = self.record.get("format")
+        if not (isinstance(form, str) and form.startswith("causalcity-counterfactual-sweep/")):
+            # (as every command refuses it)
+            raise InputError(f"{_os.fspath(record)}: format {form!r} is not causalcity-counterfactual-sweep/1")
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
         self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")

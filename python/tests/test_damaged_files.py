@@ -192,6 +192,13 @@ def test_city_logs_outside_the_schema_are_refused(city, tmp_path):
             causalcity.load(copy / scenario)
         checked += 1
     assert checked == len(cases) >= 4
+    # A pipe for a log hung the reader (events, interactions, lights alike).
+    for n, file in enumerate(["events.csv", "interactions.csv", "light_changes.csv"]):
+        copy = copy_of(city, tmp_path, f"city-pipe-{n}")
+        (copy / scenario / file).unlink()
+        os.mkfifo(copy / scenario / file)
+        said = in_a_process("import sys, causalcity; causalcity.load(sys.argv[1])", copy / scenario)
+        assert f"{file}: not a regular file" in said, said
 
 
 def test_frames_and_records_that_cannot_be_read_are_named(toy, tmp_path):
@@ -355,9 +362,21 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     with pytest.raises(RuntimeError, match=says):
         causalcity.evaluate(edited, predictions)
 
+    # A stray folder among the pairs is named, not read as one.
+    stray = copy_of(sweep, tmp_path, "stray-pair")
+    shutil.copytree(stray / test, stray / GROUP / "test" / "copy-of-00000")
+    with pytest.raises(DatasetError, match="copy-of-00000: not a pair folder of the sweep"):
+        load_pairs(stray, GROUP, "test")
+
     # A pipe for divergence.csv hung the reader.
     piped = copy_of(sweep, tmp_path, "piped-pair")
     (piped / test / "divergence.csv").unlink()
     os.mkfifo(piped / test / "divergence.csv")
     said = in_a_process("import sys, causalcity; s = causalcity.open_sweep(sys.argv[1]); s.load(s.keys('test')[0])", piped)
     assert "divergence.csv: not a regular file" in said, said
+
+    # A record of another format was opened (every command refuses it).
+    other = copy_of(sweep, tmp_path, "other-format")
+    edit_json(other / "sweep.json", lambda v: v.update(format="something-else/9"))
+    with pytest.raises(causalcity.InputError, match="format 'something-else/9' is not causalcity-counterfactual-sweep/1"):
+        causalcity.open_sweep(other)

@@ -799,30 +799,35 @@ def test_device_is_refused_for_a_users_class_that_does_not_take_it(toy, tmp_path
     assert not out.exists()
 
 
-def test_a_method_returning_too_few_predictions_is_named_not_a_traceback(toy, sweep, tmp_path, user_module, capsys):
-    # Too few failed with an IndexError deep in the runner; too many were cut silently.
+def refused_each(capsys, tmp_path, cases, code, *also):
+    """Runs each (method, data, says) of ``cases`` through the methods
+    command: exit ``code``, ``says`` and each of ``also`` on stderr, and no
+    predictions file."""
     from causalcity.methods.__main__ import main
 
-    for name, data, says in [(f"{user_module}:Miscounted", toy, "returned edges for"),
-                             (f"{user_module}:ShortChanged", sweep, "returned positions for")]:  # fmt: skip
+    for name, data, says in cases:
         out = tmp_path / "p.npz"
-        assert main([name, str(data), "--out", str(out), "--quiet"]) == 2, name
+        assert main([name, str(data), "--out", str(out), "--quiet"]) == code, name
         err = capsys.readouterr().err
-        assert says in err and "return one per" in err and ".predict on" in err, err
+        assert says in err and all(a in err for a in also), err
         assert not out.exists()
+    assert cases
+
+
+def test_a_method_returning_too_few_predictions_is_named_not_a_traceback(toy, sweep, tmp_path, user_module, capsys):
+    # Too few failed with an IndexError deep in the runner; too many were cut silently.
+    cases = [(f"{user_module}:Miscounted", toy, "returned edges for"),
+             (f"{user_module}:ShortChanged", sweep, "returned positions for")]  # fmt: skip
+    refused_each(capsys, tmp_path, cases, 2, "return one per", ".predict on")
 
 
 def test_a_method_predicting_nan_or_infinity_is_refused_before_writing(toy, sweep, tmp_path, user_module, capsys):
     # The file was written, exit 0, and only evaluate refused it.
     from causalcity.methods.__main__ import main
 
-    for name, data, says in [(f"{user_module}:NotFinite", toy, "returned edges holding nan for scenario"),
-                             (f"{user_module}:InfinitePosition", sweep, "returned positions holding inf for pair")]:  # fmt: skip
-        out = tmp_path / "p.npz"
-        assert main([name, str(data), "--out", str(out), "--quiet"]) == 2, name
-        err = capsys.readouterr().err
-        assert says in err and "every value must be a finite number" in err, err
-        assert not out.exists()
+    cases = [(f"{user_module}:NotFinite", toy, "returned edges holding nan for scenario"),
+             (f"{user_module}:InfinitePosition", sweep, "returned positions holding inf for pair")]  # fmt: skip
+    refused_each(capsys, tmp_path, cases, 2, "every value must be a finite number")
     # A car's score for itself is not read, by evaluate or by this check.
     out = tmp_path / "self.npz"
     assert main([f"{user_module}:SelfNaN", str(toy), "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
@@ -832,16 +837,9 @@ def test_a_method_predicting_nan_or_infinity_is_refused_before_writing(toy, swee
 def test_a_bug_in_a_users_method_shows_its_traceback_not_bad_input(toy, sweep, tmp_path, user_module, capsys):
     # A ValueError or OSError raised in a user's fit or predict was printed as
     # "error: <message>", exit 2 (bad input), without a line of where it came from.
-    from causalcity.methods.__main__ import main
-
-    for name, data, says in [(f"{user_module}:Buggy", toy, "Buggy.fit on"),
-                             (f"{user_module}:BuggyCounterfactual", sweep, "BuggyCounterfactual.predict on")]:  # fmt: skip
-        out = tmp_path / "p.npz"
-        assert main([name, str(data), "--out", str(out), "--quiet"]) == 1, name
-        err = capsys.readouterr().err
-        assert "Traceback (most recent call last)" in err and "user_methods.py" in err, err
-        assert says in err and "nothing was written" in err, err
-        assert not out.exists()
+    cases = [(f"{user_module}:Buggy", toy, "Buggy.fit on"),
+             (f"{user_module}:BuggyCounterfactual", sweep, "BuggyCounterfactual.predict on")]  # fmt: skip
+    refused_each(capsys, tmp_path, cases, 1, "Traceback (most recent call last)", "user_methods.py", "nothing was written")
 
 
 @pytest.mark.parametrize(

@@ -625,6 +625,10 @@ impl Sweep {
                 record.format
             ));
         }
+        if record.limit == Some(0) {
+            // (validate said "0 of 0 scenarios checked: valid".)
+            return Err(format!("{}: limit 0 is not allowed: a number above 0, or absent", path.display()));
+        }
         let expansion = expansion_from(record.spec, &path)?;
         if let Some(recorded) = &record.spec_sha256 {
             check_spec_hash(&expansion, recorded, &path, "the sweep was run", "pairs")?;

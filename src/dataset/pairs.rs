@@ -17,15 +17,32 @@ const DIVERGENCE_SLACK_M: f64 = 1e-4;
 
 /// Checks the pair folder `pair`, read as `(group, split, index)` of its
 /// sweep, and returns its summary. Errors name the file and what differs.
-pub fn check_pair(pair: &Path, (group, split, index): (&str, &str, u64)) -> Result<PairSummary, String> {
-    let read_json = |path: &Path| -> Result<serde_json::Value, String> {
-        let bytes = crate::input::read_record(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        serde_json::from_slice(&bytes).map_err(|e| format!("{}: not JSON: {e}", path.display()))
+pub fn check_pair(pair: &Path, key: (&str, &str, u64)) -> Result<PairSummary, String> {
+    let read = |name: &str| {
+        let path = pair.join(name);
+        // A regular file only (a pipe hung the reader), JSON records of a
+        // record's size.
+        let read = if name.ends_with(".json") { crate::input::read_record } else { crate::input::read_data };
+        read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+    };
+    check_pair_files(&read, pair, key)
+}
+
+/// [`check_pair`] of a pair's files as `read` gives them by their name in
+/// the pair (`summary.json`, `factual/scenario.json`, ...: a packed pair's
+/// members); errors name them under `shown`.
+pub fn check_pair_files(
+    read: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    pair: &Path,
+    (group, split, index): (&str, &str, u64),
+) -> Result<PairSummary, String> {
+    let read_json = |name: &str| -> Result<serde_json::Value, String> {
+        serde_json::from_slice(&read(name)?).map_err(|e| format!("{}: not JSON: {e}", pair.join(name).display()))
     };
     let mut runs = Vec::new();
     for run in ["factual", "counterfactual"] {
         let path = pair.join(run).join("scenario.json");
-        let record = read_json(&path)?;
+        let record = read_json(&format!("{run}/scenario.json"))?;
         let found = (record["group"].as_str(), record["split"].as_str(), record["index"].as_u64());
         if found != (Some(group), Some(split), Some(index)) {
             return Err(format!(
@@ -57,8 +74,7 @@ pub fn check_pair(pair: &Path, (group, split, index): (&str, &str, u64)) -> Resu
         ));
     }
     let path = pair.join("summary.json");
-    let bytes = crate::input::read_record(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let summary: PairSummary = serde_json::from_slice(&bytes)
+    let summary: PairSummary = serde_json::from_slice(&read("summary.json")?)
         .map_err(|e| format!("{}: not a counterfactual pair's summary: {e}", path.display()))?;
     let bad = |what: String| Err(format!("{}: {what}", path.display()));
     // The pair's folder name (a packed pair is read from a temporary folder).
@@ -101,16 +117,21 @@ pub fn check_pair(pair: &Path, (group, split, index): (&str, &str, u64)) -> Resu
         }
     }
     let first = summary.intervention.as_ref().map(|r| r.frame as usize);
-    check_divergence(&pair.join("divergence.csv"), &summary, frames, first)?;
+    check_divergence(&read("divergence.csv")?, &pair.join("divergence.csv"), &summary, frames, first)?;
     Ok(summary)
 }
 
 /// divergence.csv: a row per frame and car in order, each distance 0 or
 /// more, none before `first` (the intervention's frame), and each car's
 /// largest the summary's `max_divergence_m`.
-fn check_divergence(path: &Path, summary: &PairSummary, frames: usize, first: Option<usize>) -> Result<(), String> {
-    let data = crate::input::read_data(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let mut reader = csv::Reader::from_reader(&data[..]);
+fn check_divergence(
+    data: &[u8],
+    path: &Path,
+    summary: &PairSummary,
+    frames: usize,
+    first: Option<usize>,
+) -> Result<(), String> {
+    let mut reader = csv::Reader::from_reader(data);
     let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
     let columns = ["frame", "t", "car", "distance_m", "distance_px"];
     if header.iter().ne(columns) {

@@ -103,16 +103,16 @@ fn parse_row(record: &csv::ByteRecord, path: &Path, line: usize) -> Result<PoseR
     };
     let within = |v: f64| v.abs() <= MAX_POSE_MAGNITUDE;
     let place = "a finite number within +-1e9";
-    let angle = "a finite angle, radians";
+    let angle = "radians from -3.141593 to 3.141593";
     Ok(PoseRow {
         frame: whole(0)?,
-        t: number(1, "seconds, 0 or more", &|v| (0.0..=MAX_POSE_MAGNITUDE).contains(&v))?,
+        t: number(1, "seconds, 0 or more (at most 1e9)", &|v| (0.0..=MAX_POSE_MAGNITUDE).contains(&v))?,
         car: whole(2)?,
         position: [number(3, place, &within)?, number(4, place, &within)?, number(5, place, &within)?],
         rotation: [
             number(6, angle, &|v| v.abs() <= MAX_YAW)?,
             number(7, angle, &|v| v.abs() <= MAX_YAW)?,
-            number(8, "radians from -3.141593 to 3.141593", &|v| v.abs() <= MAX_YAW)?,
+            number(8, angle, &|v| v.abs() <= MAX_YAW)?,
         ],
         pixel: [number(9, place, &within)?, number(10, place, &within)?],
         speed: number(11, "metres per second, 0 or more (at most 1e9)", &|v| (0.0..=MAX_POSE_MAGNITUDE).contains(&v))?,

@@ -101,6 +101,8 @@ pub fn read_scenario(dir: &Path) -> Result<ScenarioArrays, String> {
 }
 
 fn open_csv(path: &Path) -> Result<csv::Reader<std::fs::File>, String> {
+    // A regular file only: a pipe hung the reader.
+    crate::input::regular_file(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     csv::Reader::from_path(path).map_err(|e| format!("cannot read {}: {e}", path.display()))
 }
 

@@ -188,6 +188,8 @@ pub struct InteractionRecord {
 /// with a known `bound_by` and an `other_car` below `cars`.
 pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<InteractionRecord>, String> {
     let fail = |what: String| format!("{}: {what}", path.display());
+    // A regular file only: a pipe hung the reader.
+    crate::input::regular_file(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut reader = csv::Reader::from_path(path).map_err(|e| fail(e.to_string()))?;
     // The columns as written: a renamed or reordered column is not read
     // as another one.

@@ -98,8 +98,8 @@ def _call(where: str, call, *args):
     dataset read through the episodes) and interrupts pass as they are."""
     try:
         return call(*args)
-    except (InputError, DatasetError, _native.GenerationError):
-        raise
+    except (InputError, DatasetError, _native.GenerationError, ImportError):
+        raise  # (ImportError: a method's optional dependency, as before)
     except Exception as e:
         raise MethodFailed(f"{where} raised {type(e).__name__}: {e}") from e
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -200,10 +201,13 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
     for name, folder in _pair_folders(root, record, group, split):
         names.append(name)
         index = name.rsplit("/", 1)[-1]
+        if not re.fullmatch(r"[0-9]{5,}", index):
+            raise DatasetError(f"{root / name}: not a pair folder of the sweep (they are named 00000, 00001, ...): "
+                               "remove it, or make the sweep again into a new --out")  # fmt: skip
         try:
             # The pair's own runs and files, agreeing, as evaluate holds them.
-            _native.check_pair(os.fspath(folder), group, split, int(index) if index.isdigit() else -1)
-        except (InputError, OverflowError) as e:
+            _native.check_pair(os.fspath(folder), group, split, int(index))
+        except InputError as e:
             raise DatasetError(str(e).replace(os.fspath(folder), os.fspath(root / name))) from None
         summary = json.loads((folder / "summary.json").read_text())
         if "intervention" not in summary:
