@@ -373,7 +373,7 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     (piped / test / "divergence.csv").unlink()
     os.mkfifo(piped / test / "divergence.csv")
     said = in_a_process("import sys, causalcity; s = causalcity.open_sweep(sys.argv[1]); s.load(s.keys('test')[0])", piped)
-    assert "divergence.csv: not a regular file" in said, said
+    assert "divergence.csv: cannot read it: not a regular file" in said, said
 
     # A record of another format was opened (every command refuses it).
     other = copy_of(sweep, tmp_path, "other-format")

@@ -23,7 +23,7 @@ pub fn check_pair(pair: &Path, key: (&str, &str, u64)) -> Result<PairSummary, St
         // A regular file only (a pipe hung the reader), JSON records of a
         // record's size.
         let read = if name.ends_with(".json") { crate::input::read_record } else { crate::input::read_data };
-        read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+        read(&path).map_err(|e| format!("{}: cannot read it: {e}", path.display()))
     };
     check_pair_files(&read, pair, key)
 }
@@ -86,7 +86,7 @@ pub fn check_pair_files(
         ));
     }
     if summary.cars.len() != names.len() {
-        return bad(format!("{} cars, and its runs have {}", summary.cars.len(), names.len()));
+        return bad(format!("names {} cars, and its runs have {}", summary.cars.len(), names.len()));
     }
     for (i, car) in summary.cars.iter().enumerate() {
         if car.id as usize != i || car.name != names[i] {
@@ -135,11 +135,7 @@ fn check_divergence(
     let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
     let columns = ["frame", "t", "car", "distance_m", "distance_px"];
     if header.iter().ne(columns) {
-        return Err(format!(
-            "{}: columns {:?}, expected {columns:?}",
-            path.display(),
-            header.iter().collect::<Vec<_>>()
-        ));
+        return Err(format!("{}: line 1: expected the header {:?}", path.display(), columns.join(",")));
     }
     let cars = summary.cars.len();
     let mut largest = vec![0.0f64; cars];
@@ -153,14 +149,14 @@ fn check_divergence(
         let Some(distance) = distance.filter(|_| whole(0) == Some(frame) && whole(2) == Some(car) && n < frames * cars)
         else {
             return Err(format!(
-                "{} line {line}: {:?}: expected frame {frame}, car {car} and a distance in metres, 0 or more",
+                "{}: line {line}: {:?}: expected frame {frame}, car {car} and a distance in metres, 0 or more",
                 path.display(),
                 row.iter().collect::<Vec<_>>().join(",")
             ));
         };
         if first.is_some_and(|f| frame < f) && distance > 0.0 {
             return Err(format!(
-                "{} line {line}: car {car} diverges at frame {frame}, before the intervention's frame {}: the runs \
+                "{}: line {line}: car {car} diverges at frame {frame}, before the intervention's frame {}: the runs \
                  are identical until it (another pair's file, or an edited frame)",
                 path.display(),
                 first.unwrap_or(0)
