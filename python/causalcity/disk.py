@@ -681,38 +681,10 @@ def open_dataset(root: PathLike, split: Optional[str] = None, images: bool = Tru
 
 def _read_divergence(path: Path, frames: int, cars: int) -> _np.ndarray:
     """A pair's ``divergence.csv`` (``frame,t,car,distance_m,distance_px``, a
-    row per frame and car in that order) as ``[frames, cars]`` metres;
-    :class:`~causalcity.InputError` naming the file, line and field for a
-    file that is not as the sweep wrote it."""
-    header = "frame,t,car,distance_m,distance_px"
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as e:
-        raise InputError(f"{_os.fspath(path)}: cannot read it: {e}") from None
-    if not lines or lines[0] != header:
-        raise InputError(f"{_os.fspath(path)}: line 1: expected the header {header!r}")
-    if len(lines) - 1 != frames * cars:
-        raise InputError(
-            f"{_os.fspath(path)}: {len(lines) - 1} rows, expected {frames * cars} (a row per frame and car, "
-            f"{frames} frames x {cars} cars)"
-        )
-    divergence = _np.zeros((frames, cars))
-    for number, line in enumerate(lines[1:], start=2):
-        fields = line.split(",")
-        frame, car = divmod(number - 2, cars)
-        try:
-            if len(fields) != 5 or int(fields[0]) != frame or int(fields[2]) != car:
-                raise ValueError
-            distance = float(fields[3])
-        except ValueError:
-            raise InputError(
-                f"{_os.fspath(path)}: line {number}: {line!r}: expected frame {frame}, car {car} and a distance "
-                "in metres, as the sweep writes them"
-            ) from None
-        if not (distance >= 0.0 and distance < float("inf")):
-            raise InputError(f"{_os.fspath(path)}: line {number}: distance_m {fields[3]!r}: a distance, 0 or more")
-        divergence[frame, car] = distance
-    return divergence
+    row per frame and car in that order) as ``[frames, cars]`` metres, once
+    the pair rule (``_native.check_pair``) has checked every row."""
+    rows = path.read_text().splitlines()[1:]
+    return _np.array([float(row.split(",")[3]) for row in rows]).reshape(frames, cars)
 
 
 class Sweep(_Packed):

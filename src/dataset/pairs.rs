@@ -30,7 +30,7 @@ pub fn check_pair(pair: &Path, key: (&str, &str, u64)) -> Result<PairSummary, St
 
 /// [`check_pair`] of a pair's files as `read` gives them by their name in
 /// the pair (`summary.json`, `factual/scenario.json`, ...: a packed pair's
-/// members); errors name them under `shown`.
+/// members); errors name them under the folder `pair`.
 pub fn check_pair_files(
     read: &dyn Fn(&str) -> Result<Vec<u8>, String>,
     pair: &Path,
