@@ -294,3 +294,58 @@ fn a_scenario_too_long_for_a_tape_is_not_recorded() {
     let short = Expansion::new(spec("short", &[(8, 0.5)], 1, ""), Arc::new(CityMap::default())).unwrap();
     assert!(Recording::pays_for(&short.plan(&short.keys(None)[0]).unwrap()));
 }
+
+#[test]
+fn toy_reruns_simulate_only_the_cars_whose_route_changed_and_match_full_reruns() {
+    // Every group of the paper's toy spec: removals stop the cause's
+    // followers, action changes re-route the cause and its chain of followers.
+    let text = r#"{"name": "toy-groups", "world": "toy", "seed": 5, "frames": 150, "frame_interval": 0.1,
+        "groups": [{"cars": 4, "edge_proportion": 0.5}, {"cars": 8, "edge_proportion": 0.2},
+                   {"cars": 8, "edge_proportion": 0.5}, {"cars": 8, "edge_proportion": 0.8},
+                   {"cars": 12, "edge_proportion": 0.5}],
+        "splits": {"train": 4, "val": 0, "test": 0}}"#;
+    let expansion = Expansion::new(DatasetSpec::from_json(text).unwrap(), Arc::new(CityMap::default())).unwrap();
+    let never = AtomicBool::new(false);
+    let (mut scenarios, mut reruns, mut changed_cars) = (0, 0, 0);
+    let (mut replayed, mut car_steps) = (0, 0);
+    for key in expansion.keys(None) {
+        let plan = expansion.plan(&key).unwrap();
+        let map = &expansion.map;
+        let WorldPlan::Toy { step_m } = plan.world else { panic!("a toy plan") };
+        let factual = causalcity::world::simulate(map, &plan);
+        // effects.csv's rows, through the public entry point, both ways.
+        let (incremental, cost) = measure_with(map, &plan, &factual, Rerun::Incremental, &never).unwrap();
+        let (reference, full_cost) = measure_with(map, &plan, &factual, Rerun::Full, &never).unwrap();
+        assert_eq!(incremental, reference, "{key:?}: effects differ");
+        assert_eq!(
+            (cost.incremental, full_cost.incremental),
+            (cost.reruns, 0),
+            "{key:?}: every toy re-run incremental"
+        );
+        (replayed, car_steps) = (replayed + cost.replayed_car_steps, car_steps + cost.car_steps);
+        scenarios += 1;
+        // Every car at every frame of every re-run, bit for bit.
+        for car in 0..plan.cars.len() {
+            for kind in InterventionKind::ALL {
+                let Some(changed) = intervened(map, &plan, car, kind) else { continue };
+                let full = causalcity::world::simulate(map, &changed);
+                let rerun = causalcity::world::toy::rerun(map, &plan, &changed, &factual, step_m, &never).unwrap();
+                assert_eq!(
+                    format!("{:?}", rerun.to_trajectories(plan.frame_interval).states),
+                    format!("{:?}", full.states),
+                    "{key:?}, {kind:?} on car {car}: positions differ"
+                );
+                // The intervened car is simulated (a removal parks it).
+                assert_eq!(rerun.first_simulated(car), 0, "{key:?}, {kind:?} on car {car}: the cause replayed");
+                changed_cars += (0..plan.cars.len()).filter(|&c| rerun.first_simulated(c) == 0).count();
+                reruns += 1;
+            }
+        }
+    }
+    assert_eq!(scenarios, 20);
+    assert!(reruns >= 2 * 20 * 4, "only {reruns} re-runs");
+    assert!(changed_cars > reruns, "no follower was ever re-routed or stopped");
+    let share = replayed as f64 / car_steps as f64;
+    eprintln!("{reruns} toy re-runs; {:.1} % of their car frames replayed", 100.0 * share);
+    assert!(share > 0.5, "only {:.0} % of car frames replayed", 100.0 * share);
+}

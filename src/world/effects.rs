@@ -10,13 +10,15 @@
 //!
 //! In the city world a re-run simulates only the cars the intervention has
 //! reached and replays the others from a recording of the factual run
-//! (`world/city/replay.rs`): the same result bit for bit, at a fraction of
+//! (`world/city/replay.rs`); in the toy world, only the cars whose route it
+//! changed (`toy::rerun`): the same result bit for bit, at a fraction of
 //! the cost. [`Rerun::Full`] keeps the reference path.
 //!
 //! Units: metres; frames are the scenario's frame indices.
 
-use super::city::replay::{Recording, RerunTrajectories};
-use super::{simulate_until, Interaction, Trajectories};
+use super::city::replay::Recording;
+use super::rerun::RerunTrajectories;
+use super::{simulate_until, toy, Interaction, Trajectories};
 use crate::map::{Action, CityMap, LegKind, Turn};
 use crate::plan::interventions::{Effect, Intervention, Trigger};
 use crate::plan::{ScenarioPlan, WorldPlan};
@@ -188,10 +190,11 @@ pub fn measure_until(
 pub enum Rerun {
     /// Every car, every step: the reference.
     Full,
-    /// City world: only the cars the intervention reached, the others
-    /// replayed from the factual run (`world/city/replay.rs`), with the same
-    /// result bit for bit; in full where replaying does not apply or pay
-    /// (`Recording::pays_for`).
+    /// Only the cars the intervention reached, the others replayed from the
+    /// factual run, with the same result bit for bit. City world:
+    /// `world/city/replay.rs`, in full where replaying does not apply or pay
+    /// (`Recording::pays_for`). Toy world: the cars whose route the
+    /// intervention changed (`toy::rerun`).
     Incremental,
 }
 
@@ -224,7 +227,7 @@ pub fn measure_with(
         Rerun::Full => None,
     };
     debug_assert!(recording.as_ref().is_none_or(|r| r.factual().states == factual.states), "the factual run");
-    measure_runs(map, plan, factual, recording.as_ref(), stop)
+    measure_runs(map, plan, factual, recording.as_ref(), how, stop)
 }
 
 /// A scenario's factual run, as its effects' re-runs reuse it.
@@ -288,16 +291,19 @@ pub fn measure_recorded(
         FactualRun::Recorded(recording) => Some(&**recording),
         FactualRun::Simulated(_) => None,
     };
-    measure_runs(map, plan, run.trajectories(), recording, stop).map(|(report, _)| report)
+    measure_runs(map, plan, run.trajectories(), recording, Rerun::Incremental, stop).map(|(report, _)| report)
 }
 
 /// Re-runs `plan` once per car and intervention, replaying from `recording`
-/// where it is replayable, and compares every other car with `factual`.
+/// where it is replayable (city) or simulating only the cars the
+/// intervention reached (toy, [`Rerun::Incremental`]), and compares every
+/// other car with `factual`.
 fn measure_runs(
     map: &CityMap,
     plan: &ScenarioPlan,
     factual: &Trajectories,
     recording: Option<&Recording>,
+    how: Rerun,
     stop: &AtomicBool,
 ) -> Option<(EffectReport, RerunCost)> {
     let recording = recording.filter(|r| r.replayable());
@@ -323,7 +329,18 @@ fn measure_runs(
                     cost.woke += replayed.woke;
                     rerun
                 }
-                None => RerunTrajectories::Full(simulate_until(map, &changed, stop)?),
+                None => match (&plan.world, how) {
+                    (WorldPlan::Toy { step_m }, Rerun::Incremental) => {
+                        let run = toy::rerun(map, plan, &changed, factual, *step_m, stop)?;
+                        let frames = run.frames();
+                        cost.incremental += 1;
+                        cost.car_steps += frames * plan.cars.len();
+                        cost.replayed_car_steps +=
+                            (0..plan.cars.len()).map(|car| run.first_simulated(car)).sum::<usize>();
+                        RerunTrajectories::Replayed(run)
+                    }
+                    _ => RerunTrajectories::Full(simulate_until(map, &changed, stop)?),
+                },
             };
             for (b, effect) in plan.cars.iter().enumerate().filter(|&(b, _)| b != a) {
                 rows.push(compare(plan, factual, &rerun, b, cause.id, effect.id, kind));

@@ -4,6 +4,7 @@
 pub mod city;
 pub mod driver;
 pub mod effects;
+pub mod rerun;
 pub mod toy;
 
 use crate::map::signals::LightState;

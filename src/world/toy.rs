@@ -10,6 +10,7 @@
 //! `ReplaceActions` re-plans its route from its start. Other effects need
 //! agency and change nothing here (scenario files refuse toy interventions).
 
+use super::rerun::RerunFrames;
 use super::{CarState, Trajectories};
 use crate::map::{Action, CityMap, LanePolicy, Route};
 use crate::plan::interventions::Effect;
@@ -38,24 +39,7 @@ pub fn simulate(map: &CityMap, plan: &ScenarioPlan, step: f64, stop: &AtomicBool
             if stop.load(Ordering::Relaxed) {
                 return None;
             }
-            Some(
-                plan.cars
-                    .iter()
-                    .zip(&drives)
-                    .map(|(car, drive)| match drive {
-                        Drive::Removed => CarState::parked(car.id),
-                        Drive::Stopped => {
-                            let (position, yaw) = car.route.pose_at(car.spawn_distance, 0.0);
-                            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: 0.0 }
-                        }
-                        Drive::Route(route) => {
-                            let s = car.spawn_distance + step * frame as f64;
-                            let (position, yaw) = route.pose_at(s, 0.0);
-                            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
-                        }
-                    })
-                    .collect(),
-            )
+            Some(plan.cars.iter().zip(&drives).map(|(car, drive)| state(car, drive, frame, step, speed)).collect())
         })
         .collect::<Option<_>>()?;
     Some(Trajectories {
@@ -66,6 +50,63 @@ pub fn simulate(map: &CityMap, plan: &ScenarioPlan, step: f64, stop: &AtomicBool
         confounder_changes: Vec::new(),
         interactions: Vec::new(),
     })
+}
+
+/// An effects re-run of `changed` (`plan` with interventions added) that
+/// simulates only the cars whose drive the interventions changed (the
+/// intervened car, and the followers whose chain of leaders reaches it);
+/// every other car's frames are `factual`'s, which must be `plan`'s
+/// simulation. The same frames as [`simulate`] on `changed`, bit for bit: a
+/// toy car's pose depends on its drive alone. `None` once `stop` is set.
+pub fn rerun<'r>(
+    map: &CityMap,
+    plan: &ScenarioPlan,
+    changed: &ScenarioPlan,
+    factual: &'r Trajectories,
+    step: f64,
+    stop: &AtomicBool,
+) -> Option<RerunFrames<'r>> {
+    let speed = step / changed.frame_interval;
+    let before = drives(map, plan);
+    let after = drives(map, changed);
+    let reached: Vec<usize> = (0..changed.cars.len()).filter(|&i| !same_drive(&before[i], &after[i])).collect();
+    let mut run = RerunFrames::new(factual, changed.cars.len());
+    for frame in 0..factual.states.len() {
+        if stop.load(Ordering::Relaxed) {
+            return None;
+        }
+        for &i in &reached {
+            run.push(i, frame, state(&changed.cars[i], &after[i], frame as u32, step, speed), None);
+        }
+    }
+    Some(run)
+}
+
+/// Whether two drives move a car alike at every frame: the same route (one
+/// shared route, not merely an equal one), or both standing or removed.
+fn same_drive(a: &Drive, b: &Drive) -> bool {
+    match (a, b) {
+        (Drive::Route(a), Drive::Route(b)) => Arc::ptr_eq(a, b),
+        (Drive::Stopped, Drive::Stopped) | (Drive::Removed, Drive::Removed) => true,
+        _ => false,
+    }
+}
+
+/// Car `car`'s state at `frame` on `drive`, moving `step` metres per frame
+/// at `speed` (m/s).
+fn state(car: &CarPlan, drive: &Drive, frame: u32, step: f64, speed: f64) -> CarState {
+    match drive {
+        Drive::Removed => CarState::parked(car.id),
+        Drive::Stopped => {
+            let (position, yaw) = car.route.pose_at(car.spawn_distance, 0.0);
+            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed: 0.0 }
+        }
+        Drive::Route(route) => {
+            let s = car.spawn_distance + step * frame as f64;
+            let (position, yaw) = route.pose_at(s, 0.0);
+            CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw, speed }
+        }
+    }
 }
 
 /// Each car's route (in id order) after the plan's interventions: its own,

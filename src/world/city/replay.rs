@@ -42,7 +42,8 @@ use crate::map::{Action, Route};
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
 use crate::world::driver::{model_by_name, CarFollowing};
-use crate::world::{CarState, Interaction, Trajectories};
+use crate::world::rerun::{RerunFrames, RerunTrajectories};
+use crate::world::Trajectories;
 use glam::DVec2;
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -419,12 +420,7 @@ impl<'a> Recording<'a> {
             ..StepBuffers::default()
         };
         let frames = changed.frames as usize;
-        let mut run = RerunFrames {
-            factual: &self.factual,
-            from: vec![frames; n],
-            states: vec![Vec::new(); n],
-            interactions: vec![Vec::new(); n],
-        };
+        let mut run = RerunFrames::new(&self.factual, n);
         let mut replayed = 0;
         for frame in 0..frames {
             if stop.load(Ordering::Relaxed) {
@@ -441,118 +437,13 @@ impl<'a> Recording<'a> {
             sim.fire_interventions(t, dt);
             // A car simulated once stays simulated.
             for &i in &sim.live {
-                if run.from[i] == frames {
-                    run.from[i] = frame;
-                    run.states[i].reserve_exact(frames - frame);
-                    run.interactions[i].reserve_exact(frames - frame);
-                }
-                run.states[i].push(sim.cars[i].state());
-                run.interactions[i].push(sim.cars[i].binding);
+                run.push(i, frame, sim.cars[i].state(), Some(sim.cars[i].binding));
             }
         }
         let car_steps = n * steps * frames.saturating_sub(1);
         let StepBuffers { shown_from_tape, tries, woke, .. } = buffers;
         let replayed = Replayed { car_steps: replayed, of: car_steps, shown_from_tape, tries, woke };
         Some((RerunTrajectories::Replayed(run), replayed))
-    }
-}
-
-/// A re-run as [`Recording::rerun_frames`] made it.
-pub enum RerunTrajectories<'r> {
-    /// Every car simulated.
-    Full(Trajectories),
-    /// The cars it simulated; the others replayed.
-    Replayed(RerunFrames<'r>),
-}
-
-impl RerunTrajectories<'_> {
-    /// The frames.
-    pub fn frames(&self) -> usize {
-        match self {
-            RerunTrajectories::Full(run) => run.states.len(),
-            RerunTrajectories::Replayed(run) => run.frames(),
-        }
-    }
-
-    /// The first frame in which car `car` was simulated (0 in a full re-run).
-    pub fn first_simulated(&self, car: usize) -> usize {
-        match self {
-            RerunTrajectories::Full(_) => 0,
-            RerunTrajectories::Replayed(run) => run.first_simulated(car),
-        }
-    }
-
-    /// Car `car` at frame `frame`.
-    pub fn state(&self, frame: usize, car: usize) -> &CarState {
-        match self {
-            RerunTrajectories::Full(run) => &run.states[frame][car],
-            RerunTrajectories::Replayed(run) => run.state(frame, car),
-        }
-    }
-
-    /// What bound car `car`'s latest decision at frame `frame`, if the
-    /// world records it (the city does).
-    pub fn interaction(&self, frame: usize, car: usize) -> Option<&Interaction> {
-        match self {
-            RerunTrajectories::Full(run) => run.interactions.get(frame).and_then(|cars| cars.get(car)),
-            RerunTrajectories::Replayed(run) => Some(run.interaction(frame, car)),
-        }
-    }
-}
-
-/// A replayed re-run's cars: each car's frames from the first one in which
-/// it was simulated; before that (and for a car replayed throughout) the
-/// factual run's, bit for bit.
-pub struct RerunFrames<'r> {
-    factual: &'r Trajectories,
-    /// Per car, the first frame simulated (the frame count: none).
-    from: Vec<usize>,
-    /// Per car, its states and what bound it from `from` on.
-    states: Vec<Vec<CarState>>,
-    interactions: Vec<Vec<Interaction>>,
-}
-
-impl RerunFrames<'_> {
-    /// The frames (the factual run's count).
-    pub fn frames(&self) -> usize {
-        self.factual.states.len()
-    }
-
-    /// The first frame in which car `car` was simulated (before it, the
-    /// re-run's car is the factual run's); [`RerunFrames::frames`] when never.
-    pub fn first_simulated(&self, car: usize) -> usize {
-        self.from[car]
-    }
-
-    /// Car `car` at frame `frame`.
-    pub fn state(&self, frame: usize, car: usize) -> &CarState {
-        match frame.checked_sub(self.from[car]) {
-            Some(at) => &self.states[car][at],
-            None => &self.factual.states[frame][car],
-        }
-    }
-
-    /// What bound car `car`'s latest decision at frame `frame`.
-    pub fn interaction(&self, frame: usize, car: usize) -> &Interaction {
-        match frame.checked_sub(self.from[car]) {
-            Some(at) => &self.interactions[car][at],
-            None => &self.factual.interactions[frame][car],
-        }
-    }
-
-    /// Every car, frame by frame (no lights or events), as
-    /// [`Recording::rerun`] returns it.
-    pub fn to_trajectories(&self, frame_interval: f64) -> Trajectories {
-        let cars = self.from.len();
-        let frames = 0..self.frames();
-        Trajectories {
-            frame_interval,
-            states: frames.clone().map(|f| (0..cars).map(|c| *self.state(f, c)).collect()).collect(),
-            lights: Vec::new(),
-            events: Vec::new(),
-            confounder_changes: Vec::new(),
-            interactions: frames.map(|f| (0..cars).map(|c| *self.interaction(f, c)).collect()).collect(),
-        }
     }
 }
 
