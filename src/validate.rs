@@ -894,6 +894,9 @@ fn check_scenario_files(
             }
         }
     }
+    // The light log's lights, where it could be read: the events' and
+    // interactions' lights are among them.
+    let mut light_names: Option<Vec<String>> = None;
     if city && expected.layout.lights == crate::output::manifest::LightsLog::Changes {
         // Every light at frame 0, then changes in order (as the Python
         // package reads it).
@@ -901,7 +904,7 @@ fn check_scenario_files(
             let path = dir.join(LIGHT_CHANGES_CSV);
             let reader = csv::Reader::from_reader(&data[..]);
             match crate::dataset::readback::parse_light_changes(reader, &path, frames, spec.frame_interval()) {
-                Ok(read) if read.names.len() == lights_per_frame => {}
+                Ok(read) if read.names.len() == lights_per_frame => light_names = Some(read.names),
                 Ok(read) => problems.push(Problem {
                     path,
                     message: format!("{} lights at frame 0, expected {lights_per_frame}", read.names.len()),
@@ -913,9 +916,18 @@ fn check_scenario_files(
         if let Some(data) = read(LIGHTS_CSV, &mut problems) {
             // Every light of every intersection, every frame.
             let lights = lights_per_frame;
-            check_csv(&dir.join(LIGHTS_CSV), &data, &LIGHT_COLUMNS, frames * lights, &mut problems, |row, i| {
+            let path = dir.join(LIGHTS_CSV);
+            let before = problems.len();
+            check_csv(&path, &data, &LIGHT_COLUMNS, frames * lights, &mut problems, |row, i| {
                 (row.get(0)?.parse::<usize>().ok()? == i / lights).then_some(())
             });
+            // In order: then every value as the readers take it.
+            if problems.len() == before {
+                match crate::dataset::readback::parse_lights(csv::Reader::from_reader(&data[..]), &path, frames) {
+                    Ok(read) => light_names = Some(read.names),
+                    Err(message) => problems.push(Problem { message: without_path(message, &path), path }),
+                }
+            }
         }
     }
     if city {
@@ -931,6 +943,7 @@ fn check_scenario_files(
             }
             // `car` names a car of the scenario, or is empty for an
             // intervention on no car (a light, the weather).
+            let before = problems.len();
             for (i, row) in reader.records().enumerate() {
                 let ok = row.as_ref().ok().is_some_and(|r| match r.get(3) {
                     Some("") => r.get(2) == Some("intervention"),
@@ -945,6 +958,14 @@ fn check_scenario_files(
                     break;
                 }
             }
+            // Then every value as the readers take it.
+            if problems.len() == before {
+                let reader = csv::Reader::from_reader(&data[..]);
+                let names = light_names.as_deref();
+                if let Err(message) = crate::dataset::readback::parse_events(reader, &path, frames, cars, names) {
+                    problems.push(Problem { message: without_path(message, &path), path });
+                }
+            }
         }
     }
 
@@ -952,10 +973,20 @@ fn check_scenario_files(
         if let Some(data) = read(INTERACTIONS_CSV, &mut problems) {
             // One row per car and frame: frame by frame, cars in id order.
             let path = dir.join(INTERACTIONS_CSV);
+            let before = problems.len();
             check_csv(&path, &data, &INTERACTION_COLUMNS, frames * cars, &mut problems, |row, i| {
                 let (frame, car) = (row.get(0)?.parse::<usize>().ok()?, row.get(1)?.parse::<usize>().ok()?);
                 (cars > 0 && frame == i / cars && car == i % cars).then_some(())
             });
+            // In order: then every value as the readers take it.
+            if problems.len() == before {
+                let reader = csv::Reader::from_reader(&data[..]);
+                let names = light_names.as_deref();
+                let read = crate::dataset::readback::parse_interaction_arrays(reader, &path, frames, cars, names);
+                if let Err(message) = read {
+                    problems.push(Problem { message: without_path(message, &path), path });
+                }
+            }
         }
     }
 

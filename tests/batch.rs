@@ -566,6 +566,80 @@ fn validate_reads_a_city_scenarios_logs_in_either_light_layout() {
 }
 
 #[test]
+fn validate_holds_the_city_logs_to_the_values_the_readers_take() {
+    // validate checked the events', interactions' and lights.csv's order and
+    // cars only: a NaN time, an unknown light, a free car bound by another
+    // or a negative time since a light changed validated, and every reader
+    // (stats, evaluate, the Python package) then refused the dataset.
+    let dir = fresh_dir("batch-validate-log-values");
+    let spec = write_spec(&dir, &city_spec("log-values", &[(4, 0.5)], (1, 0, 0), 40, "{}"));
+    let scenario = "cars04_edges50/train/00000";
+    let events_header = "frame,t,kind,car,other_car,light,detail\n";
+    let edit_line = |d: &Path, file: &str, line: usize, from: &str, to: &str| {
+        let text = std::fs::read_to_string(d.join(file)).unwrap();
+        let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+        assert!(lines[line - 1].contains(from), "{file} line {line}: {}", lines[line - 1]);
+        lines[line - 1] = lines[line - 1].replacen(from, to, 1);
+        replace_signed(d, file, &(lines.join("\n") + "\n"));
+    };
+    let mut checked = 0;
+    for lights in ["changes", "frames"] {
+        let clean = dir.join(format!("clean-{lights}"));
+        gen_ok(&spec, &clean, &["--quiet", "--no-images", "--lights", lights]);
+        let (code, report) = validate_dir(&clean);
+        assert_eq!(code, 0, "{report}");
+        type Damage<'a> = (&'a str, Box<dyn Fn(&Path) + 'a>, &'a str);
+        let mut damages: Vec<Damage> = vec![
+            (
+                "event-at-nan-seconds",
+                Box::new(|d| replace_signed(d, "events.csv", &format!("{events_header}3,NaN,turn_done,0,,,x\n"))),
+                "events.csv: line 2: t NaN is not allowed",
+            ),
+            (
+                "event-at-an-unknown-light",
+                Box::new(|d| {
+                    replace_signed(d, "events.csv", &format!("{events_header}3,3.0,turn_done,0,,ZZ/N/left,x\n"))
+                }),
+                "is not one of the light log's lights",
+            ),
+            (
+                "free-car-bound-by-another",
+                Box::new(|d| edit_line(d, "interactions.csv", 2, "0,0,free,,", "0,0,free,1,")),
+                "interactions.csv: line 2: bound_by free names an other_car",
+            ),
+            (
+                "car-bound-by-itself",
+                Box::new(|d| edit_line(d, "interactions.csv", 2, "0,0,free,,", "0,0,car,0,")),
+                "car 0 is bound by itself",
+            ),
+        ];
+        if lights == "frames" {
+            damages.push((
+                "light-changed-minus-a-second-ago",
+                Box::new(|d| {
+                    let text = std::fs::read_to_string(d.join("lights.csv")).unwrap();
+                    let line: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+                    let since = line[6];
+                    edit_line(d, "lights.csv", 2, &format!(",{since},"), ",-1.0,");
+                }),
+                "lights.csv: line 2: since_change -1 is not allowed",
+            ));
+        }
+        for (name, damage, needle) in &damages {
+            let copy = dir.join(format!("{name}-{lights}"));
+            assert!(Command::new("cp").arg("-r").arg(&clean).arg(&copy).status().unwrap().success());
+            damage(&copy.join(scenario));
+            let (code, report) = validate_dir(&copy);
+            assert_eq!(code, 1, "{name} ({lights}): validate should fail: {report}");
+            assert!(report.contains(needle), "{name} ({lights}): report should contain {needle:?}:\n{report}");
+            assert!(!report.contains("checksum mismatch"), "{report}");
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 9);
+}
+
+#[test]
 fn validate_while_gen_writes_says_so_not_that_the_dataset_is_damaged() {
     // validate of a folder gen was writing reported "did not finish: rerun
     // its gen command", leftovers and missing scenarios (helper audit).

@@ -8,7 +8,9 @@ use super::ScenarioSummary;
 use crate::map::signals::light_label;
 use crate::output::arrays::{EventRow, InteractionArrays, LightArrays, ScenarioArrays, LIGHT_COLOURS};
 use crate::output::layout::{frame_digits, FrameKind};
-use crate::output::logs::{read_effects, read_interactions as read_interaction_records};
+use crate::output::logs::{
+    parse_interactions, read_effects, read_interactions as read_interaction_records, InteractionRecord,
+};
 use crate::output::png::decode_8bit;
 use crate::world::{BoundBy, EventKind};
 use std::path::Path;
@@ -277,7 +279,16 @@ pub fn parse_light_changes<R: std::io::Read>(
 }
 
 fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
-    let mut reader = open_csv(path)?;
+    parse_lights(open_csv(path)?, path, frames)
+}
+
+/// `lights.csv` (`--lights frames`): every light, frame by frame, in frame
+/// 0's order, read from `reader` (errors name `path`).
+pub fn parse_lights<R: std::io::Read>(
+    mut reader: csv::Reader<R>,
+    path: &Path,
+    frames: usize,
+) -> Result<LightArrays, String> {
     check_header(path, &mut reader, &LIGHT_COLUMNS)?;
     let mut lights =
         LightArrays { names: Vec::new(), colour: Vec::new(), since_change: Vec::new(), head_pixels: Vec::new() };
@@ -318,20 +329,43 @@ fn read_lights(path: &Path, frames: usize) -> Result<LightArrays, String> {
 }
 
 /// The index of light `name` among `names` (-1 for none); `place` says
-/// where it was read, for the error.
-fn light_index(place: &dyn Fn() -> String, names: &[String], name: &str) -> Result<i16, String> {
-    match name {
-        "" => Ok(-1),
-        _ => names
+/// where it was read, for the error. With no names (a light log that could
+/// not be read, which is reported on its own) any name is taken, as 0.
+fn light_index(place: &dyn Fn() -> String, names: Option<&[String]>, name: &str) -> Result<i16, String> {
+    match (name, names) {
+        ("", _) => Ok(-1),
+        (_, None) => Ok(0),
+        (_, Some(names)) => names
             .iter()
             .position(|n| n == name)
             .map(|i| i as i16)
-            .ok_or_else(|| format!("{}: light {name:?} is not one of lights.csv's lights", place())),
+            .ok_or_else(|| format!("{}: light {name:?} is not one of the light log's lights", place())),
     }
 }
 
 fn read_interactions(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Result<InteractionArrays, String> {
-    let records = read_interaction_records(path, frames, cars)?;
+    interaction_arrays(&read_interaction_records(path, frames, cars)?, path, cars, Some(lights))
+}
+
+/// `interactions.csv` read from `reader` (errors name `path`), its lights
+/// among `lights` (the light log's, where it could be read): the rule
+/// `validate` holds the file to, as the readers do.
+pub fn parse_interaction_arrays<R: std::io::Read>(
+    reader: csv::Reader<R>,
+    path: &Path,
+    frames: usize,
+    cars: usize,
+    lights: Option<&[String]>,
+) -> Result<InteractionArrays, String> {
+    interaction_arrays(&parse_interactions(reader, path, frames, cars)?, path, cars, lights)
+}
+
+fn interaction_arrays(
+    records: &[InteractionRecord],
+    path: &Path,
+    cars: usize,
+    lights: Option<&[String]>,
+) -> Result<InteractionArrays, String> {
     let mut out = InteractionArrays { bound_by: Vec::new(), other_car: Vec::new(), light: Vec::new() };
     for (at, r) in records.iter().enumerate() {
         out.bound_by.push(BoundBy::ALL.iter().position(|&b| b == r.bound_by).unwrap_or(0) as u8);
@@ -345,7 +379,21 @@ fn read_interactions(path: &Path, frames: usize, cars: usize, lights: &[String])
 const EVENT_COLUMNS: [&str; 7] = ["frame", "t", "kind", "car", "other_car", "light", "detail"];
 
 fn read_events(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Result<Vec<EventRow>, String> {
-    let mut reader = open_csv(path)?;
+    parse_events(open_csv(path)?, path, frames, cars, Some(lights))
+}
+
+/// `events.csv` read from `reader` (errors name `path`): each row's frame
+/// within the scenario, a known kind, `t` in seconds (0 or more), its cars
+/// among the scenario's (the car empty only for an intervention on no car:
+/// a light or the weather) and its light among `lights` (the light log's,
+/// where it could be read).
+pub fn parse_events<R: std::io::Read>(
+    mut reader: csv::Reader<R>,
+    path: &Path,
+    frames: usize,
+    cars: usize,
+    lights: Option<&[String]>,
+) -> Result<Vec<EventRow>, String> {
     check_header(path, &mut reader, &EVENT_COLUMNS)?;
     let mut events = Vec::new();
     for (n, row) in reader.records().enumerate() {
@@ -383,6 +431,13 @@ fn read_events(path: &Path, frames: usize, cars: usize, lights: &[String]) -> Re
             return Err(format!("{} line {line}: t {t} is not allowed: seconds, 0 or more", path.display()));
         }
         let (car, other_car) = (car(3)?, car(4)?);
+        if car.is_none() && *kind != EventKind::Intervention {
+            return Err(format!(
+                "{} line {line}: a {} event names no car (only an intervention may have none)",
+                path.display(),
+                kind.name()
+            ));
+        }
         if car.is_some() && car == other_car {
             return Err(format!("{} line {line}: other_car is the car itself ({})", path.display(), &row[3]));
         }

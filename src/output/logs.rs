@@ -187,10 +187,21 @@ pub struct InteractionRecord {
 /// frame and car, at `frame * cars + car`. Every row must be there once,
 /// with a known `bound_by` and an `other_car` below `cars`.
 pub fn read_interactions(path: &Path, frames: usize, cars: usize) -> Result<Vec<InteractionRecord>, String> {
-    let fail = |what: String| format!("{}: {what}", path.display());
     // A regular file only: a pipe hung the reader.
     crate::input::regular_file(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let mut reader = csv::Reader::from_path(path).map_err(|e| fail(e.to_string()))?;
+    let reader = csv::Reader::from_path(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    parse_interactions(reader, path, frames, cars)
+}
+
+/// [`read_interactions`] of `interactions.csv`'s bytes, read from `reader`
+/// (errors name `path`): the rule `validate` holds a dataset's files to.
+pub fn parse_interactions<R: std::io::Read>(
+    mut reader: csv::Reader<R>,
+    path: &Path,
+    frames: usize,
+    cars: usize,
+) -> Result<Vec<InteractionRecord>, String> {
+    let fail = |what: String| format!("{}: {what}", path.display());
     // The columns as written: a renamed or reordered column is not read
     // as another one.
     let header = reader.headers().map_err(|e| fail(e.to_string()))?;
