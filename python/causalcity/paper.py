@@ -30,9 +30,12 @@ import argparse
 import contextlib
 import csv
 import dataclasses
+import hashlib
 import io
 import json
+import math
 import os
+import stat
 import sys
 import threading
 import time
@@ -255,10 +258,26 @@ def _projected_seconds(name: str, setting: Setting, cars: int, rates: Tuple[floa
 
 
 def _unit_key(world: str, name: str, group: str, setting: Setting, device: str, seed: int, spec: Spec) -> dict:
-    """What a finished unit must have been made with to be kept on a rerun."""
-    return dict(world=world, method=name, group=group, spec=spec.name, splits=setting.splits,
+    """What a finished unit must have been made with to be kept on a rerun:
+    its world, method, group, the spec's contents (the group's own entry
+    and every other field: another seed or map is another dataset, though
+    paper names every spec alike), splits, the method's options and the seed."""
+    return dict(world=world, method=name, group=group, spec=spec.name, spec_sha256=_group_spec_sha256(spec, group),
+                splits=setting.splits,
                 options={k: v for k, v in _method_options(name, setting, device, seed, True).items() if k != "quiet"},
                 seed=seed)  # fmt: skip
+
+
+def _group_spec_sha256(spec: Spec, group: str) -> str:
+    """SHA-256 of ``spec``'s contents as they make ``group``'s scenarios:
+    every field but the splits (the key's own field), with ``group``'s entry
+    as the only group (a run of some groups and a run of all make the same
+    scenarios of each)."""
+    raw = spec.to_dict()
+    raw.pop("splits", None)
+    entries = dict(zip(spec.groups, raw.pop("groups", [])))
+    raw["groups"] = [entries.get(group)]
+    return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()
 
 
 def _runs_beside(name: str) -> bool:
@@ -329,7 +348,9 @@ def run(
     cars = {g: int(g[len("cars") : g.index("_")]) for world in worlds for g in chosen[world]}
     units = [(world, name, group) for world in worlds for name in methods for group in chosen[world]]
     # A rerun projects only the units left, and calibrates NRI only when a
-    # neural unit is among them.
+    # neural unit is among them. Records are read from below --out only,
+    # never through a link.
+    _refuse_links_below(out, [_unit_path(out, *u) for u in units])
     finished = {u: _read_unit(_unit_path(out, *u), _unit_key(*u, setting, device, seed, loaded[u[0]])) for u in units}
     left = [u for u in units if finished[u] is None]
     if report_only:
@@ -475,10 +496,12 @@ def _only_run(out: Path) -> Iterator[None]:
 
     path = out / PAPER_LOCK
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
     except OSError as e:
         raise InputError(f"{path}: cannot open this run's lock file ({e.strerror}; a link there is not followed)") from None
     try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise InputError(f"{path}: not a regular file where this run's lock file should be: remove it")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -538,18 +561,92 @@ def _refuse_links_below(out: Path, paths: Sequence[Path]) -> None:
 
 
 def _read_unit(path: Path, key: dict) -> Optional[dict]:
-    """A finished unit's record, when it was made as ``key`` says."""
+    """A finished unit's record, made as ``key`` says; ``None`` when there
+    is none. A record that is not this run's to keep is refused
+    (``InputError``), before anything is run or written: one made with
+    another setting (its results would be replaced), one edited or damaged
+    (its numbers would go into the table), or something other than a file."""
+    if not os.path.lexists(path):
+        return None
+    again = "remove it to run the unit again"
+    mode = os.lstat(path).st_mode
+    if not stat.S_ISREG(mode):
+        kind = "a folder" if stat.S_ISDIR(mode) else "a link" if stat.S_ISLNK(mode) else "not a regular file"
+        raise InputError(f"{path}: {kind} where a finished unit's record should be: {again}")
     try:
-        record = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(record, dict) or record.get("key") != json.loads(json.dumps(key)):
-        return None
-    # Rows as _rows makes them, and the unit's time: else it is run again.
-    rows, seconds = record.get("rows"), record.get("seconds")
-    whole = isinstance(rows, list) and all(isinstance(r, dict) and set(COLUMNS) <= r.keys() for r in rows)
-    timed = isinstance(seconds, (int, float)) and not isinstance(seconds, bool)
-    return record if whole and timed else None
+        record = json.loads(path.read_text(), parse_constant=_no_constant)
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise InputError(f"{path}: a damaged unit record ({e}): {again}") from None
+    if not isinstance(record, dict) or not isinstance(record.get("key"), dict):
+        raise InputError(f"{path}: not a unit record (a JSON object with key, seconds and rows): {again}")
+    theirs, ours = record["key"], json.loads(json.dumps(key))
+    differ = [k for k in sorted(set(theirs) | set(ours)) if theirs.get(k) != ours.get(k)]
+    if differ:
+        said = "; ".join(
+            f"the spec's contents (--{key['world']}-spec): sha256 {str(theirs.get(k))[:12]}... there, "
+            f"{str(ours.get(k))[:12]}... now" if k == "spec_sha256"
+            else f"{k}: {_short(theirs.get(k))} there, {_short(ours.get(k))} now"
+            for k in differ
+        )  # fmt: skip
+        raise InputError(f"{path}: a unit made with another setting ({said}). Its result would be replaced: give "
+                         f"another --out, or {again}")  # fmt: skip
+    seconds = record.get("seconds")
+    if not (_real(seconds) and seconds >= 0):
+        raise InputError(f"{path}: seconds {_short(seconds)} is not allowed: the unit's time, 0 or more: {again}")
+    _check_rows(path, record.get("rows"), (key["world"], key["method"], key["group"]), again)
+    return record
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _short(value) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _real(value) -> bool:
+    """A finite int or float (not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+#: What each metric's value may be: within [0, 1], or 0 or more.
+_UNIT_METRICS = {"f1": 1.0, "auroc": 1.0, "auprc": 1.0, "shd": math.inf, "trajectory_mse": math.inf}
+
+
+def _check_rows(path: Path, rows, unit: Tuple[str, str, str], again: str) -> None:
+    """A unit record's rows as :func:`_rows` makes them, each of ``unit``
+    (world, method, group), every number finite and within its metric's
+    range; raises ``InputError`` naming the row, field and value."""
+    if not isinstance(rows, list) or not rows:
+        raise InputError(f"{path}: rows {_short(rows)} is not a list of result rows: {again}")
+    for i, row in enumerate(rows):
+        where = f"{path}: rows[{i}]"
+        if not isinstance(row, dict) or set(row) != set(COLUMNS):
+            raise InputError(f"{where} is not a result row (an object of {', '.join(COLUMNS)}): {again}")
+        for column, own in zip(("world", "method", "group"), unit):
+            if row[column] != own:
+                raise InputError(f"{where}: {column} {_short(row[column])} is not this unit's ({_short(own)}): {again}")
+        metric, value, se, step, scenarios = (row[c] for c in ("metric", "value", "se", "step", "scenarios"))
+        bad = None
+        if metric not in _UNIT_METRICS:
+            bad = f"metric {_short(metric)} is not one of {', '.join(_UNIT_METRICS)}"
+        elif row["split"] not in ("train", "val", "test"):
+            bad = f"split {_short(row['split'])} is not train, val or test"
+        elif not isinstance(row["graph"], str):
+            bad = f"graph {_short(row['graph'])} is not a graph's name"
+        elif value is not None and not (_real(value) and 0 <= value <= _UNIT_METRICS[metric]):
+            top = "1" if _UNIT_METRICS[metric] == 1.0 else "any finite number"
+            bad = f"value {_short(value)} is not allowed for {metric}: from 0 to {top}, or null"
+        elif se is not None and not (_real(se) and se >= 0):
+            bad = f"se {_short(se)} is not allowed: a finite number from 0 up, or null"
+        elif not (step == "" or (isinstance(step, int) and not isinstance(step, bool) and step >= 1)):
+            bad = f"step {_short(step)} is not allowed: empty, or a whole number from 1 up"
+        elif not (isinstance(scenarios, int) and not isinstance(scenarios, bool) and scenarios >= 0):
+            bad = f"scenarios {_short(scenarios)} is not allowed: a whole number from 0 up"
+        if bad:
+            raise InputError(f"{where}: {bad}: {again}")
 
 
 def _write_unit(path: Path, record: dict) -> None:

@@ -6,6 +6,8 @@ and the whole pipeline runs end to end, writing a
 results table, a CSV and two figures."""
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -312,14 +314,44 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
     redone = [p for p in predictions if p.stat().st_mtime_ns != stamps[p]]
     assert [p.relative_to(out).as_posix() for p in redone] == ["predictions/toy/frame0/cars08_edges50.npz"]
     assert (out / "results.csv").read_bytes() == table
-    # A record whose key is right but whose rows are not (edited by hand,
-    # or written by another version): run again (it raised KeyError).
+    # A record edited by hand, damaged, or made with another setting is
+    # refused, naming the file and what is wrong, before anything is run or
+    # written: its numbers went into the table (a NaN, an F1 of 5, true as
+    # 1.00, another group's row), a string crashed the figure after
+    # results.csv was rewritten, another spec's or seed's record was kept or
+    # replaced silently (helper audit).
     record = out / "units" / "toy" / "path" / "cars04_edges50.json"
-    for rows in ([{"bad": 1}], "notalist"):
-        record.write_text(json.dumps({**json.loads(record.read_text()), "rows": rows}))
-        third = run()
-        assert third.count("kept from an earlier run") == 9 and third.count("done in") == 1, third
-        assert (out / "results.csv").read_bytes() == table
+    good = json.loads(record.read_text())
+
+    def row0(**change):
+        return {**good, "rows": [{**good["rows"][0], **change}, *good["rows"][1:]]}
+
+    edits = [
+        ({**good, "rows": [{"bad": 1}]}, "rows[0] is not a result row"),
+        ({**good, "rows": "notalist"}, "is not a list of result rows"),
+        (row0(value=5.0), "rows[0]: value 5.0 is not allowed for f1: from 0 to 1"),
+        (row0(value=True), "rows[0]: value true is not allowed"),
+        (row0(value="abc"), 'rows[0]: value "abc" is not allowed'),
+        (row0(se="x"), 'rows[0]: se "x" is not allowed'),
+        (row0(group="cars08_edges50"), "rows[0]: group \"cars08_edges50\" is not this unit's"),
+        ({**good, "seconds": -1}, "seconds -1 is not allowed"),
+        ({**good, "key": {**good["key"], "seed": 7}}, "made with another setting (seed: 7 there, 0 now)"),
+        ({**good, "key": {**good["key"], "spec_sha256": "0" * 64}}, "the spec's contents (--toy-spec)"),
+    ]
+    texts = [(json.dumps(e), needle) for e, needle in edits]
+    texts += [(json.dumps(good).replace('"value": 1.0', '"value": NaN', 1), "NaN is not a number JSON allows"),
+              (json.dumps(good)[:200], "a damaged unit record")]  # fmt: skip
+    stamps = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+    for text, needle in texts:
+        record.write_text(text)
+        stamps[record] = record.stat().st_mtime_ns
+        with pytest.raises(paper.InputError, match="remove it to run the unit again") as refused:
+            run()
+        assert str(record) in str(refused.value) and needle in str(refused.value), (needle, str(refused.value))
+        assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == stamps, f"{needle}: files written"
+    record.write_text(json.dumps(good))
+    assert run().count("kept from an earlier run") == 10
+    assert (out / "results.csv").read_bytes() == table
 
 
 def test_the_paper_says_what_to_do_when_cut_off_or_given_other_splits(tmp_path, capsys, monkeypatch):
@@ -343,14 +375,20 @@ def test_the_paper_says_what_to_do_when_cut_off_or_given_other_splits(tmp_path, 
     capsys.readouterr()
     # Other splits into the same --out: the advice is this command's (it
     # said "--force", which paper does not take).
+    # Its finished unit is named first (it would be replaced), then its data.
     assert paper.main(["--splits", "4/1/1", *base]) == 2
     err = capsys.readouterr().err
-    assert "made with another setting" in err and "remove" in err and "--force" not in err, err
+    assert "a unit made with another setting (splits: " in err and "cars04_edges50.json" in err, err
+    shutil.rmtree(out / "units")
+    assert paper.main(["--splits", "4/1/1", *base]) == 2
+    err = capsys.readouterr().err
+    assert "data made with another setting" in err and "remove" in err and "--force" not in err, err
     # Ctrl-C: one line and exit 130 (a traceback before), the finished units kept.
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(paper, "generate", interrupted)
+    base[base.index("--out") + 1] = str(tmp_path / "cut")
     assert paper.main(["--splits", "5/1/1", *base]) == 130
     err = capsys.readouterr().err
     assert "interrupted: the finished units are kept" in err and "Traceback" not in err, err
@@ -408,6 +446,76 @@ def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, caps
     assert "10 of them finished earlier" in err and "calibrated" not in err and "done in" not in err, err
     assert "generating toy" not in err and "every toy unit finished earlier: its data is not needed" in err, err
     assert len(calibrations) == 2 and again == every
+
+
+def test_the_paper_names_a_pipe_or_folder_where_a_record_or_its_lock_should_be(tmp_path, capsys):
+    # A pipe as a unit's record hung every mode (--plan and --report too); a
+    # folder there failed after the unit's predictions were rewritten; a
+    # pipe as the lock file gave a traceback (helper audit).
+    import subprocess
+    import sys
+
+    from causalcity import paper
+
+    out = tmp_path / "paper"
+    args = ["--quick", "--world", "toy", "--group", "cars04_edges50", "--method", "path", "--splits", "3/2/2",
+            "--toy-spec", str(ROOT / "configs" / "toy.json"), "--out", str(out), "--quiet"]  # fmt: skip
+    assert paper.main(args) == 0
+    record = out / "units" / "toy" / "path" / "cars04_edges50.json"
+    predictions = out / "predictions" / "toy" / "path" / "cars04_edges50.npz"
+    stamp = predictions.stat().st_mtime_ns
+    record.unlink()
+    os.mkfifo(record)
+    for extra in ([], ["--plan"], ["--report"]):
+        try:
+            done = subprocess.run([sys.executable, "-m", "causalcity.paper", *args, *extra], capture_output=True,
+                                  text=True, timeout=60)  # fmt: skip
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"paper {extra}: still reading the pipe after 60 s")
+        assert done.returncode == 2, done.stderr
+        assert f"{record}: not a regular file where a finished unit's record should be" in done.stderr, done.stderr
+    record.unlink()
+    record.mkdir()
+    capsys.readouterr()
+    assert paper.main(args) == 2
+    assert f"{record}: a folder where a finished unit's record should be" in capsys.readouterr().err
+    assert predictions.stat().st_mtime_ns == stamp, "the unit ran before its record was found to be a folder"
+    record.rmdir()
+    lock = out / paper.PAPER_LOCK
+    lock.unlink(missing_ok=True)
+    os.mkfifo(lock)
+    assert paper.main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{lock}: not a regular file where this run's lock file should be" in err and "Traceback" not in err, err
+    assert not record.exists() and predictions.stat().st_mtime_ns == stamp
+
+
+def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):
+    # A pipe as pixels.npy hung `python -m causalcity.methods`; a NaN in it
+    # went into the method's scores (helper audit).
+    import subprocess
+    import sys
+
+    for damage in ("pipe", "nan"):
+        copy = tmp_path / damage
+        shutil.copytree(toy, copy)
+        pixels = copy / "cars06_edges50" / "train" / "00000" / "pixels.npy"
+        if damage == "pipe":
+            pixels.unlink()
+            os.mkfifo(pixels)
+        else:
+            values = np.load(pixels)
+            values[3, 1, 0] = np.nan
+            np.save(pixels, values)
+        try:
+            done = subprocess.run([sys.executable, "-m", "causalcity.methods", "path", str(copy), "--out",
+                                   str(tmp_path / f"{damage}.npz")], capture_output=True, text=True, timeout=60)  # fmt: skip
+        except subprocess.TimeoutExpired:
+            pytest.fail("methods: still reading the pipe after 60 s")
+        assert done.returncode == 1, done.stderr
+        said = {"pipe": "a pipe where gen writes a file", "nan": "frame 3, car 1 holds nan"}[damage]
+        assert f"{pixels}: {said}" in done.stderr and "Traceback" not in done.stderr, done.stderr
+        assert not (tmp_path / f"{damage}.npz").exists()
 
 
 def test_the_paper_refuses_a_group_its_spec_lacks(tmp_path, capsys, monkeypatch):

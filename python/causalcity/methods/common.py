@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import sys
 import time
 import dataclasses
@@ -110,9 +111,23 @@ class DatasetError(RuntimeError):
     command line, as ``causalcity evaluate`` reports it."""
 
 
+def _regular(path: Path) -> Path:
+    """``path`` when it is a regular file (or a link to one); else a
+    :class:`DatasetError` naming what is there: a pipe would hang the read,
+    a device read until memory ran out."""
+    try:
+        mode = path.stat().st_mode
+    except OSError as e:
+        raise DatasetError(f"{path}: cannot be read ({e.strerror}); causalcity validate tells what else is damaged") from None
+    if not stat.S_ISREG(mode):
+        kind = "a folder" if stat.S_ISDIR(mode) else "a pipe" if stat.S_ISFIFO(mode) else "not a regular file"
+        raise DatasetError(f"{path}: {kind} where gen writes a file; causalcity validate tells what else is damaged")
+    return path
+
+
 def _read_json(path: Path) -> dict:
     try:
-        return json.loads(path.read_text())
+        return json.loads(_regular(path).read_text())
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise DatasetError(f"{path}: cannot be read as JSON ({e}); causalcity validate tells what else is damaged") from None
 
@@ -143,14 +158,20 @@ def _scenario_arrays(folder: Path) -> Tuple[dict, np.ndarray, np.ndarray]:
     except (KeyError, TypeError, ValueError) as e:
         raise DatasetError(f"{folder / 'scenario.json'}: not a scenario gen wrote (field {e})") from None
     try:
-        pixels = np.load(folder / "pixels.npy").astype(np.float64).reshape(frames, n, 2)
+        pixels = np.load(_regular(folder / "pixels.npy")).astype(np.float64).reshape(frames, n, 2)
     except (OSError, ValueError, EOFError) as e:
         raise DatasetError(f"{folder / 'pixels.npy'}: not the [{frames}, {n}, 2] array gen writes ({e})") from None
     try:
-        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+        table = np.loadtxt(_regular(folder / "poses.csv"), delimiter=",", skiprows=1, ndmin=2)
         metres = table[:, [3, 4, 8, 11]].reshape(frames, n, 4)
     except (OSError, ValueError, IndexError) as e:
         raise DatasetError(f"{folder / 'poses.csv'}: not the {frames} x {n} rows gen writes ({e})") from None
+    # (the pose rule's finiteness, as the package's own reader holds it)
+    for name, values in (("pixels.npy", pixels), ("poses.csv", metres)):
+        if not np.isfinite(values).all():
+            at = np.argwhere(~np.isfinite(values))[0]
+            raise DatasetError(f"{folder / name}: frame {at[0]}, car {at[1]} holds {values[tuple(at)]}: gen writes "
+                               "finite numbers only; causalcity validate tells what else is damaged")  # fmt: skip
     if any(not (0 <= a < n and 0 <= b < n) for a, b in edges):
         raise DatasetError(f"{folder / 'scenario.json'}: an edge names a car outside 0..{n - 1}")
     return meta, pixels, metres
