@@ -238,6 +238,62 @@ fn a_link_at_the_lock_file_is_refused_never_written_through() {
 }
 
 #[test]
+fn a_hard_link_or_a_pipe_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
+    // O_NOFOLLOW stops a symbolic link only: a hard link at the lock's name
+    // had gen, merge and pack write their holder line into the file
+    // outside --out and then unlink the name; a pipe there was locked,
+    // written to and removed (helper audit).
+    let dir = fresh_dir("rule-lock-hard-link");
+    let spec = write_spec(&dir, &toy_spec("hardlock", &[(4, 0.5)], (2, 1, 1), 20));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("shard{k}"))).collect();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--no-images", "--shard", &format!("{k}/2")]);
+    }
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    let commands: [(&str, Vec<String>); 3] = [
+        (
+            "gen",
+            vec![
+                "gen".into(),
+                "--quiet".into(),
+                "--no-images".into(),
+                "--spec".into(),
+                s(&spec).into(),
+                "--out".into(),
+            ],
+        ),
+        ("merge", vec!["merge".into(), s(&shards[0]).into(), s(&shards[1]).into(), "--out".into()]),
+        ("pack", vec!["pack".into(), s(&data).into(), "--out".into()]),
+    ];
+    let mut refused = 0;
+    for (name, args) in &commands {
+        for planted in ["hard link", "pipe"] {
+            let out = dir.join(format!("{name}-{}", planted.replace(' ', "-")));
+            std::fs::create_dir(&out).unwrap();
+            let lock = out.join(".causalcity.lock");
+            if planted == "hard link" {
+                std::fs::hard_link(&victim, &lock).unwrap();
+            } else {
+                assert!(std::process::Command::new("mkfifo").arg(&lock).status().unwrap().success());
+            }
+            let mut args = args.clone();
+            args.push(s(&out).into());
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let says = if planted == "hard link" { "a hard link (" } else { "not a regular file" };
+            assert_refused(&run(&args), says);
+            assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious", "{name}: the file outside was written");
+            assert!(std::fs::symlink_metadata(&lock).is_ok(), "{name}: the planted {planted} was removed");
+            assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1, "{name}: something was written");
+            refused += 1;
+        }
+    }
+    assert_eq!(refused, 6);
+}
+
+#[test]
 fn force_removes_only_what_causalcity_wrote_and_refuses_whole_otherwise() {
     let dir = fresh_dir("rule-force");
     let data = toy_dataset(&dir);

@@ -500,8 +500,13 @@ def _only_run(out: Path) -> Iterator[None]:
     except OSError as e:
         raise InputError(f"{path}: cannot open this run's lock file ({e.strerror}; a link there is not followed)") from None
     try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
             raise InputError(f"{path}: not a regular file where this run's lock file should be: remove it")
+        if st.st_nlink > 1:
+            # a second name of a file elsewhere, which the process id would overwrite
+            raise InputError(f"{path}: a hard link ({st.st_nlink} names of one file) where this run's lock file "
+                             "should be: causalcity never writes through a link; remove it")  # fmt: skip
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -488,6 +488,14 @@ def test_the_paper_names_a_pipe_or_folder_where_a_record_or_its_lock_should_be(t
     err = capsys.readouterr().err
     assert f"{lock}: not a regular file where this run's lock file should be" in err and "Traceback" not in err, err
     assert not record.exists() and predictions.stat().st_mtime_ns == stamp
+    # A hard link there: its holder's process id went into the file elsewhere.
+    lock.unlink()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    os.link(victim, lock)
+    assert paper.main(args) == 2
+    assert f"{lock}: a hard link (2 names of one file)" in capsys.readouterr().err
+    assert victim.read_text() == "precious" and not record.exists()
 
 
 def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):

@@ -273,20 +273,42 @@ fn lock(path: &Path, shared: bool) -> Result<Lock, ClaimError> {
 
 /// Opens (creating it if missing) a lock file without following a link:
 /// a link planted at the lock's name (dangling or not) is refused, never
-/// written through.
+/// written through. So is anything but a file of its own: a hard link (a
+/// second name of a file elsewhere, which the holder's line would
+/// overwrite, and its removal unlink), a pipe or a device (opened without
+/// waiting for a writer, never written).
 fn open_lock_file(path: &Path) -> Result<File, ClaimError> {
     let mut options = fs::OpenOptions::new();
     options.read(true).write(true).create(true).truncate(false);
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
-        options.custom_flags(libc::O_NOFOLLOW);
+        options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
     }
-    match options.open(path) {
-        Ok(file) => Ok(file),
-        Err(_) if fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) => Err(link_error(path)),
-        Err(source) => Err(ClaimError::Io { path: path.to_path_buf(), source }),
+    let file = match options.open(path) {
+        Ok(file) => file,
+        Err(_) if fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) => return Err(link_error(path)),
+        Err(source) => return Err(ClaimError::Io { path: path.to_path_buf(), source }),
+    };
+    let meta = file.metadata().map_err(|source| ClaimError::Io { path: path.to_path_buf(), source })?;
+    let refuse = |why: String| Err(ClaimError::BadPath { path: path.to_path_buf(), why });
+    if !meta.is_file() {
+        return refuse(
+            "not a regular file (a pipe, a device or a socket) where a lock file should be: remove it".into(),
+        );
     }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if meta.nlink() > 1 {
+            return refuse(format!(
+                "a hard link ({} names of one file) where a lock file should be: causalcity never writes \
+                 through a link; remove it",
+                meta.nlink()
+            ));
+        }
+    }
+    Ok(file)
 }
 
 fn link_error(path: &Path) -> ClaimError {
