@@ -294,6 +294,45 @@ fn a_hard_link_or_a_pipe_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
 }
 
 #[test]
+fn a_pipe_inside_a_scenario_is_named_by_merge_and_pack_never_opened() {
+    // merge and pack verify each scenario against its checksums: a pipe
+    // in place of poses.csv hung them (merge left a lock behind), and a
+    // resumed gen hung on it past SIGTERM (helper audit). gen rewrites it as
+    // a damaged scenario of its own.
+    let dir = fresh_dir("rule-pipe-in-scenario");
+    let spec = write_spec(&dir, &toy_spec("pipe", &[(4, 0.5)], (2, 1, 1), 20));
+    let shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("shard{k}"))).collect();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--no-images", "--shard", &format!("{k}/2")]);
+    }
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let plant = |root: &Path| {
+        let scenario = common::scenario_dirs(root).into_iter().next().expect("a scenario");
+        let poses = scenario.join("poses.csv");
+        std::fs::remove_file(&poses).unwrap();
+        assert!(std::process::Command::new("mkfifo").arg(&poses).status().unwrap().success());
+        poses
+    };
+    let in_shard = plant(&shards[1]);
+    let merged = dir.join("merged");
+    let output = common::run_within(&["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])], 60);
+    assert_refused(&output, &format!("{}: not a regular file (a pipe or a device)", in_shard.display()));
+    assert!(!merged.exists(), "merge wrote {}", merged.display());
+    let in_data = plant(&data);
+    let packed = dir.join("packed");
+    let output = common::run_within(&["pack", s(&data), "--out", s(&packed)], 60);
+    assert_refused(&output, &format!("{}: not a regular file", in_data.display()));
+    // gen's resume reads it as damaged and writes it again: a valid shard.
+    let output = common::run_within(
+        &["gen", "--quiet", "--no-images", "--spec", s(&spec), "--out", s(&shards[1]), "--shard", "1/2"],
+        60,
+    );
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(std::fs::metadata(&in_shard).unwrap().is_file());
+}
+
+#[test]
 fn force_removes_only_what_causalcity_wrote_and_refuses_whole_otherwise() {
     let dir = fresh_dir("rule-force");
     let data = toy_dataset(&dir);

@@ -274,7 +274,7 @@ fn keep_shard_manifests(out: &Path, manifests: &[(PathBuf, ManifestRecord)]) -> 
         }
         crate::output::refuse_links_below(out, &target).map_err(|why| GenError::Input(why.to_string()))?;
         fs::create_dir_all(&folder).map_err(io_err(&folder))?;
-        write_atomically(&target, &fs::read(path).map_err(io_err(path))?)?;
+        write_atomically(&target, &crate::input::read_record(path).map_err(io_err(path))?)?;
     }
     Ok(())
 }
@@ -511,6 +511,11 @@ fn merge_packs(
 /// Whether two files hold the same bytes (read a block at a time).
 fn same_bytes(a: &Path, b: &Path) -> bool {
     use std::io::Read;
+    // (regular files only: a pipe is never opened)
+    let regular = |p: &Path| fs::metadata(p).is_ok_and(|m| m.is_file());
+    if !(regular(a) && regular(b)) {
+        return false;
+    }
     let (Ok(fa), Ok(fb)) = (fs::File::open(a), fs::File::open(b)) else { return false };
     if fa.metadata().map(|m| m.len()).ok() != fb.metadata().map(|m| m.len()).ok() {
         return false;

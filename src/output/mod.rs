@@ -396,7 +396,8 @@ pub fn link_below(dir: &Path, name: &str) -> Option<PathBuf> {
 /// refuses it).
 pub fn verify_scenario(dir: &Path) -> Result<(), String> {
     let listing_path = dir.join(CHECKSUMS);
-    let listing = fs::read_to_string(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let listing =
+        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
     let mut listed = 0usize;
     for line in listing.lines() {
         let Some((hash, name)) = line.split_once("  ") else {
@@ -409,7 +410,8 @@ pub fn verify_scenario(dir: &Path) -> Result<(), String> {
             return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
         }
         let path = dir.join(name);
-        let data = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        // A regular file only: a pipe hung merge, pack and a resumed gen.
+        let data = crate::input::read_data(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         if hex(&Sha256::digest(&data)) != hash {
             return Err(format!("{}: its checksum does not match {CHECKSUMS}", path.display()));
         }

@@ -226,7 +226,8 @@ fn append_folder<W: Write>(
 ) -> Result<(), WriteError> {
     for name in unit.files(dir)? {
         let path = dir.join(&name);
-        let bytes = fs::read(&path).map_err(io_err(&path))?;
+        // A regular file only: a pipe hung pack.
+        let bytes = crate::input::read_data(&path).map_err(io_err(&path))?;
         let mut header = tar::Header::new_gnu();
         header.set_entry_type(tar::EntryType::Regular);
         header.set_mode(0o644);
