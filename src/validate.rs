@@ -824,6 +824,7 @@ fn check_scenario_files(
                     (v["group"] == key.group.as_str(), "group"),
                     (v["split"] == key.split.name(), "split"),
                     (v["index"] == key.index, "index"),
+                    (v["seed"] == spec.seed, "seed"),
                     (v["frames"] == spec.frames, "frames"),
                     (v["world"] == spec.world.name(), "world"),
                 ];

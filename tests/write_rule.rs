@@ -333,6 +333,78 @@ fn a_pipe_inside_a_scenario_is_named_by_merge_and_pack_never_opened() {
 }
 
 #[test]
+fn a_scenario_of_another_seed_or_place_is_refused_by_merge_pack_gen_and_validate() {
+    // merge checked checksums only: another seed's scenario copied into a
+    // shard (checksums intact, folder or tar) was merged, exit 0, and
+    // validate called the result valid; another group's was merged too
+    // (helper audit).
+    let dir = fresh_dir("rule-foreign-scenario");
+    let spec = write_spec(&dir, &toy_spec("foreign", &[(4, 0.5), (6, 0.5)], (2, 1, 1), 20));
+    std::fs::create_dir_all(dir.join("other")).unwrap();
+    let other_seed = write_spec(
+        &dir.join("other"),
+        &toy_spec("foreign", &[(4, 0.5), (6, 0.5)], (2, 1, 1), 20).replace("\"seed\": 11,", "\"seed\": 8,"),
+    );
+    assert_ne!(std::fs::read(&spec).unwrap(), std::fs::read(&other_seed).unwrap(), "the seed was not changed");
+    let elsewhere = dir.join("seed8");
+    gen_ok(&other_seed, &elsewhere, &["--quiet", "--no-images"]);
+    let copy = |from: &Path, to: &Path| {
+        std::fs::remove_dir_all(to).unwrap();
+        assert!(std::process::Command::new("cp").arg("-a").arg(from).arg(to).status().unwrap().success());
+    };
+    let place = "cars04_edges50/val/00000";
+    let mut checked = 0;
+    for (case, from, says) in [
+        ("seed", elsewhere.join(place), "`seed` is 8 there, 11 for this scenario"),
+        ("group", PathBuf::from("cars06_edges50/train/00000"), "`group` is \"cars06_edges50\" there"),
+    ] {
+        let shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("{case}-shard{k}"))).collect();
+        for (k, shard) in shards.iter().enumerate() {
+            gen_ok(&spec, shard, &["--quiet", "--no-images", "--shard", &format!("{k}/2")]);
+        }
+        let holder = shards.iter().find(|s| s.join(place).is_dir()).expect("a shard holds the scenario");
+        let from =
+            if from.is_absolute() { from } else { shards.iter().map(|s| s.join(&from)).find(|p| p.is_dir()).unwrap() };
+        copy(&from, &holder.join(place));
+        let before = hash_tree(holder);
+        let merged = dir.join(format!("{case}-merged"));
+        let output = run(&["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])]);
+        assert_refused(&output, says);
+        assert_eq!(hash_tree(holder), before, "{case}: merge moved something");
+        // The whole dataset with the scenario swapped: validate and pack name it.
+        let data = dir.join(format!("{case}-data"));
+        gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+        copy(&from, &data.join(place));
+        let report = run(&["validate", s(&data)]);
+        assert_eq!(report.status.code(), Some(1), "{case}: {}", String::from_utf8_lossy(&report.stdout));
+        assert!(
+            String::from_utf8_lossy(&report.stdout).contains(&format!("`{case}` is")),
+            "{case}: {}",
+            String::from_utf8_lossy(&report.stdout)
+        ); // fmt: skip
+        assert_refused(&run(&["pack", s(&data), "--out", s(&dir.join(format!("{case}-packed")))]), says);
+        // gen's resume takes it as damaged and writes the scenario again.
+        gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+        assert_valid(&data);
+        checked += 1;
+    }
+    // Tar shards: a pack of another seed's dataset in place of the shard's.
+    let shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("tar-shard{k}"))).collect();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--no-images", "--format", "tar", "--shard", &format!("{k}/2")]);
+    }
+    let elsewhere_packed = dir.join("seed8-packed");
+    gen_ok(&other_seed, &elsewhere_packed, &["--quiet", "--no-images", "--format", "tar"]);
+    let pack = "cars04_edges50/val/00000-00000.tar";
+    let holder = shards.iter().find(|s| s.join(pack).is_file()).expect("a shard holds the pack");
+    std::fs::copy(elsewhere_packed.join(pack), holder.join(pack)).unwrap();
+    let output = run(&["merge", "--out", s(&dir.join("tar-merged")), s(&shards[0]), s(&shards[1])]);
+    assert_refused(&output, "scenario.json: `seed` is 8 there, 11 for this scenario");
+    checked += 1;
+    assert_eq!(checked, 3);
+}
+
+#[test]
 fn force_removes_only_what_causalcity_wrote_and_refuses_whole_otherwise() {
     let dir = fresh_dir("rule-force");
     let data = toy_dataset(&dir);

@@ -7,7 +7,7 @@ use super::run::GenError;
 use crate::output::claim::{claim, Writer};
 use crate::output::manifest::{Manifest, ManifestRecord, Packing};
 use crate::output::packs::Packs;
-use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use crate::output::{io_err, scenario_dir, verify_scenario_of, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::KeySequence;
 use rayon::prelude::*;
 use std::collections::BTreeSet;
@@ -198,8 +198,10 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // command finishes, the scenarios already moved found in place.
     let mark_out = || keep_shard_manifests(out, &manifests);
     let (moved, already) = match first.packing() {
-        Packing::Folders => merge_folders(out, &others, &sequence, &mark_out)?,
-        Packing::Tar { per_tar } => merge_packs(out, &others, Packs::new(sequence, per_tar), &mark_out)?,
+        Packing::Folders => merge_folders(out, &others, &sequence, expansion.spec.seed, &mark_out)?,
+        Packing::Tar { per_tar } => {
+            merge_packs(out, &others, Packs::new(sequence, per_tar), expansion.spec.seed, &mark_out)?
+        }
     };
     // The networks the spec names (read from the first shard's folder).
     super::run::keep_networks(&expansion.spec, out)?;
@@ -298,6 +300,7 @@ fn merge_folders(
     out: &Path,
     others: &[&PathBuf],
     sequence: &KeySequence<'_>,
+    seed: u64,
     before_moving: &dyn Fn() -> Result<(), GenError>,
 ) -> Result<(usize, usize), GenError> {
     // Where the scenario at `position` is; with `compare`, copies of it in
@@ -366,7 +369,8 @@ fn merge_folders(
             .into_par_iter()
             .map(|position| {
                 let located = locate(position, false).ok()?;
-                located.found.as_deref().and_then(|dir| verify_scenario(dir).err())
+                let key = sequence.key(position);
+                located.found.as_deref().and_then(|dir| verify_scenario_of(dir, &key, seed).err())
             })
             .collect();
         for broken in broken.into_iter().flatten() {
@@ -416,6 +420,7 @@ fn merge_packs(
     out: &Path,
     others: &[&PathBuf],
     packs: Packs<'_>,
+    seed: u64,
     before_moving: &dyn Fn() -> Result<(), GenError>,
 ) -> Result<(usize, usize), GenError> {
     // Where pack `number` is: (its place in --out, the copy kept, whether
@@ -469,7 +474,8 @@ fn merge_packs(
         .into_par_iter()
         .filter_map(|number| {
             let (_, found, ..) = locate(number, false).ok()?;
-            crate::output::packs::verify(found.as_deref()?, &packs.keys(&packs.pack(number))).err()
+            let keys = packs.keys(&packs.pack(number));
+            crate::output::packs::verify_scenarios_of(found.as_deref()?, &keys, seed).err()
         })
         .collect();
     if let Some(first_damaged) = damaged.first() {

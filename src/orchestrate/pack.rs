@@ -9,7 +9,8 @@ use crate::dataset::{Dataset, Sweep, SWEEP_RECORD};
 use crate::output::claim::{claim, resolve, Writer};
 use crate::output::manifest::{Manifest, ManifestRecord, Packing};
 use crate::output::packs::{verify_of, PackUnit, PackWriter, Packs};
-use crate::output::{scenario_dir, verify_scenario, write_atomically};
+use crate::output::{scenario_dir, verify_scenario_of, write_atomically};
+use crate::plan::ScenarioKey;
 use crate::progress::{Progress, ProgressMode};
 use rayon::prelude::*;
 use std::path::Path;
@@ -57,8 +58,9 @@ pub fn pack_dataset(
     keep_networks(spec, out)?;
 
     let packs = Packs::new(opened.key_sequence(), per_tar);
-    let whole = |dir: &Path| {
-        verify_scenario(dir).map_err(|why| {
+    let seed = spec.seed;
+    let whole = |dir: &Path, key: &ScenarioKey| {
+        verify_scenario_of(dir, key, seed).map_err(|why| {
             format!(
                 "{why}: {} is damaged or unfinished (validate says what else is); rerun its gen command, \
                  which rewrites damaged scenarios, then pack again",
@@ -122,7 +124,7 @@ fn pack_sweep(
     write_atomically(&record_path, &json(false))?;
     keep_networks(&sweep.expansion.spec, out)?;
     let packs = Packs::new(sweep.key_sequence(), per_tar);
-    let whole = |dir: &Path| match complete_pair(dir) {
+    let whole = |dir: &Path, _: &ScenarioKey| match complete_pair(dir) {
         Some(_) => Ok(()),
         None => Err(format!(
             "{}: the pair is missing, damaged or unfinished (validate says what else is); rerun its counterfactual \
@@ -192,7 +194,7 @@ fn pack_all(
     out: &Path,
     packs: &Packs<'_>,
     unit: PackUnit,
-    whole: &(dyn Fn(&Path) -> Result<(), String> + Sync),
+    whole: &(dyn Fn(&Path, &ScenarioKey) -> Result<(), String> + Sync),
     threads: Option<usize>,
     progress: ProgressMode,
 ) -> Result<Packed, GenError> {
@@ -215,7 +217,7 @@ fn pack_all(
                 return Ok(());
             }
             for key in &keys {
-                whole(&scenario_dir(input, &key.group, key.split.name(), &key.folder_name()))
+                whole(&scenario_dir(input, &key.group, key.split.name(), &key.folder_name()), key)
                     .map_err(GenError::Input)?;
             }
             let writer = PackWriter::begin_of(unit, input, keys, &target)?;

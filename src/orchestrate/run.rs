@@ -5,7 +5,7 @@ use crate::output::claim::{claim, ClaimError, Writer};
 use crate::output::manifest::{Manifest, ManifestRecord, Packing, Products, ShardEntry};
 use crate::output::packs::Packs;
 use crate::output::writer::{ScenarioWriteError, ScenarioWriter, WriterBuffers};
-use crate::output::{io_err, scenario_dir, verify_scenario, write_atomically, WriteError, PARTIAL_PREFIX};
+use crate::output::{io_err, scenario_dir, verify_scenario_of, write_atomically, WriteError, PARTIAL_PREFIX};
 use crate::plan::{Expansion, ScenarioKey, ScenarioPlan};
 use crate::progress::{Progress, ProgressMode};
 use crate::spec::{DatasetSpec, SpecError};
@@ -918,7 +918,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         // Never kept, read or written through a link.
         crate::output::refuse_links_below(&out, &target).map_err(|why| GenError::Input(why.to_string()))?;
         let intact = target.exists()
-            && verify_scenario(&target)
+            && verify_scenario_of(&target, key, expansion.spec.seed)
                 .map_err(|why| {
                     crate::progress::note(format_args!(
                         "warning: {} is damaged ({why}): writing it again",
@@ -950,7 +950,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             let keys = packs.keys(&pack);
             let folder = |key: &ScenarioKey| scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
             if path.exists() {
-                match crate::output::packs::verify(&path, &keys) {
+                match crate::output::packs::verify_scenarios_of(&path, &keys, expansion.spec.seed) {
                     Ok(()) => {
                         // Folders a run killed after packing them left behind.
                         for key in &keys {

@@ -389,6 +389,16 @@ pub fn link_below(dir: &Path, name: &str) -> Option<PathBuf> {
     None
 }
 
+/// [`verify_scenario`] of the folder that holds scenario `key` of a spec of
+/// `seed`, and its `scenario.json` says it is that scenario
+/// ([`scenario::check_identity`]).
+pub fn verify_scenario_of(dir: &Path, key: &crate::plan::ScenarioKey, seed: u64) -> Result<(), String> {
+    verify_scenario(dir)?;
+    let path = dir.join(layout::SCENARIO_JSON);
+    let bytes = crate::input::read_record(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    scenario::check_identity(&bytes, key, seed).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 /// Checks a finished scenario folder against its `checksums.sha256`: the
 /// listing is there and every file it lists is there with its hash, none
 /// of them through a symbolic link. Says

@@ -530,6 +530,25 @@ pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
     verify_of(PackUnit::Scenario, path, keys)
 }
 
+/// [`verify`] of a pack of a dataset whose spec has `seed`: each scenario's
+/// `scenario.json` says it is the scenario of its key
+/// ([`super::scenario::check_identity`]).
+pub fn verify_scenarios_of(path: &Path, keys: &[ScenarioKey], seed: u64) -> Result<(), String> {
+    let found = read_scenarios(path, keys, |i, members| {
+        let folder = keys[i].relative_folder();
+        let json = members.get(super::layout::SCENARIO_JSON).cloned();
+        verify_listed(path, &folder, members)?;
+        let json =
+            json.ok_or_else(|| format!("{}: {folder}/{} is missing", path.display(), super::layout::SCENARIO_JSON))?;
+        super::scenario::check_identity(&json, &keys[i], seed)
+            .map_err(|e| format!("{}: {folder}/{}: {e}", path.display(), super::layout::SCENARIO_JSON))
+    })?;
+    match found.iter().position(|f| !f) {
+        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder())),
+        None => Ok(()),
+    }
+}
+
 /// [`verify`] for packs of `unit`'s folders. A pair is whole when both its
 /// runs are, by their listings, and it has its [`PAIR_FILES`], a summary
 /// that reads, and nothing else.

@@ -14,6 +14,27 @@ use serde::Serialize;
 /// Format tag written into every scenario.json.
 pub const SCENARIO_FORMAT: &str = "causalcity-scenario/1";
 
+/// Whether `scenario.json`'s bytes are those of the scenario `key` of a
+/// spec of `seed`, by the fields that say which scenario it is: a
+/// scenario of another seed, group, split or index copied into a folder
+/// (its checksums intact) is not that folder's. The error names the field,
+/// its value and the one wanted.
+pub fn check_identity(bytes: &[u8], key: &crate::plan::ScenarioKey, seed: u64) -> Result<(), String> {
+    let value: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| format!("not valid JSON: {e}"))?;
+    let wanted = [
+        ("group", serde_json::json!(key.group)),
+        ("split", serde_json::json!(key.split.name())),
+        ("index", serde_json::json!(key.index)),
+        ("seed", serde_json::json!(seed)),
+    ];
+    for (field, want) in wanted {
+        if value[field] != want {
+            return Err(format!("`{field}` is {} there, {want} for this scenario of the dataset", value[field]));
+        }
+    }
+    Ok(())
+}
+
 #[derive(Serialize)]
 struct CarRecord<'a> {
     id: u32,
