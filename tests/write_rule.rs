@@ -405,6 +405,42 @@ fn a_scenario_of_another_seed_or_place_is_refused_by_merge_pack_gen_and_validate
 }
 
 #[test]
+fn merge_moves_only_scenarios_that_hold_their_layouts_files_and_nothing_else() {
+    // A user's file inside a shard's scenario was moved into --out, and
+    // shard manifests edited to say "effects": false (a field outside the
+    // spec's hash) were merged over scenarios holding effects.csv: exit 0,
+    // then validate found unexpected files (helper audit).
+    let dir = fresh_dir("rule-merge-layout");
+    let spec = write_spec(&dir, &toy_spec("layout", &[(4, 0.5)], (2, 1, 1), 20));
+    let shards: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("shard{k}"))).collect();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--no-images", "--shard", &format!("{k}/2")]);
+    }
+    let scenario = common::scenario_dirs(&shards[1]).into_iter().next().expect("a scenario");
+    std::fs::write(scenario.join("notes.txt"), "mine").unwrap();
+    let before: Vec<_> = shards.iter().map(|s| hash_tree(s)).collect();
+    let merged = dir.join("merged");
+    let output = run(&["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])]);
+    assert_refused(&output, "notes.txt: not a file of the scenario (not in its checksums.sha256)");
+    assert_eq!(shards.iter().map(|s| hash_tree(s)).collect::<Vec<_>>(), before, "merge moved something");
+    std::fs::remove_file(scenario.join("notes.txt")).unwrap();
+    let mut edited = 0;
+    for shard in &shards {
+        for manifest in std::fs::read_dir(shard.join("shards")).unwrap() {
+            let path = manifest.unwrap().path();
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!(text.contains("\"effects\": true"), "{text}");
+            std::fs::write(&path, text.replace("\"effects\": true", "\"effects\": false")).unwrap();
+            edited += 1;
+        }
+    }
+    assert_eq!(edited, 2);
+    let output = run(&["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])]);
+    assert_refused(&output, "lists effects.csv, which is not a file of this dataset's scenarios");
+    assert!(!merged.join("manifest.json").exists());
+}
+
+#[test]
 fn force_removes_only_what_causalcity_wrote_and_refuses_whole_otherwise() {
     let dir = fresh_dir("rule-force");
     let data = toy_dataset(&dir);

@@ -5,9 +5,12 @@
 
 use super::run::GenError;
 use crate::output::claim::{claim, Writer};
+use crate::output::layout::{CameraFolder, ScenarioLayout};
 use crate::output::manifest::{Manifest, ManifestRecord, Packing};
 use crate::output::packs::Packs;
-use crate::output::{io_err, scenario_dir, verify_scenario_of, write_atomically, CHECKSUMS, PARTIAL_PREFIX};
+use crate::output::{
+    io_err, scenario_dir, verify_layout, verify_scenario_of, write_atomically, CHECKSUMS, PARTIAL_PREFIX,
+};
 use crate::plan::KeySequence;
 use rayon::prelude::*;
 use std::collections::BTreeSet;
@@ -198,7 +201,14 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     // command finishes, the scenarios already moved found in place.
     let mark_out = || keep_shard_manifests(out, &manifests);
     let (moved, already) = match first.packing() {
-        Packing::Folders => merge_folders(out, &others, &sequence, expansion.spec.seed, &mark_out)?,
+        Packing::Folders => {
+            // The files every scenario holds, by the shards' products.
+            let spec = &expansion.spec;
+            let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
+            let city = spec.world == crate::spec::WorldKind::City;
+            let layout = ScenarioLayout::new(spec.frames, city, first.products(), cameras);
+            merge_folders(out, &others, &sequence, (spec.seed, &layout), &mark_out)?
+        }
         Packing::Tar { per_tar } => {
             merge_packs(out, &others, Packs::new(sequence, per_tar), expansion.spec.seed, &mark_out)?
         }
@@ -300,7 +310,7 @@ fn merge_folders(
     out: &Path,
     others: &[&PathBuf],
     sequence: &KeySequence<'_>,
-    seed: u64,
+    (seed, layout): (u64, &ScenarioLayout),
     before_moving: &dyn Fn() -> Result<(), GenError>,
 ) -> Result<(usize, usize), GenError> {
     // Where the scenario at `position` is; with `compare`, copies of it in
@@ -370,7 +380,10 @@ fn merge_folders(
             .map(|position| {
                 let located = locate(position, false).ok()?;
                 let key = sequence.key(position);
-                located.found.as_deref().and_then(|dir| verify_scenario_of(dir, &key, seed).err())
+                located
+                    .found
+                    .as_deref()
+                    .and_then(|dir| verify_scenario_of(dir, &key, seed).and_then(|()| verify_layout(dir, layout)).err())
             })
             .collect();
         for broken in broken.into_iter().flatten() {
@@ -380,8 +393,9 @@ fn merge_folders(
     }
     if let Some(first_damaged) = first_damaged {
         return Err(GenError::Input(format!(
-            "{damaged} scenarios are damaged (first: {first_damaged}): rerun their shards' gen commands, which rewrite damaged \
-             scenarios; nothing was moved"
+            "{damaged} scenarios are damaged or hold what is not theirs (first: {first_damaged}): rerun their shards' gen \
+             commands, which rewrite damaged scenarios, and move out any file that is not the scenario's; nothing was \
+             moved"
         )));
     }
 

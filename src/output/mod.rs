@@ -399,6 +399,50 @@ pub fn verify_scenario_of(dir: &Path, key: &crate::plan::ScenarioKey, seed: u64)
     scenario::check_identity(&bytes, key, seed).map_err(|e| format!("{}: {e}", path.display()))
 }
 
+/// Whether the scenario folder `dir` holds exactly the files of `layout`:
+/// its `checksums.sha256` lists every one of them and nothing else, and
+/// the folder holds no other file (a user's note, a file of another
+/// layout: a `--no-effects` dataset's scenario holding `effects.csv`). The
+/// checksums themselves are [`verify_scenario`]'s.
+pub fn verify_layout(dir: &Path, layout: &ScenarioLayout) -> Result<(), String> {
+    let listing_path = dir.join(CHECKSUMS);
+    let listing =
+        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let wanted: std::collections::BTreeSet<String> = layout.files().into_iter().filter(|n| n != CHECKSUMS).collect();
+    let listed: std::collections::BTreeSet<String> =
+        listing.lines().filter_map(|l| l.split_once("  ").map(|(_, name)| name.to_string())).collect();
+    if let Some(extra) = listed.difference(&wanted).next() {
+        return Err(format!(
+            "{}: lists {extra}, which is not a file of this dataset's scenarios (its manifest's products)",
+            listing_path.display()
+        ));
+    }
+    if let Some(missing) = wanted.difference(&listed).next() {
+        return Err(format!("{}: does not list {missing}, a file of this dataset's scenarios", listing_path.display()));
+    }
+    // Every file there, below the scenario's own folders too.
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        let entries = fs::read_dir(&folder).map_err(|e| format!("{}: {e}", folder.display()))?;
+        for entry in entries {
+            let entry = entry.map_err(|e| format!("{}: {e}", folder.display()))?;
+            let path = entry.path();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                folders.push(path);
+                continue;
+            }
+            let name = path.strip_prefix(dir).unwrap_or(&path).to_string_lossy().into_owned();
+            if name != CHECKSUMS && !listed.contains(&name) {
+                return Err(format!(
+                    "{}: not a file of the scenario (not in its {CHECKSUMS}): move it out of the dataset",
+                    path.display()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks a finished scenario folder against its `checksums.sha256`: the
 /// listing is there and every file it lists is there with its hash, none
 /// of them through a symbolic link. Says
