@@ -141,6 +141,9 @@ def _spec(
     of its groups (each group's scenarios are the same either way: they are
     drawn from the seed and the group's name)."""
     if not path.is_file():
+        if os.path.exists(path):
+            raise InputError(f"{path}: not a regular file (a folder, a pipe or a device): give a spec file as "
+                             f"--{world}-spec")  # fmt: skip
         raise InputError(f"{path}: no such spec file (run from the repository root, or give --{world}-spec)")
     try:
         raw = json.loads(path.read_text())

@@ -135,6 +135,8 @@ def _read_json(path: Path) -> dict:
 def _manifest(dataset: Path) -> dict:
     path = dataset / "manifest.json"
     if not path.is_file():
+        if os.path.exists(path):
+            raise InputError(f"{path}: not a regular file (a folder, a pipe or a device): not a dataset gen wrote")
         raise InputError(f"no manifest.json in {dataset}: not a dataset gen wrote")
     manifest = _read_json(path)
     groups = manifest.get("groups") if isinstance(manifest, dict) else None
