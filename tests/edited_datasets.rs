@@ -546,4 +546,18 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
     record["limit"] = 0.into();
     std::fs::write(none.join("sweep.json"), record.to_string()).unwrap();
     assert_error(&run(&["validate", s(&none)]), 2, "sweep.json: limit 0 is not allowed");
+    // Its kinds edited to one no sweep draws, or one named twice: validated
+    // (the kind names lived above the readers).
+    for (kinds, says) in [
+        (serde_json::json!(["nuke"]), "kinds[0] \"nuke\" is not a kind of intervention a sweep draws: use stop"),
+        (serde_json::json!(["stop", "stop"]), "kinds[1] \"stop\" is named twice"),
+    ] {
+        let edited = dir.join(format!("kinds-{}", kinds.as_array().unwrap().len()));
+        assert!(std::process::Command::new("cp").args(["-r", s(&sweep), s(&edited)]).status().unwrap().success());
+        let mut record = read_json(&edited.join("sweep.json"));
+        assert!(record["kinds"].is_array(), "{record}");
+        record["kinds"] = kinds;
+        std::fs::write(edited.join("sweep.json"), record.to_string()).unwrap();
+        assert_error(&run(&["validate", s(&edited)]), 2, says);
+    }
 }

@@ -297,13 +297,15 @@ fn a_scenario_too_long_for_a_tape_is_not_recorded() {
 
 #[test]
 fn toy_reruns_simulate_only_the_cars_whose_route_changed_and_match_full_reruns() {
-    // Every group of the paper's toy spec: removals stop the cause's
-    // followers, action changes re-route the cause and its chain of followers.
+    // configs/toy.json's five groups, speed, gap and actions (another seed,
+    // 4 scenarios each): removals stop the cause's followers, action
+    // changes re-route the cause and its chain of followers.
     let text = r#"{"name": "toy-groups", "world": "toy", "seed": 5, "frames": 150, "frame_interval": 0.1,
         "groups": [{"cars": 4, "edge_proportion": 0.5}, {"cars": 8, "edge_proportion": 0.2},
                    {"cars": 8, "edge_proportion": 0.5}, {"cars": 8, "edge_proportion": 0.8},
                    {"cars": 12, "edge_proportion": 0.5}],
-        "splits": {"train": 4, "val": 0, "test": 0}}"#;
+        "splits": {"train": 4, "val": 0, "test": 0}, "actions_per_car": 5,
+        "toy_speed_px_per_frame": 2.0, "leader_gap_px": 30.0}"#;
     let expansion = Expansion::new(DatasetSpec::from_json(text).unwrap(), Arc::new(CityMap::default())).unwrap();
     let never = AtomicBool::new(false);
     let (mut scenarios, mut reruns, mut changed_cars) = (0, 0, 0);

@@ -424,6 +424,11 @@ fn merge_moves_only_scenarios_that_hold_their_layouts_files_and_nothing_else() {
     assert_refused(&output, "notes.txt: not a file of the scenario (not in its checksums.sha256)");
     assert_eq!(shards.iter().map(|s| hash_tree(s)).collect::<Vec<_>>(), before, "merge moved something");
     std::fs::remove_file(scenario.join("notes.txt")).unwrap();
+    // An empty folder of the user's likewise (validate calls it unexpected).
+    std::fs::create_dir(scenario.join("extra")).unwrap();
+    let output = run(&["merge", "--out", s(&merged), s(&shards[0]), s(&shards[1])]);
+    assert_refused(&output, "extra: not a folder of the scenario");
+    std::fs::remove_dir(scenario.join("extra")).unwrap();
     let mut edited = 0;
     for shard in &shards {
         for manifest in std::fs::read_dir(shard.join("shards")).unwrap() {

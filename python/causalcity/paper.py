@@ -588,6 +588,10 @@ def _read_unit(path: Path, key: dict) -> Optional[dict]:
     if not isinstance(record, dict) or not isinstance(record.get("key"), dict):
         raise InputError(f"{path}: not a unit record (a JSON object with key, seconds and rows): {again}")
     theirs, ours = record["key"], json.loads(json.dumps(key))
+    if "spec_sha256" not in theirs:
+        raise InputError(f"{path}: a unit record of an earlier causalcity, whose key does not hold the spec's "
+                         "contents (every record now does, so that another spec's results are never kept): remove it to run the "
+                         "unit again (or remove the whole units folder), or give another --out")  # fmt: skip
     differ = [k for k in sorted(set(theirs) | set(ours)) if theirs.get(k) != ours.get(k)]
     if differ:
         said = "; ".join(

@@ -337,6 +337,8 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
         ({**good, "seconds": -1}, "seconds -1 is not allowed"),
         ({**good, "key": {**good["key"], "seed": 7}}, "made with another setting (seed: 7 there, 0 now)"),
         ({**good, "key": {**good["key"], "spec_sha256": "0" * 64}}, "the spec's contents (--toy-spec)"),
+        ({**good, "key": {k: v for k, v in good["key"].items() if k != "spec_sha256"}},
+         "a unit record of an earlier causalcity"),
     ]
     texts = [(json.dumps(e), needle) for e, needle in edits]
     texts += [(json.dumps(good).replace('"value": 1.0', '"value": NaN', 1), "NaN is not a number JSON allows"),

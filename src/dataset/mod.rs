@@ -629,6 +629,21 @@ impl Sweep {
             // (validate said "0 of 0 scenarios checked: valid".)
             return Err(format!("{}: limit 0 is not allowed: a number above 0, or absent", path.display()));
         }
+        // The kinds, with the spec, decide each pair's intervention: one
+        // not a sweep's, or one named twice, is no sweep's record.
+        for (i, kind) in record.kinds.iter().enumerate() {
+            if crate::plan::interventions::SweepKind::from_name(kind).is_none() {
+                let allowed: Vec<&str> = crate::plan::interventions::SweepKind::ALL.iter().map(|k| k.name()).collect();
+                return Err(format!(
+                    "{}: kinds[{i}] {kind:?} is not a kind of intervention a sweep draws: use {}",
+                    path.display(),
+                    allowed.join(", ")
+                ));
+            }
+            if record.kinds[..i].contains(kind) {
+                return Err(format!("{}: kinds[{i}] {kind:?} is named twice: each kind once", path.display()));
+            }
+        }
         let expansion = expansion_from(record.spec, &path)?;
         if let Some(recorded) = &record.spec_sha256 {
             check_spec_hash(&expansion, recorded, &path, "the sweep was run", "pairs")?;

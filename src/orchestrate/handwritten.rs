@@ -401,19 +401,7 @@ fn write_pair(
     Ok((pair.summary, warnings))
 }
 
-/// Kinds of random intervention `counterfactual --sweep` draws from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SweepKind {
-    /// Stop a random car for 2-6 s.
-    Stop,
-    /// Set a random car's desired speed to 30-60 % of the spec's.
-    SetDesiredSpeed,
-    /// Make a random car run red lights.
-    RunRedLight,
-    /// Remove a random car.
-    Remove,
-}
+pub use crate::plan::interventions::SweepKind;
 
 /// What `counterfactual --sweep` was asked to do.
 #[derive(Debug, Clone)]

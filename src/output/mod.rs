@@ -420,18 +420,25 @@ pub fn verify_layout(dir: &Path, layout: &ScenarioLayout) -> Result<(), String> 
     if let Some(missing) = wanted.difference(&listed).next() {
         return Err(format!("{}: does not list {missing}, a file of this dataset's scenarios", listing_path.display()));
     }
-    // Every file there, below the scenario's own folders too.
+    // Every file and folder there, below the scenario's own folders too.
+    let own_folders: std::collections::BTreeSet<String> = layout.folders().into_iter().collect();
     let mut folders = vec![dir.to_path_buf()];
     while let Some(folder) = folders.pop() {
         let entries = fs::read_dir(&folder).map_err(|e| format!("{}: {e}", folder.display()))?;
         for entry in entries {
             let entry = entry.map_err(|e| format!("{}: {e}", folder.display()))?;
             let path = entry.path();
+            let name = path.strip_prefix(dir).unwrap_or(&path).to_string_lossy().into_owned();
             if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                if !own_folders.contains(&name) {
+                    return Err(format!(
+                        "{}: not a folder of the scenario (the dataset's layout): move it out of the dataset",
+                        path.display()
+                    ));
+                }
                 folders.push(path);
                 continue;
             }
-            let name = path.strip_prefix(dir).unwrap_or(&path).to_string_lossy().into_owned();
             if name != CHECKSUMS && !listed.contains(&name) {
                 return Err(format!(
                     "{}: not a file of the scenario (not in its {CHECKSUMS}): move it out of the dataset",

@@ -8,6 +8,40 @@ use super::confounders::ConfounderName;
 use crate::map::signals::{Colour, ScheduleStep};
 use crate::map::Action;
 
+/// Kinds of random intervention `counterfactual --sweep` draws from, as
+/// `sweep.json` names them (`kinds`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SweepKind {
+    /// Stop a random car for 2-6 s.
+    Stop,
+    /// Set a random car's desired speed to 30-60 % of the spec's.
+    SetDesiredSpeed,
+    /// Make a random car run red lights.
+    RunRedLight,
+    /// Remove a random car.
+    Remove,
+}
+
+impl SweepKind {
+    pub const ALL: [SweepKind; 4] =
+        [SweepKind::Stop, SweepKind::SetDesiredSpeed, SweepKind::RunRedLight, SweepKind::Remove];
+
+    /// The name `sweep.json` and `--kinds` use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SweepKind::Stop => "stop",
+            SweepKind::SetDesiredSpeed => "set_desired_speed",
+            SweepKind::RunRedLight => "run_red_light",
+            SweepKind::Remove => "remove",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<SweepKind> {
+        SweepKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
 /// When an intervention fires (once, at the first step its condition holds).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Trigger {
