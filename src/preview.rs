@@ -172,13 +172,19 @@ fn render(
     };
     let draw = |frame: usize| -> Result<RgbaImage, String> {
         let rgb_path = scenario_dir.join(format!("rgb/{frame:0digits$}.png"));
-        let rgb = image::open(&rgb_path).map_err(|e| format!("{}: {e}", rgb_path.display()))?.to_rgba8();
+        // Regular files only: a pipe hung preview.
+        let rgb_bytes =
+            crate::input::read_data(&rgb_path).map_err(|e| format!("cannot read {}: {e}", rgb_path.display()))?;
+        let rgb = image::load_from_memory_with_format(&rgb_bytes, image::ImageFormat::Png)
+            .map_err(|e| format!("{}: {e}", rgb_path.display()))?
+            .to_rgba8();
         let (w, h) = rgb.dimensions();
         let mut pixmap = Pixmap::from_vec(rgb.into_raw(), tiny_skia::IntSize::from_wh(w, h).ok_or("empty frame")?)
             .ok_or("frame size")?;
         if options.masks {
             let mask_path = scenario_dir.join(format!("mask/{frame:0digits$}.png"));
-            let data = std::fs::read(&mask_path).map_err(|e| format!("cannot read {}: {e}", mask_path.display()))?;
+            let data =
+                crate::input::read_data(&mask_path).map_err(|e| format!("cannot read {}: {e}", mask_path.display()))?;
             // (The size expected is the rgb frame's: either may be the odd one.)
             let mask = decode_gray8(&data, w, h)
                 .map_err(|e| format!("{}: {e} (the size of {})", mask_path.display(), rgb_path.display()))?;

@@ -561,3 +561,73 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
         assert_error(&run(&["validate", s(&edited)]), 2, says);
     }
 }
+
+#[test]
+fn a_scenario_moved_into_another_scenarios_folder_is_named_by_every_reader() {
+    // Two scenario folders swapped (their checksums intact): export nri
+    // wrote one group's arrays under the other's name, and stats, baseline
+    // and heatmap read them as written, exit 0 (helper audit).
+    let dir = fresh_dir("edited-swapped");
+    let data = city(&dir, 20);
+    let (a, b) = (data.join("cars04_edges50/train/00000"), data.join("cars04_edges50/val/00000"));
+    let swap = dir.join("swap");
+    std::fs::rename(&a, &swap).unwrap();
+    std::fs::rename(&b, &a).unwrap();
+    std::fs::rename(&swap, &b).unwrap();
+    let says =
+        "cars04_edges50/train/00000/scenario.json: `split` is \"val\", but it lies at cars04_edges50/train/00000";
+    let out = dir.join("nri");
+    for args in [
+        vec!["export", "nri", s(&data), "--out", s(&out), "-q"],
+        vec!["stats", s(&data)],
+        vec!["baseline", s(&data)],
+        vec!["heatmap", s(&data), "--out", s(&dir.join("h.png"))],
+    ] {
+        let output = run(&args);
+        assert_eq!(output.status.code(), Some(1), "{args:?}: {}", stderr(&output));
+        assert!(stderr(&output).contains(says), "{args:?}: {}", stderr(&output));
+    }
+    assert!(!dir.join("h.png").exists());
+    let report = run(&["validate", s(&data)]);
+    assert_eq!(report.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&report.stdout).contains("`split` is \"val\" here"));
+}
+
+#[test]
+fn a_pipe_in_place_of_a_frame_is_named_by_export_nsdr_and_preview() {
+    // export nsdr and preview opened a frame PNG whatever it was: a pipe
+    // there hung them (preview left its .partial behind). Run with a time
+    // limit, so that a regression fails rather than hangs.
+    let dir = fresh_dir("edited-frame-pipe");
+    let text = city_spec("framepipe", &[(4, 0.5)], (1, 0, 1), 6, "{}").replacen(
+        "\"world\"",
+        "\"image\": {\"width\": 128, \"height\": 80}, \"world\"",
+        1,
+    );
+    let spec = write_spec(&dir, &text);
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet"]);
+    let scenario = data.join("cars04_edges50/train/00000");
+    let mut checked = 0;
+    for frame in ["mask/0000.png", "rgb/0000.png"] {
+        let copy = dir.join(frame.replace('/', "-"));
+        assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&copy)]).status().unwrap().success());
+        let planted = copy.join("cars04_edges50/train/00000").join(frame);
+        std::fs::remove_file(&planted).unwrap();
+        assert!(std::process::Command::new("mkfifo").arg(&planted).status().unwrap().success());
+        let says = format!("{}: not a regular file (a pipe or a device)", planted.display());
+        let gif = dir.join(format!("{}.gif", frame.replace('/', "-")));
+        let scenario_copy = copy.join("cars04_edges50/train/00000");
+        let output = run_within(&["preview", s(&scenario_copy), "--out", s(&gif), "--masks"], 60);
+        assert!(!output.status.success() && stderr(&output).contains(&says), "preview: {}", stderr(&output));
+        assert!(!gif.exists() && !dir.join(format!("{}.partial", gif.display())).exists());
+        if frame.starts_with("mask") {
+            let out = dir.join("nsdr");
+            let output = run_within(&["export", "nsdr", s(&copy), "--out", s(&out), "-q"], 60);
+            assert!(!output.status.success() && stderr(&output).contains(&says), "nsdr: {}", stderr(&output));
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+    assert!(scenario.join("rgb/0000.png").is_file());
+}

@@ -500,6 +500,22 @@ def test_the_paper_names_a_pipe_or_folder_where_a_record_or_its_lock_should_be(t
     assert victim.read_text() == "precious" and not record.exists()
 
 
+def test_methods_name_a_scenario_moved_into_another_scenarios_folder(toy, tmp_path):
+    # Two scenario folders swapped (checksums intact) were read as each
+    # other: a train scenario scored as val, its graph under the other's key
+    # (helper audit).
+    copy = tmp_path / "swapped"
+    shutil.copytree(toy, copy)
+    a, b = copy / "cars06_edges50" / "train" / "00000", copy / "cars06_edges50" / "val" / "00000"
+    a.rename(tmp_path / "t")
+    b.rename(a)
+    (tmp_path / "t").rename(b)
+    from causalcity.methods.common import DatasetError
+
+    with pytest.raises(DatasetError, match=r"train/00000/scenario.json: split .val., but it lies in"):
+        load_split(copy, "cars06_edges50", "train")
+
+
 def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):
     # A pipe as pixels.npy hung `python -m causalcity.methods`; a NaN in it
     # went into the method's scores (helper audit).

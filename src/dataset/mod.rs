@@ -408,6 +408,32 @@ pub struct ScenarioSummary {
     /// one by default), (cause, effect) car ids.
     #[serde(skip)]
     pub graph: Vec<[u32; 2]>,
+    /// Which scenario of its dataset it is (`gen`'s scenarios say; a
+    /// handwritten run's need not).
+    #[serde(default)]
+    pub group: Option<String>,
+    #[serde(default)]
+    pub split: Option<String>,
+    #[serde(default)]
+    pub index: Option<u64>,
+}
+
+/// The scenario key a `scenario.json`'s path names, when it lies where a
+/// dataset keeps one: `<group>/<split>/<index>/scenario.json`, the group
+/// as every spec names them (`cars08_edges50`; a pack member's label
+/// `<pack>: <member>` counts from the member's name). `None` elsewhere (a
+/// pair's runs, a handwritten run's folder).
+fn place_of(path: &Path) -> Option<(String, String, u64)> {
+    let text = path.to_string_lossy();
+    let mut parts = text.rsplit('/');
+    let (file, index, split, group) = (parts.next()?, parts.next()?, parts.next()?, parts.next()?);
+    let group = group.rsplit(": ").next()?;
+    let is_group = group.strip_prefix("cars").and_then(|r| r.split_once("_edges")).is_some_and(|(c, e)| {
+        !c.is_empty() && !e.is_empty() && c.bytes().all(|b| b.is_ascii_digit()) && e.bytes().all(|b| b.is_ascii_digit())
+    });
+    let is_split = crate::spec::Split::ALL.iter().any(|s| s.name() == split);
+    let index = index.bytes().all(|b| b.is_ascii_digit()).then(|| index.parse::<u64>().ok()).flatten()?;
+    (file == "scenario.json" && is_group && is_split).then(|| (group.to_string(), split.to_string(), index))
 }
 
 impl ScenarioSummary {
@@ -460,6 +486,24 @@ impl ScenarioSummary {
                 summary.cars.len(),
                 crate::spec::MAX_CARS
             ));
+        }
+        // A scenario is read only where its dataset keeps it: one moved or
+        // copied into another's folder was read as that one (its graph
+        // scored against the other's predictions, exported under its name).
+        if let Some((group, split, index)) = place_of(path) {
+            let here = [
+                ("group", summary.group.as_ref().is_none_or(|g| *g == group), format!("{:?}", summary.group)),
+                ("split", summary.split.as_ref().is_none_or(|s| *s == split), format!("{:?}", summary.split)),
+                ("index", summary.index.is_none_or(|i| i == index), format!("{:?}", summary.index)),
+            ];
+            if let Some((field, _, value)) = here.iter().find(|(_, ok, _)| !ok) {
+                let value = value.trim_start_matches("Some(").trim_end_matches(')');
+                return Err(format!(
+                    "{}: `{field}` is {value}, but it lies at {group}/{split}/{index:05}: a scenario moved or copied \
+                     from elsewhere (causalcity validate says what else is)",
+                    path.display()
+                ));
+            }
         }
         let cars = summary.cars.len() as u32;
         if let Some((i, car)) = summary.cars.iter().enumerate().find(|(i, c)| c.id != *i as u32) {

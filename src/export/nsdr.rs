@@ -99,8 +99,9 @@ fn copy_frames(source: &Path, target: &Path) -> Result<(), String> {
         let entries = std::fs::read_dir(&from).map_err(|e| format!("cannot read {}: {e}", from.display()))?;
         for entry in entries {
             let entry = entry.map_err(|e| format!("cannot read {}: {e}", from.display()))?;
-            let bytes =
-                std::fs::read(entry.path()).map_err(|e| format!("cannot read {}: {e}", entry.path().display()))?;
+            // (regular files only: a pipe hung the export)
+            let bytes = crate::input::read_data(&entry.path())
+                .map_err(|e| format!("cannot read {}: {e}", entry.path().display()))?;
             write_atomically(&to.join(entry.file_name()), &bytes).map_err(|e| e.to_string())?;
         }
     }
@@ -118,7 +119,7 @@ pub fn annotate(dir: &Path, width: u32, height: u32, digits: usize) -> Result<Ve
     for frame in 0..scenario.frames {
         let (rgb_name, mask_name) = (format!("rgb/{frame:0digits$}.png"), format!("mask/{frame:0digits$}.png"));
         let path = dir.join(&mask_name);
-        let data = std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let data = crate::input::read_data(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let mask = decode_gray8(&data, width, height).map_err(|e| format!("{}: {e}", path.display()))?;
         pixels.clear();
         pixels.extend(poses.frame(frame as usize).iter().map(|p| [p.px, p.py]));

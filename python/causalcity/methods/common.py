@@ -254,6 +254,14 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
     interval = float(spec.get("frame_interval") or 0.1)
     for folder in folders:
         meta, scenario_pixels, scenario_metres = _scenario_arrays(folder)
+        # (a scenario moved or copied from elsewhere was read as this one)
+        place = {"group": group, "split": split, "index": int(folder.name) if folder.name.isdigit() else folder.name,
+                 "seed": spec.get("seed")}  # fmt: skip
+        wrong = next((k for k, v in place.items() if meta.get(k) != v), None)
+        if wrong is not None:
+            raise DatasetError(f"{folder / 'scenario.json'}: {wrong} {meta.get(wrong)!r}, but it lies in {root} at "
+                               f"{group}/{split}/{folder.name} ({wrong} {place[wrong]!r}): a scenario moved or copied "
+                               f"from elsewhere; causalcity validate {root} tells what else is")  # fmt: skip
         n = len(meta["cars"])
         interval = float(meta.get("frame_interval", interval))
         pixels.append(scenario_pixels)
