@@ -428,9 +428,7 @@ fn place_of(path: &Path) -> Option<(String, String, u64)> {
     let mut parts = text.rsplit('/');
     let (file, index, split, group) = (parts.next()?, parts.next()?, parts.next()?, parts.next()?);
     let group = group.rsplit(": ").next()?;
-    let is_group = group.strip_prefix("cars").and_then(|r| r.split_once("_edges")).is_some_and(|(c, e)| {
-        !c.is_empty() && !e.is_empty() && c.bytes().all(|b| b.is_ascii_digit()) && e.bytes().all(|b| b.is_ascii_digit())
-    });
+    let is_group = crate::output::claim::is_group_folder(group);
     let is_split = crate::spec::Split::ALL.iter().any(|s| s.name() == split);
     let index = index.bytes().all(|b| b.is_ascii_digit()).then(|| index.parse::<u64>().ok()).flatten()?;
     (file == "scenario.json" && is_group && is_split).then(|| (group.to_string(), split.to_string(), index))

@@ -393,7 +393,7 @@ fn host_name() -> String {
 }
 
 /// A group folder's name (`cars08_edges50`), as every spec names them.
-fn is_group_folder(name: &str) -> bool {
+pub fn is_group_folder(name: &str) -> bool {
     name.strip_prefix("cars").and_then(|rest| rest.split_once("_edges")).is_some_and(|(cars, edges)| {
         !cars.is_empty()
             && !edges.is_empty()
