@@ -900,8 +900,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     except KeyboardInterrupt:
         # Each finished unit is on disk; the one cut off is run again.
-        print(f"\ninterrupted: the finished units are kept in {out / 'units'}; rerun the same command to go on",
-              file=sys.stderr)  # fmt: skip
+        units = out / "units"
+        finished = units.is_dir() and any(p.is_file() for p in units.rglob("*.json"))
+        if finished:
+            print(f"\ninterrupted: the finished units are kept in {units}; rerun the same command to go on",
+                  file=sys.stderr)  # fmt: skip
+        else:
+            print("\ninterrupted before any unit finished: nothing to keep; rerun the same command to start again",
+                  file=sys.stderr)  # fmt: skip
         return 130
     if args.plan:
         return 0

@@ -389,11 +389,23 @@ def test_the_paper_says_what_to_do_when_cut_off_or_given_other_splits(tmp_path, 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
+    real_generate = paper.generate
     monkeypatch.setattr(paper, "generate", interrupted)
     base[base.index("--out") + 1] = str(tmp_path / "cut")
+    # Cut off before any unit finished: it said the finished units were
+    # kept in a folder that did not exist.
     assert paper.main(["--splits", "5/1/1", *base]) == 130
     err = capsys.readouterr().err
+    assert "interrupted before any unit finished" in err and "Traceback" not in err, err
+    assert not (tmp_path / "cut" / "units").exists()
+    monkeypatch.setattr(paper, "generate", real_generate)
+    assert paper.main(["--splits", "5/1/1", *base]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(paper, "generate", interrupted)
+    assert paper.main(["--splits", "5/1/1", *base, "--group", "cars08_edges50"]) == 130
+    err = capsys.readouterr().err
     assert "interrupted: the finished units are kept" in err and "Traceback" not in err, err
+    assert (tmp_path / "cut" / "units" / "toy").is_dir()
 
 
 def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, capsys, monkeypatch):
