@@ -816,7 +816,9 @@ fn main() {
     if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "effects" || v == "effects_town") {
         if std::env::var("BENCH_ONLY").is_ok_and(|v| v == "effects") {
             paper_city_effects();
-            if std::env::var("PAPER_ONLY").is_ok() { return; }
+            if std::env::var("PAPER_ONLY").is_ok() {
+                return;
+            }
         }
         effects_cost(&root);
         let _ = std::fs::remove_dir_all(&root);

@@ -275,6 +275,47 @@ fn an_nri_export_that_fails_part_way_leaves_an_earlier_export_as_it_was() {
 }
 
 #[test]
+fn a_failed_export_leaves_its_out_as_it_found_it() {
+    // A damaged file in the dataset's last group (nri) or split (nsdr): the
+    // export failed there and left its folders (nri: every group's, empty;
+    // nsdr: the scenarios before, annotations and links) in --out.
+    let dir = fresh_dir("export-failed-leaves-nothing");
+    let toy = dir.join("toy");
+    gen_ok(&write_spec(&dir, &toy_spec("toy", &[(4, 0.5), (5, 0.5)], (2, 1, 1), 10)), &toy, &["--no-images", "-q"]);
+    std::fs::write(toy.join("cars05_edges50/test/00000/pixels.npy"), b"not an array").unwrap();
+    let city_dir = dir.join("city-spec");
+    std::fs::create_dir_all(&city_dir).unwrap();
+    let spec = city_spec("city", &[(4, 0.5)], (2, 1, 1), 5, "{}").replacen(
+        "\"frames\"",
+        "\"image\": {\"width\": 128, \"height\": 80}, \"frames\"",
+        1,
+    );
+    let city = dir.join("city");
+    gen_ok(&write_spec(&city_dir, &spec), &city, &["--no-effects", "-q"]);
+    std::fs::write(city.join("cars04_edges50/test/00000/mask/0003.png"), b"not a png").unwrap();
+    let mut checked = 0;
+    for (kind, data, damaged) in [("nri", &toy, "pixels.npy"), ("nsdr", &city, "0003.png")] {
+        // A new --out, and an empty one the user made.
+        for made in [false, true] {
+            let out = dir.join(format!("{kind}-{made}"));
+            if made {
+                std::fs::create_dir_all(&out).unwrap();
+            }
+            let failed = run(&["export", kind, data.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+            let stderr = String::from_utf8_lossy(&failed.stderr);
+            assert_eq!(failed.status.code(), Some(1), "{kind}: {stderr}");
+            assert!(stderr.contains(damaged), "{kind}: {stderr}");
+            match made {
+                false => assert!(!out.exists(), "{kind}: {:?}", hash_tree(&out)),
+                true => assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "{kind}: {:?}", hash_tree(&out)),
+            }
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 4);
+}
+
+#[test]
 fn an_nri_export_of_a_dataset_without_val_says_it_writes_no_val_files() {
     // It wrote train and test and nothing about val, which NRI's loaders
     // read (helper audit).

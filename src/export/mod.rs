@@ -10,6 +10,36 @@ use crate::error::Error;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+/// The folders an export created under its `--out`: removed again, with
+/// what the export wrote into them, when it fails, so that a failed export
+/// leaves `--out` as it found it (its group folders stayed behind, and
+/// `export nsdr` kept the scenarios before the one that failed). Shared by
+/// the threads of a split.
+#[derive(Default)]
+struct NewFolders(std::sync::Mutex<Vec<PathBuf>>);
+
+impl NewFolders {
+    /// `std::fs::create_dir_all(dir)`, noting each folder it made.
+    fn create(&self, dir: &Path) -> Result<(), String> {
+        let missing: Vec<PathBuf> = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_err())
+            .map(Path::to_path_buf)
+            .collect();
+        std::fs::create_dir_all(dir).map_err(|e| crate::output::io_err(dir)(e).to_string())?;
+        self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).extend(missing);
+        Ok(())
+    }
+
+    /// After a failure: removes every folder made with what the export
+    /// wrote into it (a link inside is removed, never followed).
+    fn remove(self) {
+        for dir in self.0.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner()) {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
+}
+
 /// Refuses an `out` holding, `depth` folders down, an entry this export
 /// would not write (`writes`, relative to `out`): an earlier export's, of
 /// another dataset, split sizes or options, would stay beside this one's,

@@ -31,7 +31,6 @@
 use crate::dataset::{Dataset, GraphKind, ScenarioSummary};
 use crate::error::Error;
 use crate::output::claim::{claim, Writer};
-use crate::output::io_err;
 use crate::output::layout::INTERACTIONS_CSV;
 use crate::output::logs::read_interactions;
 use crate::output::poses::{read_pixels, PIXELS_FILE};
@@ -254,7 +253,8 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
     // dataset) leaves an earlier export as it was, never this export's
     // first splits beside an earlier one's others.
     let mut written = Vec::new();
-    let report = export_nri_groups(&opened, out, options, &mut written);
+    let folders = super::NewFolders::default();
+    let report = export_nri_groups(&opened, out, options, &mut written, &folders);
     let commit = report.and_then(|report| {
         for path in &written {
             std::fs::rename(staged(path), path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
@@ -265,6 +265,7 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
         for path in &written {
             let _ = std::fs::remove_file(staged(path));
         }
+        folders.remove();
     }
     commit.map_err(Error::Failure)
 }
@@ -297,19 +298,21 @@ fn valid_suffix(suffix: &str) -> bool {
 }
 
 /// Writes every group's and split's files at their [`staged`] paths,
-/// listing each in `written` as it is begun.
+/// listing each in `written` as it is begun and each folder it makes in
+/// `folders`.
 fn export_nri_groups(
     opened: &Dataset,
     out: &Path,
     options: &NriOptions,
     written: &mut Vec<PathBuf>,
+    folders: &super::NewFolders,
 ) -> Result<Vec<String>, String> {
     let frames = opened.spec().frames as usize;
     let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
     let mut report = Vec::new();
     for group in &opened.spec().groups {
         let group_dir: PathBuf = out.join(group.name());
-        std::fs::create_dir_all(&group_dir).map_err(|e| io_err(&group_dir)(e).to_string())?;
+        folders.create(&group_dir)?;
         for split in Split::ALL {
             // A split that holds the car count out has its own.
             let cars = opened.spec().group_of(split, group).cars as usize;

@@ -31,21 +31,26 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split, frames and all,
     // in TMPDIR.
-    opened
-        .each_scenario_in_turn(|source, relative| {
-            let target = out.join(relative);
-            let json = annotate(source, w, h, digits)?;
-            std::fs::create_dir_all(&target).map_err(|e| io_err(&target)(e).to_string())?;
-            write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-            match packed {
-                false => link_frames(source, &target)?,
-                // Unpacked into a temporary folder: links would outlive it.
-                true => copy_frames(source, &target)?,
-            }
-            bar.inc();
-            Ok(())
-        })
-        .map_err(Error::Failure)?;
+    let folders = super::NewFolders::default();
+    let exported = opened.each_scenario_in_turn(|source, relative| {
+        let target = out.join(relative);
+        let json = annotate(source, w, h, digits)?;
+        folders.create(&target)?;
+        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+        match packed {
+            false => link_frames(source, &target)?,
+            // Unpacked into a temporary folder: links would outlive it.
+            true => copy_frames(source, &target)?,
+        }
+        bar.inc();
+        Ok(())
+    });
+    if let Err(e) = exported {
+        // The scenarios this run added go again (those of an earlier run
+        // it replaced stay, as replaced).
+        folders.remove();
+        return Err(Error::Failure(e));
+    }
     bar.finish();
     Ok(opened.key_sequence().len())
 }

@@ -114,19 +114,27 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
     super::refuse_earlier_export(out, 3, &writes, "a scenario file")?;
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split in TMPDIR.
-    opened
-        .each_scenario_in_turn(|source, relative| {
-            let target = out.join(relative).with_extension("h5");
-            let arrays = vcdn_arrays(source, graph)?;
-            let parent = target.parent().expect("files have a folder");
-            std::fs::create_dir_all(parent).map_err(|e| format!("cannot create {}: {e}", parent.display()))?;
-            let partial = target.with_extension("h5.partial");
-            write_hdf5(&partial, &arrays).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-            std::fs::rename(&partial, &target).map_err(|e| format!("cannot write {}: {e}", target.display()))?;
-            bar.inc();
-            Ok(())
-        })
-        .map_err(Error::Failure)?;
+    let folders = super::NewFolders::default();
+    let exported = opened.each_scenario_in_turn(|source, relative| {
+        let target = out.join(relative).with_extension("h5");
+        let arrays = vcdn_arrays(source, graph)?;
+        folders.create(target.parent().expect("files have a folder"))?;
+        let partial = target.with_extension("h5.partial");
+        let written = write_hdf5(&partial, &arrays)
+            .and_then(|()| std::fs::rename(&partial, &target).map_err(|e| e.to_string()))
+            .map_err(|e| format!("cannot write {}: {e}", target.display()));
+        if written.is_err() {
+            let _ = std::fs::remove_file(&partial);
+        }
+        written?;
+        bar.inc();
+        Ok(())
+    });
+    if let Err(e) = exported {
+        // The files this run added go again with their folders.
+        folders.remove();
+        return Err(Error::Failure(e));
+    }
     bar.finish();
     Ok(opened.key_sequence().len())
 }
