@@ -118,6 +118,65 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
 }
 
 #[test]
+fn a_damaged_network_is_refused_in_a_few_words_and_never_hangs() {
+    // From a helper's audit: an internal lane leading on into itself (its
+    // shape empty) looped for ever in `map`, `gen` and `run`; a file of
+    // zero bytes, or an attribute of millions of characters, was quoted
+    // whole (a 1 GB file gave 2 GB of error); a root other than <net>, and
+    // phases of different lengths, were taken as a network.
+    let dir = fresh_dir("sumo-damaged");
+    let grid = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/grid2-arrows.net.xml");
+    let text = std::fs::read_to_string(&grid).unwrap();
+    let (lane, onward) = (
+        r#"<lane id=":A1_8_0" index="0" speed="6.51" length="9.03" shape=""#,
+        r#"<connection from=":A1_8" to="A1B1" fromLane="0" toLane="0" "#,
+    );
+    assert!(text.contains(lane) && text.contains(onward));
+    let circle = {
+        let start = text.find(lane).unwrap() + lane.len();
+        let end = start + text[start..].find('"').unwrap();
+        let emptied = format!("{}{}", &text[..start], &text[end..]);
+        emptied.replacen(onward, &format!(r#"{onward}via=":A1_8_0" "#), 1)
+    };
+    let programme = text.find("<phase ").map(|at| at + text[at..].find("state=\"").unwrap() + 7).unwrap();
+    let short_phase =
+        format!("{}rG\"/>{}", &text[..programme], &text[programme + text[programme..].find("/>").unwrap() + 2..]);
+    let long_value = text.replacen(r#"speed="6.51""#, &format!(r#"speed="{}x""#, "9".repeat(1_000_000)), 1);
+    let osm = text.replacen("<net ", "<osm ", 1).replacen("</net>", "</osm>", 1);
+    let mut checked = 0;
+    for (name, bad, needle) in [
+        ("circle", circle, "its internal lanes lead round in a circle (via :A1_8_0 comes back to :A1_8_0)"),
+        ("zeros", "\0".repeat(1 << 20), "it holds no XML element: not a SUMO network"),
+        ("long-value", long_value, "characters left out"),
+        ("osm", osm, "its root element is <osm>, not <net>"),
+        ("phases", short_phase, "letters, the first phase's"),
+    ] {
+        let net = dir.join(format!("{name}.net.xml"));
+        std::fs::write(&net, bad).unwrap();
+        let out = dir.join(format!("{name}.png"));
+        let refused = run_within(&["map", "--net", net.to_str().unwrap(), "--out", out.to_str().unwrap()], 60);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(needle), "{name}: {stderr}");
+        assert!(stderr.len() < 1000, "{name}: {} bytes of error", stderr.len());
+        assert!(!out.exists(), "{name}: wrote a picture");
+        checked += 1;
+    }
+    assert_eq!(checked, 5);
+    // gen through a spec naming the circular network: refused, not hung.
+    let spec = r#"{"name": "circle", "world": "city", "seed": 1, "frames": 5, "frame_interval": 1.0,
+        "groups": [{"cars": 4, "edge_proportion": 0.5}], "splits": {"train": 1, "val": 0, "test": 0},
+        "map": {"sumo": "circle.net.xml"}}"#;
+    std::fs::write(dir.join("circle.json"), spec).unwrap();
+    let (spec, out) = (dir.join("circle.json"), dir.join("data"));
+    let refused = run_within(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"], 60);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("lead round in a circle"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
 fn imported_traffic_lights_run_the_files_programmes_without_crossing_greens() {
     use causalcity::map::signals::{Colour, Signal};
     let text = std::fs::read_to_string(berlin()).unwrap();

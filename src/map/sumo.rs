@@ -261,6 +261,40 @@ struct ConnectionNames {
     to: Option<String>,
 }
 
+/// The name of the document's first element (`None`: it has none).
+fn root_element(text: &str) -> Result<Option<String>, quick_xml::Error> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(text);
+    loop {
+        match reader.read_event()? {
+            Event::Start(e) | Event::Empty(e) => return Ok(Some(e.name().into_inner().to_owned())),
+            Event::Eof => return Ok(None),
+            _ => {}
+        }
+    }
+}
+
+/// Most characters of a message quoted from a network file: a value of
+/// millions of characters (or a file of zero bytes read as one) was quoted
+/// whole, gigabytes of error.
+const QUOTED_CHARS: usize = 240;
+
+/// `message` with its middle left out when it is longer than
+/// [`QUOTED_CHARS`], and control characters escaped.
+fn clipped(message: &str) -> String {
+    let shown = |s: &str| -> String {
+        s.chars().map(|c| if c.is_control() { c.escape_debug().to_string() } else { c.to_string() }).collect()
+    };
+    let chars = message.chars().count();
+    if chars <= QUOTED_CHARS {
+        return shown(message);
+    }
+    let (head, tail) = (QUOTED_CHARS * 2 / 3, QUOTED_CHARS / 3);
+    let (first, last): (String, String) =
+        (message.chars().take(head).collect(), message.chars().skip(chars - tail).collect());
+    format!("{} ... ({} characters left out) ... {}", shown(&first), chars - head - tail, shown(&last))
+}
+
 /// Why `text` is not a network, naming the element and the attribute
 /// the reader stopped at (`<lane id="a_0">: speed: invalid type: string
 /// "fast", expected a number`; `<junction id="J1">: no x attribute`),
@@ -482,8 +516,19 @@ impl SumoNetwork {
     /// Reads the text of a `.net.xml`; errors name the element, its id and
     /// what is wrong (the file's name is the caller's to add).
     pub fn from_xml(text: &str) -> Result<SumoNetwork, String> {
+        match root_element(text) {
+            Ok(Some(root)) if root != "net" => {
+                return Err(format!(
+                    "its root element is <{}>, not <net>: not a SUMO network (.net.xml, as netconvert writes it)",
+                    clipped(&root)
+                ))
+            }
+            Ok(Some(_)) => {}
+            Ok(None) => return Err("it holds no XML element: not a SUMO network (.net.xml)".into()),
+            Err(e) => return Err(clipped(&format!("not XML, so not a SUMO network (.net.xml): {e}"))),
+        }
         let mut de = quick_xml::de::Deserializer::from_str(text);
-        let raw: RawNet = serde_path_to_error::deserialize(&mut de).map_err(|e| unreadable(text, &e))?;
+        let raw: RawNet = serde_path_to_error::deserialize(&mut de).map_err(|e| clipped(&unreadable(text, &e)))?;
         if raw.version.is_none() {
             return Err("<net> has no version attribute: not a network netconvert wrote".into());
         }
@@ -650,6 +695,19 @@ impl SumoNetwork {
                         p.id, ph.state
                     ));
                 }
+                // One letter per link in every phase (SUMO refuses phases of
+                // other lengths; the links beyond the shortest had no state).
+                if let Some((_, first)) = phases.first().filter(|(_, s): &&(f64, String)| s.len() != ph.state.len()) {
+                    return Err(format!(
+                        "<tlLogic id=\"{}\">: phase state {} has {} letters, the first phase's {} has {}; allowed: one \
+                         letter per link in every phase, all of the same length",
+                        p.id,
+                        clipped(&format!("{:?}", ph.state)),
+                        ph.state.len(),
+                        clipped(&format!("{first:?}")),
+                        first.len()
+                    ));
+                }
                 phases.push((ph.duration, ph.state.clone()));
                 if p.kind.as_deref() == Some("actuated") {
                     actuated.push(phase_bounds(&p.id, ph)?);
@@ -710,7 +768,18 @@ impl SumoNetwork {
                 .ok_or_else(|| format!("{}: dir=\"{}\" is not allowed: s, l, L, r, R or t", name(), c.dir))?;
             let mut path = Vec::new();
             let mut via = c.via.as_deref();
+            // The internal lanes passed, so that a chain leading back into
+            // itself ends (one of empty shapes added no points and looped
+            // for ever).
+            let mut passed: Vec<&str> = Vec::new();
             while let Some(lane) = via {
+                if passed.contains(&lane) {
+                    return Err(format!(
+                        "{}: its internal lanes lead round in a circle (via {lane} comes back to {lane})",
+                        name()
+                    ));
+                }
+                passed.push(lane);
                 let Some(text) = internal_shapes.get(lane) else { break };
                 path.extend(
                     polyline(text).ok_or_else(|| {
@@ -721,9 +790,6 @@ impl SumoNetwork {
                 let (edge, index) = lane.rsplit_once('_').unwrap_or((lane, ""));
                 let index: u32 = index.parse().unwrap_or(0);
                 via = onward.get(&(edge, index, c.to.as_str(), c.to_lane)).copied();
-                if path.len() > 10_000 {
-                    return Err(format!("{}: its internal lanes lead round in a circle", name()));
-                }
             }
             let signal = match (&c.tl, c.link_index.and_then(|l| usize::try_from(l).ok())) {
                 (Some(tl), Some(link)) => {

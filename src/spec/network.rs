@@ -59,8 +59,22 @@ pub fn read_network_file(path: &Path) -> Result<Vec<u8>, String> {
     if !metadata.is_file() {
         return Err(cannot("not a regular file; give a .net.xml file".into()));
     }
-    std::fs::read(path).map_err(|e| cannot(e.to_string()))
+    // (Read whole and parsed in memory: a file near the machine's memory
+    // was read until the kernel killed the command.)
+    crate::input::read_regular(path, MAX_NETWORK_BYTES).map_err(|e| {
+        cannot(match e.kind() {
+            std::io::ErrorKind::InvalidData => {
+                format!("{e}; cut the area with netconvert (--keep-edges.in-boundary)")
+            }
+            _ => e.to_string(),
+        })
+    })
 }
+
+/// Largest `.net.xml` read, bytes: read whole and parsed in memory (several
+/// times its size); a city district of a few thousand junctions, as the
+/// maps here are drawn, is tens of MB, `tests/data/sumo/berlin-small.net.xml` 0.2 MB.
+pub const MAX_NETWORK_BYTES: u64 = 1 << 30;
 
 impl ImportedNetwork {
     /// Reads and builds the network at `path` with lane changes
