@@ -760,7 +760,7 @@ fn scenario_files_are_read_strictly() {
         let file = dir.join(format!("{case}.json"));
         std::fs::write(&file, text).unwrap();
         let out = dir.join(format!("out-{case}"));
-        let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+        let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
         rejected_by(case, &args, &out, parts);
     }
 }
@@ -975,6 +975,39 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
     assert_eq!(hash_tree(&out), hash_tree(&reference));
     let validated = run(&["validate", out.to_str().unwrap()]);
     assert!(validated.status.success(), "{}", String::from_utf8_lossy(&validated.stdout));
+}
+
+#[test]
+fn a_run_stopped_by_ctrl_c_says_how_many_scenarios_it_wrote_and_where() {
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    // A short scenario and one of 100,000 frames with images (minutes):
+    // stopped once the short one is written, it said "0 of 0 scenarios are
+    // complete in .".
+    let dir = fresh_dir("hw-run-stopped");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let example: serde_json::Value = read_json(&root.join("configs/examples/stop-the-leader.json"));
+    let (mut short, mut long) = (example[0].clone(), example[0].clone());
+    short["Name"] = "short".into();
+    short["frames"] = 40.into();
+    long["Name"] = "long".into();
+    long["frames"] = 100_000.into();
+    let file = dir.join("two.json");
+    std::fs::write(&file, serde_json::to_string(&[short, long]).unwrap()).unwrap();
+    let out = dir.join("out");
+    let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let child = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !out.join("short/scenario.json").exists() {
+        assert!(Instant::now() < deadline, "the short scenario was not written");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    let said = format!("interrupted: 1 of 2 scenarios are complete in {}", out.display());
+    assert!(stderr.contains(&said), "{stderr}");
 }
 
 #[test]

@@ -194,7 +194,7 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
     refuse_inputs_below(&out, &scenarios, &[("the scenario file", options.scenario_file.as_path())])?;
     let describe = format!("run {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
-    scenarios
+    let results: Vec<Result<Written, RunError>> = scenarios
         .par_iter()
         .map(|s| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
@@ -214,7 +214,14 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
             let warnings = warnings(s, &trajectories);
             Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
-        .collect()
+        .collect();
+    // Cut off: how many are written, and where (it said "0 of 0 scenarios
+    // are complete in .").
+    if results.iter().any(|r| matches!(r, Err(RunError::Write(GenError::Interrupted { .. })))) {
+        let done = results.iter().filter(|r| r.is_ok()).count() as u64;
+        return Err(RunError::Write(GenError::Interrupted { done, total: results.len() as u64, out }));
+    }
+    results.into_iter().collect()
 }
 
 impl std::fmt::Display for Written {
