@@ -26,7 +26,12 @@ pub struct Progress {
 
 impl Progress {
     pub fn new(total: u64, mode: ProgressMode) -> Progress {
-        let start = Instant::now();
+        Progress::since(Instant::now(), total, mode)
+    }
+
+    /// [`Progress::new`] of work that began at `start` (rates and the ETA
+    /// count from then).
+    pub fn since(start: Instant, total: u64, mode: ProgressMode) -> Progress {
         let terminal = std::io::stderr().is_terminal();
         let (bar, plain) = match mode {
             ProgressMode::Quiet => (None, None),
@@ -36,9 +41,9 @@ impl Progress {
                     "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} scenarios ({rate_eta})",
                 )
                 .expect("valid template")
-                .with_key("rate_eta", |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                .with_key("rate_eta", move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
                     let total = state.len().unwrap_or(0);
-                    let _ = w.write_str(&rate_and_eta(state.pos(), total, state.elapsed().as_secs_f64()));
+                    let _ = w.write_str(&rate_and_eta(state.pos(), total, start.elapsed().as_secs_f64()));
                 });
                 bar.set_style(style);
                 bar.enable_steady_tick(Duration::from_millis(200));

@@ -278,3 +278,23 @@ fn lights_logged_as_changes_carry_every_frame_of_lights_csv_in_a_fraction_of_the
     assert_eq!(mixed.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("lights: changes there, frames now (--lights)"), "{stderr}");
 }
+
+#[test]
+fn the_progress_rate_counts_the_first_scenario_from_the_start() {
+    // One scenario of 3,000 city frames (gen writes it first, as the free
+    // space check's sample): its progress line said thousands of scenarios
+    // a second (counted from after it) where the summary said 0.2.
+    let dir = fresh_dir("e2e-progress-rate");
+    let spec = write_spec(&dir, &city_spec("rate", &[(8, 0.5)], (1, 0, 0), 3000, "{}"));
+    let output = gen_ok(&spec, &dir.join("out"), &["--no-images"]);
+    let (stdout, stderr) = (String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    let number_before = |text: &str, marker: &str| -> f64 {
+        let end = text.find(marker).unwrap_or_else(|| panic!("no {marker:?} in {text}"));
+        let start = text[..end].rfind(' ').unwrap() + 1;
+        text[start..end].parse().unwrap()
+    };
+    let progress = number_before(&stderr, "/s, ETA");
+    let summary = number_before(&stdout, " scenarios/s");
+    assert!(stderr.contains("progress: 1/1 scenarios"), "{stderr}");
+    assert!(progress <= 2.0 * summary + 0.1, "progress {progress}/s, summary {summary} scenarios/s: {stderr}{stdout}");
+}
