@@ -115,7 +115,7 @@ fn what_a_real_network_spec_cannot_use_is_refused_with_nothing_written() {
         (r#"{"sumo": "berlin-small.net.xml", "grid": {"rows": 2, "columns": 2}}"#, "map.grid", "brings its own roads"),
         (r#"{"sumo": "berlin-small.net.xml", "lane_width": 3.5}"#, "map.lane_width", "leave map.lane_width out"),
         (r#"{"sumo": "berlin-small.png"}"#, "map.sumo", "a SUMO network file"),
-        (r#"{"sumo": "not-a-net.xml"}"#, "map.sumo", "not-a-net.xml: <net> has no version"),
+        (r#"{"sumo": "not-a-net.xml"}"#, "map.sumo", "not-a-net.xml: its root element is <html>, not <net>"),
     ];
     let mut checked = 0;
     for (k, (map, field, needle)) in cases.into_iter().enumerate() {
