@@ -760,7 +760,7 @@ fn scenario_files_are_read_strictly() {
         let file = dir.join(format!("{case}.json"));
         std::fs::write(&file, text).unwrap();
         let out = dir.join(format!("out-{case}"));
-        let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
         rejected_by(case, &args, &out, parts);
     }
 }
@@ -978,7 +978,7 @@ fn a_sweep_stopped_by_ctrl_c_says_so_validates_as_unfinished_and_resumes_to_the_
 }
 
 #[test]
-fn a_run_stopped_by_ctrl_c_says_how_many_scenarios_it_wrote_and_where() {
+fn a_run_or_counterfactual_stopped_by_ctrl_c_says_how_many_scenarios_it_wrote_and_where() {
     use std::process::{Command, Stdio};
     use std::time::{Duration, Instant};
     // A short scenario and one of 100,000 frames with images (minutes):
@@ -1006,7 +1006,22 @@ fn a_run_stopped_by_ctrl_c_says_how_many_scenarios_it_wrote_and_where() {
     let output = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(130), "{stderr}");
-    let said = format!("interrupted: 1 of 2 scenarios are complete in {}", out.display());
+    let said = format!("interrupted: 1 of 2 scenarios are written in {}", out.display());
+    assert!(stderr.contains(&said) && stderr.contains("it writes every scenario again"), "{stderr}");
+    // counterfactual --scenario shares the path: the same count.
+    let pairs = dir.join("pairs");
+    let args = ["counterfactual", "--scenario", file.to_str().unwrap(), "--out", pairs.to_str().unwrap()];
+    let child = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !pairs.join("short/summary.json").exists() {
+        assert!(Instant::now() < deadline, "the short pair was not written");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    let said = format!("interrupted: 1 of 2 scenarios are written in {}", pairs.display());
     assert!(stderr.contains(&said), "{stderr}");
 }
 

@@ -26,9 +26,10 @@ impl NewFolders {
             .take_while(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_err())
             .map(Path::to_path_buf)
             .collect();
-        std::fs::create_dir_all(dir).map_err(|e| crate::output::io_err(dir)(e).to_string())?;
+        // Noted first: a creation that fails part way (a full disk) leaves
+        // the folders it made noted too.
         self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).extend(missing);
-        Ok(())
+        std::fs::create_dir_all(dir).map_err(|e| crate::output::io_err(dir)(e).to_string())
     }
 
     /// After a failure: removes every folder made with what the export

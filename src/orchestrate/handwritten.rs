@@ -46,12 +46,22 @@ pub enum RunError {
     Usage(String),
     #[error(transparent)]
     Write(#[from] GenError),
+    /// Stopped (Ctrl-C) with `done` of the file's `total` scenarios
+    /// written in `out`. `run` and `counterfactual --scenario` write every
+    /// scenario again when rerun, so the message says so (gen's says
+    /// "resume").
+    #[error(
+        "interrupted: {done} of {total} scenarios are written in {out}; rerun the same command to write them \
+         all (it writes every scenario again)"
+    )]
+    Interrupted { done: u64, total: u64, out: PathBuf },
 }
 
 impl From<RunError> for crate::error::Error {
     fn from(e: RunError) -> Self {
         match e {
             RunError::Write(e) => e.into(),
+            RunError::Interrupted { .. } => crate::error::Error::Interrupted(e.to_string()),
             RunError::Input(_) | RunError::Usage(_) => crate::error::Error::Input(e.to_string()),
         }
     }
@@ -62,6 +72,7 @@ impl RunError {
     pub fn exit_code(&self) -> i32 {
         match self {
             RunError::Input(_) | RunError::Usage(_) => 2,
+            RunError::Interrupted { .. } => 130,
             RunError::Write(e) => e.exit_code(),
         }
     }
@@ -215,11 +226,15 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
             Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
         .collect();
-    // Cut off: how many are written, and where (it said "0 of 0 scenarios
-    // are complete in .").
+    gathered(results, out)
+}
+
+/// Each scenario's result, or (stopped part way) how many were written and
+/// where: it said "0 of 0 scenarios are complete in .".
+fn gathered<T>(results: Vec<Result<T, RunError>>, out: PathBuf) -> Result<Vec<T>, RunError> {
     if results.iter().any(|r| matches!(r, Err(RunError::Write(GenError::Interrupted { .. })))) {
         let done = results.iter().filter(|r| r.is_ok()).count() as u64;
-        return Err(RunError::Write(GenError::Interrupted { done, total: results.len() as u64, out }));
+        return Err(RunError::Interrupted { done, total: results.len() as u64, out });
     }
     results.into_iter().collect()
 }
@@ -250,7 +265,7 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
     refuse_inputs_below(&out, &scenarios, &inputs)?;
     let describe = format!("counterfactual {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
-    pairs
+    let results: Vec<Result<WrittenPair, RunError>> = pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
             let writer = scenario_writer(&s.expansion, options.products(), false);
@@ -265,8 +280,8 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
             let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
             Ok(WrittenPair { summary, warnings: read.chain(driven).collect() })
         })
-        .collect::<Result<Vec<_>, GenError>>()
-        .map_err(RunError::Write)
+        .collect();
+    gathered(results, out)
 }
 
 /// One pair `counterfactual` wrote: its summary.json, and what reading and
