@@ -295,9 +295,12 @@ fn a_failed_export_leaves_its_out_as_it_found_it() {
     std::fs::write(city.join("cars04_edges50/test/00000/mask/0003.png"), b"not a png").unwrap();
     let mut checked = 0;
     for (kind, data, damaged) in [("nri", &toy, "pixels.npy"), ("nsdr", &city, "0003.png")] {
-        // A new --out, and an empty one the user made.
+        // A new --out (in a new folder), and an empty one the user made.
         for made in [false, true] {
-            let out = dir.join(format!("{kind}-{made}"));
+            let out = match made {
+                false => dir.join(format!("{kind}-new/out")),
+                true => dir.join(format!("{kind}-made")),
+            };
             if made {
                 std::fs::create_dir_all(&out).unwrap();
             }
@@ -306,7 +309,7 @@ fn a_failed_export_leaves_its_out_as_it_found_it() {
             assert_eq!(failed.status.code(), Some(1), "{kind}: {stderr}");
             assert!(stderr.contains(damaged), "{kind}: {stderr}");
             match made {
-                false => assert!(!out.exists(), "{kind}: {:?}", hash_tree(&out)),
+                false => assert!(!out.parent().unwrap().exists(), "{kind}: {:?}", hash_tree(&out)),
                 true => assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "{kind}: {:?}", hash_tree(&out)),
             }
             checked += 1;

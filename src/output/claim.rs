@@ -125,7 +125,9 @@ pub struct Claim {
     /// False where the filesystem does not support locks (some network
     /// filesystems): the claim then only checked the folder's contents.
     pub locked: bool,
-    created: Option<PathBuf>,
+    /// The folders the claim made (the folder and any missing above it),
+    /// deepest first.
+    created: Vec<PathBuf>,
 }
 
 impl Claim {
@@ -163,8 +165,12 @@ impl Drop for Claim {
             }
             drop(file);
         }
-        if let Some(dir) = &self.created {
-            let _ = fs::remove_dir(dir); // only when empty
+        // Only while empty, the folder first, then those made above it (a
+        // refused `--out new/data` left `new`).
+        for dir in &self.created {
+            if fs::remove_dir(dir).is_err() {
+                break;
+            }
         }
     }
 }
@@ -209,7 +215,11 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
     }
     check_ancestors(dir)?;
     check_contents(dir, writer)?;
-    let created = (!dir.exists()).then(|| dir.to_path_buf());
+    let created: Vec<PathBuf> = dir
+        .ancestors()
+        .take_while(|a| !a.as_os_str().is_empty() && fs::symlink_metadata(a).is_err())
+        .map(Path::to_path_buf)
+        .collect();
     fs::create_dir_all(dir).map_err(io(dir))?;
     let holder = format!("pid {} on {}: {describe}", std::process::id(), host_name());
     let mut claim = Claim { locks: Vec::new(), locked: true, created };
