@@ -37,19 +37,18 @@ impl Progress {
             ProgressMode::Quiet => (None, None),
             ProgressMode::Auto if terminal => {
                 let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-                let style = ProgressStyle::with_template(
-                    "{spinner} [{since}] {wide_bar} {pos}/{len} scenarios ({rate_eta})",
-                )
-                .expect("valid template")
-                // (From `start`, as the rate: indicatif's own clock starts here.)
-                .with_key("since", move |_: &ProgressState, w: &mut dyn std::fmt::Write| {
-                    let s = start.elapsed().as_secs();
-                    let _ = write!(w, "{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60);
-                })
-                .with_key("rate_eta", move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
-                    let total = state.len().unwrap_or(0);
-                    let _ = w.write_str(&rate_and_eta(state.pos(), total, start.elapsed().as_secs_f64()));
-                });
+                let style =
+                    ProgressStyle::with_template("{spinner} [{since}] {wide_bar} {pos}/{len} scenarios ({rate_eta})")
+                        .expect("valid template")
+                        // (From `start`, as the rate: indicatif's own clock starts here.)
+                        .with_key("since", move |_: &ProgressState, w: &mut dyn std::fmt::Write| {
+                            let s = start.elapsed().as_secs();
+                            let _ = write!(w, "{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60);
+                        })
+                        .with_key("rate_eta", move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                            let total = state.len().unwrap_or(0);
+                            let _ = w.write_str(&rate_and_eta(state.pos(), total, start.elapsed().as_secs_f64()));
+                        });
                 bar.set_style(style);
                 bar.enable_steady_tick(Duration::from_millis(200));
                 (Some(bar), None)

@@ -994,35 +994,27 @@ fn a_run_or_counterfactual_stopped_by_ctrl_c_says_how_many_scenarios_it_wrote_an
     long["frames"] = 100_000.into();
     let file = dir.join("two.json");
     std::fs::write(&file, serde_json::to_string(&[short, long]).unwrap()).unwrap();
-    let out = dir.join("out");
-    let args = ["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
-    let child = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !out.join("short/scenario.json").exists() {
-        assert!(Instant::now() < deadline, "the short scenario was not written");
-        std::thread::sleep(Duration::from_millis(10));
+    // Each command, stopped once its short scenario (`done`, a file written
+    // last) is there: exit 130, and the count and folder named.
+    let mut checked = 0;
+    for (command, done) in [("run", "short/scenario.json"), ("counterfactual", "short/summary.json")] {
+        let out = dir.join(command);
+        let args = [command, "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        let child = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while !out.join(done).exists() {
+            assert!(Instant::now() < deadline, "{command}: the short scenario was not written");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(130), "{command}: {stderr}");
+        let said = format!("interrupted: 1 of 2 scenarios are written in {}", out.display());
+        assert!(stderr.contains(&said) && stderr.contains("it writes every scenario again"), "{command}: {stderr}");
+        checked += 1;
     }
-    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
-    let output = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(130), "{stderr}");
-    let said = format!("interrupted: 1 of 2 scenarios are written in {}", out.display());
-    assert!(stderr.contains(&said) && stderr.contains("it writes every scenario again"), "{stderr}");
-    // counterfactual --scenario shares the path: the same count.
-    let pairs = dir.join("pairs");
-    let args = ["counterfactual", "--scenario", file.to_str().unwrap(), "--out", pairs.to_str().unwrap()];
-    let child = Command::new(bin()).args(args).stderr(Stdio::piped()).spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !pairs.join("short/summary.json").exists() {
-        assert!(Instant::now() < deadline, "the short pair was not written");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
-    let output = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(130), "{stderr}");
-    let said = format!("interrupted: 1 of 2 scenarios are written in {}", pairs.display());
-    assert!(stderr.contains(&said), "{stderr}");
+    assert_eq!(checked, 2);
 }
 
 #[test]
