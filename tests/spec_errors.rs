@@ -519,7 +519,21 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     let seed = with(|v| v["seed"] = 12345.into()).replace("12345", "18446744073709551616");
     rejected("seed-2-64", &seed, &["field `seed`", "above 18446744073709551615 is too large", "whole number from 0"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "2.5");
-    rejected("frames-fraction", &frames, &["field `frames`", "2.5 is not a whole number"]);
+    // The field's own range, not its type's ("from 0 to 4294967295" for
+    // frames, "0 or more" for a negative one).
+    rejected(
+        "frames-fraction",
+        &frames,
+        &["field `frames`", "2.5 is not a whole number: use a whole number from 1 to 100000"],
+    );
+    let cars = with(|v| v["groups"][0]["cars"] = 12345.into()).replace("12345", "2.5");
+    rejected(
+        "cars-fraction",
+        &cars,
+        &["field `groups[0].cars`", "2.5 is not a whole number: use a whole number from 1 to 255"],
+    );
+    let train = with(|v| v["splits"]["train"] = 4_294_967_296u64.into());
+    rejected("splits-u32", &train, &["field `splits.train`", "is too large: use a whole number from 0 to 10000000"]);
     // Light timings past any sense: at a cycle_scale of 1e-300 every light
     // changed at every frame, exit 0.
     rejected(
@@ -541,9 +555,9 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     let said =
         run(&["gen", "--spec", write_spec(&dir, &long).to_str().unwrap(), "--out", dir.join("o").to_str().unwrap()]);
     assert!(said.stderr.len() < 1_000, "{} bytes of error", said.stderr.len());
-    // Below 0 names no type's top ("from 0 to 4294967295" is not the field's range).
+    // Below 0 names the field's range, not the type's.
     let frames = with(|v| v["frames"] = (-5).into());
-    rejected("frames-negative", &frames, &["field `frames`", "-5 is too small: use a whole number, 0 or more"]);
+    rejected("frames-negative", &frames, &["field `frames`", "-5 is too small: use a whole number from 1 to 100000"]);
     let frames = with(|v| v["frames"] = 12345.into()).replace("12345", "1000000000000.0");
     rejected("frames-1e12", &frames, &["field `frames`", " 1000000000000 is too large"]);
     // The largest value a field holds, written as a float, is not "too large".

@@ -308,7 +308,17 @@ impl DatasetSpec {
     /// Parses and checks a spec from JSON text (strictly: no duplicate
     /// keys, no trailing data, objects where the spec has objects).
     pub fn from_json(text: &str) -> Result<DatasetSpec, SpecError> {
-        let spec: DatasetSpec = crate::json::parse_strict(text).map_err(|e| SpecError::new(e.path, e.message))?;
+        let spec: DatasetSpec = crate::json::parse_strict(text).map_err(|e| {
+            // A fraction or a negative number named the type's range ("from
+            // 0 to 4294967295" for frames); the field's own is the one allowed.
+            let message = match whole_range(&e.path) {
+                Some((lo, hi)) => ["use a whole number from 0 to 4294967295", "use a whole number, 0 or more"]
+                    .iter()
+                    .fold(e.message, |m, said| m.replace(said, &format!("use a whole number from {lo} to {hi}"))),
+                None => e.message,
+            };
+            SpecError::new(e.path, message)
+        })?;
         spec.validate()?;
         Ok(spec.resolved())
     }
@@ -389,7 +399,7 @@ impl DatasetSpec {
                 ),
             ));
         }
-        range("frames", self.frames, 1, MAX_FRAMES)?;
+        whole("frames", self.frames)?;
         let interval = self.frame_interval();
         let lowest = if recorded { f64::MIN_POSITIVE } else { MIN_FRAME_INTERVAL_S };
         if !(interval.is_finite() && (lowest..=MAX_FRAME_INTERVAL_S).contains(&interval)) {
@@ -401,8 +411,8 @@ impl DatasetSpec {
                 ),
             ));
         }
-        range("image.width", self.image.width, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
-        range("image.height", self.image.height, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)?;
+        whole("image.width", self.image.width)?;
+        whole("image.height", self.image.height)?;
         if self.groups.is_empty() {
             return Err(SpecError::new(
                 "groups",
@@ -417,12 +427,12 @@ impl DatasetSpec {
         }
         for split in [Split::Val, Split::Test] {
             if let Some(cars) = self.held_out.of(split).and_then(|h| h.cars) {
-                range(&format!("held_out.{}.cars", split.name()), cars, 1, MAX_CARS)?;
+                whole(&format!("held_out.{}.cars", split.name()), cars)?;
             }
         }
         let mut names = std::collections::HashSet::new();
         for (i, g) in self.groups.iter().enumerate() {
-            range(&format!("groups[{i}].cars"), g.cars, 1, MAX_CARS)?;
+            whole(&format!("groups[{i}].cars"), g.cars)?;
             let field = format!("groups[{i}].edge_proportion");
             if !(g.edge_proportion.is_finite() && (0.0..=1.0).contains(&g.edge_proportion)) {
                 return Err(SpecError::new(
@@ -467,12 +477,12 @@ impl DatasetSpec {
             }
         }
         for split in Split::ALL {
-            range(&format!("splits.{}", split.name()), self.splits.count(split), 0, MAX_SCENARIOS_PER_SPLIT)?;
+            whole(&format!("splits.{}", split.name()), self.splits.count(split))?;
         }
         if Split::ALL.iter().all(|s| self.splits.count(*s) == 0) {
             return Err(SpecError::new("splits", "all splits are 0: ask for at least one scenario"));
         }
-        range("actions_per_car", self.actions_per_car, 0, MAX_ACTIONS)?;
+        whole("actions_per_car", self.actions_per_car)?;
         positive("toy_speed_px_per_frame", self.toy_speed_px_per_frame, 100.0, "pixels per frame")?;
         positive("car_length_m", self.car_length_m, 20.0, "metres")?;
         positive("car_width_m", self.car_width_m, 3.0, "metres")?;
@@ -745,6 +755,35 @@ impl DatasetSpec {
             Split::ALL.iter().map(|s| self.splits.count(*s).min(limit.unwrap_or(u32::MAX)) as u64).sum();
         per_group * self.groups.len() as u64
     }
+}
+
+/// The spec's whole-number fields narrower than their type, and their
+/// ranges: one table for the checks and for the parser's messages.
+fn whole_range(field: &str) -> Option<(u32, u32)> {
+    // `groups[3].cars` as `groups[].cars`, `held_out.test.cars` as `held_out.*.cars`.
+    let general = match field.split_once('[').zip(field.split_once(']')) {
+        Some(((before, _), (_, after))) => format!("{before}[]{after}"),
+        None => field.to_string(),
+    };
+    let general = match general.strip_prefix("held_out.").and_then(|rest| rest.split_once('.')) {
+        Some((_, after)) => format!("held_out.*.{after}"),
+        None => general,
+    };
+    Some(match general.as_str() {
+        "frames" => (1, MAX_FRAMES),
+        "image.width" | "image.height" => (MIN_IMAGE_SIDE, MAX_IMAGE_SIDE),
+        "groups[].cars" | "held_out.*.cars" => (1, MAX_CARS),
+        "splits.train" | "splits.val" | "splits.test" => (0, MAX_SCENARIOS_PER_SPLIT),
+        "actions_per_car" => (0, MAX_ACTIONS),
+        _ => return None,
+    })
+}
+
+/// `value` of `field` within its [`whole_range`].
+fn whole(field: &str, value: u32) -> Result<(), SpecError> {
+    debug_assert!(whole_range(field).is_some(), "{field} has no range in whole_range");
+    let (lo, hi) = whole_range(field).unwrap_or((u32::MIN, u32::MAX));
+    range(field, value, lo, hi)
 }
 
 fn range(field: &str, value: u32, lo: u32, hi: u32) -> Result<(), SpecError> {
