@@ -534,6 +534,15 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     );
     let train = with(|v| v["splits"]["train"] = 4_294_967_296u64.into());
     rejected("splits-u32", &train, &["field `splits.train`", "is too large: use a whole number from 0 to 10000000"]);
+    // Platoons that cannot be placed name the gap within them too: a gap
+    // of 1 cm was blamed on the cars and the platoon size alone.
+    rejected(
+        "platoon-gap-tiny",
+        &city_with(
+            r#"{"start": {"follower_gap_m": {"uniform": [0.01, 0.01]}, "platoon_cars": 4}, "driver": {"min_gap": 0.01}}"#,
+        ),
+        &["groups[0]", "could not place 4 cars in platoons of 4", "wider gaps within them (city.start.follower_gap_m)"],
+    );
     // Light timings past any sense: at a cycle_scale of 1e-300 every light
     // changed at every frame, exit 0.
     rejected(

@@ -102,7 +102,7 @@ impl Planner {
             let placed = (0..PLACEMENT_ATTEMPTS).find_map(|_| self.try_platoon(rng, city, split, count, &cars, &boxes));
             let Some(starts) = placed else {
                 return Err(format!(
-                    "could not place {} cars in platoons of {size} without overlap after {PLACEMENT_ATTEMPTS} tries: use fewer cars or smaller platoons",
+                    "could not place {} cars in platoons of {size} without overlap after {PLACEMENT_ATTEMPTS} tries: use fewer cars, smaller platoons (city.start.platoon_cars) or wider gaps within them (city.start.follower_gap_m)",
                     group.cars
                 ));
             };
