@@ -6,8 +6,8 @@
 
 use crate::dataset::Dataset;
 use crate::output::layout::{
-    CameraFolder, FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV,
-    POSES_CSV, SCENARIO_JSON,
+    FrameKind, ScenarioLayout, EFFECTS_CSV, EVENTS_CSV, INTERACTIONS_CSV, LIGHTS_CSV, LIGHT_CHANGES_CSV, POSES_CSV,
+    SCENARIO_JSON,
 };
 use crate::output::logs::{parse_effects, EVENT_COLUMNS, INTERACTION_COLUMNS, LIGHT_COLUMNS};
 use crate::output::manifest::Packing;
@@ -15,7 +15,7 @@ use crate::output::packs::{split_pair, PackUnit, Packs, PAIR_FILES, PAIR_RUNS};
 use crate::output::poses::{parse_pixels, PIXELS_FILE, POSE_COLUMNS};
 use crate::output::{hex, scenario_dir, CHECKSUMS, PARTIAL_PREFIX};
 use crate::plan::ScenarioKey;
-use crate::spec::{DatasetSpec, Split, WorldKind};
+use crate::spec::{DatasetSpec, Split};
 use rayon::prelude::*;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -209,9 +209,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
     let keys: Vec<ScenarioKey> = dataset.keys().collect();
     let (record, keys) = (&dataset.record, &keys);
     let spec = dataset.spec();
-    let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
-    let layout = ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, record.products(), cameras);
-    let expected = Expected::new(spec, layout);
+    let expected = Expected::new(spec, ScenarioLayout::of_spec(spec, record.products()));
 
     let mut problems = derived_fields_edited(&manifest_path, &dataset);
     if !record.complete {
@@ -298,9 +296,7 @@ fn validate_sweep(
     };
     let products =
         crate::output::manifest::Products { images, annotations: false, effects: false, lights: sweep.lights };
-    let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
-    let expected =
-        Expected::new(spec, ScenarioLayout::new(spec.frames, spec.world == WorldKind::City, products, cameras));
+    let expected = Expected::new(spec, ScenarioLayout::of_spec(spec, products));
     let check_pair = |key: &ScenarioKey| -> ScenarioCheck {
         let pair = pair_of(key);
         if !pair.is_dir() {

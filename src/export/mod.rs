@@ -21,11 +21,7 @@ struct NewFolders(std::sync::Mutex<Vec<PathBuf>>);
 impl NewFolders {
     /// `std::fs::create_dir_all(dir)`, noting each folder it made.
     fn create(&self, dir: &Path) -> Result<(), String> {
-        let missing: Vec<PathBuf> = dir
-            .ancestors()
-            .take_while(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_err())
-            .map(Path::to_path_buf)
-            .collect();
+        let missing = crate::output::claim::missing_folders(dir);
         // Noted first: a creation that fails part way (a full disk) leaves
         // the folders it made noted too.
         self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).extend(missing);

@@ -5,7 +5,7 @@
 
 use super::run::GenError;
 use crate::output::claim::{claim, Writer};
-use crate::output::layout::{CameraFolder, ScenarioLayout};
+use crate::output::layout::ScenarioLayout;
 use crate::output::manifest::{Manifest, ManifestRecord, Packing};
 use crate::output::packs::Packs;
 use crate::output::{
@@ -203,11 +203,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let (moved, already) = match first.packing() {
         Packing::Folders => {
             // The files every scenario holds, by the shards' products.
-            let spec = &expansion.spec;
-            let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
-            let city = spec.world == crate::spec::WorldKind::City;
-            let layout = ScenarioLayout::new(spec.frames, city, first.products(), cameras);
-            merge_folders(out, &others, &sequence, (spec.seed, &layout), &mark_out)?
+            let layout = ScenarioLayout::of_spec(&expansion.spec, first.products());
+            merge_folders(out, &others, &sequence, (expansion.spec.seed, &layout), &mark_out)?
         }
         Packing::Tar { per_tar } => {
             merge_packs(out, &others, Packs::new(sequence, per_tar), expansion.spec.seed, &mark_out)?

@@ -175,6 +175,15 @@ impl Drop for Claim {
     }
 }
 
+/// The folders `std::fs::create_dir_all(dir)` would make: `dir` and each
+/// missing folder above it, deepest first.
+pub(crate) fn missing_folders(dir: &Path) -> Vec<PathBuf> {
+    dir.ancestors()
+        .take_while(|a| !a.as_os_str().is_empty() && fs::symlink_metadata(a).is_err())
+        .map(Path::to_path_buf)
+        .collect()
+}
+
 /// Claims `dir` (created if missing) for `writer`: locks it, then checks
 /// what it holds. `describe` says who holds the lock, for a refused second
 /// writer (e.g. the command line).
@@ -215,11 +224,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
     }
     check_ancestors(dir)?;
     check_contents(dir, writer)?;
-    let created: Vec<PathBuf> = dir
-        .ancestors()
-        .take_while(|a| !a.as_os_str().is_empty() && fs::symlink_metadata(a).is_err())
-        .map(Path::to_path_buf)
-        .collect();
+    let created = missing_folders(dir);
     fs::create_dir_all(dir).map_err(io(dir))?;
     let holder = format!("pid {} on {}: {describe}", std::process::id(), host_name());
     let mut claim = Claim { locks: Vec::new(), locked: true, created };

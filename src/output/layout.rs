@@ -86,6 +86,13 @@ pub fn frame_digits(frames: u32) -> usize {
 }
 
 impl ScenarioLayout {
+    /// The files every scenario of a dataset made from `spec` with
+    /// `products` holds (the readers' view: a spec's cameras, not a plan's).
+    pub fn of_spec(spec: &crate::spec::DatasetSpec, products: Products) -> ScenarioLayout {
+        let cameras = spec.cameras.iter().map(|c| CameraFolder { name: c.name.clone(), depth: c.depth }).collect();
+        ScenarioLayout::new(spec.frames, spec.world == crate::spec::WorldKind::City, products, cameras)
+    }
+
     pub fn new(frames: u32, city: bool, products: Products, cameras: Vec<CameraFolder>) -> ScenarioLayout {
         let images = products.images;
         ScenarioLayout {
