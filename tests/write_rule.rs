@@ -734,8 +734,50 @@ fn run_and_counterfactual_never_replace_a_folder_holding_the_users_files() {
     assert_refused(&run(&args), "are not files causalcity wrote there");
     assert_eq!(hash_tree(&cf), before, "nothing was replaced");
     // `run` into the counterfactual's folder would replace the pair.
-    assert_refused(&run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]), "counterfactual/");
+    let output = run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&cf)]);
+    assert_refused(&output, "holds a counterfactual pair");
     assert_eq!(hash_tree(&cf), before, "nothing was replaced");
+
+    // A user's file at the top of the pair folder stops the rerun too (it
+    // was written around, exit 0).
+    std::fs::remove_file(&notes).unwrap();
+    let top = cf.join(&name).join("notes.txt");
+    std::fs::write(&top, "the user's").unwrap();
+    let before = hash_tree(&cf);
+    let output = run(&args);
+    assert_refused(&output, "are not files causalcity wrote there");
+    assert!(String::from_utf8_lossy(&output.stderr).contains("notes.txt"), "the file is named");
+    assert_eq!(hash_tree(&cf), before, "nothing was replaced");
+
+    // `counterfactual` into a `run` folder would mix the two (it wrote its
+    // pair beside run's files, exit 0, and run then refused the folder).
+    let ran = dir.join("ran");
+    assert!(run(&["run", "--no-images", "--scenario", s(&example), "--out", s(&ran)]).status.success());
+    let before = hash_tree(&ran);
+    let output = run(&["counterfactual", "--no-images", "--scenario", s(&example), "--out", s(&ran)]);
+    assert_refused(&output, "holds a scenario of `causalcity run`");
+    assert_eq!(hash_tree(&ran), before, "run's folder is as it was");
+}
+
+#[test]
+fn a_file_of_several_scenarios_writes_none_when_one_folder_is_refused() {
+    let dir = fresh_dir("rule-run-several");
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/examples/stop-the-leader.json");
+    let mut scenarios: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(&example).unwrap()).unwrap();
+    let mut second = scenarios[0].clone();
+    second["Name"] = serde_json::json!("second_one");
+    scenarios.push(second);
+    let file = dir.join("two.json");
+    std::fs::write(&file, serde_json::to_vec_pretty(&scenarios).unwrap()).unwrap();
+    for command in ["run", "counterfactual"] {
+        let out = dir.join(command);
+        std::fs::create_dir_all(out.join("second_one")).unwrap();
+        std::fs::write(out.join("second_one/notes.txt"), "the user's").unwrap();
+        let before = hash_tree(&out);
+        let output = run(&[command, "--no-images", "--scenario", s(&file), "--out", s(&out)]);
+        assert_refused(&output, "notes.txt");
+        assert_eq!(hash_tree(&out), before, "{command}: the first scenario was not written either");
+    }
 }
 
 #[test]

@@ -205,6 +205,13 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
     refuse_inputs_below(&out, &scenarios, &[("the scenario file", options.scenario_file.as_path())])?;
     let describe = format!("run {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
+    refuse_unowned(
+        &out,
+        &scenarios,
+        &crate::output::OwnFiles::SCENARIO,
+        "a new scenario folder",
+        ("summary.json", "a counterfactual pair (`causalcity counterfactual`)"),
+    )?;
     let results: Vec<Result<Written, RunError>> = scenarios
         .par_iter()
         .map(|s| {
@@ -265,6 +272,13 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
     refuse_inputs_below(&out, &scenarios, &inputs)?;
     let describe = format!("counterfactual {}", options.scenario_file.display());
     let _claim = claim(&out, Writer::Scenarios, &describe).map_err(GenError::Claim)?;
+    refuse_unowned(
+        &out,
+        &scenarios,
+        &PAIR_OWN,
+        "a new pair folder",
+        ("checksums.sha256", "a scenario of `causalcity run`"),
+    )?;
     let results: Vec<Result<WrittenPair, RunError>> = pairs
         .par_iter()
         .map(|(s, factual, counterfactual)| {
@@ -289,6 +303,40 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
 pub struct WrittenPair {
     pub summary: PairSummary,
     pub warnings: Vec<String>,
+}
+
+/// Refuses, before anything is written, a scenario folder this command
+/// would replace (`<out>/<Name>/`) that lies behind a link or holds what it
+/// did not write there (`own`): a user's note, or the other command's
+/// output (a `run` folder given to `counterfactual` was mixed with the pair
+/// written around it). The writers check each folder again as they write.
+/// `other` is the mark of the other command's folder and what it is (the
+/// `checksums.sha256` at the top of a scenario folder `run` wrote).
+fn refuse_unowned(
+    out: &Path,
+    scenarios: &[LoadedScenario],
+    own: &crate::output::OwnFiles,
+    what: &str,
+    (mark, other): (&str, &str),
+) -> Result<(), RunError> {
+    let refused = |why: crate::output::Refused| RunError::from(GenError::Input(why.to_string()));
+    for s in scenarios {
+        let folder = out.join(&s.name);
+        crate::output::refuse_links_below(out, &folder).map_err(refused)?;
+        if std::fs::symlink_metadata(&folder).is_ok_and(|m| m.is_dir()) {
+            if std::fs::symlink_metadata(folder.join(mark)).is_ok() {
+                return Err(GenError::Input(format!(
+                    "{} holds {other} (it has {mark}), which {what} would replace or be mixed with: each \
+                     command writes its own --out. Nothing was written; give another --out (or move that \
+                     folder away), then rerun.",
+                    folder.display()
+                ))
+                .into());
+            }
+            crate::output::refuse_foreign(&folder, own, what).map_err(refused)?;
+        }
+    }
+    Ok(())
 }
 
 /// Refuses an input file that lies in a scenario folder this command
