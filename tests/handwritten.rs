@@ -513,6 +513,65 @@ fn extra_cameras_write_their_own_frames_and_the_chase_camera_keeps_its_car_centr
     assert!(checked > 0, "at least one car crossed the corner camera");
 }
 
+/// Rows of a camera's poses.csv (frame, car, px, py, in_view, ...).
+fn camera_rows(folder: &Path) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(folder.join("poses.csv")).unwrap();
+    text.lines().skip(1).map(|l| l.split(',').map(String::from).collect()).collect()
+}
+
+#[test]
+fn a_removed_car_is_seen_by_no_camera_and_the_cameras_following_it_stay_where_it_left() {
+    let dir = fresh_dir("hw-removed-camera");
+    let file = dir.join("removed.json");
+    std::fs::write(
+        &file,
+        r#"[{"Name": "s", "seed": 5, "frames": 8,
+  "Vehicles": [{"Id": "Car_1", "Spawn": "A1w", "SpawnAtDistance": 10, "DriveQueue": ["right"], "MergeAtDistances": [0]},
+               {"Id": "Car_2", "Spawn": "A1w", "SpawnAtDistance": 5, "DriveQueue": ["right"], "MergeAtDistances": [0]}],
+  "cameras": [{"name": "fp", "first_person": "Car_1", "width": 64, "height": 48},
+              {"name": "tp", "third_person": "Car_1", "width": 64, "height": 48},
+              {"name": "ch", "chase": "Car_1", "width": 64, "height": 256}],
+  "interventions": [{"at_frame": 3, "do": "remove", "car": "Car_1"}]}]"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let scenario = out.join("s");
+    // The bird's-eye log says from which frame Car_1 (id 0, mask 1) is gone.
+    let gone: Vec<usize> = std::fs::read_to_string(scenario.join("poses.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| r[2] == "0" && r[12] == "0")
+        .map(|r| r[0].parse().unwrap())
+        .collect();
+    assert_eq!(gone, (3..8).collect::<Vec<_>>(), "removed at frame 3");
+    for camera in ["tp", "ch"] {
+        let folder = scenario.join("cameras").join(camera);
+        let rows = camera_rows(&folder);
+        for frame in 0..8usize {
+            let seen = |car: &str| rows.iter().any(|r| r[0] == frame.to_string() && r[1] == car && r[4] == "1");
+            let mask = image::open(folder.join(format!("mask/{frame:04}.png"))).unwrap().to_luma8();
+            let pixels = |id: u8| mask.pixels().filter(|p| p[0] == id).count();
+            if frame < 3 {
+                assert!(seen("0") && pixels(1) > 0, "{camera} frame {frame}: Car_1 in view before its removal");
+            } else {
+                assert!(!seen("0"), "{camera} frame {frame}: the removed Car_1 is logged out of view");
+                assert_eq!(pixels(1), 0, "{camera} frame {frame}: no pixel of the removed Car_1");
+                // The camera stayed where Car_1 left: Car_2, behind it, is still seen.
+                assert!(seen("1") && pixels(2) > 0, "{camera} frame {frame}: Car_2 behind is in view");
+            }
+        }
+    }
+    let first_person = camera_rows(&scenario.join("cameras/fp"));
+    assert!(
+        first_person.iter().filter(|r| r[0].parse::<usize>().unwrap() >= 3).all(|r| r[1] != "0" || r[4] == "0"),
+        "the removed car is not in its own first-person view"
+    );
+}
+
 #[test]
 fn a_confounder_changed_mid_scenario_greys_the_frames_and_slows_every_car() {
     let pair =

@@ -51,7 +51,10 @@ impl<'a> Footage<'a> {
         let states: &[CarState] = &trajectories.states[frame];
         let city = plan.world.city().is_some();
         sprites.clear();
-        sprites.extend(plan.cars.iter().zip(states).enumerate().map(|(i, (car, s))| CarSprite {
+        // A removed car (parked off the map) is drawn by no camera, though
+        // one may look at its parking spot.
+        let on_map = plan.cars.iter().zip(states).enumerate().filter(|(_, (_, s))| !s.is_parked());
+        sprites.extend(on_map.map(|(i, (car, s))| CarSprite {
             position: s.position,
             yaw: s.yaw,
             length: car.length,

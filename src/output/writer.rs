@@ -309,9 +309,14 @@ impl FrameWriter<'_, '_> {
         let mut poses = b"frame,car,px,py,in_view,visible_px\n".to_vec();
         let mut bytes = 0;
         let (mut sprites, mut head_sprites) = (Vec::new(), Vec::new());
+        // A camera whose car is removed stays where the car left.
+        let mut last_follow = None;
         for (frame, states) in trajectories.states.iter().enumerate() {
             self.check_stop()?;
-            let follow = followed.and_then(|k| Some((states.get(k)?, plan.cars.get(k)?)));
+            let follow = followed
+                .and_then(|k| Some((states.get(k).filter(|s| !s.is_parked())?, plan.cars.get(k)?)))
+                .or(last_follow);
+            last_follow = follow;
             let camera = camera_plan
                 .pinhole_at(follow.map(|(s, c)| (s.position, s.yaw, c.length)), pinhole.as_ref())
                 .expect("a perspective kind has a pinhole");
@@ -338,7 +343,7 @@ impl FrameWriter<'_, '_> {
             for (car, state) in plan.cars.iter().zip(states) {
                 let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
                 let pixel = camera.to_pixel(centre);
-                let in_view = pixel.is_some_and(|p| camera.contains_pixel(p));
+                let in_view = !state.is_parked() && pixel.is_some_and(|p| camera.contains_pixel(p));
                 push_camera_pose(&mut poses, frame, car.id, pixel, in_view, Some(visible[car.mask_id as usize]));
             }
         }
@@ -360,7 +365,7 @@ impl FrameWriter<'_, '_> {
         let Footage { plan, trajectories, .. } = *footage;
         let name = &camera_plan.name;
         let chased = |states: &[CarState]| match camera_plan.kind {
-            CameraKind::Chase { car } => states.get(car).map(|s| (s.position, s.yaw)),
+            CameraKind::Chase { car } => states.get(car).filter(|s| !s.is_parked()).map(|s| (s.position, s.yaw)),
             _ => None,
         };
         let size = (camera_plan.width, camera_plan.height);
@@ -371,9 +376,12 @@ impl FrameWriter<'_, '_> {
         let mut bytes = 0;
         let mut sprites = Vec::with_capacity(plan.cars.len());
         let mut head_sprites = Vec::with_capacity(footage.heads.len());
+        // A chase camera whose car is removed stays where the car left.
+        let mut last_chased = None;
         for (frame, states) in trajectories.states.iter().enumerate() {
             self.check_stop()?;
-            let camera = camera_plan.camera_at(chased(states));
+            last_chased = chased(states).or(last_chased);
+            let camera = camera_plan.camera_at(last_chased);
             let look = SceneLook::at_frame(plan, trajectories, frame);
             if trajectories.confounder_changes.iter().any(|(from, _)| *from == frame) {
                 fixed = None;
@@ -411,7 +419,8 @@ impl FrameWriter<'_, '_> {
             }
             for (car, state) in plan.cars.iter().zip(states) {
                 let pixel = camera.to_pixel(state.position);
-                push_camera_pose(&mut poses, frame, car.id, Some(pixel), camera.contains_pixel(pixel), None);
+                let in_view = !state.is_parked() && camera.contains_pixel(pixel);
+                push_camera_pose(&mut poses, frame, car.id, Some(pixel), in_view, None);
             }
         }
         bytes += self.dir.write_file(&ScenarioLayout::camera_poses(name), &poses)?;

@@ -40,6 +40,12 @@ impl CarState {
         CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 }
     }
 
+    /// Whether this is a removed car's state (parked off the map): no
+    /// camera draws it or sees it.
+    pub fn is_parked(&self) -> bool {
+        Self::is_parked_at(self.position.x, self.position.y)
+    }
+
     /// Whether a logged position (metres, as poses.csv rounds it) is a
     /// removed car's parking spot rather than a place on the map.
     pub fn is_parked_at(x: f64, y: f64) -> bool {
