@@ -845,6 +845,23 @@ fn intervention_files_are_read_strictly() {
             r#"[{"at": 1, "do": "none"}, {"at": 1, "do": "remove", "car": "Car_1", "colour": "red"}]"#,
             vec!["interventions[1]", "unknown field `colour`"],
         ),
+        // Times past any scenario, or shorter than any frame (1e300 s was
+        // taken and printed with 300 digits).
+        (
+            "a-stop-of-1e300-s",
+            r#"[{"at": 1, "do": "stop", "car": "Car_1", "seconds": 1e300}]"#,
+            vec!["interventions[0].seconds", "1e300 is not allowed", "from 0.001 to 1000000"],
+        ),
+        (
+            "a-phase-of-1e-300-s",
+            r#"[{"at": 1, "do": "set_light_plan", "light": "AC/W/straight", "schedule": [{"colour": "red", "duration": 1e-300}]}]"#,
+            vec!["interventions[0].schedule[0].duration", "1e-300 is not allowed", "from 0.001 to 1000000"],
+        ),
+        (
+            "an-offset-of-1e308-s",
+            r#"[{"at": 1, "do": "set_light_plan", "light": "AC/W/straight", "schedule": [{"colour": "red", "duration": 1}], "offset": -1e308}]"#,
+            vec!["interventions[0].offset", "-1e308 is not allowed", "from -1000000 to 1000000"],
+        ),
     ];
     for (case, text, parts) in &cases {
         let file = dir.join(format!("{case}.json"));

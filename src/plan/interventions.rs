@@ -110,7 +110,8 @@ impl Effect {
             }
             Effect::ReplaceActions { car: c, actions, .. } => {
                 let names: Vec<&str> = actions.iter().map(|a| a.name()).collect();
-                format!("{} drives {} from now on", car(*c), names.join(", "))
+                let names = if names.is_empty() { "no further actions".to_string() } else { names.join(", ") };
+                format!("{} drives {names} from now on", car(*c))
             }
             Effect::SetConfounder { confounder, value } => format!("{} becomes {value}", confounder.name()),
         }

@@ -301,6 +301,10 @@ pub const MAX_FRAME_INTERVAL_S: f64 = 10.0;
 /// millimetre (below it, frames repeat one another and speeds in stats
 /// ran to hundreds of digits).
 pub const MIN_FRAME_INTERVAL_S: f64 = 0.001;
+/// The longest scenario a spec allows, seconds ([`MAX_FRAMES`] frames
+/// [`MAX_FRAME_INTERVAL_S`] apart): a time an intervention holds, or a
+/// light plan's offset, needs no more.
+pub const MAX_SCENARIO_S: f64 = MAX_FRAMES as f64 * MAX_FRAME_INTERVAL_S;
 const MAX_SCENARIOS_PER_SPLIT: u32 = 10_000_000;
 const MAX_ACTIONS: u32 = 100;
 

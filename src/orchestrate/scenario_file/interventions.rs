@@ -58,6 +58,24 @@ fn resolve_intervention(
             Err((field.to_string(), format!("{} is not allowed: {what}, above 0", Shown(v))))
         }
     };
+    // A time held or a phase's length: from a millisecond (the shortest
+    // frame interval) to the longest scenario (a hold that long lasts to
+    // the end of any; 1e300 s was taken and printed with 300 digits).
+    let (shortest, longest) = (crate::spec::MIN_FRAME_INTERVAL_S, crate::spec::MAX_SCENARIO_S);
+    let duration = |field: &str, v: f64, what: &str| {
+        if v.is_finite() && (shortest..=longest).contains(&v) {
+            Ok(v)
+        } else {
+            Err((
+                field.to_string(),
+                format!(
+                    "{} is not allowed: {what}, from {shortest} to {longest} (the longest scenario a spec \
+                     allows)",
+                    Shown(v)
+                ),
+            ))
+        }
+    };
     // An intervention after the last frame changes nothing a file records:
     // refused, so that a counterfactual is never silently the factual run.
     let (frames, interval) = (expansion.spec.frames, expansion.spec.frame_interval());
@@ -121,7 +139,7 @@ fn resolve_intervention(
         RawEffect::None {} => return Ok(None),
         RawEffect::Stop { car, seconds } => Effect::Stop {
             car: car_named("car", car)?,
-            seconds: positive("seconds", *seconds, "seconds to stay stopped")?,
+            seconds: duration("seconds", *seconds, "seconds to stay stopped")?,
         },
         RawEffect::RunRedLight { car } => Effect::RunRedLights { car: car_named("car", car)? },
         RawEffect::SetDesiredSpeed { car, speed } => {
@@ -138,7 +156,7 @@ fn resolve_intervention(
         RawEffect::SetLight { light, colour, seconds } => Effect::SetLight {
             light: light_named("light", light)?,
             colour: *colour,
-            seconds: positive("seconds", *seconds, "seconds the colour is held")?,
+            seconds: duration("seconds", *seconds, "seconds the colour is held")?,
         },
         RawEffect::ReplaceActions { car, actions, merge_distances } => {
             let car = car_named("car", car)?;
@@ -169,11 +187,14 @@ fn resolve_intervention(
                 return Err(("schedule".into(), "expected [{\"colour\": \"green\", \"duration\": 10}, ...]".into()));
             }
             for (k, step) in schedule.iter().enumerate() {
-                positive(&format!("schedule[{k}].duration"), step.duration, "seconds")?;
+                duration(&format!("schedule[{k}].duration"), step.duration, "seconds")?;
             }
             let offset = offset.unwrap_or(0.0);
-            if !offset.is_finite() {
-                return Err(("offset".into(), format!("{offset} is not a number of seconds")));
+            if !(offset.is_finite() && offset.abs() <= longest) {
+                return Err((
+                    "offset".into(),
+                    format!("{} is not allowed: seconds, from -{longest} to {longest}", Shown(offset)),
+                ));
             }
             Effect::SetLightPlan { light, offset, schedule: schedule.clone() }
         }
