@@ -570,6 +570,22 @@ fn a_removed_car_is_seen_by_no_camera_and_the_cameras_following_it_stay_where_it
         first_person.iter().filter(|r| r[0].parse::<usize>().unwrap() >= 3).all(|r| r[1] != "0" || r[4] == "0"),
         "the removed car is not in its own first-person view"
     );
+
+    // Without images the cameras write nothing, and both commands say so
+    // (gen did; run and counterfactual were silent).
+    for command in ["run", "counterfactual"] {
+        let out = dir.join(format!("{command}-no-images"));
+        let output =
+            run(&[command, "--no-images", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{stderr}");
+        assert!(
+            stderr.contains("scenario \"s\": --no-images: its cameras (fp, tp, ch) write nothing"),
+            "{command}: {stderr}"
+        );
+        let cameras = if command == "run" { out.join("s/cameras") } else { out.join("s/factual/cameras") };
+        assert!(!cameras.exists(), "{command}: no cameras/ folder");
+    }
 }
 
 #[test]
@@ -844,6 +860,17 @@ fn intervention_files_are_read_strictly() {
             "unknown-key",
             r#"[{"at": 1, "do": "none"}, {"at": 1, "do": "remove", "car": "Car_1", "colour": "red"}]"#,
             vec!["interventions[1]", "unknown field `colour`"],
+        ),
+        // Not interventions at all: it said "give exactly one trigger".
+        (
+            "a-list-wrapped-in-an-object",
+            r#"{"interventions": [{"at": 1, "do": "remove", "car": "Car_1"}]}"#,
+            vec!["interventions[0]", "has no trigger and no \"do\"", "the list itself"],
+        ),
+        (
+            "a-scenario-file",
+            r#"[{"Name": "s", "Vehicles": [], "interventions": []}]"#,
+            vec!["interventions[0]", "keys \"Name\", \"Vehicles\"", "given as --scenario"],
         ),
         // Times past any scenario, or shorter than any frame (1e300 s was
         // taken and printed with 300 digits).

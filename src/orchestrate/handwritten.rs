@@ -127,11 +127,25 @@ pub struct Written {
     pub warnings: Vec<String>,
 }
 
-/// The warnings of scenario `s`: what reading adapted, then every action
-/// the simulation adapted or skipped, in time order.
-fn warnings(s: &LoadedScenario, trajectories: &Trajectories) -> Vec<String> {
+/// The warnings of scenario `s`: what reading adapted (and cameras that
+/// `--no-images` leaves without pictures), then every action the
+/// simulation adapted or skipped, in time order.
+fn warnings(s: &LoadedScenario, trajectories: &Trajectories, images: bool) -> Vec<String> {
     let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
-    read.chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect()
+    read.chain(camera_warning(s, images)).chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect()
+}
+
+/// A camera is pictures: without images it writes nothing, which
+/// scenario.json (listing it) does not tell. `gen` says so too.
+fn camera_warning(s: &LoadedScenario, images: bool) -> Option<String> {
+    let names: Vec<&str> = s.plan.cameras.iter().map(|c| c.name.as_str()).collect();
+    (!images && !names.is_empty()).then(|| {
+        format!(
+            "scenario {:?}: --no-images: its cameras ({}) write nothing (no cameras/ folders)",
+            s.name,
+            names.join(", ")
+        )
+    })
 }
 
 /// Every action the simulation of `plan` adapted or skipped, in time order,
@@ -229,7 +243,7 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
                 &mut writer.buffers(),
                 &times,
             )?;
-            let warnings = warnings(s, &trajectories);
+            let warnings = warnings(s, &trajectories, options.images);
             Ok(Written { scenario: s.name.clone(), path, bytes, warnings })
         })
         .collect();
@@ -292,7 +306,8 @@ pub fn counterfactual(options: &RunOptions, intervention_file: Option<&Path>) ->
                 (&out, &out.join(&s.name)),
             )?;
             let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
-            Ok(WrittenPair { summary, warnings: read.chain(driven).collect() })
+            let warnings = read.chain(camera_warning(s, options.images)).chain(driven).collect();
+            Ok(WrittenPair { summary, warnings })
         })
         .collect();
     gathered(results, out)

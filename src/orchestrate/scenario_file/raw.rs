@@ -132,6 +132,36 @@ pub(super) fn raw_intervention(value: Value, path: &str) -> Result<RawInterventi
             effect.insert(key, v);
         }
     }
+    // Neither a trigger nor "do": not an intervention at all (a scenario,
+    // or a list wrapped in an object), which "give exactly one trigger"
+    // did not say.
+    if trigger.is_empty() && !effect.contains_key("do") {
+        let short = |k: &str| {
+            if k.chars().count() > 40 {
+                format!("{}...", k.chars().take(40).collect::<String>())
+            } else {
+                k.to_string()
+            }
+        };
+        let keys: Vec<String> = effect.keys().take(8).map(|k| format!("{:?}", short(k))).collect();
+        let more = if effect.len() > keys.len() { ", ..." } else { "" };
+        let hint = if effect.contains_key("Vehicles") || effect.contains_key("Name") {
+            "; it looks like a scenario (it has Name or Vehicles), which is given as --scenario"
+        } else if effect.contains_key("interventions") {
+            "; an intervention file is the list itself ([{\"at\": 6.0, \"do\": ...}, ...]), not an object \
+             holding one"
+        } else {
+            ""
+        };
+        return Err(fail(
+            "",
+            &format!(
+                "this object (keys {}{more}) has no trigger and no \"do\": it is not an intervention such as \
+                 {{\"at\": 6.0, \"do\": \"stop\", \"car\": \"Car_1\", \"seconds\": 4}}{hint}",
+                if keys.is_empty() { "none".to_string() } else { keys.join(", ") }
+            ),
+        ));
+    }
     if trigger.len() != 1 {
         return Err(fail(
             "",
