@@ -37,6 +37,18 @@ impl Error {
     pub fn failure(message: impl fmt::Display) -> Error {
         Error::Failure(message.to_string())
     }
+
+    /// A file of the dataset at `dataset` that is missing or cannot be read
+    /// as causalcity wrote it: bad input (readers exited 1), told with how
+    /// to find every problem.
+    pub fn damaged(dataset: &std::path::Path, message: impl fmt::Display) -> Error {
+        Error::Input(format!(
+            "{message}\n{} is damaged: `causalcity validate {}` names every problem, and rerunning the gen that \
+             wrote it repairs them",
+            dataset.display(),
+            dataset.display()
+        ))
+    }
 }
 
 impl fmt::Display for Error {

@@ -140,9 +140,10 @@ fn render(
     let scenario_of_camera = scenario_of_camera(scenario_dir);
     let camera = scenario_of_camera.is_some();
     let meta_dir = scenario_of_camera.unwrap_or(scenario_dir);
-    let scenario = ScenarioSummary::read(meta_dir).map_err(Error::Failure)?;
+    // A scenario folder that cannot be read is bad input, as for every reader.
+    let scenario = ScenarioSummary::read(meta_dir).map_err(Error::Input)?;
     let (frames, cars) = (scenario.frames as usize, scenario.cars.len());
-    let poses = PoseLog::read(meta_dir, frames, cars).map_err(Error::Failure)?;
+    let poses = PoseLog::read(meta_dir, frames, cars).map_err(Error::Input)?;
     let options = &PreviewOptions {
         trails: options.trails && !camera,
         arrows: options.arrows && !camera,
@@ -152,7 +153,7 @@ fn render(
     let digits = frame_digits(scenario.frames);
     let first = scenario_dir.join(format!("rgb/{:0digits$}.png", 0));
     if !first.exists() {
-        return Err(Error::Failure(format!(
+        return Err(Error::Input(format!(
             "{} has no frames (made with --no-images?): nothing to preview",
             scenario_dir.display()
         )));

@@ -50,20 +50,20 @@ fn a_scenario_json_edited_out_of_range_is_named_by_every_reader() {
     let data = city(&dir, 20);
     let bad_edge = edited(&data, &dir.join("edge"), false, |v| v["edges"] = serde_json::json!([[0, 99]]));
     for command in ["stats", "baseline"] {
-        assert_error(&run(&[command, s(&bad_edge)]), 1, "edges: pair [0, 99] names a car beyond the 4 cars");
+        assert_error(&run(&[command, s(&bad_edge)]), 2, "edges: pair [0, 99] names a car beyond the 4 cars");
     }
     let no_interval = edited(&data, &dir.join("interval"), false, |v| v["frame_interval"] = 0.into());
-    assert_error(&run(&["baseline", s(&no_interval)]), 1, "frame_interval 0");
+    assert_error(&run(&["baseline", s(&no_interval)]), 2, "frame_interval 0");
     // Claims a billion frames: refused before memory is set aside for them.
     let billion = edited(&data, &dir.join("billion"), false, |v| v["frames"] = 1_000_000_000u64.into());
     for command in ["stats", "baseline"] {
-        assert_error(&run(&[command, s(&billion)]), 1, "frames 1000000000");
+        assert_error(&run(&[command, s(&billion)]), 2, "frames 1000000000");
     }
     let scenario = billion.join("cars04_edges50/train/00000");
-    assert_error(&run(&["preview", s(&scenario), "--out", s(&dir.join("p.gif"))]), 1, "frames 1000000000");
+    assert_error(&run(&["preview", s(&scenario), "--out", s(&dir.join("p.gif"))]), 2, "frames 1000000000");
     // Claims the most a spec allows, far more than its poses.csv holds.
     let most = edited(&data, &dir.join("most"), false, |v| v["frames"] = 100_000.into());
-    assert_error(&run(&["baseline", s(&most)]), 1, "more rows than");
+    assert_error(&run(&["baseline", s(&most)]), 2, "more rows than");
     let manifest = edited(&data, &dir.join("manifest"), true, |v| v["spec"]["frames"] = 0.into());
     assert_error(&run(&["export", "nri", s(&manifest), "--out", s(&dir.join("nri"))]), 2, "the spec in it is invalid");
     assert!(!dir.join("nri").exists(), "nothing exported");
@@ -236,7 +236,7 @@ fn pipes_devices_and_linked_folders_are_refused_by_name_never_read_without_end()
     let checked = run_within(&["validate", s(&linked_file)], 30);
     assert_eq!(checked.status.code(), Some(1), "{}", stderr(&checked));
     assert!(String::from_utf8_lossy(&checked.stdout).contains("scenario.json: a symbolic link"));
-    assert_error(&run_within(&["stats", s(&linked_file)], 30), 1, "scenario.json: not a regular file");
+    assert_error(&run_within(&["stats", s(&linked_file)], 30), 2, "scenario.json: not a regular file");
     // A pipe at the lock file: validate asks whether a command is writing
     // the folder without opening it (it hung).
     let locked = dir.join("piped-lock");
@@ -310,11 +310,11 @@ fn stats_and_heatmap_read_poses_and_events_as_every_reader_does() {
     for (copy, says) in
         [(&emptied, "poses.csv (0 bytes) can hold"), (&nan, r#"poses.csv line 2: speed "NaN" is not allowed"#)]
     {
-        assert_error(&run(&["stats", s(copy)]), 1, says);
-        assert_error(&run(&["heatmap", s(copy), "--out", s(&heat)]), 1, says);
+        assert_error(&run(&["stats", s(copy)]), 2, says);
+        assert_error(&run(&["heatmap", s(copy), "--out", s(&heat)]), 2, says);
         assert!(!heat.exists(), "no picture of a damaged dataset");
     }
-    assert_error(&run(&["stats", s(&no_header)]), 1, "events.csv: columns [], expected frame,t,kind");
+    assert_error(&run(&["stats", s(&no_header)]), 2, "events.csv: columns [], expected frame,t,kind");
     assert!(run(&["stats", s(&data)]).status.success());
 }
 
@@ -400,7 +400,7 @@ fn pose_values_outside_the_schema_and_malformed_graphs_are_named_by_every_reader
     for (name, row, column, value, says) in &cases {
         let bad = edited_file(&data, &dir.join(name), "poses.csv", |t| pose_set(t, *row, *column, value));
         for command in ["stats", "baseline"] {
-            assert_error(&run(&[command, s(&bad)]), 1, says);
+            assert_error(&run(&[command, s(&bad)]), 2, says);
         }
         let report = run(&["validate", s(&bad)]);
         assert_eq!(report.status.code(), Some(1), "validate {name}");
@@ -416,7 +416,7 @@ fn pose_values_outside_the_schema_and_malformed_graphs_are_named_by_every_reader
     let poses = piped.join("cars04_edges50/train/00000/poses.csv");
     std::fs::remove_file(&poses).unwrap();
     assert!(std::process::Command::new("mkfifo").arg(&poses).status().unwrap().success());
-    assert_error(&run_within(&["stats", s(&piped)], 60), 1, "not a regular file (a pipe or a device)");
+    assert_error(&run_within(&["stats", s(&piped)], 60), 2, "not a regular file (a pipe or a device)");
 
     for (name, field, pairs, says) in [
         ("self-loop", "edges", serde_json::json!([[2, 2]]), "edges: pair [2, 2] links a car to itself"),
@@ -424,7 +424,7 @@ fn pose_values_outside_the_schema_and_malformed_graphs_are_named_by_every_reader
         ("beyond", "causal_edges", serde_json::json!([[0, 50]]), "causal_edges: pair [0, 50] names a car beyond"),
     ] {
         let bad = edited(&data, &dir.join(name), false, |v| v[field] = pairs.clone());
-        assert_error(&run(&["stats", s(&bad)]), 1, says);
+        assert_error(&run(&["stats", s(&bad)]), 2, says);
     }
 }
 
@@ -446,7 +446,7 @@ fn export_nri_refuses_non_finite_pixels_and_a_manifest_claiming_more_than_memory
         bytes[start + 8..start + 12].copy_from_slice(&value.to_le_bytes());
         std::fs::write(&path, bytes).unwrap();
         let out = dir.join(format!("{name}-nri"));
-        assert_error(&run(&["export", "nri", s(&copy), "--out", s(&out), "--quiet"]), 1, says);
+        assert_error(&run(&["export", "nri", s(&copy), "--out", s(&out), "--quiet"]), 2, says);
         assert!(!out.join("cars04_edges50/loc_train.npy").exists(), "nothing exported");
     }
     // A manifest edited (its hash recomputed) to claim 88-car scenarios of
@@ -584,8 +584,10 @@ fn a_scenario_moved_into_another_scenarios_folder_is_named_by_every_reader() {
         vec!["heatmap", s(&data), "--out", s(&dir.join("h.png"))],
     ] {
         let output = run(&args);
-        assert_eq!(output.status.code(), Some(1), "{args:?}: {}", stderr(&output));
+        // A damaged dataset is bad input (readers exited 1), with the way to every problem.
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {}", stderr(&output));
         assert!(stderr(&output).contains(says), "{args:?}: {}", stderr(&output));
+        assert!(stderr(&output).contains("is damaged: `causalcity validate"), "{args:?}: {}", stderr(&output));
     }
     assert!(!dir.join("h.png").exists());
     let report = run(&["validate", s(&data)]);

@@ -265,8 +265,10 @@ fn an_nri_export_that_fails_part_way_leaves_an_earlier_export_as_it_was() {
     std::fs::remove_dir_all(damaged.join("cars04_edges50/test/00000")).unwrap();
     let failed = run(&["export", "nri", damaged.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
     let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert_eq!(failed.status.code(), Some(1), "{stderr}");
+    // A damaged dataset is bad input (it exited 1), told how to find every problem.
+    assert_eq!(failed.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("test/00000"), "{stderr}");
+    assert!(stderr.contains("is damaged: `causalcity validate"), "{stderr}");
     assert_eq!(hash_tree(&out), before, "the earlier export whole, and nothing staged left behind");
     // The earlier dataset exports again over it, as before.
     let again = run(&["export", "nri", earlier.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
@@ -306,8 +308,9 @@ fn a_failed_export_leaves_its_out_as_it_found_it() {
             }
             let failed = run(&["export", kind, data.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
             let stderr = String::from_utf8_lossy(&failed.stderr);
-            assert_eq!(failed.status.code(), Some(1), "{kind}: {stderr}");
+            assert_eq!(failed.status.code(), Some(2), "{kind}: {stderr}");
             assert!(stderr.contains(damaged), "{kind}: {stderr}");
+            assert!(stderr.contains("is damaged: `causalcity validate"), "{kind}: {stderr}");
             match made {
                 false => assert!(!out.parent().unwrap().exists(), "{kind}: {:?}", hash_tree(&out)),
                 true => assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "{kind}: {:?}", hash_tree(&out)),

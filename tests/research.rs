@@ -279,8 +279,10 @@ fn the_baseline_needs_links_somewhere_in_train() {
     let data = dir.join("data");
     gen_ok(&write_spec(&dir, &toy_spec("empty", &[(4, 0.0)], (2, 0, 1), 30)), &data, &["--quiet", "--no-images"]);
     let output = run(&["baseline", data.to_str().unwrap()]);
-    assert_eq!(output.status.code(), Some(1));
+    // Bad input, and not a damaged dataset.
+    assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("no leader-follower pairs"));
+    assert!(!String::from_utf8_lossy(&output.stderr).contains("is damaged"));
 }
 
 #[cfg(feature = "hdf5")]

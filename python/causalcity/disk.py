@@ -349,11 +349,13 @@ class _Packed:
         return state
 
 
-def _check_is(scenario: "Scenario", key: "Key", record: Path) -> None:
+def _check_is(scenario: "Scenario", key: "Key", record: Path, seed: Any) -> None:
     """Refuses a scenario whose scenario.json (at ``record``) names another
-    key than the one it was read for: a folder linked to another
-    scenario's, an edited index, or pack members renamed were handed back
-    as ``key`` with the other scenario's arrays."""
+    key than the one it was read for, or another spec seed than the
+    dataset's (``seed``): a folder linked to another scenario's, an edited
+    index, pack members renamed, or a scenario copied in from another
+    dataset at the same key were handed back as ``key`` with the other
+    scenario's arrays."""
     meta = scenario.metadata
     found = (meta.get("group"), meta.get("split"), meta.get("index"))
     if found != (key.group, key.split, key.index):
@@ -361,6 +363,12 @@ def _check_is(scenario: "Scenario", key: "Key", record: Path) -> None:
             f"{_os.fspath(record)}: it is scenario {found[0]}/{found[1]} index {found[2]}, not {key.folder} "
             f"(index {key.index}) where it was read: a linked or renamed folder, or an edited scenario.json; "
             "causalcity validate names what else is wrong"
+        )
+    if meta.get("seed") != seed:
+        raise InputError(
+            f"{_os.fspath(record)}: its seed is {meta.get('seed')!r}, but the dataset's spec has seed {seed!r}: a "
+            "scenario of another dataset, copied or moved in, or an edited scenario.json; causalcity validate names "
+            "what else is wrong"
         )
 
 
@@ -466,11 +474,19 @@ class Dataset(_Packed):
         images = self._images if images is None else _flag("images", images)
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
+            # A dataset holds its own scenarios: one read through a link may
+            # be anyone's (as causalcity's readers and validate have it).
+            linked = next((p for p in (folder.parent.parent, folder.parent, folder) if p.is_symlink()), None)
+            if linked is not None:
+                raise InputError(
+                    f"{_os.fspath(linked)} is a symbolic link (to {_os.readlink(linked)}): a dataset's scenarios are "
+                    "read from its own folders, never through a link; causalcity validate names what else is wrong"
+                )
             if not (folder / "scenario.json").is_file():
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
             self._require_frames(folder, images)
             scenario = load(folder, images=images)
-            _check_is(scenario, key, folder / "scenario.json")
+            _check_is(scenario, key, folder / "scenario.json", self.spec.seed)
             return scenario
         scratch = self._unpack(key, images)
         if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
@@ -478,7 +494,7 @@ class Dataset(_Packed):
         with self._as_members(scratch, key):
             self._require_frames(Path(scratch.name), images, self.pack_of(key))
             scenario = load(Path(scratch.name), images=images)
-            _check_is(scenario, key, Path(scratch.name) / "scenario.json")
+            _check_is(scenario, key, Path(scratch.name) / "scenario.json", self.spec.seed)
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
         _keep_with_frames(scratch, [scenario])

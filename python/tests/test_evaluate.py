@@ -461,7 +461,9 @@ def test_the_counterfactual_task_is_scored_from_the_intervention_on_with_the_aff
     summary["cars"] = summary["cars"][:2]
     summary_path.write_text(json.dumps(summary))
     run = cli("evaluate", damaged, tmp_path / "cf.npz")
-    assert run.returncode == 1 and "summary.json: names 2 cars" in run.stderr, run.stderr
+    # A damaged dataset is bad input (it exited 1).
+    assert run.returncode == 2 and "summary.json: names 2 cars" in run.stderr, run.stderr
+    assert "is damaged: `causalcity validate" in run.stderr, run.stderr
     # On a gen dataset (no re-simulated runs), counterfactual and affected arrays are refused.
     for suffix in ("/counterfactual", "/affected"):
         np.savez(tmp_path / "wrong.npz", **{"cars08_edges50/test/00000" + suffix: np.zeros((3, 8, 2))})

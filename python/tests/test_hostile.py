@@ -214,7 +214,7 @@ def test_a_damaged_dataset_file_is_named_with_exit_1(toy, tmp_path, damage):
     damaged = copy / GROUP / "train" / "00001" / damage
     damaged.write_text("{ not json" if damage == "scenario.json" else "")
     run = methods("constant_velocity", copy, "--out", tmp_path / "p.npz")
-    assert run.returncode == 1, (run.returncode, run.stderr)
+    assert run.returncode == 2, (run.returncode, run.stderr)  # a damaged dataset is bad input
     assert str(damaged) in run.stderr and "Traceback" not in run.stderr, run.stderr
 
 
@@ -266,7 +266,7 @@ def test_a_scenario_folder_missing_from_a_complete_dataset_is_named_not_skipped(
         f.unlink()
     gone.rmdir()
     run = methods("path", copy, "--out", tmp_path / "p.npz")
-    assert run.returncode == 1, (run.returncode, run.stderr)
+    assert run.returncode == 2, (run.returncode, run.stderr)
     assert str(split) in run.stderr and "manifest.json lists" in run.stderr and "Traceback" not in run.stderr
     assert not (tmp_path / "p.npz").exists()
     # A scenario still being written (hidden) is not one of the finished.

@@ -550,7 +550,7 @@ def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):
                                    str(tmp_path / f"{damage}.npz")], capture_output=True, text=True, timeout=60)  # fmt: skip
         except subprocess.TimeoutExpired:
             pytest.fail("methods: still reading the pipe after 60 s")
-        assert done.returncode == 1, done.stderr
+        assert done.returncode == 2, done.stderr  # a damaged dataset is bad input
         said = {"pipe": "a pipe where gen writes a file", "nan": "frame 3, car 1 holds nan"}[damage]
         assert f"{pixels}: {said}" in done.stderr and "Traceback" not in done.stderr, done.stderr
         assert not (tmp_path / f"{damage}.npz").exists()

@@ -114,7 +114,7 @@ pub const LAG_GRID_S: [f64; 6] = [2.0, 4.0, 8.0, 15.0, 30.0, 60.0];
 /// Runs the baseline over the dataset in `dir`, with lags up to `max_lag_s`
 /// seconds, or (`None`) the lag of [`LAG_GRID_S`] that ranks train best.
 /// Bad input (a lag that is no positive number, a graph the dataset does not
-/// have) is an [`Error::Input`]; unreadable files an [`Error::Failure`].
+/// have), and unreadable files (a damaged dataset), are an [`Error::Input`].
 pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<BaselineReport, Error> {
     if let Some(lag) = max_lag_s.filter(|l| !(*l > 0.0 && l.is_finite())) {
         return Err(Error::Input(format!("--max-lag must be a positive number of seconds, not {lag}")));
@@ -153,17 +153,20 @@ pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<
             LAG_GRID_S[..=covering].to_vec()
         }
     };
-    score(dir, &dataset, &lags, graph).map_err(Error::Failure)
+    score(dir, &dataset, &lags, graph)
 }
 
 /// [`baseline`] of an opened dataset, the dynamics score at each of `lags`.
-fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Result<BaselineReport, String> {
+/// A scenario it cannot read is the dataset's damage ([`Error::damaged`]).
+fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Result<BaselineReport, Error> {
     let spec = dataset.spec();
     let mut per_group = Vec::new();
     for group in &spec.groups {
         let name = group.name();
-        let score_split = |split: Split| -> Result<Vec<ScenarioScores>, String> {
-            dataset.with_split(&name, split, |dirs| dirs.par_iter().map(|d| score_scenario(d, lags, graph)).collect())
+        let score_split = |split: Split| -> Result<Vec<ScenarioScores>, Error> {
+            dataset
+                .with_split(&name, split, |dirs| dirs.par_iter().map(|d| score_scenario(d, lags, graph)).collect())
+                .map_err(|e| Error::damaged(dir, e))
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }
@@ -193,11 +196,11 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
                 (Some(t), _) => (t, "train"),
                 (None, Some(t)) => (t, "pooled"),
                 (None, None) => {
-                    return Err(format!(
+                    return Err(Error::Input(format!(
                         "{}: no leader-follower pairs in any train split, so there is no threshold to learn; \
                          generate train scenarios with edge_proportion > 0",
                         dir.display()
-                    ))
+                    )))
                 }
             };
             let counts = Counts::at(&test_pairs, threshold);

@@ -556,8 +556,8 @@ impl PairTruth {
 
 impl ScenarioPredictions {
     /// (cars, frames) from its scenario.json, read once. A dataset file
-    /// that cannot be read is a failure, kept in `failure`; the returned
-    /// message only stops the reader.
+    /// that cannot be read is kept in `failure` (the dataset's damage, bad
+    /// input once told); the returned message only stops the reader.
     fn size(&mut self, failure: &mut Option<Error>) -> Result<(usize, usize), String> {
         if let Some(size) = self.size {
             return Ok(size);
@@ -629,7 +629,8 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     // they were unpacked.
     let named = |e: Error| match e {
         Error::Input(m) => Error::Input(truth.name_unpacked(m)),
-        Error::Failure(m) => Error::Failure(truth.name_unpacked(m)),
+        // (match_scenarios fails only on the dataset's own files.)
+        Error::Failure(m) => Error::damaged(&truth.dir, truth.name_unpacked(m)),
         other => other,
     };
     let (scored, record) = match_scenarios(&truth, predictions, options).map_err(named)?;
@@ -981,7 +982,7 @@ fn score_in_turn(
         let (group, split) = (&run[0].group, run[0].split);
         // Unpacked here (the folders' paths are the run's own); a failure to
         // unpack is the dataset's, a bad score the input's.
-        dataset.scenario_dirs(group, split).map_err(Error::Failure)?;
+        dataset.scenario_dirs(group, split).map_err(|e| Error::damaged(&truth.dir, e))?;
         let scores = score(run).map_err(|e| truth.name_unpacked(e));
         dataset.release(group, split).map_err(Error::Failure)?;
         results.extend(scores.map_err(Error::Input)?);

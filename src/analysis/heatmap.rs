@@ -103,10 +103,12 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
         )));
     }
     let file = claim_file(out, &[("the dataset it maps", dataset)], FileKind::Png)?;
-    draw(&opened, &file, filter).map_err(Error::Failure)
+    draw(dataset, &opened, &file, filter)
 }
 
-fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<HeatmapSummary, String> {
+/// Counts and draws; a scenario file that cannot be read is the dataset's
+/// damage ([`Error::damaged`]), a failed write a failure.
+fn draw(dataset: &Path, opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<HeatmapSummary, Error> {
     let out = file.path();
     let spec = opened.spec();
     let camera = opened.expansion.camera;
@@ -126,7 +128,8 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
                         Ok(a)
                     },
                 )
-            })?;
+            });
+            let split_counts = split_counts.map_err(|e| Error::damaged(dataset, e))?;
             counts.iter_mut().zip(split_counts).for_each(|(x, y)| *x += y);
         }
     }
@@ -195,8 +198,8 @@ fn draw(opened: &Dataset, file: &OutputFile, filter: &HeatmapFilter) -> Result<H
     }
     let mut png = Vec::new();
     encode_png(&mut png, iw, ih, PixelFormat::Rgb8, &rgb, PngSettings::rgb())
-        .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
-    file.write(&png).map_err(|e| e.to_string())?;
+        .map_err(|e| Error::Failure(format!("cannot write {}: {e}", out.display())))?;
+    file.write(&png).map_err(Error::failure)?;
     Ok(HeatmapSummary {
         path: out.to_path_buf(),
         scenarios,

@@ -333,8 +333,8 @@ struct Tally {
 }
 
 /// Computes the statistics of the dataset in `dir`.
-/// A folder that is no finished dataset is bad input (exit 2, as for
-/// `evaluate`); a scenario file that cannot be read is a failure.
+/// A folder that is no finished dataset, or one whose scenario files
+/// cannot be read, is bad input (exit 2, [`Error::damaged`]).
 pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
     let dataset = Dataset::open_complete(dir).map_err(crate::error::Error::Input)?;
     let mut rows = Vec::new();
@@ -344,7 +344,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
                 .with_split(&group.name(), split, |dirs| {
                     dirs.par_iter().map(|d| tally(d, dataset.expansion.towns())).collect()
                 })
-                .map_err(crate::error::Error::Failure)?;
+                .map_err(|e| crate::error::Error::damaged(dir, e))?;
             if !tallies.is_empty() {
                 rows.push(combine(group.name(), split.name(), tallies));
             }

@@ -37,6 +37,33 @@ impl NewFolders {
     }
 }
 
+/// Whether an export failed on the dataset's own files (a scenario it
+/// could not read: bad input) or while writing, noted by the threads of a
+/// split as they fail.
+#[derive(Default)]
+struct Damage(std::sync::atomic::AtomicBool);
+
+impl Damage {
+    /// `read`'s error noted as the dataset's.
+    fn note<T>(&self, read: Result<T, String>) -> Result<T, String> {
+        if read.is_err() {
+            self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        read
+    }
+
+    /// The export's error: a damaged dataset is bad input ([`Error::damaged`],
+    /// exit 2); anything else a failure (exit 1). A truncated pixels.npy
+    /// exited 1 with "failed to fill whole buffer".
+    fn error(&self, dataset: &Path, message: String) -> Error {
+        if self.0.load(std::sync::atomic::Ordering::Relaxed) {
+            Error::damaged(dataset, message)
+        } else {
+            Error::Failure(message)
+        }
+    }
+}
+
 /// Refuses an `out` holding, `depth` folders down, an entry this export
 /// would not write (`writes`, relative to `out`): an earlier export's, of
 /// another dataset, split sizes or options, would stay beside this one's,

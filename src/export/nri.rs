@@ -253,8 +253,8 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
     // dataset) leaves an earlier export as it was, never this export's
     // first splits beside an earlier one's others.
     let mut written = Vec::new();
-    let folders = super::NewFolders::default();
-    let report = export_nri_groups(&opened, out, options, &mut written, &folders);
+    let (folders, damage) = (super::NewFolders::default(), super::Damage::default());
+    let report = export_nri_groups(&opened, out, options, &mut written, (&folders, &damage));
     let commit = report.and_then(|report| {
         for path in &written {
             std::fs::rename(staged(path), path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
@@ -267,7 +267,7 @@ pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Ve
         }
         folders.remove();
     }
-    commit.map_err(Error::Failure)
+    commit.map_err(|e| damage.error(dataset, e))
 }
 
 /// The files this export writes, relative to `out`: an NRI loader reads a
@@ -305,7 +305,7 @@ fn export_nri_groups(
     out: &Path,
     options: &NriOptions,
     written: &mut Vec<PathBuf>,
-    folders: &super::NewFolders,
+    (folders, damage): (&super::NewFolders, &super::Damage),
 ) -> Result<Vec<String>, String> {
     let frames = opened.spec().frames as usize;
     let image = (opened.spec().image.width as f32, opened.spec().image.height as f32);
@@ -344,7 +344,7 @@ fn export_nri_groups(
                 .zip(dynamic.par_chunks_mut(graphs))
                 .zip(dirs.par_iter())
                 .try_for_each(|((((loc, vel), edges), dynamic), dir)| {
-                    fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges, dynamic))
+                    damage.note(fill_scenario(dir, (frames, cars), image, options, (loc, vel, edges, dynamic)))
                 })
                 .map_err(|e| opened.name_packed_paths(e))?;
             opened.release(&group.name(), split)?;

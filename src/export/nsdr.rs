@@ -32,9 +32,10 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     // A split at a time: a packed dataset holds one split, frames and all,
     // in TMPDIR.
     let folders = super::NewFolders::default();
+    let damage = super::Damage::default();
     let exported = opened.each_scenario_in_turn(|source, relative| {
         let target = out.join(relative);
-        let json = annotate(source, w, h, digits)?;
+        let json = damage.note(annotate(source, w, h, digits))?;
         folders.create(&target)?;
         write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
         match packed {
@@ -49,7 +50,7 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
         // The scenarios this run added go again (those of an earlier run
         // it replaced stay, as replaced).
         folders.remove();
-        return Err(Error::Failure(e));
+        return Err(damage.error(dataset, e));
     }
     bar.finish();
     Ok(opened.key_sequence().len())

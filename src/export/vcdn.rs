@@ -115,9 +115,10 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
     let bar = Progress::new(opened.key_sequence().len() as u64, progress);
     // A split at a time: a packed dataset holds one split in TMPDIR.
     let folders = super::NewFolders::default();
+    let damage = super::Damage::default();
     let exported = opened.each_scenario_in_turn(|source, relative| {
         let target = out.join(relative).with_extension("h5");
-        let arrays = vcdn_arrays(source, graph)?;
+        let arrays = damage.note(vcdn_arrays(source, graph))?;
         folders.create(target.parent().expect("files have a folder"))?;
         let partial = target.with_extension("h5.partial");
         let written = write_hdf5(&partial, &arrays)
@@ -133,7 +134,7 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
     if let Err(e) = exported {
         // The files this run added go again with their folders.
         folders.remove();
-        return Err(Error::Failure(e));
+        return Err(damage.error(dataset, e));
     }
     bar.finish();
     Ok(opened.key_sequence().len())

@@ -140,10 +140,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         traceback.print_exception(e.__cause__, file=sys.stderr)
         print(f"error: {e}; nothing was written", file=sys.stderr)
         return 1
-    except (InputError, ValueError, FileNotFoundError, NotADirectoryError) as e:
+    except (InputError, ValueError, FileNotFoundError, NotADirectoryError, DatasetError) as e:
+        # (a damaged dataset is bad input, as for causalcity's readers)
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except (GenerationError, DatasetError, OSError, RuntimeError) as e:
+    except (GenerationError, OSError, RuntimeError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -107,8 +107,8 @@ def _call(where: str, call, *args):
 
 class DatasetError(RuntimeError):
     """A file of a dataset that cannot be read as gen writes it (damaged or
-    changed by hand): a failure while working, exit status 1 from the
-    command line, as ``causalcity evaluate`` reports it."""
+    changed by hand): bad input, exit status 2 from the command line, as
+    causalcity's readers (``evaluate``, ``stats``, ``export``) report it."""
 
 
 def _regular(path: Path) -> Path:
