@@ -1130,3 +1130,21 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
     for bad in bad_options:
         assert exit_code(["nri", str(toy), "--out", str(tmp_path / "bad.npz"), "--device", "cpu", *bad]) == 2, bad
         assert not (tmp_path / "bad.npz").exists()
+
+
+def test_scenarios_shorter_than_the_history_are_told_not_passed_off(tmp_path):
+    # 20 frames, fewer than the 100 of history and 20 steps: NRI's
+    # trajectories came after frame 19, and evaluate's default history
+    # refused the file without saying why; constant velocity predicted
+    # nothing and said "give edge scores, trajectories, ...".
+    spec = dict(TOY, name="short", frames=20, splits={"train": 4, "val": 1, "test": 2})
+    causalcity.generate(spec, tmp_path / "short", images=False, effects=False, progress=False)
+    with pytest.warns(UserWarning, match=r"20 frames, fewer than 100 frames of history and 1 steps: .* "
+                                         r"score them with causalcity evaluate --history 19"):  # fmt: skip
+        out = run_method(lambda: make("nri", epochs=1, device="cpu", quiet=True), tmp_path / "short",
+                         tmp_path / "nri.npz", quiet=True)  # fmt: skip
+    rows = causalcity.evaluate(tmp_path / "short", out, history=19)["trajectories"]
+    assert rows and all([s["step"] for s in r["steps"]] == [1] for r in rows), rows
+    with pytest.raises(causalcity.InputError, match=r"predicted nothing: its scenarios have 20 frames"):
+        run_method(lambda: make("constant_velocity"), tmp_path / "short", tmp_path / "cv.npz", quiet=True)
+    assert not (tmp_path / "cv.npz").exists()

@@ -9,6 +9,7 @@ import os
 import stat
 import sys
 import time
+import warnings
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
@@ -372,18 +373,40 @@ def run_method(
     """Fits a fresh method (``make_method()``) per group of ``dataset`` on its
     train split and writes its predictions for ``splits`` to ``out``."""
     root = Path(dataset)
+    # The input first: a folder that is no dataset is said to be one (an
+    # --out inside /tmp was "inside the dataset it reads").
+    all_groups = groups_of(root)
     # The one write rule, checked before any training: never into a
     # dataset, never onto the input, never through a link.
     _native.claim_output(os.fspath(out), [("the dataset it reads", os.fspath(root))])
-    names = groups_of(root) if groups is None else groups
+    names = all_groups if groups is None else groups
     edges: Dict[str, np.ndarray] = {}
     trajectories: Dict[str, np.ndarray] = {}
+    frames = None
     for episodes, predicted in fit_per_group(make_method, root, names, load_split, splits, quiet):
+        frames = episodes.frames
         for k, folder in enumerate(episodes.folders):
             if predicted.edges is not None:
                 edges[folder] = predicted.edges[k]
             if predicted.trajectories is not None:
                 trajectories[folder] = predicted.trajectories[k]
+        # Scenarios shorter than the history and its steps: what was
+        # predicted comes after fewer frames than evaluate's default
+        # history, which then refused the file without saying why.
+        steps = predicted.trajectories.shape[1] if predicted.trajectories is not None else 0
+        if steps and episodes.frames < HISTORY + steps:
+            warnings.warn(
+                f"{episodes.group}: its scenarios have {episodes.frames} frames, fewer than {HISTORY} frames of "
+                f"history and {steps} steps: trajectories are predicted after frame {episodes.frames - steps}; "
+                f"score them with causalcity evaluate --history {episodes.frames - steps}",
+                stacklevel=2,
+            )
+    if not edges and not trajectories and frames is not None:
+        raise InputError(
+            f"{root}: the method predicted nothing: its scenarios have {frames} frames, and trajectories are predicted "
+            f"after {HISTORY} frames of history ({HISTORY + STEPS} frames for the paper's {STEPS} steps); generate "
+            "longer scenarios, or use a method that scores edges"
+        )
     write_predictions(out, edges, trajectories, dataset=root)
     return Path(out)
 
