@@ -38,6 +38,19 @@ impl Error {
         Error::Failure(message.to_string())
     }
 
+    /// A reader's failure on the dataset at `dataset`: a write of its own
+    /// (unpacking a packed dataset into `TMPDIR`: told "cannot write", as
+    /// every [`crate::output::WriteError`], or "cannot make a folder to
+    /// unpack into") is a failure; anything else, the dataset's damage
+    /// ([`Error::damaged`]).
+    pub fn reading(dataset: &std::path::Path, message: String) -> Error {
+        if message.contains("cannot write ") || message.contains("cannot make a folder to unpack into") {
+            Error::Failure(message)
+        } else {
+            Error::damaged(dataset, message)
+        }
+    }
+
     /// A file of the dataset at `dataset` that is missing or cannot be read
     /// as causalcity wrote it: bad input (readers exited 1), told with how
     /// to find every problem.

@@ -161,8 +161,30 @@ fn a_reader_names_the_pack_and_member_it_could_not_read_not_a_temporary_folder()
         let out = run(&[command, packed.to_str().unwrap()]);
         let said = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{command}: a damaged dataset is bad input: {said}");
+        assert!(said.contains("is damaged: `causalcity validate"), "{command}: {said}");
         assert!(said.contains(&format!("{}: {member}", pack.display())), "{command} names the pack and member: {said}");
         assert!(!said.contains("causalcity-unpacked"), "{command} names a temporary folder: {said}");
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+}
+
+#[test]
+fn a_reader_that_cannot_unpack_into_tmpdir_fails_without_calling_the_dataset_damaged() {
+    let (_, _, packed) = both("packs-reader-tmpdir");
+    // No file may grow past 0 bytes (as on a full TMPDIR): unpacking fails
+    // on its first write.
+    let mut checked = 0;
+    for command in ["stats", "baseline"] {
+        let script = format!("trap '' XFSZ; ulimit -f 0; exec \"$0\" {command} \"$1\"");
+        let out = Command::new("sh")
+            .args(["-c", &script, env!("CARGO_BIN_EXE_causalcity"), packed.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{command}: a failure while working: {said}");
+        assert!(said.contains("cannot write") && said.contains("causalcity-unpacked"), "{command}: {said}");
+        assert!(!said.contains("is damaged"), "{command}: the dataset is whole: {said}");
         checked += 1;
     }
     assert_eq!(checked, 2);

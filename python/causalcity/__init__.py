@@ -860,6 +860,8 @@ def generate(
     limit = _optional_whole("limit", limit, 1, _U32_MAX, "gen --limit")
     threads = _optional_whole("threads", threads, 1, MAX_THREADS, "gen -j")
     images, annotations, effects = _flag("images", images), _flag("annotations", annotations), _flag("effects", effects)
+    # (force="no" said "'str' object is not an instance of 'bool'", naming no argument)
+    force, fsync, force_space = _flag("force", force), _flag("fsync", fsync), _flag("force_space", force_space)
     if annotations and not images:
         raise InputError(
             "annotations=True needs images=True: annotations.json holds the frames' masks "

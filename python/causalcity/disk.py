@@ -521,6 +521,11 @@ class Dataset(_Packed):
 
     def __getitem__(self, key: Any) -> "Scenario":
         if isinstance(key, (int, _np.integer)) and not isinstance(key, (bool, _np.bool_)):
+            if not -len(self._keys) <= int(key) < len(self._keys):
+                held = f" ({self.split} split)" if self.split else ""
+                raise IndexError(
+                    f"position {int(key)} is outside the {len(self._keys)} scenarios of {_os.fspath(self.root)}{held}"
+                )
             return self.load(self._keys[int(key)])
         return self.load(key)
 

@@ -209,6 +209,10 @@ def test_a_dataset_hands_out_only_its_own_scenarios_by_key(tmp_path):
     # Its own keys still load, by key, tuple and position.
     key = train.keys()[0]
     assert train.load(key).key == key == train[tuple(key)].key == train[0].key
+    assert train[-1].key == train.keys()[-1]
+    # A position past the end names the count (it said "list index out of range").
+    with pytest.raises(IndexError, match=rf"position {len(train)} is outside the {len(train)} scenarios of .* \(train split\)"):
+        train[len(train)]
 
 
 def test_a_manifest_edited_or_malformed_is_named_and_a_missing_scenario_is_told(tmp_path):

@@ -172,12 +172,17 @@ def test_the_package_shows_its_api_a_version_and_short_reprs():
     assert len(text) < 300 and "cars04_edges50" in text and "cars=4" in text
 
 
-def test_flags_are_true_or_false_and_a_batch_never_mixes_frame_intervals():
+def test_flags_are_true_or_false_and_a_batch_never_mixes_frame_intervals(tmp_path):
     data = Path(os.environ.get("CAUSALCITY_DATA", ROOT / "target" / "python-data"))
     city = causalcity.open_dataset(data / "city", images=False)
     for flag in ("shuffle", "drop_last", "mix_groups", "tensors"):
         with pytest.raises(TypeError, match=f"{flag}='no': give True or False"):
             causalcity.batches(city.spec, "train", 2, **{flag: "no"})
+    # generate's too, before anything is written (force="no" named no argument).
+    for flag in ("force", "fsync", "force_space"):
+        with pytest.raises(TypeError, match=f"{flag}='no': give True or False"):
+            causalcity.generate(city.spec, tmp_path / "never-written", **{flag: "no"})
+        assert not (tmp_path / "never-written").exists()
     # A toy and a city scenario (frames 0.1 s and 1 s apart) were stacked
     # as one batch silently.
     toy = causalcity.open_dataset(data / "toy", images=False)

@@ -166,7 +166,7 @@ fn score(dir: &Path, dataset: &Dataset, lags: &[f64], graph: GraphKind) -> Resul
         let score_split = |split: Split| -> Result<Vec<ScenarioScores>, Error> {
             dataset
                 .with_split(&name, split, |dirs| dirs.par_iter().map(|d| score_scenario(d, lags, graph)).collect())
-                .map_err(|e| Error::damaged(dir, e))
+                .map_err(|e| Error::reading(dir, e))
         };
         per_group.push((group, score_split(Split::Train)?, score_split(Split::Test)?));
     }

@@ -630,7 +630,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     let named = |e: Error| match e {
         Error::Input(m) => Error::Input(truth.name_unpacked(m)),
         // (match_scenarios fails only on the dataset's own files.)
-        Error::Failure(m) => Error::damaged(&truth.dir, truth.name_unpacked(m)),
+        Error::Failure(m) => Error::reading(&truth.dir, truth.name_unpacked(m)),
         other => other,
     };
     let (scored, record) = match_scenarios(&truth, predictions, options).map_err(named)?;
@@ -982,7 +982,7 @@ fn score_in_turn(
         let (group, split) = (&run[0].group, run[0].split);
         // Unpacked here (the folders' paths are the run's own); a failure to
         // unpack is the dataset's, a bad score the input's.
-        dataset.scenario_dirs(group, split).map_err(|e| Error::damaged(&truth.dir, e))?;
+        dataset.scenario_dirs(group, split).map_err(|e| Error::reading(&truth.dir, e))?;
         let scores = score(run).map_err(|e| truth.name_unpacked(e));
         dataset.release(group, split).map_err(Error::Failure)?;
         results.extend(scores.map_err(Error::Input)?);

@@ -129,7 +129,7 @@ fn draw(dataset: &Path, opened: &Dataset, file: &OutputFile, filter: &HeatmapFil
                     },
                 )
             });
-            let split_counts = split_counts.map_err(|e| Error::damaged(dataset, e))?;
+            let split_counts = split_counts.map_err(|e| Error::reading(dataset, e))?;
             counts.iter_mut().zip(split_counts).for_each(|(x, y)| *x += y);
         }
     }

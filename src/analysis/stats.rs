@@ -344,7 +344,7 @@ pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
                 .with_split(&group.name(), split, |dirs| {
                     dirs.par_iter().map(|d| tally(d, dataset.expansion.towns())).collect()
                 })
-                .map_err(|e| crate::error::Error::damaged(dir, e))?;
+                .map_err(|e| crate::error::Error::reading(dir, e))?;
             if !tallies.is_empty() {
                 rows.push(combine(group.name(), split.name(), tallies));
             }

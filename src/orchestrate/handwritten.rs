@@ -224,7 +224,7 @@ pub fn run_file(options: &RunOptions) -> Result<Vec<Written>, RunError> {
         &scenarios,
         &crate::output::OwnFiles::SCENARIO,
         "a new scenario folder",
-        ("summary.json", "a counterfactual pair (`causalcity counterfactual`)"),
+        ("factual", "a counterfactual pair (`causalcity counterfactual`)"),
     )?;
     let results: Vec<Result<Written, RunError>> = scenarios
         .par_iter()
@@ -326,7 +326,8 @@ pub struct WrittenPair {
 /// output (a `run` folder given to `counterfactual` was mixed with the pair
 /// written around it). The writers check each folder again as they write.
 /// `other` is the mark of the other command's folder and what it is (the
-/// `checksums.sha256` at the top of a scenario folder `run` wrote).
+/// `checksums.sha256` at the top of a scenario folder `run` wrote, the
+/// `factual/` of a pair).
 fn refuse_unowned(
     out: &Path,
     scenarios: &[LoadedScenario],

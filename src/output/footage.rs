@@ -53,7 +53,7 @@ impl<'a> Footage<'a> {
         sprites.clear();
         // A removed car (parked off the map) is drawn by no camera, though
         // one may look at its parking spot.
-        let on_map = plan.cars.iter().zip(states).enumerate().filter(|(_, (_, s))| !s.is_parked());
+        let on_map = plan.cars.iter().zip(states).enumerate().filter(|(_, (car, s))| !s.is_parked(car.id));
         sprites.extend(on_map.map(|(i, (car, s))| CarSprite {
             position: s.position,
             yaw: s.yaw,

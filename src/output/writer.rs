@@ -314,7 +314,8 @@ impl FrameWriter<'_, '_> {
         for (frame, states) in trajectories.states.iter().enumerate() {
             self.check_stop()?;
             let follow = followed
-                .and_then(|k| Some((states.get(k).filter(|s| !s.is_parked())?, plan.cars.get(k)?)))
+                .and_then(|k| Some((states.get(k)?, plan.cars.get(k)?)))
+                .filter(|(s, car)| !s.is_parked(car.id))
                 .or(last_follow);
             last_follow = follow;
             let camera = camera_plan
@@ -343,7 +344,7 @@ impl FrameWriter<'_, '_> {
             for (car, state) in plan.cars.iter().zip(states) {
                 let centre = glam::DVec3::new(state.position.x, state.position.y, CAR_HEIGHT_M / 2.0);
                 let pixel = camera.to_pixel(centre);
-                let in_view = !state.is_parked() && pixel.is_some_and(|p| camera.contains_pixel(p));
+                let in_view = !state.is_parked(car.id) && pixel.is_some_and(|p| camera.contains_pixel(p));
                 push_camera_pose(&mut poses, frame, car.id, pixel, in_view, Some(visible[car.mask_id as usize]));
             }
         }
@@ -365,7 +366,10 @@ impl FrameWriter<'_, '_> {
         let Footage { plan, trajectories, .. } = *footage;
         let name = &camera_plan.name;
         let chased = |states: &[CarState]| match camera_plan.kind {
-            CameraKind::Chase { car } => states.get(car).filter(|s| !s.is_parked()).map(|s| (s.position, s.yaw)),
+            CameraKind::Chase { car } => {
+                let id = plan.cars.get(car)?.id;
+                states.get(car).filter(|s| !s.is_parked(id)).map(|s| (s.position, s.yaw))
+            }
             _ => None,
         };
         let size = (camera_plan.width, camera_plan.height);
@@ -419,7 +423,7 @@ impl FrameWriter<'_, '_> {
             }
             for (car, state) in plan.cars.iter().zip(states) {
                 let pixel = camera.to_pixel(state.position);
-                let in_view = !state.is_parked() && camera.contains_pixel(pixel);
+                let in_view = !state.is_parked(car.id) && camera.contains_pixel(pixel);
                 push_camera_pose(&mut poses, frame, car.id, Some(pixel), in_view, None);
             }
         }

@@ -40,16 +40,34 @@ impl CarState {
         CarState { position, z: 0.0, roll: 0.0, pitch: 0.0, yaw: 0.0, speed: 0.0 }
     }
 
-    /// Whether this is a removed car's state (parked off the map): no
-    /// camera draws it or sees it.
-    pub fn is_parked(&self) -> bool {
-        Self::is_parked_at(self.position.x, self.position.y)
+    /// Whether this is car `id`'s state once removed (exactly its parking
+    /// spot, at rest): no camera draws it or sees it. (A position alone
+    /// could be a real car's: a network may span 1,000 km.)
+    pub fn is_parked(&self, id: u32) -> bool {
+        *self == CarState::parked(id)
     }
 
     /// Whether a logged position (metres, as poses.csv rounds it) is a
     /// removed car's parking spot rather than a place on the map.
     pub fn is_parked_at(x: f64, y: f64) -> bool {
         (y - PARKING.y).abs() < 0.5 && x > PARKING.x - 0.5
+    }
+}
+
+#[cfg(test)]
+mod parked_tests {
+    use super::*;
+
+    #[test]
+    fn only_a_removed_cars_own_parking_state_is_parked() {
+        let parked = CarState::parked(3);
+        assert!(parked.is_parked(3));
+        assert!(!parked.is_parked(4), "another car's spot");
+        // A real car driving through the parking band of a network that
+        // large (SUMO networks may span 1,000 km) is on the map.
+        let driving = CarState { speed: 8.0, yaw: 0.3, ..parked };
+        assert!(!driving.is_parked(3));
+        assert!(CarState::is_parked_at(driving.position.x, driving.position.y), "the band alone would say parked");
     }
 }
 
