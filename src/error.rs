@@ -40,8 +40,8 @@ impl Error {
 
     /// A reader's failure on the dataset at `dataset`: a write of its own
     /// (unpacking a packed dataset into `TMPDIR`: told "cannot write", as
-    /// every [`crate::output::WriteError`], or "cannot make a folder to
-    /// unpack into") is a failure; anything else, the dataset's damage
+    /// every write error of the output layer is, or "cannot make a folder
+    /// to unpack into") is a failure; anything else, the dataset's damage
     /// ([`Error::damaged`]).
     pub fn reading(dataset: &std::path::Path, message: String) -> Error {
         if message.contains("cannot write ") || message.contains("cannot make a folder to unpack into") {
