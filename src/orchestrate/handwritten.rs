@@ -135,17 +135,11 @@ fn warnings(s: &LoadedScenario, trajectories: &Trajectories, images: bool) -> Ve
     read.chain(camera_warning(s, images)).chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect()
 }
 
-/// A camera is pictures: without images it writes nothing, which
-/// scenario.json (listing it) does not tell. `gen` says so too.
+/// The scenario's cameras that `--no-images` leaves without pictures, as
+/// `gen` tells a spec's.
 fn camera_warning(s: &LoadedScenario, images: bool) -> Option<String> {
-    let names: Vec<&str> = s.plan.cameras.iter().map(|c| c.name.as_str()).collect();
-    (!images && !names.is_empty()).then(|| {
-        format!(
-            "scenario {:?}: --no-images: its cameras ({}) write nothing (no cameras/ folders)",
-            s.name,
-            names.join(", ")
-        )
-    })
+    let names = s.plan.cameras.iter().map(|c| c.name.as_str());
+    super::cameras_without_images(images, "its", names).map(|w| format!("scenario {:?}: {w}", s.name))
 }
 
 /// Every action the simulation of `plan` adapted or skipped, in time order,

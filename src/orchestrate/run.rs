@@ -646,15 +646,9 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
 }
 
 fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
-    // A camera is pictures: without images it writes nothing, which
-    // scenario.json (listing it) does not tell.
-    let cameras = &expansion.spec.cameras;
-    if !options.images && !cameras.is_empty() {
-        let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
-        crate::progress::note(format_args!(
-            "warning: --no-images: the spec's cameras ({}) write nothing (no cameras/ folders)",
-            names.join(", ")
-        ));
+    let names = expansion.spec.cameras.iter().map(|c| c.name.as_str());
+    if let Some(warning) = super::cameras_without_images(options.images, "the spec's", names) {
+        crate::progress::note(format_args!("warning: {warning}"));
     }
     if let Some(why) = expansion.spec.cars_below_a_pixel().filter(|_| options.images) {
         crate::progress::note(format_args!("warning: {why}"));

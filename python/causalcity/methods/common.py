@@ -373,8 +373,8 @@ def run_method(
     """Fits a fresh method (``make_method()``) per group of ``dataset`` on its
     train split and writes its predictions for ``splits`` to ``out``."""
     root = Path(dataset)
-    # The input first: a folder that is no dataset is said to be one (an
-    # --out inside /tmp was "inside the dataset it reads").
+    # The input first: a folder that is no dataset is named so (an --out
+    # inside /tmp was called "inside the dataset it reads").
     all_groups = groups_of(root)
     # The one write rule, checked before any training: never into a
     # dataset, never onto the input, never through a link.
