@@ -1360,7 +1360,22 @@ fn counterfactual_tells_what_it_adapted_and_what_never_fired_and_refuses_an_empt
     let fires = write("fires.json", scenario(r#""straight""#, "0", stop));
     let (output, _) = counterfactual(&fires, "fires", &[]);
     assert!(output.status.success());
-    assert!(!String::from_utf8_lossy(&output.stderr).contains("never fired"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!stderr.contains("never fired") && !stderr.contains("last frame"), "{stderr}");
+    // One that fires at the last frame (3.8 s, frame 19), by time or by
+    // frame: told that no frame shows its effect, and none does.
+    for (name, trigger) in [("last-at", r#""at": 3.8"#), ("last-frame", r#""at_frame": 19"#)] {
+        let last = format!(r#"[{{{trigger}, "do": "stop", "car": "Car_1", "seconds": 2}}]"#);
+        let file = write(&format!("{name}.json"), scenario(r#""straight""#, "0", &last));
+        let (output, out) = counterfactual(&file, name, &[]);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{stderr}");
+        assert!(stderr.contains("fired at 3.8 s, the scenario's last frame: no frame after it shows"), "{stderr}");
+        let summary = read_json(&out.join("b/summary.json"));
+        let fired = summary["intervention_time_s"].as_f64().unwrap();
+        assert!((fired - 3.8).abs() < 1e-9, "{summary}");
+        assert_eq!(summary["affected"], serde_json::json!([]), "{summary}");
+    }
     // An empty intervention file: the counterfactual would be the factual run.
     let empty = write("empty.json", "[]".into());
     let (output, out) = counterfactual(&fires, "empty", &["--intervention", empty.to_str().unwrap()]);

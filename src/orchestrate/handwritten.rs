@@ -180,20 +180,31 @@ fn pair_warnings(
     let in_factual = as_counterfactual(factual, &pair.factual);
     let in_counterfactual = as_counterfactual(counterfactual, &pair.counterfactual);
     warnings.extend(in_counterfactual.into_iter().filter(|w| !in_factual.contains(w)));
-    let fired = |label: &str| {
-        let count = |t: &Trajectories| {
-            t.events.iter().filter(|e| e.kind == EventKind::Intervention && e.detail == label).count()
+    // When the added intervention first fired: its first firing in the
+    // counterfactual run beyond those of the factual run (which has them
+    // too when it was the scenario's own).
+    let fired_at = |label: &str| {
+        let firings = |t: &Trajectories| {
+            t.events.iter().filter(|e| e.kind == EventKind::Intervention && e.detail == label).map(|e| e.t).collect()
         };
-        count(&pair.counterfactual) > count(&pair.factual)
+        let (factual, counterfactual): (Vec<f64>, Vec<f64>) = (firings(&pair.factual), firings(&pair.counterfactual));
+        counterfactual.get(factual.len()).copied()
     };
+    let end = counterfactual.frames.saturating_sub(1) as f64 * counterfactual.frame_interval;
     for intervention in &counterfactual.interventions[factual.interventions.len()..] {
-        if !fired(&intervention.label) {
-            let end = counterfactual.frames.saturating_sub(1) as f64 * counterfactual.frame_interval;
-            warnings.push(format!(
-                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {:.1} s: the \
+        match fired_at(&intervention.label) {
+            None => warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {end:.1} s: the \
                  counterfactual run is the factual one",
-                intervention.label, end
-            ));
+                intervention.label
+            )),
+            // Fired at the last frame: no later frame can show what it did.
+            Some(t) if t > end - counterfactual.frame_interval / 2.0 => warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{}\" fired at {t:.1} s, the scenario's last frame: no \
+                 frame after it shows what it does to the cars (give the scenario more frames or fire it earlier)",
+                intervention.label
+            )),
+            Some(_) => {}
         }
     }
     warnings
