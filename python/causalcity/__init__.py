@@ -148,6 +148,38 @@ class Key(NamedTuple):
         return f"{self.group}/{self.split}/{self.index:05d}"
 
 
+def _spec_json(spec: Any) -> str:
+    """``spec`` as JSON text, or an InputError naming the first field whose
+    value JSON cannot hold (NaN or infinity, a set, an object), where
+    ``json.dumps`` would write ``NaN`` for the spec reader to call "not
+    valid JSON" or raise a TypeError naming no field. NumPy's integers and
+    floats are taken as Python's."""
+
+    def plain(value: Any, field: str) -> Any:
+        where = f"field `{field}`" if field else "the spec"
+        if isinstance(value, Mapping):
+            for key in value:
+                if not isinstance(key, str):
+                    raise InputError(f"invalid spec <dict>: {where}: key {key!r} is not a string: JSON keys are strings")
+            return {key: plain(inner, f"{field}.{key}" if field else key) for key, inner in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [plain(inner, f"{field}[{i}]") for i, inner in enumerate(value)]
+        if value is None or isinstance(value, (str, bool, _np.bool_)):
+            return bool(value) if isinstance(value, _np.bool_) else value
+        if isinstance(value, _numbers.Integral):
+            return int(value)
+        if isinstance(value, _numbers.Real):
+            if not _np.isfinite(float(value)):
+                raise InputError(f"invalid spec <dict>: {where}: {value} is not allowed: give a finite number")
+            return float(value)
+        raise InputError(
+            f"invalid spec <dict>: {where}: a {type(value).__name__} is not a JSON value: give a number, string, "
+            "bool, list or dict"
+        )
+
+    return _json.dumps(plain(spec, ""))
+
+
 class Spec:
     """A dataset spec, read and checked as ``causalcity gen`` reads it.
 
@@ -170,7 +202,7 @@ class Spec:
         it names (``map.sumo``) is read from the folder ``networks`` by file
         name (a dataset's ``networks/``), else from the working folder."""
         folder = None if networks is None else _os.fspath(networks)
-        return cls(_native.Spec.from_json(_json.dumps(spec), "<dict>", None, folder))
+        return cls(_native.Spec.from_json(_spec_json(spec), "<dict>", None, folder))
 
     @property
     def name(self) -> str:
@@ -956,9 +988,9 @@ def save_predictions(
                     f"save_predictions: {label} key {folder!r} is not a scenario folder: give Key.folder "
                     "(e.g. 'cars08_edges50/test/00000') or a Key"
                 )
-            if _np.iscomplexobj(values):
-                raise InputError(f"save_predictions: {label}[{folder!r}] holds complex numbers: give real scores")
             try:
+                if _np.iscomplexobj(values):
+                    raise InputError(f"save_predictions: {label}[{folder!r}] holds complex numbers: give real scores")
                 values = _np.asarray(values)
                 # float16 and float32 are read as they are: half the bytes or less
                 arrays[f"{folder}{suffix}"] = values if values.dtype in (_np.float16, _np.float32) else values.astype(_np.float64)

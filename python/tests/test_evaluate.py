@@ -630,6 +630,8 @@ def test_save_predictions_takes_keys_or_folders_and_refuses_what_it_would_change
         ({key.folder: np.eye(cars) * (1 + 1j)}, "complex numbers"),
         ({"causalcity-dataset": np.eye(cars)}, "is not a scenario folder"),
         ({3: np.eye(cars)}, "is not a scenario folder"),
+        # Ragged rows: it raised numpy's ValueError.
+        ({key.folder: [[0.1, 0.2], [0.3]]}, "is not an array of numbers"),
     ]:
         with pytest.raises(causalcity.InputError, match=says):
             causalcity.save_predictions(tmp_path / "bad.npz", edges=edges)

@@ -156,6 +156,25 @@ def test_batch_arguments_are_checked_and_batches_pickle():
     assert copy.keys() == batches.keys()
 
 
+def test_a_spec_dict_json_cannot_hold_is_named_by_its_field():
+    spec = json.loads(TOY_SPEC.read_text())
+    # NaN was written as NaN and read back as "not valid JSON"; a set raised
+    # json's TypeError naming no field.
+    for field, value, says in [
+        ("seed", float("nan"), "field `seed`: nan is not allowed: give a finite number"),
+        ("frame_interval", float("inf"), "field `frame_interval`: inf is not allowed"),
+        ("seed", {1, 2}, "field `seed`: a set is not a JSON value"),
+    ]:
+        with pytest.raises(causalcity.InputError) as error:
+            causalcity.Spec.from_dict({**spec, field: value})
+        assert says in str(error.value), error.value
+    group = dict(spec["groups"][0], edge_proportion=float("nan"))
+    with pytest.raises(causalcity.InputError, match=r"field `groups\[0\]\.edge_proportion`: nan"):
+        causalcity.Spec.from_dict({**spec, "groups": [group]})
+    # NumPy's numbers are numbers.
+    assert causalcity.Spec.from_dict({**spec, "seed": np.int64(5), "frame_interval": np.float64(0.1)}).seed == 5
+
+
 def test_the_package_shows_its_api_a_version_and_short_reprs():
     assert causalcity.__version__ != "unknown" and causalcity.__version__[0].isdigit()
     names = dir(causalcity)
