@@ -994,6 +994,8 @@ def test_a_bug_in_a_users_method_shows_its_traceback_not_bad_input(toy, sweep, t
         ("no_such_module_here:Method", "cannot import no_such_module_here"),
         ("user_methods:Missing", "user_methods has no Missing"),
         ("user_methods:Silent", "set discovers = True"),
+        # A function that makes no method: it raised a TypeError traceback.
+        ("os:system", "method 'os:system': cannot be made with no arguments"),
         ("nrri", "is not one of"),
     ],
 )

@@ -181,7 +181,13 @@ def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
     naming ``name`` and what is wrong."""
     target = _user_class(name)
     given = {k: v for k, v in options.items() if _takes(target, k)}
-    method = target(**given)
+    try:
+        method = target(**given)
+    except TypeError as e:
+        # A function that is no method's constructor (os:system), or a class
+        # needing arguments the command line cannot give.
+        taking = ", ".join(f"{k}=" for k in given) or "no arguments"
+        raise ValueError(f"method {name!r}: cannot be made with {taking}: {e}") from None
     missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
     if missing:
         raise ValueError(f"method {name!r}: an instance has no {' or '.join(missing)}() (see causalcity.methods.Method)")
