@@ -277,6 +277,86 @@ fn another_spec_is_refused_unless_forced() {
     }
 }
 
+#[test]
+fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
+    // gen --force deleted the old scenario folders one file at a time,
+    // checksums first: killed part way, it left folders "not written by
+    // causalcity" under a manifest still saying complete, and every rerun,
+    // forced or not, was refused for good.
+    let dir = fresh_dir("batch-force-kill");
+    let spec = write_spec(&dir, &toy_spec("forcekill", &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let (reference, other_reference) = (dir.join("reference"), dir.join("other-reference"));
+    gen_ok(&spec, &reference, &["--quiet"]);
+    gen_ok(&other, &other_reference, &["--quiet"]);
+    let expected = [hash_tree(&reference), hash_tree(&other_reference)];
+    // A file the removal takes away early, in either order it may go.
+    let first_scenario = |out: &Path| out.join("cars04_edges50/train/00000/checksums.sha256");
+    for (trial, rerun) in [(0, &spec), (1, &other)] {
+        let out = dir.join(format!("killed-{trial}"));
+        gen_ok(&spec, &out, &["--quiet"]);
+        let mut child =
+            gen_cmd(&other, &out, &["--force", "-j", "1"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+        // Killed as soon as the removal has begun.
+        let started = Instant::now();
+        while first_scenario(&out).exists() && started.elapsed() < Duration::from_secs(30) {
+            std::thread::sleep(Duration::from_micros(200));
+        }
+        let _ = child.kill(); // SIGKILL
+        child.wait().unwrap();
+        assert!(!first_scenario(&out).exists(), "trial {trial}: the removal never began");
+        // Rerun with the old spec (a resume) or the new one (forced again):
+        // either completes the folder it asks for, byte for byte.
+        let force: &[&str] = if trial == 0 { &["--quiet"] } else { &["--quiet", "--force"] };
+        gen_ok(rerun, &out, force);
+        assert_eq!(hash_tree(&out), expected[trial], "trial {trial}: the rerun differs from an uninterrupted run");
+        let (code, report) = validate_dir(&out);
+        assert_eq!(code, 0, "trial {trial}: {report}");
+    }
+    // A damaged scenario is replaced whole (the old copy moved aside, then
+    // deleted), leaving nothing behind.
+    let out = dir.join("killed-1");
+    let scenario = first_scenario(&out).parent().unwrap().to_path_buf();
+    std::fs::remove_file(scenario.join("poses.csv")).unwrap();
+    let output = gen_cmd(&other, &out, &[]).output().unwrap();
+    assert!(String::from_utf8_lossy(&output.stderr).contains("writing it again"), "{output:?}");
+    assert_eq!(hash_tree(&out), expected[1]);
+}
+
+#[test]
+fn a_sigterm_while_force_removes_finishes_the_removal_and_stops_with_the_resume_hint() {
+    // SIGTERM during the removal ended gen at once (exit 143, no word),
+    // leaving its lock file and half a removal.
+    let dir = fresh_dir("batch-force-term");
+    let spec = write_spec(&dir, &toy_spec("forceterm", &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet"]);
+    let child =
+        gen_cmd(&other, &out, &["--force", "-j", "1"]).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let first = out.join("cars04_edges50/train/00000/checksums.sha256");
+    let started = Instant::now();
+    while first.exists() && started.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    let status = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("Rerun the same command to resume"), "{stderr}");
+    let names: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(!names.iter().any(|n| n.ends_with(".lock") || n.starts_with(".causalcity")), "{names:?}");
+    let manifest = read_json(&out.join("manifest.json"));
+    assert_eq!(manifest["spec"]["seed"], 12, "the old dataset's manifest outlived the removal");
+    gen_ok(&other, &out, &["--quiet"]);
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 0, "{report}");
+}
+
 /// A small tmpfs mounted for a test, unmounted when dropped.
 struct Tmpfs(PathBuf);
 

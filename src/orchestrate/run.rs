@@ -427,13 +427,29 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
             if more > 0 { format!("\n  ... and {more} more") } else { String::new() }
         )));
     }
-    for (path, record) in records {
-        for g in &record.groups {
+    // Each group folder leaves the dataset by one rename, then the
+    // manifests go, then the moved folders are deleted: a run killed in
+    // between leaves the old manifests (a dataset missing whole groups,
+    // which --force removes and a resume rewrites) or none, never a
+    // scenario folder with some of its files deleted, which no rerun
+    // could tell from a user's.
+    finish_removal(out)?;
+    let removing = out.join(crate::output::layout::REMOVING_DIR);
+    let mut moved = false;
+    for (_, record) in records {
+        for g in record.groups.iter().filter(|g| group_name(&g.name)) {
             let dir = out.join(&g.name);
-            if group_name(&g.name) && dir.exists() {
-                std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
+            if std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir()) {
+                if !moved {
+                    std::fs::create_dir(&removing).map_err(io_err(&removing))?;
+                    moved = true;
+                }
+                let to = removing.join(&g.name);
+                std::fs::rename(&dir, &to).map_err(io_err(&dir))?;
             }
         }
+    }
+    for (path, _) in records {
         std::fs::remove_file(path).map_err(io_err(path))?;
     }
     // The networks the old specs named.
@@ -451,7 +467,26 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
         }
     }
     remove_dir_if_empty(&networks)?;
-    Ok(remove_dir_if_empty(&out.join("shards"))?)
+    remove_dir_if_empty(&out.join("shards"))?;
+    finish_removal(out)
+}
+
+/// Deletes what a `gen --force` moved aside to remove ([`crate::output::layout::REMOVING_DIR`]),
+/// if anything: all of it causalcity's (only group folders of a dataset
+/// it wrote are moved there). Something else at that name, a link or a
+/// file, is refused: nothing is moved or deleted through it.
+fn finish_removal(out: &Path) -> Result<(), GenError> {
+    let removing = out.join(crate::output::layout::REMOVING_DIR);
+    match std::fs::symlink_metadata(&removing) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Ok(m) if m.is_dir() => Ok(std::fs::remove_dir_all(&removing).map_err(io_err(&removing))?),
+        Ok(_) => Err(GenError::Input(format!(
+            "{}: a link or a file where gen --force moves the folders it removes; nothing is moved or deleted \
+             through it. Remove it",
+            removing.display()
+        ))),
+        Err(e) => Err(io_err(&removing)(e).into()),
+    }
 }
 
 /// Removes `dir` if it is a real, empty folder; a link, a file, a folder
@@ -725,6 +760,16 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             }
         }
     }
+    // Ctrl-C or a SIGTERM while --force removes lets the removal finish,
+    // then stops the run (exit 130); before, SIGTERM ended it at once
+    // (exit 143), leaving its lock file.
+    STOP.store(false, Ordering::SeqCst);
+    if options.handle_signals {
+        install_signal_handler();
+    }
+    // What a removal cut off left (moved aside whole) goes first, while
+    // no other run writes here.
+    claim.alone(|| finish_removal(&out)).map_err(GenError::Claim)?.transpose()?;
     let mut removal = std::time::Duration::ZERO;
     if !differences.is_empty() {
         if !options.force {
@@ -767,10 +812,6 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         .num_threads(threads)
         .build()
         .map_err(|e| GenError::Threads { threads, reason: e.to_string() })?;
-    if options.handle_signals {
-        install_signal_handler();
-    }
-    STOP.store(false, Ordering::SeqCst);
 
     let sequence = expansion.key_sequence(options.limit);
     let positions = ShardPositions::new(sequence.len(), options.shard);

@@ -481,6 +481,7 @@ fn check_contents(dir: &Path, writer: Writer) -> Result<(), ClaimError> {
                     || (is_dir
                         && (n == "shards"
                             || n == super::layout::JOB_LOGS_DIR
+                            || n == super::layout::REMOVING_DIR
                             || n == crate::spec::NETWORKS_FOLDER
                             || is_group_folder(n)))
             };

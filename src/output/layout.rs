@@ -35,6 +35,12 @@ pub const EFFECTS_CSV: &str = "effects.csv";
 /// (`examples/slurm` writes there); not part of the dataset, which
 /// `validate` accepts beside it.
 pub const JOB_LOGS_DIR: &str = "logs";
+
+/// Where `gen --force` moves the old dataset's group folders, each by one
+/// rename, before it deletes them: a removal cut off part way (a kill)
+/// leaves whole scenario folders or none, and the next `gen` in the
+/// folder finishes deleting what is here.
+pub const REMOVING_DIR: &str = ".causalcity-removing";
 /// Folder of the extra cameras.
 pub const CAMERAS: &str = "cameras";
 

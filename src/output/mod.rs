@@ -190,11 +190,25 @@ impl<'t> ScenarioDir<'t> {
                 fs::File::open(&dir).and_then(|d| d.sync_all()).map_err(io_err(&dir))?;
             }
         }
-        if self.target.exists() {
-            fs::remove_dir_all(&self.target).map_err(io_err(&self.target))?;
+        // An older copy leaves by one rename and is deleted after the new
+        // one is in place: deleted where it stood, a kill part way left a
+        // folder with some of its files and no checksums, which no rerun
+        // could tell from a user's (a hidden leftover is swept on rerun).
+        let mut old = None;
+        if fs::symlink_metadata(&self.target).is_ok() {
+            let name = self.target.file_name().unwrap_or_default().to_string_lossy();
+            let aside = self.target.with_file_name(format!("{PARTIAL_PREFIX}replaced-{name}"));
+            if fs::symlink_metadata(&aside).is_ok_and(|m| m.is_dir()) {
+                fs::remove_dir_all(&aside).map_err(io_err(&aside))?;
+            }
+            fs::rename(&self.target, &aside).map_err(io_err(&self.target))?;
+            old = Some(aside);
         }
         fs::rename(&self.temp, &self.target).map_err(io_err(&self.target))?;
         self.committed = true;
+        if let Some(old) = old {
+            fs::remove_dir_all(&old).map_err(io_err(&old))?;
+        }
         Ok(len)
     }
 }
