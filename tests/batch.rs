@@ -325,6 +325,35 @@ fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
 }
 
 #[test]
+fn a_killed_shards_lock_file_goes_when_a_plain_run_finishes_the_job() {
+    // It stayed: the finished dataset held an extra file, no longer the
+    // bytes of an uninterrupted run.
+    let dir = fresh_dir("batch-shard-lock");
+    let spec = write_spec(&dir, &toy_spec("shardlock", &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet", "--no-images"]);
+    let out = dir.join("out");
+    let lock = out.join(".causalcity-shard-1-of-2.lock");
+    let mut child = gen_cmd(&spec, &out, &["--shard", "1/2", "--no-images", "-j", "1"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while !lock.exists() && started.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    let _ = child.kill(); // SIGKILL
+    child.wait().unwrap();
+    assert!(lock.exists(), "the killed shard left no lock file to test with");
+    gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+    assert!(!lock.exists(), "the killed shard's lock file outlived the run that finished the job");
+    assert!(hash_tree(&out) == hash_tree(&reference), "the finished dataset is not an uninterrupted run's bytes");
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 0, "{report}");
+}
+
+#[test]
 fn a_sigterm_while_force_removes_finishes_the_removal_and_stops_with_the_resume_hint() {
     // SIGTERM during the removal ended gen at once (exit 143, no word),
     // leaving its lock file and half a removal.

@@ -161,6 +161,13 @@ impl Drop for Claim {
             // A shared lock's file goes only with its last holder: taking it
             // exclusively succeeds only then.
             if !shared || file.try_lock().is_ok() {
+                // Held alone, the folder lock says no shard runs here: a
+                // shard's lock file left by a killed shard goes with it
+                // (a finished dataset held one after a plain gen finished
+                // the job).
+                if path.file_name().is_some_and(|n| n == LOCK_FILE) {
+                    remove_shard_locks(path.parent().unwrap_or(Path::new(".")));
+                }
                 let _ = fs::remove_file(&path);
             }
             drop(file);
@@ -171,6 +178,17 @@ impl Drop for Claim {
             if fs::remove_dir(dir).is_err() {
                 break;
             }
+        }
+    }
+}
+
+/// Removes the shard lock files (`.causalcity-shard-K-of-N.lock`) in `dir`;
+/// called only while holding its folder lock alone.
+fn remove_shard_locks(dir: &Path) {
+    for entry in fs::read_dir(dir).into_iter().flatten().flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with(".causalcity-shard-") && is_lock_file(&name) {
+            let _ = fs::remove_file(entry.path());
         }
     }
 }
