@@ -238,7 +238,7 @@ fn a_link_at_the_lock_file_is_refused_never_written_through() {
 }
 
 #[test]
-fn a_hard_link_or_a_pipe_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
+fn a_hard_link_a_pipe_or_a_folder_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
     // O_NOFOLLOW stops a symbolic link only: a hard link at the lock's name
     // had gen, merge and pack write their holder line into the file
     // outside --out and then unlink the name; a pipe there was locked,
@@ -270,19 +270,24 @@ fn a_hard_link_or_a_pipe_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
     ];
     let mut refused = 0;
     for (name, args) in &commands {
-        for planted in ["hard link", "pipe"] {
+        // A folder there: it exited 1, "cannot write ...: Is a directory".
+        for planted in ["hard link", "pipe", "folder"] {
             let out = dir.join(format!("{name}-{}", planted.replace(' ', "-")));
             std::fs::create_dir(&out).unwrap();
             let lock = out.join(".causalcity.lock");
-            if planted == "hard link" {
-                std::fs::hard_link(&victim, &lock).unwrap();
-            } else {
-                assert!(std::process::Command::new("mkfifo").arg(&lock).status().unwrap().success());
+            match planted {
+                "hard link" => std::fs::hard_link(&victim, &lock).unwrap(),
+                "folder" => std::fs::create_dir(&lock).unwrap(),
+                _ => assert!(std::process::Command::new("mkfifo").arg(&lock).status().unwrap().success()),
             }
             let mut args = args.clone();
             args.push(s(&out).into());
             let args: Vec<&str> = args.iter().map(String::as_str).collect();
-            let says = if planted == "hard link" { "a hard link (" } else { "not a regular file" };
+            let says = match planted {
+                "hard link" => "a hard link (",
+                "folder" => "a folder where a lock file should be: remove it",
+                _ => "not a regular file",
+            };
             assert_refused(&run(&args), says);
             assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious", "{name}: the file outside was written");
             assert!(std::fs::symlink_metadata(&lock).is_ok(), "{name}: the planted {planted} was removed");
@@ -290,7 +295,7 @@ fn a_hard_link_or_a_pipe_at_the_lock_file_is_refused_for_gen_merge_and_pack() {
             refused += 1;
         }
     }
-    assert_eq!(refused, 6);
+    assert_eq!(refused, 9);
 }
 
 #[test]

@@ -321,6 +321,13 @@ fn open_lock_file(path: &Path) -> Result<File, ClaimError> {
     let file = match options.open(path) {
         Ok(file) => file,
         Err(_) if fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) => return Err(link_error(path)),
+        // (exit 2, as for a pipe: it said "cannot write", exit 1)
+        Err(_) if fs::symlink_metadata(path).is_ok_and(|m| m.is_dir()) => {
+            return Err(ClaimError::BadPath {
+                path: path.to_path_buf(),
+                why: "a folder where a lock file should be: remove it".into(),
+            })
+        }
         Err(source) => return Err(ClaimError::Io { path: path.to_path_buf(), source }),
     };
     let meta = file.metadata().map_err(|source| ClaimError::Io { path: path.to_path_buf(), source })?;
