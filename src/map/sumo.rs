@@ -845,7 +845,19 @@ impl SumoNetwork {
     /// axis, naming the lane or junction outline farthest from the bulk of
     /// it (the median lane point): where to look in the file.
     fn refuse_too_wide(&self) -> Result<(), String> {
+        // Every point anything is built from: lanes, junction outlines and
+        // centres, and the paths through junctions (one far point of an
+        // internal lane, unchecked, had the map built for minutes, growing
+        // past a gigabyte).
+        let name = |lane: usize| &self.lanes[lane].id;
+        let paths = self.connections.iter().flat_map(|c| {
+            c.path.iter().map(move |p| {
+                (*p, format!("<connection from lane {} to lane {}>'s internal lane", name(c.from), name(c.to)))
+            })
+        });
+        let centres = self.junctions.iter().map(|j| (j.centre, format!("<junction id=\"{}\">'s x, y", j.id)));
         let (lo, hi) = self.bounds();
+        let (lo, hi) = paths.clone().chain(centres.clone()).fold((lo, hi), |(lo, hi), (p, _)| (lo.min(p), hi.max(p)));
         let span = hi - lo;
         if span.max_element() <= MAX_NETWORK_SPAN_M {
             return Ok(());
@@ -864,6 +876,8 @@ impl SumoNetwork {
             .flat_map(|j| j.shape.iter().map(move |p| (*p, format!("<junction id=\"{}\">", j.id))));
         let (point, element) = lanes
             .chain(outlines)
+            .chain(paths)
+            .chain(centres)
             .max_by(|a, b| a.0.distance(centre).total_cmp(&b.0.distance(centre)))
             .expect("a network with lanes has points");
         Err(format!(
@@ -1032,6 +1046,19 @@ mod tests {
                 r#"shape="0,0 10,0""#,
                 r#"shape="-2e6,0 10,0""#,
                 r#"the network spans 2000025 m x 4 m (its farthest point <lane id="a_0"> at -2000000, 0); allowed: at most 1000000 m a side"#,
+            ),
+            // A far point of an internal lane, or a junction's centre far
+            // off: unchecked, the first built the map for minutes, past a
+            // gigabyte (helper audit).
+            (
+                r#"length="5" shape="10,0 15,0""#,
+                r#"length="5" shape="10,0 9e6,9e6 15,0""#,
+                r#"(its farthest point <connection from lane a_0 to lane b_0>'s internal lane at 9000000, 9000000)"#,
+            ),
+            (
+                r#"<junction id="J2" type="priority" x="25" y="0""#,
+                r#"<junction id="J2" type="priority" x="5e6" y="0""#,
+                r#"(its farthest point <junction id="J2">'s x, y at 5000000, 0)"#,
             ),
             (
                 r#"length="10" shape="15,0 25,0""#,
