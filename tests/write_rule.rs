@@ -965,3 +965,39 @@ fn nothing_is_written_into_a_dataset_still_being_written_in_shards() {
     assert!(merged.status.success(), "{}", stderr(&merged));
     assert_valid(&sharded);
 }
+
+#[test]
+fn gen_force_never_removes_the_network_its_spec_reads() {
+    // A spec naming the dataset's own copy of its network (networks/):
+    // --force deleted that file, its own input, and wrote it again
+    // (helper audit).
+    let dir = fresh_dir("rule-force-own-network");
+    let network = dir.join("grid2.net.xml");
+    std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sumo/grid2-arrows.net.xml"), &network)
+        .unwrap();
+    let spec_text = |seed: u32, sumo: &str| {
+        format!(
+            r#"{{"name": "ownnet", "world": "city", "seed": {seed}, "frames": 10, "frame_interval": 1.0,
+               "image": {{"width": 128, "height": 96}}, "groups": [{{"cars": 4, "edge_proportion": 0.5}}],
+               "splits": {{"train": 1, "val": 1, "test": 1}}, "actions_per_car": 3, "map": {{"sumo": "{sumo}"}}}}"#
+        )
+    };
+    let first = dir.join("first.json");
+    std::fs::write(&first, spec_text(2, "grid2.net.xml")).unwrap();
+    let data = dir.join("data");
+    gen_ok(&first, &data, &["--quiet", "--no-images"]);
+    let kept = data.join("networks/grid2.net.xml");
+    let inode = std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(&kept).unwrap());
+    let before = hash_tree(&data);
+    let again = dir.join("again.json");
+    std::fs::write(&again, spec_text(3, "data/networks/grid2.net.xml")).unwrap();
+    let output = run(&["gen", "--quiet", "--no-images", "--force", "--spec", s(&again), "--out", s(&data)]);
+    assert_refused(&output, "the spec's map.sumo network lies inside");
+    assert!(stderr(&output).contains("Nothing was removed"), "{}", stderr(&output));
+    assert_eq!(hash_tree(&data), before, "the dataset was touched");
+    assert_eq!(
+        std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(&kept).unwrap()),
+        inode,
+        "the network was rewritten"
+    );
+}

@@ -471,6 +471,25 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     finish_removal(out)
 }
 
+/// Refuses a `--force` removal of `out` when a SUMO network the new spec
+/// reads lies inside it (its `networks/` copy of an earlier run): the
+/// removal would delete the run's own input and write it again.
+fn refuse_removing_inputs(out: &Path, spec: &DatasetSpec) -> Result<(), GenError> {
+    let Ok(out_real) = std::fs::canonicalize(out) else { return Ok(()) };
+    for (_, network) in spec.networks() {
+        let Ok(path) = std::fs::canonicalize(&network.path) else { continue };
+        if path.starts_with(&out_real) {
+            return Err(GenError::Input(format!(
+                "{}: the spec's map.sumo network lies inside {}, which --force removes: gen would delete its own \
+                 input. Nothing was removed. Copy the network out of the dataset and name the copy in the spec",
+                network.path.display(),
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Deletes what a `gen --force` moved aside to remove ([`crate::output::layout::REMOVING_DIR`]),
 /// if anything: all of it causalcity's (only group folders of a dataset
 /// it wrote are moved there). Something else at that name, a link or a
@@ -775,6 +794,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         if !options.force {
             return Err(GenError::Mixed { out, differences });
         }
+        refuse_removing_inputs(&out, &expansion.spec)?;
         // Said, timed and kept out of the run's rate: removing a large
         // dataset can take a minute.
         let quiet = options.progress == ProgressMode::Quiet;
