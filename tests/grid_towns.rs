@@ -735,7 +735,13 @@ fn a_town_with_priority_junctions_and_all_way_stops_generates_draws_and_validate
     // Refused with exit 2, naming the field, nothing written.
     let overridden = r#"{"confounders": {}, "lights": {"overrides": [{"intersection": "AD", "approach": "N", "signal": "straight", "schedule": [{"colour": "green", "duration": 5}]}]}}"#;
     for (sub, control, city, needle) in [
-        ("kind", serde_json::json!("roundabout"), None, "\"roundabout\" is not allowed: use \"signals\", \"priority\""),
+        // Every control a junction takes is named (right_before_left was not).
+        (
+            "kind",
+            serde_json::json!("roundabout"),
+            None,
+            "\"roundabout\" is not allowed: use \"signals\", \"priority\", \"all_way_stop\", \"right_before_left\", or",
+        ),
         ("junction", serde_json::json!({"XY": "priority"}), None, "map.grid.control.XY`: \"XY\" is not a junction"),
         (
             "override",

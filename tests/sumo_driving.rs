@@ -116,6 +116,13 @@ fn what_a_real_network_spec_cannot_use_is_refused_with_nothing_written() {
         (r#"{"sumo": "berlin-small.net.xml", "lane_width": 3.5}"#, "map.lane_width", "leave map.lane_width out"),
         (r#"{"sumo": "berlin-small.png"}"#, "map.sumo", "a SUMO network file"),
         (r#"{"sumo": "not-a-net.xml"}"#, "map.sumo", "not-a-net.xml: its root element is <html>, not <net>"),
+        // Measured against the network, not the default four-road city
+        // (helper audit: "47.2 m x 47.2 m" for any network).
+        (
+            r#"{"sumo": "berlin-small.net.xml", "camera_altitude_m": 20}"#,
+            "map.camera_altitude_m",
+            "20 m shows less than the whole network (",
+        ),
     ];
     let mut checked = 0;
     for (k, (map, field, needle)) in cases.into_iter().enumerate() {
@@ -129,7 +136,7 @@ fn what_a_real_network_spec_cannot_use_is_refused_with_nothing_written() {
         assert!(!out.exists(), "{map}: something was written");
         checked += 1;
     }
-    assert_eq!(checked, 5);
+    assert_eq!(checked, 6);
 }
 
 #[test]

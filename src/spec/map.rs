@@ -127,7 +127,8 @@ impl ControlSpec {
 
 /// What [`ControlSpec`] accepts, for errors.
 const CONTROL_FORMS: &str =
-    "\"signals\", \"priority\", \"all_way_stop\", or {\"JUNCTION\": one of those, ...} (e.g. {\"AC\": \"priority\"})";
+    "\"signals\", \"priority\", \"all_way_stop\", \"right_before_left\", or {\"JUNCTION\": one of \
+     those, ...} (e.g. {\"AC\": \"priority\"})";
 
 fn control_named<E: serde::de::Error>(v: &str) -> Result<JunctionControl, E> {
     JunctionControl::ALL

@@ -562,7 +562,11 @@ impl DatasetSpec {
         }
         self.check_overridden_lights()?;
         self.check_actuated_lights()?;
-        self.birds_eye_camera()?;
+        // A SUMO map is framed by its own bounds, checked once it is read
+        // (before, this checked it against the default four-road city).
+        if self.map.sumo.is_none() || self.map.network.0.is_some() {
+            self.birds_eye_camera()?;
+        }
         let fewest_cars = Split::ALL.iter().flat_map(|&s| self.groups_of(s)).map(|g| g.cars).min().unwrap_or(0);
         for (i, camera) in self.cameras.iter().enumerate() {
             let field = format!("cameras[{i}]");
@@ -611,6 +615,8 @@ impl DatasetSpec {
                     format!(
                         "{a} m shows less than {} ({:.1} m x {:.1} m) in a {width}x{height} image: use at least {:.2} m, or leave it out",
                         match self.map.camera_area {
+                            // An imported network is framed whole.
+                            None | Some(CameraArea::Named(_)) if self.map.network.0.is_some() => "the whole network",
                             None | Some(CameraArea::Named(CameraAreaName::Junctions)) => "every intersection and its stop lines",
                             Some(CameraArea::Named(CameraAreaName::Network)) => "the whole network",
                             Some(CameraArea::Area { .. }) => "map.camera_area",
@@ -619,7 +625,7 @@ impl DatasetSpec {
                         hi.y - lo.y,
                         fits
                     ),
-                ))
+                ));
             }
             Some(a) => a,
             // The junctions: the original's 40 m unless they need more; a
