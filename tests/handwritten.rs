@@ -51,6 +51,32 @@ fn pairs_are_inferred_as_in_the_original() {
     assert_eq!(record["cars"][2]["desired_speeds"], serde_json::json!([2.0, 2.0]));
 }
 
+#[test]
+fn a_lane_a_town_leaves_out_is_never_offered_as_the_example_spawn_point() {
+    // map.grid.missing removed D0: "D0w" was refused with 'e.g. "D0w"'
+    // (helper audit).
+    let dir = fresh_dir("hw-missing-lane");
+    let file = dir.join("gone.json");
+    std::fs::write(
+        &file,
+        r#"[{"Name": "S1", "map": {"grid": {"rows": 3, "columns": 3, "missing": ["D0"]}}, "Vehicles": [
+            {"Id": "Car_1", "Spawn": "D0w", "SpawnAtDistance": 0, "DriveQueue": ["left"]}]}]"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains(r#"field Spawn: "D0w" is not a spawn point of this town"#), "{stderr}");
+    assert!(stderr.contains("map.grid's missing, dead_ends and lanes leave some out"), "{stderr}");
+    let example = stderr.split("e.g. \"").nth(1).and_then(|rest| rest.split('"').next()).unwrap_or_default();
+    assert!(!example.is_empty() && example != "D0w", "the example {example:?}: {stderr}");
+    // The example is a lane of the town: a car spawns there.
+    std::fs::write(&file, std::fs::read_to_string(&file).unwrap().replace("D0w", example)).unwrap();
+    let output = run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+}
+
 fn scenario_with(vehicles: &str) -> String {
     format!(r#"[{{"Name": "Bad_1", "frames": 10, "Vehicles": [{vehicles}]}}]"#)
 }

@@ -84,12 +84,21 @@ pub(super) fn resolve_vehicle(
         roads.sort_unstable();
         let segments = layout.east_west_roads.len().max(layout.north_south_roads.len());
         let (first, last) = (roads.first().copied().unwrap_or('A'), roads.last().copied().unwrap_or('A'));
+        // A lane of the map, never the refused one (a lane a town's
+        // map.grid.missing leaves out was offered as the example).
+        let example = map
+            .spawn_points()
+            .iter()
+            .map(|&l| map.lanes[l].name.as_str())
+            .find(|name| *name != spawn_name)
+            .unwrap_or("C0w");
         here.err(
             car,
             "Spawn",
             format!(
-                "{spawn_name:?} is not a spawn point: road {first}-{last}, segment 0-{segments}, lane w-z, e.g. \"{}0w\" (causalcity map lists them)",
-                layout.north_south_roads.first().map_or('C', |r| r.0)
+                "{spawn_name:?} is not a spawn point of this town: its lanes are named by road {first}-{last}, segment \
+                 0-{segments} and lane w-z, where the town has them (map.grid's missing, dead_ends and lanes leave \
+                 some out), e.g. {example:?} (causalcity map lists them)"
             ),
         )
     })?;
