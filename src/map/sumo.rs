@@ -541,6 +541,9 @@ impl SumoNetwork {
         let mut unsupported: HashMap<&str, &str> = HashMap::new();
         let mut junction_ids = std::collections::HashSet::new();
         for j in &raw.junctions {
+            if j.id.trim().is_empty() || j.id.chars().any(char::is_control) {
+                return Err(format!("<junction id={:?}>: an empty id; give each junction a name", j.id));
+            }
             if !junction_ids.insert(j.id.as_str()) {
                 return Err(format!("<junction id=\"{}\">: defined twice; each junction's id must be unique", j.id));
             }
@@ -571,8 +574,19 @@ impl SumoNetwork {
             if edge_lanes.contains_key(e.id.as_str()) {
                 return Err(format!("<edge id=\"{}\">: defined twice; each edge's id must be unique", e.id));
             }
+            // An empty id is no name a scenario file or a reader can use.
+            let blank = |id: &str| id.trim().is_empty() || id.chars().any(char::is_control);
+            if blank(&e.id) {
+                return Err(format!("<edge id={:?}>: an empty id; give each edge a name", e.id));
+            }
             let indices = edge_lanes.entry(e.id.as_str()).or_default();
             for l in &e.lanes {
+                if blank(&l.id) {
+                    return Err(format!(
+                        "<lane id={:?}> of <edge id=\"{}\">: an empty id; give each lane a name (SUMO's are EDGE_INDEX)",
+                        l.id, e.id
+                    ));
+                }
                 if indices.contains(&l.index) {
                     return Err(format!(
                         "<edge id=\"{}\">: two lanes have index {}; each lane of an edge has its own",
@@ -1047,6 +1061,11 @@ mod tests {
                 r#"shape="-2e6,0 10,0""#,
                 r#"the network spans 2000025 m x 4 m (its farthest point <lane id="a_0"> at -2000000, 0); allowed: at most 1000000 m a side"#,
             ),
+            // Empty ids: a lane listed and recorded as spawn "" that no
+            // scenario file can name (helper audit).
+            (r#"<lane id="b_0""#, r#"<lane id="""#, r#"<lane id=""> of <edge id="b">: an empty id"#),
+            (r#"<edge id="b""#, r#"<edge id=" ""#, r#"<edge id=" ">: an empty id"#),
+            (r#"<junction id="J2""#, r#"<junction id="""#, r#"<junction id="">: an empty id"#),
             // A far point of an internal lane, or a junction's centre far
             // off: unchecked, the first built the map for minutes, past a
             // gigabyte (helper audit).
