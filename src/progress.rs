@@ -15,8 +15,10 @@ pub enum ProgressMode {
     Quiet,
 }
 
-/// Counts finished scenarios and reports them.
+/// Counts finished scenarios (or other units of work) and reports them.
 pub struct Progress {
+    /// What is counted, plural ("scenarios", "tar files").
+    unit: &'static str,
     bar: Option<ProgressBar>,
     plain: Option<Mutex<(Instant, u64)>>,
     done: AtomicU64,
@@ -29,21 +31,33 @@ impl Progress {
         Progress::since(Instant::now(), total, mode)
     }
 
+    /// [`Progress::new`] counting `unit` (plural, e.g. "tar files").
+    pub fn counting(total: u64, mode: ProgressMode, unit: &'static str) -> Progress {
+        Progress::of(Instant::now(), total, mode, unit)
+    }
+
     /// [`Progress::new`] of work that began at `start` (rates and the ETA
     /// count from then).
     pub fn since(start: Instant, total: u64, mode: ProgressMode) -> Progress {
+        Progress::of(start, total, mode, "scenarios")
+    }
+
+    fn of(start: Instant, total: u64, mode: ProgressMode, unit: &'static str) -> Progress {
         let terminal = std::io::stderr().is_terminal();
         let (bar, plain) = match mode {
             ProgressMode::Quiet => (None, None),
             ProgressMode::Auto if terminal => {
                 let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
                 let style =
-                    ProgressStyle::with_template("{spinner} [{since}] {wide_bar} {pos}/{len} scenarios ({rate_eta})")
+                    ProgressStyle::with_template("{spinner} [{since}] {wide_bar} {pos}/{len} {unit} ({rate_eta})")
                         .expect("valid template")
                         // (From `start`, as the rate: indicatif's own clock starts here.)
                         .with_key("since", move |_: &ProgressState, w: &mut dyn std::fmt::Write| {
                             let s = start.elapsed().as_secs();
                             let _ = write!(w, "{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60);
+                        })
+                        .with_key("unit", move |_: &ProgressState, w: &mut dyn std::fmt::Write| {
+                            let _ = w.write_str(unit);
                         })
                         .with_key("rate_eta", move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
                             let total = state.len().unwrap_or(0);
@@ -55,10 +69,10 @@ impl Progress {
             }
             ProgressMode::Auto => (None, Some(Mutex::new((start, 0)))),
         };
-        Progress { bar, plain, done: AtomicU64::new(0), total, start }
+        Progress { unit, bar, plain, done: AtomicU64::new(0), total, start }
     }
 
-    /// One more scenario finished.
+    /// One more scenario (unit) finished.
     pub fn inc(&self) {
         let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
         if let Some(bar) = &self.bar {
@@ -71,8 +85,9 @@ impl Progress {
             if due {
                 let secs = self.start.elapsed().as_secs_f64();
                 note(format_args!(
-                    "progress: {done}/{} scenarios ({:.0} %), {}",
+                    "progress: {done}/{} {} ({:.0} %), {}",
                     self.total,
+                    self.unit,
                     100.0 * done as f64 / self.total.max(1) as f64,
                     rate_and_eta(done, self.total, secs)
                 ));

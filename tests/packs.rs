@@ -445,9 +445,12 @@ fn pack_turns_a_folder_dataset_into_the_packs_gen_writes_and_leaves_its_input_al
     let lost = out.join("cars06_edges50/test/00000-00001.tar");
     std::fs::remove_file(&lost).unwrap();
     std::fs::write(out.join("cars06_edges50/test/00000-00001.tar.partial"), b"half").unwrap();
-    let again = run(&["pack", f, "--out", o, "--scenarios-per-tar", "2", "-q"]);
-    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    let again = run(&["pack", f, "--out", o, "--scenarios-per-tar", "2"]);
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{stderr}");
     assert!(String::from_utf8_lossy(&again.stdout).contains("7 packs already there kept"));
+    // Progress counts what it packs: "6/6 scenarios" was shown for 12.
+    assert!(stderr.contains("progress: 8/8 tar files (100 %)"), "{stderr}");
     assert_eq!(hash_tree(&out), hash_tree(&packed));
 
     // Refused, exit 2, nothing written: into itself, a packed input, another size into a pack.

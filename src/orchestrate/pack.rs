@@ -204,7 +204,8 @@ fn pack_all(
         .num_threads(threads)
         .build()
         .map_err(|e| GenError::Threads { threads, reason: e.to_string() })?;
-    let bar = Progress::new(packs.len() as u64, progress);
+    // Counted in tar files: "6/6 scenarios" was shown for 14 scenarios.
+    let bar = Progress::counting(packs.len() as u64, progress, "tar files");
     let (kept, bytes) = (AtomicU64::new(0), AtomicU64::new(0));
     pool.install(|| {
         (0..packs.len()).into_par_iter().try_for_each(|number| {
