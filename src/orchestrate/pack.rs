@@ -137,6 +137,24 @@ fn pack_sweep(
     Ok(packed.describe(sweep.key_sequence().len(), "counterfactual pairs", input, out, start))
 }
 
+/// A failure of packing: one reading a file of the input (checked whole a
+/// moment before) is the input changing under pack, the user's to resolve
+/// (exit 2, "cannot read"); any other is writing the packs (exit 1). It
+/// said "cannot write" of a file of the input that a `gen --force` had
+/// removed, with advice to free space.
+fn read_or_write(error: crate::output::WriteError, input: &Path) -> GenError {
+    if error.path.starts_with(input) {
+        GenError::Input(format!(
+            "cannot read {}: {}: the dataset changed while pack read it (another run writing or removing it?); \
+             rerun pack once nothing else uses it (the packs written so far are kept)",
+            error.path.display(),
+            error.source
+        ))
+    } else {
+        GenError::Write { error, done: 0 }
+    }
+}
+
 /// What [`pack_all`] did.
 struct Packed {
     packs: usize,
@@ -221,8 +239,8 @@ fn pack_all(
                 whole(&scenario_dir(input, &key.group, key.split.name(), &key.folder_name()), key)
                     .map_err(GenError::Input)?;
             }
-            let writer = PackWriter::begin_of(unit, input, keys, &target)?;
-            bytes.fetch_add(writer.commit(false)?, Ordering::Relaxed);
+            let writer = PackWriter::begin_of(unit, input, keys, &target).map_err(|e| read_or_write(e, input))?;
+            bytes.fetch_add(writer.commit(false).map_err(|e| read_or_write(e, input))?, Ordering::Relaxed);
             bar.inc();
             Ok::<(), GenError>(())
         })
