@@ -458,6 +458,13 @@ fn unexpected_entries(dir: &Path, keys: &[ScenarioKey], spec: &DatasetSpec, pack
         for e in entries.flatten() {
             let lock = parent == dir && crate::output::claim::is_lock_file(&e.file_name().to_string_lossy());
             if !allowed.contains(&e.path()) && !lock {
+                let removing = parent == dir && e.file_name() == crate::output::layout::REMOVING_DIR;
+                let message = if removing {
+                    "leftover of an interrupted gen --force (the old dataset moved aside to be deleted): rerun gen \
+                     or merge to finish deleting it"
+                } else {
+                    message
+                };
                 problems.push(Problem { path: e.path(), message: message.into() });
             }
         }

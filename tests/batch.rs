@@ -325,6 +325,34 @@ fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
 }
 
 #[test]
+fn only_what_a_cut_off_removal_left_is_deleted_never_a_users_folder_of_that_name() {
+    // A folder of the user's named .causalcity-removing was deleted by
+    // any plain gen (review): only group folders and networks/ that a
+    // removal moved there are.
+    let dir = fresh_dir("batch-removing-name");
+    let spec = small_spec(&dir);
+    let out = dir.join("out");
+    gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+    let removing = out.join(".causalcity-removing");
+    std::fs::create_dir_all(removing.join("cars04_edges50/train/00000")).unwrap();
+    std::fs::write(removing.join("cars04_edges50/train/00000/poses.csv"), "old").unwrap();
+    let (code, report) = validate_dir(&out);
+    assert_eq!(code, 1, "{report}");
+    assert!(report.contains("leftover of an interrupted gen --force"), "{report}");
+    // What a removal leaves goes with the next run.
+    gen_ok(&spec, &out, &["--quiet", "--no-images"]);
+    assert!(!removing.exists(), "the leftover of a cut-off removal stayed");
+    // Anything else there is the user's: refused, kept.
+    std::fs::create_dir_all(&removing).unwrap();
+    std::fs::write(removing.join("notes.txt"), "precious").unwrap();
+    let output = gen_cmd(&spec, &out, &["--no-images"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("notes.txt: not what an interrupted gen --force leaves"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(removing.join("notes.txt")).unwrap(), "precious");
+}
+
+#[test]
 fn a_killed_shards_lock_file_goes_when_a_plain_run_finishes_the_job() {
     // It stayed: the finished dataset held an extra file, no longer the
     // bytes of an uninterrupted run.

@@ -191,6 +191,24 @@ fn a_reader_that_cannot_unpack_into_tmpdir_fails_without_calling_the_dataset_dam
 }
 
 #[test]
+fn pack_that_cannot_write_its_packs_says_so_and_never_blames_its_input() {
+    // A pack file that cannot grow is a failure writing (exit 1), however
+    // --out is spelled: one spelled under the input (`in/../out`) was told
+    // as "cannot read ... the dataset changed", exit 2 (review).
+    let (_, folders, _) = both("packs-cannot-write");
+    let spelled = format!("{}/../packed-nowhere", folders.display());
+    let script = "trap '' XFSZ; ulimit -f 8; exec \"$0\" pack \"$1\" --out \"$2\" -q";
+    let out = Command::new("sh")
+        .args(["-c", script, env!("CARGO_BIN_EXE_causalcity"), folders.to_str().unwrap(), &spelled])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(said.contains("cannot write") && said.contains(".tar"), "{said}");
+    assert!(!said.contains("cannot read") && !said.contains("changed while"), "{said}");
+}
+
+#[test]
 fn validate_says_when_a_pack_lacks_a_scenario_or_holds_a_stranger_and_gen_repairs_both() {
     let (spec, folders, packed) = both("packs-membership");
     let before = hash_tree(&packed);

@@ -148,19 +148,20 @@ class Key(NamedTuple):
         return f"{self.group}/{self.split}/{self.index:05d}"
 
 
-def _spec_json(spec: Any) -> str:
-    """``spec`` as JSON text, or an InputError naming the first field whose
-    value JSON cannot hold (NaN or infinity, a set, an object), where
-    ``json.dumps`` would write ``NaN`` for the spec reader to call "not
-    valid JSON" or raise a TypeError naming no field. NumPy's integers and
-    floats are taken as Python's."""
+def _json_text(value: Any, origin: str) -> str:
+    """``value`` as JSON text, or an InputError (``origin: field ...``)
+    naming the first field whose value JSON cannot hold (NaN or infinity,
+    a set, an object), where ``json.dumps`` would write ``NaN`` for the
+    reader to call "not valid JSON" or raise a TypeError naming no field.
+    NumPy's integers and floats are taken as Python's; keys must be
+    strings (``json.dumps`` would turn ``1`` into ``"1"`` unasked)."""
 
     def plain(value: Any, field: str) -> Any:
-        where = f"field `{field}`" if field else "the spec"
+        where = f"field `{field}`" if field else "the value"
         if isinstance(value, Mapping):
             for key in value:
                 if not isinstance(key, str):
-                    raise InputError(f"invalid spec <dict>: {where}: key {key!r} is not a string: JSON keys are strings")
+                    raise InputError(f"{origin}: {where}: key {key!r} is not a string: JSON keys are strings")
             return {key: plain(inner, f"{field}.{key}" if field else key) for key, inner in value.items()}
         if isinstance(value, (list, tuple)):
             return [plain(inner, f"{field}[{i}]") for i, inner in enumerate(value)]
@@ -170,14 +171,18 @@ def _spec_json(spec: Any) -> str:
             return int(value)
         if isinstance(value, _numbers.Real):
             if not _np.isfinite(float(value)):
-                raise InputError(f"invalid spec <dict>: {where}: {value} is not allowed: give a finite number")
+                raise InputError(f"{origin}: {where}: {value} is not allowed: give a finite number")
             return float(value)
         raise InputError(
-            f"invalid spec <dict>: {where}: a {type(value).__name__} is not a JSON value: give a number, string, "
-            "bool, list or dict"
+            f"{origin}: {where}: a {type(value).__name__} is not a JSON value: give a number, string, bool, list or dict"
         )
 
-    return _json.dumps(plain(spec, ""))
+    return _json.dumps(plain(value, ""))
+
+
+def _spec_json(spec: Any) -> str:
+    """A spec dict as JSON text (see :func:`_json_text`)."""
+    return _json_text(spec, "invalid spec <dict>")
 
 
 class Spec:
@@ -815,7 +820,7 @@ class Counterfactual:
 def _json_input(value: Union[PathLike, Dict[str, Any], List[Any]], label: str) -> Tuple[str, str]:
     """(text, origin) of a file path or an already parsed JSON value."""
     if isinstance(value, (dict, list)):
-        return _json.dumps(value), label
+        return _json_text(value, label), label
     path = _os.fspath(value)
     try:
         with open(path, encoding="utf-8") as f:
@@ -994,6 +999,8 @@ def save_predictions(
                 values = _np.asarray(values)
                 # float16 and float32 are read as they are: half the bytes or less
                 arrays[f"{folder}{suffix}"] = values if values.dtype in (_np.float16, _np.float32) else values.astype(_np.float64)
+            except InputError:
+                raise
             except (TypeError, ValueError) as e:
                 raise InputError(f"save_predictions: {label}[{folder!r}] is not an array of numbers: {e}") from None
     if not arrays:

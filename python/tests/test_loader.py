@@ -173,6 +173,10 @@ def test_a_spec_dict_json_cannot_hold_is_named_by_its_field():
         causalcity.Spec.from_dict({**spec, "groups": [group]})
     # NumPy's numbers are numbers.
     assert causalcity.Spec.from_dict({**spec, "seed": np.int64(5), "frame_interval": np.float64(0.1)}).seed == 5
+    # So for a scenario given as a dict.
+    scenario = [{"Name": "a", "seed": float("nan"), "Vehicles": []}]
+    with pytest.raises(causalcity.InputError, match=r"<dict>: field `\[0\]\.seed`: nan is not allowed"):
+        causalcity.counterfactual(scenario)
 
 
 def test_the_package_shows_its_api_a_version_and_short_reprs():

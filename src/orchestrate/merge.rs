@@ -80,6 +80,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     }
     // No shard may still be running, and --out takes nothing but a dataset.
     let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
+    // What a `gen --force` cut off left aside (shards running skip it).
+    super::run::finish_removal(out)?;
     let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,

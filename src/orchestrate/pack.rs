@@ -137,13 +137,15 @@ fn pack_sweep(
     Ok(packed.describe(sweep.key_sequence().len(), "counterfactual pairs", input, out, start))
 }
 
-/// A failure of packing: one reading a file of the input (checked whole a
-/// moment before) is the input changing under pack, the user's to resolve
-/// (exit 2, "cannot read"); any other is writing the packs (exit 1). It
-/// said "cannot write" of a file of the input that a `gen --force` had
-/// removed, with advice to free space.
-fn read_or_write(error: crate::output::WriteError, input: &Path) -> GenError {
-    if error.path.starts_with(input) {
+/// A failure of writing the pack at `target`: one about a file beside it
+/// (the pack, its `.partial`) or a folder above it is writing (exit 1);
+/// any other is reading a scenario of the input (checked whole a moment
+/// before), the input changing under pack, the user's to resolve (exit 2,
+/// "cannot read"). It said "cannot write" of a file of the input that a
+/// `gen --force` had removed, with advice to free space.
+fn read_or_write(error: crate::output::WriteError, target: &Path) -> GenError {
+    let writing = error.path.parent() == target.parent() || target.starts_with(&error.path);
+    if !writing {
         GenError::Input(format!(
             "cannot read {}: {}: the dataset changed while pack read it (another run writing or removing it?); \
              rerun pack once nothing else uses it (the packs written so far are kept)",
@@ -239,8 +241,8 @@ fn pack_all(
                 whole(&scenario_dir(input, &key.group, key.split.name(), &key.folder_name()), key)
                     .map_err(GenError::Input)?;
             }
-            let writer = PackWriter::begin_of(unit, input, keys, &target).map_err(|e| read_or_write(e, input))?;
-            bytes.fetch_add(writer.commit(false).map_err(|e| read_or_write(e, input))?, Ordering::Relaxed);
+            let writer = PackWriter::begin_of(unit, input, keys, &target).map_err(|e| read_or_write(e, &target))?;
+            bytes.fetch_add(writer.commit(false).map_err(|e| read_or_write(e, &target))?, Ordering::Relaxed);
             bar.inc();
             Ok::<(), GenError>(())
         })

@@ -435,24 +435,16 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     // could tell from a user's.
     finish_removal(out)?;
     let removing = out.join(crate::output::layout::REMOVING_DIR);
-    let mut moved = false;
     for (_, record) in records {
         for g in record.groups.iter().filter(|g| group_name(&g.name)) {
             let dir = out.join(&g.name);
             if std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir()) {
-                if !moved {
-                    std::fs::create_dir(&removing).map_err(io_err(&removing))?;
-                    moved = true;
-                }
-                let to = removing.join(&g.name);
-                std::fs::rename(&dir, &to).map_err(io_err(&dir))?;
+                move_aside(&removing, &dir, Path::new(&g.name))?;
             }
         }
     }
-    for (path, _) in records {
-        std::fs::remove_file(path).map_err(io_err(path))?;
-    }
-    // The networks the old specs named.
+    // The networks the old specs named, aside too: once the manifests are
+    // gone, nothing else would say they were the old dataset's.
     let networks = out.join(crate::spec::NETWORKS_FOLDER);
     // Never through a link: a linked networks/ is left alone.
     let real_folder = std::fs::symlink_metadata(&networks).is_ok_and(|m| m.is_dir());
@@ -460,15 +452,69 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
         let sections =
             [&record.spec["map"], &record.spec["held_out"]["val"]["map"], &record.spec["held_out"]["test"]["map"]];
         for sumo in sections.iter().filter_map(|m| m["sumo"].as_str()) {
-            let path = networks.join(crate::spec::network_file_name(sumo));
+            let name = crate::spec::network_file_name(sumo);
+            let path = networks.join(name);
             if std::fs::symlink_metadata(&path).is_ok_and(|m| !m.is_dir()) {
-                std::fs::remove_file(&path).map_err(io_err(&path))?;
+                move_aside(&removing, &path, &Path::new(crate::spec::NETWORKS_FOLDER).join(name))?;
             }
         }
+    }
+    for (path, _) in records {
+        std::fs::remove_file(path).map_err(io_err(path))?;
     }
     remove_dir_if_empty(&networks)?;
     remove_dir_if_empty(&out.join("shards"))?;
     finish_removal(out)
+}
+
+/// Moves `from` by one rename to `removing/name` (the folder made if
+/// missing).
+fn move_aside(removing: &Path, from: &Path, name: &Path) -> Result<(), GenError> {
+    let to = removing.join(name);
+    let parent = to.parent().unwrap_or(removing);
+    std::fs::create_dir_all(parent).map_err(io_err(parent))?;
+    std::fs::rename(from, &to).map_err(io_err(from))?;
+    Ok(())
+}
+
+/// Deletes what a `gen --force` moved aside to remove
+/// ([`crate::output::layout::REMOVING_DIR`]), if anything: group folders
+/// and a `networks/` folder of network files, all checked to be
+/// causalcity's before they were moved. Anything else there (a link, a
+/// file, a folder of another name) is refused, never deleted: it is not
+/// what a removal left.
+pub(crate) fn finish_removal(out: &Path) -> Result<(), GenError> {
+    let removing = out.join(crate::output::layout::REMOVING_DIR);
+    let refuse = |what: &Path| {
+        GenError::Input(format!(
+            "{}: not what an interrupted gen --force leaves in {} (group folders and networks/ only); nothing \
+             was deleted. Move it out",
+            what.display(),
+            removing.display()
+        ))
+    };
+    match std::fs::symlink_metadata(&removing) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(io_err(&removing)(e).into()),
+        Ok(m) if !m.is_dir() => return Err(refuse(&removing)),
+        Ok(_) => {}
+    }
+    for entry in std::fs::read_dir(&removing).map_err(io_err(&removing))? {
+        let entry = entry.map_err(io_err(&removing))?;
+        let (name, path) = (entry.file_name().to_string_lossy().into_owned(), entry.path());
+        let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
+        let ours = is_dir
+            && (crate::output::claim::is_group_folder(&name)
+                || (name == crate::spec::NETWORKS_FOLDER
+                    && std::fs::read_dir(&path)
+                        .map_err(io_err(&path))?
+                        .flatten()
+                        .all(|f| f.file_type().is_ok_and(|t| !t.is_dir()))));
+        if !ours {
+            return Err(refuse(&path));
+        }
+    }
+    Ok(std::fs::remove_dir_all(&removing).map_err(io_err(&removing))?)
 }
 
 /// Refuses a `--force` removal of `out` when a SUMO network the new spec
@@ -488,24 +534,6 @@ fn refuse_removing_inputs(out: &Path, spec: &DatasetSpec) -> Result<(), GenError
         }
     }
     Ok(())
-}
-
-/// Deletes what a `gen --force` moved aside to remove ([`crate::output::layout::REMOVING_DIR`]),
-/// if anything: all of it causalcity's (only group folders of a dataset
-/// it wrote are moved there). Something else at that name, a link or a
-/// file, is refused: nothing is moved or deleted through it.
-fn finish_removal(out: &Path) -> Result<(), GenError> {
-    let removing = out.join(crate::output::layout::REMOVING_DIR);
-    match std::fs::symlink_metadata(&removing) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Ok(m) if m.is_dir() => Ok(std::fs::remove_dir_all(&removing).map_err(io_err(&removing))?),
-        Ok(_) => Err(GenError::Input(format!(
-            "{}: a link or a file where gen --force moves the folders it removes; nothing is moved or deleted \
-             through it. Remove it",
-            removing.display()
-        ))),
-        Err(e) => Err(io_err(&removing)(e).into()),
-    }
 }
 
 /// Removes `dir` if it is a real, empty folder; a link, a file, a folder
@@ -787,8 +815,11 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
         install_signal_handler();
     }
     // What a removal cut off left (moved aside whole) goes first, while
-    // no other run writes here.
-    claim.alone(|| finish_removal(&out)).map_err(GenError::Claim)?.transpose()?;
+    // no other run writes here (a shard takes the folder alone only then:
+    // shards started together would find it taken).
+    if std::fs::symlink_metadata(out.join(crate::output::layout::REMOVING_DIR)).is_ok() {
+        claim.alone(|| finish_removal(&out)).map_err(GenError::Claim)?.transpose()?;
+    }
     let mut removal = std::time::Duration::ZERO;
     if !differences.is_empty() {
         if !options.force {

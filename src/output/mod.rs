@@ -112,6 +112,14 @@ impl<W: Write> Write for HashingWriter<W> {
     }
 }
 
+/// Where [`ScenarioDir::commit`] moves an older copy of `target` before
+/// deleting it: hidden, and never another folder's temporary name (a
+/// folder name never starts with a dot).
+fn replaced_aside(target: &Path) -> PathBuf {
+    let name = target.file_name().unwrap_or_default().to_string_lossy();
+    target.with_file_name(format!("{PARTIAL_PREFIX}.replaced-{name}"))
+}
+
 impl<'t> ScenarioDir<'t> {
     /// Starts writing the scenario that will live at `target` with the
     /// folders of `layout`; leftovers of an interrupted attempt are
@@ -126,8 +134,12 @@ impl<'t> ScenarioDir<'t> {
     ) -> Result<ScenarioDir<'t>, WriteError> {
         let name = target.file_name().expect("scenario folder has a name").to_string_lossy().into_owned();
         let temp = target.with_file_name(format!("{PARTIAL_PREFIX}{name}"));
-        if temp.exists() {
-            fs::remove_dir_all(&temp).map_err(io_err(&temp))?;
+        // This attempt's leftovers, and an older copy a cut-off commit had
+        // moved aside.
+        for leftover in [&temp, &replaced_aside(&target)] {
+            if fs::symlink_metadata(leftover).is_ok() {
+                fs::remove_dir_all(leftover).map_err(io_err(leftover))?;
+            }
         }
         fs::create_dir_all(&temp).map_err(io_err(&temp))?;
         let folders = layout.folders();
@@ -196,9 +208,8 @@ impl<'t> ScenarioDir<'t> {
         // could tell from a user's (a hidden leftover is swept on rerun).
         let mut old = None;
         if fs::symlink_metadata(&self.target).is_ok() {
-            let name = self.target.file_name().unwrap_or_default().to_string_lossy();
-            let aside = self.target.with_file_name(format!("{PARTIAL_PREFIX}replaced-{name}"));
-            if fs::symlink_metadata(&aside).is_ok_and(|m| m.is_dir()) {
+            let aside = replaced_aside(&self.target);
+            if fs::symlink_metadata(&aside).is_ok() {
                 fs::remove_dir_all(&aside).map_err(io_err(&aside))?;
             }
             fs::rename(&self.target, &aside).map_err(io_err(&self.target))?;

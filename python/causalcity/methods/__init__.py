@@ -181,13 +181,18 @@ def _user_method(name: str, options: dict, task: str = "discovery") -> Method:
     naming ``name`` and what is wrong."""
     target = _user_class(name)
     given = {k: v for k, v in options.items() if _takes(target, k)}
+    # A function that is no method's constructor (os:system), or a class
+    # needing arguments the command line cannot give, is refused before it
+    # is called; an error raised inside a constructor is the user's code's,
+    # with its traceback.
     try:
-        method = target(**given)
+        inspect.signature(target).bind(**given)
     except TypeError as e:
-        # A function that is no method's constructor (os:system), or a class
-        # needing arguments the command line cannot give.
         taking = ", ".join(f"{k}=" for k in given) or "no arguments"
         raise ValueError(f"method {name!r}: cannot be made with {taking}: {e}") from None
+    except ValueError:
+        pass  # no signature to check (some built-ins): called as it is
+    method = target(**given)
     missing = [a for a in ("fit", "predict") if not callable(getattr(method, a, None))]
     if missing:
         raise ValueError(f"method {name!r}: an instance has no {' or '.join(missing)}() (see causalcity.methods.Method)")
