@@ -277,6 +277,23 @@ fn another_spec_is_refused_unless_forced() {
     }
 }
 
+/// A spec with images (removing its dataset takes a while) and the same
+/// spec with another seed, which `gen --force` replaces it with.
+fn spec_and_reseeded(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+    let spec = write_spec(dir, &toy_spec(name, &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    (spec, other)
+}
+
+/// Waits (at most 30 s) until `path` is gone: a removal has begun.
+fn wait_until_gone(path: &Path) {
+    let started = Instant::now();
+    while path.exists() && started.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_micros(200));
+    }
+}
+
 #[test]
 fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
     // gen --force deleted the old scenario folders one file at a time,
@@ -284,9 +301,7 @@ fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
     // causalcity" under a manifest still saying complete, and every rerun,
     // forced or not, was refused for good.
     let dir = fresh_dir("batch-force-kill");
-    let spec = write_spec(&dir, &toy_spec("forcekill", &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
-    let other = dir.join("other.json");
-    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let (spec, other) = spec_and_reseeded(&dir, "forcekill");
     let (reference, other_reference) = (dir.join("reference"), dir.join("other-reference"));
     gen_ok(&spec, &reference, &["--quiet"]);
     gen_ok(&other, &other_reference, &["--quiet"]);
@@ -299,10 +314,7 @@ fn a_force_killed_while_removing_leaves_a_folder_any_rerun_repairs() {
         let mut child =
             gen_cmd(&other, &out, &["--force", "-j", "1"]).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
         // Killed as soon as the removal has begun.
-        let started = Instant::now();
-        while first_scenario(&out).exists() && started.elapsed() < Duration::from_secs(30) {
-            std::thread::sleep(Duration::from_micros(200));
-        }
+        wait_until_gone(&first_scenario(&out));
         let _ = child.kill(); // SIGKILL
         child.wait().unwrap();
         assert!(!first_scenario(&out).exists(), "trial {trial}: the removal never began");
@@ -386,18 +398,12 @@ fn a_sigterm_while_force_removes_finishes_the_removal_and_stops_with_the_resume_
     // SIGTERM during the removal ended gen at once (exit 143, no word),
     // leaving its lock file and half a removal.
     let dir = fresh_dir("batch-force-term");
-    let spec = write_spec(&dir, &toy_spec("forceterm", &[(4, 0.5), (8, 0.5)], (6, 3, 3), 60));
-    let other = dir.join("other.json");
-    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let (spec, other) = spec_and_reseeded(&dir, "forceterm");
     let out = dir.join("out");
     gen_ok(&spec, &out, &["--quiet"]);
     let child =
         gen_cmd(&other, &out, &["--force", "-j", "1"]).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
-    let first = out.join("cars04_edges50/train/00000/checksums.sha256");
-    let started = Instant::now();
-    while first.exists() && started.elapsed() < Duration::from_secs(30) {
-        std::thread::sleep(Duration::from_micros(200));
-    }
+    wait_until_gone(&out.join("cars04_edges50/train/00000/checksums.sha256"));
     let status = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     assert!(status.success());
     let output = child.wait_with_output().unwrap();
