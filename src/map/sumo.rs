@@ -794,7 +794,14 @@ impl SumoNetwork {
                     ));
                 }
                 passed.push(lane);
-                let Some(text) = internal_shapes.get(lane) else { break };
+                // A via naming no internal lane left the path cut short
+                // without a word.
+                let text = internal_shapes.get(lane).ok_or_else(|| {
+                    format!(
+                        "{}: via {lane:?} is no internal lane of the file (an <edge function=\"internal\">'s lane)",
+                        name()
+                    )
+                })?;
                 path.extend(
                     polyline(text).ok_or_else(|| {
                         format!("{}: internal lane {lane}'s shape; allowed: {POINTS_ALLOWED}", name())
@@ -1060,6 +1067,12 @@ mod tests {
                 r#"shape="0,0 10,0""#,
                 r#"shape="-2e6,0 10,0""#,
                 r#"the network spans 2000025 m x 4 m (its farthest point <lane id="a_0"> at -2000000, 0); allowed: at most 1000000 m a side"#,
+            ),
+            // A via naming no internal lane (helper audit).
+            (
+                r#"toLane="0" via=":J1_0_0""#,
+                r#"toLane="0" via=":J1_7_0""#,
+                r#"<connection from="a_0" to="b_0">: via ":J1_7_0" is no internal lane of the file"#,
             ),
             // Empty ids: a lane listed and recorded as spawn "" that no
             // scenario file can name (helper audit).
