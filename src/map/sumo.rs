@@ -470,6 +470,12 @@ pub const MAX_NETWORK_SPAN_M: f64 = 1.0e6;
 /// few metres wide (SUMO's default [`SUMO_DEFAULT_LANE_WIDTH_M`]).
 pub const MAX_LANE_WIDTH_M: f64 = 50.0;
 
+/// An id that is empty (or blank, or holds control characters): no name a
+/// scenario file or a reader can use.
+fn blank_id(id: &str) -> bool {
+    id.trim().is_empty() || id.chars().any(char::is_control)
+}
+
 /// Parses `"x1,y1 x2,y2 ..."`.
 fn polyline(text: &str) -> Option<Vec<DVec2>> {
     text.split_whitespace()
@@ -541,7 +547,7 @@ impl SumoNetwork {
         let mut unsupported: HashMap<&str, &str> = HashMap::new();
         let mut junction_ids = std::collections::HashSet::new();
         for j in &raw.junctions {
-            if j.id.trim().is_empty() || j.id.chars().any(char::is_control) {
+            if blank_id(&j.id) {
                 return Err(format!("<junction id={:?}>: an empty id; give each junction a name", j.id));
             }
             if !junction_ids.insert(j.id.as_str()) {
@@ -574,14 +580,12 @@ impl SumoNetwork {
             if edge_lanes.contains_key(e.id.as_str()) {
                 return Err(format!("<edge id=\"{}\">: defined twice; each edge's id must be unique", e.id));
             }
-            // An empty id is no name a scenario file or a reader can use.
-            let blank = |id: &str| id.trim().is_empty() || id.chars().any(char::is_control);
-            if blank(&e.id) {
+            if blank_id(&e.id) {
                 return Err(format!("<edge id={:?}>: an empty id; give each edge a name", e.id));
             }
             let indices = edge_lanes.entry(e.id.as_str()).or_default();
             for l in &e.lanes {
-                if blank(&l.id) {
+                if blank_id(&l.id) {
                     return Err(format!(
                         "<lane id={:?}> of <edge id=\"{}\">: an empty id; give each lane a name (SUMO's are EDGE_INDEX)",
                         l.id, e.id

@@ -18,6 +18,9 @@ use std::path::{Path, PathBuf};
 /// The folder lock's file name.
 pub const LOCK_FILE: &str = ".causalcity.lock";
 
+/// How a shard's own lock file is named: `.causalcity-shard-K-of-N.lock`.
+const SHARD_LOCK_PREFIX: &str = ".causalcity-shard-";
+
 /// How every sweep.json's `format` begins.
 pub const SWEEP_FORMAT_PREFIX: &str = "causalcity-counterfactual-sweep/";
 
@@ -187,7 +190,7 @@ impl Drop for Claim {
 fn remove_shard_locks(dir: &Path) {
     for entry in fs::read_dir(dir).into_iter().flatten().flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
-        if name.starts_with(".causalcity-shard-") && is_lock_file(&name) {
+        if name.starts_with(SHARD_LOCK_PREFIX) && is_lock_file(&name) {
             let _ = fs::remove_file(entry.path());
         }
     }
@@ -248,7 +251,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
     let mut claim = Claim { locks: Vec::new(), locked: true, created };
     let shard = match writer {
         Writer::Gen { shard: Some((index, count)) } => {
-            Some(dir.join(format!(".causalcity-shard-{index}-of-{count}.lock")))
+            Some(dir.join(format!("{SHARD_LOCK_PREFIX}{index}-of-{count}.lock")))
         }
         _ => None,
     };
@@ -401,7 +404,7 @@ pub fn writer_at_work(dir: &Path) -> Option<String> {
         .into_iter()
         .flatten()
         .flatten()
-        .any(|e| e.file_name().to_string_lossy().starts_with(".causalcity-shard-") && busy(&e.path()));
+        .any(|e| e.file_name().to_string_lossy().starts_with(SHARD_LOCK_PREFIX) && busy(&e.path()));
     (shards || busy(&dir.join(LOCK_FILE))).then(|| holders(dir))
 }
 
@@ -411,7 +414,7 @@ fn holders(dir: &Path) -> String {
         .into_iter()
         .flatten()
         .flatten()
-        .filter(|e| e.file_name().to_string_lossy().starts_with(".causalcity-shard-"))
+        .filter(|e| e.file_name().to_string_lossy().starts_with(SHARD_LOCK_PREFIX))
         .filter(|e| File::open(e.path()).is_ok_and(|f| matches!(f.try_lock_shared(), Err(TryLockError::WouldBlock))))
         .map(|e| read_holder(&e.path()))
         .collect();
