@@ -1001,3 +1001,39 @@ fn gen_force_never_removes_the_network_its_spec_reads() {
         "the network was rewritten"
     );
 }
+
+#[test]
+fn gen_force_never_removes_a_dataset_open_for_reading_and_no_reader_opens_one_being_removed() {
+    // Readers took no lock: gen --force removed a dataset under a running
+    // export, pack or training loop, which then failed part way.
+    let dir = fresh_dir("rule-force-reader");
+    let data = toy_dataset(&dir);
+    let before = hash_tree(&data);
+    let other = dir.join("other.json");
+    std::fs::write(&other, toy_spec("rule", &[(4, 0.5)], (2, 1, 1), 20)).unwrap();
+    let force = || run(&["gen", "--quiet", "--no-images", "--force", "--spec", s(&other), "--out", s(&data)]);
+    // The dataset every reading command opens, held as they hold it.
+    let reader = causalcity::dataset::Dataset::open(&data).unwrap();
+    let output = force();
+    assert_refused(&output, "is open for reading");
+    assert!(stderr(&output).contains("Nothing was removed"), "{}", stderr(&output));
+    assert_eq!(hash_tree(&data), before, "the dataset was touched");
+    // Readers share: a second one reads on.
+    let stats = run(&["stats", s(&data)]);
+    assert!(stats.status.success(), "{}", stderr(&stats));
+    drop(reader);
+    let output = force();
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert_valid(&data);
+    assert_ne!(hash_tree(&data), before, "--force wrote nothing new once the reader closed");
+    // While gen --force removes a dataset it holds every manifest alone,
+    // as here: a reader refuses to open it rather than read it half gone.
+    let removing = causalcity::output::claim::exclude_readers([data.join("manifest.json").as_path()]).unwrap();
+    assert_eq!(removing.len(), 1, "no manifest was held");
+    for command in ["stats", "validate"] {
+        let output = run(&[command, s(&data)]);
+        assert_refused(&output, "is being removed by gen --force");
+    }
+    drop(removing);
+    assert_valid(&data);
+}

@@ -399,6 +399,63 @@ class _Kept:
             pass
 
 
+class _ReadHold:
+    """A reader's hold on a dataset: a shared lock on its ``manifest.json``,
+    as the command line's readers take it. ``gen --force`` takes that lock
+    exclusively before it removes anything, so it refuses to remove a
+    dataset held open here, and a dataset being removed is never opened.
+    Nothing is written; the lock goes with :meth:`close` or the process."""
+
+    def __init__(self, manifest: Path) -> None:
+        self._fd: Optional[int] = None
+        try:
+            import fcntl
+        except ImportError:  # no POSIX locks here: read unheld
+            return
+        # A holder may replace the file as it is opened: the lock is taken
+        # again on the file then at the path.
+        for _ in range(100):
+            try:
+                fd = _os.open(manifest, _os.O_RDONLY | getattr(_os, "O_NOFOLLOW", 0) | getattr(_os, "O_NONBLOCK", 0))
+            except OSError:  # the manifest's reader names what is wrong
+                return
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                here = _same_file(fd, manifest)
+                _os.close(fd)
+                if here:
+                    raise InputError(
+                        f"{_os.fspath(manifest.parent)} is being removed by gen --force: wait for it to finish, "
+                        "then open the dataset it writes there"
+                    ) from None
+                continue
+            except OSError:  # a filesystem without locks: read unheld
+                _os.close(fd)
+                return
+            if _same_file(fd, manifest):
+                self._fd = fd
+                return
+            _os.close(fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            _os.close(self._fd)
+            self._fd = None
+
+    def __del__(self) -> None:
+        self.close()
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether the open file ``fd`` is the one now at ``path``."""
+    try:
+        a, b = _os.fstat(fd), _os.stat(path)
+    except OSError:
+        return False
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+
 class Dataset(_Packed):
     """A dataset folder ``gen`` wrote, opened for reading: its manifest, the
     spec it was made from (:attr:`spec`, a :class:`~causalcity.Spec`), its
@@ -406,7 +463,11 @@ class Dataset(_Packed):
     ``dataset[i]`` (the i-th of :meth:`keys`) and iteration give
     :class:`~causalcity.Scenario` objects, so that with ``split`` it is a
     map-style PyTorch dataset: ``DataLoader(open_dataset(root, "train"),
-    collate_fn=causalcity.collate)``."""
+    collate_fn=causalcity.collate)``.
+
+    While it is open, ``gen --force`` refuses to remove the dataset (as
+    while any command reads it): :meth:`close` it, or use it in a ``with``
+    block, to let go sooner than the object goes."""
 
     def __init__(self, root: PathLike, split: Optional[str] = None, images: bool = True) -> None:
         from . import Spec
@@ -416,6 +477,7 @@ class Dataset(_Packed):
         if not manifest.is_file():
             sweep = " (it is a counterfactual sweep: use causalcity.open_sweep)" if (self.root / "sweep.json").is_file() else ""
             raise FileNotFoundError(f"{_os.fspath(self.root)}: no manifest.json, so not a dataset gen wrote{sweep}")
+        self._hold: Optional[_ReadHold] = _ReadHold(manifest)
         self.manifest: Dict[str, Any] = _read_record(manifest, "a manifest gen wrote")
         if not self.manifest.get("complete", False):
             _warnings.warn(
@@ -452,6 +514,25 @@ class Dataset(_Packed):
                 "checks it",
                 stacklevel=2,
             )
+
+    def close(self) -> None:
+        """Lets go of the dataset, so that ``gen --force`` may remove it;
+        reading on is then at the reader's own risk."""
+        if self._hold is not None:
+            self._hold.close()
+            self._hold = None
+
+    def __enter__(self) -> "Dataset":
+        return self
+
+    def __exit__(self, *_: Any) -> None:
+        self.close()
+
+    def __getstate__(self) -> Dict[str, Any]:
+        # A copy in a DataLoader worker reads under its parent's hold.
+        state = super().__getstate__()
+        state["_hold"] = None
+        return state
 
     def keys(self, split: Optional[str] = None) -> List["Key"]:
         """The keys of the scenarios on disk, in ``gen``'s order (groups,

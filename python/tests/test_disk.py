@@ -319,3 +319,51 @@ def test_a_scenario_without_its_frames_in_a_dataset_with_images_is_named(tmp_pat
     with pytest.raises(causalcity.InputError, match="no rgb/ though the dataset has images"):
         causalcity.open_dataset(root).load(key)
     assert causalcity.open_dataset(root, images=False).load(key).rgb is None
+
+
+def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_removed(tmp_path):
+    # Readers took no lock: gen --force removed a dataset under a training
+    # loop, which then failed part way through an epoch.
+    import fcntl
+    import pickle
+    import shlex
+    import subprocess
+
+    spec = {"name": "held", "world": "toy", "seed": 5, "frames": 6, "groups": [{"cars": 4, "edge_proportion": 0.5}],
+            "splits": {"train": 2, "val": 1, "test": 1}}  # fmt: skip
+    out = tmp_path / "held"
+    causalcity.generate(spec, out, progress=False, images=False)
+    (tmp_path / "other.json").write_text(json.dumps(dict(spec, seed=6)))
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", "target/release/causalcity"))
+    force = command + ["gen", "--quiet", "--no-images", "--force", "--spec", str(tmp_path / "other.json"), "--out", str(out)]
+
+    def files():
+        return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+    before = files()
+    data = causalcity.open_dataset(out, "train")
+    refused = subprocess.run(force, capture_output=True, text=True)
+    assert refused.returncode == 2 and "is open for reading" in refused.stderr, refused.stderr
+    assert files() == before
+    # In this very process too, and a copy for a DataLoader worker reads
+    # under the hold of the one it came from.
+    with pytest.raises(causalcity.InputError, match="is open for reading"):
+        causalcity.generate(dict(spec, seed=6), out, progress=False, images=False, force=True)
+    copy = pickle.loads(pickle.dumps(data))
+    assert copy[0].key == data[0].key and files() == before
+    data.close()
+    assert subprocess.run(force, capture_output=True, text=True).returncode == 0
+    assert files() != before
+    with causalcity.open_dataset(out) as data:
+        assert data.spec.seed == 6 and len(data) == 4
+    after = files()
+    causalcity.generate(spec, out, progress=False, images=False, force=True)
+    assert files() != after, "a with block kept its hold"
+
+    # gen --force holds the manifest alone while it removes, as here: the
+    # dataset is not opened half gone.
+    with open(out / "manifest.json") as manifest:
+        fcntl.flock(manifest, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(causalcity.InputError, match="is being removed by gen --force"):
+            causalcity.open_dataset(out)
+    assert len(causalcity.open_dataset(out)) == 4

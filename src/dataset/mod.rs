@@ -25,6 +25,9 @@ pub struct Dataset {
     /// of scenario folders when they first need them; the folders go when
     /// this goes.
     pub unpacked: Option<Unpacked>,
+    /// Held while this is open: `gen --force` refuses to remove the
+    /// dataset meanwhile.
+    _hold: crate::output::claim::ReadHold,
 }
 
 /// Each scenario's (cars, frames) by its folder relative to the dataset
@@ -46,6 +49,7 @@ impl Dataset {
     /// Opens the dataset in `dir`; errors name the folder and what is wrong.
     pub fn open(dir: &Path) -> Result<Dataset, String> {
         let manifest = dir.join("manifest.json");
+        let hold = crate::output::claim::hold_for_reading(&manifest)?;
         let record = ManifestRecord::read(&manifest)?.ok_or_else(|| match dir.join(SWEEP_RECORD).is_file() {
             true => format!(
                 "{} is a counterfactual sweep (sweep.json), not a gen dataset: this command reads datasets gen \
@@ -64,7 +68,7 @@ impl Dataset {
                 done: std::sync::Mutex::new(Vec::new()),
             }),
         };
-        Ok(Dataset { dir: dir.to_path_buf(), record, expansion, unpacked })
+        Ok(Dataset { dir: dir.to_path_buf(), record, expansion, unpacked, _hold: hold })
     }
 
     /// The folder the scenario folders at `positions` are under: the
