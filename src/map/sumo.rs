@@ -466,6 +466,12 @@ pub const MAX_NETWORK_COORDINATE_M: f64 = 1.0e7;
 /// lane's route) would not fit in memory.
 pub const MAX_NETWORK_SPAN_M: f64 = 1.0e6;
 
+/// Largest offset (either sign) of a light programme, seconds: the longest
+/// scenario a spec allows (`spec::MAX_SCENARIO_S`, which a test holds it
+/// to). A light's clock is the scenario's time plus its offset, which
+/// beyond that would lose the time itself (1e300 s froze every light).
+pub const MAX_LIGHT_OFFSET_S: f64 = 1.0e6;
+
 /// Widest lane an imported network may give, metres: roads' lanes are a
 /// few metres wide (SUMO's default [`SUMO_DEFAULT_LANE_WIDTH_M`]).
 pub const MAX_LANE_WIDTH_M: f64 = 50.0;
@@ -664,6 +670,14 @@ impl SumoNetwork {
                         l.id, l.length, l.speed
                     ));
                 }
+                // (Listed by `map`, and no longer than the network spans.)
+                if l.length > MAX_NETWORK_SPAN_M {
+                    return Err(format!(
+                        "<lane id=\"{}\">: length {:e} m; allowed: above 0 and at most {MAX_NETWORK_SPAN_M} m (1,000 km, \
+                         the largest span of a network)",
+                        l.id, l.length
+                    ));
+                }
                 let width = l.width.unwrap_or(SUMO_DEFAULT_LANE_WIDTH_M);
                 if !(width > 0.0 && width <= MAX_LANE_WIDTH_M) {
                     return Err(format!(
@@ -693,10 +707,13 @@ impl SumoNetwork {
             if programme_index.contains_key(p.id.as_str()) {
                 continue; // another programme of the same lights: the first one runs
             }
-            if !p.offset.is_finite() {
+            if !(p.offset.is_finite() && p.offset.abs() <= MAX_LIGHT_OFFSET_S) {
                 return Err(format!(
-                    "<tlLogic id=\"{}\">: offset {}; allowed: a finite number of seconds",
-                    p.id, p.offset
+                    "<tlLogic id=\"{}\">: offset {:?}; allowed: a finite number of seconds from -{max} to {max} \
+                     (the longest scenario)",
+                    p.id,
+                    p.offset,
+                    max = MAX_LIGHT_OFFSET_S
                 ));
             }
             let (mut phases, mut actuated) = (Vec::new(), Vec::new());
@@ -1043,6 +1060,16 @@ mod tests {
                 r#"<tlLogic id="J1">: offset NaN; allowed: a finite number of seconds"#,
             ),
             (r#"offset="2""#, r#"offset="inf""#, r#"<tlLogic id="J1">: offset inf; allowed"#),
+            (
+                r#"offset="2""#,
+                r#"offset="1e300""#,
+                r#"<tlLogic id="J1">: offset 1e300; allowed: a finite number of seconds from -1000000 to 1000000"#,
+            ),
+            (
+                r#"speed="13.9" length="10" shape="15,0 25,0""#,
+                r#"speed="13.9" length="1e15" shape="15,0 25,0""#,
+                r#"<lane id="b_0">: length 1e15 m; allowed: above 0 and at most 1000000 m"#,
+            ),
             (
                 r#"<connection from="a" to="b""#,
                 r#"<connection from="aa" to="b""#,

@@ -519,11 +519,13 @@ impl CitySpec {
                 ),
             ));
         }
-        if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !o.is_finite()) {
+        let max = crate::map::sumo::MAX_LIGHT_OFFSET_S;
+        if self.lights.offsets.len() != 4 || self.lights.offsets.iter().any(|o| !(o.is_finite() && o.abs() <= max)) {
             return Err(SpecError::new(
                 "city.lights.offsets",
                 format!(
-                    "{:?} is not allowed: give 4 finite offsets in seconds, for AC, AD, BC, BD",
+                    "{:?} is not allowed: give 4 offsets in seconds, each from -{max} to {max} (the longest \
+                     scenario), for AC, AD, BC, BD",
                     self.lights.offsets
                 ),
             ));

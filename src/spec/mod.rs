@@ -818,6 +818,11 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_sumo_lights_offset_is_bounded_by_the_longest_scenario() {
+        assert_eq!(crate::map::sumo::MAX_LIGHT_OFFSET_S, MAX_SCENARIO_S);
+    }
+
+    #[test]
     fn edges_follow_the_documented_rule() {
         let g = |cars, p| GroupSpec { cars, edge_proportion: p }.edges();
         assert_eq!(g(8, 0.5), 2);
