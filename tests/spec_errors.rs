@@ -342,6 +342,18 @@ fn a_grid_town_is_checked_for_its_size_and_room_to_change_lanes() {
         &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 4})),
         &["map.grid.lanes", "4 is not allowed", "1 to 3"],
     );
+    // Roads in descending order were told as a negative road length.
+    rejected(
+        "roads-descending",
+        &with(|v| v["map"] = serde_json::json!({"east_west_roads": [30, -30]})),
+        &["map.east_west_roads", "[30.0, -30.0] is not allowed", "road B's centre line first", "[-30, 30]"],
+    );
+    // Beyond a byte it was told "0 to 255", which allowed none of them.
+    rejected(
+        "grid-lanes-1000",
+        &grid(serde_json::json!({"rows": 2, "columns": 2, "lanes": 1000})),
+        &["map.grid.lanes", "1000 is not allowed", "1 to 3"],
+    );
     // 20 m blocks leave 8 m between the 12 m wide roads: too short for a lane change.
     rejected(
         "grid-block",

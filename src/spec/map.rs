@@ -77,9 +77,10 @@ pub struct GridSpec {
     /// T-junctions.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub missing: Vec<String>,
-    /// Lanes each way on every road: 2 (the original's), 1 or 3.
+    /// Lanes each way on every road: 2 (the original's), 1 or 3 (read
+    /// wide, so that 1000 is told as what it is, not as "0 to 255").
     #[serde(default = "default_lanes", skip_serializing_if = "is_default_lanes")]
-    pub lanes: u8,
+    pub lanes: u32,
     /// How junctions decide who goes: traffic lights everywhere (absent),
     /// one control for every junction (`"priority"`), or some junctions by
     /// name (`{"AC": "all_way_stop"}`, the rest with lights).
@@ -165,11 +166,11 @@ impl<'de> Deserialize<'de> for ControlSpec {
 }
 
 /// The original's roads: two lanes each way.
-fn default_lanes() -> u8 {
+fn default_lanes() -> u32 {
     2
 }
 
-fn is_default_lanes(lanes: &u8) -> bool {
+fn is_default_lanes(lanes: &u32) -> bool {
     *lanes == default_lanes()
 }
 
@@ -548,7 +549,7 @@ impl MapSpec {
                 extent_y: reach(grid.rows),
                 lane_change_length: self.lane_change_m,
                 missing_segments: spec.missing.iter().filter_map(|name| parse_segment(name)).collect(),
-                lanes_per_direction: spec.lanes,
+                lanes_per_direction: u8::try_from(spec.lanes).unwrap_or(u8::MAX),
                 junction_controls,
                 dead_ends,
                 ..d
@@ -635,6 +636,18 @@ impl MapSpec {
                 ));
             }
             positive(extent_field, extent, MAX_MAP_EXTENT, "metres")?;
+            // (Told as it is: a negative road length between them said
+            // nothing of the order.)
+            if roads[1] <= roads[0] {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{roads:?} is not allowed: give road {first}'s centre line first, then road {second}'s, \
+                         the second greater (e.g. [{}, {}])",
+                        roads[1], roads[0]
+                    ),
+                ));
+            }
             let segments = [
                 (format!("from -{extent_field} to road {first}"), roads[0] - hw + extent),
                 (format!("between roads {first} and {second}"), roads[1] - roads[0] - 2.0 * hw),
