@@ -400,60 +400,58 @@ class _Kept:
 
 
 class _ReadHold:
-    """A reader's hold on a dataset: a shared lock on its ``manifest.json``,
-    as the command line's readers take it. ``gen --force`` takes that lock
+    """A reader's hold on a dataset: a shared lock on its folder, as the
+    command line's readers take it. ``gen --force`` takes that lock
     exclusively before it removes anything, so it refuses to remove a
     dataset held open here, and a dataset being removed is never opened.
-    Nothing is written; the lock goes with :meth:`close` or the process."""
+    Nothing is written; the lock goes with :meth:`close` (in the process
+    that took it, even while forked DataLoader workers still hold the
+    open file) or with the process."""
 
-    def __init__(self, manifest: Path) -> None:
+    def __init__(self, root: Path) -> None:
         self._fd: Optional[int] = None
+        self._pid = _os.getpid()
         try:
             import fcntl
         except ImportError:  # no POSIX locks here: read unheld
             return
-        # A holder may replace the file as it is opened: the lock is taken
-        # again on the file then at the path.
-        for _ in range(100):
-            try:
-                fd = _os.open(manifest, _os.O_RDONLY | getattr(_os, "O_NOFOLLOW", 0) | getattr(_os, "O_NONBLOCK", 0))
-            except OSError:  # the manifest's reader names what is wrong
-                return
-            try:
-                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            except BlockingIOError:
-                here = _same_file(fd, manifest)
-                _os.close(fd)
-                if here:
-                    raise InputError(
-                        f"{_os.fspath(manifest.parent)} is being removed by gen --force: wait for it to finish, "
-                        "then open the dataset it writes there"
-                    ) from None
-                continue
-            except OSError:  # a filesystem without locks: read unheld
-                _os.close(fd)
-                return
-            if _same_file(fd, manifest):
-                self._fd = fd
-                return
+        try:
+            fd = _os.open(root, _os.O_RDONLY | getattr(_os, "O_DIRECTORY", 0) | getattr(_os, "O_NONBLOCK", 0))
+        except OSError:  # the dataset's reader names what is wrong
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
             _os.close(fd)
+            raise InputError(
+                f"{_os.fspath(root)} is being removed by gen --force: wait for it to finish, then open the dataset it "
+                "writes there"
+            ) from None
+        except OSError:  # a filesystem without locks: read unheld
+            _os.close(fd)
+            return
+        self._fd = fd
 
     def close(self) -> None:
-        if self._fd is not None:
-            _os.close(self._fd)
-            self._fd = None
+        if self._fd is None:
+            return
+        fd, self._fd = self._fd, None
+        # Only the process that took the lock lets it go: a forked worker
+        # shares the open file, and its unlock would be its parent's.
+        if _os.getpid() == self._pid:
+            import fcntl
+
+            try:
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            except OSError:
+                pass
+        try:
+            _os.close(fd)
+        except OSError:
+            pass
 
     def __del__(self) -> None:
         self.close()
-
-
-def _same_file(fd: int, path: Path) -> bool:
-    """Whether the open file ``fd`` is the one now at ``path``."""
-    try:
-        a, b = _os.fstat(fd), _os.stat(path)
-    except OSError:
-        return False
-    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
 
 
 class Dataset(_Packed):
@@ -477,7 +475,7 @@ class Dataset(_Packed):
         if not manifest.is_file():
             sweep = " (it is a counterfactual sweep: use causalcity.open_sweep)" if (self.root / "sweep.json").is_file() else ""
             raise FileNotFoundError(f"{_os.fspath(self.root)}: no manifest.json, so not a dataset gen wrote{sweep}")
-        self._hold: Optional[_ReadHold] = _ReadHold(manifest)
+        self._hold: Optional[_ReadHold] = _ReadHold(self.root)
         self.manifest: Dict[str, Any] = _read_record(manifest, "a manifest gen wrote")
         if not self.manifest.get("complete", False):
             _warnings.warn(

@@ -329,6 +329,8 @@ def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_re
     import shlex
     import subprocess
 
+    from causalcity.methods.common import Method, Predicted, run_method
+
     spec = {"name": "held", "world": "toy", "seed": 5, "frames": 6, "groups": [{"cars": 4, "edge_proportion": 0.5}],
             "splits": {"train": 2, "val": 1, "test": 1}}  # fmt: skip
     out = tmp_path / "held"
@@ -340,8 +342,10 @@ def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_re
     def files():
         return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
 
-    before = files()
     data = causalcity.open_dataset(out, "train")
+    # A plain gen replaces the manifest whole; the hold is on the folder.
+    causalcity.generate(spec, out, progress=False, images=False)
+    before = files()
     refused = subprocess.run(force, capture_output=True, text=True)
     assert refused.returncode == 2 and "is open for reading" in refused.stderr, refused.stderr
     assert files() == before
@@ -351,8 +355,24 @@ def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_re
         causalcity.generate(dict(spec, seed=6), out, progress=False, images=False, force=True)
     copy = pickle.loads(pickle.dumps(data))
     assert copy[0].key == data[0].key and files() == before
+    # A forked worker shares the open folder: its letting go is not its
+    # parent's, and its parent's close() lets go while it still runs.
+    child = os.fork()
+    if child == 0:
+        data.close()
+        os._exit(0)
+    os.waitpid(child, 0)
+    assert subprocess.run(force, capture_output=True, text=True).returncode == 2
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:
+        os.read(read, 1)
+        os._exit(0)
     data.close()
-    assert subprocess.run(force, capture_output=True, text=True).returncode == 0
+    forced = subprocess.run(force, capture_output=True, text=True)
+    os.write(write, b"x")
+    os.waitpid(child, 0)
+    assert forced.returncode == 0, forced.stderr
     assert files() != before
     with causalcity.open_dataset(out) as data:
         assert data.spec.seed == 6 and len(data) == 4
@@ -360,10 +380,26 @@ def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_re
     causalcity.generate(spec, out, progress=False, images=False, force=True)
     assert files() != after, "a with block kept its hold"
 
-    # gen --force holds the manifest alone while it removes, as here: the
+    # The reference methods hold it while they train: a gen --force run
+    # from inside fit is refused.
+    class Regenerates(Method):
+        def fit(self, train, val):
+            self.forced = subprocess.run(force, capture_output=True, text=True)
+
+        def predict(self, episodes):
+            return Predicted(edges=np.zeros((len(episodes), episodes.cars, episodes.cars)))
+
+    made = []
+    run_method(lambda: made.append(Regenerates()) or made[-1], out, tmp_path / "pred.npz", quiet=True)
+    assert made and made[0].forced.returncode == 2 and "is open for reading" in made[0].forced.stderr
+
+    # gen --force holds the folder alone while it removes, as here: the
     # dataset is not opened half gone.
-    with open(out / "manifest.json") as manifest:
-        fcntl.flock(manifest, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    folder = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(folder, fcntl.LOCK_EX | fcntl.LOCK_NB)
         with pytest.raises(causalcity.InputError, match="is being removed by gen --force"):
             causalcity.open_dataset(out)
+    finally:
+        os.close(folder)
     assert len(causalcity.open_dataset(out)) == 4

@@ -49,7 +49,7 @@ impl Dataset {
     /// Opens the dataset in `dir`; errors name the folder and what is wrong.
     pub fn open(dir: &Path) -> Result<Dataset, String> {
         let manifest = dir.join("manifest.json");
-        let hold = crate::output::claim::hold_for_reading(&manifest)?;
+        let hold = crate::output::claim::hold_for_reading(dir)?;
         let record = ManifestRecord::read(&manifest)?.ok_or_else(|| match dir.join(SWEEP_RECORD).is_file() {
             true => format!(
                 "{} is a counterfactual sweep (sweep.json), not a gen dataset: this command reads datasets gen \

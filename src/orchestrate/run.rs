@@ -408,9 +408,8 @@ fn remove_dataset(out: &Path, records: &[(PathBuf, ManifestRecord)]) -> Result<(
     };
     // Never under a reader: a dataset open for reading (a command, or the
     // Python package) makes --force refuse, and none opens it from here
-    // until its manifests are gone.
-    let _readers_excluded = crate::output::claim::exclude_readers(records.iter().map(|(path, _)| path.as_path()))
-        .map_err(GenError::Claim)?;
+    // until the removal is done.
+    let _readers_excluded = crate::output::claim::exclude_readers(out).map_err(GenError::Claim)?;
     // Everything is looked at before anything is removed: a user's file
     // anywhere in the old dataset's folders makes --force refuse, whole.
     let mut foreign = Vec::new();

@@ -74,11 +74,12 @@ pub enum ClaimError {
     InUse { dir: PathBuf, holder: String },
     /// A dataset `gen --force` would remove while a reader has it open.
     #[error(
-        "{dir} is open for reading ({manifest} is held by a causalcity reader: validate, stats, evaluate, export, \
-         pack, heatmap, preview, baseline, or a causalcity.Dataset in Python, perhaps in this very process, which \
-         lets go with its close()). Nothing was removed: let the reader finish, or close it, then rerun with --force"
+        "{dir} is open for reading (held by a causalcity reader: validate, stats, evaluate, export, pack, heatmap, \
+         preview, baseline, python -m causalcity.methods, or a causalcity.Dataset in Python, perhaps in this very \
+         process, which lets go with its close()). Nothing was removed: let the reader finish, or close it, then \
+         rerun with --force"
     )]
-    BeingRead { dir: PathBuf, manifest: PathBuf },
+    BeingRead { dir: PathBuf },
     #[error("{dir} holds {what}: {command} writes only {writes}. Use another --out{hint}")]
     Foreign { dir: PathBuf, what: String, command: &'static str, writes: &'static str, hint: &'static str },
     #[error("{dir} is inside {inside} ({ancestor}), which it would then fail to validate: write outside it")]
@@ -876,86 +877,59 @@ mod tests {
     }
 }
 
-/// A reader's hold on a dataset: a shared lock on its `manifest.json`,
-/// kept while the dataset is open. `gen --force` takes that lock
-/// exclusively before it removes anything ([`exclude_readers`]), so it
-/// refuses to remove a dataset being read, and a reader refuses to open one
-/// being removed. Nothing is written: the manifest is only opened.
+/// A reader's hold on a dataset: a shared lock on its folder, kept while
+/// the dataset is open. `gen --force` takes that lock exclusively before
+/// it removes anything ([`exclude_readers`]), so it refuses to remove a
+/// dataset being read, and a reader refuses to open one being removed. The
+/// folder, not its manifest: a plain `gen` replaces the manifest whole, and
+/// a hold on the file it replaced held nothing. Nothing is written.
 #[derive(Debug)]
 pub struct ReadHold {
-    /// None where there is no plain manifest to hold (its reader says
-    /// why) or the filesystem has no locks.
-    _manifest: Option<File>,
+    /// None where the filesystem has no locks (some network filesystems).
+    _folder: Option<File>,
 }
 
-/// Takes a reader's hold on the dataset whose manifest is `manifest`; an
-/// error, naming the folder and who is removing it, while a `gen --force`
-/// removes that dataset.
-pub fn hold_for_reading(manifest: &Path) -> Result<ReadHold, String> {
-    let none = ReadHold { _manifest: None };
-    // A holder may be replacing the file as we open it: the lock is taken
-    // again on the file then at the path (a few tries are plenty).
-    for _ in 0..100 {
-        // Plain files only (a pipe would block the open); a link or
-        // anything else is left to the manifest's reader to name.
-        if !fs::symlink_metadata(manifest).is_ok_and(|m| m.is_file()) {
-            return Ok(none);
-        }
-        let mut options = fs::OpenOptions::new();
-        options.read(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt;
-            options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
-        }
-        let Ok(file) = options.open(manifest) else { return Ok(none) };
-        match file.try_lock_shared() {
-            Ok(()) if is_at(&file, manifest) => return Ok(ReadHold { _manifest: Some(file) }),
-            Ok(()) => continue,
-            Err(TryLockError::WouldBlock) if !is_at(&file, manifest) => continue,
-            Err(TryLockError::WouldBlock) => {
-                let dir = manifest.parent().unwrap_or(Path::new("."));
-                return Err(format!(
-                    "{} is being removed by gen --force ({}): wait for it to finish, then read the dataset it \
-                     writes there",
-                    dir.display(),
-                    holders(dir)
-                ));
-            }
-            // No locks here (some network filesystems): read unheld.
-            Err(TryLockError::Error(_)) => return Ok(none),
-        }
+/// Opens a folder to lock it (read only, never waiting: a pipe named as
+/// the folder is not one).
+fn open_folder(dir: &Path) -> Option<File> {
+    if !fs::metadata(dir).is_ok_and(|m| m.is_dir()) {
+        return None;
     }
-    Ok(none)
+    let mut options = fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_DIRECTORY | libc::O_NONBLOCK);
+    }
+    options.open(dir).ok()
 }
 
-/// Before a dataset is removed: every reader's hold taken away, by an
-/// exclusive lock on each of its manifests, kept while the returned files
-/// live (their removal does not end it). [`ClaimError::BeingRead`] while a
-/// reader holds one; a manifest that is no plain file, or a filesystem
-/// without locks, is passed over.
-pub fn exclude_readers<'a>(manifests: impl IntoIterator<Item = &'a Path>) -> Result<Vec<File>, ClaimError> {
-    let mut held = Vec::new();
-    for manifest in manifests {
-        if !fs::symlink_metadata(manifest).is_ok_and(|m| m.is_file()) {
-            continue;
-        }
-        let mut options = fs::OpenOptions::new();
-        options.read(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt;
-            options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
-        }
-        let file = options.open(manifest).map_err(|source| ClaimError::Io { path: manifest.to_path_buf(), source })?;
-        match file.try_lock() {
-            Ok(()) => held.push(file),
-            Err(TryLockError::WouldBlock) => {
-                let dir = manifest.parent().unwrap_or(Path::new(".")).to_path_buf();
-                return Err(ClaimError::BeingRead { dir, manifest: manifest.to_path_buf() });
-            }
-            Err(TryLockError::Error(_)) => {}
-        }
+/// Takes a reader's hold on the dataset in `dir`; an error, naming the
+/// folder and who is removing it, while a `gen --force` removes it.
+pub fn hold_for_reading(dir: &Path) -> Result<ReadHold, String> {
+    let Some(folder) = open_folder(dir) else { return Ok(ReadHold { _folder: None }) };
+    match folder.try_lock_shared() {
+        Ok(()) => Ok(ReadHold { _folder: Some(folder) }),
+        Err(TryLockError::WouldBlock) => Err(format!(
+            "{} is being removed by gen --force ({}): wait for it to finish, then read the dataset it writes there",
+            dir.display(),
+            holders(dir)
+        )),
+        // No locks here: read unheld.
+        Err(TryLockError::Error(_)) => Ok(ReadHold { _folder: None }),
     }
-    Ok(held)
+}
+
+/// Before the dataset in `dir` is removed: every reader's hold taken away,
+/// by an exclusive lock on the folder, kept while the returned file lives.
+/// [`ClaimError::BeingRead`] while a reader holds it; a filesystem without
+/// locks is passed over.
+pub fn exclude_readers(dir: &Path) -> Result<Option<File>, ClaimError> {
+    let Some(folder) = open_folder(dir) else { return Ok(None) };
+    match folder.try_lock() {
+        Ok(()) => Ok(Some(folder)),
+        Err(TryLockError::WouldBlock) => Err(ClaimError::BeingRead { dir: dir.to_path_buf() }),
+        Err(TryLockError::Error(_)) => Ok(None),
+    }
 }

@@ -379,7 +379,20 @@ def run_method(
     # The one write rule, checked before any training: never into a
     # dataset, never onto the input, never through a link.
     _native.claim_output(os.fspath(out), [("the dataset it reads", os.fspath(root))])
-    names = all_groups if groups is None else groups
+    # Held while the method trains and predicts, group by group: gen
+    # --force removed the dataset under it, and later groups were read from
+    # the new one (exit 0).
+    from ..disk import _ReadHold
+
+    hold = _ReadHold(root)
+    try:
+        return _run_method(make_method, root, out, all_groups if groups is None else groups, splits, quiet)
+    finally:
+        hold.close()
+
+
+def _run_method(make_method, root: Path, out: "str | Path", names, splits: Iterable[str], quiet: bool) -> Path:
+    """:func:`run_method` under its hold on ``root``."""
     edges: Dict[str, np.ndarray] = {}
     trajectories: Dict[str, np.ndarray] = {}
     frames = None
