@@ -224,6 +224,10 @@ fn spec_schema_and_parser_agree() {
         ("driver field as text", edited(&base, |v| v["city"]["driver"]["min_gap"] = json!("wide"))),
         ("three offsets", edited(&base, |v| v["city"]["lights"]["offsets"] = json!([0, 1, 2]))),
         ("an offset of 1e300 s", edited(&base, |v| v["city"]["lights"]["offsets"] = json!([0, 1, 2, 1e300]))),
+        (
+            "an override's offset of 1e300 s",
+            edited(&base, |v| v["city"]["lights"]["overrides"][0]["offset"] = json!(1e300)),
+        ),
         ("missing splits", edited(&base, |v| v.as_object_mut().unwrap().remove("splits").map(|_| ()).unwrap())),
         ("no frames", edited(&base, |v| v["frames"] = json!(0))),
         ("tiny image", edited(&base, |v| v["image"] = json!({"width": 10, "height": 640}))),

@@ -564,8 +564,14 @@ impl CitySpec {
                     format!("{} is not allowed: seconds, at least {MIN_PHASE_S}", Shown(st.duration)),
                 ));
             }
-            if !o.offset.is_finite() {
-                return Err(SpecError::new(format!("{field}.offset"), "must be a finite number of seconds"));
+            if !(o.offset.is_finite() && o.offset.abs() <= max) {
+                return Err(SpecError::new(
+                    format!("{field}.offset"),
+                    format!(
+                        "{} is not allowed: a number of seconds from -{max} to {max} (the longest scenario)",
+                        Shown(o.offset)
+                    ),
+                ));
             }
         }
         self.confounders.validate("city.confounders")

@@ -644,7 +644,8 @@ impl MapSpec {
                     format!(
                         "{roads:?} is not allowed: give road {first}'s centre line first, then road {second}'s, \
                          the second greater (e.g. [{}, {}])",
-                        roads[1], roads[0]
+                        roads[0].min(roads[1]),
+                        roads[0].min(roads[1]) + 60.0
                     ),
                 ));
             }
