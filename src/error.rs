@@ -56,8 +56,8 @@ impl Error {
     /// to find every problem.
     pub fn damaged(dataset: &std::path::Path, message: impl fmt::Display) -> Error {
         Error::Input(format!(
-            "{message}\n{} is damaged: `causalcity validate {}` names every problem, and rerunning the gen that \
-             wrote it repairs them",
+            "{message}\n{} is damaged: `causalcity validate {}` names every problem, and rerunning the command \
+             that wrote it (gen, or counterfactual --sweep) repairs them",
             dataset.display(),
             dataset.display()
         ))

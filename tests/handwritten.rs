@@ -392,6 +392,45 @@ fn a_sweep_writes_reproducible_pairs_from_a_gen_spec() {
 }
 
 #[test]
+fn a_sweep_rerun_repairs_an_edited_summary_or_divergence_log_and_a_refused_one_leaves_the_record_as_it_was() {
+    let dir = fresh_dir("hw-sweep-repair");
+    let spec = write_spec(&dir, &city_spec("sweep-repair", &[(6, 0.5)], (2, 1, 0), 60, "{}"));
+    let out = dir.join("out");
+    let sweep = || {
+        let args = ["counterfactual", "--sweep", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+        run(&[&args[..], &["-q", "--kinds", "stop,remove"]].concat())
+    };
+    assert!(sweep().status.success());
+    let whole = hash_tree(&out);
+    // summary.json and divergence.csv carry no checksum: an edited
+    // intervention (which evaluate scores, and validate passes) and a
+    // damaged log were kept by every rerun, exit 0.
+    let pair = out.join("cars06_edges50/train/00001");
+    let summary = std::fs::read_to_string(pair.join("summary.json")).unwrap();
+    let car = read_json(&pair.join("summary.json"))["intervention"]["car"].as_u64().unwrap();
+    let edited = summary.replacen(&format!("\"car\": {car}"), &format!("\"car\": {}", (car + 1) % 6), 1);
+    assert_ne!(edited, summary, "the edit must change the summary");
+    std::fs::write(pair.join("summary.json"), edited).unwrap();
+    let log = out.join("cars06_edges50/val/00000/divergence.csv");
+    std::fs::write(&log, std::fs::read_to_string(&log).unwrap() + "x\n").unwrap();
+    let rerun = sweep();
+    assert!(rerun.status.success(), "{}", String::from_utf8_lossy(&rerun.stderr));
+    assert_eq!(hash_tree(&out), whole, "the rerun did not write the edited pairs again");
+
+    // A pair the rerun refuses (a link at its folder): exit 2, and the
+    // sweep's record as it was (it was left incomplete, which evaluate
+    // then refused).
+    let moved = dir.join("elsewhere");
+    std::fs::rename(&pair, &moved).unwrap();
+    std::os::unix::fs::symlink(&moved, &pair).unwrap();
+    let record = std::fs::read(out.join("sweep.json")).unwrap();
+    let refused = sweep();
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("is a link"));
+    assert_eq!(std::fs::read(out.join("sweep.json")).unwrap(), record, "the refused rerun rewrote sweep.json");
+}
+
+#[test]
 fn run_and_counterfactual_log_the_lights_as_gen_does_and_a_sweep_records_how() {
     let dir = fresh_dir("hw-light-logs");
     // run: light_changes.csv by default, lights.csv with --lights frames;

@@ -639,6 +639,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             )));
         }
     }
+    // Put back as it was when a pair is refused (a link, a user's file):
+    // a refused rerun of a complete sweep left it incomplete.
+    let previous_record = std::fs::read(&record_path).ok();
     write_atomically(&record_path, &record(None)).map_err(GenError::from)?;
     keep_networks(&expansion.spec, &out)?;
     let keys = expansion.keys(options.limit);
@@ -656,17 +659,25 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         let refused = |why: crate::output::Refused| GenError::Input(why.to_string());
         // Never kept, read or written through a link.
         crate::output::refuse_links_below(&out, &folder).map_err(refused)?;
-        if let Some(summary) = complete_pair(&folder) {
-            kept.fetch_add(1, Ordering::Relaxed);
-            bar.inc();
-            return Ok(summary);
-        }
         let plan = expansion.plan(key).map_err(|reason| GenError::Plan {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
-        let mut counterfactual = plan.clone();
         let (intervention, record) = random_intervention(&plan, &options.kinds);
+        // Kept only as this sweep writes it: its summary.json and
+        // divergence.csv carry no checksum, so they are held to the
+        // readers' rule and to the intervention the pair's key draws (an
+        // edited summary or divergence log was kept by every rerun).
+        if let Some(summary) =
+            complete_pair(&folder).filter(|s| s.intervention.as_ref() == Some(&record)).filter(|_| {
+                crate::dataset::pairs::check_pair(&folder, (&key.group, key.split.name(), key.index.into())).is_ok()
+            })
+        {
+            kept.fetch_add(1, Ordering::Relaxed);
+            bar.inc();
+            return Ok(summary);
+        }
+        let mut counterfactual = plan.clone();
         counterfactual.interventions.push(intervention);
         let pair = (&plan, &counterfactual);
         // An incomplete pair is written again from scratch: removed first,
@@ -747,7 +758,12 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             let done = (in_folders + in_packs) as u64;
             return Err(RunError::Write(GenError::Interrupted { done, total: keys.len() as u64, out }));
         }
-        Err(e) => return Err(RunError::Write(e)),
+        Err(e) => {
+            if let (GenError::Input(_), Some(previous)) = (&e, previous_record) {
+                write_atomically(&record_path, &previous).map_err(GenError::from)?;
+            }
+            return Err(RunError::Write(e));
+        }
     };
     write_atomically(&record_path, &record(Some(summaries.len()))).map_err(GenError::from)?;
     let affected: usize = summaries.iter().map(|s| s.affected.len()).sum();
