@@ -639,16 +639,19 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             )));
         }
     }
-    // Put back as it was when a pair is refused (a link, a user's file):
-    // a refused rerun of a complete sweep left it incomplete.
-    let previous_record = std::fs::read(&record_path).ok();
+    let keys = expansion.keys(options.limit);
+    let folder_of = |key: &ScenarioKey| scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
+    // A pair is never kept, read or written through a link: refused
+    // before anything is written (a refused rerun of a complete sweep left
+    // it incomplete, which evaluate then refused).
+    for key in &keys {
+        crate::output::refuse_links_below(&out, &folder_of(key)).map_err(|why| GenError::Input(why.to_string()))?;
+    }
     write_atomically(&record_path, &record(None)).map_err(GenError::from)?;
     keep_networks(&expansion.spec, &out)?;
-    let keys = expansion.keys(options.limit);
     let writers = TownWriters::new(&expansion, options.products, false);
     let bar = Progress::new(keys.len() as u64, options.progress);
     let kept = AtomicUsize::new(0);
-    let folder_of = |key: &ScenarioKey| scenario_dir(&out, &key.group, key.split.name(), &key.folder_name());
     // The pair of `key`, simulated and written into its folder, unless a
     // complete one is there (a rerun keeps every complete pair).
     let one = |key: &ScenarioKey| -> Result<PairSummary, GenError> {
@@ -758,12 +761,7 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             let done = (in_folders + in_packs) as u64;
             return Err(RunError::Write(GenError::Interrupted { done, total: keys.len() as u64, out }));
         }
-        Err(e) => {
-            if let (GenError::Input(_), Some(previous)) = (&e, previous_record) {
-                write_atomically(&record_path, &previous).map_err(GenError::from)?;
-            }
-            return Err(RunError::Write(e));
-        }
+        Err(e) => return Err(RunError::Write(e)),
     };
     write_atomically(&record_path, &record(Some(summaries.len()))).map_err(GenError::from)?;
     let affected: usize = summaries.iter().map(|s| s.affected.len()).sum();

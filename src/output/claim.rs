@@ -75,9 +75,9 @@ pub enum ClaimError {
     /// A dataset `gen --force` would remove while a reader has it open.
     #[error(
         "{dir} is open for reading (held by a causalcity reader: validate, stats, evaluate, export, pack, heatmap, \
-         preview, baseline, python -m causalcity.methods, or a causalcity.Dataset in Python, perhaps in this very \
-         process, which lets go with its close()). Nothing was removed: let the reader finish, or close it, then \
-         rerun with --force"
+         baseline, python -m causalcity.methods, or a causalcity.Dataset in Python, perhaps in this very process, \
+         which lets go with its close()). Nothing was removed: let the reader finish, or close it, then rerun with \
+         --force"
     )]
     BeingRead { dir: PathBuf },
     #[error("{dir} holds {what}: {command} writes only {writes}. Use another --out{hint}")]

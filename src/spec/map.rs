@@ -643,9 +643,8 @@ impl MapSpec {
                     field,
                     format!(
                         "{roads:?} is not allowed: give road {first}'s centre line first, then road {second}'s, \
-                         the second greater (e.g. [{}, {}])",
-                        roads[0].min(roads[1]),
-                        roads[0].min(roads[1]) + 60.0
+                         the second greater{}",
+                        if roads[0] == roads[1] { String::new() } else { format!(" ([{}, {}])", roads[1], roads[0]) }
                     ),
                 ));
             }
