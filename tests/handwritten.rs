@@ -488,6 +488,24 @@ fn run_and_counterfactual_log_the_lights_as_gen_does_and_a_sweep_records_how() {
     let stderr = String::from_utf8_lossy(&resumed.stderr);
     assert_eq!(resumed.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("lights (it was made with --lights frames)"), "{stderr}");
+    // Other settings are told with both values, as given (it said "differs: kinds").
+    for (extra, says) in [
+        (
+            &["--kinds", "remove,set-desired-speed"][..],
+            "kinds (it was made with --kinds stop, this run asks for --kinds remove,set-desired-speed)",
+        ),
+        (&["--limit", "1"][..], "limit (it was made with no --limit, this run asks for --limit 1)"),
+    ] {
+        let refused = run(&[
+            &["counterfactual", "--sweep", spec.to_str().unwrap(), "--out", changes.to_str().unwrap()][..],
+            &["--no-images", "-q"],
+            extra,
+        ]
+        .concat());
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(says), "{stderr}");
+    }
     // validate reads each pair by the record: told changes, it misses light_changes.csv.
     record["lights"] = "changes".into();
     std::fs::write(frames.join("sweep.json"), record.to_string()).unwrap();

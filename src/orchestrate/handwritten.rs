@@ -628,6 +628,29 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                 "images" => {
                     "images (it was made with images; add nothing, or use another --out for --no-images)".to_string()
                 }
+                // The old and the new value, as given on the command line.
+                "kinds" => {
+                    let kinds = |v: &serde_json::Value| {
+                        let names = v.as_array().into_iter().flatten().filter_map(|k| k.as_str());
+                        names.map(|k| k.replace('_', "-")).collect::<Vec<_>>().join(",")
+                    };
+                    format!(
+                        "kinds (it was made with --kinds {}, this run asks for --kinds {})",
+                        kinds(&old[field]),
+                        kinds(&new[field])
+                    )
+                }
+                "limit" => {
+                    let limit =
+                        |v: &serde_json::Value| v.as_u64().map_or("no --limit".to_string(), |n| format!("--limit {n}"));
+                    format!("limit (it was made with {}, this run asks for {})", limit(&old[field]), limit(&new[field]))
+                }
+                "version" => format!(
+                    "version (it was made by causalcity {}, this is {})",
+                    old[field].as_str().unwrap_or("?"),
+                    env!("CARGO_PKG_VERSION")
+                ),
+                "spec" => "spec (it was made from another spec, or this one was edited since)".to_string(),
                 _ => field.to_string(),
             })
             .collect();
