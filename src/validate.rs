@@ -231,7 +231,7 @@ pub fn validate(dir: &Path, threads: Option<usize>) -> Result<ValidationReport, 
             let checked: Vec<Vec<ScenarioCheck>> = pool.install(|| {
                 (0..packs.len())
                     .into_par_iter()
-                    .map(|n| check_pack(dir, packs, n, PackUnit::Scenario, &expected))
+                    .map(|n| check_pack(dir, packs, n, PackUnit::Scenario, &expected, None))
                     .collect()
             });
             checked.into_iter().flatten().collect()
@@ -360,6 +360,10 @@ fn validate_sweep(
                 let shown = format!("{}/", pair.display());
                 let message = message.strip_prefix(&shown).map(str::to_string).unwrap_or(message);
                 problems.push(Problem { path: pair.clone(), message });
+            } else if let Ok(text) = ScenarioFiles::Folder.read(&pair, "summary.json") {
+                if let Err(message) = drawn_as_recorded(sweep, key, &text) {
+                    problems.push(Problem { path: pair.join("summary.json"), message });
+                }
             }
         }
         (problems, files, bytes, Vec::new())
@@ -371,7 +375,7 @@ fn validate_sweep(
             .install(|| {
                 (0..packs.len())
                     .into_par_iter()
-                    .map(|n| check_pack(dir, packs, n, PackUnit::Pair, &expected))
+                    .map(|n| check_pack(dir, packs, n, PackUnit::Pair, &expected, Some(sweep)))
                     .collect::<Vec<_>>()
             })
             .into_iter()
@@ -396,6 +400,13 @@ fn validate_sweep(
         problems,
         design: None,
     })
+}
+
+/// [`crate::dataset::Sweep::check_drawn`] of pair `key`'s `summary.json` (`text`).
+fn drawn_as_recorded(sweep: &crate::dataset::Sweep, key: &ScenarioKey, text: &[u8]) -> Result<(), String> {
+    let summary: crate::output::pair_summary::PairSummary =
+        serde_json::from_slice(text).map_err(|e| format!("not a pair summary: {e}"))?;
+    sweep.check_drawn(key, &summary)
 }
 
 /// Whether the first pack of a packed sweep holds frames (false when it is
@@ -518,6 +529,7 @@ fn check_pack(
     number: usize,
     unit: PackUnit,
     expected: &Expected<'_>,
+    sweep: Option<&crate::dataset::Sweep>,
 ) -> Vec<ScenarioCheck> {
     let pack = packs.pack(number);
     let keys = packs.keys(&pack);
@@ -588,6 +600,10 @@ fn check_pack(
                     let key = (keys[i].group.as_str(), keys[i].split.name(), keys[i].index.into());
                     if let Err(message) = crate::dataset::pairs::check_pair_files(&read, &folder, key) {
                         check.0.push(problem(message));
+                    } else if let (Some(sweep), Some(text)) = (sweep, members.pair.get("summary.json")) {
+                        if let Err(message) = drawn_as_recorded(sweep, &keys[i], text) {
+                            check.0.push(problem(format!("{}: {message}", folder.join("summary.json").display())));
+                        }
                     }
                 }
                 // A pair's runs are not a dataset's scenarios: no twins are sought.

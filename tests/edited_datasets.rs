@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{city_spec, fresh_dir, gen_ok, read_json, run, run_within, write_spec};
+use common::{city_spec, fresh_dir, gen_ok, npy, npz, read_json, run, run_within, toy_spec, write_spec};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -632,4 +632,65 @@ fn a_pipe_in_place_of_a_frame_is_named_by_export_nsdr_and_preview() {
     }
     assert_eq!(checked, 2);
     assert!(scenario.join("rgb/0000.png").is_file());
+}
+
+#[test]
+fn evaluate_scores_nothing_against_a_file_that_changed_after_it_was_written() {
+    // An edited graph in scenario.json was scored as written, exit 0
+    // (AUROC 0.364 became 1.000): only validate named it.
+    let dir = fresh_dir("edited-evaluate-checksums");
+    let spec = write_spec(&dir, &toy_spec("scored", &[(4, 0.5)], (1, 1, 2), 30));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let pred = dir.join("pred.npz");
+    let mut arrays = Vec::new();
+    for folder in ["val/00000", "test/00000", "test/00001"] {
+        let edges: Vec<f64> = (0..16).map(|i| (i % 7) as f64 / 7.0).collect();
+        arrays.push((format!("cars04_edges50/{folder}"), npy(&[4, 4], &edges)));
+        let path: Vec<f64> = (0..10 * 4 * 2).map(|i| 300.0 + i as f64).collect();
+        arrays.push((format!("cars04_edges50/{folder}/trajectory"), npy(&[10, 4, 2], &path)));
+    }
+    let named: Vec<(&str, Vec<u8>)> = arrays.iter().map(|(n, b)| (n.as_str(), b.clone())).collect();
+    npz(&pred, &named);
+    let scored = run(&["evaluate", s(&data), s(&pred), "--history", "20"]);
+    assert!(scored.status.success(), "{}", stderr(&scored));
+    let table = String::from_utf8_lossy(&scored.stdout).into_owned();
+    assert!(table.contains("cars04_edges50") && table.contains("test"), "{table}");
+
+    let scenario = "cars04_edges50/test/00001";
+    type Edit = Box<dyn Fn(String) -> String>;
+    let cases: Vec<(&str, &str, Edit)> = vec![
+        // Another graph, valid JSON and pairs: what a hand edit looks like.
+        ("graph", "scenario.json", Box::new(|t: String| t.replacen("\"edges\": [", "\"edges\": [[0, 3], ", 1))),
+        // One pose moved by a metre: the trajectory error's truth.
+        (
+            "pose",
+            "poses.csv",
+            Box::new(|t: String| {
+                let x: f64 = t.lines().nth(1).unwrap().split(',').nth(3).unwrap().parse().unwrap();
+                pose_set(t, 0, 3, &format!("{}", x + 1.0))
+            }),
+        ),
+    ];
+    let mut checked = 0;
+    for (name, file, edit) in &cases {
+        let copy = dir.join(name);
+        assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&copy)]).status().unwrap().success());
+        let path = copy.join(scenario).join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let changed = edit(text.clone());
+        assert_ne!(changed, text, "{name}: the edit changed nothing");
+        std::fs::write(&path, changed).unwrap();
+        let output = run(&["evaluate", s(&copy), s(&pred), "--history", "20"]);
+        assert_error(&output, 2, &format!("{scenario}/{file}: its checksum does not match checksums.sha256"));
+        assert_error(&output, 2, &format!("causalcity validate {}", copy.display()));
+        assert!(output.stdout.is_empty(), "{name}: nothing is scored: {}", String::from_utf8_lossy(&output.stdout));
+        // The same dataset repaired by rerunning gen scores as before.
+        gen_ok(&spec, &copy, &["--quiet", "--no-images"]);
+        let again = run(&["evaluate", s(&copy), s(&pred), "--history", "20"]);
+        assert!(again.status.success(), "{name}: {}", stderr(&again));
+        assert_eq!(String::from_utf8_lossy(&again.stdout).replace(s(&copy), s(&data)), table, "{name}");
+        checked += 1;
+    }
+    assert_eq!(checked, cases.len());
 }

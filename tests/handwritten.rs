@@ -431,6 +431,93 @@ fn a_sweep_rerun_repairs_an_edited_summary_or_divergence_log_and_a_refused_one_l
 }
 
 #[test]
+fn validate_and_evaluate_refuse_a_sweep_pair_whose_intervention_is_not_the_one_its_key_draws() {
+    // An edited intervention in summary.json (another car) passed validate
+    // and evaluate scored it (exit 0); so did every pair of a sweep.json
+    // whose kinds were edited. Folder and packed sweeps alike.
+    let dir = fresh_dir("hw-sweep-drawn");
+    let spec = write_spec(&dir, &city_spec("sweep-drawn", &[(6, 0.5)], (1, 1, 1), 60, "{}"));
+    let out = dir.join("out");
+    let args = ["counterfactual", "--sweep", spec.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"];
+    assert!(run(&[&args[..], &["-q", "--kinds", "stop,remove"]].concat()).status.success());
+    let pred = dir.join("affected.npz");
+    let scores: Vec<f64> = (0..6).map(|c| c as f64 / 6.0).collect();
+    let arrays = [
+        ("cars06_edges50/val/00000/affected", npy(&[6], &scores)),
+        ("cars06_edges50/test/00000/affected", npy(&[6], &scores)),
+    ];
+    npz(&pred, &arrays);
+    let evaluate = |data: &Path| run(&["evaluate", data.to_str().unwrap(), pred.to_str().unwrap()]);
+    let validate = |data: &Path| run(&["validate", data.to_str().unwrap()]);
+    assert!(validate(&out).status.success());
+    let scored = evaluate(&out);
+    assert!(scored.status.success(), "{}", String::from_utf8_lossy(&scored.stderr));
+
+    let says = "records the intervention";
+    let edited = dir.join("edited");
+    copy_tree(&out, &edited);
+    let summary_path = edited.join("cars06_edges50/test/00000/summary.json");
+    let summary = std::fs::read_to_string(&summary_path).unwrap();
+    // Another car, its id and name as the runs have them (a careless edit
+    // of one alone is the pair's files disagreeing, which was named).
+    let intervention = &read_json(&summary_path)["intervention"];
+    let car = intervention["car"].as_u64().unwrap();
+    let name = intervention["car_name"].as_str().unwrap().to_string();
+    let other = (car + 1) % 6;
+    let other_name = read_json(&summary_path)["cars"][other as usize]["name"].as_str().unwrap().to_string();
+    let changed = summary.replacen(
+        &format!("\"car\": {car},\n    \"car_name\": \"{name}\""),
+        &format!("\"car\": {other},\n    \"car_name\": \"{other_name}\""),
+        1,
+    );
+    assert_ne!(changed, summary, "the edit must change the summary");
+    std::fs::write(&summary_path, changed).unwrap();
+    let packed = dir.join("packed");
+    assert!(run(&["pack", edited.to_str().unwrap(), "--out", packed.to_str().unwrap(), "-q"]).status.success());
+    let mut checked = 0;
+    for data in [&edited, &packed] {
+        let report = validate(data);
+        assert_eq!(report.status.code(), Some(1), "validate {}", data.display());
+        let text = String::from_utf8_lossy(&report.stdout).into_owned();
+        let named: Vec<&str> = text.lines().filter(|l| l.contains(says)).collect();
+        assert_eq!(named.len(), 1, "{text}");
+        assert!(named[0].contains("cars06_edges50/test/00000/summary.json"), "{text}");
+        assert!(named[0].contains(&format!("stop car {car} ")) || named[0].contains(&format!("remove car {car} ")));
+        let refused = evaluate(data);
+        assert_eq!(refused.status.code(), Some(2), "evaluate {}", data.display());
+        assert!(
+            String::from_utf8_lossy(&refused.stderr).contains(says),
+            "{}",
+            String::from_utf8_lossy(&refused.stderr)
+        );
+        assert!(refused.stdout.is_empty(), "nothing is scored");
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+
+    // sweep.json's kinds in another order draw another kind for every pair.
+    let reordered = dir.join("reordered");
+    copy_tree(&out, &reordered);
+    let mut record = read_json(&reordered.join("sweep.json"));
+    record["kinds"] = serde_json::json!(["remove", "stop"]);
+    std::fs::write(reordered.join("sweep.json"), record.to_string()).unwrap();
+    let report = validate(&reordered);
+    assert_eq!(report.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&report.stdout).into_owned();
+    assert_eq!(
+        text.lines().filter(|l| l.contains(says) && l.contains("kinds remove, stop in sweep.json")).count(),
+        3,
+        "{text}"
+    );
+}
+
+/// `from` copied whole to `to`.
+fn copy_tree(from: &Path, to: &Path) {
+    let status = std::process::Command::new("cp").args(["-r", from.to_str().unwrap(), to.to_str().unwrap()]).status();
+    assert!(status.unwrap().success());
+}
+
+#[test]
 fn run_and_counterfactual_log_the_lights_as_gen_does_and_a_sweep_records_how() {
     let dir = fresh_dir("hw-light-logs");
     // run: light_changes.csv by default, lights.csv with --lights frames;

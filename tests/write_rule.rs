@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{fresh_dir, gen_ok, hash_tree, run, toy_spec, write_spec};
+use common::{fresh_dir, gen_ok, hash_tree, npy, npz, run, toy_spec, write_spec};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -35,35 +35,6 @@ fn toy_dataset(dir: &Path) -> PathBuf {
     let data = dir.join("data");
     gen_ok(&spec, &data, &["--quiet", "--no-images"]);
     data
-}
-
-/// One `.npy` of float64 values in C order, as numpy writes it.
-fn npy(shape: &[usize], values: &[f64]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let tuple = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {tuple}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for v in values {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    bytes
-}
-
-/// An `.npz` of the given arrays (stored, as `np.savez` writes).
-fn npz(path: &Path, arrays: &[(&str, Vec<u8>)]) {
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
-    let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
-    for (name, bytes) in arrays {
-        zip.start_file(format!("{name}.npy"), options).unwrap();
-        zip.write_all(bytes).unwrap();
-    }
-    zip.finish().unwrap();
 }
 
 /// Edge scores for the test split of the toy dataset.

@@ -857,7 +857,8 @@ class Sweep(_Packed):
         with self._as_members(scratch, key) if scratch is not None else contextlib.nullcontext():
             # The pair's own runs and files, agreeing (a linked run or an
             # edited summary.json was handed back as this pair).
-            _native.check_pair(_os.fspath(folder), key.group, key.split, key.index)
+            _native.check_pair(_os.fspath(folder), key.group, key.split, key.index, self.spec._native,
+                               self.record.get("kinds"))  # fmt: skip
             factual = load(folder / "factual", images=images)
             counterfactual = load(folder / "counterfactual", images=images)
             divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)

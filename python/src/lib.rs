@@ -361,12 +361,34 @@ fn simulate<'py>(
 /// dict [`simulate`] gives (without frames: see [`read_frames`]).
 /// Checks the counterfactual pair in `dir`, read as `(group, split,
 /// index)` of its sweep, by the rule every reader of a sweep holds
-/// (`causalcity::dataset::pairs`): `InputError` naming the file otherwise.
+/// (`causalcity::dataset::pairs`), and, given the sweep's `spec` and
+/// `kinds`, that its summary records the intervention the sweep draws for
+/// it (`causalcity::dataset::check_drawn`): `InputError` naming the file
+/// otherwise.
 #[pyfunction]
-fn check_pair(py: Python<'_>, dir: PathBuf, group: String, split: String, index: u64) -> PyResult<()> {
-    py.detach(|| causalcity::dataset::pairs::check_pair(&dir, (&group, &split, index)))
-        .map(|_| ())
-        .map_err(InputError::new_err)
+#[pyo3(signature = (dir, group, split, index, spec=None, kinds=None))]
+fn check_pair(
+    py: Python<'_>,
+    dir: PathBuf,
+    group: String,
+    split: String,
+    index: u64,
+    spec: Option<&Spec>,
+    kinds: Option<Vec<String>>,
+) -> PyResult<()> {
+    let key = match spec {
+        Some(spec) => Some(key_of(spec, (group.clone(), split.clone(), u32::try_from(index).unwrap_or(u32::MAX)))?),
+        None => None,
+    };
+    py.detach(|| {
+        let summary = causalcity::dataset::pairs::check_pair(&dir, (&group, &split, index))?;
+        if let (Some(spec), Some(key), Some(kinds)) = (spec, &key, &kinds) {
+            causalcity::dataset::check_drawn(spec.expansion(), kinds, key, &summary)
+                .map_err(|e| format!("{}: {e}", dir.join("summary.json").display()))?;
+        }
+        Ok::<(), String>(())
+    })
+    .map_err(InputError::new_err)
 }
 
 #[pyfunction]

@@ -392,6 +392,22 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     with pytest.raises(causalcity.InputError, match=says):
         causalcity.evaluate(edited, predictions)
 
+    # Another car's id and name in the intervention record, as the runs
+    # name them: the pair's files agree, but it is not the intervention the
+    # sweep drew for this pair (it was read as the task's truth).
+    other = copy_of(sweep, tmp_path, "other-car")
+    summary = json.loads((other / test / "summary.json").read_text())
+    car = (summary["intervention"]["car"] + 1) % len(summary["cars"])
+    summary["intervention"].update(car=car, car_name=summary["cars"][car]["name"])
+    (other / test / "summary.json").write_text(json.dumps(summary))
+    says = f"records the intervention stop car {car} "
+    with pytest.raises(causalcity.InputError, match=says):
+        causalcity.open_sweep(other).load((GROUP, "test", 0))
+    with pytest.raises(DatasetError, match=says):
+        load_pairs(other, GROUP, "test")
+    with pytest.raises(causalcity.InputError, match=says):
+        causalcity.evaluate(other, predictions)
+
     # A stray folder among the pairs is named, not read as one.
     stray = copy_of(sweep, tmp_path, "stray-pair")
     shutil.copytree(stray / test, stray / GROUP / "test" / "copy-of-00000")

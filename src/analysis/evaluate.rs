@@ -378,6 +378,9 @@ struct Truth {
     sweep: bool,
     /// A sweep's `--kinds`, in order (empty for a `gen` dataset).
     kinds: Vec<String>,
+    /// A sweep, which draws each pair's intervention (its summary's is
+    /// checked against it).
+    drawn: Option<Sweep>,
     /// Where a packed sweep's pairs are unpacked (their logs, no frames)
     /// for as long as they are scored.
     unpacked: Option<crate::output::packs::Scratch>,
@@ -393,15 +396,16 @@ impl Truth {
                 let unpacked = unpack_sweep(&sweep)?;
                 let scenarios = unpacked.as_ref().map_or_else(|| sweep.dir.clone(), |s| s.path().to_path_buf());
                 return Ok(Truth {
-                    dir: sweep.dir,
+                    dir: sweep.dir.clone(),
                     scenarios,
                     dataset: None,
                     sizes: None,
-                    spec: sweep.expansion.spec,
+                    spec: sweep.expansion.spec.clone(),
                     keys,
                     effects: false,
                     sweep: true,
-                    kinds: sweep.kinds,
+                    kinds: sweep.kinds.clone(),
+                    drawn: Some(sweep),
                     unpacked,
                 });
             }
@@ -420,6 +424,7 @@ impl Truth {
             keys,
             sweep: false,
             kinds: Vec::new(),
+            drawn: None,
             unpacked: None,
         })
     }
@@ -485,6 +490,7 @@ fn unpack_sweep(sweep: &Sweep) -> Result<Option<crate::output::packs::Scratch>, 
 
 /// One scored scenario's predictions, checked against its files.
 struct ScenarioPredictions {
+    key: ScenarioKey,
     group: String,
     split: Split,
     /// The scenario's folder (a sweep pair's factual run).
@@ -514,10 +520,11 @@ struct PairTruth {
 
 impl PairTruth {
     /// Reads the summary.json of the pair around `factual_dir`, whose runs
-    /// have `cars` cars and `frames` frames.
+    /// have `cars` cars and `frames` frames: pair `key` of `sweep`, whose
+    /// intervention it must record.
     fn read(
         factual_dir: &Path,
-        (group, split): (&str, Split),
+        (key, sweep): (&ScenarioKey, Option<&Sweep>),
         frame_interval: f64,
         (cars, frames): (usize, usize),
     ) -> Result<PairTruth, String> {
@@ -526,7 +533,10 @@ impl PairTruth {
         let index = pair.file_name().and_then(|n| n.to_str()).and_then(|n| n.parse::<u64>().ok()).unwrap_or(u64::MAX);
         // The pair's own runs and files, agreeing (an edited or swapped
         // summary.json was scored as written).
-        let summary = crate::dataset::pairs::check_pair(pair, (group, split.name(), index))?;
+        let summary = crate::dataset::pairs::check_pair(pair, (&key.group, key.split.name(), index))?;
+        if let Some(sweep) = sweep {
+            sweep.check_drawn(key, &summary).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
         let (frame, car) = match &summary.intervention {
             Some(record) => (record.frame as usize, record.car as usize),
             None => {
@@ -562,7 +572,10 @@ impl ScenarioPredictions {
         if let Some(size) = self.size {
             return Ok(size);
         }
-        match ScenarioSummary::read(&self.dir) {
+        // Checked first: an edited scenario.json would size the arrays.
+        let read = crate::output::verify_files(&self.dir, &[crate::output::layout::SCENARIO_JSON])
+            .and_then(|()| ScenarioSummary::read(&self.dir));
+        match read {
             Ok(summary) => Ok(*self.size.insert((summary.cars.len(), summary.frames as usize))),
             Err(e) => {
                 *failure = Some(Error::Failure(e.clone()));
@@ -576,11 +589,11 @@ impl ScenarioPredictions {
     }
 
     /// The pair's truth (a sweep only), read once; failures as in [`Self::size`].
-    fn pair(&mut self, failure: &mut Option<Error>) -> Result<&PairTruth, String> {
+    fn pair(&mut self, failure: &mut Option<Error>, sweep: Option<&Sweep>) -> Result<&PairTruth, String> {
         if self.pair.is_none() {
             let read = ScenarioSummary::read(&self.dir).and_then(|s| {
                 let size = (s.cars.len(), s.frames as usize);
-                PairTruth::read(&self.dir, (&self.group, self.split), s.frame_interval, size)
+                PairTruth::read(&self.dir, (&self.key, sweep), s.frame_interval, size)
             });
             match read {
                 Ok(pair) => self.pair = Some(pair),
@@ -688,6 +701,7 @@ fn match_scenarios(
         by_folder.insert(
             folder,
             ScenarioPredictions {
+                key: key.clone(),
                 group: key.group.clone(),
                 split: key.split,
                 dir,
@@ -797,7 +811,10 @@ fn match_scenarios(
                     )));
                 }
                 let mut failure = None;
-                let start = scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?.frame;
+                let start = scenario
+                    .pair(&mut failure, truth.drawn.as_ref())
+                    .map_err(|e| failure.unwrap_or(Error::Failure(e)))?
+                    .frame;
                 if start.saturating_add(shape[0]) > frames {
                     return Err(bad(format!(
                         "array {:?} predicts {} steps from the intervention's frame {start}, but the pair has \
@@ -853,7 +870,12 @@ fn match_scenarios(
         let intervened = match what {
             Predicted::Affected => {
                 let mut failure = None;
-                Some(scenario.pair(&mut failure).map_err(|e| failure.unwrap_or(Error::Failure(e)))?.car)
+                Some(
+                    scenario
+                        .pair(&mut failure, truth.drawn.as_ref())
+                        .map_err(|e| failure.unwrap_or(Error::Failure(e)))?
+                        .car,
+                )
             }
             _ => None,
         };
@@ -973,21 +995,47 @@ fn score_in_turn(
     scored: &[ScenarioPredictions],
     options: &EvaluateOptions,
 ) -> Result<Vec<ScenarioResult>, Error> {
-    let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, String> {
-        run.par_iter().map(|s| score_scenario(s, truth, options)).collect()
+    let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, Error> {
+        // Nothing is scored against a file that changed after it was written.
+        run.par_iter().try_for_each(verify_truth).map_err(|e| Error::damaged(&truth.dir, truth.name_unpacked(e)))?;
+        let scores: Result<Vec<ScenarioResult>, String> =
+            run.par_iter().map(|s| score_scenario(s, truth, options)).collect();
+        scores.map_err(|e| Error::Input(truth.name_unpacked(e)))
     };
-    let Some(dataset) = &truth.dataset else { return score(scored).map_err(|e| Error::Input(truth.name_unpacked(e))) };
+    let Some(dataset) = &truth.dataset else { return score(scored) };
     let mut results = Vec::with_capacity(scored.len());
     for run in scored.chunk_by(|a, b| a.group == b.group && a.split == b.split) {
         let (group, split) = (&run[0].group, run[0].split);
         // Unpacked here (the folders' paths are the run's own); a failure to
         // unpack is the dataset's, a bad score the input's.
         dataset.scenario_dirs(group, split).map_err(|e| Error::reading(&truth.dir, e))?;
-        let scores = score(run).map_err(|e| truth.name_unpacked(e));
+        let scores = score(run);
         dataset.release(group, split).map_err(Error::Failure)?;
-        results.extend(scores.map_err(Error::Input)?);
+        results.extend(scores?);
     }
     Ok(results)
+}
+
+/// Checks every file of scenario `s` that [`score_scenario`] reads against
+/// its folder's checksums: its `scenario.json` (the graphs), and the
+/// `interactions.csv` and `poses.csv` its predictions are scored against
+/// (a counterfactual's in the pair's counterfactual run). An edited graph
+/// was scored as written, exit 0 (AUROC 0.364 became 1.000); `validate`
+/// alone named it.
+fn verify_truth(s: &ScenarioPredictions) -> Result<(), String> {
+    let mut files = vec![crate::output::layout::SCENARIO_JSON];
+    if s.get(Predicted::PerFrame).is_some() {
+        files.push(INTERACTIONS_CSV);
+    }
+    if s.get(Predicted::Trajectory).is_some() {
+        files.push(crate::output::layout::POSES_CSV);
+    }
+    crate::output::verify_files(&s.dir, &files)?;
+    if let (Some(dir), Some(_)) = (&s.counterfactual_dir, s.get(Predicted::Counterfactual)) {
+        let files = [crate::output::layout::SCENARIO_JSON, crate::output::layout::POSES_CSV];
+        crate::output::verify_files(dir, &files)?;
+    }
+    Ok(())
 }
 
 /// Reads one scenario's truth and scores its predictions.

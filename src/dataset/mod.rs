@@ -296,6 +296,43 @@ impl Dataset {
     }
 }
 
+/// Whether the intervention pair `key`'s summary records is the one a sweep
+/// of `expansion`'s spec and `kinds` (sweep.json's names, in order) draws
+/// for it ([`crate::plan::interventions::SweepDraw`]): an edited summary
+/// (another car, kind or frame) was read as the pair's truth by `validate`,
+/// `evaluate` and the Python package, and so was every pair of a
+/// sweep.json whose kinds were edited. Summaries from before the record
+/// are not compared.
+pub fn check_drawn(
+    expansion: &Expansion,
+    kinds: &[String],
+    key: &ScenarioKey,
+    summary: &crate::output::pair_summary::PairSummary,
+) -> Result<(), String> {
+    use crate::plan::interventions::{SweepDraw, SweepKind};
+    let Some(recorded) = &summary.intervention else { return Ok(()) };
+    let drawn_from = kinds
+        .iter()
+        .map(|k| SweepKind::from_name(k).ok_or_else(|| format!("{k:?} is not a kind of intervention a sweep draws")))
+        .collect::<Result<Vec<_>, _>>()?;
+    if drawn_from.is_empty() {
+        return Ok(());
+    }
+    let plan = expansion.plan(key)?;
+    let drawn = crate::output::pair_summary::InterventionRecord::of_draw(&plan, &SweepDraw::of(&plan, &drawn_from));
+    if *recorded == drawn {
+        return Ok(());
+    }
+    Err(format!(
+        "records the intervention {}, but this sweep (its spec, and kinds {} in {SWEEP_RECORD}) draws {} for this \
+         pair: the summary, or sweep.json's kinds, changed after the sweep wrote them. Rerun the counterfactual \
+         --sweep command (with sweep.json as it was written) to write the pair again",
+        recorded.describe(),
+        kinds.join(", "),
+        drawn.describe()
+    ))
+}
+
 /// The expansion of the spec a manifest (at `path`) records, refused when
 /// the spec no longer hashes to the manifest's `spec_sha256`: an edited
 /// spec would describe scenarios other than the ones on disk (another
@@ -713,6 +750,15 @@ impl Sweep {
     }
 
     /// The keys of the sweep's pairs, in order.
+    /// [`check_drawn`] of pair `key` of this sweep.
+    pub fn check_drawn(
+        &self,
+        key: &ScenarioKey,
+        summary: &crate::output::pair_summary::PairSummary,
+    ) -> Result<(), String> {
+        check_drawn(&self.expansion, &self.kinds, key, summary)
+    }
+
     pub fn key_sequence(&self) -> KeySequence<'_> {
         self.expansion.key_sequence(self.limit)
     }

@@ -24,7 +24,7 @@ use crate::output::packs::{PackUnit, PackWriter, Packs};
 use crate::output::poses::logged_pose;
 use crate::output::writer::ScenarioWriter;
 use crate::output::{scenario_dir, write_atomically, WriteError};
-use crate::plan::interventions::{Effect, Intervention, Trigger};
+use crate::plan::interventions::{Intervention, SweepDraw};
 use crate::plan::ScenarioPlan;
 use crate::plan::{Expansion, ScenarioKey};
 use crate::progress::{Progress, ProgressMode};
@@ -689,7 +689,9 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
             scenario: format!("{}/{}/{}", key.group, key.split.name(), key.folder_name()),
             reason,
         })?;
-        let (intervention, record) = random_intervention(&plan, &options.kinds);
+        let draw = SweepDraw::of(&plan, &options.kinds);
+        let record = InterventionRecord::of_draw(&plan, &draw);
+        let intervention = draw.intervention;
         // Kept only as this sweep writes it: its summary.json and
         // divergence.csv carry no checksum, so they are held to the
         // readers' rule and to the intervention the pair's key draws (an
@@ -835,47 +837,6 @@ pub fn complete_pair(folder: &Path) -> Option<PairSummary> {
         crate::output::verify_scenario(&folder.join(run)).ok()?;
     }
     Some(summary)
-}
-
-/// One random intervention for `plan`, from a stream derived from the
-/// scenario's own key, and its record for summary.json.
-fn random_intervention(plan: &ScenarioPlan, kinds: &[SweepKind]) -> (Intervention, InterventionRecord) {
-    use rand::{RngExt, SeedableRng};
-    use sha2::Digest;
-    let mut seed = sha2::Sha256::new();
-    seed.update(b"causalcity/sweep/v1\0");
-    seed.update(plan.stream_key.as_bytes());
-    let mut rng = rand_chacha::ChaCha8Rng::from_seed(seed.finalize().into());
-    let kind = kinds[rng.random_range(0..kinds.len())];
-    let car = rng.random_range(0..plan.cars.len());
-    let duration = plan.frames.saturating_sub(1) as f64 * plan.frame_interval;
-    // On a frame, in the first half of the scenario after a moment to get going.
-    let frame = ((rng.random_range(0.1..0.5) * duration) / plan.frame_interval).round();
-    let at = frame * plan.frame_interval;
-    let (effect, name, seconds, speed) = match kind {
-        SweepKind::Stop => {
-            let seconds = (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0;
-            (Effect::Stop { car, seconds }, "stop", Some(seconds), None)
-        }
-        SweepKind::SetDesiredSpeed => {
-            let base = plan.world.city().and_then(|c| c.agency[car].desired_speeds.first().copied()).unwrap_or(1.8);
-            let speed = (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0;
-            (Effect::SetDesiredSpeed { car, speed }, "set_desired_speed", None, Some(speed))
-        }
-        SweepKind::RunRedLight => (Effect::RunRedLights { car }, "run_red_light", None, None),
-        SweepKind::Remove => (Effect::Remove { car }, "remove", None, None),
-    };
-    let what = effect.describe(|c| plan.cars[c].name.clone(), |l| format!("light {l}"));
-    let record = InterventionRecord {
-        car: plan.cars[car].id,
-        car_name: plan.cars[car].name.clone(),
-        kind: name.to_string(),
-        at_s: crate::output::number::logged_value(at, 6),
-        frame: frame as u64,
-        seconds,
-        speed,
-    };
-    (Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") }, record)
 }
 
 /// divergence.csv (`frame,t,car,distance_m,distance_px`), its distances in

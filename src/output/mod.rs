@@ -414,6 +414,38 @@ pub fn link_below(dir: &Path, name: &str) -> Option<PathBuf> {
     None
 }
 
+/// Checks the files `names` of the scenario folder `dir` against its
+/// `checksums.sha256`, as a reader that scores or trusts them must: each is
+/// listed there, is no symbolic link, and has the hash listed. The rest of
+/// the folder is not read (a dataset with images holds hundreds of frames
+/// its scores never look at). Errors name the file and say what is wrong.
+pub fn verify_files(dir: &Path, names: &[&str]) -> Result<(), String> {
+    let listing_path = dir.join(CHECKSUMS);
+    let listing =
+        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    for &name in names {
+        let Some(hash) = listing.lines().find_map(|l| l.split_once("  ").filter(|(_, n)| *n == name).map(|(h, _)| h))
+        else {
+            return Err(format!(
+                "{}: does not list {name}, so nothing shows that {name} is the one written with it",
+                listing_path.display()
+            ));
+        };
+        if let Some(link) = link_below(dir, name) {
+            return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
+        }
+        let path = dir.join(name);
+        let data = crate::input::read_data(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        if hex(&Sha256::digest(&data)) != hash {
+            return Err(format!(
+                "{}: its checksum does not match {CHECKSUMS}: the file changed after it was written",
+                path.display()
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// [`verify_scenario`] of the folder that holds scenario `key` of a spec of
 /// `seed`, and its `scenario.json` says it is that scenario
 /// ([`scenario::check_identity`]).

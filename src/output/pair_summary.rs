@@ -37,6 +37,38 @@ pub struct InterventionRecord {
     pub speed: Option<f64>,
 }
 
+impl InterventionRecord {
+    /// The record of `draw`, a sweep's intervention for `plan`, as
+    /// `summary.json` holds it.
+    pub fn of_draw(
+        plan: &crate::plan::ScenarioPlan,
+        draw: &crate::plan::interventions::SweepDraw,
+    ) -> InterventionRecord {
+        InterventionRecord {
+            car: plan.cars[draw.car].id,
+            car_name: plan.cars[draw.car].name.clone(),
+            kind: draw.kind.name().to_string(),
+            at_s: crate::output::number::logged_value(draw.at, 6),
+            frame: draw.frame,
+            seconds: draw.seconds,
+            speed: draw.speed,
+        }
+    }
+
+    /// In words, as a sentence says it: `stop car 3 (car03) at frame 40
+    /// for 2.5 s`.
+    pub fn describe(&self) -> String {
+        let mut text = format!("{} car {} ({}) at frame {}", self.kind, self.car, self.car_name, self.frame);
+        if let Some(seconds) = self.seconds {
+            text.push_str(&format!(" for {seconds} s"));
+        }
+        if let Some(speed) = self.speed {
+            text.push_str(&format!(" to {speed} m/s"));
+        }
+        text
+    }
+}
+
 /// `summary.json` of a counterfactual pair.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct PairSummary {

@@ -42,6 +42,62 @@ impl SweepKind {
     }
 }
 
+/// The one intervention `counterfactual --sweep` draws for a scenario, from
+/// a stream derived from the scenario's own key and the sweep's kinds (in
+/// the order given): the same scenario and kinds always draw the same, so
+/// a rerun and `validate` can tell a pair's recorded intervention from an
+/// edited one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepDraw {
+    pub kind: SweepKind,
+    /// The car (index into the plan's cars).
+    pub car: usize,
+    /// The frame it fires on and its time, seconds.
+    pub frame: u64,
+    pub at: f64,
+    /// `Stop`: how long the car stays stopped, seconds.
+    pub seconds: Option<f64>,
+    /// `SetDesiredSpeed`: the new desired speed, m/s.
+    pub speed: Option<f64>,
+    /// What the counterfactual run is given.
+    pub intervention: Intervention,
+}
+
+impl SweepDraw {
+    /// The draw for `plan` from `kinds` (at least one).
+    pub fn of(plan: &super::ScenarioPlan, kinds: &[SweepKind]) -> SweepDraw {
+        use rand::{RngExt, SeedableRng};
+        use sha2::Digest;
+        let mut seed = sha2::Sha256::new();
+        seed.update(b"causalcity/sweep/v1\0");
+        seed.update(plan.stream_key.as_bytes());
+        let mut rng = rand_chacha::ChaCha8Rng::from_seed(seed.finalize().into());
+        let kind = kinds[rng.random_range(0..kinds.len())];
+        let car = rng.random_range(0..plan.cars.len());
+        let duration = plan.frames.saturating_sub(1) as f64 * plan.frame_interval;
+        // On a frame, in the first half of the scenario after a moment to get going.
+        let frame = ((rng.random_range(0.1..0.5) * duration) / plan.frame_interval).round();
+        let at = frame * plan.frame_interval;
+        let (effect, seconds, speed) = match kind {
+            SweepKind::Stop => {
+                let seconds = (rng.random_range(2.0..6.0f64) * 10.0).round() / 10.0;
+                (Effect::Stop { car, seconds }, Some(seconds), None)
+            }
+            SweepKind::SetDesiredSpeed => {
+                let base = plan.world.city().and_then(|c| c.agency[car].desired_speeds.first().copied()).unwrap_or(1.8);
+                let speed = (base * rng.random_range(0.3..0.6) * 100.0).round() / 100.0;
+                (Effect::SetDesiredSpeed { car, speed }, None, Some(speed))
+            }
+            SweepKind::RunRedLight => (Effect::RunRedLights { car }, None, None),
+            SweepKind::Remove => (Effect::Remove { car }, None, None),
+        };
+        let what = effect.describe(|c| plan.cars[c].name.clone(), |l| format!("light {l}"));
+        let intervention =
+            Intervention { trigger: Trigger::At(at), effect, label: format!("{what} (at frame {frame})") };
+        SweepDraw { kind, car, frame: frame as u64, at, seconds, speed, intervention }
+    }
+}
+
 /// When an intervention fires (once, at the first step its condition holds).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Trigger {

@@ -198,6 +198,10 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
         raise InputError(f"group {group!r} is not in {root}: its groups are {', '.join(groups)}")
     names, pixels, metres, interventions, cf_pixels, affected = [], [], [], [], [], []
     interval = float(spec.get("frame_interval") or 0.1)
+    # Each pair's intervention is held to the one the sweep draws for it.
+    from .. import Spec
+
+    drawn_by = Spec.from_dict(spec, networks=root / "networks")._native
     for name, folder in _pair_folders(root, record, group, split):
         names.append(name)
         index = name.rsplit("/", 1)[-1]
@@ -206,7 +210,7 @@ def load_pairs(sweep: "str | Path", group: str, split: str) -> Pairs:
                                "remove it, or make the sweep again into a new --out")  # fmt: skip
         try:
             # The pair's own runs and files, agreeing, as evaluate holds them.
-            _native.check_pair(os.fspath(folder), group, split, int(index))
+            _native.check_pair(os.fspath(folder), group, split, int(index), drawn_by, record.get("kinds"))
         except InputError as e:
             raise DatasetError(str(e).replace(os.fspath(folder), os.fspath(root / name))) from None
         summary = json.loads((folder / "summary.json").read_text())
