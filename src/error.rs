@@ -57,8 +57,7 @@ impl Error {
     pub fn damaged(dataset: &std::path::Path, message: impl fmt::Display) -> Error {
         Error::Input(format!(
             "{message}\n{} is damaged: `causalcity validate {}` names every problem, and rerunning the command \
-             that wrote it (gen, or counterfactual --sweep) repairs them (a packed sweep's damaged pack: delete it \
-             first)",
+             that wrote it (gen, or counterfactual --sweep) repairs them",
             dataset.display(),
             dataset.display()
         ))

@@ -406,7 +406,7 @@ fn validate_sweep(
 fn drawn_as_recorded(sweep: &crate::dataset::Sweep, key: &ScenarioKey, text: &[u8]) -> Result<(), String> {
     let summary: crate::output::pair_summary::PairSummary =
         serde_json::from_slice(text).map_err(|e| format!("not a pair summary: {e}"))?;
-    sweep.check_drawn(key, &summary)
+    sweep.check_drawn(key, &summary).map(|_| ())
 }
 
 /// Whether the first pack of a packed sweep holds frames (false when it is
@@ -587,18 +587,8 @@ fn check_pack(
                 // Whole files that read: then whether they are this pair's
                 // and agree, as for a pair folder.
                 if check.0.is_empty() {
-                    let read = |name: &str| {
-                        let (held, file) = match name.split_once('/') {
-                            Some((run, file)) => {
-                                (PAIR_RUNS.iter().position(|r| *r == run).map(|r| &members.runs[r]), file)
-                            }
-                            None => (Some(&members.pair), name),
-                        };
-                        let missing = || format!("{}: missing", folder.join(name).display());
-                        held.and_then(|m| m.get(file)).cloned().ok_or_else(missing)
-                    };
                     let key = (keys[i].group.as_str(), keys[i].split.name(), keys[i].index.into());
-                    if let Err(message) = crate::dataset::pairs::check_pair_files(&read, &folder, key) {
+                    if let Err(message) = crate::dataset::pairs::check_packed_pair(&members, &folder, key) {
                         check.0.push(problem(message));
                     } else if let (Some(sweep), Some(text)) = (sweep, members.pair.get("summary.json")) {
                         if let Err(message) = drawn_as_recorded(sweep, &keys[i], text) {

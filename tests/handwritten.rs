@@ -453,7 +453,7 @@ fn validate_and_evaluate_refuse_a_sweep_pair_whose_intervention_is_not_the_one_i
     let scored = evaluate(&out);
     assert!(scored.status.success(), "{}", String::from_utf8_lossy(&scored.stderr));
 
-    let says = "records the intervention";
+    let says = ", but this sweep (its spec, and kinds";
     let edited = dir.join("edited");
     copy_tree(&out, &edited);
     let summary_path = edited.join("cars06_edges50/test/00000/summary.json");
@@ -494,6 +494,43 @@ fn validate_and_evaluate_refuse_a_sweep_pair_whose_intervention_is_not_the_one_i
         checked += 1;
     }
     assert_eq!(checked, 2);
+    // A packed sweep's rerun holds what carries no checksum to the same
+    // rule: it kept the edited summary inside its pack, exit 0.
+    let args = ["counterfactual", "--sweep", spec.to_str().unwrap(), "--no-images", "-q", "--kinds", "stop,remove"];
+    let fresh = dir.join("fresh-packed");
+    assert!(run(&[&args[..], &["--format", "tar", "--out", fresh.to_str().unwrap()]].concat()).status.success());
+    assert_ne!(hash_tree(&packed), hash_tree(&fresh), "the edit is in the pack");
+    let rerun = run(&[&args[..], &["--format", "tar", "--out", packed.to_str().unwrap()]].concat());
+    assert!(rerun.status.success(), "{}", String::from_utf8_lossy(&rerun.stderr));
+    assert!(String::from_utf8_lossy(&rerun.stderr).contains("writing the pack again"));
+    assert_eq!(hash_tree(&packed), hash_tree(&fresh), "the rerun wrote the pack as a sweep writes it");
+    assert!(validate(&packed).status.success());
+
+    // A summary without the record (as sweeps made before it was kept) is
+    // held to the drawn frame by when its intervention fired.
+    let unrecorded = dir.join("unrecorded");
+    copy_tree(&out, &unrecorded);
+    let path = unrecorded.join("cars06_edges50/test/00000/summary.json");
+    let mut old_style = read_json(&path);
+    old_style.as_object_mut().unwrap().remove("intervention");
+    std::fs::write(&path, old_style.to_string()).unwrap();
+    assert!(validate(&unrecorded).status.success(), "a summary from before the record reads");
+    assert!(evaluate(&unrecorded).status.success());
+    old_style["intervention_time_s"] = serde_json::json!(0.1);
+    std::fs::write(&path, old_style.to_string()).unwrap();
+    let text = String::from_utf8_lossy(&validate(&unrecorded).stdout).into_owned();
+    assert!(text.contains("records no intervention, and one that fired at 0.1 s, but this sweep"), "{text}");
+    // sweep.json without kinds: nothing says which intervention each pair
+    // was given (the check passed then).
+    let kindless = dir.join("kindless");
+    copy_tree(&edited, &kindless);
+    let mut record = read_json(&kindless.join("sweep.json"));
+    record.as_object_mut().unwrap().remove("kinds");
+    std::fs::write(kindless.join("sweep.json"), record.to_string()).unwrap();
+    for output in [validate(&kindless), evaluate(&kindless)] {
+        assert_eq!(output.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&output.stderr).contains("sweep.json: kinds is missing or empty"));
+    }
 
     // sweep.json's kinds in another order draw another kind for every pair.
     let reordered = dir.join("reordered");

@@ -377,13 +377,19 @@ fn check_pair(
     kinds: Option<Vec<String>>,
 ) -> PyResult<()> {
     let key = match spec {
-        Some(spec) => Some(key_of(spec, (group.clone(), split.clone(), u32::try_from(index).unwrap_or(u32::MAX)))?),
+        Some(spec) => {
+            let at = u32::try_from(index).map_err(|_| InputError::new_err(format!("index {index} is no pair's")))?;
+            Some(key_of(spec, (group.clone(), split.clone(), at))?)
+        }
         None => None,
     };
+    // Given the spec, the kinds must be given too (a sweep.json without
+    // them was edited): none names no draw.
+    let kinds = kinds.unwrap_or_default();
     py.detach(|| {
         let summary = causalcity::dataset::pairs::check_pair(&dir, (&group, &split, index))?;
-        if let (Some(spec), Some(key), Some(kinds)) = (spec, &key, &kinds) {
-            causalcity::dataset::check_drawn(spec.expansion(), kinds, key, &summary)
+        if let (Some(spec), Some(key)) = (spec, &key) {
+            causalcity::dataset::check_drawn(spec.expansion(), &kinds, key, &summary)
                 .map_err(|e| format!("{}: {e}", dir.join("summary.json").display()))?;
         }
         Ok::<(), String>(())

@@ -400,13 +400,25 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     car = (summary["intervention"]["car"] + 1) % len(summary["cars"])
     summary["intervention"].update(car=car, car_name=summary["cars"][car]["name"])
     (other / test / "summary.json").write_text(json.dumps(summary))
-    says = f"records the intervention stop car {car} "
+    says = f"records stop car {car} .*, but this sweep"
     with pytest.raises(causalcity.InputError, match=says):
         causalcity.open_sweep(other).load((GROUP, "test", 0))
     with pytest.raises(DatasetError, match=says):
         load_pairs(other, GROUP, "test")
     with pytest.raises(causalcity.InputError, match=says):
         causalcity.evaluate(other, predictions)
+
+    # Without sweep.json's kinds nothing says which intervention a pair had.
+    kindless = copy_of(sweep, tmp_path, "kindless")
+    record = json.loads((kindless / "sweep.json").read_text())
+    del record["kinds"]
+    (kindless / "sweep.json").write_text(json.dumps(record))
+    with pytest.raises(causalcity.InputError, match="names no kinds"):
+        causalcity.open_sweep(kindless).load((GROUP, "test", 0))
+    with pytest.raises(DatasetError, match="names no kinds"):
+        load_pairs(kindless, GROUP, "test")
+    with pytest.raises(causalcity.InputError, match="kinds is missing or empty"):
+        causalcity.evaluate(kindless, predictions)
 
     # A stray folder among the pairs is named, not read as one.
     stray = copy_of(sweep, tmp_path, "stray-pair")

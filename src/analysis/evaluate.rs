@@ -534,10 +534,12 @@ impl PairTruth {
         // The pair's own runs and files, agreeing (an edited or swapped
         // summary.json was scored as written).
         let summary = crate::dataset::pairs::check_pair(pair, (&key.group, key.split.name(), index))?;
-        if let Some(sweep) = sweep {
-            sweep.check_drawn(key, &summary).map_err(|e| format!("{}: {e}", path.display()))?;
-        }
-        let (frame, car) = match &summary.intervention {
+        let drawn = match sweep {
+            Some(sweep) => Some(sweep.check_drawn(key, &summary).map_err(|e| format!("{}: {e}", path.display()))?),
+            None => None,
+        };
+        // (A summary from before the record: the drawn one, which fired then.)
+        let (frame, car) = match summary.intervention.as_ref().or(drawn.as_ref()) {
             Some(record) => (record.frame as usize, record.car as usize),
             None => {
                 let t = summary.intervention_time_s.ok_or_else(|| {

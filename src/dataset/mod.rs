@@ -298,36 +298,40 @@ impl Dataset {
 
 /// Whether the intervention pair `key`'s summary records is the one a sweep
 /// of `expansion`'s spec and `kinds` (sweep.json's names, in order) draws
-/// for it ([`crate::plan::interventions::SweepDraw`]): an edited summary
-/// (another car, kind or frame) was read as the pair's truth by `validate`,
-/// `evaluate` and the Python package, and so was every pair of a
-/// sweep.json whose kinds were edited. Summaries from before the record
-/// are not compared.
+/// for it ([`crate::plan::interventions::SweepDraw`]); returns the drawn
+/// one. An edited summary (another car, kind or frame) was read as the
+/// pair's truth by `validate`, `evaluate` and the Python package, and so
+/// was every pair of a sweep.json whose kinds were edited. A summary from
+/// before the record was kept (it has none) must have fired the
+/// intervention on the drawn frame.
 pub fn check_drawn(
     expansion: &Expansion,
     kinds: &[String],
     key: &ScenarioKey,
     summary: &crate::output::pair_summary::PairSummary,
-) -> Result<(), String> {
+) -> Result<crate::output::pair_summary::InterventionRecord, String> {
     use crate::plan::interventions::{SweepDraw, SweepKind};
-    let Some(recorded) = &summary.intervention else { return Ok(()) };
     let drawn_from = kinds
         .iter()
         .map(|k| SweepKind::from_name(k).ok_or_else(|| format!("{k:?} is not a kind of intervention a sweep draws")))
         .collect::<Result<Vec<_>, _>>()?;
     if drawn_from.is_empty() {
-        return Ok(());
+        return Err(format!("{SWEEP_RECORD} names no kinds, so nothing says which intervention a pair was given"));
     }
     let plan = expansion.plan(key)?;
     let drawn = crate::output::pair_summary::InterventionRecord::of_draw(&plan, &SweepDraw::of(&plan, &drawn_from));
-    if *recorded == drawn {
-        return Ok(());
-    }
+    let recorded = match (&summary.intervention, summary.intervention_time_s) {
+        (Some(recorded), _) if *recorded == drawn => return Ok(drawn),
+        (Some(recorded), _) => recorded.describe(),
+        // Fired at the first step at or after the drawn time.
+        (None, Some(t)) if (t - drawn.at_s).abs() <= plan.frame_interval / 2.0 => return Ok(drawn),
+        (None, Some(t)) => format!("no intervention, and one that fired at {t} s"),
+        (None, None) => "no intervention, and none that fired".to_string(),
+    };
     Err(format!(
-        "records the intervention {}, but this sweep (its spec, and kinds {} in {SWEEP_RECORD}) draws {} for this \
-         pair: the summary, or sweep.json's kinds, changed after the sweep wrote them. Rerun the counterfactual \
-         --sweep command (with sweep.json as it was written) to write the pair again",
-        recorded.describe(),
+        "records {recorded}, but this sweep (its spec, and kinds {} in {SWEEP_RECORD}) draws {} for this pair: the \
+         summary, or sweep.json's kinds, changed after the sweep wrote them. Rerun the counterfactual --sweep \
+         command (with sweep.json as it was written) to write the pair again",
         kinds.join(", "),
         drawn.describe()
     ))
@@ -712,8 +716,16 @@ impl Sweep {
             // (validate said "0 of 0 scenarios checked: valid".)
             return Err(format!("{}: limit 0 is not allowed: a number above 0, or absent", path.display()));
         }
-        // The kinds, with the spec, decide each pair's intervention: one
-        // not a sweep's, or one named twice, is no sweep's record.
+        // The kinds, with the spec, decide each pair's intervention: none
+        // (every sweep records its --kinds), one not a sweep's, or one
+        // named twice, is no sweep's record.
+        if record.kinds.is_empty() {
+            return Err(format!(
+                "{}: kinds is missing or empty: every sweep records the --kinds it drew its interventions from, so \
+                 this record was edited (rerun its counterfactual --sweep command into a new --out)",
+                path.display()
+            ));
+        }
         for (i, kind) in record.kinds.iter().enumerate() {
             if crate::plan::interventions::SweepKind::from_name(kind).is_none() {
                 let allowed: Vec<&str> = crate::plan::interventions::SweepKind::ALL.iter().map(|k| k.name()).collect();
@@ -749,16 +761,16 @@ impl Sweep {
         Ok(Some((sweep, record.complete)))
     }
 
-    /// The keys of the sweep's pairs, in order.
     /// [`check_drawn`] of pair `key` of this sweep.
     pub fn check_drawn(
         &self,
         key: &ScenarioKey,
         summary: &crate::output::pair_summary::PairSummary,
-    ) -> Result<(), String> {
+    ) -> Result<crate::output::pair_summary::InterventionRecord, String> {
         check_drawn(&self.expansion, &self.kinds, key, summary)
     }
 
+    /// The keys of the sweep's pairs, in order.
     pub fn key_sequence(&self) -> KeySequence<'_> {
         self.expansion.key_sequence(self.limit)
     }

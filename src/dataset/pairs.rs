@@ -28,6 +28,25 @@ pub fn check_pair(pair: &Path, key: (&str, &str, u64)) -> Result<PairSummary, St
     check_pair_files(&read, pair, key)
 }
 
+/// [`check_pair`] of a packed pair, its files as its pack holds them
+/// (`members`), named as within `pair` (`<pack>: <group>/<split>/<index>`).
+pub fn check_packed_pair(
+    members: &crate::output::packs::PairMembers,
+    pair: &Path,
+    key: (&str, &str, u64),
+) -> Result<PairSummary, String> {
+    use crate::output::packs::PAIR_RUNS;
+    let read = |name: &str| {
+        let (held, file) = match name.split_once('/') {
+            Some((run, file)) => (PAIR_RUNS.iter().position(|r| *r == run).map(|r| &members.runs[r]), file),
+            None => (Some(&members.pair), name),
+        };
+        let missing = || format!("{}: missing", pair.join(name).display());
+        held.and_then(|m| m.get(file)).cloned().ok_or_else(missing)
+    };
+    check_pair_files(&read, pair, key)
+}
+
 /// [`check_pair`] of a pair's files as `read` gives them by their name in
 /// the pair (`summary.json`, `factual/scenario.json`, ...: a packed pair's
 /// members); errors name them under the folder `pair`.

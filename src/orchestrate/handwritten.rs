@@ -738,7 +738,12 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                 let pack = packs.pack(number);
                 let (path, pack_keys) = (packs.path(&out, &pack), packs.keys(&pack));
                 if path.exists() {
-                    match crate::output::packs::verify_of(PackUnit::Pair, &path, &pack_keys) {
+                    // Its runs by their checksums, then what carries none
+                    // (summary.json, divergence.csv) by the readers' rule
+                    // and the draw, as a folder sweep's pairs.
+                    let verified = crate::output::packs::verify_of(PackUnit::Pair, &path, &pack_keys)
+                        .and_then(|()| packed_pairs_as_drawn(&path, &pack_keys, &expansion, &options.kinds));
+                    match verified {
                         Ok(()) => {
                             let summaries = packed_summaries(&path)?;
                             for key in &pack_keys {
@@ -797,6 +802,33 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
         pairs_with_effect: summaries.iter().filter(|s| !s.affected.is_empty()).count(),
         mean_affected_cars: affected as f64 / summaries.len().max(1) as f64,
     })
+}
+
+/// Whether every pair in the pack at `path` (of the pairs `keys`) passes
+/// the readers' rule (`dataset::pairs`) and records the intervention its
+/// key draws from `kinds`: `summary.json` and `divergence.csv` carry no
+/// checksum, so a rerun kept an edited or damaged one inside a pack.
+fn packed_pairs_as_drawn(
+    path: &Path,
+    keys: &[ScenarioKey],
+    expansion: &Expansion,
+    kinds: &[crate::plan::interventions::SweepKind],
+) -> Result<(), String> {
+    let names: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
+    crate::output::packs::read_scenarios(path, keys, |i, members| {
+        let key = &keys[i];
+        let folder = PathBuf::from(format!("{}: {}", path.display(), key.relative_folder()));
+        let members = crate::output::packs::split_pair(members);
+        let summary = crate::dataset::pairs::check_packed_pair(
+            &members,
+            &folder,
+            (&key.group, key.split.name(), key.index.into()),
+        )?;
+        crate::dataset::check_drawn(expansion, &names, key, &summary)
+            .map(|_| ())
+            .map_err(|e| format!("{}: {e}", folder.join("summary.json").display()))
+    })
+    .map(|_| ())
 }
 
 /// The summaries of the pairs in the pack at `path` (whole: verified).
