@@ -406,7 +406,9 @@ fn validate_sweep(
 fn drawn_as_recorded(sweep: &crate::dataset::Sweep, key: &ScenarioKey, text: &[u8]) -> Result<(), String> {
     let summary: crate::output::pair_summary::PairSummary =
         serde_json::from_slice(text).map_err(|e| format!("not a pair summary: {e}"))?;
-    sweep.check_drawn(key, &summary).map(|_| ())
+    sweep.check_drawn(key, &summary).map(|_| ()).map_err(|e| {
+        format!("{e}. Rerun the counterfactual --sweep command (with sweep.json as it was written) to write it again")
+    })
 }
 
 /// Whether the first pack of a packed sweep holds frames (false when it is

@@ -532,6 +532,25 @@ fn validate_and_evaluate_refuse_a_sweep_pair_whose_intervention_is_not_the_one_i
         assert!(String::from_utf8_lossy(&output.stderr).contains("sweep.json: kinds is missing or empty"));
     }
 
+    // The affected list and the firing time agree with the cars' flags and
+    // the record (an emptied list changed the count of pairs with an
+    // effect; both were kept by every rerun).
+    let mut repaired = 0;
+    for (name, says) in [("affected", "affected lists []"), ("intervention_time_s", "intervention_time_s 0.05")] {
+        let copy = dir.join(format!("edited-{name}"));
+        copy_tree(&out, &copy);
+        let path = copy.join("cars06_edges50/test/00000/summary.json");
+        let mut summary = read_json(&path);
+        summary[name] = if name == "affected" { serde_json::json!([]) } else { serde_json::json!(0.05) };
+        std::fs::write(&path, summary.to_string()).unwrap();
+        let text = String::from_utf8_lossy(&validate(&copy).stdout).into_owned();
+        assert!(text.contains(says), "{name}: {text}");
+        assert!(run(&[&args[..], &["--out", copy.to_str().unwrap()]].concat()).status.success());
+        assert_eq!(hash_tree(&copy), hash_tree(&out), "{name}: the rerun wrote the pair again");
+        repaired += 1;
+    }
+    assert_eq!(repaired, 2);
+
     // sweep.json's kinds in another order draw another kind for every pair.
     let reordered = dir.join("reordered");
     copy_tree(&out, &reordered);

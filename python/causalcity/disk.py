@@ -787,6 +787,19 @@ def _read_divergence(path: Path, frames: int, cars: int) -> _np.ndarray:
     return _np.array([float(row.split(",")[3]) for row in rows]).reshape(frames, cars)
 
 
+def check_sweep_kinds(record: Dict[str, Any], path: Path) -> None:
+    """Refuses a sweep record (read from ``path``) whose ``kinds`` are not a
+    non-empty list of names: every sweep records the ``--kinds`` it drew its
+    pairs' interventions from, and they decide which one each pair had."""
+    kinds = record.get("kinds")
+    if not (isinstance(kinds, list) and kinds and all(isinstance(k, str) for k in kinds)):
+        raise InputError(
+            f"{_os.fspath(path)}: kinds {kinds!r} is not allowed: every sweep records the --kinds it drew its "
+            "interventions from, a list of names, so this record was edited (rerun its counterfactual --sweep "
+            "command into a new --out)"
+        )
+
+
 class Sweep(_Packed):
     """A ``counterfactual --sweep`` output opened for reading: its record
     (``sweep.json``), the spec it was made from, and its pairs, each a
@@ -810,6 +823,7 @@ class Sweep(_Packed):
             raise InputError(f"{_os.fspath(record)}: format {form!r} is not causalcity-counterfactual-sweep/1")
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
+        check_sweep_kinds(self.record, record)
         self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
         _check_spec_hash(self.spec, self.record, record, "the sweep was run", "pairs")
         self.scenarios_per_tar: Optional[int] = self.record.get("scenarios_per_tar")

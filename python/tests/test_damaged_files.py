@@ -413,12 +413,16 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     record = json.loads((kindless / "sweep.json").read_text())
     del record["kinds"]
     (kindless / "sweep.json").write_text(json.dumps(record))
-    with pytest.raises(causalcity.InputError, match="names no kinds"):
-        causalcity.open_sweep(kindless).load((GROUP, "test", 0))
-    with pytest.raises(DatasetError, match="names no kinds"):
+    with pytest.raises(causalcity.InputError, match="sweep.json: kinds None is not allowed"):
+        causalcity.open_sweep(kindless)
+    with pytest.raises(causalcity.InputError, match="sweep.json: kinds None is not allowed"):
         load_pairs(kindless, GROUP, "test")
     with pytest.raises(causalcity.InputError, match="kinds is missing or empty"):
         causalcity.evaluate(kindless, predictions)
+    record["kinds"] = "stop"
+    (kindless / "sweep.json").write_text(json.dumps(record))
+    with pytest.raises(causalcity.InputError, match="sweep.json: kinds 'stop' is not allowed"):
+        causalcity.open_sweep(kindless)
 
     # A stray folder among the pairs is named, not read as one.
     stray = copy_of(sweep, tmp_path, "stray-pair")

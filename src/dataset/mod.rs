@@ -330,8 +330,7 @@ pub fn check_drawn(
     };
     Err(format!(
         "records {recorded}, but this sweep (its spec, and kinds {} in {SWEEP_RECORD}) draws {} for this pair: the \
-         summary, or sweep.json's kinds, changed after the sweep wrote them. Rerun the counterfactual --sweep \
-         command (with sweep.json as it was written) to write the pair again",
+         summary, or sweep.json's kinds, changed after the sweep wrote them",
         kinds.join(", "),
         drawn.describe()
     ))

@@ -1,8 +1,9 @@
 //! One rule for a counterfactual pair's folder, held by every reader of a
 //! sweep (`evaluate`, `validate` and the Python package): both runs are the
 //! pair's own scenario (its group, split and index) and of one size,
-//! `summary.json` names the pair and its cars as the runs do, the
-//! intervention lies within the run and names its car, and every car's
+//! `summary.json` names the pair and its cars as the runs do, its affected
+//! list is the cars it flags (those that diverged), the intervention lies
+//! within the run, names its car and fired when it says, and every car's
 //! `max_divergence_m` is the largest of its rows in `divergence.csv`, which
 //! holds no divergence before the intervention's frame (the runs are
 //! identical until then). An edited, swapped or linked file was scored as
@@ -118,7 +119,34 @@ pub fn check_pair_files(
             return bad(format!("cars[{i}].max_divergence_m {} is not a distance, 0 or more", car.max_divergence_m));
         }
     }
+    // The cars it says were affected are those it flags, in car order, and
+    // a car is flagged when it diverged at some frame (an edited list, or
+    // flag, changed the sweep's count of pairs with an effect).
+    for (i, car) in summary.cars.iter().enumerate() {
+        if car.affected != car.first_divergent_frame.is_some() {
+            return bad(format!(
+                "cars[{i}] is flagged affected {} with first_divergent_frame {:?}: a car is affected when it \
+                 diverged",
+                car.affected, car.first_divergent_frame
+            ));
+        }
+    }
+    let flagged: Vec<&str> = summary.cars.iter().filter(|c| c.affected).map(|c| c.name.as_str()).collect();
+    if !summary.affected.iter().map(String::as_str).eq(flagged.iter().copied()) {
+        return bad(format!(
+            "affected lists {:?}, and the cars it flags affected are {flagged:?}: the same cars, in car order",
+            summary.affected
+        ));
+    }
     if let Some(record) = &summary.intervention {
+        // Fired at the first step at or after its time.
+        let interval = runs[0].1["frame_interval"].as_f64().unwrap_or(0.0);
+        if let Some(t) = summary.intervention_time_s.filter(|t| (t - record.at_s).abs() > interval / 2.0) {
+            return bad(format!(
+                "intervention_time_s {t}, and its intervention fires at {} s (frame {}): the same moment",
+                record.at_s, record.frame
+            ));
+        }
         let car = record.car as usize;
         if car >= names.len() || record.frame as usize >= frames {
             return bad(format!(

@@ -634,11 +634,11 @@ pub fn sweep(options: &SweepOptions) -> Result<SweepSummary, RunError> {
                         let names = v.as_array().into_iter().flatten().filter_map(|k| k.as_str());
                         names.map(|k| k.replace('_', "-")).collect::<Vec<_>>().join(",")
                     };
-                    format!(
-                        "kinds (it was made with --kinds {}, this run asks for --kinds {})",
-                        kinds(&old[field]),
-                        kinds(&new[field])
-                    )
+                    let made = match kinds(&old[field]) {
+                        none if none.is_empty() => "its record names none".to_string(),
+                        some => format!("it was made with --kinds {some}"),
+                    };
+                    format!("kinds ({made}, this run asks for --kinds {})", kinds(&new[field]))
                 }
                 "limit" => {
                     let limit =
@@ -824,9 +824,13 @@ fn packed_pairs_as_drawn(
             &folder,
             (&key.group, key.split.name(), key.index.into()),
         )?;
-        crate::dataset::check_drawn(expansion, &names, key, &summary)
-            .map(|_| ())
-            .map_err(|e| format!("{}: {e}", folder.join("summary.json").display()))
+        // Its record, as a folder sweep's kept pair must have it.
+        let drawn = crate::dataset::check_drawn(expansion, &names, key, &summary)
+            .map_err(|e| format!("{}: {e}", folder.join("summary.json").display()))?;
+        match summary.intervention == Some(drawn) {
+            true => Ok(()),
+            false => Err(format!("{}: no intervention record", folder.join("summary.json").display())),
+        }
     })
     .map(|_| ())
 }

@@ -139,6 +139,9 @@ def _sweep_record(root: Path) -> dict:
         raise DatasetError(f"{path}: not JSON ({e})") from None
     if not record.get("complete", False):
         raise InputError(f"{root} is not complete: finish it with its counterfactual --sweep command first")
+    from ..disk import check_sweep_kinds
+
+    check_sweep_kinds(record, path)
     return record
 
 
