@@ -103,7 +103,7 @@ fn opening_a_dataset_or_a_sweep_takes_the_same_memory_for_a_thousand_scenarios_a
         let manifest: Value = serde_json::from_slice(&std::fs::read(folder.join("manifest.json")).unwrap()).unwrap();
         let sweep_dir = dir.join(format!("sweep-{per_split}"));
         std::fs::create_dir_all(&sweep_dir).unwrap();
-        let record = serde_json::json!({"format": "causalcity-counterfactual-sweep/1", "spec": manifest["spec"], "limit": null, "complete": true});
+        let record = serde_json::json!({"format": "causalcity-counterfactual-sweep/1", "spec": manifest["spec"], "limit": null, "complete": true, "kinds": ["stop"]});
         std::fs::write(sweep_dir.join("sweep.json"), record.to_string()).unwrap();
         let (pairs, sweep_peak) = peak_growth(|| Sweep::open(&sweep_dir).unwrap().unwrap().key_sequence().len());
         assert_eq!(pairs, 3 * per_split as usize);
