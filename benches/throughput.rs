@@ -224,6 +224,8 @@ fn effects_cost(root: &Path) {
             cost.car_steps += c.car_steps;
             cost.tries += c.tries;
             cost.woke += c.woke;
+            cost.cause_replayed_steps += c.cause_replayed_steps;
+            cost.next_action_steps += c.next_action_steps;
         }
         let t = Instant::now();
         for plan in &plans {
@@ -241,7 +243,7 @@ fn effects_cost(root: &Path) {
         println!(
             "effects per scenario: every car re-simulated {full:.2} ms ({:.1}x the factual simulation, {one:.2} ms), \
              incremental {measured:.2} ms ({:.1}x; {:.2}x faster); {} of {} re-runs incremental, \
-             {:.0} % of their car steps replayed; {} decisions of replayed cars tried, {} of them woke the car",
+             {:.0} % of their car steps replayed; {} decisions of replayed cars tried, {} of them woke the car{}",
             full / one,
             measured / one,
             full / measured,
@@ -249,7 +251,15 @@ fn effects_cost(root: &Path) {
             cost.reruns,
             100.0 * cost.replayed_car_steps as f64 / cost.car_steps.max(1) as f64,
             cost.tries,
-            cost.woke
+            cost.woke,
+            if cost.next_action_steps > 0 {
+                format!(
+                    "; a next-action cause replayed in {:.0} % of its steps (until its re-planned route could matter)",
+                    100.0 * cost.cause_replayed_steps as f64 / cost.next_action_steps as f64
+                )
+            } else {
+                String::new()
+            }
         );
         let floor = plans.iter().zip(&factual).map(|(p, f)| effects_floor(map, p, f)).sum::<f64>() / plans.len() as f64;
         println!(

@@ -181,7 +181,7 @@ pub enum LegKind {
 }
 
 /// One stretch of a route: part of a curve.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RouteLeg {
     pub kind: LegKind,
     pub curve: Curve,

@@ -212,6 +212,10 @@ pub struct RerunCost {
     /// ([`crate::world::city::replay::Replayed`]).
     pub tries: usize,
     pub woke: usize,
+    /// Steps of next-action re-runs in which the cause was replayed
+    /// (`Replayed::cause_replayed_steps`), of those re-runs' steps.
+    pub cause_replayed_steps: usize,
+    pub next_action_steps: usize,
 }
 
 /// [`measure_until`] with re-runs made as `how` says, and what they cost.
@@ -327,6 +331,10 @@ fn measure_runs(
                     cost.car_steps += replayed.of;
                     cost.tries += replayed.tries;
                     cost.woke += replayed.woke;
+                    if kind == InterventionKind::NextAction {
+                        cost.cause_replayed_steps += replayed.cause_replayed_steps;
+                        cost.next_action_steps += replayed.of / plan.cars.len().max(1);
+                    }
                     rerun
                 }
                 None => match (&plan.world, how) {

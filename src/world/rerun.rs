@@ -89,6 +89,14 @@ impl<'r> RerunFrames<'r> {
         self.interactions[car].extend(binding);
     }
 
+    /// Car `car` is the factual run's again in every frame so far (it was
+    /// pushed only where it was: a re-run that defers it).
+    pub(super) fn forget(&mut self, car: usize) {
+        self.from[car] = self.frames();
+        self.states[car].clear();
+        self.interactions[car].clear();
+    }
+
     /// The frames (the factual run's count).
     pub fn frames(&self) -> usize {
         self.factual.states.len()

@@ -222,6 +222,7 @@ impl SimCar<'_> {
     /// A point and a radius (metres) such that the car's centre is within
     /// the radius of the point, without the trigonometry of [`SimCar::pose`]
     /// most of the time: collision checks skip pairs that are clearly apart.
+    #[inline]
     pub(super) fn near_point(&mut self) -> (DVec2, f64) {
         let radius = |a: &Anchor, car: &SimCar| {
             let ds = (car.s - a.s).abs();
@@ -251,10 +252,27 @@ impl SimCar<'_> {
     /// collision check's anchor (a cache), the route compared by identity
     /// (a re-planned or changed route is a new one).
     pub(super) fn same_state(&self, other: &SimCar) -> bool {
-        std::ptr::eq(self.plan, other.plan)
-            && Arc::ptr_eq(&self.route, &other.route)
+        self.same_motion(other) && self.same_queue(other)
+    }
+
+    /// Whether `other` has this car's route and drive queue: the route by
+    /// identity, the queue (actions, merges, pending and given-up actions,
+    /// adaptations logged) by value.
+    pub(super) fn same_queue(&self, other: &SimCar) -> bool {
+        Arc::ptr_eq(&self.route, &other.route)
             && self.action_base == other.action_base
             && self.merges == other.merges
+            && self.actions == other.actions
+            && self.pending_actions == other.pending_actions
+            && self.given_up == other.given_up
+            && self.logged_adaptations == other.logged_adaptations
+    }
+
+    /// Whether `other` is this car in the same state apart from its route
+    /// and drive queue ([`SimCar::same_queue`]) and the anchor: where it is
+    /// on its route, how it moves, its driver and random stream.
+    pub(super) fn same_motion(&self, other: &SimCar) -> bool {
+        std::ptr::eq(self.plan, other.plan)
             && self.s == other.s
             && self.v == other.v
             && self.accel == other.accel
@@ -271,10 +289,6 @@ impl SimCar<'_> {
             && self.stopped_until == other.stopped_until
             && self.desired_override == other.desired_override
             && self.removed == other.removed
-            && self.actions == other.actions
-            && self.pending_actions == other.pending_actions
-            && self.given_up == other.given_up
-            && self.logged_adaptations == other.logged_adaptations
             && self.waiting_since == other.waiting_since
             && self.merge_claim == other.merge_claim
             && self.binding == other.binding
@@ -282,6 +296,19 @@ impl SimCar<'_> {
             && self.driver == other.driver
             && self.speed_factor == other.speed_factor
             && self.leader == other.leader
+    }
+
+    /// Takes `other`'s route and drive queue ([`SimCar::same_queue`]),
+    /// keeping its own motion; the anchor is dropped (a new route).
+    pub(super) fn take_queue(&mut self, other: &SimCar<'_>) {
+        self.route = Arc::clone(&other.route);
+        self.action_base = other.action_base;
+        self.merges = Arc::clone(&other.merges);
+        self.actions = Arc::clone(&other.actions);
+        self.pending_actions = other.pending_actions.clone();
+        self.given_up.clone_from(&other.given_up);
+        self.logged_adaptations.clone_from(&other.logged_adaptations);
+        self.anchor = None;
     }
 
     /// The car's rectangle on the ground.

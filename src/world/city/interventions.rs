@@ -25,7 +25,13 @@ const ROUTE_SLACK: f64 = 20.0;
 impl Sim<'_> {
     /// Fires the interventions whose trigger holds at time `t` (the start of
     /// a step of length `dt`, seconds), logging each.
+    #[inline]
     pub(super) fn fire_interventions(&mut self, t: f64, dt: f64) {
+        // Most steps of most runs (every effects re-run after its start)
+        // have none left.
+        if self.pending.is_empty() {
+            return;
+        }
         let mut k = 0;
         while k < self.pending.len() {
             let intervention = self.pending[k];

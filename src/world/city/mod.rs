@@ -242,6 +242,9 @@ struct Sim<'a> {
     /// While a re-run brings a replayed car up to date: its leader's
     /// changes reach its followers through their own snapshots instead.
     quiet_followers: bool,
+    /// A re-run's cause whose drive queue the intervention replaced, replayed
+    /// until the part of its route it reads changes (`replay.rs`).
+    deferred: Option<Box<replay::Deferred<'a>>>,
     /// Buffers the collision checks reuse from step to step (no allocation
     /// per step): near points, candidate pairs, the sweep's extents and the
     /// footprints computed.
@@ -302,6 +305,7 @@ impl<'a> Sim<'a> {
             frozen: vec![false; plan.cars.len()],
             live: (0..plan.cars.len()).collect(),
             quiet_followers: false,
+            deferred: None,
             scratch_points: Vec::new(),
             scratch_pairs: Vec::new(),
             scratch_extents: Vec::new(),

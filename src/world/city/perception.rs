@@ -20,8 +20,10 @@ pub(super) const LANE_CHANGE_PATIENCE: f64 = 20.0;
 /// other lane to stop short of (cooperative lane changes), metres: covers
 /// that car's perception error in stopping.
 const CLAIM_MARGIN: f64 = 0.5;
-/// How far ahead along its route a driver looks, metres.
-const LOOKAHEAD: f64 = 30.0;
+/// How far ahead along its route a driver looks, metres: no perception
+/// reads a route leg that starts farther ahead (an effects re-run relies on
+/// it, `replay.rs`).
+pub(super) const LOOKAHEAD: f64 = 30.0;
 /// A car on a sibling movement (same lane, other turn) counts as ahead of
 /// cars behind it until it is this far into its turn, metres.
 const SIBLING_CLEARANCE: f64 = 3.0;

@@ -9,7 +9,10 @@
 //! re-planned or gave up a lane change.
 //!
 //! A re-run simulates the intervened car and its followers (theirs, and so
-//! on) and replays every other car from the tape. A replayed car is brought
+//! on) and replays every other car from the tape. An intervened car whose
+//! drive queue was replaced re-plans at the first step and is then
+//! replayed too while its new route lies beyond all it reads ([`Deferred`]),
+//! taking that route when it wakes. A replayed car is brought
 //! up to date (its latest snapshot, moved on step by step) and simulated
 //! from then on, with its followers, as soon as
 //! - a decision it takes would read a track on which a simulated car stands
@@ -34,11 +37,11 @@
 
 use super::car::SimCar;
 use super::events::{extent, may_touch};
-use super::perception::Places;
+use super::perception::{Places, LOOKAHEAD};
 use super::{Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
 use crate::map::CityMap;
-use crate::map::{Action, Route};
+use crate::map::{Action, LegKind, Route, RouteLeg};
 use crate::plan::interventions::{Effect, Trigger};
 use crate::plan::{CarPlan, CityPlan, ScenarioPlan, WorldPlan};
 use crate::world::driver::{model_by_name, CarFollowing};
@@ -187,6 +190,7 @@ impl<'a> Tape<'a> {
 
     /// The collision check's near points and extents this step (`None`:
     /// off the map).
+    #[inline]
     pub(super) fn note_extents(&mut self, extents: impl Iterator<Item = Option<(DVec2, f64)>>) {
         let from = self.near.len();
         self.near.extend(extents.map(|e| e.unwrap_or((DVec2::NAN, 0.0))));
@@ -421,7 +425,8 @@ impl<'a> Recording<'a> {
         };
         let frames = changed.frames as usize;
         let mut run = RerunFrames::new(&self.factual, n);
-        let mut replayed = 0;
+        let replaces_queue = matches!(changed.interventions[0].effect, Effect::ReplaceActions { .. });
+        let (mut replayed, mut cause_replayed_steps) = (0, 0);
         for frame in 0..frames {
             if stop.load(Ordering::Relaxed) {
                 return None;
@@ -429,8 +434,15 @@ impl<'a> Recording<'a> {
             if frame > 0 {
                 for k in (frame - 1) * steps..frame * steps {
                     let t = Sim::step_time(k, steps, changed.frame_interval, dt);
+                    if let Some(car) = sim.deferred.as_ref().filter(|d| d.wake_at == k).map(|d| d.car) {
+                        sim.wake(self, car, k as i64 - 1, steps, dt);
+                    }
                     sim.replay_step(self, k, t, dt, steps, &mut buffers);
+                    if k == 0 && replaces_queue {
+                        sim.defer(self, cause, steps, dt, &mut run);
+                    }
                     replayed += n - sim.live.len();
+                    cause_replayed_steps += usize::from(sim.deferred.is_some());
                 }
             }
             let t = frame as f64 * changed.frame_interval;
@@ -442,7 +454,8 @@ impl<'a> Recording<'a> {
         }
         let car_steps = n * steps * frames.saturating_sub(1);
         let StepBuffers { shown_from_tape, tries, woke, .. } = buffers;
-        let replayed = Replayed { car_steps: replayed, of: car_steps, shown_from_tape, tries, woke };
+        let replayed =
+            Replayed { car_steps: replayed, of: car_steps, shown_from_tape, tries, woke, cause_replayed_steps };
         Some((RerunTrajectories::Replayed(run), replayed))
     }
 }
@@ -462,6 +475,10 @@ pub struct Replayed {
     /// car differed from the tape, and how many of them woke their car.
     pub tries: usize,
     pub woke: usize,
+    /// Steps in which the cause of a re-run that replaced its drive queue
+    /// was replayed (its re-planned route could not matter yet: see
+    /// `Recording::deferral_end`), rather than simulated.
+    pub cause_replayed_steps: usize,
 }
 
 /// How clear a simulated car is of every taped car, as of the end of step
@@ -527,7 +544,136 @@ fn replays(changed: &ScenarioPlan, cause: usize) -> bool {
     }
 }
 
+/// A re-run's cause whose drive queue the intervention replaced at time 0,
+/// replayed from the tape while it drives as the factual run did: its
+/// re-planned route matches the factual one up to some leg, and until its
+/// perception could read that leg ([`LOOKAHEAD`] ahead, and the two legs
+/// after its own) nothing it does can differ. It wakes then (or earlier,
+/// like any replayed car) and takes its re-planned route and queue.
+pub(super) struct Deferred<'a> {
+    car: usize,
+    /// The step at whose start it wakes at the latest.
+    wake_at: usize,
+    /// The car as re-planned at step 0 (its route and drive queue).
+    replanned: SimCar<'a>,
+}
+
+/// Room (metres) a deferred cause keeps from the first leg of its re-planned
+/// route that differs, beyond what its perception reads: more than a car's
+/// half length plus a step's travel (the front, the legs a step completes).
+const DEFERRAL_MARGIN_M: f64 = 5.0;
+
+impl<'s> Sim<'s> {
+    /// After step 0 of a re-run that replaced car `cause`'s drive queue
+    /// (it re-planned in that step, showing its followers): replays the car
+    /// from the tape until its re-planned route can matter, if it drives as
+    /// the factual run did so far ([`Recording::deferral_end`]).
+    fn defer(&mut self, rec: &Recording<'s>, cause: usize, steps: usize, dt: f64, run: &mut RerunFrames) {
+        let replanned = self.cars[cause].clone();
+        // Its frame 0 is the factual one (the intervention has not moved it).
+        let frame0 = run.state(0, cause) == &rec.factual.states[0][cause]
+            && run.interaction(0, cause) == rec.factual.interactions[0].get(cause);
+        self.catch_up(rec, cause, 0, steps, dt);
+        let factual = &self.cars[cause];
+        let start = &rec.tape.snapshots[cause][0].1;
+        let alike = frame0
+            && replanned.pending_actions.is_none()
+            && replanned.action_base == start.action_base
+            && replanned.same_motion(factual)
+            && factual.same_queue(start);
+        let wake_at = if alike { rec.deferral_end(cause, &replanned) } else { 0 };
+        if wake_at < 2 {
+            self.cars[cause] = replanned;
+            return;
+        }
+        self.frozen[cause] = true;
+        self.live.retain(|&i| i != cause);
+        run.forget(cause);
+        self.deferred = Some(Box::new(Deferred { car: cause, wake_at, replanned }));
+    }
+}
+
 impl Recording<'_> {
+    /// The step at whose start car `car`, re-planned as `replanned` at step
+    /// 0, must be simulated at the latest (0: throughout): the first at
+    /// which the factual car changed its route or queue, or showed its
+    /// followers one, or at which its driving could read the first leg `m`
+    /// where the re-planned route differs:
+    /// - perception reads the legs that start within [`LOOKAHEAD`] of the
+    ///   car's centre, and a claim at the stop line before leg `m`;
+    /// - by index, the two legs after its own: the next leg's kind and
+    ///   start (claims, completed legs, a lane change ahead), and the one
+    ///   after only for the connector the car committed to, which is one
+    ///   of the legs before `m` (checked: neither route has it again at `m`
+    ///   or `m + 1`);
+    /// - a lane change at leg `m` from the lane the car is on: a decision
+    ///   looks at its gap, which can matter only near it or at rest (see
+    ///   `Sim::merge_wait`), so the car may drive on the lane before leg
+    ///   `m` while it decides moving and far from it.
+    fn deferral_end(&self, car: usize, replanned: &SimCar) -> usize {
+        let tape = &self.tape;
+        let start = &tape.snapshots[car][0].1;
+        let steps = tape.s_wander.len() / tape.cars;
+        let (old, new) = (&start.route.legs, &replanned.route.legs);
+        let m = old.iter().zip(new.iter()).take_while(|(a, b)| a == b).count();
+        // The centre's route position at the start of step `k`.
+        let s_at = |k: usize| if k == 0 { start.s } else { tape.s_wander[tape.index(k - 1, car)].0 };
+        let drives_alike = |k: usize| -> bool {
+            if m == old.len() && m == new.len() {
+                return true;
+            }
+            if m == 0 {
+                return false;
+            }
+            let s = s_at(k);
+            // Leg m (in either route) is beyond what perception reads, the
+            // stop line before it too.
+            let at_m = [old.get(m), new.get(m)].into_iter().flatten().map(|l| l.route_start);
+            let ahead = at_m.fold(f64::INFINITY, f64::min) - s;
+            let reach = LOOKAHEAD.max(self.map.layout.stop_line_setback + start.plan.length);
+            if ahead <= reach + DEFERRAL_MARGIN_M {
+                return false;
+            }
+            // The committed connector is one before leg m.
+            let connector = |l: &RouteLeg| match l.kind {
+                LegKind::Connector(c) => Some(c),
+                _ => None,
+            };
+            let again = |legs: &[RouteLeg]| {
+                legs.iter()
+                    .skip(m)
+                    .take(2)
+                    .filter_map(connector)
+                    .any(|c| old[..m].iter().any(|l| connector(l) == Some(c)))
+            };
+            if again(old) || again(new) {
+                // Two legs before m at most, whatever the committed connector.
+                return m >= 3 && s < old[m - 2].route_start - DEFERRAL_MARGIN_M;
+            }
+            if m >= 2 && s < old[m - 1].route_start - DEFERRAL_MARGIN_M {
+                return true;
+            }
+            // On the leg before m: both routes go on, and the car decides
+            // (if it does) moving and far from a lane change at m.
+            if old.len() == m || new.len() == m {
+                return false;
+            }
+            let decides = tape.decisions_at(k).any(|d| tape.deciders[d] == car);
+            let v = tape.speed[tape.index(k, car)];
+            let near = v * (start.driver.reaction_time + 0.5) + 1.5 + DEFERRAL_MARGIN_M;
+            !decides || (v >= 0.1 && ahead > near)
+        };
+        let horizon = (0..steps).find(|&k| !drives_alike(k)).unwrap_or(steps);
+        let first_step = |step: i64| usize::try_from(step).unwrap_or(0);
+        let route_changed = tape.routes[car].get(1).map_or(steps, |&(step, _)| first_step(step));
+        let queue_changed = tape.snapshots[car][1..]
+            .iter()
+            .find(|(_, snapshot)| !snapshot.same_queue(start))
+            .map_or(steps, |&(step, _)| first_step(step));
+        let showed = tape.shown.iter().find(|e| e.leader == car).map_or(steps, |e| e.step);
+        horizon.min(route_changed).min(queue_changed).min(showed)
+    }
+
     /// Car `c` and its followers, theirs, and so on: a leader's re-planning
     /// reaches its followers, so a simulated car's followers are simulated
     /// too, while its leader can be replayed (its re-plans shown to it from
@@ -550,6 +696,7 @@ impl Recording<'_> {
 impl<'s> Sim<'s> {
     /// One step of a re-run (global step `k`, from `t` to `t + dt` seconds):
     /// [`Sim::step`] for the simulated cars, the tape for the replayed ones.
+    #[inline(always)]
     fn replay_step(&mut self, rec: &Recording<'s>, k: usize, t: f64, dt: f64, steps: usize, buffers: &mut StepBuffers) {
         let n = self.cars.len();
         self.fire_interventions(t, dt);
@@ -777,6 +924,12 @@ impl<'s> Sim<'s> {
         let woken: Vec<usize> = rec.subtree(c).into_iter().filter(|&m| self.frozen[m]).collect();
         for &m in &woken {
             self.catch_up(rec, m, to, steps, dt);
+            if let Some(deferred) = self.deferred.take_if(|d| d.car == m) {
+                // Its queue and route as the factual run had them until now:
+                // the re-planned ones take their place.
+                debug_assert!(self.cars[m].same_queue(&rec.tape.snapshots[m][0].1), "car {m}'s queue changed");
+                self.cars[m].take_queue(&deferred.replanned);
+            }
             self.thaw(m);
         }
         woken
