@@ -323,8 +323,7 @@ pub fn check_drawn(
     let recorded = match (&summary.intervention, summary.intervention_time_s) {
         (Some(recorded), _) if *recorded == drawn => return Ok(drawn),
         (Some(recorded), _) => recorded.describe(),
-        // Fired at the first step at or after the drawn time.
-        (None, Some(t)) if (t - drawn.at_s).abs() <= plan.frame_interval / 2.0 => return Ok(drawn),
+        (None, Some(t)) if drawn.fired_at(t, plan.frame_interval) => return Ok(drawn),
         (None, Some(t)) => format!("no intervention, and one that fired at {t} s"),
         (None, None) => "no intervention, and none that fired".to_string(),
     };

@@ -139,9 +139,8 @@ pub fn check_pair_files(
         ));
     }
     if let Some(record) = &summary.intervention {
-        // Fired at the first step at or after its time.
         let interval = runs[0].1["frame_interval"].as_f64().unwrap_or(0.0);
-        if let Some(t) = summary.intervention_time_s.filter(|t| (t - record.at_s).abs() > interval / 2.0) {
+        if let Some(t) = summary.intervention_time_s.filter(|&t| !record.fired_at(t, interval)) {
             return bad(format!(
                 "intervention_time_s {t}, and its intervention fires at {} s (frame {}): the same moment",
                 record.at_s, record.frame

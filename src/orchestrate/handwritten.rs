@@ -827,9 +827,10 @@ fn packed_pairs_as_drawn(
         // Its record, as a folder sweep's kept pair must have it.
         let drawn = crate::dataset::check_drawn(expansion, &names, key, &summary)
             .map_err(|e| format!("{}: {e}", folder.join("summary.json").display()))?;
-        match summary.intervention == Some(drawn) {
-            true => Ok(()),
-            false => Err(format!("{}: no intervention record", folder.join("summary.json").display())),
+        if summary.intervention == Some(drawn) {
+            Ok(())
+        } else {
+            Err(format!("{}: no intervention record", folder.join("summary.json").display()))
         }
     })
     .map(|_| ())

@@ -420,9 +420,7 @@ pub fn link_below(dir: &Path, name: &str) -> Option<PathBuf> {
 /// the folder is not read (a dataset with images holds hundreds of frames
 /// its scores never look at). Errors name the file and say what is wrong.
 pub fn verify_files(dir: &Path, names: &[&str]) -> Result<(), String> {
-    let listing_path = dir.join(CHECKSUMS);
-    let listing =
-        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let (listing_path, listing) = read_listing(dir)?;
     for &name in names {
         let Some(hash) = listing.lines().find_map(|l| l.split_once("  ").filter(|(_, n)| *n == name).map(|(h, _)| h))
         else {
@@ -431,17 +429,32 @@ pub fn verify_files(dir: &Path, names: &[&str]) -> Result<(), String> {
                 listing_path.display()
             ));
         };
-        if let Some(link) = link_below(dir, name) {
-            return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
-        }
-        let path = dir.join(name);
-        let data = crate::input::read_data(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        if hex(&Sha256::digest(&data)) != hash {
-            return Err(format!(
-                "{}: its checksum does not match {CHECKSUMS}: the file changed after it was written",
-                path.display()
-            ));
-        }
+        check_listed(dir, name, hash)?;
+    }
+    Ok(())
+}
+
+/// The scenario folder `dir`'s `checksums.sha256`: its path and text.
+fn read_listing(dir: &Path) -> Result<(PathBuf, String), String> {
+    let path = dir.join(CHECKSUMS);
+    let text = crate::input::read_record_text(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok((path, text))
+}
+
+/// Checks file `name` of the scenario folder `dir` against `hash`, its
+/// listed SHA-256: a regular file of the folder's own (no symbolic link on
+/// the way; a pipe hung merge, pack and a resumed gen) with that hash.
+fn check_listed(dir: &Path, name: &str, hash: &str) -> Result<(), String> {
+    if let Some(link) = link_below(dir, name) {
+        return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
+    }
+    let path = dir.join(name);
+    let data = crate::input::read_data(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if hex(&Sha256::digest(&data)) != hash {
+        return Err(format!(
+            "{}: its checksum does not match {CHECKSUMS}: the file changed after it was written",
+            path.display()
+        ));
     }
     Ok(())
 }
@@ -462,9 +475,7 @@ pub fn verify_scenario_of(dir: &Path, key: &crate::plan::ScenarioKey, seed: u64)
 /// layout: a `--no-effects` dataset's scenario holding `effects.csv`). The
 /// checksums themselves are [`verify_scenario`]'s.
 pub fn verify_layout(dir: &Path, layout: &ScenarioLayout) -> Result<(), String> {
-    let listing_path = dir.join(CHECKSUMS);
-    let listing =
-        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let (listing_path, listing) = read_listing(dir)?;
     let wanted: std::collections::BTreeSet<String> = layout.files().into_iter().filter(|n| n != CHECKSUMS).collect();
     let listed: std::collections::BTreeSet<String> =
         listing.lines().filter_map(|l| l.split_once("  ").map(|(_, name)| name.to_string())).collect();
@@ -513,9 +524,7 @@ pub fn verify_layout(dir: &Path, layout: &ScenarioLayout) -> Result<(), String> 
 /// what is wrong otherwise (a rerun rewrites such a scenario; `merge`
 /// refuses it).
 pub fn verify_scenario(dir: &Path) -> Result<(), String> {
-    let listing_path = dir.join(CHECKSUMS);
-    let listing =
-        crate::input::read_record_text(&listing_path).map_err(|e| format!("{}: {e}", listing_path.display()))?;
+    let (listing_path, listing) = read_listing(dir)?;
     let mut listed = 0usize;
     for line in listing.lines() {
         let Some((hash, name)) = line.split_once("  ") else {
@@ -524,15 +533,7 @@ pub fn verify_scenario(dir: &Path) -> Result<(), String> {
         if name.contains("..") || name.starts_with('/') {
             return Err(format!("{}: {name:?} is not a file of the scenario", listing_path.display()));
         }
-        if let Some(link) = link_below(dir, name) {
-            return Err(format!("{}: a symbolic link, not a file of the scenario's own", link.display()));
-        }
-        let path = dir.join(name);
-        // A regular file only: a pipe hung merge, pack and a resumed gen.
-        let data = crate::input::read_data(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        if hex(&Sha256::digest(&data)) != hash {
-            return Err(format!("{}: its checksum does not match {CHECKSUMS}", path.display()));
-        }
+        check_listed(dir, name, hash)?;
         listed += 1;
     }
     if listed == 0 {

@@ -38,6 +38,14 @@ pub struct InterventionRecord {
 }
 
 impl InterventionRecord {
+    /// Whether an intervention a summary says fired at `t` seconds is this
+    /// one, due at `at_s`, in a run of frames `frame_interval` seconds
+    /// apart: it fires at the first step at or after its time, so within
+    /// half a frame of it.
+    pub fn fired_at(&self, t: f64, frame_interval: f64) -> bool {
+        (t - self.at_s).abs() <= frame_interval / 2.0
+    }
+
     /// The record of `draw`, a sweep's intervention for `plan`, as
     /// `summary.json` holds it.
     pub fn of_draw(
