@@ -438,11 +438,11 @@ impl<'a> Recording<'a> {
                         sim.wake(self, car, k as i64 - 1, steps, dt);
                     }
                     sim.replay_step(self, k, t, dt, steps, &mut buffers);
+                    cause_replayed_steps += usize::from(sim.deferred.is_some());
                     if k == 0 && replaces_queue {
                         sim.defer(self, cause, steps, dt, &mut run);
                     }
                     replayed += n - sim.live.len();
-                    cause_replayed_steps += usize::from(sim.deferred.is_some());
                 }
             }
             let t = frame as f64 * changed.frame_interval;
@@ -570,14 +570,12 @@ impl<'s> Sim<'s> {
     /// the factual run did so far ([`Recording::deferral_end`]).
     fn defer(&mut self, rec: &Recording<'s>, cause: usize, steps: usize, dt: f64, run: &mut RerunFrames) {
         let replanned = self.cars[cause].clone();
-        // Its frame 0 is the factual one (the intervention has not moved it).
-        let frame0 = run.state(0, cause) == &rec.factual.states[0][cause]
-            && run.interaction(0, cause) == rec.factual.interactions[0].get(cause);
+        // Its frame 0 is the factual one (pushed before the intervention fired).
+        debug_assert!(run.state(0, cause) == &rec.factual.states[0][cause]);
         self.catch_up(rec, cause, 0, steps, dt);
         let factual = &self.cars[cause];
         let start = &rec.tape.snapshots[cause][0].1;
-        let alike = frame0
-            && replanned.pending_actions.is_none()
+        let alike = replanned.pending_actions.is_none()
             && replanned.action_base == start.action_base
             && replanned.same_motion(factual)
             && factual.same_queue(start);
@@ -601,15 +599,17 @@ impl Recording<'_> {
     /// where the re-planned route differs:
     /// - perception reads the legs that start within [`LOOKAHEAD`] of the
     ///   car's centre, and a claim at the stop line before leg `m`;
-    /// - by index, the two legs after its own: the next leg's kind and
-    ///   start (claims, completed legs, a lane change ahead), and the one
-    ///   after only for the connector the car committed to, which is one
-    ///   of the legs before `m` (checked: neither route has it again at `m`
-    ///   or `m + 1`);
-    /// - a lane change at leg `m` from the lane the car is on: a decision
-    ///   looks at its gap, which can matter only near it or at rest (see
-    ///   `Sim::merge_wait`), so the car may drive on the lane before leg
-    ///   `m` while it decides moving and far from it.
+    /// - by index, the legs after its own: the next leg's kind and start
+    ///   (claims, completed legs, a lane change ahead), the one after it
+    ///   for the connector the car committed to (one of the legs before
+    ///   `m`: checked that neither route has it again at `m` or `m + 1`),
+    ///   and a lane change's next leg when the car moves the change along
+    ///   its lane (`Route::move_lane_change`), which it does only near the
+    ///   change. So the legs from `m` on are out of index reach while the
+    ///   car is two legs before the `edge` (`m`, or `m - 1` when that leg
+    ///   is a lane change), and on the leg just before the edge while it
+    ///   decides moving and far from the edge: a lane change at the edge
+    ///   matters to a decision only near it or at rest (`Sim::merge_wait`).
     fn deferral_end(&self, car: usize, replanned: &SimCar) -> usize {
         let tape = &self.tape;
         let start = &tape.snapshots[car][0].1;
@@ -618,58 +618,73 @@ impl Recording<'_> {
         let m = old.iter().zip(new.iter()).take_while(|(a, b)| a == b).count();
         // The centre's route position at the start of step `k`.
         let s_at = |k: usize| if k == 0 { start.s } else { tape.s_wander[tape.index(k - 1, car)].0 };
-        let drives_alike = |k: usize| -> bool {
-            if m == old.len() && m == new.len() {
-                return true;
-            }
-            if m == 0 {
-                return false;
-            }
-            let s = s_at(k);
-            // Leg m (in either route) is beyond what perception reads, the
-            // stop line before it too.
-            let at_m = [old.get(m), new.get(m)].into_iter().flatten().map(|l| l.route_start);
-            let ahead = at_m.fold(f64::INFINITY, f64::min) - s;
+        let horizon = if m == old.len() && m == new.len() {
+            // The same legs: the route cannot matter.
+            steps
+        } else if m == 0 {
+            0
+        } else {
+            // Perception's reach: leg m (in either route) and the stop line
+            // before it beyond it.
+            let leg_m = [old.get(m), new.get(m)].into_iter().flatten().map(|l| l.route_start);
             let reach = LOOKAHEAD.max(self.map.layout.stop_line_setback + start.plan.length);
-            if ahead <= reach + DEFERRAL_MARGIN_M {
-                return false;
-            }
-            // The committed connector is one before leg m.
+            let read_from = leg_m.fold(f64::INFINITY, f64::min) - reach - DEFERRAL_MARGIN_M;
+            // The index reach.
             let connector = |l: &RouteLeg| match l.kind {
                 LegKind::Connector(c) => Some(c),
                 _ => None,
             };
-            let again = |legs: &[RouteLeg]| {
+            let committed_again = |legs: &[RouteLeg]| {
                 legs.iter()
                     .skip(m)
                     .take(2)
                     .filter_map(connector)
                     .any(|c| old[..m].iter().any(|l| connector(l) == Some(c)))
             };
-            if again(old) || again(new) {
-                // Two legs before m at most, whatever the committed connector.
-                return m >= 3 && s < old[m - 2].route_start - DEFERRAL_MARGIN_M;
-            }
-            if m >= 2 && s < old[m - 1].route_start - DEFERRAL_MARGIN_M {
-                return true;
-            }
-            // On the leg before m: both routes go on, and the car decides
-            // (if it does) moving and far from a lane change at m.
-            if old.len() == m || new.len() == m {
-                return false;
-            }
-            let decides = tape.decisions_at(k).any(|d| tape.deciders[d] == car);
-            let v = tape.speed[tape.index(k, car)];
-            let near = v * (start.driver.reaction_time + 0.5) + 1.5 + DEFERRAL_MARGIN_M;
-            !decides || (v >= 0.1 && ahead > near)
+            let committed_again = committed_again(old) || committed_again(new);
+            let edge = if matches!(old[m - 1].kind, LegKind::LaneChange { .. }) { m - 1 } else { m };
+            // Free on the legs before `free_until` (route metres, with room);
+            // on the leg before the edge only as its decisions allow.
+            let before = |leg: usize| old[leg].route_start - DEFERRAL_MARGIN_M;
+            let (free_until, edge_leg_ok) = match (committed_again, edge) {
+                // Three legs before the edge at most, whatever is committed.
+                (true, edge) if edge >= 3 => (before(edge - 2), false),
+                (true, _) => (f64::NEG_INFINITY, false),
+                (false, edge) if edge >= 2 => (before(edge - 1), true),
+                (false, _) => (f64::NEG_INFINITY, true),
+            };
+            let edge_start = [old.get(edge), new.get(edge)].into_iter().flatten().map(|l| l.route_start);
+            let edge_start = edge_start.fold(f64::INFINITY, f64::min);
+            let both_go_on = old.len() > edge && new.len() > edge;
+            // The driver changes only with a confounder intervention, and a
+            // deferred re-run has only its own intervention.
+            let reaction_time = start.driver.reaction_time;
+            let drives_alike = |k: usize| {
+                let s = s_at(k);
+                if s >= read_from {
+                    return false;
+                }
+                if s < free_until {
+                    return true;
+                }
+                if !(edge_leg_ok && both_go_on) {
+                    return false;
+                }
+                // On the leg before the edge: at a decision, moving and far off.
+                let decides = tape.decisions_at(k).any(|d| tape.deciders[d] == car);
+                let v = tape.speed[tape.index(k, car)];
+                let near = v * (reaction_time + 0.5) + 1.5 + DEFERRAL_MARGIN_M;
+                !decides || (v >= 0.1 && edge_start - s > near)
+            };
+            (0..steps).find(|&k| !drives_alike(k)).unwrap_or(steps)
         };
-        let horizon = (0..steps).find(|&k| !drives_alike(k)).unwrap_or(steps);
-        let first_step = |step: i64| usize::try_from(step).unwrap_or(0);
-        let route_changed = tape.routes[car].get(1).map_or(steps, |&(step, _)| first_step(step));
+        // A snapshot or route from the end of step j: awake at its start.
+        let from_step = |step: i64| usize::try_from(step).unwrap_or(0);
+        let route_changed = tape.routes[car].get(1).map_or(steps, |&(step, _)| from_step(step));
         let queue_changed = tape.snapshots[car][1..]
             .iter()
             .find(|(_, snapshot)| !snapshot.same_queue(start))
-            .map_or(steps, |&(step, _)| first_step(step));
+            .map_or(steps, |&(step, _)| from_step(step));
         let showed = tape.shown.iter().find(|e| e.leader == car).map_or(steps, |e| e.step);
         horizon.min(route_changed).min(queue_changed).min(showed)
     }
