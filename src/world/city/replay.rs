@@ -908,6 +908,7 @@ impl<'s> Sim<'s> {
     /// in the factual run, when it is not where and as fast as the tape says
     /// at step `k`, with the farthest such position along it; lists the
     /// tracks marked in `marked`.
+    #[inline(always)]
     fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [f64], marked: &mut Vec<usize>) {
         marked.clear();
         for &i in &self.live {
@@ -991,6 +992,7 @@ impl<'s> Sim<'s> {
     /// [`Sim::detect_collisions`] at the end of step `k` (time `now`), a
     /// replayed car's footprint from the tape; a replayed car that a
     /// simulated one touches wakes up (with its followers) before the collision.
+    #[inline(always)]
     fn replayed_collisions(
         &mut self,
         rec: &Recording<'s>,
