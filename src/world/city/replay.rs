@@ -547,9 +547,9 @@ fn replays(changed: &ScenarioPlan, cause: usize) -> bool {
 /// A re-run's cause whose drive queue the intervention replaced at time 0,
 /// replayed from the tape while it drives as the factual run did: its
 /// re-planned route matches the factual one up to some leg, and until its
-/// perception could read that leg ([`LOOKAHEAD`] ahead, and the two legs
-/// after its own) nothing it does can differ. It wakes then (or earlier,
-/// like any replayed car) and takes its re-planned route and queue.
+/// driving could read that leg (see [`Recording::deferral_end`]) nothing
+/// it does can differ. It wakes then (or earlier, like any replayed car)
+/// and takes its re-planned route and queue.
 pub(super) struct Deferred<'a> {
     car: usize,
     /// The step at whose start it wakes at the latest.
@@ -667,7 +667,7 @@ impl Recording<'_> {
                 if s < free_until {
                     return true;
                 }
-                if !(edge_leg_ok && both_go_on) {
+                if !(edge_leg_ok && both_go_on && s < edge_start) {
                     return false;
                 }
                 // On the leg before the edge: at a decision, moving and far off.
