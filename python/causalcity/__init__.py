@@ -202,12 +202,18 @@ class Spec:
         return cls(_native.Spec.load(_os.fspath(path)))
 
     @classmethod
-    def from_dict(cls, spec: Dict[str, Any], networks: Optional[PathLike] = None) -> "Spec":
+    def from_dict(
+        cls, spec: Dict[str, Any], networks: Optional[PathLike] = None, beside: Optional[PathLike] = None
+    ) -> "Spec":
         """A spec from a dict with the fields of a spec file. A SUMO network
         it names (``map.sumo``) is read from the folder ``networks`` by file
-        name (a dataset's ``networks/``), else from the working folder."""
+        name (a dataset's ``networks/``); else, given ``beside`` (the spec
+        file the dict was read from, and then edited), relative to that
+        file's folder, as :meth:`load` reads it; else from the working
+        folder."""
         folder = None if networks is None else _os.fspath(networks)
-        return cls(_native.Spec.from_json(_spec_json(spec), "<dict>", None, folder))
+        path = None if beside is None else _os.fspath(beside)
+        return cls(_native.Spec.from_json(_spec_json(spec), path or "<dict>", path, folder))
 
     @property
     def name(self) -> str:
@@ -249,7 +255,8 @@ class Spec:
 
     @property
     def path(self) -> Optional[str]:
-        """The file the spec was read from (None for :meth:`from_dict`)."""
+        """The file the spec was read from: :meth:`load`'s, or
+        :meth:`from_dict`'s ``beside`` (None without one)."""
         return self._native.path
 
     def to_dict(self) -> Dict[str, Any]:

@@ -154,12 +154,13 @@ def _spec(
     raw["name"] = f"paper-{setting.name}-{world}"
     raw["splits"] = dict(splits or setting.splits)
     if groups:
-        named = {Spec.from_dict({**raw, "groups": [g]}).groups[0]: g for g in raw.get("groups", [])}
+        named = {Spec.from_dict({**raw, "groups": [g]}, beside=path).groups[0]: g for g in raw.get("groups", [])}
         unknown = [g for g in groups if g not in named]
         if unknown:
             raise InputError(f"--group {' '.join(unknown)}: {path} has no such group (its groups: {', '.join(named)})")
         raw["groups"] = [g for name, g in named.items() if name in groups]
-    return Spec.from_dict(raw)
+    # (a SUMO network the spec names is read beside its file, as gen reads it)
+    return Spec.from_dict(raw, beside=path)
 
 
 def _method_options(name: str, setting: Setting, device: str, seed: int, quiet: bool) -> dict:

@@ -1052,6 +1052,37 @@ def test_the_counterfactual_reference_methods_run_on_a_sweep_and_are_scored(swee
     assert moved["steps"][-1]["mse"] > everyone["steps"][-1]["mse"] > 0
 
 
+def test_a_sweep_of_a_sumo_network_reads_its_pairs_from_any_folder(tmp_path, monkeypatch):
+    """The pairs of a sweep on an imported network read back with the
+    sweep's own copy of the network (networks/), once the spec's copy is
+    gone and from another working folder, as validate reads them."""
+    import shlex
+    import subprocess
+
+    from causalcity.methods.counterfactual import load_pairs, sweep_groups
+
+    shutil.copy(ROOT / "tests" / "data" / "sumo" / "berlin-small.net.xml", tmp_path)
+    spec = json.loads((ROOT / "configs" / "city.json").read_text())
+    spec.update(name="berlin-sweep", frames=20, map={"sumo": "berlin-small.net.xml"},
+                groups=[{"cars": 4, "edge_proportion": 0.5}], splits={"train": 2, "val": 1, "test": 1})  # fmt: skip
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    command = shlex.split(os.environ.get("CAUSALCITY_CLI", str(ROOT / "target" / "release" / "causalcity")))
+    args = ["counterfactual", "--sweep", tmp_path / "spec.json", "--no-images", "--quiet", "--kinds", "stop"]
+    run = subprocess.run(command + [str(a) for a in args + ["--out", tmp_path / "sweep"]], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    (tmp_path / "berlin-small.net.xml").unlink()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert sweep_groups(tmp_path / "sweep") == ["cars04_edges50"]
+    train, test = (load_pairs(tmp_path / "sweep", "cars04_edges50", split) for split in ("train", "test"))
+    assert len(train) == 2 and len(test) == 1 and train.truth is not None
+    for pairs in (train, test):
+        # the factual runs drove on the network
+        assert pairs.metres.shape[1:] == (20, 4, 4)
+        assert np.all((pairs.metres[..., 0] > 850) & (pairs.metres[..., 0] < 1410))
+
+
 def test_the_nri_rollout_holds_a_stopped_car_and_scores_cars_by_its_own_rollout(sweep):
     from causalcity.methods.counterfactual import NriRollout, load_pairs
 
@@ -1150,3 +1181,32 @@ def test_scenarios_shorter_than_the_history_are_told_not_passed_off(tmp_path):
     with pytest.raises(causalcity.InputError, match=r"predicted nothing: its scenarios have 20 frames"):
         run_method(lambda: make("constant_velocity"), tmp_path / "short", tmp_path / "cv.npz", quiet=True)
     assert not (tmp_path / "cv.npz").exists()
+
+
+def test_the_paper_reads_a_sumo_network_beside_its_spec_file_from_any_folder(tmp_path, capsys, monkeypatch):
+    """A spec naming a SUMO network by a path relative to its own file (as
+    configs/ood-real-network.json does) runs in the paper from any working
+    folder, as gen runs it: the path is the spec file's, not the caller's."""
+    from causalcity import paper
+
+    specs = tmp_path / "specs"
+    (specs / "nets").mkdir(parents=True)
+    shutil.copy(ROOT / "tests" / "data" / "sumo" / "berlin-small.net.xml", specs / "nets")
+    spec = json.loads((ROOT / "configs" / "city.json").read_text())
+    spec.update(frames=20, map={"sumo": "nets/berlin-small.net.xml"}, groups=[{"cars": 4, "edge_proportion": 0.5}])
+    (specs / "berlin.json").write_text(json.dumps(spec))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    out = tmp_path / "paper"
+    flags = ["--splits", "2/1/1", "--world", "city", "--city-spec", str(specs / "berlin.json"), "--quiet"]
+    assert paper.main([*flags, "--method", "path", "--out", str(out)]) == 0, capsys.readouterr().err
+    assert (out / "results.md").is_file()
+    # Its scenarios drove on the network (the town the datasets record).
+    manifests = sorted(out.rglob("manifest.json"))
+    assert manifests, sorted(p.relative_to(out) for p in out.rglob("*"))
+    for manifest in manifests:
+        data = causalcity.open_dataset(manifest.parent)
+        assert data.spec.to_dict()["map"]["sumo"] == "nets/berlin-small.net.xml"
+        assert (manifest.parent / "networks" / "berlin-small.net.xml").is_file()
+        assert all(np.all((s.position[..., 0] > 850) & (s.position[..., 0] < 1410)) for s in data)

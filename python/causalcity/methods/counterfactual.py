@@ -154,7 +154,8 @@ def sweep_groups(root: "str | Path") -> List[str]:
     """The sweep's group names, in its spec's order."""
     from .. import Spec
 
-    return Spec.from_dict(_sweep_record(Path(root))["spec"]).groups
+    # (a SUMO network the spec names is the sweep's own copy, in networks/)
+    return Spec.from_dict(_sweep_record(Path(root))["spec"], networks=Path(root) / "networks").groups
 
 
 def _run_arrays(folder: Path) -> Tuple[np.ndarray, np.ndarray, dict]:
