@@ -333,7 +333,7 @@ fn measure_runs(
                     cost.woke += replayed.woke;
                     if kind == InterventionKind::NextAction {
                         cost.cause_replayed_steps += replayed.cause_replayed_steps;
-                        cost.next_action_steps += replayed.of / plan.cars.len().max(1);
+                        cost.next_action_steps += replayed.steps;
                     }
                     rerun
                 }

@@ -89,8 +89,10 @@ impl<'r> RerunFrames<'r> {
         self.interactions[car].extend(binding);
     }
 
-    /// Car `car` is the factual run's again in every frame so far (it was
-    /// pushed only where it was: a re-run that defers it).
+    /// Takes back every frame pushed for car `car`: it is the factual run's
+    /// again in every frame so far. A re-run that defers its cause pushed
+    /// the cause's frame 0 (it re-planned there) and then found it driving
+    /// as the factual car does; from its waking on, it is pushed again.
     pub(super) fn forget(&mut self, car: usize) {
         self.from[car] = self.frames();
         self.states[car].clear();

@@ -452,10 +452,17 @@ impl<'a> Recording<'a> {
                 run.push(i, frame, sim.cars[i].state(), Some(sim.cars[i].binding));
             }
         }
-        let car_steps = n * steps * frames.saturating_sub(1);
+        let run_steps = steps * frames.saturating_sub(1);
         let StepBuffers { shown_from_tape, tries, woke, .. } = buffers;
-        let replayed =
-            Replayed { car_steps: replayed, of: car_steps, shown_from_tape, tries, woke, cause_replayed_steps };
+        let replayed = Replayed {
+            car_steps: replayed,
+            of: n * run_steps,
+            steps: run_steps,
+            shown_from_tape,
+            tries,
+            woke,
+            cause_replayed_steps,
+        };
         Some((RerunTrajectories::Replayed(run), replayed))
     }
 }
@@ -466,6 +473,8 @@ pub struct Replayed {
     /// Car steps replayed, of all the re-run's car steps.
     pub car_steps: usize,
     pub of: usize,
+    /// The re-run's steps (each car's: `of` is this times the cars).
+    pub steps: usize,
     /// Drive queues that replayed leaders showed followers from the tape:
     /// simulated followers as the leaders re-planned, followers woken in
     /// that step, and simulated followers as the leaders gave up lane
@@ -647,7 +656,7 @@ impl Recording<'_> {
             // on the leg before the edge only as its decisions allow.
             let before = |leg: usize| old[leg].route_start - DEFERRAL_MARGIN_M;
             let (free_until, edge_leg_ok) = match (committed_again, edge) {
-                // Three legs before the edge at most, whatever is committed.
+                // Free only at least three legs before the edge, whatever is committed.
                 (true, edge) if edge >= 3 => (before(edge - 2), false),
                 (true, _) => (f64::NEG_INFINITY, false),
                 (false, edge) if edge >= 2 => (before(edge - 1), true),
