@@ -524,6 +524,54 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
         checked += 1;
     }
     assert_eq!(checked, edits.len());
+    // summary.json and divergence.csv edited alike (neither has a checksum):
+    // a still car made affected, and the moved car moved 2 m further at the
+    // last frame. Both passed: the runs' poses.csv (checksummed) now decide.
+    let still = summary["cars"].as_array().unwrap().iter().position(|c| c["max_divergence_m"].as_f64() == Some(0.0));
+    let still = still.expect("a car the stop did not move");
+    let text = std::fs::read_to_string(sweep.join(pair).join("divergence.csv")).unwrap();
+    let last = 1 + 19 * 4 + moved; // the header, then a row per frame and car
+    let further = text.lines().nth(last).unwrap().split(',').nth(3).unwrap().parse::<f64>().unwrap() + 2.0;
+    type Forgery = Box<dyn Fn(&mut serde_json::Value, &mut Vec<String>)>;
+    let forgeries: Vec<(&str, Forgery, String)> = vec![
+        (
+            "made-affected",
+            Box::new(move |v, _| {
+                v["cars"][still]["affected"] = true.into();
+                v["cars"][still]["first_divergent_frame"] = 19.into();
+                let flagged = v["cars"].as_array().unwrap().iter().filter(|c| c["affected"] == true);
+                v["affected"] = flagged.map(|c| c["name"].clone()).collect();
+            }),
+            format!("cars[{still}].first_divergent_frame is frame 19, and the runs' poses.csv first differ for car {still} at no frame"),
+        ),
+        (
+            "moved-further",
+            Box::new(move |v, rows| {
+                v["cars"][moved]["max_divergence_m"] = further.into();
+                let mut row: Vec<String> = rows[last].split(',').map(String::from).collect();
+                row[3] = format!("{further:.4}");
+                rows[last] = row.join(",");
+            }),
+            format!("line {}: car {moved} is {further:.4} m from its factual position at frame 19, and the runs' poses.csv put it", last + 1),
+        ),
+    ];
+    let mut forged = 0;
+    for (name, forge, says) in &forgeries {
+        let copy = dir.join(name);
+        assert!(std::process::Command::new("cp").args(["-r", s(&sweep), s(&copy)]).status().unwrap().success());
+        let path = copy.join(pair).join("summary.json");
+        let mut value = read_json(&path);
+        let mut rows: Vec<String> = text.lines().map(String::from).collect();
+        forge(&mut value, &mut rows);
+        std::fs::write(&path, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+        std::fs::write(copy.join(pair).join("divergence.csv"), rows.join("\n") + "\n").unwrap();
+        let output = run(&["validate", s(&copy)]);
+        let printed = String::from_utf8_lossy(&output.stdout);
+        assert_eq!(output.status.code(), Some(1), "{name}: {printed}");
+        assert!(printed.contains(says.as_str()), "{name}: expected {says:?} in {printed}");
+        forged += 1;
+    }
+    assert_eq!(forged, forgeries.len());
     // The same rule for a packed sweep's pairs (validate parsed the summary only).
     let packed = dir.join("packed");
     let args = ["--no-images", "-q", "--kinds", "stop", "--format", "tar", "--scenarios-per-tar", "4"];

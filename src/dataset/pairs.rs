@@ -8,6 +8,12 @@
 //! holds no divergence before the intervention's frame (the runs are
 //! identical until then). An edited, swapped or linked file was scored as
 //! written.
+//!
+//! `summary.json` and `divergence.csv` carry no checksum, so both are also
+//! held to the runs' `poses.csv` (which do): a car's first divergent frame
+//! is the first whose rows differ, and each distance is the one between the
+//! two runs' logged positions. Both files edited alike (a car made affected,
+//! or moved further, in each) passed every other check.
 
 use crate::output::pair_summary::PairSummary;
 use std::path::Path;
@@ -15,6 +21,16 @@ use std::path::Path;
 /// Slack between `max_divergence_m` (full precision) and `divergence.csv`'s
 /// distances (written to 0.1 mm), metres.
 const DIVERGENCE_SLACK_M: f64 = 1e-4;
+
+/// Slack between a `divergence.csv` distance (to 0.1 mm, from the runs'
+/// full-precision positions) and the distance between the positions the
+/// runs' `poses.csv` log (each coordinate to 0.1 mm): at most 0.05 mm for
+/// the written distance and 0.14 mm for the logged positions, metres.
+const POSES_SLACK_M: f64 = 2.5e-4;
+
+/// The `poses.csv` columns whose logged values decide whether a car's rows
+/// differ between the runs (`output::poses::logged_pose`); x and y first.
+const POSE_COLUMNS: [&str; 7] = ["x", "y", "z", "roll", "pitch", "yaw", "speed"];
 
 /// Checks the pair folder `pair`, read as `(group, split, index)` of its
 /// sweep, and returns its summary. Errors name the file and what differs.
@@ -163,19 +179,85 @@ pub fn check_pair_files(
         }
     }
     let first = summary.intervention.as_ref().map(|r| r.frame as usize);
-    check_divergence(&read("divergence.csv")?, &pair.join("divergence.csv"), &summary, frames, first)?;
+    // What the runs' poses say (checksummed, unlike the two files below).
+    let cars = names.len();
+    let factual = read_poses(&read("factual/poses.csv")?, &pair.join("factual/poses.csv"), frames, cars)?;
+    let counterfactual =
+        read_poses(&read("counterfactual/poses.csv")?, &pair.join("counterfactual/poses.csv"), frames, cars)?;
+    for (i, car) in summary.cars.iter().enumerate() {
+        let differs = (0..frames).find(|&f| factual[f * cars + i] != counterfactual[f * cars + i]);
+        if car.first_divergent_frame != differs {
+            return bad(format!(
+                "cars[{i}].first_divergent_frame is {}, and the runs' poses.csv first differ for car {i} at {}: \
+                 the summary is another pair's or edited",
+                frame_or_none(car.first_divergent_frame),
+                frame_or_none(differs)
+            ));
+        }
+    }
+    let apart: Vec<f64> = factual
+        .iter()
+        .zip(&counterfactual)
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+        .collect();
+    check_divergence(&read("divergence.csv")?, &pair.join("divergence.csv"), &summary, frames, first, &apart)?;
     Ok(summary)
 }
 
+fn frame_or_none(frame: Option<usize>) -> String {
+    frame.map_or_else(|| "no frame".to_string(), |f| format!("frame {f}"))
+}
+
+/// A run's `poses.csv`: each row's logged pose ([`POSE_COLUMNS`]), a row
+/// per frame and car in order, `frames` x `cars` rows.
+fn read_poses(data: &[u8], path: &Path, frames: usize, cars: usize) -> Result<Vec<[f64; 7]>, String> {
+    let mut reader = csv::Reader::from_reader(data);
+    let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?.clone();
+    let column = |name: &str| header.iter().position(|h| h == name);
+    let wanted: Vec<Option<usize>> = ["frame", "car"].iter().chain(&POSE_COLUMNS).map(|name| column(name)).collect();
+    let Some(wanted) = wanted.into_iter().collect::<Option<Vec<usize>>>() else {
+        return Err(format!(
+            "{}: line 1: expected a header with frame, car, {}",
+            path.display(),
+            POSE_COLUMNS.join(", ")
+        ));
+    };
+    let mut poses = Vec::with_capacity(frames * cars);
+    for (n, row) in reader.records().enumerate() {
+        let row = row.map_err(|e| format!("{}: {e}", path.display()))?;
+        let (frame, car) = (n / cars.max(1), n % cars.max(1));
+        let value = |k: usize| row.get(wanted[k]).and_then(|v| v.parse::<f64>().ok()).filter(|v| v.is_finite());
+        let pose: Option<Vec<f64>> = (2..wanted.len()).map(value).collect();
+        let place = (value(0), value(1)) == (Some(frame as f64), Some(car as f64));
+        match pose.filter(|_| place && n < frames * cars) {
+            Some(pose) => poses.push(std::array::from_fn(|k| pose[k])),
+            None => {
+                return Err(format!(
+                    "{}: line {}: {:?}: expected frame {frame}, car {car} and a pose of numbers",
+                    path.display(),
+                    n + 2,
+                    row.iter().collect::<Vec<_>>().join(",")
+                ))
+            }
+        }
+    }
+    if poses.len() != frames * cars {
+        return Err(format!("{}: {} rows, expected {frames} frames x {cars} cars", path.display(), poses.len()));
+    }
+    Ok(poses)
+}
+
 /// divergence.csv: a row per frame and car in order, each distance 0 or
-/// more, none before `first` (the intervention's frame), and each car's
-/// largest the summary's `max_divergence_m`.
+/// more, none before `first` (the intervention's frame), each the distance
+/// between the runs' logged positions (`apart`, in the same order), and each
+/// car's largest the summary's `max_divergence_m`.
 fn check_divergence(
     data: &[u8],
     path: &Path,
     summary: &PairSummary,
     frames: usize,
     first: Option<usize>,
+    apart: &[f64],
 ) -> Result<(), String> {
     let mut reader = csv::Reader::from_reader(data);
     let header = reader.headers().map_err(|e| format!("{}: {e}", path.display()))?;
@@ -206,6 +288,14 @@ fn check_divergence(
                  are identical until it (another pair's file, or an edited frame)",
                 path.display(),
                 first.unwrap_or(0)
+            ));
+        }
+        if apart.get(n).is_some_and(|&logged| (distance - logged).abs() > POSES_SLACK_M) {
+            return Err(format!(
+                "{}: line {line}: car {car} is {distance} m from its factual position at frame {frame}, and the \
+                 runs' poses.csv put it {:.4} m apart: the file is another pair's or edited",
+                path.display(),
+                apart[n]
             ));
         }
         largest[car] = largest[car].max(distance);
