@@ -572,6 +572,18 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
         forged += 1;
     }
     assert_eq!(forged, forgeries.len());
+    // A summary from before the intervention record still reads: then a
+    // first divergent frame could come a frame before the rows differ.
+    let dated = dir.join("dated");
+    assert!(std::process::Command::new("cp").args(["-r", s(&sweep), s(&dated)]).status().unwrap().success());
+    let path = dated.join(pair).join("summary.json");
+    let mut value = read_json(&path);
+    value.as_object_mut().unwrap().remove("intervention");
+    let first = value["cars"][moved]["first_divergent_frame"].as_u64().unwrap();
+    value["cars"][moved]["first_divergent_frame"] = (first - 1).into();
+    std::fs::write(&path, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+    let output = run(&["validate", s(&dated)]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stdout));
     // The same rule for a packed sweep's pairs (validate parsed the summary only).
     let packed = dir.join("packed");
     let args = ["--no-images", "-q", "--kinds", "stop", "--format", "tar", "--scenarios-per-tar", "4"];

@@ -213,7 +213,8 @@ class Spec:
         folder."""
         folder = None if networks is None else _os.fspath(networks)
         path = None if beside is None else _os.fspath(beside)
-        return cls(_native.Spec.from_json(_spec_json(spec), path or "<dict>", path, folder))
+        origin = "<dict>" if path is None else f"<dict from {path}>"
+        return cls(_native.Spec.from_json(_spec_json(spec), origin, path, folder))
 
     @property
     def name(self) -> str:
