@@ -730,14 +730,11 @@ fn check_scenario(root: &Path, key: &ScenarioKey, expected: &Expected<'_>) -> Sc
     // (gen refuses to write through it).
     // (Every folder from the root down: group, split, a sweep's pair, the
     // scenario or run.)
-    let mut below_root: Vec<&Path> = dir.ancestors().take_while(|a| *a != root).collect();
-    below_root.reverse();
-    let linked = below_root.into_iter().find(|folder| std::fs::symlink_metadata(folder).is_ok_and(|m| m.is_symlink()));
-    if let Some(folder) = linked {
+    if let Some(folder) = crate::output::linked_below(root, &dir) {
         let message = format!(
             "{LINKED_FOLDER}, never links (replace it with the folder it points to, or rerun gen into a new folder)"
         );
-        return (vec![Problem { path: folder.to_path_buf(), message }], 0, 0, Vec::new());
+        return (vec![Problem { path: folder, message }], 0, 0, Vec::new());
     }
     if !dir.is_dir() {
         let message = "missing scenario folder: rerun gen to write it".to_string();

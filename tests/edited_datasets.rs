@@ -754,3 +754,53 @@ fn evaluate_scores_nothing_against_a_file_that_changed_after_it_was_written() {
     }
     assert_eq!(checked, cases.len());
 }
+
+#[test]
+fn readers_refuse_a_linked_scenario_split_or_group_folder_as_validate_names_it() {
+    // evaluate, stats, export and baseline read through a linked folder
+    // (exit 0) while validate named it: a dataset's scenarios are read from
+    // its own folders. A link to a good copy, so that nothing else differs.
+    let dir = fresh_dir("edited-linked-readers");
+    let spec = write_spec(&dir, &toy_spec("linked", &[(4, 0.5)], (1, 1, 2), 30));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet", "--no-images"]);
+    let pred = dir.join("pred.npz");
+    let edges: Vec<f64> = (0..16).map(|i| (i % 7) as f64 / 7.0).collect();
+    let arrays: Vec<(String, Vec<u8>)> = ["val/00000", "test/00000", "test/00001"]
+        .iter()
+        .map(|folder| (format!("cars04_edges50/{folder}"), npy(&[4, 4], &edges)))
+        .collect();
+    npz(&pred, &arrays.iter().map(|(n, b)| (n.as_str(), b.clone())).collect::<Vec<_>>());
+    let readers = |data: &Path, out: &Path| -> Vec<(&'static str, Output)> {
+        vec![
+            ("evaluate", run(&["evaluate", s(data), s(&pred)])),
+            ("stats", run(&["stats", s(data)])),
+            ("baseline", run(&["baseline", s(data)])),
+            ("export", run(&["export", "nri", s(data), "--out", s(out), "--quiet"])),
+        ]
+    };
+    // As written, every reader reads it.
+    for (name, output) in readers(&data, &dir.join("nri")) {
+        assert!(output.status.success(), "{name}: {}", stderr(&output));
+    }
+    let mut refused = 0;
+    for (level, linked) in
+        [("scenario", "cars04_edges50/test/00001"), ("split", "cars04_edges50/test"), ("group", "cars04_edges50")]
+    {
+        let copy = dir.join(format!("linked-{level}"));
+        assert!(std::process::Command::new("cp").args(["-r", s(&data), s(&copy)]).status().unwrap().success());
+        std::fs::remove_dir_all(copy.join(linked)).unwrap();
+        std::os::unix::fs::symlink(data.join(linked), copy.join(linked)).unwrap();
+        let checked = run(&["validate", s(&copy)]);
+        assert_eq!(checked.status.code(), Some(1), "{level}: {}", String::from_utf8_lossy(&checked.stdout));
+        let out = dir.join(format!("nri-{level}"));
+        for (name, output) in readers(&copy, &out) {
+            let says = format!("{}: a symbolic link (to {})", copy.join(linked).display(), data.join(linked).display());
+            assert_error(&output, 2, &says);
+            assert!(stderr(&output).contains("never through a link"), "{name}: {}", stderr(&output));
+            refused += 1;
+        }
+        assert!(!out.exists(), "{level}: export wrote {}", out.display());
+    }
+    assert_eq!(refused, 12);
+}

@@ -349,6 +349,19 @@ class _Packed:
         return state
 
 
+def _refuse_linked(folder: Path) -> None:
+    """Refuses a scenario (or pair) folder ``group/split/name`` read through
+    a link at any of its three levels: a dataset holds its own scenarios,
+    and one read through a link may be anyone's (as causalcity's readers
+    and validate have it)."""
+    linked = next((p for p in (folder.parent.parent, folder.parent, folder) if p.is_symlink()), None)
+    if linked is not None:
+        raise InputError(
+            f"{_os.fspath(linked)} is a symbolic link (to {_os.readlink(linked)}): a dataset's scenarios are "
+            "read from its own folders, never through a link; causalcity validate names what else is wrong"
+        )
+
+
 def _check_is(scenario: "Scenario", key: "Key", record: Path, seed: Any) -> None:
     """Refuses a scenario whose scenario.json (at ``record``) names another
     key than the one it was read for, or another spec seed than the
@@ -553,14 +566,7 @@ class Dataset(_Packed):
         images = self._images if images is None else _flag("images", images)
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
-            # A dataset holds its own scenarios: one read through a link may
-            # be anyone's (as causalcity's readers and validate have it).
-            linked = next((p for p in (folder.parent.parent, folder.parent, folder) if p.is_symlink()), None)
-            if linked is not None:
-                raise InputError(
-                    f"{_os.fspath(linked)} is a symbolic link (to {_os.readlink(linked)}): a dataset's scenarios are "
-                    "read from its own folders, never through a link; causalcity validate names what else is wrong"
-                )
+            _refuse_linked(folder)
             if not (folder / "scenario.json").is_file():
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
             self._require_frames(folder, images)
@@ -851,6 +857,7 @@ class Sweep(_Packed):
             raise KeyError(f"{tuple(key)} is not a pair of {_os.fspath(self.root)}")
         if not self.scenarios_per_tar:
             folder = self.root / key.folder
+            _refuse_linked(folder)
             if not _os.path.lexists(folder / "summary.json"):
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
             return folder, None

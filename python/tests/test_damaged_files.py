@@ -368,10 +368,19 @@ def test_a_pair_is_read_only_as_itself_with_files_that_agree(sweep, tmp_path):
     linked = copy_of(sweep, tmp_path, "linked-pair")
     shutil.rmtree(linked / test)
     (linked / test).symlink_to(linked / GROUP / "val" / "00000", target_is_directory=True)
-    with pytest.raises(causalcity.InputError, match='it is a run of "cars04_edges50"/"val" index 0'):
+    # (read through no link, as validate and every reader of a dataset have it)
+    with pytest.raises(causalcity.InputError, match=f"{test} is a symbolic link .*never through a link"):
         causalcity.open_sweep(linked).load((GROUP, "test", 0))
-    with pytest.raises(DatasetError, match="not of cars04_edges50/test index 0"):
+    with pytest.raises(DatasetError, match=f"{test} is a symbolic link .*never through a link"):
         load_pairs(linked, GROUP, "test")
+    # A run copied in from another pair: not this pair's.
+    moved = copy_of(sweep, tmp_path, "moved-run")
+    shutil.rmtree(moved / test / "factual")
+    shutil.copytree(moved / GROUP / "val" / "00000" / "factual", moved / test / "factual")
+    with pytest.raises(causalcity.InputError, match='it is a run of "cars04_edges50"/"val" index 0'):
+        causalcity.open_sweep(moved).load((GROUP, "test", 0))
+    with pytest.raises(DatasetError, match="not of cars04_edges50/test index 0"):
+        load_pairs(moved, GROUP, "test")
 
     # A car's max_divergence_m edited: its affected label changed silently.
     edited = copy_of(sweep, tmp_path, "edited-pair")

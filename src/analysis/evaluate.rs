@@ -999,6 +999,10 @@ fn score_in_turn(
 ) -> Result<Vec<ScenarioResult>, Error> {
     let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, Error> {
         // Nothing is scored against a file that changed after it was written.
+        // Nor through a linked folder below the dataset (validate names one).
+        if let Some(link) = run.iter().find_map(|s| linked_truth(s, &truth.scenarios)) {
+            return Err(Error::Input(crate::output::linked_folder_error(&link)));
+        }
         run.par_iter().try_for_each(verify_truth).map_err(|e| Error::damaged(&truth.dir, truth.name_unpacked(e)))?;
         let scores: Result<Vec<ScenarioResult>, String> =
             run.par_iter().map(|s| score_scenario(s, truth, options)).collect();
@@ -1038,6 +1042,15 @@ fn verify_truth(s: &ScenarioPredictions) -> Result<(), String> {
         crate::output::verify_files(dir, &files)?;
     }
     Ok(())
+}
+
+/// The first linked folder below the dataset's `root` on the way to scenario
+/// `s`'s folders (a pair's runs included), if any.
+fn linked_truth(s: &ScenarioPredictions, root: &Path) -> Option<PathBuf> {
+    [Some(&s.dir), s.counterfactual_dir.as_ref()]
+        .into_iter()
+        .flatten()
+        .find_map(|dir| crate::output::linked_below(root, dir))
 }
 
 /// Reads one scenario's truth and scores its predictions.

@@ -185,6 +185,7 @@ impl Dataset {
         if !dataset.record.complete {
             return Err(format!("{} is not complete: finish it with its gen command first", dir.display()));
         }
+        dataset.refuse_linked_folders()?;
         Ok(dataset)
     }
 
@@ -293,6 +294,33 @@ impl Dataset {
             .map(|p| sequence.key(p))
             .map(|k| scenario_dir(root, &k.group, split.name(), &k.folder_name()))
             .collect())
+    }
+
+    /// Refuses a folder dataset with a linked group, split or scenario
+    /// folder ([`crate::output::linked_below`]): its readers read a
+    /// dataset's scenarios from its own folders, never through a link, as
+    /// `validate` names one and `gen` writes through none (`evaluate`,
+    /// `stats` and `export` read through them). One `lstat` per folder,
+    /// the keys walked as `gen` walks them.
+    pub fn refuse_linked_folders(&self) -> Result<(), String> {
+        if self.unpacked.is_some() {
+            return Ok(());
+        }
+        let sequence = self.key_sequence();
+        let mut above = std::collections::BTreeSet::new();
+        for p in 0..sequence.len() {
+            let key = sequence.key(p);
+            let split = self.dir.join(&key.group).join(key.split.name());
+            // (each group and split folder once)
+            let link = match above.insert(split.clone()) {
+                true => crate::output::linked_below(&self.dir, &split.join(key.folder_name())),
+                false => crate::output::linked_below(&split, &split.join(key.folder_name())),
+            };
+            if let Some(link) = link {
+                return Err(crate::output::linked_folder_error(&link));
+            }
+        }
+        Ok(())
     }
 }
 

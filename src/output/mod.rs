@@ -74,6 +74,29 @@ pub fn scenario_dir(root: &Path, group: &str, split: &str, folder: &str) -> Path
     root.join(group).join(split).join(folder)
 }
 
+/// The first folder below `root` on the way down to `dir` (`dir` included)
+/// that is a symbolic link, if any: a dataset holds its own group, split,
+/// scenario (pair, run) folders, and its readers read none through a link,
+/// as `validate` names one and `gen` writes through none.
+pub fn linked_below(root: &Path, dir: &Path) -> Option<PathBuf> {
+    let mut below_root: Vec<&Path> = dir.ancestors().take_while(|a| *a != root).collect();
+    below_root.reverse();
+    below_root
+        .into_iter()
+        .find(|folder| fs::symlink_metadata(folder).is_ok_and(|m| m.is_symlink()))
+        .map(Path::to_path_buf)
+}
+
+/// A reader's refusal of the linked folder `link` ([`linked_below`]).
+pub fn linked_folder_error(link: &Path) -> String {
+    let target = fs::read_link(link).map(|t| format!(" (to {})", t.display())).unwrap_or_default();
+    format!(
+        "{}: a symbolic link{target}: a dataset's scenarios are read from its own folders, never through a link \
+         (replace it with the folder it points to); `causalcity validate` names what else is wrong",
+        link.display()
+    )
+}
+
 /// Name of the checksum file in every scenario folder (`sha256sum -c` format).
 pub const CHECKSUMS: &str = "checksums.sha256";
 

@@ -174,8 +174,14 @@ def _pair_folders(root: Path, record: dict, group: str, split: str) -> Iterator[
     packed sweep) a temporary one it is unpacked into without frames, which
     goes once the next pair is asked for."""
     if not record.get("scenarios_per_tar"):
+        from ..disk import _refuse_linked
+
         # (A summary.json that is not a file is taken, and named when read.)
         for folder in sorted(p for p in (root / group / split).glob("*") if os.path.lexists(p / "summary.json")):
+            try:
+                _refuse_linked(folder)
+            except InputError as e:
+                raise DatasetError(str(e)) from None
             yield str(folder.relative_to(root)).replace(os.sep, "/"), folder
         return
     from ..disk import Sweep
