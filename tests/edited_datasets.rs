@@ -584,6 +584,15 @@ fn a_counterfactual_pair_whose_files_disagree_is_named_by_validate() {
     std::fs::write(&path, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
     let output = run(&["validate", s(&dated)]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stdout));
+    // Never after the rows differ, record or not.
+    value["cars"][moved]["first_divergent_frame"] = (first + 1).into();
+    std::fs::write(&path, serde_json::to_vec_pretty(&value).unwrap()).unwrap();
+    let output = run(&["validate", s(&dated)]);
+    let printed = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(output.status.code(), Some(1), "{printed}");
+    let says =
+        format!("cars[{moved}].first_divergent_frame is frame {}, and the runs' poses.csv first differ", first + 1);
+    assert!(printed.contains(&says), "expected {says:?} in {printed}");
     // The same rule for a packed sweep's pairs (validate parsed the summary only).
     let packed = dir.join("packed");
     let args = ["--no-images", "-q", "--kinds", "stop", "--format", "tar", "--scenarios-per-tar", "4"];

@@ -230,6 +230,8 @@ def _read_json(path: Path) -> dict:
 def _scenario_folders(root: Path) -> Dict[Tuple[str, str], List[Path]]:
     """Every finished scenario folder of the complete dataset ``root``, by
     (group, split), checked against the counts its manifest lists."""
+    from .disk import _refuse_linked
+
     if not root.is_dir():
         raise ValueError(f"{root} is not a folder: give the dataset folder gen wrote (the one holding manifest.json)")
     path = root / "manifest.json"
@@ -246,6 +248,8 @@ def _scenario_folders(root: Path) -> Dict[Tuple[str, str], List[Path]]:
         for split in SPLITS:
             # Hidden folders are scenarios still being written.
             found = sorted(p for p in (root / g["name"] / split).glob("*") if p.is_dir() and not p.name.startswith("."))
+            for folder in found:
+                _refuse_linked(folder)  # (read through no link, as every reader)
             expected = g.get("splits", {}).get(split)
             if expected is not None and len(found) != expected:
                 raise ValueError(

@@ -100,6 +100,15 @@ def test_a_scenario_is_never_handed_back_under_another_key(toy, packed, tmp_path
     with pytest.raises(causalcity.InputError, match=r"train/00000 is a symbolic link \(to .*00001\)"):
         data.load((GROUP, "train", 0))
     assert data.load((GROUP, "train", 1)).key.index == 1, "the scenario itself still reads"
+    # So do the reference methods' loaders (they read through it).
+    from causalcity.methods.common import DatasetError, load_split
+    from causalcity.reference import _scenario_folders
+
+    with pytest.raises(DatasetError, match=r"train/00000 is a symbolic link \(to .*00001\)"):
+        load_split(linked, GROUP, "train")
+    with pytest.raises(causalcity.InputError, match=r"train/00000 is a symbolic link \(to .*00001\)"):
+        _scenario_folders(linked)
+    assert len(load_split(toy, GROUP, "train")) == len(_scenario_folders(toy)[(GROUP, "train")]) > 1
 
     edited = copy_of(toy, tmp_path, "edited")
     edit_json(edited / FIRST / "scenario.json", lambda v: v.update(index=7))

@@ -184,14 +184,21 @@ pub fn check_pair_files(
     let factual = read_poses(&read("factual/poses.csv")?, &pair.join("factual/poses.csv"), frames, cars)?;
     let counterfactual =
         read_poses(&read("counterfactual/poses.csv")?, &pair.join("counterfactual/poses.csv"), frames, cars)?;
-    // (A summary without the intervention record is from before summaries
-    // recorded it, when a car's first divergent frame could come a frame
-    // before its rows differ: it compared full-precision states. Its
-    // distances, from which evaluate takes the affected truth, still hold.)
+    // A summary without the intervention record is from before summaries
+    // recorded it, when a car's first divergent frame compared
+    // full-precision states: it may come before the rows differ, or with
+    // none differing (a difference below the logged precision), never
+    // after. (Its distances, from which evaluate takes the affected truth,
+    // hold as today's.)
     let dated = summary.intervention.is_none();
-    for (i, car) in summary.cars.iter().enumerate().filter(|_| !dated) {
+    for (i, car) in summary.cars.iter().enumerate() {
         let differs = (0..frames).find(|&f| factual[f * cars + i] != counterfactual[f * cars + i]);
-        if car.first_divergent_frame != differs {
+        let agrees = match (car.first_divergent_frame, differs) {
+            (Some(said), Some(found)) => said == found || (dated && said < found),
+            (Some(_), None) => dated,
+            (None, found) => found.is_none(),
+        };
+        if !agrees {
             return bad(format!(
                 "cars[{i}].first_divergent_frame is {}, and the runs' poses.csv first differ for car {i} at {}: \
                  the summary is another pair's or edited",

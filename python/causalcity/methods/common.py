@@ -253,7 +253,13 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
         )
     pixels, metres, graphs = [], [], []
     interval = float(spec.get("frame_interval") or 0.1)
+    from ..disk import _refuse_linked
+
     for folder in folders:
+        try:
+            _refuse_linked(folder)  # (read through no link, as every reader)
+        except InputError as e:
+            raise DatasetError(str(e)) from None
         meta, scenario_pixels, scenario_metres = _scenario_arrays(folder)
         # (a scenario moved or copied from elsewhere was read as this one)
         place = {"group": group, "split": split, "index": int(folder.name) if folder.name.isdigit() else folder.name,
