@@ -300,8 +300,8 @@ impl Dataset {
     /// folder ([`crate::output::linked_below`]): its readers read a
     /// dataset's scenarios from its own folders, never through a link, as
     /// `validate` names one and `gen` writes through none (`evaluate`,
-    /// `stats` and `export` read through them). One `lstat` per folder,
-    /// the keys walked as `gen` walks them.
+    /// `stats` and `export` read through them before, exit 0). One `lstat`
+    /// per folder, the keys walked as `gen` walks them.
     pub fn refuse_linked_folders(&self) -> Result<(), String> {
         if self.unpacked.is_some() {
             return Ok(());
