@@ -44,11 +44,17 @@ impl Error {
     /// to unpack into") is a failure; anything else, the dataset's damage
     /// ([`Error::damaged`]).
     pub fn reading(dataset: &std::path::Path, message: String) -> Error {
-        if message.contains("cannot write ") || message.contains("cannot make a folder to unpack into") {
+        if Error::is_own_write(&message) {
             Error::Failure(message)
         } else {
             Error::damaged(dataset, message)
         }
+    }
+
+    /// Whether a reader's error `message` is a write of its own failing
+    /// (see [`Error::reading`]), not the dataset's damage.
+    pub fn is_own_write(message: &str) -> bool {
+        message.contains("cannot write ") || message.contains("cannot make a folder to unpack into")
     }
 
     /// A file of the dataset at `dataset` that is missing or cannot be read

@@ -643,8 +643,16 @@ fn every_reader_refuses_a_pack_with_a_member_twice_a_stranger_or_cut_short() {
             std::fs::copy(packed.join(&file), data.join(&file)).unwrap();
         }
         std::fs::write(data.join(rel), &bytes).unwrap();
-        for command in ["stats", "baseline", "validate"] {
-            let out = run(&[command, data.to_str().unwrap()]);
+        // The exports too: they exited 1, as if writing had failed.
+        let exports = dir.join("exports");
+        for command in ["stats", "baseline", "validate", "export nri", "export nsdr"] {
+            let mut args: Vec<&str> = command.split(' ').collect();
+            args.push(data.to_str().unwrap());
+            let export = exports.join(command.replace(' ', "-"));
+            if command.starts_with("export") {
+                args.extend(["--out", export.to_str().unwrap(), "-q"]);
+            }
+            let out = run(&args);
             let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
             // validate finds a problem (1); a reader is given bad input (2).
             let code = if command == "validate" { 1 } else { 2 };
@@ -655,7 +663,7 @@ fn every_reader_refuses_a_pack_with_a_member_twice_a_stranger_or_cut_short() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 9);
+    assert_eq!(checked, 15);
     // The rule takes a pack made by hand with `tar -cf pack.tar ./group/...`,
     // whose members' names start `./` (stats took it, validate did not).
     let dotted = fresh_dir("packs-tampered-dotted").join("data");

@@ -238,20 +238,25 @@ impl Dataset {
     /// parallel within a split, a group's split at a time through
     /// [`Dataset::with_split`]: `relative` is the scenario's folder
     /// relative to the dataset (`<group>/<split>/<scenario>`), which exports
-    /// mirror.
+    /// mirror. A failure to read the dataset itself (a packed split's packs
+    /// unpacked) is told to `unreadable` before it is returned, so that the
+    /// caller can tell it from a failure of `each`.
     pub fn each_scenario_in_turn(
         &self,
+        unreadable: impl Fn(&str),
         each: impl Fn(&Path, &Path) -> Result<(), String> + Sync,
     ) -> Result<(), String> {
         use rayon::prelude::*;
         for group in self.spec().groups.iter().map(|g| g.name()) {
             for split in Split::ALL {
                 let under = Path::new(&group).join(split.name());
-                self.with_split(&group, split, |dirs| {
-                    dirs.par_iter().try_for_each(|dir| {
-                        each(dir, &under.join(dir.file_name().expect("scenario folders have names")))
-                    })
-                })?;
+                let dirs = self.scenario_dirs(&group, split).inspect_err(|e| unreadable(e))?;
+                let result = dirs
+                    .par_iter()
+                    .try_for_each(|dir| each(dir, &under.join(dir.file_name().expect("scenario folders have names"))))
+                    .map_err(|e| self.name_packed_paths(e));
+                self.release(&group, split)?;
+                result?;
             }
         }
         Ok(())

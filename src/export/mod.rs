@@ -52,6 +52,20 @@ impl Damage {
         read
     }
 
+    /// A failure to read the dataset itself (unpacking a packed split)
+    /// noted as the dataset's, unless it was a write of the reader's own
+    /// ([`Error::reading`]'s rule): a truncated pack exited 1.
+    fn note_unreadable(&self, message: &str) {
+        if !Error::is_own_write(message) {
+            self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    /// [`Damage::note_unreadable`] of `read`'s error.
+    fn note_reading<T>(&self, read: Result<T, String>) -> Result<T, String> {
+        read.inspect_err(|e| self.note_unreadable(e))
+    }
+
     /// The export's error: a damaged dataset is bad input ([`Error::damaged`],
     /// exit 2); anything else a failure (exit 1). A truncated pixels.npy
     /// exited 1 with "failed to fill whole buffer".

@@ -316,7 +316,7 @@ fn export_nri_groups(
         for split in Split::ALL {
             // A split that holds the car count out has its own.
             let cars = opened.spec().group_of(split, group).cars as usize;
-            let dirs = opened.scenario_dirs(&group.name(), split)?;
+            let dirs = damage.note_reading(opened.scenario_dirs(&group.name(), split))?;
             if dirs.is_empty() {
                 // Said, not silent: NRI's loaders read all three splits.
                 report.push(format!(

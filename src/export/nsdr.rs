@@ -33,19 +33,22 @@ pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result
     // in TMPDIR.
     let folders = super::NewFolders::default();
     let damage = super::Damage::default();
-    let exported = opened.each_scenario_in_turn(|source, relative| {
-        let target = out.join(relative);
-        let json = damage.note(annotate(source, w, h, digits))?;
-        folders.create(&target)?;
-        write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
-        match packed {
-            false => link_frames(source, &target)?,
-            // Unpacked into a temporary folder: links would outlive it.
-            true => copy_frames(source, &target)?,
-        }
-        bar.inc();
-        Ok(())
-    });
+    let exported = opened.each_scenario_in_turn(
+        |e| damage.note_unreadable(e),
+        |source, relative| {
+            let target = out.join(relative);
+            let json = damage.note(annotate(source, w, h, digits))?;
+            folders.create(&target)?;
+            write_atomically(&target.join(ANNOTATIONS_FILE), &json).map_err(|e| e.to_string())?;
+            match packed {
+                false => link_frames(source, &target)?,
+                // Unpacked into a temporary folder: links would outlive it.
+                true => copy_frames(source, &target)?,
+            }
+            bar.inc();
+            Ok(())
+        },
+    );
     if let Err(e) = exported {
         // The scenarios this run added go again (those of an earlier run
         // it replaced stay, as replaced).

@@ -116,21 +116,24 @@ pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: Progr
     // A split at a time: a packed dataset holds one split in TMPDIR.
     let folders = super::NewFolders::default();
     let damage = super::Damage::default();
-    let exported = opened.each_scenario_in_turn(|source, relative| {
-        let target = out.join(relative).with_extension("h5");
-        let arrays = damage.note(vcdn_arrays(source, graph))?;
-        folders.create(target.parent().expect("files have a folder"))?;
-        let partial = target.with_extension("h5.partial");
-        let written = write_hdf5(&partial, &arrays)
-            .and_then(|()| std::fs::rename(&partial, &target).map_err(|e| e.to_string()))
-            .map_err(|e| format!("cannot write {}: {e}", target.display()));
-        if written.is_err() {
-            let _ = std::fs::remove_file(&partial);
-        }
-        written?;
-        bar.inc();
-        Ok(())
-    });
+    let exported = opened.each_scenario_in_turn(
+        |e| damage.note_unreadable(e),
+        |source, relative| {
+            let target = out.join(relative).with_extension("h5");
+            let arrays = damage.note(vcdn_arrays(source, graph))?;
+            folders.create(target.parent().expect("files have a folder"))?;
+            let partial = target.with_extension("h5.partial");
+            let written = write_hdf5(&partial, &arrays)
+                .and_then(|()| std::fs::rename(&partial, &target).map_err(|e| e.to_string()))
+                .map_err(|e| format!("cannot write {}: {e}", target.display()));
+            if written.is_err() {
+                let _ = std::fs::remove_file(&partial);
+            }
+            written?;
+            bar.inc();
+            Ok(())
+        },
+    );
     if let Err(e) = exported {
         // The files this run added go again with their folders.
         folders.remove();
