@@ -718,9 +718,13 @@ impl SumoNetwork {
             }
             let (mut phases, mut actuated) = (Vec::new(), Vec::new());
             for ph in &p.phases {
-                if !(ph.duration.is_finite() && ph.duration > 0.0) {
+                // Bounded as an offset is: a cycle of longer phases could
+                // add up to infinity (1e308 s wrote since_change inf into
+                // light_changes.csv, which validate then refused).
+                if !(ph.duration.is_finite() && ph.duration > 0.0 && ph.duration <= MAX_LIGHT_OFFSET_S) {
                     return Err(format!(
-                        "<tlLogic id=\"{}\">: a phase lasts {} s; allowed: seconds above 0",
+                        "<tlLogic id=\"{}\">: a phase lasts {:?} s; allowed: seconds above 0, at most {MAX_LIGHT_OFFSET_S} \
+                         (the longest scenario)",
                         p.id, ph.duration
                     ));
                 }
@@ -1064,6 +1068,13 @@ mod tests {
                 r#"offset="2""#,
                 r#"offset="1e300""#,
                 r#"<tlLogic id="J1">: offset 1e300; allowed: a finite number of seconds from -1000000 to 1000000"#,
+            ),
+            // Phases of 1e308 s add up to an infinite cycle (light_changes.csv
+            // said since_change inf, which validate refused).
+            (
+                r#"<phase duration="3" state="y"/>"#,
+                r#"<phase duration="1e308" state="y"/>"#,
+                r#"<tlLogic id="J1">: a phase lasts 1e308 s; allowed: seconds above 0, at most 1000000 (the longest"#,
             ),
             (
                 r#"speed="13.9" length="10" shape="15,0 25,0""#,
