@@ -452,6 +452,18 @@ fn validate_and_evaluate_refuse_a_sweep_pair_whose_intervention_is_not_the_one_i
     assert!(validate(&out).status.success());
     let scored = evaluate(&out);
     assert!(scored.status.success(), "{}", String::from_utf8_lossy(&scored.stderr));
+    // A pair folder that is a link to a good copy: evaluate refuses it,
+    // naming it, as validate does (it read through it, exit 0).
+    let linked = dir.join("linked-pair");
+    copy_tree(&out, &linked);
+    let pair = linked.join("cars06_edges50/test/00000");
+    std::fs::remove_dir_all(&pair).unwrap();
+    std::os::unix::fs::symlink(out.join("cars06_edges50/test/00000"), &pair).unwrap();
+    let refused = evaluate(&linked);
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains(&format!("{}: a symbolic link", pair.display())), "{stderr}");
+    assert!(refused.stdout.is_empty(), "nothing is scored");
 
     let says = ", but this sweep (its spec, and kinds";
     let edited = dir.join("edited");

@@ -110,3 +110,41 @@ def test_the_path_rule_and_the_supervised_classifier_are_rows_evaluate_scores(da
     for group in ("cars04_edges50", "cars08_edges50"):
         assert scored["path"][group] > 0.7, scored
         assert scored["supervised"][group] > 0.6, scored
+
+
+def test_a_group_whose_val_holds_no_link_takes_the_pooled_val_threshold_not_a_false_warning(tmp_path):
+    # Val predictions of a group without links (edge_proportion 0) were
+    # told "NO VAL PREDICTIONS" and called at a fixed 0.5, which for
+    # scores on no probability scale (negative distances) calls nothing.
+    spec = dict(TOY, name="unlinked", groups=[{"cars": 4, "edge_proportion": 0.5}, {"cars": 4, "edge_proportion": 0.0}])
+    data = tmp_path / "data"
+    causalcity.generate(spec, data, images=False, progress=False)
+    rng = np.random.default_rng(2)
+    edges = {}
+    for group in ("cars04_edges50", "cars04_edges00"):
+        for split in ("val", "test"):
+            part = load_split(data, group, split)
+            for folder, graph in zip(part.folders, part.graph):
+                # Negative distances: linked pairs from -0.6 to -0.5, the
+                # others from -2 to -1.
+                edges[folder] = np.where(graph == 1, -0.5 - 0.1 * rng.random((4, 4)), -1.0 - rng.random((4, 4)))
+    pred = tmp_path / "scores.npz"
+    causalcity.save_predictions(pred, edges, dataset=data)
+    report = json.loads(cli("evaluate", data, pred, "--json").stdout)
+    rows = {(r["group"], r["split"]): r for r in report["edges"]}
+    assert rows[("cars04_edges50", "test")]["threshold_from"] == "val"
+    unlinked = rows[("cars04_edges00", "test")]
+    assert unlinked["threshold_from"] == "pooled", unlinked
+    # The best F1 on both groups' val together: between the linked and
+    # the unlinked scores, so nothing of the unlinked group is called.
+    assert -1.0 <= unlinked["threshold"] <= -0.6 and unlinked["predicted_edges"] == 0, unlinked
+    assert not any("NO VAL PREDICTIONS" in w for w in report["warnings"]), report["warnings"]
+    assert any("no true link in val for cars04_edges00 designed" in w for w in report["warnings"]), report["warnings"]
+    # No group's val with a link: 0.5, and said so (not "no val predictions").
+    only = tmp_path / "only-unlinked.npz"
+    causalcity.save_predictions(only, {k: v for k, v in edges.items() if "edges00" in k}, dataset=data)
+    report = json.loads(cli("evaluate", data, only, "--json").stdout)
+    row = next(r for r in report["edges"] if r["split"] == "test")
+    assert row["threshold_from"] == "default" and row["threshold"] == 0.5, row
+    assert [w for w in report["warnings"] if "NO TRUE LINK IN VAL for cars04_edges00 designed" in w], report["warnings"]
+    assert not any("NO VAL PREDICTIONS" in w for w in report["warnings"]), report["warnings"]

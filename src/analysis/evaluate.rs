@@ -183,8 +183,10 @@ pub struct EdgeScores {
     pub predicted_edges: usize,
     /// A pair is called linked when its score is above this.
     pub threshold: f64,
-    /// `val` (best F1 on this group's val split), `given` (--threshold) or
-    /// `default` (0.5: no val predictions with a link to tune on).
+    /// `val` (best F1 on this group's val split), `given` (--threshold),
+    /// `pooled` (best F1 on every group's val pooled: this group's val
+    /// holds no true link) or `default` (0.5: no val predictions, or no
+    /// true link in any group's val).
     pub threshold_from: &'static str,
     /// Over all pairs; None when nothing was called (precision) or nothing
     /// was there to find (recall).
@@ -999,8 +1001,10 @@ fn score_in_turn(
 ) -> Result<Vec<ScenarioResult>, Error> {
     let score = |run: &[ScenarioPredictions]| -> Result<Vec<ScenarioResult>, Error> {
         // Nothing is scored against a file that changed after it was written.
-        // Nor through a linked folder below the dataset (validate names one).
-        if let Some(link) = run.iter().find_map(|s| linked_truth(s, &truth.scenarios)) {
+        // Nor through a linked folder below a sweep (validate names one; a
+        // `gen` dataset's were refused as it was opened, by
+        // `Dataset::open_complete`).
+        if let Some(link) = run.iter().filter(|_| truth.sweep).find_map(|s| linked_truth(s, &truth.scenarios)) {
             return Err(Error::Input(crate::output::linked_folder_error(&link)));
         }
         run.par_iter().try_for_each(verify_truth).map_err(|e| Error::damaged(&truth.dir, truth.name_unpacked(e)))?;
@@ -1210,15 +1214,25 @@ fn mean_se(values: &[f64]) -> (f64, Option<f64>) {
 }
 
 /// The threshold for one graph and group: given, else the best F1 on val's
-/// pairs, else 0.5.
-fn threshold_for(options: &EvaluateOptions, val_pairs: &[ScoredPair]) -> (f64, &'static str) {
+/// pairs, else (val scored but holding no true link, where F1 picks
+/// nothing) the best F1 on every group's val pooled, as `baseline` does,
+/// else 0.5. A group without a link in val took 0.5 and was told it had no
+/// val predictions.
+fn threshold_for(
+    options: &EvaluateOptions,
+    val_pairs: &[ScoredPair],
+    pooled_val: &[ScoredPair],
+) -> (f64, &'static str) {
     if let Some(t) = options.threshold {
         return (t, "given");
     }
-    match best_threshold(val_pairs) {
-        // The metrics rank negated scores: negate back.
-        Some(t) => (-t, "val"),
-        None => (0.5, "default"),
+    // The metrics rank negated scores: negate back.
+    if let Some(t) = best_threshold(val_pairs) {
+        return (-t, "val");
+    }
+    match best_threshold(pooled_val) {
+        Some(t) if !val_pairs.is_empty() => (-t, "pooled"),
+        _ => (0.5, "default"),
     }
 }
 
@@ -1241,6 +1255,13 @@ fn edge_rows<'a>(
 ) -> (Vec<EdgeScores>, Vec<OverallScores>) {
     let mut rows = Vec::new();
     let mut pooled: [Pooled; 3] = Default::default();
+    let pooled_val: Vec<ScoredPair> = scored
+        .iter()
+        .zip(results)
+        .filter(|(s, _)| s.split == Split::Val)
+        .filter_map(|(_, r)| pairs_of(r))
+        .flat_map(|(p, _)| p.iter().copied())
+        .collect();
     for group in &truth.spec.groups {
         let name = group.name();
         let in_split = |split: Split| -> Vec<GraphPairs<'a>> {
@@ -1252,7 +1273,7 @@ fn edge_rows<'a>(
                 .collect()
         };
         let val: Vec<ScoredPair> = in_split(Split::Val).iter().flat_map(|(p, _)| p.iter().copied()).collect();
-        let (threshold, threshold_from) = threshold_for(options, &val);
+        let (threshold, threshold_from) = threshold_for(options, &val, &pooled_val);
         for split in Split::ALL {
             let scenarios = in_split(split);
             if scenarios.is_empty() {
@@ -1407,20 +1428,43 @@ fn summarise(
         trajectory_only.filter(|(_, r)| !r.step_errors.is_empty() || !r.counterfactual_errors.is_empty());
     per_scenario.extend(trajectory_only.map(|(s, r)| scenario_base(&truth.scenarios, s, r)));
     per_scenario.sort_by(|a, b| (a.scenario.as_str(), a.graph).cmp(&(b.scenario.as_str(), b.graph)));
-    let untuned: Vec<String> = edges
-        .iter()
-        .filter(|e| e.threshold_from == "default")
-        .map(|e| format!("{} {}", e.group, e.graph))
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
+    // Rows by where their threshold came from, and whether val was scored.
+    let rows_from = |from: &str, val_scored: bool| -> Vec<String> {
+        let val_rows: std::collections::BTreeSet<(&str, &str)> =
+            edges.iter().filter(|e| e.split == Split::Val.name()).map(|e| (e.group.as_str(), e.graph)).collect();
+        edges
+            .iter()
+            .filter(|e| e.threshold_from == from && val_rows.contains(&(e.group.as_str(), e.graph)) == val_scored)
+            .map(|e| format!("{} {}", e.group, e.graph))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect()
+    };
     let mut warnings = Vec::new();
+    let untuned = rows_from("default", false);
     if !untuned.is_empty() {
         warnings.push(format!(
             "NO VAL PREDICTIONS for {}: their F1, precision, recall and SHD use a fixed threshold of 0.5, which \
              means something only for probabilities. Read AUROC and AUPRC (threshold-free), save val predictions \
              (the threshold is then the best F1 on val), or give --threshold",
             untuned.join(", ")
+        ));
+    }
+    let unlinked = rows_from("default", true);
+    if !unlinked.is_empty() {
+        warnings.push(format!(
+            "NO TRUE LINK IN VAL for {}, nor in any group's val: no F1 on val picks a threshold, so their F1, \
+             precision, recall and SHD use a fixed threshold of 0.5, which means something only for probabilities. \
+             Read AUROC and AUPRC (threshold-free), or give --threshold",
+            unlinked.join(", ")
+        ));
+    }
+    let pooled = rows_from("pooled", true);
+    if !pooled.is_empty() {
+        warnings.push(format!(
+            "no true link in val for {}: their threshold is the best F1 on every group's val pooled (threshold \
+             \"pooled\")",
+            pooled.join(", ")
         ));
     }
     EvaluationReport {
