@@ -428,6 +428,9 @@ class _ReadHold:
             import fcntl
         except ImportError:  # no POSIX locks here: read unheld
             return
+        # Kept for close: a hold collected as the interpreter shuts down
+        # can import nothing (a DataLoader script printed a traceback).
+        self._fcntl = fcntl
         try:
             fd = _os.open(root, _os.O_RDONLY | getattr(_os, "O_DIRECTORY", 0) | getattr(_os, "O_NONBLOCK", 0))
         except OSError:  # the dataset's reader names what is wrong
@@ -452,10 +455,8 @@ class _ReadHold:
         # Only the process that took the lock lets it go: a forked worker
         # shares the open file, and its unlock would be its parent's.
         if _os.getpid() == self._pid:
-            import fcntl
-
             try:
-                fcntl.flock(fd, fcntl.LOCK_UN)
+                self._fcntl.flock(fd, self._fcntl.LOCK_UN)
             except OSError:
                 pass
         try:

@@ -403,3 +403,28 @@ def test_gen_force_never_removes_a_dataset_held_open_and_none_is_opened_while_re
     finally:
         os.close(folder)
     assert len(causalcity.open_dataset(out)) == 4
+
+
+def test_a_dataset_still_open_as_the_interpreter_exits_says_nothing(tmp_path):
+    # python.md's DataLoader loop, run as a script that leaves its dataset
+    # open: the hold let go as the interpreter shut down imported fcntl,
+    # which failed ("Exception ignored in: <function _ReadHold.__del__ ...>"
+    # and a traceback on stderr, every run with torch imported).
+    import subprocess
+    import sys
+
+    script = tmp_path / "loop.py"
+    script.write_text(
+        "import torch, causalcity\n"
+        f"data = causalcity.open_dataset({os.fspath(DATA / 'city')!r}, 'train', images=False)\n"
+        "loader = torch.utils.data.DataLoader(data, batch_size=3, shuffle=True, collate_fn=causalcity.collate)\n"
+        "batches = sum(1 for batch in loader)\n"
+        "print(batches)\n"
+    )
+    seen = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=os.environ.copy())
+        assert done.returncode == 0, done.stderr
+        assert int(done.stdout) >= 1, "the loop read no batch"
+        seen.append(done.stderr)
+    assert seen == ["", ""], seen
