@@ -30,11 +30,13 @@ Features, per ordered pair, from ``poses.csv`` (metres, radians, m/s):
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import shutil
 import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -227,9 +229,12 @@ def _read_json(path: Path) -> dict:
     return value
 
 
-def _scenario_folders(root: Path) -> Dict[Tuple[str, str], List[Path]]:
+@contextlib.contextmanager
+def _scenario_folders(root: Path) -> Iterator[Dict[Tuple[str, str], List[Path]]]:
     """Every finished scenario folder of the complete dataset ``root``, by
-    (group, split), checked against the counts its manifest lists."""
+    (group, split), checked against the counts its manifest lists. A packed
+    dataset's (``gen --format tar``) scenarios are unpacked, without
+    frames, into a temporary folder that goes when the context ends."""
     from .disk import _refuse_linked
 
     if not root.is_dir():
@@ -243,21 +248,47 @@ def _scenario_folders(root: Path) -> Dict[Tuple[str, str], List[Path]]:
         raise ValueError(f"{path}: no list of groups: not a manifest gen wrote")
     if manifest.get("complete") is not True:
         raise ValueError(f"{root} is not complete: finish it with its gen command first")
+
+    def refuse_count(group: dict, split: str, found: int, what: str) -> None:
+        expected = group.get("splits", {}).get(split)
+        if expected is not None and found != expected:
+            raise ValueError(
+                f"{root / group['name'] / split}: {found} {what}, but {path} lists {expected}; "
+                f"causalcity validate {root} tells what is missing"
+            )
+
     folders = {}
+    if manifest.get("scenarios_per_tar"):
+        import tempfile
+
+        from .disk import Dataset
+
+        with Dataset(root, images=False) as opened, tempfile.TemporaryDirectory(prefix="causalcity-reference-") as into:
+            for g in groups:
+                for split in SPLITS:
+                    keys = [k for k in opened.keys(split) if k.group == g["name"]]
+                    refuse_count(g, split, len(keys), "scenarios in its packs")
+                    folders[(g["name"], split)] = []
+                    for key in keys:
+                        scratch = opened._unpack(key, False)
+                        target = Path(into) / key.folder
+                        shutil.copytree(scratch.name, target)
+                        scratch.cleanup()
+                        folders[(g["name"], split)].append(target)
+            try:
+                yield folders
+            except ValueError as e:  # named by the dataset, not the temporary folder
+                raise ValueError(str(e).replace(into, f"{root} (unpacked from its packs)")) from None
+        return
     for g in groups:
         for split in SPLITS:
             # Hidden folders are scenarios still being written.
             found = sorted(p for p in (root / g["name"] / split).glob("*") if p.is_dir() and not p.name.startswith("."))
             for folder in found:
                 _refuse_linked(folder)  # (read through no link, as every reader)
-            expected = g.get("splits", {}).get(split)
-            if expected is not None and len(found) != expected:
-                raise ValueError(
-                    f"{root / g['name'] / split}: {len(found)} scenario folders, but {path} lists {expected}; "
-                    f"causalcity validate {root} tells what is missing"
-                )
+            refuse_count(g, split, len(found), "scenario folders")
             folders[(g["name"], split)] = found
-    return folders
+    yield folders
 
 
 def _table(folders: Sequence[Path], method: str, graph: str):
@@ -304,48 +335,48 @@ def evaluate(
     root = Path(dataset)
     if graph not in GRAPHS:
         raise ValueError(f"graph {graph!r} is not one of {', '.join(GRAPHS)}")
-    every = _scenario_folders(root)
-    names = list(dict.fromkeys(group for group, _ in every))
-    results = []
-    for group in names if groups is None else groups:
-        if group not in names:
-            raise ValueError(f"group {group!r} is not in {root}: its groups are {', '.join(names)}")
-        folders = {s: every[(group, s)] for s in SPLITS}
-        for method in methods:
-            train = _table(folders["train"], method, graph)
-            test = _table(folders["test"], method, graph)
-            if train is None or test is None or not train[1].any():
-                raise ValueError(f"{root / group}: needs train scenarios with links and test scenarios")
-            model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=seed)
-            model.fit(train[0], train[1])
-            tune = _table(folders["val"], method, graph)
-            source = "val" if tune is not None and tune[1].any() else "train"
-            tune = tune if source == "val" else train
-            threshold = _best_threshold(model.predict_proba(tune[0])[:, 1], tune[1])
-            scores = model.predict_proba(test[0])[:, 1]
-            called = scores >= threshold
-            tp = int((called & test[1]).sum())
-            precision = tp / max(int(called.sum()), 1)
-            recall = tp / max(int(test[1].sum()), 1)
-            f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
-            lane = test[2]
-            results.append(
-                Scored(
-                    group=group,
-                    method=method,
-                    graph=graph,
-                    pairs=int(len(scores)),
-                    linked=int(test[1].sum()),
-                    threshold=threshold,
-                    threshold_from=source,
-                    precision=precision,
-                    recall=recall,
-                    f1=f1,
-                    auroc=_auroc(scores, test[1]),
-                    same_lane_pairs=int(lane.sum()),
-                    same_lane_auroc=_auroc(scores[lane], test[1][lane]),
+    with _scenario_folders(root) as every:
+        names = list(dict.fromkeys(group for group, _ in every))
+        results = []
+        for group in names if groups is None else groups:
+            if group not in names:
+                raise ValueError(f"group {group!r} is not in {root}: its groups are {', '.join(names)}")
+            folders = {s: every[(group, s)] for s in SPLITS}
+            for method in methods:
+                train = _table(folders["train"], method, graph)
+                test = _table(folders["test"], method, graph)
+                if train is None or test is None or not train[1].any():
+                    raise ValueError(f"{root / group}: needs train scenarios with links and test scenarios")
+                model = HistGradientBoostingClassifier(max_iter=300, learning_rate=0.08, random_state=seed)
+                model.fit(train[0], train[1])
+                tune = _table(folders["val"], method, graph)
+                source = "val" if tune is not None and tune[1].any() else "train"
+                tune = tune if source == "val" else train
+                threshold = _best_threshold(model.predict_proba(tune[0])[:, 1], tune[1])
+                scores = model.predict_proba(test[0])[:, 1]
+                called = scores >= threshold
+                tp = int((called & test[1]).sum())
+                precision = tp / max(int(called.sum()), 1)
+                recall = tp / max(int(test[1].sum()), 1)
+                f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+                lane = test[2]
+                results.append(
+                    Scored(
+                        group=group,
+                        method=method,
+                        graph=graph,
+                        pairs=int(len(scores)),
+                        linked=int(test[1].sum()),
+                        threshold=threshold,
+                        threshold_from=source,
+                        precision=precision,
+                        recall=recall,
+                        f1=f1,
+                        auroc=_auroc(scores, test[1]),
+                        same_lane_pairs=int(lane.sum()),
+                        same_lane_auroc=_auroc(scores[lane], test[1][lane]),
+                    )
                 )
-            )
     return results
 
 

@@ -236,3 +236,39 @@ def test_every_reader_refuses_a_pack_with_a_member_twice_apart_a_stranger_or_cut
     key = ("cars04_edges50", "val", 1)
     got, want = causalcity.open_dataset(dotted, images=False)[key], causalcity.open_dataset(packed, images=False)[key]
     np.testing.assert_array_equal(got.position, want.position)
+
+
+def test_the_reference_methods_read_a_packed_dataset_as_its_folders(datasets, tmp_path):
+    # methods.load_split and reference globbed scenario folders only: a
+    # packed dataset that validate called valid was "0 scenario folders,
+    # but manifest.json lists 3", exit 2, though python.md says a packed
+    # dataset opens the same way.
+    import subprocess
+    import sys
+
+    from causalcity import reference
+    from causalcity.methods import load_split
+
+    folders, packed = datasets
+    compared = 0
+    for group in ("cars04_edges50", "cars05_edges50"):
+        for split in ("train", "val", "test"):
+            a, b = load_split(folders, group, split), load_split(packed, group, split)
+            assert a.folders == b.folders and len(b.folders) == SPEC["splits"][split]
+            for field in ("pixels", "metres", "graph"):
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=f"{group} {split} {field}")
+            compared += 1
+    assert compared == 6
+    scores = {}
+    for name, data in (("folders", folders), ("packed", packed)):
+        out = tmp_path / f"{name}.npz"
+        run = subprocess.run([sys.executable, "-m", "causalcity.methods", "path", str(data), "--out", str(out), "--quiet"],
+                             capture_output=True, text=True)  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        with np.load(out) as arrays:
+            scores[name] = {k: arrays[k] for k in arrays.files if k.count("/") == 2}
+    assert len(scores["packed"]) == 2 * (SPEC["splits"]["val"] + SPEC["splits"]["test"]), sorted(scores["packed"])
+    assert scores["folders"].keys() == scores["packed"].keys()
+    for k in scores["folders"]:
+        np.testing.assert_array_equal(scores["folders"][k], scores["packed"][k], err_msg=k)
+    assert reference.evaluate(packed, methods=["frame0"]) == reference.evaluate(folders, methods=["frame0"])

@@ -231,8 +231,61 @@ def groups_of(dataset: "str | Path") -> List[str]:
     return [g["name"] for g in _manifest(Path(dataset))["groups"]]
 
 
+def _split_scenarios(root: Path, manifest: dict, group: str, split: str, read) -> list:
+    """``(folder, read(path, index))`` for every finished scenario of
+    ``group``'s ``split`` in index order, ``folder`` relative to ``root`` and
+    ``path`` where its files are, the count checked against the manifest's.
+    A packed dataset's (``gen --format tar``) scenarios are unpacked one at
+    a time, without frames, into a temporary folder that goes once read
+    (errors name the pack and member, as the command line does)."""
+    listed = next(g for g in manifest["groups"] if g["name"] == group).get("splits", {}).get(split)
+
+    def refuse_count(found: int, what: str) -> None:
+        if listed is not None and found != listed:
+            raise DatasetError(
+                f"{root / group / split}: {found} {what}, but {root / 'manifest.json'} lists {listed}; "
+                f"causalcity validate {root} tells what is missing"
+            )
+
+    if manifest.get("scenarios_per_tar"):
+        from ..disk import Dataset
+
+        with Dataset(root, split, images=False) as opened:
+            keys = [k for k in opened.keys(split) if k.group == group]
+            refuse_count(len(keys), "scenarios in its packs")
+            read_in = []
+            for key in keys:
+                scratch = opened._unpack(key, False)
+                where = f"{root / opened.pack_of(key)}: {key.folder}"
+                try:
+                    read_in.append((key.folder, read(Path(scratch.name), key.index)))
+                except (DatasetError, InputError) as e:
+                    raise type(e)(str(e).replace(scratch.name, where)) from None
+                finally:
+                    scratch.cleanup()
+            return read_in
+    from ..disk import _refuse_linked
+
+    # Hidden folders are scenarios being written; the manifest says how many
+    # finished ones there are.
+    folders = sorted(
+        p for p in (root / group / split).glob("*") if not p.name.startswith(".") and (p / "scenario.json").is_file()
+    )
+    refuse_count(len(folders), "scenario folders")
+    read_in = []
+    for folder in folders:
+        try:
+            _refuse_linked(folder)  # (read through no link, as every reader)
+        except InputError as e:
+            raise DatasetError(str(e)) from None
+        index = int(folder.name) if folder.name.isdigit() else folder.name
+        read_in.append((str(folder.relative_to(root)).replace(os.sep, "/"), read(folder, index)))
+    return read_in
+
+
 def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
-    """Reads every scenario of ``group`` and ``split`` (pixels.npy, poses.csv, scenario.json)."""
+    """Reads every scenario of ``group`` and ``split`` (pixels.npy, poses.csv,
+    scenario.json), from its folders or its packs."""
     root = Path(dataset)
     manifest = _manifest(root)
     spec = manifest["spec"]
@@ -240,35 +293,23 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
         raise InputError(f"group {group!r} is not in {root}: its groups are {', '.join(groups_of(root))}")
     if split not in SPLITS:
         raise InputError(f"split {split!r} is not one of {', '.join(SPLITS)}")
-    # Hidden folders are scenarios being written; the manifest says how many
-    # finished ones there are.
-    folders = sorted(
-        p for p in (root / group / split).glob("*") if not p.name.startswith(".") and (p / "scenario.json").is_file()
-    )
-    listed = next(g for g in manifest["groups"] if g["name"] == group).get("splits", {}).get(split)
-    if listed is not None and len(folders) != listed:
-        raise DatasetError(
-            f"{root / group / split}: {len(folders)} scenario folders, but {root / 'manifest.json'} lists {listed}; "
-            f"causalcity validate {root} tells what is missing"
-        )
-    pixels, metres, graphs = [], [], []
-    interval = float(spec.get("frame_interval") or 0.1)
-    from ..disk import _refuse_linked
 
-    for folder in folders:
-        try:
-            _refuse_linked(folder)  # (read through no link, as every reader)
-        except InputError as e:
-            raise DatasetError(str(e)) from None
+    def read(folder: Path, index) -> Tuple[dict, np.ndarray, np.ndarray]:
         meta, scenario_pixels, scenario_metres = _scenario_arrays(folder)
         # (a scenario moved or copied from elsewhere was read as this one)
-        place = {"group": group, "split": split, "index": int(folder.name) if folder.name.isdigit() else folder.name,
-                 "seed": spec.get("seed")}  # fmt: skip
+        place = {"group": group, "split": split, "index": index, "seed": spec.get("seed")}
         wrong = next((k for k, v in place.items() if meta.get(k) != v), None)
         if wrong is not None:
+            named = f"{index:05}" if isinstance(index, int) else index
             raise DatasetError(f"{folder / 'scenario.json'}: {wrong} {meta.get(wrong)!r}, but it lies in {root} at "
-                               f"{group}/{split}/{folder.name} ({wrong} {place[wrong]!r}): a scenario moved or copied "
+                               f"{group}/{split}/{named} ({wrong} {place[wrong]!r}): a scenario moved or copied "
                                f"from elsewhere; causalcity validate {root} tells what else is")  # fmt: skip
+        return meta, scenario_pixels, scenario_metres
+
+    scenarios = _split_scenarios(root, manifest, group, split, read)
+    pixels, metres, graphs = [], [], []
+    interval = float(spec.get("frame_interval") or 0.1)
+    for _, (meta, scenario_pixels, scenario_metres) in scenarios:
         n = len(meta["cars"])
         interval = float(meta.get("frame_interval", interval))
         pixels.append(scenario_pixels)
@@ -283,7 +324,7 @@ def load_split(dataset: "str | Path", group: str, split: str) -> Episodes:
         dataset=root,
         group=group,
         split=split,
-        folders=[str(f.relative_to(root)).replace(os.sep, "/") for f in folders],
+        folders=[folder for folder, _ in scenarios],
         pixels=np.stack(pixels) if pixels else np.zeros(shape_px),
         metres=np.stack(metres) if metres else np.zeros(shape_m),
         graph=np.stack(graphs) if graphs else np.zeros((0, 0, 0), dtype=np.uint8),
