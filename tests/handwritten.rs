@@ -135,9 +135,19 @@ fn bad_scenarios_exit_2_naming_scenario_car_and_field() {
     let long =
         format!(r#"{{"Id": "Car_2", "Spawn": "B1w", "DriveQueue": [{}]}}"#, vec![r#""straight""#; 1001].join(", "));
     let frozen = format!(r#"[{{"Name": "Bad_1", "frames": 10, "frame_interval": 5e-324, "Vehicles": [{ok}]}}]"#);
+    // A fraction or a huge number of frames named the type's range (0 to
+    // 4294967295), not the field's.
+    let frames = |n: &str| format!(r#"[{{"Name": "Bad_1", "frames": {n}, "Vehicles": [{ok}]}}]"#);
     for (case, text, parts) in [
         ("long", scenario_with(&format!("{ok}, {long}")), ["field DriveQueue", "1001 actions: at most 1000"]),
         ("frozen", frozen, ["field frame_interval", "5e-324 is not allowed: seconds, from 0.001 to 10"]),
+        (
+            "fraction",
+            frames("20.5"),
+            ["field frames", "20.5 is not a whole number: use a whole number from 1 to 100000"],
+        ),
+        ("huge", frames("1e12"), ["field frames", "1000000000000 is too large: use a whole number from 1 to 100000"]),
+        ("negative", frames("-3"), ["field frames", "-3 is too small: use a whole number from 1 to 100000"]),
     ] {
         let file = dir.join(format!("{case}.json"));
         std::fs::write(&file, text).unwrap();
@@ -1614,6 +1624,28 @@ fn counterfactual_tells_what_it_adapted_and_what_never_fired_and_refuses_an_empt
         assert!((fired - 3.8).abs() < 1e-9, "{summary}");
         assert_eq!(summary["affected"], serde_json::json!([]), "{summary}");
     }
+    // `run` tells its own interventions alike (it said nothing, though the
+    // docs say it warns of one at the last frame).
+    let ran = |file: &Path, out: &str| {
+        let out = dir.join(out);
+        run(&["run", "--scenario", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images"])
+    };
+    let mut told = 0;
+    for (name, says) in [
+        ("last-at", "fired at 3.8 s, the scenario's last frame: no frame after it shows"),
+        ("last-frame", "fired at 3.8 s, the scenario's last frame: no frame after it shows"),
+        ("never", "reaches AD)\" never fired in the scenario's 3.8 s: it changed nothing"),
+    ] {
+        let output = ran(&dir.join(format!("{name}.json")), &format!("run-{name}"));
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{name}: {stderr}");
+        assert!(stderr.contains(says), "{name}: {stderr}");
+        told += 1;
+    }
+    assert_eq!(told, 3);
+    let output = ran(&fires, "run-fires");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success() && !stderr.contains("never fired") && !stderr.contains("last frame"), "{stderr}");
     // An empty intervention file: the counterfactual would be the factual run.
     let empty = write("empty.json", "[]".into());
     let (output, out) = counterfactual(&fires, "empty", &["--intervention", empty.to_str().unwrap()]);

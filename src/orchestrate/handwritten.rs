@@ -132,7 +132,47 @@ pub struct Written {
 /// simulation adapted or skipped, in time order.
 fn warnings(s: &LoadedScenario, trajectories: &Trajectories, images: bool) -> Vec<String> {
     let read = s.warnings.iter().map(|w| format!("scenario {:?}, {w}", s.name));
-    read.chain(camera_warning(s, images)).chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect()
+    let mut warnings: Vec<String> =
+        read.chain(camera_warning(s, images)).chain(driven_warnings(&s.name, &s.plan, trajectories, "")).collect();
+    // Each of its interventions that never fired, or fired at the last
+    // frame, as a counterfactual pair tells its added ones (`run` said
+    // nothing, though the docs say it warns of the last frame).
+    let fired_at = |label: &str| {
+        let firing = trajectories.events.iter().find(|e| e.kind == EventKind::Intervention && e.detail == label);
+        firing.map(|e| e.t)
+    };
+    warnings.extend(intervention_warnings(&s.name, &s.plan, &s.plan.interventions, fired_at, "it changed nothing"));
+    warnings
+}
+
+/// A warning for each of `interventions` (of `plan`) that never fired in
+/// the run (`fired_at` tells when it first did), saying `never_means`, or
+/// that fired at the scenario's last frame, which no frame after it shows.
+fn intervention_warnings(
+    scenario: &str,
+    plan: &ScenarioPlan,
+    interventions: &[crate::plan::interventions::Intervention],
+    fired_at: impl Fn(&str) -> Option<f64>,
+    never_means: &str,
+) -> Vec<String> {
+    let end = plan.frames.saturating_sub(1) as f64 * plan.frame_interval;
+    let mut warnings = Vec::new();
+    for intervention in interventions {
+        match fired_at(&intervention.label) {
+            None => warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {end:.1} s: {never_means}",
+                intervention.label
+            )),
+            // Fired at the last frame: no later frame can show what it did.
+            Some(t) if t > end - plan.frame_interval / 2.0 => warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{}\" fired at {t:.1} s, the scenario's last frame: no \
+                 frame after it shows what it does to the cars (give the scenario more frames or fire it earlier)",
+                intervention.label
+            )),
+            Some(_) => {}
+        }
+    }
+    warnings
 }
 
 /// The scenario's cameras that `--no-images` leaves without pictures, as
@@ -190,23 +230,9 @@ fn pair_warnings(
         let (factual, counterfactual): (Vec<f64>, Vec<f64>) = (firings(&pair.factual), firings(&pair.counterfactual));
         counterfactual.get(factual.len()).copied()
     };
-    let end = counterfactual.frames.saturating_sub(1) as f64 * counterfactual.frame_interval;
-    for intervention in &counterfactual.interventions[factual.interventions.len()..] {
-        match fired_at(&intervention.label) {
-            None => warnings.push(format!(
-                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {end:.1} s: the \
-                 counterfactual run is the factual one",
-                intervention.label
-            )),
-            // Fired at the last frame: no later frame can show what it did.
-            Some(t) if t > end - counterfactual.frame_interval / 2.0 => warnings.push(format!(
-                "scenario {scenario:?}: the intervention \"{}\" fired at {t:.1} s, the scenario's last frame: no \
-                 frame after it shows what it does to the cars (give the scenario more frames or fire it earlier)",
-                intervention.label
-            )),
-            Some(_) => {}
-        }
-    }
+    let added = &counterfactual.interventions[factual.interventions.len()..];
+    let never_means = "the counterfactual run is the factual one";
+    warnings.extend(intervention_warnings(scenario, counterfactual, added, fired_at, never_means));
     warnings
 }
 

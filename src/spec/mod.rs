@@ -313,14 +313,7 @@ impl DatasetSpec {
     /// keys, no trailing data, objects where the spec has objects).
     pub fn from_json(text: &str) -> Result<DatasetSpec, SpecError> {
         let spec: DatasetSpec = crate::json::parse_strict(text).map_err(|e| {
-            // A fraction or a negative number named the type's range ("from
-            // 0 to 4294967295" for frames); the field's own is the one allowed.
-            let message = match whole_range(&e.path) {
-                Some((lo, hi)) => ["use a whole number from 0 to 4294967295", "use a whole number, 0 or more"]
-                    .iter()
-                    .fold(e.message, |m, said| m.replace(said, &format!("use a whole number from {lo} to {hi}"))),
-                None => e.message,
-            };
+            let message = field_range_said(&e.path, e.message);
             SpecError::new(e.path, message)
         })?;
         spec.validate()?;
@@ -769,6 +762,19 @@ impl DatasetSpec {
 
 /// The spec's whole-number fields narrower than their type, and their
 /// ranges: one table for the checks and for the parser's messages.
+/// A parse error's `message` about whole-number `field` (of a spec, or
+/// the same field of a hand-written scenario) with the field's own range
+/// allowed: a fraction, a negative or a huge number named the type's range
+/// ("from 0 to 4294967295" for frames, whose range is 1 to 100000).
+pub fn field_range_said(field: &str, message: String) -> String {
+    match whole_range(field) {
+        Some((lo, hi)) => ["use a whole number from 0 to 4294967295", "use a whole number, 0 or more"]
+            .iter()
+            .fold(message, |m, said| m.replace(said, &format!("use a whole number from {lo} to {hi}"))),
+        None => message,
+    }
+}
+
 fn whole_range(field: &str) -> Option<(u32, u32)> {
     // `groups[3].cars` as `groups[].cars`, `held_out.test.cars` as `held_out.*.cars`.
     let general = match field.split_once('[').zip(field.split_once(']')) {

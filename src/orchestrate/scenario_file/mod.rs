@@ -223,7 +223,12 @@ impl Here<'_> {
                 }
             }
         }
-        self.err(None, e.path, e.message)
+        // A scenario's frames take the spec's range (the type's was named).
+        let message = match e.path.as_str() {
+            "frames" => crate::spec::field_range_said(&e.path, e.message),
+            _ => e.message,
+        };
+        self.err(None, e.path, message)
     }
 }
 
