@@ -34,6 +34,7 @@ import contextlib
 import json
 import shutil
 import sys
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
@@ -81,7 +82,9 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 def _poses(folder: Path, frames: int, cars: int) -> np.ndarray:
     """[frames, cars, 4]: x, y, yaw, speed."""
     try:
-        table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
+        with warnings.catch_warnings():  # an empty log is named below, not warned of
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(folder / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
     except ValueError as e:
         raise ValueError(f"{folder / 'poses.csv'}: not the pose log gen writes ({e})") from None
     if table.shape[0] != frames * cars:
@@ -230,11 +233,13 @@ def _read_json(path: Path) -> dict:
 
 
 @contextlib.contextmanager
-def _scenario_folders(root: Path) -> Iterator[Dict[Tuple[str, str], List[Path]]]:
+def _scenario_folders(root: Path, unpack: Optional[Sequence[str]] = None) -> Iterator[Dict[Tuple[str, str], List[Path]]]:
     """Every finished scenario folder of the complete dataset ``root``, by
     (group, split), checked against the counts its manifest lists. A packed
-    dataset's (``gen --format tar``) scenarios are unpacked, without
-    frames, into a temporary folder that goes when the context ends."""
+    dataset's (``gen --format tar``) scenarios (of the groups ``unpack``
+    names, every group when None) are unpacked, without frames, into a
+    temporary folder that goes when the context ends; errors about them
+    name the pack and member, as the command line does."""
     from .disk import _refuse_linked
 
     if not root.is_dir():
@@ -264,21 +269,29 @@ def _scenario_folders(root: Path) -> Iterator[Dict[Tuple[str, str], List[Path]]]
         from .disk import Dataset
 
         with Dataset(root, images=False) as opened, tempfile.TemporaryDirectory(prefix="causalcity-reference-") as into:
+            # Where each unpacked folder came from: `<pack>: <folder>`.
+            came_from = {}
             for g in groups:
                 for split in SPLITS:
                     keys = [k for k in opened.keys(split) if k.group == g["name"]]
                     refuse_count(g, split, len(keys), "scenarios in its packs")
                     folders[(g["name"], split)] = []
+                    if unpack is not None and g["name"] not in unpack:
+                        continue
                     for key in keys:
                         scratch = opened._unpack(key, False)
                         target = Path(into) / key.folder
                         shutil.copytree(scratch.name, target)
                         scratch.cleanup()
                         folders[(g["name"], split)].append(target)
+                        came_from[str(target)] = f"{root / opened.pack_of(key)}: {key.folder}"
             try:
                 yield folders
-            except ValueError as e:  # named by the dataset, not the temporary folder
-                raise ValueError(str(e).replace(into, f"{root} (unpacked from its packs)")) from None
+            except (ValueError, OSError) as e:  # named by its pack, not the temporary folder
+                message = str(e)
+                for target, origin in came_from.items():
+                    message = message.replace(target, origin)
+                raise type(e)(message) from None
         return
     for g in groups:
         for split in SPLITS:
@@ -335,7 +348,7 @@ def evaluate(
     root = Path(dataset)
     if graph not in GRAPHS:
         raise ValueError(f"graph {graph!r} is not one of {', '.join(GRAPHS)}")
-    with _scenario_folders(root) as every:
+    with _scenario_folders(root, groups) as every:
         names = list(dict.fromkeys(group for group, _ in every))
         results = []
         for group in names if groups is None else groups:

@@ -3,8 +3,10 @@ them, ``open_dataset`` reads them into the same arrays as the folder
 layout, ``read_tar`` streams a tar's scenarios with the folders' bytes, and
 ``evaluate`` scores them as it scores folders."""
 
+import io
 import json
 import pickle
+import shutil
 import tarfile
 from pathlib import Path
 
@@ -272,3 +274,27 @@ def test_the_reference_methods_read_a_packed_dataset_as_its_folders(datasets, tm
     for k in scores["folders"]:
         np.testing.assert_array_equal(scores["folders"][k], scores["packed"][k], err_msg=k)
     assert reference.evaluate(packed, methods=["frame0"]) == reference.evaluate(folders, methods=["frame0"])
+
+
+def test_the_reference_classifiers_name_a_damaged_pack_not_the_folder_they_unpacked_it_into(datasets, tmp_path):
+    from causalcity import reference
+
+    _, packed = datasets
+    for damage in ("missing", "emptied"):
+        data = tmp_path / damage
+        shutil.copytree(packed, data)
+        pack = data / "cars04_edges50/val/00000-00001.tar"
+        with tarfile.open(pack) as tar:
+            members = [(m, tar.extractfile(m).read() if m.isfile() else None) for m in tar.getmembers()]
+        with tarfile.open(pack, "w") as tar:
+            for member, data_bytes in members:
+                if member.name.endswith("00000/poses.csv"):
+                    if damage == "missing":
+                        continue
+                    data_bytes, member.size = b"", 0
+                tar.addfile(member, io.BytesIO(data_bytes) if data_bytes is not None else None)
+        with pytest.raises((ValueError, OSError)) as raised:
+            reference.evaluate(data, methods=["frame0"], groups=["cars04_edges50"])
+        said = str(raised.value)
+        assert f"{pack}: cars04_edges50/val/00000" in said, said
+        assert "causalcity-reference" not in said, said

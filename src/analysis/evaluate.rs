@@ -1735,8 +1735,8 @@ impl fmt::Display for EvaluationReport {
             writeln!(
                 f,
                 "edges: AUROC and AUPRC over all pairs need no threshold; a pair is called linked when its score is \
-                 above the threshold (from: val = best F1 on the val split, given, or default 0.5, see any warning \
-                 above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
+                 above the threshold (from: val = best F1 on the val split, pooled = best F1 on every group's val \
+                 where this group's holds no link, given, or default 0.5, see any warning above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
                  against interactions.csv, SHD per frame"
             )?;
             if !self.overall.is_empty() {
