@@ -51,6 +51,18 @@ impl Error {
         }
     }
 
+    /// A reader's failure to open the dataset at hand: making the folder it
+    /// unpacks a packed dataset into (a TMPDIR that cannot hold it) is a
+    /// failure of its own; anything else, bad input. A TMPDIR that is a
+    /// file exited 2, as if the dataset were the problem.
+    pub fn opening(message: String) -> Error {
+        if Error::is_own_write(&message) {
+            Error::Failure(message)
+        } else {
+            Error::Input(message)
+        }
+    }
+
     /// Whether a reader's error `message` is a write of its own failing
     /// (see [`Error::reading`]), not the dataset's damage.
     pub fn is_own_write(message: &str) -> bool {

@@ -188,6 +188,21 @@ fn a_reader_that_cannot_unpack_into_tmpdir_fails_without_calling_the_dataset_dam
         checked += 1;
     }
     assert_eq!(checked, 2);
+    // A TMPDIR where no folder can be made (a file): exit 2 before, as if
+    // the dataset were the problem.
+    let file = packed.parent().unwrap().join("tmpdir-is-a-file");
+    std::fs::write(&file, "").unwrap();
+    let export = packed.parent().unwrap().join("export");
+    for args in [vec!["stats"], vec!["baseline"], vec!["export", "nri", "--out", export.to_str().unwrap()]] {
+        let mut args = args.clone();
+        args.insert(args.len().min(2), packed.to_str().unwrap());
+        let out = Command::new(common::bin()).args(&args).env("TMPDIR", &file).output().unwrap();
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: a failure while working: {said}");
+        assert!(said.contains("cannot make a folder to unpack into"), "{args:?}: {said}");
+        checked += 1;
+    }
+    assert_eq!(checked, 5);
 }
 
 #[test]

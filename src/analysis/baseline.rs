@@ -119,7 +119,7 @@ pub fn baseline(dir: &Path, max_lag_s: Option<f64>, graph: GraphKind) -> Result<
     if let Some(lag) = max_lag_s.filter(|l| !(*l > 0.0 && l.is_finite())) {
         return Err(Error::Input(format!("--max-lag must be a positive number of seconds, not {lag}")));
     }
-    let dataset = Dataset::open_complete(dir).map_err(Error::Input)?;
+    let dataset = Dataset::open_complete(dir).map_err(Error::opening)?;
     dataset.require_graph(graph).map_err(Error::Input)?;
     if dataset.spec().frames < 2 {
         return Err(Error::Input(format!(

@@ -638,7 +638,7 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     if options.graphs.is_empty() {
         return Err(Error::input("give at least one graph kind to score against"));
     }
-    let truth = Truth::open(dataset).map_err(Error::Input)?;
+    let truth = Truth::open(dataset).map_err(Error::opening)?;
     for &graph in &options.graphs {
         truth.require_graph(graph).map_err(Error::Input)?;
     }

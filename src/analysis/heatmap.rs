@@ -74,7 +74,7 @@ pub fn heatmap(dataset: &Path, out: &Path, filter: &HeatmapFilter) -> Result<Hea
     if !out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
         return Err(Error::Input(format!("--out {}: a heat map is a PNG: give a name ending in .png", out.display())));
     }
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::opening)?;
     let spec = opened.spec();
     if let Some(g) = &filter.group {
         if !spec.groups.iter().any(|x| &x.name() == g) {

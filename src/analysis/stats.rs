@@ -336,7 +336,7 @@ struct Tally {
 /// A folder that is no finished dataset, or one whose scenario files
 /// cannot be read, is bad input (exit 2, [`Error::damaged`]).
 pub fn dataset_stats(dir: &Path) -> Result<DatasetStats, crate::error::Error> {
-    let dataset = Dataset::open_complete(dir).map_err(crate::error::Error::Input)?;
+    let dataset = Dataset::open_complete(dir).map_err(crate::error::Error::opening)?;
     let mut rows = Vec::new();
     for group in &dataset.spec().groups {
         for split in Split::ALL {

@@ -224,7 +224,7 @@ fn write_npy<T: LittleEndian>(path: &Path, shape: &[u64], data: &[T]) -> Result<
 /// `dynamic` on a toy-world dataset is an input error, found before anything
 /// is written.
 pub fn export_nri(dataset: &Path, out: &Path, options: &NriOptions) -> Result<Vec<String>, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::opening)?;
     opened.require_graph(options.graph).map_err(Error::Input)?;
     if options.dynamic && opened.spec().world != WorldKind::City {
         return Err(Error::Input(format!(

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 /// Writes annotations for every scenario of `dataset` under `out`; returns
 /// how many scenarios were written.
 pub fn export_nsdr(dataset: &Path, out: &Path, progress: ProgressMode) -> Result<usize, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?.with_frames();
+    let opened = Dataset::open_complete(dataset).map_err(Error::opening)?.with_frames();
     if !opened.record.images {
         return Err(Error::Input(format!(
             "{} has no masks (made with --no-images): NS-DR annotations need them; regenerate without --no-images",

@@ -96,7 +96,7 @@ pub fn vcdn_arrays(dir: &Path, graph: GraphKind) -> Result<VcdnArrays, String> {
 /// Exports every scenario of `dataset` into `out`, linking the pairs of
 /// `graph`; returns how many files were written.
 pub fn export_vcdn(dataset: &Path, out: &Path, graph: GraphKind, progress: ProgressMode) -> Result<usize, Error> {
-    let opened = Dataset::open_complete(dataset).map_err(Error::Input)?;
+    let opened = Dataset::open_complete(dataset).map_err(Error::opening)?;
     opened.require_graph(graph).map_err(Error::Input)?;
     if !cfg!(feature = "hdf5") {
         return Err(Error::Failure(NO_HDF5.into()));
