@@ -48,10 +48,20 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     // Pair-frames in which one car of a pair names the other in
     // interactions.csv, for leader-follower pairs and the rest.
     let (mut edge_frames, mut edge_together, mut other_frames, mut other_together) = (0usize, 0usize, 0usize, 0usize);
+    // Each designed pair's coefficient of variation of its gap (metres).
+    let mut gap_cvs = Vec::new();
     for d in scenario_dirs(&city).into_iter().filter(|d| d.to_string_lossy().contains("/train/")) {
         let s = read_scenario(&d);
         let to_px = s.frame_interval * s.camera.pixels_per_metre;
-        for track in poses_by_car(&read_poses(&d.join("poses.csv"))).values() {
+        let by_car = poses_by_car(&read_poses(&d.join("poses.csv")));
+        for e in &s.edges {
+            let (a, b) = (&by_car[&e[0]], &by_car[&e[1]]);
+            let gaps: Vec<f64> = a.iter().zip(b).map(|(p, q)| (p.x - q.x).hypot(p.y - q.y)).collect();
+            let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
+            let sd = (gaps.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / gaps.len() as f64).sqrt();
+            gap_cvs.push(sd / mean);
+        }
+        for track in by_car.values() {
             cars += 1;
             let (mut run, mut stop) = (0, false);
             for p in track {
@@ -111,6 +121,13 @@ fn stats_match_the_logs_and_separate_the_worlds() {
     );
     assert!(train["stopped_share"].as_f64().unwrap() > 0.2, "city cars stop");
     assert!(train["gap_cv_median"].as_f64().unwrap() > 0.05, "city gaps vary");
+    // The median of an even count is the mean of the middle two (it took
+    // the upper one).
+    gap_cvs.sort_by(f64::total_cmp);
+    let k = gap_cvs.len();
+    assert!(k >= 2 && k % 2 == 0, "{k} pairs: an even count tells the two medians apart");
+    let median = (gap_cvs[k / 2 - 1] + gap_cvs[k / 2]) / 2.0;
+    assert!((train["gap_cv_median"].as_f64().unwrap() - median).abs() < 1e-9, "{train}: median {median}");
     assert!(train["p95_speed_px"].as_f64().unwrap() > train["mean_speed_px"].as_f64().unwrap());
 
     // The plain table fits a terminal (before: ~190 columns and a

@@ -393,7 +393,6 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
             break;
         }
     }
-    all.gap_cvs.sort_by(f64::total_cmp);
     let frames = all.car_frames.max(1) as f64;
     SplitStats {
         group,
@@ -414,7 +413,8 @@ fn combine(group: String, split: &str, tallies: Vec<Tally>) -> SplitStats {
         collisions: all.collisions,
         red_light_runs: all.red_light_runs,
         gap_mean_m: (!all.gap_means.is_empty()).then(|| all.gap_means.iter().sum::<f64>() / all.gap_means.len() as f64),
-        gap_cv_median: all.gap_cvs.get(all.gap_cvs.len() / 2).copied(),
+        // (the upper middle one was taken: the larger of two pairs)
+        gap_cv_median: median(&mut all.gap_cvs),
         in_view_share: all.in_view as f64 / frames,
         lane_change_share: all.lane_changers as f64 / all.cars.max(1) as f64,
         actions_adapted: all.actions_adapted,
