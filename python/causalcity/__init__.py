@@ -26,6 +26,7 @@ import io as _io
 import json as _json
 import numbers as _numbers
 import os as _os
+import re as _re
 import sys as _sys
 import warnings as _warnings
 from dataclasses import dataclass
@@ -951,6 +952,10 @@ HISTORY_FRAMES = 100
 paper (``causalcity evaluate --history``'s default)."""
 
 
+# A scenario or pair folder as a Key names it: group/split/index.
+_FOLDER_KEY = _re.compile(r"(?!\.\.?/)[^/\\]+/(train|val|test)/[0-9]+")
+
+
 def save_predictions(
     path: PathLike,
     edges: Optional[Mapping[str, _np.ndarray]] = None,
@@ -996,7 +1001,8 @@ def save_predictions(
         for folder, values in (given or {}).items():
             # A Key names its folder; any other name must be a folder's.
             folder = folder.folder if isinstance(folder, Key) else folder
-            if not isinstance(folder, str) or folder == _DATASET_RECORD:
+            # (an empty name, or one reaching out with ../, was written as given)
+            if not isinstance(folder, str) or not _FOLDER_KEY.fullmatch(folder):
                 raise InputError(
                     f"save_predictions: {label} key {folder!r} is not a scenario folder: give Key.folder "
                     "(e.g. 'cars08_edges50/test/00000') or a Key"
@@ -1005,6 +1011,10 @@ def save_predictions(
                 if _np.iscomplexobj(values):
                     raise InputError(f"save_predictions: {label}[{folder!r}] holds complex numbers: give real scores")
                 values = _np.asarray(values)
+                # Dates and durations became numbers; text and objects fail below.
+                if values.dtype.kind in "mM":
+                    raise InputError(f"save_predictions: {label}[{folder!r}] holds {values.dtype} values: give "
+                                     "numbers (scores, or metres)")  # fmt: skip
                 # float16 and float32 are read as they are: half the bytes or less
                 arrays[f"{folder}{suffix}"] = values if values.dtype in (_np.float16, _np.float32) else values.astype(_np.float64)
             except InputError:

@@ -632,6 +632,13 @@ def test_save_predictions_takes_keys_or_folders_and_refuses_what_it_would_change
         ({3: np.eye(cars)}, "is not a scenario folder"),
         # Ragged rows: it raised numpy's ValueError.
         ({key.folder: [[0.1, 0.2], [0.3]]}, "is not an array of numbers"),
+        # Names that are no folder, and dates, were written as given.
+        ({"": np.eye(cars)}, "is not a scenario folder"),
+        ({"../../etc/x": np.eye(cars)}, "is not a scenario folder"),
+        ({"../test/00000": np.eye(cars)}, "is not a scenario folder"),
+        ({key.folder + "/extra": np.eye(cars)}, "is not a scenario folder"),
+        ({key.folder: np.full((cars, cars), "2020-01-01", dtype="datetime64[D]")}, "holds datetime64"),
+        ({key.folder: np.ones((cars, cars)).astype("timedelta64[s]")}, "holds timedelta64"),
     ]:
         with pytest.raises(causalcity.InputError, match=says):
             causalcity.save_predictions(tmp_path / "bad.npz", edges=edges)
