@@ -834,8 +834,7 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
             auroc = "" if a is None else f"{a['value']:.2f}"
             lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {auroc} |")
     lines += ["", "Trajectory error (MSE of positions normalised by image size; 8 cars, 50 % linked; test):", ""]
-    lines.append("| world | method | 1 step | 10 steps | 20 steps |")
-    lines.append("|---|---|---|---|---|")
+    table = ["| world | method | 1 step | 10 steps | 20 steps |", "|---|---|---|---|---|"]
     for world in worlds:
         for method in _ordered(rows):
             cells = []
@@ -844,7 +843,12 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
                          metric="trajectory_mse", step=step)
                 cells.append("" if r is None else f"{r['value']:.2e}")
             if any(cells):
-                lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + " |")
+                table.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + " |")
+    if len(table) == 2:
+        # (a header with no rows was printed when the group was left out)
+        table = [f"None: this run has no method that predicts trajectories on {TRAJECTORY_GROUP}, the group this "
+                 "table reads (constant_velocity, interaction or nri, with that group in --group)."]  # fmt: skip
+    lines += table
     return "\n".join(lines) + "\n"
 
 

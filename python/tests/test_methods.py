@@ -246,6 +246,26 @@ def test_the_cpu_methods_beside_the_neural_ones_give_the_same_results(tmp_path, 
     assert {r["method"] for r in paper.read_results(tmp_path / "overlap-True" / "results.csv")} == set(methods)
 
 
+def test_the_paper_trajectory_table_says_when_no_method_predicted_its_group():
+    # A run without cars08_edges50 printed the table's header with no rows
+    # and no word on why.
+    from causalcity import paper
+
+    def row(group, step):
+        return dict(world="toy", method="constant_velocity", group=group, split="test", graph="", metric="trajectory_mse",
+                    step=step, value=0.01 * step, se=None, scenarios=3)  # fmt: skip
+
+    def trajectory_part(rows):
+        text = paper.markdown(rows, paper.QUICK, ["toy"])
+        return text[text.index("Trajectory error"):]
+
+    elsewhere = trajectory_part([row("cars04_edges50", s) for s in (1, 10, 20)])
+    assert "None: this run has no method that predicts trajectories on cars08_edges50" in elsewhere, elsewhere
+    assert "| world | method |" not in elsewhere, elsewhere
+    there = trajectory_part([row(paper.TRAJECTORY_GROUP, s) for s in (1, 10, 20)])
+    assert "| toy | " in there and "1.00e-01" in there and "None:" not in there, there
+
+
 def test_a_cpu_method_that_fails_beside_the_neural_ones_stops_the_run_with_its_error(tmp_path, monkeypatch):
     from causalcity import paper
 
