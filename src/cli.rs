@@ -1047,7 +1047,7 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             report(&heatmap(&args.dataset, &args.out, &filter)?, args.json)
         }
         Command::Validate(args) => {
-            let found = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::Input)?;
+            let found = validate(&args.dir, args.threads.map(|t| t as usize)).map_err(Error::opening)?;
             report(&found, args.json)?;
             if found.problems.is_empty() {
                 Ok(())

@@ -66,7 +66,10 @@ impl Error {
     /// Whether a reader's error `message` is a write of its own failing
     /// (see [`Error::reading`]), not the dataset's damage.
     pub fn is_own_write(message: &str) -> bool {
-        message.contains("cannot write ") || message.contains("cannot make a folder to unpack into")
+        // Told by where it writes, not by words a dataset's own path could
+        // hold ("cannot write x" exited 1 for a folder of that name).
+        message.starts_with("cannot make a folder to unpack into")
+            || (message.contains("cannot write ") && message.contains(crate::output::packs::SCRATCH_PREFIX))
     }
 
     /// A file of the dataset at `dataset` that is missing or cannot be read

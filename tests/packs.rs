@@ -193,7 +193,9 @@ fn a_reader_that_cannot_unpack_into_tmpdir_fails_without_calling_the_dataset_dam
     let file = packed.parent().unwrap().join("tmpdir-is-a-file");
     std::fs::write(&file, "").unwrap();
     let export = packed.parent().unwrap().join("export");
-    for args in [vec!["stats"], vec!["baseline"], vec!["export", "nri", "--out", export.to_str().unwrap()]] {
+    for args in
+        [vec!["stats"], vec!["baseline"], vec!["validate"], vec!["export", "nri", "--out", export.to_str().unwrap()]]
+    {
         let mut args = args.clone();
         args.insert(args.len().min(2), packed.to_str().unwrap());
         let out = Command::new(common::bin()).args(&args).env("TMPDIR", &file).output().unwrap();
@@ -202,7 +204,15 @@ fn a_reader_that_cannot_unpack_into_tmpdir_fails_without_calling_the_dataset_dam
         assert!(said.contains("cannot make a folder to unpack into"), "{args:?}: {said}");
         checked += 1;
     }
-    assert_eq!(checked, 5);
+    assert_eq!(checked, 6);
+    // pack of a packed dataset says so first (it named the folder it
+    // could not make).
+    let repack = packed.parent().unwrap().join("repack");
+    let args = ["pack", packed.to_str().unwrap(), "--out", repack.to_str().unwrap()];
+    let out = Command::new(common::bin()).args(args).env("TMPDIR", &file).output().unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("is packed already") && !said.contains("unpack into"), "{said}");
 }
 
 #[test]

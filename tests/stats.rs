@@ -239,21 +239,29 @@ fn the_city_presets_drive_like_traffic_by_the_stats_figures() {
 #[test]
 fn every_reader_of_a_dataset_refuses_a_folder_that_is_none_with_exit_2() {
     let dir = fresh_dir("not-a-dataset");
-    let missing = dir.join("nonexistent");
-    let missing = missing.to_str().unwrap();
+    // Also a folder whose name reads like a reader's own write failing
+    // (it was told by those words, and exited 1).
+    let worded = dir.join("cannot write x");
+    std::fs::create_dir_all(&worded).unwrap();
     let heatmap = dir.join("h.png");
-    let commands: [&[&str]; 5] = [
-        &["stats", missing],
-        &["baseline", missing],
-        &["evaluate", missing, "x.npz"],
-        &["validate", missing],
-        &["heatmap", missing, "--out", heatmap.to_str().unwrap()],
-    ];
-    for args in commands {
-        let output = run(args);
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
-        assert!(stderr.contains("no manifest.json"), "{args:?}: {stderr}");
+    let mut checked = 0;
+    for missing in [dir.join("nonexistent"), worded] {
+        let missing = missing.to_str().unwrap();
+        let commands: [&[&str]; 5] = [
+            &["stats", missing],
+            &["baseline", missing],
+            &["evaluate", missing, "x.npz"],
+            &["validate", missing],
+            &["heatmap", missing, "--out", heatmap.to_str().unwrap()],
+        ];
+        for args in commands {
+            let output = run(args);
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+            assert!(stderr.contains("no manifest.json"), "{args:?}: {stderr}");
+            checked += 1;
+        }
     }
+    assert_eq!(checked, 10);
     assert!(!heatmap.exists());
 }

@@ -34,8 +34,14 @@ pub fn pack_dataset(
             return pack_sweep(&sweep, out, per_tar, threads, progress);
         }
     }
+    // Packed already: said before opening it, which makes a folder to
+    // unpack into (a TMPDIR that could hold none was named instead).
+    let what = ("dataset", "scenarios", "scenario");
+    if let Ok(Some(record)) = ManifestRecord::read(&dataset.join("manifest.json")) {
+        refuse_packed(dataset, record.packing(), what)?;
+    }
     let opened = Dataset::open_complete(dataset).map_err(GenError::Input)?;
-    let _claim = claim_out(dataset, opened.record.packing(), out, Writer::Pack, ("dataset", "scenarios", "scenario"))?;
+    let _claim = claim_out(dataset, opened.record.packing(), out, Writer::Pack, what)?;
     let spec = opened.spec();
     super::run::refuse_linked_splits(out, spec)?;
     let (products, packing) = (opened.record.products(), Packing::Tar { per_tar: per_tar.max(1) });
@@ -191,12 +197,7 @@ fn claim_out(
     writer: Writer,
     (what, units, unit): (&str, &str, &str),
 ) -> Result<crate::output::claim::Claim, GenError> {
-    if let Packing::Tar { per_tar } = packing {
-        return Err(GenError::Input(format!(
-            "{} is packed already ({per_tar} {units} per tar): pack reads a {what} of {unit} folders",
-            input.display()
-        )));
-    }
+    refuse_packed(input, packing, (what, units, unit))?;
     if resolve(out) == resolve(input) {
         return Err(GenError::Input(format!(
             "--out {} is the {what} itself: pack writes a new {what} and leaves its input as it is; nothing was written",
@@ -204,6 +205,17 @@ fn claim_out(
         )));
     }
     claim(out, writer, &format!("pack {}", input.display())).map_err(GenError::Claim)
+}
+
+/// Refuses an `input` (a `what` of `unit` folders) that is packed already.
+fn refuse_packed(input: &Path, packing: Packing, (what, units, unit): (&str, &str, &str)) -> Result<(), GenError> {
+    match packing {
+        Packing::Tar { per_tar } => Err(GenError::Input(format!(
+            "{} is packed already ({per_tar} {units} per tar): pack reads a {what} of {unit} folders",
+            input.display()
+        ))),
+        Packing::Folders => Ok(()),
+    }
 }
 
 /// Writes every pack of `packs` from the folders under `input` into `out`,
