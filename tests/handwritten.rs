@@ -148,6 +148,18 @@ fn bad_scenarios_exit_2_naming_scenario_car_and_field() {
         ),
         ("huge", frames("1e12"), ["field frames", "1000000000000 is too large: use a whole number from 1 to 100000"]),
         ("negative", frames("-3"), ["field frames", "-3 is too small: use a whole number from 1 to 100000"]),
+        // A frame index named the type's range too (0 to 18446744073709551615).
+        (
+            "at-frame",
+            format!(
+                r#"[{{"Name": "Bad_1", "frames": 20, "Vehicles": [{ok}],
+                    "interventions": [{{"at_frame": 2.5, "do": "stop", "car": "Car_1", "seconds": 2}}]}}]"#
+            ),
+            [
+                "field interventions[0].at_frame",
+                "2.5 is not a whole number: use a frame index, a whole number from 0 to the scenario's last frame",
+            ],
+        ),
     ] {
         let file = dir.join(format!("{case}.json"));
         std::fs::write(&file, text).unwrap();
@@ -1646,6 +1658,23 @@ fn counterfactual_tells_what_it_adapted_and_what_never_fired_and_refuses_an_empt
     let output = ran(&fires, "run-fires");
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success() && !stderr.contains("never fired") && !stderr.contains("last frame"), "{stderr}");
+    // Two interventions of one label, one of which never fires: told once
+    // (the one that fired stood for both), by run and by counterfactual,
+    // whose counterfactual run then is not the factual one.
+    let fire_and_never = r#"[{"at": 0.5, "do": "stop", "car": "Car_1", "seconds": 2, "label": "X"},
+        {"when": {"car": "Car_2", "reaches": "AD"}, "do": "stop", "car": "Car_1", "seconds": 2, "label": "X"}]"#;
+    let twice = write("twice.json", scenario(r#""straight""#, "0", fire_and_never));
+    let output = ran(&twice, "run-twice");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("\"X\" never fired in the scenario's 3.8 s: it changed nothing").count(), 1, "{stderr}");
+    let added = write("added.json", fire_and_never.to_string());
+    let (output, _) = counterfactual(&fires, "added-twice", &["--intervention", added.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("\"X\" never fired").count(), 1, "{stderr}");
+    assert!(stderr.contains("it changed nothing in the counterfactual run"), "{stderr}");
+    assert!(!stderr.contains("the counterfactual run is the factual one"), "{stderr}");
     // An empty intervention file: the counterfactual would be the factual run.
     let empty = write("empty.json", "[]".into());
     let (output, out) = counterfactual(&fires, "empty", &["--intervention", empty.to_str().unwrap()]);

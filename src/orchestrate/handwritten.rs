@@ -137,39 +137,50 @@ fn warnings(s: &LoadedScenario, trajectories: &Trajectories, images: bool) -> Ve
     // Each of its interventions that never fired, or fired at the last
     // frame, as a counterfactual pair tells its added ones (`run` said
     // nothing, though the docs say it warns of the last frame).
-    let fired_at = |label: &str| {
-        let firing = trajectories.events.iter().find(|e| e.kind == EventKind::Intervention && e.detail == label);
-        firing.map(|e| e.t)
-    };
-    warnings.extend(intervention_warnings(&s.name, &s.plan, &s.plan.interventions, fired_at, "it changed nothing"));
+    let firings = |label: &str| firings_of(trajectories, label);
+    warnings.extend(intervention_warnings(&s.name, &s.plan, &s.plan.interventions, firings, "it changed nothing"));
     warnings
 }
 
+/// When the interventions labelled `label` fired in a run, in time order
+/// (each fires once).
+fn firings_of(run: &Trajectories, label: &str) -> Vec<f64> {
+    run.events.iter().filter(|e| e.kind == EventKind::Intervention && e.detail == label).map(|e| e.t).collect()
+}
+
 /// A warning for each of `interventions` (of `plan`) that never fired in
-/// the run (`fired_at` tells when it first did), saying `never_means`, or
-/// that fired at the scenario's last frame, which no frame after it shows.
+/// the run, saying `never_means`, and each that fired at the scenario's last
+/// frame, which no frame after it shows. `firings` tells when the ones of a
+/// label fired: interventions that share a label are told by how many of
+/// them fired (one that fired stood for all of them: review).
 fn intervention_warnings(
     scenario: &str,
     plan: &ScenarioPlan,
     interventions: &[crate::plan::interventions::Intervention],
-    fired_at: impl Fn(&str) -> Option<f64>,
+    firings: impl Fn(&str) -> Vec<f64>,
     never_means: &str,
 ) -> Vec<String> {
     let end = plan.frames.saturating_sub(1) as f64 * plan.frame_interval;
     let mut warnings = Vec::new();
+    let mut told = std::collections::BTreeSet::new();
     for intervention in interventions {
-        match fired_at(&intervention.label) {
-            None => warnings.push(format!(
-                "scenario {scenario:?}: the intervention \"{}\" never fired in the scenario's {end:.1} s: {never_means}",
-                intervention.label
-            )),
-            // Fired at the last frame: no later frame can show what it did.
-            Some(t) if t > end - plan.frame_interval / 2.0 => warnings.push(format!(
-                "scenario {scenario:?}: the intervention \"{}\" fired at {t:.1} s, the scenario's last frame: no \
-                 frame after it shows what it does to the cars (give the scenario more frames or fire it earlier)",
-                intervention.label
-            )),
-            Some(_) => {}
+        let label = intervention.label.as_str();
+        if !told.insert(label) {
+            continue;
+        }
+        let times = firings(label);
+        let never = interventions.iter().filter(|i| i.label == label).count().saturating_sub(times.len());
+        for _ in 0..never {
+            warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{label}\" never fired in the scenario's {end:.1} s: {never_means}"
+            ));
+        }
+        // Fired at the last frame: no later frame can show what it did.
+        for t in times.into_iter().filter(|&t| t > end - plan.frame_interval / 2.0) {
+            warnings.push(format!(
+                "scenario {scenario:?}: the intervention \"{label}\" fired at {t:.1} s, the scenario's last frame: no \
+                 frame after it shows what it does to the cars (give the scenario more frames or fire it earlier)"
+            ));
         }
     }
     warnings
@@ -220,19 +231,20 @@ fn pair_warnings(
     let in_factual = as_counterfactual(factual, &pair.factual);
     let in_counterfactual = as_counterfactual(counterfactual, &pair.counterfactual);
     warnings.extend(in_counterfactual.into_iter().filter(|w| !in_factual.contains(w)));
-    // When the added intervention first fired: its first firing in the
-    // counterfactual run beyond those of the factual run (which has them
-    // too when it was the scenario's own).
-    let fired_at = |label: &str| {
-        let firings = |t: &Trajectories| {
-            t.events.iter().filter(|e| e.kind == EventKind::Intervention && e.detail == label).map(|e| e.t).collect()
-        };
-        let (factual, counterfactual): (Vec<f64>, Vec<f64>) = (firings(&pair.factual), firings(&pair.counterfactual));
-        counterfactual.get(factual.len()).copied()
+    // When the added interventions fired: the counterfactual run's firings
+    // of their label beyond those of the factual run (which has them too
+    // when it was the scenario's own).
+    let firings = |label: &str| {
+        let factual = firings_of(&pair.factual, label).len();
+        firings_of(&pair.counterfactual, label).into_iter().skip(factual).collect()
     };
     let added = &counterfactual.interventions[factual.interventions.len()..];
-    let never_means = "the counterfactual run is the factual one";
-    warnings.extend(intervention_warnings(scenario, counterfactual, added, fired_at, never_means));
+    // (with others added, the runs may still differ)
+    let never_means = match added.len() {
+        1 => "the counterfactual run is the factual one",
+        _ => "it changed nothing in the counterfactual run",
+    };
+    warnings.extend(intervention_warnings(scenario, counterfactual, added, firings, never_means));
     warnings
 }
 

@@ -168,7 +168,17 @@ pub(super) fn raw_intervention(value: Value, path: &str) -> Result<RawInterventi
             "give exactly one trigger: \"at\" (seconds), \"at_frame\" (frame index) or \"when\" (an event)",
         ));
     }
-    let trigger: RawTrigger = json::from_value(Value::Object(trigger)).map_err(|e| e.under(path))?;
+    let trigger: RawTrigger = json::from_value(Value::Object(trigger)).map_err(|mut e| {
+        // A frame index's range is the scenario's frames, not the type's
+        // (0 to 18446744073709551615 was named for 2.5); checked once read.
+        if e.path == "at_frame" {
+            for said in ["use a whole number from 0 to 18446744073709551615", "use a whole number, 0 or more"] {
+                e.message =
+                    e.message.replace(said, "use a frame index, a whole number from 0 to the scenario's last frame");
+            }
+        }
+        e.under(path)
+    })?;
     let RawCommon { label, .. } = json::from_value(Value::Object(common)).map_err(|e| e.under(path))?;
     const DO: &str = "stop, run_red_light, set_desired_speed, remove, replace_actions, set_light, set_light_plan, set_confounder or none";
     let tag = match effect.remove("do") {
