@@ -1011,8 +1011,8 @@ def save_predictions(
                 if _np.iscomplexobj(values):
                     raise InputError(f"save_predictions: {label}[{folder!r}] holds complex numbers: give real scores")
                 values = _np.asarray(values)
-                # Dates and durations became numbers; text and objects fail below.
-                if values.dtype.kind in "mM":
+                # Numbers only: dates, durations and text ("0.5") became numbers.
+                if values.dtype.kind not in "biuf":
                     raise InputError(f"save_predictions: {label}[{folder!r}] holds {values.dtype} values: give "
                                      "numbers (scores, or metres)")  # fmt: skip
                 # float16 and float32 are read as they are: half the bytes or less

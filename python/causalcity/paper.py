@@ -847,7 +847,7 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
     if len(table) == 2:
         # (a header with no rows was printed when the group was left out)
         table = [f"None: this run has no method that predicts trajectories on {TRAJECTORY_GROUP}, the group this "
-                 "table reads (constant_velocity, interaction or nri, with that group in --group)."]  # fmt: skip
+                 "table reads (constant_velocity, interaction, nri or nri_trail, with that group in --group)."]  # fmt: skip
     lines += table
     return "\n".join(lines) + "\n"
 

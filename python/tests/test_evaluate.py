@@ -639,6 +639,7 @@ def test_save_predictions_takes_keys_or_folders_and_refuses_what_it_would_change
         ({key.folder + "/extra": np.eye(cars)}, "is not a scenario folder"),
         ({key.folder: np.full((cars, cars), "2020-01-01", dtype="datetime64[D]")}, "holds datetime64"),
         ({key.folder: np.ones((cars, cars)).astype("timedelta64[s]")}, "holds timedelta64"),
+        ({key.folder: np.full((cars, cars), "0.5")}, "holds <U3"),
     ]:
         with pytest.raises(causalcity.InputError, match=says):
             causalcity.save_predictions(tmp_path / "bad.npz", edges=edges)
