@@ -647,7 +647,10 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     let named = |e: Error| match e {
         Error::Input(m) => Error::Input(truth.name_unpacked(m)),
         // (match_scenarios fails only on the dataset's own files.)
-        Error::Failure(m) => Error::reading(&truth.dir, truth.name_unpacked(m)),
+        // (told apart before the unpack folder's name is replaced: it is
+        // what tells a write of evaluate's own)
+        Error::Failure(m) if Error::is_own_write(&m) => Error::Failure(truth.name_unpacked(m)),
+        Error::Failure(m) => Error::damaged(&truth.dir, truth.name_unpacked(m)),
         other => other,
     };
     let (scored, record) = match_scenarios(&truth, predictions, options).map_err(named)?;
