@@ -235,8 +235,8 @@ impl Dataset {
     }
 
     /// Calls `each(folder, relative)` for every scenario of the dataset, in
-    /// parallel within a split, a group's split at a time through
-    /// [`Dataset::with_split`]: `relative` is the scenario's folder
+    /// parallel within a split, a group's split at a time as
+    /// [`Dataset::with_split`] reads one: `relative` is the scenario's folder
     /// relative to the dataset (`<group>/<split>/<scenario>`), which exports
     /// mirror. A failure to read the dataset itself (a packed split's packs
     /// unpacked) is told to `unreadable` before it is returned, so that the

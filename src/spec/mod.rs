@@ -760,8 +760,6 @@ impl DatasetSpec {
     }
 }
 
-/// The spec's whole-number fields narrower than their type, and their
-/// ranges: one table for the checks and for the parser's messages.
 /// A parse error's `message` about whole-number `field` (of a spec, or
 /// the same field of a hand-written scenario) with the field's own range
 /// allowed: a fraction, a negative or a huge number named the type's range
@@ -775,6 +773,8 @@ pub fn field_range_said(field: &str, message: String) -> String {
     }
 }
 
+/// The spec's whole-number fields narrower than their type, and their
+/// ranges: one table for the checks and for the parser's messages.
 fn whole_range(field: &str) -> Option<(u32, u32)> {
     // `groups[3].cars` as `groups[].cars`, `held_out.test.cars` as `held_out.*.cars`.
     let general = match field.split_once('[').zip(field.split_once(']')) {
