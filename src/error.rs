@@ -18,6 +18,11 @@ pub enum Error {
     Memory(String),
 }
 
+/// How the name of every folder a reader unpacks a packed dataset into
+/// begins (`output::packs::Scratch`): a write failing there is the
+/// reader's own ([`Error::is_own_write`]).
+pub const UNPACK_FOLDER_PREFIX: &str = "causalcity-unpacked-";
+
 impl Error {
     /// The process exit status for this error.
     pub fn exit_code(&self) -> i32 {
@@ -69,7 +74,7 @@ impl Error {
         // Told by where it writes, not by words a dataset's own path could
         // hold ("cannot write x" exited 1 for a folder of that name).
         message.starts_with("cannot make a folder to unpack into")
-            || (message.contains("cannot write ") && message.contains(crate::output::packs::SCRATCH_PREFIX))
+            || (message.contains("cannot write ") && message.contains(UNPACK_FOLDER_PREFIX))
     }
 
     /// A file of the dataset at `dataset` that is missing or cannot be read

@@ -677,9 +677,6 @@ pub fn unpack(
     }
 }
 
-/// How the name of every [`Scratch`] folder begins.
-pub const SCRATCH_PREFIX: &str = "causalcity-unpacked-";
-
 /// A private folder under the system's temporary folder (`TMPDIR`) that
 /// readers unpack packs into; removed with everything in it when dropped.
 #[derive(Debug)]
@@ -697,7 +694,8 @@ impl Scratch {
             let nanos =
                 std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
             let n = MADE.fetch_add(1, Ordering::Relaxed);
-            let root = base.join(format!("{SCRATCH_PREFIX}{}-{n}-{nanos}", std::process::id()));
+            let prefix = crate::error::UNPACK_FOLDER_PREFIX;
+            let root = base.join(format!("{prefix}{}-{n}-{nanos}", std::process::id()));
             let mut builder = fs::DirBuilder::new();
             #[cfg(unix)]
             std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
