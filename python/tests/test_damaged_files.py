@@ -107,8 +107,10 @@ def test_a_scenario_is_never_handed_back_under_another_key(toy, packed, tmp_path
     with pytest.raises(DatasetError, match=r"train/00000 is a symbolic link \(to .*00001\)"):
         load_split(linked, GROUP, "train")
     with pytest.raises(causalcity.InputError, match=r"train/00000 is a symbolic link \(to .*00001\)"):
-        _scenario_folders(linked)
-    assert len(load_split(toy, GROUP, "train")) == len(_scenario_folders(toy)[(GROUP, "train")]) > 1
+        with _scenario_folders(linked):
+            pass
+    with _scenario_folders(toy) as folders:
+        assert len(load_split(toy, GROUP, "train")) == len(folders[(GROUP, "train")]) > 1
 
     edited = copy_of(toy, tmp_path, "edited")
     edit_json(edited / FIRST / "scenario.json", lambda v: v.update(index=7))
