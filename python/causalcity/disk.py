@@ -278,10 +278,11 @@ class _Packed:
         last = min(first + per, self._split_sizes[(key.group, key.split)]) - 1
         return f"{key.group}/{key.split}/{first:05d}-{last:05d}.tar"
 
-    def _unpack(self, key: "Key", images: bool) -> Any:
+    def _unpack(self, key: "Key", images: bool, into: Optional[Path] = None) -> Any:
         """The folder of ``key`` (a scenario, or a counterfactual pair),
         unpacked alone from its pack into a new temporary folder (a
-        ``TemporaryDirectory``, removed when dropped), frames only when
+        ``TemporaryDirectory``, removed when dropped), or into the new folder
+        ``into`` (kept: ``cleanup()`` removes it), frames only when
         ``images``. :class:`~causalcity.InputError` names a pack that breaks
         the packs' rule (:class:`_MemberOrder`: a member twice was taken
         last copy winning; a pack cut short as one without its last
@@ -305,7 +306,7 @@ class _Packed:
             members = self._members[pack].get(key.folder)
             if members is None:
                 raise InputError(f"{_os.fspath(path)}: holds no member of {key.folder}: the pack is damaged")
-            scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
+            scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-") if into is None else _Folder(into)
             with _naming_damage(path):
                 for member in members:
                     _, name = _member_parts(path, member)
@@ -322,6 +323,28 @@ class _Packed:
                                          "pack's members: the pack is damaged") from None  # fmt: skip
         return scratch
 
+    def _member_name(self, key: "Key") -> str:
+        """How errors name ``key``'s folder in its pack: ``<pack>: <folder>``."""
+        return f"{_os.fspath(self.root / self.pack_of(key))}: {key.folder}"
+
+    def _read_unpacked(self, keys: List["Key"], read: Any, into: Optional[Path] = None) -> list:
+        """``read(folder, key)`` of each of ``keys`` in turn, its folder
+        unpacked without frames into a temporary folder removed once read
+        (or, with ``into``, into ``into/<its folder>``, kept). An error that
+        names the unpacked folder names its pack and member instead, as the
+        command line does; it is raised as the same type."""
+        results = []
+        for key in keys:
+            scratch = self._unpack(key, False, None if into is None else into / key.folder)
+            try:
+                results.append(read(Path(scratch.name), key))
+            except (ValueError, RuntimeError, OSError) as e:
+                raise _renamed(e, scratch.name, self._member_name(key)) from None
+            finally:
+                if into is None:
+                    scratch.cleanup()
+        return results
+
     def _as_members(self, scratch: Any, key: "Key") -> Any:
         """A context in which an :class:`~causalcity.InputError` naming a file
         of ``key``'s folder unpacked into ``scratch`` names it by its pack
@@ -335,8 +358,7 @@ class _Packed:
                 yield
             except InputError as e:
                 scratch.cleanup()
-                where = f"{_os.fspath(self.root / self.pack_of(key))}: {key.folder}"
-                raise InputError(str(e).replace(scratch.name, where)) from None
+                raise InputError(str(e).replace(scratch.name, self._member_name(key))) from None
             except BaseException:
                 scratch.cleanup()
                 raise
@@ -347,6 +369,43 @@ class _Packed:
         state = dict(self.__dict__)
         state["_members"] = {}
         return state
+
+
+class _Folder:
+    """A folder made to unpack into, kept (as a ``TemporaryDirectory``'s
+    ``name`` and ``cleanup()``, which removes it)."""
+
+    def __init__(self, path: Path) -> None:
+        path.mkdir(parents=True)
+        self.name = _os.fspath(path)
+
+    def cleanup(self) -> None:
+        import shutil
+
+        shutil.rmtree(self.name, ignore_errors=True)
+
+
+def _renamed(error: BaseException, path: str, name: str) -> BaseException:
+    """``error`` as the same type with ``path`` named ``name`` in its
+    message (``error`` itself where it does not name ``path``, or where its
+    type is not made from a message alone)."""
+    message = str(error)
+    if path not in message:
+        return error
+    try:
+        return type(error)(message.replace(path, name))
+    except Exception:  # (a UnicodeDecodeError is made from five values)
+        return error
+
+
+def _count_refused(root: Path, group: str, split: str, listed: Optional[int], found: int, what: str) -> Optional[str]:
+    """Why ``found`` finished scenarios (``what`` they are) of ``group``'s
+    ``split`` do not agree with the ``listed`` count of ``root``'s manifest,
+    or None when they agree or it lists none."""
+    if listed is None or found == listed:
+        return None
+    return (f"{root / group / split}: {found} {what}, but {root / 'manifest.json'} lists {listed}; "
+            f"causalcity validate {root} tells what is missing")  # fmt: skip
 
 
 def _refuse_linked(folder: Path) -> None:

@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import shutil
 import sys
 import warnings
 from dataclasses import asdict, dataclass
@@ -240,7 +239,7 @@ def _scenario_folders(root: Path, unpack: Optional[Sequence[str]] = None) -> Ite
     names, every group when None) are unpacked, without frames, into a
     temporary folder that goes when the context ends; errors about them
     name the pack and member, as the command line does."""
-    from .disk import _refuse_linked
+    from .disk import _count_refused, _refuse_linked
 
     if not root.is_dir():
         raise ValueError(f"{root} is not a folder: give the dataset folder gen wrote (the one holding manifest.json)")
@@ -255,18 +254,15 @@ def _scenario_folders(root: Path, unpack: Optional[Sequence[str]] = None) -> Ite
         raise ValueError(f"{root} is not complete: finish it with its gen command first")
 
     def refuse_count(group: dict, split: str, found: int, what: str) -> None:
-        expected = group.get("splits", {}).get(split)
-        if expected is not None and found != expected:
-            raise ValueError(
-                f"{root / group['name'] / split}: {found} {what}, but {path} lists {expected}; "
-                f"causalcity validate {root} tells what is missing"
-            )
+        refused = _count_refused(root, group["name"], split, group.get("splits", {}).get(split), found, what)
+        if refused is not None:
+            raise ValueError(refused)
 
     folders = {}
     if manifest.get("scenarios_per_tar"):
         import tempfile
 
-        from .disk import Dataset
+        from .disk import Dataset, _renamed
 
         with Dataset(root, images=False) as opened, tempfile.TemporaryDirectory(prefix="causalcity-reference-") as into:
             # Where each unpacked folder came from: `<pack>: <folder>`.
@@ -278,20 +274,15 @@ def _scenario_folders(root: Path, unpack: Optional[Sequence[str]] = None) -> Ite
                     folders[(g["name"], split)] = []
                     if unpack is not None and g["name"] not in unpack:
                         continue
-                    for key in keys:
-                        scratch = opened._unpack(key, False)
-                        target = Path(into) / key.folder
-                        shutil.copytree(scratch.name, target)
-                        scratch.cleanup()
-                        folders[(g["name"], split)].append(target)
-                        came_from[str(target)] = f"{root / opened.pack_of(key)}: {key.folder}"
+                    for key, folder in opened._read_unpacked(keys, lambda folder, key: (key, folder), Path(into)):
+                        folders[(g["name"], split)].append(folder)
+                        came_from[str(folder)] = opened._member_name(key)
             try:
                 yield folders
             except (ValueError, OSError) as e:  # named by its pack, not the temporary folder
-                message = str(e)
                 for target, origin in came_from.items():
-                    message = message.replace(target, origin)
-                raise type(e)(message) from None
+                    e = _renamed(e, target, origin)
+                raise e from None
         return
     for g in groups:
         for split in SPLITS:

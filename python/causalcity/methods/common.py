@@ -238,34 +238,20 @@ def _split_scenarios(root: Path, manifest: dict, group: str, split: str, read) -
     A packed dataset's (``gen --format tar``) scenarios are unpacked one at
     a time, without frames, into a temporary folder that goes once read
     (errors name the pack and member, as the command line does)."""
+    from ..disk import Dataset, _count_refused, _refuse_linked
+
     listed = next(g for g in manifest["groups"] if g["name"] == group).get("splits", {}).get(split)
 
     def refuse_count(found: int, what: str) -> None:
-        if listed is not None and found != listed:
-            raise DatasetError(
-                f"{root / group / split}: {found} {what}, but {root / 'manifest.json'} lists {listed}; "
-                f"causalcity validate {root} tells what is missing"
-            )
+        refused = _count_refused(root, group, split, listed, found, what)
+        if refused is not None:
+            raise DatasetError(refused)
 
     if manifest.get("scenarios_per_tar"):
-        from ..disk import Dataset
-
         with Dataset(root, split, images=False) as opened:
             keys = [k for k in opened.keys(split) if k.group == group]
             refuse_count(len(keys), "scenarios in its packs")
-            read_in = []
-            for key in keys:
-                scratch = opened._unpack(key, False)
-                where = f"{root / opened.pack_of(key)}: {key.folder}"
-                try:
-                    read_in.append((key.folder, read(Path(scratch.name), key.index)))
-                except (DatasetError, InputError) as e:
-                    raise type(e)(str(e).replace(scratch.name, where)) from None
-                finally:
-                    scratch.cleanup()
-            return read_in
-    from ..disk import _refuse_linked
-
+            return opened._read_unpacked(keys, lambda folder, key: (key.folder, read(folder, key.index)))
     # Hidden folders are scenarios being written; the manifest says how many
     # finished ones there are.
     folders = sorted(
