@@ -944,3 +944,49 @@ fn the_space_check_measures_a_scenario_of_the_most_cars() {
         "measured {each_kb} kB, a 12-car scenario is {twelve} kB: {stderr}"
     );
 }
+
+#[test]
+fn shards_of_two_datasets_started_together_never_both_write_one_folder() {
+    // Shards share the folder's lock: shard 0/2 of one seed and shard 1/2 of
+    // another, started at the same moment, both found the folder empty and
+    // both wrote into it, exit 0 (one try in three), leaving two datasets
+    // mixed for merge to refuse.
+    let dir = fresh_dir("batch-shard-race");
+    let spec = small_spec(&dir);
+    let other = dir.join("other.json");
+    std::fs::write(&other, std::fs::read_to_string(&spec).unwrap().replace("\"seed\": 11", "\"seed\": 12")).unwrap();
+    let out = dir.join("out");
+    let mut one_won = 0;
+    // (40 tries: the code before this test let both write in 1 to 3 of 12)
+    for _ in 0..40 {
+        let _ = std::fs::remove_dir_all(&out);
+        let start = |spec: &Path, shard: &str| {
+            gen_cmd(spec, &out, &["--no-images", "-j", "1", "--shard", shard])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        };
+        let (a, b) = (start(&spec, "0/2"), start(&other, "1/2"));
+        let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+        assert!(!(a.status.success() && b.status.success()), "both shards wrote into {}", out.display());
+        for refused in [&a, &b].into_iter().filter(|o| !o.status.success()) {
+            let stderr = String::from_utf8_lossy(&refused.stderr);
+            assert_eq!(refused.status.code(), Some(2), "{stderr}");
+            assert!(stderr.contains("holds a dataset made differently") && stderr.contains("seed"), "{stderr}");
+        }
+        // What is left is one dataset's: every manifest there of one seed.
+        let seeds: std::collections::BTreeSet<u64> = std::fs::read_dir(out.join("shards"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| read_json(&e.path())["spec"]["seed"].as_u64().unwrap())
+            .collect();
+        assert!(seeds.len() <= 1, "manifests of seeds {seeds:?} in one folder");
+        if a.status.success() != b.status.success() {
+            one_won += 1;
+            assert_eq!(seeds.len(), 1, "the shard that went on left no manifest");
+        }
+    }
+    assert!(one_won > 0, "in no try did one shard go on: the race was not run");
+}

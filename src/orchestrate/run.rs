@@ -731,6 +731,71 @@ pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: In
     }
 }
 
+/// What sets the dataset `options` would write apart from the `existing`
+/// manifests in its folder (theirs and their shards'): one difference per
+/// line, none when they are one dataset (the shards of one folder split it
+/// the same way).
+fn differences_from(
+    existing: &[(PathBuf, ManifestRecord)],
+    expansion: &Expansion,
+    options: &GenOptions,
+    products: Products,
+) -> Vec<String> {
+    let mut differences: Vec<String> = existing
+        .iter()
+        .flat_map(|(_, record)| record.differences(&expansion.spec, products, options.packing))
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    // A different --limit: a larger one (or none) extends the dataset, whose
+    // first scenarios are the same keys; a smaller one would leave scenarios
+    // the new manifest does not list, and shards of one job share theirs.
+    let shown = |limit: Option<u32>| limit.map_or("no --limit".to_string(), |n| format!("--limit {n}"));
+    // What a limit means is the scenarios per split it leaves: a limit at
+    // or above every split's size is the same dataset as no limit.
+    let per_split = |limit: Option<u32>| {
+        crate::spec::Split::ALL.map(|split| {
+            let size = expansion.spec.splits.count(split);
+            limit.map_or(size, |l| l.min(size))
+        })
+    };
+    for (path, record) in existing {
+        let (theirs, ours) = (per_split(record.limit), per_split(options.limit));
+        let shrinks = ours.iter().zip(&theirs).any(|(o, t)| o < t);
+        // A pack is named by the scenarios it holds, so more of them would
+        // make other packs and leave the old ones behind.
+        let packed = options.packing != Packing::Folders || record.packing() != Packing::Folders;
+        if theirs != ours && (shrinks || packed || options.shard.is_some() || record.shard.is_some()) {
+            differences.push(format!(
+                "limit: {} was written with {}, this run asks for {}{}",
+                path.display(),
+                shown(record.limit),
+                shown(options.limit),
+                if shrinks {
+                    " (fewer scenarios: the others would stay behind, unlisted)"
+                } else if packed {
+                    " (a packed dataset keeps its --limit: its packs are named by the scenarios they hold)"
+                } else {
+                    ""
+                }
+            ));
+        }
+    }
+    if let Some(ours) = options.shard {
+        for (path, record) in existing {
+            if let Some(theirs) = record.shard.filter(|theirs| theirs.count != ours.count) {
+                differences.push(format!(
+                    "shards: {} splits the dataset into {} shards, this run into {}",
+                    path.display(),
+                    theirs.count,
+                    ours.count
+                ));
+            }
+        }
+    }
+    differences
+}
+
 fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
     let names = expansion.spec.cameras.iter().map(|c| c.name.as_str());
     if let Some(warning) = super::cameras_without_images(options.images, "the spec's", names) {
@@ -759,58 +824,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     // One dataset per folder: same spec, tool version and image setting;
     // the shards of one folder split it the same way.
     let existing = existing_manifests(&out)?;
-    let mut differences: Vec<String> = existing
-        .iter()
-        .flat_map(|(_, record)| record.differences(&expansion.spec, products, options.packing))
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    // A different --limit: a larger one (or none) extends the dataset, whose
-    // first scenarios are the same keys; a smaller one would leave scenarios
-    // the new manifest does not list, and shards of one job share theirs.
-    let shown = |limit: Option<u32>| limit.map_or("no --limit".to_string(), |n| format!("--limit {n}"));
-    // What a limit means is the scenarios per split it leaves: a limit at
-    // or above every split's size is the same dataset as no limit.
-    let per_split = |limit: Option<u32>| {
-        crate::spec::Split::ALL.map(|split| {
-            let size = expansion.spec.splits.count(split);
-            limit.map_or(size, |l| l.min(size))
-        })
-    };
-    for (path, record) in &existing {
-        let (theirs, ours) = (per_split(record.limit), per_split(options.limit));
-        let shrinks = ours.iter().zip(&theirs).any(|(o, t)| o < t);
-        // A pack is named by the scenarios it holds, so more of them would
-        // make other packs and leave the old ones behind.
-        let packed = options.packing != Packing::Folders || record.packing() != Packing::Folders;
-        if theirs != ours && (shrinks || packed || options.shard.is_some() || record.shard.is_some()) {
-            differences.push(format!(
-                "limit: {} was written with {}, this run asks for {}{}",
-                path.display(),
-                shown(record.limit),
-                shown(options.limit),
-                if shrinks {
-                    " (fewer scenarios: the others would stay behind, unlisted)"
-                } else if packed {
-                    " (a packed dataset keeps its --limit: its packs are named by the scenarios they hold)"
-                } else {
-                    ""
-                }
-            ));
-        }
-    }
-    if let Some(ours) = options.shard {
-        for (path, record) in &existing {
-            if let Some(theirs) = record.shard.filter(|theirs| theirs.count != ours.count) {
-                differences.push(format!(
-                    "shards: {} splits the dataset into {} shards, this run into {}",
-                    path.display(),
-                    theirs.count,
-                    ours.count
-                ));
-            }
-        }
-    }
+    let differences = differences_from(&existing, expansion, options, products);
     // Ctrl-C or a SIGTERM while --force removes lets the removal finish,
     // then stops the run (exit 130); before, SIGTERM ended it at once
     // (exit 143), leaving its lock file.
@@ -943,6 +957,31 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     // sample included) lands in a folder that says which dataset it is.
     let previous_manifest = std::fs::read(&manifest_file).ok();
     write_atomically(&manifest_file, &manifest(false))?;
+    // Nothing written: the manifest as it was (or none).
+    let undo_manifest = |previous: Option<Vec<u8>>| -> Result<(), GenError> {
+        match previous {
+            Some(bytes) => write_atomically(&manifest_file, &bytes)?,
+            None => {
+                let _ = std::fs::remove_file(&manifest_file);
+                if let Some(folder) = &made_manifest_folder {
+                    let _ = std::fs::remove_dir(folder);
+                }
+            }
+        }
+        Ok(())
+    };
+    // Shards share the folder's lock, so shards of two datasets started
+    // together could both have found no other manifest above, and both
+    // written (one in three tries). Each looks again now that its own is
+    // there: of two, the one that wrote later sees the other's, and leaves.
+    if options.shard.is_some() {
+        let others: Vec<_> = existing_manifests(&out)?.into_iter().filter(|(path, _)| *path != manifest_file).collect();
+        let differences = differences_from(&others, expansion, options, products);
+        if !differences.is_empty() {
+            undo_manifest(previous_manifest)?;
+            return Err(GenError::Mixed { out, differences });
+        }
+    }
 
     let writer = TownWriters::new(expansion, products, options.fsync);
     let times = StageTimes::default();
@@ -971,16 +1010,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
             Ok(sample) => sample,
             Err(GenError::Interrupted { .. }) => return Err(GenError::Interrupted { done: 0, total, out }),
             Err(refused @ GenError::Space { .. }) => {
-                // Nothing written: the manifest as it was (or none).
-                match previous_manifest {
-                    Some(bytes) => write_atomically(&manifest_file, &bytes)?,
-                    None => {
-                        let _ = std::fs::remove_file(&manifest_file);
-                        if let Some(folder) = made_manifest_folder {
-                            let _ = std::fs::remove_dir(folder);
-                        }
-                    }
-                }
+                undo_manifest(previous_manifest)?;
                 return Err(refused);
             }
             Err(e) => return Err(e),
