@@ -44,7 +44,7 @@ class Frames:
     dtype = _np.dtype(_np.uint8)
 
     def __init__(self, folder: Path, kind: str, frames: int, width: int, height: int, cars: Optional[int] = None) -> None:
-        self.folder = folder
+        self._folder = folder
         self.kind = kind
         self._frames, self._width, self._height = frames, width, height
         # A mask's values are 0 (no car) and a car's mask_id (its id + 1).
@@ -52,11 +52,30 @@ class Frames:
         # A packed dataset's temporary folder that ``folder`` is in (kept
         # alive while these frames are; not sent to other processes).
         self._keep: Any = None
+        # Where a packed dataset's frames come from: (``<pack>: <folder>``,
+        # the run's folder within the scenario's, "" for a scenario's own).
+        self._packed: Optional[Tuple[str, str]] = None
 
     def __getstate__(self) -> Dict[str, Any]:
+        # Frames unpacked into a temporary folder go to another process (a
+        # DataLoader worker's scenario to the main process) without it:
+        # the sender removes it once its own copy goes, so the receiver
+        # unpacks them again from the pack when first read (it read a
+        # removed folder: "cannot read /tmp/causalcity-scenario-...").
         state = dict(self.__dict__)
         state["_keep"] = None
+        if self._packed is not None:
+            state["_folder"] = None
         return state
+
+    @property
+    def folder(self) -> Path:
+        """The folder the frames are read from (a packed dataset's: a
+        temporary one, unpacked again from the pack in a process the frames
+        were sent to)."""
+        if self._folder is None and self._packed is not None:
+            self._folder, self._keep = _unpack_frames(*self._packed, self.kind)
+        return self._folder
 
     @property
     def shape(self) -> Tuple[int, ...]:
@@ -71,14 +90,21 @@ class Frames:
         return self._frames
 
     def _read(self, start: int, end: int) -> _np.ndarray:
-        raw = _native.read_frames(
-            _os.fspath(self.folder), self.kind, self._frames, start, end, self._width, self._height
-        )
+        try:
+            return self._read_from(self.folder, start, end)
+        except InputError as e:
+            if self._packed is None or self._keep is None:
+                raise
+            # named by its pack and member, not the temporary folder
+            raise InputError(str(e).replace(self._keep.scratch.name, self._packed[0])) from None
+
+    def _read_from(self, folder: Path, start: int, end: int) -> _np.ndarray:
+        raw = _native.read_frames(_os.fspath(folder), self.kind, self._frames, start, end, self._width, self._height)
         out = _np.asarray(raw)
         if self.kind == "mask" and self._cars is not None and out.size and int(out.max()) > self._cars:
             frame = start + int(_np.argmax(out.reshape(len(out), -1).max(axis=1) > self._cars))
             raise InputError(
-                f"{_os.fspath(self.folder)}: mask frame {frame} holds the value {int(out[frame - start].max())}, and "
+                f"{_os.fspath(folder)}: mask frame {frame} holds the value {int(out[frame - start].max())}, and "
                 f"the scenario has {self._cars} cars: a mask holds 0 (no car) or a car's mask_id, 1 to {self._cars}"
             )
         return out
@@ -92,25 +118,27 @@ class Frames:
             i = int(first) + (self._frames if first < 0 else 0)
             if not 0 <= i < self._frames:
                 raise IndexError(f"frame {int(first)} is outside the scenario's {self._frames} frames")
-            out = self._read(i, i + 1)[0]
-            return out[rest] if rest else out
+            # (as the frame's position in one frame: numpy pairs an int
+            # with the other index arrays, which out[rest] would not)
+            return self._read(i, i + 1)[(0,) + rest]
         if isinstance(first, (bool, _np.bool_)):
             return _np.asarray(self)[index]  # numpy's new axis (or none), as an array gives
         chosen = _np.arange(self._frames)[first]
         if chosen.ndim == 0:
-            out = self._read(int(chosen), int(chosen) + 1)[0]
-            return out[rest] if rest else out
-        if chosen.ndim > 1:  # an index array of any shape gives frames in that shape, as numpy does
-            out = self[(chosen.ravel(),) + rest]
-            return out.reshape(chosen.shape + out.shape[1:])
-        chosen = chosen.ravel()
-        if len(chosen) == 0:
-            out = self._read(0, 0)
-        elif (_np.diff(chosen) == 1).all():
-            out = self._read(int(chosen[0]), int(chosen[-1]) + 1)
+            return self._read(int(chosen), int(chosen) + 1)[(0,) + rest]
+        # Only the frames chosen are decoded, each once (sorted); the index
+        # then picks from them as it would from every frame.
+        frames = _np.unique(chosen)
+        if len(frames) == 0:
+            decoded = self._read(0, 0)
+        elif frames[-1] - frames[0] == len(frames) - 1:
+            decoded = self._read(int(frames[0]), int(frames[-1]) + 1)
         else:
-            out = _np.stack([self._read(int(i), int(i) + 1)[0] for i in chosen])
-        return out[(slice(None),) + rest] if rest else out
+            decoded = _np.stack([self._read(int(i), int(i) + 1)[0] for i in frames])
+        if isinstance(first, slice):  # basic indexing: the other indices apply to every frame taken
+            return decoded[_np.searchsorted(frames, chosen)][(slice(None),) + rest]
+        # An index array: numpy pairs it with the other index arrays.
+        return decoded[(_np.searchsorted(frames, chosen),) + rest]
 
     def __iter__(self) -> Iterator[_np.ndarray]:
         for i in range(self._frames):
@@ -444,31 +472,57 @@ def _check_is(scenario: "Scenario", key: "Key", record: Path, seed: Any) -> None
         )
 
 
-def _keep_with_frames(scratch: Any, scenarios: List["Scenario"]) -> None:
-    """Hands the temporary folder ``scenarios`` were read from to their
-    frames, which read from it while they live; without frames it goes now."""
+def _keep_with_frames(scratch: Any, scenarios: List["Scenario"], member: str) -> None:
+    """Hands the temporary folder ``scenarios`` were read from (unpacked
+    from ``member``: ``<pack>: <folder>``) to their frames, which read from
+    it while they live; without frames it goes now."""
     kept, holder = False, _Kept(scratch)
     for scenario in scenarios:
         for frames in (scenario.rgb, scenario.mask):
             if isinstance(frames, Frames):
-                frames._keep, kept = holder, True
+                inside = Path(frames.folder).relative_to(scratch.name).as_posix().strip(".")
+                frames._keep, frames._packed, kept = holder, (member, inside), True
     if not kept:
         scratch.cleanup()
 
 
+def _unpack_frames(member: str, inside: str, kind: str) -> Tuple[Path, "_Kept"]:
+    """The ``kind`` frames (``rgb`` or ``mask``) of ``member`` (``<pack>:
+    <folder>``; of its run ``inside``, "" for the scenario's own), unpacked
+    alone into a new temporary folder: (the folder they are in, its holder)."""
+    import tempfile
+
+    pack, folder = member.rsplit(": ", 1)
+    path = Path(pack)
+    prefix = f"{inside}/{kind}/" if inside else f"{kind}/"
+    scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
+    kept = _Kept(scratch)
+    with _open_pack(path) as tar, _naming_damage(path):
+        for entry in tar:
+            if entry.isdir():
+                continue
+            owner, name = _member_parts(path, entry)
+            if owner == folder and name.startswith(prefix):
+                target = Path(scratch.name) / name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                data = tar.extractfile(entry)
+                target.write_bytes(data.read() if data is not None else b"")
+    return Path(scratch.name) / inside if inside else Path(scratch.name), kept
+
+
 class _Kept:
     """A temporary folder that frames read from, removed once the last of
-    them goes (left to ``TemporaryDirectory``'s own finaliser, its removal
-    warned "Implicitly cleaning up" under ``-W always`` and pytest)."""
+    them goes. Removed by a finaliser that holds the folder's
+    ``TemporaryDirectory``, so that the directory's own finaliser, which
+    warns "Implicitly cleaning up" (under ``-W always`` and pytest), never
+    runs first: it did when both were collected in one reference cycle
+    (frames held by an exception's traceback)."""
 
     def __init__(self, scratch: Any) -> None:
-        self.scratch = scratch
+        import weakref
 
-    def __del__(self) -> None:
-        try:
-            self.scratch.cleanup()
-        except Exception:  # at interpreter exit, or already removed
-            pass
+        self.scratch = scratch
+        weakref.finalize(self, scratch.cleanup)
 
 
 class _ReadHold:
@@ -628,21 +682,25 @@ class Dataset(_Packed):
             folder = self.root / key.folder
             _refuse_linked(folder)
             if not (folder / "scenario.json").is_file():
-                raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in {key.folder})")
+                # (listed: the dataset's own key, so its folder is damaged)
+                raise InputError(f"{_os.fspath(folder / 'scenario.json')}: missing, and manifest.json lists "
+                                 f"{tuple(key)}: the dataset is damaged (causalcity validate names what else is)")
             self._require_frames(folder, images)
             scenario = load(folder, images=images)
             _check_is(scenario, key, folder / "scenario.json", self.spec.seed)
             return scenario
         scratch = self._unpack(key, images)
-        if scratch is None or not (Path(scratch.name) / "scenario.json").is_file():
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no scenario.json in its pack {self.pack_of(key)})")
+        if not (Path(scratch.name) / "scenario.json").is_file():
+            scratch.cleanup()
+            raise InputError(f"{self._member_name(key)}/scenario.json: missing from its pack, and manifest.json "
+                             f"lists {tuple(key)}: the pack is damaged (causalcity validate names what else is)")
         with self._as_members(scratch, key):
             self._require_frames(Path(scratch.name), images, self.pack_of(key))
             scenario = load(Path(scratch.name), images=images)
             _check_is(scenario, key, Path(scratch.name) / "scenario.json", self.spec.seed)
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
-        _keep_with_frames(scratch, [scenario])
+        _keep_with_frames(scratch, [scenario], self._member_name(key))
         return scenario
 
     def _require_frames(self, folder: Path, images: bool, pack: Optional[str] = None) -> None:
@@ -921,9 +979,14 @@ class Sweep(_Packed):
             if not _os.path.lexists(folder / "summary.json"):
                 raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no {key.folder}/summary.json)")
             return folder, None
-        scratch = self._unpack(key, images) if (self.root / self.pack_of(key)).is_file() else None
-        if scratch is None or not (Path(scratch.name) / "summary.json").is_file():
-            raise KeyError(f"{tuple(key)} is not in {_os.fspath(self.root)} (no summary.json in its pack {self.pack_of(key)})")
+        if not (self.root / self.pack_of(key)).is_file():
+            raise InputError(f"{_os.fspath(self.root / self.pack_of(key))}: missing, and sweep.json lists "
+                             f"{tuple(key)} in it: the sweep is damaged (causalcity validate names what else is)")
+        scratch = self._unpack(key, images)
+        if not (Path(scratch.name) / "summary.json").is_file():
+            scratch.cleanup()
+            raise InputError(f"{self._member_name(key)}/summary.json: missing from its pack, and sweep.json lists "
+                             f"{tuple(key)}: the pack is damaged (causalcity validate names what else is)")
         return Path(scratch.name), scratch
 
     def load(self, key: "Key", images: bool = True) -> "Counterfactual":
@@ -945,7 +1008,7 @@ class Sweep(_Packed):
             divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)
             summary = _json.loads((folder / "summary.json").read_text())
         if scratch is not None:
-            _keep_with_frames(scratch, [factual, counterfactual])
+            _keep_with_frames(scratch, [factual, counterfactual], self._member_name(key))
         return Counterfactual(name=summary["scenario"], factual=factual, counterfactual=counterfactual,
                               divergence=divergence, summary=summary)  # fmt: skip
 

@@ -282,6 +282,61 @@ def test_frames_index_as_numpy_does(toy):
     assert s.rgb[picks].shape == whole[picks].shape == (2, 2, 160, 256, 3)
     np.testing.assert_array_equal(s.rgb[picks], whole[picks])
     assert s.rgb[True].shape == whole[True].shape == (1, 6, 160, 256, 3)
+    # Index arrays after the first pair with it, as numpy pairs them (a
+    # second array gave (2, 2, 256, 3) where numpy gives (2, 256, 3)), and
+    # an int with an array apart from it moves their axis first.
+    checked = 0
+    for index in [([1, 3], [1, 3]), ([1, 3], slice(None), [0, 1]), (2, slice(None), [0, 2]), ([3, 1, 3], 5, [0, 2, 1]),
+                  (np.array([[0, 2], [5, 1]]), [[1], [2]]), (slice(1, 4), slice(None), [0, 1]), ([], [])]:  # fmt: skip
+        assert s.rgb[index].shape == whole[index].shape, index
+        np.testing.assert_array_equal(s.rgb[index], whole[index])
+        checked += 1
+    assert checked == 7
+
+
+def test_a_packed_scenarios_frames_read_where_a_dataloader_worker_sends_them(tmp_path):
+    # A packed dataset's scenario pickled (as a DataLoader worker sends it)
+    # kept the path of its temporary folder, which the sender removed once
+    # its own copy went: "cannot read /tmp/causalcity-scenario-.../rgb/0005.png".
+    import gc
+    import pickle
+
+    causalcity.generate(SPEC, tmp_path / "folders", progress=False)
+    causalcity.generate(SPEC, tmp_path / "packed", progress=False, format="tar", scenarios_per_tar=2)
+    folders, packed = (causalcity.open_dataset(tmp_path / n, "train") for n in ("folders", "packed"))
+    for position in range(len(packed)):
+        sent = pickle.dumps(packed[position])
+        gc.collect()  # the sender's copy and its folder are gone
+        received = pickle.loads(sent)
+        np.testing.assert_array_equal(np.asarray(received.rgb), np.asarray(folders[position].rgb))
+        np.testing.assert_array_equal(received.mask[[5, 1]], np.asarray(folders[position].mask)[[5, 1]])
+    assert position == len(folders) - 1 > 0
+
+
+def test_a_damaged_packs_frames_and_missing_files_are_named_by_the_pack(tmp_path):
+    # A frame missing from a pack was named by the removed temporary folder,
+    # and a listed scenario whose scenario.json was missing from its pack
+    # raised a KeyError, as for a key the dataset does not have.
+    causalcity.generate(SPEC, tmp_path / "p", progress=False, format="tar", scenarios_per_tar=2)
+    pack = tmp_path / "p" / GROUP / "train" / "00000-00001.tar"
+    with tarfile.open(pack) as tar:
+        members = [(m, tar.extractfile(m).read()) for m in tar.getmembers()]
+
+    def rewrite(leave_out):
+        with tarfile.open(pack, "w", format=tarfile.USTAR_FORMAT) as tar:
+            for m, data in members:
+                if not m.name.endswith(leave_out):
+                    tar.addfile(m, __import__("io").BytesIO(data))
+
+    rewrite("00000/rgb/0005.png")
+    scenario = causalcity.open_dataset(tmp_path / "p", "train")[0]
+    with pytest.raises(causalcity.InputError) as error:
+        scenario.rgb[5]
+    assert f"cannot read {pack}: {GROUP}/train/00000/rgb/0005.png" in str(error.value), str(error.value)
+    rewrite("00001/scenario.json")
+    with pytest.raises(causalcity.InputError) as error:
+        causalcity.open_dataset(tmp_path / "p", "train").load((GROUP, "train", 1))
+    assert f"{pack}: {GROUP}/train/00001/scenario.json: missing from its pack" in str(error.value), str(error.value)
 
 
 def test_flags_and_batches_of_the_wrong_kind_are_named(toy, tmp_path):
