@@ -197,6 +197,16 @@ fn three_shards_merged_equal_one_run() {
     let merged = dir.join("merged");
     let mut args = vec!["merge", "--out", merged.to_str().unwrap()];
     args.extend(shard_dirs.iter().map(String::as_str));
+    // A file of the user's in a shard: said of the shard (it was told "Use
+    // another --out", though the shard is an input).
+    let notes = Path::new(&shard_dirs[0]).join("notes.txt");
+    std::fs::write(&notes, "mine").unwrap();
+    let output = run(&args);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("(a shard to merge) holds") && stderr.contains("notes.txt"), "{stderr}");
+    assert!(stderr.contains("Move the rest out of it") && !stderr.contains("another --out"), "{stderr}");
+    std::fs::remove_file(&notes).unwrap();
     let output = run(&args);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert_eq!(hash_tree(&merged), expected, "merged shards differ from one run");
@@ -212,6 +222,10 @@ fn three_shards_merged_equal_one_run() {
     }
     let premature = run(&["validate", shared.to_str().unwrap()]);
     assert_ne!(premature.status.code(), Some(0), "shards without a merge are not a dataset yet");
+    // Said as shards to merge (it said "not a causalcity dataset").
+    let said = String::from_utf8_lossy(&premature.stderr);
+    assert!(said.contains("holds the shards of a gen job (shards/0-of-3.json, shards/1-of-3.json"), "{said}");
+    assert!(said.contains(&format!("causalcity merge --out {}", shared.display())), "{said}");
     let output = run(&["merge", "--out", shared.to_str().unwrap()]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert_eq!(hash_tree(&shared), expected);
@@ -989,4 +1003,53 @@ fn shards_of_two_datasets_started_together_never_both_write_one_folder() {
         }
     }
     assert!(one_won > 0, "in no try did one shard go on: the race was not run");
+}
+
+#[test]
+fn a_limit_at_or_above_every_split_writes_the_dataset_of_no_limit() {
+    // A rerun of a finished dataset with --limit 12 (every split at most 4)
+    // rewrote its manifest with "limit": 12, no longer the bytes of a run
+    // without, and a later --limit was told it "was written with --limit 12".
+    let dir = fresh_dir("batch-limit-all");
+    let spec = small_spec(&dir);
+    let (plain, limited) = (dir.join("plain"), dir.join("limited"));
+    gen_ok(&spec, &plain, &["--no-images"]);
+    let expected = hash_tree(&plain);
+    gen_ok(&spec, &limited, &["--no-images", "--limit", "4"]);
+    assert_eq!(hash_tree(&limited), expected, "--limit 4 of splits of 4, 2 and 2");
+    gen_ok(&spec, &plain, &["--no-images", "--limit", "12"]);
+    assert_eq!(hash_tree(&plain), expected, "a rerun with --limit 12 changed the dataset");
+    assert!(read_json(&plain.join("manifest.json"))["limit"].is_null());
+    let output = gen_cmd(&spec, &plain, &["--no-images", "--limit", "1"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("was written with no --limit, this run asks for --limit 1"), "{stderr}");
+}
+
+#[test]
+fn a_packed_merge_counts_what_it_moved_as_tar_files() {
+    // "100 scenarios (40 moved, ...)": the 40 were tar files.
+    let dir = fresh_dir("batch-merge-tar");
+    let spec = small_spec(&dir);
+    let mut args = vec!["merge".to_string(), "--out".into(), dir.join("merged").display().to_string()];
+    for k in 0..2 {
+        let out = dir.join(format!("s{k}"));
+        gen_ok(
+            &spec,
+            &out,
+            &["--no-images", "--format", "tar", "--scenarios-per-tar", "2", "--shard", &format!("{k}/2")],
+        );
+        args.push(out.display().to_string());
+    }
+    let output = run(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let said = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    assert!(output.status.success(), "{said}");
+    let packs = glob_count(&dir.join("merged"), ".tar");
+    assert!(said.contains(&format!("16 scenarios ({packs} tar files moved, 0 duplicate tar files dropped)")), "{said}");
+    assert!(packs == 8, "2 groups' splits of 4, 2 and 2 in packs of 2: {packs}");
+}
+
+/// How many files under `root` have names ending in `suffix`.
+fn glob_count(root: &Path, suffix: &str) -> usize {
+    hash_tree(root).keys().filter(|name| name.ends_with(suffix)).count()
 }

@@ -45,6 +45,21 @@ pub struct Unpacked {
     done: std::sync::Mutex<Vec<bool>>,
 }
 
+/// The shard manifests in `dir/shards/` (`shards/K-of-N.json`), sorted: a
+/// `gen --shard` job's folder before its merge.
+fn shard_manifests(dir: &Path) -> Vec<String> {
+    let mut found: Vec<String> = std::fs::read_dir(dir.join("shards"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|entry| entry.file_name().to_string_lossy().into_owned())
+        .filter(|name| name.contains("-of-") && name.ends_with(".json"))
+        .map(|name| format!("shards/{name}"))
+        .collect();
+    found.sort();
+    found
+}
+
 impl Dataset {
     /// Opens the dataset in `dir`; errors name the folder and what is wrong.
     pub fn open(dir: &Path) -> Result<Dataset, String> {
@@ -56,7 +71,17 @@ impl Dataset {
                      wrote",
                 dir.display()
             ),
-            false => format!("no manifest.json in {}: not a causalcity dataset", dir.display()),
+            false => match shard_manifests(dir).as_slice() {
+                [] => format!("no manifest.json in {}: not a causalcity dataset", dir.display()),
+                shards => format!(
+                    "{} holds the shards of a gen job ({}) and no manifest.json: not a dataset until they are \
+                     merged. Run `causalcity merge --out {}` once every shard has finished (it names any that has \
+                     not), or rerun an interrupted merge",
+                    dir.display(),
+                    shards.join(", "),
+                    dir.display()
+                ),
+            },
         })?;
         let expansion = expansion_of(&record, &manifest)?;
         let unpacked = match record.packing() {

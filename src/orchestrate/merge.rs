@@ -4,7 +4,7 @@
 //! own; either way the shard manifests say what each contains.
 
 use super::run::GenError;
-use crate::output::claim::{claim, Writer};
+use crate::output::claim::{claim, ClaimError, Writer};
 use crate::output::layout::ScenarioLayout;
 use crate::output::manifest::{Manifest, ManifestRecord, Packing};
 use crate::output::packs::Packs;
@@ -90,7 +90,17 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let mut source_claims = Vec::new();
     let mut manifests = shard_manifests(out)?;
     for source in &others {
-        source_claims.push(claim(source, Writer::Merge, "merge").map_err(GenError::Claim)?);
+        // A shard folder is emptied and removed, so it may hold nothing of
+        // the user's: said as the shard's, not as --out's ("Use another --out").
+        let claimed = claim(source, Writer::Merge, "merge").map_err(|e| match e {
+            ClaimError::Foreign { dir, what, .. } => GenError::Input(format!(
+                "{} (a shard to merge) holds {what}: merge moves a shard's scenarios out and removes its folder, \
+                 so it holds only what `gen --shard` wrote. Move the rest out of it, then rerun; nothing was moved",
+                dir.display()
+            )),
+            other => GenError::Claim(other),
+        })?;
+        source_claims.push(claimed);
         let found = shard_manifests(source)?;
         if found.is_empty() {
             return Err(GenError::Input(format!(
@@ -138,16 +148,25 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         let first: Vec<String> = (0..count).filter(|i| !present.contains(i)).take(10).map(|i| i.to_string()).collect();
         let more = if missing > first.len() { format!(" and {} more", missing - first.len()) } else { String::new() };
         return Err(GenError::Input(format!(
-            "shards {}{more} of {count} are missing: run `causalcity gen --shard K/{count}` for them",
-            first.join(", ")
+            "shard{} {}{more} of {count} {} missing: run `causalcity gen --shard K/{count}` for {}",
+            if missing == 1 { "" } else { "s" },
+            first.join(", "),
+            if missing == 1 { "is" } else { "are" },
+            if missing == 1 { "it" } else { "them" }
         )));
     }
     let incomplete: Vec<String> =
         manifests.iter().filter(|(_, r)| !r.complete).map(|(_, r)| r.shard.expect("shard").index.to_string()).collect();
     if !incomplete.is_empty() {
         return Err(GenError::Input(format!(
-            "shards {} did not finish: rerun their gen commands to resume them",
-            incomplete.join(", ")
+            "{} did not finish: rerun {} to resume {}",
+            if incomplete.len() == 1 {
+                format!("shard {}", incomplete[0])
+            } else {
+                format!("shards {}", incomplete.join(", "))
+            },
+            if incomplete.len() == 1 { "its gen command" } else { "their gen commands" },
+            if incomplete.len() == 1 { "it" } else { "them" }
         )));
     }
     if let Some(existing) = ManifestRecord::read(&out.join("manifest.json")).map_err(GenError::Manifest)? {
@@ -267,8 +286,11 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             let _ = fs::remove_dir(source);
         }
     }
+    // (A packed dataset moves whole tar files: they were counted as scenarios.)
+    let unit = if first.packing() == Packing::Folders { "" } else { " tar files" };
     Ok(format!(
-        "merged {count} shards into {}: {} scenarios ({moved} moved, {already} duplicates dropped); wrote manifest.json",
+        "merged {count} shards into {}: {} scenarios ({moved}{unit} moved, {already} duplicate{unit} dropped); wrote \
+         manifest.json",
         out.display(),
         sequence.len()
     ))

@@ -716,6 +716,13 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 /// [`generate`] of a spec already read and expanded (`options.spec_path` is
 /// not read again); `start` is when the run began, for its summary.
 pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
+    // A limit at or above every split's size is the same dataset as no
+    // limit, and is written as none: a rerun of a finished dataset with
+    // such a limit rewrote its manifest with it (no longer the bytes of a
+    // run without), and later runs were told it "was written with" it.
+    let splits = &expansion.spec.splits;
+    let limit = options.limit.filter(|&l| crate::spec::Split::ALL.iter().any(|&split| splits.count(split) > l));
+    let options = &GenOptions { limit, ..options.clone() };
     let kept = || {
         let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
         finished_on_disk(&out, &expansion.spec)
@@ -894,12 +901,13 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     if let Some(shard) = options.shard {
         let (units, what) = packs.map_or((sequence.len(), "scenarios"), |p| (p.len(), "tar files"));
         if shard.count as usize > units {
+            let idle = match shard.count - 1 {
+                last if last as usize == units => format!("shard {units} would hold none"),
+                last => format!("shards {units} to {last} would hold none"),
+            };
             return Err(GenError::Input(format!(
-                "--shard {}/{}: this run has {units} {what} to share out, so shards {units} to {} would hold \
-                 none: use at most {units} shards",
-                shard.index,
-                shard.count,
-                shard.count - 1
+                "--shard {}/{}: this run has {units} {what} to share out, so {idle}: use at most {units} shards",
+                shard.index, shard.count,
             )));
         }
     }
