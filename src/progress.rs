@@ -22,6 +22,9 @@ pub struct Progress {
     bar: Option<ProgressBar>,
     plain: Option<Mutex<(Instant, u64)>>,
     done: AtomicU64,
+    /// Of `done`, those found finished already (a resumed run's): left
+    /// out of the rate, which they made meaningless ("70/100, 586/s").
+    skipped: std::sync::Arc<AtomicU64>,
     total: u64,
     start: Instant,
 }
@@ -44,6 +47,8 @@ impl Progress {
 
     fn of(start: Instant, total: u64, mode: ProgressMode, unit: &'static str) -> Progress {
         let terminal = std::io::stderr().is_terminal();
+        let skipped = std::sync::Arc::new(AtomicU64::new(0));
+        let skipped_seen = skipped.clone();
         let (bar, plain) = match mode {
             ProgressMode::Quiet => (None, None),
             ProgressMode::Auto if terminal => {
@@ -61,7 +66,9 @@ impl Progress {
                         })
                         .with_key("rate_eta", move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
                             let total = state.len().unwrap_or(0);
-                            let _ = w.write_str(&rate_and_eta(state.pos(), total, start.elapsed().as_secs_f64()));
+                            let skipped = skipped_seen.load(Ordering::Relaxed);
+                            let seconds = start.elapsed().as_secs_f64();
+                            let _ = w.write_str(&rate_and_eta_skipping(state.pos(), skipped, total, seconds));
                         });
                 bar.set_style(style);
                 bar.enable_steady_tick(Duration::from_millis(200));
@@ -69,7 +76,14 @@ impl Progress {
             }
             ProgressMode::Auto => (None, Some(Mutex::new((start, 0)))),
         };
-        Progress { unit, bar, plain, done: AtomicU64::new(0), total, start }
+        Progress { unit, bar, plain, done: AtomicU64::new(0), skipped, total, start }
+    }
+
+    /// One more scenario (unit) found finished already: counted as done,
+    /// but not into the rate and ETA.
+    pub fn skip(&self) {
+        self.skipped.fetch_add(1, Ordering::Relaxed);
+        self.inc();
     }
 
     /// One more scenario (unit) finished.
@@ -89,7 +103,7 @@ impl Progress {
                     self.total,
                     self.unit,
                     100.0 * done as f64 / self.total.max(1) as f64,
-                    rate_and_eta(done, self.total, secs)
+                    rate_and_eta_skipping(done, self.skipped.load(Ordering::Relaxed), self.total, secs)
                 ));
                 *last = (Instant::now(), done);
             }
@@ -106,10 +120,17 @@ impl Progress {
 /// `12/s, ETA 40 s` (`0.4/s` below 10 per second); `starting` before the
 /// first one finishes, when there is no rate to tell yet.
 pub fn rate_and_eta(done: u64, total: u64, seconds: f64) -> String {
-    if done == 0 || seconds <= 0.0 {
-        return "starting".into();
+    rate_and_eta_skipping(done, 0, total, seconds)
+}
+
+/// [`rate_and_eta`] of `done` units of which `skipped` were found done
+/// already: the rate is of the others, the ETA of what is left at it.
+fn rate_and_eta_skipping(done: u64, skipped: u64, total: u64, seconds: f64) -> String {
+    let worked = done.saturating_sub(skipped);
+    if worked == 0 || seconds <= 0.0 {
+        return if skipped > 0 { "those found finished already" } else { "starting" }.into();
     }
-    let rate = done as f64 / seconds;
+    let rate = worked as f64 / seconds;
     let rate_text = if rate >= 10.0 { format!("{rate:.0}/s") } else { format!("{rate:.1}/s") };
     let eta = total.saturating_sub(done) as f64 / rate;
     let eta_text = if eta >= 3600.0 {
@@ -141,5 +162,8 @@ mod tests {
         assert_eq!(rate_and_eta(150, 1000, 10.0), "15/s, ETA 57 s");
         assert_eq!(rate_and_eta(10, 100_000, 1.0), "10/s, ETA 2h46m");
         assert_eq!(rate_and_eta(30, 30, 3.0), "10/s, ETA 0 s");
+        // A resumed run: 70 found done, 10 written in 2 s, 20 left.
+        assert_eq!(rate_and_eta_skipping(80, 70, 100, 2.0), "5.0/s, ETA 4 s");
+        assert_eq!(rate_and_eta_skipping(70, 70, 100, 2.0), "those found finished already");
     }
 }

@@ -1060,14 +1060,15 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
                 .is_ok();
         if intact {
             skipped.fetch_add(1, Ordering::Relaxed);
+            progress.skip();
         } else {
             let written_bytes = write_scenario(expansion, &writer, key, (&out, target), buffers, &times)?;
             if packs.is_none() {
                 bytes.fetch_add(written_bytes, Ordering::Relaxed);
             }
             written.fetch_add(1, Ordering::Relaxed);
+            progress.inc();
         }
-        progress.inc();
         Ok(())
     };
     let result = pool.install(|| match &packs {
@@ -1088,7 +1089,7 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
                             remove_packed(&out, &folder(key), &crate::output::OwnFiles::SCENARIO)?;
                         }
                         skipped.fetch_add(u64::from(pack.count), Ordering::Relaxed);
-                        (0..pack.count).for_each(|_| progress.inc());
+                        (0..pack.count).for_each(|_| progress.skip());
                         return Ok(());
                     }
                     Err(why) => {
