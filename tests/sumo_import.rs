@@ -64,7 +64,30 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
         let shape = start + text[start..].find("shape=\"").unwrap() + 7;
         format!("{}12,x{}", &text[..shape], &text[shape..])
     };
+    // The same lane moved 5 km east (its ends no longer on the junctions its
+    // edge names: cars drove a straight line over no road to its
+    // connections), and given a length of inf ("must be positive").
+    let (moved, endless) = {
+        let start = text.find(lane).unwrap();
+        let shape = start + text[start..].find("shape=\"").unwrap() + 7;
+        let end = shape + text[shape..].find('"').unwrap();
+        let points: Vec<String> = text[shape..end]
+            .split(' ')
+            .map(|p| {
+                let (x, y) = p.split_once(',').unwrap();
+                format!("{},{y}", x.parse::<f64>().unwrap() + 5000.0)
+            })
+            .collect();
+        let length = start + text[start..].find("length=\"").unwrap() + 8;
+        let length_end = length + text[length..].find('"').unwrap();
+        (
+            format!("{}{}{}", &text[..shape], points.join(" "), &text[end..]),
+            format!("{}inf{}", &text[..length], &text[length_end..]),
+        )
+    };
     for (name, bad, needle) in [
+        ("moved", moved, r#"<lane id="-172014854#1_1">: starts at"#),
+        ("endless", endless, r#"<lane id="-172014854#1_1">: length inf m; allowed: a number above 0"#),
         (
             "rail",
             text.replacen(junction, r#"<junction id="1560592097" type="rail_crossing""#, 1),

@@ -466,6 +466,12 @@ pub const MAX_NETWORK_COORDINATE_M: f64 = 1.0e7;
 /// lane's route) would not fit in memory.
 pub const MAX_NETWORK_SPAN_M: f64 = 1.0e6;
 
+/// Farthest a lane's end may lie beyond the outline of the junction it
+/// starts or ends at, metres. netconvert writes a lane's ends on the
+/// outline (0 m beyond it in every network under tests/data/sumo); 50 m
+/// leaves room for hand-made files whose junctions have no outline.
+pub const MAX_LANE_END_GAP_M: f64 = 50.0;
+
 /// Largest offset (either sign) of a light programme, seconds: the longest
 /// scenario a spec allows (`spec::MAX_SCENARIO_S`, which a test holds it
 /// to). A light's clock is the scenario's time plus its offset, which
@@ -664,19 +670,18 @@ impl SumoNetwork {
                 let shape = polyline(&l.shape).filter(|s| s.len() >= 2).ok_or_else(|| {
                     format!("<lane id=\"{}\">: shape {:?}; allowed: two or more {POINTS_ALLOWED}", l.id, l.shape)
                 })?;
-                if !(l.length.is_finite() && l.length > 0.0 && l.speed.is_finite() && l.speed > 0.0) {
+                // (A length of inf was told it "must be positive": each
+                // value now with its own range. Listed by `map`, and no
+                // longer than the network spans.)
+                if !(l.length.is_finite() && l.length > 0.0 && l.length <= MAX_NETWORK_SPAN_M) {
                     return Err(format!(
-                        "<lane id=\"{}\">: length {} m and speed {} m/s must be positive",
-                        l.id, l.length, l.speed
-                    ));
-                }
-                // (Listed by `map`, and no longer than the network spans.)
-                if l.length > MAX_NETWORK_SPAN_M {
-                    return Err(format!(
-                        "<lane id=\"{}\">: length {:e} m; allowed: above 0 and at most {MAX_NETWORK_SPAN_M} m (1,000 km, \
-                         the largest span of a network)",
+                        "<lane id=\"{}\">: length {} m; allowed: a number above 0 and at most {MAX_NETWORK_SPAN_M} m \
+                         (1,000 km, the largest span of a network)",
                         l.id, l.length
                     ));
+                }
+                if !(l.speed.is_finite() && l.speed > 0.0) {
+                    return Err(format!("<lane id=\"{}\">: speed {} m/s; allowed: a number above 0", l.id, l.speed));
                 }
                 let width = l.width.unwrap_or(SUMO_DEFAULT_LANE_WIDTH_M);
                 if !(width > 0.0 && width <= MAX_LANE_WIDTH_M) {
@@ -684,6 +689,23 @@ impl SumoNetwork {
                         "<lane id=\"{}\">: width {width} m; allowed: above 0 and at most {MAX_LANE_WIDTH_M} m",
                         l.id
                     ));
+                }
+                // A lane's ends lie on its junctions (netconvert writes
+                // them on the outline): a shape that ends elsewhere
+                // contradicts the connections from it, and cars drove the
+                // straight line between (500 m over no road).
+                for (what, point, junction) in [("starts", shape[0], from), ("ends", shape[shape.len() - 1], to)] {
+                    let j = &junctions[junction];
+                    let reach = j.shape.iter().map(|p| p.distance(j.centre)).fold(0.0, f64::max) + MAX_LANE_END_GAP_M;
+                    let away = point.distance(j.centre);
+                    if away > reach {
+                        return Err(format!(
+                            "<lane id=\"{}\">: {what} at ({}, {}), {away:.1} m from <junction id=\"{}\"> at ({}, {}), \
+                             which its edge names: allowed: within the junction's outline and {MAX_LANE_END_GAP_M} m \
+                             (MAX_LANE_END_GAP_M); its shape contradicts the network",
+                            l.id, point.x, point.y, j.id, j.centre.x, j.centre.y
+                        ));
+                    }
                 }
                 lane_index.insert((e.id.as_str(), l.index), lanes.len());
                 lanes.push(SumoLane {

@@ -359,7 +359,8 @@ impl Planner {
             }
             if !done && collider {
                 return Err(format!(
-                    "could not place a collider (a leader, its follower and a car with priority timed to meet the follower at its first junction) after {PLACEMENT_ATTEMPTS} tries: colliders need junctions where drivers give way with approaches long enough to start the car with priority on (longer blocks, map.grid.block_m, help), or fewer cars"
+                    "could not place a collider (a leader, its follower and a car with priority timed to meet the follower at its first junction) after {PLACEMENT_ATTEMPTS} tries: colliders need junctions where drivers give way with approaches long enough to start the car with priority on {}, or fewer cars",
+                    self.longer_approaches()
                 ));
             }
             if !done {
@@ -458,6 +459,17 @@ impl Planner {
     }
 
     /// The footprint of a car centred `s` metres along `lane`.
+    /// How a refusal of colliders says to get longer approaches: a grid's
+    /// blocks, or (an imported network, where map.grid is refused) another
+    /// network.
+    pub(super) fn longer_approaches(&self) -> &'static str {
+        if self.map.is_imported() {
+            "(this network has too few such approaches: another network)"
+        } else {
+            "(longer blocks, map.grid.block_m, help)"
+        }
+    }
+
     pub(super) fn car_box(&self, lane: LaneId, s: f64) -> OrientedBox {
         let curve = &self.map.lanes[lane].curve;
         OrientedBox {

@@ -75,7 +75,8 @@ impl Planner {
         // with priority.
         let failed = failed.filter(|_| !reached_priority);
         Err(failed.unwrap_or_else(|| format!(
-            "could not give {colliders} followers a car with priority at their first junction after {COLLIDER_PLATOON_TRIES} tries: colliders need junctions where drivers give way (no lights, or left turns on a permissive green) with approaches long enough to start the car with priority on (longer blocks, map.grid.block_m, help), or fewer cars"
+            "could not give {colliders} followers a car with priority at their first junction after {COLLIDER_PLATOON_TRIES} tries: colliders need junctions where drivers give way (no lights, or left turns on a permissive green) with approaches long enough to start the car with priority on {}, or fewer cars",
+                    self.longer_approaches()
         )))
     }
 
