@@ -128,7 +128,7 @@ pub fn rate_and_eta(done: u64, total: u64, seconds: f64) -> String {
 fn rate_and_eta_skipping(done: u64, skipped: u64, total: u64, seconds: f64) -> String {
     let worked = done.saturating_sub(skipped);
     if worked == 0 || seconds <= 0.0 {
-        return if skipped > 0 { "those found finished already" } else { "starting" }.into();
+        return if skipped > 0 { "resuming" } else { "starting" }.into();
     }
     let rate = worked as f64 / seconds;
     let rate_text = if rate >= 10.0 { format!("{rate:.0}/s") } else { format!("{rate:.1}/s") };
@@ -164,6 +164,6 @@ mod tests {
         assert_eq!(rate_and_eta(30, 30, 3.0), "10/s, ETA 0 s");
         // A resumed run: 70 found done, 10 written in 2 s, 20 left.
         assert_eq!(rate_and_eta_skipping(80, 70, 100, 2.0), "5.0/s, ETA 4 s");
-        assert_eq!(rate_and_eta_skipping(70, 70, 100, 2.0), "those found finished already");
+        assert_eq!(rate_and_eta_skipping(70, 70, 100, 2.0), "resuming");
     }
 }

@@ -987,7 +987,11 @@ fn shards_of_two_datasets_started_together_never_both_write_one_folder() {
         for refused in [&a, &b].into_iter().filter(|o| !o.status.success()) {
             let stderr = String::from_utf8_lossy(&refused.stderr);
             assert_eq!(refused.status.code(), Some(2), "{stderr}");
-            assert!(stderr.contains("holds a dataset made differently") && stderr.contains("seed"), "{stderr}");
+            let raced = stderr.contains("a `gen --shard` run of another dataset began writing here at the same moment");
+            assert!(
+                (raced || stderr.contains("holds a dataset made differently")) && stderr.contains("seed"),
+                "{stderr}"
+            );
         }
         // What is left is one dataset's: every manifest there of one seed.
         let seeds: std::collections::BTreeSet<u64> = std::fs::read_dir(out.join("shards"))
@@ -1024,6 +1028,13 @@ fn a_limit_at_or_above_every_split_writes_the_dataset_of_no_limit() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("was written with no --limit, this run asks for --limit 1"), "{stderr}");
+    // A refusal names the limit as given (a packed dataset keeps its own).
+    let packed = dir.join("packed");
+    gen_ok(&spec, &packed, &["--no-images", "--format", "tar", "--limit", "1"]);
+    let output = gen_cmd(&spec, &packed, &["--no-images", "--format", "tar", "--limit", "12"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("was written with --limit 1, this run asks for --limit 12"), "{stderr}");
 }
 
 #[test]

@@ -85,7 +85,44 @@ fn a_network_that_cannot_be_imported_is_refused_naming_the_element_and_nothing_i
             format!("{}inf{}", &text[..length], &text[length_end..]),
         )
     };
+    // A 201 m lane whose written shape stops 40 m along it: refused, unless
+    // its endOffset says it ends that far before its junction (SUMO cuts
+    // the shape it writes by it: a stop line set back).
+    let (cut, set_back) = {
+        let long = r#"<lane id="190083608#1_1""#;
+        let start = text.find(long).unwrap();
+        let shape = start + text[start..].find("shape=\"").unwrap() + 7;
+        let end = shape + text[shape..].find('"').unwrap();
+        let points: Vec<(f64, f64)> = text[shape..end]
+            .split(' ')
+            .map(|p| {
+                let (x, y) = p.split_once(',').unwrap();
+                (x.parse().unwrap(), y.parse().unwrap())
+            })
+            .collect();
+        let (mut kept, mut along) = (vec![points[0]], 0.0);
+        for pair in points.windows(2) {
+            let ((x0, y0), (x1, y1)) = (pair[0], pair[1]);
+            let step = ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt();
+            if along + step >= 40.0 {
+                let f = (40.0 - along) / step;
+                kept.push((x0 + f * (x1 - x0), y0 + f * (y1 - y0)));
+                break;
+            }
+            along += step;
+            kept.push((x1, y1));
+        }
+        let shape_text: Vec<String> = kept.iter().map(|(x, y)| format!("{x:.2},{y:.2}")).collect();
+        let cut = format!("{}{}{}", &text[..shape], shape_text.join(" "), &text[end..]);
+        let set_back = cut.replacen(long, &format!(r#"{long} endOffset="161.24""#), 1);
+        (cut, set_back)
+    };
+    let accepted = dir.join("set-back.net.xml");
+    std::fs::write(&accepted, set_back).unwrap();
+    let listed = run(&["map", "--net", accepted.to_str().unwrap()]);
+    assert!(listed.status.success(), "endOffset: {}", String::from_utf8_lossy(&listed.stderr));
     for (name, bad, needle) in [
+        ("cut", cut, r#"<lane id="190083608#1_1">: ends at"#),
         ("moved", moved, r#"<lane id="-172014854#1_1">: starts at"#),
         ("endless", endless, r#"<lane id="-172014854#1_1">: length inf m; allowed: a number above 0"#),
         (

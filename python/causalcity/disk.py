@@ -121,8 +121,9 @@ class Frames:
             # (as the frame's position in one frame: numpy pairs an int
             # with the other index arrays, which out[rest] would not)
             return self._read(i, i + 1)[(0,) + rest]
-        if isinstance(first, (bool, _np.bool_)):
-            return _np.asarray(self)[index]  # numpy's new axis (or none), as an array gives
+        if isinstance(first, (bool, _np.bool_)) or (_np.ndim(first) > 1 and _np.asarray(first).dtype == bool):
+            # numpy's new axis (or none), or a mask over frames and rows: as an array gives
+            return _np.asarray(self)[index]
         chosen = _np.arange(self._frames)[first]
         if chosen.ndim == 0:
             return self._read(int(chosen), int(chosen) + 1)[(0,) + rest]
@@ -355,6 +356,11 @@ class _Packed:
         """How errors name ``key``'s folder in its pack: ``<pack>: <folder>``."""
         return f"{_os.fspath(self.root / self.pack_of(key))}: {key.folder}"
 
+    def _member_source(self, key: "Key") -> str:
+        """:meth:`_member_name` with the pack's absolute path: where frames
+        sent to another process (another working directory) unpack from."""
+        return f"{_os.path.abspath(self.root / self.pack_of(key))}: {key.folder}"
+
     def _read_unpacked(self, keys: List["Key"], read: Any, into: Optional[Path] = None) -> list:
         """``read(folder, key)`` of each of ``keys`` in turn, its folder
         unpacked without frames into a temporary folder removed once read
@@ -421,6 +427,9 @@ def _renamed(error: BaseException, path: str, name: str) -> BaseException:
     if path not in message:
         return error
     try:
+        if isinstance(error, OSError) and error.errno is not None:  # (its errno and file kept)
+            filename = error.filename if error.filename is None else _os.fspath(error.filename).replace(path, name)
+            return type(error)(error.errno, error.strerror, filename)
         return type(error)(message.replace(path, name))
     except Exception:  # (a UnicodeDecodeError is made from five values)
         return error
@@ -498,11 +507,15 @@ def _unpack_frames(member: str, inside: str, kind: str) -> Tuple[Path, "_Kept"]:
     scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
     kept = _Kept(scratch)
     with _open_pack(path) as tar, _naming_damage(path):
+        seen = False
         for entry in tar:
             if entry.isdir():
                 continue
             owner, name = _member_parts(path, entry)
-            if owner == folder and name.startswith(prefix):
+            if seen and owner != folder:
+                break  # a scenario's members run together (the packs' rule)
+            seen = owner == folder
+            if seen and name.startswith(prefix):
                 target = Path(scratch.name) / name
                 target.parent.mkdir(parents=True, exist_ok=True)
                 data = tar.extractfile(entry)
@@ -700,7 +713,7 @@ class Dataset(_Packed):
             _check_is(scenario, key, Path(scratch.name) / "scenario.json", self.spec.seed)
         # Read from the temporary folder, the scenario has the key it has here.
         object.__setattr__(scenario, "key", key)
-        _keep_with_frames(scratch, [scenario], self._member_name(key))
+        _keep_with_frames(scratch, [scenario], self._member_source(key))
         return scenario
 
     def _require_frames(self, folder: Path, images: bool, pack: Optional[str] = None) -> None:
@@ -1008,7 +1021,7 @@ class Sweep(_Packed):
             divergence = _read_divergence(folder / "divergence.csv", factual.frames, factual.cars)
             summary = _json.loads((folder / "summary.json").read_text())
         if scratch is not None:
-            _keep_with_frames(scratch, [factual, counterfactual], self._member_name(key))
+            _keep_with_frames(scratch, [factual, counterfactual], self._member_source(key))
         return Counterfactual(name=summary["scenario"], factual=factual, counterfactual=counterfactual,
                               divergence=divergence, summary=summary)  # fmt: skip
 

@@ -287,14 +287,15 @@ def test_frames_index_as_numpy_does(toy):
     # an int with an array apart from it moves their axis first.
     checked = 0
     for index in [([1, 3], [1, 3]), ([1, 3], slice(None), [0, 1]), (2, slice(None), [0, 2]), ([3, 1, 3], 5, [0, 2, 1]),
-                  (np.array([[0, 2], [5, 1]]), [[1], [2]]), (slice(1, 4), slice(None), [0, 1]), ([], [])]:  # fmt: skip
+                  (np.array([[0, 2], [5, 1]]), [[1], [2]]), (slice(1, 4), slice(None), [0, 1]), ([], []),
+                  (np.eye(6, 160, dtype=bool),)]:  # fmt: skip
         assert s.rgb[index].shape == whole[index].shape, index
         np.testing.assert_array_equal(s.rgb[index], whole[index])
         checked += 1
-    assert checked == 7
+    assert checked == 8
 
 
-def test_a_packed_scenarios_frames_read_where_a_dataloader_worker_sends_them(tmp_path):
+def test_a_packed_scenarios_frames_read_where_a_dataloader_worker_sends_them(tmp_path, monkeypatch):
     # A packed dataset's scenario pickled (as a DataLoader worker sends it)
     # kept the path of its temporary folder, which the sender removed once
     # its own copy went: "cannot read /tmp/causalcity-scenario-.../rgb/0005.png".
@@ -303,11 +304,15 @@ def test_a_packed_scenarios_frames_read_where_a_dataloader_worker_sends_them(tmp
 
     causalcity.generate(SPEC, tmp_path / "folders", progress=False)
     causalcity.generate(SPEC, tmp_path / "packed", progress=False, format="tar", scenarios_per_tar=2)
-    folders, packed = (causalcity.open_dataset(tmp_path / n, "train") for n in ("folders", "packed"))
+    monkeypatch.chdir(tmp_path)  # opened by a relative path, as a user in the dataset's parent would
+    folders, packed = (causalcity.open_dataset(n, "train") for n in ("folders", "packed"))
     for position in range(len(packed)):
         sent = pickle.dumps(packed[position])
         gc.collect()  # the sender's copy and its folder are gone
-        received = pickle.loads(sent)
+        with monkeypatch.context() as m:
+            m.chdir(tmp_path / "folders")  # (a receiver elsewhere: the pack named whole)
+            received = pickle.loads(sent)
+            received.rgb[0]
         np.testing.assert_array_equal(np.asarray(received.rgb), np.asarray(folders[position].rgb))
         np.testing.assert_array_equal(received.mask[[5, 1]], np.asarray(folders[position].mask)[[5, 1]])
     assert position == len(folders) - 1 > 0

@@ -75,8 +75,9 @@ impl Dataset {
                 [] => format!("no manifest.json in {}: not a causalcity dataset", dir.display()),
                 shards => format!(
                     "{} holds the shards of a gen job ({}) and no manifest.json: not a dataset until they are \
-                     merged. Run `causalcity merge --out {}` once every shard has finished (it names any that has \
-                     not), or rerun an interrupted merge",
+                     merged. Once every shard has finished: `causalcity merge --out {}` if all of them wrote here, \
+                     or `causalcity merge --out DEST FOLDER...` naming each shard's folder (merge names any shard \
+                     missing or unfinished); or rerun an interrupted merge",
                     dir.display(),
                     shards.join(", "),
                     dir.display()

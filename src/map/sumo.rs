@@ -67,6 +67,13 @@ struct RawLane {
     allow: Option<String>,
     #[serde(rename = "@disallow")]
     disallow: Option<String>,
+    /// How far before its junction the lane's written shape stops, metres
+    /// (a stop line set back: SUMO cuts the shape it writes by it).
+    #[serde(rename = "@endOffset")]
+    end_offset: Option<f64>,
+    /// The same at the lane's start.
+    #[serde(rename = "@startOffset")]
+    start_offset: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -694,15 +701,23 @@ impl SumoNetwork {
                 // them on the outline): a shape that ends elsewhere
                 // contradicts the connections from it, and cars drove the
                 // straight line between (500 m over no road).
-                for (what, point, junction) in [("starts", shape[0], from), ("ends", shape[shape.len() - 1], to)] {
+                // (SUMO cuts a lane's written shape by its start and end
+                // offsets, which set its ends back from the outline.)
+                let offset = |value: Option<f64>| value.filter(|v| v.is_finite()).unwrap_or(0.0).clamp(0.0, l.length);
+                let ends = [
+                    ("starts", shape[0], from, offset(l.start_offset)),
+                    ("ends", shape[shape.len() - 1], to, offset(l.end_offset)),
+                ];
+                for (what, point, junction, set_back) in ends {
                     let j = &junctions[junction];
-                    let reach = j.shape.iter().map(|p| p.distance(j.centre)).fold(0.0, f64::max) + MAX_LANE_END_GAP_M;
+                    let outline = j.shape.iter().map(|p| p.distance(j.centre)).fold(0.0, f64::max);
+                    let reach = outline + set_back + MAX_LANE_END_GAP_M;
                     let away = point.distance(j.centre);
                     if away > reach {
                         return Err(format!(
                             "<lane id=\"{}\">: {what} at ({}, {}), {away:.1} m from <junction id=\"{}\"> at ({}, {}), \
-                             which its edge names: allowed: within the junction's outline and {MAX_LANE_END_GAP_M} m \
-                             (MAX_LANE_END_GAP_M); its shape contradicts the network",
+                             which its edge names: allowed: within the junction's outline, the lane's offset there \
+                             and {MAX_LANE_END_GAP_M} m (MAX_LANE_END_GAP_M); its shape contradicts the network",
                             l.id, point.x, point.y, j.id, j.centre.x, j.centre.y
                         ));
                     }

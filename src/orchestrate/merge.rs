@@ -233,9 +233,16 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     };
     // The networks the spec names (read from the first shard's folder).
     super::run::keep_networks(&expansion.spec, out)?;
-    let manifest =
-        Manifest::new(&expansion.spec, &expansion.camera, first.limit, first.products(), first.packing(), true, None)
-            .to_json();
+    let manifest = Manifest::new(
+        &expansion.spec,
+        &expansion.camera,
+        first.effective_limit(),
+        first.products(),
+        first.packing(),
+        true,
+        None,
+    )
+    .to_json();
     write_atomically(&out.join("manifest.json"), &manifest)?;
     // The shard manifests: the shard folders' first, then their copies in
     // --out (the last to go, so that a merge cut off in between is still
@@ -287,10 +294,13 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         }
     }
     // (A packed dataset moves whole tar files: they were counted as scenarios.)
-    let unit = if first.packing() == Packing::Folders { "" } else { " tar files" };
+    let (moved_what, dropped_what) = match first.packing() {
+        Packing::Folders => ("", "duplicates"),
+        Packing::Tar { .. } => (" tar files", "duplicate tar files"),
+    };
     Ok(format!(
-        "merged {count} shards into {}: {} scenarios ({moved}{unit} moved, {already} duplicate{unit} dropped); wrote \
-         manifest.json",
+        "merged {count} shards into {}: {} scenarios ({moved}{moved_what} moved, {already} {dropped_what} dropped); \
+         wrote manifest.json",
         out.display(),
         sequence.len()
     ))

@@ -48,7 +48,8 @@ pub fn pack_dataset(
     let manifest_path = out.join("manifest.json");
     if let Some(existing) = ManifestRecord::read(&manifest_path).map_err(GenError::Manifest)? {
         let differences = existing.differences(spec, products, packing);
-        if !differences.is_empty() || existing.limit != opened.record.limit {
+        // (Limits that leave the same scenarios are one: 12 and none over splits of at most 4.)
+        if !differences.is_empty() || existing.effective_limit() != opened.record.effective_limit() {
             return Err(GenError::Input(format!(
                 "{} already holds another dataset ({}): pack into an empty folder; nothing was written",
                 out.display(),
@@ -57,7 +58,8 @@ pub fn pack_dataset(
         }
     }
     let manifest = |complete| {
-        Manifest::new(spec, &opened.expansion.camera, opened.record.limit, products, packing, complete, None).to_json()
+        let limit = opened.record.effective_limit();
+        Manifest::new(spec, &opened.expansion.camera, limit, products, packing, complete, None).to_json()
     };
     write_atomically(&manifest_path, &manifest(false))?;
     sweep_partials(out, spec)?;

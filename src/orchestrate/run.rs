@@ -716,13 +716,6 @@ pub fn generate(options: &GenOptions) -> Result<Summary, GenError> {
 /// [`generate`] of a spec already read and expanded (`options.spec_path` is
 /// not read again); `start` is when the run began, for its summary.
 pub fn generate_expansion(expansion: &Expansion, options: &GenOptions, start: Instant) -> Result<Summary, GenError> {
-    // A limit at or above every split's size is the same dataset as no
-    // limit, and is written as none: a rerun of a finished dataset with
-    // such a limit rewrote its manifest with it (no longer the bytes of a
-    // run without), and later runs were told it "was written with" it.
-    let splits = &expansion.spec.splits;
-    let limit = options.limit.filter(|&l| crate::spec::Split::ALL.iter().any(|&split| splits.count(split) > l));
-    let options = &GenOptions { limit, ..options.clone() };
     let kept = || {
         let out = options.out.clone().unwrap_or_else(|| Path::new("data").join(&expansion.spec.name));
         finished_on_disk(&out, &expansion.spec)
@@ -949,11 +942,17 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     if let Some(parent) = manifest_file.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
+    // A limit at or above every split's size is the same dataset as no
+    // limit, and is written as none: a rerun of a finished dataset with
+    // such a limit rewrote its manifest with it (no longer the bytes of a
+    // run without), and later runs were told it "was written with" it.
+    let splits = &expansion.spec.splits;
+    let written_limit = options.limit.filter(|&l| crate::spec::Split::ALL.iter().any(|&split| splits.count(split) > l));
     let manifest = |complete| {
         Manifest::new(
             &expansion.spec,
             &expansion.camera,
-            options.limit,
+            written_limit,
             products,
             options.packing,
             complete,
@@ -981,13 +980,20 @@ fn generate_into(expansion: &Expansion, options: &GenOptions, start: Instant) ->
     // Shards share the folder's lock, so shards of two datasets started
     // together could both have found no other manifest above, and both
     // written (one in three tries). Each looks again now that its own is
-    // there: of two, the one that wrote later sees the other's, and leaves.
+    // there: of two, the one that wrote later sees the other's and leaves
+    // (both may, if each looks after both wrote: a rerun then goes on).
     if options.shard.is_some() {
         let others: Vec<_> = existing_manifests(&out)?.into_iter().filter(|(path, _)| *path != manifest_file).collect();
         let differences = differences_from(&others, expansion, options, products);
         if !differences.is_empty() {
             undo_manifest(previous_manifest)?;
-            return Err(GenError::Mixed { out, differences });
+            return Err(GenError::Input(format!(
+                "{}: a `gen --shard` run of another dataset began writing here at the same moment:\n  {}\nNothing \
+                 was written by this run: rerun it once the other has finished (it then says what to do), or use \
+                 another --out",
+                out.display(),
+                differences.join("\n  ")
+            )));
         }
     }
 
