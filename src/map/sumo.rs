@@ -402,6 +402,9 @@ pub struct SumoLane {
     /// Junctions (indices into [`SumoNetwork::junctions`]) at its start and end.
     pub from: usize,
     pub to: usize,
+    /// How far its written shape stops before its start and end junctions
+    /// (`startOffset`, `endOffset`), metres.
+    pub set_back: (f64, f64),
     /// Its edge's priority (higher: the priority road), as netconvert set it.
     pub priority: i32,
 }
@@ -681,10 +684,15 @@ impl SumoNetwork {
                 // value now with its own range. Listed by `map`, and no
                 // longer than the network spans.)
                 if !(l.length.is_finite() && l.length > 0.0 && l.length <= MAX_NETWORK_SPAN_M) {
+                    // (1e15 written so, not as sixteen digits)
+                    let length = match l.length {
+                        big if big.is_finite() && big.abs() >= 1e6 => format!("{big:e}"),
+                        other => other.to_string(),
+                    };
                     return Err(format!(
-                        "<lane id=\"{}\">: length {} m; allowed: a number above 0 and at most {MAX_NETWORK_SPAN_M} m \
-                         (1,000 km, the largest span of a network)",
-                        l.id, l.length
+                        "<lane id=\"{}\">: length {length} m; allowed: a number above 0 and at most \
+                         {MAX_NETWORK_SPAN_M} m (1,000 km, the largest span of a network)",
+                        l.id
                     ));
                 }
                 if !(l.speed.is_finite() && l.speed > 0.0) {
@@ -697,31 +705,9 @@ impl SumoNetwork {
                         l.id
                     ));
                 }
-                // A lane's ends lie on its junctions (netconvert writes
-                // them on the outline): a shape that ends elsewhere
-                // contradicts the connections from it, and cars drove the
-                // straight line between (500 m over no road).
                 // (SUMO cuts a lane's written shape by its start and end
                 // offsets, which set its ends back from the outline.)
                 let offset = |value: Option<f64>| value.filter(|v| v.is_finite()).unwrap_or(0.0).clamp(0.0, l.length);
-                let ends = [
-                    ("starts", shape[0], from, offset(l.start_offset)),
-                    ("ends", shape[shape.len() - 1], to, offset(l.end_offset)),
-                ];
-                for (what, point, junction, set_back) in ends {
-                    let j = &junctions[junction];
-                    let outline = j.shape.iter().map(|p| p.distance(j.centre)).fold(0.0, f64::max);
-                    let reach = outline + set_back + MAX_LANE_END_GAP_M;
-                    let away = point.distance(j.centre);
-                    if away > reach {
-                        return Err(format!(
-                            "<lane id=\"{}\">: {what} at ({}, {}), {away:.1} m from <junction id=\"{}\"> at ({}, {}), \
-                             which its edge names: allowed: within the junction's outline, the lane's offset there \
-                             and {MAX_LANE_END_GAP_M} m (MAX_LANE_END_GAP_M); its shape contradicts the network",
-                            l.id, point.x, point.y, j.id, j.centre.x, j.centre.y
-                        ));
-                    }
-                }
                 lane_index.insert((e.id.as_str(), l.index), lanes.len());
                 lanes.push(SumoLane {
                     id: l.id.clone(),
@@ -733,6 +719,7 @@ impl SumoNetwork {
                     shape,
                     from,
                     to,
+                    set_back: (offset(l.start_offset), offset(l.end_offset)),
                     priority: e.priority.unwrap_or(-1),
                 });
             }
@@ -921,7 +908,37 @@ impl SumoNetwork {
         left_out.sort();
         let network = SumoNetwork { junctions, lanes, connections, programmes, left_out };
         network.refuse_too_wide()?;
+        network.refuse_stray_lane_ends()?;
         Ok(network)
+    }
+
+    /// Refuses a lane whose shape starts or ends more than
+    /// [`MAX_LANE_END_GAP_M`] beyond the outline of the junction its edge
+    /// names (and its offset there). netconvert writes a lane's ends on the
+    /// outline; a shape that ends elsewhere contradicts the connections
+    /// from it, and cars drove the straight line between (500 m over no
+    /// road). After the span check, which names a far point first.
+    fn refuse_stray_lane_ends(&self) -> Result<(), String> {
+        for l in &self.lanes {
+            let ends = [
+                ("starts", l.shape[0], l.from, l.set_back.0),
+                ("ends", l.shape[l.shape.len() - 1], l.to, l.set_back.1),
+            ];
+            for (what, point, junction, set_back) in ends {
+                let j = &self.junctions[junction];
+                let outline = j.shape.iter().map(|p| p.distance(j.centre)).fold(0.0, f64::max);
+                let away = point.distance(j.centre);
+                if away > outline + set_back + MAX_LANE_END_GAP_M {
+                    return Err(format!(
+                        "<lane id=\"{}\">: {what} at ({}, {}), {away:.1} m from <junction id=\"{}\"> at ({}, {}), \
+                         which its edge names: allowed: within the junction's outline, the lane's offset there and \
+                         {MAX_LANE_END_GAP_M} m (MAX_LANE_END_GAP_M); its shape contradicts the network",
+                        l.id, point.x, point.y, j.id, j.centre.x, j.centre.y
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Refuses a network spanning more than [`MAX_NETWORK_SPAN_M`] on an
@@ -1116,7 +1133,7 @@ mod tests {
             (
                 r#"speed="13.9" length="10" shape="15,0 25,0""#,
                 r#"speed="13.9" length="1e15" shape="15,0 25,0""#,
-                r#"<lane id="b_0">: length 1e15 m; allowed: above 0 and at most 1000000 m"#,
+                r#"<lane id="b_0">: length 1e15 m; allowed: a number above 0 and at most 1000000 m"#,
             ),
             (
                 r#"<connection from="a" to="b""#,
