@@ -284,3 +284,47 @@ fn imported_traffic_lights_run_the_files_programmes_without_crossing_greens() {
     assert_eq!(programmed, map.programmed.len());
     assert!(programmed >= 5, "{programmed} lights run a programme");
 }
+
+#[test]
+fn a_network_cars_cannot_drive_round_says_why() {
+    // One one-way street between two dead ends: "no lane cars drive is
+    // left", with no word of why.
+    let dir = fresh_dir("sumo-one-way");
+    let net = dir.join("one-way.net.xml");
+    std::fs::write(
+        &net,
+        r#"<net version="1.9">
+  <location netOffset="0.00,0.00" convBoundary="0.00,0.00,200.00,0.00" origBoundary="0,0,200,0" projParameter="!"/>
+  <edge id="AB" from="A" to="B" priority="1">
+    <lane id="AB_0" index="0" speed="13.89" length="200.00" shape="0.00,-1.60 200.00,-1.60"/>
+  </edge>
+  <junction id="A" type="dead_end" x="0.00" y="0.00" incLanes="" intLanes="" shape="0.00,0.00 0.00,-3.20"/>
+  <junction id="B" type="dead_end" x="200.00" y="0.00" incLanes="AB_0" intLanes="" shape="200.00,-3.20 200.00,0.00"/>
+</net>"#,
+    )
+    .unwrap();
+    let listed = run(&["map", "--net", net.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&listed.stdout);
+    assert!(
+        stdout.contains("cannot be driven: no two lanes cars drive reach each other: of 1 lanes cars may drive, 1 is left out (AB_0 leads nowhere)"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("a street both ways, or a loop"), "{stdout}");
+    // A spec naming it is refused the same way, nothing written.
+    let spec = dir.join("spec.json");
+    std::fs::write(
+        &spec,
+        city_spec("one-way", &[(2, 0.5)], (1, 0, 0), 5, "{}").replacen(
+            "\"world\": \"city\",",
+            &format!("\"world\": \"city\", \"map\": {{\"sumo\": {:?}}},", net.to_str().unwrap()),
+            1,
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let refused = run(&["gen", "--spec", spec.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("AB_0 leads nowhere") && stderr.contains("map.sumo"), "{stderr}");
+    assert!(!out.exists());
+}

@@ -444,6 +444,29 @@ fn side_roads(map: &CityMap, priority: impl Fn(LaneId) -> i32) -> Vec<LaneId> {
         .collect()
 }
 
+/// Why no network is left once the lanes that lead nowhere or are cut off
+/// are dropped (`dropped`, in the order they were), naming the first few:
+/// cars drive round for the whole run, so they need lanes that lead back.
+fn nothing_left(net: &SumoNetwork, dropped: &[(usize, &str)]) -> String {
+    const NAMED: usize = 4;
+    let named: Vec<String> = dropped
+        .iter()
+        .take(NAMED)
+        .map(|&(l, why)| format!("{} {}", net.lanes[l].id, why.split(':').next().unwrap_or(why)))
+        .collect();
+    let more = dropped.len().saturating_sub(NAMED);
+    format!(
+        "no two lanes cars drive reach each other: of {} lanes cars may drive, {} {} left out ({}{}). Cars drive \
+         round for the whole run, so a network needs lanes that lead back to where they start: a street both \
+         ways, or a loop (a one-way street between dead ends has none)",
+        net.lanes.len(),
+        dropped.len(),
+        if dropped.len() == 1 { "is" } else { "are" },
+        named.join("; "),
+        if more > 0 { format!("; {more} more: `causalcity map --net` lists them") } else { String::new() }
+    )
+}
+
 impl CityMap {
     /// The driveable map of `net`, with lane changes `lane_change_m` long.
     /// Refused when no two lanes reach each other.
@@ -514,7 +537,7 @@ impl CityMap {
                 *size.entry(component[lane]).or_default() += 1;
             }
             let Some((&largest, _)) = size.iter().max_by_key(|(c, s)| (**s, std::cmp::Reverse(**c))) else {
-                return Err("no lane cars drive is left".into());
+                return Err(nothing_left(net, &dropped));
             };
             let mut changed = false;
             for lane in 0..n {
@@ -540,10 +563,7 @@ impl CityMap {
         }
         let ids: Vec<usize> = (0..n).filter(|&l| kept[l]).collect();
         if ids.len() < 2 {
-            return Err(format!(
-                "no two lanes cars drive reach each other (of {n} lanes, {} lead nowhere or are cut off)",
-                dropped.len()
-            ));
+            return Err(nothing_left(net, &dropped));
         }
         let new_id: HashMap<usize, LaneId> = ids.iter().enumerate().map(|(k, &l)| (l, k)).collect();
 
