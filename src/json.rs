@@ -1,6 +1,6 @@
 //! Strict JSON input, shared by every file the tool reads (specs, scenario
-//! files, intervention files): duplicate keys, trailing data and an array
-//! where an object belongs are errors, and every error names the JSON path
+//! files, intervention files): duplicate keys, trailing data, `null` and
+//! an array where an object belongs are errors, and every error names the JSON path
 //! of the field. Imports nothing from the crate.
 //!
 //! Reading is two steps: [`parse`] turns text into a [`Value`] (rejecting
@@ -112,9 +112,16 @@ fn from_value_with<T: DeserializeOwned>(value: Value, skip_variants: bool) -> Re
     })
 }
 
+/// What a `null` is told, wherever it stands: one rule for fields with a
+/// default and fields without.
+const NULL_REFUSED: &str = "null is not a value here: give a value, or leave the field out where it has a default";
+
 /// serde's "expected u32" and the like in the words of a JSON file: a
 /// user wrote a number, a list or an object, not a Rust type.
 pub(crate) fn in_plain_words(message: &str) -> String {
+    if message.starts_with("invalid type: null,") {
+        return NULL_REFUSED.to_string();
+    }
     const WHOLE: [&str; 9] = ["u8", "u16", "u32", "u64", "usize", "i8", "i16", "i32", "i64"];
     let plain_type = |rust: &str| match rust {
         "f32" | "f64" => Some("a number"),
@@ -297,7 +304,9 @@ impl<'de> de::Deserializer<'de> for Strict {
 
     fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Error> {
         match self.0 {
-            Value::Null => visitor.visit_none(),
+            // As a field that is not optional (`"frames": null` was refused
+            // while `"frame_interval": null` was taken as left out).
+            Value::Null => Err(de::Error::custom(NULL_REFUSED)),
             _ => visitor.visit_some(self),
         }
     }

@@ -29,6 +29,21 @@ fn with(edit: impl FnOnce(&mut serde_json::Value)) -> String {
 }
 
 #[test]
+fn null_is_refused_like_a_value_of_the_wrong_kind() {
+    // `"frame_interval": null` was taken as left out, `"frames": null` refused.
+    for (case, field) in [("null-interval", "frame_interval"), ("null-frames", "frames")] {
+        let text = with(|v| v[field] = serde_json::Value::Null);
+        rejected(
+            case,
+            &text,
+            &[&format!("field `{field}`"), "null is not a value here: give a value, or leave the field out"],
+        );
+    }
+    let text = city_with(r#"{"start": {"platoon_cars": null}}"#);
+    rejected("null-nested", &text, &["city.start.platoon_cars", "null is not a value here"]);
+}
+
+#[test]
 fn malformed_json() {
     rejected("malformed", r#"{"name": "x", "world": "toy",,}"#, &["invalid spec", "line 1"]);
     rejected("empty", "", &["invalid spec"]);
@@ -567,7 +582,24 @@ fn numbers_are_echoed_as_written_and_every_value_names_what_is_allowed() {
     rejected(
         "schedule-tiny",
         &city_with(schedule),
-        &["city.lights.overrides[0].schedule[1].duration", "1e-300 is not allowed", "at least 0.04"],
+        &["city.lights.overrides[0].schedule[1].duration", "1e-300 is not allowed", "from 0.04 to 1000000"],
+    );
+    // A phase longer than any scenario (1e300 s was taken and written so
+    // to light_changes.csv), and one light given two schedules (the second
+    // silently won).
+    rejected(
+        "schedule-endless",
+        &city_with(&schedule.replace("1e-300", "1e300")),
+        &["city.lights.overrides[0].schedule[1].duration", "1e300 is not allowed", "(the longest scenario)"],
+    );
+    let twice = r#"{"lights": {"overrides": [
+        {"intersection": "AC", "approach": "W", "signal": "straight", "schedule": [{"colour": "green", "duration": 5}]},
+        {"intersection": "AD", "approach": "W", "signal": "straight", "schedule": [{"colour": "red", "duration": 5}]},
+        {"intersection": "AC", "approach": "W", "signal": "straight", "schedule": [{"colour": "red", "duration": 5}]}]}}"#;
+    rejected(
+        "override-twice",
+        &city_with(twice),
+        &["field `city.lights.overrides[2]`", "AC W straight is given twice (also overrides[0])"],
     );
     // A long name is shown by its start and length: 100 MB of it was echoed whole.
     let long = with(|v| v["name"] = "a".repeat(100_000).into());
@@ -644,4 +676,48 @@ fn actuated_lights_need_an_imported_network() {
         &["city.lights.actuated", "no split drives a SUMO network", "map.sumo"],
     );
     rejected("actuated-type", &city_with(r#"{"lights": {"actuated": "yes"}}"#), &["city.lights.actuated", "boolean"]);
+}
+
+#[test]
+fn platoons_packed_too_tightly_are_refused_before_anything_is_written_never_midway() {
+    // 100 cars in platoons of 4 with gaps of 1-12 m on a small town: the
+    // first scenario planned, and one scenario in 4 then failed midway
+    // through the dataset (exit 1, two scenarios left behind). Now each
+    // seed's dataset is either refused up front or written whole.
+    let (mut refused, mut written) = (0, 0);
+    for seed in 1..=8 {
+        let mut spec: serde_json::Value = serde_json::from_str(&city_spec(
+            "tight",
+            &[(100, 0.5)],
+            (20, 5, 5),
+            2,
+            r#"{"start": {"follower_gap_m": {"uniform": [1, 12]}, "platoon_cars": 4}}"#,
+        ))
+        .unwrap();
+        spec["seed"] = seed.into();
+        spec["map"] = serde_json::json!({"north_south_roads": [-24, 24], "extent_x": 44, "camera_altitude_m": 48});
+        let dir = fresh_dir(&format!("spec-errors-tight-{seed}"));
+        let path = write_spec(&dir, &spec.to_string());
+        let out = dir.join("out");
+        let args =
+            ["gen", "--spec", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-images", "--no-effects"];
+        let result = run(&args);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        match result.status.code() {
+            Some(2) => {
+                assert!(stderr.contains("could not place 100 cars in platoons of 4"), "seed {seed}: {stderr}");
+                assert!(!out.exists(), "seed {seed}: refused, yet wrote {out:?}");
+                refused += 1;
+            }
+            Some(0) => {
+                let manifest: serde_json::Value =
+                    serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+                assert_eq!((&manifest["scenarios"], &manifest["complete"]), (&30.into(), &true.into()), "seed {seed}");
+                written += 1;
+            }
+            code => panic!("seed {seed}: exit {code:?} midway: {stderr}"),
+        }
+    }
+    // Both outcomes happen at this density: the test checks each.
+    assert!(refused > 0 && written > 0, "refused {refused}, written {written}");
 }

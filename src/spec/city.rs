@@ -556,12 +556,34 @@ impl CitySpec {
                     ),
                 ));
             }
-            if let Some((k, st)) =
-                o.schedule.iter().enumerate().find(|(_, st)| !(st.duration.is_finite() && st.duration >= shortest))
+            // (A phase longer than the longest scenario never ends in one:
+            // 1e300 s was taken and written as such to light_changes.csv.)
+            if let Some((k, st)) = o
+                .schedule
+                .iter()
+                .enumerate()
+                .find(|(_, st)| !(st.duration.is_finite() && st.duration >= shortest && st.duration <= max))
             {
                 return Err(SpecError::new(
                     format!("{field}.schedule[{k}].duration"),
-                    format!("{} is not allowed: seconds, at least {MIN_PHASE_S}", Shown(st.duration)),
+                    format!(
+                        "{} is not allowed: seconds, from {MIN_PHASE_S} to {max} (the longest scenario)",
+                        Shown(st.duration)
+                    ),
+                ));
+            }
+            if let Some(first) = self.lights.overrides[..i]
+                .iter()
+                .position(|e| (&e.intersection, e.approach, e.signal) == (&o.intersection, o.approach, o.signal))
+            {
+                return Err(SpecError::new(
+                    field,
+                    format!(
+                        "{} {} {} is given twice (also overrides[{first}]): give each light one schedule",
+                        o.intersection,
+                        o.approach,
+                        o.signal.name()
+                    ),
                 ));
             }
             if !(o.offset.is_finite() && o.offset.abs() <= max) {
