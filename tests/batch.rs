@@ -248,6 +248,64 @@ fn three_shards_merged_equal_one_run() {
 }
 
 #[test]
+fn a_merge_cut_off_as_it_removes_the_shard_manifests_and_folders_is_finished_by_running_it_again() {
+    // Cut off after it wrote the complete manifest, a merge left shard
+    // manifests, empty group folders and a lock file; run again it was
+    // refused ("holds group folders but no manifest.json", "is not a
+    // folder") and they stayed.
+    let dir = fresh_dir("batch-merge-cut-off");
+    let spec = small_spec(&dir);
+    let whole = dir.join("whole");
+    gen_ok(&spec, &whole, &["--quiet", "-j", "2"]);
+    let expected = hash_tree(&whole);
+    let shards: Vec<PathBuf> = (0..3).map(|k| dir.join(format!("shard{k}"))).collect();
+    let mut manifests = Vec::new();
+    for (k, shard) in shards.iter().enumerate() {
+        gen_ok(&spec, shard, &["--quiet", "--shard", &format!("{k}/3")]);
+        let name = format!("{k}-of-3.json");
+        manifests.push((name.clone(), std::fs::read(shard.join("shards").join(&name)).unwrap()));
+    }
+    let merged = dir.join("merged");
+    let mut args = vec!["merge".to_string(), "--out".into(), merged.display().to_string()];
+    args.extend(shards.iter().map(|s| s.display().to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert!(run(&args).status.success());
+    // What a cut off merge leaves, from the shard manifests' removal on:
+    // shard 0 emptied but for its group and split folders and its lock,
+    // shard 1 still holding its manifest, shard 2 gone, and --out one
+    // copy of the shard manifests.
+    let leave = |with_notes: bool| {
+        std::fs::create_dir_all(shards[0].join("cars04_edges50/train")).unwrap();
+        std::fs::create_dir_all(shards[0].join("cars08_edges50/test")).unwrap();
+        std::fs::write(shards[0].join(".causalcity.lock"), "").unwrap();
+        std::fs::create_dir_all(shards[1].join("shards")).unwrap();
+        std::fs::create_dir_all(shards[1].join("cars04_edges50/val")).unwrap();
+        std::fs::write(shards[1].join("shards").join(&manifests[1].0), &manifests[1].1).unwrap();
+        std::fs::create_dir_all(merged.join("shards")).unwrap();
+        std::fs::write(merged.join("shards").join(&manifests[2].0), &manifests[2].1).unwrap();
+        if with_notes {
+            std::fs::write(shards[0].join("cars04_edges50/notes.txt"), "mine").unwrap();
+        }
+    };
+    leave(false);
+    let again = run(&args);
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert!(stdout.contains("merged before); finished what the merge cut off left"), "{stdout}");
+    for shard in &shards {
+        assert!(!shard.exists(), "{} is left: {:?}", shard.display(), hash_tree(shard));
+    }
+    assert_eq!(hash_tree(&merged), expected, "the finished merge differs from one run");
+    // A file of the user's among the leftovers: nothing is removed.
+    leave(true);
+    let refused = run(&args);
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(shards[0].join("cars04_edges50/notes.txt").exists());
+    assert!(shards[1].join("shards").join(&manifests[1].0).exists());
+    assert!(merged.join("shards").join(&manifests[2].0).exists());
+}
+
+#[test]
 fn another_spec_is_refused_unless_forced() {
     let dir = fresh_dir("batch-mixing");
     let spec = small_spec(&dir);

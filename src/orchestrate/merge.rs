@@ -60,6 +60,9 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         let gone = if sources.is_empty() { "" } else { ", and the shard folders are gone into it" };
         return Ok(format!("nothing to merge: {} holds the complete dataset{gone} (merged before)", out.display()));
     }
+    if let Some(finished) = finish_cut_off_merge(out, sources)? {
+        return Ok(finished);
+    }
     for (i, source) in sources.iter().enumerate() {
         if !source.is_dir() {
             let hint = match merged {
@@ -304,6 +307,127 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
         out.display(),
         sequence.len()
     ))
+}
+
+/// A merge cut off after it wrote `out`'s complete manifest, its last
+/// step before removing the shard manifests and the emptied shard folders:
+/// run again, it was refused ("holds group folders but no manifest.json",
+/// or "is not a folder") and left them for good. Finished when every shard
+/// manifest left (in `out/shards/` and in `sources`) is one of the dataset
+/// `out` completes, and each shard folder holds nothing else but empty
+/// folders, lock files and copies of `out`'s networks; anything else is
+/// left to the merge's own checks.
+fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String>, GenError> {
+    let Some(done) = ManifestRecord::read(&out.join("manifest.json")).ok().flatten().filter(|m| m.complete) else {
+        return Ok(None);
+    };
+    let ours = |found: &[(PathBuf, ManifestRecord)]| {
+        found.iter().all(|(_, r)| {
+            r.complete && r.shard_differences(&done, ("", "")).iter().all(|d| d.starts_with("shard count"))
+        })
+    };
+    let copies = shard_manifests(out).unwrap_or_default();
+    if !ours(&copies) {
+        return Ok(None);
+    }
+    let mut leftovers = Vec::new();
+    for source in sources.iter().filter(|s| fs::symlink_metadata(s).is_ok()) {
+        if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || same_folder(source, out) {
+            return Ok(None);
+        }
+        let Ok(found) = shard_manifests(source) else { return Ok(None) };
+        if !ours(&found) {
+            return Ok(None);
+        }
+        let manifests: Vec<PathBuf> = found.into_iter().map(|(path, _)| path).collect();
+        let mut files = Vec::new();
+        if !only_merge_leftovers(out, source, source, &manifests, &mut files) {
+            return Ok(None);
+        }
+        leftovers.push((source, files));
+    }
+    if leftovers.is_empty() && copies.is_empty() {
+        return Ok(None);
+    }
+    let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
+    for (source, files) in &leftovers {
+        for file in files {
+            fs::remove_file(file).map_err(io_err(file))?;
+        }
+        remove_empty_folders(source);
+        // Its lock (a stale one taken over; a live one refused) goes with the claim.
+        drop(claim(source, Writer::Merge, "merge").map_err(GenError::Claim)?);
+        fs::remove_dir(source).map_err(io_err(source))?;
+    }
+    for (copy, _) in &copies {
+        fs::remove_file(copy).map_err(io_err(copy))?;
+    }
+    let _ = fs::remove_dir(out.join("shards")); // only when empty
+    let folders: Vec<String> = leftovers.iter().map(|(s, _)| s.display().to_string()).collect();
+    let removed =
+        copies.len() + leftovers.iter().map(|(_, f)| f.iter().filter(|p| is_shard_manifest(p)).count()).sum::<usize>();
+    Ok(Some(format!(
+        "nothing to merge: {} holds the complete dataset (merged before); finished what the merge cut off left: \
+         removed {removed} shard manifest{}{}",
+        out.display(),
+        if removed == 1 { "" } else { "s" },
+        if folders.is_empty() {
+            String::new()
+        } else {
+            format!(" and the emptied shard folders {}", folders.join(", "))
+        }
+    )))
+}
+
+/// Whether `a` and `b` name one folder.
+fn same_folder(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+}
+
+/// Whether `path` lies in a `shards/` folder.
+fn is_shard_manifest(path: &Path) -> bool {
+    path.parent().and_then(Path::file_name).is_some_and(|n| n == "shards")
+}
+
+/// Whether `dir` (under the shard folder `root`) holds nothing but
+/// folders, lock files, the shard manifests `manifests` and copies of
+/// `out`'s networks; the files to remove (not the locks) go to `files`.
+/// A link is never followed: it is not a leftover.
+fn only_merge_leftovers(out: &Path, root: &Path, dir: &Path, manifests: &[PathBuf], files: &mut Vec<PathBuf>) -> bool {
+    let Ok(entries) = fs::read_dir(dir) else { return false };
+    for entry in entries {
+        let Ok(entry) = entry else { return false };
+        let path = entry.path();
+        let Ok(kind) = entry.file_type() else { return false };
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if kind.is_dir() {
+            if !only_merge_leftovers(out, root, &path, manifests, files) {
+                return false;
+            }
+        } else if !kind.is_file() {
+            return false;
+        } else if dir == root && crate::output::claim::is_lock_file(&name) {
+            // (the claim takes it)
+        } else if manifests.contains(&path)
+            || (dir == root.join(crate::spec::NETWORKS_FOLDER)
+                && same_bytes(&path, &out.join(crate::spec::NETWORKS_FOLDER).join(&name)))
+        {
+            files.push(path);
+        } else {
+            return false;
+        }
+    }
+    true
+}
+
+/// Removes the empty folders below `dir`, deepest first (never a file).
+fn remove_empty_folders(dir: &Path) {
+    for entry in fs::read_dir(dir).into_iter().flatten().flatten() {
+        if entry.file_type().is_ok_and(|k| k.is_dir()) {
+            remove_empty_folders(&entry.path());
+            let _ = fs::remove_dir(entry.path());
+        }
+    }
 }
 
 /// Copies into `out/shards/` each shard manifest of `manifests` that it
