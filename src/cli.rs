@@ -830,6 +830,38 @@ fn progress(quiet: bool) -> ProgressMode {
     }
 }
 
+/// `export`'s formats.
+fn export(command: ExportCommand) -> Result<(), Error> {
+    match command {
+        ExportCommand::Nri(args) => {
+            let options = NriOptions {
+                layout: args.layout.into(),
+                suffix: args.suffix,
+                directed: args.directed,
+                clip: args.clip,
+                velocity: args.velocity.into(),
+                dynamic: args.dynamic,
+                graph: args.graph.into(),
+            };
+            for line in export_nri(&args.dataset, &args.out, &options)? {
+                if !args.quiet {
+                    say(line)?;
+                }
+            }
+            Ok(())
+        }
+        ExportCommand::Nsdr(args) => {
+            let n = export_nsdr(&args.dataset, &args.out, progress(args.quiet))?;
+            say(format!("wrote annotations.json for {n} scenarios under {}", args.out.display()))
+        }
+        ExportCommand::Vcdn(args) => {
+            let ExportVcdnArgs { dir, graph } = args;
+            let n = export_vcdn(&dir.dataset, &dir.out, graph.into(), progress(dir.quiet))?;
+            say(format!("wrote {n} V-CDN HDF5 files under {}", dir.out.display()))
+        }
+    }
+}
+
 /// Writes `text` to stdout. A closed pipe (`causalcity stats D | head`)
 /// ends the program quietly.
 fn say(text: impl Display) -> Result<(), Error> {
@@ -873,39 +905,18 @@ pub fn run(cli: Cli) -> Result<(), Error> {
             };
             report(&generate(&options)?, args.json)
         }
-        Command::Merge(args) => say(merge(&args.out, &args.shards)?),
-        Command::Pack(args) => say(pack_dataset(
-            &args.dataset,
-            &args.out,
-            args.scenarios_per_tar,
-            args.threads.map(|t| t as usize),
-            progress(args.quiet),
-        )?),
-        Command::Export(ExportCommand::Nri(args)) => {
-            let options = NriOptions {
-                layout: args.layout.into(),
-                suffix: args.suffix,
-                directed: args.directed,
-                clip: args.clip,
-                velocity: args.velocity.into(),
-                dynamic: args.dynamic,
-                graph: args.graph.into(),
-            };
-            for line in export_nri(&args.dataset, &args.out, &options)? {
-                if !args.quiet {
-                    say(line)?;
-                }
-            }
-            Ok(())
+        Command::Merge(args) => {
+            causalcity::orchestrate::run::install_quit_handler("merge");
+            say(merge(&args.out, &args.shards)?)
         }
-        Command::Export(ExportCommand::Nsdr(args)) => {
-            let n = export_nsdr(&args.dataset, &args.out, progress(args.quiet))?;
-            say(format!("wrote annotations.json for {n} scenarios under {}", args.out.display()))
+        Command::Pack(args) => {
+            causalcity::orchestrate::run::install_quit_handler("pack");
+            let threads = args.threads.map(|t| t as usize);
+            say(pack_dataset(&args.dataset, &args.out, args.scenarios_per_tar, threads, progress(args.quiet))?)
         }
-        Command::Export(ExportCommand::Vcdn(args)) => {
-            let ExportVcdnArgs { dir, graph } = args;
-            let n = export_vcdn(&dir.dataset, &dir.out, graph.into(), progress(dir.quiet))?;
-            say(format!("wrote {n} V-CDN HDF5 files under {}", dir.out.display()))
+        Command::Export(command) => {
+            causalcity::orchestrate::run::install_quit_handler("export");
+            export(command)
         }
         Command::Preview(args) => {
             let options = PreviewOptions {

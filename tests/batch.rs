@@ -1122,3 +1122,57 @@ fn a_packed_merge_counts_what_it_moved_as_tar_files() {
 fn glob_count(root: &Path, suffix: &str) -> usize {
     hash_tree(root).keys().filter(|name| name.ends_with(suffix)).count()
 }
+
+#[test]
+fn pack_and_export_stopped_by_sigterm_or_ctrl_c_say_how_to_finish_and_a_rerun_does() {
+    // They died of the signal (exit 143 for SIGTERM), saying nothing.
+    let dir = fresh_dir("batch-pack-term");
+    let spec = write_spec(&dir, &toy_spec("packterm", &[(4, 0.5), (8, 0.5)], (4, 2, 2), 150));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet"]);
+    let (packed, nri) = (dir.join("packed"), dir.join("nri"));
+    let jobs: [(&str, Vec<String>, &Path, &str); 2] = [
+        (
+            "-TERM",
+            ["pack", "--out", packed.to_str().unwrap(), data.to_str().unwrap(), "--scenarios-per-tar", "1", "-j", "1"]
+                .map(String::from)
+                .to_vec(),
+            &packed,
+            "pack",
+        ),
+        (
+            "-INT",
+            ["export", "nri", data.to_str().unwrap(), "--out", nri.to_str().unwrap()].map(String::from).to_vec(),
+            &nri,
+            "export",
+        ),
+    ];
+    for (signal, args, out, command) in jobs {
+        let child = Command::new(bin()).args(&args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+        // Held still once it has begun writing, then signalled: it cannot
+        // finish in between.
+        let started = Instant::now();
+        while !out.exists() || hash_tree(out).is_empty() {
+            assert!(started.elapsed() < Duration::from_secs(60), "{command} wrote nothing");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let pid = child.id().to_string();
+        for s in ["-STOP", signal, "-CONT"] {
+            assert!(Command::new("kill").args([s, &pid]).status().unwrap().success());
+        }
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(130), "{command}: {stderr}");
+        assert!(
+            stderr.contains(&format!("interrupted: {command} stopped; run the same command again to finish it")),
+            "{stderr}"
+        );
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let rerun = run(&args);
+        assert!(rerun.status.success(), "{command}: {}", String::from_utf8_lossy(&rerun.stderr));
+        let finished = hash_tree(out);
+        std::fs::remove_dir_all(out).unwrap();
+        assert!(run(&args).status.success());
+        assert_eq!(finished, hash_tree(out), "{command}: the finished rerun differs from one whole run");
+    }
+}

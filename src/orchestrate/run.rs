@@ -254,6 +254,22 @@ pub fn install_signal_handler() {
     });
 }
 
+/// Ctrl-C (SIGINT) and SIGTERM end `command` (one that works through no
+/// frames: merge, pack, export) at once with exit 130 and a word on how to
+/// finish: what it wrote lies in partial files and folders that running it
+/// again discards or finishes. (It died of the signal, exit 143 for
+/// SIGTERM, saying nothing.) For the command line only.
+pub fn install_quit_handler(command: &'static str) {
+    HANDLER.call_once(|| {
+        let _ = ctrlc::set_handler(move || {
+            crate::progress::note(format_args!(
+                "\ninterrupted: {command} stopped; run the same command again to finish it"
+            ));
+            std::process::exit(130);
+        });
+    });
+}
+
 /// The writer of a run over `expansion`'s (first) town, camera and spec.
 pub(crate) fn scenario_writer(expansion: &Expansion, products: Products, fsync: bool) -> ScenarioWriter {
     ScenarioWriter::new(expansion.map.clone(), expansion.camera, expansion.spec.leader_gap_px(), products, fsync)
