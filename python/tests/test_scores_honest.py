@@ -43,6 +43,7 @@ def data(tmp_path_factory):
     for name, spec in {
         "toy": TOY,
         "toy_seed4": dict(TOY, seed=4),
+        "toy_groups": dict(TOY, groups=[{"cars": 6, "edge_proportion": 0.5}]),
         "city": dict(TOY, world="city", name="honest-city"),
     }.items():
         made[name] = root / name
@@ -55,7 +56,8 @@ def test_predictions_made_on_another_dataset_are_refused_naming_both(data, tmp_p
     run = methods("path", data["toy"], "--out", pred, "--quiet")
     assert run.returncode == 0, run.stderr
     assert cli("evaluate", data["toy"], pred).returncode == 0
-    for other, says in (("toy_seed4", "seed 4"), ("city", "city world")):
+    # (Other groups: it was told by the first array naming no scenario there.)
+    for other, says in (("toy_seed4", "seed 4"), ("city", "city world"), ("toy_groups", "score them against")):
         run = cli("evaluate", data[other], pred)
         assert run.returncode == 2, (other, run.stderr)
         assert "made on honest-toy (toy world, seed 3" in run.stderr and says in run.stderr, run.stderr

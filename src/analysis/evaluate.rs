@@ -41,7 +41,7 @@
 //! ahead, mean over scenarios with its standard error.
 
 use super::metrics::{auroc, average_precision, best_threshold, Counts, ScoredPair};
-use super::predictions::{read_npz, NamedArray};
+use super::predictions::{read_npz, read_npz_array, NamedArray};
 use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary, Sweep};
 use crate::error::Error;
 use crate::output::layout::INTERACTIONS_CSV;
@@ -653,20 +653,28 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
         Error::Failure(m) => Error::damaged(&truth.dir, truth.name_unpacked(m)),
         other => other,
     };
+    let ours = truth.identity();
+    let mismatch = |theirs: &DatasetIdentity| {
+        Error::Input(format!(
+            "{}: these predictions were made on {}, and {} is {}: score them against the dataset they were made on",
+            predictions.display(),
+            theirs.describe(),
+            dataset.display(),
+            ours.describe()
+        ))
+    };
+    // The record first: predictions made on another dataset are told so,
+    // not by the first array that names no scenario here.
+    let record = read_npz_array(predictions, DATASET_RECORD, MAX_DATASET_RECORD).ok().flatten();
+    if let Some(theirs) = record.and_then(|array| dataset_record(&array)) {
+        if !theirs.matches(&ours) {
+            return Err(mismatch(&theirs));
+        }
+    }
     let (scored, record) = match_scenarios(&truth, predictions, options).map_err(named)?;
     let mut warnings = Vec::new();
-    let ours = truth.identity();
     match record {
-        Some(theirs) if !theirs.matches(&ours) => {
-            return Err(Error::Input(format!(
-                "{}: these predictions were made on {}, and {} is {}: score them against the dataset they were \
-                 made on",
-                predictions.display(),
-                theirs.describe(),
-                dataset.display(),
-                ours.describe()
-            )));
-        }
+        Some(theirs) if !theirs.matches(&ours) => return Err(mismatch(&theirs)),
         Some(_) => {}
         None => warnings.push(format!(
             "{} does not say which dataset it was made on (no {DATASET_RECORD:?} array), so nothing checks that it \
@@ -685,6 +693,13 @@ pub fn evaluate(dataset: &Path, predictions: &Path, options: &EvaluateOptions) -
     let mut report = summarise(&truth, dataset, predictions, options, &scored, &results);
     report.warnings.splice(0..0, warnings);
     Ok(report)
+}
+
+/// The dataset record `array` holds (UTF-8 JSON as uint8), if it is one.
+fn dataset_record(array: &NamedArray) -> Option<DatasetIdentity> {
+    let bytes: Option<Vec<u8>> =
+        array.values.iter().map(|&v| (v.fract() == 0.0 && (0.0..=255.0).contains(&v)).then_some(v as u8)).collect();
+    bytes.and_then(|b| serde_json::from_slice::<DatasetIdentity>(&b).ok())
 }
 
 /// Pairs every array with its scenario and checks names, shapes, values and
@@ -758,13 +773,7 @@ fn match_scenarios(
         None => None,
         Some(at) => {
             let array = arrays.remove(at);
-            let bytes: Option<Vec<u8>> = array
-                .values
-                .iter()
-                .map(|&v| (v.fract() == 0.0 && (0.0..=255.0).contains(&v)).then_some(v as u8))
-                .collect();
-            let parsed = bytes.and_then(|b| serde_json::from_slice::<DatasetIdentity>(&b).ok());
-            Some(parsed.ok_or_else(|| {
+            Some(dataset_record(&array).ok_or_else(|| {
                 bad(format!(
                     "array {DATASET_RECORD:?} is not the dataset record save_predictions writes (UTF-8 JSON as uint8)"
                 ))

@@ -90,6 +90,21 @@ pub fn read_npz_from(
     Ok(arrays)
 }
 
+/// The one array `name` of the `.npz` file at `path`, read alone (at most
+/// `max_values` values), if the file holds it; `None` too where the file
+/// is no readable zip: [`read_npz`] then says why.
+pub fn read_npz_array(path: &Path, name: &str, max_values: u64) -> Result<Option<NamedArray>, String> {
+    let Ok(_) = crate::input::regular_file(path) else { return Ok(None) };
+    let Ok(file) = std::fs::File::open(path) else { return Ok(None) };
+    let Ok(mut archive) = zip::ZipArchive::new(std::io::BufReader::new(file)) else { return Ok(None) };
+    let Ok(entry) = archive.by_name(&format!("{name}.npy")) else { return Ok(None) };
+    let cap = max_values.checked_mul(MAX_ITEM_SIZE).and_then(|b| b.checked_add(MAX_NPY_HEADER)).unwrap_or(u64::MAX);
+    let tell = |e: String| format!("{}: array {name:?}: {e}", path.display());
+    let bytes =
+        read_capped(entry, cap).map_err(tell)?.ok_or_else(|| tell(format!("holds more than {max_values} values")))?;
+    parse_npy(name.to_string(), &bytes, max_values).map(Some).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 fn twice(name: &str) -> String {
     format!(
         "holds the array {name:?} twice: each array name may appear once (np.savez never writes a name twice; \
