@@ -35,6 +35,7 @@ import io
 import json
 import math
 import os
+import re
 import stat
 import sys
 import threading
@@ -151,6 +152,10 @@ def _spec(
         raise InputError(f"{path}: not a spec file (JSON): {e}") from None
     if not isinstance(raw, dict):
         raise InputError(f"{path}: not a spec file (a JSON object with name, world, groups, ...)")
+    if raw.get("world") != world:
+        # (A city spec as --toy-spec ran, its rows filed as the toy world's.)
+        raise InputError(f"{path}: world {json.dumps(raw.get('world'))} given as --{world}-spec: give a {world}-world "
+                         f"spec (e.g. configs/{world}.json)")  # fmt: skip
     raw["name"] = f"paper-{setting.name}-{world}"
     raw["splits"] = dict(splits or setting.splits)
     if groups:
@@ -876,6 +881,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if args.plan and args.report:
         print("error: --plan and --report: give one (--plan projects a run, --report tables a finished one)",
               file=sys.stderr)  # fmt: skip
+        return 2
+    if not re.fullmatch(r"auto|cpu|cuda(:[0-9]+)?", args.device):
+        # (said here whichever methods run: with the path rule alone it was taken)
+        print(f"error: --device {args.device!r} is not a device: use auto, cpu, cuda or cuda:N", file=sys.stderr)
         return 2
     setting = QUICK if args.quick else FULL
     splits = None

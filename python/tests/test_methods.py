@@ -554,13 +554,19 @@ def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):
     import subprocess
     import sys
 
-    for damage in ("pipe", "nan"):
+    # A poses.csv of its header alone: numpy's warning ("input contained no
+    # data", with a line of the package's source) came before the message.
+    for damage in ("pipe", "nan", "no rows"):
         copy = tmp_path / damage
         shutil.copytree(toy, copy)
         pixels = copy / "cars06_edges50" / "train" / "00000" / "pixels.npy"
         if damage == "pipe":
             pixels.unlink()
             os.mkfifo(pixels)
+        elif damage == "no rows":
+            poses = pixels.parent / "poses.csv"
+            poses.write_text(poses.read_text().splitlines()[0] + "\n")
+            pixels = poses
         else:
             values = np.load(pixels)
             values[3, 1, 0] = np.nan
@@ -571,8 +577,10 @@ def test_methods_name_a_pipe_or_a_nan_in_a_scenario_they_read(toy, tmp_path):
         except subprocess.TimeoutExpired:
             pytest.fail("methods: still reading the pipe after 60 s")
         assert done.returncode == 2, done.stderr  # a damaged dataset is bad input
-        said = {"pipe": "a pipe where gen writes a file", "nan": "frame 3, car 1 holds nan"}[damage]
-        assert f"{pixels}: {said}" in done.stderr and "Traceback" not in done.stderr, done.stderr
+        said = {"pipe": "a pipe where gen writes a file", "nan": "frame 3, car 1 holds nan",
+                "no rows": "x 6 rows gen writes"}[damage]  # fmt: skip
+        assert f"{pixels}: " in done.stderr and said in done.stderr and "Traceback" not in done.stderr, done.stderr
+        assert "Warning" not in done.stderr, done.stderr
         assert not (tmp_path / f"{damage}.npz").exists()
 
 
@@ -586,6 +594,35 @@ def test_the_paper_refuses_a_group_its_spec_lacks(tmp_path, capsys, monkeypatch)
     err = capsys.readouterr().err
     assert "--group cars09_edges50:" in err and "configs/toy.json has no such group" in err, err
     assert "cars04_edges50, " in err and not out.exists()
+
+
+def test_the_paper_refuses_a_spec_of_the_other_world_and_a_device_that_is_none(tmp_path, capsys, monkeypatch):
+    # A city spec given as --toy-spec ran, its rows filed as the toy
+    # world's; --device foo was taken when no method chosen used a device.
+    from causalcity import paper
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "paper"
+    small = ["--quick", "--group", "cars04_edges50", "--splits", "3/2/2", "--method", "path", "--out", str(out)]
+    for flags, says in [
+        (["--world", "toy", "--toy-spec", "configs/ci-city.json"], 'configs/ci-city.json: world "city" given as --toy-spec: give a toy-world spec'),
+        (["--world", "city", "--city-spec", "configs/ci-toy.json"], 'configs/ci-toy.json: world "toy" given as --city-spec'),
+        (["--world", "toy", "--device", "foo"], "--device 'foo' is not a device: use auto, cpu, cuda or cuda:N"),
+    ]:  # fmt: skip
+        assert paper.main(small + flags) == 2
+        err = capsys.readouterr().err
+        assert says in err, err
+        assert not out.exists()
+
+
+def test_the_methods_command_predicts_every_split_its_flags_name(toy, tmp_path):
+    # `--split val --split test` kept only test (and evaluate then found no val).
+    from causalcity.methods.__main__ import main
+
+    out = tmp_path / "p.npz"
+    assert main(["path", str(toy), "--out", str(out), "--split", "val", "--split", "test", "--quiet"]) == 0
+    splits = {name.split("/")[1] for name in np.load(out).files if name.count("/") == 2}
+    assert splits == {"val", "test"}, splits
 
 
 def test_a_paper_run_of_trajectory_methods_only_finishes_and_bad_epochs_are_refused_first(tmp_path, capsys, monkeypatch):

@@ -70,7 +70,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     )
     parser.add_argument("--out", required=True, help="the predictions .npz to write")
     parser.add_argument("--group", nargs="+", help="only these groups")
-    parser.add_argument("--split", nargs="+", default=["val", "test"], choices=["train", "val", "test"])
+    # (extend: `--split val --split test` kept only test)
+    parser.add_argument("--split", nargs="+", action="extend", choices=["train", "val", "test"],
+                        help="the splits to predict (default: val test)")  # fmt: skip
     parser.add_argument("--epochs", type=_positive, help="nri, nri_trail, interaction: training epochs, at least 1 (default 30)")
     parser.add_argument("--device", help="nri, interaction, cf_nri, your own class: cpu, cuda or auto (default)")
     parser.add_argument("--batch-size", type=_positive, help="nri, interaction: windows per batch (default 16; use 128 or more on a GPU)")
@@ -93,6 +95,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     args = parser.parse_args(argv)
+    args.split = list(dict.fromkeys(args.split or ["val", "test"]))
     options = {}
     if args.method == "nri_trail" and (args.decoder or args.encoder_input):
         print("error: nri_trail is nri with --decoder trail --encoder-input heading: give those to nri instead",

@@ -165,7 +165,11 @@ def _scenario_arrays(folder: Path) -> Tuple[dict, np.ndarray, np.ndarray]:
     except (OSError, ValueError, EOFError) as e:
         raise DatasetError(f"{folder / 'pixels.npy'}: not the [{frames}, {n}, 2] array gen writes ({e})") from None
     try:
-        table = np.loadtxt(_regular(folder / "poses.csv"), delimiter=",", skiprows=1, ndmin=2)
+        with warnings.catch_warnings():
+            # (numpy's "input contained no data" for a file of no rows: the
+            # shape check below says what is wrong with it)
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(_regular(folder / "poses.csv"), delimiter=",", skiprows=1, ndmin=2)
         metres = table[:, [3, 4, 8, 11]].reshape(frames, n, 4)
     except (OSError, ValueError, IndexError) as e:
         raise DatasetError(f"{folder / 'poses.csv'}: not the {frames} x {n} rows gen writes ({e})") from None
