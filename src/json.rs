@@ -1,6 +1,6 @@
 //! Strict JSON input, shared by every file the tool reads (specs, scenario
-//! files, intervention files): duplicate keys, trailing data, `null` and
-//! an array where an object belongs are errors, and every error names the JSON path
+//! files, intervention files): duplicate keys, trailing data and an array
+//! where an object belongs are errors, and every error names the JSON path
 //! of the field. Imports nothing from the crate.
 //!
 //! Reading is two steps: [`parse`] turns text into a [`Value`] (rejecting
@@ -112,9 +112,9 @@ fn from_value_with<T: DeserializeOwned>(value: Value, skip_variants: bool) -> Re
     })
 }
 
-/// What a `null` is told, wherever it stands: one rule for fields with a
-/// default and fields without.
-const NULL_REFUSED: &str = "null is not a value here: give a value, or leave the field out where it has a default";
+/// What a `null` is told where a value must stand (`"frames": null` was
+/// "invalid type: null, expected a whole number").
+const NULL_REFUSED: &str = "null is not a value here: give a value, or leave the field out for its default";
 
 /// serde's "expected u32" and the like in the words of a JSON file: a
 /// user wrote a number, a list or an object, not a Rust type.
@@ -304,9 +304,9 @@ impl<'de> de::Deserializer<'de> for Strict {
 
     fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Error> {
         match self.0 {
-            // As a field that is not optional (`"frames": null` was refused
-            // while `"frame_interval": null` was taken as left out).
-            Value::Null => Err(de::Error::custom(NULL_REFUSED)),
+            // A field that may have no value is left out by null, as files
+            // the tool writes say it (a camera's width in manifest.json).
+            Value::Null => visitor.visit_none(),
             _ => visitor.visit_some(self),
         }
     }

@@ -458,3 +458,19 @@ fn intervention_file_schema_and_parser_agree() {
         assert!(e.contains("duplicate") || e.contains("trailing") || e.contains("not valid JSON"), "{what}: {e}");
     }
 }
+
+#[test]
+fn the_spec_a_manifest_records_reads_back_as_a_spec() {
+    // A camera without width and height is written with both null; the
+    // Python package reads the manifest's spec back through the spec parser
+    // (a null refused there made such datasets unreadable).
+    let dir = fresh_dir("schemas-manifest-spec");
+    let mut spec: Value = serde_json::from_str(&toy_spec("manifest-spec", &[(4, 0.5)], (1, 0, 0), 5)).unwrap();
+    spec["cameras"] = serde_json::json!([{"name": "top", "static": {"centre": [0, 0]}}]);
+    let out = dir.join("out");
+    let path = write_spec(&dir, &spec.to_string());
+    gen_ok(&path, &out, &["--quiet"]);
+    let manifest = read_json(&out.join("manifest.json"));
+    assert!(manifest["spec"]["cameras"][0]["width"].is_null(), "{}", manifest["spec"]);
+    spec_parser(&manifest["spec"].to_string()).unwrap_or_else(|e| panic!("{e}: {}", manifest["spec"]));
+}
