@@ -303,6 +303,33 @@ fn a_merge_cut_off_as_it_removes_the_shard_manifests_and_folders_is_finished_by_
     assert!(shards[0].join("cars04_edges50/notes.txt").exists());
     assert!(shards[1].join("shards").join(&manifests[1].0).exists());
     assert!(merged.join("shards").join(&manifests[2].0).exists());
+    std::fs::remove_file(shards[0].join("cars04_edges50/notes.txt")).unwrap();
+    // A shard folder a running command holds: refused before anything goes.
+    let held = Command::new("flock")
+        .args(["-s", shards[0].join(".causalcity.lock").to_str().unwrap(), "sleep", "30"])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let refused = run(&args);
+    let mut held = held;
+    let _ = held.kill();
+    let _ = held.wait();
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("in use"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+    assert!(shards[0].join("cars04_edges50/train").is_dir() && shards[1].join("shards").join(&manifests[1].0).exists());
+    // A network in a shard folder that --out's copy links to is the only
+    // copy: never removed as a leftover.
+    let network = shards[0].join("networks/town.net.xml");
+    std::fs::create_dir_all(network.parent().unwrap()).unwrap();
+    std::fs::write(&network, "<net/>").unwrap();
+    std::fs::create_dir_all(merged.join("networks")).unwrap();
+    std::os::unix::fs::symlink("../../shard0/networks/town.net.xml", merged.join("networks/town.net.xml")).unwrap();
+    let _ = run(&args);
+    assert_eq!(std::fs::read_to_string(&network).unwrap(), "<net/>");
 }
 
 #[test]

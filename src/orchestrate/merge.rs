@@ -330,33 +330,47 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
     if !ours(&copies) {
         return Ok(None);
     }
-    let mut leftovers = Vec::new();
+    let mut folders = Vec::new();
     for source in sources.iter().filter(|s| fs::symlink_metadata(s).is_ok()) {
         if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || same_folder(source, out) {
             return Ok(None);
         }
-        let Ok(found) = shard_manifests(source) else { return Ok(None) };
+        folders.push(source);
+    }
+    // What each shard folder holds, looked at before anything is locked
+    // (most merges are no such case) and again under the locks.
+    let leftovers_of = |source: &Path| -> Option<Vec<PathBuf>> {
+        let found = shard_manifests(source).ok()?;
         if !ours(&found) {
-            return Ok(None);
+            return None;
         }
         let manifests: Vec<PathBuf> = found.into_iter().map(|(path, _)| path).collect();
         let mut files = Vec::new();
-        if !only_merge_leftovers(out, source, source, &manifests, &mut files) {
-            return Ok(None);
-        }
-        leftovers.push((source, files));
-    }
-    if leftovers.is_empty() && copies.is_empty() {
+        only_merge_leftovers(out, source, source, &manifests, &mut files).then_some(files)
+    };
+    if folders.iter().any(|s| leftovers_of(s).is_none()) || (folders.is_empty() && copies.is_empty()) {
         return Ok(None);
     }
     let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
+    let mut locked = Vec::new();
+    for source in &folders {
+        locked.push(crate::output::claim::lock_only(source, "merge").map_err(GenError::Claim)?);
+    }
+    let mut leftovers = Vec::new();
+    for source in &folders {
+        let Some(files) = leftovers_of(source) else { return Ok(None) };
+        leftovers.push((source, files));
+    }
     for (source, files) in &leftovers {
         for file in files {
             fs::remove_file(file).map_err(io_err(file))?;
         }
         remove_empty_folders(source);
-        // Its lock (a stale one taken over; a live one refused) goes with the claim.
-        drop(claim(source, Writer::Merge, "merge").map_err(GenError::Claim)?);
+    }
+    // The locks go (their files with them, and a killed shard's), then the
+    // emptied folders.
+    drop(locked);
+    for (source, _) in &leftovers {
         fs::remove_dir(source).map_err(io_err(source))?;
     }
     for (copy, _) in &copies {
@@ -371,10 +385,10 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
          removed {removed} shard manifest{}{}",
         out.display(),
         if removed == 1 { "" } else { "s" },
-        if folders.is_empty() {
-            String::new()
-        } else {
-            format!(" and the emptied shard folders {}", folders.join(", "))
+        match folders.len() {
+            0 => String::new(),
+            1 => format!(" and the emptied shard folder {}", folders[0]),
+            _ => format!(" and the emptied shard folders {}", folders.join(", ")),
         }
     )))
 }
@@ -409,8 +423,7 @@ fn only_merge_leftovers(out: &Path, root: &Path, dir: &Path, manifests: &[PathBu
         } else if dir == root && crate::output::claim::is_lock_file(&name) {
             // (the claim takes it)
         } else if manifests.contains(&path)
-            || (dir == root.join(crate::spec::NETWORKS_FOLDER)
-                && same_bytes(&path, &out.join(crate::spec::NETWORKS_FOLDER).join(&name)))
+            || (dir == root.join(crate::spec::NETWORKS_FOLDER) && kept_in(out, &path, &name))
         {
             files.push(path);
         } else {
@@ -418,6 +431,24 @@ fn only_merge_leftovers(out: &Path, root: &Path, dir: &Path, manifests: &[PathBu
         }
     }
     true
+}
+
+/// Whether the network file at `path` has the bytes of `out`'s own copy
+/// named `name`: a file of its own there, never a link (which may lead
+/// back to `path`, the dataset's only copy) nor `path` itself.
+fn kept_in(out: &Path, path: &Path, name: &str) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    let folder = out.join(crate::spec::NETWORKS_FOLDER);
+    let copy = folder.join(name);
+    let (Ok(kept), Ok(here), Ok(networks)) =
+        (fs::symlink_metadata(&copy), fs::symlink_metadata(path), fs::symlink_metadata(&folder))
+    else {
+        return false;
+    };
+    networks.is_dir()
+        && kept.is_file()
+        && (kept.dev(), kept.ino()) != (here.dev(), here.ino())
+        && same_bytes(path, &copy)
 }
 
 /// Removes the empty folders below `dir`, deepest first (never a file).

@@ -289,6 +289,25 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
     Ok(claim)
 }
 
+/// Locks the folder `dir` as [`claim`] does for a writer of its own, but
+/// leaves what it holds to the caller, who checks it under the lock by a
+/// rule of its own (merge, finishing what a cut-off merge left in a shard
+/// folder, which [`claim`] refuses for its empty group folders). A folder
+/// a running command holds is refused.
+pub fn lock_only(dir: &Path, describe: &str) -> Result<Claim, ClaimError> {
+    let mut claim = Claim { locks: Vec::new(), locked: true, created: Vec::new() };
+    let folder_lock = dir.join(LOCK_FILE);
+    match lock(&folder_lock, false)? {
+        Lock::Held(file) => {
+            record_holder(&file, &format!("pid {} on {}: {describe}", std::process::id(), host_name()));
+            claim.locks.push((folder_lock, file, false));
+        }
+        Lock::Busy => return Err(ClaimError::InUse { dir: dir.to_path_buf(), holder: holders(dir) }),
+        Lock::Unsupported => claim.locked = false,
+    }
+    Ok(claim)
+}
+
 /// The outcome of trying one lock file.
 enum Lock {
     Held(File),

@@ -194,8 +194,10 @@ impl Planner {
                         e
                     } else {
                         format!(
-                            "{e} (scenario {index} of the {CHECKED_PLATOON_SCENARIOS} planned before anything is \
-                             written: the platoons fill the visible lanes too tightly to place every scenario)"
+                            "{e} (in trial {} of the {CHECKED_PLATOON_SCENARIOS} trial plans of the group made \
+                             before anything is written: the platoons fill the visible lanes too tightly to place \
+                             every scenario reliably)",
+                            index + 1
                         )
                     };
                     SpecError::new(format!("groups[{i}]"), why)
