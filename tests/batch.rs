@@ -330,6 +330,11 @@ fn a_merge_cut_off_as_it_removes_the_shard_manifests_and_folders_is_finished_by_
     std::os::unix::fs::symlink("../../shard0/networks/town.net.xml", merged.join("networks/town.net.xml")).unwrap();
     let _ = run(&args);
     assert_eq!(std::fs::read_to_string(&network).unwrap(), "<net/>");
+    // An empty folder inside --out named as a shard is the dataset's own.
+    let inside = merged.join("cars04_edges50/spare");
+    std::fs::create_dir_all(&inside).unwrap();
+    let _ = run(&["merge", "--out", merged.to_str().unwrap(), inside.to_str().unwrap()]);
+    assert!(inside.is_dir(), "merge removed a folder of --out's as a shard's leftover");
 }
 
 #[test]

@@ -332,7 +332,9 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
     }
     let mut folders = Vec::new();
     for source in sources.iter().filter(|s| fs::symlink_metadata(s).is_ok()) {
-        if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || same_folder(source, out) {
+        // (A folder inside --out is the dataset's own, never a shard's leftover.)
+        let inside = matches!((source.canonicalize(), out.canonicalize()), (Ok(s), Ok(o)) if s.starts_with(&o));
+        if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || inside {
             return Ok(None);
         }
         folders.push(source);
@@ -391,11 +393,6 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
             _ => format!(" and the emptied shard folders {}", folders.join(", ")),
         }
     )))
-}
-
-/// Whether `a` and `b` name one folder.
-fn same_folder(a: &Path, b: &Path) -> bool {
-    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }
 
 /// Whether `path` lies in a `shards/` folder.

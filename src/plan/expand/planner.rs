@@ -81,9 +81,9 @@ pub(super) const PLATOON_STARTS: usize = 64;
 /// Scenarios of each platoon group planned before anything is written, and
 /// the starts each may take there: a group whose platoons place within
 /// [`CHECKED_PLATOON_STARTS`] starts in every one of [`CHECKED_PLATOON_SCENARIOS`]
-/// places at a start with a chance of about 0.4 or more (below it, all
-/// 16 pass less than once in 80), so that [`PLATOON_STARTS`] leave one
-/// scenario in about 10^14 unplaced. Platoons of 4 with gaps of 1-12 m
+/// places at a start with a chance of about 0.3 or more (at 0.3, all 16
+/// pass once in 80; below, less often), so that [`PLATOON_STARTS`] leave
+/// one scenario in about 10^10 unplaced (0.7^64). Platoons of 4 with gaps of 1-12 m
 /// placed 100 cars at a first start 3 times in 4: one scenario in 4
 /// failed midway through a dataset whose first scenario planned.
 const CHECKED_PLATOON_SCENARIOS: u32 = 16;
