@@ -371,11 +371,23 @@ fn a_merge_cut_off_part_way_is_finished_by_the_same_command() {
     assert!(again.status.success(), "{said}");
     assert!(said.contains("nothing to merge") && said.contains("(merged before)"), "{said}");
     assert_eq!(hash_tree(&out), hash_tree(&reference));
-    // With one shard folder still there, the other gone: refused, said why.
+    // With one shard folder still there and empty, the other gone: what a
+    // merge cut off as it removed the emptied folders leaves, finished
+    // (it was refused, and the folder stayed for good).
     std::fs::create_dir_all(&s0).unwrap();
+    let partly = run(&args);
+    let said = String::from_utf8_lossy(&partly.stdout).into_owned() + &stderr(&partly);
+    assert!(partly.status.success(), "{said}");
+    assert!(said.contains("finished what the merge cut off left") && said.contains("emptied shard folder"), "{said}");
+    assert!(!s0.exists());
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+    // One holding something else: refused, said why.
+    std::fs::create_dir_all(&s0).unwrap();
+    std::fs::write(s0.join("notes.txt"), "mine").unwrap();
     let partly = run(&args);
     assert_eq!(partly.status.code(), Some(2), "{}", stderr(&partly));
     assert!(stderr(&partly).contains("already holds a complete dataset: merged before?"), "{}", stderr(&partly));
+    assert!(s0.join("notes.txt").exists());
     let moved_train = || out.join("cars03_edges50/train").read_dir().map_or(0, |d| d.count());
     let mut cut_off = Vec::new();
     for after in [1, 150, 1, 300, 1, 150] {
