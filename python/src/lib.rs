@@ -256,7 +256,13 @@ impl Spec {
                     (None, None) => spec.read_networks(|sumo| PathBuf::from(sumo)),
                 }
                 .map_err(spec_err)?;
-                Expansion::from_spec(spec).map_err(spec_err)
+                // A dataset's own spec (its networks in its folder) was
+                // checked by the gen that wrote it.
+                match networks {
+                    Some(_) => Expansion::from_written_spec(spec),
+                    None => Expansion::from_spec(spec),
+                }
+                .map_err(spec_err)
             })
             .map_err(py_err)?;
         Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path, networks })

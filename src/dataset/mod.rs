@@ -437,7 +437,7 @@ fn expansion_from(spec: serde_json::Value, path: &Path) -> Result<Expansion, Str
     // A hand-edited record is checked as a spec file is (frames, sizes, ...).
     // (Limits added since an earlier version wrote it are not applied.)
     spec.validate_recorded().map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))?;
-    Expansion::from_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
+    Expansion::from_written_spec(spec).map_err(|e| format!("{}: the spec in it is invalid: {e}", path.display()))
 }
 
 /// One car as a scenario.json names it.

@@ -15,7 +15,7 @@ mod planner;
 mod platoons;
 mod spawn;
 
-pub use planner::Planner;
+pub use planner::{Planner, Trials};
 pub use spawn::split_owning_start;
 
 use super::{stream_key, GivenCar, PlannedTown, ScenarioKey, ScenarioPlan};
@@ -129,8 +129,18 @@ const TOWN_TAG: &[u8] = b"causalcity/town/v1";
 
 impl Expansion {
     /// The spec's towns (`map` section), each with its map and camera,
-    /// checked as [`Planner::new`] does.
+    /// checked as [`Planner::new`] does for a spec about to be written.
     pub fn from_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
+        Expansion::checked(spec, Trials::Writing)
+    }
+
+    /// [`Expansion::from_spec`] for a dataset's own spec, which the `gen`
+    /// that wrote it checked: fewer trial plans ([`Trials::Written`]).
+    pub fn from_written_spec(spec: DatasetSpec) -> Result<Expansion, SpecError> {
+        Expansion::checked(spec, Trials::Written)
+    }
+
+    fn checked(spec: DatasetSpec, trials: Trials) -> Result<Expansion, SpecError> {
         spec.map.validate()?;
         let mut planners: Vec<Planner> = Vec::new();
         let mut split_towns = Vec::new();
@@ -151,7 +161,7 @@ impl Expansion {
                         };
                         let town_spec =
                             DatasetSpec { map: town.clone(), graph, groups: groups.clone(), ..spec.clone() };
-                        let mut planner = Planner::new(town_spec, map).map_err(|e| {
+                        let mut planner = Planner::new(town_spec, map, trials).map_err(|e| {
                             let e = if held_cars { held_cars_field(e, split) } else { e };
                             in_town(e, &town, section.towns().len(), held_out.then_some(split))
                         })?;
@@ -182,7 +192,7 @@ impl Expansion {
     /// One town, `map`, checked as [`Planner::new`] does (hand-written
     /// scenarios bring their own map).
     pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Expansion, SpecError> {
-        let planner = Planner::new(spec.clone(), map)?;
+        let planner = Planner::new(spec.clone(), map, Trials::Writing)?;
         let towns = SplitTowns { map: spec.map.clone(), towns: vec![(spec.map.clone(), 0)] };
         let (map, camera) = (planner.map.clone(), planner.camera);
         Ok(Expansion {

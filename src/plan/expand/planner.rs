@@ -89,12 +89,26 @@ pub(super) const PLATOON_STARTS: usize = 64;
 const CHECKED_PLATOON_SCENARIOS: u32 = 16;
 const CHECKED_PLATOON_STARTS: usize = 4;
 
+/// How many trial plans [`Planner::new`] makes of each group before it
+/// takes a spec.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trials {
+    /// A spec about to be written: one plan per group, and
+    /// [`CHECKED_PLATOON_SCENARIOS`] of a platoon group, so that none fails
+    /// midway through a dataset.
+    Writing,
+    /// A dataset's own spec, which the `gen` that wrote it checked: one plan
+    /// per group (the platoon trials cost opening a dataset 10-40 ms).
+    Written,
+}
+
 /// (leader, follower) indices into a scenario's placed cars.
 pub(super) type LeaderFollowerPairs = Vec<(usize, usize)>;
 
 impl Planner {
-    /// Checks that every group can be planned on this map and camera.
-    pub fn new(spec: DatasetSpec, map: Arc<CityMap>) -> Result<Planner, SpecError> {
+    /// Checks that every group can be planned on this map and camera, as
+    /// thoroughly as `trials` asks.
+    pub fn new(spec: DatasetSpec, map: Arc<CityMap>, trials: Trials) -> Result<Planner, SpecError> {
         let camera = spec.birds_eye_camera()?;
         let leader_gap_m = camera.pixels_to_metres(spec.leader_gap_px());
         if spec.world == WorldKind::Toy && leader_gap_m < spec.car_length_m + SPAWN_CLEARANCE {
@@ -131,7 +145,8 @@ impl Planner {
             WorldKind::City => spec.car_length_m + spec.city_settings().start.follower_gap_m.lowest(),
         };
         let name = spec.map.town_name();
-        let platoon_starts = CHECKED_PLATOON_STARTS;
+        // A written spec's one plan may take every start a scenario may.
+        let platoon_starts = if trials == Trials::Writing { CHECKED_PLATOON_STARTS } else { PLATOON_STARTS };
         let mut expansion =
             Planner { spec, name, map, camera, spans, leader_gap_m, shortest_spacing_m, toy_step_m, platoon_starts };
         let colliders = expansion.spec.graph.unit_cars();
@@ -185,8 +200,9 @@ impl Planner {
             }
             // A dry run proves the group can be planned before anything is
             // written (platoons: reliably, see CHECKED_PLATOON_SCENARIOS).
-            let platoons =
-                expansion.spec.world == WorldKind::City && expansion.spec.city_settings().start.platoon_cars != 0;
+            let platoons = trials == Trials::Writing
+                && expansion.spec.world == WorldKind::City
+                && expansion.spec.city_settings().start.platoon_cars != 0;
             for index in 0..if platoons { CHECKED_PLATOON_SCENARIOS } else { 1 } {
                 let key = ScenarioKey { group: g.name(), group_index: i, split: Split::Train, index, name: None };
                 expansion.plan(&key).map_err(|e| {
