@@ -85,11 +85,8 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
     // What a `gen --force` cut off left aside (shards running skip it).
     super::run::finish_removal(out)?;
-    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    let others: Vec<&PathBuf> = sources.iter().filter(|s| !same(s, out)).collect();
+    let others: Vec<&PathBuf> =
+        sources.iter().filter(|s| !real_paths(s, out).is_some_and(|(s, out)| s == out)).collect();
     let mut source_claims = Vec::new();
     let mut manifests = shard_manifests(out)?;
     for source in &others {
@@ -333,7 +330,7 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
     let mut folders = Vec::new();
     for source in sources.iter().filter(|s| fs::symlink_metadata(s).is_ok()) {
         // (A folder inside --out is the dataset's own, never a shard's leftover.)
-        let inside = matches!((source.canonicalize(), out.canonicalize()), (Ok(s), Ok(o)) if s.starts_with(&o));
+        let inside = real_paths(source, out).is_some_and(|(source, out)| source.starts_with(out));
         if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || inside {
             return Ok(None);
         }
@@ -751,3 +748,8 @@ struct Located {
 
 /// Scenarios checked at a time (in parallel) before anything moves.
 const MERGE_CHUNK: usize = 256;
+
+/// `a` and `b` as their real paths (links resolved), when both exist.
+fn real_paths(a: &Path, b: &Path) -> Option<(PathBuf, PathBuf)> {
+    Some((a.canonicalize().ok()?, b.canonicalize().ok()?))
+}

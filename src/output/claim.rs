@@ -255,7 +255,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
     check_contents(dir, writer)?;
     let created = missing_folders(dir);
     fs::create_dir_all(dir).map_err(io(dir))?;
-    let holder = format!("pid {} on {}: {describe}", std::process::id(), host_name());
+    let holder = holder_line(describe);
     let mut claim = Claim { locks: Vec::new(), locked: true, created };
     let shard = match writer {
         Writer::Gen { shard: Some((index, count)) } => {
@@ -263,17 +263,7 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
         }
         _ => None,
     };
-    let folder_lock = dir.join(LOCK_FILE);
-    match lock(&folder_lock, shard.is_some())? {
-        Lock::Held(file) => {
-            if shard.is_none() {
-                record_holder(&file, &holder);
-            }
-            claim.locks.push((folder_lock, file, shard.is_some()));
-        }
-        Lock::Busy => return Err(ClaimError::InUse { dir: dir.to_path_buf(), holder: holders(dir) }),
-        Lock::Unsupported => claim.locked = false,
-    }
+    lock_folder(&mut claim, dir, shard.is_some(), &holder)?;
     if let Some(shard_lock) = shard {
         match lock(&shard_lock, false)? {
             Lock::Held(file) => {
@@ -296,16 +286,32 @@ pub fn claim(dir: &Path, writer: Writer, describe: &str) -> Result<Claim, ClaimE
 /// a running command holds is refused.
 pub fn lock_only(dir: &Path, describe: &str) -> Result<Claim, ClaimError> {
     let mut claim = Claim { locks: Vec::new(), locked: true, created: Vec::new() };
+    lock_folder(&mut claim, dir, false, &holder_line(describe))?;
+    Ok(claim)
+}
+
+/// What a lock file records of its holder: this process, its host and
+/// `describe` (e.g. the command line).
+fn holder_line(describe: &str) -> String {
+    format!("pid {} on {}: {describe}", std::process::id(), host_name())
+}
+
+/// Takes `dir`'s folder lock into `claim`: shared by the shards of one
+/// run (`shared`), or alone with `holder` recorded in it. A folder a
+/// running command holds is refused, naming its holders.
+fn lock_folder(claim: &mut Claim, dir: &Path, shared: bool, holder: &str) -> Result<(), ClaimError> {
     let folder_lock = dir.join(LOCK_FILE);
-    match lock(&folder_lock, false)? {
+    match lock(&folder_lock, shared)? {
         Lock::Held(file) => {
-            record_holder(&file, &format!("pid {} on {}: {describe}", std::process::id(), host_name()));
-            claim.locks.push((folder_lock, file, false));
+            if !shared {
+                record_holder(&file, holder);
+            }
+            claim.locks.push((folder_lock, file, shared));
         }
         Lock::Busy => return Err(ClaimError::InUse { dir: dir.to_path_buf(), holder: holders(dir) }),
         Lock::Unsupported => claim.locked = false,
     }
-    Ok(claim)
+    Ok(())
 }
 
 /// The outcome of trying one lock file.
