@@ -306,7 +306,7 @@ fn a_network_cars_cannot_drive_round_says_why() {
     let listed = run(&["map", "--net", net.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&listed.stdout);
     assert!(
-        stdout.contains("cannot be driven: no two lanes cars drive reach each other: of 1 lanes cars may drive, 1 is left out (AB_0 leads nowhere)"),
+        stdout.contains("cannot be driven: no two lanes cars drive reach each other: the one lane cars may drive is left out (AB_0 leads nowhere)"),
         "{stdout}"
     );
     assert!(stdout.contains("a street both ways, or a loop"), "{stdout}");

@@ -456,12 +456,14 @@ fn nothing_left(net: &SumoNetwork, dropped: &[(usize, &str)]) -> String {
         .collect();
     let more = dropped.len().saturating_sub(NAMED);
     format!(
-        "no two lanes cars drive reach each other: of {} lanes cars may drive, {} {} left out ({}{}). Cars drive \
+        "no two lanes cars drive reach each other: {} left out ({}{}). Cars drive \
          round for the whole run, so a network needs lanes that lead back to where they start: a street both \
          ways, or a loop (a one-way street between dead ends has none)",
-        net.lanes.len(),
-        dropped.len(),
-        if dropped.len() == 1 { "is" } else { "are" },
+        match (net.lanes.len(), dropped.len()) {
+            (1, _) => "the one lane cars may drive is".to_string(),
+            (lanes, 1) => format!("of {lanes} lanes cars may drive, 1 is"),
+            (lanes, dropped) => format!("of {lanes} lanes cars may drive, {dropped} are"),
+        },
         named.join("; "),
         if more > 0 { format!("; {more} more: `causalcity map --net` lists them") } else { String::new() }
     )
