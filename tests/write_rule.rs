@@ -479,6 +479,38 @@ fn a_link_into_a_dataset_does_not_get_an_export_or_a_picture_inside_it() {
 }
 
 #[test]
+fn a_picture_a_table_or_a_dataset_never_lands_in_an_export_which_export_then_still_updates() {
+    let dir = fresh_dir("rule-into-export");
+    let data = toy_dataset(&dir);
+    let export = dir.join("nri");
+    let exported = run(&["export", "nri", s(&data), "--out", s(&export), "--quiet"]);
+    assert!(exported.status.success(), "{}", stderr(&exported));
+    let spec = write_spec(&dir, &toy_spec("inner", &[(4, 0.5)], (1, 1, 1), 10));
+    let before = hash_tree(&export);
+    let pred = predictions(&dir);
+    let attempts: Vec<Vec<String>> = vec![
+        vec!["heatmap".into(), s(&data).into(), "--out".into(), s(&export.join("heat.png")).into()],
+        vec!["heatmap".into(), s(&data).into(), "--out".into(), s(&export.join("cars04_edges50/h.png")).into()],
+        vec!["evaluate".into(), s(&data).into(), s(&pred).into(), "--csv".into(), s(&export.join("s.csv")).into()],
+        vec!["gen".into(), "--spec".into(), s(&spec).into(), "--out".into(), s(&export.join("d")).into()],
+    ];
+    for args in &attempts {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_refused(&run(&args), &format!("is inside an export ({})", export.display()));
+    }
+    // Nothing written, and the export is still export's own to update.
+    assert_eq!(hash_tree(&export), before);
+    let again = run(&["export", "nri", s(&data), "--out", s(&export), "--quiet"]);
+    assert!(again.status.success(), "{}", stderr(&again));
+    // A folder of datasets named after their groups is no export: a picture goes beside them.
+    let datasets = dir.join("by-group");
+    gen_ok(&spec, &datasets.join("cars04_edges50"), &["--quiet", "--no-images"]);
+    let beside = datasets.join("heat.png");
+    let drawn = run(&["heatmap", s(&data), "--out", s(&beside)]);
+    assert!(drawn.status.success() && beside.is_file(), "{}", stderr(&drawn));
+}
+
+#[test]
 fn an_export_never_writes_through_a_link_planted_in_its_folder() {
     // export nri wrote through a link at its staged loc_train.npy.partial
     // (the file it pointed to, outside --out, became an array), and export

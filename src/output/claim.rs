@@ -82,8 +82,8 @@ pub enum ClaimError {
     BeingRead { dir: PathBuf },
     #[error("{dir} holds {what}: {command} writes only {writes}. Use another --out{hint}")]
     Foreign { dir: PathBuf, what: String, command: &'static str, writes: &'static str, hint: &'static str },
-    #[error("{dir} is inside {inside} ({ancestor}), which it would then fail to validate: write outside it")]
-    Inside { dir: PathBuf, inside: &'static str, ancestor: PathBuf },
+    #[error("{dir} is inside {inside} ({ancestor}), {harm}: write outside it")]
+    Inside { dir: PathBuf, inside: &'static str, ancestor: PathBuf, harm: &'static str },
     #[error("cannot write {path}: {source}\nFix the folder's permissions, or choose another --out.")]
     Io { path: PathBuf, source: std::io::Error },
     /// A path to write that is a symbolic link: writing through it could
@@ -632,17 +632,51 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
             })
         })
     };
+    // An export: group folders and nothing else, as `export` takes a folder
+    // for its own (a file beside them, and it refuses to update them), each
+    // holding what an export writes there and something of it: `.npy`
+    // arrays (NRI) or split folders (NS-DR, V-CDN). (A folder of datasets
+    // named after their groups is no export: their folders hold manifests.)
+    let all_of = |dir: &Path, kind: &dyn Fn(&fs::DirEntry) -> bool| {
+        fs::read_dir(dir).is_ok_and(|entries| {
+            let mut seen = 0;
+            for entry in entries {
+                match entry {
+                    Ok(entry) if kind(&entry) => seen += 1,
+                    _ => return false,
+                }
+            }
+            seen > 0
+        })
+    };
+    let is_dir = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_dir());
+    let name = |entry: &fs::DirEntry| entry.file_name().to_string_lossy().into_owned();
+    let exported = |entry: &fs::DirEntry| {
+        let name = name(entry);
+        if is_dir(entry) {
+            matches!(name.as_str(), "train" | "val" | "valid" | "test")
+        } else {
+            entry.file_type().is_ok_and(|t| t.is_file()) && name.ends_with(".npy")
+        }
+    };
+    let export = |dir: &Path| {
+        all_of(dir, &|entry| is_dir(entry) && is_group_folder(&name(entry)) && all_of(&entry.path(), &exported))
+    };
+    let fails_validate = "which it would then fail to validate";
     for ancestor in absolute.ancestors().skip(1) {
-        let inside = if holds(ancestor.join("manifest.json"), super::manifest::MANIFEST_FORMAT) {
-            "a gen dataset"
+        let (inside, harm) = if holds(ancestor.join("manifest.json"), super::manifest::MANIFEST_FORMAT) {
+            ("a gen dataset", fails_validate)
         } else if sharded(ancestor) {
-            "a gen dataset written in shards (shards/K-of-N.json)"
+            ("a gen dataset written in shards (shards/K-of-N.json)", fails_validate)
         } else if holds(ancestor.join("sweep.json"), SWEEP_FORMAT_PREFIX) {
-            "a counterfactual sweep"
+            ("a counterfactual sweep", fails_validate)
+        } else if export(ancestor) {
+            ("an export", "which holds only what export writes (a file beside it, and export refuses to update it)")
         } else {
             continue;
         };
-        return Err(ClaimError::Inside { dir: dir.to_path_buf(), inside, ancestor: ancestor.to_path_buf() });
+        let ancestor = ancestor.to_path_buf();
+        return Err(ClaimError::Inside { dir: dir.to_path_buf(), inside, ancestor, harm });
     }
     Ok(())
 }
