@@ -196,6 +196,16 @@ SECONDS_PER_SCENARIO = {
     "granger": 0.025,
     "pcmci": 0.04,
 }
+# Seconds a unit takes whatever its size, measured on a 2-core CPU in runs
+# of 10/4/4 toy scenarios of 4 and 8 cars (2026-12-07): Granger starts a
+# process per core, each importing statsmodels, for every unit (4.9-5.3 s
+# in all); PCMCI's workers need less (0.7-1.0 s); a neural method builds its
+# model (0.5-0.9 s). RUN_START_SECONDS: the first unit's imports (2.3 s
+# more than the next one's). Without them --plan projected such a run at
+# 3 s, and it took 12.
+UNIT_START_SECONDS = {"granger": 4.5, "pcmci": 0.7, "nri": 0.5, "interaction": 0.5, "nri_trail": 0.6}
+DEFAULT_UNIT_START_SECONDS = 0.1
+RUN_START_SECONDS = 2.3
 NEURAL = ("nri", "interaction", "nri_trail")
 # A trail-message window's cost against one of NRI's, measured in whole quick
 # runs on a 2-core CPU: toy 926 s against NRI's 449 s, city 14.7 min against
@@ -259,11 +269,16 @@ def _projected_seconds(name: str, setting: Setting, cars: int, rates: Tuple[floa
         # Each epoch's val loss, and the predictions of every split at the end.
         seconds = 4 * splits["train"] * epochs / training + (splits["val"] * epochs + scenarios) / forward
         # A window costs about what its pairs cost: cars x (cars - 1), 56 at 8 cars.
-        return seconds * cars * (cars - 1) / 56
+        return _unit_start(name) + seconds * cars * (cars - 1) / 56
     seconds = SECONDS_PER_SCENARIO.get(name, 0.05) * scenarios * max(cars, 4) / 8
     if name in PARALLEL:
         seconds *= 2 / max(os.cpu_count() or 1, 2)  # measured on 2 cores; they use every core
-    return seconds
+    return _unit_start(name) + seconds
+
+
+def _unit_start(name: str) -> float:
+    """Seconds a unit of method ``name`` takes whatever its size."""
+    return UNIT_START_SECONDS.get(name, DEFAULT_UNIT_START_SECONDS)
 
 
 def _unit_key(world: str, name: str, group: str, setting: Setting, device: str, seed: int, spec: Spec) -> dict:
@@ -382,7 +397,7 @@ def run(
     beside = " with the CPU methods beside the GPU's" if overlap else ""
     kept = f", {len(units) - len(left)} of them finished earlier" if len(left) < len(units) else ""
     say(
-        f"{len(units)} units (world x method x group){kept}, projected {_clock(_overlapped(units, projected, overlap))}"
+        f"{len(units)} units (world x method x group){kept}, projected {_clock(RUN_START_SECONDS + _overlapped(units, projected, overlap))}"
         f"{beside} besides "
         f"generating the data ({calibrated}the classical methods "
         f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"

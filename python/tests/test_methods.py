@@ -302,10 +302,13 @@ def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsy
     assert not out.exists()
     # NRI's val windows (a forward pass) are projected at their own rate,
     # apart from its training windows: 1,600,000 at 1,000/s, 55,000 at 4,000/s.
-    assert paper._projected_seconds("nri", paper.FULL, 8, (1000.0, 4000.0)) == pytest.approx(1600 + 13.75)
+    # Beside them, what a unit takes whatever its size (measured).
+    nri = paper._projected_seconds("nri", paper.FULL, 8, (1000.0, 4000.0))
+    assert nri == pytest.approx(1600 + 13.75 + paper.UNIT_START_SECONDS["nri"])
     # NRI with trail messages: its own 20 epochs, each window TRAIL_COST of NRI's.
     trail = paper._projected_seconds("nri_trail", paper.FULL, 8, (1000.0, 4000.0))
-    assert trail == pytest.approx((320 + (500 * 20 + 5000) / 4000) * paper.TRAIL_COST)
+    start = paper.UNIT_START_SECONDS["nri_trail"]
+    assert trail == pytest.approx((320 + (500 * 20 + 5000) / 4000) * paper.TRAIL_COST + start)
 
 
 def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, capsys):
