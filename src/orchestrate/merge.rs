@@ -85,8 +85,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
     let _claim = claim(out, Writer::Merge, "merge").map_err(GenError::Claim)?;
     // What a `gen --force` cut off left aside (shards running skip it).
     super::run::finish_removal(out)?;
-    let others: Vec<&PathBuf> =
-        sources.iter().filter(|s| !real_paths(s, out).is_some_and(|(s, out)| s == out)).collect();
+    let others: Vec<&PathBuf> = sources.iter().filter(|s| real_paths(s, out).is_none_or(|(s, out)| s != out)).collect();
     let mut source_claims = Vec::new();
     let mut manifests = shard_manifests(out)?;
     for source in &others {
