@@ -502,12 +502,24 @@ fn a_picture_a_table_or_a_dataset_never_lands_in_an_export_which_export_then_sti
     assert_eq!(hash_tree(&export), before);
     let again = run(&["export", "nri", s(&data), "--out", s(&export), "--quiet"]);
     assert!(again.status.success(), "{}", stderr(&again));
-    // A folder of datasets named after their groups is no export: a picture goes beside them.
+    // Folders of that shape that export did not write are no export: a
+    // folder of datasets named after their groups, a user's notes in split
+    // folders, a user's own arrays per group. A picture goes into each.
     let datasets = dir.join("by-group");
     gen_ok(&spec, &datasets.join("cars04_edges50"), &["--quiet", "--no-images"]);
-    let beside = datasets.join("heat.png");
-    let drawn = run(&["heatmap", s(&data), "--out", s(&beside)]);
-    assert!(drawn.status.success() && beside.is_file(), "{}", stderr(&drawn));
+    let notes = dir.join("notes/cars08_edges50/train");
+    std::fs::create_dir_all(&notes).unwrap();
+    std::fs::write(notes.join("notes.txt"), "mine").unwrap();
+    let arrays = dir.join("arrays/cars08_edges50");
+    std::fs::create_dir_all(&arrays).unwrap();
+    std::fs::write(arrays.join("scores.npy"), npy(&[2], &[0.5, 1.0])).unwrap();
+    let mut drawn_into = 0;
+    for picture in [datasets.join("heat.png"), notes.join("heat.png"), arrays.join("heat.png")] {
+        let drawn = run(&["heatmap", s(&data), "--out", s(&picture)]);
+        assert!(drawn.status.success() && picture.is_file(), "{}: {}", picture.display(), stderr(&drawn));
+        drawn_into += 1;
+    }
+    assert_eq!(drawn_into, 3);
 }
 
 #[test]

@@ -634,15 +634,17 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
     };
     // An export: group folders and nothing else, as `export` takes a folder
     // for its own (a file beside them, and it refuses to update them), each
-    // holding what an export writes there and something of it: `.npy`
-    // arrays (NRI) or split folders (NS-DR, V-CDN). (A folder of datasets
-    // named after their groups is no export: their folders hold manifests.)
-    let all_of = |dir: &Path, kind: &dyn Fn(&fs::DirEntry) -> bool| {
+    // holding only what an export writes there, and some of it: NRI's
+    // arrays (`loc_train.npy`, `edges_valid_x.npy`, ...), or split folders
+    // of V-CDN's `.h5` files or NS-DR's scenario folders (each with its
+    // annotations). A user's own folders of that shape, and a folder of
+    // datasets named after their groups (each with a manifest), are none.
+    let all_of = |dir: &Path, kind: &dyn Fn(&fs::DirEntry, &str) -> bool| {
         fs::read_dir(dir).is_ok_and(|entries| {
             let mut seen = 0;
             for entry in entries {
                 match entry {
-                    Ok(entry) if kind(&entry) => seen += 1,
+                    Ok(entry) if kind(&entry, &entry.file_name().to_string_lossy()) => seen += 1,
                     _ => return false,
                 }
             }
@@ -650,17 +652,25 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
         })
     };
     let is_dir = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_dir());
-    let name = |entry: &fs::DirEntry| entry.file_name().to_string_lossy().into_owned();
-    let exported = |entry: &fs::DirEntry| {
-        let name = name(entry);
+    let is_file = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_file());
+    let scenario = |entry: &fs::DirEntry, name: &str| {
         if is_dir(entry) {
-            matches!(name.as_str(), "train" | "val" | "valid" | "test")
+            entry.path().join(super::annotations::ANNOTATIONS_FILE).is_file()
         } else {
-            entry.file_type().is_ok_and(|t| t.is_file()) && name.ends_with(".npy")
+            name.ends_with(".h5") && is_file(entry)
+        }
+    };
+    let exported = |entry: &fs::DirEntry, name: &str| {
+        let array =
+            name.ends_with(".npy") && ["loc_", "vel_", "edges_", "dynamic_edges_"].iter().any(|p| name.starts_with(p));
+        if array {
+            is_file(entry)
+        } else {
+            matches!(name, "train" | "val" | "valid" | "test") && is_dir(entry) && all_of(&entry.path(), &scenario)
         }
     };
     let export = |dir: &Path| {
-        all_of(dir, &|entry| is_dir(entry) && is_group_folder(&name(entry)) && all_of(&entry.path(), &exported))
+        all_of(dir, &|entry, name| is_group_folder(name) && is_dir(entry) && all_of(&entry.path(), &exported))
     };
     let fails_validate = "which it would then fail to validate";
     for ancestor in absolute.ancestors().skip(1) {
