@@ -280,6 +280,15 @@ class Spec:
         return f"Spec(name={self.name!r}, world={self.world!r}, groups={self.groups}, splits={self.splits})"
 
 
+def _dataset_spec(raw: Dict[str, Any], root: PathLike, record: PathLike) -> Spec:
+    """A dataset's own spec, from its record (``manifest.json`` or
+    ``sweep.json``, which errors name), read to read the dataset: the gen
+    that wrote it checked it, so it is planned with fewer trial plans than
+    a spec about to be written (``Spec.from_dict`` checks that in full)."""
+    networks = _os.fspath(_os.path.join(_os.fspath(root), "networks"))
+    return Spec(_native.Spec.from_json(_spec_json(raw), _os.fspath(record), None, networks, True))
+
+
 def _spec_from_state(text: str, path: Optional[str], networks: Optional[str] = None) -> Spec:
     return Spec(_native.Spec.from_json(text, path if path is not None else "<dict>", path, networks))
 

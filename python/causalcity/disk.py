@@ -608,7 +608,7 @@ class Dataset(_Packed):
     block, to let go sooner than the object goes."""
 
     def __init__(self, root: PathLike, split: Optional[str] = None, images: bool = True) -> None:
-        from . import Spec
+        from . import _dataset_spec
 
         self.root = Path(root)
         manifest = self.root / "manifest.json"
@@ -623,7 +623,7 @@ class Dataset(_Packed):
                 "only the scenarios written so far are listed",
                 stacklevel=2,
             )
-        self.spec = Spec.from_dict(self.manifest["spec"], networks=self.root / "networks")
+        self.spec = _dataset_spec(self.manifest["spec"], self.root, manifest)
         _check_spec_hash(self.spec, self.manifest, manifest, "gen wrote the dataset", "scenarios")
         self.images = bool(self.manifest.get("images", False))
         self.split = split
@@ -946,7 +946,7 @@ class Sweep(_Packed):
     the tar files of ``--format tar``."""
 
     def __init__(self, root: PathLike) -> None:
-        from . import Spec
+        from . import _dataset_spec
 
         self.root = Path(root)
         record = self.root / "sweep.json"
@@ -961,7 +961,7 @@ class Sweep(_Packed):
         if not self.record.get("complete", False):
             _warnings.warn(f"{_os.fspath(self.root)} is unfinished (sweep.json's complete is false)", stacklevel=2)
         check_sweep_kinds(self.record, record)
-        self.spec = Spec.from_dict(self.record["spec"], networks=self.root / "networks")
+        self.spec = _dataset_spec(self.record["spec"], self.root, record)
         _check_spec_hash(self.spec, self.record, record, "the sweep was run", "pairs")
         self.scenarios_per_tar: Optional[int] = self.record.get("scenarios_per_tar")
         """``--format tar``: pairs per tar file (None: a folder per pair)."""

@@ -222,7 +222,7 @@ impl Spec {
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Spec> {
         match std::fs::read_to_string(&path) {
-            Ok(text) => Spec::from_json(py, text, path.clone(), Some(path), None),
+            Ok(text) => Spec::from_json(py, text, path.clone(), Some(path), None, false),
             // The command line's message for a file it cannot read.
             Err(_) => Err(py_err(
                 py.detach(|| load_spec(&path))
@@ -234,15 +234,18 @@ impl Spec {
 
     /// A spec from its JSON; errors name `origin`; `path` is the file it
     /// came from, if any; `networks` the folder that keeps the SUMO
-    /// networks it names by file name (a dataset's `networks/`).
+    /// networks it names by file name (a dataset's `networks/`); `written`:
+    /// a dataset's own spec, read to read the dataset, which the gen that
+    /// wrote it checked (fewer trial plans: `Expansion::from_written_spec`).
     #[staticmethod]
-    #[pyo3(signature = (text, origin, path=None, networks=None))]
+    #[pyo3(signature = (text, origin, path=None, networks=None, written=false))]
     fn from_json(
         py: Python<'_>,
         text: String,
         origin: PathBuf,
         path: Option<PathBuf>,
         networks: Option<PathBuf>,
+        written: bool,
     ) -> PyResult<Spec> {
         let expansion = py
             .detach(|| {
@@ -256,13 +259,7 @@ impl Spec {
                     (None, None) => spec.read_networks(|sumo| PathBuf::from(sumo)),
                 }
                 .map_err(spec_err)?;
-                // A dataset's own spec (its networks in its folder) was
-                // checked by the gen that wrote it.
-                match networks {
-                    Some(_) => Expansion::from_written_spec(spec),
-                    None => Expansion::from_spec(spec),
-                }
-                .map_err(spec_err)
+                if written { Expansion::from_written_spec(spec) } else { Expansion::from_spec(spec) }.map_err(spec_err)
             })
             .map_err(py_err)?;
         Ok(Spec { generator: Arc::new(Generator::new(expansion)), json: text, path, networks })

@@ -225,6 +225,22 @@ def test_spec_from_a_dict_gives_the_same_scenarios_as_its_file():
     assert causalcity.Spec.from_dict(as_dict).to_dict() == as_dict
 
 
+def test_platoons_packed_too_tightly_are_refused_by_a_spec_from_a_dict_with_networks_too(tmp_path):
+    # 100 cars in platoons of 4 with gaps of 1-12 m on a small town: seed 5
+    # places the first scenario, and `gen` refuses it from its trial plans
+    # (tests/spec_errors.rs). A dict spec given a networks folder is still a
+    # spec about to be written: it was planned with a dataset's fewer trials,
+    # and generate() then failed midway.
+    raw = json.loads((ROOT / "configs" / "ci-city.json").read_text())
+    raw.update(name="tight", seed=5, groups=[{"cars": 100, "edge_proportion": 0.5}],
+               splits={"train": 20, "val": 5, "test": 5},
+               map={"north_south_roads": [-24, 24], "extent_x": 44, "camera_altitude_m": 48})  # fmt: skip
+    raw["city"]["start"] = {"follower_gap_m": {"uniform": [1, 12]}, "platoon_cars": 4}
+    for networks in (None, tmp_path):
+        with pytest.raises(causalcity.InputError, match="could not place 100 cars in platoons of 4"):
+            causalcity.Spec.from_dict(raw, networks=networks)
+
+
 def test_map_gives_the_road_network_as_arrays_and_agrees_with_the_command(tmp_path):
     grid = json.loads(CITY_SPEC.read_text())
     grid["map"] = {"grid": {"rows": 3, "columns": 3}}
