@@ -201,7 +201,7 @@ SECONDS_PER_SCENARIO = {
 # process per core, each importing statsmodels, for every unit (4.9-5.3 s
 # in all); PCMCI's workers need less (0.7-1.0 s); a neural method builds its
 # model (0.5-0.9 s). RUN_START_SECONDS: the first unit's imports (2.3 s
-# more than the next one's). Without them --plan projected such a run at
+# more than the next one's), counted in its projection. Without them --plan projected such a run at
 # 3 s, and it took 12.
 UNIT_START_SECONDS = {"granger": 4.5, "pcmci": 0.7, "nri": 0.5, "interaction": 0.5, "nri_trail": 0.6}
 DEFAULT_UNIT_START_SECONDS = 0.1
@@ -392,12 +392,14 @@ def run(
     else:
         rates, on, calibrated = (1.0, 1.0), device, ""
     projected = {u: _projected_seconds(u[1], setting, cars[u[2]], rates) if u in left else 0.0 for u in units}
+    if left:
+        projected[left[0]] += RUN_START_SECONDS  # the first unit run pays the imports
     if overlap is None:
         overlap = on.startswith("cuda") and any(u[1] in NEURAL for u in units)
     beside = " with the CPU methods beside the GPU's" if overlap else ""
     kept = f", {len(units) - len(left)} of them finished earlier" if len(left) < len(units) else ""
     say(
-        f"{len(units)} units (world x method x group){kept}, projected {_clock(RUN_START_SECONDS + _overlapped(units, projected, overlap))}"
+        f"{len(units)} units (world x method x group){kept}, projected {_clock(_overlapped(units, projected, overlap))}"
         f"{beside} besides "
         f"generating the data ({calibrated}the classical methods "
         f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"
