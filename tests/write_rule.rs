@@ -523,6 +523,57 @@ fn a_picture_a_table_or_a_dataset_never_lands_in_an_export_which_export_then_sti
 }
 
 #[test]
+fn an_export_cut_off_midway_is_still_an_export_nothing_lands_in_it_and_the_rerun_finishes_it() {
+    // A cut-off export (its lock left, arrays still staged as .partial,
+    // NS-DR scenario folders without their annotations yet) took a picture
+    // (exit 0), and the rerun that would finish the export then refused the
+    // folder: "holds files it did not write".
+    let dir = fresh_dir("rule-into-cut-export");
+    let spec = write_spec(&dir, &toy_spec("cut", &[(4, 0.5)], (2, 1, 1), 8));
+    let data = dir.join("data");
+    gen_ok(&spec, &data, &["--quiet"]);
+    let (nri, nsdr) = (dir.join("nri"), dir.join("nsdr"));
+    for (kind, out) in [("nri", &nri), ("nsdr", &nsdr)] {
+        let output = run(&["export", kind, s(&data), "--out", s(out), "--quiet"]);
+        assert!(output.status.success(), "{}", stderr(&output));
+    }
+    let finished: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
+    // Cut off: the lock file a killed export leaves, an array not yet
+    // moved into place, a scenario before its annotations and one with
+    // them half written.
+    std::fs::write(nri.join(".causalcity.lock"), "pid 1 on host: export nri").unwrap();
+    let array = nri.join("cars04_edges50/loc_train.npy");
+    std::fs::rename(&array, array.with_extension("npy.partial")).unwrap();
+    std::fs::write(nsdr.join(".causalcity.lock"), "pid 1 on host: export nsdr").unwrap();
+    let mut scenarios: Vec<PathBuf> =
+        std::fs::read_dir(nsdr.join("cars04_edges50/train")).unwrap().map(|e| e.unwrap().path()).collect();
+    scenarios.sort();
+    assert!(scenarios.len() >= 2, "{scenarios:?}");
+    std::fs::remove_file(scenarios[0].join("annotations.json")).unwrap();
+    let half = scenarios[1].join("annotations.json");
+    std::fs::rename(&half, half.with_extension("json.partial")).unwrap();
+    let cut: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
+    let mut refused = 0;
+    for out in [&nri, &nsdr] {
+        for picture in [out.join("heat.png"), out.join("cars04_edges50/heat.png")] {
+            let drawn = run(&["heatmap", s(&data), "--out", s(&picture)]);
+            assert_refused(&drawn, &format!("is inside an export ({})", out.display()));
+            refused += 1;
+        }
+    }
+    assert_eq!(refused, 4);
+    let now: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
+    assert_eq!(now, cut, "nothing written into the cut-off exports");
+    // The same export run again finishes each, as one whole run wrote it.
+    for (kind, out) in [("nri", &nri), ("nsdr", &nsdr)] {
+        let output = run(&["export", kind, s(&data), "--out", s(out), "--quiet"]);
+        assert!(output.status.success(), "{}", stderr(&output));
+    }
+    let again: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
+    assert_eq!(again, finished);
+}
+
+#[test]
 fn an_export_never_writes_through_a_link_planted_in_its_folder() {
     // export nri wrote through a link at its staged loc_train.npy.partial
     // (the file it pointed to, outside --out, became an array), and export

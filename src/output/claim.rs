@@ -632,13 +632,15 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
             })
         })
     };
-    // An export: group folders and nothing else, as `export` takes a folder
-    // for its own (a file beside them, and it refuses to update them), each
-    // holding only what an export writes there, and some of it: NRI's
-    // arrays (`loc_train.npy`, `edges_valid_x.npy`, ...), or split folders
-    // of V-CDN's `.h5` files or NS-DR's scenario folders (each with its
-    // annotations). A user's own folders of that shape, and a folder of
-    // datasets named after their groups (each with a manifest), are none.
+    // An export: group folders and nothing else (but the lock of an export
+    // under way or cut off), as `export` takes a folder for its own (a file
+    // beside them, and it refuses to update them), each holding only what
+    // an export writes there, and some of it: NRI's arrays (`loc_train.npy`,
+    // `edges_valid_x.npy`, ...), or split folders of V-CDN's `.h5` files or
+    // NS-DR's scenario folders (each with its annotations), finished or
+    // still staged (`.partial`, NS-DR's frames before their annotations). A
+    // user's own folders of that shape, and a folder of datasets named
+    // after their groups (each with a manifest), are none.
     let all_of = |dir: &Path, kind: &dyn Fn(&fs::DirEntry, &str) -> bool| {
         fs::read_dir(dir).is_ok_and(|entries| {
             let mut seen = 0;
@@ -653,16 +655,24 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
     };
     let is_dir = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_dir());
     let is_file = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_file());
+    let staged = |name: &str| name.strip_suffix(".partial").unwrap_or(name).to_string();
+    let annotations = super::annotations::ANNOTATIONS_FILE;
+    let nsdr_part = |entry: &fs::DirEntry, name: &str| match name {
+        // (links to the dataset's frames, or copies of a pack's)
+        "rgb" | "mask" => entry.file_type().is_ok_and(|t| t.is_dir() || t.is_symlink()),
+        _ => staged(name) == annotations && is_file(entry),
+    };
     let scenario = |entry: &fs::DirEntry, name: &str| {
         if is_dir(entry) {
-            entry.path().join(super::annotations::ANNOTATIONS_FILE).is_file()
+            let dir = entry.path();
+            dir.join(annotations).is_file() || all_of(&dir, &nsdr_part)
         } else {
-            name.ends_with(".h5") && is_file(entry)
+            staged(name).ends_with(".h5") && is_file(entry)
         }
     };
     let exported = |entry: &fs::DirEntry, name: &str| {
-        let array =
-            name.ends_with(".npy") && ["loc_", "vel_", "edges_", "dynamic_edges_"].iter().any(|p| name.starts_with(p));
+        let array = staged(name).ends_with(".npy")
+            && ["loc_", "vel_", "edges_", "dynamic_edges_"].iter().any(|p| name.starts_with(p));
         if array {
             is_file(entry)
         } else {
@@ -670,7 +680,12 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
         }
     };
     let export = |dir: &Path| {
-        all_of(dir, &|entry, name| is_group_folder(name) && is_dir(entry) && all_of(&entry.path(), &exported))
+        let groups = std::cell::Cell::new(0);
+        all_of(dir, &|entry, name| {
+            let group = is_group_folder(name) && is_dir(entry) && all_of(&entry.path(), &exported);
+            groups.set(groups.get() + usize::from(group));
+            group || (is_lock_file(name) && is_file(entry))
+        }) && groups.get() > 0
     };
     let fails_validate = "which it would then fail to validate";
     for ancestor in absolute.ancestors().skip(1) {
