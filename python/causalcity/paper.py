@@ -198,12 +198,14 @@ SECONDS_PER_SCENARIO = {
 }
 # Seconds a unit takes whatever its size, measured on a 2-core CPU in runs
 # of 10/4/4 toy scenarios of 4 and 8 cars (2026-12-07): Granger starts a
-# process per core, each importing statsmodels, for every unit (4.9-5.3 s
-# in all); PCMCI's workers need less (0.7-1.0 s); a neural method builds its
-# model (0.5-0.9 s). RUN_START_SECONDS: the first unit's imports (2.3 s
-# more than the next one's), counted in its projection. Without them --plan projected such a run at
-# 3 s, and it took 12.
-UNIT_START_SECONDS = {"granger": 4.5, "pcmci": 0.7, "nri": 0.5, "interaction": 0.5, "nri_trail": 0.6}
+# pool of a process per core for each lag and split (1.5 s in all, since
+# the fork server loads scipy.stats once rather than each worker: 4.5 s
+# before, 5 toy units 27 s against 12); PCMCI's workers need less (0.4 s,
+# 0.7 before); a neural method builds its model (0.5-0.9 s).
+# RUN_START_SECONDS: the first unit's imports (2.3 s more than the next
+# one's), counted in its projection. Without them --plan projected such a
+# run at 3 s, and it took 12.
+UNIT_START_SECONDS = {"granger": 1.5, "pcmci": 0.4, "nri": 0.5, "interaction": 0.5, "nri_trail": 0.6}
 DEFAULT_UNIT_START_SECONDS = 0.1
 RUN_START_SECONDS = 2.3
 NEURAL = ("nri", "interaction", "nri_trail")
