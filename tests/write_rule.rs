@@ -539,8 +539,9 @@ fn an_export_cut_off_midway_is_still_an_export_nothing_lands_in_it_and_the_rerun
     }
     let finished: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
     // Cut off: the lock file a killed export leaves, an array not yet
-    // moved into place, a scenario before its annotations and one with
-    // them half written.
+    // moved into place; NS-DR writes a scenario's folder, its annotations
+    // (staged, then renamed), then links its frames: a scenario folder
+    // still empty, one with its annotations staged, a split folder just made.
     std::fs::write(nri.join(".causalcity.lock"), "pid 1 on host: export nri").unwrap();
     let array = nri.join("cars04_edges50/loc_train.npy");
     std::fs::rename(&array, array.with_extension("npy.partial")).unwrap();
@@ -549,9 +550,15 @@ fn an_export_cut_off_midway_is_still_an_export_nothing_lands_in_it_and_the_rerun
         std::fs::read_dir(nsdr.join("cars04_edges50/train")).unwrap().map(|e| e.unwrap().path()).collect();
     scenarios.sort();
     assert!(scenarios.len() >= 2, "{scenarios:?}");
-    std::fs::remove_file(scenarios[0].join("annotations.json")).unwrap();
+    std::fs::remove_dir_all(&scenarios[0]).unwrap();
+    std::fs::create_dir(&scenarios[0]).unwrap();
+    for link in ["rgb", "mask"] {
+        std::fs::remove_file(scenarios[1].join(link)).unwrap();
+    }
     let half = scenarios[1].join("annotations.json");
     std::fs::rename(&half, half.with_extension("json.partial")).unwrap();
+    std::fs::remove_dir_all(nsdr.join("cars04_edges50/val")).unwrap();
+    std::fs::create_dir(nsdr.join("cars04_edges50/val")).unwrap();
     let cut: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
     let mut refused = 0;
     for out in [&nri, &nsdr] {
@@ -571,6 +578,13 @@ fn an_export_cut_off_midway_is_still_an_export_nothing_lands_in_it_and_the_rerun
     }
     let again: Vec<_> = [&nri, &nsdr].iter().map(|out| hash_tree(out)).collect();
     assert_eq!(again, finished);
+    // Without a lock, a folder of that shape holding frames but no
+    // annotations (a user's copies) is no export: a picture goes in.
+    let copies = dir.join("copies/cars04_edges50/train/00000/rgb");
+    std::fs::create_dir_all(&copies).unwrap();
+    let picture = dir.join("copies/heat.png");
+    let drawn = run(&["heatmap", s(&data), "--out", s(&picture)]);
+    assert!(drawn.status.success() && picture.is_file(), "{}", stderr(&drawn));
 }
 
 #[test]

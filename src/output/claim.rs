@@ -632,61 +632,6 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
             })
         })
     };
-    // An export: group folders and nothing else (but the lock of an export
-    // under way or cut off), as `export` takes a folder for its own (a file
-    // beside them, and it refuses to update them), each holding only what
-    // an export writes there, and some of it: NRI's arrays (`loc_train.npy`,
-    // `edges_valid_x.npy`, ...), or split folders of V-CDN's `.h5` files or
-    // NS-DR's scenario folders (each with its annotations), finished or
-    // still staged (`.partial`, NS-DR's frames before their annotations). A
-    // user's own folders of that shape, and a folder of datasets named
-    // after their groups (each with a manifest), are none.
-    let all_of = |dir: &Path, kind: &dyn Fn(&fs::DirEntry, &str) -> bool| {
-        fs::read_dir(dir).is_ok_and(|entries| {
-            let mut seen = 0;
-            for entry in entries {
-                match entry {
-                    Ok(entry) if kind(&entry, &entry.file_name().to_string_lossy()) => seen += 1,
-                    _ => return false,
-                }
-            }
-            seen > 0
-        })
-    };
-    let is_dir = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_dir());
-    let is_file = |entry: &fs::DirEntry| entry.file_type().is_ok_and(|t| t.is_file());
-    let staged = |name: &str| name.strip_suffix(".partial").unwrap_or(name).to_string();
-    let annotations = super::annotations::ANNOTATIONS_FILE;
-    let nsdr_part = |entry: &fs::DirEntry, name: &str| match name {
-        // (links to the dataset's frames, or copies of a pack's)
-        "rgb" | "mask" => entry.file_type().is_ok_and(|t| t.is_dir() || t.is_symlink()),
-        _ => staged(name) == annotations && is_file(entry),
-    };
-    let scenario = |entry: &fs::DirEntry, name: &str| {
-        if is_dir(entry) {
-            let dir = entry.path();
-            dir.join(annotations).is_file() || all_of(&dir, &nsdr_part)
-        } else {
-            staged(name).ends_with(".h5") && is_file(entry)
-        }
-    };
-    let exported = |entry: &fs::DirEntry, name: &str| {
-        let array = staged(name).ends_with(".npy")
-            && ["loc_", "vel_", "edges_", "dynamic_edges_"].iter().any(|p| name.starts_with(p));
-        if array {
-            is_file(entry)
-        } else {
-            matches!(name, "train" | "val" | "valid" | "test") && is_dir(entry) && all_of(&entry.path(), &scenario)
-        }
-    };
-    let export = |dir: &Path| {
-        let groups = std::cell::Cell::new(0);
-        all_of(dir, &|entry, name| {
-            let group = is_group_folder(name) && is_dir(entry) && all_of(&entry.path(), &exported);
-            groups.set(groups.get() + usize::from(group));
-            group || (is_lock_file(name) && is_file(entry))
-        }) && groups.get() > 0
-    };
     let fails_validate = "which it would then fail to validate";
     for ancestor in absolute.ancestors().skip(1) {
         let (inside, harm) = if holds(ancestor.join("manifest.json"), super::manifest::MANIFEST_FORMAT) {
@@ -695,7 +640,7 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
             ("a gen dataset written in shards (shards/K-of-N.json)", fails_validate)
         } else if holds(ancestor.join("sweep.json"), SWEEP_FORMAT_PREFIX) {
             ("a counterfactual sweep", fails_validate)
-        } else if export(ancestor) {
+        } else if is_export(ancestor) {
             ("an export", "which holds only what export writes (a file beside it, and export refuses to update it)")
         } else {
             continue;
@@ -704,6 +649,80 @@ fn check_ancestors(dir: &Path) -> Result<(), ClaimError> {
         return Err(ClaimError::Inside { dir: dir.to_path_buf(), inside, ancestor, harm });
     }
     Ok(())
+}
+
+/// Whether `dir` is an export: group folders and nothing else, as `export`
+/// takes a folder for its own (a file beside them, and it refuses to update
+/// them), each holding only what an export writes there, and some of it:
+/// NRI's arrays (`loc_train.npy`, `edges_valid_x.npy`, ...), or split
+/// folders of V-CDN's `.h5` files or NS-DR's scenario folders (each with its
+/// annotations). An export under way or cut off midway (killed or
+/// interrupted, it leaves its lock file) holds its lock too, and may hold
+/// empty folders and files still staged (`.partial`). A user's own folders
+/// of that shape, and a folder of datasets named after their groups (each
+/// with a manifest), are none.
+fn is_export(dir: &Path) -> bool {
+    let cut_off = fs::read_dir(dir)
+        .is_ok_and(|entries| entries.flatten().any(|e| is_lock_file(&e.file_name().to_string_lossy()) && is_file(&e)));
+    let groups = std::cell::Cell::new(0);
+    let exported = |entry: &fs::DirEntry, name: &str| exported(entry, name, cut_off);
+    let top = every_entry(dir, false, &|entry, name| {
+        let group = is_group_folder(name) && is_dir(entry) && every_entry(&entry.path(), cut_off, &exported);
+        groups.set(groups.get() + usize::from(group));
+        group || (is_lock_file(name) && is_file(entry))
+    });
+    top && groups.get() > 0
+}
+
+/// Whether every entry of folder `dir` is of `kind` and there is one (or
+/// none, where `empty_too`).
+fn every_entry(dir: &Path, empty_too: bool, kind: &dyn Fn(&fs::DirEntry, &str) -> bool) -> bool {
+    fs::read_dir(dir).is_ok_and(|entries| {
+        let mut seen = 0;
+        for entry in entries {
+            match entry {
+                Ok(entry) if kind(&entry, &entry.file_name().to_string_lossy()) => seen += 1,
+                _ => return false,
+            }
+        }
+        seen > 0 || empty_too
+    })
+}
+
+/// Whether `entry` (named `name`) of a group folder is what an export
+/// writes there: NRI's arrays or a split folder of scenarios, also still
+/// staged where the export was `cut_off`.
+fn exported(entry: &fs::DirEntry, name: &str, cut_off: bool) -> bool {
+    let finished =
+        |name: &str| if cut_off { name.strip_suffix(".partial").unwrap_or(name).to_string() } else { name.to_string() };
+    let array = finished(name).ends_with(".npy")
+        && ["loc_", "vel_", "edges_", "dynamic_edges_"].iter().any(|p| name.starts_with(p));
+    if array {
+        return is_file(entry);
+    }
+    let scenario = |entry: &fs::DirEntry, name: &str| {
+        if is_dir(entry) {
+            // NS-DR writes a scenario's annotations, then links its frames:
+            // cut off, its folder may hold nothing yet, or the annotations
+            // still staged.
+            let (dir, annotations) = (entry.path(), super::annotations::ANNOTATIONS_FILE);
+            let staged = |e: &fs::DirEntry, n: &str| n.strip_suffix(".partial") == Some(annotations) && is_file(e);
+            dir.join(annotations).is_file() || (cut_off && every_entry(&dir, true, &staged))
+        } else {
+            finished(name).ends_with(".h5") && is_file(entry)
+        }
+    };
+    matches!(name, "train" | "val" | "valid" | "test")
+        && is_dir(entry)
+        && every_entry(&entry.path(), cut_off, &scenario)
+}
+
+fn is_dir(entry: &fs::DirEntry) -> bool {
+    entry.file_type().is_ok_and(|t| t.is_dir())
+}
+
+fn is_file(entry: &fs::DirEntry) -> bool {
+    entry.file_type().is_ok_and(|t| t.is_file())
 }
 
 /// `path` made absolute with every link resolved: its longest existing
