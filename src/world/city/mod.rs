@@ -228,9 +228,10 @@ struct Sim<'a> {
     contacts: BTreeSet<(usize, usize)>,
     /// Time of the last frame, seconds: re-planned routes must last until then.
     horizon: f64,
-    /// While set, the stretches of tracks each decision reads, where what
-    /// stands can change what it finds (see `perception::Read`).
-    reads: Option<RefCell<Vec<perception::Read>>>,
+    /// While set, the tracks each decision reads, each with the position
+    /// along it from which on what it finds there can matter (see
+    /// `perception::occupants_from`).
+    reads: Option<RefCell<Vec<(usize, f64)>>>,
     /// A factual run for effects re-runs records here (`replay.rs`).
     tape: Option<Box<replay::Tape<'a>>>,
     /// A re-run's cars replayed from the tape rather than simulated.

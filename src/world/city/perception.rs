@@ -87,27 +87,6 @@ impl Places {
 /// A candidate car ahead: (distance along the route to its centre, car).
 type Candidate = (f64, usize);
 
-/// A stretch of a track that a decision read: only a car that stands (or,
-/// in an effects re-run, stood) on `track` from `from` to `to` metres along
-/// it, both included, can change what the decision found there.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Read {
-    pub(super) track: usize,
-    pub(super) from: f64,
-    pub(super) to: f64,
-}
-
-/// How far beyond the nearest car found on a track a search notes its read,
-/// metres: a car there cannot be nearer, but distances along a route are
-/// computed with round-off (about 1e-13 m), so a car a hair beyond could
-/// compare nearer.
-const NEAREST_READ_MARGIN_M: f64 = 1e-6;
-
-/// How far beyond [`LOOKAHEAD`] a search for the car ahead notes its read,
-/// metres: more than the 0.01 m by which a car beyond a leg's end still
-/// counts as on it.
-const LOOKAHEAD_READ_MARGIN_M: f64 = 0.05;
-
 /// The nearest of `candidates`; the first one on a tie.
 fn nearest(candidates: impl Iterator<Item = Candidate>) -> Option<Candidate> {
     let mut best = None;
@@ -209,17 +188,10 @@ impl Sim<'_> {
     /// so that an effects re-run tries the decision again only when a car
     /// it changed stands (or stood) within it (`replay.rs`).
     fn occupants_from(&self, track: usize, from: f64) -> &[(usize, f64)] {
-        self.note_read(track, from, f64::INFINITY);
-        &self.occupancy[track]
-    }
-
-    /// Notes, while recording, that a decision read `track` from `from` to
-    /// `to` metres along it ([`Read`]); the reader takes `occupancy[track]`
-    /// itself.
-    fn note_read(&self, track: usize, from: f64, to: f64) {
         if let Some(reads) = &self.reads {
-            reads.borrow_mut().push(Read { track, from, to });
+            reads.borrow_mut().push((track, from));
         }
+        &self.occupancy[track]
     }
 
     /// Records car `i` on `track`, `pos` metres along it.
@@ -372,27 +344,15 @@ impl Sim<'_> {
         let behind = start + (car.s - leg.route_start);
         let from = (start - 0.01).max(behind - 1e-6);
         let mut best: Option<Candidate> = None;
-        // A car farther along the route than LOOKAHEAD is never the one
-        // ahead (`leader_ahead`, the one caller, drops it), and this leg
-        // then reaches past LOOKAHEAD, so it hides no leg after it either
-        // (with room for the 0.01 m leeway at the leg's end).
-        let seen_until = start + (car.s + LOOKAHEAD - leg.route_start) + LOOKAHEAD_READ_MARGIN_M;
         for track in tracks.into_iter().flatten() {
-            // The nearest on this track: a car beyond it (on this track) is
-            // never nearer, so the read ends there.
-            let mut nearest_here = (f64::INFINITY, (end + 0.01).min(seen_until));
-            for &(j, pos) in &self.occupancy[track] {
+            for &(j, pos) in self.occupants_from(track, from) {
                 if j != i && pos >= start - 0.01 && pos <= end + 0.01 {
                     let d = leg.route_start + (pos - start) - car.s;
                     if d > 0.0 {
                         closer(&mut best, (d, j));
-                        if d < nearest_here.0 {
-                            nearest_here = (d, (pos + NEAREST_READ_MARGIN_M).min(seen_until));
-                        }
                     }
                 }
             }
-            self.note_read(track, from, nearest_here.1);
         }
         best
     }

@@ -37,7 +37,7 @@
 
 use super::car::SimCar;
 use super::events::{extent, may_touch};
-use super::perception::{Places, Read, LOOKAHEAD};
+use super::perception::{Places, LOOKAHEAD};
 use super::{Sim, MAX_STEP};
 use crate::geometry::OrientedBox;
 use crate::map::CityMap;
@@ -96,10 +96,10 @@ pub(super) struct Tape<'a> {
     /// Per car, `(step, route)` from the end of that step on, in step order.
     routes: Vec<Vec<(i64, Arc<Route>)>>,
     /// Each decision's reads (`DecisionReads`), in the order of `deciders`:
-    /// the stretches of tracks where a car could change it are
-    /// `reads[start..end]`.
+    /// the tracks it read, each with the position from which on a car
+    /// there could change it, are `reads[start..end]`.
     decisions: Vec<DecisionReads>,
-    reads: Vec<Read>,
+    reads: Vec<(usize, f64)>,
     /// The cars that decided, step by step in car order
     /// (`deciders[deciders_from[step]..deciders_from[step + 1]]`).
     deciders: Vec<usize>,
@@ -247,7 +247,7 @@ impl<'a> Tape<'a> {
     }
 
     /// The tracks decision `d` (a position in `deciders`) read.
-    fn reads_of(&self, d: usize) -> &[Read] {
+    fn reads_of(&self, d: usize) -> &[(usize, f64)] {
         let (start, end) = self.decisions[d].reads;
         &self.reads[start..end]
     }
@@ -272,7 +272,7 @@ impl Sim<'_> {
         let (Some(tape), Some(reads)) = (&mut self.tape, &self.reads) else { return };
         let start = tape.reads.len();
         tape.reads.extend(reads.borrow().iter().copied());
-        let tracks = tape.reads[start..].iter().fold(0, |bits, read| bits | track_bit(read.track));
+        let tracks = tape.reads[start..].iter().fold(0, |bits, &(track, _)| bits | track_bit(track));
         let step = tape.places.len() / tape.cars - 1;
         debug_assert!(
             tape.decisions_at(step).last().is_none_or(|d| tape.deciders[d] < i),
@@ -420,7 +420,6 @@ impl<'a> Recording<'a> {
         let dt = changed.frame_interval / steps as f64;
         let mut buffers = StepBuffers {
             dirty: vec![CLEAN; self.map.track_count()],
-            dirty_from: vec![f64::INFINITY; self.map.track_count()],
             clearances: vec![Clearance::default(); n],
             ..StepBuffers::default()
         };
@@ -521,15 +520,14 @@ const CLEARANCE_MARGIN_M: f64 = 1e-3;
 const CLEAN: f64 = f64::NEG_INFINITY;
 
 /// What a re-run's steps reuse (nothing allocated per step): per track
-/// the farthest and the nearest position along it at which a simulated car
-/// stands, or stood in the factual run, otherwise than the tape says
-/// ([`CLEAN`]: none), the tracks marked, the decisions of replayed cars
-/// tried (positions in the tape's `deciders`), and each car's clearance of
-/// the taped cars.
+/// the farthest position along it at which a simulated car stands, or
+/// stood in the factual run, otherwise than the tape says ([`CLEAN`]:
+/// none), the tracks marked, the decisions of replayed cars tried
+/// (positions in the tape's `deciders`), and each car's clearance of the
+/// taped cars.
 #[derive(Default)]
 struct StepBuffers {
     dirty: Vec<f64>,
-    dirty_from: Vec<f64>,
     marked: Vec<usize>,
     trying: Vec<usize>,
     /// Per car, how clear of the taped cars it last was.
@@ -752,18 +750,15 @@ impl<'s> Sim<'s> {
         // Replayed cars about to decide on what may differ from the factual
         // run try the decision; those who decide otherwise wake up. (Most
         // steps no replayed car decides, and nothing need be marked.)
-        let StepBuffers { dirty, dirty_from, marked, trying, clearances, shown_from_tape, tries, woke } = buffers;
+        let StepBuffers { dirty, marked, trying, clearances, shown_from_tape, tries, woke } = buffers;
         trying.clear();
         trying.extend(rec.tape.decisions_at(k).filter(|&d| self.frozen[rec.tape.deciders[d]]));
         if !trying.is_empty() {
-            self.mark_dirty(rec, k, dirty, dirty_from, marked);
+            self.mark_dirty(rec, k, dirty, marked);
             if marked.is_empty() {
                 trying.clear();
             } else {
-                let changed = |read: &Read| {
-                    let track = read.track;
-                    dirty[track] != CLEAN && dirty[track] >= read.from && dirty_from[track] <= read.to
-                };
+                let changed = |&(track, from): &(usize, f64)| dirty[track] != CLEAN && dirty[track] >= from;
                 let marked_bits = marked.iter().fold(0, |bits, &track| bits | track_bit(track));
                 trying.retain(|&d| {
                     rec.tape.decisions[d].tracks & marked_bits != 0 && rec.tape.reads_of(d).iter().any(changed)
@@ -771,7 +766,6 @@ impl<'s> Sim<'s> {
             }
             for &track in marked.iter() {
                 dirty[track] = CLEAN;
-                dirty_from[track] = f64::INFINITY;
             }
         }
         let mut waking = Vec::new();
@@ -919,19 +913,12 @@ impl<'s> Sim<'s> {
         }
     }
 
-    /// Marks in `dirty` and `dirty_from` every track on which a simulated
-    /// car stands, or stood in the factual run, when it is not where and as
-    /// fast as the tape says at step `k`, with the farthest and the nearest
-    /// such position along it; lists the tracks marked in `marked`.
+    /// Marks in `dirty` every track on which a simulated car stands, or stood
+    /// in the factual run, when it is not where and as fast as the tape says
+    /// at step `k`, with the farthest such position along it; lists the
+    /// tracks marked in `marked`.
     #[inline(always)]
-    fn mark_dirty(
-        &self,
-        rec: &Recording<'s>,
-        k: usize,
-        dirty: &mut [f64],
-        dirty_from: &mut [f64],
-        marked: &mut Vec<usize>,
-    ) {
+    fn mark_dirty(&self, rec: &Recording<'s>, k: usize, dirty: &mut [f64], marked: &mut Vec<usize>) {
         marked.clear();
         for &i in &self.live {
             let index = rec.tape.index(k, i);
@@ -947,13 +934,9 @@ impl<'s> Sim<'s> {
                     if dirty[track] == CLEAN {
                         marked.push(track);
                     }
-                    // The farthest and the nearest along; a position that
-                    // is not a number marks the whole track.
-                    if pos.is_nan() {
-                        (dirty[track], dirty_from[track]) = (f64::INFINITY, f64::NEG_INFINITY);
-                    } else {
-                        (dirty[track], dirty_from[track]) = (dirty[track].max(pos), dirty_from[track].min(pos));
-                    }
+                    // The farthest along; a position that is not a number
+                    // marks the whole track.
+                    dirty[track] = if pos.is_nan() { f64::INFINITY } else { dirty[track].max(pos) };
                 }
             }
         }
@@ -1117,7 +1100,7 @@ impl Tape<'_> {
             + self.near.capacity() * size_of::<(DVec2, f64)>()
             + self.near_shift.capacity() * 8
             + self.decisions.capacity() * size_of::<DecisionReads>()
-            + self.reads.capacity() * size_of::<Read>()
+            + self.reads.capacity() * size_of::<(usize, f64)>()
             + (self.deciders.capacity() + self.deciders_from.capacity()) * 8
             + self.snapshots.iter().flatten().map(|(_, car)| snapshot(car)).sum::<usize>()
             + self.shown.iter().map(|e| size_of::<Shown>() + e.seen.capacity() + e.merges.capacity() * 8).sum::<usize>()
