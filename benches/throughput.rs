@@ -177,8 +177,8 @@ fn effects_floor(
     diverged as f64 / (frames * cars) as f64
 }
 
-/// Rounds in which `effects_cost` times the factual runs and gen's path in
-/// turn, keeping the fastest of each.
+/// Rounds in which `effects_cost` times each of its figures in turn with
+/// the others, keeping the fastest of each.
 const EFFECTS_ROUNDS: usize = 3;
 
 /// The interventional ground truth against the re-runs it needs: measuring a

@@ -31,7 +31,7 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
     # What the workers import, loaded once in the server: each of Granger's
     # workers imported scipy.stats itself, in every pool (a pool per lag
     # and split), which made 5 Granger units of 10/4/4 toy scenarios take
-    # 27 s in `paper` rather than 13. (A module that is missing is skipped.)
+    # 27 s in `paper` rather than 12. (A module that is missing is skipped.)
     context.set_forkserver_preload([__name__, "scipy.stats", __name__.rsplit(".", 1)[0] + ".pcmci"])
     return ProcessPoolExecutor(workers, mp_context=context)
 
