@@ -713,3 +713,58 @@ fn every_reader_refuses_a_pack_with_a_member_twice_a_stranger_or_cut_short() {
     assert!(ours.len() > 100, "stats --json of the packed dataset: {}", String::from_utf8_lossy(&ours));
     assert_eq!(theirs, ours, "stats of the hand-made pack are those of gen's");
 }
+
+#[test]
+fn validate_finds_an_empty_folder_in_a_pack_and_gen_writes_that_pack_again() {
+    // Readers pass over a pack's folder entries (`tar -cf` of scenario
+    // folders lists them), so a folder entry with no file under it went
+    // unseen: validate said "valid", yet `tar -xf` unpacked it as a folder
+    // the layout does not have, which validate refuses in a folder dataset.
+    let (spec, folders, packed) = both("packs-empty-folder");
+    let before = hash_tree(&packed);
+    let rel = "cars04_edges50/train/00000-00001.tar";
+    let mut cases = Vec::new();
+    for folder in ["cars04_edges50/train/00001/junk/", "cars04_edges50/train/00007/"] {
+        let mut builder = tar::Builder::new(Vec::new());
+        for (name, bytes) in members(&packed.join(rel)) {
+            let mut header = tar::Header::new_gnu();
+            header.set_size(bytes.len() as u64);
+            header.set_mode(0o644);
+            builder.append_data(&mut header, &name, bytes.as_slice()).unwrap();
+        }
+        let mut header = tar::Header::new_gnu();
+        header.set_entry_type(tar::EntryType::Directory);
+        header.set_size(0);
+        header.set_mode(0o755);
+        builder.append_data(&mut header, folder, std::io::empty()).unwrap();
+        cases.push((folder, builder.into_inner().unwrap()));
+    }
+    let mut checked = 0;
+    for (folder, bytes) in cases {
+        std::fs::write(packed.join(rel), bytes).unwrap();
+        let unpacked = fresh_dir("packs-empty-folder-untar");
+        untar_all(&packed, &unpacked);
+        assert!(unpacked.join(folder).is_dir(), "tar -xf makes {folder}");
+        let out = run(&["validate", packed.to_str().unwrap()]);
+        let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{folder}: {said}");
+        let name = folder.trim_end_matches('/');
+        assert!(said.contains(&format!("{}: {name}/: a folder with no file", packed.join(rel).display())), "{said}");
+        // As a folder dataset refuses that folder.
+        let copy = fresh_dir("packs-empty-folder-copy");
+        for (file, _) in hash_tree(&folders) {
+            std::fs::create_dir_all(copy.join(&file).parent().unwrap()).unwrap();
+            std::fs::copy(folders.join(&file), copy.join(&file)).unwrap();
+        }
+        assert!(run(&["validate", copy.to_str().unwrap()]).status.success());
+        std::fs::create_dir_all(copy.join(folder)).unwrap();
+        assert_eq!(run(&["validate", copy.to_str().unwrap()]).status.code(), Some(1), "{folder} in a folder dataset");
+        // gen, resuming, no longer keeps the pack as finished.
+        let out = gen_ok(&spec, &packed, PACKED);
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(said.contains("writing the pack again"), "{folder}: {said}");
+        assert_eq!(hash_tree(&packed), before, "{folder}: the rewritten pack is the original, byte for byte");
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+}

@@ -395,6 +395,44 @@ pub fn read_members_where(
     Ok(())
 }
 
+/// The folder members of the pack at `path` with no file member under
+/// them, as named in it (without the trailing `/`), read from the headers
+/// alone. `tar -cf` of scenario folders lists each folder beside its
+/// files, and readers pass over folder entries; but one with no file under
+/// it unpacks (`tar -xf`) to an empty folder that the folder layout does
+/// not have.
+pub fn empty_folder_members(path: &Path) -> Result<Vec<String>, String> {
+    let mut file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    ends_whole(&mut file).map_err(|e| format!("{}: {e}: the pack is damaged", path.display()))?;
+    let mut archive = tar::Archive::new(Skipping(BufReader::with_capacity(1 << 16, file)));
+    let bad = |e: std::io::Error| format!("{}: not a whole tar: {e}", path.display());
+    let (mut folders, mut holding) = (Vec::new(), std::collections::BTreeSet::new());
+    let mut last_parent = String::new();
+    for entry in archive.entries_with_seek().map_err(bad)? {
+        let entry = entry.map_err(bad)?;
+        let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
+        let name = name.strip_prefix("./").unwrap_or(&name).trim_end_matches('/');
+        if entry.header().entry_type().is_dir() {
+            // `tar -cf pack.tar .` lists the root itself as `./`.
+            if !name.is_empty() && name != "." {
+                folders.push(name.to_string());
+            }
+            continue;
+        }
+        // Every folder above a file holds it; scenario after scenario, most
+        // files share the last one's folder.
+        let parent = name.rsplit_once('/').map_or("", |(parent, _)| parent);
+        if parent != last_parent {
+            for (i, _) in name.match_indices('/') {
+                holding.insert(name[..i].to_string());
+            }
+            last_parent = parent.to_string();
+        }
+    }
+    folders.retain(|folder| !holding.contains(folder));
+    Ok(folders)
+}
+
 /// Checks that `file` ends as every tar ends, in two empty 512-byte blocks
 /// after whole blocks (a tar cut short at a member's header read as one
 /// with fewer members, without a word); leaves it at its start.
@@ -543,8 +581,15 @@ pub fn verify_scenarios_of(path: &Path, keys: &[ScenarioKey], seed: u64) -> Resu
         super::scenario::check_identity(&json, &keys[i], seed)
             .map_err(|e| format!("{}: {folder}/{}: {e}", path.display(), super::layout::SCENARIO_JSON))
     })?;
-    match found.iter().position(|f| !f) {
-        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder())),
+    if let Some(i) = found.iter().position(|f| !f) {
+        return Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder()));
+    }
+    match empty_folder_members(path)?.first() {
+        Some(folder) => Err(format!(
+            "{}: {folder}/ is a folder with no file in the pack (unpacked, an empty folder that the folder layout \
+             does not have)",
+            path.display()
+        )),
         None => Ok(()),
     }
 }
