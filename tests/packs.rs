@@ -715,7 +715,7 @@ fn every_reader_refuses_a_pack_with_a_member_twice_a_stranger_or_cut_short() {
 }
 
 #[test]
-fn validate_finds_an_empty_folder_in_a_pack_and_gen_writes_that_pack_again() {
+fn validate_finds_an_empty_folder_in_a_pack_and_gen_or_the_sweep_rerun_writes_that_pack_again() {
     // Readers pass over a pack's folder entries (`tar -cf` of scenario
     // folders lists them), so a folder entry with no file under it went
     // unseen: validate said "valid", yet `tar -xf` unpacked it as a folder
@@ -723,22 +723,10 @@ fn validate_finds_an_empty_folder_in_a_pack_and_gen_writes_that_pack_again() {
     let (spec, folders, packed) = both("packs-empty-folder");
     let before = hash_tree(&packed);
     let rel = "cars04_edges50/train/00000-00001.tar";
-    let mut cases = Vec::new();
-    for folder in ["cars04_edges50/train/00001/junk/", "cars04_edges50/train/00007/"] {
-        let mut builder = tar::Builder::new(Vec::new());
-        for (name, bytes) in members(&packed.join(rel)) {
-            let mut header = tar::Header::new_gnu();
-            header.set_size(bytes.len() as u64);
-            header.set_mode(0o644);
-            builder.append_data(&mut header, &name, bytes.as_slice()).unwrap();
-        }
-        let mut header = tar::Header::new_gnu();
-        header.set_entry_type(tar::EntryType::Directory);
-        header.set_size(0);
-        header.set_mode(0o755);
-        builder.append_data(&mut header, folder, std::io::empty()).unwrap();
-        cases.push((folder, builder.into_inner().unwrap()));
-    }
+    let cases: Vec<_> = ["cars04_edges50/train/00001/junk/", "cars04_edges50/train/00007/"]
+        .into_iter()
+        .map(|folder| (folder, with_folder(&packed.join(rel), folder)))
+        .collect();
     let mut checked = 0;
     for (folder, bytes) in cases {
         std::fs::write(packed.join(rel), bytes).unwrap();
@@ -767,4 +755,37 @@ fn validate_finds_an_empty_folder_in_a_pack_and_gen_writes_that_pack_again() {
         checked += 1;
     }
     assert_eq!(checked, 2);
+    // A counterfactual sweep's packs of pairs, rerun, write theirs again too.
+    let sweep = spec.parent().unwrap().join("sweep");
+    let args = ["counterfactual", "--sweep", spec.to_str().unwrap(), "--out", sweep.to_str().unwrap(), "--no-images"];
+    let args = [&args[..], &["--kinds", "stop", "--format", "tar", "--scenarios-per-tar", "2", "-q"]].concat();
+    assert!(run(&args).status.success());
+    let made = hash_tree(&sweep);
+    let pack = sweep.join("cars04_edges50/test/00000-00001.tar");
+    std::fs::write(&pack, with_folder(&pack, "cars04_edges50/test/00000/factual/junk/")).unwrap();
+    let out = run(&["validate", sweep.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(said.contains("cars04_edges50/test/00000/factual/junk/: a folder with no file"), "{said}");
+    let again = run(&args);
+    assert!(String::from_utf8_lossy(&again.stderr).contains("writing the pack again"), "the sweep rerun");
+    assert_eq!(hash_tree(&sweep), made, "the sweep's pack written again, byte for byte");
+}
+
+/// The pack at `path` with a folder entry `folder` (ending in `/`) added
+/// after its members.
+fn with_folder(path: &Path, folder: &str) -> Vec<u8> {
+    let mut builder = tar::Builder::new(Vec::new());
+    for (name, bytes) in members(path) {
+        let mut header = tar::Header::new_gnu();
+        header.set_size(bytes.len() as u64);
+        header.set_mode(0o644);
+        builder.append_data(&mut header, &name, bytes.as_slice()).unwrap();
+    }
+    let mut header = tar::Header::new_gnu();
+    header.set_entry_type(tar::EntryType::Directory);
+    header.set_size(0);
+    header.set_mode(0o755);
+    builder.append_data(&mut header, folder, std::io::empty()).unwrap();
+    builder.into_inner().unwrap()
 }

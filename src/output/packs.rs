@@ -581,6 +581,13 @@ pub fn verify_scenarios_of(path: &Path, keys: &[ScenarioKey], seed: u64) -> Resu
         super::scenario::check_identity(&json, &keys[i], seed)
             .map_err(|e| format!("{}: {folder}/{}: {e}", path.display(), super::layout::SCENARIO_JSON))
     })?;
+    whole(path, keys, &found)
+}
+
+/// After a pack's scenarios were verified (`found`: which of `keys` it
+/// holds): that it holds every one of them, and no folder entry with no
+/// file under it ([`empty_folder_members`]).
+fn whole(path: &Path, keys: &[ScenarioKey], found: &[bool]) -> Result<(), String> {
     if let Some(i) = found.iter().position(|f| !f) {
         return Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder()));
     }
@@ -623,10 +630,7 @@ pub fn verify_of(unit: PackUnit, path: &Path, keys: &[ScenarioKey]) -> Result<()
             }
         }
     })?;
-    match found.iter().position(|f| !f) {
-        Some(i) => Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder())),
-        None => Ok(()),
-    }
+    whole(path, keys, &found)
 }
 
 /// A pair's members split by where they lie: each run's (by name within
