@@ -457,3 +457,37 @@ fn shards_of_another_dataset_are_named_by_what_differs_and_a_shard_count_fits_th
         stderr(&merged)
     );
 }
+
+#[test]
+fn a_shard_named_through_a_link_is_merged_and_removed_and_a_retried_merge_says_merged_before() {
+    // A shard folder given as a link (data/s0 -> /scratch/s0) was merged,
+    // but its emptied folder stayed behind the link, and the merge retried
+    // (a cluster task run again) found the link and exited 2.
+    let dir = fresh_dir("folders-merge-link");
+    let spec = write_spec(&dir, &toy_spec("linked", &[(3, 0.5)], (6, 2, 2), 2));
+    let reference = dir.join("reference");
+    gen_ok(&spec, &reference, &["--quiet", "--no-images", "--no-effects"]);
+    let (s0, s1, link, out) = (dir.join("s0"), dir.join("s1"), dir.join("l0"), dir.join("out"));
+    gen_ok(&spec, &s0, &["--quiet", "--no-images", "--no-effects", "--shard", "0/2"]);
+    gen_ok(&spec, &s1, &["--quiet", "--no-images", "--no-effects", "--shard", "1/2"]);
+    std::os::unix::fs::symlink(&s0, &link).unwrap();
+    let args = ["merge", "--out", out.to_str().unwrap(), link.to_str().unwrap(), s1.to_str().unwrap()];
+    let merged = run(&args);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+    for gone in [&s0, &s1, &link] {
+        assert!(std::fs::symlink_metadata(gone).is_err(), "{} is left after the merge", gone.display());
+    }
+    let again = run(&args);
+    let said = String::from_utf8_lossy(&again.stdout).into_owned() + &stderr(&again);
+    assert!(again.status.success() && said.contains("(merged before)"), "{said}");
+    // A merge cut off as it removed the emptied folders, the linked one
+    // left: finished by the same command.
+    std::fs::create_dir(&s0).unwrap();
+    std::os::unix::fs::symlink(&s0, &link).unwrap();
+    let finished = run(&args);
+    let said = String::from_utf8_lossy(&finished.stdout).into_owned() + &stderr(&finished);
+    assert!(finished.status.success() && said.contains("finished what the merge cut off left"), "{said}");
+    assert!(std::fs::symlink_metadata(&s0).is_err() && std::fs::symlink_metadata(&link).is_err(), "{said}");
+    assert_eq!(hash_tree(&out), hash_tree(&reference));
+}

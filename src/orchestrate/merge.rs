@@ -271,7 +271,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             }
             let _ = fs::remove_dir(&group);
         }
-        let _ = fs::remove_dir(source);
+        let _ = remove_emptied_shard(source);
     }
     // A shard folder's copies of the networks, now kept in --out: its
     // networks/ goes when it holds those alone, then the folder if empty.
@@ -289,7 +289,7 @@ pub fn merge(out: &Path, sources: &[PathBuf]) -> Result<String, GenError> {
             }
         }
         if fs::remove_dir(&folder).is_ok() {
-            let _ = fs::remove_dir(source);
+            let _ = remove_emptied_shard(source);
         }
     }
     // (A packed dataset moves whole tar files: they were counted as scenarios.)
@@ -330,7 +330,8 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
     for source in sources.iter().filter(|s| fs::symlink_metadata(s).is_ok()) {
         // (A folder inside --out is the dataset's own, never a shard's leftover.)
         let inside = real_paths(source, out).is_some_and(|(source, out)| source.starts_with(out));
-        if !fs::symlink_metadata(source).is_ok_and(|m| m.is_dir()) || inside {
+        // (A shard named through a link to its folder, as merge takes it.)
+        if !source.is_dir() || inside {
             return Ok(None);
         }
         folders.push(source);
@@ -369,7 +370,7 @@ fn finish_cut_off_merge(out: &Path, sources: &[PathBuf]) -> Result<Option<String
     // emptied folders.
     drop(locked);
     for (source, _) in &leftovers {
-        fs::remove_dir(source).map_err(io_err(source))?;
+        remove_emptied_shard(source).map_err(io_err(source))?;
     }
     for (copy, _) in &copies {
         fs::remove_file(copy).map_err(io_err(copy))?;
@@ -749,6 +750,19 @@ struct Located {
 const MERGE_CHUNK: usize = 256;
 
 /// `a` and `b` as their real paths (links resolved), when both exist.
+/// Removes the shard folder `source` when merge has emptied it (an error
+/// when it holds anything). Named through a link, the folder the link
+/// leads to goes, then the link: a shard named so was left as an empty
+/// folder behind its link, and a retried merge, finding the link, refused
+/// to say "merged before" (exit 2).
+fn remove_emptied_shard(source: &Path) -> std::io::Result<()> {
+    if !fs::symlink_metadata(source)?.file_type().is_symlink() {
+        return fs::remove_dir(source);
+    }
+    fs::remove_dir(source.canonicalize()?)?;
+    fs::remove_file(source)
+}
+
 fn real_paths(a: &Path, b: &Path) -> Option<(PathBuf, PathBuf)> {
     Some((a.canonicalize().ok()?, b.canonicalize().ok()?))
 }
