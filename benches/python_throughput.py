@@ -12,6 +12,9 @@ figures and ratios; asserts nothing.
   the same scenarios, poses only and with images (target >= 80 %); beside
   them, the same batches through 2 DataLoader workers, and the recipe README
   gave before (`DataLoader(stream, batch_size=None, num_workers=2)`).
+- a packed scenario's frames read in the process a DataLoader worker sent
+  the scenario to: from where the worker found them in the pack, against
+  finding them again by the pack's headers.
 
 Same spec, same scenarios, same thread counts, without the interventional
 effects on either side. $CAUSALCITY_CLI is the
@@ -92,6 +95,7 @@ def main():
         )
     if os.environ.get("BENCH_SKIP_DATALOADER") is None:
         dataloader_side_by_side()
+    packed_frames_sent()
 
 
 def rate_of(items, count):
@@ -131,6 +135,41 @@ def dataloader_side_by_side():
             f"with 2 workers {workers:.1f}/s ({workers / bare:.0%}); "
             f"old recipe (Scenario objects through 2 workers) {before:.1f}/s ({before / bare:.0%})"
         )
+
+
+def packed_frames_sent():
+    """A packed scenario's frames read in the process a DataLoader worker
+    sent the scenario to (README's recipe with ``batch_size=None``): read
+    from where the worker found them in the pack, against finding them by
+    the pack's headers (the fallback for a pack written again, and the only
+    way before), beside reading them in the worker itself."""
+    import pickle
+
+    raw = json.loads(IMAGES_SPEC.read_text())
+    raw.update(name="bench-packed-frames", frames=150, image={"width": 256, "height": 160})
+    raw["groups"] = [{"cars": 4, "edge_proportion": 0.5}]
+    raw["splits"] = {"train": 64, "val": 1, "test": 1}
+    with tempfile.TemporaryDirectory() as tmp:
+        causalcity.generate(raw, Path(tmp) / "packed", effects=False, progress=False, format="tar")
+        data = causalcity.open_dataset(Path(tmp) / "packed", "train")
+        print(f"packed frames sent to another process (one pack of {len(data)} scenarios, rgb + mask of 150 frames, "
+              "seconds per scenario):")  # fmt: skip
+        for position in (0, len(data) // 2, len(data) - 1):
+            start = time.perf_counter()
+            here = data[position]
+            rgb, mask = here.rgb[:], here.mask[:]
+            worker = time.perf_counter() - start
+            sent = pickle.dumps(here)
+            timed = []
+            for located in (True, False):
+                received = pickle.loads(sent)
+                if not located:
+                    received.rgb._located = received.mask._located = None
+                start = time.perf_counter()
+                assert (received.rgb[:] == rgb).all() and (received.mask[:] == mask).all()
+                timed.append(time.perf_counter() - start)
+            print(f"  scenario {position}: read where the worker found it {timed[0]:.3f} s, found by the pack's "
+                  f"headers {timed[1]:.3f} s ({timed[1] / timed[0]:.1f}x); in the worker {worker:.3f} s")  # fmt: skip
 
 
 if __name__ == "__main__":
