@@ -365,7 +365,8 @@ class _Packed:
         of the bytes, size)]); None when not read yet."""
         pack = self.pack_of(key)
         members = self._members.get(pack, {}).get(key.folder)
-        if members is None or pack not in self._pack_identity:
+        # (A sparse member's bytes are not where its header says: unpacked.)
+        if members is None or pack not in self._pack_identity or any(m.issparse() for m in members):
             return None
         path = self.root / pack
         return self._pack_identity[pack], [(_member_parts(path, m)[1], m.offset_data, m.size) for m in members]
@@ -562,9 +563,15 @@ def _read_located(path: Path, located: Any, into: Path) -> bool:
     under ``into`` from its bytes in the pack at ``path``; False (and
     nothing to rely on under ``into``) when the pack is no longer the file
     they were found in, or does not hold them whole."""
+    import stat
+
     identity, members = located
     found = []
     try:
+        # (Opening a pipe put at the pack's name would block: unpacked, the
+        # pack is refused by name.)
+        if not stat.S_ISREG(_os.stat(path).st_mode):
+            return False
         with open(path, "rb") as f:
             if _identity(_os.fstat(f.fileno())) != tuple(identity):
                 return False

@@ -751,16 +751,23 @@ const MERGE_CHUNK: usize = 256;
 
 /// `a` and `b` as their real paths (links resolved), when both exist.
 /// Removes the shard folder `source` when merge has emptied it (an error
-/// when it holds anything). Named through a link, the folder the link
-/// leads to goes, then the link: a shard named so was left as an empty
-/// folder behind its link, and a retried merge, finding the link, refused
-/// to say "merged before" (exit 2).
+/// when it holds anything). Named through a link (`l0` or `l0/`), the link
+/// goes, then the folder it leads to: a shard named so was left as an
+/// empty folder behind its link, and a retried merge, finding the link,
+/// refused to say "merged before" (exit 2). (Cut off between the two, the
+/// retry finds the shard gone; an empty folder no one named is left.)
 fn remove_emptied_shard(source: &Path) -> std::io::Result<()> {
-    if !fs::symlink_metadata(source)?.file_type().is_symlink() {
-        return fs::remove_dir(source);
+    // `l0/` is the folder a link leads to; `l0` is the link.
+    let source: PathBuf = source.components().collect();
+    if !fs::symlink_metadata(&source)?.file_type().is_symlink() {
+        return fs::remove_dir(&source);
     }
-    fs::remove_dir(source.canonicalize()?)?;
-    fs::remove_file(source)
+    let folder = source.canonicalize()?;
+    if fs::read_dir(&folder)?.next().is_some() {
+        return Err(std::io::Error::new(std::io::ErrorKind::DirectoryNotEmpty, "it holds more than merge moved"));
+    }
+    fs::remove_file(&source)?;
+    fs::remove_dir(&folder)
 }
 
 fn real_paths(a: &Path, b: &Path) -> Option<(PathBuf, PathBuf)> {
