@@ -605,29 +605,27 @@ fn check_pack(
         Ok(())
     });
     match read {
-        Ok(found) => {
-            for (i, _) in found.iter().enumerate().filter(|(_, f)| !**f) {
+        Ok(read) => {
+            for (i, _) in read.found.iter().enumerate().filter(|(_, f)| !**f) {
                 let message = format!("{} is not in it: {rerun} to write the pack again", folder_of(&keys[i]));
                 checks[i].0.push(problem(message));
             }
+            // Readers pass over folder entries, but `tar -xf` makes an empty
+            // one a folder the layout does not have: named under its
+            // scenario where it lies in one.
+            for folder in read.empty_folders {
+                let owner = keys.iter().position(|k| {
+                    let own = folder_of(k);
+                    folder == own || folder.strip_prefix(&own).is_some_and(|rest| rest.starts_with('/'))
+                });
+                let message = format!(
+                    "{folder}/: a folder with no file in the pack; unpacked (tar -xf) it is an empty folder that \
+                     the folder layout does not have: {rerun} to write the pack again"
+                );
+                checks[owner.unwrap_or(0)].0.push(problem(message));
+            }
         }
         Err(why) => checks[0].0.push(problem(why)),
-    }
-    // Readers pass over folder entries, but `tar -xf` makes an empty one a
-    // folder the layout does not have: named under its scenario where it
-    // lies in one.
-    if let Ok(empty) = crate::output::packs::empty_folder_members(&path) {
-        for folder in empty {
-            let owner = keys.iter().position(|k| {
-                let own = folder_of(k);
-                folder == own || folder.strip_prefix(&own).is_some_and(|rest| rest.starts_with('/'))
-            });
-            let message = format!(
-                "{folder}/: a folder with no file in the pack; unpacked (tar -xf) it is an empty folder that the \
-                 folder layout does not have: {rerun} to write the pack again"
-            );
-            checks[owner.unwrap_or(0)].0.push(problem(message));
-        }
     }
     checks
 }

@@ -357,8 +357,23 @@ pub fn read_members(path: &Path, each: impl FnMut(&str, Vec<u8>) -> Result<(), S
 pub fn read_members_where(
     path: &Path,
     wanted: &dyn Fn(&str) -> bool,
-    mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>,
+    each: impl FnMut(&str, Vec<u8>) -> Result<(), String>,
 ) -> Result<(), String> {
+    read_members_noting_folders(path, wanted, each).map(|_| ())
+}
+
+/// [`read_members_where`], returning the pack's folder members with no file
+/// member under them, as named in it (without the trailing `/`). `tar -cf`
+/// of scenario folders lists each folder beside its files, and readers
+/// pass over folder entries; but one with no file under it unpacks (`tar
+/// -xf`) to an empty folder that the folder layout does not have.
+fn read_members_noting_folders(
+    path: &Path,
+    wanted: &dyn Fn(&str) -> bool,
+    mut each: impl FnMut(&str, Vec<u8>) -> Result<(), String>,
+) -> Result<Vec<String>, String> {
+    let (mut folders, mut holding) = (Vec::new(), std::collections::BTreeSet::new());
+    let mut last_parent = String::new();
     let mut file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     ends_whole(&mut file).map_err(|e| format!("{}: {e}: the pack is damaged", path.display()))?;
     let mut archive = tar::Archive::new(Skipping(BufReader::with_capacity(1 << 20, file)));
@@ -374,6 +389,11 @@ pub fn read_members_where(
         let kind = entry.header().entry_type();
         if kind.is_dir() {
             // `tar -cf` of scenario folders lists the folders too: no data.
+            // (`tar -cf pack.tar .` lists the root itself as `./`.)
+            let folder = name.trim_end_matches('/');
+            if !folder.is_empty() && folder != "." {
+                folders.push(folder.to_string());
+            }
             continue;
         }
         if !kind.is_file() {
@@ -385,40 +405,6 @@ pub fn read_members_where(
         if name.starts_with('/') || name.split('/').any(|part| part == ".." || part.is_empty()) {
             return Err(format!("{}: {name:?} is not a path inside the dataset", path.display()));
         }
-        if !wanted(&name) {
-            continue;
-        }
-        let mut bytes = Vec::new();
-        entry.read_to_end(&mut bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
-        each(&name, bytes)?;
-    }
-    Ok(())
-}
-
-/// The folder members of the pack at `path` with no file member under
-/// them, as named in it (without the trailing `/`), read from the headers
-/// alone. `tar -cf` of scenario folders lists each folder beside its
-/// files, and readers pass over folder entries; but one with no file under
-/// it unpacks (`tar -xf`) to an empty folder that the folder layout does
-/// not have.
-pub fn empty_folder_members(path: &Path) -> Result<Vec<String>, String> {
-    let mut file = fs::File::open(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    ends_whole(&mut file).map_err(|e| format!("{}: {e}: the pack is damaged", path.display()))?;
-    let mut archive = tar::Archive::new(Skipping(BufReader::with_capacity(1 << 16, file)));
-    let bad = |e: std::io::Error| format!("{}: not a whole tar: {e}", path.display());
-    let (mut folders, mut holding) = (Vec::new(), std::collections::BTreeSet::new());
-    let mut last_parent = String::new();
-    for entry in archive.entries_with_seek().map_err(bad)? {
-        let entry = entry.map_err(bad)?;
-        let name = entry.path().map_err(bad)?.to_string_lossy().into_owned();
-        let name = name.strip_prefix("./").unwrap_or(&name).trim_end_matches('/');
-        if entry.header().entry_type().is_dir() {
-            // `tar -cf pack.tar .` lists the root itself as `./`.
-            if !name.is_empty() && name != "." {
-                folders.push(name.to_string());
-            }
-            continue;
-        }
         // Every folder above a file holds it; scenario after scenario, most
         // files share the last one's folder.
         let parent = name.rsplit_once('/').map_or("", |(parent, _)| parent);
@@ -428,6 +414,12 @@ pub fn empty_folder_members(path: &Path) -> Result<Vec<String>, String> {
             }
             last_parent = parent.to_string();
         }
+        if !wanted(&name) {
+            continue;
+        }
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).map_err(|e| format!("{}: {name}: {e}", path.display()))?;
+        each(&name, bytes)?;
     }
     folders.retain(|folder| !holding.contains(folder));
     Ok(folders)
@@ -531,18 +523,28 @@ impl<'a> MemberOrder<'a> {
     }
 }
 
+/// What [`read_scenarios`] found in a pack.
+pub struct ScenariosRead {
+    /// Per key, whether any member of its folder came.
+    pub found: Vec<bool>,
+    /// Folder members with no file member under them, as named in the pack:
+    /// `tar -xf` unpacks each to an empty folder that the folder layout
+    /// does not have (readers pass over folder entries).
+    pub empty_folders: Vec<String>,
+}
+
 /// Reads the pack at `path` a scenario at a time: calls `each(i, members)`
 /// with the members of the `i`-th of `keys`, by name within its folder, in
 /// the pack's order. Refuses what [`MemberOrder`] refuses but a scenario
-/// with no members. Returns which scenarios it found members of.
+/// with no members.
 pub fn read_scenarios(
     path: &Path,
     keys: &[ScenarioKey],
     mut each: impl FnMut(usize, BTreeMap<String, Vec<u8>>) -> Result<(), String>,
-) -> Result<Vec<bool>, String> {
+) -> Result<ScenariosRead, String> {
     let mut order = MemberOrder::new(path, keys);
     let mut current: Option<(usize, BTreeMap<String, Vec<u8>>)> = None;
-    read_members(path, |name, bytes| {
+    let empty_folders = read_members_noting_folders(path, &|_| true, |name, bytes| {
         let (i, first, within) = order.member(name)?;
         if first {
             if let Some((c, members)) = current.replace((i, BTreeMap::new())) {
@@ -557,7 +559,7 @@ pub fn read_scenarios(
     if let Some((c, members)) = current {
         each(c, members)?;
     }
-    Ok(order.found)
+    Ok(ScenariosRead { found: order.found, empty_folders })
 }
 
 /// Checks that the pack at `path` holds exactly the scenarios of `keys`,
@@ -572,7 +574,7 @@ pub fn verify(path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
 /// `scenario.json` says it is the scenario of its key
 /// ([`super::scenario::check_identity`]).
 pub fn verify_scenarios_of(path: &Path, keys: &[ScenarioKey], seed: u64) -> Result<(), String> {
-    let found = read_scenarios(path, keys, |i, members| {
+    let read = read_scenarios(path, keys, |i, members| {
         let folder = keys[i].relative_folder();
         let json = members.get(super::layout::SCENARIO_JSON).cloned();
         verify_listed(path, &folder, members)?;
@@ -581,17 +583,16 @@ pub fn verify_scenarios_of(path: &Path, keys: &[ScenarioKey], seed: u64) -> Resu
         super::scenario::check_identity(&json, &keys[i], seed)
             .map_err(|e| format!("{}: {folder}/{}: {e}", path.display(), super::layout::SCENARIO_JSON))
     })?;
-    whole(path, keys, &found)
+    whole(path, keys, &read)
 }
 
-/// After a pack's scenarios were verified (`found`: which of `keys` it
-/// holds): that it holds every one of them, and no folder entry with no
-/// file under it ([`empty_folder_members`]).
-fn whole(path: &Path, keys: &[ScenarioKey], found: &[bool]) -> Result<(), String> {
-    if let Some(i) = found.iter().position(|f| !f) {
+/// After a pack's scenarios were verified (`read` of `keys`): that it
+/// holds every one of them, and no folder entry with no file under it.
+fn whole(path: &Path, keys: &[ScenarioKey], read: &ScenariosRead) -> Result<(), String> {
+    if let Some(i) = read.found.iter().position(|f| !f) {
         return Err(format!("{}: {}/{CHECKSUMS} is missing", path.display(), keys[i].relative_folder()));
     }
-    match empty_folder_members(path)?.first() {
+    match read.empty_folders.first() {
         Some(folder) => Err(format!(
             "{}: {folder}/ is a folder with no file in the pack (unpacked, an empty folder that the folder layout \
              does not have)",
@@ -605,7 +606,7 @@ fn whole(path: &Path, keys: &[ScenarioKey], found: &[bool]) -> Result<(), String
 /// runs are, by their listings, and it has its [`PAIR_FILES`], a summary
 /// that reads, and nothing else.
 pub fn verify_of(unit: PackUnit, path: &Path, keys: &[ScenarioKey]) -> Result<(), String> {
-    let found = read_scenarios(path, keys, |i, members| {
+    let read = read_scenarios(path, keys, |i, members| {
         let folder = keys[i].relative_folder();
         match unit {
             PackUnit::Scenario => verify_listed(path, &folder, members),
@@ -630,7 +631,7 @@ pub fn verify_of(unit: PackUnit, path: &Path, keys: &[ScenarioKey]) -> Result<()
             }
         }
     })?;
-    whole(path, keys, &found)
+    whole(path, keys, &read)
 }
 
 /// A pair's members split by where they lie: each run's (by name within
