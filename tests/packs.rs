@@ -624,13 +624,18 @@ fn members(path: &Path) -> Vec<(String, Vec<u8>)> {
 /// A tar of `members`, in order.
 fn tar_of(members: &[(String, Vec<u8>)]) -> Vec<u8> {
     let mut builder = tar::Builder::new(Vec::new());
+    append_files(&mut builder, members);
+    builder.into_inner().unwrap()
+}
+
+/// Appends `members` to `builder` as plain files, in order.
+fn append_files(builder: &mut tar::Builder<Vec<u8>>, members: &[(String, Vec<u8>)]) {
     for (name, bytes) in members {
         let mut header = tar::Header::new_gnu();
         header.set_size(bytes.len() as u64);
         header.set_mode(0o644);
         builder.append_data(&mut header, name, bytes.as_slice()).unwrap();
     }
-    builder.into_inner().unwrap()
 }
 
 #[test]
@@ -776,12 +781,7 @@ fn validate_finds_an_empty_folder_in_a_pack_and_gen_or_the_sweep_rerun_writes_th
 /// after its members.
 fn with_folder(path: &Path, folder: &str) -> Vec<u8> {
     let mut builder = tar::Builder::new(Vec::new());
-    for (name, bytes) in members(path) {
-        let mut header = tar::Header::new_gnu();
-        header.set_size(bytes.len() as u64);
-        header.set_mode(0o644);
-        builder.append_data(&mut header, &name, bytes.as_slice()).unwrap();
-    }
+    append_files(&mut builder, &members(path));
     let mut header = tar::Header::new_gnu();
     header.set_entry_type(tar::EntryType::Directory);
     header.set_size(0);

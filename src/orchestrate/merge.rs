@@ -749,7 +749,6 @@ struct Located {
 /// Scenarios checked at a time (in parallel) before anything moves.
 const MERGE_CHUNK: usize = 256;
 
-/// `a` and `b` as their real paths (links resolved), when both exist.
 /// Removes the shard folder `source` when merge has emptied it (an error
 /// when it holds anything). Named through a link (`l0` or `l0/`), the link
 /// goes, then the folder it leads to: a shard named so was left as an
@@ -770,6 +769,7 @@ fn remove_emptied_shard(source: &Path) -> std::io::Result<()> {
     fs::remove_dir(&folder)
 }
 
+/// `a` and `b` as their real paths (links resolved), when both exist.
 fn real_paths(a: &Path, b: &Path) -> Option<(PathBuf, PathBuf)> {
     Some((a.canonicalize().ok()?, b.canonicalize().ok()?))
 }
