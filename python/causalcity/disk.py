@@ -512,10 +512,16 @@ def _keep_with_frames(scratch: Any, scenarios: List["Scenario"], member: str, lo
                 inside = Path(frames.folder).relative_to(scratch.name).as_posix().strip(".")
                 frames._keep, frames._packed, kept = holder, (member, inside), True
                 if located is not None:
-                    prefix = f"{inside}/{frames.kind}/" if inside else f"{frames.kind}/"
+                    prefix = _frames_prefix(inside, frames.kind)
                     frames._located = (located[0], [m for m in located[1] if m[0].startswith(prefix)])
     if not kept:
         scratch.cleanup()
+
+
+def _frames_prefix(inside: str, kind: str) -> str:
+    """Where the ``kind`` frames lie within a scenario's folder in its pack:
+    under its run ``inside`` ("" for the scenario's own)."""
+    return f"{inside}/{kind}/" if inside else f"{kind}/"
 
 
 def _identity(stat: Any) -> Tuple[int, ...]:
@@ -536,11 +542,12 @@ def _unpack_frames(member: str, inside: str, kind: str, located: Any = None) -> 
 
     pack, folder = member.rsplit(": ", 1)
     path = Path(pack)
-    prefix = f"{inside}/{kind}/" if inside else f"{kind}/"
+    prefix = _frames_prefix(inside, kind)
     scratch = tempfile.TemporaryDirectory(prefix="causalcity-scenario-")
     kept = _Kept(scratch)
+    where = Path(scratch.name) / inside if inside else Path(scratch.name)
     if located is not None and _read_located(path, located, Path(scratch.name)):
-        return Path(scratch.name) / inside if inside else Path(scratch.name), kept
+        return where, kept
     with _open_pack(path) as tar, _naming_damage(path):
         seen = False
         for entry in tar:
@@ -555,7 +562,7 @@ def _unpack_frames(member: str, inside: str, kind: str, located: Any = None) -> 
                 target.parent.mkdir(parents=True, exist_ok=True)
                 data = tar.extractfile(entry)
                 target.write_bytes(data.read() if data is not None else b"")
-    return Path(scratch.name) / inside if inside else Path(scratch.name), kept
+    return where, kept
 
 
 def _read_located(path: Path, located: Any, into: Path) -> bool:

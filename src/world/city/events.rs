@@ -214,7 +214,25 @@ impl Sim<'_> {
     /// near"), and each pair that newly touches collides, `before_collide`
     /// called first. `footprint` gives a car's rectangle, asked at most once
     /// per car.
+    ///
+    /// Most steps there is nothing to settle (no pair near, no contact):
+    /// that is told here, before any call (every step of every effects
+    /// re-run comes here).
+    #[inline(always)]
     pub(super) fn settle_pairs(
+        &mut self,
+        candidates: &[(usize, usize)],
+        now: f64,
+        footprint: impl Fn(&Self, usize) -> OrientedBox,
+        before_collide: impl FnMut(&mut Self, usize, usize),
+    ) {
+        if !candidates.is_empty() || !self.contacts.is_empty() {
+            self.settle_candidates(candidates, now, footprint, before_collide);
+        }
+    }
+
+    /// [`Sim::settle_pairs`] where there is something to settle.
+    fn settle_candidates(
         &mut self,
         candidates: &[(usize, usize)],
         now: f64,

@@ -1085,10 +1085,7 @@ impl<'s> Sim<'s> {
                 }
             }
         };
-        // (Most steps there is nothing to settle: no pair near, no contact.)
-        if !candidates.is_empty() || !self.contacts.is_empty() {
-            self.settle_pairs(&candidates, now, footprint, wake);
-        }
+        self.settle_pairs(&candidates, now, footprint, wake);
         self.scratch_points = points;
         self.scratch_pairs = candidates;
     }
