@@ -102,7 +102,7 @@ def test_nri_s_cosine_schedule_and_kl_weight_reach_training(toy):
     assert free.epoch_lrs[0] == 1e-2 and len(free.epoch_lrs) == 8
     assert all(a > b > 0 for a, b in zip(free.epoch_lrs, free.epoch_lrs[1:])), free.epoch_lrs
     assert abs(free.epoch_lrs[-1] - 1e-2 * 0.5 * (1 + np.cos(np.pi * 7 / 8))) < 1e-12
-    for bad in (dict(kl_weight=-1), dict(kl_weight=float("nan")), dict(lr_schedule="step")):
+    for bad in (dict(kl_weight=-1), dict(kl_weight=float("nan")), dict(lr_schedule="step"), dict(warmup_epochs=-1)):
         with pytest.raises(causalcity.InputError):
             make("nri", **bad)
 
@@ -295,6 +295,8 @@ def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsy
     err = capsys.readouterr().err
     assert "90 units" in err and "projected" in err and "training windows/s and" in err, err
     assert "val windows/s on cpu" in err, err
+    # NRI with trail messages is timed on its own model, not as a multiple of NRI.
+    assert "NRI calibrated at" in err and "nri_trail calibrated at" in err, err
     for world in paper.WORLDS:
         for method in paper.METHOD_ORDER:
             line = next(x for x in err.splitlines() if x.startswith(f"[paper]   {world} {paper._label(method)}:"))
@@ -305,10 +307,28 @@ def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsy
     # Beside them, what a unit takes whatever its size (measured).
     nri = paper._projected_seconds("nri", paper.FULL, 8, (1000.0, 4000.0))
     assert nri == pytest.approx(1600 + 13.75 + paper.UNIT_START_SECONDS["nri"])
-    # NRI with trail messages: its own 20 epochs, each window TRAIL_COST of NRI's.
-    trail = paper._projected_seconds("nri_trail", paper.FULL, 8, (1000.0, 4000.0))
+    # NRI with trail messages: its own 20 epochs, at the rates of its own calibration.
+    trail = paper._projected_seconds("nri_trail", paper.FULL, 8, (500.0, 2000.0))
     start = paper.UNIT_START_SECONDS["nri_trail"]
-    assert trail == pytest.approx((320 + (500 * 20 + 5000) / 4000) * paper.TRAIL_COST + start)
+    assert trail == pytest.approx(4 * 4000 * 20 / 500 + (500 * 20 + 5000) / 2000 + start)
+
+
+def test_the_paper_eta_paces_each_kind_of_method_by_its_own_units():
+    from causalcity import paper
+
+    # A full-size toy run on a 2-core CPU: the path rule took 33 s where 17
+    # were projected, and the ETA then scaled NRI's calibrated hour by that
+    # (3h04m shown for what took about 50 minutes).
+    projected = {("toy", "path", "g"): 17.0, ("toy", "granger", "g"): 126.0, ("toy", "nri_trail", "g"): 3480.0}
+    paced = {True: dict(projected=17.0, measured=33.0), False: dict(projected=0.0, measured=0.0)}
+    eta = paper._paced(projected, paced)
+    assert eta[("toy", "nri_trail", "g")] == 3480.0  # no neural unit has run: as calibrated
+    assert eta[("toy", "granger", "g")] == pytest.approx(126.0 * 33 / 17)
+    # Once a neural unit has run, neural units go at its pace, the others at theirs.
+    paced[False] = dict(projected=1000.0, measured=1500.0)
+    eta = paper._paced(projected, paced)
+    assert eta[("toy", "nri_trail", "g")] == pytest.approx(3480.0 * 1.5)
+    assert eta[("toy", "path", "g")] == pytest.approx(33.0)
 
 
 def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, capsys):
@@ -353,6 +373,7 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
         ({**good, "rows": [{"bad": 1}]}, "rows[0] is not a result row"),
         ({**good, "rows": "notalist"}, "is not a list of result rows"),
         (row0(value=5.0), "rows[0]: value 5.0 is not allowed for f1: from 0 to 1"),
+        (row0(value=1.000001), "rows[0]: value 1.000001 is not allowed for f1: from 0 to 1"),
         (row0(value=True), "rows[0]: value true is not allowed"),
         (row0(value="abc"), 'rows[0]: value "abc" is not allowed'),
         (row0(se="x"), 'rows[0]: se "x" is not allowed'),
@@ -374,6 +395,10 @@ def test_a_cut_off_paper_run_resumes_without_redoing_finished_units(tmp_path, ca
             run()
         assert str(record) in str(refused.value) and needle in str(refused.value), (needle, str(refused.value))
         assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == stamps, f"{needle}: files written"
+    # Round-off beyond the range, as evaluate's AUPRC of a perfect ranking
+    # carried (its own run refused the record), is kept.
+    record.write_text(json.dumps(row0(value=1.0000000000000004)))
+    assert run().count("kept from an earlier run") == 10
     record.write_text(json.dumps(good))
     assert run().count("kept from an earlier run") == 10
     assert (out / "results.csv").read_bytes() == table
@@ -852,6 +877,7 @@ def test_a_flag_a_method_does_not_take_is_refused_not_ignored(toy, tmp_path, cap
         ("path", ["--epochs", "5"], "--epochs does nothing for path"),
         ("granger", ["--device", "cpu"], "--device does nothing for granger"),
         ("interaction", ["--kl-weight", "2"], "--kl-weight does nothing for interaction"),
+        ("interaction", ["--warmup-epochs", "0"], "--warmup-epochs does nothing for interaction"),
         ("frame0", ["--lr", "0.1"], "--lr does nothing for frame0"),
     ]:
         assert main([method, str(toy), "--out", str(out), *flags]) == 2, method
@@ -1209,6 +1235,12 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
     err = capsys.readouterr().err
     # the time limit stopped it after the five warm-up epochs and one with edges
     assert "6/12" in err and "7/12" not in err and "12/12" not in err, err
+    # ... after two with --warmup-epochs 2 (nri_trail takes it too)
+    for method in ("nri", "nri_trail"):
+        flags = [f for f in args[1:] if f not in ("mlp", "both", "--decoder", "--encoder-input")]
+        assert main([method, *flags, "--warmup-epochs", "2"]) == 0
+        err = capsys.readouterr().err
+        assert "3/12" in err and "4/12" not in err, (method, err)
     with np.load(out) as arrays:
         scores = [arrays[k] for k in arrays.files if k.startswith("cars06_edges50/test/") and k.count("/") == 2]
     assert scores and all(s.shape == (6, 6) for s in scores)
@@ -1219,7 +1251,7 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
             return e.code
 
     bad_options = (["--lr", "-1"], ["--time-limit", "0"], ["--batch-size", "0"], ["--decoder", "gru"], ["--kl-weight", "-1"],
-                   ["--lr-schedule", "step"])  # fmt: skip
+                   ["--lr-schedule", "step"], ["--warmup-epochs", "-1"], ["--warmup-epochs", "1.5"])  # fmt: skip
     for bad in bad_options:
         assert exit_code(["nri", str(toy), "--out", str(tmp_path / "bad.npz"), "--device", "cpu", *bad]) == 2, bad
         assert not (tmp_path / "bad.npz").exists()

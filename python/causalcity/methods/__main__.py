@@ -13,7 +13,15 @@ from .. import GenerationError, InputError
 from . import METHODS, is_user_method, make, user_method_takes
 from .counterfactual import COUNTERFACTUAL_METHODS, is_sweep, run_counterfactual_method
 from .classical import Pcmci
-from .common import DatasetError, MethodFailed, non_negative_float, positive_float, positive_int as _positive, run_method
+from .common import (
+    DatasetError,
+    MethodFailed,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int as _positive,
+    run_method,
+)
 
 
 # The flags that set up one method or another, and the reference methods
@@ -21,13 +29,13 @@ from .common import DatasetError, MethodFailed, non_negative_float, positive_flo
 # --seed and --quiet apply to every method.
 _TRAINING = ("epochs", "device", "batch_size", "lr", "time_limit", "lr_schedule")
 _TAKES = {
-    "nri": (*_TRAINING, "decoder", "encoder_input", "kl_weight"),
-    "nri_trail": (*_TRAINING, "kl_weight"),
+    "nri": (*_TRAINING, "decoder", "encoder_input", "kl_weight", "warmup_epochs"),
+    "nri_trail": (*_TRAINING, "kl_weight", "warmup_epochs"),
     "interaction": (*_TRAINING, "decoder"),
     "pcmci": ("backend",),
     "cf_nri": ("epochs", "device"),
 }
-_FLAGS = (*_TRAINING, "decoder", "encoder_input", "kl_weight", "backend")
+_FLAGS = (*_TRAINING, "decoder", "encoder_input", "kl_weight", "warmup_epochs", "backend")
 
 
 def _flag_not_taken(args: argparse.Namespace) -> Optional[str]:
@@ -89,6 +97,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
     parser.add_argument("--kl-weight", type=non_negative_float, metavar="W",
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
+    parser.add_argument("--warmup-epochs", type=non_negative_int, metavar="N",
+                        help="nri, nri_trail: first epochs that train the decoder alone, with no edges (default 5; "
+                             "nri_trail on more than a few hundred training scenarios: 0, see docs/evaluation.md)")
     parser.add_argument("--backend", choices=Pcmci.BACKENDS,
                         help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
                              "faster, the same scores to 1e-10) or tigramite itself")
@@ -119,9 +130,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         given = dict(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, decoder=args.decoder,
                      time_limit_s=args.time_limit, lr_schedule=args.lr_schedule)  # fmt: skip
         if args.method == "nri_trail":
-            given.update(decoder=None, kl_weight=args.kl_weight)
+            given.update(decoder=None, kl_weight=args.kl_weight, warmup_epochs=args.warmup_epochs)
         if args.method == "nri":
-            given.update(encoder_input=args.encoder_input, kl_weight=args.kl_weight)
+            given.update(encoder_input=args.encoder_input, kl_weight=args.kl_weight, warmup_epochs=args.warmup_epochs)
         options.update({k: v for k, v in given.items() if v is not None})
     elif args.method in ("granger", "pcmci"):
         options["quiet"] = args.quiet

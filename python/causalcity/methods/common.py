@@ -230,6 +230,19 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_int(text: str) -> int:
+    """A whole number >= 0, for argparse (which then exits 2 with the message)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 0 or more")
+    return value
+
+
 def groups_of(dataset: "str | Path") -> List[str]:
     """The dataset's group names, in its spec's order."""
     return [g["name"] for g in _manifest(Path(dataset))["groups"]]

@@ -594,6 +594,7 @@ class Nri(Method):
         self.predicts = True
         epochs = _whole("epochs", epochs, 1, 10**6)
         batch_size = _whole("batch_size", batch_size, 1, 2**31 - 1)
+        warmup_epochs = _whole("warmup_epochs", warmup_epochs, 0, 10**6)
         if not (isinstance(lr, (int, float)) and 0 < lr < float("inf")):
             raise InputError(f"lr={lr!r} is not a learning rate: use a number above 0")
         self.epochs, self.hidden, self.batch_size, self.lr = epochs, hidden, batch_size, lr
