@@ -219,27 +219,24 @@ def _finite(text: str) -> float:
 
 def positive_int(text: str) -> int:
     """A whole number >= 1, for argparse (which then exits 2 with the message)."""
-    import argparse
-
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 1 or more")
-    return value
+    return _whole_from(text, 1)
 
 
 def non_negative_int(text: str) -> int:
     """A whole number >= 0, for argparse (which then exits 2 with the message)."""
+    return _whole_from(text, 0)
+
+
+def _whole_from(text: str, least: int) -> int:
+    """``text`` as a whole number of at least ``least``, or argparse's error."""
     import argparse
 
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: use 0 or more")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use {least} or more")
     return value
 
 
