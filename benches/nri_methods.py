@@ -39,7 +39,8 @@ BENCH_SPRINGS_EPOCHS (default "10,30"), BENCH_SPRINGS_SECONDS (a time limit
 per fit), BENCH_SPRINGS_SETTING ("nri", NRI's springs setting, the default
 on a GPU; "default", our default model, the default on a CPU), BENCH_DEVICE (default cpu), BENCH_NRI_BEFORE, BENCH_TOY_TRAIN
 (default 4000), BENCH_TOY_SECONDS (time limit per NRI fit, default none),
-BENCH_TOY_EPOCHS (default 100), BENCH_TOY_METHODS (default
+BENCH_TOY_EPOCHS (default 100), BENCH_TOY_WARMUP (NRI's warm-up epochs,
+default the method's own), BENCH_TOY_METHODS (default
 "path,granger,nri,nri_trail"),
 BENCH_RECIPE_TRAIN (default 1000), BENCH_RECIPE_EPOCHS (default 40),
 BENCH_RECIPES (default "default,kl10-cosine,kl100-cosine": klW-SCHEDULE).
@@ -235,6 +236,8 @@ def toy_full(tmp: Path) -> None:
     print(f"\n== toy at full size: 8 cars, 50 %, {size}/500/500, {device_name()} ==")
     wanted = os.environ.get("BENCH_TOY_METHODS", "path,granger,nri,nri_trail").split(",")
     neural = dict(epochs=epochs, batch_size=128, lr=3e-3, time_limit_s=limit, device=DEVICE, quiet=True)
+    if os.environ.get("BENCH_TOY_WARMUP"):
+        neural["warmup_epochs"] = int(os.environ["BENCH_TOY_WARMUP"])
     runs = [("path", dict()), ("granger", dict(quiet=True)), ("nri", neural), ("nri_trail", neural)]
     for k, (name, options) in enumerate(r for r in runs if r[0] in wanted):
         predictions = tmp / f"toy-{k}.npz"
@@ -250,7 +253,7 @@ def toy_full(tmp: Path) -> None:
         report = causalcity.evaluate(folder, predictions, graph="designed")
         row = next(e for e in report["edges"] if e["split"] == "test")
         scores = kept["method"].predict(test).edges
-        label = name + "".join(f" {k}={v}" for k, v in options.items() if k in ("decoder", "encoder_input"))
+        label = name + "".join(f" {k}={v}" for k, v in options.items() if k in ("decoder", "encoder_input", "warmup_epochs"))
         epochs_run = len(getattr(kept["method"], "losses", [])) or "-"
         print(f"{label:<18} test F1 {row['f1']:.3f} AUROC {row['auroc']:.3f} direction right "
               f"{direction_right(scores, test.graph):.0%}  epochs {epochs_run}, {seconds:.0f} s", flush=True)  # fmt: skip

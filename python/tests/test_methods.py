@@ -107,6 +107,31 @@ def test_nri_s_cosine_schedule_and_kl_weight_reach_training(toy):
             make("nri", **bad)
 
 
+def test_nri_trail_warms_up_only_where_that_is_few_optimiser_steps(toy):
+    # 24 train scenarios, 4 windows each: 96 windows an epoch. Its 5 warm-up
+    # epochs are kept at 1 and 12 optimiser steps an epoch (5 and 60 steps)
+    # and dropped at 14 (70): at 625 its encoder switched every true edge
+    # off (nri.AUTO_WARMUP_STEPS). The time limit stops a fit at the first
+    # epoch with edges, so the epochs run tell the warm-up.
+    from causalcity.methods.nri import AUTO_WARMUP_STEPS
+
+    assert AUTO_WARMUP_STEPS == 60
+    train, val = (load_split(toy, "cars06_edges50", s) for s in ("train", "val"))
+    options = dict(epochs=12, time_limit_s=1e-6, device="cpu", quiet=True)
+    for batch, warmup in ((96, 5), (8, 5), (7, 0)):
+        nri = make("nri_trail", batch_size=batch, **options)
+        nri.fit(train, val)
+        assert (len(nri.losses), nri.warmup_epochs) == (warmup + 1, warmup), (batch, nri.losses)
+    # a warm-up given is kept whatever the steps; nri's default stays NRI's 5
+    given = make("nri_trail", batch_size=7, warmup_epochs=2, **options)
+    given.fit(train, val)
+    assert len(given.losses) == 3, given.losses
+    assert make("nri").warmup_epochs == 5 and make("nri").warmup == 5
+    for bad in ("Auto", "5", -1, 1.5):
+        with pytest.raises(causalcity.InputError, match="warmup_epochs"):
+            make("nri_trail", warmup_epochs=bad)
+
+
 def test_nri_fitted_on_one_car_count_scores_splits_that_hold_other_counts_out(tmp_path):
     # Train on 6 cars; val holds out 5 and test 9 (held_out.<split>.cars).
     spec = dict(TOY, name="held-cars", splits={"train": 12, "val": 3, "test": 4})
@@ -1241,6 +1266,10 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
         assert main([method, *flags, "--warmup-epochs", "2"]) == 0
         err = capsys.readouterr().err
         assert "3/12" in err and "4/12" not in err, (method, err)
+    # ... and after five with auto (2 optimiser steps an epoch at batch 64)
+    assert main(["nri", *flags, "--warmup-epochs", "auto"]) == 0
+    err = capsys.readouterr().err
+    assert "6/12" in err and "7/12" not in err, err
     with np.load(out) as arrays:
         scores = [arrays[k] for k in arrays.files if k.startswith("cars06_edges50/test/") and k.count("/") == 2]
     assert scores and all(s.shape == (6, 6) for s in scores)
@@ -1251,7 +1280,8 @@ def test_the_methods_command_passes_nri_s_training_options(toy, tmp_path, capsys
             return e.code
 
     bad_options = (["--lr", "-1"], ["--time-limit", "0"], ["--batch-size", "0"], ["--decoder", "gru"], ["--kl-weight", "-1"],
-                   ["--lr-schedule", "step"], ["--warmup-epochs", "-1"], ["--warmup-epochs", "1.5"])  # fmt: skip
+                   ["--lr-schedule", "step"], ["--warmup-epochs", "-1"], ["--warmup-epochs", "1.5"],
+                   ["--warmup-epochs", "Auto"])  # fmt: skip
     for bad in bad_options:
         assert exit_code(["nri", str(toy), "--out", str(tmp_path / "bad.npz"), "--device", "cpu", *bad]) == 2, bad
         assert not (tmp_path / "bad.npz").exists()

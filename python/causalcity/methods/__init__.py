@@ -89,7 +89,8 @@ def _nri(**options) -> Method:
 def _nri_trail(**options) -> Method:
     from .nri import Nri
 
-    return Nri(decoder="trail", encoder_input="heading", name="nri_trail", **options)
+    # (warmed up only where that is few optimiser steps: nri.AUTO_WARMUP_STEPS)
+    return Nri(decoder="trail", encoder_input="heading", name="nri_trail", **{"warmup_epochs": "auto", **options})
 
 
 def _interaction(**options) -> Method:

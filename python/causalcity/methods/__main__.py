@@ -17,10 +17,10 @@ from .common import (
     DatasetError,
     MethodFailed,
     non_negative_float,
-    non_negative_int,
     positive_float,
     positive_int as _positive,
     run_method,
+    warmup_epochs_arg,
 )
 
 
@@ -97,9 +97,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri, interaction: the learning rate over the epochs (see causalcity.methods.nri)")
     parser.add_argument("--kl-weight", type=non_negative_float, metavar="W",
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
-    parser.add_argument("--warmup-epochs", type=non_negative_int, metavar="N",
-                        help="nri, nri_trail: first epochs that train the decoder alone, with no edges (default 5; "
-                             "nri_trail on more than a few hundred training scenarios: 0, see docs/evaluation.md)")
+    parser.add_argument("--warmup-epochs", type=warmup_epochs_arg, metavar="N|auto",
+                        help="nri, nri_trail: first epochs that train the decoder alone, with no edges (nri: default "
+                             "5; nri_trail: default auto, 5 where those are at most 60 optimiser steps and 0 above: "
+                             "longer, its encoder switched every true edge off; see docs/evaluation.md)")
     parser.add_argument("--backend", choices=Pcmci.BACKENDS,
                         help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
                              "faster, the same scores to 1e-10) or tigramite itself")

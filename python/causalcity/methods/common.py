@@ -222,21 +222,23 @@ def positive_int(text: str) -> int:
     return _whole_from(text, 1)
 
 
-def non_negative_int(text: str) -> int:
-    """A whole number >= 0, for argparse (which then exits 2 with the message)."""
-    return _whole_from(text, 0)
+def warmup_epochs_arg(text: str) -> "int | str":
+    """``auto`` or a whole number >= 0, for argparse (which then exits 2
+    with the message)."""
+    return "auto" if text == "auto" else _whole_from(text, 0, " or auto")
 
 
-def _whole_from(text: str, least: int) -> int:
-    """``text`` as a whole number of at least ``least``, or argparse's error."""
+def _whole_from(text: str, least: int, other: str = "") -> int:
+    """``text`` as a whole number of at least ``least``, or argparse's error
+    (its allowed values ending with ``other``)."""
     import argparse
 
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number{other}") from None
     if value < least:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: use {least} or more")
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: use {least} or more{other}")
     return value
 
 
