@@ -1191,7 +1191,7 @@ fn pack_and_export_stopped_by_sigterm_or_ctrl_c_say_how_to_finish_and_a_rerun_do
             // Held still once it has begun writing, then signalled: it cannot
             // finish in between.
             let started = Instant::now();
-            while !out.exists() || hash_tree(out).is_empty() {
+            while !holds_a_file_while_written(out) {
                 assert!(started.elapsed() < Duration::from_secs(60), "{command} wrote nothing");
                 std::thread::sleep(Duration::from_millis(1));
             }

@@ -186,6 +186,24 @@ pub fn hash_tree(root: &Path) -> BTreeMap<String, String> {
     hashes
 }
 
+/// Whether any file lies under `root`, read while another process may still be
+/// writing there: an entry renamed or removed between listing and looking (a
+/// temporary file made whole) counts as not there, never as an error.
+pub fn holds_a_file_while_written(root: &Path) -> bool {
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        for entry in entries.flatten() {
+            match entry.file_type() {
+                Ok(kind) if kind.is_dir() => stack.push(entry.path()),
+                Ok(_) => return true,
+                Err(_) => {}
+            }
+        }
+    }
+    false
+}
+
 static SHARED: Mutex<Option<PathBuf>> = Mutex::new(None);
 
 /// A small toy dataset with images (two groups, 2/1/1 scenarios, 150 frames),
