@@ -109,21 +109,21 @@ def test_nri_s_cosine_schedule_and_kl_weight_reach_training(toy):
 
 def test_nri_trail_warms_up_only_where_that_is_few_optimiser_steps(toy):
     # 24 train scenarios, 4 windows each: 96 windows an epoch. Its 5 warm-up
-    # epochs are kept at 1 and 12 optimiser steps an epoch (5 and 60 steps)
-    # and dropped at 14 (70): at 625 its encoder switched every true edge
+    # epochs are kept at 1 and 20 optimiser steps an epoch (5 and 100 steps)
+    # and dropped at 24 (120): at 160 its encoder switched every true edge
     # off (nri.AUTO_WARMUP_STEPS). The time limit stops a fit at the first
     # epoch with edges, so the epochs run tell the warm-up.
     from causalcity.methods.nri import AUTO_WARMUP_STEPS
 
-    assert AUTO_WARMUP_STEPS == 60
+    assert AUTO_WARMUP_STEPS == 100
     train, val = (load_split(toy, "cars06_edges50", s) for s in ("train", "val"))
     options = dict(epochs=12, time_limit_s=1e-6, device="cpu", quiet=True)
-    for batch, warmup in ((96, 5), (8, 5), (7, 0)):
+    for batch, warmup in ((96, 5), (5, 5), (4, 0)):
         nri = make("nri_trail", batch_size=batch, **options)
         nri.fit(train, val)
         assert (len(nri.losses), nri.warmup_epochs) == (warmup + 1, warmup), (batch, nri.losses)
     # a warm-up given is kept whatever the steps; nri's default stays NRI's 5
-    given = make("nri_trail", batch_size=7, warmup_epochs=2, **options)
+    given = make("nri_trail", batch_size=4, warmup_epochs=2, **options)
     given.fit(train, val)
     assert len(given.losses) == 3, given.losses
     assert make("nri").warmup_epochs == 5 and make("nri").warmup == 5

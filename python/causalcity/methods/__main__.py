@@ -99,7 +99,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="nri: the weight of the KL to the sparse prior against the prediction loss")
     parser.add_argument("--warmup-epochs", type=warmup_epochs_arg, metavar="N|auto",
                         help="nri, nri_trail: first epochs that train the decoder alone, with no edges (nri: default "
-                             "5; nri_trail: default auto, 5 where those are at most 60 optimiser steps and 0 above: "
+                             "5; nri_trail: default auto, 5 where those are at most 100 optimiser steps and 0 above: "
                              "longer, its encoder switched every true edge off; see docs/evaluation.md)")
     parser.add_argument("--backend", choices=Pcmci.BACKENDS,
                         help="pcmci: numpy (default: tigramite's algorithm without its per-test overhead, about 50x "
