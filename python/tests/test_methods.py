@@ -110,7 +110,7 @@ def test_nri_s_cosine_schedule_and_kl_weight_reach_training(toy):
 def test_nri_trail_warms_up_only_where_that_is_few_optimiser_steps(toy):
     # 24 train scenarios, 4 windows each: 96 windows an epoch. Its 5 warm-up
     # epochs are kept at 1 and 20 optimiser steps an epoch (5 and 100 steps)
-    # and dropped at 24 (120): at 160 its encoder switched every true edge
+    # and dropped at 24 (120): at 625 its encoder switched every true edge
     # off (nri.AUTO_WARMUP_STEPS). The time limit stops a fit at the first
     # epoch with edges, so the epochs run tell the warm-up.
     from causalcity.methods.nri import AUTO_WARMUP_STEPS

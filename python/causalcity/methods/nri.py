@@ -101,12 +101,13 @@ AUTO_WARMUP_STEPS = 100
 steps, and not at all where they are more. Measured on the toy (8 cars,
 50 %, batch 128, 60 epochs, test F1 with and without): 35 steps (200
 train) 0.948 against 0.806; 65 (400) 0.953 against 0.924; 125 (800)
-0.942 against 0.909, AUROC 0.998 either way at 400 and 800. At 160
-steps (1,000 train) and 625 (4,000) the encoder switched every true edge
-off the epoch the warm-up ended (AUROC 0.00 at 4,000, 0.998 without).
-The gain above 35 steps is small and the loss past the switch is whole,
-so the bound keeps a margin below 160 rather than sitting at 125
-(docs/evaluation.md, "Our NRI against NRI")."""
+0.942 against 0.909; 160 (1,000) 0.952 against 0.948. At 625 steps
+(4,000 train, the full setting's 20 epochs) the encoder switched every
+true edge off the epoch the warm-up ended (AUROC 0.00, 0.998 without),
+as it did for the first 10 epochs of a trace at 160 steps (the 60-epoch
+run above recovered). The gain shrinks with the steps and the loss where
+the switch sticks is whole, so the bound sits below 160; between 160
+and 625 it is not measured (docs/evaluation.md, "Our NRI against NRI")."""
 
 
 def pick_device(device: str) -> torch.device:
