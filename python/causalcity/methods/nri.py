@@ -104,8 +104,8 @@ train) 0.948 against 0.806; 65 (400) 0.953 against 0.924; 125 (800)
 0.942 against 0.909; 160 (1,000) 0.952 against 0.948. At 625 steps
 (4,000 train, the full setting's 20 epochs) the encoder switched every
 true edge off the epoch the warm-up ended (AUROC 0.00, 0.998 without),
-as it did for the first 10 epochs of a trace at 160 steps (the 60-epoch
-run above recovered). The gain shrinks with the steps and the loss where
+as it did in a 10-epoch trace at 160 steps on other scenarios (not in
+the 60-epoch run above). The gain shrinks with the steps and the loss where
 the switch sticks is whole, so the bound sits below 160; between 160
 and 625 it is not measured (docs/evaluation.md, "Our NRI against NRI")."""
 
