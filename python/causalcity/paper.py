@@ -427,7 +427,7 @@ def run(
     beside = " with the CPU methods beside the GPU's" if overlap else ""
     kept = f", {len(units) - len(left)} of them finished earlier" if len(left) < len(units) else ""
     say(
-        f"{len(units)} units (world x method x group){kept}, projected {_clock(_overlapped(units, projected, overlap))}"
+        f"{len(units)} unit{'' if len(units) == 1 else 's'} (world x method x group){kept}, projected {_clock(_overlapped(units, projected, overlap))}"
         f"{beside} besides "
         f"generating the data ({calibrated}the classical methods "
         f"from 2-core CPU figures, Granger and PCMCI scaled to {os.cpu_count()} cores)"
@@ -869,13 +869,27 @@ def _error_figure(plt, out: Path, rows: List[dict], worlds: Sequence[str], colou
     plt.close(fig)
 
 
+def _setting_words(setting: Setting, methods: Sequence[str]) -> str:
+    """The setting a table ran with, as its header says it: the sizes, the
+    neural methods' training, and the options of its own that the setting
+    gives a method of the table (as the method takes them), so that a
+    method trained otherwise is not read as trained like the rest."""
+    splits = setting.splits
+    words = (f"{setting.name} ({splits['train']}/{splits['val']}/{splits['test']} scenarios per group, "
+             f"{setting.epochs} epochs at batch {setting.batch_size} and learning rate {setting.lr:g} for the "
+             "neural methods")  # fmt: skip
+    for method in methods:
+        own = setting.extra.get(method)
+        if own:
+            words += f"; {method}: " + ", ".join(f"{k}={v!r}" for k, v in own.items())
+    return words + ")"
+
+
 def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
     """The results as Markdown tables: F1 (test, designed graph) per group and
     method, AUROC, and trajectory error at 1, 10 and 20 steps."""
     groups = list(dict.fromkeys(BY_CARS + BY_SHARE))
-    lines = [f"Setting: {setting.name} ({setting.splits['train']}/{setting.splits['val']}/{setting.splits['test']} "
-             f"scenarios per group, {setting.epochs} epochs at batch {setting.batch_size} for the neural methods); "
-             "test split, designed graph; "
+    lines = [f"Setting: {_setting_words(setting, _ordered(rows))}; test split, designed graph; "
              "F1 at the threshold with the best F1 on val, ± standard error over scenarios.", ""]
     lines.append("| world | method | " + " | ".join(f"F1 {g}" for g in groups) + " | AUROC 8 cars 50 % |")
     lines.append("|---" * (len(groups) + 3) + "|")

@@ -291,6 +291,29 @@ def test_the_paper_trajectory_table_says_when_no_method_predicted_its_group():
     assert "| toy | " in there and "1.00e-01" in there and "None:" not in there, there
 
 
+def test_the_paper_table_header_says_which_methods_the_setting_trained_otherwise():
+    # The full setting's results.md said "100 epochs at batch 128 for the
+    # neural methods" above an nri_trail row trained for 20 epochs without
+    # a warm-up, and the quick one "60 epochs" above the interaction net's 30.
+    from causalcity import paper
+
+    def rows(*methods):
+        return [dict(world="city", method=m, group=paper.TRAJECTORY_GROUP, split="test", graph="designed",
+                     metric="f1", step=None, value=0.5, se=0.01, scenarios=3) for m in methods]  # fmt: skip
+
+    def header(setting, *methods):
+        return paper.markdown(rows(*methods), setting, ["city"]).splitlines()[0]
+
+    full = header(paper.FULL, "path", "nri", "nri_trail")
+    assert "4000/500/500 scenarios per group, 100 epochs at batch 128 and learning rate 0.003" in full, full
+    assert "nri_trail: epochs=20, warmup_epochs=0" in full, full
+    assert "nri: kl_weight=10.0, lr_schedule='cosine'" in full, full
+    # only the methods in the table are named
+    assert "nri" not in header(paper.FULL, "path", "granger").split("neural methods")[1], header(paper.FULL, "path")
+    quick = header(paper.QUICK, "interaction", "nri")
+    assert "60 epochs at batch 32" in quick and "interaction: epochs=30" in quick, quick
+
+
 def test_a_cpu_method_that_fails_beside_the_neural_ones_stops_the_run_with_its_error(tmp_path, monkeypatch):
     from causalcity import paper
 
@@ -326,6 +349,11 @@ def test_the_paper_plan_prints_the_projection_and_writes_nothing(tmp_path, capsy
         for method in paper.METHOD_ORDER:
             line = next(x for x in err.splitlines() if x.startswith(f"[paper]   {world} {paper._label(method)}:"))
             assert line.rsplit(" ", 1)[-1][0].isdigit(), line
+    assert not out.exists()
+    one = ["--plan", "--world", "toy", "--group", "cars08_edges50", "--method", "path", "--device", "cpu"]
+    assert paper.main(one + ["--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "[paper] 1 unit (world x method x group), projected" in err, err  # (it said "1 units")
     assert not out.exists()
     # NRI's val windows (a forward pass) are projected at their own rate,
     # apart from its training windows: 1,600,000 at 1,000/s, 55,000 at 4,000/s.
