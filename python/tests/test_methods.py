@@ -248,6 +248,18 @@ def test_the_paper_pipeline_runs_end_to_end(tmp_path):
     assert "| toy | NRI |" in table and "| city | frame-0 classifier (leak: the first frame only) |" in table
     assert "| city | path rule (simple: b drives where a drove) |" in table and "| toy | supervised classifier" in table
     assert json.loads((out / "timings.json").read_text())
+    # --epochs sets the epochs alone: each method keeps the rest of what the
+    # setting gives it (it emptied them all, NRI's KL recipe too).
+    def trained(world, method):
+        return json.loads((out / "units" / world / method / f"{paper.TRAJECTORY_GROUP}.json").read_text())["key"]["options"]
+
+    for world in paper.WORLDS:
+        nri, trail = trained(world, "nri"), trained(world, "nri_trail")
+        assert nri["epochs"] == 1 and nri["kl_weight"] == 10.0 and nri["lr_schedule"] == "cosine", (world, nri)
+        assert trail["epochs"] == 1 and trail["warmup_epochs"] == 0, (world, trail)
+    assert "kl_weight" not in trained("toy", "nri_trail"), trained("toy", "nri_trail")
+    assert trained("city", "nri_trail")["kl_weight"] == 10.0, trained("city", "nri_trail")
+    assert "nri_trail: warmup_epochs=0; in the city world kl_weight=10.0, lr_schedule='cosine'" in table, table
 
 
 def test_the_cpu_methods_beside_the_neural_ones_give_the_same_results(tmp_path, capsys):
@@ -306,8 +318,11 @@ def test_the_paper_table_header_says_which_methods_the_setting_trained_otherwise
 
     full = header(paper.FULL, "path", "nri", "nri_trail")
     assert "4000/500/500 scenarios per group, 100 epochs at batch 128 and learning rate 0.003" in full, full
-    assert "nri_trail: epochs=20, warmup_epochs=0" in full, full
+    assert "nri_trail: epochs=20, warmup_epochs=0; in the city world kl_weight=10.0, lr_schedule='cosine'" in full, full
     assert "nri: kl_weight=10.0, lr_schedule='cosine'" in full, full
+    # a world's own options are named in its table only
+    toy = paper.markdown(rows("nri_trail"), paper.FULL, ["toy"]).splitlines()[0]
+    assert "nri_trail: epochs=20, warmup_epochs=0)" in toy and "city world" not in toy, toy
     # only the methods in the table are named
     classical = header(paper.FULL, "path", "granger")
     assert "nri" not in classical.split("neural methods")[1], classical
