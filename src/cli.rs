@@ -21,7 +21,7 @@ use causalcity::orchestrate::handwritten::{counterfactual, run_file, sweep, RunO
 use causalcity::orchestrate::merge::merge;
 use causalcity::orchestrate::pack::pack_dataset;
 use causalcity::orchestrate::run::{generate, GenOptions, Shard, MAX_THREADS};
-use causalcity::output::claim::{claim_file, FileKind};
+use causalcity::output::claim::claim_file;
 use causalcity::output::manifest::{LightsLog, Packing, Products};
 use causalcity::preview::{preview, PreviewOptions};
 use causalcity::progress::ProgressMode;
@@ -951,10 +951,10 @@ pub fn run(cli: Cli) -> Result<(), Error> {
                     )));
                 }
             }
-            use causalcity::analysis::evaluate::{PER_SCENARIO_CSV_HEADER, TABLE_CSV_HEADER};
-            let claim = |header| move |path: &std::path::Path| claim_file(path, &inputs, FileKind::Table(header));
-            let csv = args.csv.as_deref().map(claim(TABLE_CSV_HEADER)).transpose()?;
-            let per_scenario = args.per_scenario.as_deref().map(claim(PER_SCENARIO_CSV_HEADER)).transpose()?;
+            use causalcity::analysis::evaluate::{PER_SCENARIO_CSV, TABLE_CSV};
+            let claim = |kind| move |path: &std::path::Path| claim_file(path, &inputs, kind);
+            let csv = args.csv.as_deref().map(claim(TABLE_CSV)).transpose()?;
+            let per_scenario = args.per_scenario.as_deref().map(claim(PER_SCENARIO_CSV)).transpose()?;
             let evaluated = evaluate(&args.dataset, &args.predictions, &options)?;
             if let Some(csv) = csv {
                 csv.write(evaluated.to_csv().as_bytes()).map_err(Error::failure)?;

@@ -712,7 +712,7 @@ def _real(value) -> bool:
 
 
 #: What each metric's value may be: within [0, 1], or 0 or more.
-_UNIT_METRICS = {"f1": 1.0, "auroc": 1.0, "auprc": 1.0, "shd": math.inf, "trajectory_mse": math.inf}
+_UNIT_METRICS = {"f1": 1.0, "auroc": 1.0, "auprc": 1.0, "direction": 1.0, "shd": math.inf, "trajectory_mse": math.inf}
 #: Round-off a record's value may carry beyond its metric's range: evaluate
 #: summed AUPRC's terms as fractions until 2026-12-07, and a perfect toy
 #: ranking's came to 1.0000000000000004 (its own run then refused the record).
@@ -766,8 +766,9 @@ def _rows(world: str, method: str, report: dict) -> List[dict]:
 
     rows = []
     for e in report["edges"]:
-        for metric, se in (("f1", "f1_se"), ("auroc", None), ("auprc", None), ("shd", "shd_se")):
-            rows.append(row(e, e["graph"], metric, "", e[metric], e[se] if se else None, e["scenarios"]))
+        for metric, se in (("f1", "f1_se"), ("auroc", None), ("auprc", None), ("direction", None), ("shd", "shd_se")):
+            if metric in e:  # (evaluate gives no direction for some graphs)
+                rows.append(row(e, e["graph"], metric, "", e[metric], e[se] if se else None, e["scenarios"]))
     for t in report["trajectories"]:
         for s in t["steps"]:
             rows.append(row(t, "", "trajectory_mse", s["step"], s["mse"], s["se"], s["scenarios"]))
@@ -929,12 +930,14 @@ def _setting_words(setting: Setting, methods: Sequence[str], worlds: Sequence[st
 
 def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
     """The results as Markdown tables: F1 (test, designed graph) per group and
-    method, AUROC, and trajectory error at 1, 10 and 20 steps."""
+    method, AUROC and the direction right at 8 cars, 50 %, and trajectory
+    error at 1, 10 and 20 steps."""
     groups = list(dict.fromkeys(BY_CARS + BY_SHARE))
     lines = [f"Setting: {_setting_words(setting, _ordered(rows), worlds)}; test split, designed graph; "
              "F1 at the threshold with the best F1 on val, ± standard error over scenarios.", ""]
-    lines.append("| world | method | " + " | ".join(f"F1 {g}" for g in groups) + " | AUROC 8 cars 50 % |")
-    lines.append("|---" * (len(groups) + 3) + "|")
+    lines.append("| world | method | " + " | ".join(f"F1 {g}" for g in groups)
+                 + " | AUROC 8 cars 50 % | direction right 8 cars 50 % |")  # fmt: skip
+    lines.append("|---" * (len(groups) + 4) + "|")
     for world in worlds:
         for method in _ordered(rows):
             cells = []
@@ -943,10 +946,11 @@ def markdown(rows: List[dict], setting: Setting, worlds: Sequence[str]) -> str:
                 cells.append("" if r is None else f"{r['value']:.2f} ± {r['se'] or 0:.2f}")
             if not any(cells):
                 continue
-            a = _get(rows, world=world, method=method, group=TRAJECTORY_GROUP, split="test", graph="designed",
-                     metric="auroc")
-            auroc = "" if a is None else f"{a['value']:.2f}"
-            lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {auroc} |")
+            at = dict(world=world, method=method, group=TRAJECTORY_GROUP, split="test", graph="designed")
+            a, d = _get(rows, **at, metric="auroc"), _get(rows, **at, metric="direction")
+            auroc = "" if a is None or a["value"] is None else f"{a['value']:.2f}"
+            direction = "" if d is None or d["value"] is None else f"{100 * d['value']:.0f} %"
+            lines.append(f"| {world} | {_label(method)} | " + " | ".join(cells) + f" | {auroc} | {direction} |")
     lines += ["", "Trajectory error (MSE of positions normalised by image size; 8 cars, 50 % linked; test):", ""]
     table = ["| world | method | 1 step | 10 steps | 20 steps |", "|---|---|---|---|---|"]
     for world in worlds:

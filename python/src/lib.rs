@@ -636,10 +636,10 @@ fn evaluate(
     if csv.is_some() && csv.as_deref().map(resolve) == per_scenario.as_deref().map(resolve) {
         return Err(InputError::new_err("csv and per_scenario name the same file: give each table its own file"));
     }
-    use causalcity::analysis::evaluate::{PER_SCENARIO_CSV_HEADER, TABLE_CSV_HEADER};
-    let claim = |header| move |path: PathBuf| claim_file(&path, &inputs, FileKind::Table(header));
-    let csv = csv.map(claim(TABLE_CSV_HEADER)).transpose().map_err(py_err)?;
-    let per_scenario = per_scenario.map(claim(PER_SCENARIO_CSV_HEADER)).transpose().map_err(py_err)?;
+    use causalcity::analysis::evaluate::{PER_SCENARIO_CSV, TABLE_CSV};
+    let claim = |kind| move |path: PathBuf| claim_file(&path, &inputs, kind);
+    let csv = csv.map(claim(TABLE_CSV)).transpose().map_err(py_err)?;
+    let per_scenario = per_scenario.map(claim(PER_SCENARIO_CSV)).transpose().map_err(py_err)?;
     let mut kinds: Vec<GraphKind> = Vec::new();
     for name in &graphs {
         let Some(kind) = GraphKind::ALL.into_iter().find(|k| k.name() == name) else {

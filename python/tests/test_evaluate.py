@@ -40,6 +40,13 @@ def truth(meta, field="edges"):
     return g
 
 
+def led(g, s):
+    """(Linked pairs a -> b, with b -> a unlinked, scored above their
+    reverse, ties half; such pairs), as evaluate's direction counts them."""
+    one_way = g & ~g.T
+    return float((s > s.T)[one_way].sum() + 0.5 * (s == s.T)[one_way].sum()), int(one_way.sum())
+
+
 def pixels(rel, meta):
     table = np.loadtxt(TOY / rel / "poses.csv", delimiter=",", skiprows=1, ndmin=2)
     return table[:, [9, 10]].reshape(meta["frames"], len(meta["cars"]), 2)
@@ -73,7 +80,7 @@ def test_edge_metrics_agree_with_scikit_learn(predictions):
         group, split = row["group"], row["split"]
         rels = [(rel, meta) for rel, meta in scenarios(split) if rel.startswith(group + "/")]
         assert row["scenarios"] == len(rels) > 0
-        ys, ss, f1s, shds = [], [], [], []
+        ys, ss, f1s, shds, right, one_way = [], [], [], [], 0.0, 0
         for rel, meta in rels:
             n = len(meta["cars"])
             off = ~np.eye(n, dtype=bool)
@@ -83,6 +90,8 @@ def test_edge_metrics_agree_with_scikit_learn(predictions):
             shds.append(int((called != y).sum()))
             ys.append(y)
             ss.append(s)
+            r, k = led(truth(meta, field), edges[rel])
+            right, one_way = right + r, one_way + k
         y, s = np.concatenate(ys), np.concatenate(ss)
         assert row["pairs"] == len(y) and row["true_edges"] == int(y.sum())
         assert row["f1"] == pytest.approx(np.mean(f1s), abs=1e-9)
@@ -94,6 +103,9 @@ def test_edge_metrics_agree_with_scikit_learn(predictions):
             assert row["auprc"] == pytest.approx(average_precision_score(y, s), abs=1e-9)
         else:
             assert row["auroc"] is None
+        # who leads: noisy scores get some edges' direction wrong, not all
+        assert one_way > 0 and 0.5 < right / one_way <= 1, (right, one_way)
+        assert row["direction"] == pytest.approx(right / one_way, abs=1e-12)
         checked += 1
     assert checked == 2 * 2 * 2  # graphs x groups x (val, test)
 
@@ -187,6 +199,8 @@ def test_per_scenario_rows_agree_with_scikit_learn_and_average_to_the_group_rows
         assert r["f1"] == pytest.approx(f1_score(y, called, zero_division=1.0), abs=1e-6)
         assert r["shd"] == (y != called).sum()
         assert r["auroc"] == (pytest.approx(roc_auc_score(y, s), abs=1e-6) if 0 < y.sum() < len(y) else None)
+        right, one_way = led(truth(meta, {"designed": "edges", "causal": "causal_edges"}[r["graph"]]), edges[r["scenario"]])
+        assert r["direction"] == (pytest.approx(right / one_way, abs=1e-6) if one_way else None), r
         steps = (trajectories[r["scenario"]] - pixels(r["scenario"], meta)[HISTORY : HISTORY + STEPS]) / [1024, 640]
         assert r["trajectory_mse"] == pytest.approx(float((steps**2).mean()), rel=1e-5)
     # A group row's F1 is the mean of its scenarios' F1.
@@ -201,6 +215,14 @@ def test_per_scenario_rows_agree_with_scikit_learn_and_average_to_the_group_rows
     assert again.read_bytes() == out.read_bytes()
     header = out.read_text().splitlines()[0]
     assert header.startswith("scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,true_positives")
+    assert header.endswith(",counterfactual_mse,direction"), header  # (a new column goes last)
+    assert any(r["direction"] is not None for r in rows), rows
+    # The table as the version before the direction column wrote it is this
+    # command's own, replaced on a rerun (it was refused as someone's text).
+    earlier = tmp_path / "earlier.csv"
+    earlier.write_text(header.removesuffix(",direction") + "\ncars04_edges50/test/00000,cars04_edges50\n")
+    run = cli("evaluate", TOY, path, "--graph", "designed,causal", "--history", HISTORY, "--per-scenario", earlier)
+    assert run.returncode == 0 and earlier.read_text().splitlines()[0] == header, run.stderr
     # Never onto the dataset or the same file as --csv.
     run = cli("evaluate", TOY, path, "--per-scenario", TOY / "scenarios.csv")
     assert run.returncode == 2 and not (TOY / "scenarios.csv").exists()
@@ -239,6 +261,13 @@ def test_the_command_line_prints_the_table_and_writes_the_csv(predictions, tmp_p
     assert lines[0] == "group,cars,edge_proportion,split,graph,metric,step,value,se,scenarios"
     f1_rows = [l for l in lines if ",f1," in l]
     assert len(f1_rows) == 4
+    # the direction right: a row per group and split, and a column of the table
+    direction_rows = [l.split(",") for l in lines if ",direction," in l]
+    assert len(direction_rows) == 4 and all(0.5 < float(r[7]) <= 1 for r in direction_rows), direction_rows
+    header = next(l for l in run.stdout.splitlines() if l.startswith("graph "))
+    assert header.split()[6:9] == ["AUROC", "AUPRC", "dir"], header
+    row = next(l for l in run.stdout.splitlines() if l.startswith("designed ") and " test " in l)
+    assert row.split()[8].endswith("%"), row
     assert len([l for l in lines if ",trajectory_mse," in l]) == 4 * STEPS
     as_json = json.loads(cli("evaluate", TOY, path, "--history", HISTORY, "--json").stdout)
     assert len(as_json["edges"]) == 4
@@ -613,8 +642,11 @@ def test_constant_scores_for_every_edge_are_scored_as_every_edge_called(tmp_path
         edges = {k.folder: np.full((data.load(k).cars,) * 2, value) for k in data.keys() if k.split != "train"}
         path = tmp_path / f"const{value}.npz"
         causalcity.save_predictions(path, edges=edges, dataset=TOY)
-        rows = causalcity.evaluate(TOY, path)["scenarios"]
+        report = causalcity.evaluate(TOY, path)
+        rows = report["scenarios"]
         results[value] = {r["scenario"]: (r["predicted_edges"], r["f1"]) for r in rows if r["split"] == "test"}
+        # a score that cannot tell a -> b from b -> a is right half the time
+        assert [e["direction"] for e in report["edges"]] == [0.5] * len(report["edges"]), report["edges"]
     assert results[1.0] and results[1.0] == results[-1.0], results
     assert all(predicted > 0 for predicted, _ in results[1.0].values()), results
 

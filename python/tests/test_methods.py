@@ -247,6 +247,10 @@ def test_the_paper_pipeline_runs_end_to_end(tmp_path):
     table = (out / "results.md").read_text()
     assert "| toy | NRI |" in table and "| city | frame-0 classifier (leak: the first frame only) |" in table
     assert "| city | path rule (simple: b drives where a drove) |" in table and "| toy | supervised classifier" in table
+    # who leads, as evaluate counts it, beside AUROC: a row per split, and a column
+    assert {r["split"] for r in rows if r["metric"] == "direction" and r["method"] == "path"} == {"val", "test"}
+    path_row = next(line for line in table.splitlines() if line.startswith("| toy | path rule"))
+    assert "| AUROC 8 cars 50 % | direction right 8 cars 50 % |" in table and path_row.endswith(" % |"), path_row
     assert json.loads((out / "timings.json").read_text())
     # --epochs sets the epochs alone: each method keeps the rest of what the
     # setting gives it (it emptied them all, NRI's KL recipe too).
@@ -551,9 +555,10 @@ def test_a_paper_run_of_one_group_is_kept_by_a_run_of_every_group(tmp_path, caps
     auroc = next(r for r in one if r["method"] == "nri" and r["metric"] == "auroc" and r["split"] == "test"
                  and r["graph"] == "designed")  # fmt: skip
     line = next(x for x in table.splitlines() if x.startswith("| toy | NRI |"))
-    cells = [c.strip() for c in line.split("|")[3:-1]]  # F1 per group (cars04, cars08, cars12, 8 at 20 %, 80 %), AUROC
-    assert [bool(c) for c in cells] == [False, True, False, False, False, True], line
-    assert cells[-1] == f"{auroc['value']:.2f}", line
+    # F1 per group (cars04, cars08, cars12, 8 at 20 %, 80 %), AUROC, direction right
+    cells = [c.strip() for c in line.split("|")[3:-1]]
+    assert [bool(c) for c in cells] == [False, True, False, False, False, True, True], line
+    assert cells[-2] == f"{auroc['value']:.2f}", line
 
     # --report: the table of what has finished, nothing run, the rest named
     (out / "results.md").unlink()

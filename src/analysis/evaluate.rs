@@ -44,6 +44,7 @@ use super::metrics::{auroc, average_precision, best_threshold, Counts, ScoredPai
 use super::predictions::{read_npz, read_npz_array, NamedArray};
 use crate::dataset::{Dataset, GraphKind, PoseLog, ScenarioSummary, Sweep};
 use crate::error::Error;
+use crate::output::claim::FileKind;
 use crate::output::layout::INTERACTIONS_CSV;
 use crate::output::logs::{event_frame, read_interactions};
 use crate::plan::ScenarioKey;
@@ -201,6 +202,11 @@ pub struct EdgeScores {
     pub auroc: Option<f64>,
     /// Average precision over all pairs; None without a linked pair.
     pub auprc: Option<f64>,
+    /// Who leads whom: the share of the linked pairs a -> b (whose reverse
+    /// b -> a is not linked) scored above their reverse, ties counting
+    /// half; 0.5 is chance. None for the per-frame and affected-car
+    /// graphs, and without such a pair.
+    pub direction: Option<f64>,
     /// Mean structural Hamming distance per scenario (per frame for the
     /// per-frame graph).
     pub shd: f64,
@@ -229,6 +235,8 @@ pub struct OverallScores {
     /// Over every pair of every group (scores compared across groups).
     pub auroc: Option<f64>,
     pub auprc: Option<f64>,
+    /// Over every linked pair of every group (see [`EdgeScores::direction`]).
+    pub direction: Option<f64>,
     pub shd: f64,
     pub shd_se: Option<f64>,
 }
@@ -312,6 +320,9 @@ pub struct ScenarioScores {
     pub shd: Option<f64>,
     /// None when the scenario's pairs are all linked or all unlinked.
     pub auroc: Option<f64>,
+    /// As in the group rows ([`EdgeScores::direction`]): None without a
+    /// linked pair whose reverse is unlinked.
+    pub direction: Option<f64>,
     /// Mean over the predicted steps of the normalised squared position
     /// error, where trajectories were predicted.
     pub trajectory_mse: Option<f64>,
@@ -617,6 +628,9 @@ impl ScenarioPredictions {
 /// per step.
 struct ScenarioResult {
     pairs: Vec<Vec<ScoredPair>>,
+    /// Per graph of `pairs`: the linked pairs scored above their unlinked
+    /// reverse (ties count half) and how many such pairs there are.
+    directions: Vec<Direction>,
     frame_pairs: Option<(Vec<ScoredPair>, usize)>,
     step_errors: Vec<f64>,
     counterfactual_errors: Vec<f64>,
@@ -1074,7 +1088,7 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
     let summary = ScenarioSummary::read(&s.dir)?;
     let (frames, cars) = (summary.frames as usize, summary.cars.len());
     let off_diagonal = |i: &usize| i / cars != i % cars;
-    let mut pairs = Vec::new();
+    let (mut pairs, mut directions) = (Vec::new(), Vec::new());
     if let Some(scores) = s.get(Predicted::Edges) {
         for &graph in &options.graphs {
             let graph = if graph == GraphKind::Designed {
@@ -1087,6 +1101,7 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
                 linked[*a as usize * cars + *b as usize] = true;
             }
             pairs.push((0..cars * cars).filter(off_diagonal).map(|i| (-scores.values[i], linked[i])).collect());
+            directions.push(direction_of(&scores.values, &linked, cars));
         }
     }
     let frame_pairs = match s.get(Predicted::PerFrame) {
@@ -1128,12 +1143,52 @@ fn score_scenario(s: &ScenarioPredictions, truth: &Truth, options: &EvaluateOpti
     }
     Ok(ScenarioResult {
         pairs,
+        directions,
         frame_pairs,
         step_errors,
         counterfactual_errors,
         counterfactual_affected_errors,
         affected_pairs,
     })
+}
+
+/// A scenario's linked pairs a -> b whose reverse is not linked, counted
+/// against their reverse's score: (pairs scored above it, plus half of
+/// those tied with it; such pairs). `scores` and `linked` are row-major
+/// [cars x cars], row the cause.
+fn direction_of(scores: &[f64], linked: &[bool], cars: usize) -> Direction {
+    let mut direction = Direction::default();
+    for (a, b) in (0..cars).flat_map(|a| (0..cars).map(move |b| (a, b))).filter(|(a, b)| a != b) {
+        let (forward, reverse) = (a * cars + b, b * cars + a);
+        if linked[forward] && !linked[reverse] {
+            direction.pairs += 1;
+            direction.right += match scores[forward].partial_cmp(&scores[reverse]) {
+                Some(std::cmp::Ordering::Greater) => 1.0,
+                Some(std::cmp::Ordering::Equal) => 0.5,
+                _ => 0.0,
+            };
+        }
+    }
+    direction
+}
+
+/// Linked pairs scored above their unlinked reverse (ties count half) out
+/// of how many such pairs: summed over scenarios, then divided.
+#[derive(Debug, Clone, Copy, Default)]
+struct Direction {
+    right: f64,
+    pairs: usize,
+}
+
+impl Direction {
+    fn add(&mut self, other: Direction) {
+        self.right += other.right;
+        self.pairs += other.pairs;
+    }
+
+    fn share(&self) -> Option<f64> {
+        (self.pairs > 0).then(|| self.right / self.pairs as f64)
+    }
 }
 
 /// A threshold in the table's 9 columns: 4 decimals, or in exponent form
@@ -1250,11 +1305,13 @@ fn threshold_for(
 
 /// A scenario's scored pairs of one graph and how many graphs they span
 /// (1, or the frames of a per-frame graph), for SHD per graph.
-type GraphPairs<'a> = (&'a [ScoredPair], usize);
+/// With its direction counts where the graph has them ([`Direction`]).
+type GraphPairs<'a> = (&'a [ScoredPair], usize, Option<Direction>);
 
 /// One split's scores over every group: every pair, each scenario's F1
-/// and SHD, the counts at each group's threshold, and the groups scored.
-type Pooled = (Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize);
+/// and SHD, the counts at each group's threshold, the groups scored and
+/// the direction counts.
+type Pooled = (Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize, Option<Direction>);
 
 /// Edge rows of one graph for every group and split that has its scores.
 fn edge_rows<'a>(
@@ -1272,7 +1329,7 @@ fn edge_rows<'a>(
         .zip(results)
         .filter(|(s, _)| s.split == Split::Val)
         .filter_map(|(_, r)| pairs_of(r))
-        .flat_map(|(p, _)| p.iter().copied())
+        .flat_map(|(p, _, _)| p.iter().copied())
         .collect();
     for group in &truth.spec.groups {
         let name = group.name();
@@ -1284,16 +1341,20 @@ fn edge_rows<'a>(
                 .filter_map(|(_, r)| pairs_of(r))
                 .collect()
         };
-        let val: Vec<ScoredPair> = in_split(Split::Val).iter().flat_map(|(p, _)| p.iter().copied()).collect();
+        let val: Vec<ScoredPair> = in_split(Split::Val).iter().flat_map(|(p, _, _)| p.iter().copied()).collect();
         let (threshold, threshold_from) = threshold_for(options, &val, &pooled_val);
         for split in Split::ALL {
             let scenarios = in_split(split);
             if scenarios.is_empty() {
                 continue;
             }
-            let all: Vec<ScoredPair> = scenarios.iter().flat_map(|(p, _)| p.iter().copied()).collect();
+            let all: Vec<ScoredPair> = scenarios.iter().flat_map(|(p, _, _)| p.iter().copied()).collect();
             let per_scenario: Vec<(Counts, usize)> =
-                scenarios.iter().map(|(p, graphs)| (Counts::at(p, -threshold), *graphs)).collect();
+                scenarios.iter().map(|(p, graphs, _)| (Counts::at(p, -threshold), *graphs)).collect();
+            let direction = scenarios.iter().filter_map(|(_, _, d)| *d).reduce(|mut total, d| {
+                total.add(d);
+                total
+            });
             let f1s: Vec<f64> = per_scenario.iter().map(|(c, _)| c.f1().unwrap_or(1.0)).collect();
             let shds: Vec<f64> = per_scenario
                 .iter()
@@ -1308,6 +1369,9 @@ fn edge_rows<'a>(
             pool.3.false_positives += counts.false_positives;
             pool.3.false_negatives += counts.false_negatives;
             pool.4 += 1;
+            if let Some(d) = direction {
+                pool.5.get_or_insert_with(Direction::default).add(d);
+            }
             let (f1, f1_se) = mean_se(&f1s);
             let (shd, shd_se) = mean_se(&shds);
             rows.push(EdgeScores {
@@ -1329,13 +1393,14 @@ fn edge_rows<'a>(
                 f1_se,
                 auroc: auroc(&all),
                 auprc: average_precision(&all),
+                direction: direction.and_then(|d| d.share()),
                 shd,
                 shd_se,
             });
         }
     }
     let mut overall = Vec::new();
-    for (split, (all, f1s, shds, counts, groups)) in Split::ALL.into_iter().zip(pooled) {
+    for (split, (all, f1s, shds, counts, groups, direction)) in Split::ALL.into_iter().zip(pooled) {
         if groups < 2 {
             continue;
         }
@@ -1356,6 +1421,7 @@ fn edge_rows<'a>(
             f1_se,
             auroc: auroc(&all),
             auprc: average_precision(&all),
+            direction: direction.and_then(|d| d.share()),
             shd,
             shd_se,
         });
@@ -1497,17 +1563,17 @@ fn summarise(
 
 /// A scenario's scored pairs of graph `g` (one graph counted).
 fn graph_pairs(r: &ScenarioResult, g: usize) -> Option<GraphPairs<'_>> {
-    r.pairs.get(g).map(|p| (p.as_slice(), 1))
+    r.pairs.get(g).map(|p| (p.as_slice(), 1, r.directions.get(g).copied()))
 }
 
 /// A sweep pair's affected-car scores (one "graph" of cars).
 fn affected_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
-    r.affected_pairs.as_ref().map(|p| (p.as_slice(), 1))
+    r.affected_pairs.as_ref().map(|p| (p.as_slice(), 1, None))
 }
 
 /// A scenario's scored pairs of every frame, with the frames counted as graphs.
 fn frame_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
-    r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames))
+    r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames, None))
 }
 
 /// A scenario's row with its name, group, split and trajectory errors
@@ -1536,6 +1602,7 @@ fn scenario_base(scenarios: &Path, s: &ScenarioPredictions, r: &ScenarioResult) 
         f1: None,
         shd: None,
         auroc: None,
+        direction: None,
         trajectory_mse: mean(&r.step_errors),
         counterfactual_mse: mean(&r.counterfactual_errors),
     }
@@ -1553,7 +1620,8 @@ fn scenario_rows<'a>(
 ) -> Vec<ScenarioScores> {
     let mut out = Vec::new();
     for (s, r) in scored.iter().zip(results) {
-        let (Some((pairs, graphs)), Some(row)) = (pairs_of(r), rows.iter().find(|e| e.group == s.group)) else {
+        let (Some((pairs, graphs, direction)), Some(row)) = (pairs_of(r), rows.iter().find(|e| e.group == s.group))
+        else {
             continue;
         };
         let counts = Counts::at(pairs, -row.threshold);
@@ -1568,6 +1636,7 @@ fn scenario_rows<'a>(
             f1: Some(counts.f1().unwrap_or(1.0)),
             shd: Some((counts.false_positives + counts.false_negatives) as f64 / graphs as f64),
             auroc: auroc(pairs),
+            direction: direction.and_then(|d| d.share()),
             ..scenario_base(dataset, s, r)
         });
     }
@@ -1588,7 +1657,20 @@ pub const TABLE_CSV_HEADER: &str = "group,cars,edge_proportion,split,graph,metri
 /// The header of `evaluate --per-scenario` (one row per scenario and graph).
 pub const PER_SCENARIO_CSV_HEADER: &str = "scenario,group,split,graph,cars,threshold,true_edges,predicted_edges,\
                                            true_positives,precision,recall,f1,shd,auroc,trajectory_mse,\
-                                           counterfactual_mse";
+                                           counterfactual_mse,direction";
+
+/// The headers `--per-scenario` wrote before: a table of one of them is
+/// replaced as this command's own (columns are only ever added at the end).
+const PER_SCENARIO_CSV_HEADERS_BEFORE: &[&str] = &["scenario,group,split,graph,cars,threshold,true_edges,\
+                                                   predicted_edges,true_positives,precision,recall,f1,shd,auroc,\
+                                                   trajectory_mse,counterfactual_mse"];
+
+/// What `--csv` writes, for the write rule ([`claim_file`](crate::output::claim::claim_file)).
+pub const TABLE_CSV: FileKind = FileKind::Table(TABLE_CSV_HEADER, &[]);
+
+/// What `--per-scenario` writes: it replaces its own table, as this
+/// version or an earlier one wrote it.
+pub const PER_SCENARIO_CSV: FileKind = FileKind::Table(PER_SCENARIO_CSV_HEADER, PER_SCENARIO_CSV_HEADERS_BEFORE);
 
 impl EvaluationReport {
     /// The per-scenario rows as a CSV table (`--per-scenario`), one row per
@@ -1598,7 +1680,7 @@ impl EvaluationReport {
         let mut out = format!("{PER_SCENARIO_CSV_HEADER}\n");
         for r in &self.per_scenario {
             out += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 r.scenario,
                 r.group,
                 r.split,
@@ -1615,6 +1697,7 @@ impl EvaluationReport {
                 cell(r.auroc, ""),
                 cell(r.trajectory_mse, ""),
                 cell(r.counterfactual_mse, ""),
+                cell(r.direction, ""),
             );
         }
         out
@@ -1628,16 +1711,18 @@ impl EvaluationReport {
     pub fn to_csv(&self) -> String {
         let mut out = format!("{TABLE_CSV_HEADER}\n");
         for e in &self.edges {
-            let metrics: [(&str, Option<f64>, Option<f64>); 7] = [
+            let metrics: [(&str, Option<f64>, Option<f64>); 8] = [
                 ("f1", Some(e.f1), e.f1_se),
                 ("precision", e.precision, None),
                 ("recall", e.recall, None),
                 ("auroc", e.auroc, None),
                 ("auprc", e.auprc, None),
+                ("direction", e.direction, None),
                 ("shd", Some(e.shd), e.shd_se),
                 ("threshold", Some(e.threshold), None),
             ];
-            for (metric, value, se) in metrics {
+            // (a graph without direction counts writes no direction row)
+            for (metric, value, se) in metrics.into_iter().filter(|(m, v, _)| *m != "direction" || v.is_some()) {
                 out += &format!(
                     "{},{},{},{},{},{metric},,{},{},{}\n",
                     e.group,
@@ -1676,6 +1761,7 @@ impl EvaluationReport {
 impl fmt::Display for EvaluationReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
+        let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.0}%", 100.0 * v));
         let pm = |v: f64, se: Option<f64>| format!("{v:.3}±{}", se.map_or("-".to_string(), |s| format!("{s:.3}")));
         for warning in &self.warnings {
             writeln!(f, "warning: {warning}")?;
@@ -1684,7 +1770,7 @@ impl fmt::Display for EvaluationReport {
         if !self.edges.is_empty() {
             writeln!(
                 f,
-                "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
+                "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>5} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
                 "graph",
                 "group",
                 "split",
@@ -1693,6 +1779,7 @@ impl fmt::Display for EvaluationReport {
                 "linked",
                 "AUROC",
                 "AUPRC",
+                "dir",
                 "called",
                 "threshold",
                 "from",
@@ -1704,7 +1791,7 @@ impl fmt::Display for EvaluationReport {
             for e in &self.edges {
                 writeln!(
                     f,
-                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
+                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>5} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
                     e.graph,
                     e.group,
                     if e.held_out { format!("{}*", e.split) } else { e.split.to_string() },
@@ -1713,6 +1800,7 @@ impl fmt::Display for EvaluationReport {
                     e.true_edges,
                     show(e.auroc),
                     show(e.auprc),
+                    percent(e.direction),
                     e.predicted_edges,
                     shown_threshold(e.threshold),
                     e.threshold_from,
@@ -1726,7 +1814,7 @@ impl fmt::Display for EvaluationReport {
                 let split = if o.held_out { format!("{}*", o.split) } else { o.split.to_string() };
                 writeln!(
                     f,
-                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
+                    "{:<9} {:<16} {:<5} {:>5} {:>7} {:>6} {:>6} {:>6} {:>5} {:>6} {:>9} {:<7} {:>6} {:>6} {:>12} {:>12}",
                     o.graph,
                     format!("all {} groups", o.groups),
                     split,
@@ -1735,6 +1823,7 @@ impl fmt::Display for EvaluationReport {
                     o.true_edges,
                     show(o.auroc),
                     show(o.auprc),
+                    percent(o.direction),
                     o.predicted_edges,
                     "-",
                     "group",
@@ -1746,7 +1835,8 @@ impl fmt::Display for EvaluationReport {
             }
             writeln!(
                 f,
-                "edges: AUROC and AUPRC over all pairs need no threshold; a pair is called linked when its score is \
+                "edges: AUROC and AUPRC over all pairs need no threshold, nor dir (who leads: the linked pairs \
+                 a -> b scored above their reverse b -> a, ties half; 50% is chance); a pair is called linked when its score is \
                  above the threshold (from: val = best F1 on the val split, pooled = best F1 on every group's val \
                  where this group's holds no link, given, or default 0.5, see any warning above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
                  against interactions.csv, SHD per frame"

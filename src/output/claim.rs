@@ -797,8 +797,10 @@ pub enum FileKind {
     /// Other UTF-8 text (CSV, Markdown).
     Text,
     /// A CSV table whose first line is this header: it replaces only an
-    /// earlier table of the same columns (never notes or a script).
-    Table(&'static str),
+    /// earlier table of the same columns, or of one of the earlier headers
+    /// given (the table as an earlier version wrote it), never notes or a
+    /// script.
+    Table(&'static str, &'static [&'static str]),
     /// Anything else.
     Binary,
 }
@@ -834,7 +836,7 @@ impl FileKind {
             FileKind::Gif => "a GIF",
             FileKind::Json => "JSON (such as a spec)",
             FileKind::Text => "text (such as a CSV table)",
-            FileKind::Table(_) => "a CSV table",
+            FileKind::Table(..) => "a CSV table",
             FileKind::Binary => "binary data",
         }
     }
@@ -883,9 +885,10 @@ pub fn claim_file(path: &Path, inputs: &[(&str, &Path)], writes: FileKind) -> Re
     if let Some(head) = existing_head(path) {
         let held = FileKind::of(&head);
         let (same, held) = match writes {
-            FileKind::Table(header) if held == FileKind::Text => {
+            FileKind::Table(header, earlier) if held == FileKind::Text => {
                 let first = head.split(|&b| b == b'\n').next().unwrap_or_default();
-                (first == header.as_bytes(), "text other than this command's table (its first line differs)")
+                let ours = std::iter::once(header).chain(earlier.iter().copied()).any(|h| first == h.as_bytes());
+                (ours, "text other than this command's table (its first line differs)")
             }
             _ => (held == writes, held.name()),
         };

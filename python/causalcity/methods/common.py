@@ -356,9 +356,12 @@ def auroc_of(scores: np.ndarray, graph: np.ndarray) -> float:
 
 
 def direction_right(scores: np.ndarray, graph: np.ndarray) -> float:
-    """Share of the true edges ``graph[s, a, b] = 1`` scored above their
-    reverse (``scores[s, a, b] > scores[s, b, a]``): 0.5 is chance."""
-    return float((scores > scores.transpose(0, 2, 1))[graph == 1].mean())
+    """Share of the true edges ``graph[s, a, b] = 1`` whose reverse is not
+    one scored above their reverse (``scores[s, a, b] > scores[s, b, a]``),
+    ties counting half: 0.5 is chance. ``evaluate``'s ``direction``."""
+    reverse = scores.transpose(0, 2, 1)
+    one_way = (graph == 1) & (graph.transpose(0, 2, 1) != 1)
+    return float(((scores > reverse) + 0.5 * (scores == reverse))[one_way].mean())
 
 
 class Progress:
