@@ -39,7 +39,7 @@ BENCH_SPRINGS_EPOCHS (default "10,30"), BENCH_SPRINGS_SECONDS (a time limit
 per fit), BENCH_SPRINGS_SETTING ("nri", NRI's springs setting, the default
 on a GPU; "default", our default model, the default on a CPU), BENCH_DEVICE (default cpu), BENCH_NRI_BEFORE, BENCH_TOY_TRAIN
 (default 4000), BENCH_TOY_SECONDS (time limit per NRI fit, default none),
-BENCH_TOY_EPOCHS (default 100), BENCH_TOY_WARMUP (NRI's warm-up epochs,
+BENCH_TOY_EPOCHS (default 100), BENCH_TOY_WARMUP (NRI's warm-up epochs, a number or "auto",
 default the method's own), BENCH_TOY_METHODS (default
 "path,granger,nri,nri_trail"),
 BENCH_RECIPE_TRAIN (default 1000), BENCH_RECIPE_EPOCHS (default 40),
@@ -237,7 +237,10 @@ def toy_full(tmp: Path) -> None:
     wanted = os.environ.get("BENCH_TOY_METHODS", "path,granger,nri,nri_trail").split(",")
     neural = dict(epochs=epochs, batch_size=128, lr=3e-3, time_limit_s=limit, device=DEVICE, quiet=True)
     if os.environ.get("BENCH_TOY_WARMUP"):
-        neural["warmup_epochs"] = int(os.environ["BENCH_TOY_WARMUP"])
+        warmup = os.environ["BENCH_TOY_WARMUP"]
+        if warmup != "auto" and not warmup.isdigit():
+            raise SystemExit(f"BENCH_TOY_WARMUP={warmup!r}: use a whole number of epochs, or auto")
+        neural["warmup_epochs"] = warmup if warmup == "auto" else int(warmup)
     runs = [("path", dict()), ("granger", dict(quiet=True)), ("nri", neural), ("nri_trail", neural)]
     for k, (name, options) in enumerate(r for r in runs if r[0] in wanted):
         predictions = tmp / f"toy-{k}.npz"

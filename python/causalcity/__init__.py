@@ -1057,14 +1057,15 @@ def evaluate(
     ``gen`` wrote to ``dataset`` (or a ``counterfactual --sweep`` output),
     and returns the report as ``evaluate --json`` prints it: ``edges`` (per
     graph, group and split: F1 at the threshold with the best F1 on val,
-    with its standard error, precision, recall, AUROC, AUPRC, SHD; graph
-    ``per-frame`` for per-frame scores), ``trajectories`` and
+    with its standard error, precision, recall, AUROC, AUPRC, ``direction``
+    (the linked pairs scored above their unlinked reverse, ties half), SHD;
+    graph ``per-frame`` for per-frame scores), ``trajectories`` and
     ``counterfactuals`` (per group and split: normalised squared error at
     each step ahead). ``graph`` is one of
     ``designed``, ``causal``, ``direct`` or a list of them; ``csv`` also
     writes the table as ``--csv`` does. ``report["scenarios"]`` holds one
-    dict per scenario and graph (its counts, precision, recall, F1, SHD and
-    AUROC at its group's threshold, its mean trajectory error), as
+    dict per scenario and graph (its counts, precision, recall, F1, SHD,
+    AUROC and direction at its group's threshold, its mean trajectory error), as
     ``--per-scenario`` writes them to ``per_scenario``. Bad predictions (a wrong shape, a
     NaN, a partly scored split) raise :class:`InputError`.
     """
