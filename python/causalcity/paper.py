@@ -767,8 +767,7 @@ def _rows(world: str, method: str, report: dict) -> List[dict]:
     rows = []
     for e in report["edges"]:
         for metric, se in (("f1", "f1_se"), ("auroc", None), ("auprc", None), ("direction", None), ("shd", "shd_se")):
-            if metric in e:  # (evaluate gives no direction for some graphs)
-                rows.append(row(e, e["graph"], metric, "", e[metric], e[se] if se else None, e["scenarios"]))
+            rows.append(row(e, e["graph"], metric, "", e[metric], e[se] if se else None, e["scenarios"]))
     for t in report["trajectories"]:
         for s in t["steps"]:
             rows.append(row(t, "", "trajectory_mse", s["step"], s["mse"], s["se"], s["scenarios"]))

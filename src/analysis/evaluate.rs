@@ -1836,7 +1836,7 @@ impl fmt::Display for EvaluationReport {
             writeln!(
                 f,
                 "edges: AUROC and AUPRC over all pairs need no threshold, nor dir (who leads: the linked pairs \
-                 a -> b scored above their reverse b -> a, ties half; 50% is chance); a pair is called linked when its score is \
+                 a -> b, b -> a unlinked, scored above b -> a, ties half; 50% is chance); a pair is called linked when its score is \
                  above the threshold (from: val = best F1 on the val split, pooled = best F1 on every group's val \
                  where this group's holds no link, given, or default 0.5, see any warning above); F1 and SHD are means over scenarios, P and R over all pairs; per-frame: every frame's pairs \
                  against interactions.csv, SHD per frame"
