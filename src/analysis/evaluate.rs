@@ -1305,13 +1305,14 @@ fn threshold_for(
 
 /// A scenario's scored pairs of one graph and how many graphs they span
 /// (1, or the frames of a per-frame graph), for SHD per graph.
-/// With its direction counts where the graph has them ([`Direction`]).
-type GraphPairs<'a> = (&'a [ScoredPair], usize, Option<Direction>);
+/// With its direction counts ([`Direction`]; none counted for the
+/// per-frame and affected-car graphs).
+type GraphPairs<'a> = (&'a [ScoredPair], usize, Direction);
 
 /// One split's scores over every group: every pair, each scenario's F1
 /// and SHD, the counts at each group's threshold, the groups scored and
 /// the direction counts.
-type Pooled = (Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize, Option<Direction>);
+type Pooled = (Vec<ScoredPair>, Vec<f64>, Vec<f64>, Counts, usize, Direction);
 
 /// Edge rows of one graph for every group and split that has its scores.
 fn edge_rows<'a>(
@@ -1351,10 +1352,10 @@ fn edge_rows<'a>(
             let all: Vec<ScoredPair> = scenarios.iter().flat_map(|(p, _, _)| p.iter().copied()).collect();
             let per_scenario: Vec<(Counts, usize)> =
                 scenarios.iter().map(|(p, graphs, _)| (Counts::at(p, -threshold), *graphs)).collect();
-            let direction = scenarios.iter().filter_map(|(_, _, d)| *d).reduce(|mut total, d| {
-                total.add(d);
-                total
-            });
+            let mut direction = Direction::default();
+            for (_, _, d) in &scenarios {
+                direction.add(*d);
+            }
             let f1s: Vec<f64> = per_scenario.iter().map(|(c, _)| c.f1().unwrap_or(1.0)).collect();
             let shds: Vec<f64> = per_scenario
                 .iter()
@@ -1369,9 +1370,7 @@ fn edge_rows<'a>(
             pool.3.false_positives += counts.false_positives;
             pool.3.false_negatives += counts.false_negatives;
             pool.4 += 1;
-            if let Some(d) = direction {
-                pool.5.get_or_insert_with(Direction::default).add(d);
-            }
+            pool.5.add(direction);
             let (f1, f1_se) = mean_se(&f1s);
             let (shd, shd_se) = mean_se(&shds);
             rows.push(EdgeScores {
@@ -1393,7 +1392,7 @@ fn edge_rows<'a>(
                 f1_se,
                 auroc: auroc(&all),
                 auprc: average_precision(&all),
-                direction: direction.and_then(|d| d.share()),
+                direction: direction.share(),
                 shd,
                 shd_se,
             });
@@ -1421,7 +1420,7 @@ fn edge_rows<'a>(
             f1_se,
             auroc: auroc(&all),
             auprc: average_precision(&all),
-            direction: direction.and_then(|d| d.share()),
+            direction: direction.share(),
             shd,
             shd_se,
         });
@@ -1563,17 +1562,17 @@ fn summarise(
 
 /// A scenario's scored pairs of graph `g` (one graph counted).
 fn graph_pairs(r: &ScenarioResult, g: usize) -> Option<GraphPairs<'_>> {
-    r.pairs.get(g).map(|p| (p.as_slice(), 1, r.directions.get(g).copied()))
+    r.pairs.get(g).map(|p| (p.as_slice(), 1, r.directions[g]))
 }
 
 /// A sweep pair's affected-car scores (one "graph" of cars).
 fn affected_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
-    r.affected_pairs.as_ref().map(|p| (p.as_slice(), 1, None))
+    r.affected_pairs.as_ref().map(|p| (p.as_slice(), 1, Direction::default()))
 }
 
 /// A scenario's scored pairs of every frame, with the frames counted as graphs.
 fn frame_pairs(r: &ScenarioResult) -> Option<GraphPairs<'_>> {
-    r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames, None))
+    r.frame_pairs.as_ref().map(|(p, frames)| (p.as_slice(), *frames, Direction::default()))
 }
 
 /// A scenario's row with its name, group, split and trajectory errors
@@ -1636,7 +1635,7 @@ fn scenario_rows<'a>(
             f1: Some(counts.f1().unwrap_or(1.0)),
             shd: Some((counts.false_positives + counts.false_negatives) as f64 / graphs as f64),
             auroc: auroc(pairs),
-            direction: direction.and_then(|d| d.share()),
+            direction: direction.share(),
             ..scenario_base(dataset, s, r)
         });
     }
